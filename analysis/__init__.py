@@ -1,0 +1,1 @@
+"""Analysis of Parquet results (reads Parquet only; no torch or PyBullet needed)."""

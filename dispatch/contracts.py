@@ -1,0 +1,191 @@
+"""The plugin surface: what an allocator or a planner receives, returns, and must never do.
+
+Allocators
+    Subclass :class:`Allocator` and implement :meth:`Allocator.allocate`. The allocator receives
+    a read-only :class:`AllocationProblem` and returns an :class:`Allocation` that names agents
+    and tasks by *id*. It must not mutate the problem, must not hold a task for two agents, and
+    must not pair an agent with a task whose cost is ``inf``; the dispatcher rejects such answers
+    with :class:`~dispatch.errors.AllocationError`. Randomness comes only from ``problem.rng``.
+    Decentralized allocators should build on :class:`dispatch.decentralized.DecentralizedAllocator`,
+    which runs the paper's decision rounds and conflict rule in one shared place.
+
+Planners
+    Subclass :class:`Planner` and implement :meth:`Planner.costs` and :meth:`Planner.plan`.
+    A cost is the shortest path length (metres) divided by the agent's speed: travel seconds.
+    ``inf`` marks a pair the agent can never serve (unreachable, or a UGV asked to fly).
+    Planners may cache anything that depends only on the static world and the task's goal cell
+    (the grid is immutable); :meth:`Planner.task_closed` tells them when a task's cache can go.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from typing import ClassVar, Literal
+
+import numpy as np
+
+from dispatch.world import Cell, World
+
+VehicleKind = Literal["uav", "ugv"]
+TaskKind = Literal["ground", "air"]
+
+
+@dataclass(frozen=True)
+class AgentView:
+    """What an allocator or planner may know about one vehicle at a decision."""
+
+    id: int
+    kind: VehicleKind
+    cell: Cell
+    speed: float  # metres per simulated second
+
+    @property
+    def flies(self) -> bool:
+        return self.kind == "uav"
+
+
+@dataclass(frozen=True)
+class TaskView:
+    """What an allocator or planner may know about one open task."""
+
+    id: int
+    kind: TaskKind
+    cell: Cell
+    released_at: float
+
+
+@dataclass(frozen=True, eq=False)
+class AllocationProblem:
+    """One decision: idle agents, open tasks, and the cost matrix between them (read-only).
+
+    ``cost[a, t]`` is the travel time in seconds of ``agents[a]`` to ``tasks[t]``; ``inf`` where
+    the agent cannot serve the task. ``comm`` is the symmetric boolean adjacency of the agents'
+    communication graph (all True when range is unlimited). ``rng`` is the only source of
+    randomness an allocator may use.
+    """
+
+    time: float
+    agents: tuple[AgentView, ...]
+    tasks: tuple[TaskView, ...]
+    cost: np.ndarray
+    comm: np.ndarray
+    rng: np.random.Generator
+    max_rounds: int = 1000
+
+    def __post_init__(self) -> None:
+        n, m = len(self.agents), len(self.tasks)
+        if self.cost.shape != (n, m):
+            raise ValueError(f"cost has shape {self.cost.shape}, expected {(n, m)}")
+        self.cost.setflags(write=False)
+        self.comm.setflags(write=False)
+
+    @property
+    def n_agents(self) -> int:
+        return len(self.agents)
+
+    @property
+    def n_tasks(self) -> int:
+        return len(self.tasks)
+
+    @property
+    def feasible(self) -> np.ndarray:
+        """Boolean ``(N, M)`` mask of pairs with finite cost."""
+        return np.isfinite(self.cost)
+
+
+@dataclass(frozen=True)
+class Request:
+    """One agent's request for one task in one decision round, and whether it won."""
+
+    round: int
+    agent_id: int
+    task_id: int
+    cost: float
+    won: bool
+
+
+@dataclass(frozen=True)
+class Allocation:
+    """An allocator's answer: ``(agent_id, task_id)`` pairs and how they were reached.
+
+    ``requests`` lists every request made in every round (a centralized allocator lists its
+    chosen pairs as round-0 requests that won); a task requested by two or more agents in one
+    round was in conflict. ``messages`` counts messages exchanged (0 for a centralized method).
+    """
+
+    pairs: tuple[tuple[int, int], ...]
+    rounds: int = 1
+    requests: tuple[Request, ...] = ()
+    messages: int = 0
+
+    @classmethod
+    def centralized(cls, problem: AllocationProblem, index_pairs) -> Allocation:
+        """Build the answer of a centralized method from ``(agent_index, task_index)`` pairs."""
+        pairs, reqs = [], []
+        for a, t in index_pairs:
+            aid, tid = problem.agents[a].id, problem.tasks[t].id
+            pairs.append((aid, tid))
+            reqs.append(Request(0, aid, tid, float(problem.cost[a, t]), True))
+        return cls(pairs=tuple(pairs), rounds=1, requests=tuple(reqs), messages=0)
+
+    def conflicted_tasks(self) -> set[int]:
+        """Ids of tasks requested by more than one agent in some round."""
+        seen: dict[tuple[int, int], int] = {}
+        for r in self.requests:
+            seen[(r.round, r.task_id)] = seen.get((r.round, r.task_id), 0) + 1
+        return {task for (_, task), n in seen.items() if n > 1}
+
+
+class Allocator(ABC):
+    """Base class of allocator plugins.
+
+    Subclasses set ``name`` and implement :meth:`allocate`. Constructor keyword arguments come
+    from the scenario's ``[dispatch.allocator_params]`` table; reject unknown ones with
+    ``TypeError`` (the default ``__init__`` accepts none).
+    """
+
+    name: ClassVar[str] = ""
+    #: True for methods whose agents decide from local information (reported in summaries).
+    decentralized: ClassVar[bool] = False
+
+    @abstractmethod
+    def allocate(self, problem: AllocationProblem) -> Allocation:
+        """Return a valid allocation for ``problem`` (see the module docstring)."""
+
+
+@dataclass
+class PlanStats:
+    """Counters a planner keeps for the run's summary."""
+
+    cost_queries: int = 0
+    plans: int = 0
+    extra: dict = field(default_factory=dict)
+
+
+class Planner(ABC):
+    """Base class of planner plugins.
+
+    A planner is created once per run with the run's :class:`World`. Costs are travel seconds:
+    shortest path length in metres divided by the agent's speed; ``inf`` where the agent can
+    never reach the task or may not serve it (a UGV and a task above the ground layer).
+    Paths are lists of cells from the agent's cell to the goal cell, both included, each step a
+    legal move of the agent's kind (see :mod:`dispatch.motion`).
+    """
+
+    name: ClassVar[str] = ""
+
+    def __init__(self, world: World) -> None:
+        self.world = world
+        self.stats = PlanStats()
+
+    @abstractmethod
+    def costs(self, agents: tuple[AgentView, ...], tasks: tuple[TaskView, ...]) -> np.ndarray:
+        """Return the ``(len(agents), len(tasks))`` float array of travel seconds."""
+
+    @abstractmethod
+    def plan(self, agent: AgentView, goal: Cell) -> list[Cell] | None:
+        """Return a shortest path of cells from ``agent.cell`` to ``goal``, or None."""
+
+    def task_closed(self, task_id: int) -> None:  # noqa: B027 - optional hook
+        """Forget anything cached for a task that will never be asked about again."""
