@@ -1,0 +1,100 @@
+"""PyBullet mirror of a run: obstacle boxes and one kinematic body per vehicle.
+
+The simulation's truth is the grid and SimPy time; PyBullet mirrors it so that collisions can
+be checked, rays cast (sampling planners) and images rendered. The client runs in DIRECT mode
+(headless) unless ``gui=True``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import os
+
+from dispatch.world import World
+
+UAV_RADIUS = 0.3  # of a cell: a vehicle body fits well inside its cell
+UGV_HALF = (0.35, 0.35, 0.25)
+
+
+def _quiet_import():
+    # pybullet prints its build time to the C-level stderr on import; keep the CLI clean.
+    fd = os.dup(2)
+    try:
+        with open(os.devnull, "w") as devnull:
+            os.dup2(devnull.fileno(), 2)
+            import pybullet
+
+            ctypes.CDLL(None).fflush(None)
+    finally:
+        os.dup2(fd, 2)
+        os.close(fd)
+    return pybullet
+
+
+class Physics:
+    """A PyBullet client holding the world's obstacles and the vehicles' bodies."""
+
+    def __init__(self, world: World, gui: bool = False) -> None:
+        self.p = p = _quiet_import()
+        self.world = world
+        self.client = p.connect(p.GUI if gui else p.DIRECT)
+        self.obstacles: list[int] = []
+        self.vehicles: dict[int, int] = {}
+        for box in world.boxes:
+            he = box.half_extents()
+            col = p.createCollisionShape(p.GEOM_BOX, halfExtents=he, physicsClientId=self.client)
+            vis = p.createVisualShape(p.GEOM_BOX, halfExtents=he, rgbaColor=(0.55, 0.55, 0.6, 1),
+                                      physicsClientId=self.client)
+            self.obstacles.append(p.createMultiBody(0, col, vis, basePosition=box.centre(),
+                                                    physicsClientId=self.client))
+
+    def add_vehicle(self, agent_id: int, flies: bool, position) -> int:
+        """Create a vehicle's body at ``position`` (metres); returns the body id."""
+        p, c, s = self.p, self.client, self.world.cell
+        if flies:
+            col = p.createCollisionShape(p.GEOM_SPHERE, radius=UAV_RADIUS * s, physicsClientId=c)
+            vis = p.createVisualShape(p.GEOM_SPHERE, radius=UAV_RADIUS * s,
+                                      rgbaColor=(0.1, 0.4, 0.9, 1), physicsClientId=c)
+        else:
+            he = tuple(h * s for h in UGV_HALF)
+            col = p.createCollisionShape(p.GEOM_BOX, halfExtents=he, physicsClientId=c)
+            vis = p.createVisualShape(p.GEOM_BOX, halfExtents=he, rgbaColor=(0.9, 0.5, 0.1, 1),
+                                      physicsClientId=c)
+        body = p.createMultiBody(0, col, vis, basePosition=position, physicsClientId=c)
+        self.vehicles[agent_id] = body
+        return body
+
+    def move(self, agent_id: int, position) -> None:
+        """Put a vehicle's body at ``position`` (metres)."""
+        self.p.resetBasePositionAndOrientation(
+            self.vehicles[agent_id], position, (0, 0, 0, 1), physicsClientId=self.client
+        )
+
+    def position(self, agent_id: int) -> tuple[float, float, float]:
+        pos, _ = self.p.getBasePositionAndOrientation(self.vehicles[agent_id],
+                                                      physicsClientId=self.client)
+        return tuple(pos)  # type: ignore[return-value]
+
+    def contacts(self, margin: float = 0.0) -> list[tuple[int, int]]:
+        """Pairs of bodies (vehicle-obstacle or vehicle-vehicle) closer than ``margin`` metres."""
+        p, c = self.p, self.client
+        bodies = list(self.vehicles.values())
+        out = []
+        for i, a in enumerate(bodies):
+            for b in bodies[i + 1 :] + self.obstacles:
+                if p.getClosestPoints(a, b, margin, physicsClientId=c):
+                    out.append((a, b))
+        return out
+
+    def close(self) -> None:
+        if self.client is not None:
+            with contextlib.suppress(Exception):
+                self.p.disconnect(physicsClientId=self.client)
+            self.client = None
+
+    def __enter__(self) -> Physics:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

@@ -1,0 +1,67 @@
+"""Plugin registry: allocators and planners found by name through entry points.
+
+Built-ins are registered in ``pyproject.toml`` under the same entry-point groups as third-party
+plugins (``dispatch.allocators``, ``dispatch.planners``), so both are first-class. The table
+below is only a fallback for a source tree that was never installed; it names modules as
+strings, so the kernel still imports no concrete plugin.
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+from functools import cache
+from importlib.metadata import entry_points
+
+from dispatch.errors import PluginError
+
+log = logging.getLogger(__name__)
+
+GROUPS = {"allocator": "dispatch.allocators", "planner": "dispatch.planners"}
+_FALLBACK = {
+    "allocator": {
+        "hungarian": "allocators.hungarian:HungarianAllocator",
+        "greedy": "allocators.greedy:GreedyAllocator",
+        "random": "allocators.randomized:RandomAllocator",
+    },
+    "planner": {"astar": "planners.astar:AStarPlanner"},
+}
+
+
+@cache
+def available(kind: str) -> dict[str, str]:
+    """Installed plugins of a kind (``"allocator"`` or ``"planner"``): name -> ``module:attr``."""
+    found = dict(_FALLBACK[kind])
+    for ep in entry_points(group=GROUPS[kind]):
+        found[ep.name] = ep.value
+    return dict(sorted(found.items()))
+
+
+def load(kind: str, name: str) -> type:
+    """The plugin class registered as ``name``; PluginError lists what is installed."""
+    plugins = available(kind)
+    if name not in plugins:
+        raise PluginError(
+            f"unknown {kind} {name!r}; installed {kind}s: {', '.join(plugins) or 'none'}"
+        )
+    module, _, attr = plugins[name].partition(":")
+    try:
+        obj = importlib.import_module(module)
+        for part in attr.split("."):
+            obj = getattr(obj, part)
+    except Exception as e:  # a broken plugin must not take the others down with it
+        log.warning("%s plugin %r (%s) failed to load: %s", kind, name, plugins[name], e)
+        raise PluginError(f"{kind} plugin {name!r} ({plugins[name]}) failed to load: {e}") from e
+    return obj
+
+
+def describe(kind: str) -> list[tuple[str, str, str]]:
+    """``(name, target, first docstring line or load error)`` for each installed plugin."""
+    rows = []
+    for name, target in available(kind).items():
+        try:
+            doc = (load(kind, name).__doc__ or "").strip().splitlines()
+            rows.append((name, target, doc[0] if doc else ""))
+        except PluginError as e:
+            rows.append((name, target, f"BROKEN: {e.__cause__}"))
+    return rows

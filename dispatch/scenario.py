@@ -1,0 +1,389 @@
+"""Scenario files: TOML parsed once into frozen, typed configuration.
+
+Every mistake (an unknown key, a wrong type, an impossible value) raises one
+:class:`~dispatch.errors.ScenarioError` that names the file, the dotted key and the reason.
+See ``scenarios/README.md`` for every key with its default.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import tomllib
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from dispatch.errors import ScenarioError
+from dispatch.traces import read_trace
+
+Vec3 = tuple[float, float, float]
+SOURCES = ("static", "periodic", "poisson", "trace")
+
+
+@dataclass(frozen=True)
+class ObstacleConfig:
+    count: int = 10
+    min_size: Vec3 = (3.0, 3.0, 5.0)  # metres (x, y, height)
+    max_size: Vec3 = (10.0, 10.0, 30.0)
+
+
+@dataclass(frozen=True)
+class WorldConfig:
+    size: Vec3 = (50.0, 50.0, 30.0)  # metres
+    cell: float = 1.0  # metres
+    obstacles: ObstacleConfig = field(default_factory=ObstacleConfig)
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return tuple(int(round(s / self.cell)) for s in self.size)  # type: ignore[return-value]
+
+
+@dataclass(frozen=True)
+class FleetConfig:
+    agents: int = 8
+    uav_fraction: float = 0.5  # share of the fleet that flies (rounded to whole vehicles)
+    uav_speed: float = 5.0  # m/s
+    ugv_speed: float = 3.0  # m/s
+    uav_max_start_altitude: float = 10.0  # metres: UAVs start in a free cell at or below this
+
+    @property
+    def n_uav(self) -> int:
+        return int(round(self.agents * self.uav_fraction))
+
+
+@dataclass(frozen=True)
+class TaskConfig:
+    source: str = "static"
+    count: int | None = None  # static: number of tasks (None: as many as agents); others: cap
+    interval: float | None = None  # periodic: seconds between releases
+    rate: float | None = None  # poisson: releases per second
+    max_active: int | None = None  # periodic/poisson: a release is skipped while this many are open
+    ground_fraction: float = 0.5  # probability that a generated task is on the ground layer
+    service_time: float = 0.0  # seconds a vehicle spends at the task after arriving
+    ttl: float | None = None  # seconds an unassigned task waits before it expires
+    trace: Path | None = None  # trace: CSV or Parquet file of release_time, x, y, z
+    trace_rows: tuple[tuple[float, float, float, float], ...] = ()
+
+
+@dataclass(frozen=True)
+class DispatchConfig:
+    allocator: str = "hungarian"
+    planner: str = "astar"
+    batch_window: float = 0.0  # seconds the dispatcher waits after a wake-up to batch events
+    max_rounds: int = 1000  # decision-round limit for decentralized allocators
+    allocator_params: tuple[tuple[str, Any], ...] = ()
+    planner_params: tuple[tuple[str, Any], ...] = ()
+
+
+@dataclass(frozen=True)
+class SweepConfig:
+    allocator: tuple[str, ...] = ()
+    planner: tuple[str, ...] = ()
+    agents: tuple[int, ...] = ()
+    seed: tuple[int, ...] = ()
+
+    @property
+    def declared(self) -> bool:
+        return bool(self.allocator or self.planner or self.agents or self.seed)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A parsed scenario file. ``text`` is the file's exact content (stored with results)."""
+
+    name: str
+    path: Path
+    text: str
+    description: str = ""
+    seed: int = 0
+    duration: float = 3600.0  # simulated seconds before the run stops
+    world: WorldConfig = field(default_factory=WorldConfig)
+    fleet: FleetConfig = field(default_factory=FleetConfig)
+    tasks: TaskConfig = field(default_factory=TaskConfig)
+    dispatch: DispatchConfig = field(default_factory=DispatchConfig)
+    sweep: SweepConfig = field(default_factory=SweepConfig)
+
+    def runs(
+        self,
+        allocator: str | None = None,
+        planner: str | None = None,
+        agents: int | None = None,
+        seed: int | None = None,
+    ) -> list[RunSpec]:
+        """Expand the sweep into runs; a given argument replaces that sweep dimension."""
+
+        def dim(override, swept, default):
+            return (override,) if override is not None else (swept or (default,))
+
+        if agents is not None and agents < 1:
+            raise ScenarioError(self.path, "--agents", f"must be >= 1, got {agents}")
+        if agents is not None:
+            _check_fits(self, agents)
+        combos = itertools.product(
+            dim(allocator, self.sweep.allocator, self.dispatch.allocator),
+            dim(planner, self.sweep.planner, self.dispatch.planner),
+            dim(agents, self.sweep.agents, self.fleet.agents),
+            dim(seed, self.sweep.seed, self.seed),
+        )
+        return [RunSpec(self, a, p, n, s) for a, p, n, s in combos]
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One run of a scenario: the scenario with allocator, planner, fleet size and seed fixed."""
+
+    scenario: Scenario
+    allocator: str
+    planner: str
+    agents: int
+    seed: int
+
+    @property
+    def run_id(self) -> str:
+        return f"{self.scenario.name}__{self.allocator}__{self.planner}__n{self.agents}__s{self.seed}"
+
+    @property
+    def fleet(self) -> FleetConfig:
+        return replace(self.scenario.fleet, agents=self.agents)
+
+    @property
+    def n_static_tasks(self) -> int:
+        """Tasks a static source releases (M = N unless ``tasks.count`` says otherwise)."""
+        return self.scenario.tasks.count if self.scenario.tasks.count is not None else self.agents
+
+    @property
+    def partition(self) -> dict[str, Any]:
+        """Hive partition keys of this run inside a sweep's output folder."""
+        return {"allocator": self.allocator, "planner": self.planner,
+                "n_agents": self.agents, "seed": self.seed}
+
+
+# ----------------------------------------------------------------------------- reading
+
+
+class _Table:
+    """A TOML table being read: typed getters that raise ScenarioError, unknown-key check."""
+
+    def __init__(self, file: Path, prefix: str, data: Any) -> None:
+        self.file, self.prefix = file, prefix
+        if not isinstance(data, dict):
+            raise ScenarioError(file, prefix.rstrip(".") or "<root>", "must be a table")
+        self.data, self.used = data, set()
+
+    def key(self, k: str) -> str:
+        return f"{self.prefix}{k}"
+
+    def fail(self, k: str, reason: str) -> ScenarioError:
+        return ScenarioError(self.file, self.key(k), reason)
+
+    def get(self, k: str, default: Any) -> Any:
+        self.used.add(k)
+        return self.data.get(k, default)
+
+    def table(self, k: str) -> _Table:
+        return _Table(self.file, self.key(k) + ".", self.get(k, {}))
+
+    def number(self, k, default, *, lo=None, gt=None, hi=None, integer=False, optional=False):
+        v = self.get(k, default)
+        if v is None and optional:
+            return None
+        kind = "an integer" if integer else "a number"
+        if isinstance(v, bool) or not isinstance(v, (int, float) if not integer else int):
+            raise self.fail(k, f"must be {kind}, got {v!r}")
+        if not integer and not math.isfinite(v):
+            raise self.fail(k, f"must be finite, got {v!r}")
+        if lo is not None and v < lo:
+            raise self.fail(k, f"must be >= {lo}, got {v!r}")
+        if gt is not None and v <= gt:
+            raise self.fail(k, f"must be > {gt}, got {v!r}")
+        if hi is not None and v > hi:
+            raise self.fail(k, f"must be <= {hi}, got {v!r}")
+        return int(v) if integer else float(v)
+
+    def string(self, k, default, choices=None) -> str:
+        v = self.get(k, default)
+        if not isinstance(v, str) or not v:
+            raise self.fail(k, f"must be a non-empty string, got {v!r}")
+        if choices and v not in choices:
+            raise self.fail(k, f"must be one of {', '.join(choices)}; got {v!r}")
+        return v
+
+    def vec3(self, k, default, *, gt=0.0) -> Vec3:
+        v = self.get(k, default)
+        if (
+            not isinstance(v, (list, tuple))
+            or len(v) != 3
+            or any(isinstance(x, bool) or not isinstance(x, (int, float)) for x in v)
+        ):
+            raise self.fail(k, f"must be a list of 3 numbers, got {v!r}")
+        if any(not math.isfinite(x) or x <= gt for x in v):
+            raise self.fail(k, f"every entry must be finite and > {gt}, got {v!r}")
+        return tuple(float(x) for x in v)  # type: ignore[return-value]
+
+    def str_list(self, k) -> tuple[str, ...]:
+        v = self.get(k, [])
+        if not isinstance(v, list) or any(not isinstance(x, str) or not x for x in v):
+            raise self.fail(k, f"must be a list of names, got {v!r}")
+        return tuple(v)
+
+    def int_list(self, k, lo=None) -> tuple[int, ...]:
+        v = self.get(k, [])
+        if not isinstance(v, list) or any(isinstance(x, bool) or not isinstance(x, int) for x in v):
+            raise self.fail(k, f"must be a list of integers, got {v!r}")
+        if lo is not None and any(x < lo for x in v):
+            raise self.fail(k, f"every entry must be >= {lo}, got {v!r}")
+        return tuple(v)
+
+    def params(self, k) -> tuple[tuple[str, Any], ...]:
+        v = self.get(k, {})
+        if not isinstance(v, dict):
+            raise self.fail(k, "must be a table of parameters")
+        return tuple(sorted(v.items()))
+
+    def done(self) -> None:
+        unknown = sorted(set(self.data) - self.used)
+        if unknown:
+            known = ", ".join(sorted(self.used))
+            raise self.fail(unknown[0], f"unknown key (known keys here: {known})")
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read and validate a scenario file; raise ScenarioError naming file, key and reason."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as e:
+        raise ScenarioError(path, "<file>", f"cannot be read ({e.strerror or e})") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise ScenarioError(path, "<syntax>", f"invalid TOML: {e}") from None
+    return parse_scenario(data, path, text)
+
+
+def parse_scenario(data: dict, path: Path, text: str = "") -> Scenario:
+    """Validate an already-decoded TOML document (see :func:`load_scenario`)."""
+    root = _Table(path, "", data)
+    name = root.string("name", path.stem)
+    description = root.get("description", "")
+    if not isinstance(description, str):
+        raise root.fail("description", "must be a string")
+    seed = root.number("seed", 0, lo=0, integer=True)
+    duration = root.number("duration", 3600.0, gt=0.0)
+
+    w = root.table("world")
+    size = w.vec3("size", [50, 50, 30])
+    cell = w.number("cell", 1.0, gt=0.0)
+    for axis, s in zip("xyz", size):
+        if abs(s / cell - round(s / cell)) > 1e-9 or round(s / cell) < 1:
+            raise w.fail("size", f"{axis} size {s} is not a whole number of {cell} m cells")
+    o = w.table("obstacles")
+    obstacles = ObstacleConfig(
+        count=o.number("count", 10, lo=0, integer=True),
+        min_size=o.vec3("min_size", [3, 3, 5]),
+        max_size=o.vec3("max_size", [10, 10, 30]),
+    )
+    for a, (lo_, hi_, s) in enumerate(zip(obstacles.min_size, obstacles.max_size, size)):
+        if lo_ > hi_:
+            raise o.fail("min_size", f"entry {a} ({lo_}) is larger than max_size's ({hi_})")
+        if a < 2 and lo_ > s:
+            raise o.fail("min_size", f"entry {a} ({lo_} m) does not fit in the world ({s} m)")
+    o.done()
+    world = WorldConfig(size=size, cell=cell, obstacles=obstacles)
+    _check_obstacles_fit(o, world)
+    w.done()
+
+    f = root.table("fleet")
+    fleet = FleetConfig(
+        agents=f.number("agents", 8, lo=1, integer=True),
+        uav_fraction=f.number("uav_fraction", 0.5, lo=0.0, hi=1.0),
+        uav_speed=f.number("uav_speed", 5.0, gt=0.0),
+        ugv_speed=f.number("ugv_speed", 3.0, gt=0.0),
+        uav_max_start_altitude=f.number("uav_max_start_altitude", 10.0, lo=0.0),
+    )
+    f.done()
+
+    t = root.table("tasks")
+    source = t.string("source", "static", SOURCES)
+    tasks = TaskConfig(
+        source=source,
+        count=t.number("count", None, lo=1, integer=True, optional=True),
+        interval=t.number("interval", None, gt=0.0, optional=True),
+        rate=t.number("rate", None, gt=0.0, optional=True),
+        max_active=t.number("max_active", None, lo=1, integer=True, optional=True),
+        ground_fraction=t.number("ground_fraction", 0.5, lo=0.0, hi=1.0),
+        service_time=t.number("service_time", 0.0, lo=0.0),
+        ttl=t.number("ttl", None, gt=0.0, optional=True),
+    )
+    trace = t.get("trace", None)
+    if source == "periodic" and tasks.interval is None:
+        raise t.fail("interval", "is required when source = 'periodic'")
+    if source == "poisson" and tasks.rate is None:
+        raise t.fail("rate", "is required when source = 'poisson'")
+    if source == "trace":
+        if not isinstance(trace, str) or not trace:
+            raise t.fail("trace", "is required when source = 'trace' (a CSV or Parquet file)")
+        trace_path = (path.parent / trace).resolve()
+        rows = read_trace(trace_path, size)
+        tasks = replace(tasks, trace=trace_path, trace_rows=rows)
+    elif trace is not None:
+        raise t.fail("trace", f"is only used when source = 'trace' (source is {source!r})")
+    for k, allowed in (("interval", ("periodic",)), ("rate", ("poisson",)),
+                       ("max_active", ("periodic", "poisson"))):
+        if getattr(tasks, k) is not None and source not in allowed:
+            raise t.fail(k, f"is only used when source is {' or '.join(allowed)} (not {source!r})")
+    t.done()
+
+    d = root.table("dispatch")
+    disp = DispatchConfig(
+        allocator=d.string("allocator", "hungarian"),
+        planner=d.string("planner", "astar"),
+        batch_window=d.number("batch_window", 0.0, lo=0.0),
+        max_rounds=d.number("max_rounds", 1000, lo=1, integer=True),
+        allocator_params=d.params("allocator_params"),
+        planner_params=d.params("planner_params"),
+    )
+    d.done()
+
+    s = root.table("sweep")
+    sweep = SweepConfig(
+        allocator=s.str_list("allocator"),
+        planner=s.str_list("planner"),
+        agents=s.int_list("agents", lo=1),
+        seed=s.int_list("seed", lo=0),
+    )
+    s.done()
+    root.done()
+
+    sc = Scenario(name=name, path=path, text=text, description=description, seed=seed,
+                  duration=duration, world=world, fleet=fleet, tasks=tasks, dispatch=disp,
+                  sweep=sweep)
+    for n in sweep.agents or (fleet.agents,):
+        _check_fits(sc, n)
+    return sc
+
+
+def _check_obstacles_fit(o: _Table, world: WorldConfig) -> None:
+    """Obstacles stand one free cell apart: their smallest footprints must fit the ground."""
+    nx, ny, _ = world.shape
+    w = max(1, round(world.obstacles.min_size[0] / world.cell))
+    d = max(1, round(world.obstacles.min_size[1] / world.cell))
+    need = world.obstacles.count * (w + 1) * (d + 1)
+    have = (nx + 1) * (ny + 1)
+    if need > have // 2:
+        raise o.fail(
+            "count",
+            f"{world.obstacles.count} obstacles of at least {w}x{d} cells (plus a free margin) "
+            f"do not fit in a {nx}x{ny} ground with room left to move; use fewer or smaller ones",
+        )
+
+
+def _check_fits(sc: Scenario, agents: int) -> None:
+    """Vehicles start in distinct free cells: the fleet must fit beside the largest obstacles."""
+    nx, ny, _ = sc.world.shape
+    o = sc.world.obstacles
+    cover = o.count * round(o.max_size[0] / sc.world.cell) * round(o.max_size[1] / sc.world.cell)
+    if agents > max(nx * ny - cover, 0):
+        raise ScenarioError(sc.path, "fleet.agents",
+                            f"{agents} vehicles may not find distinct free cells in the world")

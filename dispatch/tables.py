@@ -1,0 +1,91 @@
+"""Paper-style result tables from run summaries (Tables I and III of the MAGNNET paper)."""
+
+from __future__ import annotations
+
+import math
+from collections import defaultdict
+from statistics import fmean
+
+PREFERRED_ORDER = ("hungarian", "magnnet", "auction", "greedy", "random")
+
+
+def allocator_order(names) -> list[str]:
+    names = set(names)
+    first = [n for n in PREFERRED_ORDER if n in names]
+    return first + sorted(names - set(first))
+
+
+def aggregate(summaries: list[dict], reference: str = "hungarian") -> dict[tuple[str, int], dict]:
+    """Per (allocator, n_agents): mean total cost, mean paired gap to ``reference`` (same seed,
+    planner and N), mean conflict-free rate, mean allocation seconds, number of runs."""
+    ref = {
+        (s["planner"], s["n_agents"], s["seed"]): s["total_cost"]
+        for s in summaries if s["allocator"] == reference
+    }
+    groups: dict[tuple[str, int], list[dict]] = defaultdict(list)
+    for s in summaries:
+        groups[(s["allocator"], s["n_agents"])].append(s)
+    out = {}
+    for key, rows in groups.items():
+        gaps = [
+            (r["total_cost"] - ref[k]) / ref[k]
+            for r in rows
+            if (k := (r["planner"], r["n_agents"], r["seed"])) in ref and ref[k] > 0
+        ]
+        rates = [r["conflict_free_rate"] for r in rows if not math.isnan(r["conflict_free_rate"])]
+        out[key] = {
+            "runs": len(rows),
+            "total_cost": fmean(r["total_cost"] for r in rows),
+            "gap": fmean(gaps) if gaps else math.nan,
+            "conflict_free_rate": fmean(rates) if rates else math.nan,
+            "alloc_seconds": fmean(r["alloc_seconds"] for r in rows),
+            "first_decision_seconds": fmean(r["first_decision_seconds"] for r in rows),
+            "tasks_completed": fmean(r["tasks_completed"] for r in rows),
+        }
+    return out
+
+
+def render(summaries: list[dict], console=None) -> None:
+    """Print Table I (total travel cost, gap to Hungarian) and Table III (conflict-free success
+    rate, allocation time) with rich."""
+    from rich.console import Console
+    from rich.table import Table
+
+    console = console or Console()
+    agg = aggregate(summaries)
+    allocs = allocator_order({a for a, _ in agg})
+    sizes = sorted({n for _, n in agg})
+    runs = {n: max(agg[(a, n)]["runs"] for a in allocs if (a, n) in agg) for n in sizes}
+
+    t1 = Table(title="Table I: total travel cost (s), mean over seeds [gap to Hungarian]")
+    t1.add_column("N", justify="right")
+    t1.add_column("runs", justify="right")
+    for a in allocs:
+        t1.add_column(a, justify="right")
+    for n in sizes:
+        cells = []
+        for a in allocs:
+            r = agg.get((a, n))
+            if r is None:
+                cells.append("-")
+            elif a == "hungarian" or math.isnan(r["gap"]):
+                cells.append(f"{r['total_cost']:.1f}")
+            else:
+                cells.append(f"{r['total_cost']:.1f} [{100 * r['gap']:+.1f}%]")
+        t1.add_row(str(n), str(runs[n]), *cells)
+    console.print(t1)
+
+    t3 = Table(title="Table III: conflict-free success rate (%) / allocation time (s)")
+    t3.add_column("N", justify="right")
+    for a in allocs:
+        t3.add_column(a, justify="right")
+    for n in sizes:
+        cells = []
+        for a in allocs:
+            r = agg.get((a, n))
+            cells.append("-" if r is None else
+                         f"{100 * r['conflict_free_rate']:.1f} / {r['first_decision_seconds']:.3f}")
+        t3.add_row(str(n), *cells)
+    console.print(t3)
+    console.print("allocation time: wall seconds of the first decision (cost matrix + allocator), "
+                  "mean over seeds")
