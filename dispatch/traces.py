@@ -27,7 +27,7 @@ def read_trace(path: Path, size: tuple[float, float, float]) -> tuple[tuple[floa
 
             columns = pq.read_table(path).to_pydict()
         elif suffix == ".csv":
-            with path.open(newline="", encoding="utf-8") as fh:
+            with path.open(newline="", encoding="utf-8-sig") as fh:
                 reader = csv.DictReader(fh)
                 data = list(reader)
                 names = reader.fieldnames or []

@@ -107,34 +107,38 @@ def place_obstacles(
     min_cells: tuple[int, int, int],
     max_cells: tuple[int, int, int],
     rng: np.random.Generator,
-    max_tries: int = 10_000,
+    max_tries: int = 2_000,
+    max_restarts: int = 50,
 ) -> list[tuple[int, int, int, int, int, int]]:
     """Draw ``count`` ground-standing boxes in cell units, ``(i0, j0, 0, i1, j1, k1)`` exclusive.
 
     Sizes are uniform integers in ``[min_cells, max_cells]``; footprints are kept one free cell
-    apart (and may touch the world's border). Raises :class:`WorldError` if they cannot be placed.
+    apart (and may touch the world's border). A layout that gets stuck is drawn again, up to
+    ``max_restarts`` times; then :class:`WorldError`.
     """
     nx, ny, nz = shape
-    taken = np.zeros((nx, ny), dtype=bool)  # footprints grown by the one-cell margin
-    boxes = []
-    tries = 0
-    while len(boxes) < count:
-        tries += 1
-        if tries > max_tries:
-            raise WorldError(
-                f"could only place {len(boxes)} of {count} obstacles in a {nx}x{ny} ground "
-                f"after {max_tries} tries; use fewer or smaller obstacles"
-            )
-        w = int(rng.integers(min_cells[0], max_cells[0] + 1))
-        d = int(rng.integers(min_cells[1], max_cells[1] + 1))
-        h = int(rng.integers(min_cells[2], max_cells[2] + 1))
-        i0 = int(rng.integers(0, nx - w + 1))
-        j0 = int(rng.integers(0, ny - d + 1))
-        if taken[i0 : i0 + w, j0 : j0 + d].any():
-            continue
-        taken[max(i0 - 1, 0) : i0 + w + 1, max(j0 - 1, 0) : j0 + d + 1] = True
-        boxes.append((i0, j0, 0, i0 + w, j0 + d, min(h, nz)))
-    return boxes
+    for _attempt in range(max_restarts):
+        taken = np.zeros((nx, ny), dtype=bool)  # footprints grown by the one-cell margin
+        boxes: list[tuple[int, int, int, int, int, int]] = []
+        tries = 0
+        while len(boxes) < count and tries < max_tries:
+            tries += 1
+            w = int(rng.integers(min_cells[0], max_cells[0] + 1))
+            d = int(rng.integers(min_cells[1], max_cells[1] + 1))
+            h = int(rng.integers(min_cells[2], max_cells[2] + 1))
+            i0 = int(rng.integers(0, nx - w + 1))
+            j0 = int(rng.integers(0, ny - d + 1))
+            if taken[i0 : i0 + w, j0 : j0 + d].any():
+                continue
+            taken[max(i0 - 1, 0) : i0 + w + 1, max(j0 - 1, 0) : j0 + d + 1] = True
+            boxes.append((i0, j0, 0, i0 + w, j0 + d, min(h, nz)))
+        if len(boxes) == count:
+            return boxes
+        # A crowded early layout can leave no room; start over rather than fail the seed.
+    raise WorldError(
+        f"could not place {count} obstacles in a {nx}x{ny} ground in {max_restarts} layouts "
+        f"of {max_tries} tries; use fewer or smaller obstacles"
+    )
 
 
 def build_world(

@@ -1,0 +1,169 @@
+"""Smoke tests of the ``dispatch`` command line (run in a subprocess, as a user would)."""
+
+from __future__ import annotations
+
+import json
+
+import pyarrow.parquet as pq
+import pytest
+
+from dispatch import __version__
+from dispatch.registry import available
+from tests.conftest import write_scenario
+
+#: The documented columns of each table (DESIGN.md / the issue list); tables may hold more.
+DOCUMENTED = {
+    "summary": ["run_id", "scenario", "allocator", "planner", "n_agents", "n_tasks", "seed",
+                "total_cost", "conflict_free_rate", "alloc_seconds", "tasks_completed",
+                "tasks_unfinished", "makespan"],
+    "tasks": ["run_id", "task_id", "kind", "x", "y", "z", "released_at", "assigned_at",
+              "agent_id", "cost", "arrived_at", "completed_at", "state", "conflicted"],
+    "assignments": ["run_id", "decision", "round", "agent_id", "task_id", "cost", "won",
+                    "alloc_seconds"],
+    "events": ["run_id", "t", "event", "agent_id", "task_id", "x", "y", "z"],
+    "vehicles": ["run_id", "agent_id", "kind", "speed", "x0", "y0", "z0", "distance",
+                 "busy_seconds"],
+    "obstacles": ["run_id", "x0", "y0", "z0", "x1", "y1", "z1"],
+}
+
+
+@pytest.fixture(scope="module")
+def single_run(tmp_path_factory):
+    """``dispatch run tiny.toml --out DIR --agents 3 --seed 1``, run once for the module."""
+    from tests.conftest import run_cli
+
+    d = tmp_path_factory.mktemp("cli_run")
+    scenario = write_scenario(d, fleet={"agents": 5}, tasks={"count": 4})
+    out = d / "out"
+    proc = run_cli("run", scenario, "--out", out, "--agents", 3, "--seed", 1)
+    return scenario, out, proc
+
+
+def test_run_exits_0_and_prints_tables(single_run):
+    scenario, out, proc = single_run
+    assert proc.returncode == 0, proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert "Table I" in proc.stdout and "Table III" in proc.stdout
+    assert "hungarian" in proc.stdout
+    assert "1 run(s)" in proc.stdout
+    assert str(out) in proc.stdout.replace("\n", "")
+
+
+@pytest.mark.parametrize("table", list(DOCUMENTED))
+def test_run_writes_documented_columns(single_run, table):
+    _, out, proc = single_run
+    assert proc.returncode == 0, proc.stderr
+    path = out / f"{table}.parquet"
+    assert path.is_file()
+    t = pq.read_table(path)
+    cols = t.column_names
+    missing = [c for c in DOCUMENTED[table] if c not in cols]
+    assert not missing, f"{table} lacks {missing}"
+    # the documented columns keep their documented order
+    assert [c for c in cols if c in DOCUMENTED[table]] == DOCUMENTED[table]
+    assert set(t.column("run_id").to_pylist()) <= {"tiny__hungarian__astar__n3__s1"}
+    meta = t.schema.metadata
+    assert meta[b"dispatch.scenario"].decode() == (out.parent / "tiny.toml").read_text()
+    assert meta[b"dispatch.seed"] == b"1"
+    assert meta[b"dispatch.version"].decode() == __version__
+    if table == "obstacles":
+        assert json.loads(meta[b"dispatch.world_size"]) == [12.0, 12.0, 6.0]
+        assert float(meta[b"dispatch.cell"]) == 1.0
+
+
+def test_run_output_content(single_run):
+    _, out, _ = single_run
+    summary = pq.read_table(out / "summary.parquet").to_pylist()
+    assert len(summary) == 1
+    s = summary[0]
+    assert (s["scenario"], s["allocator"], s["planner"], s["n_agents"], s["seed"]) == (
+        "tiny", "hungarian", "astar", 3, 1)
+    assert s["n_tasks"] == 4
+    assert pq.read_table(out / "vehicles.parquet").num_rows == 3
+    assert pq.read_table(out / "tasks.parquet").num_rows == 4
+    assert pq.read_table(out / "obstacles.parquet").num_rows == 3
+    # nothing half-written is left behind
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]
+
+
+def test_plugins_lists_builtins(cli):
+    proc = cli("plugins")
+    assert proc.returncode == 0, proc.stderr
+    for name in ("hungarian", "greedy", "random", "astar"):
+        assert name in proc.stdout
+    for name in set(available("allocator")) | set(available("planner")):
+        assert name in proc.stdout
+
+
+def test_unknown_allocator_exits_2_listing_installed(tiny_scenario, cli, tmp_path):
+    out = tmp_path / "never"
+    proc = cli("run", tiny_scenario, "--allocator", "nosuch", "--out", out)
+    assert proc.returncode == 2
+    assert "Traceback" not in proc.stdout + proc.stderr
+    assert "nosuch" in proc.stderr
+    for name in ("hungarian", "greedy", "random"):
+        assert name in proc.stderr
+    assert not out.exists()
+
+
+def test_unknown_allocator_in_file(make_scenario, cli):
+    path = make_scenario(dispatch={"allocator": "nosuch"})
+    proc = cli("validate", path)
+    assert proc.returncode == 2
+    assert "nosuch" in proc.stderr and "hungarian" in proc.stderr
+    assert "Traceback" not in proc.stderr
+
+
+def test_sweep_prints_all_allocators(make_scenario, cli, tmp_path):
+    sweep = {"allocator": ["hungarian", "greedy", "random"], "agents": [2, 3], "seed": [0, 1]}
+    path = make_scenario(sweep=sweep)
+    out = tmp_path / "sweep_out"
+    proc = cli("run", path, "--out", out)
+    assert proc.returncode == 0, proc.stderr
+    assert "12 run(s)" in proc.stdout
+    header = next(line for line in proc.stdout.splitlines()
+                  if "hungarian" in line and "greedy" in line)
+    assert "random" in header
+    assert (out / "summary" / "allocator=random" / "planner=astar" / "n_agents=2" / "seed=0"
+            / "part-0.parquet").is_file()
+
+
+def test_validate_good_file(tiny_scenario, cli):
+    proc = cli("validate", tiny_scenario)
+    assert proc.returncode == 0, proc.stderr
+    assert "ok" in proc.stdout and "1 run(s)" in proc.stdout
+
+
+def test_version(cli):
+    proc = cli("--version")
+    assert proc.returncode == 0
+    assert __version__ in proc.stdout
+
+
+def test_usage_error_exits_2(cli):
+    proc = cli("run")
+    assert proc.returncode == 2
+    assert "usage" in proc.stderr.lower()
+
+
+def test_module_entry_point(tiny_scenario, tmp_path):
+    """``python -m dispatch.cli`` works as well as the console script."""
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, "-m", "dispatch.cli", "validate", str(tiny_scenario)],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "ok" in proc.stdout
+
+
+# ----------------------------------------------------------------------------- known bugs
+
+
+def test_negative_seed_override_is_a_clean_error(tiny_scenario, tmp_path, capsys):
+    from dispatch import cli as cli_module
+
+    out = tmp_path / "neg"
+    assert cli_module.main(["run", str(tiny_scenario), "--seed", "-1", "--out", str(out)]) == 2
+    assert "--seed" in capsys.readouterr().err
+    assert not out.exists()
