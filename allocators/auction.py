@@ -30,8 +30,10 @@ Scores
     ``L > 1``: a path's score is the time-discounted reward ``sum_k exp(-tau_k / time_scale)``
     over its tasks, ``tau_k`` the arrival time at the k-th task: the first leg is the exact
     ``cost`` (the planner's travel time), later legs are straight-line distance / speed (the
-    problem has no task-to-task travel times; a lower bound). A task inserted into a path can
-    only delay those after it. Bids are *warped* (Johnson, Ponda, Choi & How 2012): an agent
+    problem has no task-to-task travel times; a lower bound), and no arrival is earlier than
+    the task's own ``cost`` (nothing beats the shortest path from the start). The marginal score
+    of a task is the score of the path with the task at its best position minus the score of the
+    path without it. Bids are *warped* (Johnson, Ponda, Choi & How 2012): an agent
     never bids more than its previous bid in the bundle, which keeps the diminishing marginal
     gain that CBBA's convergence needs whatever the cost matrix.
 
@@ -184,10 +186,14 @@ class _CBBA:
 
     # -------------------------------------------------------------- scores (L > 1)
     def arrivals(self, i: int, path: list[int]) -> np.ndarray:
+        """Arrival times along ``path``: ``tau_1 = cost[i, p_1]``, then
+        ``tau_q = max(tau_{q-1} + leg / speed, cost[i, p_q])`` (no route through other tasks
+        beats the planner's shortest path from the start)."""
         tau = np.empty(len(path))
         t = 0.0
         for q, j in enumerate(path):
-            t = self.cost[i, j] if q == 0 else t + self.legs[path[q - 1], j] / self.speed[i]
+            t = self.cost[i, j] if q == 0 else max(t + self.legs[path[q - 1], j] / self.speed[i],
+                                                   self.cost[i, j])
             tau[q] = t
         return tau
 
@@ -197,34 +203,32 @@ class _CBBA:
         return float(np.exp(-self.arrivals(i, path) / self.T).sum())
 
     def marginals(self, i: int) -> tuple[np.ndarray, np.ndarray]:
-        """Best marginal score of inserting each task into agent i's path, and where."""
+        """Best marginal score ``S(path with j inserted) - S(path)`` of each task, and where."""
         path, T = self.paths[i], self.T
         cost_i = self.cost[i]
         if self.L == 1:  # the bundle is empty whenever this is asked
             return -cost_i, np.zeros(self.m, dtype=np.int64)
         tau = self.arrivals(i, path)
-        w = np.exp(-tau / T)
-        tails = np.concatenate([np.cumsum(w[::-1])[::-1], [0.0]])  # tails[q] = sum_{r>=q} w_r
+        base = np.exp(-tau / T)
         v = self.speed[i]
         best = np.full(self.m, -np.inf)
         where = np.zeros(self.m, dtype=np.int64)
         k = len(path)
-        for q in range(k + 1):  # insert before path[q] (q = k: at the end)
-            if q == 0:
-                tj = cost_i
-            else:
-                tj = tau[q - 1] + self.legs[path[q - 1]] / v
-            if q < k:
-                nxt = path[q]
-                before = cost_i[nxt] if q == 0 else tau[q - 1] + self.legs[path[q - 1], nxt] / v
-                # via j: arrive at j, then go on to nxt; never faster than going directly
-                delay = np.maximum(tj + self.legs[:, nxt] / v - (tau[q] if q else before), 0.0)
-                gain = np.exp(-tj / T) - (1.0 - np.exp(-delay / T)) * tails[q]
-            else:
-                gain = np.exp(-tj / T)
-            take = gain > best
-            best = np.where(take, gain, best)
-            where = np.where(take, q, where)
+        with np.errstate(invalid="ignore"):  # inf costs of tasks the agent cannot serve
+            for q in range(k + 1):  # insert j before path[q] (q = k: at the end)
+                tj = cost_i if q == 0 else np.maximum(tau[q - 1] + self.legs[path[q - 1]] / v,
+                                                      cost_i)
+                gain = np.exp(-tj / T) - base[q:].sum()
+                t, prev = tj, None
+                for r in range(q, k):  # the tasks after j, each chain vectorized over j
+                    nxt = path[r]
+                    leg = self.legs[:, nxt] if prev is None else self.legs[prev, nxt]
+                    t = np.maximum(t + leg / v, cost_i[nxt])
+                    gain = gain + np.exp(-t / T)
+                    prev = nxt
+                take = gain > best
+                best = np.where(take, gain, best)
+                where = np.where(take, q, where)
         best = np.where(self.feasible[i], best, -np.inf)
         return best, where
 
@@ -290,8 +294,18 @@ class _CBBA:
             self.seconds[rec] += (time.perf_counter() - t0) / rec.size
 
     def _apply(self, k: int, rec: np.ndarray, yk, zk, sk) -> None:
-        """CBBA's Table 1: receiver i (rows ``rec``) and sender k, for every task at once."""
-        Y, Z, S = self.y[rec], self.z[rec], self.s[rec]
+        """CBBA's Table 1: receiver i (rows ``rec``) and sender k, for every task at once.
+
+        Only tasks where some receiver's ``(y, z)`` differs from the sender's are looked at:
+        where they agree, every rule leaves the entry as it is."""
+        Y, Z = self.y[rec], self.z[rec]
+        cols = np.flatnonzero(((Z != zk[None, :]) | (Y != yk[None, :])).any(axis=0))
+        if cols.size == 0:
+            return
+        if cols.size < self.m:
+            yk, zk = yk[cols], zk[cols]
+            Y, Z = Y[:, cols], Z[:, cols]
+        S = self.s[rec]
         i = rec[:, None]
         zk_b = np.broadcast_to(zk, Z.shape)
         s_km = np.where(zk >= 0, sk[np.maximum(zk, 0)], -1)[None, :]  # k's time for k's winner
@@ -326,7 +340,10 @@ class _CBBA:
         )
         Y = np.where(update, yk[None, :], np.where(reset, -np.inf, Y))
         Z = np.where(update, zk_b, np.where(reset, NONE, Z))
-        self.y[rec], self.z[rec] = Y, Z
+        if cols.size < self.m:
+            self.y[np.ix_(rec, cols)], self.z[np.ix_(rec, cols)] = Y, Z
+        else:
+            self.y[rec], self.z[rec] = Y, Z
 
     def release_outbid(self) -> bool:
         """Drop from each bundle the first task the agent lost and every task after it."""

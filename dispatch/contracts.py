@@ -61,8 +61,13 @@ class AllocationProblem:
 
     ``cost[a, t]`` is the travel time in seconds of ``agents[a]`` to ``tasks[t]``; ``inf`` where
     the agent cannot serve the task. ``comm`` is the symmetric boolean adjacency of the agents'
-    communication graph (all True when range is unlimited). ``rng`` is the only source of
-    randomness an allocator may use.
+    communication graph, diagonal included (all True when range is unlimited; see
+    :mod:`dispatch.comms`). ``rng`` is the only source of randomness an allocator may use.
+
+    ``loss`` is the probability that one reception of a broadcast is lost (a decentralized
+    allocator simulates it with ``rng``, e.g. through :class:`dispatch.comms.Channel`);
+    ``latency`` is the simulated seconds per message hop, for information only: the dispatcher
+    applies it from :attr:`Allocation.hops`. ``cell_size`` (metres) turns cells into positions.
     """
 
     time: float
@@ -72,11 +77,20 @@ class AllocationProblem:
     comm: np.ndarray
     rng: np.random.Generator
     max_rounds: int = 1000
+    loss: float = 0.0
+    latency: float = 0.0
+    cell_size: float = 1.0
 
     def __post_init__(self) -> None:
         n, m = len(self.agents), len(self.tasks)
         if self.cost.shape != (n, m):
             raise ValueError(f"cost has shape {self.cost.shape}, expected {(n, m)}")
+        if self.comm.shape != (n, n):
+            raise ValueError(f"comm has shape {self.comm.shape}, expected {(n, n)}")
+        if not 0.0 <= self.loss < 1.0:
+            raise ValueError(f"loss must be in [0, 1), got {self.loss!r}")
+        if not self.latency >= 0.0:
+            raise ValueError(f"latency must be >= 0, got {self.latency!r}")
         self.cost.setflags(write=False)
         self.comm.setflags(write=False)
 
@@ -111,13 +125,23 @@ class Allocation:
 
     ``requests`` lists every request made in every round (a centralized allocator lists its
     chosen pairs as round-0 requests that won); a task requested by two or more agents in one
-    round was in conflict. ``messages`` counts messages exchanged (0 for a centralized method).
+    round, or requested after it was won, was in conflict. ``messages`` counts messages
+    transmitted (0 for a centralized method; see :mod:`dispatch.comms`).
+
+    ``hops`` is the number of sequential message hops of the decision (its critical path in
+    communication): the dispatcher hands the tasks out ``hops * problem.latency`` simulated
+    seconds after the decision started (0 for a centralized method). ``agent_seconds``, when
+    given, holds each agent's own compute seconds (aligned with ``problem.agents``): agents think
+    in parallel, so the decision's per-agent critical path is its maximum. Being wall-clock
+    time, it takes no part in comparing two allocations.
     """
 
     pairs: tuple[tuple[int, int], ...]
     rounds: int = 1
     requests: tuple[Request, ...] = ()
     messages: int = 0
+    hops: int = 0
+    agent_seconds: tuple[float, ...] = field(default=(), compare=False)  # wall clock
 
     @classmethod
     def centralized(cls, problem: AllocationProblem, index_pairs) -> Allocation:
@@ -130,11 +154,16 @@ class Allocation:
         return cls(pairs=tuple(pairs), rounds=1, requests=tuple(reqs), messages=0)
 
     def conflicted_tasks(self) -> set[int]:
-        """Ids of tasks requested by more than one agent in some round."""
+        """Ids of tasks requested by more than one agent in some round, or requested again in a
+        later round than the one it was won in (an agent that did not hear of the win)."""
         seen: dict[tuple[int, int], int] = {}
+        won: dict[int, int] = {}
         for r in self.requests:
             seen[(r.round, r.task_id)] = seen.get((r.round, r.task_id), 0) + 1
-        return {task for (_, task), n in seen.items() if n > 1}
+            if r.won:
+                won[r.task_id] = min(r.round, won.get(r.task_id, r.round))
+        late = {r.task_id for r in self.requests if r.task_id in won and r.round > won[r.task_id]}
+        return {task for (_, task), n in seen.items() if n > 1} | late
 
 
 class Allocator(ABC):

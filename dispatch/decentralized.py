@@ -1,21 +1,50 @@
 """The paper's decision rounds and conflict rule, shared by every decentralized allocator.
 
-In each round every agent that is still unassigned and still has a feasible open task either
-rejects (``-1``; the paper's action 0) or requests one open task. A task requested by several
-agents in the same round is a *conflict*: it goes to the requester with the smallest cost (ties
-to the lowest agent index), the others stay unassigned and may request again next round.
-Rounds repeat until every task is assigned, no agent requests, or ``problem.max_rounds``.
+In each round every agent that is still unassigned and still believes it has a feasible open
+task either rejects (``-1``; the paper's action 0) or requests one task it believes open. A task
+requested by several agents in the same round is a *conflict*: it goes to the requester with the
+smallest cost (ties to the lowest agent index), the others stay unassigned and may request again
+next round. Rounds repeat until no agent has anything left to request, no agent requests, or
+``problem.max_rounds``.
 
 Putting the loop here means every decentralized method is measured the same way: the same
-rounds, the same request log, the same conflict counting.
+rounds, the same request log, the same conflict counting, the same communication model.
+
+Communication model (see :mod:`dispatch.comms`)
+    * **The arbiter at the task.** A request goes to the task, which settles it by the conflict
+      rule and answers each requester (won, or lost: the task is taken). The arbiter is the
+      ground truth: a task is never given twice, whatever the agents believe. A request for a
+      task that was already won in an earlier round (by an agent that did not hear of it) loses
+      and marks the task as conflicted. The request/answer exchange is reliable (acknowledged);
+      ``loss`` applies to what agents learn from each other.
+    * **Local knowledge.** Each agent knows which tasks are taken only from what reached it: its
+      own answers from arbiters, and broadcasts of its neighbours. A request is one broadcast,
+      heard by the arbiter and by the requester's neighbours; any request means the task is
+      taken from the next round on (the conflict rule always gives a requested open task to
+      someone), so a neighbour that hears it marks the task taken. News travels further by
+      relays: an agent that learned something its own neighbours may have missed (it has a
+      neighbour out of the sender's reach: the self-pruning rule of neighbour-knowledge
+      flooding) passes it on in its next broadcast, piggybacked on its request if it makes one,
+      else as a relay message of its own. One hop per round. ``choose`` sees each agent's belief:
+      agents with the same belief are asked together, as before.
+    * **Counting.** ``messages`` = requests (each sent whether or not the agent has neighbours:
+      it is addressed to the arbiter) + relay-only broadcasts (only by agents with neighbours).
+      On a complete graph without loss every agent hears every request, nobody relays, and the
+      rounds, requests and messages are exactly those of a global-knowledge loop.
+    * **Latency.** A round is a request hop and an answer hop: ``hops = 2 * rounds`` (rounds in
+      which someone requested); the dispatcher turns that into simulated time.
+    * **Compute time.** Each call of ``choose`` is timed and its seconds shared evenly among the
+      agents it decided for: ``Allocation.agent_seconds``.
 """
 
 from __future__ import annotations
 
+import time
 from abc import abstractmethod
 
 import numpy as np
 
+from dispatch.comms import Channel, relay_needed
 from dispatch.contracts import Allocation, AllocationProblem, Allocator, Request
 from dispatch.errors import AllocationError
 
@@ -37,62 +66,132 @@ class DecentralizedAllocator(Allocator):
 
         Args:
             problem: the decision (read-only).
-            agents: indices (into ``problem.agents``) of the agents deciding this round.
-            open_tasks: boolean mask over ``problem.tasks`` of tasks not yet assigned.
+            agents: indices (into ``problem.agents``) of the agents deciding this round. All of
+                them hold the same belief ``open_tasks``; agents with different beliefs are
+                asked in separate calls.
+            open_tasks: boolean mask over ``problem.tasks`` of tasks these agents believe open
+                (not known to be taken, from what reached them over the communication graph).
             round_: the round number, from 0.
 
         Returns:
-            An int array aligned with ``agents``: a task index that is open and feasible for
-            that agent, or ``-1`` to reject.
+            An int array aligned with ``agents``: a task index that is open in ``open_tasks``
+            and feasible for that agent, or ``-1`` to reject.
         """
 
     def allocate(self, problem: AllocationProblem) -> Allocation:
         return run_rounds(problem, self.choose)
 
 
-def run_rounds(problem: AllocationProblem, choose) -> Allocation:
-    """Run decision rounds with the conflict rule; ``choose`` is :meth:`DecentralizedAllocator.choose`."""
+def run_rounds(
+    problem: AllocationProblem,
+    choose,
+    *,
+    first: np.ndarray | None = None,
+    known: np.ndarray | None = None,
+    start_round: int = 0,
+) -> Allocation:
+    """Run decision rounds with the conflict rule and the communication model.
+
+    ``choose`` is :meth:`DecentralizedAllocator.choose`.
+
+    Args:
+        first: optional ``(N,)`` requests of round 0 (task index or ``-1`` per agent) that
+            replace the call of ``choose`` in that round (an auction's claims); the entries of
+            agents that are not deciding are ignored.
+        known: optional ``(N, M)`` boolean "agent knows this task is taken" to start from.
+        start_round: number of the first round in the request log (rounds already spent).
+    """
     n, m = problem.cost.shape
     feasible = problem.feasible
+    channel = Channel(problem.comm, problem.loss, problem.rng)
+    has_nb = channel.has_neighbours()
+    need_relay = relay_needed(problem.comm) if n else np.zeros((0, 0), bool)
+    known = np.zeros((n, m), dtype=bool) if known is None else np.array(known, dtype=bool)
     agent_task = np.full(n, -1, dtype=np.int64)
-    open_tasks = np.ones(m, dtype=bool)
+    taken = np.zeros(m, dtype=bool)  # the arbiters' truth
+    relay = np.zeros((n, m), dtype=bool)  # news each agent passes on in its next broadcast
+    seconds = np.zeros(n)
     requests: list[Request] = []
-    rounds = 0
+    rounds = messages = hops = 0
     for r in range(problem.max_rounds):
-        deciding = np.flatnonzero((agent_task < 0) & (feasible & open_tasks).any(axis=1))
+        believed_open = ~known
+        deciding = np.flatnonzero((agent_task < 0) & (feasible & believed_open).any(axis=1))
         if deciding.size == 0:
             break
-        choice = np.asarray(choose(problem, deciding, open_tasks.copy(), r), dtype=np.int64)
-        if choice.shape != deciding.shape:
-            raise AllocationError(
-                f"choose() returned {choice.shape[0] if choice.ndim else 'a scalar'} "
-                f"requests for {deciding.size} deciding agents"
-            )
+        if r == 0 and first is not None:
+            choice = np.asarray(first, dtype=np.int64)[deciding]
+        else:
+            choice = _choose_local(problem, choose, deciding, believed_open, start_round + r,
+                                   seconds)
         rounds = r + 1
         asked = choice >= 0
         if not asked.any():
             break
-        for a, t in zip(deciding[asked], choice[asked]):
-            if t >= m or not open_tasks[t] or not feasible[a, t]:
+        req_agents, req_tasks = deciding[asked], choice[asked]
+        for a, t in zip(req_agents, req_tasks):
+            if t >= m or not believed_open[a, t] or not feasible[a, t]:
                 raise AllocationError(
                     f"agent {problem.agents[a].id} requested task index {t}, which is not an "
                     "open task it can serve"
                 )
-        winners = _resolve(problem.cost, deciding[asked], choice[asked])
-        for a, t in zip(deciding[asked], choice[asked]):
-            won = winners[t] == a
-            requests.append(
-                Request(r, problem.agents[a].id, problem.tasks[t].id, float(problem.cost[a, t]), won)
-            )
+        fresh = ~taken[req_tasks]
+        winners = _resolve(problem.cost, req_agents[fresh], req_tasks[fresh])
+        for a, t in zip(req_agents, req_tasks):
+            won = winners.get(int(t)) == a
+            requests.append(Request(start_round + r, problem.agents[a].id, problem.tasks[t].id,
+                                    float(problem.cost[a, t]), won))
         for t, a in winners.items():
             agent_task[a] = t
-            open_tasks[t] = False
-        if not open_tasks.any():
-            break
+            taken[t] = True
+        known[req_agents, req_tasks] = True  # the arbiter's answer
+        # Broadcasts: every request (with any pending relay piggybacked), and relay-only
+        # messages from agents that have news and neighbours.
+        news = relay.copy()
+        news[req_agents, req_tasks] = True
+        relay_only = np.flatnonzero(news.any(axis=1) & has_nb)
+        relay_only = relay_only[~np.isin(relay_only, req_agents)]
+        messages += int(req_agents.size + relay_only.size)
+        senders = np.union1d(req_agents, relay_only)
+        got = channel.deliver(senders)
+        relay = np.zeros((n, m), dtype=bool)
+        for k in senders:
+            rec = np.flatnonzero(got[k])
+            if rec.size == 0:
+                continue
+            new = news[k][None, :] & ~known[rec]
+            known[rec] |= news[k][None, :]
+            relay[rec] |= new & need_relay[k, rec][:, None]
+        hops += 2
     pairs = tuple(
         (problem.agents[a].id, problem.tasks[t].id) for a, t in enumerate(agent_task) if t >= 0
     )
-    return Allocation(pairs=pairs, rounds=rounds, requests=tuple(requests), messages=len(requests))
+    return Allocation(pairs=pairs, rounds=rounds, requests=tuple(requests), messages=messages,
+                      hops=hops, agent_seconds=tuple(float(x) for x in seconds))
+
+
+def _choose_local(problem, choose, deciding, believed_open, round_, seconds) -> np.ndarray:
+    """Ask ``choose`` once per group of deciding agents that share a belief (one call when
+    everyone knows the same, as on a complete graph)."""
+    rows = believed_open[deciding]
+    if len(rows) and (rows == rows[0]).all():
+        groups = [np.arange(len(deciding))]
+    else:
+        _, first_at, inverse = np.unique(rows, axis=0, return_index=True, return_inverse=True)
+        inverse = np.asarray(inverse).reshape(-1)
+        groups = [np.flatnonzero(inverse == g) for g in np.argsort(first_at)]
+    choice = np.full(len(deciding), -1, dtype=np.int64)
+    for pos in groups:
+        members = deciding[pos]
+        t0 = time.perf_counter()
+        c = np.asarray(choose(problem, members, rows[pos[0]].copy(), round_), dtype=np.int64)
+        seconds[members] += (time.perf_counter() - t0) / len(members)
+        if c.shape != members.shape:
+            raise AllocationError(
+                f"choose() returned {c.shape[0] if c.ndim else 'a scalar'} "
+                f"requests for {members.size} deciding agents"
+            )
+        choice[pos] = c
+    return choice
 
 
 def _resolve(cost: np.ndarray, agents: np.ndarray, tasks: np.ndarray) -> dict[int, int]:

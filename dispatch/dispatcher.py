@@ -2,8 +2,21 @@
 
 It wakes when a task is released or a vehicle becomes idle, waits the optional batching window
 (a zero window still lets every event of the same instant land first), builds an
-:class:`AllocationProblem` with the planner's cost matrix, asks the allocator, checks the answer
-and hands the tasks to the vehicles.
+:class:`AllocationProblem` with the planner's cost matrix and the communication graph of the idle
+vehicles (from their positions and the scenario's ``[comms] range``; see :mod:`dispatch.comms`),
+asks the allocator, checks the answer and hands the tasks to the vehicles.
+
+Latency. With ``[comms] latency > 0`` a decision takes simulated time: the allocator reports the
+sequential message hops of its decision (:attr:`Allocation.hops`; 0 for centralized methods)
+and the dispatcher hands the tasks out ``hops * latency`` seconds after the decision started.
+Meanwhile the deciding vehicles stay idle where they are and the dispatcher takes no other
+decision (events that arrive meanwhile trigger the next one, right after the hand-out). A pair
+whose task closed meanwhile (it expired) is not handed out: that vehicle stays idle and the next
+decision considers it again. The ``decisions`` row is written at the hand-out and counts only
+the pairs handed out; the summary's rounds, messages and comm delay are added up at the
+hand-out too, so they always match the ``decisions`` table (a decision cut short by the end of
+the run is in neither). Tasks are stamped ``assigned_at`` at the hand-out, so the deliberation
+shows in wait times.
 """
 
 from __future__ import annotations
@@ -11,10 +24,12 @@ from __future__ import annotations
 import logging
 import math
 import time
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from dispatch.comms import comm_graph, components
 from dispatch.contracts import Allocation, AllocationProblem
 from dispatch.errors import AllocationError
 from dispatch.tasks import TaskState
@@ -53,6 +68,20 @@ def validate(problem: AllocationProblem, allocation: Allocation) -> None:
         seen_tasks.add(tid)
 
 
+@dataclass
+class _Pending:
+    """A decision taken and validated, waiting for its hand-out (after the comms delay)."""
+
+    problem: AllocationProblem
+    allocation: Allocation
+    tasks: list
+    vehicles: list
+    cost_s: float
+    decide_s: float
+    delay: float
+    components: int
+
+
 class Dispatcher:
     """Owns the wake-up event and the decision step of one simulation."""
 
@@ -64,6 +93,9 @@ class Dispatcher:
         self.decide_seconds = 0.0
         self.rounds = 0
         self.messages = 0
+        self.comm_delay = 0.0  # simulated seconds spent deliberating (hops * latency)
+        self.agent_seconds = 0.0  # sum over decisions of the per-agent critical path
+        self._pending: _Pending | None = None
         self.process = sim.env.process(self._loop())
 
     def notify(self) -> None:
@@ -78,9 +110,15 @@ class Dispatcher:
             yield env.timeout(window)
             self.wake = env.event()
             self.decide()
+            if self._pending is not None:
+                yield env.timeout(self._pending.delay)
+                self._hand_out()
 
     def decide(self) -> None:
-        """One decision over the idle vehicles and the open tasks (nothing if either is empty)."""
+        """One decision over the idle vehicles and the open tasks (nothing if either is empty).
+
+        Without latency the tasks are handed out at once; with it the hand-out waits in
+        ``self._pending`` for the loop to let the simulated deliberation time pass."""
         sim = self.sim
         idle = [v for v in sim.vehicles if not v.busy]
         open_tasks = [t for t in sim.tasks if t.state is TaskState.OPEN]
@@ -97,30 +135,59 @@ class Dispatcher:
         if not servable.any():
             return
         open_tasks = [t for t, ok in zip(open_tasks, servable) if ok]
+        comms = sim.spec.scenario.comms
+        grid = sim.world.grid
+        comm = comm_graph([grid.centre(a.cell) for a in agents], comms.range)
         problem = AllocationProblem(
             time=sim.env.now, agents=agents, tasks=tuple(t.view() for t in open_tasks),
-            cost=np.ascontiguousarray(cost[:, servable]), comm=np.ones((len(idle),) * 2, bool),
+            cost=np.ascontiguousarray(cost[:, servable]), comm=comm,
             rng=sim.alloc_rng, max_rounds=sim.spec.scenario.dispatch.max_rounds,
+            loss=comms.loss, latency=comms.latency, cell_size=grid.cell,
         )
         t1 = time.perf_counter()
         allocation = sim.allocator.allocate(problem)
         decide_s = time.perf_counter() - t1
         validate(problem, allocation)
         self.decide_seconds += decide_s
-        self.rounds += allocation.rounds
-        self.messages += allocation.messages
-        sim.record_decision(self.decisions, problem, allocation, cost_s, decide_s)
-        self.decisions += 1
+        delay = allocation.hops * comms.latency
         conflicted = allocation.conflicted_tasks()
-        by_task = {t.id: t for t in open_tasks}
-        by_agent = {v.id: v for v in idle}
         for t in open_tasks:
             t.offered = True
             t.conflicted = t.conflicted or t.id in conflicted
-        col = {t.id: j for j, t in enumerate(open_tasks)}
-        row = {a.id: i for i, a in enumerate(agents)}
-        for aid, tid in allocation.pairs:
-            sim.assign(by_task[tid], by_agent[aid], float(problem.cost[row[aid], col[tid]]))
+        self._pending = _Pending(problem, allocation, open_tasks, idle, cost_s, decide_s, delay,
+                                 components(comm)[0])
+        if delay <= 0:
+            self._hand_out()
+
+    def _hand_out(self) -> None:
+        """Record the pending decision and give each vehicle its task (see the module doc)."""
+        p, self._pending = self._pending, None
+        if p is None:
+            return
+        sim = self.sim
+        by_task = {t.id: t for t in p.tasks}
+        by_agent = {v.id: v for v in p.vehicles}
+        handed = tuple((a, t) for a, t in p.allocation.pairs
+                       if by_task[t].state is TaskState.OPEN and not by_agent[a].busy)
+        allocation = p.allocation
+        if len(handed) != len(allocation.pairs):
+            log.debug("decision %d: %d pair(s) not handed out (task closed while deciding)",
+                      self.decisions, len(allocation.pairs) - len(handed))
+            allocation = replace(allocation, pairs=handed)
+            self.notify()
+        critical = max(allocation.agent_seconds, default=p.decide_s)
+        self.rounds += allocation.rounds
+        self.messages += allocation.messages
+        self.comm_delay += p.delay
+        self.agent_seconds += critical
+        sim.record_decision(self.decisions, p.problem, allocation, p.cost_s, p.decide_s,
+                            hops=allocation.hops, comm_delay=p.delay, agent_seconds=critical,
+                            components=p.components)
+        self.decisions += 1
+        col = {t.id: j for j, t in enumerate(p.tasks)}
+        row = {a.id: i for i, a in enumerate(p.problem.agents)}
+        for aid, tid in handed:
+            sim.assign(by_task[tid], by_agent[aid], float(p.problem.cost[row[aid], col[tid]]))
 
     def _close_unreachable(self, tasks) -> None:
         """Close tasks no vehicle of the fleet can reach; vehicles never leave their connected

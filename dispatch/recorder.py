@@ -31,6 +31,7 @@ SCHEMAS: dict[str, pa.Schema] = {
         ("first_decision_cost", _F), ("first_decision_seconds", _F), ("realized_travel", _F),
         ("wait_time_mean", _F), ("tasks_expired", _I), ("tasks_unreachable", _I),
         ("tasks_cancelled", _I), ("sim_time", _F),
+        ("comm_delay", _F), ("agent_seconds", _F),
     ]),
     "tasks": pa.schema([
         ("run_id", _S), ("task_id", _I), ("kind", _S), ("x", _F), ("y", _F), ("z", _F),
@@ -46,6 +47,7 @@ SCHEMAS: dict[str, pa.Schema] = {
         ("run_id", _S), ("decision", _I), ("t", _F), ("n_agents", _I), ("n_tasks", _I),
         ("n_assigned", _I), ("rounds", _I), ("messages", _I), ("conflicts", _I),
         ("total_cost", _F), ("cost_seconds", _F), ("decide_seconds", _F),
+        ("hops", _I), ("comm_delay", _F), ("agent_seconds", _F), ("comm_components", _I),
     ]),
     "events": pa.schema([
         ("run_id", _S), ("t", _F), ("event", _S), ("agent_id", _I), ("task_id", _I),
@@ -61,7 +63,8 @@ SCHEMAS: dict[str, pa.Schema] = {
 }
 
 #: Columns that hold wall-clock measurements: they differ between identical runs.
-TIMING_COLUMNS = {"alloc_seconds", "cost_seconds", "decide_seconds", "first_decision_seconds"}
+TIMING_COLUMNS = {"alloc_seconds", "cost_seconds", "decide_seconds", "first_decision_seconds",
+                  "agent_seconds"}
 
 
 class Recorder:

@@ -77,6 +77,19 @@ class DispatchConfig:
 
 
 @dataclass(frozen=True)
+class CommsConfig:
+    """Who can talk at a decision, and what a message costs (see :mod:`dispatch.comms`)."""
+
+    range: float | None = None  # metres; None: unlimited
+    latency: float = 0.0  # simulated seconds per message hop
+    loss: float = 0.0  # probability that one reception of a message is lost, in [0, 1)
+
+    @property
+    def unlimited(self) -> bool:
+        return self.range is None
+
+
+@dataclass(frozen=True)
 class SweepConfig:
     allocator: tuple[str, ...] = ()
     planner: tuple[str, ...] = ()
@@ -103,6 +116,7 @@ class Scenario:
     tasks: TaskConfig = field(default_factory=TaskConfig)
     dispatch: DispatchConfig = field(default_factory=DispatchConfig)
     sweep: SweepConfig = field(default_factory=SweepConfig)
+    comms: CommsConfig = field(default_factory=CommsConfig)
 
     def runs(
         self,
@@ -116,6 +130,8 @@ class Scenario:
         def dim(override, swept, default):
             return (override,) if override is not None else (swept or (default,))
 
+        if seed is not None and seed < 0:
+            raise ScenarioError(self.path, "--seed", f"must be >= 0, got {seed}")
         if agents is not None and agents < 1:
             raise ScenarioError(self.path, "--agents", f"must be >= 1, got {agents}")
         if agents is not None:
@@ -287,8 +303,8 @@ def parse_scenario(data: dict, path: Path, text: str = "") -> Scenario:
     for a, (lo_, hi_, s) in enumerate(zip(obstacles.min_size, obstacles.max_size, size)):
         if lo_ > hi_:
             raise o.fail("min_size", f"entry {a} ({lo_}) is larger than max_size's ({hi_})")
-        if a < 2 and lo_ > s:
-            raise o.fail("min_size", f"entry {a} ({lo_} m) does not fit in the world ({s} m)")
+        if a < 2 and hi_ > s:
+            raise o.fail("max_size", f"entry {a} ({hi_} m) does not fit in the world ({s} m)")
     o.done()
     world = WorldConfig(size=size, cell=cell, obstacles=obstacles)
     _check_obstacles_fit(o, world)
@@ -346,6 +362,17 @@ def parse_scenario(data: dict, path: Path, text: str = "") -> Scenario:
     )
     d.done()
 
+    c = root.table("comms")
+    comms = CommsConfig(
+        range=c.number("range", None, lo=0.0, optional=True),
+        latency=c.number("latency", 0.0, lo=0.0),
+        loss=c.number("loss", 0.0, lo=0.0),
+    )
+    if comms.loss >= 1.0:
+        raise c.fail("loss", f"must be < 1 (a link that drops every message is no link; use "
+                             f"a small range for agents that cannot talk), got {comms.loss!r}")
+    c.done()
+
     s = root.table("sweep")
     sweep = SweepConfig(
         allocator=s.str_list("allocator"),
@@ -358,7 +385,7 @@ def parse_scenario(data: dict, path: Path, text: str = "") -> Scenario:
 
     sc = Scenario(name=name, path=path, text=text, description=description, seed=seed,
                   duration=duration, world=world, fleet=fleet, tasks=tasks, dispatch=disp,
-                  sweep=sweep)
+                  sweep=sweep, comms=comms)
     for n in sweep.agents or (fleet.agents,):
         _check_fits(sc, n)
     return sc

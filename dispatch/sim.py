@@ -186,7 +186,8 @@ class Simulation:
                           task_id=task_id, x=x, y=y, z=z)
 
     def record_decision(self, index: int, problem: AllocationProblem, allocation: Allocation,
-                        cost_s: float, decide_s: float) -> None:
+                        cost_s: float, decide_s: float, *, hops: int = 0, comm_delay: float = 0.0,
+                        agent_seconds: float = math.nan, components: int = 1) -> None:
         for r in allocation.requests:
             self.recorder.add("assignments", decision=index, round=r.round, agent_id=r.agent_id,
                               task_id=r.task_id, cost=r.cost, won=r.won,
@@ -199,7 +200,9 @@ class Simulation:
                           n_assigned=len(allocation.pairs), rounds=allocation.rounds,
                           messages=allocation.messages,
                           conflicts=len(allocation.conflicted_tasks()), total_cost=total,
-                          cost_seconds=cost_s, decide_seconds=decide_s)
+                          cost_seconds=cost_s, decide_seconds=decide_s, hops=hops,
+                          comm_delay=comm_delay, agent_seconds=agent_seconds,
+                          comm_components=components)
 
     # --------------------------------------------------------------- running
     def run(self) -> RunResult:
@@ -269,6 +272,7 @@ def summarize(sim: Simulation) -> dict:
         wait_time_mean=float(np.mean(waits)) if waits else math.nan,
         tasks_expired=count[TaskState.EXPIRED], tasks_unreachable=count[TaskState.UNREACHABLE],
         tasks_cancelled=count[TaskState.CANCELLED], sim_time=float(sim.env.now),
+        comm_delay=d.comm_delay, agent_seconds=d.agent_seconds,
     )
 
 
