@@ -1,9 +1,10 @@
-"""The ``dispatch`` command line: run, validate, plugins."""
+"""The ``dispatch`` command line: run, validate, plugins, sweep, report, render."""
 
 from __future__ import annotations
 
 import argparse
 import logging
+import os
 import sys
 import time
 from pathlib import Path
@@ -30,6 +31,12 @@ def _parser() -> argparse.ArgumentParser:
     v.add_argument("scenario", type=Path)
 
     sub.add_parser("plugins", help="list installed allocators and planners")
+    t = sub.add_parser("train", help="train a learned allocator (e.g. `dispatch train magnnet "
+                       "--agents 8`); options after the name go to its trainer (--help)",
+                       add_help=False)
+    t.add_argument("trainer", help="trainer name (entry-point group dispatch.trainers)")
+    t.add_argument("trainer_args", nargs=argparse.REMAINDER)
+    _add_analysis_parsers(sub)
     return p
 
 
@@ -42,7 +49,8 @@ def main(argv: list[str] | None = None) -> int:
     console = Console()
     err = Console(stderr=True)
     try:
-        return {"run": _run, "validate": _validate, "plugins": _plugins}[args.command](args, console)
+        return {"run": _run, "validate": _validate, "plugins": _plugins, "sweep": _sweep,
+                "report": _report, "render": _render, "train": _train}[args.command](args, console)
     except DispatchError as e:
         err.print(f"[bold red]error:[/] {e}", highlight=False)
         return 2
@@ -97,6 +105,27 @@ def _validate(args, console) -> int:
     return 0
 
 
+TRAINERS = {"magnnet": "allocators.magnnet.train"}  # fallback for a never-installed tree
+
+
+def _train(args, console) -> int:
+    """Hand the arguments to a trainer module (``main(argv)``) found by entry point."""
+    import importlib
+    from importlib.metadata import entry_points
+
+    from dispatch.errors import PluginError
+
+    found = dict(TRAINERS)
+    found.update({ep.name: ep.value for ep in entry_points(group="dispatch.trainers")})
+    if args.trainer not in found:
+        raise PluginError(f"unknown trainer {args.trainer!r}; installed: {', '.join(found)}")
+    try:
+        module = importlib.import_module(found[args.trainer].partition(":")[0])
+    except ImportError as e:
+        raise PluginError(f"trainer {args.trainer!r} failed to load: {e}") from e
+    return int(module.main(args.trainer_args) or 0)
+
+
 def _plugins(args, console) -> int:
     from rich.table import Table
 
@@ -109,6 +138,127 @@ def _plugins(args, console) -> int:
         for row in describe(kind):
             t.add_row(*row)
         console.print(t)
+    return 0
+
+
+# ----------------------------------------------------------------------------- sweep, report,
+# render (the work is in dispatch.runner and in the analysis package, imported when used)
+
+
+def _add_analysis_parsers(sub) -> None:
+    s = sub.add_parser("sweep", help="run a scenario's sweep on a process pool or Ray; "
+                       "resumable (complete runs are skipped)")
+    s.add_argument("scenario", type=Path)
+    s.add_argument("--out", type=Path, help="output folder (default: runs/<scenario name>/)")
+    s.add_argument("--workers", type=int, metavar="K",
+                   help="worker processes (or local Ray CPUs); default: the CPU count")
+    s.add_argument("--ray", nargs="?", const="", metavar="ADDRESS",
+                   help="run the runs as Ray tasks: on a local Ray, or on the cluster at "
+                        "ADDRESS (e.g. auto or ray://host:10001)")
+    s.add_argument("--force", action="store_true", help="redo runs that are already complete")
+    s.add_argument("--allocator", help="allocator name (overrides the file and its sweep)")
+    s.add_argument("--planner", help="planner name (overrides the file and its sweep)")
+    s.add_argument("--agents", type=int, help="fleet size N (overrides the file and its sweep)")
+    s.add_argument("--seed", type=int, help="seed (overrides the file and its sweep)")
+
+    r = sub.add_parser("report", help="tables and plots (Markdown or HTML) of run or sweep "
+                       "folders")
+    r.add_argument("runs", type=Path, nargs="+", metavar="RUNS",
+                   help="run folders, sweep folders, or folders holding them")
+    r.add_argument("--out", type=Path, help="report folder (default: RUNS/report/)")
+    r.add_argument("--format", choices=("md", "html"), default="md")
+    r.add_argument("--run", metavar="RUN_ID", help="the run shown in detail (timeline, 3D)")
+
+    g = sub.add_parser("render", help="draw a run as an animated GIF from PyBullet images")
+    g.add_argument("run", type=Path, metavar="RUN", help="a run folder (or a sweep folder)")
+    g.add_argument("--run-id", help="which run of a sweep folder (default: as the report)")
+    g.add_argument("--out", type=Path, help="output .gif (or .mp4; default: RUN/<run id>.gif)")
+    g.add_argument("--fps", type=int, default=10)
+    g.add_argument("--seconds", type=float, help="length of the animation (default: the "
+                   "run's simulated time, at most 12 s)")
+    g.add_argument("--size", default="480x360", help="frame size WIDTHxHEIGHT")
+
+
+def _sweep(args, console) -> int:
+    from collections import Counter
+
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from dispatch.runner import default_out, foreign_runs, sweep
+    from dispatch.tables import render
+
+    if args.workers is not None and args.workers < 1:
+        raise DispatchError(f"--workers must be >= 1, got {args.workers}")
+    sc, specs = _specs(args)
+    out = args.out or default_out(specs[0])
+    counts: Counter = Counter()
+    where = (f"Ray ({args.ray or 'local'})" if args.ray is not None
+             else f"{args.workers or os.cpu_count()} worker process(es)")
+    started = time.perf_counter()
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                  TextColumn("{task.fields[tally]}"), TimeElapsedColumn(), console=console,
+                  transient=True) as progress:
+        bar = progress.add_task(sc.name, total=len(specs), tally="")
+
+        def done(o):
+            counts[o.status] += 1
+            progress.update(bar, advance=1, tally=", ".join(f"{v} {k}" for k, v in
+                                                            sorted(counts.items())))
+
+        outcomes = sweep(specs, out, workers=args.workers, ray=args.ray is not None,
+                         address=args.ray or None, force=args.force, on_done=done)
+    summaries = [o.summary for o in outcomes if o.summary is not None]
+    if summaries:
+        render(summaries, console)
+    failed = [o for o in outcomes if o.status == "failed"]
+    for o in failed:
+        console.print(f"[red]failed[/]: {o.run_id}: {o.error}", highlight=False)
+    console.print(f"{len(specs)} run(s): {counts['done']} run, {counts['skipped']} already "
+                  f"complete, {len(failed)} failed; {time.perf_counter() - started:.1f} s on "
+                  f"{where}; Parquet written to {out}/", highlight=False)
+    if failed:
+        console.print(f"errors: {out}/errors/ (run the sweep again to retry the failed runs)",
+                      highlight=False)
+    foreign = foreign_runs(out, specs)
+    if foreign:
+        console.print(f"[yellow]note[/]: {out}/ also holds {len(foreign)} run(s) of another "
+                      f"scenario text (e.g. {foreign[0]}); reports of the folder include them",
+                      highlight=False)
+    return 1 if failed else 0
+
+
+def _analysis_call(fn, *args, **kwargs):
+    """Call into the analysis package; its input errors become one clean DispatchError."""
+    from analysis.io import NoResultsError
+
+    try:
+        return fn(*args, **kwargs)
+    except (NoResultsError, KeyError, ValueError) as e:
+        raise DispatchError(e.args[0] if e.args else str(e)) from e
+
+
+def _report(args, console) -> int:
+    from analysis.report import write_report
+
+    out = args.out or args.runs[0] / "report"
+    files = _analysis_call(write_report, list(args.runs), out, fmt=args.format, run_id=args.run)
+    console.print(f"report: {files[0]}", highlight=False)
+    console.print("files: " + ", ".join(f.name for f in files[1:]), highlight=False)
+    return 0
+
+
+def _render(args, console) -> int:
+    from analysis.render import render_run
+
+    try:
+        w, h = (int(v) for v in args.size.lower().split("x"))
+    except ValueError:
+        raise DispatchError(f"--size must be WIDTHxHEIGHT, got {args.size!r}") from None
+    if args.fps < 1 or w < 16 or h < 16:
+        raise DispatchError("--fps must be >= 1 and --size at least 16x16")
+    path = _analysis_call(render_run, args.run, args.out, run_id=args.run_id, fps=args.fps,
+                          seconds=args.seconds, size=(w, h))
+    console.print(f"animation: {path}", highlight=False)
     return 0
 
 

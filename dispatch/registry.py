@@ -23,8 +23,15 @@ _FALLBACK = {
         "hungarian": "allocators.hungarian:HungarianAllocator",
         "greedy": "allocators.greedy:GreedyAllocator",
         "random": "allocators.randomized:RandomAllocator",
+        "auction": "allocators.auction:AuctionAllocator",
+        "magnnet": "allocators.magnnet.allocator:MagnnetAllocator",
+        "magnnet_edge": "allocators.magnnet.allocator:MagnnetEdgeAllocator",
     },
-    "planner": {"astar": "planners.astar:AStarPlanner"},
+    "planner": {
+        "astar": "planners.astar:AStarPlanner",
+        "rrt_star": "planners.rrt_star:RRTStarPlanner",
+        "rstar": "planners.rstar:RStarPlanner",
+    },
 }
 
 

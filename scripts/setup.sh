@@ -11,9 +11,12 @@ stamp=.venv/.installed-$(sha1sum pyproject.toml | cut -c1-16)
 if [ ! -f "$stamp" ]; then
     .venv/bin/python -m pip install -q --upgrade pip 2>&1 | grep -v "is ignored" || true
     # Build-backend chatter about editable installs is noise for a newcomer; errors still show.
-    PYTHONWARNINGS=ignore .venv/bin/python -m pip install -q -e ".[test]" 2>&1 \
+    # torch first, pinned: the magnnet extra pins the same version, so nothing below resolves
+    # torch again (another version would pull gigabytes of CUDA libraries).
+    .venv/bin/python -m pip install -q "torch==2.13.0" 2>&1 | grep -vE "is ignored|^\s*$" || true
+    PYTHONWARNINGS=ignore .venv/bin/python -m pip install -q -e ".[test,magnnet]" 2>&1 \
         | grep -vE "is ignored|^\s*$" || true
-    .venv/bin/python -c "import dispatch, simpy, pybullet, scipy, pyarrow" >/dev/null
+    .venv/bin/python -c "import dispatch, simpy, pybullet, scipy, pyarrow, torch, pettingzoo" >/dev/null
     rm -f .venv/.installed-*
     touch "$stamp"
 fi

@@ -254,12 +254,12 @@ def test_shipped_scenario_validates(path, capsys):
 
 def test_paper_static_sweep_expansion():
     sc = load_scenario(ROOT / "scenarios" / "paper_static.toml")
-    assert sc.sweep.allocator == ("hungarian", "greedy", "random")
+    assert sc.sweep.allocator == ("hungarian", "magnnet", "magnnet_edge", "greedy", "random")
     assert sc.sweep.agents == (4, 8, 12, 20)
     n_seeds = len(sc.sweep.seed)
     assert n_seeds >= 1
     runs = sc.runs()
-    assert len(runs) == 3 * 4 * n_seeds
+    assert len(runs) == 5 * 4 * n_seeds
     assert len({r.run_id for r in runs}) == len(runs)
     assert {(r.allocator, r.agents, r.seed) for r in runs} == {
         (a, n, s) for a in sc.sweep.allocator for n in sc.sweep.agents for s in sc.sweep.seed
@@ -272,12 +272,12 @@ def test_paper_static_sweep_expansion():
 def test_overrides_replace_sweep_dimension():
     sc = load_scenario(ROOT / "scenarios" / "paper_static.toml")
     n_seeds = len(sc.sweep.seed)
-    assert len(sc.runs(agents=5)) == 3 * n_seeds
+    assert len(sc.runs(agents=5)) == len(sc.sweep.allocator) * n_seeds
     assert {r.agents for r in sc.runs(agents=5)} == {5}
     only_greedy = sc.runs(allocator="greedy")
     assert len(only_greedy) == 4 * n_seeds and {r.allocator for r in only_greedy} == {"greedy"}
     one_seed = sc.runs(seed=77)
-    assert len(one_seed) == 3 * 4 and {r.seed for r in one_seed} == {77}
+    assert len(one_seed) == len(sc.sweep.allocator) * 4 and {r.seed for r in one_seed} == {77}
     single = sc.runs(allocator="random", planner="astar", agents=3, seed=1)
     assert [(r.allocator, r.planner, r.agents, r.seed) for r in single] == [
         ("random", "astar", 3, 1)]

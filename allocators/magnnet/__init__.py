@@ -1,0 +1,17 @@
+"""MAGNNET (Ratnabala et al. 2025): decentralized task allocation with a GNN policy per agent,
+trained with PPO under centralized training / decentralized execution.
+
+Modules, in reading order:
+
+* :mod:`~allocators.magnnet.rules` — the allocation game and the reward shaping;
+* :mod:`~allocators.magnnet.problems` — training and evaluation instances, drawn exactly as
+  real runs draw them (world, fleet, tasks, A* costs), cached;
+* :mod:`~allocators.magnnet.game` — the game for one instance (numpy) and batched (torch);
+* :mod:`~allocators.magnnet.env` — the PettingZoo ``ParallelEnv``;
+* :mod:`~allocators.magnnet.model` — the paper's network and the size-agnostic edge scorer;
+* :mod:`~allocators.magnnet.ppo` — PPO (CTDE), GAE, the imitation warm start, checkpoints;
+* :mod:`~allocators.magnnet.train` — ``dispatch train magnnet``;
+* :mod:`~allocators.magnnet.allocator` — the ``magnnet`` / ``magnnet_edge`` plugins.
+
+torch is imported by the modules that need it, never by the kernel.
+"""

@@ -1,0 +1,127 @@
+"""The ``magnnet`` allocator plugin: trained MAGNNET policies, executed decentralized.
+
+Each deciding agent builds the observation of :mod:`allocators.magnnet.game` from what it knows
+(its own costs, task positions and which tasks it believes open, and what its communication
+neighbours broadcast), runs the graph network over its neighbourhood and takes the most likely
+action of its policy: reject, or request one task. Rounds and conflicts are the shared ones of
+:class:`~dispatch.decentralized.DecentralizedAllocator`. For speed every deciding agent of a
+call is evaluated in one batched pass over the problem's graph; the network only mixes
+information along communication links (two hops), so each agent's action is the one it would
+compute alone from its own neighbourhood (tests check it).
+
+Parameters (``[dispatch.allocator_params]``):
+    variant: ``"paper"`` (the paper's model, one checkpoint per size N = M), ``"edge"`` (the
+        size-agnostic edge-scoring model, any N and M) or ``"auto"`` (default: the paper's
+        model when a checkpoint for the problem's N x M ships, else the edge model).
+    checkpoint: path of a checkpoint to use instead of the shipped ones.
+
+Checkpoints ship in ``allocators/magnnet/checkpoints`` (``paper_n{N}.pt``, ``edge.pt``).
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from dispatch.contracts import AllocationProblem
+from dispatch.decentralized import DecentralizedAllocator
+from dispatch.errors import AllocationError
+
+CHECKPOINTS = Path(__file__).resolve().parent / "checkpoints"
+#: Positions are divided by the size of the world the shipped models were trained in.
+TRAIN_WORLD = np.array([50.0, 50.0, 30.0], np.float32)
+
+
+@lru_cache(maxsize=16)
+def _load(path: str):
+    import torch
+
+    from allocators.magnnet.ppo import load_checkpoint
+
+    torch.set_num_threads(1)
+    model, ck = load_checkpoint(path)
+    size = np.asarray(ck.get("extra", {}).get("world_size", TRAIN_WORLD), np.float32)
+    return model, size
+
+
+def shipped(variant: str, n: int | None = None) -> Path:
+    return CHECKPOINTS / (f"paper_n{n}.pt" if variant == "paper" else "edge.pt")
+
+
+class MagnnetAllocator(DecentralizedAllocator):
+    """MAGNNET (Ratnabala et al. 2025): GNN + MLP policy per agent, trained with CTDE PPO."""
+
+    name = "magnnet"
+
+    def __init__(self, variant: str = "auto", checkpoint: str | None = None) -> None:
+        if variant not in ("auto", "paper", "edge"):
+            raise TypeError(f"variant must be 'auto', 'paper' or 'edge', got {variant!r}")
+        self.variant = variant
+        self.checkpoint = checkpoint
+
+    def model_for(self, n: int, m: int):
+        if self.checkpoint is not None:
+            path = Path(self.checkpoint)
+        elif self.variant == "edge" or (self.variant == "auto" and
+                                        (n != m or not shipped("paper", n).exists())):
+            path = shipped("edge")
+        else:
+            path = shipped("paper", n)
+        if not path.exists():
+            raise AllocationError(f"magnnet: no checkpoint at {path} (variant {self.variant!r}, "
+                                  f"N={n}, M={m}); train one with `dispatch train magnnet`")
+        model, size = _load(str(path))
+        if model.variant == "paper" and (model.n_agents, model.n_tasks) != (n, m):
+            raise AllocationError(
+                f"magnnet: checkpoint {path.name} is for N={model.n_agents}, M={model.n_tasks}, "
+                f"the problem is N={n}, M={m}; use variant='edge' for other sizes")
+        return model, size
+
+    def choose(self, problem: AllocationProblem, agents: np.ndarray, open_tasks: np.ndarray,
+               round_: int) -> np.ndarray:
+        import torch
+
+        n, m = problem.cost.shape
+        model, size = self.model_for(n, m)
+        obs = observe(problem, agents, open_tasks, size)
+        with torch.no_grad():
+            logits, _ = model(obs)
+        act = logits[0].argmax(-1).numpy()[agents]
+        return np.where(act > 0, act - 1, -1)
+
+
+class MagnnetEdgeAllocator(MagnnetAllocator):
+    """MAGNNET, size-agnostic variant: scores every agent-task edge; one model for any N, M."""
+
+    name = "magnnet_edge"
+
+    def __init__(self, checkpoint: str | None = None) -> None:
+        super().__init__("edge", checkpoint)
+
+
+def observe(problem: AllocationProblem, agents: np.ndarray, open_tasks: np.ndarray,
+            world_size: np.ndarray) -> dict:
+    """The batched observation (batch of one) of the deciding ``agents`` that believe
+    ``open_tasks`` open (see :func:`allocators.magnnet.game.global_obs`)."""
+    import torch
+
+    from allocators.magnnet import rules
+
+    n, m = problem.cost.shape
+    cs = problem.cell_size
+    deciding = np.zeros(n, bool)
+    deciding[agents] = True
+    avail = problem.feasible & open_tasks[None, :] & deciding[:, None]
+    apos = (np.array([a.cell for a in problem.agents], np.float32).reshape(n, 3) + 0.5) * cs
+    tpos = (np.array([t.cell for t in problem.tasks], np.float32).reshape(m, 3) + 0.5) * cs
+    flies = np.array([a.flies for a in problem.agents], np.float32)
+    agent_f = np.concatenate([deciding[:, None].astype(np.float32), flies[:, None],
+                              apos / world_size], 1)
+    cost = np.where(avail, np.minimum(problem.cost / rules.COST_SCALE, rules.COST_CAP),
+                    rules.COST_CAP).astype(np.float32)
+    task_f = np.concatenate([open_tasks[:, None].astype(np.float32), tpos / world_size], 1)
+    t = lambda x: torch.from_numpy(np.ascontiguousarray(x))[None]  # noqa: E731
+    return {"agents": t(agent_f), "cost": t(cost), "available": t(avail),
+            "tasks": t(task_f), "adjacency": t(problem.comm.astype(np.float32))}

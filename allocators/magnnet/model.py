@@ -1,0 +1,272 @@
+"""MAGNNET's networks, as Section III of the paper describes them, plus our size-agnostic one.
+
+Inputs are the observation tensors of :mod:`allocators.magnnet.game`, batched:
+``agents (B, N, 5)`` = ``[status, flies, x, y, z]``, ``cost (B, N, M)`` (scaled, capped),
+``available (B, N, M)``, ``tasks (B, M, 4)`` = ``[open, x, y, z]`` and ``adjacency (B, N, N)``
+(communication links, diagonal included).
+
+The graph is heterogeneous: agent nodes, task nodes, agent-task edges (every pair; the edge
+carries the pair's scaled cost and availability) and agent-agent edges (the communication
+graph). :class:`HeteroGraphConv` is one graph-convolution layer over it in dense batched form
+(many tiny graphs of equal size at once: one batched matrix product per edge type instead of
+scatter operations). Messages flow task -> agent and agent -> agent only; task nodes are
+updated from their own state. So after two layers an agent's embedding depends on its own
+features, every task, and the agents within two communication hops, and nothing else: that is
+what makes execution decentralized (each agent can compute its own embedding from what its
+neighbourhood sends it; a test checks it).
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from allocators.magnnet import rules
+
+AGENT_F = 5
+TASK_F = 4
+
+
+class HeteroGraphConv(nn.Module):
+    r"""One graph convolution over agent and task nodes.
+
+    .. math::
+        h_i' = \mathrm{ReLU}\Big(W_s h_i + \frac{1}{|\mathcal N(i)|}\sum_{k \in \mathcal N(i)}
+               W_a h_k + \frac1M \sum_j W_t [g_j \,\|\, e_{ij}] + b\Big), \qquad
+        g_j' = \mathrm{ReLU}(W_g g_j + b_g)
+
+    with :math:`\mathcal N(i)` the communication neighbours of agent ``i`` (itself included).
+
+    Args:
+        agent_in, task_in, edge_in: feature sizes of agent nodes, task nodes, agent-task edges.
+        out: output size of both node types (default in MAGNNET: 6).
+
+    Shapes:
+        agents ``(B, N, agent_in)``, tasks ``(B, M, task_in)``, edges ``(B, N, M, edge_in)``,
+        adjacency ``(B, N, N)`` -> ``(B, N, out)``, ``(B, M, out)``.
+    """
+
+    def __init__(self, agent_in: int, task_in: int, edge_in: int, out: int) -> None:
+        super().__init__()
+        self.self_lin = nn.Linear(agent_in, out)
+        self.nb_lin = nn.Linear(agent_in, out, bias=False)
+        self.task_lin = nn.Linear(task_in + edge_in, out, bias=False)
+        self.task_self = nn.Linear(task_in, out)
+
+    def reset_parameters(self) -> None:
+        for m in (self.self_lin, self.nb_lin, self.task_lin, self.task_self):
+            m.reset_parameters()
+
+    def forward(self, h, g, e, adj):
+        deg = adj.sum(-1, keepdim=True).clamp(min=1.0)
+        nb = torch.bmm(adj, self.nb_lin(h)) / deg
+        m = g.shape[1]
+        ge = torch.cat([g[:, None].expand(-1, h.shape[1], -1, -1), e], -1)
+        tk = self.task_lin(ge).sum(2) / max(m, 1)
+        return torch.relu(self.self_lin(h) + nb + tk), torch.relu(self.task_self(g))
+
+
+def _edges(obs):
+    return torch.stack([obs["cost"], obs["available"].float()], -1)
+
+
+def _mask(logits_tasks, reject, available):
+    logits = torch.cat([reject, logits_tasks], -1)
+    ok = torch.cat([torch.ones_like(available[..., :1], dtype=torch.bool),
+                    available.bool()], -1)
+    return logits.masked_fill(~ok, -1e9)
+
+
+class MagnnetPolicy(nn.Module):
+    """The paper's model for ``N`` agents and ``M`` tasks.
+
+    Two :class:`HeteroGraphConv` layers of ``hidden`` units (6) give each agent an embedding
+    ``z_i``; the actor is an MLP over ``[status, M costs, z_i]`` (input ``M + 7``) with one
+    hidden layer of 128 and a softmax over ``{reject, task 1 .. task M}``; the centralized
+    critic is an MLP (128 hidden) over all embeddings and task states, used in training only.
+    """
+
+    variant = "paper"
+
+    def __init__(self, n_agents: int, n_tasks: int, hidden: int = 6, mlp: int = 128) -> None:
+        super().__init__()
+        self.n_agents, self.n_tasks, self.hidden, self.mlp = n_agents, n_tasks, hidden, mlp
+        self.gnn = nn.ModuleList([
+            HeteroGraphConv(AGENT_F + n_tasks, TASK_F, 2, hidden),
+            HeteroGraphConv(hidden, hidden, 2, hidden),
+        ])
+        self.actor = nn.Sequential(nn.Linear(n_tasks + 1 + hidden, mlp), nn.ReLU(),
+                                   nn.Linear(mlp, n_tasks + 1))
+        self.critic = nn.Sequential(nn.Linear(n_agents * hidden + n_tasks * TASK_F, mlp),
+                                    nn.ReLU(), nn.Linear(mlp, 1))
+
+    def config(self) -> dict:
+        return {"variant": self.variant, "n_agents": self.n_agents, "n_tasks": self.n_tasks,
+                "hidden": self.hidden, "mlp": self.mlp}
+
+    def embed(self, obs):
+        h = torch.cat([obs["agents"], obs["cost"]], -1)
+        g, e, adj = obs["tasks"], _edges(obs), obs["adjacency"]
+        for layer in self.gnn:
+            h, g = layer(h, g, e, adj)
+        return h, g
+
+    def forward(self, obs):
+        """Masked action logits ``(B, N, M + 1)`` and the embeddings ``(B, N, hidden)``."""
+        z, _ = self.embed(obs)
+        x = torch.cat([obs["agents"][..., :1], obs["cost"], z], -1)
+        out = self.actor(x)
+        return _mask(out[..., 1:], out[..., :1], obs["available"]), z
+
+    def value(self, obs, z):
+        b = z.shape[0]
+        return self.critic(torch.cat([z.reshape(b, -1), obs["tasks"].reshape(b, -1)], -1))[:, 0]
+
+
+class EdgePolicy(nn.Module):
+    """Size-agnostic MAGNNET: one score per agent-task edge, so one model serves any N and M.
+
+    The same two graph-convolution layers (``hidden`` units) embed agents and tasks, with agent
+    node features ``[status, flies, x, y, z, own min cost, own mean cost]`` instead of a cost
+    vector of length M. Each available edge ``(i, j)`` is scored by an MLP over ``z_i``,
+    ``g_j`` and edge features that agent ``i`` computes from its own costs and those its
+    one-hop neighbours broadcast (see :func:`edge_features`); a second MLP over ``z_i`` scores
+    rejecting. A softmax over ``{reject} + edges`` is the policy. The critic pools embeddings.
+    """
+
+    variant = "edge"
+    EDGE_F = 9
+
+    def __init__(self, hidden: int = 16, mlp: int = 64) -> None:
+        super().__init__()
+        self.hidden, self.mlp = hidden, mlp
+        self.gnn = nn.ModuleList([
+            HeteroGraphConv(AGENT_F + 2, TASK_F, 2, hidden),
+            HeteroGraphConv(hidden, hidden, 2, hidden),
+        ])
+        self.scorer = nn.Sequential(nn.Linear(2 * hidden + self.EDGE_F, mlp), nn.ReLU(),
+                                    nn.Linear(mlp, mlp), nn.ReLU(), nn.Linear(mlp, 1))
+        self.rejecter = nn.Sequential(nn.Linear(hidden + AGENT_F + 2, mlp), nn.ReLU(),
+                                      nn.Linear(mlp, 1))
+        self.critic = nn.Sequential(nn.Linear(3 * hidden + 2, mlp), nn.ReLU(), nn.Linear(mlp, 1))
+
+    def config(self) -> dict:
+        return {"variant": self.variant, "hidden": self.hidden, "mlp": self.mlp}
+
+    def embed(self, obs):
+        cost, avail = obs["cost"], obs["available"].bool()
+        x = torch.cat([obs["agents"], _row_stats(cost, avail)], -1)
+        h, g, e, adj = x, obs["tasks"], _edges(obs), obs["adjacency"]
+        for layer in self.gnn:
+            h, g = layer(h, g, e, adj)
+        return h, g, x
+
+    def forward(self, obs):
+        z, g, x = self.embed(obs)
+        n, m = z.shape[1], g.shape[1]
+        f = edge_features(obs)
+        inp = torch.cat([z[:, :, None].expand(-1, -1, m, -1),
+                         g[:, None].expand(-1, n, -1, -1), f], -1)
+        scores = self.scorer(inp)[..., 0]
+        reject = self.rejecter(torch.cat([z, x], -1))
+        return _mask(scores, reject, obs["available"]), z
+
+    def value(self, obs, z):
+        _, g, _ = self.embed(obs)
+        pooled = torch.cat([z.mean(1), z.amax(1), g.mean(1),
+                            obs["agents"][..., 0].mean(1, keepdim=True),
+                            obs["tasks"][..., 0].mean(1, keepdim=True)], -1)
+        return self.critic(pooled)[:, 0]
+
+
+def _row_stats(cost, avail):
+    cap = rules.COST_CAP
+    any_ = avail.any(-1, keepdim=True)
+    mn = torch.where(avail, cost, torch.full_like(cost, cap)).amin(-1, keepdim=True)
+    mean = (torch.where(avail, cost, torch.zeros_like(cost)).sum(-1, keepdim=True)
+            / avail.sum(-1, keepdim=True).clamp(min=1))
+    return torch.cat([torch.where(any_, mn, cap), torch.where(any_, mean, cap)], -1)
+
+
+def edge_features(obs) -> torch.Tensor:
+    """Per edge ``(i, j)``, from agent ``i``'s costs and its one-hop neighbours' broadcasts:
+
+    0. ``c_ij``; 1. ``c_ij - min_j' c_ij'`` (how far ``j`` is from ``i``'s best);
+    2. ``c_ij - min_k c_kj`` over deciding neighbours ``k != i`` (negative: ``i`` is cheapest);
+    3. ``min_k (c_kj - min_j' c_kj')`` over those neighbours cheaper than ``i`` for ``j`` (0:
+       ``j`` is the best task of a cheaper neighbour); 4. how many neighbours are cheaper for
+       ``j`` (/10); 5. how many deciding neighbours have ``j`` as their best task (/10);
+    6. ``i``'s regret (second-best minus best cost); 7. open tasks per deciding neighbour;
+    8. whether ``(i, j)`` is in the optimal assignment that ``i`` computes over the costs it
+    knows: its own and its deciding one-hop neighbours' (:func:`local_assignment`).
+    Shape ``(B, N, M, 9)``; costs in the scaled units of the observations.
+    """
+    cap = rules.COST_CAP
+    cost, avail = obs["cost"], obs["available"].bool()
+    adj = obs["adjacency"].bool()
+    n = cost.shape[1]
+    status = obs["agents"][..., 0] > 0.5
+    eye = torch.eye(n, dtype=torch.bool)
+    nb = adj & ~eye & status[:, None, :]  # (B, i, k): deciding neighbours k of i
+    c = torch.where(avail, cost, torch.full_like(cost, cap))
+    rowmin = c.amin(-1, keepdim=True)
+    two = torch.topk(c, min(2, c.shape[-1]), dim=-1, largest=False).values
+    regret = (two[..., -1:] - two[..., :1]) if c.shape[-1] > 1 else torch.zeros_like(rowmin)
+    # neighbour costs as seen by i: (B, i, k, j)
+    ck = torch.where(nb[..., None], c[:, None], torch.full_like(c[:, None], cap))
+    colmin = ck.amin(2)
+    cheaper = (ck < c[:, :, None]) & nb[..., None]
+    slack = (c - rowmin)[:, None]  # (B, 1, k, j): how far j is from k's best
+    slack_cheaper = torch.where(cheaper, slack.expand_as(ck), torch.full_like(ck, cap)).amin(2)
+    is_best = (c <= rowmin + 1e-6) & avail  # (B, k, j)
+    best_count = (nb[..., None] & is_best[:, None]).sum(2).float()
+    n_open = obs["tasks"][..., 0].sum(-1)[:, None, None]
+    n_dec = (nb.sum(-1).float() + 1.0)[..., None]
+    f = torch.stack([
+        c, c - rowmin, c - colmin, slack_cheaper, cheaper.sum(2).float() / 10.0,
+        best_count / 10.0, regret.expand_as(c), (n_open / n_dec).expand_as(c) / 10.0,
+        local_assignment(obs).float(),
+    ], -1)
+    return f
+
+
+def local_assignment(obs) -> torch.Tensor:
+    """``(B, N, M)`` bool: for each deciding agent ``i``, the pairs ``(i, j)`` of an optimal
+    assignment of the tasks ``i`` believes open to ``i`` and its deciding one-hop neighbours,
+    computed from their costs alone (what reaches ``i``). On a complete graph every agent finds
+    the same (global) optimum. Agents with the same neighbourhood share one solve."""
+    import numpy as np
+
+    from allocators.hungarian import optimal_pairs
+
+    cost = obs["cost"].detach().numpy()
+    avail = obs["available"].bool().numpy()
+    adj = obs["adjacency"].detach().numpy() > 0.5
+    status = obs["agents"][..., 0].detach().numpy() > 0.5
+    B, n, m = cost.shape
+    out = np.zeros((B, n, m), bool)
+    for b in range(B):
+        seen: dict[bytes, dict[int, int]] = {}
+        for i in np.flatnonzero(status[b]):
+            rows = np.flatnonzero(adj[b, i] & status[b])
+            rows = np.union1d(rows, [i])
+            key = rows.tobytes()
+            pairs = seen.get(key)
+            if pairs is None:
+                c = np.where(avail[b][rows], cost[b][rows], np.inf)
+                pairs = {int(rows[a]): t for a, t in optimal_pairs(c)}
+                seen[key] = pairs
+            if i in pairs:
+                out[b, i, pairs[i]] = True
+    return torch.from_numpy(out)
+
+
+def build(config: dict) -> nn.Module:
+    """A model from its :meth:`config` (what a checkpoint stores beside the weights)."""
+    cfg = dict(config)
+    variant = cfg.pop("variant")
+    if variant == "paper":
+        return MagnnetPolicy(**cfg)
+    if variant == "edge":
+        return EdgePolicy(**cfg)
+    raise ValueError(f"unknown MAGNNET variant {variant!r}")

@@ -1,0 +1,119 @@
+"""``dispatch train magnnet``: train a MAGNNET model, log to Parquet, draw Figures 3 and 4.
+
+Output folder: ``model.pt`` (checkpoint, loadable with ``weights_only=True``), ``log.parquet``
+(one row per update: ``charts/...`` and ``losses/...`` scalars), ``reward.png`` (the paper's
+Figure 3: mean reward against training steps) and ``entropy.png`` (Figure 4).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import time
+from pathlib import Path
+
+log = logging.getLogger(__name__)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    from allocators.magnnet.ppo import PPOConfig
+
+    d = PPOConfig()
+    p.add_argument("--agents", type=int, default=8, help="N (= M tasks) of the paper model")
+    p.add_argument("--variant", choices=["paper", "edge"], default="paper")
+    p.add_argument("--steps", type=int, default=d.total_steps, help="PPO environment steps")
+    p.add_argument("--bc-updates", type=int, default=200,
+                   help="imitation warm-start updates before PPO (0: pure PPO as in the paper)")
+    p.add_argument("--lr", type=float, default=d.lr)
+    p.add_argument("--envs", type=int, default=d.n_envs)
+    p.add_argument("--seed", type=int, default=d.seed)
+    p.add_argument("--pool", type=int, default=600, help="training instances (cached A* costs)")
+    p.add_argument("--out", type=Path, default=None, help="output folder")
+
+
+def run(args, console=None) -> int:
+    import numpy as np
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+    import torch
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from allocators.magnnet.model import EdgePolicy, MagnnetPolicy
+    from allocators.magnnet.ppo import PPOConfig, save_checkpoint, train
+    from allocators.magnnet.problems import load_pool
+
+    torch.set_num_threads(1)
+    n = args.agents
+    out = args.out or Path("runs") / "train" / f"magnnet_{args.variant}_n{n}"
+    out.mkdir(parents=True, exist_ok=True)
+    cfg = PPOConfig(lr=args.lr, total_steps=args.steps, bc_updates=args.bc_updates,
+                    n_envs=args.envs, seed=args.seed)
+    pool_n = max(20, n)
+    pool = load_pool(pool_n, args.pool, "train", workers=2)
+    if args.variant == "paper":
+        model, sizes = MagnnetPolicy(n, n), None
+    else:
+        model, sizes = EdgePolicy(), [(k, k) for k in (4, 8, 12, 20) if k <= pool_n]
+    started = time.perf_counter()
+    total = cfg.bc_updates + cfg.total_steps // (max(1, cfg.batch_size // cfg.n_envs)
+                                                 * cfg.n_envs)
+    with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}"
+                  "/{task.total}"), TimeElapsedColumn(), console=console) as progress:
+        bar = progress.add_task(f"magnnet {args.variant} N={n}", total=total)
+
+        def on_update(row):
+            desc = (f"{row['phase']} loss {row['losses/imitation']:.3f}" if row["phase"] == "bc"
+                    else f"ppo return {row['charts/episode_return']:.2f} "
+                         f"gap {row['charts/gap']:.3f}")
+            progress.update(bar, advance=1, description=desc)
+
+        rows = train(model, pool, n, n, cfg, on_update, sizes=sizes,
+                     comm_ranges=(10.0, 40.0) if args.variant == "edge" else None)
+    wall = time.perf_counter() - started
+    steps = rows[-1]["env_steps"] if rows else 0
+    save_checkpoint(model, out / "model.pt", cfg,
+                    {"wall_s": wall, "env_steps": steps, "world_size": pool.world_size.tolist(),
+                     "pool": f"train seeds from 1000000, N={pool_n}, {len(pool)} instances"})
+    keys = sorted({k for r in rows for k in r})
+    table = pa.table({k: [r.get(k) for r in rows] for k in keys})
+    pq.write_table(table, out / "log.parquet")
+    _figures(rows, out)
+    msg = (f"trained in {wall:.1f} s, {steps} env steps ({steps / wall:.0f} steps/s); "
+           f"checkpoint {out / 'model.pt'}")
+    (console.print if console else print)(msg)
+    return 0
+
+
+def _figures(rows, out: Path) -> None:
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        log.warning("matplotlib missing: no figures")
+        return
+    ppo = [r for r in rows if r["phase"] == "ppo"]
+    if not ppo:
+        return
+    x = [r["env_steps"] for r in ppo]
+    for key, name, label in (("charts/episode_return", "reward.png", "mean episode reward"),
+                             ("losses/entropy", "entropy.png", "policy entropy")):
+        fig, ax = plt.subplots(figsize=(5, 3.2))
+        ax.plot(x, [r[key] for r in ppo])
+        ax.set_xlabel("environment steps")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+        fig.tight_layout()
+        fig.savefig(out / name, dpi=120)
+        plt.close(fig)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="magnnet-train", description=__doc__)
+    add_arguments(p)
+    return run(p.parse_args(argv))
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,220 @@
+"""Reading results: one run folder, a sweep's Hive-partitioned folder, or a folder of those.
+
+Layouts (written by ``dispatch run`` / ``dispatch sweep``):
+
+* a **run folder** holds ``<table>.parquet`` files;
+* a **sweep folder** holds one folder per table, ``<table>/allocator=…/planner=…/n_agents=…/
+  seed=…/part-0.parquet``; the partition columns live in the path (Hive), not in the files.
+
+:func:`open_results` takes any number of such folders (or folders that contain them) and gives
+one :class:`Results`, whose :meth:`Results.table` returns a pandas DataFrame in which every
+table carries the run's keys (``scenario``, ``allocator``, ``planner``, ``n_agents``, ``seed``)
+whatever the layout. Only pyarrow and pandas are needed: no torch, no PyBullet, not even the
+``dispatch`` package.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import pyarrow as pa
+import pyarrow.dataset as ds
+import pyarrow.parquet as pq
+
+TABLES = ("summary", "tasks", "assignments", "decisions", "events", "vehicles", "obstacles")
+#: The columns that name a run; every table returned by :meth:`Results.table` has them.
+RUN_KEYS = ("scenario", "allocator", "planner", "n_agents", "seed")
+
+
+class NoResultsError(FileNotFoundError):
+    """A path holds no run folder and no sweep folder."""
+
+
+@dataclass(frozen=True)
+class Source:
+    """One results folder: ``kind`` is ``"run"`` (``<table>.parquet``) or ``"sweep"`` (Hive)."""
+
+    kind: str
+    path: Path
+
+    def has(self, table: str) -> bool:
+        if self.kind == "run":
+            return (self.path / f"{table}.parquet").is_file()
+        return (self.path / table).is_dir()
+
+    def dataset(self, table: str) -> ds.Dataset:
+        """The table as a pyarrow dataset; a sweep's files are read with one unified schema
+        (files written by older versions may lack newer columns: those read as null)."""
+        if self.kind == "run":
+            return ds.dataset(self.path / f"{table}.parquet", format="parquet")
+        d = ds.dataset(self.path / table, format="parquet", partitioning="hive")
+        schemas = [f.physical_schema for f in d.get_fragments()]
+        unified = pa.unify_schemas([d.schema, *schemas])
+        if unified.equals(d.schema):
+            return d
+        return ds.dataset(self.path / table, format="parquet", partitioning=d.partitioning,
+                          schema=unified)
+
+
+def _kind(path: Path) -> str | None:
+    if (path / "summary.parquet").is_file():
+        return "run"
+    if (path / "summary").is_dir():
+        return "sweep"
+    return None
+
+
+def find_sources(path: str | os.PathLike) -> list[Source]:
+    """The run and sweep folders at or below ``path`` (a run or sweep folder is not searched
+    further; folders named ``_…``, ``.…`` or ``key=value`` are skipped)."""
+    path = Path(path)
+    if not path.exists():
+        raise NoResultsError(f"{path}: no such file or directory")
+    if path.is_file() and path.suffix == ".parquet":
+        path = path.parent
+    kind = _kind(path)
+    if kind is not None:
+        return [Source(kind, path)]
+    found = []
+    for root, dirs, _files in os.walk(path):
+        dirs[:] = sorted(d for d in dirs if not d.startswith(("_", ".")) and "=" not in d)
+        here = Path(root)
+        kind = _kind(here)
+        if kind is not None:
+            found.append(Source(kind, here))
+            dirs[:] = []
+    return found
+
+
+def open_results(*paths: str | os.PathLike) -> Results:
+    """Open one or more results folders (see the module docstring)."""
+    sources: list[Source] = []
+    for p in paths:
+        sources += find_sources(p)
+    if not sources:
+        raise NoResultsError(
+            f"no results in {', '.join(map(str, paths))}: expected a run folder "
+            "(summary.parquet) or a sweep folder (summary/allocator=…/…)")
+    return Results(sources)
+
+
+class Results:
+    """Tables of one or more results folders, read on demand."""
+
+    def __init__(self, sources: list[Source]) -> None:
+        self.sources = sources
+        self._summary = None
+
+    def __repr__(self) -> str:
+        return f"Results({[str(s.path) for s in self.sources]})"
+
+    # ------------------------------------------------------------------ tables
+    def table(self, name: str, *, columns: list[str] | None = None,
+              run_id: str | list[str] | None = None):
+        """One table of every source, as a pandas DataFrame with the run keys (``scenario``,
+        ``allocator``, ``planner``, ``n_agents``, ``seed``) added from the summary where the
+        files lack them. ``columns`` and ``run_id`` (one id or a list) are pushed down to the
+        Parquet reader. A table that no source has gives an empty DataFrame."""
+        import pandas as pd
+
+        flt = None
+        if run_id is not None:
+            ids = [run_id] if isinstance(run_id, str) else list(run_id)
+            flt = ds.field("run_id").isin(ids)
+        frames = []
+        for src in self.sources:
+            if not src.has(name):
+                continue
+            d = src.dataset(name)
+            want = None
+            if columns is not None:
+                want = [c for c in dict.fromkeys([*columns, "run_id"]) if c in d.schema.names]
+            df = _normalise(d.to_table(columns=want, filter=flt).to_pandas())
+            if name != "summary":
+                df = self._with_keys(df)
+            if columns is not None:
+                df = df[[c for c in dict.fromkeys([*columns, *RUN_KEYS, "run_id"])
+                         if c in df.columns]]
+            frames.append(df)
+        if not frames:
+            return pd.DataFrame(columns=list(columns or []))
+        frames = [f for f in frames if len(f)] or frames[:1]
+        return pd.concat(frames, ignore_index=True) if len(frames) > 1 else frames[0]
+
+    @property
+    def summary(self):
+        """The summary table (cached), one row per run."""
+        if self._summary is None:
+            self._summary = self.table("summary")
+        return self._summary
+
+    def errors(self):
+        """The ``errors`` table of sweeps (failed runs), empty when none failed."""
+        return self.table("errors")
+
+    def run_ids(self) -> list[str]:
+        return list(self.summary["run_id"])
+
+    def run(self, run_id: str) -> dict:
+        """Every table of one run, as DataFrames (reads only that run's rows)."""
+        if run_id not in set(self.summary["run_id"]):
+            raise KeyError(f"no run {run_id!r}; there are {len(self.summary)} runs, e.g. "
+                           f"{', '.join(self.summary['run_id'].head(3))}")
+        return {name: self.table(name, run_id=run_id) for name in TABLES}
+
+    def metadata(self, run_id: str, table: str = "obstacles") -> dict[str, str]:
+        """The Parquet schema metadata of one run's file of ``table`` (scenario text, seed,
+        version; the world's size and cell for ``obstacles``)."""
+        for src in self.sources:
+            if not src.has(table):
+                continue
+            d = src.dataset(table)
+            for frag in d.get_fragments(filter=_run_filter(self.summary, run_id, src)):
+                meta = frag.physical_schema.metadata or {}
+                if meta.get(b"dispatch.run_id", run_id.encode()).decode() == run_id:
+                    return {k.decode(): v.decode() for k, v in meta.items()}
+        raise KeyError(f"no {table} file for run {run_id!r}")
+
+    def world(self, run_id: str) -> tuple[tuple[float, float, float], float]:
+        """The world size (metres) and cell size of a run, from the obstacles metadata."""
+        meta = self.metadata(run_id, "obstacles")
+        return tuple(json.loads(meta["dispatch.world_size"])), float(meta["dispatch.cell"])
+
+    # ------------------------------------------------------------------ helpers
+    def _with_keys(self, df):
+        missing = [k for k in RUN_KEYS if k not in df.columns]
+        if not missing or "run_id" not in df.columns:
+            return df
+        keys = self.summary[["run_id", *missing]].drop_duplicates("run_id")
+        return df.merge(keys, on="run_id", how="left")
+
+
+def _normalise(df):
+    """Partition columns come back as int32 / categorical: make them int64 / str."""
+    for k in ("n_agents", "seed"):
+        if k in df.columns and str(df[k].dtype) != "int64":
+            df[k] = df[k].astype("int64")
+    for k in ("allocator", "planner", "scenario"):
+        if k in df.columns and str(df[k].dtype) == "category":
+            df[k] = df[k].astype(str)
+    return df
+
+
+def _run_filter(summary, run_id: str, src: Source) -> ds.Expression | None:
+    if src.kind == "run":
+        return None
+    row = summary.loc[summary["run_id"] == run_id]
+    if row.empty:
+        return None
+    r = row.iloc[0]
+    return ((ds.field("allocator") == r["allocator"]) & (ds.field("planner") == r["planner"])
+            & (ds.field("n_agents") == int(r["n_agents"])) & (ds.field("seed") == int(r["seed"])))
+
+
+def read_parquet_metadata(path: str | os.PathLike) -> dict[str, str]:
+    """The ``dispatch.*`` schema metadata of one Parquet file."""
+    meta = pq.read_schema(path).metadata or {}
+    return {k.decode(): v.decode() for k, v in meta.items() if k.startswith(b"dispatch.")}

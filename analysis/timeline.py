@@ -1,0 +1,85 @@
+"""What each vehicle did when, rebuilt from a run's ``events`` table.
+
+Vehicle events (``agent_id`` >= 0) and what they mean for the vehicle:
+
+* ``assign``  a task was given to it (x, y, z: the task's cell);
+* ``depart``  it leaves its cell for the task (x, y, z: where it is);
+* ``move``    it entered the next cell of its path (x, y, z: that cell);
+* ``wait``    it holds its cell on the way (a reservation conflict), until its next ``move``;
+* ``arrive``  it reached the task and starts serving it;
+* ``idle``    it finished the task and is free again.
+
+:func:`vehicle_intervals` turns them into ``travel`` / ``service`` (both busy), ``waiting`` and
+``idle`` intervals for a Gantt chart; :func:`trajectories` and :func:`positions_at` give where
+each vehicle is, for the 3D view and the rendered animation.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+#: Events whose x, y, z are the vehicle's own position (``assign`` and the task-closing events
+#: carry the task's cell instead).
+POSITION_EVENTS = ("depart", "move", "wait", "arrive", "idle")
+STATES = ("travel", "service", "waiting", "idle")
+
+
+def vehicle_intervals(events: pd.DataFrame, vehicles: pd.DataFrame,
+                      end: float | None = None) -> pd.DataFrame:
+    """Columns agent_id, state (one of :data:`STATES`), start, end, task_id; every vehicle is
+    covered from 0 to ``end`` (default: the last event) without gaps or overlaps."""
+    e = events.loc[events["agent_id"] >= 0].sort_values("t", kind="stable")
+    if end is None:
+        end = float(events["t"].max()) if len(events) else 0.0
+    rows = []
+    by_agent = dict(iter(e.groupby("agent_id", sort=False)))
+    for agent in sorted(vehicles["agent_id"].astype(int)):
+        state, since, task = "idle", 0.0, -1
+        g = by_agent.get(agent)
+        for ev in (g.itertuples(index=False) if g is not None else ()):
+            new = {"assign": "waiting", "depart": "travel", "move": "travel", "wait": "waiting",
+                   "arrive": "service", "idle": "idle"}.get(ev.event)
+            if new is None or (ev.event == "assign" and state != "idle"):
+                continue
+            if new != state:
+                if ev.t > since:
+                    rows.append((agent, state, since, float(ev.t), task))
+                state, since = new, float(ev.t)
+            task = int(ev.task_id) if new != "idle" else -1
+        if end > since:
+            rows.append((agent, state, since, end, task))
+    return pd.DataFrame(rows, columns=["agent_id", "state", "start", "end", "task_id"])
+
+
+def trajectories(events: pd.DataFrame, vehicles: pd.DataFrame) -> dict[int, pd.DataFrame]:
+    """Per vehicle: its known positions in time order (columns t, x, y, z), starting with its
+    start cell at t = 0. Between two rows it moves in a straight line."""
+    e = events.loc[events["event"].isin(POSITION_EVENTS) & (events["agent_id"] >= 0)]
+    e = e.sort_values("t", kind="stable")
+    by_agent = dict(iter(e.groupby("agent_id", sort=False)))
+    out = {}
+    for v in vehicles.sort_values("agent_id").itertuples(index=False):
+        start = pd.DataFrame({"t": [0.0], "x": [v.x0], "y": [v.y0], "z": [v.z0]})
+        g = by_agent.get(v.agent_id)
+        parts = [start] if g is None else [start, g[["t", "x", "y", "z"]]]
+        out[int(v.agent_id)] = pd.concat(parts, ignore_index=True)
+    return out
+
+
+def positions_at(traj: dict[int, pd.DataFrame], t: float) -> dict[int, np.ndarray]:
+    """Each vehicle's position at time ``t`` (linear between its known positions)."""
+    out = {}
+    for agent, df in traj.items():
+        ts = df["t"].to_numpy(dtype=float)
+        xyz = df[["x", "y", "z"]].to_numpy(dtype=float)
+        i = int(np.searchsorted(ts, t, side="right"))
+        if i == 0:
+            out[agent] = xyz[0]
+        elif i >= len(ts):
+            out[agent] = xyz[-1]
+        else:
+            t0, t1 = ts[i - 1], ts[i]
+            a = 0.0 if t1 <= t0 else (t - t0) / (t1 - t0)
+            out[agent] = xyz[i - 1] + a * (xyz[i] - xyz[i - 1])
+    return out

@@ -1,0 +1,162 @@
+"""``dispatch report`` / ``dispatch render`` on a small sweep; DuckDB and polars read the output."""
+
+from __future__ import annotations
+
+import csv
+import math
+import statistics
+from collections import defaultdict
+
+import pytest
+from PIL import Image
+
+from analysis.report import FIGURES, write_report
+from tests.analysis.helpers import read_hive_rows
+
+FILES = ("report.md", "allocators.csv", "taxi.csv", "runs.csv", *FIGURES)
+
+
+@pytest.fixture(scope="module")
+def report(small_sweep, tmp_path_factory):
+    out = tmp_path_factory.mktemp("report")
+    files = write_report(small_sweep, out)
+    return out, files
+
+
+def test_report_files(report):
+    out, files = report
+    assert [f.name for f in files] == list(FILES)
+    for name in FIGURES:
+        with Image.open(out / name) as img:
+            assert img.format == "PNG"
+            assert img.width >= 600 and img.height >= 300
+            # not a blank canvas: many distinct colours
+            assert len(img.convert("RGB").getcolors(maxcolors=1 << 16) or range(1 << 16)) > 20
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]  # no temporary files
+
+
+def test_report_tables_agree_with_parquet(report, small_sweep):
+    """Table I's cells are the mean total cost ± CI [gap] computed by hand from the files."""
+    from scipy import stats
+
+    out, _ = report
+    text = (out / "report.md").read_text()
+    rows = read_hive_rows(small_sweep / "summary")
+    by = defaultdict(list)
+    for r in rows:
+        by[(r["allocator"], r["n_agents"])].append(r)
+    ref = {(r["n_agents"], r["seed"]): r["total_cost"] for r in rows
+           if r["allocator"] == "hungarian"}
+    table1 = text.split("## Table I")[1].split("## ")[0]
+    for n in (2, 3):
+        line = next(ln for ln in table1.splitlines() if ln.startswith(f"| {n} |"))
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        assert cells[1] == "3"  # runs
+        for col, alloc in zip(cells[2:], ("hungarian", "greedy", "random")):
+            costs = [r["total_cost"] for r in by[(alloc, n)]]
+            half = stats.t.ppf(0.975, 2) * statistics.stdev(costs) / math.sqrt(3)
+            want = f"{statistics.fmean(costs):.1f} ± {half:.1f}"
+            if alloc != "hungarian":
+                gaps = [(r["total_cost"] - ref[(n, r["seed"])]) / ref[(n, r["seed"])]
+                        for r in by[(alloc, n)]]
+                want += f" [{100 * statistics.fmean(gaps):+.1f} %]"
+            assert col == want, (n, alloc)
+    table3 = text.split("## Table III")[1].split("## ")[0]
+    line = next(ln for ln in table3.splitlines() if ln.startswith("| 3 |"))
+    greedy = [c.strip() for c in line.strip("|").split("|")][3]
+    rate = statistics.fmean(r["conflict_free_rate"] for r in by[("greedy", 3)])
+    assert greedy.startswith(f"{100 * rate:.1f} % / ")
+    for name in FIGURES:
+        assert f"]({name})" in text
+    # the CSVs hold the same numbers
+    with open(out / "allocators.csv") as f:
+        got = {(r["allocator"], int(r["n_agents"])): r for r in csv.DictReader(f)}
+    for key, rs in by.items():
+        assert float(got[key]["total_cost_mean"]) == pytest.approx(
+            statistics.fmean(r["total_cost"] for r in rs))
+    with open(out / "taxi.csv") as f:
+        taxi = list(csv.DictReader(f))
+    assert len(taxi) == 6
+    for col in ("wait_average", "wait_median", "wait_p90", "service_rate", "utilization",
+                "totalEmptyDistance", "rejectionRate", "rides"):
+        assert col in taxi[0]
+    with open(out / "runs.csv") as f:
+        assert len(list(csv.DictReader(f))) == 18
+
+
+def test_html_report_and_chosen_run(small_sweep, tmp_path):
+    files = write_report(small_sweep, tmp_path, fmt="html", run_id="tiny__random__astar__n2__s1")
+    html = files[0].read_text()
+    assert files[0].name == "report.html" and html.startswith("<!doctype html>")
+    assert "<table" in html and "tiny__random__astar__n2__s1" in html
+    assert "<img src='timeline.png'" in html
+    with pytest.raises(ValueError):
+        write_report(small_sweep, tmp_path, fmt="pdf")
+
+
+def test_cli_report_and_render(small_sweep, tmp_path, cli):
+    out = tmp_path / "rep"
+    proc = cli("report", small_sweep, "--out", out)
+    assert proc.returncode == 0, proc.stderr
+    assert "report.md" in proc.stdout
+    assert all((out / f).is_file() for f in FILES)
+    proc = cli("report", tmp_path / "nothing-here")
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert "no such file" in proc.stderr
+
+    gif = tmp_path / "run.gif"
+    proc = cli("render", small_sweep, "--run-id", "tiny__greedy__astar__n3__s0", "--out", gif,
+               "--fps", "4", "--seconds", "2", "--size", "160x120")
+    assert proc.returncode == 0, proc.stderr
+    with Image.open(gif) as img:
+        assert img.format == "GIF" and img.size == (160, 120)
+        # 2 s at 4 fps = 8 frames; Pillow merges identical ones (vehicles standing still)
+        assert 2 <= img.n_frames <= 8
+        img.seek(0)
+        first = img.convert("RGB").tobytes()
+        img.seek(img.n_frames - 1)
+        assert img.convert("RGB").tobytes() != first  # vehicles moved
+    proc = cli("render", small_sweep, "--run-id", "nosuch", "--out", gif)
+    assert proc.returncode == 2 and "nosuch" in proc.stderr
+
+
+def test_render_a_run_folder(single_run, tmp_path):
+    from analysis.render import render_run
+
+    path = render_run(single_run, tmp_path / "a.gif", fps=3, seconds=1, size=(96, 72))
+    with Image.open(path) as img:
+        assert 2 <= img.n_frames <= 3 and img.size == (96, 72)
+
+
+# ----------------------------------------------------------------------------- other readers
+
+
+def test_duckdb_reads_the_sweep(small_sweep):
+    duckdb = pytest.importorskip("duckdb")
+    rows = read_hive_rows(small_sweep / "summary")
+    con = duckdb.connect()
+    got = con.execute(f"""
+        SELECT allocator, n_agents, count(*) AS runs, avg(total_cost) AS cost
+        FROM read_parquet('{small_sweep}/summary/**/*.parquet', hive_partitioning = true)
+        GROUP BY ALL ORDER BY ALL""").fetchall()
+    assert len(got) == 6
+    for alloc, n, runs, cost in got:
+        mine = [r["total_cost"] for r in rows if r["allocator"] == alloc and r["n_agents"] == n]
+        assert runs == 3 and cost == pytest.approx(statistics.fmean(mine))
+    waits = con.execute(f"""
+        SELECT allocator, median(arrived_at - released_at)
+        FROM read_parquet('{small_sweep}/tasks/**/*.parquet', hive_partitioning = true)
+        WHERE state = 'completed' GROUP BY ALL""").fetchall()
+    assert {a for a, _ in waits} == {"hungarian", "greedy", "random"}
+
+
+def test_polars_reads_the_sweep(small_sweep):
+    pl = pytest.importorskip("polars")
+    rows = read_hive_rows(small_sweep / "tasks")
+    df = pl.scan_parquet(small_sweep / "tasks" / "**" / "*.parquet",
+                         hive_partitioning=True).collect()
+    assert df.height == len(rows) == 18 * 4
+    assert {"allocator", "planner", "n_agents", "seed"} <= set(df.columns)
+    per = (df.group_by("allocator", "n_agents").agg(pl.len().alias("tasks"))
+             .sort("allocator", "n_agents"))
+    assert per["tasks"].to_list() == [12] * 6

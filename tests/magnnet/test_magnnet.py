@@ -1,0 +1,204 @@
+"""MAGNNET: environment conformance, batched = PettingZoo, GAE, learning, decentralization,
+shipped checkpoints."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+pytest.importorskip("pettingzoo")
+
+from allocators.magnnet import rules  # noqa: E402
+from allocators.magnnet.env import MagnnetEnv, random_instance, random_pool  # noqa: E402
+from allocators.magnnet.game import BatchedGame, global_obs  # noqa: E402
+from allocators.magnnet.model import EdgePolicy, MagnnetPolicy  # noqa: E402
+from allocators.magnnet.ppo import PPOConfig, gae, train  # noqa: E402
+
+
+def test_parallel_api():
+    from pettingzoo.test import parallel_api_test
+
+    parallel_api_test(MagnnetEnv(4), num_cycles=40)
+    parallel_api_test(MagnnetEnv(6, comm_range=20.0), num_cycles=40)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_batched_equals_pettingzoo(seed):
+    n = 5
+    rng = np.random.default_rng(seed)
+    insts = [random_instance(rng, n, n) for _ in range(3)]
+    envs = [MagnnetEnv(n) for _ in insts]
+    for e, inst in zip(envs, insts):
+        e.reset(seed=seed, options={"instance": inst})
+    bg = BatchedGame(3, n, n)
+    c, a, t, f, s = zip(*insts)
+    bg.load(np.arange(3), np.stack(c), np.stack(a), np.stack(t), np.stack(f), s[0])
+    done = np.zeros(3, bool)
+    for _ in range(30):
+        if done.all():
+            break
+        bo = bg.obs()
+        acts = np.zeros((3, n), np.int64)
+        for b, e in enumerate(envs):
+            if done[b]:
+                continue
+            g = global_obs(e.game)
+            for k in ("agents", "cost", "available", "tasks", "adjacency"):
+                np.testing.assert_allclose(bo[k][b].numpy().astype(float), g[k].astype(float),
+                                           atol=1e-6, err_msg=k)
+            for ag in e.agents:
+                i = int(ag.split("_")[1])
+                mask = np.flatnonzero(g["available"][i])
+                acts[b, i] = 0 if rng.random() < 0.2 or not mask.size else 1 + rng.choice(mask)
+        r, team, acted, ended, bdone, _ = bg.step(torch.from_numpy(acts))
+        for b, e in enumerate(envs):
+            if done[b]:
+                continue
+            live = list(e.agents)
+            _, rew, term, trunc, info = e.step({ag: acts[b, int(ag.split("_")[1])]
+                                                for ag in live})
+            for ag in live:
+                i = int(ag.split("_")[1])
+                assert rew[ag] == pytest.approx(float(r[b, i]), abs=1e-5)
+                assert (term[ag] or trunc[ag]) == bool(ended[b, i])
+                assert info[ag]["team_reward"] == pytest.approx(float(team[b]), abs=1e-4)
+            assert bool(bdone[b]) == e.game.done
+            np.testing.assert_array_equal(bg.agent_task[b].numpy(), e.game.agent_task)
+            done[b] = e.game.done
+    assert done.all()
+
+
+def test_gae_hand_computed():
+    r = torch.tensor([1.0, 0.0, 2.0])
+    v = torch.tensor([0.5, 0.2, 1.0])
+    d = torch.tensor([0.0, 1.0, 0.0])
+    adv, ret = gae(r, v, d, torch.tensor(3.0), gamma=0.9, lam=0.5)
+    # t=2: delta = 2 + .9*3 - 1 = 3.7 ; adv = 3.7
+    # t=1: terminal: delta = 0 - .2 = -.2 ; adv = -.2
+    # t=0: delta = 1 + .9*.2 - .5 = .68 ; adv = .68 + .9*.5*(-.2) = .59
+    assert adv.tolist() == pytest.approx([0.59, -0.2, 3.7])
+    assert ret.tolist() == pytest.approx([1.09, 0.0, 4.7])
+
+
+def test_training_raises_reward():
+    torch.set_num_threads(1)
+    pool = random_pool(0, 100, 3)
+    model = EdgePolicy(hidden=8, mlp=32)
+    cfg = PPOConfig(lr=3e-3, total_steps=256 * 12, batch_size=256, n_envs=32, epochs=4, seed=0)
+    rows = train(model, pool, 3, 3, cfg)
+    ret = [r["charts/episode_return"] for r in rows]
+    assert np.mean(ret[-3:]) > np.mean(ret[:3]) + 0.3
+
+
+def _obs_np(model_obs):
+    return {k: torch.as_tensor(v)[None] for k, v in model_obs.items() if k not in
+            ("self", "action_mask")}
+
+
+@pytest.mark.parametrize("cls", ["paper", "edge"])
+def test_action_ignores_agents_beyond_two_hops(cls):
+    """Agents on a line 0-1-2-3-4-5: agent 0's logits do not change when agent 3, 4 or 5
+    changes (position, costs, status), and do change when agent 2 changes."""
+    n = 6
+    torch.manual_seed(0)
+    model = MagnnetPolicy(n, n) if cls == "paper" else EdgePolicy()
+    rng = np.random.default_rng(0)
+    cost, apos, tpos, flies, size = random_instance(rng, n, n)
+    comm = np.eye(n, dtype=bool) | np.eye(n, k=1, dtype=bool) | np.eye(n, k=-1, dtype=bool)
+
+    def logits_of(cost, apos):
+        env = MagnnetEnv(n)
+        env.reset(options={"instance": (cost, apos, tpos, flies, size)})
+        env.game.comm = comm
+        with torch.no_grad():
+            lg, _ = model(_obs_np(global_obs(env.game)))
+        return lg[0, 0]
+
+    base = logits_of(cost, apos)
+    for far in (3, 4, 5):
+        c2, a2 = cost.copy(), apos.copy()
+        c2[far] = rng.uniform(1, 20, n)
+        a2[far] = rng.uniform(0, 30, 3)
+        torch.testing.assert_close(logits_of(c2, a2), base)
+    c2 = cost.copy()
+    c2[2] = rng.uniform(1, 20, n)
+    assert not torch.allclose(logits_of(c2, apos), base)
+
+
+def test_allocator_is_local_and_valid():
+    """The plugin's choices on a problem equal each agent's own local-view computation."""
+    from allocators.magnnet.allocator import observe
+    from allocators.magnnet.game import local_obs
+    from tests.allocators.helpers import make_problem
+
+    torch.manual_seed(1)
+    model = EdgePolicy()
+    cost = np.random.default_rng(3).uniform(1, 20, (6, 6))
+    p = make_problem(cost)
+    comm = np.eye(6, dtype=bool) | np.eye(6, k=1, dtype=bool) | np.eye(6, k=-1, dtype=bool)
+    obs = observe(p, np.arange(6), np.ones(6, bool), np.array([50, 50, 30], np.float32))
+    obs["adjacency"] = torch.from_numpy(comm.astype(np.float32))[None]
+    with torch.no_grad():
+        full, _ = model(obs)
+    g = {k: v[0].numpy() for k, v in obs.items()}
+    for i in range(6):
+        loc = local_obs(g, i, 6)
+        with torch.no_grad():
+            lg, _ = model(_obs_np(loc))
+        torch.testing.assert_close(lg[0, i], full[0, i])
+
+
+def _shipped(name):
+    from allocators.magnnet.allocator import CHECKPOINTS
+
+    path = CHECKPOINTS / name
+    if not path.exists():
+        pytest.skip(f"no shipped checkpoint {name}")
+    return path
+
+
+@pytest.mark.parametrize("n", [4, 8])
+def test_shipped_checkpoints_load_and_beat_random(n):
+    from allocators.magnnet.ppo import load_checkpoint
+    from allocators.randomized import RandomAllocator
+    from dispatch.registry import load
+    from tests.allocators.helpers import assert_valid, make_problem, total_cost
+
+    _shipped(f"paper_n{n}.pt")
+    ck = torch.load(_shipped(f"paper_n{n}.pt"), weights_only=True)
+    assert ck["config"]["n_agents"] == n
+    load_checkpoint(_shipped("edge.pt"))
+    rng = np.random.default_rng(123)
+    wins = {"magnnet": 0.0, "random": 0.0}
+    for k in range(10):
+        cost, *_ = random_instance(rng, n, n)
+        for name, alloc in (("magnnet", load("allocator", "magnnet")()),
+                            ("random", RandomAllocator())):
+            p = make_problem(cost, seed=k)
+            a = alloc.allocate(p)
+            assert_valid(p, a)
+            wins[name] += total_cost(p, a) + 100.0 * (n - len(a.pairs))
+    assert wins["magnnet"] < wins["random"]
+
+
+def test_rules_bonus():
+    assert rules.team_bonus(3, 10.0, 3, 10.0) == pytest.approx(rules.R_TEAM)
+    assert rules.team_bonus(2, 10.0, 3, 10.0) == 0.0
+
+
+@pytest.mark.slow
+def test_train_cli_smoke(tmp_path, monkeypatch):
+    """`dispatch train magnnet` end to end on a tiny pool: checkpoint, Parquet log, figures."""
+    import pyarrow.parquet as pq
+
+    from dispatch.cli import main
+
+    monkeypatch.setenv("MAGNNET_CACHE", str(tmp_path / "cache"))
+    out = tmp_path / "out"
+    assert main(["train", "magnnet", "--agents", "4", "--steps", "512", "--bc-updates", "2",
+                 "--pool", "3", "--envs", "8", "--out", str(out)]) == 0
+    for name in ("model.pt", "log.parquet", "reward.png", "entropy.png"):
+        assert (out / name).exists()
+    assert pq.read_table(out / "log.parquet").num_rows == 2 + 1
+    torch.load(out / "model.pt", weights_only=True)
