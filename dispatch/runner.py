@@ -11,8 +11,9 @@ is recorded in the ``errors`` table (same partition layout: run_id, scenario, er
 message, traceback, seconds) and the sweep goes on; its error partition is removed once it
 succeeds. Folders starting with ``_`` are ignored by pyarrow, DuckDB's and polars' Hive readers.
 
-Every run of a sweep starts from cold caches (no world or planner cache of an earlier run in the
-same worker), so its wall-clock columns mean the same whatever the number of workers.
+Every run (of a sweep or of :func:`execute`) starts from cold caches (no world or planner cache
+of an earlier run in the same process), so its wall-clock columns mean the same whatever the
+number of workers and the order of the runs: every allocator pays for its own cost matrices.
 """
 
 from __future__ import annotations
@@ -65,13 +66,15 @@ def execute(
 ) -> list[dict]:
     """Run every spec in order, writing each run's tables as soon as it finishes.
 
-    ``partitioned`` chooses the Hive layout (default: when there is more than one run).
+    ``partitioned`` chooses the Hive layout (default: when there is more than one run). Each run
+    starts from cold caches, as in :func:`sweep`.
     Returns the summaries in the order of ``specs``.
     """
     if partitioned is None:
         partitioned = len(specs) > 1
     summaries = []
     for spec in specs:
+        _cold_start()
         result = run_one(spec)
         write_run(result.tables, out, spec.partition if partitioned else None)
         summaries.append(result.summary)

@@ -39,7 +39,13 @@ Costs and caching
 
 Parameters (``[dispatch.planner_params]``): ``w`` (suboptimality bound, >= 1; 1.5), ``delta``
 (cells, 8), ``k`` (successors per expansion, 8), ``local_expansions`` (500), ``seed`` (0),
-``enforce_bound`` (true).
+``enforce_bound`` (true), ``max_expansions`` (high-level expansions per search, 100: when
+spent, the best goal path known so far is kept and the bound enforced as above; without this
+cap a goal whose detour exceeds ``w`` x octile is AVOID and R* first expands every easy state).
+
+Statistics (``stats.extra``): ``searches``, ``high_expansions``, ``local_expansions``,
+``avoid_labels`` (local searches abandoned at ``local_expansions``), ``certified``,
+``bound_fallbacks``.
 """
 
 from __future__ import annotations
@@ -265,7 +271,7 @@ class _Query:
 
         update(start)
         found = False
-        high = 0
+        high = avoided = 0
         while heap:
             avoid, f, _, s = heapq.heappop(heap)
             if current.get(s) != (avoid, f) or s in closed:
@@ -279,6 +285,8 @@ class _Query:
                 e.exp, e.clow = e.exp + exp, cost
                 if path is not None:
                     e.path = path
+                elif limit is not None and math.isfinite(cost):
+                    avoided += 1  # hard to solve: s is labelled AVOID
                 if e.path is None or g[u] + e.clow > w * self.h(start, s) + _EPS:
                     best, best_q = None, math.inf
                     for p in preds[s]:
@@ -311,6 +319,7 @@ class _Query:
                     update(t)
         stats = self.pl.stats.extra
         stats["high_expansions"] += high
+        stats["avoid_labels"] += avoided
         result: tuple[float, list[int]] | None = None
         if not found and goal in bp and edges[(bp[goal], goal)].path is not None:
             found = True  # the goal's path is known (it was waiting in OPEN)
@@ -385,8 +394,8 @@ class RStarPlanner(Planner):
         self.enforce_bound = bool(enforce_bound)
         # (flies, goal) -> {start cell: (metres, cells) or None}
         self._cache = GoalCache(lambda key: {})
-        for name in ("searches", "high_expansions", "local_expansions", "certified",
-                     "bound_fallbacks"):
+        for name in ("searches", "high_expansions", "local_expansions", "avoid_labels",
+                     "certified", "bound_fallbacks"):
             self.stats.extra.setdefault(name, 0)
 
     def _answer(self, start: Cell, goal: Cell, flies: bool, task_id: int | None):

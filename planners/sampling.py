@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 import weakref
+from collections import OrderedDict
 
 import numpy as np
 from scipy.sparse import csr_matrix
@@ -388,8 +389,6 @@ class GoalCache:
     """
 
     def __init__(self, factory, max_loose: int = 64) -> None:
-        from collections import OrderedDict
-
         self.factory = factory
         self.max_loose = max_loose
         self.entries: dict = {}
