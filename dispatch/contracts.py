@@ -15,13 +15,20 @@ Planners
     ``inf`` marks a pair the agent can never serve (unreachable, or a UGV asked to fly).
     Planners may cache anything that depends only on the static world and the task's goal cell
     (the grid is immutable); :meth:`Planner.task_closed` tells them when a task's cache can go.
+
+Reservation-aware planners
+    A planner that sets ``reservation_aware = True`` and implements :meth:`Planner.plan_timed`
+    makes the kernel execute routes with reservations (:mod:`dispatch.reservations`: the time
+    model, the conflict rule, waits and replans). Other planners need neither; their vehicles
+    follow :meth:`Planner.plan`'s paths without reservations.
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
-from typing import ClassVar, Literal
+from collections.abc import Sequence
+from typing import ClassVar, Literal, Protocol
 
 import numpy as np
 
@@ -183,6 +190,14 @@ class Allocator(ABC):
         """Return a valid allocation for ``problem`` (see the module docstring)."""
 
 
+class Reservations(Protocol):
+    """What a reservation-aware planner sees of the other vehicles' reservations (read-only)."""
+
+    def blocked(self, cell: Cell) -> Sequence[tuple[float, float]]:
+        """The half-open intervals ``[start, end)`` of simulated seconds during which ``cell``
+        is reserved by someone else, sorted and merged (``end`` may be ``inf``)."""
+
+
 @dataclass
 class PlanStats:
     """Counters a planner keeps for the run's summary."""
@@ -203,6 +218,11 @@ class Planner(ABC):
     """
 
     name: ClassVar[str] = ""
+    #: True for planners that implement :meth:`plan_timed` (execution with reservations).
+    reservation_aware: ClassVar[bool] = False
+    #: Seconds after which a vehicle that found no timed route tries again (it also tries when
+    #: other vehicles' reservations are released). Used only when ``reservation_aware``.
+    retry_after: float = 1.0
 
     def __init__(self, world: World) -> None:
         self.world = world
@@ -215,6 +235,23 @@ class Planner(ABC):
     @abstractmethod
     def plan(self, agent: AgentView, goal: Cell) -> list[Cell] | None:
         """Return a shortest path of cells from ``agent.cell`` to ``goal``, or None."""
+
+    def plan_timed(self, agent: AgentView, goal: Cell | None, reservations: Reservations,
+                   t0: float) -> list[tuple[float, Cell]] | None:
+        """A timed route from ``agent.cell`` at time ``t0`` to ``goal``, or None (the vehicle
+        waits and tries again later). Only called when ``reservation_aware`` is True.
+        ``goal=None`` asks an idle vehicle that is in someone's way for a route to any cell
+        where it can stay for good (the nearest: it is parking).
+
+        The route is ``[(t0, agent.cell), (t1, c1), ..., (tn, goal)]``: ``t_i`` is when the step
+        into ``c_i`` ends; each step is a legal move that takes its length / ``agent.speed``
+        seconds and may start after a wait. Under the time model of
+        :func:`dispatch.reservations.occupancy` (standing cells, the step's bounding box, the
+        goal held to infinity) the route must overlap none of ``reservations.blocked(cell)``.
+        The kernel checks this and stops the run with an error naming the planner otherwise.
+        A planner should return the earliest-arriving such route (SIPP does).
+        """
+        raise NotImplementedError(f"planner {self.name!r} is not reservation-aware")
 
     def task_closed(self, task_id: int) -> None:  # noqa: B027 - optional hook
         """Forget anything cached for a task that will never be asked about again."""

@@ -56,6 +56,9 @@ SCHEMAS: dict[str, pa.Schema] = {
     "vehicles": pa.schema([
         ("run_id", _S), ("agent_id", _I), ("kind", _S), ("speed", _F), ("x0", _F), ("y0", _F),
         ("z0", _F), ("distance", _F), ("busy_seconds", _F), ("tasks_completed", _I),
+        # execution with reservations (0 otherwise): wait episodes, routes replaced by a
+        # higher-priority vehicle, seconds spent standing on the way (see dispatch.reservations)
+        ("waits", _I), ("replans", _I), ("wait_seconds", _F),
     ]),
     "obstacles": pa.schema([
         ("run_id", _S), ("x0", _F), ("y0", _F), ("z0", _F), ("x1", _F), ("y1", _F), ("z1", _F),

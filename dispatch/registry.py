@@ -31,6 +31,7 @@ _FALLBACK = {
         "astar": "planners.astar:AStarPlanner",
         "rrt_star": "planners.rrt_star:RRTStarPlanner",
         "rstar": "planners.rstar:RStarPlanner",
+        "reservation": "planners.reservation:ReservationPlanner",
     },
 }
 

@@ -22,6 +22,7 @@ from dispatch.dispatcher import Dispatcher
 from dispatch.errors import PluginError
 from dispatch.physics import Physics
 from dispatch.recorder import Recorder, json_meta
+from dispatch.reservations import Traffic
 from dispatch.scenario import RunSpec, WorldConfig
 from dispatch.tasks import Task, TaskFactory, TaskState, start_source
 from dispatch.vehicles import Vehicle
@@ -111,6 +112,11 @@ class Simulation:
         self.physics = Physics(self.world)
         for v in self.vehicles:
             self.physics.add_vehicle(v.id, v.flies, self.world.grid.centre(v.cell))
+        #: reservation-based execution, with a reservation-aware planner only
+        self.traffic = Traffic(self) if self.planner.reservation_aware else None
+        if self.traffic is not None:
+            for v in self.vehicles:
+                self.env.process(v.drive(self))
         self._source_finished = False
         self.finished = self.env.event()
         self.dispatcher = Dispatcher(self)
@@ -141,15 +147,22 @@ class Simulation:
             self.close_task(task, TaskState.EXPIRED)
 
     def assign(self, task: Task, vehicle: Vehicle, cost: float) -> None:
-        path = self.planner.plan(vehicle.view(), task.cell)
-        if path is None or path[0] != vehicle.cell or path[-1] != task.cell:
-            raise RuntimeError(f"planner {self.spec.planner!r} gave no path for a finite cost "
-                               f"(vehicle {vehicle.id} -> task {task.id})")
+        path = None
+        if self.traffic is None:
+            path = self.planner.plan(vehicle.view(), task.cell)
+            if path is None or path[0] != vehicle.cell or path[-1] != task.cell:
+                raise RuntimeError(f"planner {self.spec.planner!r} gave no path for a finite "
+                                   f"cost (vehicle {vehicle.id} -> task {task.id})")
         task.state, task.assigned_at, task.agent_id, task.cost = (
             TaskState.ASSIGNED, self.env.now, vehicle.id, cost)
         self.record_event("assign", vehicle.id, task.id, task.cell)
         vehicle.busy = True
-        self.env.process(vehicle.serve(self, task, path))
+        if self.traffic is None:
+            self.env.process(vehicle.serve(self, task, path))
+        else:  # its drive process follows the route; the task's cost is its priority
+            vehicle.task, vehicle.busy_since = task, self.env.now
+            self.record_event("depart", vehicle.id, task.id, vehicle.cell)
+            self.traffic.request(vehicle)
 
     def task_arrived(self, task: Task, vehicle: Vehicle) -> None:
         task.arrived_at = self.env.now
@@ -216,6 +229,7 @@ class Simulation:
             for v in self.vehicles:
                 if v.busy:
                     v.busy_seconds += self.env.now - v.busy_since
+                v.end_wait(self.env.now)
             summary = self._finish()
             return RunResult(self.spec, summary, self.recorder.tables())
         finally:
@@ -233,7 +247,8 @@ class Simulation:
         for v in self.vehicles:
             x, y, z = g.centre(v.start)
             rec.add("vehicles", agent_id=v.id, kind=v.kind, speed=v.speed, x0=x, y0=y, z0=z,
-                    distance=v.distance, busy_seconds=v.busy_seconds, tasks_completed=v.completed)
+                    distance=v.distance, busy_seconds=v.busy_seconds, tasks_completed=v.completed,
+                    waits=v.waits, replans=v.replans, wait_seconds=v.wait_seconds)
         for b in self.world.boxes:
             rec.add("obstacles", x0=b.x0, y0=b.y0, z0=b.z0, x1=b.x1, y1=b.y1, z1=b.z1)
         summary = summarize(self)
