@@ -10,12 +10,17 @@ information along communication links (two hops), so each agent's action is the 
 compute alone from its own neighbourhood (tests check it).
 
 Parameters (``[dispatch.allocator_params]``):
-    variant: ``"paper"`` (the paper's model, one checkpoint per size N = M), ``"edge"`` (the
-        size-agnostic edge-scoring model, any N and M) or ``"auto"`` (default: the paper's
-        model when a checkpoint for the problem's N x M ships, else the edge model).
+    variant: ``"paper"`` (the paper's model exactly, one checkpoint per size N = M),
+        ``"paper_nb"`` (the paper's model plus per-task features from the neighbours' cost
+        vectors in the actor's input: our addition, one checkpoint per size), ``"edge"`` (the
+        size-agnostic edge-scoring model, any N and M), ``"edge_noassign"`` (the edge model
+        without its hand-written local-assignment feature: an ablation) or ``"auto"``
+        (default: ``paper_nb`` when a checkpoint for the problem's N x M ships, else the edge
+        model).
     checkpoint: path of a checkpoint to use instead of the shipped ones.
 
-Checkpoints ship in ``allocators/magnnet/checkpoints`` (``paper_n{N}.pt``, ``edge.pt``).
+Checkpoints ship in ``allocators/magnnet/checkpoints`` (``paper_n{N}.pt``,
+``paper_nb_n{N}.pt``, ``edge.pt``, ``edge_noassign.pt``).
 """
 
 from __future__ import annotations
@@ -46,8 +51,13 @@ def _load(path: str):
     return model, size
 
 
+VARIANTS = ("auto", "paper", "paper_nb", "edge", "edge_noassign")
+
+
 def shipped(variant: str, n: int | None = None) -> Path:
-    return CHECKPOINTS / (f"paper_n{n}.pt" if variant == "paper" else "edge.pt")
+    if variant in ("paper", "paper_nb"):
+        return CHECKPOINTS / f"{variant}_n{n}.pt"
+    return CHECKPOINTS / f"{variant}.pt"
 
 
 class MagnnetAllocator(DecentralizedAllocator):
@@ -56,24 +66,27 @@ class MagnnetAllocator(DecentralizedAllocator):
     name = "magnnet"
 
     def __init__(self, variant: str = "auto", checkpoint: str | None = None) -> None:
-        if variant not in ("auto", "paper", "edge"):
-            raise TypeError(f"variant must be 'auto', 'paper' or 'edge', got {variant!r}")
+        if variant not in VARIANTS:
+            raise TypeError(f"variant must be one of {VARIANTS}, got {variant!r}")
         self.variant = variant
         self.checkpoint = checkpoint
 
     def model_for(self, n: int, m: int):
         if self.checkpoint is not None:
             path = Path(self.checkpoint)
-        elif self.variant == "edge" or (self.variant == "auto" and
-                                        (n != m or not shipped("paper", n).exists())):
-            path = shipped("edge")
+        elif self.variant in ("edge", "edge_noassign"):
+            path = shipped(self.variant)
+        elif self.variant == "auto":
+            path = shipped("paper_nb", n)
+            if n != m or not path.exists():
+                path = shipped("edge")
         else:
-            path = shipped("paper", n)
+            path = shipped(self.variant, n)
         if not path.exists():
             raise AllocationError(f"magnnet: no checkpoint at {path} (variant {self.variant!r}, "
                                   f"N={n}, M={m}); train one with `dispatch train magnnet`")
         model, size = _load(str(path))
-        if model.variant == "paper" and (model.n_agents, model.n_tasks) != (n, m):
+        if model.variant.startswith("paper") and (model.n_agents, model.n_tasks) != (n, m):
             raise AllocationError(
                 f"magnnet: checkpoint {path.name} is for N={model.n_agents}, M={model.n_tasks}, "
                 f"the problem is N={n}, M={m}; use variant='edge' for other sizes")

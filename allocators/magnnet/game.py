@@ -64,11 +64,12 @@ class Game:
         avail = self.available()
         rewards = np.zeros(self.n)
         req = np.full(self.n, -1, np.int64)
+        owner = rules.cheapest_contender(np.where(avail, self.cost, np.inf))
         for i in np.flatnonzero(dec):
             a = int(actions[i])
             if a > 0 and avail[i, a - 1]:
                 req[i] = a - 1
-            else:
+            elif (owner == i).any():
                 rewards[i] += rules.R_REJECT
         winners: dict[int, int] = {}
         count = np.zeros(self.m, np.int64)
@@ -229,7 +230,12 @@ class BatchedGame:
         a = actions.long()
         t = (a - 1).clamp(min=0)
         ok = dec & (a > 0) & torch.gather(avail, 2, t[..., None])[..., 0]
-        rewards = torch.where(dec & ~ok, rules.R_REJECT, 0.0).double()
+        c_av = torch.where(avail, self.cost, torch.full_like(self.cost, float("inf")))
+        has_av = avail.any(1)  # (B, M)
+        owner = torch.where(has_av, c_av.argmin(1),
+                            torch.full_like(has_av, -1, dtype=torch.long))
+        owns = (owner[:, None, :] == torch.arange(n)[None, :, None]).any(2)  # (B, N)
+        rewards = torch.where(dec & ~ok & owns, rules.R_REJECT, 0.0).double()
         onehot = torch.zeros(B, n, m, dtype=torch.bool)
         onehot.scatter_(2, t[..., None], ok[..., None])
         count = onehot.sum(1)  # (B, M)

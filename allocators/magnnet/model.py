@@ -80,29 +80,46 @@ def _mask(logits_tasks, reject, available):
 class MagnnetPolicy(nn.Module):
     """The paper's model for ``N`` agents and ``M`` tasks.
 
+    Agent nodes hold ``[status, flies, x, y, z]`` and the agent's ``M`` scaled cost estimates
+    (the paper: "position, status and cost estimates {c_ij}"); task nodes ``[open, x, y, z]``.
     Two :class:`HeteroGraphConv` layers of ``hidden`` units (6) give each agent an embedding
     ``z_i``; the actor is an MLP over ``[status, M costs, z_i]`` (input ``M + 7``) with one
     hidden layer of 128 and a softmax over ``{reject, task 1 .. task M}``; the centralized
     critic is an MLP (128 hidden) over all embeddings and task states, used in training only.
+
+    ``task_features=0`` is that model exactly (variant ``"paper"``). With
+    ``task_features=K > 0`` (variant ``"paper_nb"``, **our addition**, not in the paper) the
+    actor's input also holds, per task, the ``K`` features of :func:`neighbour_task_features`
+    that agent ``i`` computes from the cost vectors its one-hop neighbours broadcast (the
+    agent-agent messages carry per-task information): input ``M (1 + K) + 7``. Both are
+    decentralized in the same way (only one- and two-hop information reaches ``z_i``).
     """
 
-    variant = "paper"
-
-    def __init__(self, n_agents: int, n_tasks: int, hidden: int = 6, mlp: int = 128) -> None:
+    def __init__(self, n_agents: int, n_tasks: int, hidden: int = 6, mlp: int = 128,
+                 task_features: int = 0) -> None:
         super().__init__()
         self.n_agents, self.n_tasks, self.hidden, self.mlp = n_agents, n_tasks, hidden, mlp
+        self.task_features = task_features
         self.gnn = nn.ModuleList([
             HeteroGraphConv(AGENT_F + n_tasks, TASK_F, 2, hidden),
             HeteroGraphConv(hidden, hidden, 2, hidden),
         ])
-        self.actor = nn.Sequential(nn.Linear(n_tasks + 1 + hidden, mlp), nn.ReLU(),
-                                   nn.Linear(mlp, n_tasks + 1))
+        self.actor = nn.Sequential(
+            nn.Linear(n_tasks * (1 + task_features) + 1 + hidden, mlp), nn.ReLU(),
+            nn.Linear(mlp, n_tasks + 1))
         self.critic = nn.Sequential(nn.Linear(n_agents * hidden + n_tasks * TASK_F, mlp),
                                     nn.ReLU(), nn.Linear(mlp, 1))
 
+    @property
+    def variant(self) -> str:
+        return "paper_nb" if self.task_features else "paper"
+
     def config(self) -> dict:
-        return {"variant": self.variant, "n_agents": self.n_agents, "n_tasks": self.n_tasks,
-                "hidden": self.hidden, "mlp": self.mlp}
+        cfg = {"variant": "paper", "n_agents": self.n_agents, "n_tasks": self.n_tasks,
+               "hidden": self.hidden, "mlp": self.mlp}
+        if self.task_features:
+            cfg["task_features"] = self.task_features
+        return cfg
 
     def embed(self, obs):
         h = torch.cat([obs["agents"], obs["cost"]], -1)
@@ -114,7 +131,11 @@ class MagnnetPolicy(nn.Module):
     def forward(self, obs):
         """Masked action logits ``(B, N, M + 1)`` and the embeddings ``(B, N, hidden)``."""
         z, _ = self.embed(obs)
-        x = torch.cat([obs["agents"][..., :1], obs["cost"], z], -1)
+        parts = [obs["agents"][..., :1], obs["cost"]]
+        if self.task_features:
+            f = neighbour_task_features(obs)[..., :self.task_features]
+            parts.append(f.reshape(*f.shape[:2], -1))
+        x = torch.cat(parts + [z], -1)
         out = self.actor(x)
         return _mask(out[..., 1:], out[..., :1], obs["available"]), z
 
@@ -132,14 +153,19 @@ class EdgePolicy(nn.Module):
     ``g_j`` and edge features that agent ``i`` computes from its own costs and those its
     one-hop neighbours broadcast (see :func:`edge_features`); a second MLP over ``z_i`` scores
     rejecting. A softmax over ``{reject} + edges`` is the policy. The critic pools embeddings.
+
+    Honest note: edge feature 8 (each agent's own optimal assignment over what it knows, a
+    hand-written solver) carries most of this model's quality: on a complete graph it *is* the
+    optimal assignment, and the policy mostly learns to follow it. ``assignment=False``
+    (variant ``"edge_noassign"``) drops it, as an ablation.
     """
 
-    variant = "edge"
     EDGE_F = 9
 
-    def __init__(self, hidden: int = 16, mlp: int = 64) -> None:
+    def __init__(self, hidden: int = 16, mlp: int = 64, assignment: bool = True) -> None:
         super().__init__()
-        self.hidden, self.mlp = hidden, mlp
+        self.hidden, self.mlp, self.assignment = hidden, mlp, assignment
+        self.EDGE_F = 9 if assignment else 8
         self.gnn = nn.ModuleList([
             HeteroGraphConv(AGENT_F + 2, TASK_F, 2, hidden),
             HeteroGraphConv(hidden, hidden, 2, hidden),
@@ -150,8 +176,15 @@ class EdgePolicy(nn.Module):
                                       nn.Linear(mlp, 1))
         self.critic = nn.Sequential(nn.Linear(3 * hidden + 2, mlp), nn.ReLU(), nn.Linear(mlp, 1))
 
+    @property
+    def variant(self) -> str:
+        return "edge" if self.assignment else "edge_noassign"
+
     def config(self) -> dict:
-        return {"variant": self.variant, "hidden": self.hidden, "mlp": self.mlp}
+        cfg = {"variant": "edge", "hidden": self.hidden, "mlp": self.mlp}
+        if not self.assignment:
+            cfg["assignment"] = False
+        return cfg
 
     def embed(self, obs):
         cost, avail = obs["cost"], obs["available"].bool()
@@ -164,7 +197,7 @@ class EdgePolicy(nn.Module):
     def forward(self, obs):
         z, g, x = self.embed(obs)
         n, m = z.shape[1], g.shape[1]
-        f = edge_features(obs)
+        f = edge_features(obs, self.assignment)
         inp = torch.cat([z[:, :, None].expand(-1, -1, m, -1),
                          g[:, None].expand(-1, n, -1, -1), f], -1)
         scores = self.scorer(inp)[..., 0]
@@ -188,7 +221,66 @@ def _row_stats(cost, avail):
     return torch.cat([torch.where(any_, mn, cap), torch.where(any_, mean, cap)], -1)
 
 
-def edge_features(obs) -> torch.Tensor:
+#: Number of per-task features :func:`neighbour_task_features` returns.
+NB_FEATURES = 6
+
+
+def neighbour_task_features(obs) -> torch.Tensor:
+    """Per agent ``i`` and task ``j`` (our addition to the paper's actor input), from ``i``'s
+    own costs and the cost vectors its deciding one-hop neighbours ``k`` broadcast:
+
+    0. ``c_ij - min_k c_kj`` (negative: ``i`` is the cheapest contender for ``j`` it can hear);
+    1. ``min (c_kj - min_j' c_kj')`` over the neighbours ``k`` cheaper than ``i`` for ``j``
+       (0: ``j`` is the best task of a cheaper neighbour; the cap when none is cheaper);
+    2. how many deciding neighbours are cheaper than ``i`` for ``j``, divided by 10;
+    3. ``second-smallest c_kj - c_ij`` over the neighbours (how deep the competition is);
+    4. the regret of the cheapest neighbour ``k*`` for ``j``: ``c_k*j' - c_k*j`` with ``j'``
+       the best other task of ``k*`` (what ``k*`` loses without ``j``);
+    5. ``i``'s own regret for ``j``: ``c_ij - min_{j' != j} c_ij'`` (negative: ``j`` is its
+       best task, by that much).
+
+    Scaled cost units, clamped to ``[-cap, cap]``
+    (:data:`~allocators.magnnet.rules.COST_CAP`); shape ``(B, N, M, NB_FEATURES)``.
+    """
+    cap = rules.COST_CAP
+    cost, avail = obs["cost"], obs["available"].bool()
+    adj = obs["adjacency"].bool()
+    n, m = cost.shape[1], cost.shape[2]
+    status = obs["agents"][..., 0] > 0.5
+    eye = torch.eye(n, dtype=torch.bool)
+    nb = adj & ~eye & status[:, None, :]
+    c = torch.where(avail, cost, torch.full_like(cost, cap))
+    rowmin = c.amin(-1, keepdim=True)
+    # best other task of every agent, per task: min over j' != j
+    if m > 1:
+        two = torch.topk(c, 2, dim=-1, largest=False)
+        best_other = torch.where(torch.arange(m) == two.indices[..., :1],
+                                 two.values[..., 1:2], two.values[..., :1])
+    else:
+        best_other = torch.full_like(c, cap)
+    regret = best_other - c  # (B, k, j): what k loses without j (>0: j is k's best)
+    big = torch.full_like(c[:, None], 2 * cap)
+    ck = torch.where(nb[..., None], c[:, None].expand(-1, n, -1, -1), big)  # (B, i, k, j)
+    if n > 2:
+        low = torch.topk(ck, 2, dim=2, largest=False)
+        colmin, second = low.values[:, :, 0], low.values[:, :, 1]
+        kstar = low.indices[:, :, 0]
+    else:
+        colmin = ck.amin(2)
+        second = torch.full_like(colmin, 2 * cap)
+        kstar = ck.argmin(2)
+    has = nb.any(-1)[..., None]
+    k_regret = torch.gather(regret, 1, kstar)  # regret[b, kstar[b, i, j], j]
+    k_regret = torch.where(has, k_regret, torch.zeros_like(k_regret))
+    cheaper = (ck < c[:, :, None]) & nb[..., None]
+    slack = (c - rowmin)[:, None]
+    slack_cheaper = torch.where(cheaper, slack.expand_as(ck), torch.full_like(ck, cap)).amin(2)
+    f = torch.stack([c - colmin, slack_cheaper, cheaper.sum(2).float() / 10.0, second - c,
+                     k_regret, c - best_other], -1)
+    return f.clamp(-cap, cap)
+
+
+def edge_features(obs, assignment: bool = True) -> torch.Tensor:
     """Per edge ``(i, j)``, from agent ``i``'s costs and its one-hop neighbours' broadcasts:
 
     0. ``c_ij``; 1. ``c_ij - min_j' c_ij'`` (how far ``j`` is from ``i``'s best);
@@ -199,7 +291,8 @@ def edge_features(obs) -> torch.Tensor:
     6. ``i``'s regret (second-best minus best cost); 7. open tasks per deciding neighbour;
     8. whether ``(i, j)`` is in the optimal assignment that ``i`` computes over the costs it
     knows: its own and its deciding one-hop neighbours' (:func:`local_assignment`).
-    Shape ``(B, N, M, 9)``; costs in the scaled units of the observations.
+    Shape ``(B, N, M, 9)`` (``(B, N, M, 8)`` without feature 8 when ``assignment`` is false:
+    the ablation); costs in the scaled units of the observations.
     """
     cap = rules.COST_CAP
     cost, avail = obs["cost"], obs["available"].bool()
@@ -222,12 +315,11 @@ def edge_features(obs) -> torch.Tensor:
     best_count = (nb[..., None] & is_best[:, None]).sum(2).float()
     n_open = obs["tasks"][..., 0].sum(-1)[:, None, None]
     n_dec = (nb.sum(-1).float() + 1.0)[..., None]
-    f = torch.stack([
-        c, c - rowmin, c - colmin, slack_cheaper, cheaper.sum(2).float() / 10.0,
-        best_count / 10.0, regret.expand_as(c), (n_open / n_dec).expand_as(c) / 10.0,
-        local_assignment(obs).float(),
-    ], -1)
-    return f
+    feats = [c, c - rowmin, c - colmin, slack_cheaper, cheaper.sum(2).float() / 10.0,
+             best_count / 10.0, regret.expand_as(c), (n_open / n_dec).expand_as(c) / 10.0]
+    if assignment:
+        feats.append(local_assignment(obs).float())
+    return torch.stack(feats, -1)
 
 
 def local_assignment(obs) -> torch.Tensor:

@@ -14,8 +14,14 @@ Counting: one *environment step* is one round of one game (all its deciding agen
 Warm start (our addition, off with ``bc_updates=0``): before PPO, the actor can imitate the
 optimal assignment on the states it visits (DAgger-style: roll out the current policy, label
 each deciding agent with its task in the optimal assignment of the open tasks to the deciding
-agents, minimize cross-entropy). This is centralized information used in training only; at
-execution the policy is as decentralized as ever.
+agents, minimize cross-entropy). With ``bc_defer`` an agent whose optimal task has a cheaper
+deciding contender is labelled "reject" for that round (it waits; the rest of the optimum
+stays optimal), which a policy can imitate without conflicts. This is centralized information
+used in training only; at execution the policy is as decentralized as ever.
+
+Also ours: ``critic_warmup`` PPO updates that fit only the critic first (so an untrained critic
+does not undo the warm start), and, when ``train`` gets a ``validate`` function (held-out
+training instances, never the evaluation ones), the weights that validate best are kept.
 """
 
 from __future__ import annotations
@@ -60,8 +66,16 @@ class PPOConfig:
     """imitation (warm start) updates before PPO; 0 = pure PPO as in the paper."""
     bc_lr: float = 3e-3
     """Adam learning rate of the warm start."""
+    critic_warmup: int = 0
+    """PPO updates at the start that fit only the critic (the actor is left as the warm start
+    made it, instead of being pushed around by advantages of an untrained critic)."""
+    bc_defer: bool = False
+    """warm-start target: agents whose optimal task has a cheaper contender wait a round
+    (:func:`optimal_targets` with ``defer``)."""
     seed: int = 0
     """seed of torch and of the instance draws."""
+    val_every: int = 20
+    """PPO updates between two validations (when ``train`` gets a ``validate`` function)."""
 
 
 def gae(rewards, values, dones, last_value, gamma: float, lam: float):
@@ -178,9 +192,10 @@ def collect(model, game: BatchedGame, sampler: Sampler, steps: int, stats: dict)
             "rewards": torch.stack(rew_l), "dones": torch.stack(done_l), "last_value": last_v}
 
 
-def ppo_update(model, optimizer, batch, cfg: PPOConfig) -> dict[str, float]:
+def ppo_update(model, optimizer, batch, cfg: PPOConfig, actor: bool = True) -> dict[str, float]:
     """The PPO update on one batch from :func:`collect`: ``cfg.epochs`` passes in minibatches of
-    ``cfg.minibatch_size`` environment steps. Returns mean losses and entropy."""
+    ``cfg.minibatch_size`` environment steps. Returns mean losses and entropy. With
+    ``actor=False`` only the value loss is minimized (critic warm-up)."""
     adv, ret = gae(batch["rewards"], batch["values"], batch["dones"], batch["last_value"],
                    cfg.gamma, cfg.gae_lambda)
     T, B = adv.shape
@@ -206,9 +221,11 @@ def ppo_update(model, optimizer, batch, cfg: PPOConfig) -> dict[str, float]:
             pg = -torch.min(ratio * a, ratio.clamp(1 - cfg.clip, 1 + cfg.clip) * a)
             pg = (pg * mask).sum() / cnt
             entropy = (ent * mask).sum() / cnt
-            v = model.value(o, z)
+            v = model.value(o, z if actor else z.detach())
             vloss = ((v - ret[idx]) ** 2).mean()
-            loss = pg - cfg.ent_coef * entropy + cfg.vf_coef * vloss
+            loss = cfg.vf_coef * vloss
+            if actor:
+                loss = loss + pg - cfg.ent_coef * entropy
             optimizer.zero_grad()
             loss.backward()
             torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.max_grad_norm)
@@ -222,9 +239,15 @@ def ppo_update(model, optimizer, batch, cfg: PPOConfig) -> dict[str, float]:
     return {k: float(np.mean(v)) for k, v in logs.items()}
 
 
-def optimal_targets(game: BatchedGame) -> torch.Tensor:
+def optimal_targets(game: BatchedGame, defer: bool = False) -> torch.Tensor:
     """Per deciding agent, ``1 + its task`` in the optimal assignment of the open tasks to the
-    deciding agents (0 for agents left out of it); ``-1`` for agents not deciding."""
+    deciding agents (0 for agents left out of it); ``-1`` for agents not deciding.
+
+    ``defer``: an agent whose optimal task has a cheaper deciding contender rejects this round
+    instead (it waits; the optimal assignment of what is left is unchanged by the commits of
+    the others), unless that would leave the round without any request. Same optimum, more
+    rounds, and a target a policy that sees its neighbours' costs per task can imitate better.
+    """
     from allocators.hungarian import optimal_pairs
 
     dec = game.deciding()
@@ -236,18 +259,22 @@ def optimal_targets(game: BatchedGame) -> torch.Tensor:
         if rows.size == 0:
             continue
         tgt[b, rows] = 0
-        for a, t in optimal_pairs(cost[b][rows]):
+        c = cost[b][rows]
+        pairs = optimal_pairs(c)
+        keep = [(a, t) for a, t in pairs if not defer or int(np.argmin(c[:, t])) == a]
+        for a, t in (keep or pairs):
             tgt[b, rows[a]] = t + 1
     return tgt
 
 
-def bc_update(model, optimizer, game: BatchedGame, sampler: Sampler, steps: int = 8) -> float:
+def bc_update(model, optimizer, game: BatchedGame, sampler: Sampler, steps: int = 8,
+              defer: bool = False) -> float:
     """One warm-start update: roll the current policy for ``steps`` rounds, label every state
     with :func:`optimal_targets`, and take one cross-entropy step on all of them."""
     obs_l, tgt_l = [], []
     for _ in range(steps):
         obs = game.obs()
-        tgt_l.append(optimal_targets(game))
+        tgt_l.append(optimal_targets(game, defer))
         obs_l.append(obs)
         with torch.no_grad():
             logits, _ = model(obs)
@@ -268,13 +295,18 @@ def bc_update(model, optimizer, game: BatchedGame, sampler: Sampler, steps: int 
 
 def train(model, pool, n: int, m: int, cfg: PPOConfig, on_update=None,
           sizes: list[tuple[int, int]] | None = None,
-          comm_ranges: tuple[float, float] | None = None) -> list[dict]:
+          comm_ranges: tuple[float, float] | None = None, validate=None) -> list[dict]:
     """Warm start (``cfg.bc_updates``) then PPO for ``cfg.total_steps`` environment steps.
 
     ``comm_ranges``: when given, half the games get a communication graph of a range drawn
-    uniformly from it (metres), the rest a complete graph. ``sizes`` (size-agnostic model only) lists ``(N, M)`` sizes to cycle through, one per
+    uniformly from it (metres), the rest a complete graph. ``sizes`` (size-agnostic model
+    only) lists ``(N, M)`` sizes to cycle through, one per
     update; default ``[(n, m)]``. ``on_update(row)`` is called after every update with the
     logged scalars (``charts/...``, ``losses/...``); the rows are also returned.
+
+    ``validate(model) -> dict`` (optional; held-out instances, never the evaluation ones): run
+    after the warm start and every ``cfg.val_every`` PPO updates; its ``"score"`` (lower is
+    better) picks the weights the model ends with (logged as ``phase="val"`` rows).
     """
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
@@ -292,7 +324,7 @@ def train(model, pool, n: int, m: int, cfg: PPOConfig, on_update=None,
         bc_opt = torch.optim.Adam(model.parameters(), lr=cfg.bc_lr)
         for u in range(cfg.bc_updates):
             game, sampler, _ = games[u % len(games)]
-            loss = bc_update(model, bc_opt, game, sampler)
+            loss = bc_update(model, bc_opt, game, sampler, defer=cfg.bc_defer)
             env_steps += 8 * cfg.n_envs
             row = {"phase": "bc", "update": u, "env_steps": env_steps, "n_agents": game.n,
                    "wall_s": time.perf_counter() - started, "losses/imitation": loss}
@@ -301,6 +333,21 @@ def train(model, pool, n: int, m: int, cfg: PPOConfig, on_update=None,
                 on_update(row)
         for game, sampler, _ in games:
             sampler.fill(game, np.arange(cfg.n_envs))
+    best = {"score": float("inf"), "state": None}
+
+    def check(u):
+        if validate is None:
+            return
+        res = validate(model)
+        row = {"phase": "val", "update": u, "env_steps": env_steps,
+               "wall_s": time.perf_counter() - started,
+               **{f"val/{k}": float(v) for k, v in res.items()}}
+        rows.append(row)
+        if res["score"] < best["score"]:
+            best["score"] = res["score"]
+            best["state"] = {k: v.clone() for k, v in model.state_dict().items()}
+
+    check(-1)
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr, eps=1e-5)
     steps_per = max(1, cfg.batch_size // cfg.n_envs)
     n_updates = cfg.total_steps // (steps_per * cfg.n_envs)
@@ -308,7 +355,7 @@ def train(model, pool, n: int, m: int, cfg: PPOConfig, on_update=None,
         game, sampler, stats = games[u % len(games)]
         batch = collect(model, game, sampler, steps_per, stats)
         env_steps += steps_per * cfg.n_envs
-        logs = ppo_update(model, opt, batch, cfg)
+        logs = ppo_update(model, opt, batch, cfg, actor=u >= cfg.critic_warmup)
         rets = stats.pop("returns", [])
         gaps = stats.pop("gaps", [])
         comp = stats.pop("complete", [])
@@ -324,7 +371,27 @@ def train(model, pool, n: int, m: int, cfg: PPOConfig, on_update=None,
         rows.append(row)
         if on_update:
             on_update(row)
+        if (u + 1) % cfg.val_every == 0 or u == n_updates - 1:
+            check(u)
+    if best["state"] is not None:
+        model.load_state_dict(best["state"])
     return rows
+
+
+def validation_set(pool, n: int, m: int, count: int, seed: int = 12345):
+    """A fixed :class:`~allocators.magnnet.problems.Pool` of ``count`` ``N x M`` instances cut
+    from ``pool``'s instances as the trainer's :class:`Sampler` cuts them."""
+    from allocators.magnnet.problems import Pool
+
+    c, a, t, f, s = Sampler(pool, n, m, np.random.default_rng(seed)).draw(count)
+    return Pool(c, a, t, f, np.arange(count, dtype=np.int64), s)
+
+
+def score(res: dict) -> float:
+    """Validation score (lower is better): the gap plus the shares of tasks in conflict and of
+    instances left incomplete (each such point weighs as much as a point of gap)."""
+    gap = res["gap"] if res["gap"] == res["gap"] else 1.0
+    return gap + (1.0 - res["conflict_free"]) + (1.0 - res["complete"])
 
 
 def save_checkpoint(model, path, cfg: PPOConfig | None = None, extra: dict | None = None):
@@ -342,3 +409,31 @@ def load_checkpoint(path):
     model.load_state_dict(ck["state_dict"])
     model.eval()
     return model, ck
+
+
+def evaluate(model, pool, comm=None) -> dict[str, float]:
+    """Play every instance of ``pool`` once with the model's most likely actions (as the plugin
+    does) on a complete communication graph (or ``comm (B, N, N)``); mean gap to the optimal
+    total over fully assigned instances, share fully assigned, and conflict-free rate (tasks
+    never requested by two agents in one round, over all tasks)."""
+    b, n, m = pool.cost.shape
+    game = BatchedGame(b, n, m)
+    game.load(np.arange(b), pool.cost, pool.agent_pos, pool.task_pos, pool.flies,
+              pool.world_size, comm)
+    over = torch.zeros(b, dtype=torch.bool)
+    with torch.no_grad():
+        for _ in range(game.max_rounds):
+            logits, _ = model(game.obs())
+            a = torch.where(over[:, None], torch.zeros_like(logits[..., 0], dtype=torch.long),
+                            logits.argmax(-1))
+            # finished games only see rejects: nothing changes in them
+            _, _, _, _, done, _ = game.step(a)
+            over |= done
+            if over.all():
+                break
+    total = game.totals()
+    gap = (total - game.opt_total) / game.opt_total.clamp(min=1e-9)
+    full = (game.agent_task >= 0).sum(1) >= game.opt_count
+    return {"gap": float(gap[full].mean()) if full.any() else float("nan"),
+            "complete": float(full.float().mean()),
+            "conflict_free": float(1.0 - game.conflicted.float().mean())}

@@ -19,7 +19,10 @@ Rewards (per agent, per round), the paper's shaping with our magnitudes:
 * ``R_WIN - R_COST * c_ij / c_mean`` to an agent that wins task ``j`` (``c_mean``: the mean
   finite cost of the instance), so a cheap win is worth more than a dear one;
 * ``R_CONFLICT`` to every requester of a task that two or more agents requested this round;
-* ``R_REJECT`` to a deciding agent that rejects (rejecting "without reason");
+* ``R_REJECT`` to a deciding agent that rejects "without a valid reason": while it is the
+  cheapest deciding contender (ties to the lowest index) for some task it could request, i.e.
+  it holds back a task it would win. Waiting while a cheaper agent contends for one's tasks is
+  free (that is how agents avoid conflicts over several rounds);
 * at the last round, ``R_TEAM * exp(-TEAM_SHARPNESS * gap)`` to every agent still in the game
   when the episode ends with as many tasks assigned as the optimum assigns, ``gap`` the total
   cost's relative gap to the optimal (Hungarian) assignment; the *team* reward used by the
@@ -44,6 +47,14 @@ TEAM_SHARPNESS = 10.0
 #: features local.
 COST_SCALE = 10.0
 COST_CAP = 3.0
+
+
+def cheapest_contender(cost: np.ndarray) -> np.ndarray:
+    """Per task, the agent with the smallest cost (ties to the lowest index; ``inf`` where
+    unavailable), ``-1`` where no agent can take it. ``cost (N, M)``."""
+    if cost.shape[0] == 0:
+        return np.full(cost.shape[1], -1, np.int64)
+    return np.where(np.isfinite(cost).any(0), cost.argmin(0), -1)
 
 
 def max_rounds_for(m: int) -> int:

@@ -20,14 +20,26 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
     d = PPOConfig()
     p.add_argument("--agents", type=int, default=8, help="N (= M tasks) of the paper model")
-    p.add_argument("--variant", choices=["paper", "edge"], default="paper")
+    p.add_argument("--variant", choices=["paper", "paper_nb", "edge", "edge_noassign"],
+                   default="paper_nb",
+                   help="paper: the paper's model exactly; paper_nb: plus per-task neighbour "
+                        "features in the actor (ours); edge: size-agnostic; edge_noassign: "
+                        "edge without its local-assignment feature (ablation)")
     p.add_argument("--steps", type=int, default=d.total_steps, help="PPO environment steps")
-    p.add_argument("--bc-updates", type=int, default=200,
+    p.add_argument("--bc-updates", type=int, default=1500,
                    help="imitation warm-start updates before PPO (0: pure PPO as in the paper)")
+    p.add_argument("--bc-defer", action=argparse.BooleanOptionalAction, default=True,
+                   help="warm-start target: agents with a cheaper contender for their optimal "
+                        "task wait a round (see ppo.optimal_targets)")
     p.add_argument("--lr", type=float, default=d.lr)
     p.add_argument("--envs", type=int, default=d.n_envs)
     p.add_argument("--seed", type=int, default=d.seed)
     p.add_argument("--pool", type=int, default=600, help="training instances (cached A* costs)")
+    p.add_argument("--val", type=int, default=100,
+                   help="of those, held out for validation (picks the final weights; 0: none)")
+    p.add_argument("--critic-warmup", type=int, default=20,
+                   help="PPO updates at the start that fit only the critic")
+    p.add_argument("--ent", type=float, default=d.ent_coef, help="entropy coefficient")
     p.add_argument("--out", type=Path, default=None, help="output folder")
 
 
@@ -38,8 +50,9 @@ def run(args, console=None) -> int:
     import torch
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from allocators.magnnet.model import EdgePolicy, MagnnetPolicy
-    from allocators.magnnet.ppo import PPOConfig, save_checkpoint, train
+    from allocators.magnnet.model import NB_FEATURES, EdgePolicy, MagnnetPolicy
+    from allocators.magnnet.ppo import (PPOConfig, evaluate, save_checkpoint, score, train,
+                                        validation_set)
     from allocators.magnnet.problems import load_pool
 
     torch.set_num_threads(1)
@@ -47,13 +60,25 @@ def run(args, console=None) -> int:
     out = args.out or Path("runs") / "train" / f"magnnet_{args.variant}_n{n}"
     out.mkdir(parents=True, exist_ok=True)
     cfg = PPOConfig(lr=args.lr, total_steps=args.steps, bc_updates=args.bc_updates,
-                    n_envs=args.envs, seed=args.seed)
+                    n_envs=args.envs, seed=args.seed, bc_defer=args.bc_defer,
+                    critic_warmup=args.critic_warmup, ent_coef=args.ent)
     pool_n = max(20, n)
-    pool = load_pool(pool_n, args.pool, "train", workers=2)
-    if args.variant == "paper":
-        model, sizes = MagnnetPolicy(n, n), None
+    full = load_pool(pool_n, args.pool, "train", workers=2)
+    n_val = min(args.val, len(full) // 2)
+    pool = full.take(slice(0, len(full) - n_val))
+    validate = None
+    if n_val and args.variant.startswith("paper"):
+        val = validation_set(full.take(slice(len(full) - n_val, len(full))), n, n, 100)
+
+        def validate(model):
+            res = evaluate(model, val)
+            return {**res, "score": score(res)}
+    if args.variant in ("paper", "paper_nb"):
+        tf = NB_FEATURES if args.variant == "paper_nb" else 0
+        model, sizes = MagnnetPolicy(n, n, task_features=tf), None
     else:
-        model, sizes = EdgePolicy(), [(k, k) for k in (4, 8, 12, 20) if k <= pool_n]
+        model = EdgePolicy(assignment=args.variant == "edge")
+        sizes = [(k, k) for k in (4, 8, 12, 20) if k <= pool_n]
     started = time.perf_counter()
     total = cfg.bc_updates + cfg.total_steps // (max(1, cfg.batch_size // cfg.n_envs)
                                                  * cfg.n_envs)
@@ -62,24 +87,45 @@ def run(args, console=None) -> int:
         bar = progress.add_task(f"magnnet {args.variant} N={n}", total=total)
 
         def on_update(row):
+            if row["phase"] == "val":
+                return
             desc = (f"{row['phase']} loss {row['losses/imitation']:.3f}" if row["phase"] == "bc"
                     else f"ppo return {row['charts/episode_return']:.2f} "
                          f"gap {row['charts/gap']:.3f}")
-            progress.update(bar, advance=1, description=desc)
+            if row["phase"] != "val":
+                progress.update(bar, advance=1, description=desc)
 
         rows = train(model, pool, n, n, cfg, on_update, sizes=sizes,
-                     comm_ranges=(10.0, 40.0) if args.variant == "edge" else None)
+                     comm_ranges=(10.0, 40.0) if args.variant.startswith("edge") else None,
+                     validate=validate)
     wall = time.perf_counter() - started
     steps = rows[-1]["env_steps"] if rows else 0
+    ppo_rows = [r for r in rows if r["phase"] == "ppo"]
+    bc_rows = [r for r in rows if r["phase"] == "bc"]
+    bc_wall = bc_rows[-1]["wall_s"] if bc_rows else 0.0
+    ppo_wall = (ppo_rows[-1]["wall_s"] - bc_wall) if ppo_rows else 0.0
+    ppo_steps = len(ppo_rows) and ppo_rows[-1]["env_steps"] - (bc_rows[-1]["env_steps"]
+                                                               if bc_rows else 0)
+    vals = [r for r in rows if r["phase"] == "val"]
+    best_val = min(vals, key=lambda r: r["val/score"]) if vals else None
     save_checkpoint(model, out / "model.pt", cfg,
-                    {"wall_s": wall, "env_steps": steps, "world_size": pool.world_size.tolist(),
-                     "pool": f"train seeds from 1000000, N={pool_n}, {len(pool)} instances"})
+                    {"wall_s": wall, "env_steps": steps, "ppo_wall_s": ppo_wall,
+                     "ppo_env_steps": ppo_steps,
+                     "val": {k: v for k, v in (best_val or {}).items() if k.startswith("val/")},
+                     "world_size": pool.world_size.tolist(),
+                     "pool": f"train seeds from 1000000, N={pool_n}, {len(pool)} training + "
+                             f"{n_val} validation instances"})
     keys = sorted({k for r in rows for k in r})
     table = pa.table({k: [r.get(k) for r in rows] for k in keys})
     pq.write_table(table, out / "log.parquet")
     _figures(rows, out)
-    msg = (f"trained in {wall:.1f} s, {steps} env steps ({steps / wall:.0f} steps/s); "
-           f"checkpoint {out / 'model.pt'}")
+    msg = (f"trained in {wall:.1f} s, {steps} env steps ({steps / wall:.0f} steps/s); PPO "
+           f"{ppo_steps} env steps in {ppo_wall:.1f} s "
+           f"({ppo_steps / max(ppo_wall, 1e-9):.0f} steps/s); checkpoint {out / 'model.pt'}")
+    if best_val:
+        msg += (f"\nkept weights of update {best_val['update']} (validation gap "
+                f"{100 * best_val['val/gap']:.2f} %, conflict-free "
+                f"{100 * best_val['val/conflict_free']:.1f} %)")
     (console.print if console else print)(msg)
     return 0
 

@@ -96,13 +96,23 @@ def _obs_np(model_obs):
             ("self", "action_mask")}
 
 
-@pytest.mark.parametrize("cls", ["paper", "edge"])
+def _model(cls, n):
+    from allocators.magnnet.model import NB_FEATURES
+
+    return {"paper": lambda: MagnnetPolicy(n, n),
+            "paper_nb": lambda: MagnnetPolicy(n, n, task_features=NB_FEATURES),
+            "edge": lambda: EdgePolicy(),
+            "edge_noassign": lambda: EdgePolicy(assignment=False)}[cls]()
+
+
+@pytest.mark.parametrize("cls", ["paper", "paper_nb", "edge", "edge_noassign"])
 def test_action_ignores_agents_beyond_two_hops(cls):
     """Agents on a line 0-1-2-3-4-5: agent 0's logits do not change when agent 3, 4 or 5
     changes (position, costs, status), and do change when agent 2 changes."""
     n = 6
     torch.manual_seed(0)
-    model = MagnnetPolicy(n, n) if cls == "paper" else EdgePolicy()
+    model = _model(cls, n)
+    assert model.variant == cls
     rng = np.random.default_rng(0)
     cost, apos, tpos, flies, size = random_instance(rng, n, n)
     comm = np.eye(n, dtype=bool) | np.eye(n, k=1, dtype=bool) | np.eye(n, k=-1, dtype=bool)
@@ -126,14 +136,15 @@ def test_action_ignores_agents_beyond_two_hops(cls):
     assert not torch.allclose(logits_of(c2, apos), base)
 
 
-def test_allocator_is_local_and_valid():
+@pytest.mark.parametrize("cls", ["paper_nb", "edge"])
+def test_allocator_is_local_and_valid(cls):
     """The plugin's choices on a problem equal each agent's own local-view computation."""
     from allocators.magnnet.allocator import observe
     from allocators.magnnet.game import local_obs
     from tests.allocators.helpers import make_problem
 
     torch.manual_seed(1)
-    model = EdgePolicy()
+    model = _model(cls, 6)
     cost = np.random.default_rng(3).uniform(1, 20, (6, 6))
     p = make_problem(cost)
     comm = np.eye(6, dtype=bool) | np.eye(6, k=1, dtype=bool) | np.eye(6, k=-1, dtype=bool)
@@ -165,21 +176,70 @@ def test_shipped_checkpoints_load_and_beat_random(n):
     from dispatch.registry import load
     from tests.allocators.helpers import assert_valid, make_problem, total_cost
 
-    _shipped(f"paper_n{n}.pt")
-    ck = torch.load(_shipped(f"paper_n{n}.pt"), weights_only=True)
-    assert ck["config"]["n_agents"] == n
+    for name in (f"paper_n{n}.pt", f"paper_nb_n{n}.pt"):
+        ck = torch.load(_shipped(name), weights_only=True)
+        assert ck["config"]["n_agents"] == n
+        load_checkpoint(_shipped(name))
     load_checkpoint(_shipped("edge.pt"))
+    assert load_checkpoint(_shipped("edge_noassign.pt"))[0].variant == "edge_noassign"
     rng = np.random.default_rng(123)
-    wins = {"magnnet": 0.0, "random": 0.0}
+    allocs = {v: load("allocator", "magnnet")(v) for v in ("auto", "paper", "paper_nb")}
+    allocs["random"] = RandomAllocator()
+    wins = dict.fromkeys(allocs, 0.0)
     for k in range(10):
         cost, *_ = random_instance(rng, n, n)
-        for name, alloc in (("magnnet", load("allocator", "magnnet")()),
-                            ("random", RandomAllocator())):
+        for name, alloc in allocs.items():
             p = make_problem(cost, seed=k)
             a = alloc.allocate(p)
             assert_valid(p, a)
             wins[name] += total_cost(p, a) + 100.0 * (n - len(a.pairs))
-    assert wins["magnnet"] < wins["random"]
+    for v in ("auto", "paper", "paper_nb"):
+        assert wins[v] < wins["random"], v
+
+
+def test_neighbour_task_features_hand_computed():
+    """Agent 0 of three on a complete graph, costs (scaled) rows [1, 2], [3, 1.5], [2, 4]."""
+    from allocators.magnnet.model import neighbour_task_features
+
+    cost = torch.tensor([[[1.0, 2.0], [3.0, 1.5], [2.0, 4.0]]])
+    obs = {"cost": cost, "available": torch.ones(1, 3, 2, dtype=torch.bool),
+           "adjacency": torch.ones(1, 3, 3), "agents": torch.ones(1, 3, 5)}
+    f = neighbour_task_features(obs)[0, 0]
+    # task 0: others 3, 2 -> margin 1-2=-1, none cheaper, second-min 3-1=2, cheapest other
+    # (agent 2, best other task 4) regret 4-2=2, own regret 1-2=-1
+    assert f[0].tolist() == pytest.approx([-1.0, rules.COST_CAP, 0.0, 2.0, 2.0, -1.0])
+    # task 1: others 1.5, 4 -> margin .5, agent 1 cheaper with slack 0, one cheaper,
+    # second-min 4-2=2, agent 1's regret 3-1.5=1.5, own regret 2-1=1
+    assert f[1].tolist() == pytest.approx([0.5, 0.0, 0.1, 2.0, 1.5, 1.0])
+
+
+def test_deferring_teacher_is_optimal_and_conflict_free():
+    """Following :func:`optimal_targets` with ``defer`` reaches the optimum without conflicts."""
+    from allocators.magnnet.ppo import optimal_targets
+
+    pool = random_pool(5, 16, 6)
+    g = BatchedGame(16, 6, 6)
+    g.load(np.arange(16), pool.cost, pool.agent_pos, pool.task_pos, pool.flies,
+           pool.world_size)
+    over = torch.zeros(16, dtype=torch.bool)
+    for _ in range(g.max_rounds):
+        a = optimal_targets(g, defer=True).clamp(min=0)
+        a[over] = 0
+        over |= g.step(a)[4]
+        if over.all():
+            break
+    assert over.all()
+    assert not g.conflicted.any()
+    torch.testing.assert_close(g.totals(), g.opt_total)
+
+
+def test_evaluate_plays_the_pool():
+    from allocators.magnnet.ppo import evaluate
+
+    pool = random_pool(2, 8, 4)
+    r = evaluate(_model("paper_nb", 4), pool)
+    assert 0.0 <= r["conflict_free"] <= 1.0 and 0.0 <= r["complete"] <= 1.0
+    assert np.isnan(r["gap"]) or r["gap"] >= -1e-9
 
 
 def test_rules_bonus():
@@ -200,5 +260,7 @@ def test_train_cli_smoke(tmp_path, monkeypatch):
                  "--pool", "3", "--envs", "8", "--out", str(out)]) == 0
     for name in ("model.pt", "log.parquet", "reward.png", "entropy.png"):
         assert (out / name).exists()
-    assert pq.read_table(out / "log.parquet").num_rows == 2 + 1
+    log = pq.read_table(out / "log.parquet").to_pydict()
+    assert sum(ph != "val" for ph in log["phase"]) == 2 + 1
+    assert "val" in log["phase"]
     torch.load(out / "model.pt", weights_only=True)
