@@ -11,56 +11,113 @@ A step is an edge only if every cell of its bounding box is free (the MovingAI n
 rule, :func:`dispatch.motion.step_is_legal`); blocked cells have no edges at all. Edge weights
 are in **metres** (step length in cells times ``grid.cell``). Both graphs are symmetric.
 
+The graph is implicit: a per-node bit mask of legal steps (``GridGraph.dirs``, vectorized with
+numpy) plus the index delta and weight of each step. The searches are compiled
+(:mod:`planners._fast`, numba): distance fields by an exact Dijkstra with one FIFO per step
+length (several fields at once on threads), single pairs by A* with a radix heap. An explicit ``scipy.sparse`` adjacency
+(``GridGraph.csr``) is built only on request, for references and other tools.
+
 Everything here depends only on the immutable :class:`~dispatch.world.Grid`, so it is cached
-on ``grid.cache``: the graphs (built once per grid and model, vectorized with numpy) and an LRU
-of distance fields bounded both in count and in bytes.
+on ``grid.cache``: the graphs (built once per grid and model) and an LRU of distance fields
+bounded both in count and in bytes.
 """
 
 from __future__ import annotations
 
-import heapq
 import math
+import os
+import threading
 from collections import OrderedDict
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from functools import cached_property, partial
 
 import numpy as np
 from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import dijkstra
 
 from dispatch.motion import offsets
 from dispatch.world import Cell, Grid
+from planners import _fast
 
 #: Most distance fields kept per grid (both movement models together).
 FIELD_CACHE_MAX_FIELDS = 4096
 #: Most bytes of distance fields kept per grid (a 50x50x30 field is 600 kB).
 FIELD_CACHE_MAX_BYTES = 512 * 2**20
+#: Largest node lattice for which :func:`astar` builds (and caches) the per-node move masks;
+#: beyond it (e.g. the 89-million-voxel MovingAI 3D maps) A* reads moves from the occupancy.
+MASK_MAX_NODES = 1 << 23
+#: Largest lattice whose A* scratch arrays (13 bytes a node) are kept between searches.
+SCRATCH_MAX_NODES = 1 << 22
+#: Threads that compute several distance fields at once (1: never in parallel).
+FIELD_THREADS = max(1, min(4, os.cpu_count() or 1))
+#: Smallest lattice whose fields are worth a thread each (a 50x50 ground layer is not).
+PARALLEL_MIN_NODES = 20_000
 
 _GRAPH_KEY = "planners.graph.graph"
 _FIELDS_KEY = "planners.graph.fields"
+_PADDED_KEY = "planners.graph.padded"
+_SCRATCH_KEY = "planners.graph.astar_scratch"
 
-_C2 = math.sqrt(2.0) - 1.0
-_C3 = math.sqrt(3.0) - math.sqrt(2.0)
+
+def _lattice(grid: Grid, flies: bool) -> tuple[int, int, int]:
+    nx, ny, nz = grid.shape
+    return (nx, ny, nz) if flies else (nx, ny, 1)
+
+
+def _steps(shape3: tuple[int, int, int], flies: bool):
+    """Per move ``b`` of ``offsets(flies)``: index delta in ``shape3``, number of axes moved."""
+    strides = (shape3[1] * shape3[2], shape3[2], 1)
+    offs = offsets(flies)
+    deltas = np.array([sum(s * v for s, v in zip(strides, d)) for d in offs], dtype=np.int64)
+    axes = np.array([sum(map(abs, d)) for d in offs], dtype=np.int64)
+    return deltas, axes
 
 
 @dataclass(frozen=True, eq=False)
 class GridGraph:
     """One movement model's graph over a grid.
 
-    ``csr`` is the symmetric ``(n, n)`` adjacency in metres. ``shape`` is the node lattice
-    (``grid.shape`` for UAVs, ``grid.shape[:2]`` for UGVs); node ``n`` is the C-order flat index
-    in it. ``dirs`` is a per-node bit mask of legal steps, bit ``b`` for ``offsets(flies)[b]``
-    (the same legality as ``csr``, kept for the A* neighbour tables).
+    ``shape`` is the node lattice (``grid.shape`` for UAVs, ``grid.shape[:2]`` for UGVs); node
+    ``n`` is the C-order flat index in it. ``dirs`` is a per-node bit mask of legal steps, bit
+    ``b`` for ``offsets(flies)[b]``; ``deltas[b]`` is that step's node-index delta and
+    ``weights[b]`` its length in metres. ``csr`` is the same graph as a symmetric ``(n, n)``
+    scipy adjacency in metres, built on first use.
     """
 
     flies: bool
     shape: tuple[int, ...]
     cell: float
-    csr: csr_matrix
     dirs: np.ndarray
+    deltas: np.ndarray
+    axes: np.ndarray
 
     @property
     def n_nodes(self) -> int:
         return int(np.prod(self.shape))
+
+    @cached_property
+    def steps(self) -> np.ndarray:
+        """Length of each move in cells (1, sqrt 2 or sqrt 3)."""
+        return np.sqrt(self.axes.astype(np.float64))
+
+    @property
+    def weights(self) -> np.ndarray:
+        """Length of each move in metres."""
+        return self.cell * self.steps
+
+    @cached_property
+    def csr(self) -> csr_matrix:
+        rows, cols, weights = [], [], []
+        for b, delta in enumerate(self.deltas.tolist()):
+            nodes = np.flatnonzero(self.dirs & np.int32(1 << b))
+            rows.append(nodes)
+            cols.append(nodes + delta)
+            weights.append(np.full(nodes.size, self.cell * math.sqrt(int(self.axes[b]))))
+        n = self.n_nodes
+        m = csr_matrix((np.concatenate(weights), (np.concatenate(rows), np.concatenate(cols))),
+                       shape=(n, n))
+        m.sort_indices()
+        return m
 
     def node(self, c: Cell) -> int | None:
         """The node of cell ``c``, or None if it is out of bounds or off this model's layer."""
@@ -85,12 +142,7 @@ def _build(grid: Grid, flies: bool) -> GridGraph:
     occ = grid.occupied if flies else grid.occupied[:, :, :1]
     free = ~occ
     shape3 = occ.shape
-    shape = shape3 if flies else shape3[:2]
-    n = int(np.prod(shape3))
-    flat = np.arange(n, dtype=np.int64).reshape(shape3)
-    strides = np.array([shape3[1] * shape3[2], shape3[2], 1], dtype=np.int64)
     dirs = np.zeros(shape3, dtype=np.int32)
-    rows, cols, weights = [], [], []
     for b, d in enumerate(offsets(flies)):
         if any(s == 1 and v != 0 for s, v in zip(shape3, d)):
             continue  # no room for this step along a flat axis
@@ -109,17 +161,12 @@ def _build(grid: Grid, flies: bool) -> GridGraph:
                     sl[a] = slice(1, s) if d[a] > 0 else slice(0, s - 1)
             legal &= free[tuple(sl)]
         dirs[src][legal] |= np.int32(1 << b)
-        a_nodes = flat[src][legal]
-        rows.append(a_nodes)
-        cols.append(a_nodes + int(np.dot(strides, d)))
-        weights.append(np.full(a_nodes.size, grid.cell * math.sqrt(len(moving))))
-    r = np.concatenate(rows) if rows else np.zeros(0, np.int64)
-    c = np.concatenate(cols) if cols else np.zeros(0, np.int64)
-    w = np.concatenate(weights) if weights else np.zeros(0)
-    csr = csr_matrix((w, (r, c)), shape=(n, n))
-    csr.sort_indices()
+    deltas, axes = _steps(shape3, flies)
+    dirs = dirs.reshape(-1)
+    dirs.setflags(write=False)
+    shape = shape3 if flies else shape3[:2]
     return GridGraph(flies=flies, shape=tuple(int(s) for s in shape), cell=float(grid.cell),
-                     csr=csr, dirs=dirs.reshape(-1))
+                     dirs=dirs, deltas=deltas, axes=axes)
 
 
 def graph(grid: Grid, flies: bool) -> GridGraph:
@@ -131,6 +178,73 @@ def graph(grid: Grid, flies: bool) -> GridGraph:
     return g
 
 
+_SCRATCH = threading.local()
+_POOL: dict = {}  # pid -> ThreadPoolExecutor (a forked child must not reuse its parent's)
+_POOL_LOCK = threading.Lock()
+
+
+def _field(g: GridGraph, node: int) -> np.ndarray:
+    """A complete Dijkstra field (metres, flat) from ``node`` over ``g``, compiled."""
+    n = g.n_nodes
+    scratch = getattr(_SCRATCH, "queues", None)
+    if scratch is None or scratch[0].shape[1] < n:
+        scratch = _SCRATCH.queues = (np.empty((3, n), np.int64), np.empty((3, n)))
+    # weight classes: moves along 1, 2 and 3 axes
+    wvalue = g.cell * np.sqrt(np.arange(1.0, 4.0))
+    dist = np.empty(n)
+    _fast.dijkstra_field(g.dirs, g.deltas, g.axes - 1, wvalue, node, dist, *scratch)
+    return dist
+
+
+def _pool() -> ThreadPoolExecutor | None:
+    if FIELD_THREADS < 2:
+        return None
+    with _POOL_LOCK:
+        pool = _POOL.get(os.getpid())
+        if pool is None:
+            _POOL.clear()
+            pool = _POOL[os.getpid()] = ThreadPoolExecutor(FIELD_THREADS,
+                                                           thread_name_prefix="fields")
+        return pool
+
+
+def distance_fields(grid: Grid, goal_cells, flies: bool) -> list[np.ndarray]:
+    """:func:`distance_field` for several goals at once: ``[field of each goal]``.
+
+    The fields not cached yet are computed together, on up to :data:`FIELD_THREADS` threads
+    (the compiled kernel releases the GIL) when the lattice is large enough to pay for it.
+    """
+    g = graph(grid, flies)
+    nodes = []
+    for c in goal_cells:
+        node = g.node(c)
+        if node is None:
+            on_grid = grid.in_bounds(c)
+            where = "off the ground layer" if not flies and on_grid else "out of bounds"
+            raise ValueError(f"goal cell {tuple(c)} is {where} for a "
+                             f"{'UAV' if flies else 'UGV'} distance field")
+        nodes.append(node)
+    lru: OrderedDict = grid.cache.setdefault(_FIELDS_KEY, OrderedDict())
+    missing = [n for n in dict.fromkeys(nodes) if (bool(flies), n) not in lru]
+    todo = [n for n in missing if not grid.occupied[g.cell_of(n)]]
+    pool = _pool() if len(todo) > 1 and g.n_nodes >= PARALLEL_MIN_NODES else None
+    compute = partial(_field, g)
+    done = dict(zip(todo, pool.map(compute, todo) if pool else map(compute, todo)))
+    for n in missing:
+        field = done[n].reshape(g.shape) if n in done else np.full(g.shape, np.inf)
+        field.setflags(write=False)
+        lru[(bool(flies), n)] = field
+    out = []
+    for n in nodes:
+        lru.move_to_end((bool(flies), n))
+        out.append(lru[(bool(flies), n)])
+    total = sum(f.nbytes for f in lru.values())
+    while len(lru) > 1 and (len(lru) > FIELD_CACHE_MAX_FIELDS or total > FIELD_CACHE_MAX_BYTES):
+        _, old = lru.popitem(last=False)
+        total -= old.nbytes
+    return out
+
+
 def distance_field(grid: Grid, goal_cell: Cell, flies: bool) -> np.ndarray:
     """Shortest-path metres from every node to ``goal_cell`` (read-only, cached).
 
@@ -138,53 +252,68 @@ def distance_field(grid: Grid, goal_cell: Cell, flies: bool) -> np.ndarray:
     layer only, indexed ``[i, j]`` for cell ``(i, j, 0)``. ``inf`` where the goal cannot be
     reached, everywhere if the goal cell is blocked. Raises ``ValueError`` if the goal is out of
     bounds or, for UGVs, not on the ground layer. The graph is symmetric, so one Dijkstra run
-    from the goal gives the distances to it. Fields are kept in an LRU on ``grid.cache``
-    (at most :data:`FIELD_CACHE_MAX_FIELDS` fields and :data:`FIELD_CACHE_MAX_BYTES` bytes).
+    from the goal gives the distances to it (exact: the same float64 relaxations as
+    ``scipy.sparse.csgraph.dijkstra`` on :attr:`GridGraph.csr`). Fields are kept in an LRU on
+    ``grid.cache`` (at most :data:`FIELD_CACHE_MAX_FIELDS` fields and
+    :data:`FIELD_CACHE_MAX_BYTES` bytes).
     """
-    g = graph(grid, flies)
-    node = g.node(goal_cell)
-    if node is None:
-        on_grid = grid.in_bounds(goal_cell)
-        where = "off the ground layer" if not flies and on_grid else "out of bounds"
-        raise ValueError(f"goal cell {tuple(goal_cell)} is {where} for a "
-                         f"{'UAV' if flies else 'UGV'} distance field")
-    lru: OrderedDict = grid.cache.setdefault(_FIELDS_KEY, OrderedDict())
-    key = (bool(flies), node)
-    field = lru.get(key)
-    if field is not None:
-        lru.move_to_end(key)
-        return field
-    if grid.occupied[g.cell_of(node)]:
-        field = np.full(g.shape, np.inf)
-    else:
-        field = dijkstra(g.csr, directed=True, indices=node).reshape(g.shape)
-    field.setflags(write=False)
-    lru[key] = field
-    total = sum(f.nbytes for f in lru.values())
-    while len(lru) > 1 and (len(lru) > FIELD_CACHE_MAX_FIELDS or total > FIELD_CACHE_MAX_BYTES):
-        _, old = lru.popitem(last=False)
-        total -= old.nbytes
-    return field
+    return distance_fields(grid, (goal_cell,), flies)[0]
 
 
-def _moves(grid: Grid, flies: bool) -> list:
-    """Per node, a shared tuple of ``(node_delta, step_cells)`` for its legal steps (cached)."""
-    key = ("planners.graph.moves", bool(flies))
-    moves = grid.cache.get(key)
-    if moves is None:
-        g = graph(grid, flies)
-        shape3 = grid.shape if flies else (grid.shape[0], grid.shape[1], 1)
-        strides = (shape3[1] * shape3[2], shape3[2], 1)
-        offs = offsets(flies)
-        uniq, inverse = np.unique(g.dirs, return_inverse=True)
-        tables = np.empty(len(uniq), dtype=object)
-        for u, m in enumerate(uniq.tolist()):
-            tables[u] = tuple(
-                (sum(s * v for s, v in zip(strides, d)), math.sqrt(sum(map(abs, d))))
-                for b, d in enumerate(offs) if m >> b & 1
-            )
-        moves = grid.cache[key] = tables[inverse.reshape(-1)].tolist()
-    return moves
+# ----------------------------------------------------------------------------- A*
+
+_NO_DIRS = np.zeros(0, dtype=np.int32)
+_NO_DIRS.setflags(write=False)  # the same kernel signature as a cached (read-only) mask
+_NO_OCC = np.zeros(0, dtype=np.uint8)
+_NO_I64 = np.zeros(0, dtype=np.int64)
+
+
+def _padded(grid: Grid, flies: bool):
+    """Tables for A* without move masks: the occupancy padded by one blocked cell on each side
+    (uint8, the UGV's ground layer alone in the middle of three layers), its shape, the move
+    deltas, the neighbourhood offsets and, per move, the neighbourhood bits it needs free."""
+    per = grid.cache.setdefault(_PADDED_KEY, {})
+    hit = per.get(bool(flies))
+    if hit is not None:
+        return hit
+    nx, ny, nz = _lattice(grid, flies)
+    occ = np.ones((nx + 2, ny + 2, nz + 2), dtype=np.uint8)
+    occ[1:-1, 1:-1, 1:-1] = grid.occupied[:, :, :nz]
+    shape3 = occ.shape
+    strides = (shape3[1] * shape3[2], shape3[2], 1)
+    deltas, axes = _steps(shape3, flies)
+    hood = [d for d in offsets(flies)]  # the neighbourhood cells a move may cover
+    bit = {d: q for q, d in enumerate(hood)}
+    nbr = np.array([sum(s * v for s, v in zip(strides, d)) for d in hood], dtype=np.int64)
+    req = np.zeros(len(deltas), dtype=np.int64)
+    for b, d in enumerate(offsets(flies)):
+        moving = [a for a in range(3) if d[a] != 0]
+        for mask in range(1, 1 << len(moving)):
+            e = [0, 0, 0]
+            for t, a in enumerate(moving):
+                if mask >> t & 1:
+                    e[a] = d[a]
+            req[b] |= 1 << bit[tuple(e)]
+    wstep = np.sqrt(axes.astype(np.float64))
+    hit = per[bool(flies)] = (occ.reshape(-1), shape3, deltas, wstep, nbr, req)
+    return hit
+
+
+def _scratch(grid: Grid, flies: bool, n: int):
+    """A* scratch ``(seen, gen, g, parent)`` for ``n`` nodes. Up to :data:`SCRATCH_MAX_NODES`
+    the arrays are kept per grid, model and thread and reused with a new generation number
+    (no allocation, no zeroing, no page faults); beyond, fresh lazily zeroed arrays."""
+    if n > SCRATCH_MAX_NODES:
+        return (np.zeros(n, np.uint32), np.uint32(1), np.zeros(n, np.float64),
+                np.zeros(n, np.uint8))
+    per = grid.cache.setdefault(_SCRATCH_KEY, {})
+    key = (bool(flies), threading.get_ident())
+    hit = per.get(key)
+    if hit is None or hit[1] == 0xFFFFFFFF:
+        hit = [np.zeros(n, np.uint32), 0, np.empty(n, np.float64), np.empty(n, np.uint8)]
+        per[key] = hit
+    hit[1] += 1
+    return hit[0], np.uint32(hit[1]), hit[2], hit[3]
 
 
 def astar(grid: Grid, start: Cell, goal: Cell, flies: bool) -> tuple[float, list[Cell] | None]:
@@ -195,76 +324,46 @@ def astar(grid: Grid, start: Cell, goal: Cell, flies: bool) -> tuple[float, list
     either cell is blocked, out of bounds, off the ground layer for a UGV, or no path exists.
     The heuristic is the octile distance of :func:`dispatch.motion.octile` (consistent), ties
     in ``f`` go to the larger ``g``; the path is optimal (equal to the distance field up to
-    float rounding).
+    float rounding). Compiled (:func:`planners._fast.astar`); on lattices larger than
+    :data:`MASK_MAX_NODES` whose move masks are not cached yet, moves are read from a padded
+    copy of the occupancy instead of building the masks.
     """
-    g = graph(grid, flies)
-    s, t = g.node(start), g.node(goal)
-    if s is None or t is None:
-        return math.inf, None
-    if grid.occupied[g.cell_of(s)] or grid.occupied[g.cell_of(t)]:
-        return math.inf, None
-    if s == t:
-        return 0.0, [g.cell_of(s)]
-    moves = _moves(grid, flies)
-    _, ny, nz = grid.shape if flies else (grid.shape[0], grid.shape[1], 1)
-    syz = ny * nz
-    gi, gr = divmod(t, syz)
-    gj, gk = divmod(gr, nz)
-    c2, c3 = _C2, _C3
-
-    def h(n: int) -> float:
-        i, r = divmod(n, syz)
-        j, k = divmod(r, nz)
-        a, b, c = abs(i - gi), abs(j - gj), abs(k - gk)
-        if a < b:
-            a, b = b, a
-        if b < c:
-            b, c = c, b
-            if a < b:
-                a, b = b, a
-        return c3 * c + c2 * b + a
-
-    inf = math.inf
-    best = [inf] * g.n_nodes
-    parent = {s: -1}
-    best[s] = 0.0
-    heap = [(h(s), -0.0, s)]
-    pop, push = heapq.heappop, heapq.heappush
-    while heap:
-        _, ng, n = pop(heap)
-        gn = -ng
-        if gn > best[n]:
-            continue  # stale entry: n was reached more cheaply since it was pushed
-        if n == t:
-            break
-        for dn, w in moves[n]:
-            m = n + dn
-            gm = gn + w
-            if gm < best[m]:
-                best[m] = gm
-                parent[m] = n
-                # h(m) inlined: octile distance in cells to the goal
-                i, r = divmod(m, syz)
-                j, k = divmod(r, nz)
-                a, b, c = abs(i - gi), abs(j - gj), abs(k - gk)
-                if a < b:
-                    a, b = b, a
-                if b < c:
-                    b, c = c, b
-                    if a < b:
-                        a, b = b, a
-                push(heap, (gm + c3 * c + c2 * b + a, ng - w, m))
+    nx, ny, nz = _lattice(grid, flies)
+    s3 = tuple(int(v) for v in start)
+    t3 = tuple(int(v) for v in goal)
+    if len(s3) != 3 or len(t3) != 3:
+        raise ValueError(f"a cell has three indices, got {start!r} and {goal!r}")
+    occupied = grid.occupied
+    for i, j, k in (s3, t3):
+        if not (0 <= i < nx and 0 <= j < ny and 0 <= k < nz) or occupied[i, j, k]:
+            return math.inf, None
+    if s3 == t3:
+        return 0.0, [s3]
+    g = grid.cache.get(_GRAPH_KEY, {}).get(bool(flies))
+    if g is not None or nx * ny * nz <= MASK_MAX_NODES:
+        g = g or graph(grid, flies)
+        dirs, occ, nbr, req, deltas, wstep = g.dirs, _NO_OCC, _NO_I64, _NO_I64, g.deltas, g.steps
+        pad = 0
     else:
-        return inf, None
-    path = []
-    n = t
-    while n != -1:
-        path.append(n)
-        n = parent[n]
-    path.reverse()
-    cells = []
-    for n in path:
-        i, r = divmod(n, syz)
-        j, k = divmod(r, nz)
-        cells.append((i, j, k))
-    return best[t] * grid.cell, cells
+        occ, (nx, ny, nz), deltas, wstep, nbr, req = _padded(grid, flies)
+        dirs, pad = _NO_DIRS, 1
+    shape3 = np.array((nx, ny, nz), dtype=np.int64)
+    sn = ((s3[0] + pad) * ny + s3[1] + pad) * nz + s3[2] + pad
+    tn = ((t3[0] + pad) * ny + t3[1] + pad) * nz + t3[2] + pad
+    seen, gen, gbuf, pbuf = _scratch(grid, flies, nx * ny * nz)
+    length, cells = _fast.astar(dirs, occ, nbr, req, deltas, wstep, shape3, pad, sn, tn,
+                                seen, gen, gbuf, pbuf)
+    if cells.shape[0] == 0:
+        return math.inf, None
+    return float(length) * grid.cell, list(map(tuple, cells.tolist()))
+
+
+def _warm_up() -> None:
+    """Load (or, the first time on a machine, compile) the kernels now, at import, with the
+    argument types of real calls: a run's first decision must not pay for numba."""
+    grid = Grid(np.zeros((3, 3, 2), dtype=bool), 1.0)
+    distance_field(grid, (0, 0, 0), True)
+    astar(grid, (0, 0, 0), (2, 2, 1), True)
+
+
+_warm_up()

@@ -158,6 +158,64 @@ def test_astar_is_optimal_on_random_worlds(seed, flies):
 
 
 @pytest.mark.parametrize("flies", [True, False], ids=["uav", "ugv"])
+@pytest.mark.parametrize("seed", SEEDS)
+def test_astar_without_move_masks_is_optimal(monkeypatch, seed, flies):
+    """Huge grids read moves from the padded occupancy instead of per-node masks: same answers."""
+    monkeypatch.setattr(G, "MASK_MAX_NODES", 0)
+    world, cells, _, dist = reference(seed, flies)
+    grid = Grid(world.grid.occupied.copy(), world.grid.cell)  # a fresh grid: nothing cached
+    rng = np.random.default_rng(500 + seed)
+    for a, b, ia, ib in pair_sample(cells, dist, rng, 100):
+        want = dist[ia, ib] if grid.is_free(a) and grid.is_free(b) else math.inf
+        length, path = G.astar(grid, a, b, flies)
+        if math.isinf(want):
+            assert math.isinf(length) and path is None
+            continue
+        assert abs(length - want) < 1e-9
+        assert path[0] == a and path[-1] == b
+        check_path(grid, path, flies)
+    assert G._GRAPH_KEY not in grid.cache  # no masks were built
+
+
+def test_astar_scratch_is_reused_and_wraps():
+    """Reused scratch arrays (a generation number per search) give the same answers, also
+    across the generation counter's wrap-around."""
+    world, cells, _, dist = reference(1, True)
+    grid = Grid(world.grid.occupied.copy(), 1.0)
+    free = [c for c in cells if grid.is_free(c)]
+    pairs = [(free[i], free[-1 - 3 * i], cells.index(free[i]), cells.index(free[-1 - 3 * i]))
+             for i in range(6)]
+    first = [G.astar(grid, a, b, True) for a, b, _, _ in pairs]
+    (key, hit), = grid.cache[G._SCRATCH_KEY].items()
+    hit[1] = 0xFFFFFFFF - 2  # three searches before the counter would overflow
+    again = [G.astar(grid, a, b, True) for a, b, _, _ in pairs]
+    assert grid.cache[G._SCRATCH_KEY][key][1] < 10  # wrapped: fresh arrays, counter restarted
+    for (a, b, ia, ib), (l1, p1), (l2, p2) in zip(pairs, first, again):
+        assert l1 == l2 and p1 == p2
+        assert abs(l1 - dist[ia, ib]) < 1e-9 if np.isfinite(dist[ia, ib]) else p1 is None
+
+
+@pytest.mark.parametrize("flies", [True, False], ids=["uav", "ugv"])
+def test_distance_fields_batch_equals_single(monkeypatch, flies):
+    """Several fields computed together (on threads) equal fields computed one by one."""
+    world = random_world(7, shape=(40, 30, 20) if flies else (150, 150, 1), blocked=0.2)
+    grid = world.grid
+    free = grid.free_cells(layer=None if flies else 0)
+    goals = [tuple(int(v) for v in free[i]) for i in range(0, len(free), len(free) // 6)]
+    goals.append(tuple(int(v) for v in np.argwhere(grid.occupied[:, :, :1])[0]))  # blocked
+    goals.append(goals[0])  # repeated
+    monkeypatch.setattr(G, "FIELD_THREADS", 2)
+    batch = G.distance_fields(grid, goals, flies)
+    assert batch[0] is batch[-1]
+    assert np.isinf(batch[-2]).all()
+    single = Grid(grid.occupied.copy(), grid.cell)
+    monkeypatch.setattr(G, "FIELD_THREADS", 1)
+    for goal, field in zip(goals, batch):
+        np.testing.assert_array_equal(field, G.distance_field(single, goal, flies))
+        assert not field.flags.writeable
+
+
+@pytest.mark.parametrize("flies", [True, False], ids=["uav", "ugv"])
 def test_astar_on_obstacle_free_grid_matches_octile(flies):
     from dispatch.motion import octile
 
@@ -273,13 +331,13 @@ def test_costs_cached_per_task_until_closed(monkeypatch):
     world = random_world(1)
     free = world.grid.free_cells(layer=0)
     calls = []
-    real = astar_mod.distance_field
+    real = astar_mod.distance_fields
 
-    def counting(grid, cell, flies):
-        calls.append((cell, flies))
-        return real(grid, cell, flies)
+    def counting(grid, cells, flies):
+        calls.extend((cell, flies) for cell in cells)
+        return real(grid, cells, flies)
 
-    monkeypatch.setattr(astar_mod, "distance_field", counting)
+    monkeypatch.setattr(astar_mod, "distance_fields", counting)
     planner = AStarPlanner(world)
     agents = (AgentView(0, "uav", tuple(int(v) for v in free[0]), 1.0),
               AgentView(1, "ugv", tuple(int(v) for v in free[1]), 1.0))
@@ -407,8 +465,88 @@ def test_movingai_distance_field_sample(name):
         assert abs(field[sx, sy] - optimal) < 1e-4
 
 
+FULL_CHUNK = 1000
+
+
+def full_chunks():
+    """``(map, first_row)`` per chunk of the full scenario sets, so they can be run piecemeal."""
+    out = []
+    for name in MAPS:
+        with open(DATA / "scen" / f"{name}.scen") as f:
+            n = sum(1 for line in f if line.strip()) - 1
+        out += [pytest.param(name, i, id=f"{name}-{i // FULL_CHUNK}")
+                for i in range(0, n, FULL_CHUNK)]
+    return out
+
+
 @pytest.mark.slow
 @needs_data
-@pytest.mark.parametrize("name", MAPS)
-def test_movingai_full(name):
-    check_scenarios(name, load_scen(DATA / "scen" / f"{name}.scen"))
+@pytest.mark.parametrize(("name", "first"), full_chunks())
+def test_movingai_full(name, first):
+    rows = load_scen(DATA / "scen" / f"{name}.scen")
+    check_scenarios(name, rows[first : first + FULL_CHUNK])
+
+
+def test_kernels_compile_without_a_writable_cache(monkeypatch):
+    """numba refuses cache=True where no cache directory is writable: compile per process."""
+    from planners import _fast
+
+    real = _fast.numba.njit
+
+    def njit(*args, **kw):
+        if kw.get("cache"):
+            raise RuntimeError("cannot cache function 'f': no locator available for file 'x'")
+        return real(*args, **kw)
+
+    monkeypatch.setattr(_fast.numba, "njit", njit)
+    assert _fast._jit(lambda x: x + 1)(41) == 42
+
+
+# --------------------------------------------------------------------------- the paper's world
+
+
+def test_costs_on_paper_world_equal_scipy_after_moves():
+    """The paper's world (50x50x30, 10 boxes), N = M = 20 as `dispatch run` places them: the
+    matrix equals scipy shortest paths on the explicit adjacency, cold and after every vehicle
+    moved (fields reused: no new Dijkstra)."""
+    from dispatch.scenario import load_scenario
+    from dispatch.sim import STREAM_FLEET, STREAM_TASKS, place_fleet, rng_for, world_for
+    from dispatch.tasks import TaskFactory
+
+    root = Path(__file__).resolve().parents[2]
+    scenario = load_scenario(root / "scenarios" / "paper_static.toml")
+    spec = scenario.runs(allocator="hungarian", agents=20, seed=3)[0]
+    world = world_for(scenario.world, 3)
+    grid = world.grid
+    agents = tuple(v.view() for v in place_fleet(world, spec, rng_for(3, STREAM_FLEET)))
+    factory = TaskFactory(grid, 0.5, rng_for(3, STREAM_TASKS))  # ground and air tasks
+    tasks = tuple(TaskView(i, *factory.draw(), 0.0) for i in range(20))
+
+    def want(agents):
+        out = np.full((len(agents), len(tasks)), np.inf)
+        for flies in (True, False):
+            g = G.graph(grid, flies)
+            for t, task in enumerate(tasks):
+                if not flies and task.kind != "ground":
+                    continue
+                d = dijkstra(g.csr, directed=True, indices=g.node(task.cell))
+                for a, ag in enumerate(agents):
+                    if ag.flies == flies and g.node(ag.cell) is not None:
+                        out[a, t] = d[g.node(ag.cell)] / ag.speed
+        return out
+
+    planner = AStarPlanner(world)
+    cost = planner.costs(agents, tasks)
+    np.testing.assert_allclose(cost, want(agents), rtol=0, atol=1e-9)
+    assert np.isfinite(cost[: spec.fleet.n_uav]).all()
+    computed = planner.stats.extra["fields_computed"]
+    rng = np.random.default_rng(0)
+    free = grid.free_cells()
+    moved = tuple(
+        AgentView(a.id, a.kind, tuple(int(v) for v in (
+            free[rng.integers(len(free))] if a.flies else
+            free[free[:, 2] == 0][rng.integers(int((free[:, 2] == 0).sum()))])), a.speed)
+        for a in agents)
+    again = planner.costs(moved, tasks)
+    assert planner.stats.extra["fields_computed"] == computed
+    np.testing.assert_allclose(again, want(moved), rtol=0, atol=1e-9)
