@@ -135,7 +135,7 @@ class Scenario:
         if agents is not None and agents < 1:
             raise ScenarioError(self.path, "--agents", f"must be >= 1, got {agents}")
         if agents is not None:
-            _check_fits(self, agents)
+            _check_fits(self, agents, "--agents")
         combos = itertools.product(
             dim(allocator, self.sweep.allocator, self.dispatch.allocator),
             dim(planner, self.sweep.planner, self.dispatch.planner),
@@ -387,7 +387,7 @@ def parse_scenario(data: dict, path: Path, text: str = "") -> Scenario:
                   duration=duration, world=world, fleet=fleet, tasks=tasks, dispatch=disp,
                   sweep=sweep, comms=comms)
     for n in sweep.agents or (fleet.agents,):
-        _check_fits(sc, n)
+        _check_fits(sc, n, "sweep.agents" if sweep.agents else "fleet.agents")
     return sc
 
 
@@ -406,11 +406,11 @@ def _check_obstacles_fit(o: _Table, world: WorldConfig) -> None:
         )
 
 
-def _check_fits(sc: Scenario, agents: int) -> None:
+def _check_fits(sc: Scenario, agents: int, key: str) -> None:
     """Vehicles start in distinct free cells: the fleet must fit beside the largest obstacles."""
     nx, ny, _ = sc.world.shape
     o = sc.world.obstacles
     cover = o.count * round(o.max_size[0] / sc.world.cell) * round(o.max_size[1] / sc.world.cell)
     if agents > max(nx * ny - cover, 0):
-        raise ScenarioError(sc.path, "fleet.agents",
+        raise ScenarioError(sc.path, key,
                             f"{agents} vehicles may not find distinct free cells in the world")

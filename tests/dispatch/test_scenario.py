@@ -296,7 +296,16 @@ def test_override_too_many_agents(tiny_scenario):
     sc = load_scenario(tiny_scenario)
     with pytest.raises(ScenarioError) as info:
         sc.runs(agents=10_000)
-    assert "fleet.agents" in str(info.value) and tiny_scenario.name in str(info.value)
+    assert "--agents" in str(info.value) and tiny_scenario.name in str(info.value)
+
+
+def test_sweep_too_many_agents_names_the_sweep_key(tmp_path):
+    path = tmp_path / "big_sweep.toml"
+    path.write_text('[world]\nsize = [12, 12, 6]\n[world.obstacles]\ncount = 1\n'
+                    'max_size = [3, 3, 6]\n[sweep]\nagents = [4, 500]\n')
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    assert "sweep.agents" in str(info.value) and "500 vehicles" in str(info.value)
 
 
 def test_defaults_fill_missing_sections(tmp_path):
