@@ -46,13 +46,15 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(levelname)s %(name)s: %(message)s")
     from rich.console import Console
 
+    # Status and error lines stay one line whatever the terminal width (paths are long; scripts
+    # and users grep them); only tables are laid out to the width.
     console = Console()
-    err = Console(stderr=True)
+    err = Console(stderr=True, soft_wrap=True)
     try:
         return {"run": _run, "validate": _validate, "plugins": _plugins, "sweep": _sweep,
                 "report": _report, "render": _render, "train": _train}[args.command](args, console)
     except DispatchError as e:
-        err.print(f"[bold red]error:[/] {e}", highlight=False)
+        err.print(f"[bold red]error:[/] {e}", highlight=False, soft_wrap=True)
         return 2
     except KeyboardInterrupt:
         err.print("interrupted")
@@ -93,7 +95,7 @@ def _run(args, console) -> int:
         summaries = execute(specs, out, on_done=done)
     render(summaries, console)
     console.print(f"{len(specs)} run(s) in {time.perf_counter() - started:.1f} s; "
-                  f"Parquet written to {out}/")
+                  f"Parquet written to {out}/", soft_wrap=True)
     return 0
 
 
@@ -101,7 +103,7 @@ def _validate(args, console) -> int:
     sc, specs = _specs(args)
     console.print(f"[green]ok[/]: {args.scenario} ({sc.name}): {len(specs)} run(s); "
                   f"source {sc.tasks.source}, world {sc.world.shape}, "
-                  f"{sc.world.obstacles.count} obstacles")
+                  f"{sc.world.obstacles.count} obstacles", soft_wrap=True)
     return 0
 
 
@@ -212,18 +214,18 @@ def _sweep(args, console) -> int:
         render(summaries, console)
     failed = [o for o in outcomes if o.status == "failed"]
     for o in failed:
-        console.print(f"[red]failed[/]: {o.run_id}: {o.error}", highlight=False)
+        console.print(f"[red]failed[/]: {o.run_id}: {o.error}", highlight=False, soft_wrap=True)
     console.print(f"{len(specs)} run(s): {counts['done']} run, {counts['skipped']} already "
                   f"complete, {len(failed)} failed; {time.perf_counter() - started:.1f} s on "
-                  f"{where}; Parquet written to {out}/", highlight=False)
+                  f"{where}; Parquet written to {out}/", highlight=False, soft_wrap=True)
     if failed:
         console.print(f"errors: {out}/errors/ (run the sweep again to retry the failed runs)",
-                      highlight=False)
+                      highlight=False, soft_wrap=True)
     foreign = foreign_runs(out, specs)
     if foreign:
         console.print(f"[yellow]note[/]: {out}/ also holds {len(foreign)} run(s) of another "
                       f"scenario text (e.g. {foreign[0]}); reports of the folder include them",
-                      highlight=False)
+                      highlight=False, soft_wrap=True)
     return 1 if failed else 0
 
 
@@ -242,8 +244,9 @@ def _report(args, console) -> int:
 
     out = args.out or args.runs[0] / "report"
     files = _analysis_call(write_report, list(args.runs), out, fmt=args.format, run_id=args.run)
-    console.print(f"report: {files[0]}", highlight=False)
-    console.print("files: " + ", ".join(f.name for f in files[1:]), highlight=False)
+    console.print(f"report: {files[0]}", highlight=False, soft_wrap=True)
+    console.print("files: " + ", ".join(f.name for f in files[1:]), highlight=False,
+                  soft_wrap=True)
     return 0
 
 
@@ -258,7 +261,7 @@ def _render(args, console) -> int:
         raise DispatchError("--fps must be >= 1 and --size at least 16x16")
     path = _analysis_call(render_run, args.run, args.out, run_id=args.run_id, fps=args.fps,
                           seconds=args.seconds, size=(w, h))
-    console.print(f"animation: {path}", highlight=False)
+    console.print(f"animation: {path}", highlight=False, soft_wrap=True)
     return 0
 
 

@@ -17,8 +17,8 @@ UAV_RADIUS = 0.3  # of a cell: a vehicle body fits well inside its cell
 UGV_HALF = (0.35, 0.35, 0.25)
 
 
-def _quiet_import():
-    # pybullet prints its build time to the C-level stderr on import; keep the CLI clean.
+def import_pybullet():
+    """The pybullet module, imported without its build-time banner on the C-level stderr."""
     fd = os.dup(2)
     try:
         with open(os.devnull, "w") as devnull:
@@ -36,7 +36,7 @@ class Physics:
     """A PyBullet client holding the world's obstacles and the vehicles' bodies."""
 
     def __init__(self, world: World, gui: bool = False) -> None:
-        self.p = p = _quiet_import()
+        self.p = p = import_pybullet()
         self.world = world
         self.client = p.connect(p.GUI if gui else p.DIRECT)
         self.obstacles: list[int] = []

@@ -56,7 +56,7 @@ import math
 import numpy as np
 
 from dispatch.contracts import AgentView, Planner, TaskView
-from dispatch.motion import offsets
+from dispatch.motion import octile, offsets
 from dispatch.world import Cell, Grid, World
 from planners.sampling import (
     GoalCache,
@@ -91,17 +91,6 @@ def move_table(grid: Grid, flies: bool) -> list:
                               for b, d in enumerate(offs) if m >> b & 1)
         table = per[bool(flies)] = tables[inverse.reshape(-1)].tolist()
     return table
-
-
-def octile_cells(a: Cell, b: Cell) -> float:
-    x, y, z = abs(a[0] - b[0]), abs(a[1] - b[1]), abs(a[2] - b[2])
-    if x < y:
-        x, y = y, x
-    if y < z:
-        y, z = z, y
-        if x < y:
-            x, y = y, x
-    return _C3 * z + _C2 * y + x
 
 
 class _Edge:
@@ -203,7 +192,7 @@ class _Query:
 
     # ------------------------------------------------------------------ high level
     def h(self, a: int, b: int) -> float:
-        return octile_cells(unflat(self.shape, a), unflat(self.shape, b))
+        return octile(unflat(self.shape, a), unflat(self.shape, b))
 
     def successors(self, s: int) -> list[int]:
         pl, rng, shape = self.pl, self.rng, self.shape

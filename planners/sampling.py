@@ -326,9 +326,9 @@ class RayWorld:
     """
 
     def __init__(self, world: World, clearance: float) -> None:
-        from dispatch.physics import _quiet_import
+        from dispatch.physics import import_pybullet
 
-        self.p = p = _quiet_import()
+        self.p = p = import_pybullet()
         self.client = p.connect(p.DIRECT)
         self._finalizer = weakref.finalize(self, _disconnect, p, self.client)
         boxes = collision_boxes(world)

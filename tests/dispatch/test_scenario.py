@@ -252,6 +252,20 @@ def test_shipped_scenario_validates(path, capsys):
     assert "ok" in out and f"{len(sc.runs())} run(s)" in out
 
 
+def test_validate_line_survives_long_paths(tmp_path, capsys):
+    """The status line is one line however long the path (CI clones live deep in the tree)."""
+    deep = tmp_path.joinpath(*["a_rather_long_folder_name"] * 6)
+    deep.mkdir(parents=True)
+    path = deep / "paper_static.toml"
+    path.write_text((ROOT / "scenarios" / "paper_static.toml").read_text(encoding="utf-8"),
+                    encoding="utf-8")
+    assert cli.main(["validate", str(path)]) == 0
+    out, _ = capsys.readouterr()
+    line = out.strip()
+    assert "\n" not in line
+    assert str(path) in line and f"{len(load_scenario(path).runs())} run(s)" in line
+
+
 def test_paper_static_sweep_expansion():
     sc = load_scenario(ROOT / "scenarios" / "paper_static.toml")
     assert sc.sweep.allocator == ("hungarian", "magnnet", "magnnet_edge", "greedy", "random")
