@@ -42,7 +42,8 @@ import pandas as pd
 from analysis.stats import mean_ci
 
 GROUP = ["scenario", "planner", "allocator", "n_agents"]
-PREFERRED_ORDER = ("hungarian", "magnnet", "magnnet_edge", "auction", "greedy", "random")
+PREFERRED_ORDER = ("hungarian", "magnnet", "magnnet_edge", "magnnet_match", "auction", "greedy",
+                   "random")
 
 #: FleetPy's labels of the taxi-style columns that have one (for users who compare).
 FLEETPY_LABELS = {

@@ -26,6 +26,7 @@ _FALLBACK = {
         "auction": "allocators.auction:AuctionAllocator",
         "magnnet": "allocators.magnnet.allocator:MagnnetAllocator",
         "magnnet_edge": "allocators.magnnet.allocator:MagnnetEdgeAllocator",
+        "magnnet_match": "allocators.magnnet.allocator:MagnnetMatchAllocator",
     },
     "planner": {
         "astar": "planners.astar:AStarPlanner",

@@ -6,7 +6,8 @@ import math
 from collections import defaultdict
 from statistics import fmean
 
-PREFERRED_ORDER = ("hungarian", "magnnet", "auction", "greedy", "random")
+PREFERRED_ORDER = ("hungarian", "magnnet", "magnnet_edge", "magnnet_match", "auction", "greedy",
+                   "random")
 
 
 def allocator_order(names) -> list[str]:

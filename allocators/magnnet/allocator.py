@@ -20,7 +20,11 @@ Parameters (``[dispatch.allocator_params]``):
     checkpoint: path of a checkpoint to use instead of the shipped ones.
 
 Checkpoints ship in ``allocators/magnnet/checkpoints`` (``paper_n{N}.pt``,
-``paper_nb_n{N}.pt``, ``edge.pt``, ``edge_noassign.pt``).
+``paper_nb_n{N}.pt``, ``edge.pt``, ``edge_noassign.pt``, ``match.pt``).
+
+The ``magnnet_match`` plugin (:class:`MagnnetMatchAllocator`) runs the size-agnostic
+agent-task graph network of :mod:`allocators.magnnet.match`, trained to imitate the optimal
+assignment, with mutual-best requests.
 """
 
 from __future__ import annotations
@@ -112,6 +116,65 @@ class MagnnetEdgeAllocator(MagnnetAllocator):
 
     def __init__(self, checkpoint: str | None = None) -> None:
         super().__init__("edge", checkpoint)
+
+
+class MagnnetMatchAllocator(DecentralizedAllocator):
+    """MAGNNET-match: edge scores from a bipartite graph network over each agent's view, and
+    mutual-best requests (see :mod:`allocators.magnnet.match`).
+
+    An agent's view is the deciding agents within two communication hops and the tasks it
+    believes open; it computes the scores of its whole view (its neighbours' cost vectors come
+    over the links) and requests its best task only if no agent of the view scores that task
+    higher. From round ``patience`` on it requests its best task regardless, so a decision
+    under partial communication cannot stall; the conflict rule settles what follows.
+
+    Parameters (``[dispatch.allocator_params]``): ``checkpoint`` (default: the shipped
+    ``match.pt``), ``patience`` (default 3).
+    """
+
+    name = "magnnet_match"
+
+    def __init__(self, checkpoint: str | None = None, patience: int = 3) -> None:
+        if isinstance(patience, bool) or not isinstance(patience, int) or patience < 0:
+            raise TypeError(f"patience must be a non-negative integer, got {patience!r}")
+        self.checkpoint = checkpoint
+        self.patience = patience
+
+    def model(self):
+        path = Path(self.checkpoint) if self.checkpoint is not None else shipped("match")
+        if not path.exists():
+            raise AllocationError(f"magnnet_match: no checkpoint at {path}; train one with "
+                                  "`dispatch train magnnet --variant match`")
+        model, _ = _load(str(path))
+        if model.variant != "match":
+            raise AllocationError(f"magnnet_match: {path.name} holds a {model.variant!r} "
+                                  "model, not a 'match' one")
+        return model
+
+    def choose(self, problem: AllocationProblem, agents: np.ndarray, open_tasks: np.ndarray,
+               round_: int) -> np.ndarray:
+        from allocators.magnnet.game import two_hop
+        from allocators.magnnet.match import mutual_best, scores_of
+
+        model = self.model()
+        comm = problem.comm.astype(bool)
+        deciding = np.zeros(problem.cost.shape[0], bool)
+        deciding[agents] = True
+        flies = np.array([a.flies for a in problem.agents], bool)
+        tasks = np.flatnonzero(open_tasks)
+        out = np.full(len(agents), -1, np.int64)
+        views: dict[bytes, tuple[np.ndarray, list[int]]] = {}
+        for k, i in enumerate(agents):
+            _, two = two_hop(comm, int(i))
+            members = np.flatnonzero(two & deciding)
+            views.setdefault(members.tobytes(), (members, []))[1].append(k)
+        # agents that share a view share one forward pass (one for everyone on a complete graph)
+        for members, ks in views.values():
+            scores = scores_of(model, problem.cost[np.ix_(members, tasks)], flies[members])
+            rows = np.searchsorted(members, agents[ks])
+            req = mutual_best(scores, rows, force=round_ >= self.patience)
+            out[ks] = np.where(req >= 0, tasks[np.maximum(req, 0)], -1)
+        return out
 
 
 def observe(problem: AllocationProblem, agents: np.ndarray, open_tasks: np.ndarray,

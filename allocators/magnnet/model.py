@@ -361,4 +361,8 @@ def build(config: dict) -> nn.Module:
         return MagnnetPolicy(**cfg)
     if variant == "edge":
         return EdgePolicy(**cfg)
+    if variant == "match":
+        from allocators.magnnet.match import MatchPolicy
+
+        return MatchPolicy(**cfg)
     raise ValueError(f"unknown MAGNNET variant {variant!r}")

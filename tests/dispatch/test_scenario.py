@@ -268,12 +268,13 @@ def test_validate_line_survives_long_paths(tmp_path, capsys):
 
 def test_paper_static_sweep_expansion():
     sc = load_scenario(ROOT / "scenarios" / "paper_static.toml")
-    assert sc.sweep.allocator == ("hungarian", "magnnet", "magnnet_edge", "greedy", "random")
+    assert sc.sweep.allocator == ("hungarian", "magnnet", "magnnet_edge", "magnnet_match",
+                                  "greedy", "random")
     assert sc.sweep.agents == (4, 8, 12, 20)
     n_seeds = len(sc.sweep.seed)
     assert n_seeds >= 1
     runs = sc.runs()
-    assert len(runs) == 5 * 4 * n_seeds
+    assert len(runs) == len(sc.sweep.allocator) * 4 * n_seeds
     assert len({r.run_id for r in runs}) == len(runs)
     assert {(r.allocator, r.agents, r.seed) for r in runs} == {
         (a, n, s) for a in sc.sweep.allocator for n in sc.sweep.agents for s in sc.sweep.seed

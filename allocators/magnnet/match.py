@@ -1,0 +1,312 @@
+"""MAGNNET-match: a size-agnostic agent-task graph network that learns the optimal assignment.
+
+The paper's policy reads a cost vector of length ``M`` and is trained with PPO; on our instances
+it stays far from the optimum (see ``benchmarks/paper_tables.py``). This variant keeps the idea
+(a graph neural network over agents and tasks, executed per agent from what its communication
+neighbourhood gives it) and changes two things, both measured:
+
+* **The graph.** Every agent-task pair is an edge of the bipartite graph, with a hidden state.
+  Each layer updates an edge from itself and four aggregates: mean and max over the edges of its
+  agent (the agent's alternatives) and over the edges of its task (the competition for it), a
+  residual MLP and layer normalization. The input features of edge ``(i, j)`` are the agent's
+  cost and how it compares with the row and the column (:func:`edge_features`). Nothing depends
+  on ``N`` or ``M``: one checkpoint serves every size.
+* **The training signal.** Imitation of the optimal (Hungarian) assignment: a cross-entropy per
+  agent over its tasks and per task over its agents, on random sub-problems (any ``n x m``, from
+  2 up to 50) of the cached training instances. No reward shaping, no hand-written solver in the
+  input; it trains in minutes on two CPU cores.
+
+Execution (:func:`mutual_best`): in each decision round an agent scores the edges of its view
+(the deciding agents within two communication hops, all open tasks), takes its best task, and
+requests it only when no agent of its view scores that task higher; otherwise it waits a round.
+On a complete graph every view is the same, so no two agents ever request one task: the result
+is conflict-free by construction, and each round assigns at least the best-scored pair. With
+limited range the views differ, conflicts can happen and the shared conflict rule settles them;
+after ``patience`` rounds every agent requests its best task, so deciding never stalls.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+import torch
+from torch import nn
+
+from allocators.magnnet import rules
+
+log = logging.getLogger(__name__)
+
+#: Number of input features per edge (see :func:`edge_features`).
+EDGE_FEATURES = 8
+#: Cost of an infeasible or unavailable edge inside the feature computation (scaled units).
+_FAR = 10.0
+
+
+def edge_features(cost: torch.Tensor, mask: torch.Tensor, flies: torch.Tensor) -> torch.Tensor:
+    """Input features of every edge, ``(B, n, m, EDGE_FEATURES)``; zeros on masked edges.
+
+    ``cost (B, n, m)`` in scaled units (seconds / :data:`~allocators.magnnet.rules.COST_SCALE`),
+    ``mask (B, n, m)`` the available edges, ``flies (B, n)``. Per edge ``(i, j)``:
+
+    0. ``c_ij`` (capped at :data:`~allocators.magnnet.rules.COST_CAP`);
+    1. ``c_ij - min_j' c_ij'`` (how much worse than the agent's best task);
+    2. ``c_ij - min_k c_kj`` (how much dearer than the task's cheapest agent);
+    3. ``c_ij - min_{j' != j} c_ij'`` (the agent's regret: negative when ``j`` is its best);
+    4. ``c_ij - min_{k != i} c_kj`` (negative when ``i`` is the task's cheapest agent);
+    5. rank of ``c_ij`` in the agent's row, over ``m - 1``;
+    6. rank of ``c_ij`` in the task's column, over ``n - 1``;
+    7. whether agent ``i`` flies.
+    """
+    _, n, m = cost.shape
+    cap = rules.COST_CAP
+    far = torch.full_like(cost, _FAR)
+    c = torch.where(mask, cost, far)
+    rowmin = c.amin(2, keepdim=True)
+    colmin = c.amin(1, keepdim=True)
+    if m > 1:
+        two = torch.topk(c, 2, dim=2, largest=False)
+        row_other = torch.where(torch.arange(m) == two.indices[..., :1], two.values[..., 1:2],
+                                two.values[..., :1])
+    else:
+        row_other = far
+    if n > 1:
+        two = torch.topk(c, 2, dim=1, largest=False)
+        col_other = torch.where(torch.arange(n)[None, :, None] == two.indices[:, :1],
+                                two.values[:, 1:2], two.values[:, :1])
+    else:
+        col_other = far
+    row_rank = c.argsort(2).argsort(2).float() / max(m - 1, 1)
+    col_rank = c.argsort(1).argsort(1).float() / max(n - 1, 1)
+    f = torch.stack([c.clamp(max=cap), (c - rowmin).clamp(max=cap), (c - colmin).clamp(max=cap),
+                     (c - row_other).clamp(-cap, cap), (c - col_other).clamp(-cap, cap),
+                     row_rank, col_rank, flies[:, :, None].float().expand(-1, -1, m)], -1)
+    return torch.where(mask[..., None], f, torch.zeros_like(f))
+
+
+class EdgeLayer(nn.Module):
+    """One round of message passing on the complete bipartite agent-task graph."""
+
+    def __init__(self, hidden: int) -> None:
+        super().__init__()
+        self.mlp = nn.Sequential(nn.Linear(5 * hidden, 2 * hidden), nn.ReLU(),
+                                 nn.Linear(2 * hidden, hidden))
+        self.norm = nn.LayerNorm(hidden)
+
+    def forward(self, h: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+        mf = mask[..., None].to(h.dtype)
+        hm = h * mf
+        low = torch.where(mask[..., None], h, torch.full_like(h, -1e4))
+        row_mean = hm.sum(2, keepdim=True) / mf.sum(2, keepdim=True).clamp(min=1)
+        col_mean = hm.sum(1, keepdim=True) / mf.sum(1, keepdim=True).clamp(min=1)
+        # an agent (task) without any available edge aggregates to 0, not to the fill value
+        row_max = low.amax(2, keepdim=True).clamp(min=-1e3) * (mf.sum(2, keepdim=True) > 0)
+        col_max = low.amax(1, keepdim=True).clamp(min=-1e3) * (mf.sum(1, keepdim=True) > 0)
+        x = torch.cat([h, row_mean.expand_as(h), row_max.expand_as(h),
+                       col_mean.expand_as(h), col_max.expand_as(h)], -1)
+        return self.norm(h + self.mlp(x))
+
+
+class MatchPolicy(nn.Module):
+    """Edge scores ``(B, n, m)`` (``-1e4`` on unavailable edges) for any ``n`` and ``m``."""
+
+    variant = "match"
+
+    def __init__(self, hidden: int = 32, layers: int = 5) -> None:
+        super().__init__()
+        self.hidden, self.layers = hidden, layers
+        self.inp = nn.Sequential(nn.Linear(EDGE_FEATURES, hidden), nn.ReLU(),
+                                 nn.Linear(hidden, hidden))
+        self.gnn = nn.ModuleList([EdgeLayer(hidden) for _ in range(layers)])
+        self.out = nn.Sequential(nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, 1))
+
+    def config(self) -> dict:
+        return {"variant": "match", "hidden": self.hidden, "layers": self.layers}
+
+    def forward(self, cost: torch.Tensor, mask: torch.Tensor,
+                flies: torch.Tensor) -> torch.Tensor:
+        h = self.inp(edge_features(cost, mask, flies))
+        for layer in self.gnn:
+            h = layer(h, mask)
+        s = self.out(h)[..., 0]
+        return torch.where(mask, s, torch.full_like(s, -1e4))
+
+
+def scaled(cost: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(cost / COST_SCALE, finite mask)`` as a batch of one; infeasible entries read 0."""
+    mask = np.isfinite(cost)
+    c = np.where(mask, cost / rules.COST_SCALE, 0.0).astype(np.float32)
+    return torch.from_numpy(c)[None], torch.from_numpy(mask)[None]
+
+
+@torch.no_grad()
+def scores_of(model: MatchPolicy, cost: np.ndarray, flies: np.ndarray) -> np.ndarray:
+    """The model's edge scores of one ``(n, m)`` problem (``-inf`` where infeasible)."""
+    if cost.size == 0:
+        return np.full(cost.shape, -np.inf)
+    c, mask = scaled(cost)
+    s = model(c, mask, torch.from_numpy(np.asarray(flies, bool))[None])[0].numpy()
+    return np.where(mask[0].numpy(), s.astype(np.float64), -np.inf)
+
+
+def mutual_best(scores: np.ndarray, rows: np.ndarray, force: bool = False) -> np.ndarray:
+    """Requests of the agents at ``rows`` of a view's ``scores (n, m)``: each agent's best task
+    if no agent of the view scores that task higher (ties to the lower row), else ``-1``;
+    with ``force`` every agent requests its best task. ``-1`` where an agent has no task."""
+    out = np.full(len(rows), -1, np.int64)
+    if scores.size == 0:
+        return out
+    col_best = scores.argmax(0)
+    for k, r in enumerate(rows):
+        j = int(scores[r].argmax())
+        if np.isfinite(scores[r, j]) and (force or col_best[j] == r):
+            out[k] = j
+    return out
+
+
+# --------------------------------------------------------------------------- training
+
+
+@dataclass(frozen=True)
+class MatchConfig:
+    """Imitation training (defaults: the shipped ``match.pt``)."""
+
+    updates: int = 6000
+    batch: int = 32
+    lr: float = 2e-3
+    hidden: int = 32
+    layers: int = 5
+    max_size: int = 50
+    square_share: float = 0.7
+    val_every: int = 250
+    seed: int = 0
+
+
+def sample_batch(pools, rng: np.random.Generator, batch: int, max_size: int,
+                 square_share: float):
+    """Random sub-problems of one size from the cached pools, with their optimal assignment.
+
+    Returns ``cost (B, n, m)`` scaled, ``mask``, ``flies (B, n)``, ``row_target (B, n)`` (the
+    optimal task of each agent, ``-1`` if unassigned) and ``col_target (B, m)``.
+    """
+    from allocators.hungarian import optimal_pairs
+
+    pools = [p for p in pools if min(p.cost.shape[1:]) >= 2]
+    pool = pools[rng.integers(len(pools))]
+    big_n, big_m = pool.cost.shape[1:]
+    n = int(rng.integers(2, min(big_n, max_size) + 1))
+    m = n if (rng.random() < square_share and n <= big_m) else \
+        int(rng.integers(2, min(big_m, max_size) + 1))
+    cost = np.empty((batch, n, m))
+    flies = np.empty((batch, n), bool)
+    rt = np.full((batch, n), -1, np.int64)
+    ct = np.full((batch, m), -1, np.int64)
+    for b in range(batch):
+        k = rng.integers(len(pool))
+        ai = rng.choice(big_n, n, replace=False)
+        ti = rng.choice(big_m, m, replace=False)
+        cost[b] = pool.cost[k][np.ix_(ai, ti)]
+        flies[b] = pool.flies[k][ai]
+        for i, j in optimal_pairs(cost[b]):
+            rt[b, i], ct[b, j] = j, i
+    mask = np.isfinite(cost)
+    return (torch.from_numpy(np.where(mask, cost / rules.COST_SCALE, 0.0).astype(np.float32)),
+            torch.from_numpy(mask), torch.from_numpy(flies), torch.from_numpy(rt),
+            torch.from_numpy(ct))
+
+
+def imitation_loss(scores: torch.Tensor, row_target: torch.Tensor,
+                   col_target: torch.Tensor) -> torch.Tensor:
+    """Mean cross-entropy of each assigned agent over its tasks plus each assigned task over
+    its agents (entries with target ``-1`` do not count)."""
+    f = nn.functional.cross_entropy
+    lr = f(scores.transpose(1, 2), row_target.clamp(min=0), reduction="none")
+    lc = f(scores, col_target.clamp(min=0), reduction="none")
+    rw, cw = (row_target >= 0).float(), (col_target >= 0).float()
+    return (lr * rw).sum() / rw.sum().clamp(min=1) + (lc * cw).sum() / cw.sum().clamp(min=1)
+
+
+def play(model: MatchPolicy, cost: np.ndarray, flies: np.ndarray) -> tuple[float, int, int]:
+    """Decision rounds on a complete graph, as the plugin plays them: ``(total cost, agents
+    assigned, rounds)``. Conflict-free by construction (every agent shares the one view)."""
+    n, m = cost.shape
+    free_a, free_t = np.ones(n, bool), np.ones(m, bool)
+    total, assigned, rounds = 0.0, 0, 0
+    while True:
+        a_idx, t_idx = np.flatnonzero(free_a), np.flatnonzero(free_t)
+        sub = cost[np.ix_(a_idx, t_idx)]
+        if not np.isfinite(sub).any():
+            return total, assigned, rounds
+        req = mutual_best(scores_of(model, sub, flies[a_idx]), np.arange(len(a_idx)))
+        rounds += 1
+        for r, j in enumerate(req):
+            if j >= 0:
+                i, t = a_idx[r], t_idx[j]
+                total += cost[i, t]
+                assigned += 1
+                free_a[i], free_t[t] = False, False
+
+
+def evaluate(model: MatchPolicy, pool) -> dict[str, float]:
+    """Mean gap to the optimal total and share of instances fully assigned, on a complete
+    graph (see :func:`play`)."""
+    gaps, complete = [], []
+    for k in range(len(pool)):
+        cost = pool.cost[k]
+        count, best = rules.optimal(cost)
+        total, assigned, _ = play(model, cost, pool.flies[k])
+        complete.append(assigned >= count)
+        gaps.append((total - best) / best if best > 0 else 0.0)
+    return {"val/gap": float(np.mean(gaps)), "val/complete": float(np.mean(complete))}
+
+
+def train(model: MatchPolicy, pools, cfg: MatchConfig, on_update=None, val_pool=None):
+    """Fit ``model`` by imitation; returns one log row per update (and per validation).
+
+    With ``val_pool`` the model is validated every ``cfg.val_every`` updates and the weights
+    with the smallest validation gap (among fully assigning ones) are kept at the end.
+    """
+    torch.manual_seed(cfg.seed)
+    rng = np.random.default_rng(cfg.seed)
+    opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=cfg.lr, total_steps=cfg.updates)
+    rows, best, best_state = [], None, None
+    started = time.perf_counter()
+    for u in range(cfg.updates):
+        cost, mask, flies, rt, ct = sample_batch(pools, rng, cfg.batch, cfg.max_size,
+                                                 cfg.square_share)
+        model.train()
+        loss = imitation_loss(model(cost, mask, flies), rt, ct)
+        opt.zero_grad()
+        loss.backward()
+        nn.utils.clip_grad_norm_(model.parameters(), 1.0)
+        opt.step()
+        sched.step()
+        row = {"phase": "imitation", "update": u, "losses/imitation": loss.item(),
+               "size_n": cost.shape[1], "size_m": cost.shape[2],
+               "wall_s": time.perf_counter() - started}
+        rows.append(row)
+        if on_update:
+            on_update(row)
+        last = u == cfg.updates - 1
+        if val_pool is not None and ((u + 1) % cfg.val_every == 0 or last):
+            model.eval()
+            res = evaluate(model, val_pool)
+            vrow = {"phase": "val", "update": u, **res, "wall_s": time.perf_counter() - started}
+            rows.append(vrow)
+            if on_update:
+                on_update(vrow)
+            key = (-res["val/complete"], res["val/gap"])
+            if best is None or key < best:
+                best = key
+                best_state = {k: v.clone() for k, v in model.state_dict().items()}
+    if best_state is not None:
+        model.load_state_dict(best_state)
+    model.eval()
+    return rows
+
+
+def config_dict(cfg: MatchConfig) -> dict:
+    return asdict(cfg)
