@@ -156,7 +156,7 @@ def _run_match(args, console=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     full = load_pool(20, args.pool, "train", workers=2)
     n_val = min(args.val, len(full) // 2)
-    pools = [full.take(slice(0, len(full) - n_val)), load_pool(50, 200, "train", workers=2)]
+    pools = [full.take(slice(0, len(full) - n_val))]
     val = full.take(slice(len(full) - n_val, len(full))) if n_val else None
     model = MatchPolicy(cfg.hidden, cfg.layers)
     started = time.perf_counter()
@@ -179,8 +179,8 @@ def _run_match(args, console=None) -> int:
                      "val": {k: v for k, v in (best or {}).items() if k.startswith("val/")},
                      "world_size": full.world_size.tolist(),
                      "pool": f"train seeds from 1000000: N=20 ({len(full) - n_val} training + "
-                             f"{n_val} validation instances) and N=50 (200 instances), random "
-                             f"sub-problems up to {cfg.max_size} x {cfg.max_size}"})
+                             f"{n_val} validation instances), random sub-problems up to "
+                             f"{cfg.max_size} x {cfg.max_size}"})
     keys = sorted({k for r in rows for k in r})
     pq.write_table(pa.table({k: [r.get(k) for r in rows] for k in keys}), out / "log.parquet")
     _loss_figure(rows, out)
