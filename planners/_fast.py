@@ -151,13 +151,8 @@ def dijkstra_field(dirs, deltas, wclass, wvalue, src, dist, qn, qk):  # pragma: 
 
 
 @numba.njit(inline="always")
-def _octile(v, syz, nz, gi, gj, gk):  # pragma: no cover - compiled
-    """Octile distance in cells from node ``v`` to the goal cell ``(gi, gj, gk)``."""
-    i = v // syz
-    r = v % syz
-    x = abs(i - gi)
-    y = abs(r // nz - gj)
-    z = abs(r % nz - gk)
+def _octile(x, y, z):  # pragma: no cover - compiled
+    """Octile distance in cells of the absolute offsets ``x, y, z``."""
     if x < y:
         x, y = y, x
     if y < z:
@@ -168,14 +163,15 @@ def _octile(v, syz, nz, gi, gj, gk):  # pragma: no cover - compiled
 
 
 @_jit
-def astar(dirs, occ, nbr, req, deltas, wstep, shape, pad, start, goal,  # pragma: no cover
+def astar(dirs, occ, nbr, req, deltas, dcoord, wstep, shape, pad, start, goal,  # pragma: no cover
           seen, gen, gbuf, pbuf):
     """A* from ``start`` to ``goal`` (node indices in the lattice ``shape``), in cells.
 
     Legal moves from ``u``: if ``dirs.size > 0``, bit ``b`` of ``dirs[u]``; otherwise the
     3x3x3 neighbourhood of ``u`` in the padded occupancy ``occ`` (``occ[u + nbr[q]]`` nonzero
     where blocked) is read into a bit set and move ``b`` is legal when every bit of ``req[b]``
-    (its bounding box) is free. ``deltas[b]`` is the move's index delta, ``wstep[b]`` its length.
+    (its bounding box) is free. ``deltas[b]`` is the move's index delta, ``dcoord[b]`` the same
+    move as ``(di, dj, dk)`` and ``wstep[b]`` its length.
     Scratch, one slot per node: node ``n`` has been reached in this search iff
     ``seen[n] == gen`` (uint32; a caller reuses the arrays across searches by bumping ``gen``,
     or passes lazily zeroed pages with ``gen = 1`` so that only touched nodes cost memory);
@@ -189,7 +185,8 @@ def astar(dirs, occ, nbr, req, deltas, wstep, shape, pad, start, goal,  # pragma
     with it. Entries of equal ``f`` come out last-in first-out (deeper first). Lazy deletion:
     an entry whose ``g`` is above the node's best is skipped, and a node reached more cheaply
     later is pushed again, so the search is exact even where rounding makes the heuristic
-    inconsistent by an ulp.
+    inconsistent by an ulp. A popped node's coordinates are decoded once and its successors'
+    follow from ``dcoord``, so the heuristic of a push costs no integer division.
     """
     ny = shape[1]
     nz = shape[2]
@@ -216,7 +213,8 @@ def astar(dirs, occ, nbr, req, deltas, wstep, shape, pad, start, goal,  # pragma
     seen[start] = gen
     gbuf[start] = 0.0
     pbuf[start] = 255
-    fbits[0] = _octile(start, syz, nz, gi, gj, gk)
+    fbits[0] = _octile(abs(start // syz - gi), abs((start % syz) // nz - gj),
+                       abs(start % nz - gk))
     last = ubits[0]
     pkey[0] = last
     pnode[0] = start
@@ -270,6 +268,9 @@ def astar(dirs, occ, nbr, req, deltas, wstep, shape, pad, start, goal,  # pragma
             for b in range(nb):
                 if free & req[b] == req[b]:
                     m |= np.int64(1) << b
+        ui = u // syz
+        uj = (u % syz) // nz
+        uk = u % nz
         for b in range(nb):
             if not (m >> b) & 1:
                 continue
@@ -282,7 +283,8 @@ def astar(dirs, occ, nbr, req, deltas, wstep, shape, pad, start, goal,  # pragma
                 seen[v] = gen
             gbuf[v] = gv
             pbuf[v] = b + 1
-            fbits[0] = gv + _octile(v, syz, nz, gi, gj, gk)
+            fbits[0] = gv + _octile(abs(ui + dcoord[b, 0] - gi), abs(uj + dcoord[b, 1] - gj),
+                                    abs(uk + dcoord[b, 2] - gk))
             key = ubits[0]
             if key < last:
                 key = last  # an ulp of inconsistency: file it with the current minimum

@@ -30,7 +30,7 @@ import threading
 from collections import OrderedDict
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from functools import cached_property, partial
+from functools import cache, cached_property, partial
 
 import numpy as np
 from scipy.sparse import csr_matrix
@@ -351,11 +351,19 @@ def astar(grid: Grid, start: Cell, goal: Cell, flies: bool) -> tuple[float, list
     sn = ((s3[0] + pad) * ny + s3[1] + pad) * nz + s3[2] + pad
     tn = ((t3[0] + pad) * ny + t3[1] + pad) * nz + t3[2] + pad
     seen, gen, gbuf, pbuf = _scratch(grid, flies, nx * ny * nz)
-    length, cells = _fast.astar(dirs, occ, nbr, req, deltas, wstep, shape3, pad, sn, tn,
-                                seen, gen, gbuf, pbuf)
+    length, cells = _fast.astar(dirs, occ, nbr, req, deltas, _move_coords(flies), wstep, shape3,
+                                pad, sn, tn, seen, gen, gbuf, pbuf)
     if cells.shape[0] == 0:
         return math.inf, None
     return float(length) * grid.cell, list(map(tuple, cells.tolist()))
+
+
+@cache
+def _move_coords(flies: bool) -> np.ndarray:
+    """``(di, dj, dk)`` of each move of ``offsets(flies)``, aligned with the move deltas."""
+    out = np.array(offsets(flies), dtype=np.int64).reshape(-1, 3)
+    out.setflags(write=False)
+    return out
 
 
 def _warm_up() -> None:
