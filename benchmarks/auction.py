@@ -1,4 +1,4 @@
-"""Benchmark: the CBBA auction (and greedy) under limited communication, against Hungarian.
+"""Benchmark: the CBBA auction (and MAGNNET-match, greedy) under limited communication, vs Hungarian.
 
 For N = M in {4, 8, 12, 20, 50, 100} and communication ranges {unlimited, 20 m, 10 m}, on the
 first decision of the paper's static scenario (``scenarios/paper_static.toml``: the same world,
@@ -30,6 +30,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 from rich.console import Console
+from rich.progress import Progress
 from rich.table import Table
 
 from dispatch import registry
@@ -49,7 +50,7 @@ from dispatch.tasks import TaskFactory
 ROOT = Path(__file__).resolve().parents[1]
 SIZES = (4, 8, 12, 20, 50, 100)
 RANGES = (None, 20.0, 10.0)
-ALLOCATORS = ("hungarian", "auction", "greedy")
+ALLOCATORS = ("hungarian", "auction", "magnnet_match", "greedy")
 
 
 def load_planner():
@@ -96,40 +97,49 @@ def evaluate(problem: AllocationProblem, allocation, elapsed: float) -> dict:
     )
 
 
+def _instance_rows(out, scenario, planner_cls, allocs, n, seed, ranges, loss, bundle_size,
+                   warm) -> None:
+    """Every allocator on one instance under every range: rows appended to ``out``."""
+    agents, tasks, cost, positions, cell = instance(scenario, n, seed, planner_cls)
+    if warm:  # first calls pay for imports and caches: keep them out of the timings
+        for name, cls in allocs.items():
+            cls().allocate(AllocationProblem(
+                time=0.0, agents=agents, tasks=tasks, cost=cost.copy(),
+                comm=comm_graph(positions, 10.0), rng=np.random.default_rng(0),
+                cell_size=cell))
+    for rng_m in ranges:
+        comm = comm_graph(positions, rng_m)
+        n_comp = components(comm)[0]
+        for name, cls in allocs.items():
+            alloc = cls(bundle_size=bundle_size) if name == "auction" else cls()
+            problem = AllocationProblem(
+                time=0.0, agents=agents, tasks=tasks, cost=cost.copy(), comm=comm,
+                rng=rng_for(seed, STREAM_ALLOCATOR), loss=loss, cell_size=cell)
+            t0 = time.perf_counter()
+            allocation = alloc.allocate(problem)
+            elapsed = time.perf_counter() - t0
+            row = dict(allocator=name, n=n, range_m=math.inf if rng_m is None else rng_m,
+                       seed=seed, loss=loss, bundle_size=bundle_size,
+                       components=n_comp, connected=n_comp == 1,
+                       diameter=diameter(comm) if n_comp == 1 else -1)
+            row.update(evaluate(problem, allocation, elapsed))
+            out.append(row)
+
+
 def run(sizes, ranges, seeds, loss, bundle_size, console) -> list[dict]:
     scenario = load_scenario(ROOT / "scenarios" / "paper_static.toml")
     planner_cls = load_planner()
     allocs = {name: registry.load("allocator", name) for name in ALLOCATORS}
     out = []
     warm = True
-    for n in sizes:
-        for seed in seeds:
-            agents, tasks, cost, positions, cell = instance(scenario, n, seed, planner_cls)
-            if warm:  # first calls pay for imports and caches: keep them out of the timings
-                for name, cls in allocs.items():
-                    cls().allocate(AllocationProblem(
-                        time=0.0, agents=agents, tasks=tasks, cost=cost.copy(),
-                        comm=comm_graph(positions, 10.0), rng=np.random.default_rng(0),
-                        cell_size=cell))
-                warm = False
-            for rng_m in ranges:
-                comm = comm_graph(positions, rng_m)
-                n_comp = components(comm)[0]
-                for name, cls in allocs.items():
-                    alloc = cls(bundle_size=bundle_size) if name == "auction" else cls()
-                    problem = AllocationProblem(
-                        time=0.0, agents=agents, tasks=tasks, cost=cost.copy(), comm=comm,
-                        rng=rng_for(seed, STREAM_ALLOCATOR), loss=loss, cell_size=cell)
-                    t0 = time.perf_counter()
-                    allocation = alloc.allocate(problem)
-                    elapsed = time.perf_counter() - t0
-                    row = dict(allocator=name, n=n, range_m=math.inf if rng_m is None else rng_m,
-                               seed=seed, loss=loss, bundle_size=bundle_size,
-                               components=n_comp, connected=n_comp == 1,
-                               diameter=diameter(comm) if n_comp == 1 else -1)
-                    row.update(evaluate(problem, allocation, elapsed))
-                    out.append(row)
-            console.log(f"N = {n}, seed {seed} done")
+    with Progress(console=console, transient=True) as progress:
+        bar = progress.add_task("instances", total=len(sizes) * len(seeds))
+        for n, seed in ((n, s) for n in sizes for s in seeds):
+            progress.update(bar, description=f"N = {n}, seed {seed}")
+            _instance_rows(out, scenario, planner_cls, allocs, n, seed, ranges, loss,
+                           bundle_size, warm)
+            warm = False
+            progress.advance(bar)
     ref = {(r["n"], r["range_m"], r["seed"]): r for r in out if r["allocator"] == "hungarian"}
     for r in out:
         h = ref[(r["n"], r["range_m"], r["seed"])]
