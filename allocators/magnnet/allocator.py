@@ -125,19 +125,28 @@ class MagnnetMatchAllocator(DecentralizedAllocator):
     An agent's view is the deciding agents within two communication hops and the tasks it
     believes open; it computes the scores of its whole view (its neighbours' cost vectors come
     over the links) and requests its best task only if no agent of the view scores that task
-    higher. From round ``patience`` on it requests its best task regardless, so a decision
-    under partial communication cannot stall; the conflict rule settles what follows.
+    higher and, if it hears the whole fleet (so that every agent shares its view), the model
+    is confident of the pair (see :func:`~allocators.magnnet.match.mutual_best`). An agent that
+    does not hear the whole fleet skips the confidence test and requests its best task
+    regardless from round ``patience`` on, so a decision under partial communication cannot
+    stall; the conflict rule settles what follows.
 
     Parameters (``[dispatch.allocator_params]``): ``checkpoint`` (default: the shipped
-    ``match.pt``), ``patience`` (default 3).
+    ``match.pt``), ``confidence`` (in ``[0, 1]``, default 0.8; 0: plain mutual best),
+    ``patience`` (default 3).
     """
 
     name = "magnnet_match"
 
-    def __init__(self, checkpoint: str | None = None, patience: int = 3) -> None:
+    def __init__(self, checkpoint: str | None = None, confidence: float = 0.8,
+                 patience: int = 3) -> None:
         if isinstance(patience, bool) or not isinstance(patience, int) or patience < 0:
             raise TypeError(f"patience must be a non-negative integer, got {patience!r}")
+        if (isinstance(confidence, bool) or not isinstance(confidence, (int, float))
+                or not 0.0 <= confidence <= 1.0):
+            raise TypeError(f"confidence must be a number in [0, 1], got {confidence!r}")
         self.checkpoint = checkpoint
+        self.confidence = float(confidence)
         self.patience = patience
 
     def model(self):
@@ -168,12 +177,23 @@ class MagnnetMatchAllocator(DecentralizedAllocator):
             _, two = two_hop(comm, int(i))
             members = np.flatnonzero(two & deciding)
             views.setdefault(members.tobytes(), (members, []))[1].append(k)
+        # an agent that hears every vehicle directly knows its view is everyone's: no forcing
+        hears_all = comm[agents].all(axis=1)
+        late = round_ >= self.patience
         # agents that share a view share one forward pass (one for everyone on a complete graph)
         for members, ks in views.values():
             scores = scores_of(model, problem.cost[np.ix_(members, tasks)], flies[members])
-            rows = np.searchsorted(members, agents[ks])
-            req = mutual_best(scores, rows, force=round_ >= self.patience)
-            out[ks] = np.where(req >= 0, tasks[np.maximum(req, 0)], -1)
+            ks = np.asarray(ks)
+            # waiting for confidence pays only where every agent shares one view; with partial
+            # views it only delays agents while others go ahead
+            for full in (True, False):
+                sel = ks[hears_all[ks] == full]
+                if sel.size == 0:
+                    continue
+                req = mutual_best(scores, np.searchsorted(members, agents[sel]),
+                                  force=late and not full,
+                                  confidence=self.confidence if full else 0.0)
+                out[sel] = np.where(req >= 0, tasks[np.maximum(req, 0)], -1)
         return out
 
 

@@ -18,11 +18,15 @@ neighbourhood gives it) and changes two things, both measured:
 
 Execution (:func:`mutual_best`): in each decision round an agent scores the edges of its view
 (the deciding agents within two communication hops, all open tasks), takes its best task, and
-requests it only when no agent of its view scores that task higher; otherwise it waits a round.
-On a complete graph every view is the same, so no two agents ever request one task: the result
-is conflict-free by construction, and each round assigns at least the best-scored pair. With
-limited range the views differ, conflicts can happen and the shared conflict rule settles them;
-after ``patience`` rounds every agent requests its best task, so deciding never stalls.
+requests it only when no agent of its view scores that task higher and the model is confident
+of the pair (row and column softmax both at least ``confidence``; if no pair of the view is
+that sure, mutual best is enough); otherwise it waits a round, and the pairs settled meanwhile
+make its choice clearer. On a complete graph every view is the same, so no two agents ever
+request one task: the result is conflict-free by construction, and each round assigns at least
+the best-scored pair. With limited range the views differ, conflicts can happen and the shared
+conflict rule settles them; an agent that does not hear the whole fleet skips the confidence
+test (waiting only delays it while others go ahead) and requests its best task regardless from
+round ``patience`` on, so deciding never stalls.
 """
 
 from __future__ import annotations
@@ -151,18 +155,42 @@ def scores_of(model: MatchPolicy, cost: np.ndarray, flies: np.ndarray) -> np.nda
     return np.where(mask[0].numpy(), s.astype(np.float64), -np.inf)
 
 
-def mutual_best(scores: np.ndarray, rows: np.ndarray, force: bool = False) -> np.ndarray:
-    """Requests of the agents at ``rows`` of a view's ``scores (n, m)``: each agent's best task
-    if no agent of the view scores that task higher (ties to the lower row), else ``-1``;
-    with ``force`` every agent requests its best task. ``-1`` where an agent has no task."""
+#: Default of :func:`mutual_best`'s ``confidence`` (measured best on held-out instances).
+CONFIDENCE = 0.8
+
+
+def _softmax(s: np.ndarray, axis: int) -> np.ndarray:
+    finite = np.isfinite(s)
+    top = np.max(np.where(finite, s, -np.inf), axis=axis, keepdims=True)
+    e = np.where(finite, np.exp(s - np.where(np.isfinite(top), top, 0.0)), 0.0)
+    return e / np.maximum(e.sum(axis=axis, keepdims=True), 1e-300)
+
+
+def mutual_best(scores: np.ndarray, rows: np.ndarray, force: bool = False,
+                confidence: float = CONFIDENCE) -> np.ndarray:
+    """Requests of the agents at ``rows`` of a view's ``scores (n, m)`` (``-1``: wait).
+
+    A pair ``(i, j)`` is *mutual best* when ``j`` is ``i``'s best task and no agent of the view
+    scores ``j`` higher (ties to the lower row). It is *confident* when, in addition, the
+    softmax of ``i``'s row gives ``j`` at least ``confidence`` and the softmax of ``j``'s
+    column gives ``i`` at least ``confidence`` (the model was trained with exactly these two
+    cross-entropies, so they read as the chance that the pair is optimal). Agents of confident
+    pairs request; if the view has no confident pair, agents of mutual-best pairs request
+    (there always is one: the best finite score), so every round makes progress. Every agent
+    of a view computes the same answer for the whole view. With ``force`` every agent
+    requests its best task. ``-1`` where an agent has no feasible task.
+    """
     out = np.full(len(rows), -1, np.int64)
     if scores.size == 0:
         return out
-    col_best = scores.argmax(0)
-    for k, r in enumerate(rows):
-        j = int(scores[r].argmax())
-        if np.isfinite(scores[r, j]) and (force or col_best[j] == r):
-            out[k] = j
+    n = scores.shape[0]
+    best = scores.argmax(1)
+    ok = np.isfinite(scores[np.arange(n), best])
+    mutual = ok & (scores.argmax(0)[best] == np.arange(n))
+    sure = (mutual & (_softmax(scores, 1)[np.arange(n), best] >= confidence)
+            & (_softmax(scores, 0)[np.arange(n), best] >= confidence))
+    go = ok if force else (sure if sure.any() else mutual)
+    out[go[rows]] = best[rows][go[rows]]
     return out
 
 
@@ -228,7 +256,8 @@ def imitation_loss(scores: torch.Tensor, row_target: torch.Tensor,
     return (lr * rw).sum() / rw.sum().clamp(min=1) + (lc * cw).sum() / cw.sum().clamp(min=1)
 
 
-def play(model: MatchPolicy, cost: np.ndarray, flies: np.ndarray) -> tuple[float, int, int]:
+def play(model: MatchPolicy, cost: np.ndarray, flies: np.ndarray,
+         confidence: float = CONFIDENCE) -> tuple[float, int, int]:
     """Decision rounds on a complete graph, as the plugin plays them: ``(total cost, agents
     assigned, rounds)``. Conflict-free by construction (every agent shares the one view)."""
     n, m = cost.shape
@@ -239,7 +268,8 @@ def play(model: MatchPolicy, cost: np.ndarray, flies: np.ndarray) -> tuple[float
         sub = cost[np.ix_(a_idx, t_idx)]
         if not np.isfinite(sub).any():
             return total, assigned, rounds
-        req = mutual_best(scores_of(model, sub, flies[a_idx]), np.arange(len(a_idx)))
+        req = mutual_best(scores_of(model, sub, flies[a_idx]), np.arange(len(a_idx)),
+                          confidence=confidence)
         rounds += 1
         for r, j in enumerate(req):
             if j >= 0:

@@ -79,6 +79,35 @@ def test_mutual_best_requests_distinct_tasks_and_always_progress():
         assert ((forced >= 0) == np.isfinite(s).any(1)).all()
 
 
+def _softmax(s, axis):
+    e = np.where(np.isfinite(s), np.exp(s - np.nanmax(np.where(np.isfinite(s), s, np.nan),
+                                                       axis=axis, keepdims=True)), 0.0)
+    return e / e.sum(axis=axis, keepdims=True)
+
+
+def test_confident_pairs_go_first():
+    """With a confidence threshold only pairs the model is sure of request, as long as the
+    view has one; otherwise every mutual-best pair requests (no round without progress)."""
+    rng = np.random.default_rng(3)
+    seen_both = [False, False]
+    for _ in range(300):
+        n, m = rng.integers(2, 7, 2)
+        s = rng.normal(scale=3.0, size=(n, m))
+        plain = mutual_best(s, np.arange(n), confidence=0.0)
+        sure = mutual_best(s, np.arange(n), confidence=0.8)
+        pr, pc = _softmax(s, 1), _softmax(s, 0)
+        confident = [r for r in range(n) if plain[r] >= 0
+                     and pr[r, plain[r]] >= 0.8 and pc[r, plain[r]] >= 0.8]
+        if confident:
+            assert sorted(np.flatnonzero(sure >= 0).tolist()) == confident
+            seen_both[0] = True
+        else:
+            np.testing.assert_array_equal(sure, plain)
+            seen_both[1] = True
+        assert ((sure >= 0) <= (plain >= 0)).all() and (sure[sure >= 0] == plain[sure >= 0]).all()
+    assert all(seen_both)
+
+
 def test_allocator_is_conflict_free_on_complete_graphs():
     """Every agent shares the one view: no task is ever requested twice; N >= M assigns all."""
     from dispatch.registry import load
@@ -96,6 +125,20 @@ def test_allocator_is_conflict_free_on_complete_graphs():
         from allocators.hungarian import optimal_pairs
 
         assert len(pairs) == len(optimal_pairs(cost)) or np.isinf(cost).any()
+
+
+def test_patience_never_forces_agents_that_hear_everyone():
+    """On a complete graph an agent knows its view is everyone's: no forced requests, so no
+    conflicts, even with ``patience = 0``."""
+    from dispatch.registry import load
+
+    alloc = load("allocator", "magnnet_match")(patience=0)
+    rng = np.random.default_rng(8)
+    for k in range(5):
+        cost, *_ = random_instance(rng, 12, 12)
+        p = make_problem(cost, seed=k)
+        a = alloc.allocate(p)
+        assert len(assert_valid(p, a)) == 12 and not a.conflicted_tasks()
 
 
 def test_action_ignores_agents_beyond_two_hops(monkeypatch):
@@ -209,6 +252,8 @@ def test_bad_parameters_are_clear_errors(tmp_path):
 
     with pytest.raises(TypeError, match="patience"):
         MagnnetMatchAllocator(patience=-1)
+    with pytest.raises(TypeError, match="confidence"):
+        MagnnetMatchAllocator(confidence=1.5)
     with pytest.raises(AllocationError, match="no checkpoint"):
         MagnnetMatchAllocator(checkpoint=str(tmp_path / "none.pt")).allocate(
             make_problem(np.ones((2, 2))))
