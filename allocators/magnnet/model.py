@@ -9,7 +9,9 @@ The graph is heterogeneous: agent nodes, task nodes, agent-task edges (every pai
 carries the pair's scaled cost and availability) and agent-agent edges (the communication
 graph). :class:`HeteroGraphConv` is one graph-convolution layer over it in dense batched form
 (many tiny graphs of equal size at once: one batched matrix product per edge type instead of
-scatter operations). Messages flow task -> agent and agent -> agent only; task nodes are
+scatter operations). It computes the same function as the layer built from PyTorch Geometric's
+parts in :mod:`allocators.magnnet.pyg_layer` (a test checks it) and trains faster: 1.5x PyG's
+layer alone, 7-26x with the PyG batch built per minibatch (``benchmarks/gnn_layers.py``). Messages flow task -> agent and agent -> agent only; task nodes are
 updated from their own state. So after two layers an agent's embedding depends on its own
 features, every task, and the agents within two communication hops, and nothing else: that is
 what makes execution decentralized (each agent can compute its own embedding from what its
