@@ -62,7 +62,7 @@ def table_i(am: pd.DataFrame, reference: str = "hungarian") -> pd.DataFrame:
     the mean paired gap to the reference."""
     return _pivot(am, lambda r: _pm(r.total_cost_mean, r.total_cost_ci95) + (
         "" if r.allocator == reference or not math.isfinite(r.gap_mean)
-        else f" [{100 * r.gap_mean:+.1f} %]"))
+        else f" [{round(100 * r.gap_mean, 1) + 0.0:+.1f} %]"))
 
 
 def table_iii(am: pd.DataFrame) -> pd.DataFrame:

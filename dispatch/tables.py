@@ -72,7 +72,8 @@ def render(summaries: list[dict], console=None) -> None:
             elif a == "hungarian" or math.isnan(r["gap"]):
                 cells.append(f"{r['total_cost']:.1f}")
             else:
-                cells.append(f"{r['total_cost']:.1f} [{100 * r['gap']:+.1f}%]")
+                # + 0.0 turns a rounding-level -0.0 (equal totals summed in another order) into 0
+                cells.append(f"{r['total_cost']:.1f} [{round(100 * r['gap'], 1) + 0.0:+.1f}%]")
         t1.add_row(str(n), str(runs[n]), *cells)
     console.print(t1)
 

@@ -298,8 +298,7 @@ def train(model: MatchPolicy, pools, cfg: MatchConfig, on_update=None, val_pool=
     With ``val_pool`` the model is validated every ``cfg.val_every`` updates and the weights
     with the smallest validation gap (among fully assigning ones) are kept at the end.
     """
-    torch.manual_seed(cfg.seed)
-    rng = np.random.default_rng(cfg.seed)
+    rng = np.random.default_rng(cfg.seed)  # the only randomness of training: the batches
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=cfg.lr, total_steps=cfg.updates)
     rows, best, best_state = [], None, None

@@ -158,7 +158,9 @@ def _run_match(args, console=None) -> int:
     n_val = min(args.val, len(full) // 2)
     pools = [full.take(slice(0, len(full) - n_val))]
     val = full.take(slice(len(full) - n_val, len(full))) if n_val else None
-    model = MatchPolicy(cfg.hidden, cfg.layers)
+    with torch.random.fork_rng():  # seeded initial weights, without touching global state
+        torch.manual_seed(cfg.seed)
+        model = MatchPolicy(cfg.hidden, cfg.layers)
     started = time.perf_counter()
     with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}"
                   "/{task.total}"), TimeElapsedColumn(), console=console) as progress:
