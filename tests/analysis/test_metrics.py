@@ -55,13 +55,18 @@ def test_open_sweep_has_run_keys(small_sweep):
         res.run("nosuch")
 
 
-def test_open_run_folder_and_parent(single_run, small_sweep):
+def test_open_run_folder_and_parent(single_run, small_sweep, tmp_path):
+    import shutil
+
     res = open_results(single_run)
     assert [s.kind for s in res.sources] == ["run"]
     tasks = res.table("tasks")
     assert set(tasks["allocator"]) == {"hungarian"} and set(tasks["seed"]) == {2}
-    # a folder holding results is searched; both layouts are read together
-    both = open_results(single_run.parent.parent)
+    # a folder holding results is searched; both layouts are read together (copied into a
+    # folder of their own: the session's temporary root also holds other tests' outputs)
+    shutil.copytree(single_run, tmp_path / "a" / "run")
+    shutil.copytree(small_sweep, tmp_path / "b" / "sweep")
+    both = open_results(tmp_path)
     kinds = sorted(s.kind for s in both.sources)
     assert kinds == ["run", "sweep"] and len(both.summary) == 19
     with pytest.raises(NoResultsError):
