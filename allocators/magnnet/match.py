@@ -155,7 +155,8 @@ def scores_of(model: MatchPolicy, cost: np.ndarray, flies: np.ndarray) -> np.nda
     return np.where(mask[0].numpy(), s.astype(np.float64), -np.inf)
 
 
-#: Default of :func:`mutual_best`'s ``confidence`` (measured best on held-out instances).
+#: Default of :func:`mutual_best`'s ``confidence``: the best of 0, 0.5, ..., 0.9 on the 100
+#: held-out training instances (mean gap over N = 4, 8, 12, 20: 0.96 % at 0, 0.17 % at 0.8).
 CONFIDENCE = 0.8
 
 
@@ -199,7 +200,8 @@ def mutual_best(scores: np.ndarray, rows: np.ndarray, force: bool = False,
 
 @dataclass(frozen=True)
 class MatchConfig:
-    """Imitation training (defaults: the shipped ``match.pt``)."""
+    """Imitation training (defaults: the shipped ``match.pt``, which was trained with
+    ``seed=2``: the best of seeds 0-2 on the held-out training instances)."""
 
     updates: int = 6000
     batch: int = 32
