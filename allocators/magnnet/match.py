@@ -138,10 +138,15 @@ class MatchPolicy(nn.Module):
         return torch.where(mask, s, torch.full_like(s, -1e4))
 
 
+def _scale(cost: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(cost / COST_SCALE as float32, finite mask)``, any shape; infeasible entries read 0."""
+    mask = np.isfinite(cost)
+    return np.where(mask, cost / rules.COST_SCALE, 0.0).astype(np.float32), mask
+
+
 def scaled(cost: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
     """``(cost / COST_SCALE, finite mask)`` as a batch of one; infeasible entries read 0."""
-    mask = np.isfinite(cost)
-    c = np.where(mask, cost / rules.COST_SCALE, 0.0).astype(np.float32)
+    c, mask = _scale(cost)
     return torch.from_numpy(c)[None], torch.from_numpy(mask)[None]
 
 
@@ -241,10 +246,9 @@ def sample_batch(pools, rng: np.random.Generator, batch: int, max_size: int,
         flies[b] = pool.flies[k][ai]
         for i, j in optimal_pairs(cost[b]):
             rt[b, i], ct[b, j] = j, i
-    mask = np.isfinite(cost)
-    return (torch.from_numpy(np.where(mask, cost / rules.COST_SCALE, 0.0).astype(np.float32)),
-            torch.from_numpy(mask), torch.from_numpy(flies), torch.from_numpy(rt),
-            torch.from_numpy(ct))
+    c, mask = _scale(cost)
+    return (torch.from_numpy(c), torch.from_numpy(mask), torch.from_numpy(flies),
+            torch.from_numpy(rt), torch.from_numpy(ct))
 
 
 def imitation_loss(scores: torch.Tensor, row_target: torch.Tensor,

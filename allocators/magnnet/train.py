@@ -12,8 +12,6 @@ import logging
 import time
 from pathlib import Path
 
-import numpy as np
-
 log = logging.getLogger(__name__)
 
 
@@ -194,7 +192,8 @@ def _run_match(args, console=None) -> int:
     return 0
 
 
-def _loss_figure(rows, out: Path) -> None:
+def _pyplot():
+    """matplotlib's pyplot on the headless Agg backend, or None (logged) when it is missing."""
     try:
         import matplotlib
 
@@ -202,6 +201,15 @@ def _loss_figure(rows, out: Path) -> None:
         import matplotlib.pyplot as plt
     except ImportError:
         log.warning("matplotlib missing: no figures")
+        return None
+    return plt
+
+
+def _loss_figure(rows, out: Path) -> None:
+    import numpy as np
+
+    plt = _pyplot()
+    if plt is None:
         return
     fit = [r for r in rows if r["phase"] == "imitation"]
     val = [r for r in rows if r["phase"] == "val"]
@@ -223,13 +231,8 @@ def _loss_figure(rows, out: Path) -> None:
 
 
 def _figures(rows, out: Path) -> None:
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        log.warning("matplotlib missing: no figures")
+    plt = _pyplot()
+    if plt is None:
         return
     ppo = [r for r in rows if r["phase"] == "ppo"]
     if not ppo:
