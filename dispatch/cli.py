@@ -72,6 +72,9 @@ def _specs(args):
         load("allocator", name)
     for name in sorted({s.planner for s in specs}):
         load("planner", name)
+    from dispatch.sim import check_runs
+
+    check_runs(sc, sorted({s.planner for s in specs}))
     return sc, specs
 
 
@@ -101,9 +104,10 @@ def _run(args, console) -> int:
 
 def _validate(args, console) -> int:
     sc, specs = _specs(args)
+    world = (f"world {sc.world.shape}, {sc.world.obstacles.count} obstacles"
+             if sc.world.roads is None else f"road network {sc.world.roads.network!r}")
     console.print(f"[green]ok[/]: {args.scenario} ({sc.name}): {len(specs)} run(s); "
-                  f"source {sc.tasks.source}, world {sc.world.shape}, "
-                  f"{sc.world.obstacles.count} obstacles", soft_wrap=True)
+                  f"source {sc.tasks.source}, {world}", soft_wrap=True)
     return 0
 
 
@@ -135,10 +139,12 @@ def _plugins(args, console) -> int:
 
     for kind in ("allocator", "planner"):
         t = Table(title=f"{kind}s (entry-point group dispatch.{kind}s)")
-        for col in ("name", "target", "description"):
-            t.add_column(col)
-        for row in describe(kind):
-            t.add_row(*row)
+        cols = ("name", "target", "spaces", "description")
+        for col in cols:
+            if kind == "planner" or col != "spaces":
+                t.add_column(col)
+        for name, target, spaces, doc in describe(kind):
+            t.add_row(*((name, target, spaces, doc) if kind == "planner" else (name, target, doc)))
         console.print(t)
     return 0
 

@@ -30,36 +30,58 @@ from dataclasses import dataclass, field
 from collections.abc import Sequence
 from typing import ClassVar, Literal, Protocol
 
+import math
+
 import numpy as np
 
-from dispatch.world import Cell, World
+from dispatch.space import Location, Space
+from dispatch.world import Cell
 
-VehicleKind = Literal["uav", "ugv"]
-TaskKind = Literal["ground", "air"]
+VehicleKind = Literal["uav", "ugv", "car"]
+TaskKind = Literal["ground", "air", "trip"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class AgentView:
-    """What an allocator or planner may know about one vehicle at a decision."""
+    """What an allocator or planner may know about one vehicle at a decision.
+
+    ``loc`` is where the vehicle is in the run's space: a voxel cell, or on roads a
+    :class:`dispatch.roads.RoadPoint` (a node, or part-way along an edge)."""
 
     id: int
     kind: VehicleKind
-    cell: Cell
-    speed: float  # metres per simulated second
+    loc: Location
+    speed: float  # metres per simulated second (roads: the network's travel times apply)
 
     @property
     def flies(self) -> bool:
         return self.kind == "uav"
 
+    @property
+    def cell(self) -> Cell:
+        """The voxel name of :attr:`loc` (voxel planners speak cells)."""
+        return self.loc
 
-@dataclass(frozen=True)
+
+@dataclass(frozen=True, slots=True)
 class TaskView:
-    """What an allocator or planner may know about one open task."""
+    """What an allocator or planner may know about one open task (a trip).
+
+    ``loc`` is the pickup (a voxel cell or a road node); ``dropoff`` is where the trip ends
+    (None for the paper's point tasks); ``deadline`` is the latest pickup time the request
+    accepts (``released_at + max_wait``; ``inf`` without a ``max_wait``)."""
 
     id: int
     kind: TaskKind
-    cell: Cell
+    loc: Location
     released_at: float
+    dropoff: Location | None = None
+    deadline: float = math.inf
+
+    @property
+    def cell(self) -> Cell:
+        """The voxel name of :attr:`loc`."""
+        return self.loc
 
 
 @dataclass(frozen=True, eq=False)
@@ -74,7 +96,10 @@ class AllocationProblem:
     ``loss`` is the probability that one reception of a broadcast is lost (a decentralized
     allocator simulates it with ``rng``, e.g. through :class:`dispatch.comms.Channel`);
     ``latency`` is the simulated seconds per message hop, for information only: the dispatcher
-    applies it from :attr:`Allocation.hops`. ``cell_size`` (metres) turns cells into positions.
+    applies it from :attr:`Allocation.hops`. ``agent_pos`` / ``task_pos`` are the ``(N, 3)`` /
+    ``(M, 3)`` positions in metres of the agents and of the tasks' pickups (for features and
+    straight-line distances; costs come from ``cost``). ``cell_size`` (metres) is the voxel
+    world's cell (1.0 on roads).
     """
 
     time: float
@@ -87,9 +112,20 @@ class AllocationProblem:
     loss: float = 0.0
     latency: float = 0.0
     cell_size: float = 1.0
+    agent_pos: np.ndarray | None = None
+    task_pos: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n, m = len(self.agents), len(self.tasks)
+        for name, views in (("agent_pos", self.agents), ("task_pos", self.tasks)):
+            arr = getattr(self, name)
+            if arr is None:  # a voxel problem built by hand (tests, training): cell centres
+                arr = (np.array([v.loc for v in views], float).reshape(len(views), 3)
+                       + 0.5) * self.cell_size
+                object.__setattr__(self, name, arr)
+            if arr.shape != (len(views), 3):
+                raise ValueError(f"{name} has shape {arr.shape}, expected {(len(views), 3)}")
+            arr.setflags(write=False)
         if self.cost.shape != (n, m):
             raise ValueError(f"cost has shape {self.cost.shape}, expected {(n, m)}")
         if self.comm.shape != (n, n):
@@ -210,7 +246,11 @@ class PlanStats:
 class Planner(ABC):
     """Base class of planner plugins.
 
-    A planner is created once per run with the run's :class:`World`. Costs are travel seconds:
+    A planner is created once per run with the run's space (:class:`dispatch.space.Space`; a
+    voxel planner gets the :class:`~dispatch.world.World`, also as ``self.world``) and serves
+    the spaces named in :attr:`spaces` (a scenario that pairs it with another space fails
+    validation). On roads, locations are nodes and road points, :meth:`plan` returns a node
+    path and costs are the network's travel seconds. Costs are travel seconds:
     shortest path length in metres divided by the agent's speed; ``inf`` where the agent can
     never reach the task or may not serve it (a UGV and a task above the ground layer).
     Paths are lists of cells from the agent's cell to the goal cell, both included, each step a
@@ -218,14 +258,20 @@ class Planner(ABC):
     """
 
     name: ClassVar[str] = ""
+    #: The kinds of space (:attr:`dispatch.space.Space.kind`) this planner serves.
+    spaces: ClassVar[tuple[str, ...]] = ("voxel",)
     #: True for planners that implement :meth:`plan_timed` (execution with reservations).
     reservation_aware: ClassVar[bool] = False
     #: Seconds after which a vehicle that found no timed route tries again (it also tries when
     #: other vehicles' reservations are released). Used only when ``reservation_aware``.
     retry_after: float = 1.0
 
-    def __init__(self, world: World) -> None:
-        self.world = world
+    def __init__(self, space: Space) -> None:
+        if space.kind not in self.spaces:
+            raise TypeError(f"planner {self.name!r} serves {', '.join(self.spaces)} spaces, "
+                            f"not {space.kind!r}")
+        self.space = space
+        self.world = space  # the voxel planners' name for it
         self.stats = PlanStats()
 
     @abstractmethod
@@ -233,8 +279,9 @@ class Planner(ABC):
         """Return the ``(len(agents), len(tasks))`` float array of travel seconds."""
 
     @abstractmethod
-    def plan(self, agent: AgentView, goal: Cell) -> list[Cell] | None:
-        """Return a shortest path of cells from ``agent.cell`` to ``goal``, or None."""
+    def plan(self, agent: AgentView, goal: Location) -> list[Location] | None:
+        """Return a shortest path from ``agent.loc`` to ``goal`` (cells; on roads, nodes from
+        the node the agent is at or driving to), or None."""
 
     def plan_timed(self, agent: AgentView, goal: Cell | None, reservations: Reservations,
                    t0: float) -> list[tuple[float, Cell]] | None:

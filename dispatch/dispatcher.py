@@ -17,6 +17,16 @@ the pairs handed out; the summary's rounds, messages and comm delay are added up
 hand-out too, so they always match the ``decisions`` table (a decision cut short by the end of
 the run is in neither). Tasks are stamped ``assigned_at`` at the hand-out, so the deliberation
 shows in wait times.
+
+Requests with a ``max_wait``. A pair whose vehicle would reach the pickup after the request's
+deadline (``released_at + max_wait``) is infeasible (``inf`` in the problem's cost). A request
+that, the first time it is offered, no idle vehicle can reach in time is closed ``rejected`` at
+once (as ride-hailing studies reject a request nobody can serve); one that had a chance but is
+still open at its deadline expires.
+
+The dispatcher is handed what it needs (the task book, the fleet, the operator that hands tasks
+to vehicles, the planner, the allocator, the space, its configuration) and reaches into nothing
+else; each decision goes to ``on_decision`` (the recorder).
 """
 
 from __future__ import annotations
@@ -25,17 +35,22 @@ import logging
 import math
 import time
 from dataclasses import dataclass, replace
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from dispatch.comms import comm_graph, components
-from dispatch.contracts import Allocation, AllocationProblem
+from dispatch.contracts import Allocation, AllocationProblem, Allocator, Planner
 from dispatch.errors import AllocationError
-from dispatch.tasks import TaskState
+from dispatch.space import Space
+from dispatch.tasks import TaskBook, TaskState
 
 if TYPE_CHECKING:
-    from dispatch.sim import Simulation
+    import simpy
+
+    from dispatch.scenario import CommsConfig, DispatchConfig
+    from dispatch.vehicles import Fleet, Operator
 
 log = logging.getLogger(__name__)
 
@@ -85,9 +100,15 @@ class _Pending:
 class Dispatcher:
     """Owns the wake-up event and the decision step of one simulation."""
 
-    def __init__(self, sim: Simulation) -> None:
-        self.sim = sim
-        self.wake = sim.env.event()
+    def __init__(self, env: simpy.Environment, book: TaskBook, fleet: Fleet, operator: Operator,
+                 planner: Planner, allocator: Allocator, space: Space, cfg: DispatchConfig,
+                 comms: CommsConfig, rng: np.random.Generator,
+                 on_decision: Callable[..., None]) -> None:
+        self.env, self.book, self.fleet, self.operator = env, book, fleet, operator
+        self.planner, self.allocator, self.space = planner, allocator, space
+        self.cfg, self.comms, self.rng, self.on_decision = cfg, comms, rng, on_decision
+        self.cell_size = float(getattr(space, "cell", 1.0))
+        self.wake = env.event()
         self.decisions = 0
         self.cost_seconds = 0.0
         self.decide_seconds = 0.0
@@ -95,8 +116,10 @@ class Dispatcher:
         self.messages = 0
         self.comm_delay = 0.0  # simulated seconds spent deliberating (hops * latency)
         self.agent_seconds = 0.0  # sum over decisions of the per-agent critical path
+        self.first_cost = math.nan  # the first decision's total cost and wall seconds
+        self.first_seconds = math.nan
         self._pending: _Pending | None = None
-        self.process = sim.env.process(self._loop())
+        self.process = env.process(self._loop())
 
     def notify(self) -> None:
         """Ask for a decision (idempotent until the dispatcher wakes)."""
@@ -104,7 +127,7 @@ class Dispatcher:
             self.wake.succeed()
 
     def _loop(self):
-        env, window = self.sim.env, self.sim.spec.scenario.dispatch.batch_window
+        env, window = self.env, self.cfg.batch_window
         while True:
             yield self.wake
             yield env.timeout(window)
@@ -119,33 +142,43 @@ class Dispatcher:
 
         Without latency the tasks are handed out at once; with it the hand-out waits in
         ``self._pending`` for the loop to let the simulated deliberation time pass."""
-        sim = self.sim
-        idle = [v for v in sim.vehicles if not v.busy]
-        open_tasks = [t for t in sim.tasks if t.state is TaskState.OPEN]
+        idle = self.fleet.idle()
+        open_tasks = list(self.book.open.values())
         if not idle or not open_tasks:
             return
-        agents = tuple(v.view() for v in idle)
+        now = self.env.now
+        agents = tuple(v.view(now) for v in idle)
         t0 = time.perf_counter()
-        cost = sim.planner.costs(agents, tuple(t.view() for t in open_tasks))
+        cost = self.planner.costs(agents, tuple(t.view() for t in open_tasks))
         servable = np.isfinite(cost).any(axis=0)
         if not servable.all():
             self._close_unreachable([t for t, ok in zip(open_tasks, servable) if not ok])
+        deadlines = np.array([t.deadline for t in open_tasks])
+        if np.isfinite(deadlines).any():
+            cost = np.where(now + cost <= deadlines + 1e-9, cost, np.inf)
+            late = servable & ~np.isfinite(cost).any(axis=0)
+            for t, bad in zip(open_tasks, late):
+                if bad and not t.offered:
+                    self.book.close(t, TaskState.REJECTED)
+            servable &= ~late
         cost_s = time.perf_counter() - t0
         self.cost_seconds += cost_s
         if not servable.any():
             return
         open_tasks = [t for t, ok in zip(open_tasks, servable) if ok]
-        comms = sim.spec.scenario.comms
-        grid = sim.world.grid
-        comm = comm_graph([grid.centre(a.cell) for a in agents], comms.range)
+        comms = self.comms
+        apos = self.space.positions([a.loc for a in agents])
+        comm = comm_graph([tuple(p) for p in apos], comms.range)
+        tasks = tuple(t.view() for t in open_tasks)
         problem = AllocationProblem(
-            time=sim.env.now, agents=agents, tasks=tuple(t.view() for t in open_tasks),
+            time=now, agents=agents, tasks=tasks,
             cost=np.ascontiguousarray(cost[:, servable]), comm=comm,
-            rng=sim.alloc_rng, max_rounds=sim.spec.scenario.dispatch.max_rounds,
-            loss=comms.loss, latency=comms.latency, cell_size=grid.cell,
+            rng=self.rng, max_rounds=self.cfg.max_rounds,
+            loss=comms.loss, latency=comms.latency, cell_size=self.cell_size,
+            agent_pos=apos, task_pos=self.space.positions([t.loc for t in tasks]),
         )
         t1 = time.perf_counter()
-        allocation = sim.allocator.allocate(problem)
+        allocation = self.allocator.allocate(problem)
         decide_s = time.perf_counter() - t1
         validate(problem, allocation)
         self.decide_seconds += decide_s
@@ -164,7 +197,6 @@ class Dispatcher:
         p, self._pending = self._pending, None
         if p is None:
             return
-        sim = self.sim
         by_task = {t.id: t for t in p.tasks}
         by_agent = {v.id: v for v in p.vehicles}
         handed = tuple((a, t) for a, t in p.allocation.pairs
@@ -180,22 +212,26 @@ class Dispatcher:
         self.messages += allocation.messages
         self.comm_delay += p.delay
         self.agent_seconds += critical
-        sim.record_decision(self.decisions, p.problem, allocation, p.cost_s, p.decide_s,
-                            hops=allocation.hops, comm_delay=p.delay, agent_seconds=critical,
-                            components=p.components)
-        self.decisions += 1
         col = {t.id: j for j, t in enumerate(p.tasks)}
         row = {a.id: i for i, a in enumerate(p.problem.agents)}
+        total = float(sum(p.problem.cost[row[a], col[t]] for a, t in allocation.pairs))
+        if self.decisions == 0:
+            self.first_cost, self.first_seconds = total, p.cost_s + p.decide_s
+        self.on_decision(self.decisions, p.problem, allocation, total, p.cost_s, p.decide_s,
+                         hops=allocation.hops, comm_delay=p.delay, agent_seconds=critical,
+                         components=p.components)
+        self.decisions += 1
         for aid, tid in handed:
-            sim.assign(by_task[tid], by_agent[aid], float(p.problem.cost[row[aid], col[tid]]))
+            self.operator.assign(by_task[tid], by_agent[aid],
+                                 float(p.problem.cost[row[aid], col[tid]]))
 
     def _close_unreachable(self, tasks) -> None:
         """Close tasks no vehicle of the fleet can reach; vehicles never leave their connected
         component of free space, so a task unreachable from every vehicle's cell stays so."""
-        sim = self.sim
-        busy = tuple(v.view() for v in sim.vehicles if v.busy)
+        now = self.env.now
+        busy = tuple(v.view(now) for v in self.fleet.vehicles if v.busy)
         if busy:
-            c = sim.planner.costs(busy, tuple(t.view() for t in tasks))
+            c = self.planner.costs(busy, tuple(t.view() for t in tasks))
             tasks = [t for t, ok in zip(tasks, np.isfinite(c).any(axis=0)) if not ok]
         for t in tasks:
-            sim.close_task(t, TaskState.UNREACHABLE)
+            self.book.close(t, TaskState.UNREACHABLE)

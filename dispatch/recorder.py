@@ -23,28 +23,30 @@ _S, _I, _F, _B = pa.string(), pa.int64(), pa.float64(), pa.bool_()
 SCHEMAS: dict[str, pa.Schema] = {
     "summary": pa.schema([
         ("run_id", _S), ("scenario", _S), ("allocator", _S), ("planner", _S),
-        ("n_agents", _I), ("n_tasks", _I), ("seed", _I), ("total_cost", _F),
+        ("n_agents", _I), ("n_tasks", _I), ("seed", _I), ("space", _S), ("total_cost", _F),
         ("conflict_free_rate", _F), ("alloc_seconds", _F), ("tasks_completed", _I),
         ("tasks_unfinished", _I), ("makespan", _F),
         ("n_uav", _I), ("n_ugv", _I), ("decisions", _I), ("rounds", _I), ("messages", _I),
         ("conflicts", _I), ("cost_seconds", _F), ("decide_seconds", _F),
         ("first_decision_cost", _F), ("first_decision_seconds", _F), ("realized_travel", _F),
-        ("wait_time_mean", _F), ("tasks_expired", _I), ("tasks_unreachable", _I),
-        ("tasks_cancelled", _I), ("sim_time", _F),
-        ("comm_delay", _F), ("agent_seconds", _F),
+        ("wait_time_mean", _F), ("tasks_expired", _I), ("tasks_rejected", _I),
+        ("tasks_unreachable", _I), ("tasks_cancelled", _I), ("tasks_failed", _I), ("sim_time", _F),
+        ("comm_delay", _F), ("agent_seconds", _F), ("distance", _F), ("empty_distance", _F),
+        ("occupied_distance", _F),
     ]),
     "tasks": pa.schema([
         ("run_id", _S), ("task_id", _I), ("kind", _S), ("x", _F), ("y", _F), ("z", _F),
-        ("released_at", _F), ("assigned_at", _F), ("agent_id", _I), ("cost", _F),
-        ("arrived_at", _F), ("completed_at", _F), ("state", _S), ("conflicted", _B),
-        ("closed_at", _F),
+        ("dropoff_x", _F), ("dropoff_y", _F), ("dropoff_z", _F), ("released_at", _F),
+        ("max_wait", _F), ("snap_m", _F), ("dropoff_snap_m", _F), ("assigned_at", _F),
+        ("agent_id", _I), ("cost", _F), ("picked_up_at", _F), ("completed_at", _F),
+        ("state", _S), ("conflicted", _B), ("closed_at", _F),
     ]),
     "assignments": pa.schema([
         ("run_id", _S), ("decision", _I), ("round", _I), ("agent_id", _I), ("task_id", _I),
         ("cost", _F), ("won", _B), ("alloc_seconds", _F),
     ]),
     "decisions": pa.schema([
-        ("run_id", _S), ("decision", _I), ("t", _F), ("n_agents", _I), ("n_tasks", _I),
+        ("run_id", _S), ("decision", _I), ("t", _F), ("n_idle", _I), ("n_tasks", _I),
         ("n_assigned", _I), ("rounds", _I), ("messages", _I), ("conflicts", _I),
         ("total_cost", _F), ("cost_seconds", _F), ("decide_seconds", _F),
         ("hops", _I), ("comm_delay", _F), ("agent_seconds", _F), ("comm_components", _I),
@@ -55,7 +57,8 @@ SCHEMAS: dict[str, pa.Schema] = {
     ]),
     "vehicles": pa.schema([
         ("run_id", _S), ("agent_id", _I), ("kind", _S), ("speed", _F), ("x0", _F), ("y0", _F),
-        ("z0", _F), ("distance", _F), ("busy_seconds", _F), ("tasks_completed", _I),
+        ("z0", _F), ("distance", _F), ("empty_distance", _F), ("occupied_distance", _F),
+        ("busy_seconds", _F), ("tasks_completed", _I),
         # execution with reservations (0 otherwise): wait episodes, routes replaced by a
         # higher-priority vehicle, seconds spent standing on the way (see dispatch.reservations)
         ("waits", _I), ("replans", _I), ("wait_seconds", _F),

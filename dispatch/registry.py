@@ -64,13 +64,28 @@ def load(kind: str, name: str) -> type:
     return obj
 
 
-def describe(kind: str) -> list[tuple[str, str, str]]:
-    """``(name, target, first docstring line or load error)`` for each installed plugin."""
+def serving(space: str) -> list[str]:
+    """Names of the installed planners that serve ``space`` (``"voxel"`` or ``"road"``)."""
+    names = []
+    for name in available("planner"):
+        try:
+            if space in getattr(load("planner", name), "spaces", ("voxel",)):
+                names.append(name)
+        except PluginError:
+            continue
+    return names
+
+
+def describe(kind: str) -> list[tuple[str, str, str, str]]:
+    """``(name, target, spaces, first docstring line or load error)`` for each installed
+    plugin (``spaces``: the spaces a planner serves; empty for allocators)."""
     rows = []
     for name, target in available(kind).items():
         try:
-            doc = (load(kind, name).__doc__ or "").strip().splitlines()
-            rows.append((name, target, doc[0] if doc else ""))
+            cls = load(kind, name)
+            doc = (cls.__doc__ or "").strip().splitlines()
+            spaces = ", ".join(getattr(cls, "spaces", ())) if kind == "planner" else ""
+            rows.append((name, target, spaces, doc[0] if doc else ""))
         except PluginError as e:
-            rows.append((name, target, f"BROKEN: {e.__cause__}"))
+            rows.append((name, target, "", f"BROKEN: {e.__cause__}"))
     return rows

@@ -71,8 +71,11 @@ from dispatch.motion import step_is_legal, step_length
 from dispatch.world import Cell
 
 if TYPE_CHECKING:
-    from dispatch.sim import Simulation
+    import simpy
+
+    from dispatch.contracts import Planner
     from dispatch.vehicles import Vehicle
+    from dispatch.world import Grid
 
 #: Seconds by which two reservations of one cell may overlap without conflicting (float noise).
 EPS = 1e-9
@@ -215,14 +218,14 @@ class Traffic:
     became idle (:meth:`notify`).
     """
 
-    def __init__(self, sim: Simulation) -> None:
-        self.sim, self.env, self.planner = sim, sim.env, sim.planner
-        self.grid = sim.world.grid
+    def __init__(self, env: simpy.Environment, planner: Planner, grid: Grid, vehicles,
+                 emit: Callable[..., None]) -> None:
+        self.env, self.planner, self.grid, self.emit = env, planner, grid, emit
         self.table = ReservationTable()
-        self.vehicles = {v.id: v for v in sim.vehicles}
+        self.vehicles = {v.id: v for v in vehicles}
         self.retry_after = float(self.planner.retry_after)
         self.released = self.env.event()
-        for v in sim.vehicles:
+        for v in vehicles:
             v.route = [(0.0, v.cell)]
             v.changed = self.env.event()
             self._reserve(v)
@@ -340,7 +343,7 @@ class Traffic:
                 b.route = route
                 self._reserve(b)
                 b.replans += 1
-                self.sim.record_event("replan", b.id, -1, b.cell)
+                self.emit(self.env.now, "replan", b.id, -1, b.cell)
                 self._wake(b)
                 moved = True
         return moved
@@ -381,8 +384,8 @@ class Traffic:
             changed |= w.route is not old
             if w is not v:
                 w.replans += 1
-                self.sim.record_event("replan", w.id, -1 if w.task is None else w.task.id,
-                                      w.cell)
+                self.emit(self.env.now, "replan", w.id, -1 if w.task is None else w.task.id,
+                          w.cell)
             self._wake(w)
         if changed:
             self.notify()

@@ -46,11 +46,21 @@ ERRORS_SCHEMA = pa.schema([("run_id", pa.string()), ("scenario", pa.string()),
                            ("traceback", pa.string()), ("seconds", pa.float64())])
 
 
+@dataclass
+class RunResult:
+    spec: RunSpec
+    summary: dict
+    tables: dict
+
+
 def run_one(spec: RunSpec):
-    """Simulate one run and return its :class:`~dispatch.sim.RunResult` (nothing written)."""
+    """Simulate one run and return its RunResult (nothing written)."""
+    from dispatch.recorder import Recorder
     from dispatch.sim import Simulation
 
-    return Simulation(spec).run()
+    rec = Recorder(spec.run_id, {})
+    summary = Simulation(spec, rec).run()
+    return RunResult(spec, summary, rec.tables())
 
 
 def default_out(spec: RunSpec) -> Path:

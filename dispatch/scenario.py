@@ -15,10 +15,12 @@ from pathlib import Path
 from typing import Any
 
 from dispatch.errors import ScenarioError
-from dispatch.traces import read_trace
+from dispatch.traces import Trips, read_fleet_start, read_trace
 
 Vec3 = tuple[float, float, float]
 SOURCES = ("static", "periodic", "poisson", "trace")
+VOXEL_KEYS = ("size", "cell", "obstacles")
+ROAD_KEYS = ("network", "blocks", "block", "speed")
 
 
 @dataclass(frozen=True)
@@ -29,10 +31,29 @@ class ObstacleConfig:
 
 
 @dataclass(frozen=True)
+class RoadConfig:
+    """A road network: ``network`` is ``"manhattan"`` (generated from ``blocks``, ``block``,
+    ``speed``), ``"chicago"`` (the Chicago Regional network shipped with the package) or a
+    GraphML / TNTP file, relative to ``base`` (the scenario's folder)."""
+
+    network: str
+    base: Path
+    blocks: tuple[int, int] = (20, 20)  # intersections along x (columns) and y (rows)
+    block: float = 200.0  # metres between neighbouring intersections
+    speed: float = 10.0  # m/s on every street of the generated grid
+
+
+@dataclass(frozen=True)
 class WorldConfig:
     size: Vec3 = (50.0, 50.0, 30.0)  # metres
     cell: float = 1.0  # metres
     obstacles: ObstacleConfig = field(default_factory=ObstacleConfig)
+    roads: RoadConfig | None = None  # a road network instead of the voxel world
+    physics: bool = True  # mirror the run in PyBullet (default: on in voxel worlds, off on roads)
+
+    @property
+    def space(self) -> str:
+        return "voxel" if self.roads is None else "road"
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -46,6 +67,10 @@ class FleetConfig:
     uav_speed: float = 5.0  # m/s
     ugv_speed: float = 3.0  # m/s
     uav_max_start_altitude: float = 10.0  # metres: UAVs start in a free cell at or below this
+    #: where the fleet starts (``[fleet] start``): ``(vehicle_id, a, b, c)`` rows from a CSV file;
+    #: ``a`` a road node id (b, c nan) or ``(a, b[, c])`` a position in metres; empty: random
+    start: tuple[tuple, ...] = ()
+    start_file: Path | None = None
 
     @property
     def n_uav(self) -> int:
@@ -62,8 +87,9 @@ class TaskConfig:
     ground_fraction: float = 0.5  # probability that a generated task is on the ground layer
     service_time: float = 0.0  # seconds a vehicle spends at the task after arriving
     ttl: float | None = None  # seconds an unassigned task waits before it expires
-    trace: Path | None = None  # trace: CSV or Parquet file of release_time, x, y, z
-    trace_rows: tuple[tuple[float, float, float, float], ...] = ()
+    max_wait: float | None = None  # seconds a request accepts to wait for its pickup
+    trace: Path | None = None  # trace: CSV or Parquet file of trips (see dispatch.traces)
+    trips: Trips | None = None
 
 
 @dataclass(frozen=True)
@@ -289,25 +315,7 @@ def parse_scenario(data: dict, path: Path, text: str = "") -> Scenario:
     duration = root.number("duration", 3600.0, gt=0.0)
 
     w = root.table("world")
-    size = w.vec3("size", [50, 50, 30])
-    cell = w.number("cell", 1.0, gt=0.0)
-    for axis, s in zip("xyz", size):
-        if abs(s / cell - round(s / cell)) > 1e-9 or round(s / cell) < 1:
-            raise w.fail("size", f"{axis} size {s} is not a whole number of {cell} m cells")
-    o = w.table("obstacles")
-    obstacles = ObstacleConfig(
-        count=o.number("count", 10, lo=0, integer=True),
-        min_size=o.vec3("min_size", [3, 3, 5]),
-        max_size=o.vec3("max_size", [10, 10, 30]),
-    )
-    for a, (lo_, hi_, s) in enumerate(zip(obstacles.min_size, obstacles.max_size, size)):
-        if lo_ > hi_:
-            raise o.fail("min_size", f"entry {a} ({lo_}) is larger than max_size's ({hi_})")
-        if a < 2 and hi_ > s:
-            raise o.fail("max_size", f"entry {a} ({hi_} m) does not fit in the world ({s} m)")
-    o.done()
-    world = WorldConfig(size=size, cell=cell, obstacles=obstacles)
-    _check_obstacles_fit(o, world)
+    world = _parse_world(w, path)
     w.done()
 
     f = root.table("fleet")
@@ -318,6 +326,17 @@ def parse_scenario(data: dict, path: Path, text: str = "") -> Scenario:
         ugv_speed=f.number("ugv_speed", 3.0, gt=0.0),
         uav_max_start_altitude=f.number("uav_max_start_altitude", 10.0, lo=0.0),
     )
+    start = f.get("start", None)
+    if start is not None:
+        if not isinstance(start, str) or not start:
+            raise f.fail("start", f"must be a CSV file of vehicle_id and node or x, y; got {start!r}")
+        start_path = (path.parent / start).resolve()
+        rows = read_fleet_start(start_path, world.space)
+        agents = fleet.agents if "agents" in f.data else len(rows)
+        if agents > len(rows):
+            raise f.fail("agents", f"{agents} vehicles but the start file {start} places "
+                                   f"{len(rows)}")
+        fleet = replace(fleet, agents=agents, start=rows, start_file=start_path)
     f.done()
 
     t = root.table("tasks")
@@ -332,6 +351,7 @@ def parse_scenario(data: dict, path: Path, text: str = "") -> Scenario:
         service_time=t.number("service_time", 0.0, lo=0.0),
         ttl=t.number("ttl", None, gt=0.0, optional=True),
     )
+    tasks = replace(tasks, max_wait=t.number("max_wait", None, gt=0.0, optional=True))
     trace = t.get("trace", None)
     if source == "periodic" and tasks.interval is None:
         raise t.fail("interval", "is required when source = 'periodic'")
@@ -341,8 +361,8 @@ def parse_scenario(data: dict, path: Path, text: str = "") -> Scenario:
         if not isinstance(trace, str) or not trace:
             raise t.fail("trace", "is required when source = 'trace' (a CSV or Parquet file)")
         trace_path = (path.parent / trace).resolve()
-        rows = read_trace(trace_path, size)
-        tasks = replace(tasks, trace=trace_path, trace_rows=rows)
+        trips = read_trace(trace_path, world.space, world.size if world.roads is None else None)
+        tasks = replace(tasks, trace=trace_path, trips=trips)
     elif trace is not None:
         raise t.fail("trace", f"is only used when source = 'trace' (source is {source!r})")
     for k, allowed in (("interval", ("periodic",)), ("rate", ("poisson",)),
@@ -391,6 +411,54 @@ def parse_scenario(data: dict, path: Path, text: str = "") -> Scenario:
     return sc
 
 
+def _parse_world(w: _Table, path: Path) -> WorldConfig:
+    """``[world]``: a voxel world (size, cell, obstacles) or a road network (network, ...)."""
+    physics = w.get("physics", None)
+    if physics is not None and not isinstance(physics, bool):
+        raise w.fail("physics", f"must be true or false, got {physics!r}")
+    if "network" in w.data:
+        for k in VOXEL_KEYS:
+            if k in w.data:
+                raise w.fail(k, "is a voxel-world key; a road network (world.network) has none")
+        network = w.string("network", "manhattan")
+        blocks = w.int_list("blocks", lo=2) if "blocks" in w.data else (20, 20)
+        if len(blocks) != 2:
+            raise w.fail("blocks", f"must be [columns, rows] (intersections), got {list(blocks)}")
+        block = w.number("block", 200.0, gt=0.0)
+        speed = w.number("speed", 10.0, gt=0.0)
+        if network != "manhattan":
+            for k in ("blocks", "block", "speed"):
+                if k in w.data:
+                    raise w.fail(k, f"only describes network = 'manhattan' (not {network!r})")
+        roads = RoadConfig(network=network, base=path.parent.resolve(), blocks=tuple(blocks),
+                           block=block, speed=speed)
+        return WorldConfig(roads=roads, physics=bool(physics))
+    for k in ROAD_KEYS:
+        if k in w.data:
+            raise w.fail(k, "describes a road network; set world.network to use one")
+    size = w.vec3("size", [50, 50, 30])
+    cell = w.number("cell", 1.0, gt=0.0)
+    for axis, s in zip("xyz", size):
+        if abs(s / cell - round(s / cell)) > 1e-9 or round(s / cell) < 1:
+            raise w.fail("size", f"{axis} size {s} is not a whole number of {cell} m cells")
+    o = w.table("obstacles")
+    obstacles = ObstacleConfig(
+        count=o.number("count", 10, lo=0, integer=True),
+        min_size=o.vec3("min_size", [3, 3, 5]),
+        max_size=o.vec3("max_size", [10, 10, 30]),
+    )
+    for a, (lo_, hi_, s) in enumerate(zip(obstacles.min_size, obstacles.max_size, size)):
+        if lo_ > hi_:
+            raise o.fail("min_size", f"entry {a} ({lo_}) is larger than max_size's ({hi_})")
+        if a < 2 and hi_ > s:
+            raise o.fail("max_size", f"entry {a} ({hi_} m) does not fit in the world ({s} m)")
+    o.done()
+    world = WorldConfig(size=size, cell=cell, obstacles=obstacles,
+                        physics=True if physics is None else physics)
+    _check_obstacles_fit(o, world)
+    return world
+
+
 def _check_obstacles_fit(o: _Table, world: WorldConfig) -> None:
     """Obstacles stand one free cell apart: their smallest footprints must fit the ground."""
     nx, ny, _ = world.shape
@@ -407,7 +475,13 @@ def _check_obstacles_fit(o: _Table, world: WorldConfig) -> None:
 
 
 def _check_fits(sc: Scenario, agents: int, key: str) -> None:
-    """Vehicles start in distinct free cells: the fleet must fit beside the largest obstacles."""
+    """Vehicles start in distinct free cells: the fleet must fit beside the largest obstacles
+    (on roads several vehicles may share a node); a start file must place every vehicle."""
+    if sc.fleet.start and agents > len(sc.fleet.start):
+        raise ScenarioError(sc.path, key, f"{agents} vehicles but the start file "
+                                          f"{sc.fleet.start_file} places {len(sc.fleet.start)}")
+    if sc.world.roads is not None:
+        return
     nx, ny, _ = sc.world.shape
     o = sc.world.obstacles
     cover = o.count * round(o.max_size[0] / sc.world.cell) * round(o.max_size[1] / sc.world.cell)

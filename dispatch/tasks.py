@@ -1,26 +1,36 @@
-"""Tasks, their life cycle, and the task sources (SimPy processes).
+"""Tasks (trips), their life cycle, the task book, and the task sources (SimPy processes).
 
-A task is released ``open``, becomes ``assigned`` when the dispatcher hands it to a vehicle and
-ends in exactly one terminal state: ``completed``, ``expired`` (its ``ttl`` ran out while it was
-open), ``unreachable`` (no vehicle of the fleet can ever reach it) or ``cancelled`` (the run
-ended first).
+A task is a **trip**: a pickup and, for taxis, a drop-off (the paper's point tasks are trips
+without one). Life cycle::
+
+    open -> assigned -> picked_up -> completed
+      \\-> expired | rejected | unreachable | cancelled | failed   (terminal, from any live state)
+
+``expired``: its ``ttl`` or ``max_wait`` ran out while it was open; ``rejected``: when the
+dispatcher first considered it, no vehicle could reach its pickup within its ``max_wait``;
+``unreachable``: no vehicle of the fleet can ever reach it; ``cancelled``: the run ended first;
+``failed``: its vehicle broke down with the passenger on board. A vehicle holds its tasks in a
+list (capacity 1 today), so pooling adds states to a vehicle, not to a task.
+
+The :class:`TaskBook` keeps only live tasks, indexed (open ones in id order): no step scans the
+history of the run. A task leaving the book is handed to the ``on_close`` subscribers (the
+recorder writes its row, the run statistics count it) and forgotten.
 """
 
 from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from enum import Enum
-from typing import TYPE_CHECKING
 
 import numpy as np
+import simpy
 
 from dispatch.contracts import TaskView
-from dispatch.world import Cell, Grid
-
-if TYPE_CHECKING:
-    from dispatch.sim import Simulation
+from dispatch.events import EventBus
+from dispatch.space import Location
 
 log = logging.getLogger(__name__)
 
@@ -28,118 +38,263 @@ log = logging.getLogger(__name__)
 class TaskState(str, Enum):
     OPEN = "open"
     ASSIGNED = "assigned"
+    PICKED_UP = "picked_up"
     COMPLETED = "completed"
     EXPIRED = "expired"
+    REJECTED = "rejected"
     UNREACHABLE = "unreachable"
     CANCELLED = "cancelled"
+    FAILED = "failed"
 
     @property
     def terminal(self) -> bool:
         return self in TERMINAL
 
 
-TERMINAL = frozenset({TaskState.COMPLETED, TaskState.EXPIRED, TaskState.UNREACHABLE,
-                      TaskState.CANCELLED})
+TERMINAL = frozenset({TaskState.COMPLETED, TaskState.EXPIRED, TaskState.REJECTED,
+                      TaskState.UNREACHABLE, TaskState.CANCELLED, TaskState.FAILED})
+#: the event emitted when a task enters a terminal state
+CLOSE_EVENT = {TaskState.COMPLETED: "complete", TaskState.EXPIRED: "expire",
+               TaskState.REJECTED: "reject", TaskState.UNREACHABLE: "unreachable",
+               TaskState.CANCELLED: "cancel", TaskState.FAILED: "failed"}
+#: the states a task may move to from each live state
+MOVES = {
+    TaskState.OPEN: {TaskState.ASSIGNED, TaskState.EXPIRED, TaskState.REJECTED,
+                     TaskState.UNREACHABLE, TaskState.CANCELLED},
+    TaskState.ASSIGNED: {TaskState.PICKED_UP, TaskState.OPEN, TaskState.CANCELLED,
+                         TaskState.FAILED},
+    TaskState.PICKED_UP: {TaskState.COMPLETED, TaskState.CANCELLED, TaskState.FAILED},
+}
 
 
-@dataclass(eq=False)
+@dataclass(eq=False, slots=True)
 class Task:
-    """One task's record; the simulation updates it as the task moves through its states."""
+    """One task's record; the task book moves it through its states."""
 
     id: int
     kind: str
-    cell: Cell
+    loc: Location  # pickup
     released_at: float
+    dropoff: Location | None = None
+    max_wait: float = math.nan  # seconds from release to pickup the request accepts
+    snap_m: float = math.nan  # metres from the requested pickup to the node it was snapped to
+    dropoff_snap_m: float = math.nan
     state: TaskState = TaskState.OPEN
     assigned_at: float = math.nan
     agent_id: int = -1
-    cost: float = math.nan
-    arrived_at: float = math.nan
+    cost: float = math.nan  # planned seconds from the vehicle to the pickup at assignment
+    picked_up_at: float = math.nan
     completed_at: float = math.nan
     closed_at: float = math.nan
     conflicted: bool = False
     offered: bool = False  # appeared in at least one allocation problem
 
+    @property
+    def cell(self):
+        """The voxel name of :attr:`loc` (the pickup)."""
+        return self.loc
+
+    @property
+    def deadline(self) -> float:
+        """Latest pickup time the request accepts (inf without a max_wait)."""
+        return self.released_at + self.max_wait if self.max_wait == self.max_wait else math.inf
+
     def view(self) -> TaskView:
-        return TaskView(self.id, self.kind, self.cell, self.released_at)  # type: ignore[arg-type]
+        return TaskView(self.id, self.kind, self.loc, self.released_at,  # type: ignore[arg-type]
+                        self.dropoff, self.deadline)
 
 
-class TaskFactory:
-    """Draws task cells: on the ground layer with probability ``ground_fraction``, else in the
-    free cells above it. Every draw comes from the generator it is given."""
+class TaskBook:
+    """The live tasks of a run and their state changes (each emitted as an event).
 
-    def __init__(self, grid: Grid, ground_fraction: float, rng: np.random.Generator) -> None:
-        free = grid.free_cells()
-        self.ground = free[free[:, 2] == 0]
-        self.air = free[free[:, 2] > 0]
-        self.ground_fraction = ground_fraction
-        self.rng = rng
+    ``open`` holds open tasks by id in release order (re-opened tasks go back in id order);
+    ``live`` counts released tasks not yet terminal. ``on_close`` callables receive each task
+    as it reaches its terminal state, after which the book forgets it."""
 
-    def draw(self) -> tuple[str, Cell]:
-        on_ground = self.rng.random() < self.ground_fraction or len(self.air) == 0
-        pool = self.ground if on_ground else self.air
-        c = pool[self.rng.integers(len(pool))]
-        return ("ground" if on_ground else "air"), (int(c[0]), int(c[1]), int(c[2]))
+    def __init__(self, env: simpy.Environment, bus: EventBus) -> None:
+        self.env, self.bus = env, bus
+        self.open: dict[int, Task] = {}
+        self.live = 0
+        self.released = 0
+        self.on_close: list[Callable[[Task], None]] = []
+        self._active: dict[int, Task] = {}  # assigned or picked up
+
+    def _move(self, task: Task, state: TaskState) -> None:
+        if state not in MOVES.get(task.state, ()):
+            raise RuntimeError(f"task {task.id} cannot go from {task.state.value} to "
+                               f"{state.value}")
+        if task.state is TaskState.OPEN:
+            del self.open[task.id]
+        elif state is TaskState.OPEN or state.terminal:
+            del self._active[task.id]
+        task.state = state
+
+    def release(self, kind: str, loc: Location, dropoff: Location | None = None, *,
+                max_wait: float = math.nan, snap_m: float = math.nan,
+                dropoff_snap_m: float = math.nan) -> Task:
+        task = Task(self.released, kind, loc, float(self.env.now), dropoff, max_wait, snap_m,
+                    dropoff_snap_m)
+        self.released += 1
+        self.live += 1
+        self.open[task.id] = task
+        self.bus.emit(self.env.now, "release", -1, task.id, loc)
+        return task
+
+    def assign(self, task: Task, agent_id: int, cost: float) -> None:
+        self._move(task, TaskState.ASSIGNED)
+        self._active[task.id] = task
+        task.assigned_at, task.agent_id, task.cost = float(self.env.now), agent_id, cost
+        self.bus.emit(self.env.now, "assign", agent_id, task.id, task.loc)
+
+    def picked_up(self, task: Task) -> None:
+        self._move(task, TaskState.PICKED_UP)
+        self._active[task.id] = task
+        task.picked_up_at = float(self.env.now)
+        self.bus.emit(self.env.now, "pickup", task.agent_id, task.id, task.loc)
+
+    def reopen(self, task: Task) -> None:
+        """Give an assigned, not yet picked-up task back to the pool (its vehicle failed)."""
+        self._move(task, TaskState.OPEN)
+        task.agent_id = -1
+        self.open = dict(sorted({**self.open, task.id: task}.items()))
+
+    def close(self, task: Task, state: TaskState) -> None:
+        """Move ``task`` to the terminal ``state`` and hand it to the ``on_close`` callables."""
+        if not state.terminal:
+            raise ValueError(f"{state.value} is not a terminal state")
+        self._move(task, state)
+        now = float(self.env.now)
+        task.closed_at = now
+        if state is TaskState.COMPLETED:
+            task.completed_at = now
+        self.live -= 1
+        where = task.dropoff if state is TaskState.COMPLETED and task.dropoff is not None \
+            else task.loc
+        self.bus.emit(now, CLOSE_EVENT[state], task.agent_id, task.id, where)
+        for fn in self.on_close:
+            fn(task)
+
+    def close_all(self, state: TaskState) -> None:
+        """Close every live task (the run is over)."""
+        for task in sorted([*self.open.values(), *self._active.values()], key=lambda t: t.id):
+            self.close(task, state)
 
 
-def static_source(sim: Simulation, count: int):
-    """Release ``count`` tasks at t = 0."""
-    for _ in range(count):
-        sim.release(*sim.task_factory.draw())
-    sim.source_done()
-    yield sim.env.timeout(0)
+# ----------------------------------------------------------------------------- demand
 
 
-def _generated(sim: Simulation, next_gap):
-    """Release generated tasks after gaps from ``next_gap()``; skip while ``max_active`` are open."""
-    cfg = sim.spec.scenario.tasks
-    released = 0
-    while cfg.count is None or released < cfg.count:
-        yield sim.env.timeout(next_gap())
-        if cfg.max_active is not None and sim.active_tasks() >= cfg.max_active:
-            sim.record_event("skipped", -1, -1, None)
-            continue
-        sim.release(*sim.task_factory.draw())
-        released += 1
-    sim.source_done()
+@dataclass(frozen=True, slots=True)
+class Request:
+    """A trip to release: where, and what the trace said about it."""
+
+    kind: str
+    loc: Location
+    dropoff: Location | None = None
+    max_wait: float = math.nan
+    snap_m: float = math.nan
+    dropoff_snap_m: float = math.nan
 
 
-def periodic_source(sim: Simulation):
-    """A task every ``interval`` seconds (the first at ``interval``)."""
-    interval = sim.spec.scenario.tasks.interval
-    yield from _generated(sim, lambda: interval)
+class Demand:
+    """Turns a scenario's task description into requests in its space: ``draw`` makes a
+    generated one (static, periodic, poisson); ``from_trace`` converts a trace's trips.
+    ``valid(loc)`` says whether a task there can be served at all (a cell inside an
+    obstacle cannot)."""
+
+    def draw(self) -> Request:
+        raise NotImplementedError
+
+    def from_trace(self, trips) -> list[Request]:
+        raise NotImplementedError
+
+    def valid(self, loc: Location) -> bool:
+        return True
 
 
-def poisson_source(sim: Simulation, rng: np.random.Generator):
-    """Tasks as a Poisson process of ``rate`` per second."""
-    rate = sim.spec.scenario.tasks.rate
-    yield from _generated(sim, lambda: float(rng.exponential(1.0 / rate)))
+# ----------------------------------------------------------------------------- sources
 
 
-def trace_source(sim: Simulation):
-    """Tasks at the times and positions of the trace file (a task in a blocked cell is
-    released and closed as unreachable)."""
-    cfg = sim.spec.scenario.tasks
-    rows = cfg.trace_rows if cfg.count is None else cfg.trace_rows[: cfg.count]
-    for t, x, y, z in rows:
-        if t > sim.env.now:
-            yield sim.env.timeout(t - sim.env.now)
-        cell = sim.world.grid.cell_of((x, y, z))
-        sim.release("ground" if cell[2] == 0 else "air", cell)
-    sim.source_done()
+@dataclass
+class SourceConfig:
+    """What a task source needs from the scenario (seconds; None where unused)."""
+
+    kind: str
+    count: int | None
+    interval: float | None
+    rate: float | None
+    max_active: int | None
+    ttl: float | None
+    max_wait: float | None
 
 
-def start_source(sim: Simulation, rng: np.random.Generator):
-    """Start the scenario's task source as a SimPy process."""
-    cfg = sim.spec.scenario.tasks
-    if cfg.source == "static":
-        gen = static_source(sim, sim.spec.n_static_tasks)
-    elif cfg.source == "periodic":
-        gen = periodic_source(sim)
-    elif cfg.source == "poisson":
-        gen = poisson_source(sim, rng)
-    elif cfg.source == "trace":
-        gen = trace_source(sim)
-    else:  # the scenario parser admits only the sources above
-        raise ValueError(f"unknown task source {cfg.source!r}")
-    return sim.env.process(gen)
+class TaskSource:
+    """The SimPy process that releases tasks into the book, starts their expiry timers and
+    wakes the dispatcher; ``finished`` turns True (and ``on_done`` is called) when it has
+    nothing more to release."""
+
+    def __init__(self, env: simpy.Environment, book: TaskBook, demand: Demand,
+                 cfg: SourceConfig, rng: np.random.Generator, notify: Callable[[], None],
+                 trips=None) -> None:
+        self.env, self.book, self.demand, self.cfg = env, book, demand, cfg
+        self.rng, self.notify, self.trips = rng, notify, trips
+        self.finished = False
+        self.on_done: Callable[[], None] = lambda: None
+        self.process = env.process(self._run())
+
+    def _done(self) -> None:
+        self.finished = True
+        self.on_done()
+
+    def release(self, req: Request) -> Task:
+        wait = req.max_wait if req.max_wait == req.max_wait else (
+            self.cfg.max_wait if self.cfg.max_wait is not None else math.nan)
+        task = self.book.release(req.kind, req.loc, req.dropoff, max_wait=wait,
+                                 snap_m=req.snap_m, dropoff_snap_m=req.dropoff_snap_m)
+        if not self.demand.valid(req.loc) or (req.dropoff is not None
+                                              and not self.demand.valid(req.dropoff)):
+            log.warning("task %d lies in an obstacle; closed as unreachable", task.id)
+            self.book.close(task, TaskState.UNREACHABLE)
+            return task
+        limit = min(self.cfg.ttl if self.cfg.ttl is not None else math.inf,
+                    wait if wait == wait else math.inf)
+        if limit < math.inf:
+            self.env.process(self._expire(task, limit))
+        self.notify()
+        return task
+
+    def _expire(self, task: Task, after: float):
+        yield self.env.timeout(after)
+        if task.state is TaskState.OPEN:
+            self.book.close(task, TaskState.EXPIRED)
+
+    def _run(self):
+        cfg = self.cfg
+        if cfg.kind == "static":
+            for _ in range(cfg.count or 0):
+                self.release(self.demand.draw())
+            self._done()
+            yield self.env.timeout(0)
+            return
+        if cfg.kind == "trace":
+            requests = self.demand.from_trace(self.trips)[: cfg.count]
+            for t, req in zip(self.trips.t, requests):
+                if t > self.env.now:
+                    yield self.env.timeout(t - self.env.now)
+                self.release(req)
+            self._done()
+            return
+        if cfg.kind == "periodic":
+            def gap():
+                return cfg.interval
+        else:
+            def gap():
+                return float(self.rng.exponential(1.0 / cfg.rate))
+        released = 0
+        while cfg.count is None or released < cfg.count:
+            yield self.env.timeout(gap())
+            if cfg.max_active is not None and self.book.live >= cfg.max_active:
+                self.book.bus.emit(self.env.now, "skipped")
+                continue
+            self.release(self.demand.draw())
+            released += 1
+        self._done()

@@ -1,63 +1,179 @@
-"""Task traces: a CSV or Parquet file of release times and positions, validated row by row."""
+"""Input files of a scenario: trip traces and fleet start files, validated row by row.
+
+A **trace** (CSV or Parquet) holds one trip per row: its release time ``t`` (or
+``release_time``, seconds), its pickup and, optionally, its drop-off, and an optional
+``max_wait`` (seconds; blank: the scenario's). Where things are, by space:
+
+* voxel world: ``x, y, z`` (metres; the pickup), optionally ``dest_x, dest_y, dest_z``;
+* road network, one of: ``origin_node, dest_node`` (node ids of the network);
+  ``origin_x, origin_y, dest_x, dest_y`` (metres in the network's coordinates); or
+  ``pickup_latitude, pickup_longitude, dropoff_latitude, dropoff_longitude`` (WGS 84, projected
+  to the network's CRS). Positions are snapped to the nearest node at run time and the snapping
+  distance is recorded per trip.
+
+A **fleet start file** (CSV) has ``vehicle_id`` (a unique integer, the vehicle's ``agent_id``)
+and either ``node`` (roads) or ``x, y`` (and ``z`` in a voxel world; metres).
+
+A bad row (a missing or non-numeric value, a negative time, a position outside the world)
+raises a ScenarioError naming the file and its 1-based data row.
+"""
 
 from __future__ import annotations
 
 import csv
 import math
+from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 from dispatch.errors import ScenarioError
 
-TIME_COLUMNS = ("release_time", "t")
+TIME_COLUMNS = ("t", "release_time")
+#: the column sets a trace may use, by space: (name, pickup columns, drop-off columns)
+LAYOUTS = {
+    "voxel": (("xyz", ("x", "y", "z"), ("dest_x", "dest_y", "dest_z")),),
+    "road": (
+        ("node", ("origin_node",), ("dest_node",)),
+        ("metres", ("origin_x", "origin_y"), ("dest_x", "dest_y")),
+        ("latlon", ("pickup_latitude", "pickup_longitude"),
+         ("dropoff_latitude", "dropoff_longitude")),
+    ),
+}
 
 
-def read_trace(path: Path, size: tuple[float, float, float]) -> tuple[tuple[float, ...], ...]:
-    """Rows ``(release_time, x, y, z)`` sorted by time (stable), positions in metres.
+@dataclass(frozen=True, eq=False)
+class Trips:
+    """A trace's trips, sorted by release time (stable). ``layout`` names the columns used
+    (``xyz``, ``node``, ``metres`` or ``latlon``); ``origin`` / ``dest`` hold them in that
+    order (``dest`` is None when the trace has no drop-offs); ``max_wait`` is nan where blank."""
 
-    Columns: ``release_time`` (or ``t``), ``x``, ``y``, ``z``; other columns are ignored. A bad
-    row (missing or non-numeric value, negative time, position outside the world) raises a
-    ScenarioError naming the file and the 1-based data row number.
-    """
+    path: Path
+    layout: str
+    t: np.ndarray
+    origin: np.ndarray
+    dest: np.ndarray | None
+    max_wait: np.ndarray
+    row: np.ndarray  # each trip's 1-based data row in the file (for error messages)
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+
+def _read_columns(path: Path) -> dict[str, list]:
     if not path.is_file():
-        raise ScenarioError(path, "<file>", "trace file not found")
+        raise ScenarioError(path, "<file>", "file not found")
     suffix = path.suffix.lower()
     try:
         if suffix == ".parquet":
             import pyarrow.parquet as pq
 
-            columns = pq.read_table(path).to_pydict()
-        elif suffix == ".csv":
+            return pq.read_table(path).to_pydict()
+        if suffix == ".csv":
             with path.open(newline="", encoding="utf-8-sig") as fh:
                 reader = csv.DictReader(fh)
                 data = list(reader)
                 names = reader.fieldnames or []
-            columns = {n: [r.get(n) for r in data] for n in names}
-        else:
-            raise ScenarioError(path, "<file>", "trace must be a .csv or .parquet file")
+            return {n: [r.get(n) for r in data] for n in names}
     except ScenarioError:
         raise
-    except Exception as e:  # pyarrow raises several kinds for a malformed file
-        raise ScenarioError(path, "<file>", f"cannot be read as a trace: {e}") from None
-    tcol = next((c for c in TIME_COLUMNS if c in columns), None)
-    missing = [c for c in ("x", "y", "z") if c not in columns] + ([] if tcol else ["release_time"])
-    if missing:
-        raise ScenarioError(path, "<header>", f"missing column(s): {', '.join(missing)}")
-    rows = []
-    for i, values in enumerate(zip(columns[tcol], columns["x"], columns["y"], columns["z"]), 1):
-        row = []
-        for name, v in zip((tcol, "x", "y", "z"), values):
+    except Exception as e:  # pyarrow and csv raise several kinds for a malformed file
+        raise ScenarioError(path, "<file>", f"cannot be read: {e}") from None
+    raise ScenarioError(path, "<file>", "must be a .csv or .parquet file")
+
+
+def _numbers(path: Path, columns: dict[str, list], names, *, blank_ok: bool = False) -> np.ndarray:
+    """The named columns as a float array ``(rows, len(names))``; bad values name their row."""
+    n = len(columns[names[0]]) if names else 0
+    out = np.empty((n, len(names)))
+    for j, name in enumerate(names):
+        for i, v in enumerate(columns[name]):
+            if blank_ok and (v is None or (isinstance(v, str) and not v.strip())):
+                out[i, j] = math.nan
+                continue
             try:
                 f = float(v)
             except (TypeError, ValueError):
-                raise ScenarioError(path, f"row {i}", f"{name} is not a number ({v!r})") from None
+                raise ScenarioError(path, f"row {i + 1}", f"{name} is not a number ({v!r})") from None
             if not math.isfinite(f):
-                raise ScenarioError(path, f"row {i}", f"{name} is not finite ({v!r})")
-            row.append(f)
-        if row[0] < 0:
-            raise ScenarioError(path, f"row {i}", f"release time {row[0]} is negative")
-        for name, v, s in zip("xyz", row[1:], size):
-            if not 0 <= v < s:
-                raise ScenarioError(path, f"row {i}", f"{name} = {v} is outside the world [0, {s})")
-        rows.append(tuple(row))
-    rows.sort(key=lambda r: r[0])
+                raise ScenarioError(path, f"row {i + 1}", f"{name} is not finite ({v!r})")
+            out[i, j] = f
+    return out
+
+
+def read_trace(path: Path, space: str, size: tuple[float, float, float] | None) -> Trips:
+    """Read and validate a trip trace for a ``space`` (``"voxel"``: ``size`` is the world's)."""
+    columns = _read_columns(path)
+    tcol = next((c for c in TIME_COLUMNS if c in columns), None)
+    layout = next((lay for lay in LAYOUTS[space] if all(c in columns for c in lay[1])), None)
+    if tcol is None or layout is None:
+        wanted = " or ".join("(" + ", ".join(lay[1]) + ")" for lay in LAYOUTS[space])
+        missing = ([] if tcol else ["t (or release_time)"]) + ([] if layout else [wanted])
+        raise ScenarioError(path, "<header>", f"missing column(s) for a {space} trace: "
+                                              f"{'; '.join(missing)}")
+    name, pick, drop = layout
+    has_dest = all(c in columns for c in drop)
+    if not has_dest and any(c in columns for c in drop):
+        raise ScenarioError(path, "<header>", f"drop-off needs all of {', '.join(drop)}")
+    t = _numbers(path, columns, (tcol,))[:, 0]
+    origin = _numbers(path, columns, pick)
+    dest = _numbers(path, columns, drop) if has_dest else None
+    max_wait = (_numbers(path, columns, ("max_wait",), blank_ok=True)[:, 0]
+                if "max_wait" in columns else np.full(len(t), math.nan))
+    for i in range(len(t)):
+        if t[i] < 0:
+            raise ScenarioError(path, f"row {i + 1}", f"release time {t[i]} is negative")
+        if max_wait[i] <= 0:
+            raise ScenarioError(path, f"row {i + 1}", f"max_wait {max_wait[i]} is not > 0")
+        if size is not None:
+            for cols, values in ((pick, origin[i]), (drop, dest[i] if has_dest else ())):
+                for c, v, s in zip(cols, values, size):
+                    if not 0 <= v < s:
+                        raise ScenarioError(path, f"row {i + 1}",
+                                            f"{c} = {v} is outside the world [0, {s})")
+        if name == "node":
+            for c, v in zip(pick + (drop if has_dest else ()),
+                            (*origin[i], *(dest[i] if has_dest else ()))):
+                if v != int(v):
+                    raise ScenarioError(path, f"row {i + 1}", f"{c} = {v} is not a node id")
+        if name == "latlon":
+            for c, v in zip(pick + (drop if has_dest else ()),
+                            (*origin[i], *(dest[i] if has_dest else ()))):
+                if not -180 <= v <= 180 or ("latitude" in c and not -90 <= v <= 90):
+                    raise ScenarioError(path, f"row {i + 1}", f"{c} = {v} is not a coordinate")
+    order = np.argsort(t, kind="stable")
+    return Trips(path, name, t[order], origin[order],
+                 None if dest is None else dest[order], max_wait[order], order + 1)
+
+
+def read_fleet_start(path: Path, space: str) -> tuple[tuple[int, float, float, float], ...]:
+    """Rows ``(vehicle_id, a, b, c)``: on roads ``a`` is a node id (``b``, ``c`` nan) or
+    ``(a, b)`` metres; in a voxel world ``(a, b, c)`` metres (``z`` defaults to 0)."""
+    if path.suffix.lower() != ".csv":
+        raise ScenarioError(path, "<file>", "a fleet start file must be a .csv file")
+    columns = _read_columns(path)
+    if "vehicle_id" not in columns:
+        raise ScenarioError(path, "<header>", "missing column vehicle_id")
+    if space == "road" and "node" in columns:
+        pos = _numbers(path, columns, ("node",))
+    elif "x" in columns and "y" in columns:
+        pos = _numbers(path, columns, ("x", "y") + (("z",) if "z" in columns else ()))
+    else:
+        want = "node or x, y" if space == "road" else "x, y (and z)"
+        raise ScenarioError(path, "<header>", f"missing column(s): {want}")
+    ids = _numbers(path, columns, ("vehicle_id",))[:, 0]
+    if len(ids) == 0:
+        raise ScenarioError(path, "<file>", "places no vehicle")
+    seen: set[int] = set()
+    rows = []
+    for i, (vid, p) in enumerate(zip(ids, pos), 1):
+        if vid != int(vid) or vid < 0:
+            raise ScenarioError(path, f"row {i}", f"vehicle_id {vid} is not an integer >= 0")
+        if int(vid) in seen:
+            raise ScenarioError(path, f"row {i}", f"vehicle_id {int(vid)} appears twice")
+        seen.add(int(vid))
+        p = list(p) + [math.nan] * (3 - len(p))
+        if space == "voxel" and math.isnan(p[2]):
+            p[2] = 0.0
+        rows.append((int(vid), *p))
     return tuple(rows)

@@ -1,49 +1,71 @@
-"""Vehicles: each one a SimPy process that follows its path cell by cell in simulated time.
+"""Vehicles, the fleet, and the SimPy processes that drive them through their trips.
 
-With a reservation-aware planner a vehicle follows a *timed* route that the run's
-:class:`dispatch.reservations.Traffic` keeps conflict-free: it may stand in a cell before a step
-(a ``wait``), its route may be replaced by a higher-priority vehicle's request (a ``replan``),
-without any route it holds its cell and retries, and an idle vehicle may move out of the way
-(its ``move`` events have task id -1). Otherwise it follows its untimed path.
+A vehicle given a trip drives to the pickup (empty), picks the passenger up, drives to the
+drop-off (occupied; point tasks have none), spends the service time there and becomes idle.
+How it drives depends on the space, through a *driver*:
+
+* :class:`CellDriver` (voxel world): cell by cell along the planner's path, a ``move`` event
+  per cell, as the paper's vehicles do;
+* :class:`RoadDriver` (road network): one timeout per leg (``depart`` ... ``pickup`` /
+  ``dropoff``), not per edge; where a vehicle is part-way through a leg is interpolated from
+  its route when someone asks (:meth:`Vehicle.location`).
+
+With a reservation-aware planner (voxel only) a vehicle instead follows a *timed* route that
+the run's :class:`dispatch.reservations.Traffic` keeps conflict-free: it may stand in a cell
+before a step (a ``wait``), its route may be replaced by a higher-priority vehicle's request (a
+``replan``), without any route it holds its cell and retries, and an idle vehicle may move out
+of the way (its ``move`` events have task id -1).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from dispatch.contracts import AgentView
+import simpy
+
+from dispatch.contracts import AgentView, Planner
+from dispatch.events import EventBus
 from dispatch.motion import step_length
 from dispatch.reservations import EPS, step_seconds
-from dispatch.world import Cell
+from dispatch.space import Location
+from dispatch.tasks import Task, TaskBook, TaskState
 
 if TYPE_CHECKING:
-    from dispatch.sim import Simulation
-    from dispatch.tasks import Task
+    from dispatch.reservations import Traffic
+    from dispatch.roads import Leg, RoadNetwork
+    from dispatch.world import World
 
 
 @dataclass(eq=False)
 class Vehicle:
-    """A UAV or UGV. ``cell`` is where it is now; it moves only along a planned path."""
+    """A UAV, a UGV or a car. ``loc`` is where it is (on roads: the node it last reached;
+    while it drives a leg, :meth:`location` interpolates)."""
 
     id: int
     kind: str
     speed: float
-    start: Cell
-    cell: Cell = field(init=False)
+    start: Location
+    loc: Location = field(init=False)
     busy: bool = False
     task: Task | None = None
     distance: float = 0.0  # metres travelled
+    empty_distance: float = 0.0  # ... without a passenger (to pickups, repositioning)
+    occupied_distance: float = 0.0  # ... with one (pickup to drop-off)
     busy_seconds: float = 0.0
     busy_since: float = 0.0
     completed: int = 0
+    # ---- roads: the leg being driven and when it started
+    leg: Leg | None = field(default=None, repr=False)
+    leg_start: float = 0.0
     # ---- execution with reservations (see dispatch.reservations)
     #: timed route ``[(t, cell), ...]``; ``route[0]`` is the cell it stands in (or is stepping
     #: into, with the step's arrival time); a one-cell route holds that cell indefinitely
-    route: list[tuple[float, Cell]] = field(default_factory=list, repr=False)
+    route: list = field(default_factory=list, repr=False)
     #: the step being executed: (from cell, to cell, departure, arrival)
-    step: tuple[Cell, Cell, float, float] | None = field(default=None, repr=False)
+    step: tuple | None = field(default=None, repr=False)
     arrived: bool = False  # serving its task at the task's cell: its reservations are hard
     changed: Any = field(default=None, repr=False)  # SimPy event: its route was replaced
     last_try: float = -math.inf  # when it last asked for a route
@@ -53,92 +75,224 @@ class Vehicle:
     waiting_since: float | None = None
 
     def __post_init__(self) -> None:
-        self.cell = self.start
+        self.loc = self.start
+
+    @property
+    def cell(self):
+        """The voxel name of :attr:`loc`."""
+        return self.loc
+
+    @cell.setter
+    def cell(self, value) -> None:
+        self.loc = value
 
     @property
     def flies(self) -> bool:
         return self.kind == "uav"
 
-    def view(self) -> AgentView:
-        return AgentView(self.id, self.kind, self.cell, self.speed)  # type: ignore[arg-type]
+    def location(self, now: float) -> Location:
+        """Where it is at ``now``: on a leg, the road point reached by then."""
+        if self.leg is not None:
+            return self.leg.point_at(now - self.leg_start)
+        return self.loc
 
-    def serve(self, sim: Simulation, task: Task, path: list[Cell]):
-        """Process: travel ``path`` to the task, serve it, become idle again."""
-        env, cell_m = sim.env, sim.world.cell
-        self.busy, self.task = True, task
-        self.busy_since = env.now
-        sim.record_event("depart", self.id, task.id, self.cell)
-        for nxt in path[1:]:
-            metres = step_length(self.cell, nxt) * cell_m
-            yield env.timeout(metres / self.speed)
-            self._enter(sim, task, nxt, metres)
-        yield from self._serve_at(sim, task)
+    def view(self, now: float | None = None) -> AgentView:
+        loc = self.loc if now is None else self.location(now)
+        return AgentView(self.id, self.kind, loc, self.speed)  # type: ignore[arg-type]
 
-    def drive(self, sim: Simulation):
-        """Process (with reservations, one per vehicle for the whole run): follow the timed
-        route that ``sim.traffic`` keeps for this vehicle, whatever it is for: its task (then
-        serve it), parking out of someone's way while idle, or holding its cell (a one-cell
-        route). Without a route to its task it waits and asks again (see
-        :class:`dispatch.reservations.Traffic`)."""
-        env, traffic, cell_m = sim.env, sim.traffic, sim.world.cell
-        assert traffic is not None
-        while True:
-            if self.changed.triggered:
-                self.changed = env.event()
-            route, task = self.route, self.task
-            if len(route) == 1:
-                if task is None:  # idle: stay until told to move
-                    yield self.changed
-                elif self.cell == task.cell:
-                    self.arrived = True
-                    yield from self._serve_at(sim, task)
-                    self.arrived = False
-                    traffic.notify()  # idle now: it can be asked to make way
-                else:  # no route to the task: hold the cell, retry on a release or a timer
-                    self.begin_wait(sim)
-                    yield env.any_of([env.timeout(traffic.retry_after), self.changed,
-                                      traffic.released])
-                    if self.route is route and self.last_try < env.now:  # once per instant
-                        traffic.request(self)
-                continue
-            (_, here), (arr, nxt) = route[0], route[1]
-            dep = arr - step_seconds(here, nxt, self.speed, cell_m)
-            if dep > env.now + EPS:
-                if task is not None:
-                    self.begin_wait(sim)
-                yield env.any_of([env.timeout(dep - env.now), self.changed])
-                continue
-            self.end_wait(env.now)
-            nxt, arr = traffic.start_step(self)
-            yield env.timeout(max(arr - env.now, 0.0))
-            self._enter(sim, self.task, nxt, step_length(self.cell, nxt) * cell_m)
-
-    def _enter(self, sim: Simulation, task: Task | None, nxt: Cell, metres: float) -> None:
-        self.cell = nxt
-        self.distance += metres
-        sim.physics.move(self.id, sim.world.grid.centre(nxt))
-        sim.record_event("move", self.id, -1 if task is None else task.id, nxt)
-
-    def _serve_at(self, sim: Simulation, task: Task):
-        env = sim.env
-        sim.task_arrived(task, self)
-        service = sim.spec.scenario.tasks.service_time
-        if service > 0:
-            yield env.timeout(service)
-        self.busy_seconds += env.now - self.busy_since
-        self.busy, self.task = False, None
-        self.completed += 1
-        sim.task_completed(task, self)
-
-    def begin_wait(self, sim: Simulation) -> None:
+    def begin_wait(self, now: float, bus: EventBus) -> None:
         """It stands in its cell on the way to its task (until its next step starts)."""
         if self.waiting_since is None:
-            self.waiting_since = sim.env.now
+            self.waiting_since = now
             self.waits += 1
-            sim.record_event("wait", self.id, self.task.id, self.cell)  # type: ignore[union-attr]
+            bus.emit(now, "wait", self.id, self.task.id, self.loc)  # type: ignore[union-attr]
 
     def end_wait(self, now: float) -> None:
         """Its wait (if any) ends now."""
         if self.waiting_since is not None:
             self.wait_seconds += now - self.waiting_since
             self.waiting_since = None
+
+
+class Fleet:
+    """The run's vehicles by id, and the index of the idle ones."""
+
+    def __init__(self, vehicles: list[Vehicle]) -> None:
+        self.vehicles = sorted(vehicles, key=lambda v: v.id)
+        self.by_id = {v.id: v for v in self.vehicles}
+        self._idle = set(self.by_id)
+
+    def __len__(self) -> int:
+        return len(self.vehicles)
+
+    def idle(self) -> list[Vehicle]:
+        """Idle vehicles in id order."""
+        return [self.by_id[i] for i in sorted(self._idle)]
+
+    def set_busy(self, v: Vehicle) -> None:
+        v.busy = True
+        self._idle.discard(v.id)
+
+    def set_idle(self, v: Vehicle) -> None:
+        v.busy = False
+        self._idle.add(v.id)
+
+
+# ----------------------------------------------------------------------------- drivers
+
+
+class CellDriver:
+    """Voxel world: paths are cells; a vehicle steps from cell to cell at its speed."""
+
+    def __init__(self, world: World, planner: Planner, bus: EventBus) -> None:
+        self.world, self.planner, self.bus = world, planner, bus
+
+    def plan(self, v: Vehicle, goal, now: float):
+        path = self.planner.plan(v.view(), goal)
+        if path is None or path[0] != v.loc or path[-1] != goal:
+            raise RuntimeError(f"planner {self.planner.name!r} gave no path for a finite cost "
+                               f"(vehicle {v.id} -> {goal})")
+        return path
+
+    def drive(self, env: simpy.Environment, v: Vehicle, path, task_id: int):
+        """Process fragment: follow ``path``; returns the metres driven."""
+        cell_m, metres = self.world.cell, 0.0
+        for nxt in path[1:]:
+            step = step_length(v.loc, nxt) * cell_m
+            yield env.timeout(step / v.speed)
+            v.loc = nxt
+            v.distance += step
+            metres += step
+            self.bus.emit(env.now, "move", v.id, task_id, nxt)
+        return metres
+
+
+class RoadDriver:
+    """Road network: a leg is the planner's node path, driven in one timeout."""
+
+    def __init__(self, network: RoadNetwork, planner: Planner, bus: EventBus,
+                 edge_events: bool = False) -> None:
+        self.network, self.planner, self.bus = network, planner, bus
+        self.edge_events = edge_events
+
+    def plan(self, v: Vehicle, goal, now: float) -> Leg:
+        start = v.location(now)
+        nodes = self.planner.plan(v.view(now), goal)
+        if nodes is None or int(nodes[-1]) != int(goal):
+            raise RuntimeError(f"planner {self.planner.name!r} gave no path for a finite cost "
+                               f"(vehicle {v.id} -> node {goal})")
+        return self.network.leg(start, nodes)
+
+    def drive(self, env: simpy.Environment, v: Vehicle, leg: Leg, task_id: int):
+        """Process fragment: drive ``leg``; returns the metres driven."""
+        v.leg, v.leg_start = leg, env.now
+        if self.edge_events:
+            start = env.now
+            for node, t in zip(leg.nodes[1:], leg.times[1:]):
+                yield env.timeout(start + float(t) - env.now)
+                self.bus.emit(env.now, "move", v.id, task_id, int(node))
+        else:
+            yield env.timeout(leg.seconds)
+        v.leg, v.loc = None, int(leg.nodes[-1])
+        v.distance += leg.length
+        return leg.length
+
+
+# ----------------------------------------------------------------------------- operations
+
+
+class Operator:
+    """Hands tasks to vehicles and runs their trips (one SimPy process per trip, or, with
+    reservations, one ``drive`` process per vehicle for the whole run)."""
+
+    def __init__(self, env: simpy.Environment, bus: EventBus, book: TaskBook, fleet: Fleet,
+                 driver, service_time: float, notify: Callable[[], None],
+                 traffic: Traffic | None = None) -> None:
+        self.env, self.bus, self.book, self.fleet = env, bus, book, fleet
+        self.driver, self.service_time, self.notify = driver, service_time, notify
+        self.traffic = traffic
+        if traffic is not None:
+            for v in fleet.vehicles:
+                env.process(self._drive_timed(v))
+
+    def assign(self, task: Task, v: Vehicle, cost: float) -> None:
+        """Give ``task`` to the idle vehicle ``v`` at the planned ``cost`` (seconds)."""
+        path = None if self.traffic is not None else self.driver.plan(v, task.loc, self.env.now)
+        self.book.assign(task, v.id, cost)
+        self.fleet.set_busy(v)
+        if self.traffic is None:
+            self.env.process(self._serve(v, task, path))
+        else:  # its drive process follows the route; the task's cost is its priority
+            v.task, v.busy_since = task, self.env.now
+            self.bus.emit(self.env.now, "depart", v.id, task.id, v.loc)
+            self.traffic.request(v)
+
+    def _serve(self, v: Vehicle, task: Task, path):
+        """Process: to the pickup, (to the drop-off,) serve, idle."""
+        env = self.env
+        v.task, v.busy_since = task, env.now
+        self.bus.emit(env.now, "depart", v.id, task.id, v.loc)
+        v.empty_distance += yield from self.driver.drive(env, v, path, task.id)
+        self.book.picked_up(task)
+        if task.dropoff is not None:
+            leg = self.driver.plan(v, task.dropoff, env.now)
+            self.bus.emit(env.now, "depart", v.id, task.id, v.loc)
+            v.occupied_distance += yield from self.driver.drive(env, v, leg, task.id)
+            self.bus.emit(env.now, "dropoff", v.id, task.id, v.loc)
+        yield from self._finish(v, task)
+
+    def _finish(self, v: Vehicle, task: Task):
+        if self.service_time > 0:
+            yield self.env.timeout(self.service_time)
+        v.busy_seconds += self.env.now - v.busy_since
+        v.task = None
+        v.completed += 1
+        self.fleet.set_idle(v)
+        self.book.close(task, TaskState.COMPLETED)
+        self.bus.emit(self.env.now, "idle", v.id, -1, v.loc)
+        self.notify()
+
+    def _drive_timed(self, v: Vehicle):
+        """Process (with reservations, one per vehicle for the whole run): follow the timed
+        route that the traffic keeps for this vehicle, whatever it is for: its task (then serve
+        it), parking out of someone's way while idle, or holding its cell (a one-cell route).
+        Without a route to its task it waits and asks again (see
+        :class:`dispatch.reservations.Traffic`)."""
+        env, traffic, cell_m = self.env, self.traffic, self.driver.world.cell
+        assert traffic is not None
+        while True:
+            if v.changed.triggered:
+                v.changed = env.event()
+            route, task = v.route, v.task
+            if len(route) == 1:
+                if task is None:  # idle: stay until told to move
+                    yield v.changed
+                elif v.loc == task.loc:
+                    v.arrived = True
+                    self.book.picked_up(task)
+                    yield from self._finish(v, task)
+                    v.arrived = False
+                    traffic.notify()  # idle now: it can be asked to make way
+                else:  # no route to the task: hold the cell, retry on a release or a timer
+                    v.begin_wait(env.now, self.bus)
+                    yield env.any_of([env.timeout(traffic.retry_after), v.changed,
+                                      traffic.released])
+                    if v.route is route and v.last_try < env.now:  # once per instant
+                        traffic.request(v)
+                continue
+            (_, here), (arr, nxt) = route[0], route[1]
+            dep = arr - step_seconds(here, nxt, v.speed, cell_m)
+            if dep > env.now + EPS:
+                if task is not None:
+                    v.begin_wait(env.now, self.bus)
+                yield env.any_of([env.timeout(dep - env.now), v.changed])
+                continue
+            v.end_wait(env.now)
+            nxt, arr = traffic.start_step(v)
+            yield env.timeout(max(arr - env.now, 0.0))
+            metres = step_length(v.loc, nxt) * cell_m
+            v.loc = nxt
+            v.distance += metres
+            if v.task is not None:
+                v.empty_distance += metres
+            self.bus.emit(env.now, "move", v.id, -1 if v.task is None else v.task.id, nxt)

@@ -10,12 +10,15 @@ passable between them.
 from __future__ import annotations
 
 import hashlib
+import json
 from dataclasses import dataclass, field
 from functools import cached_property
+from typing import ClassVar
 
 import numpy as np
 
 from dispatch.errors import WorldError
+from dispatch.space import Space
 
 Cell = tuple[int, int, int]
 
@@ -89,8 +92,11 @@ class Grid:
 
 
 @dataclass(frozen=True, eq=False)
-class World:
-    """The static world of one run: size in metres, the grid, and the obstacle boxes."""
+class World(Space):
+    """The voxel space of one run: size in metres, the grid, and the obstacle boxes.
+    A location is a cell; its position is the cell's centre."""
+
+    kind: ClassVar[str] = "voxel"
 
     size: tuple[float, float, float]
     grid: Grid
@@ -99,6 +105,16 @@ class World:
     @property
     def cell(self) -> float:
         return self.grid.cell
+
+    def position(self, loc: Cell) -> tuple[float, float, float]:
+        return self.grid.centre(loc)
+
+    def positions(self, locs) -> np.ndarray:
+        return (np.asarray(locs, dtype=float).reshape(len(locs), 3) + 0.5) * self.grid.cell
+
+    def describe(self) -> dict[str, str]:
+        return {"dispatch.space": "voxel", "dispatch.world_size": json.dumps(list(self.size)),
+                "dispatch.cell": str(self.cell)}
 
 
 def place_obstacles(

@@ -1,0 +1,78 @@
+"""The run's event stream: everything that happens, published once, read by subscribers.
+
+Processes (the task source, the dispatcher, the vehicles) *emit*; the recorder's ``events``
+table, the PyBullet mirror and anything a user adds *subscribe*. No process reaches back into
+a central object to report what it did.
+
+Event types (``Event.kind``), with the agent and task they name (-1: none):
+
+=============  ===========================================================================
+release        a task (trip) is released (task; at its pickup)
+assign         the dispatcher hands a task to a vehicle (agent, task; at the pickup)
+depart         a vehicle starts a leg: to a pickup, or with its passenger to the drop-off
+move           a vehicle enters a cell (voxel world; one per cell) or, with
+               ``[output] edge_events``, reaches a node on the way (roads)
+pickup         a vehicle reaches a task's pickup (for the paper's point tasks: the task)
+dropoff        a vehicle reaches a trip's drop-off
+complete       a task is done (after the service time at its pickup or drop-off)
+idle           a vehicle has no task any more
+wait / replan  reservation-based execution: a vehicle stands, or its route was replaced
+expire         an open task's ``ttl`` or ``max_wait`` ran out
+reject         no vehicle could reach a request's pickup within its ``max_wait``
+unreachable    no vehicle of the fleet can ever reach the task
+cancel         the run ended before the task did
+skipped        a generated release was skipped because ``max_active`` tasks were open
+=============  ===========================================================================
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+
+from dispatch.space import Location
+
+KINDS = ("release", "assign", "depart", "move", "pickup", "dropoff", "complete", "idle", "wait",
+         "replan", "expire", "reject", "unreachable", "cancel", "failed", "skipped")
+
+
+@dataclass(frozen=True, slots=True)
+class Event:
+    """One thing that happened at simulated time ``t`` (``loc`` where, or None)."""
+
+    t: float
+    kind: str
+    agent_id: int = -1
+    task_id: int = -1
+    loc: Location | None = None
+
+
+Subscriber = Callable[[Event], None]
+
+
+class EventBus:
+    """Delivers each emitted event to the subscribers of its kind, in subscription order."""
+
+    def __init__(self) -> None:
+        self._all: list[Subscriber] = []
+        self._by_kind: dict[str, list[Subscriber]] = {k: [] for k in KINDS}
+
+    def subscribe(self, fn: Subscriber, kinds: Iterable[str] | None = None) -> None:
+        """Call ``fn(event)`` for every event (or only those of ``kinds``)."""
+        if kinds is None:
+            self._all.append(fn)
+            for subs in self._by_kind.values():
+                subs.append(fn)
+            return
+        for k in kinds:
+            if k not in self._by_kind:
+                raise ValueError(f"unknown event kind {k!r}; known: {', '.join(KINDS)}")
+            self._by_kind[k].append(fn)
+
+    def emit(self, t: float, kind: str, agent_id: int = -1, task_id: int = -1,
+             loc: Location | None = None) -> None:
+        subs = self._by_kind[kind]
+        if subs:
+            ev = Event(float(t), kind, agent_id, task_id, loc)
+            for fn in subs:
+                fn(ev)

@@ -1,0 +1,71 @@
+"""The run's one-line summary, kept as running totals so a run never re-reads its history.
+
+:class:`RunStats` subscribes to the task book's closures (each task is counted once, when it
+reaches its terminal state); :meth:`RunStats.summary` adds the fleet's and the dispatcher's
+totals at the end. The metric definitions are in the README's output section.
+"""
+
+from __future__ import annotations
+
+import math
+
+from dispatch.tasks import Task, TaskState
+
+
+class RunStats:
+    """Running totals over closed tasks."""
+
+    def __init__(self) -> None:
+        self.count = {s: 0 for s in TaskState}
+        self.total_cost = 0.0  # planned cost of every assigned task
+        self.offered = 0
+        self.clean = 0  # offered, assigned and never in conflict
+        self.conflicts = 0
+        self.waits = 0.0  # release -> pickup, over tasks picked up
+        self.picked = 0
+        self.travel = 0.0  # assignment -> pickup, over tasks picked up
+        self.makespan = 0.0
+        self.n_tasks = 0
+
+    def closed(self, t: Task) -> None:
+        self.n_tasks += 1
+        self.count[t.state] += 1
+        if t.agent_id >= 0:
+            self.total_cost += t.cost
+        if t.offered:
+            self.offered += 1
+            self.clean += t.agent_id >= 0 and not t.conflicted
+        self.conflicts += t.conflicted
+        if not math.isnan(t.picked_up_at):
+            self.picked += 1
+            self.waits += t.picked_up_at - t.released_at
+            self.travel += t.picked_up_at - t.assigned_at
+        if t.state is TaskState.COMPLETED:
+            self.makespan = max(self.makespan, t.completed_at)
+
+    def summary(self, *, run: dict, vehicles, dispatcher, sim_time: float) -> dict:
+        """The summary row: ``run`` holds the run's keys (scenario, allocator, planner,
+        n_agents, seed, space)."""
+        c, d = self.count, dispatcher
+        n_uav = sum(1 for v in vehicles if v.kind == "uav")
+        n_ugv = sum(1 for v in vehicles if v.kind == "ugv")
+        return dict(
+            **run, n_tasks=self.n_tasks, total_cost=self.total_cost,
+            conflict_free_rate=self.clean / self.offered if self.offered else math.nan,
+            alloc_seconds=d.cost_seconds + d.decide_seconds,
+            tasks_completed=c[TaskState.COMPLETED],
+            tasks_unfinished=self.n_tasks - c[TaskState.COMPLETED],
+            makespan=self.makespan, n_uav=n_uav, n_ugv=n_ugv, decisions=d.decisions,
+            rounds=d.rounds, messages=d.messages, conflicts=self.conflicts,
+            cost_seconds=d.cost_seconds, decide_seconds=d.decide_seconds,
+            first_decision_cost=d.first_cost, first_decision_seconds=d.first_seconds,
+            realized_travel=self.travel,
+            wait_time_mean=self.waits / self.picked if self.picked else math.nan,
+            tasks_expired=c[TaskState.EXPIRED], tasks_rejected=c[TaskState.REJECTED],
+            tasks_unreachable=c[TaskState.UNREACHABLE], tasks_cancelled=c[TaskState.CANCELLED],
+            tasks_failed=c[TaskState.FAILED], sim_time=sim_time, comm_delay=d.comm_delay,
+            agent_seconds=d.agent_seconds,
+            distance=sum(v.distance for v in vehicles),
+            empty_distance=sum(v.empty_distance for v in vehicles),
+            occupied_distance=sum(v.occupied_distance for v in vehicles),
+        )
