@@ -22,6 +22,7 @@ _FALLBACK = {
     "allocator": {
         "hungarian": "allocators.hungarian:HungarianAllocator",
         "greedy": "allocators.greedy:GreedyAllocator",
+        "fcfs": "allocators.fcfs:FcfsAllocator",
         "random": "allocators.randomized:RandomAllocator",
         "auction": "allocators.auction:AuctionAllocator",
         "magnnet": "allocators.magnnet.allocator:MagnnetAllocator",

@@ -16,11 +16,11 @@ def make_problem(cost, seed: int = 0, max_rounds: int = 1000) -> AllocationProbl
     cost = np.array(cost, dtype=float).reshape(np.shape(cost))
     n, m = cost.shape
     agents = tuple(
-        AgentView(id=100 + a, kind="uav" if a % 2 else "ugv", cell=(a, 0, 0), speed=3.0)
+        AgentView(id=100 + a, kind="uav" if a % 2 else "ugv", loc=(a, 0, 0), speed=3.0)
         for a in range(n)
     )
     tasks = tuple(
-        TaskView(id=500 + t, kind="ground", cell=(t, 1, 0), released_at=0.0) for t in range(m)
+        TaskView(id=500 + t, kind="ground", loc=(t, 1, 0), released_at=0.0) for t in range(m)
     )
     return AllocationProblem(
         time=0.0,

@@ -17,7 +17,7 @@ DOCUMENTED = {
                 "total_cost", "conflict_free_rate", "alloc_seconds", "tasks_completed",
                 "tasks_unfinished", "makespan"],
     "tasks": ["run_id", "task_id", "kind", "x", "y", "z", "released_at", "assigned_at",
-              "agent_id", "cost", "arrived_at", "completed_at", "state", "conflicted"],
+              "agent_id", "cost", "picked_up_at", "completed_at", "state", "conflicted"],
     "assignments": ["run_id", "decision", "round", "agent_id", "task_id", "cost", "won",
                     "alloc_seconds"],
     "events": ["run_id", "t", "event", "agent_id", "task_id", "x", "y", "z"],

@@ -115,7 +115,9 @@ def test_allocators_share_the_instance_of_a_seed(tmp_path):
         cols = ["agent_id", "kind", "speed", "x0", "y0", "z0"]
         assert t["vehicles"].select(cols).equals(ref["vehicles"].select(cols)), alloc
         cols = ["task_id", "kind", "x", "y", "z", "released_at"]
-        assert t["tasks"].select(cols).equals(ref["tasks"].select(cols)), alloc
+        # rows are written as tasks close, so their order depends on the allocator
+        assert t["tasks"].select(cols).sort_by("task_id").equals(
+            ref["tasks"].select(cols).sort_by("task_id")), alloc
 
 
 def test_sweep_writes_hive_partitions(tmp_path):

@@ -27,7 +27,8 @@ import pytest
 from dispatch.motion import step_is_legal, step_length
 from dispatch.runner import run_one
 from dispatch.scenario import RunSpec, load_scenario
-from dispatch.sim import RunResult, world_for
+from dispatch.runner import RunResult
+from dispatch.sim import world_for
 from tests.conftest import write_scenario
 
 SOURCES = ("static", "periodic", "poisson", "trace_csv", "trace_parquet")
@@ -173,9 +174,9 @@ def test_every_task_ends_in_exactly_one_terminal_state(runs, case):
     done = tasks[tasks.state == "completed"]
     assert (done.agent_id >= 0).all()
     assert (done.released_at <= done.assigned_at).all()
-    assert (done.assigned_at <= done.arrived_at).all()
+    assert (done.assigned_at <= done.picked_up_at).all()
     service = r.spec.scenario.tasks.service_time
-    assert np.allclose(done.completed_at - done.arrived_at, service)
+    assert np.allclose(done.completed_at - done.picked_up_at, service)
     assert np.allclose(done.completed_at, done.closed_at)
     never = tasks[tasks.state.isin(["expired", "unreachable"])]
     assert (never.agent_id == -1).all() and never.assigned_at.isna().all()
@@ -230,7 +231,7 @@ def test_a_vehicle_serves_one_task_at_a_time(runs, case):
             elif e.event == "depart":
                 assert current is None, f"vehicle {vid} departs for {e.task_id} while busy"
                 current, start = e.task_id, e.t
-            elif e.event in ("move", "arrive"):
+            elif e.event in ("move", "pickup"):
                 assert current == e.task_id, (vid, e)
             elif e.event == "idle":
                 assert current is not None, (vid, e)
@@ -278,8 +279,8 @@ def test_summary_counts_add_up(runs, case):
     assert set(r.assignments.decision) <= set(decisions.decision)
     assert decisions.n_assigned.sum() == len(assigned)
     assert s["rounds"] == decisions.rounds.sum()
-    arrived = tasks[tasks.arrived_at.notna()]
-    assert s["realized_travel"] == pytest.approx((arrived.arrived_at - arrived.assigned_at).sum())
+    arrived = tasks[tasks.picked_up_at.notna()]
+    assert s["realized_travel"] == pytest.approx((arrived.picked_up_at - arrived.assigned_at).sum())
     assert r.vehicles.tasks_completed.sum() == s["tasks_completed"]
     done = tasks[tasks.state == "completed"]
     assert s["makespan"] == pytest.approx(done.completed_at.max() if len(done) else 0.0)
@@ -290,7 +291,7 @@ def test_summary_counts_add_up(runs, case):
     if r.spec.scenario.tasks.source == "static":
         assert s["n_tasks"] == r.spec.n_static_tasks
     if r.spec.scenario.tasks.source == "trace":
-        assert s["n_tasks"] <= len(r.spec.scenario.tasks.trace_rows)
+        assert s["n_tasks"] <= len(r.spec.scenario.tasks.trips)
     if r.spec.scenario.tasks.count is not None:
         assert s["n_tasks"] <= r.spec.scenario.tasks.count
 
@@ -332,13 +333,13 @@ def test_vehicles_move_by_legal_timed_steps(runs, case):
                 assert e.t - t_prev == pytest.approx(length / v.speed, rel=1e-9, abs=1e-9)
                 metres += length
                 here, t_prev = nxt, e.t
-            elif e.event == "arrive":
+            elif e.event == "pickup":
                 assert cell_of(grid, e) == here
                 assert here == grid.cell_of(tuple(tasks.loc[e.task_id, ["x", "y", "z"]]))
                 assert e.t == pytest.approx(t_prev)
                 # the travel time is the planner's cost: the path followed is the costed one
                 task = tasks.loc[e.task_id]
-                assert task.arrived_at - task.assigned_at == pytest.approx(task.cost, abs=1e-6)
+                assert task.picked_up_at - task.assigned_at == pytest.approx(task.cost, abs=1e-6)
             elif e.event == "idle":
                 assert cell_of(grid, e) == here
         assert v.distance == pytest.approx(metres, abs=1e-9)
@@ -354,7 +355,7 @@ def test_ugvs_stay_on_the_ground_and_serve_ground_tasks(runs, case):
     for vid in ugvs:
         assert vehicles.z0[vid] == ground_z
     ev = r.events
-    positions = ev[ev.agent_id.isin(ugvs) & ev.event.isin(["depart", "move", "arrive", "idle"])]
+    positions = ev[ev.agent_id.isin(ugvs) & ev.event.isin(["depart", "move", "pickup", "idle"])]
     assert (positions.z == ground_z).all()
     ugv_tasks = r.tasks[r.tasks.agent_id.isin(ugvs)]
     assert (ugv_tasks.kind == "ground").all()

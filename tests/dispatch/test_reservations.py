@@ -92,7 +92,7 @@ def rebuild(events: pd.DataFrame, vehicles: pd.DataFrame, grid, end: float):
         g = by_agent.get(v.agent_id)
         for e in (() if g is None else g.itertuples()):
             cell = grid.cell_of((e.x, e.y, e.z))
-            if e.event in ("depart", "wait", "arrive", "idle"):
+            if e.event in ("depart", "wait", "pickup", "idle"):
                 assert cell == here, (v.agent_id, e)
             elif e.event == "move":
                 assert step_is_legal(grid, here, cell, v.kind == "uav"), (v.agent_id, here, cell)
@@ -162,7 +162,7 @@ def check_waits(events: pd.DataFrame, vehicles: pd.DataFrame, grid, end: float) 
                 elif task >= 0:  # on the way it never stands still without a wait event
                     assert dep <= ready + TOL, (v.agent_id, r)
                 here, ready = nxt, r.t
-            elif r.event == "arrive":
+            elif r.event == "pickup":
                 assert waiting is None and r.task_id == task, (v.agent_id, r)
             elif r.event == "idle":
                 task = -1
@@ -404,13 +404,13 @@ def test_head_on_in_a_corridor_the_cheaper_task_keeps_its_path(tmp_path, monkeyp
     cheap, dear = tasks.loc[1], tasks.loc[0]
     assert (cheap.agent_id, dear.agent_id) == (1, 0) and cheap.cost < dear.cost
     # the cheaper task's vehicle travels as costed: no wait on the way
-    assert cheap.arrived_at - cheap.assigned_at == pytest.approx(cheap.cost)
+    assert cheap.picked_up_at - cheap.assigned_at == pytest.approx(cheap.cost)
     ev = r.events
     assert not ((ev.agent_id == 1) & (ev.event == "wait")).any()
     # the other one was displaced, waited, and arrived later than its cost
     v = r.vehicles.set_index("agent_id")
     assert v.loc[0, "replans"] >= 1 and v.loc[0, "waits"] >= 1 and v.loc[0, "wait_seconds"] > 0
-    assert dear.arrived_at - dear.assigned_at > dear.cost + 0.5
+    assert dear.picked_up_at - dear.assigned_at > dear.cost + 0.5
     # vehicle 1, idle on vehicle 0's way, moved into the pocket (a move without a task)
     park = ev[(ev.agent_id == 1) & (ev.event == "move") & (ev.task_id == -1)]
     assert (3.5, 2.5) in set(zip(park.x, park.y))
@@ -424,7 +424,7 @@ def test_a_vehicle_on_its_way_is_displaced_by_a_cheaper_one(tmp_path, monkeypatc
     tasks = r.tasks.set_index("task_id")
     assert set(tasks.state) == {"completed"}
     late = tasks.loc[1]
-    assert late.arrived_at - late.assigned_at == pytest.approx(late.cost)
+    assert late.picked_up_at - late.assigned_at == pytest.approx(late.cost)
     ev = r.events
     replan = ev[(ev.event == "replan") & (ev.agent_id == 0)]
     assert len(replan) >= 1 and (replan.task_id == 0).all()

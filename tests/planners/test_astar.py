@@ -236,7 +236,7 @@ def test_astar_on_obstacle_free_grid_matches_octile(flies):
 
 def agents_for(cells, flies, speed):
     kind = "uav" if flies else "ugv"
-    return tuple(AgentView(id=n, kind=kind, cell=c, speed=speed) for n, c in enumerate(cells))
+    return tuple(AgentView(id=n, kind=kind, loc=c, speed=speed) for n, c in enumerate(cells))
 
 
 @pytest.mark.parametrize("seed", SEEDS)
@@ -249,12 +249,12 @@ def test_costs_equal_reference(seed):
     rng = np.random.default_rng(300 + seed)
     # every cell (blocked ones too) as a UAV; every ground cell as a UGV
     uavs = agents_for(w3[1], True, 2.0)
-    ugvs = tuple(AgentView(id=len(uavs) + n, kind="ugv", cell=c, speed=0.5)
+    ugvs = tuple(AgentView(id=len(uavs) + n, kind="ugv", loc=c, speed=0.5)
                  for n, c in enumerate(w2[1]))
     goals = [w3[1][int(i)] for i in rng.choice(len(w3[1]), size=12, replace=False)]
     goals += [w2[1][int(i)] for i in rng.choice(len(w2[1]), size=8, replace=False)]
     tasks = tuple(
-        TaskView(id=10 + t, kind="ground" if c[2] == 0 else "air", cell=c, released_at=0.0)
+        TaskView(id=10 + t, kind="ground" if c[2] == 0 else "air", loc=c, released_at=0.0)
         for t, c in enumerate(goals)
     )
     cost = planner.costs(uavs + ugvs, tasks)
@@ -291,8 +291,8 @@ def test_plan_is_optimal_and_matches_costs(seed):
         b = free[int(rng.integers(len(free)))]
         if not flies:
             a, b = (a[0], a[1], 0), (b[0], b[1], 0)
-        agent = AgentView(id=1, kind="uav" if flies else "ugv", cell=a, speed=3.0)
-        task = TaskView(id=1, kind="ground" if b[2] == 0 else "air", cell=b, released_at=0.0)
+        agent = AgentView(id=1, kind="uav" if flies else "ugv", loc=a, speed=3.0)
+        task = TaskView(id=1, kind="ground" if b[2] == 0 else "air", loc=b, released_at=0.0)
         cost = planner.costs((agent,), (task,))[0, 0]
         path = planner.plan(agent, b)
         if path is None:
@@ -308,12 +308,12 @@ def test_plan_is_optimal_and_matches_costs(seed):
 def test_ugv_cannot_serve_air_task():
     grid = Grid(np.zeros((6, 6, 4), dtype=bool), 1.0)
     planner = AStarPlanner(World(size=(6.0, 6.0, 4.0), grid=grid, boxes=()))
-    ugv = AgentView(id=0, kind="ugv", cell=(0, 0, 0), speed=1.0)
-    uav = AgentView(id=1, kind="uav", cell=(0, 0, 0), speed=1.0)
+    ugv = AgentView(id=0, kind="ugv", loc=(0, 0, 0), speed=1.0)
+    uav = AgentView(id=1, kind="uav", loc=(0, 0, 0), speed=1.0)
     tasks = (
-        TaskView(id=0, kind="air", cell=(3, 3, 2), released_at=0.0),
-        TaskView(id=1, kind="ground", cell=(3, 3, 0), released_at=0.0),
-        TaskView(id=2, kind="air", cell=(3, 3, 0), released_at=0.0),  # "air" kind wins
+        TaskView(id=0, kind="air", loc=(3, 3, 2), released_at=0.0),
+        TaskView(id=1, kind="ground", loc=(3, 3, 0), released_at=0.0),
+        TaskView(id=2, kind="air", loc=(3, 3, 0), released_at=0.0),  # "air" kind wins
     )
     cost = planner.costs((ugv, uav), tasks)
     assert np.isinf(cost[0, 0]) and np.isinf(cost[0, 2])
@@ -321,7 +321,7 @@ def test_ugv_cannot_serve_air_task():
     assert np.isfinite(cost[1]).all()
     assert planner.plan(ugv, (3, 3, 2)) is None
     # a UGV whose cell is off the ground cannot move at all
-    lifted = AgentView(id=2, kind="ugv", cell=(0, 0, 1), speed=1.0)
+    lifted = AgentView(id=2, kind="ugv", loc=(0, 0, 1), speed=1.0)
     assert np.isinf(planner.costs((lifted,), tasks)).all()
 
 
