@@ -218,6 +218,8 @@ class Planner(ABC):
     """
 
     name: ClassVar[str] = ""
+    #: The spaces (:attr:`dispatch.space.Space.kind`) this planner serves.
+    spaces: ClassVar[tuple[str, ...]] = ("voxel",)
     #: True for planners that implement :meth:`plan_timed` (execution with reservations).
     reservation_aware: ClassVar[bool] = False
     #: Seconds after which a vehicle that found no timed route tries again (it also tries when
