@@ -78,8 +78,9 @@ def _as_point(loc: RoadPoint | int) -> RoadPoint:
 
 @dataclass(frozen=True)
 class Leg:
-    """A drive along a node path: nodes[0] is where it starts (the point's `node`), times[i] / metres[i]
-    are the cumulative seconds / metres from the start point to nodes[i] (times[0] = point.remaining).
+    """A drive along a node path: nodes[0] is where it starts (the point's `node`),
+    times[i] / metres[i] are the cumulative seconds / metres from the start point to nodes[i]
+    (times[0] = point.remaining).
 
     ``prev`` is the start point's ``prev`` (``-1`` when the leg starts on a node): needed to say
     where a vehicle is before it reaches ``nodes[0]``.
@@ -111,7 +112,8 @@ class Leg:
         i = int(np.searchsorted(times, t, side="right"))  # times[i-1] <= t < times[i]
         if i == 0:  # still finishing the edge the leg started on
             rem = float(times[0]) - t
-            return RoadPoint(int(nodes[0]), self.prev, rem, float(self.metres[0]) * rem / float(times[0]))
+            rem_m = float(self.metres[0]) * rem / float(times[0])
+            return RoadPoint(int(nodes[0]), self.prev, rem, rem_m)
         if t == times[i - 1]:
             return RoadPoint(int(nodes[i - 1]))
         span = float(times[i] - times[i - 1])
@@ -159,7 +161,8 @@ class RoadNetwork(Space):
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
         n = xy.shape[0]
         u, v = np.asarray(u, dtype=np.int64), np.asarray(v, dtype=np.int64)
-        seconds, metres = np.asarray(seconds, dtype=np.float64), np.asarray(metres, dtype=np.float64)
+        seconds = np.asarray(seconds, dtype=np.float64)
+        metres = np.asarray(metres, dtype=np.float64)
         keep = u != v
         u, v, seconds, metres = u[keep], v[keep], seconds[keep], metres[keep]
         # sort by (u, v, seconds): the first of each (u, v) run is the fastest parallel edge
@@ -192,8 +195,8 @@ class RoadNetwork(Space):
 
     @cached_property
     def _index(self) -> dict[str, int]:
-        return {str(i): k for k, i in enumerate(self.ids.tolist() if isinstance(self.ids, np.ndarray)
-                                                 else self.ids)}
+        ids = self.ids.tolist() if isinstance(self.ids, np.ndarray) else self.ids
+        return {str(i): k for k, i in enumerate(ids)}
 
     def index_of(self, node_id: Any) -> int:
         """The node index of a source id (``12`` and ``"12"`` name the same node); ValueError
@@ -310,10 +313,11 @@ class RoadNetwork(Space):
         return self._fields(self._time_t, np.asarray(targets, dtype=np.int64).reshape(-1))
 
     def distances_from(self, sources: Sequence[int] | np.ndarray) -> np.ndarray:
-        """``(len(sources), n)``: row ``i`` is the seconds from node ``sources[i]`` to every node."""
+        """``(len(sources), n)``: row ``i`` is the seconds from node ``sources[i]`` to each node."""
         return self._fields(self.time, np.asarray(sources, dtype=np.int64).reshape(-1))
 
-    def travel_times(self, sources: Sequence[RoadPoint | int], targets: Sequence[int]) -> np.ndarray:
+    def travel_times(self, sources: Sequence[RoadPoint | int],
+                     targets: Sequence[int]) -> np.ndarray:
         """``(len(sources), len(targets))`` exact seconds, ``inf`` where unreachable:
         ``source.remaining`` plus the shortest time from ``source.node``. One Dijkstra per
         distinct node on the smaller side (forward from sources or backward from targets)."""
@@ -414,8 +418,9 @@ def manhattan(columns: int, rows: int, block: float = 200.0, speed: float = 10.0
     a = np.concatenate([idx[:, :-1].ravel(), idx[:-1, :].ravel()])
     b = np.concatenate([idx[:, 1:].ravel(), idx[1:, :].ravel()])
     u, v = np.concatenate([a, b]), np.concatenate([b, a])
-    return RoadNetwork.from_edges(f"manhattan-{columns}x{rows}", xy, np.arange(columns * rows), u, v,
-                                  np.full(u.size, block / speed), np.full(u.size, float(block)))
+    seconds, metres = np.full(u.size, block / speed), np.full(u.size, float(block))
+    return RoadNetwork.from_edges(f"manhattan-{columns}x{rows}", xy, np.arange(columns * rows),
+                                  u, v, seconds, metres)
 
 
 def _positive(file: Path, what: str, attr: str, value: Any, zero_ok: bool = False) -> float:
@@ -426,7 +431,8 @@ def _positive(file: Path, what: str, attr: str, value: Any, zero_ok: bool = Fals
         raise ValueError(f"{file}: {what}: attribute {attr!r} is not a number: {value!r}") from None
     if not np.isfinite(x) or x < 0 or (x == 0 and not zero_ok):
         need = "non-negative" if zero_ok else "positive"
-        raise ValueError(f"{file}: {what}: attribute {attr!r} must be finite and {need}, got {value!r}")
+        raise ValueError(f"{file}: {what}: attribute {attr!r} must be finite and {need}, "
+                         f"got {value!r}")
     return x
 
 
@@ -449,7 +455,8 @@ def read_graphml(path: str | Path) -> RoadNetwork:
                 raise ValueError(f"{path}: node {k!r}: missing attribute {attr!r}")
             xy[i, j] = float(data[attr])
             if not np.isfinite(xy[i, j]):
-                raise ValueError(f"{path}: node {k!r}: attribute {attr!r} is not finite: {data[attr]!r}")
+                raise ValueError(f"{path}: node {k!r}: attribute {attr!r} is not finite: "
+                                 f"{data[attr]!r}")
     u, v, sec, met = [], [], [], []
     for a, b, data in g.edges(data=True):
         what = f"edge {a!r} -> {b!r}"
@@ -562,9 +569,11 @@ def read_tntp(net_path: str | Path, node_path: str | Path, *, name: str | None =
         raise ValueError(f"{node_path}: node numbers repeat")
     u, v = np.searchsorted(sorted_no, a), np.searchsorted(sorted_no, b)
     for ends, nums in ((u, a), (v, b)):
-        missing = (ends >= sorted_no.size) | (sorted_no[np.minimum(ends, sorted_no.size - 1)] != nums)
+        at = np.minimum(ends, sorted_no.size - 1)
+        missing = (ends >= sorted_no.size) | (sorted_no[at] != nums)
         if missing.any():
-            raise ValueError(f"{net_path}: link node {int(nums[missing][0])} is not in {node_path.name}")
+            raise ValueError(f"{net_path}: link node {int(nums[missing][0])} is not in "
+                             f"{node_path.name}")
     u, v = order[u], order[v]
 
     metres = miles * MILE
@@ -591,7 +600,8 @@ def _node_file(net: Path) -> Path:
     """``X_net.tntp`` -> ``X_node.tntp`` beside it."""
     stem = net.name.removesuffix(".tntp")
     if not stem.endswith("_net"):
-        raise ValueError(f"{net}: a TNTP link file must be named X_net.tntp (its node file X_node.tntp)")
+        raise ValueError(f"{net}: a TNTP link file must be named X_net.tntp "
+                         "(its node file X_node.tntp)")
     return net.with_name(stem.removesuffix("_net") + "_node.tntp")
 
 
@@ -619,7 +629,8 @@ def load_network(source: str, *, base: Path, blocks: Sequence[int] = (20, 20), b
     else:
         path, name = (Path(base) / source).resolve(), None
         if path.suffix.lower() not in (".graphml", ".tntp"):
-            raise ValueError(f"{path}: unknown road network format {path.suffix or '(no suffix)'!r}; "
+            suffix = path.suffix or "(no suffix)"
+            raise ValueError(f"{path}: unknown road network format {suffix!r}; "
                              "expected 'manhattan', 'chicago', a .graphml or an X_net.tntp file")
     if not path.is_file():
         raise ValueError(f"{path}: road network file not found")

@@ -121,7 +121,8 @@ def test_chicago_travel_times_match_networkx_on_an_independent_parse(chicago):
     ids = np.asarray(chicago.ids)
     src = [int(ids[i]) for i in rng.integers(0, chicago.n, 2)]
     tgt = [int(ids[i]) for i in rng.integers(0, chicago.n, 30)]
-    got = chicago.travel_times([chicago.index_of(s) for s in src], [chicago.index_of(t) for t in tgt])
+    got = chicago.travel_times([chicago.index_of(s) for s in src],
+                               [chicago.index_of(t) for t in tgt])
     for i, s in enumerate(src):
         dist = nx.single_source_dijkstra_path_length(g, s, weight="t")
         np.testing.assert_allclose(got[i], [dist[t] for t in tgt], rtol=1e-9)
@@ -130,7 +131,8 @@ def test_chicago_travel_times_match_networkx_on_an_independent_parse(chicago):
 # ---------------------------------------------------------------- routes and legs
 def test_route_legs_are_edge_paths_with_cumulative_times(chicago):
     rng = np.random.default_rng(3)
-    starts: list = [int(x) for x in rng.integers(0, chicago.n, 4)] + _mid_edge_points(chicago, rng, 4)
+    starts: list = [int(x) for x in rng.integers(0, chicago.n, 4)]
+    starts += _mid_edge_points(chicago, rng, 4)
     goals = [int(x) for x in rng.integers(0, chicago.n, 8)]
     expect = chicago.travel_times(starts, goals)
     for i, (start, goal) in enumerate(zip(starts, goals)):
@@ -139,8 +141,10 @@ def test_route_legs_are_edge_paths_with_cumulative_times(chicago):
         assert leg.nodes[0] == p.node and leg.nodes[-1] == goal
         steps = [_edge(chicago, int(u), int(v)) for u, v in zip(leg.nodes[:-1], leg.nodes[1:])]
         assert all(s > 0 for s, _ in steps)  # every step is an edge
-        np.testing.assert_allclose(leg.times, p.remaining + np.concatenate([[0], np.cumsum([s for s, _ in steps])]))
-        np.testing.assert_allclose(leg.metres, p.remaining_m + np.concatenate([[0], np.cumsum([m for _, m in steps])]))
+        secs = np.concatenate([[0.0], np.cumsum([s for s, _ in steps])])
+        metres = np.concatenate([[0.0], np.cumsum([m for _, m in steps])])
+        np.testing.assert_allclose(leg.times, p.remaining + secs)
+        np.testing.assert_allclose(leg.metres, p.remaining_m + metres)
         assert leg.seconds == pytest.approx(expect[i, i], rel=1e-12)
         assert chicago.path_metres(start, goal) == pytest.approx(leg.length)
         assert leg.prev == (p.prev if not p.on_node else -1)
@@ -277,7 +281,8 @@ NET = """<NUMBER OF ZONES> 2
 \t5\t6\t1000\t0.25\t1.0\t0.15\t4\t20\t0\t1\t;
 \t4\t5\t1000\t2.5\t2.5\t0.15\t4\t60\t0\t2\t;
 """
-NODES = "node\tX\tY\t;\n1\t0\t0\t;\n2\t3937\t0\t;\n3\t0\t3937\t;\n4\t3937\t3937\t;\n5\t7874\t0\t;\n6\t0\t7874\t;\n"
+NODES = ("node\tX\tY\t;\n1\t0\t0\t;\n2\t3937\t0\t;\n3\t0\t3937\t;\n4\t3937\t3937\t;\n"
+         "5\t7874\t0\t;\n6\t0\t7874\t;\n")
 
 
 def _tiny_tntp(tmp_path: Path) -> Path:
@@ -334,7 +339,8 @@ def test_chicago_shipped_byte_for_byte_and_strongly_connected(chicago):
         if SHARED.is_dir():
             assert f.read_bytes() == (SHARED / f.name).read_bytes()
     notice = " ".join((net_file.parent / "NOTICE.md").read_text().replace("*", "").split())
-    assert "academic research purposes only" in notice and "d1639b4ef218c17928ba573e806ddf8ba5e7ae6d" in notice
+    assert "academic research purposes only" in notice
+    assert "d1639b4ef218c17928ba573e806ddf8ba5e7ae6d" in notice
     assert 11_000 <= chicago.n <= 11_300 and chicago.n == 11_180
     assert chicago.crs == "EPSG:26771" and chicago.name == "chicago"
     assert np.asarray(chicago.ids).min() >= 1791  # no zone centroid
