@@ -34,6 +34,7 @@ _FALLBACK = {
         "rrt_star": "planners.rrt_star:RRTStarPlanner",
         "rstar": "planners.rstar:RStarPlanner",
         "reservation": "planners.reservation:ReservationPlanner",
+        "dijkstra": "planners.road:RoadPlanner",
     },
 }
 

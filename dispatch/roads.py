@@ -1,0 +1,643 @@
+"""The road-network space: a directed graph with travel times, where taxis drive.
+
+A location is a node index (``int``, ``0 .. n-1``) or, for a vehicle, a :class:`RoadPoint`: on a
+node, or part-way along an edge it must finish (vehicles never turn round mid-edge). So the
+travel time from a point to a node is ``point.remaining`` plus the shortest time from
+``point.node``; every query here keeps to that rule.
+
+Networks come from three sources (:func:`load_network` picks by name or suffix):
+
+* :func:`manhattan`: a generated grid of intersections (tests, toy studies);
+* :func:`read_graphml`: any GraphML with ``x``/``y`` metres per node and ``length`` metres plus
+  ``travel_time`` seconds or ``speed`` m/s per edge (e.g. an OSMnx export, projected);
+* :func:`read_tntp`: the TNTP format of the Transportation Networks for Research project; the
+  Chicago Regional network ships with the package (``load_network("chicago")``, see
+  ``dispatch/data/chicago_regional/NOTICE.md`` for its academic-only licence).
+
+Every loader keeps only the largest strongly connected component, so every node reaches every
+other and travel times between nodes are finite. Shortest paths are
+:func:`scipy.sparse.csgraph.dijkstra` on the ``time`` matrix (forward) or its transpose
+(backward, one run per target).
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib.resources
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import connected_components, dijkstra
+
+from dispatch.space import Position, Space
+
+log = logging.getLogger(__name__)
+
+#: Metres per unit of the source formats.
+MILE = 1609.344
+MPH = 0.44704
+US_SURVEY_FOOT = 1200.0 / 3937.0
+#: The CRS of the Chicago Regional node coordinates (NAD27 / Illinois East, US survey feet).
+CHICAGO_CRS = "EPSG:26771"
+#: Rows of a ``(sources, nodes)`` Dijkstra block: bounds the scratch memory of a query
+#: (512 x 11,180 float64 = 46 MB on Chicago).
+DIJKSTRA_BLOCK = 512
+
+_CHICAGO_DIR = "data/chicago_regional"
+_CHICAGO_NET = "ChicagoRegional_net.tntp"
+
+
+@dataclass(frozen=True, slots=True)
+class RoadPoint:
+    """Where a vehicle is: at node `node` (prev == -1, remaining == 0), or on the edge prev -> node
+    with `remaining` seconds and `remaining_m` metres still to drive to `node`."""
+
+    node: int
+    prev: int = -1
+    remaining: float = 0.0
+    remaining_m: float = 0.0
+
+    @property
+    def on_node(self) -> bool:
+        """True when the vehicle stands on ``node`` (nothing left to drive)."""
+        return self.prev < 0 or self.remaining <= 0.0
+
+
+def _as_point(loc: RoadPoint | int) -> RoadPoint:
+    """A node index (any integer type) or a point, as a point."""
+    if isinstance(loc, RoadPoint):
+        return loc
+    return RoadPoint(int(loc))
+
+
+@dataclass(frozen=True)
+class Leg:
+    """A drive along a node path: nodes[0] is where it starts (the point's `node`),
+    times[i] / metres[i] are the cumulative seconds / metres from the start point to nodes[i]
+    (times[0] = point.remaining).
+
+    ``prev`` is the start point's ``prev`` (``-1`` when the leg starts on a node): needed to say
+    where a vehicle is before it reaches ``nodes[0]``.
+    """
+
+    nodes: np.ndarray  # int64
+    times: np.ndarray  # float64
+    metres: np.ndarray  # float64
+    prev: int = -1
+
+    @property
+    def seconds(self) -> float:
+        """Seconds from the start point to the last node."""
+        return float(self.times[-1])
+
+    @property
+    def length(self) -> float:
+        """Metres from the start point to the last node."""
+        return float(self.metres[-1])
+
+    def point_at(self, t: float) -> RoadPoint:
+        """Where a vehicle driving the leg is ``t`` seconds after its start: linear in time along
+        the edge it is on; the last node from ``t >= seconds`` on; a node when ``t`` is exactly
+        the arrival time there."""
+        times, nodes = self.times, self.nodes
+        if t >= times[-1]:
+            return RoadPoint(int(nodes[-1]))
+        t = max(float(t), 0.0)
+        i = int(np.searchsorted(times, t, side="right"))  # times[i-1] <= t < times[i]
+        if i == 0:  # still finishing the edge the leg started on
+            rem = float(times[0]) - t
+            rem_m = float(self.metres[0]) * rem / float(times[0])
+            return RoadPoint(int(nodes[0]), self.prev, rem, rem_m)
+        if t == times[i - 1]:
+            return RoadPoint(int(nodes[i - 1]))
+        span = float(times[i] - times[i - 1])
+        rem = float(times[i]) - t
+        return RoadPoint(int(nodes[i]), int(nodes[i - 1]), rem,
+                         float(self.metres[i] - self.metres[i - 1]) * rem / span)
+
+
+class RoadNetwork(Space):
+    """A directed road graph: node positions in metres and per-edge travel seconds and metres.
+
+    Nodes are indices ``0 .. n-1``; ``ids[i]`` is node ``i``'s id in the source (Manhattan: the
+    index; TNTP: the node number; GraphML: the node key, a string). ``time`` and ``length`` are
+    ``n x n`` CSR matrices with the same sparsity pattern (sorted indices, no explicit zeros:
+    every edge time is positive). Immutable once built: arrays are read-only, so planners and
+    the loaders' cache may share one network.
+    """
+
+    kind: ClassVar[str] = "road"
+
+    def __init__(self, name: str, xy: np.ndarray, ids: Any, time: csr_matrix, length: csr_matrix,
+                 crs: str | None = None) -> None:
+        """Wrap already-clean arrays (use :meth:`from_edges` to build from raw edge lists)."""
+        self.name = name
+        self.xy = np.ascontiguousarray(xy, dtype=np.float64)
+        self.n = int(self.xy.shape[0])
+        self.ids = ids
+        self.time = time
+        self.length = length
+        self.crs = crs
+        for a in (self.xy, time.data, time.indices, time.indptr, length.data):
+            a.setflags(write=False)
+
+    # ---------------------------------------------------------------- construction
+    @classmethod
+    def from_edges(cls, name: str, xy: np.ndarray, ids: Any, u: np.ndarray, v: np.ndarray,
+                   seconds: np.ndarray, metres: np.ndarray, crs: str | None = None) -> RoadNetwork:
+        """Build a network from directed edges ``u[k] -> v[k]`` (node indices into ``xy``).
+
+        Self-loops are dropped (they never shorten a path); of parallel edges the fastest is
+        kept, with its own length. Then only the largest strongly connected component is kept
+        (nodes renumbered in their original order), logging how many nodes were dropped.
+        Callers guarantee positive, finite ``seconds`` and non-negative ``metres``.
+        """
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        n = xy.shape[0]
+        u, v = np.asarray(u, dtype=np.int64), np.asarray(v, dtype=np.int64)
+        seconds = np.asarray(seconds, dtype=np.float64)
+        metres = np.asarray(metres, dtype=np.float64)
+        keep = u != v
+        u, v, seconds, metres = u[keep], v[keep], seconds[keep], metres[keep]
+        # sort by (u, v, seconds): the first of each (u, v) run is the fastest parallel edge
+        order = np.lexsort((seconds, v, u))
+        u, v, seconds, metres = u[order], v[order], seconds[order], metres[order]
+        first = np.ones(u.size, dtype=bool)
+        first[1:] = (u[1:] != u[:-1]) | (v[1:] != v[:-1])
+        u, v, seconds, metres = u[first], v[first], seconds[first], metres[first]
+
+        time = _csr(u, v, seconds, n)
+        _, labels = connected_components(time, directed=True, connection="strong")
+        counts = np.bincount(labels, minlength=1)
+        inside = labels == int(np.argmax(counts)) if n else np.zeros(0, dtype=bool)
+        dropped = n - int(inside.sum())
+        if dropped:
+            log.info("road network %s: kept the largest strongly connected component, %d of %d "
+                     "nodes (dropped %d)", name, n - dropped, n, dropped)
+        new = np.cumsum(inside) - 1
+        ek = inside[u] & inside[v]
+        u, v, seconds, metres = new[u[ek]], new[v[ek]], seconds[ek], metres[ek]
+        m = int(inside.sum())
+        ids = ids[inside] if isinstance(ids, np.ndarray) else [i for i, k in zip(ids, inside) if k]
+        return cls(name, xy[inside], ids, _csr(u, v, seconds, m), _csr(u, v, metres, m), crs)
+
+    # ---------------------------------------------------------------- ids and positions
+    @property
+    def n_edges(self) -> int:
+        """Number of directed edges."""
+        return int(self.time.nnz)
+
+    @cached_property
+    def _index(self) -> dict[str, int]:
+        ids = self.ids.tolist() if isinstance(self.ids, np.ndarray) else self.ids
+        return {str(i): k for k, i in enumerate(ids)}
+
+    def index_of(self, node_id: Any) -> int:
+        """The node index of a source id (``12`` and ``"12"`` name the same node); ValueError
+        naming the id when the network has no such node (or dropped it: not strongly connected)."""
+        key = node_id.strip() if isinstance(node_id, str) else str(node_id)
+        if isinstance(node_id, (float, np.floating)) and float(node_id).is_integer():
+            key = str(int(node_id))
+        try:
+            return self._index[key]
+        except KeyError:
+            raise ValueError(f"road network {self.name!r} has no node {node_id!r}") from None
+
+    def position(self, loc: RoadPoint | int) -> Position:
+        """``(x, y, 0.0)`` metres: the node's, or for a point part-way along ``prev -> node``
+        the straight-segment position at the fraction of the edge's time already driven."""
+        p = self.positions([loc])[0]
+        return float(p[0]), float(p[1]), 0.0
+
+    def positions(self, locs: Sequence[RoadPoint | int] | np.ndarray) -> np.ndarray:
+        """``(len(locs), 3)`` positions (see :meth:`position`); vectorized for integer arrays."""
+        if isinstance(locs, np.ndarray) and locs.dtype.kind in "iu":
+            out = np.zeros((locs.size, 3))
+            out[:, :2] = self.xy[locs.reshape(-1)]
+            return out
+        node, prev, rem, _ = _point_arrays(locs)
+        out = np.zeros((node.size, 3))
+        out[:, :2] = self.xy[node]
+        mid = np.flatnonzero((prev >= 0) & (rem > 0))
+        if mid.size:
+            full = self.time.data[self._edge_index(prev[mid], node[mid])]
+            frac = np.minimum(rem[mid] / full, 1.0)[:, None]  # share of the edge still ahead
+            out[mid, :2] -= frac * (self.xy[node[mid]] - self.xy[prev[mid]])
+        return out
+
+    # ---------------------------------------------------------------- edges and legs
+    @cached_property
+    def _keys(self) -> np.ndarray:
+        """``u * n + v`` of every edge in CSR order (sorted): edge lookup by searchsorted."""
+        rows = np.repeat(np.arange(self.n, dtype=np.int64), np.diff(self.time.indptr))
+        keys = rows * self.n + self.time.indices
+        keys.setflags(write=False)
+        return keys
+
+    def _edge_index(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """CSR data index of each edge ``u[k] -> v[k]``; ValueError naming the first non-edge."""
+        u, v = np.asarray(u, dtype=np.int64), np.asarray(v, dtype=np.int64)
+        ok = (u >= 0) & (u < self.n) & (v >= 0) & (v < self.n)
+        key = np.where(ok, u * self.n + v, -1)
+        k = np.minimum(np.searchsorted(self._keys, key), max(self._keys.size - 1, 0))
+        found = ok & (self._keys.size > 0)
+        if self._keys.size:
+            found &= self._keys[k] == key
+        if not found.all():
+            bad = int(np.flatnonzero(~found)[0])
+            raise ValueError(f"road network {self.name!r}: no edge {int(u[bad])} -> {int(v[bad])}")
+        return k
+
+    def edge(self, u: int, v: int) -> tuple[float, float]:
+        """``(seconds, metres)`` of the edge ``u -> v``; ValueError if there is none."""
+        k = int(self._edge_index(np.array([u]), np.array([v]))[0])
+        return float(self.time.data[k]), float(self.length.data[k])
+
+    def leg(self, start: RoadPoint | int, nodes: Sequence[int] | np.ndarray) -> Leg:
+        """The drive from ``start`` along ``nodes`` (``nodes[0]`` must be the start's node; each
+        step must be an edge): cumulative seconds and metres, starting at the start's remaining
+        seconds and metres. ValueError otherwise."""
+        p = _as_point(start)
+        nodes = np.asarray(nodes, dtype=np.int64).reshape(-1)
+        if nodes.size == 0 or int(nodes[0]) != p.node:
+            raise ValueError(f"a leg from node {p.node} must start there, got path starting "
+                             f"{nodes[:1].tolist()}")
+        k = self._edge_index(nodes[:-1], nodes[1:])
+        times = np.empty(nodes.size)
+        metres = np.empty(nodes.size)
+        times[0], metres[0] = max(p.remaining, 0.0), max(p.remaining_m, 0.0)
+        times[1:] = self.time.data[k]
+        metres[1:] = self.length.data[k]
+        return Leg(nodes, np.cumsum(times), np.cumsum(metres), p.prev if not p.on_node else -1)
+
+    # ---------------------------------------------------------------- shortest paths
+    @cached_property
+    def _time_t(self) -> csr_matrix:
+        """The transposed time matrix: Dijkstra on it from ``t`` gives times *to* ``t``."""
+        return self.time.T.tocsr()
+
+    def route(self, start: RoadPoint | int, goal: int) -> Leg | None:
+        """The fastest leg from ``start`` to node ``goal`` (via the start's node), or None if
+        ``goal`` is unreachable (never, within one strongly connected network, for valid nodes)."""
+        p = _as_point(start)
+        goal = int(goal)
+        if p.node == goal:
+            return self.leg(p, [goal])
+        dist, pred = dijkstra(self.time, indices=p.node, return_predecessors=True)
+        if not np.isfinite(dist[goal]):
+            return None
+        path = [goal]
+        while path[-1] != p.node:
+            path.append(int(pred[path[-1]]))
+        return self.leg(p, path[::-1])
+
+    def _fields(self, graph: csr_matrix, sources: np.ndarray) -> np.ndarray:
+        """``(len(sources), n)`` Dijkstra times from each source on ``graph``, in blocks."""
+        out = np.empty((sources.size, self.n))
+        for s in range(0, sources.size, DIJKSTRA_BLOCK):
+            out[s:s + DIJKSTRA_BLOCK] = dijkstra(graph, indices=sources[s:s + DIJKSTRA_BLOCK])
+        return out
+
+    def distance_to(self, target: int) -> np.ndarray:
+        """Seconds from every node to node ``target`` (``inf`` where it cannot be reached)."""
+        return dijkstra(self._time_t, indices=int(target))
+
+    def distances_to(self, targets: Sequence[int] | np.ndarray) -> np.ndarray:
+        """``(len(targets), n)``: row ``j`` is :meth:`distance_to` ``(targets[j])``."""
+        return self._fields(self._time_t, np.asarray(targets, dtype=np.int64).reshape(-1))
+
+    def distances_from(self, sources: Sequence[int] | np.ndarray) -> np.ndarray:
+        """``(len(sources), n)``: row ``i`` is the seconds from node ``sources[i]`` to each node."""
+        return self._fields(self.time, np.asarray(sources, dtype=np.int64).reshape(-1))
+
+    def travel_times(self, sources: Sequence[RoadPoint | int],
+                     targets: Sequence[int]) -> np.ndarray:
+        """``(len(sources), len(targets))`` exact seconds, ``inf`` where unreachable:
+        ``source.remaining`` plus the shortest time from ``source.node``. One Dijkstra per
+        distinct node on the smaller side (forward from sources or backward from targets)."""
+        node, _, rem, _ = _point_arrays(sources)
+        tgt = np.asarray(targets, dtype=np.int64).reshape(-1)
+        if node.size == 0 or tgt.size == 0:
+            return np.empty((node.size, tgt.size))
+        src_u, src_inv = np.unique(node, return_inverse=True)
+        tgt_u, tgt_inv = np.unique(tgt, return_inverse=True)
+        if src_u.size <= tgt_u.size:
+            block = self.distances_from(src_u)[:, tgt_u]
+        else:
+            block = self.distances_to(tgt_u)[:, src_u].T
+        return block[np.ix_(src_inv, tgt_inv)] + rem[:, None]
+
+    def path_metres(self, start: RoadPoint | int, goal: int) -> float:
+        """Metres of the fastest leg from ``start`` to ``goal`` (``inf`` if unreachable)."""
+        leg = self.route(start, goal)
+        return float("inf") if leg is None else leg.length
+
+    # ---------------------------------------------------------------- geometry
+    @cached_property
+    def _tree(self):
+        from scipy.spatial import cKDTree
+
+        return cKDTree(self.xy)
+
+    def nearest(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per point (``(k, 2)`` metres): the nearest node's index and its distance in metres."""
+        dist, idx = self._tree.query(np.asarray(xy, dtype=np.float64).reshape(-1, 2))
+        return np.asarray(idx, dtype=np.int64), np.asarray(dist, dtype=np.float64)
+
+    @cached_property
+    def _lonlat(self):
+        """(transformer WGS84 lon/lat -> crs, metres per crs unit)."""
+        from pyproj import CRS, Transformer
+
+        crs = CRS.from_user_input(self.crs)
+        unit = crs.axis_info[0].unit_conversion_factor if crs.axis_info else 1.0
+        return Transformer.from_crs("EPSG:4326", crs, always_xy=True), float(unit)
+
+    def lonlat_to_xy(self, lon: Any, lat: Any) -> np.ndarray:
+        """``(k, 2)`` metres in this network's frame of WGS84 longitudes / latitudes (degrees).
+        ValueError when the network has no CRS (e.g. Manhattan)."""
+        if self.crs is None:
+            raise ValueError(f"road network {self.name!r} has no CRS: cannot place lon/lat points")
+        transformer, unit = self._lonlat
+        x, y = transformer.transform(np.asarray(lon, dtype=np.float64).reshape(-1),
+                                     np.asarray(lat, dtype=np.float64).reshape(-1))
+        return np.column_stack([x, y]) * unit
+
+    def describe(self) -> dict[str, str]:
+        """``dispatch.*`` metadata: space kind, network name, node and edge counts, CRS."""
+        return {"dispatch.space": self.kind, "dispatch.network": self.name,
+                "dispatch.nodes": str(self.n), "dispatch.edges": str(self.n_edges),
+                "dispatch.crs": self.crs or "none"}
+
+    def __repr__(self) -> str:
+        return f"RoadNetwork({self.name!r}, nodes={self.n}, edges={self.n_edges}, crs={self.crs!r})"
+
+
+def _csr(u: np.ndarray, v: np.ndarray, w: np.ndarray, n: int) -> csr_matrix:
+    """An ``n x n`` CSR matrix from unique ``(u, v)`` entries sorted by ``(u, v)``, built
+    directly (no summing, so explicit entries are never merged or dropped)."""
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(np.bincount(u, minlength=n), out=indptr[1:])
+    m = csr_matrix((np.asarray(w, dtype=np.float64), np.asarray(v, dtype=np.int32),
+                    indptr.astype(np.int32)), shape=(n, n))
+    m.has_sorted_indices = True
+    return m
+
+
+def _point_arrays(locs: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(node, prev, remaining, remaining_m)`` arrays of a sequence of ints and points."""
+    if isinstance(locs, np.ndarray) and locs.dtype.kind in "iu":
+        node = locs.astype(np.int64).reshape(-1)
+        z = np.zeros(node.size)
+        return node, np.full(node.size, -1, dtype=np.int64), z, z
+    pts = [_as_point(loc) for loc in locs]
+    node = np.fromiter((p.node for p in pts), np.int64, len(pts))
+    prev = np.fromiter((p.prev for p in pts), np.int64, len(pts))
+    rem = np.fromiter((max(p.remaining, 0.0) for p in pts), np.float64, len(pts))
+    rem_m = np.fromiter((max(p.remaining_m, 0.0) for p in pts), np.float64, len(pts))
+    return node, prev, rem, rem_m
+
+
+# ==================================================================== loaders
+def manhattan(columns: int, rows: int, block: float = 200.0, speed: float = 10.0) -> RoadNetwork:
+    """A grid of ``columns x rows`` intersections: node ``row * columns + column`` at
+    ``(column * block, row * block)`` metres, two-way streets of ``block`` metres between
+    4-neighbours, each driven in ``block / speed`` seconds."""
+    if columns < 1 or rows < 1:
+        raise ValueError(f"manhattan: need at least 1 x 1 intersections, got {columns} x {rows}")
+    if not (np.isfinite(block) and block > 0 and np.isfinite(speed) and speed > 0):
+        raise ValueError(f"manhattan: block and speed must be positive, got {block!r}, {speed!r}")
+    idx = np.arange(columns * rows, dtype=np.int64).reshape(rows, columns)
+    xy = np.column_stack([(idx % columns).ravel() * block, (idx // columns).ravel() * block])
+    a = np.concatenate([idx[:, :-1].ravel(), idx[:-1, :].ravel()])
+    b = np.concatenate([idx[:, 1:].ravel(), idx[1:, :].ravel()])
+    u, v = np.concatenate([a, b]), np.concatenate([b, a])
+    seconds, metres = np.full(u.size, block / speed), np.full(u.size, float(block))
+    return RoadNetwork.from_edges(f"manhattan-{columns}x{rows}", xy, np.arange(columns * rows),
+                                  u, v, seconds, metres)
+
+
+def _positive(file: Path, what: str, attr: str, value: Any, zero_ok: bool = False) -> float:
+    """``value`` as a finite float, > 0 (or >= 0 with ``zero_ok``); ValueError naming it."""
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{file}: {what}: attribute {attr!r} is not a number: {value!r}") from None
+    if not np.isfinite(x) or x < 0 or (x == 0 and not zero_ok):
+        need = "non-negative" if zero_ok else "positive"
+        raise ValueError(f"{file}: {what}: attribute {attr!r} must be finite and {need}, "
+                         f"got {value!r}")
+    return x
+
+
+def read_graphml(path: str | Path) -> RoadNetwork:
+    """A network from GraphML: node ``x``/``y`` (metres), edge ``length`` (metres) and
+    ``travel_time`` (seconds) or ``speed`` (m/s; ``travel_time`` wins). Undirected graphs get
+    both directions; the graph attribute ``crs`` is kept. A missing, non-numeric, non-finite
+    or non-positive attribute raises ValueError naming the file, the node or edge and the
+    attribute (a ``length`` may be 0; a ``travel_time`` may not)."""
+    import networkx as nx
+
+    path = Path(path)
+    g = nx.read_graphml(path)
+    keys = list(g.nodes)
+    index = {k: i for i, k in enumerate(keys)}
+    xy = np.empty((len(keys), 2))
+    for i, (k, data) in enumerate(g.nodes(data=True)):
+        for j, attr in enumerate(("x", "y")):
+            if attr not in data:
+                raise ValueError(f"{path}: node {k!r}: missing attribute {attr!r}")
+            xy[i, j] = float(data[attr])
+            if not np.isfinite(xy[i, j]):
+                raise ValueError(f"{path}: node {k!r}: attribute {attr!r} is not finite: "
+                                 f"{data[attr]!r}")
+    u, v, sec, met = [], [], [], []
+    for a, b, data in g.edges(data=True):
+        what = f"edge {a!r} -> {b!r}"
+        if "length" not in data:
+            raise ValueError(f"{path}: {what}: missing attribute 'length'")
+        m = _positive(path, what, "length", data["length"], zero_ok=True)
+        if "travel_time" in data:
+            s = _positive(path, what, "travel_time", data["travel_time"])
+        elif "speed" in data:
+            s = m / _positive(path, what, "speed", data["speed"])
+            if s <= 0:
+                raise ValueError(f"{path}: {what}: 'length' 0 with a 'speed' gives a zero time; "
+                                 "give a positive 'travel_time'")
+        else:
+            raise ValueError(f"{path}: {what}: missing attribute 'travel_time' (or 'speed')")
+        u.append(index[a]), v.append(index[b]), sec.append(s), met.append(m)
+    u_a, v_a = np.array(u, dtype=np.int64), np.array(v, dtype=np.int64)
+    sec_a, met_a = np.array(sec), np.array(met)
+    if not g.is_directed():
+        u_a, v_a = np.concatenate([u_a, v_a]), np.concatenate([v_a, u_a])
+        sec_a, met_a = np.tile(sec_a, 2), np.tile(met_a, 2)
+    crs = g.graph.get("crs")
+    return RoadNetwork.from_edges(path.stem, xy, [str(k) for k in keys], u_a, v_a, sec_a, met_a,
+                                  str(crs) if crs else None)
+
+
+def _tntp_table(path: Path) -> tuple[dict[str, str], list[str], np.ndarray]:
+    """``(metadata, column names, rows)`` of a TNTP file: ``<KEY> value`` lines up to
+    ``<END OF METADATA>`` (if any), a header line (``~ a b c ;`` or ``a b c``), then
+    whitespace-separated numeric rows, each optionally ending with ``;``."""
+    text = path.read_text()
+    meta: dict[str, str] = {}
+    head, sep, body = text.partition("<END OF METADATA>")
+    if sep:
+        for line in head.splitlines():
+            line = line.strip()
+            if line.startswith("<") and ">" in line:
+                key, _, value = line[1:].partition(">")
+                meta[key.strip().upper()] = value.strip()
+    else:
+        body = text
+    lines = body.splitlines()
+    header_at = next((i for i, ln in enumerate(lines) if ln.strip()), None)
+    if header_at is None:
+        raise ValueError(f"{path}: no header line and no rows")
+    columns = [c.lower() for c in lines[header_at].replace(";", " ").replace("~", " ").split()]
+    if not columns or _is_number(columns[0]):
+        raise ValueError(f"{path}: expected a header line naming the columns, got "
+                         f"{lines[header_at].strip()!r}")
+    rows = [ln for ln in lines[header_at + 1:] if ln.strip() and not ln.lstrip().startswith("~")]
+    tokens = " ".join(rows).replace(";", " ").split()
+    if len(tokens) % len(columns):
+        counts = [len(r.replace(";", " ").split()) for r in rows]
+        bad = next(i for i, c in enumerate(counts) if c != len(columns))
+        raise ValueError(f"{path}: row {rows[bad].strip()!r} has {counts[bad]} values, "
+                         f"expected {len(columns)} ({' '.join(columns)})")
+    try:
+        data = np.array(tokens, dtype=np.float64).reshape(-1, len(columns))
+    except ValueError as e:
+        raise ValueError(f"{path}: non-numeric value in the table: {e}") from None
+    return meta, columns, data
+
+
+def _is_number(s: str) -> bool:
+    try:
+        float(s)
+    except ValueError:
+        return False
+    return True
+
+
+def _column(path: Path, columns: list[str], data: np.ndarray, name: str) -> np.ndarray:
+    if name not in columns:
+        raise ValueError(f"{path}: no column {name!r} (columns: {' '.join(columns)})")
+    return data[:, columns.index(name)]
+
+
+def read_tntp(net_path: str | Path, node_path: str | Path, *, name: str | None = None,
+              crs: str | None = CHICAGO_CRS) -> RoadNetwork:
+    """A network from a TNTP link file and node file (see ``data/roads/PROVENANCE.txt``).
+
+    Zone centroids (node numbers below ``<FIRST THRU NODE>``) and every link touching them are
+    dropped. Lengths are miles, free-flow times minutes; where a free-flow time is 0 the time is
+    length / speed (mph). Node X/Y are read in US survey feet (``crs`` EPSG:26771, the Chicago
+    Regional frame) and stored in metres. ValueError naming the file for anything malformed
+    (a link to a node the node file lacks, a link with neither a time nor a positive speed)."""
+    net_path, node_path = Path(net_path), Path(node_path)
+    meta, cols, links = _tntp_table(net_path)
+    _, ncols, nodes = _tntp_table(node_path)
+    first_thru = int(float(meta.get("FIRST THRU NODE", "1")))
+    node_no = _column(node_path, ncols, nodes, "node").astype(np.int64)
+    node_xy = np.column_stack([_column(node_path, ncols, nodes, "x"),
+                               _column(node_path, ncols, nodes, "y")]) * US_SURVEY_FOOT
+    a = _column(net_path, cols, links, "init_node").astype(np.int64)
+    b = _column(net_path, cols, links, "term_node").astype(np.int64)
+    miles = _column(net_path, cols, links, "length")
+    minutes = _column(net_path, cols, links, "free_flow_time")
+    mph = _column(net_path, cols, links, "speed")
+
+    thru = node_no >= first_thru
+    node_no, node_xy = node_no[thru], node_xy[thru]
+    keep = (a >= first_thru) & (b >= first_thru)
+    a, b, miles, minutes, mph = a[keep], b[keep], miles[keep], minutes[keep], mph[keep]
+    log.debug("%s: dropped %d zone centroids and %d links touching them", net_path.name,
+              int((~thru).sum()), int((~keep).sum()))
+
+    order = np.argsort(node_no)
+    sorted_no = node_no[order]
+    if np.any(sorted_no[1:] == sorted_no[:-1]):
+        raise ValueError(f"{node_path}: node numbers repeat")
+    u, v = np.searchsorted(sorted_no, a), np.searchsorted(sorted_no, b)
+    for ends, nums in ((u, a), (v, b)):
+        at = np.minimum(ends, sorted_no.size - 1)
+        missing = (ends >= sorted_no.size) | (sorted_no[at] != nums)
+        if missing.any():
+            raise ValueError(f"{net_path}: link node {int(nums[missing][0])} is not in "
+                             f"{node_path.name}")
+    u, v = order[u], order[v]
+
+    metres = miles * MILE
+    with np.errstate(divide="ignore", invalid="ignore"):
+        seconds = np.where(minutes > 0, minutes * 60.0, metres / (mph * MPH))
+    bad = ~(np.isfinite(seconds) & (seconds > 0) & np.isfinite(metres) & (metres >= 0))
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"{net_path}: link {int(a[k])} -> {int(b[k])}: no positive travel time "
+                         f"(free_flow_time {minutes[k]!r}, length {miles[k]!r}, speed {mph[k]!r})")
+    stem = net_path.name.removesuffix(".tntp").removesuffix("_net")
+    return RoadNetwork.from_edges(name or stem, node_xy, node_no, u, v, seconds, metres, crs)
+
+
+# ==================================================================== load by name
+def chicago_files() -> tuple[Path, Path]:
+    """Paths of the shipped Chicago Regional link and node files."""
+    root = importlib.resources.files("dispatch") / _CHICAGO_DIR
+    net = Path(str(root / _CHICAGO_NET))
+    return net, _node_file(net)
+
+
+def _node_file(net: Path) -> Path:
+    """``X_net.tntp`` -> ``X_node.tntp`` beside it."""
+    stem = net.name.removesuffix(".tntp")
+    if not stem.endswith("_net"):
+        raise ValueError(f"{net}: a TNTP link file must be named X_net.tntp "
+                         "(its node file X_node.tntp)")
+    return net.with_name(stem.removesuffix("_net") + "_node.tntp")
+
+
+@functools.lru_cache(maxsize=4)
+def _load_file(path: str, mtime_ns: int, node_mtime_ns: int, name: str | None) -> RoadNetwork:
+    """One network per (file, modification times): edited files are read again."""
+    p = Path(path)
+    if p.suffix.lower() == ".graphml":
+        return read_graphml(p)
+    return read_tntp(p, _node_file(p), name=name)
+
+
+def load_network(source: str, *, base: Path, blocks: Sequence[int] = (20, 20), block: float = 200.0,
+                 speed: float = 10.0) -> RoadNetwork:
+    """The network a scenario names: ``"manhattan"`` (``blocks = [columns, rows]`` intersections,
+    ``block`` metres apart, driven at ``speed`` m/s), ``"chicago"`` (the shipped Chicago Regional
+    network), or a ``.graphml`` / ``X_net.tntp`` file relative to ``base``. Files are read once
+    per (resolved path, modification time), up to four kept. ValueError with a one-line message
+    naming the file for a missing file or an unknown suffix."""
+    if source == "manhattan":
+        columns, rows = (int(b) for b in blocks)
+        return manhattan(columns, rows, block, speed)
+    if source == "chicago":
+        path, name = chicago_files()[0], "chicago"
+    else:
+        path, name = (Path(base) / source).resolve(), None
+        if path.suffix.lower() not in (".graphml", ".tntp"):
+            suffix = path.suffix or "(no suffix)"
+            raise ValueError(f"{path}: unknown road network format {suffix!r}; "
+                             "expected 'manhattan', 'chicago', a .graphml or an X_net.tntp file")
+    if not path.is_file():
+        raise ValueError(f"{path}: road network file not found")
+    node_mtime = 0
+    if path.suffix.lower() == ".tntp":
+        node = _node_file(path)
+        if not node.is_file():
+            raise ValueError(f"{node}: TNTP node file not found (needed beside {path.name})")
+        node_mtime = node.stat().st_mtime_ns
+    return _load_file(str(path), path.stat().st_mtime_ns, node_mtime, name)

@@ -1,0 +1,160 @@
+"""The ``dijkstra`` road planner against scipy's Dijkstra on the network's own CSR matrix."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from scipy.sparse.csgraph import dijkstra
+
+from dispatch.contracts import Planner
+from dispatch.registry import load
+from dispatch.roads import RoadNetwork, RoadPoint, load_network, manhattan
+from planners import road
+from planners.road import RoadPlanner
+
+
+@dataclass(frozen=True)
+class Agent:
+    id: int
+    kind: str
+    loc: Any
+    speed: float = 10.0
+
+
+@dataclass(frozen=True)
+class Task:
+    id: int
+    kind: str
+    loc: int
+
+
+@pytest.fixture(scope="module")
+def chicago() -> RoadNetwork:
+    return load_network("chicago", base=Path("."))
+
+
+def _agents(net: RoadNetwork, rng: np.random.Generator, k: int) -> list[Agent]:
+    """Half on nodes, half part-way along random edges."""
+    coo = net.time.tocoo()
+    out = []
+    for i in range(k):
+        if i % 2:
+            e = int(rng.integers(coo.nnz))
+            f = float(rng.uniform(0.1, 0.9))
+            loc = RoadPoint(int(coo.col[e]), int(coo.row[e]), f * coo.data[e],
+                            f * net.length[coo.row[e], coo.col[e]])
+        else:
+            loc = int(rng.integers(net.n))
+        out.append(Agent(i, "ugv", loc))
+    return out
+
+
+def _expected(net: RoadNetwork, agents, tasks) -> np.ndarray:
+    nodes = [a.loc.node if isinstance(a.loc, RoadPoint) else a.loc for a in agents]
+    rem = np.array([a.loc.remaining if isinstance(a.loc, RoadPoint) else 0.0 for a in agents])
+    return dijkstra(net.time, indices=nodes)[:, [t.loc for t in tasks]] + rem[:, None]
+
+
+def test_costs_backward_fields_then_cached(chicago):
+    rng = np.random.default_rng(1)
+    planner = RoadPlanner(chicago)
+    agents = _agents(chicago, rng, 30)
+    nodes = rng.integers(0, chicago.n, 8)
+    tasks = [Task(i, "ground", int(n)) for i, n in enumerate(nodes)]
+    tasks.append(Task(8, "ground", int(nodes[0])))  # shares task 0's node
+    got = planner.costs(agents, tasks)
+    np.testing.assert_allclose(got, _expected(chicago, agents, tasks), rtol=1e-12)
+    assert planner.stats.extra["fields_computed"] == len(set(nodes.tolist()))  # one per node
+    assert planner.stats.extra["forward_searches"] == 0
+
+    moved = _agents(chicago, rng, 30)  # vehicles moved, tasks unchanged: only cached reads
+    again = planner.costs(moved, tasks)
+    np.testing.assert_allclose(again, _expected(chicago, moved, tasks), rtol=1e-12)
+    assert planner.stats.extra["fields_computed"] == len(set(nodes.tolist()))
+    assert planner.stats.extra["field_reuses"] == len(tasks)
+
+
+def test_costs_forward_when_tasks_outnumber_agent_nodes(chicago):
+    rng = np.random.default_rng(2)
+    planner = RoadPlanner(chicago)
+    agents = _agents(chicago, rng, 3)
+    tasks = [Task(i, "ground", int(n)) for i, n in enumerate(rng.integers(0, chicago.n, 40))]
+    got = planner.costs(agents, tasks)
+    np.testing.assert_allclose(got, _expected(chicago, agents, tasks), rtol=1e-12)
+    assert planner.stats.extra["forward_searches"] == 3
+    assert planner.stats.extra["fields_computed"] == 0 and not planner._fields
+
+    # mixed: a few tasks cached by a backward decision, then many fresh ones answered forward
+    planner.costs(_agents(chicago, rng, 20), tasks[:5])
+    assert planner.stats.extra["fields_computed"] == 5
+    fresh = rng.integers(0, chicago.n, 30)
+    more = tasks[:5] + [Task(100 + i, "ground", int(n)) for i, n in enumerate(fresh)]
+    got = planner.costs(agents, more)
+    np.testing.assert_allclose(got, _expected(chicago, agents, more), rtol=1e-12)
+    assert planner.stats.extra["forward_searches"] == 6
+    assert planner.stats.extra["fields_computed"] == 5
+
+
+def test_forward_ratio_threshold_is_exact_either_side():
+    net = manhattan(15, 10, block=120.0, speed=8.0)
+    rng = np.random.default_rng(4)
+    agents = _agents(net, rng, 2)
+    agent_nodes = {a.loc if isinstance(a.loc, int) else a.loc.node for a in agents}
+    for k in (road.FORWARD_RATIO * 2 - 1, road.FORWARD_RATIO * 2 + 5):
+        nodes = rng.choice(net.n, k, replace=False)
+        tasks = [Task(i, "ground", int(n)) for i, n in enumerate(nodes)]
+        planner = RoadPlanner(net)
+        got = planner.costs(agents, tasks)
+        np.testing.assert_allclose(got, _expected(net, agents, tasks), rtol=1e-12)
+        forward = planner.stats.extra["forward_searches"] > 0
+        assert forward == (k >= road.FORWARD_RATIO * len(agent_nodes))
+
+
+def test_plan_path_time_equals_cost(chicago):
+    rng = np.random.default_rng(6)
+    planner = RoadPlanner(chicago)
+    agents = _agents(chicago, rng, 6)
+    tasks = [Task(i, "ground", int(n)) for i, n in enumerate(rng.integers(0, chicago.n, 6))]
+    cost = planner.costs(agents, tasks)
+    for a, agent in enumerate(agents):
+        for t, task in enumerate(tasks):
+            path = planner.plan(agent, task.loc)
+            start = agent.loc.node if isinstance(agent.loc, RoadPoint) else agent.loc
+            assert path[0] == start and path[-1] == task.loc
+            seconds = sum(float(chicago.time[u, v]) for u, v in zip(path[:-1], path[1:]))
+            rem = agent.loc.remaining if isinstance(agent.loc, RoadPoint) else 0.0
+            assert rem + seconds == pytest.approx(cost[a, t], rel=1e-12)
+    assert planner.plan(Agent(0, "ugv", 7), 7) == [7]
+    assert planner.stats.plans == 37
+
+
+def test_task_closed_drops_the_cache_shared_nodes_last():
+    net = manhattan(6, 6)
+    planner = RoadPlanner(net)
+    agents = [Agent(0, "ugv", 0), Agent(1, "ugv", RoadPoint(8, 7, 3.0, 30.0))]
+    tasks = [Task(1, "ground", 20), Task(2, "ground", 20), Task(3, "ground", 35)]
+    planner.costs(agents, tasks)
+    assert set(planner._fields) == {20, 35} and planner.stats.extra["fields_computed"] == 2
+    planner.task_closed(1)
+    assert 20 in planner._fields  # task 2 still stands on node 20
+    planner.task_closed(2)
+    planner.task_closed(3)
+    planner.task_closed(99)  # unknown: nothing to forget
+    assert not planner._fields and not planner._node_of
+    planner.costs(agents, tasks[:1])
+    assert planner.stats.extra["fields_computed"] == 3  # recomputed after closing
+
+
+def test_refuses_a_non_road_space_and_is_registered():
+    with pytest.raises(TypeError, match="serves road networks"):
+        RoadPlanner(object())  # type: ignore[arg-type]
+    assert load("planner", "dijkstra") is RoadPlanner
+    assert RoadPlanner.spaces == ("road",) and Planner.spaces == ("voxel",)
+    net = manhattan(2, 2)
+    planner = RoadPlanner(net)
+    assert planner.space is net
+    assert planner.costs([], [Task(0, "ground", 1)]).shape == (0, 1)
