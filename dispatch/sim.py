@@ -219,6 +219,15 @@ class Simulation:
         try:
             horizon = env.timeout(self.spec.scenario.duration)
             env.run(until=env.any_of([self.finished, horizon]))
+            for v in self.vehicles:  # the part of a leg driven before the horizon counts
+                if v.leg is not None:
+                    leg, t = v.leg, env.now - v.leg_start
+                    driven = float(np.interp(t, np.r_[0.0, leg.times], np.r_[0.0, leg.metres]))
+                    v.distance += driven
+                    if v.task is not None and v.task.state is TaskState.PICKED_UP:
+                        v.occupied_distance += driven
+                    else:
+                        v.empty_distance += driven
             self.book.close_all(TaskState.CANCELLED)
             for v in self.vehicles:
                 if v.busy:
