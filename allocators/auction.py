@@ -179,9 +179,9 @@ class _CBBA:
         self.paths: list[list[int]] = [[] for _ in range(n)]
         self.seconds = np.zeros(n)
         if bundle_size > 1 and m:
-            cells = np.array([t.cell for t in problem.tasks], dtype=float)
-            self.legs = (np.linalg.norm(cells[:, None] - cells[None, :], axis=-1)
-                         * problem.cell_size)  # metres between tasks (straight line)
+            pos = problem.task_pos
+            # metres between tasks (straight line)
+            self.legs = np.linalg.norm(pos[:, None] - pos[None, :], axis=-1)
             self.speed = np.array([a.speed for a in problem.agents], dtype=float)
 
     # -------------------------------------------------------------- scores (L > 1)

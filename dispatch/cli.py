@@ -82,7 +82,6 @@ def _run(args, console) -> int:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from dispatch.runner import default_out, execute
-    from dispatch.tables import render
 
     sc, specs = _specs(args)
     out = args.out or default_out(specs[0])
@@ -96,10 +95,22 @@ def _run(args, console) -> int:
             progress.update(bar, advance=1, description=result.spec.run_id)
 
         summaries = execute(specs, out, on_done=done)
-    render(summaries, console)
+    _tables(summaries, console)
     console.print(f"{len(specs)} run(s) in {time.perf_counter() - started:.1f} s; "
                   f"Parquet written to {out}/", soft_wrap=True)
     return 0
+
+
+def _tables(summaries, console) -> None:
+    """Paper tables for voxel runs, the trip table for road-network runs."""
+    from dispatch.tables import render, render_trips
+
+    voxel = [s for s in summaries if s.get("space", "voxel") == "voxel"]
+    roads = [s for s in summaries if s.get("space") == "road"]
+    if voxel:
+        render(voxel, console)
+    if roads:
+        render_trips(roads, console)
 
 
 def _validate(args, console) -> int:
@@ -193,7 +204,6 @@ def _sweep(args, console) -> int:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from dispatch.runner import default_out, foreign_runs, sweep
-    from dispatch.tables import render
 
     if args.workers is not None and args.workers < 1:
         raise DispatchError(f"--workers must be >= 1, got {args.workers}")
@@ -217,7 +227,7 @@ def _sweep(args, console) -> int:
                          address=args.ray or None, force=args.force, on_done=done)
     summaries = [o.summary for o in outcomes if o.summary is not None]
     if summaries:
-        render(summaries, console)
+        _tables(summaries, console)
     failed = [o for o in outcomes if o.status == "failed"]
     for o in failed:
         console.print(f"[red]failed[/]: {o.run_id}: {o.error}", highlight=False, soft_wrap=True)

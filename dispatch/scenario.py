@@ -50,6 +50,7 @@ class WorldConfig:
     obstacles: ObstacleConfig = field(default_factory=ObstacleConfig)
     roads: RoadConfig | None = None  # a road network instead of the voxel world
     physics: bool = True  # mirror the run in PyBullet (default: on in voxel worlds, off on roads)
+    edge_events: bool = False  # roads: a `move` event per node passed (for animation)
 
     @property
     def space(self) -> str:
@@ -430,10 +431,16 @@ def _parse_world(w: _Table, path: Path) -> WorldConfig:
             for k in ("blocks", "block", "speed"):
                 if k in w.data:
                     raise w.fail(k, f"only describes network = 'manhattan' (not {network!r})")
+        if physics:
+            raise w.fail("physics", "the PyBullet mirror shows voxel worlds; a road network "
+                                    "runs without it")
+        edge_events = w.get("edge_events", False)
+        if not isinstance(edge_events, bool):
+            raise w.fail("edge_events", f"must be true or false, got {edge_events!r}")
         roads = RoadConfig(network=network, base=path.parent.resolve(), blocks=tuple(blocks),
                            block=block, speed=speed)
-        return WorldConfig(roads=roads, physics=bool(physics))
-    for k in ROAD_KEYS:
+        return WorldConfig(roads=roads, physics=bool(physics), edge_events=edge_events)
+    for k in (*ROAD_KEYS, "edge_events"):
         if k in w.data:
             raise w.fail(k, "describes a road network; set world.network to use one")
     size = w.vec3("size", [50, 50, 30])

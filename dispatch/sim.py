@@ -131,7 +131,7 @@ class Simulation:
         roads = sc.world.roads is not None
         if roads:
             demand = RoadDemand(self.space, rng_for(spec.seed, STREAM_TASKS))
-            driver = RoadDriver(self.space, self.planner, bus)
+            driver = RoadDriver(self.space, self.planner, bus, sc.world.edge_events)
         else:
             recorder.table_metadata["obstacles"] = {
                 "dispatch.world_size": json_meta(list(self.space.size)),

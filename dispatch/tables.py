@@ -91,3 +91,37 @@ def render(summaries: list[dict], console=None) -> None:
     console.print(t3)
     console.print("allocation time: wall seconds of the first decision (cost matrix + allocator), "
                   "mean over seeds")
+
+
+def render_trips(summaries: list[dict], console=None) -> None:
+    """Print the trip table of road-network runs: per allocator and fleet size, the mean over
+    seeds of trips released, the share served, rejected and expired, the mean wait (release to
+    pickup), the fleet's empty and occupied kilometres and the wall seconds spent deciding."""
+    from rich.console import Console
+    from rich.table import Table
+
+    console = console or Console()
+    groups: dict[tuple[str, int], list[dict]] = defaultdict(list)
+    for s in summaries:
+        groups[(s["allocator"], s["n_agents"])].append(s)
+    runs = max((len(g) for g in groups.values()), default=0)
+    t = Table(title=f"Trips, mean over {runs} seed(s): served, rejected, expired, wait "
+                    f"(release to pickup), empty and occupied km, deciding seconds")
+    for col in ("allocator", "N", "trips", "served", "rej.", "exp.", "wait s", "empty km",
+                "occ. km", "dec. s"):
+        t.add_column(col, justify="left" if col == "allocator" else "right")
+    for alloc in allocator_order({a for a, _ in groups}):
+        for n in sorted(k for a, k in groups if a == alloc):
+            rows = groups[(alloc, n)]
+
+            def mean(key, rows=rows):
+                vals = [r[key] for r in rows if not math.isnan(r[key])]
+                return fmean(vals) if vals else math.nan
+
+            served = fmean(r["tasks_completed"] / r["n_tasks"] if r["n_tasks"] else math.nan
+                           for r in rows)
+            t.add_row(alloc, str(n), f"{mean('n_tasks'):.0f}", f"{100 * served:.1f}%",
+                      f"{mean('tasks_rejected'):.0f}", f"{mean('tasks_expired'):.0f}",
+                      f"{mean('wait_time_mean'):.1f}", f"{mean('empty_distance') / 1000:.0f}",
+                      f"{mean('occupied_distance') / 1000:.0f}", f"{mean('alloc_seconds'):.2f}")
+    console.print(t)

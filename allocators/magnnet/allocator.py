@@ -206,12 +206,11 @@ def observe(problem: AllocationProblem, agents: np.ndarray, open_tasks: np.ndarr
     from allocators.magnnet import rules
 
     n, m = problem.cost.shape
-    cs = problem.cell_size
     deciding = np.zeros(n, bool)
     deciding[agents] = True
     avail = problem.feasible & open_tasks[None, :] & deciding[:, None]
-    apos = (np.array([a.cell for a in problem.agents], np.float32).reshape(n, 3) + 0.5) * cs
-    tpos = (np.array([t.cell for t in problem.tasks], np.float32).reshape(m, 3) + 0.5) * cs
+    apos = problem.agent_pos.astype(np.float32)  # metres, from the run's space
+    tpos = problem.task_pos.astype(np.float32)
     flies = np.array([a.flies for a in problem.agents], np.float32)
     agent_f = np.concatenate([deciding[:, None].astype(np.float32), flies[:, None],
                               apos / world_size], 1)
