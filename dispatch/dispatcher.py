@@ -95,6 +95,8 @@ class Dispatcher:
         self.messages = 0
         self.comm_delay = 0.0  # simulated seconds spent deliberating (hops * latency)
         self.agent_seconds = 0.0  # sum over decisions of the per-agent critical path
+        self.first_cost = math.nan  # the first decision's total cost and wall seconds
+        self.first_seconds = math.nan
         self._pending: _Pending | None = None
         self.process = sim.env.process(self._loop())
 
@@ -180,9 +182,11 @@ class Dispatcher:
         self.messages += allocation.messages
         self.comm_delay += p.delay
         self.agent_seconds += critical
-        sim.record_decision(self.decisions, p.problem, allocation, p.cost_s, p.decide_s,
-                            hops=allocation.hops, comm_delay=p.delay, agent_seconds=critical,
-                            components=p.components)
+        total = sim.record_decision(self.decisions, p.problem, allocation, p.cost_s, p.decide_s,
+                                    hops=allocation.hops, comm_delay=p.delay,
+                                    agent_seconds=critical, components=p.components)
+        if self.decisions == 0:
+            self.first_cost, self.first_seconds = total, p.cost_s + p.decide_s
         self.decisions += 1
         col = {t.id: j for j, t in enumerate(p.tasks)}
         row = {a.id: i for i, a in enumerate(p.problem.agents)}

@@ -9,11 +9,9 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-import pyarrow as pa
 import simpy
 
 from dispatch import registry
@@ -78,17 +76,11 @@ def place_fleet(world: World, spec: RunSpec, rng: np.random.Generator) -> list[V
     return vehicles
 
 
-@dataclass
-class RunResult:
-    spec: RunSpec
-    summary: dict
-    tables: dict[str, pa.Table]
-
-
 class Simulation:
-    """Everything one run needs; :meth:`run` executes it and returns the recorded tables."""
+    """Everything one run needs; :meth:`run` executes it, recording into ``recorder``, and
+    returns the summary."""
 
-    def __init__(self, spec: RunSpec) -> None:
+    def __init__(self, spec: RunSpec, recorder: Recorder) -> None:
         sc = spec.scenario
         self.spec = spec
         self.env = simpy.Environment()
@@ -102,9 +94,7 @@ class Simulation:
                                         rng_for(spec.seed, STREAM_TASKS))
         self.vehicles = place_fleet(self.world, spec, rng_for(spec.seed, STREAM_FLEET))
         self.tasks: list[Task] = []
-        self.recorder = Recorder(spec.run_id, {"dispatch.scenario": sc.text,
-                                               "dispatch.seed": str(spec.seed),
-                                               "dispatch.spec": json_meta(_spec_meta(spec))})
+        self.recorder = recorder
         self.recorder.table_metadata["obstacles"] = {
             "dispatch.world_size": json_meta(list(self.world.size)),
             "dispatch.cell": str(self.world.cell),
@@ -200,7 +190,7 @@ class Simulation:
 
     def record_decision(self, index: int, problem: AllocationProblem, allocation: Allocation,
                         cost_s: float, decide_s: float, *, hops: int = 0, comm_delay: float = 0.0,
-                        agent_seconds: float = math.nan, components: int = 1) -> None:
+                        agent_seconds: float = math.nan, components: int = 1) -> float:
         for r in allocation.requests:
             self.recorder.add("assignments", decision=index, round=r.round, agent_id=r.agent_id,
                               task_id=r.task_id, cost=r.cost, won=r.won,
@@ -209,16 +199,17 @@ class Simulation:
         cols = {t.id: j for j, t in enumerate(problem.tasks)}
         total = float(sum(problem.cost[rows[a], cols[t]] for a, t in allocation.pairs))
         self.recorder.add("decisions", decision=index, t=float(problem.time),
-                          n_agents=problem.n_agents, n_tasks=problem.n_tasks,
+                          n_idle=problem.n_agents, n_tasks=problem.n_tasks,
                           n_assigned=len(allocation.pairs), rounds=allocation.rounds,
                           messages=allocation.messages,
                           conflicts=len(allocation.conflicted_tasks()), total_cost=total,
                           cost_seconds=cost_s, decide_seconds=decide_s, hops=hops,
                           comm_delay=comm_delay, agent_seconds=agent_seconds,
                           comm_components=components)
+        return total
 
     # --------------------------------------------------------------- running
-    def run(self) -> RunResult:
+    def run(self) -> dict:
         """Run until every task is terminal and the source is done, or the horizon."""
         try:
             horizon = self.env.timeout(self.spec.scenario.duration)
@@ -230,8 +221,7 @@ class Simulation:
                 if v.busy:
                     v.busy_seconds += self.env.now - v.busy_since
                 v.end_wait(self.env.now)
-            summary = self._finish()
-            return RunResult(self.spec, summary, self.recorder.tables())
+            return self._finish()
         finally:
             self.physics.close()
 
@@ -240,14 +230,17 @@ class Simulation:
         g = self.world.grid
         for t in self.tasks:
             x, y, z = g.centre(t.cell)
-            rec.add("tasks", task_id=t.id, kind=t.kind, x=x, y=y, z=z, released_at=t.released_at,
+            rec.add("tasks", task_id=t.id, kind=t.kind, x=x, y=y, z=z, dropoff_x=math.nan,
+                    dropoff_y=math.nan, dropoff_z=math.nan, released_at=t.released_at,
+                    max_wait=math.nan, snap_m=math.nan, dropoff_snap_m=math.nan,
                     assigned_at=t.assigned_at, agent_id=t.agent_id, cost=t.cost,
-                    arrived_at=t.arrived_at, completed_at=t.completed_at, state=t.state.value,
+                    picked_up_at=t.arrived_at, completed_at=t.completed_at, state=t.state.value,
                     conflicted=t.conflicted, closed_at=t.closed_at)
         for v in self.vehicles:
             x, y, z = g.centre(v.start)
             rec.add("vehicles", agent_id=v.id, kind=v.kind, speed=v.speed, x0=x, y0=y, z0=z,
-                    distance=v.distance, busy_seconds=v.busy_seconds, tasks_completed=v.completed,
+                    distance=v.distance, empty_distance=v.distance, occupied_distance=0.0,
+                    busy_seconds=v.busy_seconds, tasks_completed=v.completed,
                     waits=v.waits, replans=v.replans, wait_seconds=v.wait_seconds)
         for b in self.world.boxes:
             rec.add("obstacles", x0=b.x0, y0=b.y0, z0=b.z0, x1=b.x1, y1=b.y1, z1=b.z1)
@@ -265,11 +258,11 @@ def summarize(sim: Simulation) -> dict:
     clean = sum(1 for t in offered if t.agent_id >= 0 and not t.conflicted)
     waits = [t.arrived_at - t.released_at for t in tasks if not math.isnan(t.arrived_at)]
     travels = [t.arrived_at - t.assigned_at for t in tasks if not math.isnan(t.arrived_at)]
-    dec = sim.recorder.columns("decisions")
     n_uav = sum(1 for v in sim.vehicles if v.flies)
+    distance = float(sum(v.distance for v in sim.vehicles))
     return dict(
         scenario=spec.scenario.name, allocator=spec.allocator, planner=spec.planner,
-        n_agents=len(sim.vehicles), n_tasks=len(tasks), seed=spec.seed,
+        n_agents=len(sim.vehicles), n_tasks=len(tasks), seed=spec.seed, space="voxel",
         total_cost=float(sum(t.cost for t in assigned)),
         conflict_free_rate=clean / len(offered) if offered else math.nan,
         alloc_seconds=d.cost_seconds + d.decide_seconds,
@@ -280,14 +273,14 @@ def summarize(sim: Simulation) -> dict:
         n_uav=n_uav, n_ugv=len(sim.vehicles) - n_uav, decisions=d.decisions, rounds=d.rounds,
         messages=d.messages, conflicts=sum(1 for t in tasks if t.conflicted),
         cost_seconds=d.cost_seconds, decide_seconds=d.decide_seconds,
-        first_decision_cost=dec["total_cost"][0] if dec["total_cost"] else math.nan,
-        first_decision_seconds=(dec["cost_seconds"][0] + dec["decide_seconds"][0]
-                                if dec["total_cost"] else math.nan),
+        first_decision_cost=d.first_cost, first_decision_seconds=d.first_seconds,
         realized_travel=float(sum(travels)),
         wait_time_mean=float(np.mean(waits)) if waits else math.nan,
-        tasks_expired=count[TaskState.EXPIRED], tasks_unreachable=count[TaskState.UNREACHABLE],
-        tasks_cancelled=count[TaskState.CANCELLED], sim_time=float(sim.env.now),
+        tasks_expired=count[TaskState.EXPIRED], tasks_rejected=0,
+        tasks_unreachable=count[TaskState.UNREACHABLE],
+        tasks_cancelled=count[TaskState.CANCELLED], tasks_failed=0, sim_time=float(sim.env.now),
         comm_delay=d.comm_delay, agent_seconds=d.agent_seconds,
+        distance=distance, empty_distance=distance, occupied_distance=0.0,
     )
 
 
