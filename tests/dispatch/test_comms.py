@@ -27,6 +27,7 @@ from dispatch.errors import PluginError, ScenarioError
 from dispatch.runner import run_one
 from dispatch.scenario import CommsConfig, load_scenario
 from tests.allocators.helpers import assert_valid, make_problem, random_problem
+from tests.dispatch.test_determinism import bitwise
 
 
 def _installed(name: str):
@@ -280,7 +281,7 @@ def test_simulation_with_tiny_range_loss_and_latency(make_scenario, allocator):
     dec = r.tables["decisions"].to_pandas()
     assert (dec.comm_delay == dec.hops * 0.5).all()
     assert s["comm_delay"] == pytest.approx(dec.comm_delay.sum())
-    assert (dec.comm_components == dec.n_agents).all()  # nobody linked
+    assert (dec.comm_components == dec.n_idle).all()  # nobody linked
     tasks = r.tables["tasks"].to_pandas()
     events = r.tables["events"].to_pandas()
     first = dec.iloc[0]
@@ -326,4 +327,5 @@ def test_same_seed_same_run_under_loss(make_scenario):
             else a.tables[name]
         tb = b.tables[name].drop_columns(["alloc_seconds"]) if name == "assignments" \
             else b.tables[name]
-        assert ta.equals(tb), name
+        # bit for bit: Table.equals never finds NaN equal to NaN (tasks.dropoff_* are NaN)
+        assert bitwise(ta).equals(bitwise(tb)), name

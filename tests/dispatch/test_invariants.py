@@ -25,9 +25,9 @@ import pyarrow.parquet as pq
 import pytest
 
 from dispatch.motion import step_is_legal, step_length
-from dispatch.runner import run_one
+from dispatch.runner import RunResult, run_one
 from dispatch.scenario import RunSpec, load_scenario
-from dispatch.sim import RunResult, world_for
+from dispatch.sim import world_for
 from tests.conftest import write_scenario
 
 SOURCES = ("static", "periodic", "poisson", "trace_csv", "trace_parquet")
@@ -173,9 +173,9 @@ def test_every_task_ends_in_exactly_one_terminal_state(runs, case):
     done = tasks[tasks.state == "completed"]
     assert (done.agent_id >= 0).all()
     assert (done.released_at <= done.assigned_at).all()
-    assert (done.assigned_at <= done.arrived_at).all()
+    assert (done.assigned_at <= done.picked_up_at).all()
     service = r.spec.scenario.tasks.service_time
-    assert np.allclose(done.completed_at - done.arrived_at, service)
+    assert np.allclose(done.completed_at - done.picked_up_at, service)
     assert np.allclose(done.completed_at, done.closed_at)
     never = tasks[tasks.state.isin(["expired", "unreachable"])]
     assert (never.agent_id == -1).all() and never.assigned_at.isna().all()
@@ -278,8 +278,9 @@ def test_summary_counts_add_up(runs, case):
     assert set(r.assignments.decision) <= set(decisions.decision)
     assert decisions.n_assigned.sum() == len(assigned)
     assert s["rounds"] == decisions.rounds.sum()
-    arrived = tasks[tasks.arrived_at.notna()]
-    assert s["realized_travel"] == pytest.approx((arrived.arrived_at - arrived.assigned_at).sum())
+    arrived = tasks[tasks.picked_up_at.notna()]
+    assert s["realized_travel"] == pytest.approx(
+        (arrived.picked_up_at - arrived.assigned_at).sum())
     assert r.vehicles.tasks_completed.sum() == s["tasks_completed"]
     done = tasks[tasks.state == "completed"]
     assert s["makespan"] == pytest.approx(done.completed_at.max() if len(done) else 0.0)
@@ -338,7 +339,7 @@ def test_vehicles_move_by_legal_timed_steps(runs, case):
                 assert e.t == pytest.approx(t_prev)
                 # the travel time is the planner's cost: the path followed is the costed one
                 task = tasks.loc[e.task_id]
-                assert task.arrived_at - task.assigned_at == pytest.approx(task.cost, abs=1e-6)
+                assert task.picked_up_at - task.assigned_at == pytest.approx(task.cost, abs=1e-6)
             elif e.event == "idle":
                 assert cell_of(grid, e) == here
         assert v.distance == pytest.approx(metres, abs=1e-9)
