@@ -72,7 +72,8 @@ def _kind(path: Path) -> str | None:
 
 
 def find_sources(path: str | os.PathLike) -> list[Source]:
-    """The results folders at or below ``path`` (a results folder is not searched further; folders named ``_…``, ``.…`` or ``key=value`` are skipped)."""
+    """The results folders at or below ``path`` (a results folder is not searched further;
+    folders named ``_…``, ``.…`` or ``key=value`` are skipped)."""
     path = Path(path)
     if not path.exists():
         raise NoResultsError(f"{path}: no such file or directory")

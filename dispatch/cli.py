@@ -172,7 +172,8 @@ def _add_analysis_parsers(sub) -> None:
     r.add_argument("--run", metavar="RUN_ID", help="the run shown in detail (timeline, 3D)")
 
     g = sub.add_parser("render", help="draw a run as an animated GIF from PyBullet images")
-    g.add_argument("run", type=Path, metavar="RUN", help="a results folder (of dispatch run or sweep)")
+    g.add_argument("run", type=Path, metavar="RUN",
+                   help="a results folder (of dispatch run or sweep)")
     g.add_argument("--run-id", help="which run of a sweep folder (default: as the report)")
     g.add_argument("--out", type=Path, help="output .gif (or .mp4; default: RUN/<run id>.gif)")
     g.add_argument("--fps", type=int, default=10)
