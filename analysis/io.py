@@ -1,10 +1,13 @@
-"""Reading results: one run folder, a sweep's Hive-partitioned folder, or a folder of those.
+"""Reading results: a results folder (of ``dispatch run`` or ``dispatch sweep``), or a folder of
+those.
 
-Layouts (written by ``dispatch run`` / ``dispatch sweep``):
+Layout (``kind == "hive"``), the same for one run and for many: one folder per table,
+``<table>/allocator=…/planner=…/n_agents=…/seed=…/part-0.parquet``; the partition columns live
+in the path (Hive), not in the files. Files whose names start with ``_`` or ``.`` (chunks of a
+run still going or killed half-way, temporary files) are not read.
 
-* a **run folder** holds ``<table>.parquet`` files;
-* a **sweep folder** holds one folder per table, ``<table>/allocator=…/planner=…/n_agents=…/
-  seed=…/part-0.parquet``; the partition columns live in the path (Hive), not in the files.
+Results of older versions, where a single run wrote ``<table>.parquet`` files
+(``kind == "flat"``), are read too.
 
 :func:`open_results` takes any number of such folders (or folders that contain them) and gives
 one :class:`Results`, whose :meth:`Results.table` returns a pandas DataFrame in which every
@@ -30,25 +33,26 @@ RUN_KEYS = ("scenario", "allocator", "planner", "n_agents", "seed")
 
 
 class NoResultsError(FileNotFoundError):
-    """A path holds no run folder and no sweep folder."""
+    """A path holds no results folder."""
 
 
 @dataclass(frozen=True)
 class Source:
-    """One results folder: ``kind`` is ``"run"`` (``<table>.parquet``) or ``"sweep"`` (Hive)."""
+    """One results folder: ``kind`` is ``"hive"`` (``<table>/k=v/…/part-0.parquet``) or
+    ``"flat"`` (``<table>.parquet``, one run, as older versions wrote)."""
 
     kind: str
     path: Path
 
     def has(self, table: str) -> bool:
-        if self.kind == "run":
+        if self.kind == "flat":
             return (self.path / f"{table}.parquet").is_file()
         return (self.path / table).is_dir()
 
     def dataset(self, table: str) -> ds.Dataset:
-        """The table as a pyarrow dataset; a sweep's files are read with one unified schema
-        (files written by older versions may lack newer columns: those read as null)."""
-        if self.kind == "run":
+        """The table as a pyarrow dataset; the files are read with one unified schema (files
+        written by older versions may lack newer columns: those read as null)."""
+        if self.kind == "flat":
             return ds.dataset(self.path / f"{table}.parquet", format="parquet")
         d = ds.dataset(self.path / table, format="parquet", partitioning="hive")
         schemas = [f.physical_schema for f in d.get_fragments()]
@@ -60,16 +64,16 @@ class Source:
 
 
 def _kind(path: Path) -> str | None:
-    if (path / "summary.parquet").is_file():
-        return "run"
     if (path / "summary").is_dir():
-        return "sweep"
+        return "hive"
+    if (path / "summary.parquet").is_file():
+        return "flat"
     return None
 
 
 def find_sources(path: str | os.PathLike) -> list[Source]:
-    """The run and sweep folders at or below ``path`` (a run or sweep folder is not searched
-    further; folders named ``_…``, ``.…`` or ``key=value`` are skipped)."""
+    """The results folders at or below ``path`` (a results folder is not searched further;
+    folders named ``_…``, ``.…`` or ``key=value`` are skipped)."""
     path = Path(path)
     if not path.exists():
         raise NoResultsError(f"{path}: no such file or directory")
@@ -96,8 +100,9 @@ def open_results(*paths: str | os.PathLike) -> Results:
         sources += find_sources(p)
     if not sources:
         raise NoResultsError(
-            f"no results in {', '.join(map(str, paths))}: expected a run folder "
-            "(summary.parquet) or a sweep folder (summary/allocator=…/…)")
+            f"no results in {', '.join(map(str, paths))}: expected a results folder "
+            "(summary/allocator=…/…/part-0.parquet, as dispatch run and dispatch sweep write) "
+            "or a folder holding such folders")
     return Results(sources)
 
 
@@ -129,10 +134,14 @@ class Results:
             if not src.has(name):
                 continue
             d = src.dataset(name)
+            renames = _legacy_renames(name, src, d.schema.names)
+            old = {new: o for o, new in renames.items()}
             want = None
             if columns is not None:
-                want = [c for c in dict.fromkeys([*columns, "run_id"]) if c in d.schema.names]
-            df = _normalise(d.to_table(columns=want, filter=flt).to_pandas())
+                want = [old.get(c, c) for c in dict.fromkeys([*columns, "run_id"])
+                        if old.get(c, c) in d.schema.names]
+            df = d.to_table(columns=want, filter=flt).to_pandas()
+            df = _normalise(df.rename(columns=renames) if renames else df)
             if name != "summary":
                 df = self._with_keys(df)
             if columns is not None:
@@ -192,6 +201,18 @@ class Results:
         return df.merge(keys, on="run_id", how="left")
 
 
+#: Columns renamed since older versions wrote them: table -> {old name: new name}.
+RENAMED = {"tasks": {"arrived_at": "picked_up_at"}}
+
+
+def _legacy_renames(name: str, src: Source, names: list[str]) -> dict[str, str]:
+    """Old column name -> new name, for the columns of ``name`` an older version wrote."""
+    found = {o: n for o, n in RENAMED.get(name, {}).items() if o in names and n not in names}
+    if name == "decisions" and src.kind == "flat" and "n_idle" not in names:
+        found["n_agents"] = "n_idle"  # the idle vehicles, not the fleet size (a run key)
+    return found
+
+
 def _normalise(df):
     """Partition columns come back as int32 / categorical: make them int64 / str."""
     for k in ("n_agents", "seed"):
@@ -204,7 +225,7 @@ def _normalise(df):
 
 
 def _run_filter(summary, run_id: str, src: Source) -> ds.Expression | None:
-    if src.kind == "run":
+    if src.kind == "flat":
         return None
     row = summary.loc[summary["run_id"] == run_id]
     if row.empty:

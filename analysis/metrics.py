@@ -146,10 +146,10 @@ def _taxi_row(tasks: pd.DataFrame, vehicles: pd.DataFrame, summary: pd.DataFrame
               trips: pd.DataFrame | None) -> dict:
     requests = len(tasks)
     rides = int((tasks["state"] == "completed").sum())
-    reached = tasks.loc[tasks["arrived_at"].notna()]
-    wait = (reached["arrived_at"] - reached["released_at"]).to_numpy(dtype=float)
+    reached = tasks.loc[tasks["picked_up_at"].notna()]
+    wait = (reached["picked_up_at"] - reached["released_at"]).to_numpy(dtype=float)
     assigned = tasks.loc[tasks["assigned_at"].notna() & (tasks["agent_id"] >= 0)]
-    approach = (reached["arrived_at"] - reached["assigned_at"]).to_numpy(dtype=float)
+    approach = (reached["picked_up_at"] - reached["assigned_at"]).to_numpy(dtype=float)
     planned = reached["cost"].to_numpy(dtype=float)
     with np.errstate(divide="ignore", invalid="ignore"):
         rel = np.where(planned > 0, approach / planned - 1.0, np.nan)
@@ -224,6 +224,6 @@ def run_metrics(summary: pd.DataFrame, tasks: pd.DataFrame, vehicles: pd.DataFra
 
 def wait_times(tasks: pd.DataFrame) -> pd.DataFrame:
     """One row per task reached by a vehicle: the group keys, seed and ``wait`` (seconds)."""
-    reached = tasks.loc[tasks["arrived_at"].notna()]
+    reached = tasks.loc[tasks["picked_up_at"].notna()]
     cols = [c for c in [*GROUP, "seed", "run_id", "task_id"] if c in reached.columns]
-    return reached[cols].assign(wait=reached["arrived_at"] - reached["released_at"])
+    return reached[cols].assign(wait=reached["picked_up_at"] - reached["released_at"])

@@ -61,7 +61,7 @@ def one_run(scenario, planner: str, n: int, seed: int) -> dict:
     distance = float(sum(veh["distance"]))
     done = int(sum(veh["tasks_completed"]))
     dec = result.tables["decisions"].to_pydict()
-    pairs = int(sum(a * t for a, t in zip(dec["n_agents"], dec["n_tasks"])))
+    pairs = int(sum(a * t for a, t in zip(dec["n_idle"], dec["n_tasks"])))
     return {"planner": planner, "n_agents": n, "seed": seed, "distance_m": distance,
             "tasks_completed": done, "n_tasks": int(s["n_tasks"]),
             "path_m": distance / done if done else math.nan,

@@ -62,8 +62,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _specs(args):
-    from dispatch.scenario import load_scenario
     from dispatch.registry import load
+    from dispatch.scenario import load_scenario
 
     sc = load_scenario(args.scenario)
     specs = sc.runs(allocator=getattr(args, "allocator", None), planner=getattr(args, "planner", None),
@@ -183,13 +183,14 @@ def _add_analysis_parsers(sub) -> None:
     r = sub.add_parser("report", help="tables and plots (Markdown or HTML) of run or sweep "
                        "folders")
     r.add_argument("runs", type=Path, nargs="+", metavar="RUNS",
-                   help="run folders, sweep folders, or folders holding them")
+                   help="results folders (of dispatch run or sweep), or folders holding them")
     r.add_argument("--out", type=Path, help="report folder (default: RUNS/report/)")
     r.add_argument("--format", choices=("md", "html"), default="md")
     r.add_argument("--run", metavar="RUN_ID", help="the run shown in detail (timeline, 3D)")
 
     g = sub.add_parser("render", help="draw a run as an animated GIF from PyBullet images")
-    g.add_argument("run", type=Path, metavar="RUN", help="a run folder (or a sweep folder)")
+    g.add_argument("run", type=Path, metavar="RUN",
+                   help="a results folder (of dispatch run or sweep)")
     g.add_argument("--run-id", help="which run of a sweep folder (default: as the report)")
     g.add_argument("--out", type=Path, help="output .gif (or .mp4; default: RUN/<run id>.gif)")
     g.add_argument("--fps", type=int, default=10)

@@ -25,12 +25,11 @@ Reservation-aware planners
 
 from __future__ import annotations
 
-from abc import ABC, abstractmethod
-from dataclasses import dataclass, field
-from collections.abc import Sequence
-from typing import ClassVar, Literal, Protocol
-
 import math
+from abc import ABC, abstractmethod
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import ClassVar, Literal, Protocol
 
 import numpy as np
 
@@ -300,5 +299,5 @@ class Planner(ABC):
         """
         raise NotImplementedError(f"planner {self.name!r} is not reservation-aware")
 
-    def task_closed(self, task_id: int) -> None:  # noqa: B027 - optional hook
+    def task_closed(self, task_id: int) -> None:
         """Forget anything cached for a task that will never be asked about again."""

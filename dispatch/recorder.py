@@ -1,9 +1,14 @@
-"""Recording a run into Parquet tables.
+"""Recording a run into Parquet tables, streamed to disk as the run goes.
 
-Each table has a fixed schema (below), so an empty table is still a valid, typed file. Files are
-written to a temporary name and renamed into place, so a reader never sees half a file. The
-schema metadata of every file holds the scenario text, the seed, the run id and the package
-version; ``obstacles`` also holds the world's size and cell size so a run can be redrawn.
+Each table has a fixed schema (below), so an empty table is still a valid, typed file. One
+layout whatever the number of runs: ``OUT/<table>/allocator=…/planner=…/n_agents=…/seed=…/
+part-0.parquet`` (Hive; the partition columns live in the path, not in the files). While a run
+goes, rows are flushed every ``flush_rows`` rows into whole chunk files ``_inflight-NNNNN.parquet``
+next to it (ignored by Hive readers, readable one by one after a crash); at the end they are
+merged into ``part-0.parquet``. Every file is written to a temporary name and renamed into place,
+so a reader never sees half a file. The schema metadata of every file holds the scenario text,
+the seed, the run id and the package version; ``obstacles`` also holds the world's size and
+cell size so a run can be redrawn.
 """
 
 from __future__ import annotations
@@ -30,16 +35,17 @@ SCHEMAS: dict[str, pa.Schema] = {
         ("conflicts", _I), ("cost_seconds", _F), ("decide_seconds", _F),
         ("first_decision_cost", _F), ("first_decision_seconds", _F), ("realized_travel", _F),
         ("wait_time_mean", _F), ("tasks_expired", _I), ("tasks_rejected", _I),
-        ("tasks_unreachable", _I), ("tasks_cancelled", _I), ("tasks_failed", _I), ("sim_time", _F),
-        ("comm_delay", _F), ("agent_seconds", _F), ("distance", _F), ("empty_distance", _F),
-        ("occupied_distance", _F),
+        ("tasks_unreachable", _I), ("tasks_cancelled", _I), ("tasks_failed", _I),
+        ("sim_time", _F), ("comm_delay", _F), ("agent_seconds", _F),
+        ("distance", _F), ("empty_distance", _F), ("occupied_distance", _F),
     ]),
     "tasks": pa.schema([
         ("run_id", _S), ("task_id", _I), ("kind", _S), ("x", _F), ("y", _F), ("z", _F),
-        ("dropoff_x", _F), ("dropoff_y", _F), ("dropoff_z", _F), ("released_at", _F),
-        ("max_wait", _F), ("snap_m", _F), ("dropoff_snap_m", _F), ("assigned_at", _F),
-        ("agent_id", _I), ("cost", _F), ("picked_up_at", _F), ("completed_at", _F),
-        ("state", _S), ("conflicted", _B), ("closed_at", _F),
+        ("dropoff_x", _F), ("dropoff_y", _F), ("dropoff_z", _F),
+        ("released_at", _F), ("max_wait", _F), ("snap_m", _F), ("dropoff_snap_m", _F),
+        ("assigned_at", _F), ("agent_id", _I), ("cost", _F),
+        ("picked_up_at", _F), ("completed_at", _F), ("state", _S), ("conflicted", _B),
+        ("closed_at", _F),
     ]),
     "assignments": pa.schema([
         ("run_id", _S), ("decision", _I), ("round", _I), ("agent_id", _I), ("task_id", _I),
@@ -57,7 +63,9 @@ SCHEMAS: dict[str, pa.Schema] = {
     ]),
     "vehicles": pa.schema([
         ("run_id", _S), ("agent_id", _I), ("kind", _S), ("speed", _F), ("x0", _F), ("y0", _F),
-        ("z0", _F), ("distance", _F), ("empty_distance", _F), ("occupied_distance", _F),
+        ("z0", _F), ("distance", _F),
+        # metres driven without / with a passenger or load aboard (distance is their sum)
+        ("empty_distance", _F), ("occupied_distance", _F),
         ("busy_seconds", _F), ("tasks_completed", _I),
         # execution with reservations (0 otherwise): wait episodes, routes replaced by a
         # higher-priority vehicle, seconds spent standing on the way (see dispatch.reservations)
@@ -73,17 +81,69 @@ TIMING_COLUMNS = {"alloc_seconds", "cost_seconds", "decide_seconds", "first_deci
                   "agent_seconds"}
 
 
-class Recorder:
-    """Collects rows per table in memory (column lists) and writes them as Parquet."""
+def partition_path(partition: dict[str, Any]) -> Path:
+    """The Hive folders of a partition: ``k1=v1/k2=v2/...`` (``.`` when empty)."""
+    return Path(*(f"{k}={v}" for k, v in partition.items()))
 
-    def __init__(self, run_id: str, metadata: dict[str, str]) -> None:
+
+CHUNK_PREFIX = "_inflight-"
+FINAL_NAME = "part-0.parquet"
+
+
+class Recorder:
+    """Streams one run's rows into ``out/<table>/<k1=v1>/.../part-0.parquet``.
+
+    Rows are buffered per table as column lists; once a table holds ``flush_rows`` rows they
+    are written as a complete chunk file ``_inflight-NNNNN.parquet`` in the table's partition
+    folder (temporary name, then a rename), so memory stays bounded and a run killed half-way
+    leaves whole, readable chunks (names starting with ``_`` are skipped by Hive readers).
+    :meth:`finish` streams the chunks and the remainder into ``part-0.parquet`` (atomically)
+    and removes the chunks. The ``partition`` columns are left out of the files (readers put
+    them back from the path); a row whose value of such a column differs from the partition's
+    is an error.
+    """
+
+    def __init__(self, out: Path, run_id: str, metadata: dict[str, str],
+                 partition: dict[str, Any], *, flush_rows: int = 50_000) -> None:
+        if flush_rows < 1:
+            raise ValueError(f"flush_rows must be >= 1, got {flush_rows}")
+        self.out = Path(out)
         self.run_id = run_id
+        self.partition = dict(partition)
+        self.flush_rows = flush_rows
         self.metadata = {"dispatch.version": __version__, "dispatch.run_id": run_id, **metadata}
         self.table_metadata: dict[str, dict[str, str]] = {}
         self._cols = {name: {f.name: [] for f in schema} for name, schema in SCHEMAS.items()}
+        self._buffered = dict.fromkeys(SCHEMAS, 0)
+        self._chunks: dict[str, list[Path]] = {name: [] for name in SCHEMAS}
+        self._written = dict.fromkeys(SCHEMAS, 0)
+        self._closed = False
+        self._open: list[tuple[pq.ParquetWriter, Path]] = []  # writers of finish(), if any
+        for name in SCHEMAS:  # chunks of an earlier run of this partition killed half-way
+            leaf = self.leaf(name)
+            if leaf.is_dir():
+                for stale in leaf.glob(f"{CHUNK_PREFIX}*.parquet"):
+                    stale.unlink()
 
+    # ------------------------------------------------------------------ paths, schemas
+    def leaf(self, table: str) -> Path:
+        """The folder of ``table``'s files for this run."""
+        return self.out / table / partition_path(self.partition)
+
+    def file_schema(self, table: str) -> pa.Schema:
+        """``table``'s schema in the files: without the partition columns, with metadata."""
+        schema = SCHEMAS[table]
+        for k in self.partition:
+            if k in schema.names:
+                schema = schema.remove(schema.get_field_index(k))
+        meta = {**self.metadata, **self.table_metadata.get(table, {})}
+        return schema.with_metadata({k: str(v) for k, v in meta.items()})
+
+    # ------------------------------------------------------------------ rows
     def add(self, table: str, **row: Any) -> None:
         """Append one row; ``run_id`` is filled in; every other column must be given."""
+        if self._closed:
+            raise RuntimeError(f"recorder of {self.run_id} is closed (finish or abort)")
         cols = self._cols[table]
         row["run_id"] = self.run_id
         if row.keys() != cols.keys():
@@ -91,21 +151,99 @@ class Recorder:
             raise KeyError(f"{table} row: missing {sorted(missing)}, unexpected {sorted(extra)}")
         for k, v in row.items():
             cols[k].append(v)
+        self._buffered[table] += 1
+        if self._buffered[table] >= self.flush_rows:
+            self.flush(table)
 
-    def columns(self, table: str) -> dict[str, list]:
-        """The rows recorded so far, as column lists (read-only by convention)."""
-        return self._cols[table]
+    def buffered(self, table: str) -> int:
+        """Rows of ``table`` held in memory (not yet in a chunk file); below ``flush_rows``."""
+        return self._buffered[table]
 
-    def rows(self, table: str) -> int:
-        return len(self._cols[table]["run_id"])
+    def written(self, table: str) -> int:
+        """Rows of ``table`` already in chunk files."""
+        return self._written[table]
 
-    def table(self, name: str) -> pa.Table:
-        meta = {**self.metadata, **self.table_metadata.get(name, {})}
-        schema = SCHEMAS[name].with_metadata({k: str(v) for k, v in meta.items()})
-        return pa.Table.from_pydict(self._cols[name], schema=schema)
+    def chunks(self, table: str) -> list[Path]:
+        """The chunk files of ``table`` written so far (removed by :meth:`finish`)."""
+        return list(self._chunks[table])
 
-    def tables(self) -> dict[str, pa.Table]:
-        return {name: self.table(name) for name in SCHEMAS}
+    def _take(self, table: str) -> pa.Table:
+        """The buffered rows of ``table`` as a file-schema table; the buffer is emptied."""
+        cols = self._cols[table]
+        for k, v in self.partition.items():
+            if k in cols and any(x != v for x in cols[k]):
+                bad = next(x for x in cols[k] if x != v)
+                raise ValueError(f"{table} row has {k}={bad!r}, but the run's partition is "
+                                 f"{k}={v!r}")
+        schema = self.file_schema(table)
+        data = pa.Table.from_pydict({f.name: cols[f.name] for f in schema}, schema=schema)
+        self._cols[table] = {f.name: [] for f in SCHEMAS[table]}
+        self._buffered[table] = 0
+        return data
+
+    def flush(self, table: str | None = None) -> None:
+        """Write the buffered rows of ``table`` (of every table if None) as a chunk file."""
+        for name in SCHEMAS if table is None else (table,):
+            if self._buffered[name] == 0:
+                continue
+            data = self._take(name)
+            path = self.leaf(name) / f"{CHUNK_PREFIX}{len(self._chunks[name]):05d}.parquet"
+            write_atomic(data, path)
+            self._chunks[name].append(path)
+            self._written[name] += data.num_rows
+
+    # ------------------------------------------------------------------ the end
+    def finish(self) -> dict[str, Path]:
+        """Merge every table's chunks and remaining rows into its ``part-0.parquet`` (written
+        to a temporary name, then renamed: atomic), remove the chunks and return the files.
+        An empty table gives a valid, typed file with no rows."""
+        if self._closed:
+            raise RuntimeError(f"recorder of {self.run_id} is closed (finish or abort)")
+        files = {}
+        for name in SCHEMAS:
+            schema = self.file_schema(name)
+            rest = self._take(name)
+            path = self.leaf(name) / FINAL_NAME
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+            writer = pq.ParquetWriter(tmp, schema, compression="zstd")
+            self._open.append((writer, tmp))
+            rows = 0
+            for chunk in self._chunks[name]:
+                part = pq.read_table(chunk).replace_schema_metadata(schema.metadata)
+                writer.write_table(part)
+                rows += part.num_rows
+            if rest.num_rows or rows == 0:
+                writer.write_table(rest)
+            writer.close()
+            self._open.pop()
+            os.replace(tmp, path)
+            for chunk in self._chunks[name]:
+                chunk.unlink(missing_ok=True)
+            self._chunks[name] = []
+            files[name] = path
+        self._closed = True
+        return files
+
+    def abort(self) -> None:
+        """After an exception: write what is buffered as chunks (best effort), close and
+        remove a half-written final file, and leave every chunk where it is. Idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        for writer, tmp in self._open:
+            try:
+                writer.close()
+            except Exception:  # noqa: BLE001 - already failing; keep the first error
+                pass
+            tmp.unlink(missing_ok=True)
+        self._open = []
+        for name in SCHEMAS:
+            try:
+                self.flush(name)
+            except Exception:  # noqa: BLE001 - e.g. a row of the wrong type: drop the rest
+                self._cols[name] = {f.name: [] for f in SCHEMAS[name]}
+                self._buffered[name] = 0
 
 
 def write_atomic(table: pa.Table, path: Path) -> None:
@@ -114,27 +252,6 @@ def write_atomic(table: pa.Table, path: Path) -> None:
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     pq.write_table(table, tmp, compression="zstd")
     os.replace(tmp, path)
-
-
-def write_run(tables: dict[str, pa.Table], out: Path, partition: dict[str, Any] | None) -> list[Path]:
-    """Write one run's tables under ``out``.
-
-    Without ``partition``: ``out/<table>.parquet``. With it (a sweep): the Hive layout
-    ``out/<table>/k1=v1/k2=v2/.../part-0.parquet``, the partition columns left out of the files
-    (readers add them back from the path, as Hive does).
-    """
-    written = []
-    for name, table in tables.items():
-        if partition is None:
-            path = out / f"{name}.parquet"
-        else:
-            sub = Path(*(f"{k}={v}" for k, v in partition.items()))
-            path = out / name / sub / "part-0.parquet"
-            drop = [k for k in partition if k in table.column_names]
-            table = table.drop_columns(drop)
-        write_atomic(table, path)
-        written.append(path)
-    return written
 
 
 def json_meta(obj: Any) -> str:

@@ -1,10 +1,12 @@
-"""Running runs: one after another (:func:`execute`), or as a resumable sweep (:func:`sweep`)
-on a local process pool or on Ray.
+"""Running runs: one (:func:`run_one`), one after another (:func:`execute`), or as a resumable
+sweep (:func:`sweep`) on a local process pool or on Ray.
 
-A sweep writes every run into its own Hive partition of ``out`` (``<table>/allocator=…/
-planner=…/n_agents=…/seed=…/part-0.parquet``) and, once all of its tables are written, a
-completion marker ``out/_runs/<partition>/done.json`` (written atomically) that lists the files
-and their sizes. Rerunning the sweep skips every run whose marker is there, names the same
+Every run, whatever the number of runs, is streamed by a :class:`~dispatch.recorder.Recorder`
+into its own Hive partition of ``out`` (``<table>/allocator=…/planner=…/n_agents=…/seed=…/
+part-0.parquet``; chunk files ``_inflight-NNNNN.parquet`` while it runs) and, once all of
+its tables are written, gets a completion marker ``out/_runs/<partition>/done.json`` (written
+atomically) that lists the files and their sizes. Rerunning a sweep (or a sweep over the output
+of ``dispatch run``) skips every run whose marker is there, names the same
 scenario text and whose files are all present with those sizes; any other run (never started,
 killed half-way, failed, or its files touched since) is cleared and run again. A run that raises
 is recorded in the ``errors`` table (same partition layout: run_id, scenario, error_type,
@@ -22,6 +24,7 @@ import hashlib
 import json
 import logging
 import os
+import tempfile
 import time
 import traceback
 from collections import deque
@@ -34,7 +37,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from dispatch import __version__
-from dispatch.recorder import SCHEMAS, write_atomic, write_run
+from dispatch.recorder import SCHEMAS, Recorder, json_meta, partition_path, write_atomic
 from dispatch.scenario import RunSpec
 
 log = logging.getLogger(__name__)
@@ -46,21 +49,86 @@ ERRORS_SCHEMA = pa.schema([("run_id", pa.string()), ("scenario", pa.string()),
                            ("traceback", pa.string()), ("seconds", pa.float64())])
 
 
-@dataclass
+DEFAULT_FLUSH_ROWS = 50_000
+
+
 class RunResult:
-    spec: RunSpec
-    summary: dict
-    tables: dict
+    """One finished run: its spec, its summary row (a dict), the folder it was written to and
+    its files (``{table: path of part-0.parquet}``). :attr:`tables` reads them back."""
+
+    def __init__(self, spec: RunSpec, summary: dict, out: Path, files: dict[str, Path]) -> None:
+        self.spec = spec
+        self.summary = summary
+        self.out = Path(out)
+        self.files = dict(files)
+        self._tables: dict[str, pa.Table] | None = None
+        self._tmp: tempfile.TemporaryDirectory | None = None  # set by run_one(out=None)
+
+    def __repr__(self) -> str:
+        return f"RunResult({self.spec.run_id!r}, out={str(self.out)!r})"
+
+    @property
+    def tables(self) -> dict[str, pa.Table]:
+        """Every table of the run (cached), read back from its file with the partition columns
+        put back: ``tables[name]`` has exactly the columns of ``SCHEMAS[name]``, in order."""
+        if self._tables is None:
+            self._tables = {name: read_table(path, self.spec.partition, name)
+                            for name, path in self.files.items()}
+        return self._tables
 
 
-def run_one(spec: RunSpec):
-    """Simulate one run and return its RunResult (nothing written)."""
-    from dispatch.recorder import Recorder
+def read_table(path: Path, partition: dict[str, Any], name: str) -> pa.Table:
+    """One table file of a run with the ``partition`` columns (left out of the files) put
+    back where ``SCHEMAS[name]`` has them."""
+    table = pq.read_table(path)
+    schema = SCHEMAS[name]
+    for k, v in partition.items():
+        if k in schema.names and k not in table.column_names:
+            field = schema.field(k)
+            i = schema.get_field_index(k)
+            table = table.add_column(i, field, pa.array([v] * table.num_rows, field.type))
+    return table.select(schema.names)
+
+
+def run_metadata(spec: RunSpec) -> dict[str, str]:
+    """The schema metadata every file of a run carries (besides version and run id)."""
+    return {"dispatch.scenario": spec.scenario.text, "dispatch.seed": str(spec.seed),
+            "dispatch.spec": json_meta({"allocator": spec.allocator, "planner": spec.planner,
+                                        "n_agents": spec.agents, "seed": spec.seed,
+                                        "scenario": spec.scenario.name})}
+
+
+def make_recorder(spec: RunSpec, out: Path, *, flush_rows: int = DEFAULT_FLUSH_ROWS) -> Recorder:
+    """The recorder of ``spec`` writing into its partition of ``out``."""
+    return Recorder(Path(out), spec.run_id, run_metadata(spec), spec.partition,
+                    flush_rows=flush_rows)
+
+
+def run_one(spec: RunSpec, out: Path | None = None, *,
+            flush_rows: int = DEFAULT_FLUSH_ROWS) -> RunResult:
+    """Simulate one run, streaming its tables into its partition of ``out``.
+
+    With ``out=None`` the files go to a temporary folder owned by the returned result (removed
+    when it is garbage collected). On an exception the recorder is aborted (chunk files
+    written so far stay, readable) and the exception propagates."""
     from dispatch.sim import Simulation
 
-    rec = Recorder(spec.run_id, {})
-    summary = Simulation(spec, rec).run()
-    return RunResult(spec, summary, rec.tables())
+    tmp = None
+    if out is None:
+        tmp = tempfile.TemporaryDirectory(prefix=f"dispatch-{spec.run_id}-")
+        out = Path(tmp.name)
+    recorder = make_recorder(spec, out, flush_rows=flush_rows)
+    try:
+        summary = Simulation(spec, recorder).run()
+        files = recorder.finish()
+    except BaseException:
+        recorder.abort()
+        if tmp is not None:
+            tmp.cleanup()
+        raise
+    result = RunResult(spec, summary, Path(out), files)
+    result._tmp = tmp  # a TemporaryDirectory removes its folder when garbage collected
+    return result
 
 
 def default_out(spec: RunSpec) -> Path:
@@ -71,22 +139,16 @@ def execute(
     specs: list[RunSpec],
     out: Path,
     *,
-    partitioned: bool | None = None,
     on_done: Callable[[Any], None] | None = None,
+    flush_rows: int = DEFAULT_FLUSH_ROWS,
 ) -> list[dict]:
-    """Run every spec in order, writing each run's tables as soon as it finishes.
-
-    ``partitioned`` chooses the Hive layout (default: when there is more than one run). Each run
-    starts from cold caches, as in :func:`sweep`.
-    Returns the summaries in the order of ``specs``.
-    """
-    if partitioned is None:
-        partitioned = len(specs) > 1
+    """Run every spec in order into its partition of ``out`` (the layout of a sweep, markers
+    included, so that ``dispatch sweep`` over the folder skips these runs). Each run starts
+    from cold caches, as in :func:`sweep`; an exception stops here (no errors table).
+    Returns the summaries in the order of ``specs``."""
     summaries = []
     for spec in specs:
-        _cold_start()
-        result = run_one(spec)
-        write_run(result.tables, out, spec.partition if partitioned else None)
+        result, _ = _run_and_mark(spec, Path(out), flush_rows)
         summaries.append(result.summary)
         log.info("%s: total cost %.2f s", spec.run_id, result.summary["total_cost"])
         if on_done is not None:
@@ -115,7 +177,7 @@ class Outcome:
 
 
 def partition_dir(spec: RunSpec) -> Path:
-    return Path(*(f"{k}={v}" for k, v in spec.partition.items()))
+    return partition_path(spec.partition)
 
 
 def marker_path(out: Path, spec: RunSpec) -> Path:
@@ -171,27 +233,36 @@ def record_failure(out: Path, spec: RunSpec, error_type: str, message: str, tb: 
     write_atomic(table, Path(out) / ERRORS / partition_dir(spec) / "part-0.parquet")
 
 
+def _run_and_mark(spec: RunSpec, out: Path, flush_rows: int = DEFAULT_FLUSH_ROWS
+                  ) -> tuple[RunResult, dict[str, int]]:
+    """Clear ``spec``'s partition of ``out``, run it there from cold caches and write its
+    completion marker; returns the result and the marker's files (relative path: size)."""
+    started = time.perf_counter()
+    clear_partition(out, spec)
+    _cold_start()
+    result = run_one(spec, out, flush_rows=flush_rows)
+    seconds = time.perf_counter() - started
+    files = {str(p.relative_to(out)): p.stat().st_size for p in result.files.values()}
+    _write_json_atomic({"run_id": spec.run_id, "scenario_sha256": _digest(spec),
+                        "version": __version__, "seconds": seconds, "files": files},
+                       marker_path(out, spec))
+    return result, files
+
+
 def run_partition(spec: RunSpec, out: str | Path) -> Outcome:
     """Run one spec of a sweep into its partition of ``out`` and mark it complete; an
     exception is recorded in the errors table and returned as a failed :class:`Outcome`.
     This is what pool workers and Ray tasks execute (a top-level function: spawn-safe)."""
     out = Path(out)
     started = time.perf_counter()
-    clear_partition(out, spec)
     try:
-        _cold_start()
-        result = run_one(spec)
-        paths = write_run(result.tables, out, spec.partition)
+        result, files = _run_and_mark(spec, out)
     except Exception as e:  # noqa: BLE001 - any failure of one run is recorded, not raised
         seconds = time.perf_counter() - started
         log.warning("%s failed: %s: %s", spec.run_id, type(e).__name__, e)
         record_failure(out, spec, type(e).__name__, str(e), traceback.format_exc(), seconds)
         return Outcome(spec, "failed", error=f"{type(e).__name__}: {e}", seconds=seconds)
     seconds = time.perf_counter() - started
-    files = {str(p.relative_to(out)): p.stat().st_size for p in paths}
-    _write_json_atomic({"run_id": spec.run_id, "scenario_sha256": _digest(spec),
-                        "version": __version__, "seconds": seconds, "files": files},
-                       marker_path(out, spec))
     return Outcome(spec, "done", summary={"run_id": spec.run_id, **result.summary},
                    seconds=seconds, files=sorted(files))
 

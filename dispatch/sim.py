@@ -115,8 +115,8 @@ class Simulation:
         self.env = env = simpy.Environment()
         self.space = space_for(sc.world, spec.seed)
         self.world = self.space  # the voxel name, for callers that know they are in one
-        self.allocator: Allocator = make_plugin("allocator", spec.allocator,
-                                                sc.dispatch.allocator_params)
+        allocator: Allocator = make_plugin("allocator", spec.allocator,
+                                           sc.dispatch.allocator_params)
         self.planner: Planner = make_plugin("planner", spec.planner, sc.dispatch.planner_params,
                                             self.space)
         self.bus = bus = EventBus()
@@ -124,9 +124,7 @@ class Simulation:
         self.fleet = Fleet(place_fleet(self.space, spec, rng_for(spec.seed, STREAM_FLEET)))
         self.vehicles = self.fleet.vehicles
         self.stats = RunStats()
-        meta = {"dispatch.scenario": sc.text, "dispatch.seed": str(spec.seed),
-                "dispatch.spec": json_meta(_spec_meta(spec)), **self.space.describe()}
-        recorder.metadata.update(meta)
+        recorder.metadata.update(self.space.describe())
         self.physics = None
         roads = sc.world.roads is not None
         if roads:
@@ -153,7 +151,7 @@ class Simulation:
         self.operator = Operator(env, bus, book, self.fleet, driver, sc.tasks.service_time,
                                  lambda: self.dispatcher.notify(), self.traffic)
         self.dispatcher = Dispatcher(env, book, self.fleet, self.operator, self.planner,
-                                     self.allocator, self.space, sc.dispatch, sc.comms,
+                                     allocator, self.space, sc.dispatch, sc.comms,
                                      rng_for(spec.seed, STREAM_ALLOCATOR), self._record_decision)
         t = sc.tasks
         count = spec.n_static_tasks if t.source == "static" else t.count
@@ -163,6 +161,15 @@ class Simulation:
                                  rng_for(spec.seed, STREAM_SOURCE), self.dispatcher.notify,
                                  t.trips)
         self.source.on_done = self._check_finished
+
+    @property
+    def allocator(self) -> Allocator:
+        return self.dispatcher.allocator
+
+    @allocator.setter
+    def allocator(self, value: Allocator) -> None:
+        """Swap the allocator before the run (tests script decisions this way)."""
+        self.dispatcher.allocator = value
 
     def _mirror(self) -> None:
         """The PyBullet mirror: obstacles, a body per vehicle, moved on every ``move``."""
@@ -255,8 +262,3 @@ class Simulation:
                                      dispatcher=self.dispatcher, sim_time=float(self.env.now))
         rec.add("summary", **summary)
         return summary
-
-
-def _spec_meta(spec: RunSpec) -> dict:
-    return {"allocator": spec.allocator, "planner": spec.planner, "n_agents": spec.agents,
-            "seed": spec.seed, "scenario": spec.scenario.name}

@@ -97,7 +97,7 @@ class Task:
     @property
     def deadline(self) -> float:
         """Latest pickup time the request accepts (inf without a max_wait)."""
-        return self.released_at + self.max_wait if self.max_wait == self.max_wait else math.inf
+        return math.inf if math.isnan(self.max_wait) else self.released_at + self.max_wait
 
     def view(self) -> TaskView:
         return TaskView(self.id, self.kind, self.loc, self.released_at,  # type: ignore[arg-type]
@@ -246,7 +246,7 @@ class TaskSource:
         self.on_done()
 
     def release(self, req: Request) -> Task:
-        wait = req.max_wait if req.max_wait == req.max_wait else (
+        wait = req.max_wait if not math.isnan(req.max_wait) else (
             self.cfg.max_wait if self.cfg.max_wait is not None else math.nan)
         task = self.book.release(req.kind, req.loc, req.dropoff, max_wait=wait,
                                  snap_m=req.snap_m, dropoff_snap_m=req.dropoff_snap_m)
@@ -256,7 +256,7 @@ class TaskSource:
             self.book.close(task, TaskState.UNREACHABLE)
             return task
         limit = min(self.cfg.ttl if self.cfg.ttl is not None else math.inf,
-                    wait if wait == wait else math.inf)
+                    math.inf if math.isnan(wait) else wait)
         if limit < math.inf:
             self.env.process(self._expire(task, limit))
         self.notify()

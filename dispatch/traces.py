@@ -78,7 +78,7 @@ def _read_columns(path: Path) -> dict[str, list]:
     except ScenarioError:
         raise
     except Exception as e:  # pyarrow and csv raise several kinds for a malformed file
-        raise ScenarioError(path, "<file>", f"cannot be read: {e}") from None
+        raise ScenarioError(path, "<file>", f"cannot be read as a table: {e}") from None
     raise ScenarioError(path, "<file>", "must be a .csv or .parquet file")
 
 
@@ -107,10 +107,12 @@ def read_trace(path: Path, space: str, size: tuple[float, float, float] | None) 
     tcol = next((c for c in TIME_COLUMNS if c in columns), None)
     layout = next((lay for lay in LAYOUTS[space] if all(c in columns for c in lay[1])), None)
     if tcol is None or layout is None:
-        wanted = " or ".join("(" + ", ".join(lay[1]) + ")" for lay in LAYOUTS[space])
-        missing = ([] if tcol else ["t (or release_time)"]) + ([] if layout else [wanted])
-        raise ScenarioError(path, "<header>", f"missing column(s) for a {space} trace: "
-                                              f"{'; '.join(missing)}")
+        if len(LAYOUTS[space]) == 1:
+            wanted = [c for c in LAYOUTS[space][0][1] if c not in columns]
+        else:
+            wanted = [" or ".join("(" + ", ".join(lay[1]) + ")" for lay in LAYOUTS[space])]
+        missing = ([] if layout else wanted) + ([] if tcol else ["release_time (or t)"])
+        raise ScenarioError(path, "<header>", f"missing column(s): {', '.join(missing)}")
     name, pick, drop = layout
     has_dest = all(c in columns for c in drop)
     if not has_dest and any(c in columns for c in drop):

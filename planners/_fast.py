@@ -256,8 +256,7 @@ def astar(dirs, occ, nbr, req, deltas, dcoord, wstep, shape, pad, start, goal,  
             j = head[i]
             mn = pkey[j]
             while j >= 0:
-                if pkey[j] < mn:
-                    mn = pkey[j]
+                mn = min(mn, pkey[j])
                 j = pnext[j]
             last = mn
             j = head[i]
@@ -310,8 +309,7 @@ def astar(dirs, occ, nbr, req, deltas, dcoord, wstep, shape, pad, start, goal,  
             fbits[0] = gv + _octile(abs(ui + dcoord[b, 0] - gi), abs(uj + dcoord[b, 1] - gj),
                                     abs(uk + dcoord[b, 2] - gk))
             key = ubits[0]
-            if key < last:
-                key = last  # an ulp of inconsistency: file it with the current minimum
+            key = max(key, last)  # an ulp of inconsistency: file it with the current minimum
             if free_head >= 0:
                 e = free_head
                 free_head = pnext[e]

@@ -48,6 +48,7 @@ Statistics (``stats.extra``): ``trees``, ``iterations``, ``nodes``, ``rays``, ``
 from __future__ import annotations
 
 import math
+
 import numpy as np
 
 from dispatch.contracts import AgentView, Planner, TaskView
@@ -152,8 +153,7 @@ class _Tree:
                    for (a, b, c), (d, e, f) in boxes):
                 continue
             radius = min(rmax, gamma * (log(n + 1) / (n + 1)) ** inv_dim)
-            if radius < min(step, dist):
-                radius = min(step, dist)  # the nearest node is always a candidate
+            radius = max(radius, min(step, dist))  # the nearest node is always a candidate
             D = xt - xn[:, None]
             D *= D
             dn2 = D.sum(axis=0)

@@ -94,7 +94,7 @@ def move_table(grid: Grid, flies: bool) -> list:
 
 
 class _Edge:
-    __slots__ = ("clow", "path", "exp")
+    __slots__ = ("clow", "exp", "path")
 
     def __init__(self, clow: float) -> None:
         self.clow = clow

@@ -28,7 +28,8 @@ def small_sweep(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="session")
 def single_run(tmp_path_factory) -> Path:
-    """One run folder (``<table>.parquet``) of a busy dynamic run: Poisson tasks, some expire."""
+    """The folder of one busy dynamic run (``dispatch run``: the same Hive layout as a sweep,
+    one partition): Poisson tasks, some expire."""
     from dispatch.runner import execute
 
     d = tmp_path_factory.mktemp("single_run")

@@ -40,7 +40,7 @@ def test_mean_ci_by_hand():
 
 def test_open_sweep_has_run_keys(small_sweep):
     res = open_results(small_sweep)
-    assert [s.kind for s in res.sources] == ["sweep"]
+    assert [s.kind for s in res.sources] == ["hive"]
     assert len(res.summary) == 18
     for name in ("tasks", "events", "vehicles", "obstacles", "assignments", "decisions"):
         df = res.table(name)
@@ -59,18 +59,49 @@ def test_open_run_folder_and_parent(single_run, small_sweep, tmp_path):
     import shutil
 
     res = open_results(single_run)
-    assert [s.kind for s in res.sources] == ["run"]
+    assert [s.kind for s in res.sources] == ["hive"]
     tasks = res.table("tasks")
     assert set(tasks["allocator"]) == {"hungarian"} and set(tasks["seed"]) == {2}
-    # a folder holding results is searched; both layouts are read together (copied into a
+    # a folder holding results is searched; the folders are read together (copied into a
     # folder of their own: the session's temporary root also holds other tests' outputs)
     shutil.copytree(single_run, tmp_path / "a" / "run")
     shutil.copytree(small_sweep, tmp_path / "b" / "sweep")
     both = open_results(tmp_path)
-    kinds = sorted(s.kind for s in both.sources)
-    assert kinds == ["run", "sweep"] and len(both.summary) == 19
+    assert [s.kind for s in both.sources] == ["hive", "hive"] and len(both.summary) == 19
     with pytest.raises(NoResultsError):
         open_results(single_run / "nowhere")
+
+
+def test_old_single_run_folders_still_read(single_run, tmp_path):
+    """Results of older versions: one run as ``<table>.parquet`` files (no partition folders,
+    the run keys inside the summary), tasks with ``arrived_at`` and decisions with ``n_agents``
+    (the idle vehicles) for what are now ``picked_up_at`` and ``n_idle``."""
+    from dispatch.runner import read_table
+
+    new = open_results(single_run)
+    run_id = new.run_ids()[0]
+    partition = {"allocator": "hungarian", "planner": "astar", "n_agents": 3, "seed": 2}
+    old = tmp_path / "old"
+    old.mkdir()
+    for name in ("summary", "tasks", "assignments", "decisions", "events", "vehicles",
+                 "obstacles"):
+        (path,) = (single_run / name).rglob("part-0.parquet")
+        t = read_table(path, partition, name)
+        t = t.rename_columns([{"picked_up_at": "arrived_at", "n_idle": "n_agents"}.get(c, c)
+                              for c in t.column_names]).replace_schema_metadata(t.schema.metadata)
+        pq.write_table(t, old / f"{name}.parquet")
+    res = open_results(old)
+    assert [s.kind for s in res.sources] == ["flat"]
+    assert res.run_ids() == [run_id]
+    for name in ("tasks", "decisions", "events", "vehicles"):
+        got, want = res.table(name), new.table(name)
+        assert sorted(got.columns) == sorted(want.columns), name
+        assert got[list(want.columns)].equals(want), name
+    picked = res.table("tasks", columns=["task_id", "picked_up_at"])
+    assert picked["picked_up_at"].notna().any()
+    assert (res.table("decisions")["n_agents"] == 3).all()  # the run key, not the idle count
+    assert len(M.run_metrics(res.summary, res.table("tasks"), res.table("vehicles"))) == 1
+    assert res.world(run_id) == new.world(run_id)
 
 
 def test_sweep_files_with_fewer_columns_read_as_null(small_sweep, tmp_path):
@@ -148,8 +179,8 @@ def test_taxi_metrics_by_hand(small_sweep):
         for n in (2, 3):
             ts = [t for t in tasks if t["allocator"] == alloc and t["n_agents"] == n]
             vs = [v for v in vehicles if v["allocator"] == alloc and v["n_agents"] == n]
-            waits = np.array([t["arrived_at"] - t["released_at"] for t in ts
-                              if not math.isnan(t["arrived_at"])])
+            waits = np.array([t["picked_up_at"] - t["released_at"] for t in ts
+                              if not math.isnan(t["picked_up_at"])])
             got = taxi.loc[(alloc, n)]
             assert got["requests"] == len(ts) == 12
             assert got["rides"] == sum(t["state"] == "completed" for t in ts)
@@ -170,7 +201,8 @@ def test_taxi_metrics_by_hand(small_sweep):
 
 def test_run_metrics_of_a_busy_run(single_run):
     res = open_results(single_run)
-    tasks = pq.read_table(single_run / "tasks.parquet").to_pandas()
+    (path,) = (single_run / "tasks").rglob("*.parquet")
+    tasks = pq.read_table(path).to_pandas()
     rm = M.run_metrics(res.summary, res.table("tasks"), res.table("vehicles"))
     assert len(rm) == 1
     r = rm.iloc[0]

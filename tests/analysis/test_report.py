@@ -144,7 +144,7 @@ def test_duckdb_reads_the_sweep(small_sweep):
         mine = [r["total_cost"] for r in rows if r["allocator"] == alloc and r["n_agents"] == n]
         assert runs == 3 and cost == pytest.approx(statistics.fmean(mine))
     waits = con.execute(f"""
-        SELECT allocator, median(arrived_at - released_at)
+        SELECT allocator, median(picked_up_at - released_at)
         FROM read_parquet('{small_sweep}/tasks/**/*.parquet', hive_partitioning = true)
         WHERE state = 'completed' GROUP BY ALL""").fetchall()
     assert {a for a, _ in waits} == {"hungarian", "greedy", "random"}

@@ -4,17 +4,25 @@ from __future__ import annotations
 
 import json
 
+import pyarrow.dataset as ds
 import pyarrow.parquet as pq
 import pytest
 
 from dispatch import __version__
+from dispatch.recorder import SCHEMAS
 from dispatch.registry import available
 from tests.conftest import write_scenario
+
+#: The partition of the module's single run: every run writes
+#: ``OUT/<table>/allocator=…/planner=…/n_agents=…/seed=…/part-0.parquet``.
+LEAF = "allocator=hungarian/planner=astar/n_agents=3/seed=1"
+#: The partition columns, which live in the path, not in the files.
+PARTITION = ("allocator", "planner", "n_agents", "seed")
 
 #: The documented columns of each table (DESIGN.md / the issue list); tables may hold more.
 DOCUMENTED = {
     "summary": ["run_id", "scenario", "allocator", "planner", "n_agents", "n_tasks", "seed",
-                "total_cost", "conflict_free_rate", "alloc_seconds", "tasks_completed",
+                "space", "total_cost", "conflict_free_rate", "alloc_seconds", "tasks_completed",
                 "tasks_unfinished", "makespan"],
     "tasks": ["run_id", "task_id", "kind", "x", "y", "z", "released_at", "assigned_at",
               "agent_id", "cost", "picked_up_at", "completed_at", "state", "conflicted"],
@@ -22,7 +30,7 @@ DOCUMENTED = {
                     "alloc_seconds"],
     "events": ["run_id", "t", "event", "agent_id", "task_id", "x", "y", "z"],
     "vehicles": ["run_id", "agent_id", "kind", "speed", "x0", "y0", "z0", "distance",
-                 "busy_seconds"],
+                 "empty_distance", "occupied_distance", "busy_seconds"],
     "obstacles": ["run_id", "x0", "y0", "z0", "x1", "y1", "z1"],
 }
 
@@ -53,14 +61,20 @@ def test_run_exits_0_and_prints_tables(single_run):
 def test_run_writes_documented_columns(single_run, table):
     _, out, proc = single_run
     assert proc.returncode == 0, proc.stderr
-    path = out / f"{table}.parquet"
+    path = out / table / LEAF / "part-0.parquet"
     assert path.is_file()
     t = pq.read_table(path)
     cols = t.column_names
-    missing = [c for c in DOCUMENTED[table] if c not in cols]
+    documented = [c for c in DOCUMENTED[table] if c not in PARTITION]  # those are in the path
+    missing = [c for c in documented if c not in cols]
     assert not missing, f"{table} lacks {missing}"
+    assert not [c for c in PARTITION if c in cols], f"{table} repeats a partition column"
     # the documented columns keep their documented order
-    assert [c for c in cols if c in DOCUMENTED[table]] == DOCUMENTED[table]
+    assert [c for c in cols if c in documented] == documented
+    # read as a Hive dataset, the partition columns come back from the path
+    full = ds.dataset(out / table, partitioning="hive").to_table()
+    assert set(DOCUMENTED[table]) | set(PARTITION) <= set(full.column_names)
+    assert full.num_rows == t.num_rows
     assert set(t.column("run_id").to_pylist()) <= {"tiny__hungarian__astar__n3__s1"}
     meta = t.schema.metadata
     assert meta[b"dispatch.scenario"].decode() == (out.parent / "tiny.toml").read_text()
@@ -73,17 +87,19 @@ def test_run_writes_documented_columns(single_run, table):
 
 def test_run_output_content(single_run):
     _, out, _ = single_run
-    summary = pq.read_table(out / "summary.parquet").to_pylist()
+    summary = ds.dataset(out / "summary", partitioning="hive").to_table().to_pylist()
     assert len(summary) == 1
     s = summary[0]
     assert (s["scenario"], s["allocator"], s["planner"], s["n_agents"], s["seed"]) == (
         "tiny", "hungarian", "astar", 3, 1)
     assert s["n_tasks"] == 4
-    assert pq.read_table(out / "vehicles.parquet").num_rows == 3
-    assert pq.read_table(out / "tasks.parquet").num_rows == 4
-    assert pq.read_table(out / "obstacles.parquet").num_rows == 3
-    # nothing half-written is left behind
-    assert not [p for p in out.iterdir() if p.name.startswith(".")]
+    assert pq.read_table(out / "vehicles" / LEAF / "part-0.parquet").num_rows == 3
+    assert pq.read_table(out / "tasks" / LEAF / "part-0.parquet").num_rows == 4
+    assert pq.read_table(out / "obstacles" / LEAF / "part-0.parquet").num_rows == 3
+    # one file per table, nothing half-written (temporary files, chunks) left behind
+    files = sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file())
+    assert files == sorted([f"{t}/{LEAF}/part-0.parquet" for t in SCHEMAS]
+                           + [f"_runs/{LEAF}/done.json"])
 
 
 def test_plugins_lists_builtins(cli):

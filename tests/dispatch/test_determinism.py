@@ -28,8 +28,18 @@ BUSY = dict(
 )
 
 
+def leaf_files(folder: Path) -> list[Path]:
+    """The Parquet files of a folder holding one run (one ``part-0.parquet`` per table)."""
+    return sorted(folder.rglob("*.parquet"))
+
+
 def read_run(folder: Path) -> dict:
-    return {name: pq.read_table(folder / f"{name}.parquet") for name in TABLES}
+    """The tables of a folder holding one run, each read from its one file."""
+    out = {}
+    for name in TABLES:
+        (path,) = (folder / name).rglob("*.parquet")
+        out[name] = pq.read_table(path)
+    return out
 
 
 def without_timing(table):
@@ -66,7 +76,9 @@ def test_same_seed_same_parquet(tmp_path, allocator):
     a, b = tmp_path / "a", tmp_path / "b"
     sa = run_into(scenario, a, seed=3)
     sb = run_into(scenario, b, seed=3)
-    assert sorted(p.name for p in a.iterdir()) == sorted(f"{n}.parquet" for n in TABLES)
+    leaf = "allocator=" + allocator + "/planner=astar/n_agents=3/seed=3/part-0.parquet"
+    assert [str(p.relative_to(a)) for p in leaf_files(a)] == sorted(f"{n}/{leaf}"
+                                                                    for n in TABLES)
     ta, tb = read_run(a), read_run(b)
     for name in TABLES:
         assert_same_content(without_timing(ta[name]), without_timing(tb[name]), name)

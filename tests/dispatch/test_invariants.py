@@ -25,9 +25,8 @@ import pyarrow.parquet as pq
 import pytest
 
 from dispatch.motion import step_is_legal, step_length
-from dispatch.runner import run_one
+from dispatch.runner import RunResult, run_one
 from dispatch.scenario import RunSpec, load_scenario
-from dispatch.runner import RunResult
 from dispatch.sim import world_for
 from tests.conftest import write_scenario
 
@@ -280,7 +279,8 @@ def test_summary_counts_add_up(runs, case):
     assert decisions.n_assigned.sum() == len(assigned)
     assert s["rounds"] == decisions.rounds.sum()
     arrived = tasks[tasks.picked_up_at.notna()]
-    assert s["realized_travel"] == pytest.approx((arrived.picked_up_at - arrived.assigned_at).sum())
+    assert s["realized_travel"] == pytest.approx(
+        (arrived.picked_up_at - arrived.assigned_at).sum())
     assert r.vehicles.tasks_completed.sum() == s["tasks_completed"]
     done = tasks[tasks.state == "completed"]
     assert s["makespan"] == pytest.approx(done.completed_at.max() if len(done) else 0.0)

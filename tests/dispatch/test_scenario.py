@@ -120,8 +120,10 @@ def test_good_trace_loads_sorted(tmp_path):
     write_csv(tmp_path / "trace.csv", ["2.0,1.5,1.5,0.5", "0.5,3.0,4.0,2.5", "1.0,11.9,0,5.9"])
     sc = load_scenario(trace_scenario(tmp_path, "trace.csv"))
     assert sc.tasks.trace == (tmp_path / "trace.csv").resolve()
-    assert [r[0] for r in sc.tasks.trace_rows] == [0.5, 1.0, 2.0]
-    assert sc.tasks.trace_rows[0] == (0.5, 3.0, 4.0, 2.5)
+    trips = sc.tasks.trips
+    assert list(trips.t) == [0.5, 1.0, 2.0]
+    assert (trips.t[0], *trips.origin[0]) == (0.5, 3.0, 4.0, 2.5)
+    assert list(trips.row) == [2, 3, 1] and trips.dest is None
 
 
 @pytest.mark.parametrize(
@@ -187,7 +189,7 @@ def test_trace_parquet_that_is_not_parquet(tmp_path):
     trace = tmp_path / "fake.parquet"
     trace.write_bytes(b"this is not parquet")
     assert_names(load_error(trace_scenario(tmp_path, "fake.parquet")), trace, "<file>",
-                 "cannot be read as a trace")
+                 "cannot be read as a table")
 
 
 # ----------------------------------------------------------------------------- CLI path
@@ -378,4 +380,4 @@ def test_validated_obstacles_build_for_every_seed(tmp_path):
 def test_trace_csv_with_byte_order_mark(tmp_path):
     (tmp_path / "bom.csv").write_bytes(b"\xef\xbb\xbfrelease_time,x,y,z\n0,1.5,1.5,0.5\n")
     sc = load_scenario(trace_scenario(tmp_path, "bom.csv"))
-    assert sc.tasks.trace_rows == ((0.0, 1.5, 1.5, 0.5),)
+    assert (sc.tasks.trips.t.tolist(), sc.tasks.trips.origin.tolist()) == ([0.0], [[1.5, 1.5, 0.5]])

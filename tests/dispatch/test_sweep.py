@@ -63,10 +63,13 @@ def small(tmp_path_factory):
 
 
 def test_sweep_layout_matches_dispatch_run(small, tmp_path):
-    """A sweep writes exactly what ``dispatch run`` writes, plus one marker per run."""
+    """A sweep writes exactly what ``dispatch run`` writes, markers included: a sweep over the
+    output of ``dispatch run`` has nothing left to do."""
     _, specs, serial = small
     execute(specs, tmp_path / "run")
     assert_same_outputs(tmp_path / "run", serial)
+    assert sorted(markers(tmp_path / "run")) == sorted(markers(serial))
+    assert [o.status for o in sweep(specs, tmp_path / "run", workers=1)] == ["skipped"] * 12
     assert len(markers(serial)) == 12
     assert all(is_complete(serial, s) for s in specs)
     marker = json.loads(marker_path(serial, specs[0]).read_text())
@@ -172,10 +175,10 @@ def test_failing_run_is_recorded_and_retried(small, tmp_path, monkeypatch):
     real = runner.run_one
     bad = specs[4].run_id
 
-    def flaky(spec):
+    def flaky(spec, *args, **kwargs):
         if spec.run_id == bad:
             raise RuntimeError("boom in the planner")
-        return real(spec)
+        return real(spec, *args, **kwargs)
 
     monkeypatch.setattr(runner, "run_one", flaky)
     outcomes = sweep(specs, out, workers=1)

@@ -511,7 +511,7 @@ def test_costs_on_paper_world_equal_scipy_after_moves():
     moved (fields reused: no new Dijkstra)."""
     from dispatch.scenario import load_scenario
     from dispatch.sim import STREAM_FLEET, STREAM_TASKS, place_fleet, rng_for, world_for
-    from dispatch.tasks import TaskFactory
+    from dispatch.demand import VoxelDemand
 
     root = Path(__file__).resolve().parents[2]
     scenario = load_scenario(root / "scenarios" / "paper_static.toml")
@@ -519,8 +519,8 @@ def test_costs_on_paper_world_equal_scipy_after_moves():
     world = world_for(scenario.world, 3)
     grid = world.grid
     agents = tuple(v.view() for v in place_fleet(world, spec, rng_for(3, STREAM_FLEET)))
-    factory = TaskFactory(grid, 0.5, rng_for(3, STREAM_TASKS))  # ground and air tasks
-    tasks = tuple(TaskView(i, *factory.draw(), 0.0) for i in range(20))
+    demand = VoxelDemand(grid, 0.5, rng_for(3, STREAM_TASKS))  # ground and air tasks
+    tasks = tuple(TaskView(i, (r := demand.draw()).kind, r.loc, 0.0) for i in range(20))
 
     def want(agents):
         out = np.full((len(agents), len(tasks)), np.inf)
