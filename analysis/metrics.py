@@ -154,6 +154,9 @@ def _taxi_row(tasks: pd.DataFrame, vehicles: pd.DataFrame, summary: pd.DataFrame
     with np.errstate(divide="ignore", invalid="ignore"):
         rel = np.where(planned > 0, approach / planned - 1.0, np.nan)
     distance = float(vehicles["distance"].sum())
+    # results written before trips existed have no empty_distance: every metre was empty then
+    empty = (float(vehicles["empty_distance"].sum()) if "empty_distance" in vehicles
+             and vehicles["empty_distance"].notna().all() else distance)
     horizon = (summary.set_index("run_id")["sim_time"]
                .reindex(vehicles["run_id"]).to_numpy(dtype=float))
     capacity = float(np.nansum(horizon))
@@ -172,7 +175,7 @@ def _taxi_row(tasks: pd.DataFrame, vehicles: pd.DataFrame, summary: pd.DataFrame
         "rel_detour": _stat(rel[np.isfinite(rel)], np.mean),
         "vehicles": len(vehicles), "totalDistance": distance,
         "averageDrivenDistance": distance / len(vehicles) if len(vehicles) else math.nan,
-        "totalEmptyDistance": distance, "emptyRatio": 1.0 if distance > 0 else math.nan,
+        "totalEmptyDistance": empty, "emptyRatio": empty / distance if distance > 0 else math.nan,
         "utilization": float(vehicles["busy_seconds"].sum()) / capacity if capacity > 0
         else math.nan,
     }

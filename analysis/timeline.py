@@ -3,10 +3,14 @@
 Vehicle events (``agent_id`` >= 0) and what they mean for the vehicle:
 
 * ``assign``  a task was given to it (x, y, z: the task's cell);
-* ``depart``  it leaves its cell for the task (x, y, z: where it is);
-* ``move``    it entered the next cell of its path (x, y, z: that cell);
+* ``depart``  it leaves for the pickup, or with the passenger for the drop-off (x, y, z: where
+  it is);
+* ``move``    it entered the next cell of its path (x, y, z: that cell; on roads, only with
+  ``edge_events``: the node it reached);
 * ``wait``    it holds its cell on the way (a reservation conflict), until its next ``move``;
-* ``arrive``  it reached the task and starts serving it;
+* ``pickup``  it reached the task (the trip's pickup) and starts serving it (``arrive`` in
+  results written before trips existed);
+* ``dropoff`` it reached the trip's drop-off (then serves for the service time);
 * ``idle``    it finished the task and is free again.
 
 :func:`vehicle_intervals` turns them into ``travel`` / ``service`` (both busy), ``waiting`` and
@@ -21,7 +25,7 @@ import pandas as pd
 
 #: Events whose x, y, z are the vehicle's own position (``assign`` and the task-closing events
 #: carry the task's cell instead).
-POSITION_EVENTS = ("depart", "move", "wait", "arrive", "idle")
+POSITION_EVENTS = ("depart", "move", "wait", "pickup", "dropoff", "arrive", "idle")
 STATES = ("travel", "service", "waiting", "idle")
 
 
@@ -39,7 +43,8 @@ def vehicle_intervals(events: pd.DataFrame, vehicles: pd.DataFrame,
         g = by_agent.get(agent)
         for ev in (g.itertuples(index=False) if g is not None else ()):
             new = {"assign": "waiting", "depart": "travel", "move": "travel", "wait": "waiting",
-                   "arrive": "service", "idle": "idle"}.get(ev.event)
+                   "pickup": "service", "dropoff": "service", "arrive": "service",
+                   "idle": "idle"}.get(ev.event)
             if new is None or (ev.event == "assign" and state != "idle"):
                 continue
             if new != state:
