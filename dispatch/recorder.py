@@ -3,7 +3,7 @@
 Each table has a fixed schema (below), so an empty table is still a valid, typed file. One
 layout whatever the number of runs: ``OUT/<table>/allocator=…/planner=…/n_agents=…/seed=…/
 part-0.parquet`` (Hive; the partition columns live in the path, not in the files). While a run
-goes, rows are flushed every ``flush_rows`` rows into whole chunk files ``_inflight-NNNNN.parquet``
+goes, rows are flushed every ``flush_rows`` rows into whole chunk files ``_inflight-NNNNN.parquet.chunk``
 next to it (ignored by Hive readers, readable one by one after a crash); at the end they are
 merged into ``part-0.parquet``. Every file is written to a temporary name and renamed into place,
 so a reader never sees half a file. The schema metadata of every file holds the scenario text,
@@ -87,6 +87,8 @@ def partition_path(partition: dict[str, Any]) -> Path:
 
 
 CHUNK_PREFIX = "_inflight-"
+#: not ".parquet": a glob such as `**/*.parquet` (DuckDB, polars) must not pick up a chunk
+CHUNK_SUFFIX = ".parquet.chunk"
 FINAL_NAME = "part-0.parquet"
 
 
@@ -94,7 +96,7 @@ class Recorder:
     """Streams one run's rows into ``out/<table>/<k1=v1>/.../part-0.parquet``.
 
     Rows are buffered per table as column lists; once a table holds ``flush_rows`` rows they
-    are written as a complete chunk file ``_inflight-NNNNN.parquet`` in the table's partition
+    are written as a complete chunk file ``_inflight-NNNNN.parquet.chunk`` in the table's partition
     folder (temporary name, then a rename), so memory stays bounded and a run killed half-way
     leaves whole, readable chunks (names starting with ``_`` are skipped by Hive readers).
     :meth:`finish` streams the chunks and the remainder into ``part-0.parquet`` (atomically)
@@ -122,7 +124,7 @@ class Recorder:
         for name in SCHEMAS:  # chunks of an earlier run of this partition killed half-way
             leaf = self.leaf(name)
             if leaf.is_dir():
-                for stale in leaf.glob(f"{CHUNK_PREFIX}*.parquet"):
+                for stale in leaf.glob(f"{CHUNK_PREFIX}*{CHUNK_SUFFIX}"):
                     stale.unlink()
 
     # ------------------------------------------------------------------ paths, schemas
@@ -187,7 +189,7 @@ class Recorder:
             if self._buffered[name] == 0:
                 continue
             data = self._take(name)
-            path = self.leaf(name) / f"{CHUNK_PREFIX}{len(self._chunks[name]):05d}.parquet"
+            path = self.leaf(name) / f"{CHUNK_PREFIX}{len(self._chunks[name]):05d}{CHUNK_SUFFIX}"
             write_atomic(data, path)
             self._chunks[name].append(path)
             self._written[name] += data.num_rows

@@ -3,7 +3,7 @@ sweep (:func:`sweep`) on a local process pool or on Ray.
 
 Every run, whatever the number of runs, is streamed by a :class:`~dispatch.recorder.Recorder`
 into its own Hive partition of ``out`` (``<table>/allocator=…/planner=…/n_agents=…/seed=…/
-part-0.parquet``; chunk files ``_inflight-NNNNN.parquet`` while it runs) and, once all of
+part-0.parquet``; chunk files ``_inflight-NNNNN.parquet.chunk`` while it runs) and, once all of
 its tables are written, gets a completion marker ``out/_runs/<partition>/done.json`` (written
 atomically) that lists the files and their sizes. Rerunning a sweep (or a sweep over the output
 of ``dispatch run``) skips every run whose marker is there, names the same

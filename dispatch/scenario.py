@@ -375,7 +375,7 @@ def parse_scenario(data: dict, path: Path, text: str = "") -> Scenario:
     d = root.table("dispatch")
     disp = DispatchConfig(
         allocator=d.string("allocator", "hungarian"),
-        planner=d.string("planner", "astar"),
+        planner=d.string("planner", "astar" if world.roads is None else "dijkstra"),
         batch_window=d.number("batch_window", 0.0, lo=0.0),
         max_rounds=d.number("max_rounds", 1000, lo=1, integer=True),
         allocator_params=d.params("allocator_params"),

@@ -62,11 +62,11 @@ def test_chunks_appear_at_flush_rows_and_finish_merges_them(tmp_path):
         rec.add("events", **event(i))
     assert not leaf.exists()  # nothing written below flush_rows
     rec.add("events", **event(2))
-    assert sorted(p.name for p in leaf.iterdir()) == ["_inflight-00000.parquet"]
+    assert sorted(p.name for p in leaf.iterdir()) == ["_inflight-00000.parquet.chunk"]
     for i in range(3, 8):
         rec.add("events", **event(i))
     chunks = sorted(leaf.iterdir())
-    assert [p.name for p in chunks] == ["_inflight-00000.parquet", "_inflight-00001.parquet"]
+    assert [p.name for p in chunks] == ["_inflight-00000.parquet.chunk", "_inflight-00001.parquet.chunk"]
     assert rec.chunks("events") == chunks
     assert (rec.written("events"), rec.buffered("events")) == (6, 2)
     for k, chunk in enumerate(chunks):  # each chunk is a whole file with its rows
@@ -137,7 +137,7 @@ def test_abort_keeps_what_was_recorded(tmp_path):
     rec.abort()
     leaf = tmp_path / "events" / LEAF
     chunks = sorted(leaf.iterdir())
-    assert [p.name for p in chunks] == [f"_inflight-{k:05d}.parquet" for k in range(3)]
+    assert [p.name for p in chunks] == [f"_inflight-{k:05d}.parquet.chunk" for k in range(3)]
     rows = pa.concat_tables([pq.read_table(p) for p in chunks]).column("t").to_pylist()
     assert rows == [float(i) for i in range(10)]  # the buffered rest too
     assert not list(tmp_path.rglob("part-0.parquet"))
@@ -200,7 +200,7 @@ def test_failing_run_is_aborted(tmp_path, monkeypatch):
     monkeypatch.setattr(Simulation, "_record_decision", failing)
     with pytest.raises(RuntimeError, match="boom"):
         run_one(spec, tmp_path / "out", flush_rows=5)
-    files = sorted((tmp_path / "out").rglob("*.parquet"))
+    files = sorted((tmp_path / "out").rglob("*.parquet*"))
     assert files and all(f.name.startswith("_inflight-") for f in files)
     assert all(pq.read_table(f).num_rows > 0 for f in files)
     assert not [p for p in (tmp_path / "out").rglob(".*")]
@@ -227,7 +227,7 @@ def test_run_killed_half_way_leaves_readable_chunks(tmp_path):
                             cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     try:
         deadline = time.monotonic() + 120
-        while len(list(out.glob("events/**/_inflight-*.parquet"))) < 2:
+        while len(list(out.glob("events/**/_inflight-*.parquet.chunk"))) < 2:
             assert proc.poll() is None, proc.communicate()[1].decode()
             assert time.monotonic() < deadline, "no two chunks of events within 120 s"
             time.sleep(0.01)
@@ -238,7 +238,7 @@ def test_run_killed_half_way_leaves_readable_chunks(tmp_path):
             proc.kill()
             proc.communicate()
     assert proc.returncode == -signal.SIGKILL
-    files = sorted(out.rglob("*.parquet"))
+    files = sorted(out.rglob("*.parquet*"))
     assert len([f for f in files if f.relative_to(out).parts[0] == "events"]) >= 2
     assert not list(out.rglob("part-0.parquet"))  # the run never finished
     for f in files:

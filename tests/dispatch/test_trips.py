@@ -293,3 +293,25 @@ def test_a_start_file_with_a_duplicate_vehicle_is_named(tmp_path):
     with pytest.raises(ScenarioError, match="row 2.*vehicle_id 1 appears twice"):
         load_scenario(road_scenario(tmp_path, tasks=SOURCES["static"],
                                     fleet='start = "fleet.csv"'))
+
+
+def test_voxel_trips_with_drop_offs(make_scenario, tmp_path):
+    """In the voxel world a trace may give drop-offs: each trip is driven pickup -> drop-off,
+    occupied metres equal the planner's shortest paths, and the events say so."""
+    write_csv(tmp_path / "trips.csv", ["t", "x", "y", "z", "dest_x", "dest_y", "dest_z"],
+              [(0.0, 1.5, 1.5, 0.5, 10.5, 10.5, 0.5), (2.0, 10.5, 1.5, 0.5, 1.5, 10.5, 0.5)])
+    path = make_scenario(tasks={"source": "trace", "trace": "trips.csv",
+                                "ground_fraction": None},
+                         obstacles={"count": 0}, fleet={"agents": 2, "uav_fraction": 0.0})
+    [spec] = load_scenario(path).runs()
+    r = run_one(spec)
+    tasks = r.tables["tasks"].to_pandas().sort_values("task_id")
+    assert list(tasks.state) == ["completed", "completed"]
+    assert (tasks.picked_up_at <= tasks.completed_at).all()
+    assert tasks.dropoff_x.tolist() == [10.5, 1.5]
+    ev = r.tables["events"].to_pandas()
+    assert (ev.event == "dropoff").sum() == 2
+    # an empty 12 x 12 ground: octile distance between the cells, metres (UGVs drive 8-connected)
+    octile = [9 * math.sqrt(2), 9 * math.sqrt(2)]
+    assert r.summary["occupied_distance"] == pytest.approx(sum(octile))
+    assert r.tables["vehicles"].to_pandas().occupied_distance.sum() == pytest.approx(sum(octile))
