@@ -4,7 +4,7 @@ Each run is a fresh process (its peak RSS is its own): a Manhattan grid (20 x 20
 200 m blocks, 10 m/s), 100 taxis, Poisson trips at 0.5 per second (origin and destination
 uniform over the intersections), fcfs, for 1, 4 and 16 simulated hours. It is run twice:
 
-* streaming (the kernel as it is): rows flushed to Parquet chunks every 50,000;
+* streaming (the kernel as it is): rows flushed to Parquet chunks every 10,000;
 * the reference: the same kernel holding every row until the end (``flush_rows`` larger than
   the run), which is what the recorder did before it streamed.
 
@@ -81,7 +81,7 @@ def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--hours", type=float, nargs="+", default=[1.0, 4.0, 16.0])
     args = p.parse_args(argv)
-    modes = {"streaming": 50_000, "reference (all rows held)": 10**12}
+    modes = {"streaming": 10_000, "reference (all rows held)": 10**12}
     table = Table(title="Peak RSS against simulated hours (100 taxis, 0.5 trips/s, fcfs)")
     for col in ("mode", "hours", "trips", "event rows", "peak RSS MB", "wall s"):
         table.add_column(col, justify="left" if col == "mode" else "right")

@@ -49,7 +49,7 @@ ERRORS_SCHEMA = pa.schema([("run_id", pa.string()), ("scenario", pa.string()),
                            ("traceback", pa.string()), ("seconds", pa.float64())])
 
 
-DEFAULT_FLUSH_ROWS = 50_000
+DEFAULT_FLUSH_ROWS = 10_000
 
 
 class RunResult:
