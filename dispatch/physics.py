@@ -98,3 +98,12 @@ class Physics:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def mirror(physics: Physics, bus, space, vehicles) -> None:
+    """Make ``physics`` a subscriber of the run's event stream: a body per vehicle at its start,
+    moved to the cell of every ``move`` event. Nothing in the run reads it back; it is there for
+    contact checks, ray casts and pictures."""
+    for v in vehicles:
+        physics.add_vehicle(v.id, v.flies, space.position(v.loc))
+    bus.subscribe(lambda e: physics.move(e.agent_id, space.position(e.loc)), ("move",))

@@ -4,7 +4,7 @@ onto one SimPy environment. Nothing here is reached back into during the run:
     TaskSource ──release──▶ TaskBook ◀──assign/pickup/close── Operator (vehicles, drivers)
         │                      ▲  │                               ▲
         └──notify──▶ Dispatcher┘  └─on_close─▶ RunStats, Recorder  └── Dispatcher.assign
-    every process ──emit──▶ EventBus ──▶ Recorder (events), PhysicsMirror, user subscribers
+    every process ──emit──▶ EventBus ──▶ Recorder (events), PyBullet mirror, user subscribers
 
 Randomness: every stream is a ``numpy.random.Generator`` seeded from the run's seed and a fixed
 stream number, so the world (obstacles) depends on the seed only, and the same seed gives the
@@ -172,14 +172,11 @@ class Simulation:
         self.dispatcher.allocator = value
 
     def _mirror(self) -> None:
-        """The PyBullet mirror: obstacles, a body per vehicle, moved on every ``move``."""
-        from dispatch.physics import Physics
+        """The PyBullet mirror (voxel worlds, ``[world] physics``): a subscriber."""
+        from dispatch.physics import Physics, mirror
 
-        self.physics = physics = Physics(self.space)
-        for v in self.vehicles:
-            physics.add_vehicle(v.id, v.flies, self.space.position(v.loc))
-        self.bus.subscribe(lambda e: physics.move(e.agent_id, self.space.position(e.loc)),
-                           ("move",))
+        self.physics = Physics(self.space)
+        mirror(self.physics, self.bus, self.space, self.vehicles)
 
     def _check_finished(self, _task: Task | None = None) -> None:
         if self.source.finished and not self.finished.triggered and self.book.live == 0:

@@ -196,6 +196,7 @@ def test_positions_in_metres_are_snapped_and_the_distance_recorded(tmp_path):
     assert tasks.dropoff_snap_m.tolist() == pytest.approx([math.hypot(20, 10), 0.0])
 
 
+@pytest.mark.skipif(not TAXI.is_file(), reason=f"Chicago taxi sample not found at {TAXI}")
 def test_chicago_trace_by_latitude_longitude(tmp_path):
     """Real taxi trips (the shared Chicago sample) on the shipped Chicago network: snapped to
     through nodes a few hundred metres away, served, costs equal to scipy's Dijkstra."""
