@@ -69,6 +69,8 @@ def components(comm: np.ndarray) -> tuple[int, np.ndarray]:
     n = len(comm)
     if n == 0:
         return 0, np.zeros(0, dtype=np.int64)
+    if comm.all():  # everyone hears everyone (unlimited range): skip a dense N x N graph
+        return 1, np.zeros(n, dtype=np.int64)
     count, labels = connected_components(csr_matrix(np.asarray(comm, bool)), directed=False)
     return int(count), labels.astype(np.int64)
 

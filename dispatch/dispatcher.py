@@ -168,7 +168,7 @@ class Dispatcher:
         open_tasks = [t for t, ok in zip(open_tasks, servable) if ok]
         comms = self.comms
         apos = self.space.positions([a.loc for a in agents])
-        comm = comm_graph([tuple(p) for p in apos], comms.range)
+        comm = comm_graph(apos, comms.range)
         tasks = tuple(t.view() for t in open_tasks)
         problem = AllocationProblem(
             time=now, agents=agents, tasks=tasks,

@@ -396,6 +396,10 @@ def _point_arrays(locs: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nda
         node = locs.astype(np.int64).reshape(-1)
         z = np.zeros(node.size)
         return node, np.full(node.size, -1, dtype=np.int64), z, z
+    if all(type(loc) is int for loc in locs):  # the common case: everyone stands on a node
+        node = np.fromiter(locs, np.int64, len(locs))
+        z = np.zeros(node.size)
+        return node, np.full(node.size, -1, dtype=np.int64), z, z
     pts = [_as_point(loc) for loc in locs]
     node = np.fromiter((p.node for p in pts), np.int64, len(pts))
     prev = np.fromiter((p.prev for p in pts), np.int64, len(pts))

@@ -73,6 +73,7 @@ class Vehicle:
     replans: int = 0
     wait_seconds: float = 0.0
     waiting_since: float | None = None
+    _view: AgentView | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         self.loc = self.start
@@ -97,8 +98,14 @@ class Vehicle:
         return self.loc
 
     def view(self, now: float | None = None) -> AgentView:
-        loc = self.loc if now is None else self.location(now)
-        return AgentView(self.id, self.kind, loc, self.speed)  # type: ignore[arg-type]
+        """What a decision at ``now`` sees of it (kept while it stands still: a fleet of idle
+        vehicles is viewed at every decision)."""
+        if self.leg is not None and now is not None:
+            return AgentView(self.id, self.kind, self.location(now), self.speed)  # type: ignore[arg-type]
+        v = self._view
+        if v is None or v.loc is not self.loc:
+            v = self._view = AgentView(self.id, self.kind, self.loc, self.speed)  # type: ignore[arg-type]
+        return v
 
     def begin_wait(self, now: float, bus: EventBus) -> None:
         """It stands in its cell on the way to its task (until its next step starts)."""
