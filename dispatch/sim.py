@@ -58,20 +58,24 @@ def world_for(cfg: WorldConfig, seed: int) -> World:
                        rng_for(seed, STREAM_WORLD))
 
 
-def network_for(cfg: RoadConfig):
-    """The road network of a scenario (loading is cached by the loader)."""
+def network_for(cfg: RoadConfig, scenario_path=None):
+    """The road network of a scenario (loading is cached by the loader); a file that cannot
+    be loaded is a ScenarioError naming the scenario file and ``world.network``."""
     from dispatch.roads import load_network
 
     try:
         return load_network(cfg.network, base=cfg.base, blocks=cfg.blocks, block=cfg.block,
                             speed=cfg.speed)
     except (ValueError, OSError) as e:
-        raise ScenarioError(cfg.base, "world.network", str(e)) from None
+        raise ScenarioError(scenario_path or cfg.base, "world.network", str(e)) from None
+    except Exception as e:  # noqa: BLE001 - a malformed file raises whatever its parser raises
+        raise ScenarioError(scenario_path or cfg.base, "world.network",
+                            f"{cfg.network} cannot be read ({type(e).__name__}: {e})") from None
 
 
-def space_for(cfg: WorldConfig, seed: int) -> Space:
+def space_for(cfg: WorldConfig, seed: int, scenario_path=None) -> Space:
     """The run's space: its voxel world (per seed) or its road network."""
-    return world_for(cfg, seed) if cfg.roads is None else network_for(cfg.roads)
+    return world_for(cfg, seed) if cfg.roads is None else network_for(cfg.roads, scenario_path)
 
 
 def make_plugin(kind: str, name: str, params, *args):
@@ -94,7 +98,7 @@ def check_runs(sc: Scenario, planners) -> None:
                                 f"this scenario's {space} world; {space} planners: "
                                 f"{', '.join(registry.serving(space)) or 'none installed'}")
     if sc.world.roads is not None:
-        net = network_for(sc.world.roads)
+        net = network_for(sc.world.roads, sc.path)
         if sc.tasks.trips is not None:
             from dispatch.demand import trace_nodes_ok
 
@@ -113,7 +117,7 @@ class Simulation:
         sc = spec.scenario
         self.spec, self.recorder = spec, recorder
         self.env = env = simpy.Environment()
-        self.space = space_for(sc.world, spec.seed)
+        self.space = space_for(sc.world, spec.seed, sc.path)
         self.world = self.space  # the voxel name, for callers that know they are in one
         allocator: Allocator = make_plugin("allocator", spec.allocator,
                                            sc.dispatch.allocator_params)

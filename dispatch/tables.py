@@ -120,7 +120,8 @@ def render_trips(summaries: list[dict], console=None) -> None:
 
             served = fmean(r["tasks_completed"] / r["n_tasks"] if r["n_tasks"] else math.nan
                            for r in rows)
-            t.add_row(alloc, str(n), f"{mean('n_tasks'):.0f}", f"{100 * served:.1f}%",
+            t.add_row(alloc, str(n), f"{mean('n_tasks'):.0f}",
+                      "-" if math.isnan(served) else f"{100 * served:.1f}%",
                       f"{mean('tasks_rejected'):.0f}", f"{mean('tasks_expired'):.0f}",
                       f"{mean('wait_time_mean'):.1f}", f"{mean('empty_distance') / 1000:.0f}",
                       f"{mean('occupied_distance') / 1000:.0f}", f"{mean('alloc_seconds'):.2f}")
