@@ -316,3 +316,14 @@ def test_voxel_trips_with_drop_offs(make_scenario, tmp_path):
     octile = [9 * math.sqrt(2), 9 * math.sqrt(2)]
     assert r.summary["occupied_distance"] == pytest.approx(sum(octile))
     assert r.tables["vehicles"].to_pandas().occupied_distance.sum() == pytest.approx(sum(octile))
+
+
+@pytest.mark.parametrize("name, text", [("bad.graphml", "x"), ("x_net.tntp",
+                                                                 "<END OF METADATA>\nfoo\n")])
+def test_a_malformed_network_file_is_one_error_naming_the_key(tmp_path, name, text):
+    (tmp_path / name).write_text(text)
+    (tmp_path / "x_node.tntp").write_text("node X Y\n1 a b\n")
+    sc = load_scenario(road_scenario(tmp_path, tasks=SOURCES["static"],
+                                     network=f'network = "{name}"'))
+    with pytest.raises(ScenarioError, match=r"road.toml: world.network: .*"):
+        check_runs(sc, ["dijkstra"])
