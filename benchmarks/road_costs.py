@@ -31,6 +31,7 @@ import statistics
 import sys
 import time
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -139,7 +140,7 @@ def cold(net, agents, tasks, threads: int) -> tuple[float, np.ndarray]:
     road.FIELD_THREADS = threads
     try:
         planner = RoadPlanner(net)
-        return timed(lambda: planner.costs(agents, tasks))
+        return timed(partial(planner.costs, agents, tasks))
     finally:
         road.FIELD_THREADS = saved
 
@@ -183,7 +184,7 @@ def main() -> None:
         err = 0.0
         ref = None
         for _ in range(args.reps):
-            t, ref = timed(lambda: reference(net, agents, tasks))
+            t, ref = timed(partial(reference, net, agents, tasks))
             t_ref.append(t)
             t, ours = cold(net, agents, tasks, road.FIELD_THREADS)
             t_cold.append(t)
@@ -192,14 +193,14 @@ def main() -> None:
             t_cold1.append(t)
             err = max(err, check(ours, ref))
         for _ in range(args.reps):
-            t, ours = timed(lambda: stop_dijkstra(net, agents, tasks))
+            t, ours = timed(partial(stop_dijkstra, net, agents, tasks))
             t_stop.append(t)
             err = max(err, check(ours, ref))
         planner = RoadPlanner(net)
         planner.costs(agents, tasks)
         for _ in range(args.reps):  # next decisions: vehicles elsewhere, requests still open
             now = vehicles(net, rng, v)
-            t, ours = timed(lambda: planner.costs(now, tasks))
+            t, ours = timed(partial(planner.costs, now, tasks))
             t_warm.append(t)
             err = max(err, check(ours, reference(net, now, tasks)))
         best = min(t_ref)
@@ -207,7 +208,6 @@ def main() -> None:
                       ms(t_cold1), f"{best / min(t_cold1):.1f}x", ms(t_warm),
                       f"{best / min(t_warm):.0f}x", ms(t_stop), f"{best / min(t_stop):.1f}x",
                       f"{err:.1e}")
-        del planner
     console.print(table)
     console.print("scipy: csgraph.dijkstra from the distinct vehicle nodes; cold: a fresh "
                   "planner's first matrix (PHAST fields, hierarchy prebuilt); warm: the next "

@@ -181,8 +181,7 @@ def _shortcuts(v, settle_limit, head_out, nxt_out, head_in, nxt_in, eu, ev, ew, 
         if not contracted[ev[e]]:
             removed += 1
             removed_hops += eh[e]
-            if ew[e] > wmax:
-                wmax = ew[e]
+            wmax = max(wmax, ew[e])
         e = nxt_out[e]
     a = head_in[v]
     while a >= 0:
@@ -489,15 +488,13 @@ def phast(up_ptr, up_idx, up_w, sw_ptr, sw_idx, sw_w, sources, out, D, stack, se
             du = D[u, k]
             for e in range(up_ptr[u], up_ptr[u + 1]):
                 v = up_idx[e]
-                c = du + up_w[e]
-                if c < D[v, k]:
-                    D[v, k] = c
+                D[v, k] = min(D[v, k], du + up_w[e])
     if K == 1:
         for p in range(n):  # downward sweep, highest rank first; branch-free minimum
             best = D[p, 0]
             for e in range(sw_ptr[p], sw_ptr[p + 1]):
                 c = D[sw_idx[e], 0] + sw_w[e]
-                best = c if c < best else best
+                best = min(best, c)
             D[p, 0] = best
     else:
         for p in range(n):
@@ -506,7 +503,7 @@ def phast(up_ptr, up_idx, up_w, sw_ptr, sw_idx, sw_w, sources, out, D, stack, se
                 w = sw_w[e]
                 for k in range(K):
                     c = D[u, k] + w
-                    D[p, k] = c if c < D[p, k] else D[p, k]
+                    D[p, k] = min(D[p, k], c)
     for k in range(K):
         for p in range(n):
             out[k, p] = D[p, k]

@@ -107,8 +107,8 @@ class Hierarchy:
         positions = self.pos[np.asarray(nodes, dtype=np.int64)]
         chunks = [positions[i:i + PHAST_BLOCK] for i in range(0, positions.size, PHAST_BLOCK)]
         pool = _pool() if len(chunks) > 1 else None
-        run = (lambda c: self._block(c, to))  # noqa: E731
-        blocks = list(pool.map(run, chunks) if pool else map(run, chunks))
+        blocks = [self._block(c, to) for c in chunks] if pool is None else list(
+            pool.map(self._block, chunks, [to] * len(chunks)))
         return [row for b in blocks for row in b]
 
 
