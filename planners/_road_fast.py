@@ -4,8 +4,9 @@ Nothing here knows about networks, vehicles or requests: :mod:`planners.road` ha
 arrays of the travel-time matrix and reads the fields back.
 
 * :func:`ch_contract` — builds a contraction hierarchy (Geisberger et al. 2008) with float64
-  edge weights: nodes are contracted one by one in the order of a lazily updated priority
-  (edge difference plus contracted neighbours); contracting ``v`` adds the shortcut
+  edge weights: nodes are contracted one by one in the order of a priority (RoutingKit's
+  level + added / removed edges + added / removed hops), recomputed for the neighbours of each
+  contracted node and re-checked lazily when a node leaves the queue; contracting ``v`` adds the shortcut
   ``u -> w`` of weight ``w(u, v) + w(v, w)`` unless a witness search (a Dijkstra from ``u``
   avoiding ``v`` and the contracted nodes, limited to ``settle_limit`` settled nodes and to the
   shortcut's weight) finds a path at most as long. A limited search can only add shortcuts that
@@ -18,8 +19,9 @@ arrays of the travel-time matrix and reads the fields back.
   the direction by which adjacency it passes as "upward" and which as "sweep"). An upward
   Dijkstra in the hierarchy from each source, then one linear sweep over the nodes in
   descending rank, each taking the minimum over its edges from higher-ranked (already final)
-  nodes. The sweep handles the ``K`` sources together, so its inner loop is ``K`` contiguous
-  float64 ``min(d, d_u + w)`` (vectorized by LLVM). Same numbers as a one-to-all Dijkstra, up to
+  nodes. The upward search needs no heap (the upward graph is a DAG in rank order). The sweep
+  handles the ``K`` sources together, so its inner loop is ``K`` contiguous float64
+  ``min(d, d_u + w)`` (vectorized by LLVM). Same numbers as a one-to-all Dijkstra, up to
   the rounding order of sums (see above).
 * :func:`dijkstra_until` — a plain binary-heap Dijkstra on CSR arrays that stops once every
   wanted node is settled (kept for the benchmark's comparison and for callers that want a few
