@@ -158,3 +158,113 @@ def test_refuses_a_non_road_space_and_is_registered():
     planner = RoadPlanner(net)
     assert planner.space is net
     assert planner.costs([], [Task(0, "ground", 1)]).shape == (0, 1)
+
+
+# ---------------------------------------------------------------- PHAST on the hierarchy
+def _close(got: np.ndarray, want: np.ndarray) -> None:
+    assert np.array_equal(np.isfinite(got), np.isfinite(want))
+    assert np.abs(got - want).max(initial=0.0) < 1e-9
+
+
+@pytest.fixture
+def hierarchy_everywhere(monkeypatch):
+    """Give small networks (Manhattan) a contraction hierarchy too."""
+    monkeypatch.setattr(road, "CH_MIN_NODES", 0)
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_phast_decisions_equal_scipy_on_chicago(chicago, threads, monkeypatch):
+    monkeypatch.setattr(road, "FIELD_THREADS", threads)
+    planner = RoadPlanner(chicago)
+    assert planner._hierarchy is road.hierarchy(chicago)  # one hierarchy per network
+    rng = np.random.default_rng(11)
+    nodes = rng.choice(chicago.n, 37, replace=False)  # 37: blocks of 8 and a ragged one
+    tasks = [Task(i, "ground", int(n)) for i, n in enumerate(nodes)]
+    for step in range(4):  # repeated decisions: fields reused, some requests closed and new
+        agents = _agents(chicago, rng, 60)
+        _close(planner.costs(agents, tasks), _expected(chicago, agents, tasks))
+        for t in tasks[:5]:
+            planner.task_closed(t.id)
+        new = rng.integers(0, chicago.n, 5)
+        tasks = tasks[5:] + [Task(100 * (step + 1) + i, "ground", int(n))
+                             for i, n in enumerate(new)]
+    assert planner.stats.extra["field_reuses"] > 0
+    assert len(planner._fields) <= 37
+
+
+def test_phast_fields_equal_scipy_both_directions(chicago):
+    h = road.hierarchy(chicago)
+    nodes = np.random.default_rng(12).integers(0, chicago.n, 10)
+    back = np.stack(h.fields(nodes, to=True))[:, h.pos]
+    fwd = np.stack(h.fields(nodes, to=False))[:, h.pos]
+    _close(back, dijkstra(chicago.time.T.tocsr(), indices=nodes))
+    _close(fwd, dijkstra(chicago.time, indices=nodes))
+
+
+@pytest.mark.usefixtures("hierarchy_everywhere")
+@pytest.mark.parametrize("shape", [(60, 9), (3, 40), (1, 1), (1, 7), (7, 1)])
+def test_phast_on_manhattan_equals_scipy(shape):
+    net = manhattan(17, 11, block=130.0, speed=9.0)
+    rng = np.random.default_rng(shape[0] * 100 + shape[1])
+    planner = RoadPlanner(net)
+    assert planner._hierarchy is not None
+    for _ in range(3):
+        agents = _agents(net, rng, shape[0])
+        tasks = [Task(i, "ground", int(n)) for i, n in enumerate(rng.integers(0, net.n, shape[1]))]
+        _close(planner.costs(agents, tasks), _expected(net, agents, tasks))
+
+
+@pytest.mark.usefixtures("hierarchy_everywhere")
+def test_phast_edge_cases():
+    net = manhattan(9, 8, block=100.0, speed=10.0)
+    planner = RoadPlanner(net)
+    # a vehicle on the request's node, duplicated vehicle nodes, a mid-edge vehicle ending there
+    agents = [Agent(0, "ugv", 5), Agent(1, "ugv", 5), Agent(2, "ugv", RoadPoint(5, 4, 3.5, 35.0)),
+              Agent(3, "ugv", 40), Agent(4, "ugv", RoadPoint(40, 41, 1.0, 10.0))]
+    tasks = [Task(0, "ground", 5), Task(1, "ground", 5), Task(2, "ground", 40)]
+    got = planner.costs(agents, tasks)
+    _close(got, _expected(net, agents, tasks))
+    assert got[0, 0] == 0.0 and got[1, 1] == 0.0 and got[2, 0] == 3.5 and got[3, 2] == 0.0
+    assert planner.stats.extra["fields_computed"] == 2  # one per distinct node
+    assert planner.costs([], tasks).shape == (0, 3)
+    assert planner.costs(agents, []).shape == (5, 0)
+    one = planner.costs(agents[:1], tasks[2:])
+    _close(one, _expected(net, agents[:1], tasks[2:]))
+    for t in tasks:
+        planner.task_closed(t.id)
+    assert not planner._fields
+
+
+@pytest.mark.usefixtures("hierarchy_everywhere")
+def test_phast_single_node_and_two_node_networks():
+    for columns, rows in ((1, 1), (2, 1)):
+        net = manhattan(columns, rows)
+        planner = RoadPlanner(net)
+        agents = [Agent(i, "ugv", i) for i in range(net.n)]
+        tasks = [Task(i, "ground", i) for i in range(net.n)]
+        _close(planner.costs(agents, tasks), _expected(net, agents, tasks))
+
+
+def test_stop_dijkstra_kernel_is_exact_at_wanted_nodes(chicago):
+    from planners import _road_fast
+
+    t = chicago.time.T.tocsr()
+    ip, ix = t.indptr.astype(np.int64), t.indices.astype(np.int64)
+    hk, hn = np.empty(ix.size + 1), np.empty(ix.size + 1, np.int64)
+    dist = np.empty(chicago.n)
+    rng = np.random.default_rng(13)
+    for k in (0, 1, 50):
+        want = np.zeros(chicago.n, dtype=np.bool_)
+        picks = rng.integers(0, chicago.n, k)
+        want[picks] = True
+        src = int(picks[0]) if k == 1 else 17  # k == 1: the wanted node is the source
+        settled = _road_fast.dijkstra_until(ip, ix, t.data, src, want, int(want.sum()), dist, hk, hn)
+        ref = dijkstra(t, indices=src)
+        if k == 0:  # nothing wanted: a complete field
+            assert settled == chicago.n
+            np.testing.assert_array_equal(dist, ref)
+        else:
+            np.testing.assert_array_equal(dist[picks], ref[picks])
+            assert settled <= chicago.n
+        if k == 1:
+            assert settled == 1
