@@ -103,10 +103,12 @@ class Dispatcher:
     def __init__(self, env: simpy.Environment, book: TaskBook, fleet: Fleet, operator: Operator,
                  planner: Planner, allocator: Allocator, space: Space, cfg: DispatchConfig,
                  comms: CommsConfig, rng: np.random.Generator,
-                 on_decision: Callable[..., None]) -> None:
+                 on_decision: Callable[..., None], links=None) -> None:
         self.env, self.book, self.fleet, self.operator = env, book, fleet, operator
         self.planner, self.allocator, self.space = planner, allocator, space
         self.cfg, self.comms, self.rng, self.on_decision = cfg, comms, rng, on_decision
+        #: ``links(comm, positions, now) -> comm``: communication faults (a blackout), or None
+        self.links = links
         self.cell_size = float(getattr(space, "cell", 1.0))
         self.wake = env.event()
         self.decisions = 0
@@ -169,6 +171,8 @@ class Dispatcher:
         comms = self.comms
         apos = self.space.positions([a.loc for a in agents])
         comm = comm_graph(apos, comms.range)
+        if self.links is not None:
+            comm = self.links(comm, apos, now)
         tasks = tuple(t.view() for t in open_tasks)
         problem = AllocationProblem(
             time=now, agents=agents, tasks=tasks,

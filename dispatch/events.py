@@ -22,6 +22,10 @@ reject         no vehicle could reach a request's pickup within its ``max_wait``
 unreachable    no vehicle of the fleet can ever reach the task
 cancel         the run ended before the task did
 skipped        a generated release was skipped because ``max_active`` tasks were open
+breakdown      a vehicle fails where it is (its task, if any; ``[faults]``)
+repair         a failed vehicle works again (then ``idle``)
+reopen         a task goes back to open because its vehicle broke down (at its pickup:
+               for a passenger on board, where the transfer will pick them up)
 =============  ===========================================================================
 """
 
@@ -33,7 +37,8 @@ from dataclasses import dataclass
 from dispatch.space import Location
 
 KINDS = ("release", "assign", "depart", "move", "pickup", "dropoff", "complete", "idle", "wait",
-         "replan", "expire", "reject", "unreachable", "cancel", "failed", "skipped")
+         "replan", "expire", "reject", "unreachable", "cancel", "failed", "skipped",
+         "breakdown", "repair", "reopen")
 
 
 @dataclass(frozen=True, slots=True)

@@ -44,6 +44,8 @@ SCHEMAS: dict[str, pa.Schema] = {
         ("tasks_unreachable", _I), ("tasks_cancelled", _I), ("tasks_failed", _I),
         ("sim_time", _F), ("comm_delay", _F), ("agent_seconds", _F),
         ("distance", _F), ("empty_distance", _F), ("occupied_distance", _F),
+        # [faults]: vehicle breakdowns; tasks re-opened by one; of those, passengers transferred
+        ("failures", _I), ("tasks_reassigned", _I), ("tasks_transferred", _I),
     ]),
     "tasks": pa.schema([
         ("run_id", _S), ("task_id", _I), ("kind", _S), ("x", _F), ("y", _F), ("z", _F),
@@ -52,6 +54,8 @@ SCHEMAS: dict[str, pa.Schema] = {
         ("assigned_at", _F), ("agent_id", _I), ("cost", _F),
         ("picked_up_at", _F), ("completed_at", _F), ("state", _S), ("conflicted", _B),
         ("closed_at", _F),
+        # times it went back to open after a breakdown; of those, with the passenger aboard
+        ("reassigned", _I), ("transfers", _I),
     ]),
     "assignments": pa.schema([
         ("run_id", _S), ("decision", _I), ("round", _I), ("agent_id", _I), ("task_id", _I),
@@ -76,6 +80,8 @@ SCHEMAS: dict[str, pa.Schema] = {
         # execution with reservations (0 otherwise): wait episodes, routes replaced by a
         # higher-priority vehicle, seconds spent standing on the way (see dispatch.reservations)
         ("waits", _I), ("replans", _I), ("wait_seconds", _F),
+        # breakdowns ([faults]) and seconds out of service
+        ("failures", _I), ("down_seconds", _F),
     ]),
     "obstacles": pa.schema([
         ("run_id", _S), ("x0", _F), ("y0", _F), ("z0", _F), ("x1", _F), ("y1", _F), ("z1", _F),

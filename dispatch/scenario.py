@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from dispatch.errors import ScenarioError
+from dispatch.faults import FaultConfig, read_failures
 from dispatch.traces import Trips, read_fleet_start, read_trace
 
 Vec3 = tuple[float, float, float]
@@ -144,6 +145,7 @@ class Scenario:
     dispatch: DispatchConfig = field(default_factory=DispatchConfig)
     sweep: SweepConfig = field(default_factory=SweepConfig)
     comms: CommsConfig = field(default_factory=CommsConfig)
+    faults: FaultConfig = field(default_factory=FaultConfig)
 
     def runs(
         self,
@@ -394,6 +396,8 @@ def parse_scenario(data: dict, path: Path, text: str = "") -> Scenario:
                              f"a small range for agents that cannot talk), got {comms.loss!r}")
     c.done()
 
+    faults = _parse_faults(root.table("faults"), path)
+
     s = root.table("sweep")
     sweep = SweepConfig(
         allocator=s.str_list("allocator"),
@@ -406,10 +410,46 @@ def parse_scenario(data: dict, path: Path, text: str = "") -> Scenario:
 
     sc = Scenario(name=name, path=path, text=text, description=description, seed=seed,
                   duration=duration, world=world, fleet=fleet, tasks=tasks, dispatch=disp,
-                  sweep=sweep, comms=comms)
+                  sweep=sweep, comms=comms, faults=faults)
     for n in sweep.agents or (fleet.agents,):
         _check_fits(sc, n, "sweep.agents" if sweep.agents else "fleet.agents")
     return sc
+
+
+def _parse_faults(f: _Table, path: Path) -> FaultConfig:
+    """``[faults]``: vehicle breakdowns (a rate, a file) and communication blackouts."""
+    rate = f.number("rate", 0.0, lo=0.0)
+    repair = f.get("repair", 600.0)
+    if isinstance(repair, bool) or not isinstance(repair, (int, float)) or math.isnan(repair) \
+            or repair <= 0:
+        raise f.fail("repair", f"must be a number of seconds > 0 (inf: for good), got {repair!r}")
+    events: tuple = ()
+    file = f.get("file", None)
+    if file is not None:
+        if not isinstance(file, str) or not file:
+            raise f.fail("file", f"must be a CSV file of t, vehicle_id, duration; got {file!r}")
+        events = read_failures((path.parent / file).resolve())
+    on_board = f.string("on_board", "transfer", ("transfer", "fail"))
+    windows = f.get("blackout", [])
+    if not isinstance(windows, list) or any(
+            not isinstance(w, list) or len(w) != 2
+            or any(isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x)
+                   or x < 0 for x in w) or w[0] >= w[1] for w in windows):
+        raise f.fail("blackout", f"must be a list of [t0, t1] windows with 0 <= t0 < t1, "
+                                 f"got {windows!r}")
+    region = f.get("blackout_region", None)
+    if region is not None:
+        if not isinstance(region, list) or len(region) != 4 or any(
+                isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x)
+                for x in region) or region[0] > region[2] or region[1] > region[3]:
+            raise f.fail("blackout_region", f"must be [x0, y0, x1, y1] in metres with x0 <= x1 "
+                                            f"and y0 <= y1, got {region!r}")
+        if not windows:
+            raise f.fail("blackout_region", "needs blackout windows")
+    f.done()
+    return FaultConfig(rate=rate, repair=float(repair), events=events, on_board=on_board,
+                       blackout=tuple((float(a), float(b)) for a, b in windows),
+                       region=None if region is None else tuple(float(x) for x in region))
 
 
 def _parse_world(w: _Table, path: Path) -> WorldConfig:

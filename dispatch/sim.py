@@ -26,6 +26,7 @@ from dispatch.demand import RoadDemand, VoxelDemand
 from dispatch.dispatcher import Dispatcher
 from dispatch.errors import PluginError, ScenarioError
 from dispatch.events import Event, EventBus
+from dispatch.faults import FaultInjector, blackout_filter
 from dispatch.placement import place_fleet
 from dispatch.recorder import json_meta
 from dispatch.reservations import Traffic
@@ -38,7 +39,7 @@ from dispatch.world import World, build_world
 
 log = logging.getLogger(__name__)
 
-STREAM_WORLD, STREAM_FLEET, STREAM_TASKS, STREAM_ALLOCATOR, STREAM_SOURCE = range(5)
+STREAM_WORLD, STREAM_FLEET, STREAM_TASKS, STREAM_ALLOCATOR, STREAM_SOURCE, STREAM_FAULTS = range(6)
 NAN3 = (math.nan, math.nan, math.nan)
 
 __all__ = ["Simulation", "make_plugin", "place_fleet", "rng_for", "space_for", "world_for"]
@@ -107,6 +108,10 @@ def check_runs(sc: Scenario, planners) -> None:
             and any(registry.load("planner", p).reservation_aware for p in planners):
         raise ScenarioError(sc.path, "tasks.trace", "trips with drop-offs are not supported "
                                                     "with reservation-based execution yet")
+    if sc.faults.vehicles and any(registry.load("planner", p).reservation_aware
+                                  for p in planners):
+        raise ScenarioError(sc.path, "faults", "vehicle breakdowns are not supported with "
+                                               "reservation-based execution yet")
 
 
 class Simulation:
@@ -156,7 +161,8 @@ class Simulation:
                                  lambda: self.dispatcher.notify(), self.traffic)
         self.dispatcher = Dispatcher(env, book, self.fleet, self.operator, self.planner,
                                      allocator, self.space, sc.dispatch, sc.comms,
-                                     rng_for(spec.seed, STREAM_ALLOCATOR), self._record_decision)
+                                     rng_for(spec.seed, STREAM_ALLOCATOR), self._record_decision,
+                                     blackout_filter(sc.faults))
         t = sc.tasks
         count = spec.n_static_tasks if t.source == "static" else t.count
         self.source = TaskSource(env, book, demand,
@@ -165,6 +171,10 @@ class Simulation:
                                  rng_for(spec.seed, STREAM_SOURCE), self.dispatcher.notify,
                                  t.trips)
         self.source.on_done = self._check_finished
+        self.operator.on_reopen = self.source.rearm
+        self.faults = (FaultInjector(env, sc.faults, self.fleet, self.operator,
+                                     rng_for(spec.seed, STREAM_FAULTS))
+                       if sc.faults.vehicles else None)
 
     @property
     def allocator(self) -> Allocator:
@@ -193,14 +203,15 @@ class Simulation:
                           task_id=e.task_id, x=x, y=y, z=z)
 
     def _record_task(self, t: Task) -> None:
-        x, y, z = self.space.position(t.loc)
+        x, y, z = self.space.position(t.loc if t.origin is None else t.origin)
         dx, dy, dz = NAN3 if t.dropoff is None else self.space.position(t.dropoff)
         self.recorder.add("tasks", task_id=t.id, kind=t.kind, x=x, y=y, z=z, dropoff_x=dx,
                           dropoff_y=dy, dropoff_z=dz, released_at=t.released_at,
                           max_wait=t.max_wait, snap_m=t.snap_m, dropoff_snap_m=t.dropoff_snap_m,
                           assigned_at=t.assigned_at, agent_id=t.agent_id, cost=t.cost,
                           picked_up_at=t.picked_up_at, completed_at=t.completed_at,
-                          state=t.state.value, conflicted=t.conflicted, closed_at=t.closed_at)
+                          state=t.state.value, conflicted=t.conflicted, closed_at=t.closed_at,
+                          reassigned=t.reassigned, transfers=t.transfers)
 
     def _record_decision(self, index: int, problem: AllocationProblem, allocation: Allocation,
                          total: float, cost_s: float, decide_s: float, *, hops: int = 0,
@@ -254,7 +265,9 @@ class Simulation:
                     distance=v.distance, empty_distance=v.empty_distance,
                     occupied_distance=v.occupied_distance, busy_seconds=v.busy_seconds,
                     tasks_completed=v.completed, waits=v.waits, replans=v.replans,
-                    wait_seconds=v.wait_seconds)
+                    wait_seconds=v.wait_seconds, failures=v.failures,
+                    down_seconds=v.down_seconds + (self.env.now - v.down_since if v.failed
+                                                   else 0.0))
         for b in getattr(self.space, "boxes", ()):
             rec.add("obstacles", x0=b.x0, y0=b.y0, z0=b.z0, x1=b.x1, y1=b.y1, z1=b.z1)
         run = dict(scenario=spec.scenario.name, allocator=spec.allocator, planner=spec.planner,

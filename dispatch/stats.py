@@ -26,10 +26,14 @@ class RunStats:
         self.travel = 0.0  # assignment -> pickup, over tasks picked up
         self.makespan = 0.0
         self.n_tasks = 0
+        self.reassigned = 0  # tasks re-opened at least once by a breakdown
+        self.transferred = 0  # ... with the passenger on board
 
     def closed(self, t: Task) -> None:
         self.n_tasks += 1
         self.count[t.state] += 1
+        self.reassigned += t.reassigned > 0
+        self.transferred += t.transfers > 0
         if t.agent_id >= 0:
             self.total_cost += t.cost
         if t.offered:
@@ -68,4 +72,6 @@ class RunStats:
             distance=sum(v.distance for v in vehicles),
             empty_distance=sum(v.empty_distance for v in vehicles),
             occupied_distance=sum(v.occupied_distance for v in vehicles),
+            failures=sum(v.failures for v in vehicles), tasks_reassigned=self.reassigned,
+            tasks_transferred=self.transferred,
         )

@@ -63,7 +63,8 @@ MOVES = {
                      TaskState.UNREACHABLE, TaskState.CANCELLED},
     TaskState.ASSIGNED: {TaskState.PICKED_UP, TaskState.OPEN, TaskState.CANCELLED,
                          TaskState.FAILED},
-    TaskState.PICKED_UP: {TaskState.COMPLETED, TaskState.CANCELLED, TaskState.FAILED},
+    TaskState.PICKED_UP: {TaskState.COMPLETED, TaskState.OPEN, TaskState.CANCELLED,
+                          TaskState.FAILED},
 }
 
 
@@ -88,6 +89,9 @@ class Task:
     closed_at: float = math.nan
     conflicted: bool = False
     offered: bool = False  # appeared in at least one allocation problem
+    reassigned: int = 0  # times it went back to open because its vehicle broke down
+    transfers: int = 0  # ... of those, with the passenger on board (picked up again elsewhere)
+    origin: Location | None = None  # the requested pickup (``loc`` moves on a transfer)
 
     @property
     def cell(self):
@@ -96,8 +100,11 @@ class Task:
 
     @property
     def deadline(self) -> float:
-        """Latest pickup time the request accepts (inf without a max_wait)."""
-        return math.inf if math.isnan(self.max_wait) else self.released_at + self.max_wait
+        """Latest pickup time the request accepts (inf without a max_wait, and once its
+        passenger has been picked up: a transfer is owed, whatever the time)."""
+        if math.isnan(self.max_wait) or self.transfers:
+            return math.inf
+        return self.released_at + self.max_wait
 
     def view(self) -> TaskView:
         return TaskView(self.id, self.kind, self.loc, self.released_at,  # type: ignore[arg-type]
@@ -149,14 +156,27 @@ class TaskBook:
     def picked_up(self, task: Task) -> None:
         self._move(task, TaskState.PICKED_UP)
         self._active[task.id] = task
-        task.picked_up_at = float(self.env.now)
+        if math.isnan(task.picked_up_at):  # a transferred passenger keeps their first pickup
+            task.picked_up_at = float(self.env.now)
         self.bus.emit(self.env.now, "pickup", task.agent_id, task.id, task.loc)
 
-    def reopen(self, task: Task) -> None:
-        """Give an assigned, not yet picked-up task back to the pool (its vehicle failed)."""
+    def reopen(self, task: Task, pickup: Location | None = None) -> None:
+        """Give a task back to the pool because its vehicle broke down: an assigned one as it
+        was; a picked-up one (a transfer) with its new pickup where the passenger waits."""
+        transfer = task.state is TaskState.PICKED_UP
         self._move(task, TaskState.OPEN)
-        task.agent_id = -1
-        self.open = dict(sorted({**self.open, task.id: task}.items()))
+        task.reassigned += 1
+        if transfer:
+            task.transfers += 1
+            if task.origin is None:
+                task.origin = task.loc
+            task.loc = pickup if pickup is not None else task.loc
+        self.open[task.id] = task
+        if next(reversed(self.open)) != max(self.open):  # keep id order (release order)
+            self.open = dict(sorted(self.open.items()))
+        self.bus.emit(self.env.now, "reopen", task.agent_id, task.id, task.loc)
+        # the row describes the assignment that holds at the end; the history is in events
+        task.agent_id, task.cost, task.assigned_at = -1, math.nan, math.nan
 
     def close(self, task: Task, state: TaskState) -> None:
         """Move ``task`` to the terminal ``state`` and hand it to the ``on_close`` callables."""
@@ -255,16 +275,31 @@ class TaskSource:
             log.warning("task %d lies in an obstacle; closed as unreachable", task.id)
             self.book.close(task, TaskState.UNREACHABLE)
             return task
-        limit = min(self.cfg.ttl if self.cfg.ttl is not None else math.inf,
-                    math.inf if math.isnan(wait) else wait)
+        limit = self._limit(task)
         if limit < math.inf:
             self.env.process(self._expire(task, limit))
         self.notify()
         return task
 
+    def _limit(self, task: Task) -> float:
+        """Seconds from release after which an open task expires (ttl, max_wait)."""
+        return min(self.cfg.ttl if self.cfg.ttl is not None else math.inf,
+                   math.inf if math.isnan(task.max_wait) else task.max_wait)
+
+    def rearm(self, task: Task) -> None:
+        """A task re-opened after a breakdown expires at the same time it would have; a
+        transferred passenger never does."""
+        if task.transfers:
+            return
+        left = task.released_at + self._limit(task) - self.env.now
+        if left <= 0:
+            self.book.close(task, TaskState.EXPIRED)
+        elif left < math.inf:
+            self.env.process(self._expire(task, left))
+
     def _expire(self, task: Task, after: float):
         yield self.env.timeout(after)
-        if task.state is TaskState.OPEN:
+        if task.state is TaskState.OPEN and not task.transfers:
             self.book.close(task, TaskState.EXPIRED)
 
     def _run(self):

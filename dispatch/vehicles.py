@@ -24,6 +24,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
 import simpy
 
 from dispatch.contracts import AgentView, Planner
@@ -73,6 +74,12 @@ class Vehicle:
     replans: int = 0
     wait_seconds: float = 0.0
     waiting_since: float | None = None
+    # ---- faults (see dispatch.faults)
+    failed: bool = False
+    failures: int = 0
+    down_seconds: float = 0.0
+    down_since: float = 0.0
+    proc: Any = field(default=None, repr=False)  # the SimPy process serving its trip
     _view: AgentView | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
@@ -143,6 +150,11 @@ class Fleet:
     def set_idle(self, v: Vehicle) -> None:
         v.busy = False
         self._idle.add(v.id)
+
+    def set_failed(self, v: Vehicle) -> None:
+        """Out of service: neither idle nor busy until :meth:`set_idle`."""
+        v.busy = False
+        self._idle.discard(v.id)
 
 
 # ----------------------------------------------------------------------------- drivers
@@ -218,6 +230,8 @@ class Operator:
         self.env, self.bus, self.book, self.fleet = env, bus, book, fleet
         self.driver, self.service_time, self.notify = driver, service_time, notify
         self.traffic = traffic
+        #: called with a task re-opened by a breakdown (the task source re-arms its expiry)
+        self.on_reopen: Callable[[Task], None] = lambda task: None
         if traffic is not None:
             for v in fleet.vehicles:
                 env.process(self._drive_timed(v))
@@ -228,25 +242,79 @@ class Operator:
         self.book.assign(task, v.id, cost)
         self.fleet.set_busy(v)
         if self.traffic is None:
-            self.env.process(self._serve(v, task, path))
+            v.proc = self.env.process(self._serve(v, task, path))
         else:  # its drive process follows the route; the task's cost is its priority
             v.task, v.busy_since = task, self.env.now
             self.bus.emit(self.env.now, "depart", v.id, task.id, v.loc)
             self.traffic.request(v)
 
     def _serve(self, v: Vehicle, task: Task, path):
-        """Process: to the pickup, (to the drop-off,) serve, idle."""
+        """Process: to the pickup, (to the drop-off,) serve, idle. A breakdown interrupts it
+        (:meth:`breakdown` has already put the vehicle and its task right)."""
         env = self.env
         v.task, v.busy_since = task, env.now
-        self.bus.emit(env.now, "depart", v.id, task.id, v.loc)
-        v.empty_distance += yield from self.driver.drive(env, v, path, task.id)
-        self.book.picked_up(task)
-        if task.dropoff is not None:
-            leg = self.driver.plan(v, task.dropoff, env.now)
+        try:
             self.bus.emit(env.now, "depart", v.id, task.id, v.loc)
-            v.occupied_distance += yield from self.driver.drive(env, v, leg, task.id)
-            self.bus.emit(env.now, "dropoff", v.id, task.id, v.loc)
-        yield from self._finish(v, task)
+            if task.state is TaskState.ASSIGNED:  # not a passenger already on board
+                v.empty_distance += yield from self.driver.drive(env, v, path, task.id)
+                self.book.picked_up(task)
+            if task.dropoff is not None:
+                leg = self.driver.plan(v, task.dropoff, env.now)
+                self.bus.emit(env.now, "depart", v.id, task.id, v.loc)
+                v.occupied_distance += yield from self.driver.drive(env, v, leg, task.id)
+                self.bus.emit(env.now, "dropoff", v.id, task.id, v.loc)
+            yield from self._finish(v, task)
+        except simpy.Interrupt:
+            return
+
+    def breakdown(self, v: Vehicle, duration: float, transfer: bool) -> bool:
+        """``v`` fails now, where it is (on roads possibly part-way along an edge: the part of
+        the leg driven counts). Its trip goes back to open if the passenger is not on board;
+        with one on board it is re-opened for a transfer at the vehicle's position (on roads:
+        the node it was driving to) when ``transfer``, else it ends ``failed``. It is out of
+        service for ``duration`` seconds (``inf``: for good). False if it had already failed
+        (or, with reservations, never: faults are refused there at validate time)."""
+        if v.failed:
+            return False
+        env, task = self.env, v.task
+        if v.proc is not None and v.proc.is_alive and v.proc is not env.active_process:
+            v.proc.interrupt("breakdown")
+        v.proc = None
+        if v.leg is not None:  # stop part-way: count what was driven, stand where it got
+            leg, t = v.leg, env.now - v.leg_start
+            driven = float(np.interp(t, np.r_[0.0, leg.times], np.r_[0.0, leg.metres]))
+            v.distance += driven
+            if task is not None and task.state is TaskState.PICKED_UP:
+                v.occupied_distance += driven
+            else:
+                v.empty_distance += driven
+            point = leg.point_at(t)
+            v.loc, v.leg = (point.node if point.on_node else point), None
+        if v.busy:
+            v.busy_seconds += env.now - v.busy_since
+        v.failed, v.failures, v.down_since, v.task = True, v.failures + 1, env.now, None
+        self.fleet.set_failed(v)
+        self.bus.emit(env.now, "breakdown", v.id, -1 if task is None else task.id, v.loc)
+        if task is not None:
+            if task.state is TaskState.PICKED_UP and not transfer:
+                self.book.close(task, TaskState.FAILED)
+            else:
+                where = getattr(v.loc, "node", v.loc)  # a passenger waits at a node
+                self.book.reopen(task, where)
+                self.on_reopen(task)
+            self.notify()
+        if duration < math.inf:
+            env.process(self._repair(v, duration))
+        return True
+
+    def _repair(self, v: Vehicle, duration: float):
+        yield self.env.timeout(duration)
+        v.failed = False
+        v.down_seconds += self.env.now - v.down_since
+        self.fleet.set_idle(v)
+        self.bus.emit(self.env.now, "repair", v.id, -1, v.loc)
+        self.bus.emit(self.env.now, "idle", v.id, -1, v.loc)
+        self.notify()
 
     def _finish(self, v: Vehicle, task: Task):
         if self.service_time > 0:
