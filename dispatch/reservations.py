@@ -332,8 +332,8 @@ class Traffic:
         moved = False
         for b in sorted(self.vehicles.values(), key=lambda u: u.id):
             tb, cb = self.commit_point(b)
-            if b is v or b.task is not None or cb not in cells:
-                continue
+            if b is v or b.task is not None or b.arrived or cb not in cells:
+                continue  # not idle, or broken down where it stands
             # it may cross the path, but must be off it before v could have driven it all
             off = tb + (len(path) + 2) * math.sqrt(3) * self.grid.cell / min(b.speed, v.speed)
             view = self.table.view(lambda e, b=b: e.owner != b.id, tb,
@@ -396,6 +396,17 @@ class Traffic:
             w = self.vehicles[wid]
             w.route = route
             self._reserve(w)
+
+    def hold(self, v: Vehicle) -> None:
+        """``v`` broke down: it stops at its commit point (the end of the step it is executing,
+        or its cell), its later reservations are released and its cell is held hard (nobody
+        plans through it, nobody asks it to make way) until it is repaired."""
+        t, c = self.commit_point(v)
+        v.route = [(t, c)]
+        v.arrived = True
+        self._reserve(v)
+        self._wake(v)
+        self.notify()
 
     def _wake(self, v: Vehicle) -> None:
         if not v.changed.triggered:

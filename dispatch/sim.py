@@ -108,10 +108,6 @@ def check_runs(sc: Scenario, planners) -> None:
             and any(registry.load("planner", p).reservation_aware for p in planners):
         raise ScenarioError(sc.path, "tasks.trace", "trips with drop-offs are not supported "
                                                     "with reservation-based execution yet")
-    if sc.faults.vehicles and any(registry.load("planner", p).reservation_aware
-                                  for p in planners):
-        raise ScenarioError(sc.path, "faults", "vehicle breakdowns are not supported with "
-                                               "reservation-based execution yet")
 
 
 class Simulation:

@@ -76,6 +76,7 @@ class Vehicle:
     waiting_since: float | None = None
     # ---- faults (see dispatch.faults)
     failed: bool = False
+    breaking: bool = False  # with reservations: breaks down at the end of its current step
     failures: int = 0
     down_seconds: float = 0.0
     down_since: float = 0.0
@@ -234,7 +235,7 @@ class Operator:
         self.on_reopen: Callable[[Task], None] = lambda task: None
         if traffic is not None:
             for v in fleet.vehicles:
-                env.process(self._drive_timed(v))
+                v.proc = env.process(self._drive_timed(v))
 
     def assign(self, task: Task, v: Vehicle, cost: float) -> None:
         """Give ``task`` to the idle vehicle ``v`` at the planned ``cost`` (seconds)."""
@@ -274,12 +275,23 @@ class Operator:
         the node it was driving to) when ``transfer``, else it ends ``failed``. It is out of
         service for ``duration`` seconds (``inf``: for good). False if it had already failed
         (or, with reservations, never: faults are refused there at validate time)."""
-        if v.failed:
+        if v.failed or v.breaking:
             return False
         env, task = self.env, v.task
-        if v.proc is not None and v.proc.is_alive and v.proc is not env.active_process:
+        if self.traffic is not None and v.step is not None and v.step[3] > env.now + EPS:
+            # a step is never interrupted (its cells are reserved hard): it breaks down on
+            # arrival in the step's cell, so it never moves while failed
+            v.breaking = True
+            env.process(self._break_after_step(v, v.step[3], duration, transfer))
+            return True
+        if self.traffic is not None:  # its drive process lives on: stop serving, hold the cell
+            if v.arrived and task is not None and v.proc is not env.active_process:
+                v.proc.interrupt("breakdown")  # in service at the task's cell
+            v.end_wait(env.now)
+            self.traffic.hold(v)
+        elif v.proc is not None and v.proc.is_alive and v.proc is not env.active_process:
             v.proc.interrupt("breakdown")
-        v.proc = None
+            v.proc = None
         if v.leg is not None:  # stop part-way: count what was driven, stand where it got
             leg, t = v.leg, env.now - v.leg_start
             driven = float(np.interp(t, np.r_[0.0, leg.times], np.r_[0.0, leg.metres]))
@@ -307,9 +319,19 @@ class Operator:
             env.process(self._repair(v, duration))
         return True
 
+    def _break_after_step(self, v: Vehicle, at: float, duration: float, transfer: bool):
+        yield self.env.timeout(at - self.env.now)
+        v.breaking = False
+        self.breakdown(v, duration, transfer)
+
     def _repair(self, v: Vehicle, duration: float):
         yield self.env.timeout(duration)
         v.failed = False
+        if self.traffic is not None:
+            v.arrived = False  # displaceable again, like any idle vehicle
+            self.traffic.notify()
+            if not v.changed.triggered:
+                v.changed.succeed()
         v.down_seconds += self.env.now - v.down_since
         self.fleet.set_idle(v)
         self.bus.emit(self.env.now, "repair", v.id, -1, v.loc)
@@ -339,13 +361,22 @@ class Operator:
             if v.changed.triggered:
                 v.changed = env.event()
             route, task = v.route, v.task
+            if v.failed or v.breaking:  # broken down (Traffic.hold): stand until repaired
+                try:
+                    yield v.changed
+                except simpy.Interrupt:
+                    pass
+                continue
             if len(route) == 1:
                 if task is None:  # idle: stay until told to move
                     yield v.changed
                 elif v.loc == task.loc:
                     v.arrived = True
                     self.book.picked_up(task)
-                    yield from self._finish(v, task)
+                    try:
+                        yield from self._finish(v, task)
+                    except simpy.Interrupt:  # broke down while serving: breakdown() did the rest
+                        continue
                     v.arrived = False
                     traffic.notify()  # idle now: it can be asked to make way
                 else:  # no route to the task: hold the cell, retry on a release or a timer
@@ -368,6 +399,5 @@ class Operator:
             metres = step_length(v.loc, nxt) * cell_m
             v.loc = nxt
             v.distance += metres
-            if v.task is not None:
-                v.empty_distance += metres
+            v.empty_distance += metres  # to a task, or parking: never with a passenger here
             self.bus.emit(env.now, "move", v.id, -1 if v.task is None else v.task.id, nxt)

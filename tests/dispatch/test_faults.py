@@ -212,13 +212,29 @@ def test_bad_fault_settings_are_named(make_scenario, faults, key):
         load_scenario(make_scenario(extra=f"[faults]\n{faults}\n"))
 
 
-def test_breakdowns_with_reservations_are_refused(make_scenario):
-    from dispatch.sim import check_runs
+@pytest.mark.parametrize("seed, on_board", [(s, o) for s in range(4)
+                                             for o in ("transfer", "fail")])
+def test_breakdowns_with_reservations_keep_vehicles_apart(tmp_path, seed, on_board):
+    """Reservation-based execution (the crowded scenario's world): a broken-down vehicle holds
+    its cell hard, releases the rest of its route, never moves while failed; nobody ever
+    shares a cell; every task still ends once."""
+    from tests.dispatch.test_reservations import Recorded, check_run
 
-    sc = load_scenario(make_scenario(dispatch={"planner": "reservation"},
-                                     extra="[faults]\nrate = 1.0\n"))
-    with pytest.raises(ScenarioError, match="faults.*reservation"):
-        check_runs(sc, ["reservation"])
+    from dispatch.sim import world_for
+
+    path = write_scenario(tmp_path, world={"size": [10, 10, 3]},
+                          obstacles={"count": 8, "min_size": [1, 1, 3], "max_size": [3, 3, 3]},
+                          fleet={"agents": 8, "uav_max_start_altitude": 2.0},
+                          tasks={"source": "poisson", "rate": 0.5, "count": 20,
+                                 "service_time": 2.0},
+                          dispatch={"planner": "reservation"}, seed=seed, duration=400.0,
+                          extra=f'[faults]\nrate = 40.0\nrepair = 8.0\non_board = "{on_board}"\n')
+    [spec] = load_scenario(path).runs()
+    r = run_one(spec)
+    out = check(r)
+    t = {n: tb.to_pandas() for n, tb in r.tables.items()}
+    check_run(Recorded(world_for(spec.scenario.world, spec.seed).grid, t))
+    assert out["faults"] > 0
 
 
 def test_same_seed_same_faults(tmp_path):

@@ -34,7 +34,7 @@ SOURCES = ("static", "periodic", "poisson", "trace_csv", "trace_parquet")
 ALLOCATORS = ("hungarian", "greedy", "random")
 SEEDS = range(8)
 TERMINAL_EVENT = {"completed": "complete", "expired": "expire", "unreachable": "unreachable",
-                  "cancelled": "cancel"}
+                  "cancelled": "cancel", "rejected": "reject", "failed": "failed"}
 WORLD = (12.0, 12.0, 6.0)
 
 

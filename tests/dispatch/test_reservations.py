@@ -170,6 +170,11 @@ def check_waits(events: pd.DataFrame, vehicles: pd.DataFrame, grid, end: float) 
                 assert waiting is None and r.task_id == task, (v.agent_id, r)
             elif r.event == "idle":
                 task = -1
+            elif r.event == "breakdown":  # its wait (if any) ends; it has no task any more
+                if waiting is not None:
+                    total += r.t - waiting
+                    waiting = None
+                task = -1
         if waiting is not None:
             total += end - waiting
         assert v.waits == (e.event == "wait").sum()
