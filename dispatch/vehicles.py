@@ -61,6 +61,8 @@ class Vehicle:
     # ---- roads: the leg being driven and when it started
     leg: Leg | None = field(default=None, repr=False)
     leg_start: float = 0.0
+    #: voxel world: metres of the current path driven so far (counted if it breaks down)
+    driven: float = 0.0
     # ---- execution with reservations (see dispatch.reservations)
     #: timed route ``[(t, cell), ...]``; ``route[0]`` is the cell it stands in (or is stepping
     #: into, with the step's arrival time); a one-cell route holds that cell indefinitely
@@ -176,14 +178,15 @@ class CellDriver:
 
     def drive(self, env: simpy.Environment, v: Vehicle, path, task_id: int):
         """Process fragment: follow ``path``; returns the metres driven."""
-        cell_m, metres = self.world.cell, 0.0
+        cell_m, v.driven = self.world.cell, 0.0
         for nxt in path[1:]:
             step = step_length(v.loc, nxt) * cell_m
             yield env.timeout(step / v.speed)
             v.loc = nxt
             v.distance += step
-            metres += step
+            v.driven += step
             self.bus.emit(env.now, "move", v.id, task_id, nxt)
+        metres, v.driven = v.driven, 0.0
         return metres
 
 
@@ -302,6 +305,12 @@ class Operator:
                 v.empty_distance += driven
             point = leg.point_at(t)
             v.loc, v.leg = (point.node if point.on_node else point), None
+        elif v.driven:  # voxel: the cells of the path entered so far (distance has them)
+            if task is not None and task.state is TaskState.PICKED_UP:
+                v.occupied_distance += v.driven
+            else:
+                v.empty_distance += v.driven
+            v.driven = 0.0
         if v.busy:
             v.busy_seconds += env.now - v.busy_since
         v.failed, v.failures, v.down_since, v.task = True, v.failures + 1, env.now, None

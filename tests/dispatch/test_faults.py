@@ -104,6 +104,38 @@ def run_random(tmp_path: Path, seed: int) -> dict:
     return check(run_one(spec))
 
 
+def run_random_voxel(tmp_path: Path, seed: int) -> dict:
+    """A tiny voxel world (tests/conftest.py) with breakdowns, every source but traces, with
+    or without reservations."""
+    rng = np.random.default_rng(seed)
+    source = str(rng.choice(["static", "poisson", "periodic"]))
+    tasks = {"source": source, "count": int(rng.integers(3, 15)),
+             "service_time": float(rng.choice([0.0, 1.0]))}
+    if source == "poisson":
+        tasks["rate"] = float(rng.uniform(0.2, 1.0))
+    if source == "periodic":
+        tasks["interval"] = float(rng.uniform(1.0, 4.0))
+    if rng.random() < 0.3:
+        tasks["ttl"] = 30.0
+    planner = str(rng.choice(["astar", "astar", "reservation"]))
+    faults = (f"rate = {float(rng.uniform(100.0, 400.0)):.1f}\n"  # tiny runs: tens of seconds
+              f"repair = {rng.choice(['3.0', '10.0', 'inf'])}\n"
+              f'on_board = "{rng.choice(["transfer", "fail"])}"')
+    path = write_scenario(tmp_path, f"v{seed}.toml", seed=int(rng.integers(0, 1000)),
+                          fleet={"agents": int(rng.integers(1, 6))}, tasks=tasks,
+                          dispatch={"allocator": str(rng.choice(["hungarian", "greedy",
+                                                                   "auction"])),
+                                    "planner": planner},
+                          duration=2000.0, extra=f"[faults]\n{faults}\n")
+    [spec] = load_scenario(path).runs()
+    return check(run_one(spec))
+
+
+def test_random_voxel_scenarios_with_breakdowns(tmp_path):
+    totals = pd.DataFrame([run_random_voxel(tmp_path, seed) for seed in range(15)]).sum()
+    assert totals["faults"] > 10
+
+
 def test_random_road_scenarios_with_breakdowns(tmp_path):
     totals = pd.DataFrame([run_random(tmp_path, seed) for seed in range(40)]).sum()
     assert totals["faults"] > 20 and totals["reassigned"] > 5  # the sample exercises faults
@@ -111,9 +143,10 @@ def test_random_road_scenarios_with_breakdowns(tmp_path):
 
 
 @pytest.mark.slow
-def test_500_random_road_scenarios_with_breakdowns(tmp_path):
-    totals = pd.DataFrame([run_random(tmp_path, seed) for seed in range(1000, 1500)]).sum()
-    assert totals["faults"] > 200
+def test_500_random_road_and_200_voxel_scenarios_with_breakdowns(tmp_path):
+    road = pd.DataFrame([run_random(tmp_path, seed) for seed in range(1000, 1500)]).sum()
+    voxel = pd.DataFrame([run_random_voxel(tmp_path, s) for s in range(1000, 1200)]).sum()
+    assert road["faults"] > 200 and voxel["faults"] > 100
 
 
 @pytest.mark.parametrize("on_board", ["transfer", "fail"])
@@ -172,7 +205,14 @@ def test_a_trip_not_yet_picked_up_is_reassigned_and_repaired_vehicles_return(tmp
     assert veh.loc[0, "empty_distance"] == pytest.approx(200.0)
 
 
-@pytest.mark.parametrize("allocator", ["auction", "greedy", "magnnet_match"])
+def decentralized_allocators() -> list[str]:
+    from dispatch.registry import available, load
+
+    return [n for n in available("allocator") if getattr(load("allocator", n),
+                                                         "decentralized", False)]
+
+
+@pytest.mark.parametrize("allocator", decentralized_allocators())
 def test_blackout_and_loss_still_assign_every_task(make_scenario, allocator):
     """During a blackout decentralized allocators hear only themselves; with 30 % message
     loss on top, every task is still assigned and completed."""
