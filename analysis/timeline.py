@@ -11,7 +11,8 @@ Vehicle events (``agent_id`` >= 0) and what they mean for the vehicle:
 * ``pickup``  it reached the task (the trip's pickup) and starts serving it (``arrive`` in
   results written before trips existed);
 * ``dropoff`` it reached the trip's drop-off (then serves for the service time);
-* ``idle``    it finished the task and is free again.
+* ``idle``    it finished the task and is free again (or was repaired);
+* ``breakdown`` it failed where it is (``[faults]``); ``down`` until its next ``idle``.
 
 :func:`vehicle_intervals` turns them into ``travel`` / ``service`` (both busy), ``waiting`` and
 ``idle`` intervals for a Gantt chart; :func:`trajectories` and :func:`positions_at` give where
@@ -26,7 +27,7 @@ import pandas as pd
 #: Events whose x, y, z are the vehicle's own position (``assign`` and the task-closing events
 #: carry the task's cell instead).
 POSITION_EVENTS = ("depart", "move", "wait", "pickup", "dropoff", "arrive", "idle")
-STATES = ("travel", "service", "waiting", "idle")
+STATES = ("travel", "service", "waiting", "idle", "down")
 
 
 def vehicle_intervals(events: pd.DataFrame, vehicles: pd.DataFrame,
@@ -44,8 +45,9 @@ def vehicle_intervals(events: pd.DataFrame, vehicles: pd.DataFrame,
         for ev in (g.itertuples(index=False) if g is not None else ()):
             new = {"assign": "waiting", "depart": "travel", "move": "travel", "wait": "waiting",
                    "pickup": "service", "dropoff": "service", "arrive": "service",
-                   "idle": "idle"}.get(ev.event)
-            if new is None or (ev.event == "assign" and state != "idle"):
+                   "idle": "idle", "breakdown": "down"}.get(ev.event)
+            if new is None or (ev.event == "assign" and state != "idle") or (
+                    state == "down" and new != "idle"):
                 continue
             if new != state:
                 if ev.t > since:
