@@ -232,8 +232,8 @@ class RunSpec:
     @property
     def partition(self) -> dict[str, Any]:
         """Hive partition keys of this run inside a sweep's output folder."""
-        return {"allocator": self.allocator, "planner": self.planner,
-                "n_agents": self.agents, "seed": self.seed}
+        return {"scenario": self.scenario.name, "allocator": self.allocator,
+                "planner": self.planner, "n_agents": self.agents, "seed": self.seed}
 
 
 # ----------------------------------------------------------------------------- reading
