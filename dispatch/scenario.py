@@ -53,7 +53,7 @@ def safe_name(name: str, fallback: str = "scenario") -> str:
     """``name`` made safe as one folder name: letters, digits, ``-``, ``_`` and ``.`` kept,
     every other run of characters one ``_``, no leading dot, no ``..``, at most 100 chars."""
     s = re.sub(r"[^A-Za-z0-9._-]+", "_", name)
-    s = re.sub(r"\.{2,}", ".", s).lstrip(".")[:100]
+    s = re.sub(r"\.{2,}", ".", s).lstrip("._-")[:100]
     return s if s.strip("_.-") else fallback
 
 

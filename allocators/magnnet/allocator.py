@@ -79,10 +79,10 @@ def check_checkpoint(checkpoint, allocator: str, match: bool) -> str:
                          f"{first})") from None
     kind = getattr(model, "variant", None)
     if match and kind != "match":
-        raise ValueError(f"checkpoint {path} holds a {kind!r} model; {allocator} needs a "
+        raise ValueError(f"checkpoint {path} holds a model of kind {kind!r}; {allocator} needs a "
                          "'match' one (dispatch train magnnet --variant match)")
     if not match and kind == "match":
-        raise ValueError(f"checkpoint {path} holds a 'match' model; use it with "
+        raise ValueError(f"checkpoint {path} holds a model of kind 'match'; use it with "
                          "allocator = 'magnnet_match'")
     return str(path)
 
