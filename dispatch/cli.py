@@ -105,15 +105,22 @@ def build_plugins(sc, specs) -> None:
     """Build every distinct allocator and planner of ``specs`` once (constructors are cheap;
     a planner is built on the space of the first run's seed), so that a parameter the plugin
     rejects stops here with one line, not in the middle of a sweep."""
+    from dispatch.errors import PluginError
     from dispatch.sim import make_plugin, space_for
 
+    def build(kind, name, params, *args):
+        try:
+            make_plugin(kind, name, params, *args)
+        except PluginError as e:  # name the file too: "file: key: reason"
+            raise PluginError(f"{sc.path}: dispatch.{kind}_params: {e}") from e
+
     for name in sorted({s.allocator for s in specs}):
-        make_plugin("allocator", name, sc.dispatch.allocator_params)
+        build("allocator", name, sc.dispatch.allocator_params)
     planners = sorted({s.planner for s in specs})
     if planners:
         space = space_for(sc.world, specs[0].seed, sc.path)
         for name in planners:
-            make_plugin("planner", name, sc.dispatch.planner_params, space)
+            build("planner", name, sc.dispatch.planner_params, space)
 
 
 def _run(args, console) -> int:
