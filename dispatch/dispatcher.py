@@ -189,7 +189,7 @@ class Dispatcher:
             cost = self.planner.costs(agents, tuple(t.view() for t in open_tasks))
         except DispatchError:
             raise
-        except Exception as e:  # noqa: BLE001 - a plugin's bug: one line naming it and where
+        except Exception as e:  # a plugin's bug: one line naming it and where
             raise self._plugin_failed("planner", e) from e
         servable = np.isfinite(cost).any(axis=0)
         if not servable.all():
@@ -225,7 +225,7 @@ class Dispatcher:
             raise AllocationError(f"{self._where('allocator')}: {e}") from e
         except DispatchError as e:
             raise PluginError(f"{self._where('allocator')}: {e}") from e
-        except Exception as e:  # noqa: BLE001 - a plugin's bug: one line naming it and where
+        except Exception as e:  # a plugin's bug: one line naming it and where
             raise self._plugin_failed("allocator", e) from e
         decide_s = time.perf_counter() - t1
         try:

@@ -11,7 +11,6 @@ import itertools
 import math
 import re
 import reprlib
-import stat
 import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path

@@ -86,7 +86,7 @@ def make_plugin(kind: str, name: str, params, *args):
     params = dict(params)
     try:
         return cls(*args, **params)
-    except Exception as e:  # noqa: BLE001 - a plugin's constructor may raise anything
+    except Exception as e:  # a plugin's constructor may raise anything
         shown = ", ".join(f"{k} = {_short(v)}" for k, v in params.items()) or "none"
         reason = " ".join(str(e).split()) or type(e).__name__
         key = f"dispatch.{kind}_params"

@@ -174,16 +174,13 @@ def _answer(a: Allocation) -> tuple:
 
 
 def _perturb_global_rng(k: int) -> None:
+    import sys
+
     random.seed(k)
     np.random.seed(k)
-    try:
-        import sys
-
-        torch = sys.modules.get("torch")
-        if torch is not None:
-            torch.manual_seed(k)
-    except Exception:  # noqa: BLE001 - torch is optional
-        pass
+    torch = sys.modules.get("torch")  # only if a plugin imported it
+    if torch is not None:
+        torch.manual_seed(k)
 
 
 # ----------------------------------------------------------------------------- allocators
@@ -278,8 +275,9 @@ def _planner_queries(space, seed: int, n: int, m: int):
         return agents, tasks
     free = space.grid.free_cells()
     ground = free[free[:, 2] == 0]
-    pick = lambda pool, k: [tuple(int(v) for v in pool[i])  # noqa: E731
-                            for i in g.integers(0, len(pool), k)]
+    def pick(pool, k):
+        return [tuple(int(v) for v in pool[i]) for i in g.integers(0, len(pool), k)]
+
     a_cells = pick(free[free[:, 2] <= 2], n)
     kinds = ["uav" if i % 2 else "ugv" for i in range(n)]
     a_cells = [c if k == "uav" else pick(ground, 1)[0] for c, k in zip(a_cells, kinds)]

@@ -116,7 +116,7 @@ def test_deep_nesting_and_huge_integer(tmp_path, capsys):
 
 
 def test_file_size_limits_and_force(tmp_path, capsys, monkeypatch):
-    import dispatch.scenario as scenario
+    from dispatch import scenario
 
     path = write_scenario(tmp_path, tasks={"source": "trace", "trace": "t.csv",
                                            "ground_fraction": None})

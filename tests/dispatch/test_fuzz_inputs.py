@@ -460,7 +460,8 @@ def run_case(case: Case, out: Path) -> tuple[str, str]:
            "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
     try:
         proc = subprocess.run(cmd, capture_output=True, text=True, timeout=RUN_TIMEOUT_S,
-                              env=env, cwd=case.path.parent, preexec_fn=_limit_memory)
+                              env=env, cwd=case.path.parent, preexec_fn=_limit_memory,
+                              check=False)
     except subprocess.TimeoutExpired:
         return "hang", ""
     text = proc.stdout + proc.stderr

@@ -226,7 +226,7 @@ def test_broken_planners_are_caught():
 def readme_allocator():
     readme = (ROOT / "README.md").read_text(encoding="utf-8")
     section = readme.split("## Writing a plugin", 1)[1].split("\n## ", 1)[0]
-    (code,) = [b for b in re.findall(r"```python\n(.*?)```", section, re.S)
+    (code,) = [b for b in re.findall(r"```python\n(.*?)```", section, re.DOTALL)
                if "class CheapestFirst" in b]
     scope: dict = {}
     exec(compile(code, "README.md", "exec"), scope)  # noqa: S102 - the README's own code
