@@ -30,6 +30,24 @@ def test_every_builtin_allocator_passes(name):
                                                 "deterministic", "rng"}
 
 
+@pytest.mark.parametrize("name,params", [
+    ("auction", {"bundle_size": 2}),  # found by the checker: CBBA bundles crashed on 0 tasks
+    ("auction", {"bundle_size": 3, "time_scale": 5.0}),
+    ("magnnet", {"variant": "edge_noassign"}),
+    ("magnnet_match", {"confidence": 0.0, "patience": 0}),
+])
+def test_builtin_allocators_with_parameters_pass(name, params):
+    report = check_allocator(load("allocator", name), **params)
+    assert report.ok, str(report)
+
+
+def test_a_variant_that_serves_only_some_sizes_is_reported():
+    """``paper_nb`` ships checkpoints for N = M in (4, 8, 12, 20) only: the checker says so."""
+    report = check_allocator(load("allocator", "magnnet"), variant="paper_nb")
+    failed = {r.name: r.detail for r in report.failed()}
+    assert set(failed) == {"valid"} and "no checkpoint" in failed["valid"]
+
+
 @pytest.mark.parametrize("name", BUILTIN_PLANNERS)
 def test_every_builtin_planner_passes(name):
     report = check_planner(load("planner", name))
