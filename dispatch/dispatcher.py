@@ -55,6 +55,12 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 
+def _line(e: BaseException, limit: int = 400) -> str:
+    """An exception's message on one line, at most ``limit`` characters."""
+    text = " ".join(str(e).split())
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
 def _ids(ids) -> str:
     ids = sorted(ids)
     return str(ids) if len(ids) <= 10 else f"[{', '.join(map(str, ids[:10]))}, ...] ({len(ids)})"
@@ -152,9 +158,7 @@ class Dispatcher:
         return f"{kind} {name!r}{run}, decision {self.decisions}, t = {self.env.now:.6g} s"
 
     def _plugin_failed(self, kind: str, e: Exception) -> PluginError:
-        reason = " ".join(str(e).split()) or "(no message)"
-        if len(reason) > 400:
-            reason = reason[:397] + "..."
+        reason = _line(e) or "(no message)"
         return PluginError(f"{self._where(kind)}: {kind} raised {type(e).__name__}: {reason}")
 
     def notify(self) -> None:
@@ -191,6 +195,13 @@ class Dispatcher:
             raise
         except Exception as e:  # a plugin's bug: one line naming it and where
             raise self._plugin_failed("planner", e) from e
+        want = (len(agents), len(open_tasks))
+        if not isinstance(cost, np.ndarray) or cost.shape != want \
+                or not np.issubdtype(cost.dtype, np.floating) or np.isnan(cost).any():
+            got = (f"{type(cost).__name__} {getattr(cost, 'shape', '')} "
+                   f"{getattr(cost, 'dtype', '')}").strip()
+            raise PluginError(f"{self._where('planner')}: costs() must return a float array of "
+                              f"shape {want} without nan, got {got}")
         servable = np.isfinite(cost).any(axis=0)
         if not servable.all():
             self._close_unreachable([t for t, ok in zip(open_tasks, servable) if not ok])
@@ -219,15 +230,20 @@ class Dispatcher:
             agent_pos=apos, task_pos=self.space.positions([t.loc for t in tasks]),
         )
         t1 = time.perf_counter()
+        cost_given = problem.cost
         try:
             allocation = self.allocator.allocate(problem)
         except AllocationError as e:
-            raise AllocationError(f"{self._where('allocator')}: {e}") from e
+            raise AllocationError(f"{self._where('allocator')}: {_line(e)}") from e
         except DispatchError as e:
-            raise PluginError(f"{self._where('allocator')}: {e}") from e
+            raise PluginError(f"{self._where('allocator')}: {_line(e)}") from e
         except Exception as e:  # a plugin's bug: one line naming it and where
             raise self._plugin_failed("allocator", e) from e
         decide_s = time.perf_counter() - t1
+        if problem.cost is not cost_given or problem.cost.flags.writeable:
+            raise AllocationError(f"{self._where('allocator')}: the allocator replaced or made "
+                                  "writable problem.cost (the problem is read-only; work on a "
+                                  "copy)")
         try:
             validate(problem, allocation)
         except AllocationError as e:

@@ -292,7 +292,8 @@ def test_cli_check_bad_param_and_unknown_name(capsys):
     (IndexPairs(), AllocationError, "not by index"),
     (DuplicateTask(), AllocationError, "more than one agent"),
     (WrongType(), AllocationError, "not an Allocation"),
-    (MakesWritable(), AllocationError, "infinite cost"),  # validated on the crossed-out matrix
+    (MakesWritable(), AllocationError, "made writable problem.cost"),
+    (SwapsCost(), AllocationError, "replaced or made writable problem.cost"),
 ])
 def test_misbehaving_allocator_in_a_run_is_one_line_naming_it(tiny_scenario, allocator, error,
                                                               words, monkeypatch):
