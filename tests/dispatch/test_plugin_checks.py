@@ -333,3 +333,33 @@ def test_plugin_exception_in_the_loop_is_a_plugin_error(tiny_scenario, monkeypat
     with pytest.raises(PluginError, match=r"allocator 'boom', run tiny__hungarian__astar__n3__s0, "
                                           r"decision 0, t = 0 s: allocator raised KeyError"):
         run_one(spec)
+
+
+@pytest.mark.parametrize("bug,words", [
+    ("transposed", "costs() must return a float array of shape (3, 3)"),
+    ("raises", "planner raised RuntimeError: no map"),
+])
+def test_misbehaving_planner_in_a_run_is_one_line_naming_it(make_scenario, monkeypatch, bug,
+                                                            words):
+    import dispatch.sim as sim_module
+    from dispatch.runner import run_one
+    from dispatch.scenario import load_scenario
+    from planners.astar import AStarPlanner
+
+    class Bad(AStarPlanner):
+        name = "bad"
+
+        def costs(self, agents, tasks):
+            if bug == "raises":
+                raise RuntimeError("no map")
+            return np.zeros((len(tasks), len(agents) + 1))
+
+    spec = load_scenario(make_scenario()).runs()[0]
+    real = sim_module.make_plugin
+    monkeypatch.setattr(sim_module, "make_plugin", lambda kind, name, params, *args:
+                        Bad(*args) if kind == "planner" else real(kind, name, params, *args))
+    with pytest.raises(PluginError) as info:
+        run_one(spec)
+    msg = str(info.value)
+    assert "\n" not in msg and words in msg
+    assert msg.startswith(f"planner 'bad', run {spec.run_id}, decision 0, t = 0 s: ")
