@@ -104,7 +104,8 @@ def _specs(args):
 def build_plugins(sc, specs) -> None:
     """Build every distinct allocator and planner of ``specs`` once (constructors are cheap;
     a planner is built on the space of the first run's seed), so that a parameter the plugin
-    rejects stops here with one line, not in the middle of a sweep."""
+    rejects stops here with one line, not in the middle of a sweep; place the first run's fleet
+    when a start file places it (its rows are checked against the space)."""
     from dispatch.errors import PluginError
     from dispatch.sim import make_plugin, space_for
 
@@ -121,6 +122,10 @@ def build_plugins(sc, specs) -> None:
         space = space_for(sc.world, specs[0].seed, sc.path)
         for name in planners:
             build("planner", name, sc.dispatch.planner_params, space)
+        if sc.fleet.start:  # a start file's rows: known nodes, inside the world, one per cell
+            from dispatch.sim import STREAM_FLEET, place_fleet, rng_for
+
+            place_fleet(space, specs[0], rng_for(specs[0].seed, STREAM_FLEET))
 
 
 def _run(args, console) -> int:

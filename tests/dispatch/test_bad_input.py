@@ -277,3 +277,22 @@ def test_scenario_error_is_one_line_for_huge_values(tmp_path):
     with pytest.raises(ScenarioError) as info:
         load_scenario(path)
     assert len(str(info.value)) < 400
+
+
+@pytest.mark.parametrize("row,words", [("1,99999999", "has no node 99999999"),
+                                       ("1,-5", "has no node -5")])
+def test_start_file_rows_checked_at_validate(tmp_path, capsys, row, words):
+    (tmp_path / "fleet.csv").write_text(f"vehicle_id,node\n0,3\n{row}\n", encoding="utf-8")
+    path = tmp_path / "roads.toml"
+    path.write_text('[world]\nnetwork = "manhattan"\nblocks = [4, 4]\n'
+                    '[fleet]\nstart = "fleet.csv"\n', encoding="utf-8")
+    err = one_line_error(path, capsys)
+    assert "fleet.csv" in err and "row 2" in err and words in err
+
+
+def test_voxel_start_outside_the_world_checked_at_validate(tmp_path, capsys):
+    (tmp_path / "fleet.csv").write_text("vehicle_id,x,y,z\n0,0.5,0.5,0.5\n1,1e300,0.5,0.5\n"
+                                        "2,2.5,0.5,0.5\n", encoding="utf-8")
+    path = write_scenario(tmp_path, obstacles={"count": 0}, fleet={"start": "fleet.csv"})
+    err = one_line_error(path, capsys)
+    assert "fleet.csv" in err and "outside the world" in err
