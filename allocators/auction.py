@@ -178,7 +178,7 @@ class _CBBA:
         self.bundles: list[list[int]] = [[] for _ in range(n)]
         self.paths: list[list[int]] = [[] for _ in range(n)]
         self.seconds = np.zeros(n)
-        if bundle_size > 1 and m:
+        if bundle_size > 1:  # (also with no task: marginals() reads speed)
             pos = problem.task_pos
             # metres between tasks (straight line)
             self.legs = np.linalg.norm(pos[:, None] - pos[None, :], axis=-1)

@@ -2,8 +2,9 @@
 those.
 
 Layout (``kind == "hive"``), the same for one run and for many: one folder per table,
-``<table>/allocator=…/planner=…/n_agents=…/seed=…/part-0.parquet``; the partition columns live
-in the path (Hive), not in the files. Files whose names start with ``_`` or ``.`` (chunks of a
+``<table>/scenario=…/allocator=…/planner=…/n_agents=…/seed=…/part-0.parquet``; the partition
+columns live in the path (Hive), not in the files. Folders written before the scenario was a
+partition (``<table>/allocator=…/…``, the scenario in the summary files) are read too. Files whose names start with ``_`` or ``.`` (chunks of a
 run still going or killed half-way, temporary files) are not read.
 
 Results of older versions, where a single run wrote ``<table>.parquet`` files
@@ -55,11 +56,18 @@ class Source:
         if self.kind == "flat":
             return ds.dataset(self.path / f"{table}.parquet", format="parquet")
         d = ds.dataset(self.path / table, format="parquet", partitioning="hive")
+        part = d.partitioning
+        names = part.schema.names if part is not None else []
+        if "scenario" in names and part.schema.field("scenario").type != pa.string():
+            # a scenario named like a number ("2024") must still read as a string
+            ps = part.schema.set(names.index("scenario"), pa.field("scenario", pa.string()))
+            part = ds.partitioning(ps, flavor="hive")
+            d = ds.dataset(self.path / table, format="parquet", partitioning=part)
         schemas = [f.physical_schema for f in d.get_fragments()]
         unified = pa.unify_schemas([d.schema, *schemas])
         if unified.equals(d.schema):
             return d
-        return ds.dataset(self.path / table, format="parquet", partitioning=d.partitioning,
+        return ds.dataset(self.path / table, format="parquet", partitioning=part,
                           schema=unified)
 
 
@@ -101,7 +109,8 @@ def open_results(*paths: str | os.PathLike) -> Results:
     if not sources:
         raise NoResultsError(
             f"no results in {', '.join(map(str, paths))}: expected a results folder "
-            "(summary/allocator=…/…/part-0.parquet, as dispatch run and dispatch sweep write) "
+            "(summary/scenario=…/allocator=…/…/part-0.parquet, as dispatch run and dispatch sweep "
+            "write) "
             "or a folder holding such folders")
     return Results(sources)
 
@@ -231,8 +240,12 @@ def _run_filter(summary, run_id: str, src: Source) -> ds.Expression | None:
     if row.empty:
         return None
     r = row.iloc[0]
-    return ((ds.field("allocator") == r["allocator"]) & (ds.field("planner") == r["planner"])
+    expr = ((ds.field("allocator") == r["allocator"]) & (ds.field("planner") == r["planner"])
             & (ds.field("n_agents") == int(r["n_agents"])) & (ds.field("seed") == int(r["seed"])))
+    part = src.dataset("summary").partitioning
+    if part is not None and "scenario" in part.schema.names:  # folders since scenario= paths
+        expr = expr & (ds.field("scenario") == str(r["scenario"]))
+    return expr
 
 
 def read_parquet_metadata(path: str | os.PathLike) -> dict[str, str]:

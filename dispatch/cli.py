@@ -26,9 +26,24 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--planner", help="planner name (overrides the file and its sweep)")
     r.add_argument("--agents", type=int, help="fleet size N (overrides the file and its sweep)")
     r.add_argument("--seed", type=int, help="seed (overrides the file and its sweep)")
+    r.add_argument("--force", action="store_true",
+                   help="overwrite earlier results of these runs in the output folder, and run "
+                        "past the resource limits (world cells, releases, tasks, runs, sizes)")
 
     v = sub.add_parser("validate", help="check a scenario file and list the runs it expands to")
     v.add_argument("scenario", type=Path)
+    v.add_argument("--force", action="store_true",
+                   help="accept what is past the resource limits (world cells, releases, tasks, "
+                        "runs, file sizes)")
+
+    c = sub.add_parser("check", help="check an installed allocator or planner plugin on random "
+                       "problems (valid answers, no mutation, determinism, rng use)")
+    c.add_argument("name", help="plugin name (see dispatch plugins)")
+    c.add_argument("--kind", choices=("allocator", "planner"),
+                   help="which kind NAME is (needed only when both kinds have that name)")
+    c.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
+                   help="a constructor parameter (VALUE read as TOML, else as a string); repeat")
+    c.add_argument("--seed", type=int, default=0, help="seed of the random problems")
 
     sub.add_parser("plugins", help="list installed allocators and planners")
     t = sub.add_parser("train", help="train a learned allocator (e.g. `dispatch train magnnet "
@@ -52,7 +67,8 @@ def main(argv: list[str] | None = None) -> int:
     err = Console(stderr=True, soft_wrap=True)
     try:
         return {"run": _run, "validate": _validate, "plugins": _plugins, "sweep": _sweep,
-                "report": _report, "render": _render, "train": _train}[args.command](args, console)
+                "report": _report, "render": _render, "train": _train,
+                "check": _check}[args.command](args, console)
     except DispatchError as e:
         err.print(f"[bold red]error:[/] {e}", highlight=False, soft_wrap=True)
         return 2
@@ -62,12 +78,18 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _specs(args):
+    """Parse the scenario and expand its runs, checking all that can be checked before a run:
+    the file, the resource limits (unless ``--force``), the plugins (each distinct allocator
+    and planner is built once with the scenario's parameters) and the space they serve."""
     from dispatch.registry import load
-    from dispatch.scenario import load_scenario
+    from dispatch.scenario import check_limits, load_scenario
 
-    sc = load_scenario(args.scenario)
+    force = getattr(args, "force", False)
+    sc = load_scenario(args.scenario, force=force)
     specs = sc.runs(allocator=getattr(args, "allocator", None), planner=getattr(args, "planner", None),
                     agents=getattr(args, "agents", None), seed=getattr(args, "seed", None))
+    if not force:
+        check_limits(sc, specs)
     for name in sorted({s.allocator for s in specs}):
         load("allocator", name)
     for name in sorted({s.planner for s in specs}):
@@ -75,16 +97,49 @@ def _specs(args):
     from dispatch.sim import check_runs
 
     check_runs(sc, sorted({s.planner for s in specs}))
+    build_plugins(sc, specs)
     return sc, specs
+
+
+def build_plugins(sc, specs) -> None:
+    """Build every distinct allocator and planner of ``specs`` once (constructors are cheap;
+    a planner is built on the space of the first run's seed), so that a parameter the plugin
+    rejects stops here with one line, not in the middle of a sweep; place the first run's fleet
+    when a start file places it (its rows are checked against the space)."""
+    from dispatch.errors import PluginError
+    from dispatch.sim import make_plugin, space_for
+
+    def build(kind, name, params, *args):
+        try:
+            make_plugin(kind, name, params, *args)
+        except PluginError as e:  # name the file too: "file: key: reason"
+            raise PluginError(f"{sc.path}: dispatch.{kind}_params: {e}") from e
+
+    for name in sorted({s.allocator for s in specs}):
+        build("allocator", name, sc.dispatch.allocator_params)
+    planners = sorted({s.planner for s in specs})
+    if planners:
+        space = space_for(sc.world, specs[0].seed, sc.path)
+        for name in planners:
+            build("planner", name, sc.dispatch.planner_params, space)
+        if sc.fleet.start:  # a start file's rows: known nodes, inside the world, one per cell
+            from dispatch.sim import STREAM_FLEET, place_fleet, rng_for
+
+            place_fleet(space, specs[0], rng_for(specs[0].seed, STREAM_FLEET))
 
 
 def _run(args, console) -> int:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from dispatch.runner import default_out, execute
+    from dispatch.runner import default_out, execute, holds_results
 
     sc, specs = _specs(args)
     out = args.out or default_out(specs[0])
+    held = [s.run_id for s in specs if holds_results(out, s)]
+    if held and not args.force:
+        more = f" and {len(held) - 1} more" if len(held) > 1 else ""
+        raise DispatchError(f"{out}/ already holds results of {held[0]}{more}; use --force to "
+                            f"overwrite them, another --out, or dispatch sweep to resume")
     started = time.perf_counter()
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                   TimeElapsedColumn(), console=console, transient=True,
@@ -174,7 +229,8 @@ def _add_analysis_parsers(sub) -> None:
     s.add_argument("--ray", nargs="?", const="", metavar="ADDRESS",
                    help="run the runs as Ray tasks: on a local Ray, or on the cluster at "
                         "ADDRESS (e.g. auto or ray://host:10001)")
-    s.add_argument("--force", action="store_true", help="redo runs that are already complete")
+    s.add_argument("--force", action="store_true", help="redo runs that are already complete, "
+                   "and run past the resource limits (world cells, releases, tasks, runs, sizes)")
     s.add_argument("--allocator", help="allocator name (overrides the file and its sweep)")
     s.add_argument("--planner", help="planner name (overrides the file and its sweep)")
     s.add_argument("--agents", type=int, help="fleet size N (overrides the file and its sweep)")
@@ -244,6 +300,48 @@ def _sweep(args, console) -> int:
                       f"scenario text (e.g. {foreign[0]}); reports of the folder include them",
                       highlight=False, soft_wrap=True)
     return 1 if failed else 0
+
+
+def _check(args, console) -> int:
+    """``dispatch check NAME``: run :mod:`dispatch.testing`'s checks on an installed plugin;
+    one line per check; exit 0 when all pass, 1 otherwise."""
+    import tomllib
+
+    from dispatch.errors import PluginError
+    from dispatch.registry import available, load
+    from dispatch.testing import check_allocator, check_planner
+
+    kinds = [k for k in ("allocator", "planner") if args.name in available(k)]
+    if args.kind:
+        kinds = [args.kind]
+    if not kinds:
+        raise PluginError(f"no allocator or planner named {args.name!r}; installed: "
+                          f"{', '.join(available('allocator'))} (allocators), "
+                          f"{', '.join(available('planner'))} (planners)")
+    if len(kinds) > 1:
+        raise DispatchError(f"{args.name!r} is both an allocator and a planner; say --kind")
+    params = {}
+    for item in args.param:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise DispatchError(f"--param must be KEY=VALUE, got {item!r}")
+        try:
+            params[key.strip()] = tomllib.loads(f"v = {value}")["v"]
+        except tomllib.TOMLDecodeError:
+            params[key.strip()] = value
+    cls = load(kinds[0], args.name)
+    if kinds[0] == "allocator":
+        report = check_allocator(cls, seed=args.seed, **params)
+    else:
+        report = check_planner(cls, seed=args.seed, **params)
+    for r in report.results:
+        mark = "[green]pass[/]" if r.ok else "[red]FAIL[/]"
+        console.print(f"{mark} {r.name}: {r.detail}", highlight=False, soft_wrap=True)
+    verdict = "passes every check" if report.ok else \
+        f"fails {sum(not r.ok for r in report.results)} of {len(report.results)} checks"
+    console.print(f"{kinds[0]} {args.name!r} ({cls.__module__}.{cls.__qualname__}) {verdict}",
+                  highlight=False, soft_wrap=True)
+    return 0 if report.ok else 1
 
 
 def _analysis_call(fn, *args, **kwargs):

@@ -42,7 +42,7 @@ import numpy as np
 
 from dispatch.comms import comm_graph, components
 from dispatch.contracts import Allocation, AllocationProblem, Allocator, Planner
-from dispatch.errors import AllocationError
+from dispatch.errors import AllocationError, DispatchError, PluginError
 from dispatch.space import Space
 from dispatch.tasks import TaskBook, TaskState
 
@@ -55,24 +55,51 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 
+def _line(e: BaseException, limit: int = 400) -> str:
+    """An exception's message on one line, at most ``limit`` characters."""
+    text = " ".join(str(e).split())
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _ids(ids) -> str:
+    ids = sorted(ids)
+    return str(ids) if len(ids) <= 10 else f"[{', '.join(map(str, ids[:10]))}, ...] ({len(ids)})"
+
+
 def validate(problem: AllocationProblem, allocation: Allocation) -> None:
     """Raise AllocationError unless every pair names a known agent and task, no agent or task
-    appears twice, and no pair has infinite cost."""
+    appears twice, and no pair has infinite cost (and the counters are whole numbers >= 0)."""
     if not isinstance(allocation, Allocation):
         raise AllocationError(f"allocator returned {type(allocation).__name__}, not an Allocation")
+    for k in ("rounds", "messages", "hops"):
+        v = getattr(allocation, k)
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+            raise AllocationError(f"Allocation.{k} must be an integer >= 0, got {v!r}")
+    try:
+        pairs = tuple(allocation.pairs)
+    except TypeError:
+        raise AllocationError(f"Allocation.pairs must be a sequence of (agent_id, task_id) "
+                              f"pairs, got {type(allocation.pairs).__name__}") from None
     agent_index = {a.id: i for i, a in enumerate(problem.agents)}
     task_index = {t.id: j for j, t in enumerate(problem.tasks)}
     seen_agents: set[int] = set()
     seen_tasks: set[int] = set()
-    for pair in allocation.pairs:
+    hint = ("; pairs name agents and tasks by id, not by index (Allocation.centralized "
+            "turns index pairs into id pairs)")
+    for pair in pairs:
         try:
             aid, tid = pair
+            hash(aid), hash(tid)
         except (TypeError, ValueError):
             raise AllocationError(f"pair {pair!r} is not an (agent_id, task_id) pair") from None
         if aid not in agent_index:
-            raise AllocationError(f"unknown agent id {aid!r} (idle agents: {sorted(agent_index)})")
+            by_index = isinstance(aid, (int, np.integer)) and 0 <= aid < len(agent_index)
+            raise AllocationError(f"unknown agent id {aid!r} (idle agents: "
+                                  f"{_ids(agent_index)}){hint if by_index else ''}")
         if tid not in task_index:
-            raise AllocationError(f"unknown task id {tid!r} (open tasks: {sorted(task_index)})")
+            by_index = isinstance(tid, (int, np.integer)) and 0 <= tid < len(task_index)
+            raise AllocationError(f"unknown task id {tid!r} (open tasks: "
+                                  f"{_ids(task_index)}){hint if by_index else ''}")
         if tid in seen_tasks:
             raise AllocationError(f"task {tid} is given to more than one agent")
         if aid in seen_agents:
@@ -121,7 +148,20 @@ class Dispatcher:
         self.first_cost = math.nan  # the first decision's total cost and wall seconds
         self.first_seconds = math.nan
         self._pending: _Pending | None = None
+        #: the run's id, for error messages (set by the simulation)
+        self.run_id = ""
         self.process = env.process(self._loop())
+
+    def _where(self, kind: str) -> str:
+        """Where an error happened: the plugin, the run, the decision and the simulated time."""
+        plugin = self.allocator if kind == "allocator" else self.planner
+        name = getattr(plugin, "name", "") or type(plugin).__name__
+        run = f", run {self.run_id}" if self.run_id else ""
+        return f"{kind} {name!r}{run}, decision {self.decisions}, t = {self.env.now:.6g} s"
+
+    def _plugin_failed(self, kind: str, e: Exception) -> PluginError:
+        reason = _line(e) or "(no message)"
+        return PluginError(f"{self._where(kind)}: {kind} raised {type(e).__name__}: {reason}")
 
     def notify(self) -> None:
         """Ask for a decision (idempotent until the dispatcher wakes)."""
@@ -151,7 +191,19 @@ class Dispatcher:
         now = self.env.now
         agents = tuple(v.view(now) for v in idle)
         t0 = time.perf_counter()
-        cost = self.planner.costs(agents, tuple(t.view() for t in open_tasks))
+        try:
+            cost = self.planner.costs(agents, tuple(t.view() for t in open_tasks))
+        except DispatchError:
+            raise
+        except Exception as e:  # a plugin's bug: one line naming it and where
+            raise self._plugin_failed("planner", e) from e
+        want = (len(agents), len(open_tasks))
+        if not isinstance(cost, np.ndarray) or cost.shape != want \
+                or not np.issubdtype(cost.dtype, np.floating) or np.isnan(cost).any():
+            got = (f"{type(cost).__name__} {getattr(cost, 'shape', '')} "
+                   f"{getattr(cost, 'dtype', '')}").strip()
+            raise PluginError(f"{self._where('planner')}: costs() must return a float array of "
+                              f"shape {want} without nan, got {got}")
         servable = np.isfinite(cost).any(axis=0)
         if not servable.all():
             self._close_unreachable([t for t, ok in zip(open_tasks, servable) if not ok])
@@ -182,9 +234,24 @@ class Dispatcher:
             agent_pos=apos, task_pos=self.space.positions([t.loc for t in tasks]),
         )
         t1 = time.perf_counter()
-        allocation = self.allocator.allocate(problem)
+        cost_given = problem.cost
+        try:
+            allocation = self.allocator.allocate(problem)
+        except AllocationError as e:
+            raise AllocationError(f"{self._where('allocator')}: {_line(e)}") from e
+        except DispatchError as e:
+            raise PluginError(f"{self._where('allocator')}: {_line(e)}") from e
+        except Exception as e:  # a plugin's bug: one line naming it and where
+            raise self._plugin_failed("allocator", e) from e
         decide_s = time.perf_counter() - t1
-        validate(problem, allocation)
+        if problem.cost is not cost_given or problem.cost.flags.writeable:
+            raise AllocationError(f"{self._where('allocator')}: the allocator replaced or made "
+                                  "writable problem.cost (the problem is read-only; work on a "
+                                  "copy)")
+        try:
+            validate(problem, allocation)
+        except AllocationError as e:
+            raise AllocationError(f"{self._where('allocator')}: {e}") from None
         self.decide_seconds += decide_s
         delay = allocation.hops * comms.latency
         conflicted = allocation.conflicted_tasks()

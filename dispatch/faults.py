@@ -28,6 +28,8 @@ import simpy
 
 from dispatch.errors import ScenarioError
 
+MAX_FILE_BYTES = 64 * 2**20  # a breakdown file is a few lines per vehicle
+
 
 @dataclass(frozen=True)
 class FaultConfig:
@@ -46,15 +48,16 @@ class FaultConfig:
 def read_failures(path) -> tuple[tuple[float, int, float], ...]:
     """Rows ``(t, vehicle_id, duration)`` of a breakdown file (CSV), sorted by time."""
     import csv
+    import io
 
-    if not path.is_file():
-        raise ScenarioError(path, "<file>", "file not found")
+    from dispatch.traces import decode_text, read_bytes
+
+    text = decode_text(path, read_bytes(path, MAX_FILE_BYTES, "breakdown file"))
     try:
-        with path.open(newline="", encoding="utf-8-sig") as fh:
-            reader = csv.DictReader(fh)
-            rows = list(reader)
-            names = reader.fieldnames or []
-    except (OSError, UnicodeDecodeError, csv.Error) as e:
+        reader = csv.DictReader(io.StringIO(text, newline=""))
+        rows = list(reader)
+        names = reader.fieldnames or []
+    except csv.Error as e:
         raise ScenarioError(path, "<file>", f"cannot be read as CSV: {e}") from None
     missing = [c for c in ("t", "vehicle_id", "duration") if c not in names]
     if missing:

@@ -2,9 +2,9 @@
 sweep (:func:`sweep`) on a local process pool or on Ray.
 
 Every run, whatever the number of runs, is streamed by a :class:`~dispatch.recorder.Recorder`
-into its own Hive partition of ``out`` (``<table>/allocator=…/planner=…/n_agents=…/seed=…/
-part-0.parquet``; chunk files ``_inflight-NNNNN.parquet.chunk`` while it runs) and, once all of
-its tables are written, gets a completion marker ``out/_runs/<partition>/done.json`` (written
+into its own Hive partition of ``out`` (``<table>/scenario=…/allocator=…/planner=…/n_agents=…/
+seed=…/part-0.parquet``, so two scenarios can share one folder; chunk files
+``_inflight-NNNNN.parquet.chunk`` while it runs) and, once all of its tables are written, gets a completion marker ``out/_runs/<partition>/done.json`` (written
 atomically) that lists the files and their sizes. Rerunning a sweep (or a sweep over the output
 of ``dispatch run``) skips every run whose marker is there, names the same
 scenario text and whose files are all present with those sizes; any other run (never started,
@@ -132,7 +132,20 @@ def run_one(spec: RunSpec, out: Path | None = None, *,
 
 
 def default_out(spec: RunSpec) -> Path:
-    return Path("runs") / spec.scenario.name
+    """``runs/<scenario name>``, the name made safe as one folder name (no separators, no
+    ``..``, no absolute path): results never land outside ``runs/``."""
+    from dispatch.scenario import safe_name
+
+    return Path("runs") / safe_name(spec.scenario.name)
+
+
+def holds_results(out: Path, spec: RunSpec) -> bool:
+    """Whether ``out`` already holds results (complete or not) of ``spec``'s partition."""
+    if marker_path(out, spec).exists():
+        return True
+    return any((Path(out) / table / partition_dir(spec)).is_dir()
+               and any((Path(out) / table / partition_dir(spec)).iterdir())
+               for table in ("summary", ERRORS))
 
 
 def execute(
@@ -226,10 +239,14 @@ def record_failure(out: Path, spec: RunSpec, error_type: str, message: str, tb: 
     """Write the run's row of the ``errors`` table (its own partition)."""
     meta = {"dispatch.version": __version__, "dispatch.run_id": spec.run_id,
             "dispatch.scenario": spec.scenario.text, "dispatch.seed": str(spec.seed)}
-    table = pa.Table.from_pylist(
-        [{"run_id": spec.run_id, "scenario": spec.scenario.name, "error_type": error_type,
-          "message": message, "traceback": tb, "seconds": seconds}],
-        schema=ERRORS_SCHEMA.with_metadata(meta))
+    schema = ERRORS_SCHEMA  # the partition columns live in the path, not in the file
+    for k in spec.partition:
+        if k in schema.names:
+            schema = schema.remove(schema.get_field_index(k))
+    row = {"run_id": spec.run_id, "scenario": spec.scenario.name, "error_type": error_type,
+           "message": message, "traceback": tb, "seconds": seconds}
+    table = pa.Table.from_pylist([{k: row[k] for k in schema.names}],
+                                 schema=schema.with_metadata(meta))
     write_atomic(table, Path(out) / ERRORS / partition_dir(spec) / "part-0.parquet")
 
 

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import itertools
 import math
+import re
+import reprlib
 import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -16,12 +18,43 @@ from typing import Any
 
 from dispatch.errors import ScenarioError
 from dispatch.faults import FaultConfig, read_failures
-from dispatch.traces import Trips, read_fleet_start, read_trace
+from dispatch.traces import Trips, decode_text, read_bytes, read_fleet_start, read_trace
 
 Vec3 = tuple[float, float, float]
 SOURCES = ("static", "periodic", "poisson", "trace")
 VOXEL_KEYS = ("size", "cell", "obstacles")
 ROAD_KEYS = ("network", "blocks", "block", "speed")
+
+#: Resource bounds. Past a ``Limits`` value a scenario is refused with a clear error that
+#: names the override (``--force``); past a hard bound it is refused whatever.
+MAX_SEED = 2**63 - 1  # seeds are stored as int64 (Parquet); hard
+MAX_AXIS_CELLS = 1_000_000  # cells along one axis of a voxel world; hard
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Soft resource bounds, checked by :func:`check_limits` (``--force`` skips them)."""
+
+    file_bytes: int = 8 * 2**20  # a scenario file
+    input_bytes: int = 512 * 2**20  # a trace or fleet start file
+    cells: int = 50_000_000  # voxel grid cells
+    releases: int = 2_000_000  # expected releases (or release ticks) of a generated source
+    static_tasks: int = 100_000  # tasks released at once by a static source
+    agents: int = 100_000  # vehicles of a run
+    runs: int = 10_000  # runs of a sweep
+    road_nodes: int = 1_000_000  # intersections of a generated manhattan grid
+
+
+LIMITS = Limits()
+FORCE_HINT = "use --force to run anyway"
+
+
+def safe_name(name: str, fallback: str = "scenario") -> str:
+    """``name`` made safe as one folder name: letters, digits, ``-``, ``_`` and ``.`` kept,
+    every other run of characters one ``_``, no leading dot, no ``..``, at most 100 chars."""
+    s = re.sub(r"[^A-Za-z0-9._-]+", "_", name)
+    s = re.sub(r"\.{2,}", ".", s).lstrip("._-")[:100]
+    return s if s.strip("_.-") else fallback
 
 
 @dataclass(frozen=True)
@@ -159,8 +192,8 @@ class Scenario:
         def dim(override, swept, default):
             return (override,) if override is not None else (swept or (default,))
 
-        if seed is not None and seed < 0:
-            raise ScenarioError(self.path, "--seed", f"must be >= 0, got {seed}")
+        if seed is not None and not 0 <= seed <= MAX_SEED:
+            raise ScenarioError(self.path, "--seed", f"must be in [0, 2^63), got {seed}")
         if agents is not None and agents < 1:
             raise ScenarioError(self.path, "--agents", f"must be >= 1, got {agents}")
         if agents is not None:
@@ -200,11 +233,22 @@ class RunSpec:
     @property
     def partition(self) -> dict[str, Any]:
         """Hive partition keys of this run inside a sweep's output folder."""
-        return {"allocator": self.allocator, "planner": self.planner,
-                "n_agents": self.agents, "seed": self.seed}
+        return {"scenario": self.scenario.name, "allocator": self.allocator,
+                "planner": self.planner, "n_agents": self.agents, "seed": self.seed}
 
 
 # ----------------------------------------------------------------------------- reading
+
+
+_REPR = reprlib.Repr()
+_REPR.maxlevel, _REPR.maxlist, _REPR.maxdict, _REPR.maxstring, _REPR.maxother = 3, 8, 6, 80, 80
+_REPR.maxlong = 40
+
+
+def _short(v: Any, n: int = 160) -> str:
+    """A bounded ``repr(v)`` (an error line stays one readable line whatever the value)."""
+    r = _REPR.repr(v)
+    return r if len(r) <= n else r[: n - 3] + "..."
 
 
 class _Table:
@@ -235,23 +279,23 @@ class _Table:
             return None
         kind = "an integer" if integer else "a number"
         if isinstance(v, bool) or not isinstance(v, (int, float) if not integer else int):
-            raise self.fail(k, f"must be {kind}, got {v!r}")
+            raise self.fail(k, f"must be {kind}, got {_short(v)}")
         if not integer and not math.isfinite(v):
-            raise self.fail(k, f"must be finite, got {v!r}")
+            raise self.fail(k, f"must be finite, got {_short(v)}")
         if lo is not None and v < lo:
-            raise self.fail(k, f"must be >= {lo}, got {v!r}")
+            raise self.fail(k, f"must be >= {lo}, got {_short(v)}")
         if gt is not None and v <= gt:
-            raise self.fail(k, f"must be > {gt}, got {v!r}")
+            raise self.fail(k, f"must be > {gt}, got {_short(v)}")
         if hi is not None and v > hi:
-            raise self.fail(k, f"must be <= {hi}, got {v!r}")
+            raise self.fail(k, f"must be <= {hi}, got {_short(v)}")
         return int(v) if integer else float(v)
 
     def string(self, k, default, choices=None) -> str:
         v = self.get(k, default)
         if not isinstance(v, str) or not v:
-            raise self.fail(k, f"must be a non-empty string, got {v!r}")
+            raise self.fail(k, f"must be a non-empty string, got {_short(v)}")
         if choices and v not in choices:
-            raise self.fail(k, f"must be one of {', '.join(choices)}; got {v!r}")
+            raise self.fail(k, f"must be one of {', '.join(choices)}; got {_short(v)}")
         return v
 
     def vec3(self, k, default, *, gt=0.0) -> Vec3:
@@ -261,23 +305,25 @@ class _Table:
             or len(v) != 3
             or any(isinstance(x, bool) or not isinstance(x, (int, float)) for x in v)
         ):
-            raise self.fail(k, f"must be a list of 3 numbers, got {v!r}")
+            raise self.fail(k, f"must be a list of 3 numbers, got {_short(v)}")
         if any(not math.isfinite(x) or x <= gt for x in v):
-            raise self.fail(k, f"every entry must be finite and > {gt}, got {v!r}")
+            raise self.fail(k, f"every entry must be finite and > {gt}, got {_short(v)}")
         return tuple(float(x) for x in v)  # type: ignore[return-value]
 
     def str_list(self, k) -> tuple[str, ...]:
         v = self.get(k, [])
         if not isinstance(v, list) or any(not isinstance(x, str) or not x for x in v):
-            raise self.fail(k, f"must be a list of names, got {v!r}")
+            raise self.fail(k, f"must be a list of names, got {_short(v)}")
         return tuple(v)
 
-    def int_list(self, k, lo=None) -> tuple[int, ...]:
+    def int_list(self, k, lo=None, hi=None) -> tuple[int, ...]:
         v = self.get(k, [])
         if not isinstance(v, list) or any(isinstance(x, bool) or not isinstance(x, int) for x in v):
-            raise self.fail(k, f"must be a list of integers, got {v!r}")
+            raise self.fail(k, f"must be a list of integers, got {_short(v)}")
         if lo is not None and any(x < lo for x in v):
-            raise self.fail(k, f"every entry must be >= {lo}, got {v!r}")
+            raise self.fail(k, f"every entry must be >= {lo}, got {_short(v)}")
+        if hi is not None and any(x > hi for x in v):
+            raise self.fail(k, f"every entry must be <= {hi}, got {_short(v)}")
         return tuple(v)
 
     def params(self, k) -> tuple[tuple[str, Any], ...]:
@@ -293,28 +339,39 @@ class _Table:
             raise self.fail(unknown[0], f"unknown key (known keys here: {known})")
 
 
-def load_scenario(path: str | Path) -> Scenario:
-    """Read and validate a scenario file; raise ScenarioError naming file, key and reason."""
+def load_scenario(path: str | Path, *, force: bool = False) -> Scenario:
+    """Read and validate a scenario file; raise ScenarioError naming file, key and reason.
+
+    The file must be a regular file of at most ``Limits.file_bytes`` (``force``: any size) in
+    UTF-8; the traces and start files it names are size-checked before they are read too."""
     path = Path(path)
+    limits = None if force else LIMITS
+    data = read_bytes(path, None if limits is None else limits.file_bytes, "scenario file")
+    text = decode_text(path, data)
     try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as e:
-        raise ScenarioError(path, "<file>", f"cannot be read ({e.strerror or e})") from None
-    try:
-        data = tomllib.loads(text)
+        doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise ScenarioError(path, "<syntax>", f"invalid TOML: {e}") from None
-    return parse_scenario(data, path, text)
+    except RecursionError:
+        raise ScenarioError(path, "<syntax>", "invalid TOML: arrays or tables nested too "
+                                              "deeply") from None
+    except (ValueError, MemoryError) as e:  # e.g. an integer of more than 4300 digits
+        reason = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise ScenarioError(path, "<syntax>", f"invalid TOML: {reason}") from None
+    return parse_scenario(doc, path, text, limits=limits)
 
 
-def parse_scenario(data: dict, path: Path, text: str = "") -> Scenario:
-    """Validate an already-decoded TOML document (see :func:`load_scenario`)."""
+def parse_scenario(data: dict, path: Path, text: str = "", *,
+                   limits: Limits | None = LIMITS) -> Scenario:
+    """Validate an already-decoded TOML document (see :func:`load_scenario`); ``limits`` bound
+    the size of the files it names (None: no bound)."""
+    max_bytes = None if limits is None else limits.input_bytes
     root = _Table(path, "", data)
-    name = root.string("name", path.stem)
+    name = safe_name(root.string("name", path.stem), safe_name(path.stem))
     description = root.get("description", "")
     if not isinstance(description, str):
         raise root.fail("description", "must be a string")
-    seed = root.number("seed", 0, lo=0, integer=True)
+    seed = root.number("seed", 0, lo=0, hi=MAX_SEED, integer=True)
     duration = root.number("duration", 3600.0, gt=0.0)
 
     w = root.table("world")
@@ -334,7 +391,7 @@ def parse_scenario(data: dict, path: Path, text: str = "") -> Scenario:
         if not isinstance(start, str) or not start:
             raise f.fail("start", f"must be a CSV file of vehicle_id and node or x, y; got {start!r}")
         start_path = (path.parent / start).resolve()
-        rows = read_fleet_start(start_path, world.space)
+        rows = read_fleet_start(start_path, world.space, max_bytes)
         agents = fleet.agents if "agents" in f.data else len(rows)
         if agents > len(rows):
             raise f.fail("agents", f"{agents} vehicles but the start file {start} places "
@@ -364,7 +421,8 @@ def parse_scenario(data: dict, path: Path, text: str = "") -> Scenario:
         if not isinstance(trace, str) or not trace:
             raise t.fail("trace", "is required when source = 'trace' (a CSV or Parquet file)")
         trace_path = (path.parent / trace).resolve()
-        trips = read_trace(trace_path, world.space, world.size if world.roads is None else None)
+        trips = read_trace(trace_path, world.space, world.size if world.roads is None else None,
+                           max_bytes)
         tasks = replace(tasks, trace=trace_path, trips=trips)
     elif trace is not None:
         raise t.fail("trace", f"is only used when source = 'trace' (source is {source!r})")
@@ -403,7 +461,7 @@ def parse_scenario(data: dict, path: Path, text: str = "") -> Scenario:
         allocator=s.str_list("allocator"),
         planner=s.str_list("planner"),
         agents=s.int_list("agents", lo=1),
-        seed=s.int_list("seed", lo=0),
+        seed=s.int_list("seed", lo=0, hi=MAX_SEED),
     )
     s.done()
     root.done()
@@ -486,6 +544,10 @@ def _parse_world(w: _Table, path: Path) -> WorldConfig:
     size = w.vec3("size", [50, 50, 30])
     cell = w.number("cell", 1.0, gt=0.0)
     for axis, s in zip("xyz", size):
+        if not s / cell <= MAX_AXIS_CELLS:
+            raise w.fail("cell", f"{cell} m cells make the world {s / cell:.3g} cells along "
+                                 f"{axis} ({s} m); at most {MAX_AXIS_CELLS:,} per axis")
+    for axis, s in zip("xyz", size):
         if abs(s / cell - round(s / cell)) > 1e-9 or round(s / cell) < 1:
             raise w.fail("size", f"{axis} size {s} is not a whole number of {cell} m cells")
     o = w.table("obstacles")
@@ -535,3 +597,49 @@ def _check_fits(sc: Scenario, agents: int, key: str) -> None:
     if agents > max(nx * ny - cover, 0):
         raise ScenarioError(sc.path, key,
                             f"{agents} vehicles may not find distinct free cells in the world")
+
+
+def check_limits(sc: Scenario, specs: list[RunSpec], limits: Limits = LIMITS) -> None:
+    """Refuse runs that would not finish or not fit in memory (``--force`` skips this): too
+    many runs, voxel cells, vehicles, static tasks, releases of a generated source, or
+    intersections of a generated grid. Each refusal names the key, the amount and the bound."""
+
+    def refuse(key: str, what: str) -> ScenarioError:
+        return ScenarioError(sc.path, key, f"{what}; {FORCE_HINT}")
+
+    sweep_key = "sweep" if sc.sweep.declared else "<runs>"
+    if len(specs) > limits.runs:
+        raise refuse(sweep_key, f"expands to {len(specs):,} runs (more than {limits.runs:,})")
+    w = sc.world
+    if w.roads is None:
+        cells = math.prod(w.shape)
+        if cells > limits.cells:
+            raise refuse("world.cell", f"the world has {cells:,} cells {w.shape} (more than "
+                                       f"{limits.cells:,})")
+    elif w.roads.network == "manhattan":
+        nodes = w.roads.blocks[0] * w.roads.blocks[1]
+        if nodes > limits.road_nodes:
+            raise refuse("world.blocks", f"a grid of {nodes:,} intersections (more than "
+                                         f"{limits.road_nodes:,})")
+    agents = max(s.agents for s in specs)
+    if agents > limits.agents:
+        raise refuse("sweep.agents" if sc.sweep.agents else "fleet.agents",
+                     f"{agents:,} vehicles (more than {limits.agents:,})")
+    t = sc.tasks
+    if t.source == "static":
+        m = max(s.n_static_tasks for s in specs)
+        if m > limits.static_tasks:
+            raise refuse("tasks.count" if t.count is not None else "fleet.agents",
+                         f"{m:,} static tasks (more than {limits.static_tasks:,})")
+    elif t.source in ("periodic", "poisson"):
+        ticks = sc.duration / t.interval if t.source == "periodic" else sc.duration * t.rate
+        key = "tasks.interval" if t.source == "periodic" else "tasks.rate"
+        # skipped releases (max_active reached) still wake the source, so `count` bounds the
+        # work only without max_active
+        if t.count is not None and t.max_active is None:
+            ticks = min(ticks, t.count)
+        if not ticks <= limits.releases:
+            raise refuse(key, f"about {ticks:.3g} releases in {sc.duration:g} s (more than "
+                              f"{limits.releases:,}; set tasks.count to cap them)")
+    elif t.trips is not None and len(t.trips) > limits.releases:
+        raise refuse("tasks.trace", f"{len(t.trips):,} trips (more than {limits.releases:,})")

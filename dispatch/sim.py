@@ -30,7 +30,7 @@ from dispatch.faults import FaultInjector, blackout_filter
 from dispatch.placement import place_fleet
 from dispatch.recorder import json_meta
 from dispatch.reservations import Traffic
-from dispatch.scenario import RoadConfig, RunSpec, Scenario, WorldConfig
+from dispatch.scenario import RoadConfig, RunSpec, Scenario, WorldConfig, _short
 from dispatch.space import Space
 from dispatch.stats import RunStats
 from dispatch.tasks import SourceConfig, Task, TaskBook, TaskSource, TaskState
@@ -80,11 +80,19 @@ def space_for(cfg: WorldConfig, seed: int, scenario_path=None) -> Space:
 
 
 def make_plugin(kind: str, name: str, params, *args):
+    """Build an allocator or planner from its scenario parameters. Whatever its constructor
+    raises (TypeError, ValueError, an error of a library it calls) becomes one PluginError
+    naming the plugin, its parameters and the reason."""
     cls = registry.load(kind, name)
+    params = dict(params)
     try:
-        return cls(*args, **dict(params))
-    except TypeError as e:
-        raise PluginError(f"{kind} {name!r} rejected its parameters {dict(params)}: {e}") from e
+        return cls(*args, **params)
+    except Exception as e:  # a plugin's constructor may raise anything
+        shown = ", ".join(f"{k} = {_short(v)}" for k, v in params.items()) or "none"
+        reason = " ".join(str(e).split()) or type(e).__name__
+        key = f"dispatch.{kind}_params"
+        raise PluginError(f"{kind} {name!r} rejected its parameters ({key}: {shown}): "
+                          f"{type(e).__name__}: {reason}") from e
 
 
 def check_runs(sc: Scenario, planners) -> None:
@@ -159,6 +167,7 @@ class Simulation:
                                      allocator, self.space, sc.dispatch, sc.comms,
                                      rng_for(spec.seed, STREAM_ALLOCATOR), self._record_decision,
                                      blackout_filter(sc.faults))
+        self.dispatcher.run_id = spec.run_id  # named in the dispatcher's error messages
         t = sc.tasks
         count = spec.n_static_tasks if t.source == "static" else t.count
         self.source = TaskSource(env, book, demand,

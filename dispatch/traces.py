@@ -20,8 +20,12 @@ raises a ScenarioError naming the file and its 1-based data row.
 
 from __future__ import annotations
 
+import codecs
 import csv
+import io
 import math
+import os
+import stat
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -60,9 +64,63 @@ class Trips:
         return len(self.t)
 
 
-def _read_columns(path: Path) -> dict[str, list]:
-    if not path.is_file():
-        raise ScenarioError(path, "<file>", "file not found")
+#: byte order marks of encodings other than UTF-8 (longest first: UTF-32 LE starts as UTF-16 LE)
+BOMS = ((codecs.BOM_UTF32_LE, "UTF-32 LE"), (codecs.BOM_UTF32_BE, "UTF-32 BE"),
+        (codecs.BOM_UTF16_LE, "UTF-16 LE"), (codecs.BOM_UTF16_BE, "UTF-16 BE"))
+
+
+def check_file(path: Path, max_bytes: int | None, what: str = "file") -> int:
+    """Stat ``path`` before reading it: it must exist, be a regular file (not a device, a
+    FIFO or a folder) and hold at most ``max_bytes`` (None: no bound). Returns its size."""
+    try:
+        st = os.stat(path)
+    except OSError as e:
+        reason = "cannot be read: file not found" if isinstance(e, FileNotFoundError) else \
+            f"cannot be read ({e.strerror or e})"
+        raise ScenarioError(path, "<file>", reason) from None
+    if not stat.S_ISREG(st.st_mode):
+        kind = "a folder" if stat.S_ISDIR(st.st_mode) else "a device, pipe or socket"
+        raise ScenarioError(path, "<file>", f"is {kind}, not a regular {what}")
+    if max_bytes is not None and st.st_size > max_bytes:
+        raise ScenarioError(path, "<file>", f"is {st.st_size / 2**20:.1f} MiB; a {what} of "
+                                            f"more than {max_bytes / 2**20:.0f} MiB is refused "
+                                            "(use --force to read it anyway)")
+    return st.st_size
+
+
+def read_bytes(path: Path, max_bytes: int | None, what: str = "file") -> bytes:
+    """The bytes of a regular file checked by :func:`check_file` (read at most the size it
+    had, plus one byte: a file that grows meanwhile is refused, not read without end)."""
+    size = check_file(path, max_bytes, what)
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read(size + 1 if max_bytes is None else max(size, max_bytes) + 1)
+    except OSError as e:
+        raise ScenarioError(path, "<file>", f"cannot be read ({e.strerror or e})") from None
+    if max_bytes is not None and len(data) > max_bytes:
+        raise ScenarioError(path, "<file>", f"grew past {max_bytes / 2**20:.0f} MiB while read")
+    return data
+
+
+def decode_text(path: Path, data: bytes) -> str:
+    """UTF-8 text (a UTF-8 byte order mark is dropped); one-line errors for a UTF-16/32 file
+    (named by its byte order mark) and for bytes that are not UTF-8."""
+    for bom, name in BOMS:
+        if data.startswith(bom):
+            raise ScenarioError(path, "<encoding>", f"is {name} text (it starts with the byte "
+                                                    f"order mark {bom.hex(' ').upper()}); save "
+                                                    "it as UTF-8")
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        line = data[: e.start].count(b"\n") + 1
+        raise ScenarioError(path, "<encoding>", f"is not UTF-8 text (byte 0x{data[e.start]:02X} "
+                                                f"on line {line}, offset {e.start}); save it "
+                                                "as UTF-8") from None
+
+
+def _read_columns(path: Path, max_bytes: int | None = None) -> dict[str, list]:
+    check_file(path, max_bytes, "table file")
     suffix = path.suffix.lower()
     try:
         if suffix == ".parquet":
@@ -70,10 +128,10 @@ def _read_columns(path: Path) -> dict[str, list]:
 
             return pq.read_table(path).to_pydict()
         if suffix == ".csv":
-            with path.open(newline="", encoding="utf-8-sig") as fh:
-                reader = csv.DictReader(fh)
-                data = list(reader)
-                names = reader.fieldnames or []
+            text = decode_text(path, read_bytes(path, max_bytes, "table file"))
+            reader = csv.DictReader(io.StringIO(text, newline=""))
+            data = list(reader)
+            names = reader.fieldnames or []
             return {n: [r.get(n) for r in data] for n in names}
     except ScenarioError:
         raise
@@ -101,9 +159,11 @@ def _numbers(path: Path, columns: dict[str, list], names, *, blank_ok: bool = Fa
     return out
 
 
-def read_trace(path: Path, space: str, size: tuple[float, float, float] | None) -> Trips:
-    """Read and validate a trip trace for a ``space`` (``"voxel"``: ``size`` is the world's)."""
-    columns = _read_columns(path)
+def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
+               max_bytes: int | None = None) -> Trips:
+    """Read and validate a trip trace for a ``space`` (``"voxel"``: ``size`` is the world's);
+    a file of more than ``max_bytes`` is refused before it is read."""
+    columns = _read_columns(path, max_bytes)
     tcol = next((c for c in TIME_COLUMNS if c in columns), None)
     layout = next((lay for lay in LAYOUTS[space] if all(c in columns for c in lay[1])), None)
     if tcol is None or layout is None:
@@ -148,12 +208,13 @@ def read_trace(path: Path, space: str, size: tuple[float, float, float] | None) 
                  None if dest is None else dest[order], max_wait[order], order + 1)
 
 
-def read_fleet_start(path: Path, space: str) -> tuple[tuple[int, float, float, float], ...]:
+def read_fleet_start(path: Path, space: str, max_bytes: int | None = None
+                     ) -> tuple[tuple[int, float, float, float], ...]:
     """Rows ``(vehicle_id, a, b, c)``: on roads ``a`` is a node id (``b``, ``c`` nan) or
     ``(a, b)`` metres; in a voxel world ``(a, b, c)`` metres (``z`` defaults to 0)."""
     if path.suffix.lower() != ".csv":
         raise ScenarioError(path, "<file>", "a fleet start file must be a .csv file")
-    columns = _read_columns(path)
+    columns = _read_columns(path, max_bytes)
     if "vehicle_id" not in columns:
         raise ScenarioError(path, "<header>", "missing column vehicle_id")
     if space == "road" and "node" in columns:
@@ -169,8 +230,9 @@ def read_fleet_start(path: Path, space: str) -> tuple[tuple[int, float, float, f
     seen: set[int] = set()
     rows = []
     for i, (vid, p) in enumerate(zip(ids, pos), 1):
-        if vid != int(vid) or vid < 0:
-            raise ScenarioError(path, f"row {i}", f"vehicle_id {vid} is not an integer >= 0")
+        if vid != int(vid) or vid < 0 or vid >= 2**63:
+            raise ScenarioError(path, f"row {i}", f"vehicle_id {vid} is not an integer in "
+                                                  "[0, 2^63)")
         if int(vid) in seen:
             raise ScenarioError(path, f"row {i}", f"vehicle_id {int(vid)} appears twice")
         seen.add(int(vid))

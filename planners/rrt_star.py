@@ -243,6 +243,8 @@ class RRTStarPlanner(Planner):
         self.step = float(step)
         self.rewire_radius = float(rewire_radius)
         self.goal_bias = float(goal_bias)
+        if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**63:
+            raise ValueError(f"seed must be an integer in [0, 2^63), got {seed!r}")
         self.seed = int(seed)
         self.clearance = float(clearance)
         self.max_rounds = int(max_rounds)

@@ -379,6 +379,8 @@ class RStarPlanner(Planner):
         self.k = int(k)
         self.local_expansions = int(local_expansions)
         self.max_expansions = int(max_expansions)
+        if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**63:
+            raise ValueError(f"seed must be an integer in [0, 2^63), got {seed!r}")
         self.seed = int(seed)
         self.enforce_bound = bool(enforce_bound)
         # (flies, goal) -> {start cell: (metres, cells) or None}

@@ -58,6 +58,35 @@ def _load(path: str):
 VARIANTS = ("auto", "paper", "paper_nb", "edge", "edge_noassign")
 
 
+def check_checkpoint(checkpoint, allocator: str, match: bool) -> str:
+    """Check a ``checkpoint`` parameter when the allocator is built (not in its first
+    decision): a path to a file that loads with ``torch.load(weights_only=True)`` as a model
+    of the right kind (``match`` or not). ValueError naming the file and what is wrong."""
+    import os
+
+    if isinstance(checkpoint, bool) or not isinstance(checkpoint, (str, os.PathLike)) \
+            or not str(checkpoint):
+        raise ValueError(f"checkpoint must be the path of a model.pt, got {checkpoint!r}")
+    path = Path(checkpoint)
+    if not path.is_file():
+        raise ValueError(f"checkpoint {path}: no such file")
+    try:
+        model, _ = _load(str(path))
+    except Exception as e:  # noqa: BLE001 - torch and the model raise many kinds
+        first = (str(e).strip().splitlines() or [""])[0][:200]
+        raise ValueError(f"checkpoint {path} is not a MAGNNET checkpoint (torch.load with "
+                         f"weights_only=True and the model failed: {type(e).__name__}: "
+                         f"{first})") from None
+    kind = getattr(model, "variant", None)
+    if match and kind != "match":
+        raise ValueError(f"checkpoint {path} holds a model of kind {kind!r}; {allocator} needs a "
+                         "'match' one (dispatch train magnnet --variant match)")
+    if not match and kind == "match":
+        raise ValueError(f"checkpoint {path} holds a model of kind 'match'; use it with "
+                         "allocator = 'magnnet_match'")
+    return str(path)
+
+
 def shipped(variant: str, n: int | None = None) -> Path:
     if variant in ("paper", "paper_nb"):
         return CHECKPOINTS / f"{variant}_n{n}.pt"
@@ -73,6 +102,8 @@ class MagnnetAllocator(DecentralizedAllocator):
         if variant not in VARIANTS:
             raise TypeError(f"variant must be one of {VARIANTS}, got {variant!r}")
         self.variant = variant
+        if checkpoint is not None:
+            check_checkpoint(checkpoint, self.name, match=False)
         self.checkpoint = checkpoint
 
     def model_for(self, n: int, m: int):
@@ -145,6 +176,8 @@ class MagnnetMatchAllocator(DecentralizedAllocator):
         if (isinstance(confidence, bool) or not isinstance(confidence, (int, float))
                 or not 0.0 <= confidence <= 1.0):
             raise TypeError(f"confidence must be a number in [0, 1], got {confidence!r}")
+        if checkpoint is not None:
+            check_checkpoint(checkpoint, self.name, match=True)
         self.checkpoint = checkpoint
         self.confidence = float(confidence)
         self.patience = patience

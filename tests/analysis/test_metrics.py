@@ -80,7 +80,8 @@ def test_old_single_run_folders_still_read(single_run, tmp_path):
 
     new = open_results(single_run)
     run_id = new.run_ids()[0]
-    partition = {"allocator": "hungarian", "planner": "astar", "n_agents": 3, "seed": 2}
+    partition = {"scenario": "tiny", "allocator": "hungarian", "planner": "astar", "n_agents": 3,
+                 "seed": 2}
     old = tmp_path / "old"
     old.mkdir()
     for name in ("summary", "tasks", "assignments", "decisions", "events", "vehicles",

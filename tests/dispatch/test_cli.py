@@ -15,9 +15,9 @@ from tests.conftest import write_scenario
 
 #: The partition of the module's single run: every run writes
 #: ``OUT/<table>/allocator=…/planner=…/n_agents=…/seed=…/part-0.parquet``.
-LEAF = "allocator=hungarian/planner=astar/n_agents=3/seed=1"
+LEAF = "scenario=tiny/allocator=hungarian/planner=astar/n_agents=3/seed=1"
 #: The partition columns, which live in the path, not in the files.
-PARTITION = ("allocator", "planner", "n_agents", "seed")
+PARTITION = ("scenario", "allocator", "planner", "n_agents", "seed")
 
 #: The documented columns of each table (DESIGN.md / the issue list); tables may hold more.
 DOCUMENTED = {
@@ -140,7 +140,7 @@ def test_sweep_prints_all_allocators(make_scenario, cli, tmp_path):
     header = next(line for line in proc.stdout.splitlines()
                   if "hungarian" in line and "greedy" in line)
     assert "random" in header
-    assert (out / "summary" / "allocator=random" / "planner=astar" / "n_agents=2" / "seed=0"
+    assert (out / "summary" / "scenario=tiny" / "allocator=random" / "planner=astar" / "n_agents=2" / "seed=0"
             / "part-0.parquet").is_file()
 
 

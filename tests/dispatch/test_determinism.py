@@ -76,7 +76,7 @@ def test_same_seed_same_parquet(tmp_path, allocator):
     a, b = tmp_path / "a", tmp_path / "b"
     sa = run_into(scenario, a, seed=3)
     sb = run_into(scenario, b, seed=3)
-    leaf = "allocator=" + allocator + "/planner=astar/n_agents=3/seed=3/part-0.parquet"
+    leaf = "scenario=tiny/allocator=" + allocator + "/planner=astar/n_agents=3/seed=3/part-0.parquet"
     assert [str(p.relative_to(a)) for p in leaf_files(a)] == sorted(f"{n}/{leaf}"
                                                                     for n in TABLES)
     ta, tb = read_run(a), read_run(b)
@@ -140,7 +140,7 @@ def test_sweep_writes_hive_partitions(tmp_path):
     out = tmp_path / "out"
     summaries = execute(specs, out)
     assert len(summaries) == 8
-    leaf = out / "summary" / "allocator=greedy" / "planner=astar" / "n_agents=3" / "seed=1"
+    leaf = out / "summary" / "scenario=tiny" / "allocator=greedy" / "planner=astar" / "n_agents=3" / "seed=1"
     assert (leaf / "part-0.parquet").is_file()
     for name in TABLES:
         dataset = ds.dataset(out / name, partitioning="hive")

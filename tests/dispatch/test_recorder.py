@@ -258,7 +258,7 @@ def test_dispatch_run_writes_the_one_layout_and_readme_reads_it(tiny_scenario, c
     proc = cli("run", tiny_scenario, "--out", out)
     assert proc.returncode == 0, proc.stderr
     assert str(out) in proc.stdout.replace("\n", "")
-    leaf = "allocator=hungarian/planner=astar/n_agents=3/seed=0"
+    leaf = "scenario=tiny/allocator=hungarian/planner=astar/n_agents=3/seed=0"
     assert (out / "summary" / leaf / "part-0.parquet").is_file()
     assert not (out / "summary.parquet").exists()
     assert (out / "_runs" / leaf / "done.json").is_file()

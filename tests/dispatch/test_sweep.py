@@ -75,7 +75,7 @@ def test_sweep_layout_matches_dispatch_run(small, tmp_path):
     marker = json.loads(marker_path(serial, specs[0]).read_text())
     assert marker["run_id"] == specs[0].run_id
     assert sorted(marker["files"]) == sorted(
-        f"{t}/allocator=hungarian/planner=astar/n_agents=2/seed=0/part-0.parquet" for t in SCHEMAS)
+        f"{t}/scenario=tiny/allocator=hungarian/planner=astar/n_agents=2/seed=0/part-0.parquet" for t in SCHEMAS)
     # readers that know nothing about markers see only the tables
     for name in SCHEMAS:
         assert ds.dataset(serial / name, partitioning="hive").count_rows() >= 0
@@ -112,8 +112,8 @@ def test_rerun_skips_complete_runs_and_redoes_damaged_ones(small, tmp_path):
     # a run killed between its tables and its marker; a run whose file was deleted since;
     # a run killed while writing (a temporary file, no marker, one table missing)
     marker_path(out, specs[0]).unlink()
-    (out / "events" / "allocator=hungarian/planner=astar/n_agents=3/seed=0/part-0.parquet").unlink()
-    leaf = out / "tasks" / "allocator=random/planner=astar/n_agents=3/seed=1"
+    (out / "events" / "scenario=tiny/allocator=hungarian/planner=astar/n_agents=3/seed=0/part-0.parquet").unlink()
+    leaf = out / "tasks" / "scenario=tiny/allocator=random/planner=astar/n_agents=3/seed=1"
     (leaf / "part-0.parquet").unlink()
     (leaf / ".part-0.parquet.tmp-123").write_bytes(b"half")
     marker_path(out, specs[-1]).unlink()
@@ -240,19 +240,44 @@ def test_cli_sweep_killed_then_resumed(tmp_path):
     assert not [p for p in out.rglob(".*") if p.is_file()]  # no temporary files left
 
 
-def test_cli_sweep_failures_exit_1_and_the_others_go_on(make_scenario, tmp_path, cli):
+def test_cli_sweep_bad_plugin_parameters_stop_before_any_run(make_scenario, tmp_path, cli):
+    """A parameter the planner rejects is found when the sweep is checked (each distinct
+    plugin is built once), not once per run: one line, exit 2, nothing written."""
     path = make_scenario(sweep={"allocator": ["hungarian", "greedy"], "seed": [0, 1]},
                          extra="[dispatch.planner_params]\nno_such_parameter = 1\n")
     out = tmp_path / "out"
     proc = cli("sweep", path, "--out", out, "--workers", "2")
-    assert proc.returncode == 1, proc.stderr
+    assert proc.returncode == 2, proc.stderr
     assert "Traceback" not in proc.stdout + proc.stderr
-    assert "0 run, 0 already complete, 4 failed" in proc.stdout
-    assert proc.stdout.count("failed: tiny__") == 4
+    assert len(proc.stderr.strip().splitlines()) == 1
+    assert "planner 'astar'" in proc.stderr and "no_such_parameter = 1" in proc.stderr
+    assert not out.exists()
+
+
+def test_cli_sweep_failures_exit_1_and_the_others_go_on(make_scenario, tmp_path, monkeypatch,
+                                                         capsys):
+    from dispatch import cli as cli_module
+    from dispatch import runner
+
+    path = make_scenario(sweep={"allocator": ["hungarian", "greedy"], "seed": [0, 1]})
+    out = tmp_path / "out"
+    real = runner.run_one
+
+    def flaky(spec, *args, **kwargs):
+        if spec.allocator == "greedy":
+            raise RuntimeError("boom in the run")
+        return real(spec, *args, **kwargs)
+
+    monkeypatch.setattr(runner, "run_one", flaky)
+    assert cli_module.main(["sweep", str(path), "--out", str(out), "--workers", "1"]) == 1
+    stdout = " ".join(capsys.readouterr().out.split())
+    assert "Traceback" not in stdout
+    assert "2 run, 0 already complete, 2 failed" in stdout
+    assert stdout.count("failed: tiny__greedy") == 2
     errors = ds.dataset(out / "errors", partitioning="hive").to_table().to_pylist()
-    assert len(errors) == 4
-    assert {e["error_type"] for e in errors} == {"PluginError"}
-    assert all("no_such_parameter" in e["message"] for e in errors)
+    assert len(errors) == 2
+    assert {e["error_type"] for e in errors} == {"RuntimeError"}
+    assert {e["scenario"] for e in errors} == {"tiny"}  # from the partition path
 
 
 def test_cli_sweep_bad_arguments(tiny_scenario, cli, tmp_path):

@@ -248,12 +248,14 @@ def test_shipped_checkpoint_loads_and_beats_greedy():
 
 def test_bad_parameters_are_clear_errors(tmp_path):
     from allocators.magnnet.allocator import MagnnetMatchAllocator
-    from dispatch.errors import AllocationError
 
     with pytest.raises(TypeError, match="patience"):
         MagnnetMatchAllocator(patience=-1)
     with pytest.raises(TypeError, match="confidence"):
         MagnnetMatchAllocator(confidence=1.5)
-    with pytest.raises(AllocationError, match="no checkpoint"):
-        MagnnetMatchAllocator(checkpoint=str(tmp_path / "none.pt")).allocate(
-            make_problem(np.ones((2, 2))))
+    # a checkpoint is checked when the allocator is built, not in its first decision
+    with pytest.raises(ValueError, match="no such file"):
+        MagnnetMatchAllocator(checkpoint=str(tmp_path / "none.pt"))
+    (tmp_path / "text.pt").write_text("not a model\n", encoding="utf-8")
+    with pytest.raises(ValueError, match="not a MAGNNET checkpoint"):
+        MagnnetMatchAllocator(checkpoint=str(tmp_path / "text.pt"))

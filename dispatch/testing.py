@@ -1,0 +1,372 @@
+"""Checks for plugin authors: run an allocator or a planner on random problems and report what
+it gets wrong, before a simulation does.
+
+    from dispatch.testing import check_allocator, check_planner
+
+    report = check_allocator(MyAllocator, some_param=3)   # keyword arguments: the constructor's
+    assert report.ok, report                              # str(report): one line per check
+
+    report = check_planner(MyPlanner)                     # on a small voxel world / road grid
+    report = check_planner(MyPlanner, space)              # or on a space of your own
+
+From the command line: ``dispatch check NAME`` (an installed allocator or planner).
+
+Allocator checks, each on every problem of :func:`allocation_problems` (no agents, no tasks,
+square and rectangular, rows and columns all ``inf``, ids that are not indices, several
+communication components, message loss):
+
+``construct``   the class builds with the given parameters;
+``valid``       every answer is an :class:`~dispatch.contracts.Allocation` the dispatcher accepts
+                (known ids, no agent or task twice, no ``inf`` pair, whole counters);
+``progress``    when some pair is finite, the answer assigns at least one;
+``no-mutation`` the problem (its arrays, views and scalars) is the same after the call, even
+                for a plugin that makes an array writable again or swaps an attribute;
+``deterministic`` the same problem with the same seed, to a fresh instance, gives the same answer;
+``rng``         the answer does not change when the global ``random`` / ``numpy.random`` state
+                does (randomness only from ``problem.rng``).
+
+Planner checks on random agents and tasks of the space: ``construct``, ``costs`` (shape
+``(len(agents), len(tasks))``, floats, ``>= 0`` or ``inf``, no ``nan``, also for 0 agents / 0
+tasks), ``plan`` (a path from the agent's location to the goal where the cost is finite),
+``no-mutation`` (of the space's grid), ``deterministic`` and ``rng`` as above.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from dispatch.contracts import AgentView, Allocation, AllocationProblem, TaskView
+from dispatch.errors import AllocationError
+
+__all__ = ["CheckResult", "Report", "allocation_problems", "check_allocator", "check_planner",
+           "small_network", "small_world"]
+
+
+@dataclass(frozen=True)
+class CheckResult:
+    name: str
+    ok: bool
+    detail: str
+
+
+@dataclass
+class Report:
+    """The verdicts of one plugin: ``ok`` when every check passed; ``str``: one line each."""
+
+    plugin: str
+    results: list[CheckResult] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return all(r.ok for r in self.results)
+
+    def failed(self) -> list[CheckResult]:
+        return [r for r in self.results if not r.ok]
+
+    def add(self, name: str, failures: list[str], passed: str) -> None:
+        if failures:
+            more = f" (and {len(failures) - 1} more)" if len(failures) > 1 else ""
+            self.results.append(CheckResult(name, False, failures[0] + more))
+        else:
+            self.results.append(CheckResult(name, True, passed))
+
+    def __str__(self) -> str:
+        return "\n".join(f"{'pass' if r.ok else 'FAIL'} {r.name}: {r.detail}"
+                         for r in self.results)
+
+
+def _err(e: BaseException) -> str:
+    msg = " ".join(str(e).split())
+    return f"{type(e).__name__}: {msg[:300]}" if msg else type(e).__name__
+
+
+# ----------------------------------------------------------------------------- problems
+
+
+def _problem(label: str, seed: int, n: int, m: int, *, p_inf: float = 0.0, inf_rows=(),
+             inf_cols=(), components: int = 1, loss: float = 0.0, ids_offset=True,
+             air: float = 0.0) -> tuple[str, Callable[[], AllocationProblem]]:
+    """A problem factory: each call builds the same problem with a fresh ``rng`` (the answer
+    to the same seed must be the same)."""
+    g = np.random.default_rng([seed, n, m, components])
+    cells = g.integers(0, 12, (n + m, 3)) * np.array([1, 1, 0]) + np.array([0, 0, 0])
+    a_cells, t_cells = cells[:n].copy(), cells[n:].copy()
+    kinds = ["uav" if i % 2 else "ugv" for i in range(n)]
+    t_air = g.random(m) < air
+    t_cells[t_air, 2] = g.integers(1, 4, int(t_air.sum()))
+    a_ids = (g.permutation(1000)[:n] + 1000).tolist() if ids_offset else list(range(n))
+    t_ids = (g.permutation(1000)[:m] + 5000).tolist() if ids_offset else list(range(m))
+    speed = np.where(np.array(kinds) == "uav", 5.0, 3.0) if n else np.zeros(0)
+    dist = np.linalg.norm(a_cells[:, None, :] - t_cells[None, :, :], axis=-1) + 0.5
+    cost = dist / speed[:, None] if n else np.zeros((0, m))
+    ugv = np.array([k == "ugv" for k in kinds], bool)
+    cost[np.ix_(ugv, t_air)] = np.inf
+    cost[g.random((n, m)) < p_inf] = np.inf
+    cost[list(inf_rows), :] = np.inf
+    cost[:, list(inf_cols)] = np.inf
+    comm = np.zeros((n, n), bool)
+    for c in range(components):
+        members = np.arange(n)[np.arange(n) % components == c]
+        comm[np.ix_(members, members)] = True
+    agents = tuple(AgentView(a_ids[i], kinds[i], tuple(int(v) for v in a_cells[i]),
+                             float(speed[i])) for i in range(n))
+    tasks = tuple(TaskView(t_ids[j], "air" if t_air[j] else "ground",
+                           tuple(int(v) for v in t_cells[j]), 0.0) for j in range(m))
+
+    def build() -> AllocationProblem:
+        return AllocationProblem(time=10.0, agents=agents, tasks=tasks,
+                                 cost=np.ascontiguousarray(cost, float), comm=comm.copy(),
+                                 rng=np.random.default_rng(seed), max_rounds=200, loss=loss,
+                                 latency=0.0, cell_size=1.0)
+
+    return label, build
+
+
+def allocation_problems(seed: int = 0) -> list[tuple[str, Callable[[], AllocationProblem]]]:
+    """``(label, factory)`` of the problems :func:`check_allocator` runs (a factory builds the
+    same problem, with a fresh ``rng`` of the same seed, at every call)."""
+    s = seed * 1000
+    return [
+        _problem("0 agents", s + 1, 0, 3),
+        _problem("0 tasks", s + 2, 3, 0),
+        _problem("0 agents 0 tasks", s + 3, 0, 0),
+        _problem("1 x 1", s + 4, 1, 1),
+        _problem("square 4 x 4", s + 5, 4, 4),
+        _problem("square 8 x 8, ids = indices", s + 6, 8, 8, ids_offset=False),
+        _problem("wide 3 x 7", s + 7, 3, 7),
+        _problem("tall 7 x 3", s + 8, 7, 3),
+        _problem("all-inf rows", s + 9, 5, 5, inf_rows=(1, 3)),
+        _problem("all-inf columns", s + 10, 5, 5, inf_cols=(0, 4)),
+        _problem("everything inf", s + 11, 3, 3, p_inf=1.0),
+        _problem("sparse (60% inf), air tasks", s + 12, 6, 6, p_inf=0.6, air=0.5),
+        _problem("3 comm components", s + 13, 9, 6, components=3),
+        _problem("no links (9 components)", s + 14, 9, 9, components=9),
+        _problem("loss 0.3", s + 15, 6, 6, loss=0.3),
+        _problem("loss 0.3, 2 components, rectangular", s + 16, 8, 5, components=2, loss=0.3),
+    ]
+
+
+def _snapshot(p: AllocationProblem) -> tuple:
+    return (p.time, p.agents, p.tasks, p.cost.copy(), p.comm.copy(), p.max_rounds, p.loss,
+            p.latency, p.cell_size, p.agent_pos.copy(), p.task_pos.copy(),
+            p.cost.flags.writeable, p.comm.flags.writeable)
+
+
+def _same(a: tuple, b: tuple) -> bool:
+    for x, y in zip(a, b):
+        if isinstance(x, np.ndarray):
+            if not isinstance(y, np.ndarray) or x.shape != y.shape or \
+                    not np.array_equal(x, y, equal_nan=True):
+                return False
+        elif x != y:
+            return False
+    return True
+
+
+def _answer(a: Allocation) -> tuple:
+    return (tuple(map(tuple, a.pairs)), a.rounds, a.requests, a.messages, a.hops)
+
+
+def _perturb_global_rng(k: int) -> None:
+    import sys
+
+    random.seed(k)
+    np.random.seed(k)
+    torch = sys.modules.get("torch")  # only if a plugin imported it
+    if torch is not None:
+        torch.manual_seed(k)
+
+
+# ----------------------------------------------------------------------------- allocators
+
+
+def check_allocator(cls, *, seed: int = 0, **params: Any) -> Report:
+    """Run every allocator check (see the module docstring) on ``cls(**params)``."""
+    from dispatch.dispatcher import validate
+
+    report = Report(getattr(cls, "name", "") or getattr(cls, "__name__", str(cls)))
+    try:
+        cls(**params)
+    except Exception as e:  # noqa: BLE001
+        report.add("construct", [f"{cls.__name__}(**{params!r}) raised {_err(e)}"], "")
+        return report
+    report.add("construct", [], f"{getattr(cls, '__name__', cls)}(**{params!r})")
+    problems = allocation_problems(seed)
+    invalid, stuck, mutated, differs, global_rng = [], [], [], [], []
+    answers: dict[str, tuple] = {}
+    for label, build in problems:
+        problem = build()
+        before = _snapshot(problem)
+        try:
+            _perturb_global_rng(1)
+            allocation = cls(**params).allocate(problem)
+        except Exception as e:  # noqa: BLE001 - any exception is a failure of the plugin
+            invalid.append(f"{label}: allocate raised {_err(e)}")
+            continue
+        if not _same(before, _snapshot(problem)):
+            mutated.append(f"{label}: the problem changed during allocate")
+        try:
+            validate(problem, allocation)
+        except AllocationError as e:
+            invalid.append(f"{label}: {e}")
+            continue
+        if np.isfinite(before[3]).any() and not allocation.pairs:
+            stuck.append(f"{label}: no pair assigned though some pair is finite")
+        answers[label] = _answer(allocation)
+    for label, build in problems:
+        if label not in answers:
+            continue
+        try:
+            _perturb_global_rng(1)
+            again = _answer(cls(**params).allocate(build()))
+            _perturb_global_rng(987654)
+            other = _answer(cls(**params).allocate(build()))
+        except Exception as e:  # noqa: BLE001
+            differs.append(f"{label}: a second call raised {_err(e)}")
+            continue
+        if again != answers[label]:
+            differs.append(f"{label}: the same problem and seed gave {again[0]}, "
+                           f"then {answers[label][0]}")
+        elif other != answers[label]:
+            global_rng.append(f"{label}: the answer changed with the global random state "
+                              f"({answers[label][0]} vs {other[0]}); draw only from problem.rng")
+    n = len(problems)
+    report.add("valid", invalid, f"{n} problems, every answer accepted")
+    report.add("progress", stuck, "assigns a pair whenever one is finite")
+    report.add("no-mutation", mutated, "no problem changed")
+    report.add("deterministic", differs, "same problem and seed, same answer")
+    report.add("rng", global_rng, "answers do not depend on the global random state")
+    return report
+
+
+# ----------------------------------------------------------------------------- planners
+
+
+def small_world(seed: int = 0):
+    """A 12 x 12 x 6 m voxel world of 1 m cells with 4 obstacles."""
+    from dispatch.world import build_world
+
+    return build_world((12.0, 12.0, 6.0), 1.0, 4, (1.0, 1.0, 1.0), (3.0, 3.0, 6.0),
+                       np.random.default_rng(seed))
+
+
+def small_network():
+    """A 6 x 5 Manhattan grid, 100 m blocks, 10 m/s."""
+    from dispatch.roads import manhattan
+
+    return manhattan(6, 5, 100.0, 10.0)
+
+
+def _planner_queries(space, seed: int, n: int, m: int):
+    g = np.random.default_rng(seed)
+    if space.kind == "road":
+        from dispatch.roads import RoadPoint
+
+        nodes = g.integers(0, space.n, n + m)
+        agents = tuple(AgentView(100 + i, "car", RoadPoint(int(nodes[i])), 10.0)
+                       for i in range(n))
+        tasks = tuple(TaskView(500 + j, "trip", int(nodes[n + j]), 0.0) for j in range(m))
+        return agents, tasks
+    free = space.grid.free_cells()
+    ground = free[free[:, 2] == 0]
+    def pick(pool, k):
+        return [tuple(int(v) for v in pool[i]) for i in g.integers(0, len(pool), k)]
+
+    a_cells = pick(free[free[:, 2] <= 2], n)
+    kinds = ["uav" if i % 2 else "ugv" for i in range(n)]
+    a_cells = [c if k == "uav" else pick(ground, 1)[0] for c, k in zip(a_cells, kinds)]
+    t_cells = pick(free, m)
+    agents = tuple(AgentView(100 + i, kinds[i], a_cells[i], 5.0 if kinds[i] == "uav" else 3.0)
+                   for i in range(n))
+    tasks = tuple(TaskView(500 + j, "ground" if c[2] == 0 else "air", c, 0.0)
+                  for j, c in enumerate(t_cells))
+    return agents, tasks
+
+
+def check_planner(cls, space=None, *, seed: int = 0, **params: Any) -> Report:
+    """Run every planner check (see the module docstring) on ``cls(space, **params)``; without
+    a ``space``, on :func:`small_world` and/or :func:`small_network` (the spaces it serves)."""
+    report = Report(getattr(cls, "name", "") or getattr(cls, "__name__", str(cls)))
+    if space is None:
+        serves = getattr(cls, "spaces", ("voxel",))
+        spaces = ([small_world(seed)] if "voxel" in serves else []) + \
+                 ([small_network()] if "road" in serves else [])
+    else:
+        spaces = [space]
+    for sp in spaces:
+        tag = f" [{sp.kind}]" if len(spaces) > 1 else ""
+        _check_planner_on(report, cls, sp, seed, params, tag)
+    return report
+
+
+def _costs(planner, agents, tasks) -> np.ndarray:
+    return np.asarray(planner.costs(agents, tasks))
+
+
+def _check_planner_on(report: Report, cls, space, seed: int, params: dict, tag: str) -> None:
+    try:
+        cls(space, **params)
+    except Exception as e:  # noqa: BLE001
+        report.add("construct" + tag, [f"{cls.__name__}(space, **{params!r}) raised {_err(e)}"],
+                   "")
+        return
+    report.add("construct" + tag, [], f"{cls.__name__}(<{space.kind} space>, **{params!r})")
+    grid = getattr(space, "grid", None)
+    occupied = None if grid is None else np.array(grid.occupied, copy=True)
+    shapes = [(0, 3), (3, 0), (0, 0), (1, 1), (4, 6), (6, 2)]
+    bad_costs, bad_plans, differs, global_rng = [], [], [], []
+    for k, (n, m) in enumerate(shapes):
+        agents, tasks = _planner_queries(space, seed * 100 + k, n, m)
+        label = f"{n} agents x {m} tasks"
+        try:
+            _perturb_global_rng(1)
+            planner = cls(space, **params)
+            c = _costs(planner, agents, tasks)
+        except Exception as e:  # noqa: BLE001
+            bad_costs.append(f"{label}: costs raised {_err(e)}")
+            continue
+        if c.shape != (n, m):
+            bad_costs.append(f"{label}: costs has shape {c.shape}, expected {(n, m)}")
+            continue
+        if not np.issubdtype(c.dtype, np.floating) or np.isnan(c).any() or (c < 0).any():
+            bad_costs.append(f"{label}: costs must be floats >= 0 or inf (no nan), got "
+                             f"{c.dtype} {c.ravel()[:6]}")
+            continue
+        for i, a in enumerate(agents):
+            for j, t in enumerate(tasks):
+                if not math.isfinite(c[i, j]):
+                    continue
+                try:
+                    path = planner.plan(a, t.loc)
+                except Exception as e:  # noqa: BLE001
+                    bad_plans.append(f"{label}: plan raised {_err(e)}")
+                    continue
+                start = a.loc.node if space.kind == "road" else a.loc
+                if not path or path[-1] != t.loc or (space.kind == "voxel" and path[0] != start):
+                    bad_plans.append(f"{label}: agent {a.id} -> task {t.id}: cost {c[i, j]:.3g}"
+                                     f" but plan gave {path if not path else (path[0], path[-1])}")
+        try:
+            _perturb_global_rng(1)
+            again = _costs(cls(space, **params), agents, tasks)
+            _perturb_global_rng(987654)
+            other = _costs(cls(space, **params), agents, tasks)
+        except Exception as e:  # noqa: BLE001
+            differs.append(f"{label}: a second call raised {_err(e)}")
+            continue
+        if not np.array_equal(again, c):
+            differs.append(f"{label}: the same queries gave other costs")
+        elif not np.array_equal(other, c):
+            global_rng.append(f"{label}: costs changed with the global random state")
+    mutated = [] if occupied is None or np.array_equal(occupied, grid.occupied) else \
+        ["the world's grid changed"]
+    report.add("costs" + tag, bad_costs, f"{len(shapes)} query sets, shapes and values valid")
+    report.add("plan" + tag, bad_plans, "a path to the goal wherever the cost is finite")
+    report.add("no-mutation" + tag, mutated, "the space is unchanged")
+    report.add("deterministic" + tag, differs, "same queries, same costs")
+    report.add("rng" + tag, global_rng, "costs do not depend on the global random state")

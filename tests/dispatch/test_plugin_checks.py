@@ -1,0 +1,365 @@
+"""dispatch.testing: every built-in plugin passes the checks; deliberately broken plugins are
+caught by the check that names their bug; the README's allocator passes; ``dispatch check``;
+a misbehaving plugin inside a run stops it with one line naming the plugin, run and decision."""
+
+from __future__ import annotations
+
+import random
+import re
+
+import numpy as np
+import pytest
+
+from dispatch import cli
+from dispatch.contracts import Allocation, AllocationProblem, Allocator
+from dispatch.errors import AllocationError, PluginError
+from dispatch.registry import load
+from dispatch.testing import check_allocator, check_planner
+from tests.conftest import ROOT
+
+BUILTIN_ALLOCATORS = ["hungarian", "fcfs", "greedy", "random", "auction", "magnnet",
+                      "magnnet_edge", "magnnet_match"]
+BUILTIN_PLANNERS = ["astar", "rrt_star", "rstar", "reservation", "dijkstra"]
+
+
+@pytest.mark.parametrize("name", BUILTIN_ALLOCATORS)
+def test_every_builtin_allocator_passes(name):
+    report = check_allocator(load("allocator", name))
+    assert report.ok, str(report)
+    assert {r.name for r in report.results} == {"construct", "valid", "progress", "no-mutation",
+                                                "deterministic", "rng"}
+
+
+@pytest.mark.parametrize("name,params", [
+    ("auction", {"bundle_size": 2}),  # found by the checker: CBBA bundles crashed on 0 tasks
+    ("auction", {"bundle_size": 3, "time_scale": 5.0}),
+    ("magnnet", {"variant": "edge_noassign"}),
+    ("magnnet_match", {"confidence": 0.0, "patience": 0}),
+])
+def test_builtin_allocators_with_parameters_pass(name, params):
+    report = check_allocator(load("allocator", name), **params)
+    assert report.ok, str(report)
+
+
+def test_a_variant_that_serves_only_some_sizes_is_reported():
+    """``paper_nb`` ships checkpoints for N = M in (4, 8, 12, 20) only: the checker says so."""
+    report = check_allocator(load("allocator", "magnnet"), variant="paper_nb")
+    failed = {r.name: r.detail for r in report.failed()}
+    assert set(failed) == {"valid"} and "no checkpoint" in failed["valid"]
+
+
+@pytest.mark.parametrize("name", BUILTIN_PLANNERS)
+def test_every_builtin_planner_passes(name):
+    report = check_planner(load("planner", name))
+    assert report.ok, str(report)
+
+
+# ----------------------------------------------------------------------------- broken plugins
+
+
+def _cheapest(problem):
+    cost = problem.cost.copy()
+    pairs = []
+    while np.isfinite(cost).any():
+        a, t = np.unravel_index(np.argmin(cost), cost.shape)
+        pairs.append((int(a), int(t)))
+        cost[a, :] = np.inf
+        cost[:, t] = np.inf
+    return pairs
+
+
+class IndexPairs(Allocator):
+    name = "index_pairs"
+
+    def allocate(self, problem):
+        return Allocation(pairs=tuple(_cheapest(problem)))  # indices, not ids
+
+
+class DuplicateTask(Allocator):
+    name = "duplicate_task"
+
+    def allocate(self, problem):
+        if problem.n_tasks == 0:
+            return Allocation(pairs=())
+        t = problem.tasks[0].id
+        return Allocation(pairs=tuple((a.id, t) for a in problem.agents))
+
+
+class InfPair(Allocator):
+    name = "inf_pair"
+
+    def allocate(self, problem):
+        n = min(problem.n_agents, problem.n_tasks)
+        return Allocation.centralized(problem, [(i, i) for i in range(n)])  # ignores inf
+
+
+class GlobalRng(Allocator):
+    name = "global_rng"
+
+    def allocate(self, problem):
+        pairs = _cheapest(problem)
+        random.shuffle(pairs)  # the global state: harmless here, but the order ...
+        keep = [p for p in pairs if np.random.random() < 0.7]  # ... and this is not
+        return Allocation.centralized(problem, keep or pairs[:1])
+
+
+class Unseeded(Allocator):
+    name = "unseeded"
+
+    def allocate(self, problem):
+        rng = np.random.default_rng()
+        pairs = _cheapest(problem)
+        keep = [p for p in pairs if rng.random() < 0.5]
+        return Allocation.centralized(problem, keep or pairs[:1])
+
+
+class MakesWritable(Allocator):
+    """Turns the read-only cost matrix writable again and crosses pairs out in it."""
+
+    name = "makes_writable"
+
+    def allocate(self, problem):
+        cost = problem.cost
+        cost.setflags(write=True)
+        pairs = []
+        while np.isfinite(cost).any():
+            a, t = np.unravel_index(np.argmin(cost), cost.shape)
+            pairs.append((int(a), int(t)))
+            cost[a, :] = np.inf
+            cost[:, t] = np.inf
+        return Allocation.centralized(problem, pairs)
+
+
+class SwapsCost(Allocator):
+    """Mutates a copy and puts it in the (frozen) problem in place of the original."""
+
+    name = "swaps_cost"
+
+    def allocate(self, problem):
+        cost = problem.cost.copy()
+        cost[np.isfinite(cost)] = 0.0
+        object.__setattr__(problem, "cost", cost)
+        return Allocation.centralized(problem, _cheapest(problem))
+
+
+class Raises(Allocator):
+    name = "raises"
+
+    def allocate(self, problem):
+        if problem.n_agents == 0:
+            raise ZeroDivisionError("no agents")
+        return Allocation.centralized(problem, _cheapest(problem))
+
+
+class Lazy(Allocator):
+    name = "lazy"
+
+    def allocate(self, problem):
+        return Allocation(pairs=())
+
+
+class WrongType(Allocator):
+    name = "wrong_type"
+
+    def allocate(self, problem):
+        return [(a.id, t.id) for a, t in zip(problem.agents, problem.tasks)]
+
+
+class Stateful(Allocator):
+    """Answers differently on its second call (class-level state)."""
+
+    name = "stateful"
+    calls = 0
+
+    def allocate(self, problem):
+        Stateful.calls += 1
+        pairs = _cheapest(problem)
+        return Allocation.centralized(problem, pairs if Stateful.calls % 2 else pairs[:-1])
+
+
+BROKEN = {
+    IndexPairs: "valid", DuplicateTask: "valid", InfPair: "valid", GlobalRng: "rng",
+    Unseeded: "deterministic", MakesWritable: "no-mutation", SwapsCost: "no-mutation",
+    Raises: "valid", Lazy: "progress", WrongType: "valid", Stateful: "deterministic",
+}
+
+
+@pytest.mark.parametrize("cls,check", BROKEN.items(), ids=[c.__name__ for c in BROKEN])
+def test_broken_allocator_is_caught(cls, check):
+    report = check_allocator(cls)
+    assert not report.ok
+    failed = {r.name: r.detail for r in report.failed()}
+    assert check in failed, str(report)
+    assert "\n" not in failed[check]
+
+
+def test_index_pairs_failure_says_ids_not_indices():
+    detail = {r.name: r.detail for r in check_allocator(IndexPairs).failed()}["valid"]
+    assert "not by index" in detail
+
+
+def test_constructor_that_rejects_its_parameters():
+    class Picky(Allocator):
+        def __init__(self, k: int = 1) -> None:
+            if k < 1:
+                raise ValueError("k must be >= 1")
+
+        def allocate(self, problem):
+            return Allocation(pairs=())
+
+    report = check_allocator(Picky, k=0)
+    assert [r.name for r in report.results] == ["construct"] and not report.ok
+    assert "k must be >= 1" in report.results[0].detail
+
+
+def test_broken_planners_are_caught():
+    from planners.astar import AStarPlanner
+
+    class Negative(AStarPlanner):
+        name = "negative"
+
+        def costs(self, agents, tasks):
+            return -super().costs(agents, tasks)
+
+    class Noisy(AStarPlanner):
+        name = "noisy"
+
+        def costs(self, agents, tasks):
+            return super().costs(agents, tasks) + np.random.random()
+
+    class Transposed(AStarPlanner):
+        name = "transposed"
+
+        def costs(self, agents, tasks):
+            return super().costs(agents, tasks).T
+
+    for cls, check in ((Negative, "costs"), (Noisy, "rng"), (Transposed, "costs")):
+        failed = {r.name for r in check_planner(cls).failed()}
+        assert check in failed, (cls.__name__, failed)
+
+
+# ----------------------------------------------------------------------------- the README example
+
+
+def readme_allocator():
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    section = readme.split("## Writing a plugin", 1)[1].split("\n## ", 1)[0]
+    (code,) = [b for b in re.findall(r"```python\n(.*?)```", section, re.DOTALL)
+               if "class CheapestFirst" in b]
+    scope: dict = {}
+    exec(compile(code, "README.md", "exec"), scope)  # noqa: S102 - the README's own code
+    return code, scope["CheapestFirst"]
+
+
+def test_readme_allocator_passes_the_checker():
+    code, cls = readme_allocator()
+    assert len(code.strip().splitlines()) <= 30
+    report = check_allocator(cls)
+    assert report.ok, str(report)
+    assert not check_allocator(cls, max_pairs=0).ok  # its constructor rejects a bad value
+    assert check_allocator(cls, max_pairs=2).ok
+
+
+# ----------------------------------------------------------------------------- the CLI
+
+
+def test_cli_check_builtin_allocator(capsys):
+    assert cli.main(["check", "greedy"]) == 0
+    out = capsys.readouterr().out
+    lines = [line for line in out.splitlines() if line.strip()]
+    assert len(lines) == 7  # one line per check, then the verdict
+    assert all(line.startswith("pass") for line in lines[:6])
+    assert "passes every check" in lines[-1]
+
+
+def test_cli_check_planner_with_param(capsys):
+    assert cli.main(["check", "rstar", "--param", "w=2.0"]) == 0
+    assert "passes every check" in capsys.readouterr().out
+
+
+def test_cli_check_bad_param_and_unknown_name(capsys):
+    assert cli.main(["check", "rstar", "--param", "w=0.5"]) == 1
+    out = capsys.readouterr().out
+    assert "FAIL construct" in out and "w (the suboptimality bound)" in out
+    assert cli.main(["check", "no_such_plugin"]) == 2
+    assert "no allocator or planner named 'no_such_plugin'" in capsys.readouterr().err
+
+
+# ----------------------------------------------------------------------------- inside a run
+
+
+@pytest.mark.parametrize("allocator,error,words", [
+    (IndexPairs(), AllocationError, "not by index"),
+    (DuplicateTask(), AllocationError, "more than one agent"),
+    (WrongType(), AllocationError, "not an Allocation"),
+    (MakesWritable(), AllocationError, "made writable problem.cost"),
+    (SwapsCost(), AllocationError, "replaced or made writable problem.cost"),
+])
+def test_misbehaving_allocator_in_a_run_is_one_line_naming_it(tiny_scenario, allocator, error,
+                                                              words, monkeypatch):
+    import dispatch.sim as sim_module
+    from dispatch.runner import run_one
+    from dispatch.scenario import load_scenario
+
+    spec = load_scenario(tiny_scenario).runs()[0]
+    real = sim_module.make_plugin
+    monkeypatch.setattr(sim_module, "make_plugin", lambda kind, name, params, *args: allocator
+                        if kind == "allocator" else real(kind, name, params, *args))
+    with pytest.raises(error) as info:
+        run_one(spec)
+    msg = str(info.value)
+    assert "\n" not in msg and words in msg
+    assert f"allocator {allocator.name!r}" in msg
+    assert re.search(rf"run {spec.run_id}, decision \d+, t = [0-9.e+-]+ s: ", msg), msg
+
+
+def test_plugin_exception_in_the_loop_is_a_plugin_error(tiny_scenario, monkeypatch):
+    """Not a traceback through simpy: the exception becomes a PluginError with the context."""
+    from dispatch.runner import run_one
+    from dispatch.scenario import load_scenario
+
+    class Boom(Allocator):
+        name = "boom"
+
+        def allocate(self, problem: AllocationProblem):
+            raise KeyError("lost")
+
+    import dispatch.sim as sim_module
+
+    real = sim_module.make_plugin
+    monkeypatch.setattr(sim_module, "make_plugin", lambda kind, name, params, *args: Boom()
+                        if kind == "allocator" else real(kind, name, params, *args))
+    spec = load_scenario(tiny_scenario).runs()[0]
+    with pytest.raises(PluginError, match=r"allocator 'boom', run tiny__hungarian__astar__n3__s0, "
+                                          r"decision 0, t = 0 s: allocator raised KeyError"):
+        run_one(spec)
+
+
+@pytest.mark.parametrize("bug,words", [
+    ("transposed", "costs() must return a float array of shape (3, 3)"),
+    ("raises", "planner raised RuntimeError: no map"),
+])
+def test_misbehaving_planner_in_a_run_is_one_line_naming_it(make_scenario, monkeypatch, bug,
+                                                            words):
+    import dispatch.sim as sim_module
+    from dispatch.runner import run_one
+    from dispatch.scenario import load_scenario
+    from planners.astar import AStarPlanner
+
+    class Bad(AStarPlanner):
+        name = "bad"
+
+        def costs(self, agents, tasks):
+            if bug == "raises":
+                raise RuntimeError("no map")
+            return np.zeros((len(tasks), len(agents) + 1))
+
+    spec = load_scenario(make_scenario()).runs()[0]
+    real = sim_module.make_plugin
+    monkeypatch.setattr(sim_module, "make_plugin", lambda kind, name, params, *args:
+                        Bad(*args) if kind == "planner" else real(kind, name, params, *args))
+    with pytest.raises(PluginError) as info:
+        run_one(spec)
+    msg = str(info.value)
+    assert "\n" not in msg and words in msg
+    assert msg.startswith(f"planner 'bad', run {spec.run_id}, decision 0, t = 0 s: ")
