@@ -167,7 +167,7 @@ class Simulation:
                                      allocator, self.space, sc.dispatch, sc.comms,
                                      rng_for(spec.seed, STREAM_ALLOCATOR), self._record_decision,
                                      blackout_filter(sc.faults))
-        self.dispatcher.run_id = spec.run_id  # named in the dispatcher's error messages
+        self.dispatcher.run_id = driver.run_id = spec.run_id  # named in error messages
         t = sc.tasks
         count = spec.n_static_tasks if t.source == "static" else t.count
         self.source = TaskSource(env, book, demand,

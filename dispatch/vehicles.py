@@ -28,6 +28,7 @@ import numpy as np
 import simpy
 
 from dispatch.contracts import AgentView, Planner
+from dispatch.errors import PluginError
 from dispatch.events import EventBus
 from dispatch.motion import step_length
 from dispatch.reservations import EPS, step_seconds
@@ -163,17 +164,37 @@ class Fleet:
 # ----------------------------------------------------------------------------- drivers
 
 
+def _plan(planner: Planner, agent: AgentView, goal, now: float, run_id: str):
+    """``planner.plan``, with a planner's own exception turned into one PluginError line that
+    names the planner, the run, the vehicle and the simulated time."""
+    try:
+        return planner.plan(agent, goal)
+    except Exception as e:  # noqa: BLE001 - a plugin may raise anything
+        raise _plan_error(planner, agent, goal, now, run_id,
+                          f"raised {type(e).__name__}: {' '.join(str(e).split())[:300]}") from e
+
+
+def _plan_error(planner: Planner, agent: AgentView, goal, now: float, run_id: str,
+                why: str) -> PluginError:
+    run = f", run {run_id}" if run_id else ""
+    return PluginError(f"planner {planner.name!r}{run}, t = {now:.6g} s: plan() for vehicle "
+                       f"{agent.id} -> {goal} {why}")
+
+
 class CellDriver:
     """Voxel world: paths are cells; a vehicle steps from cell to cell at its speed."""
 
     def __init__(self, world: World, planner: Planner, bus: EventBus) -> None:
         self.world, self.planner, self.bus = world, planner, bus
+        self.run_id = ""  # named in error messages
 
     def plan(self, v: Vehicle, goal, now: float):
-        path = self.planner.plan(v.view(), goal)
-        if path is None or path[0] != v.loc or path[-1] != goal:
-            raise RuntimeError(f"planner {self.planner.name!r} gave no path for a finite cost "
-                               f"(vehicle {v.id} -> {goal})")
+        agent = v.view()
+        path = _plan(self.planner, agent, goal, now, self.run_id)
+        if path is None or len(path) == 0 or path[0] != v.loc or path[-1] != goal:
+            raise _plan_error(self.planner, agent, goal, now, self.run_id,
+                              "gave no path from the vehicle's cell to the goal although its "
+                              "cost was finite")
         return path
 
     def drive(self, env: simpy.Environment, v: Vehicle, path, task_id: int):
@@ -197,14 +218,19 @@ class RoadDriver:
                  edge_events: bool = False) -> None:
         self.network, self.planner, self.bus = network, planner, bus
         self.edge_events = edge_events
+        self.run_id = ""  # named in error messages
 
     def plan(self, v: Vehicle, goal, now: float) -> Leg:
-        start = v.location(now)
-        nodes = self.planner.plan(v.view(now), goal)
-        if nodes is None or int(nodes[-1]) != int(goal):
-            raise RuntimeError(f"planner {self.planner.name!r} gave no path for a finite cost "
-                               f"(vehicle {v.id} -> node {goal})")
-        return self.network.leg(start, nodes)
+        start, agent = v.location(now), v.view(now)
+        nodes = _plan(self.planner, agent, goal, now, self.run_id)
+        if nodes is None or len(nodes) == 0 or int(nodes[-1]) != int(goal):
+            raise _plan_error(self.planner, agent, goal, now, self.run_id,
+                              "gave no path to the goal node although its cost was finite")
+        try:
+            return self.network.leg(start, nodes)
+        except ValueError as e:
+            raise _plan_error(self.planner, agent, goal, now, self.run_id,
+                              f"gave a path that is not one: {e}") from None
 
     def drive(self, env: simpy.Environment, v: Vehicle, leg: Leg, task_id: int):
         """Process fragment: drive ``leg``; returns the metres driven."""

@@ -363,3 +363,41 @@ def test_misbehaving_planner_in_a_run_is_one_line_naming_it(make_scenario, monke
     msg = str(info.value)
     assert "\n" not in msg and words in msg
     assert msg.startswith(f"planner 'bad', run {spec.run_id}, decision 0, t = 0 s: ")
+
+
+@pytest.mark.parametrize("bug,words", [
+    ("raises", "plan() for vehicle 0 -> (2, 2, 0) raised ValueError: no path today"),
+    ("none", "gave no path from the vehicle's cell to the goal"),
+    ("wrong start", "gave no path from the vehicle's cell to the goal"),
+])
+def test_misbehaving_plan_in_a_run_is_one_line_naming_it(make_scenario, monkeypatch, bug,
+                                                         words, tmp_path):
+    """plan() runs inside a vehicle's process: its failure is one PluginError line naming the
+    planner, the run, the vehicle and the time (not a traceback through simpy)."""
+    import dispatch.sim as sim_module
+    from dispatch.runner import run_one
+    from dispatch.scenario import load_scenario
+    from planners.astar import AStarPlanner
+
+    class Bad(AStarPlanner):
+        name = "bad"
+
+        def plan(self, agent, goal):
+            if bug == "raises":
+                raise ValueError("no path\ntoday")
+            if bug == "none":
+                return None
+            return [(9, 9, 9), goal]
+
+    (tmp_path / "t.csv").write_text("t,x,y,z\n0,2.5,2.5,0.5\n")
+    path = make_scenario(fleet={"agents": 1, "uav_fraction": 0.0}, obstacles={"count": 0},
+                         tasks={"source": "trace", "trace": "t.csv", "ground_fraction": None})
+    spec = load_scenario(path).runs()[0]
+    real = sim_module.make_plugin
+    monkeypatch.setattr(sim_module, "make_plugin", lambda kind, name, params, *args:
+                        Bad(*args) if kind == "planner" else real(kind, name, params, *args))
+    with pytest.raises(PluginError) as info:
+        run_one(spec)
+    msg = str(info.value)
+    assert "\n" not in msg and words in msg, msg
+    assert msg.startswith(f"planner 'bad', run {spec.run_id}, t = 0 s: plan() for vehicle 0")
