@@ -149,13 +149,13 @@ def test_500_random_road_and_200_voxel_scenarios_with_breakdowns(tmp_path):
     assert road["faults"] > 200 and voxel["faults"] > 100
 
 
-@pytest.mark.parametrize("on_board", ["transfer", "fail"])
-def test_a_breakdown_with_the_passenger_on_board(tmp_path, on_board):
-    """One taxi, one long trip, a breakdown half-way to the drop-off: the passenger is
-    transferred to the second taxi (picked up where the first stopped) or the trip fails."""
-    (tmp_path / "trips.csv").write_text("t,origin_node,dest_node\n0,0,9\n")
+def two_taxis(tmp_path: Path, *, trip: str, failure: str, on_board: str = "transfer"):
+    """A 10 x 10 grid (100 m blocks, 10 m/s), taxi 0 on node 0 and taxi 1 on node 99, one
+    trip (``t,origin_node,dest_node``) and one scheduled breakdown (``t,vehicle_id,duration``);
+    the run, checked."""
+    (tmp_path / "trips.csv").write_text(f"t,origin_node,dest_node\n{trip}\n")
     (tmp_path / "fleet.csv").write_text("vehicle_id,node\n0,0\n1,99\n")
-    (tmp_path / "fail.csv").write_text("t,vehicle_id,duration\n40,0,inf\n")
+    (tmp_path / "fail.csv").write_text(f"t,vehicle_id,duration\n{failure}\n")
     path = tmp_path / "s.toml"
     path.write_text('name = "s"\nduration = 5000.0\n[world]\nnetwork = "manhattan"\n'
                     'blocks = [10, 10]\nblock = 100.0\nspeed = 10.0\n[fleet]\n'
@@ -165,6 +165,14 @@ def test_a_breakdown_with_the_passenger_on_board(tmp_path, on_board):
     [spec] = load_scenario(path).runs()
     r = run_one(spec)
     check(r)
+    return r
+
+
+@pytest.mark.parametrize("on_board", ["transfer", "fail"])
+def test_a_breakdown_with_the_passenger_on_board(tmp_path, on_board):
+    """One taxi, one long trip, a breakdown half-way to the drop-off: the passenger is
+    transferred to the second taxi (picked up where the first stopped) or the trip fails."""
+    r = two_taxis(tmp_path, trip="0,0,9", failure="40,0,inf", on_board=on_board)
     task = r.tables["tasks"].to_pandas().iloc[0]
     veh = r.tables["vehicles"].to_pandas().set_index("agent_id")
     assert veh.loc[0, "failures"] == 1
@@ -182,17 +190,7 @@ def test_a_breakdown_with_the_passenger_on_board(tmp_path, on_board):
 
 
 def test_a_trip_not_yet_picked_up_is_reassigned_and_repaired_vehicles_return(tmp_path):
-    (tmp_path / "trips.csv").write_text("t,origin_node,dest_node\n0,9,0\n")
-    (tmp_path / "fleet.csv").write_text("vehicle_id,node\n0,0\n1,99\n")
-    (tmp_path / "fail.csv").write_text("t,vehicle_id,duration\n20,0,100\n")
-    path = tmp_path / "s.toml"
-    path.write_text('name = "s"\nduration = 5000.0\n[world]\nnetwork = "manhattan"\n'
-                    'blocks = [10, 10]\nblock = 100.0\nspeed = 10.0\n[fleet]\n'
-                    'start = "fleet.csv"\n[tasks]\nsource = "trace"\ntrace = "trips.csv"\n'
-                    '[dispatch]\nallocator = "fcfs"\n[faults]\nfile = "fail.csv"\n')
-    [spec] = load_scenario(path).runs()
-    r = run_one(spec)
-    check(r)
+    r = two_taxis(tmp_path, trip="0,9,0", failure="20,0,100")
     ev = r.tables["events"].to_pandas()
     task = r.tables["tasks"].to_pandas().iloc[0]
     assert task.reassigned == 1 and task.transfers == 0 and task.state == "completed"
