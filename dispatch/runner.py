@@ -217,8 +217,13 @@ def is_complete(out: Path, spec: RunSpec) -> bool:
 
 
 def clear_partition(out: Path, spec: RunSpec) -> None:
-    """Remove a run's marker (first), then every file of its partition in every table."""
-    marker_path(out, spec).unlink(missing_ok=True)
+    """Remove a run's marker (first), then every file of its partition in every table (and a
+    marker half-written by a process killed meanwhile)."""
+    marker = marker_path(out, spec)
+    marker.unlink(missing_ok=True)
+    if marker.parent.is_dir():
+        for f in marker.parent.glob(f".{marker.name}.tmp-*"):
+            f.unlink(missing_ok=True)
     for table in (*SCHEMAS, ERRORS):
         leaf = Path(out) / table / partition_dir(spec)
         if leaf.is_dir():
