@@ -3,4 +3,5 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
-exec .venv/bin/dispatch run scenarios/paper_static.toml "$@"
+# --force: the script rewrites its own results folder (runs/paper_static) on every call
+exec .venv/bin/dispatch run scenarios/paper_static.toml --force "$@"
