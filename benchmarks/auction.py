@@ -45,7 +45,7 @@ from dispatch.sim import (
     rng_for,
     world_for,
 )
-from dispatch.tasks import TaskFactory
+from dispatch.demand import VoxelDemand
 
 ROOT = Path(__file__).resolve().parents[1]
 SIZES = (4, 8, 12, 20, 50, 100)
@@ -70,8 +70,9 @@ def instance(scenario, n: int, seed: int, planner_cls):
     spec = scenario.runs(allocator="hungarian", agents=n, seed=seed)[0]
     world = world_for(scenario.world, seed)
     fleet = place_fleet(world, spec, rng_for(seed, STREAM_FLEET))
-    factory = TaskFactory(world.grid, scenario.tasks.ground_fraction, rng_for(seed, STREAM_TASKS))
-    tasks = tuple(TaskView(i, *factory.draw(), 0.0) for i in range(spec.n_static_tasks))
+    demand = VoxelDemand(world.grid, scenario.tasks.ground_fraction, rng_for(seed, STREAM_TASKS))
+    tasks = tuple(TaskView(i, (r := demand.draw()).kind, r.loc, 0.0)
+                  for i in range(spec.n_static_tasks))
     agents = tuple(v.view() for v in fleet)
     cost = planner_cls(world).costs(agents, tasks)
     positions = np.array([world.grid.centre(a.cell) for a in agents])

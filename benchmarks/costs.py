@@ -41,7 +41,7 @@ from scipy.sparse.csgraph import dijkstra  # noqa: E402
 from dispatch.contracts import AgentView, TaskView  # noqa: E402
 from dispatch.scenario import load_scenario  # noqa: E402
 from dispatch.sim import STREAM_FLEET, STREAM_TASKS, place_fleet, rng_for, world_for  # noqa: E402
-from dispatch.tasks import TaskFactory  # noqa: E402
+from dispatch.demand import VoxelDemand  # noqa: E402
 
 t_import = time.perf_counter()
 from planners import _fast  # noqa: E402
@@ -56,10 +56,11 @@ def instance(scenario, n: int, seed: int):
     spec = scenario.runs(allocator="hungarian", agents=n, seed=seed)[0]
     world = world_for(scenario.world, seed)
     agents = tuple(v.view() for v in place_fleet(world, spec, rng_for(seed, STREAM_FLEET)))
-    factory = TaskFactory(world.grid, scenario.tasks.ground_fraction, rng_for(seed, STREAM_TASKS))
+    demand = VoxelDemand(world.grid, scenario.tasks.ground_fraction, rng_for(seed, STREAM_TASKS))
     cells: dict = {}
     while len(cells) < n:
-        kind, cell = factory.draw()
+        req = demand.draw()
+        kind, cell = req.kind, req.loc
         cells.setdefault(cell, kind)
     tasks = tuple(TaskView(i, kind, cell, 0.0) for i, (cell, kind) in enumerate(cells.items()))
     return world, agents, tasks

@@ -3,7 +3,7 @@
 An instance of seed ``s`` and fleet size ``N`` is the first decision of the static scenario
 (``scenarios/paper_static.toml`` by default) run with seed ``s``: the world of the seed
 (:func:`dispatch.sim.world_for`), the fleet of :func:`dispatch.sim.place_fleet`, ``M = N``
-tasks from :class:`dispatch.tasks.TaskFactory`, and the exact A* travel times of the ``astar``
+tasks from :class:`dispatch.demand.VoxelDemand`, and the exact A* travel times of the ``astar``
 planner. Training uses seeds from :data:`TRAIN_SEED0` on; evaluation uses seeds from
 :data:`EVAL_SEED0` on, so the two never overlap.
 
@@ -54,18 +54,18 @@ def instance(seed: int, n_agents: int, scenario: str | Path = DEFAULT_SCENARIO,
     """``(cost, agent_pos, task_pos, flies, world_size)`` of the first decision of one run."""
     from dispatch.scenario import load_scenario
     from dispatch.sim import STREAM_FLEET, STREAM_TASKS, place_fleet, rng_for, world_for
-    from dispatch.tasks import TaskFactory
+    from dispatch.demand import VoxelDemand
     from planners.astar import AStarPlanner
 
     sc = load_scenario(scenario)
     spec = sc.runs(agents=n_agents, seed=seed)[0]
     world = world_for(sc.world, seed)
     vehicles = place_fleet(world, spec, rng_for(seed, STREAM_FLEET))
-    factory = TaskFactory(world.grid, sc.tasks.ground_fraction, rng_for(seed, STREAM_TASKS))
+    demand = VoxelDemand(world.grid, sc.tasks.ground_fraction, rng_for(seed, STREAM_TASKS))
     from dispatch.tasks import Task
 
     m = n_tasks if n_tasks is not None else spec.n_static_tasks
-    tasks = [Task(j, *factory.draw(), 0.0) for j in range(m)]
+    tasks = [Task(j, (r := demand.draw()).kind, r.loc, 0.0) for j in range(m)]
     agents = tuple(v.view() for v in vehicles)
     views = tuple(t.view() for t in tasks)
     cost = AStarPlanner(world).costs(agents, views)
