@@ -25,25 +25,32 @@ class FcfsAllocator(Allocator):
 
 
 def fcfs_pairs(problem: AllocationProblem) -> list[tuple[int, int]]:
-    """Index pairs ``(agent, task)`` chosen by the rule of the module docstring."""
+    """Index pairs ``(agent, task)`` chosen by the rule of the module docstring. Its Python
+    loop runs over the tasks; each task's choice is a numpy pass over the agents' column."""
     cost = problem.cost
     n, m = cost.shape
     if n == 0 or m == 0:
         return []
     # lexsort keys, last one primary: tasks by (release time, id); agents by id among ties
-    task_order = np.lexsort(([t.id for t in problem.tasks],
-                             [t.released_at for t in problem.tasks]))
-    agent_ids = np.array([a.id for a in problem.agents])
-    free = np.ones(n, dtype=bool)
+    task_order = np.lexsort((problem.task_ids, [t.released_at for t in problem.tasks]))
+    agent_ids = problem.agent_ids
+    ascending = getattr(problem.agents, "ascending", False) or n < 2 \
+        or bool((agent_ids[1:] > agent_ids[:-1]).all())
+    taken = np.zeros(n, dtype=bool)
     pairs = []
-    for t in task_order:
-        col = np.where(free, cost[:, t], np.inf)
-        best = col.min()
+    for t in task_order.tolist():
+        col = cost[:, t]
+        if pairs:
+            col = np.where(taken, np.inf, col)
+        a = int(np.argmin(col))  # the first of the minima: the lowest id when ids ascend
+        best = col[a]
         if not np.isfinite(best):
             continue
-        a = int(np.flatnonzero(col == best)[np.argmin(agent_ids[col == best])])
-        free[a] = False
-        pairs.append((a, int(t)))
-        if not free.any():
+        if not ascending:
+            ties = np.flatnonzero(col == best)
+            a = int(ties[np.argmin(agent_ids[ties])])
+        taken[a] = True
+        pairs.append((a, t))
+        if len(pairs) == n:
             break
     return pairs

@@ -141,19 +141,56 @@ def _run(args, console) -> int:
         raise DispatchError(f"{out}/ already holds results of {held[0]}{more}; use --force to "
                             f"overwrite them, another --out, or dispatch sweep to resume")
     started = time.perf_counter()
-    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                  TimeElapsedColumn(), console=console, transient=True,
-                  disable=len(specs) == 1) as progress:
-        bar = progress.add_task(f"{sc.name}", total=len(specs))
+    single = len(specs) == 1
+    if single:  # one long run: simulated time, wall time, requests released and closed
+        with _run_progress(console, specs[0]) as report:
+            summaries = execute(specs, out, progress=report)
+    else:
+        with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                      TimeElapsedColumn(), console=console, transient=True) as progress:
+            bar = progress.add_task(f"{sc.name}", total=len(specs))
 
-        def done(result):
-            progress.update(bar, advance=1, description=result.spec.run_id)
+            def done(result):
+                progress.update(bar, advance=1, description=result.spec.run_id)
 
-        summaries = execute(specs, out, on_done=done)
+            summaries = execute(specs, out, on_done=done)
     _tables(summaries, console)
     console.print(f"{len(specs)} run(s) in {time.perf_counter() - started:.1f} s; "
                   f"Parquet written to {out}/", soft_wrap=True)
     return 0
+
+
+class _run_progress:
+    """Context manager: a progress bar of one run (simulated time out of the duration, wall
+    time, requests released and closed), shown only on a terminal; yields the callback for
+    :class:`dispatch.sim.Simulation` (None when not shown, so the run adds no process)."""
+
+    def __init__(self, console, spec) -> None:
+        self.console, self.spec = console, spec
+        self.progress = None
+
+    def __enter__(self):
+        if not self.console.is_terminal:
+            return None
+        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+        self.progress = Progress(TextColumn("{task.description}"), BarColumn(),
+                                 TextColumn("{task.fields[sim]}"), TimeElapsedColumn(),
+                                 TextColumn("{task.fields[tasks]}"), console=self.console,
+                                 transient=True)
+        self.progress.__enter__()
+        self.bar = self.progress.add_task(self.spec.scenario.name, total=1.0, sim="", tasks="")
+
+        def report(now: float, duration: float, released: int, closed: int) -> None:
+            self.progress.update(self.bar, completed=min(now / duration, 1.0),
+                                 sim=f"sim {now / 3600:.1f}/{duration / 3600:.1f} h",
+                                 tasks=f"{released:,} released, {closed:,} closed")
+
+        return report
+
+    def __exit__(self, *exc) -> None:
+        if self.progress is not None:
+            self.progress.__exit__(*exc)
 
 
 def _tables(summaries, console) -> None:

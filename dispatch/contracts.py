@@ -29,6 +29,7 @@ import math
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import ClassVar, Literal, Protocol
 
 import numpy as np
@@ -60,6 +61,79 @@ class AgentView:
     def cell(self) -> Cell:
         """The voxel name of :attr:`loc` (voxel planners speak cells)."""
         return self.loc
+
+
+class AgentViews(Sequence[AgentView]):
+    """The agents of a decision: a read-only sequence of :class:`AgentView`, each built the
+    first time it is read (a decision over a thousand idle vehicles need not build a thousand
+    views when the allocator reads a few).
+
+    It behaves as the tuple of views it stands for (index, slice, iterate, ``len``, ``==``);
+    besides, it carries arrays a fast plugin may read instead of the views, all aligned with
+    the sequence: ``ids`` (int64; ascending when the dispatcher builds it) and, on road
+    networks (else None), ``nodes`` (the node each agent stands on or drives to next) and
+    ``remaining`` (seconds left to that node: > 0 only part-way along an edge), with
+    ``points`` the indices of those agents part-way along an edge (``remaining`` is 0 for all
+    others). ``ascending`` is True when the ids are known to be strictly increasing.
+    """
+
+    __slots__ = ("ids", "nodes", "remaining", "points", "ascending", "_make", "_views")
+
+    def __init__(self, ids: np.ndarray, make, nodes: np.ndarray | None = None,
+                 remaining: np.ndarray | None = None, points: np.ndarray | None = None,
+                 ascending: bool = False) -> None:
+        self.ids = np.asarray(ids, dtype=np.int64)
+        self.ids.setflags(write=False)
+        self.ascending = ascending
+        self._make = make
+        self._views: list[AgentView | None] | None = None
+        self.nodes, self.remaining = nodes, remaining
+        self.points = np.zeros(0, dtype=np.int64) if points is None else points
+        for a in (nodes, remaining, self.points):
+            if a is not None:
+                a.setflags(write=False)
+
+    @classmethod
+    def of(cls, views) -> AgentViews:
+        """Wrap already-built views (tests, hand-made problems)."""
+        views = tuple(views)
+        out = cls(np.fromiter((v.id for v in views), np.int64, len(views)), views.__getitem__)
+        out._views = list(views)
+        return out
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+    def __getitem__(self, k):
+        if isinstance(k, slice):
+            return tuple(self[i] for i in range(*k.indices(len(self))))
+        n = len(self.ids)
+        k = int(k)
+        if k < 0:
+            k += n
+        if not 0 <= k < n:
+            raise IndexError("agent index out of range")
+        views = self._views
+        if views is None:
+            views = self._views = [None] * n
+        v = views[k]
+        if v is None:
+            v = views[k] = self._make(k)
+        return v
+
+    def __iter__(self):
+        for k in range(len(self.ids)):
+            yield self[k]
+
+    def __eq__(self, other) -> bool:
+        if not isinstance(other, Sequence) or isinstance(other, str):
+            return NotImplemented
+        return len(self) == len(other) and all(a == b for a, b in zip(self, other))
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def __repr__(self) -> str:
+        return f"AgentViews({len(self)} agents)"
 
 
 @dataclass(frozen=True, slots=True)
@@ -99,10 +173,15 @@ class AllocationProblem:
     ``(M, 3)`` positions in metres of the agents and of the tasks' pickups (for features and
     straight-line distances; costs come from ``cost``). ``cell_size`` (metres) is the voxel
     world's cell (1.0 on roads).
+
+    ``agents`` is a sequence of views: the dispatcher passes an :class:`AgentViews` (lazy, with
+    arrays), hand-made problems may pass a tuple; :attr:`agent_ids` / :attr:`task_ids` give the
+    ids as arrays either way. With an unlimited communication range ``comm`` is a read-only
+    all-True broadcast array (no ``N x N`` memory).
     """
 
     time: float
-    agents: tuple[AgentView, ...]
+    agents: Sequence[AgentView]
     tasks: tuple[TaskView, ...]
     cost: np.ndarray
     comm: np.ndarray
@@ -139,6 +218,22 @@ class AllocationProblem:
     @property
     def n_agents(self) -> int:
         return len(self.agents)
+
+    @cached_property
+    def agent_ids(self) -> np.ndarray:
+        """The agents' ids (int64, aligned with ``agents``; read-only)."""
+        ids = getattr(self.agents, "ids", None)
+        if ids is None:
+            ids = np.fromiter((a.id for a in self.agents), np.int64, len(self.agents))
+            ids.setflags(write=False)
+        return ids
+
+    @cached_property
+    def task_ids(self) -> np.ndarray:
+        """The tasks' ids (int64, aligned with ``tasks``; read-only)."""
+        ids = np.fromiter((t.id for t in self.tasks), np.int64, len(self.tasks))
+        ids.setflags(write=False)
+        return ids
 
     @property
     def n_tasks(self) -> int:
@@ -189,8 +284,9 @@ class Allocation:
     def centralized(cls, problem: AllocationProblem, index_pairs) -> Allocation:
         """Build the answer of a centralized method from ``(agent_index, task_index)`` pairs."""
         pairs, reqs = [], []
+        agent_ids, task_ids = problem.agent_ids, problem.task_ids
         for a, t in index_pairs:
-            aid, tid = problem.agents[a].id, problem.tasks[t].id
+            aid, tid = int(agent_ids[a]), int(task_ids[t])
             pairs.append((aid, tid))
             reqs.append(Request(0, aid, tid, float(problem.cost[a, t]), True))
         return cls(pairs=tuple(pairs), rounds=1, requests=tuple(reqs), messages=0)

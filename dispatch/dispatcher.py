@@ -24,6 +24,22 @@ that, the first time it is offered, no idle vehicle can reach in time is closed 
 once (as ride-hailing studies reject a request nobody can serve); one that had a chance but is
 still open at its deadline expires.
 
+Re-assignment before pickup (``[dispatch] reassign = true``, road networks). A decision also
+considers the vehicles still driving to a pickup (as FleetPy and MATSim DRT allow): they join
+the problem's agents (where they are at the decision, part-way along an edge included) and
+their tasks join its tasks. A vehicle whose answer is its own task drives on. One given another
+task, or none while its task goes to another vehicle, gives its task up (a ``reassign`` event
+naming the vehicle and the task; :meth:`Operator.give_up`): it stops where it is, the task is
+open again (release time and deadline kept) and the hand-out's ``assign`` events follow; a
+vehicle left without a task is idle where it stopped. A vehicle that gets nothing while its
+task gets no one keeps its task. The summary counts ``reassignments``.
+
+Cost per decision. The idle vehicles come from the fleet's arrays as an
+:class:`~dispatch.contracts.AgentViews` (views built only when read), the answer is checked
+pair by pair (no dict over all agents), and with an unlimited communication range the
+problem's ``comm`` is a broadcast all-True array: a decision's Python work grows with its
+tasks, not with the fleet.
+
 The dispatcher is handed what it needs (the task book, the fleet, the operator that hands tasks
 to vehicles, the planner, the allocator, the space, its configuration) and reaches into nothing
 else; each decision goes to ``on_decision`` (the recorder).
@@ -35,7 +51,7 @@ import logging
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -66,6 +82,18 @@ def _ids(ids) -> str:
     return str(ids) if len(ids) <= 10 else f"[{', '.join(map(str, ids[:10]))}, ...] ({len(ids)})"
 
 
+def _positions(space: Space, agents) -> np.ndarray:
+    """``(N, 3)`` positions of a decision's agents: from their node array where the sequence
+    carries one (road points part-way along an edge one by one), else view by view."""
+    nodes = getattr(agents, "nodes", None)
+    if nodes is None:
+        return space.positions([a.loc for a in agents])
+    out = space.positions(nodes)
+    for k in agents.points.tolist():
+        out[k] = space.positions([agents[k].loc])[0]
+    return out
+
+
 def validate(problem: AllocationProblem, allocation: Allocation) -> None:
     """Raise AllocationError unless every pair names a known agent and task, no agent or task
     appears twice, and no pair has infinite cost (and the counters are whole numbers >= 0)."""
@@ -80,34 +108,80 @@ def validate(problem: AllocationProblem, allocation: Allocation) -> None:
     except TypeError:
         raise AllocationError(f"Allocation.pairs must be a sequence of (agent_id, task_id) "
                               f"pairs, got {type(allocation.pairs).__name__}") from None
-    agent_index = {a.id: i for i, a in enumerate(problem.agents)}
-    task_index = {t.id: j for j, t in enumerate(problem.tasks)}
+    agent_row, task_col = _finders(problem)
     seen_agents: set[int] = set()
     seen_tasks: set[int] = set()
     hint = ("; pairs name agents and tasks by id, not by index (Allocation.centralized "
             "turns index pairs into id pairs)")
+    n_agents, n_tasks = len(problem.agent_ids), len(problem.task_ids)
     for pair in pairs:
         try:
             aid, tid = pair
             hash(aid), hash(tid)
         except (TypeError, ValueError):
             raise AllocationError(f"pair {pair!r} is not an (agent_id, task_id) pair") from None
-        if aid not in agent_index:
-            by_index = isinstance(aid, (int, np.integer)) and 0 <= aid < len(agent_index)
+        i, j = agent_row(aid), task_col(tid)
+        if i < 0:
+            by_index = isinstance(aid, (int, np.integer)) and 0 <= aid < n_agents
             raise AllocationError(f"unknown agent id {aid!r} (idle agents: "
-                                  f"{_ids(agent_index)}){hint if by_index else ''}")
-        if tid not in task_index:
-            by_index = isinstance(tid, (int, np.integer)) and 0 <= tid < len(task_index)
+                                  f"{_ids(problem.agent_ids.tolist())})"
+                                  f"{hint if by_index else ''}")
+        if j < 0:
+            by_index = isinstance(tid, (int, np.integer)) and 0 <= tid < n_tasks
             raise AllocationError(f"unknown task id {tid!r} (open tasks: "
-                                  f"{_ids(task_index)}){hint if by_index else ''}")
+                                  f"{_ids(problem.task_ids.tolist())}){hint if by_index else ''}")
         if tid in seen_tasks:
             raise AllocationError(f"task {tid} is given to more than one agent")
         if aid in seen_agents:
             raise AllocationError(f"agent {aid} is given more than one task")
-        if not math.isfinite(problem.cost[agent_index[aid], task_index[tid]]):
+        if not math.isfinite(problem.cost[i, j]):
             raise AllocationError(f"agent {aid} cannot serve task {tid} (infinite cost)")
         seen_agents.add(aid)
         seen_tasks.add(tid)
+
+
+def _finders(problem: AllocationProblem):
+    """``(agent row finder, task column finder)`` of a problem (see :func:`_rows`), made once
+    per problem (kept in its ``__dict__``: the problem is frozen, the finders derive from it)."""
+    f = problem.__dict__.get("_finders")
+    if f is None:
+        f = problem.__dict__["_finders"] = (
+            _rows(problem.agent_ids, getattr(problem.agents, "ascending", False)),
+            _rows(problem.task_ids))
+    return f
+
+
+def _rows(ids: np.ndarray, ascending: bool = False) -> Callable[[object], int]:
+    """``find(id) -> row`` of ``id`` in ``ids`` (unique int64), or -1: a binary search, so a
+    decision's answer is checked without a dict over all its agents. Ids match by value, as
+    dict keys would (``True`` is 1, ``2.0`` is 2); anything that is not a whole number is
+    unknown."""
+    if ids.size <= 64:  # a few ids (a decision's tasks): a dict is cheapest
+        index = {int(x): i for i, x in enumerate(ids.tolist())}
+
+        def small(x) -> int:
+            if isinstance(x, (float, np.floating)) and float(x).is_integer():
+                x = int(x)
+            if not isinstance(x, (int, np.integer)):
+                return -1
+            return index.get(int(x), -1)
+
+        return small
+    order = None if ascending or ids.size < 2 or bool((ids[1:] > ids[:-1]).all()) \
+        else np.argsort(ids)
+    keys = ids if order is None else ids[order]
+
+    def find(x) -> int:
+        if isinstance(x, (float, np.floating)) and float(x).is_integer():
+            x = int(x)
+        if not isinstance(x, (int, np.integer)) or not -2**63 <= x < 2**63:
+            return -1
+        k = int(np.searchsorted(keys, x))
+        if k >= keys.size or keys[k] != x:
+            return -1
+        return k if order is None else int(order[k])
+
+    return find
 
 
 @dataclass
@@ -117,11 +191,11 @@ class _Pending:
     problem: AllocationProblem
     allocation: Allocation
     tasks: list
-    vehicles: list
     cost_s: float
     decide_s: float
     delay: float
     components: int
+    holder: dict = field(default_factory=dict)  # reassign: task id -> vehicle id at decision
 
 
 class Dispatcher:
@@ -144,10 +218,12 @@ class Dispatcher:
         self.rounds = 0
         self.messages = 0
         self.comm_delay = 0.0  # simulated seconds spent deliberating (hops * latency)
+        self.reassignments = 0  # [dispatch] reassign: tasks a vehicle gave up for another
         self.agent_seconds = 0.0  # sum over decisions of the per-agent critical path
         self.first_cost = math.nan  # the first decision's total cost and wall seconds
         self.first_seconds = math.nan
         self._pending: _Pending | None = None
+        self._everyone: dict[int, np.ndarray] = {}  # n -> read-only all-True (n, n), no memory
         #: the run's id, for error messages (set by the simulation)
         self.run_id = ""
         self.process = env.process(self._loop())
@@ -183,13 +259,27 @@ class Dispatcher:
         """One decision over the idle vehicles and the open tasks (nothing if either is empty).
 
         Without latency the tasks are handed out at once; with it the hand-out waits in
-        ``self._pending`` for the loop to let the simulated deliberation time pass."""
-        idle = self.fleet.idle()
-        open_tasks = list(self.book.open.values())
-        if not idle or not open_tasks:
+        ``self._pending`` for the loop to let the simulated deliberation time pass.
+
+        Its Python work grows with the open tasks, not the fleet: the idle vehicles come as
+        an :class:`AgentViews` (arrays, views built on access), and a planner that reads the
+        arrays (the road planner does) costs them with numpy."""
+        held = self.book.assigned if self.cfg.reassign else {}
+        if not self.book.open and not held:
+            return
+        idle = self.fleet.idle_index()
+        holder: dict[int, int] = {}  # task id -> the vehicle driving to its pickup
+        if held:  # [dispatch] reassign: vehicles driving to a pickup take part, with their tasks
+            holder = {t.id: t.agent_id for t in held.values()}
+            slots = np.array([self.fleet.by_id[a]._slot for a in holder.values()], np.int64)
+            idle = np.union1d(idle, slots)
+            open_tasks = sorted([*self.book.open.values(), *held.values()], key=lambda t: t.id)
+        else:
+            open_tasks = list(self.book.open.values())
+        if not idle.size:
             return
         now = self.env.now
-        agents = tuple(v.view(now) for v in idle)
+        agents = self.fleet.views(idle, now)
         t0 = time.perf_counter()
         try:
             cost = self.planner.costs(agents, tuple(t.view() for t in open_tasks))
@@ -207,9 +297,9 @@ class Dispatcher:
         servable = np.isfinite(cost).any(axis=0)
         if not servable.all():
             self._close_unreachable([t for t, ok in zip(open_tasks, servable) if not ok])
-        deadlines = np.array([t.deadline for t in open_tasks])
-        if np.isfinite(deadlines).any():
-            cost = np.where(now + cost <= deadlines + 1e-9, cost, np.inf)
+        deadlines = [t.deadline for t in open_tasks]
+        if any(d < math.inf for d in deadlines):
+            cost = np.where(now + cost <= np.array(deadlines) + 1e-9, cost, np.inf)
             late = servable & ~np.isfinite(cost).any(axis=0)
             for t, bad in zip(open_tasks, late):
                 if bad and not t.offered:
@@ -219,16 +309,24 @@ class Dispatcher:
         self.cost_seconds += cost_s
         if not servable.any():
             return
-        open_tasks = [t for t, ok in zip(open_tasks, servable) if ok]
+        if not servable.all():
+            open_tasks = [t for t, ok in zip(open_tasks, servable) if ok]
+            cost = cost[:, servable]
         comms = self.comms
-        apos = self.space.positions([a.loc for a in agents])
-        comm = comm_graph(apos, comms.range)
-        if self.links is not None:
-            comm = self.links(comm, apos, now)
+        apos = _positions(self.space, agents)
+        unlimited = comms.range is None or math.isinf(comms.range)
+        if unlimited and self.links is None:  # everyone hears everyone: no N x N matrix
+            comm = self._everyone.get(len(agents))
+            if comm is None:
+                comm = self._everyone[len(agents)] = np.broadcast_to(np.True_, (len(agents),) * 2)
+        else:
+            comm = comm_graph(apos, comms.range)
+            if self.links is not None:
+                comm = self.links(comm, apos, now)
         tasks = tuple(t.view() for t in open_tasks)
         problem = AllocationProblem(
             time=now, agents=agents, tasks=tasks,
-            cost=np.ascontiguousarray(cost[:, servable]), comm=comm,
+            cost=np.array(cost, order="C"), comm=comm,
             rng=self.rng, max_rounds=self.cfg.max_rounds,
             loss=comms.loss, latency=comms.latency, cell_size=self.cell_size,
             agent_pos=apos, task_pos=self.space.positions([t.loc for t in tasks]),
@@ -254,12 +352,13 @@ class Dispatcher:
             raise AllocationError(f"{self._where('allocator')}: {e}") from None
         self.decide_seconds += decide_s
         delay = allocation.hops * comms.latency
-        conflicted = allocation.conflicted_tasks()
+        conflicted = allocation.conflicted_tasks() if allocation.requests else set()
         for t in open_tasks:
             t.offered = True
             t.conflicted = t.conflicted or t.id in conflicted
-        self._pending = _Pending(problem, allocation, open_tasks, idle, cost_s, decide_s, delay,
-                                 components(comm)[0])
+        n_comp = 1 if comm.strides == (0, 0) else components(comm)[0]
+        self._pending = _Pending(problem, allocation, open_tasks, cost_s, decide_s, delay,
+                                 n_comp, holder)
         if delay <= 0:
             self._hand_out()
 
@@ -269,9 +368,22 @@ class Dispatcher:
         if p is None:
             return
         by_task = {t.id: t for t in p.tasks}
-        by_agent = {v.id: v for v in p.vehicles}
-        handed = tuple((a, t) for a, t in p.allocation.pairs
-                       if by_task[t].state is TaskState.OPEN and not by_agent[a].busy)
+        by_id = self.fleet.by_id
+        holding = {a: t for t, a in p.holder.items()}  # vehicle -> its task at the decision
+
+        def still(a: int) -> bool:  # a vehicle of the decision, as it was then
+            v = by_id[a]
+            if a not in holding:
+                return not v.busy
+            return v.task is not None and v.task.id == holding[a] \
+                and v.task.state is TaskState.ASSIGNED
+
+        def available(t: int) -> bool:  # a task of the decision, as it was then
+            task = by_task[t]
+            return task.state is TaskState.OPEN if t not in p.holder else (
+                task.state is TaskState.ASSIGNED and task.agent_id == p.holder[t])
+
+        handed = tuple((a, t) for a, t in p.allocation.pairs if available(t) and still(a))
         allocation = p.allocation
         if len(handed) != len(allocation.pairs):
             log.debug("decision %d: %d pair(s) not handed out (task closed while deciding)",
@@ -283,24 +395,41 @@ class Dispatcher:
         self.messages += allocation.messages
         self.comm_delay += p.delay
         self.agent_seconds += critical
-        col = {t.id: j for j, t in enumerate(p.tasks)}
-        row = {a.id: i for i, a in enumerate(p.problem.agents)}
-        total = float(sum(p.problem.cost[row[a], col[t]] for a, t in allocation.pairs))
+        row, col = _finders(p.problem)
+        cost = p.problem.cost
+        pair_cost = [float(cost[row(a), col(t)]) for a, t in allocation.pairs]
+        total = float(sum(pair_cost))
         if self.decisions == 0:
             self.first_cost, self.first_seconds = total, p.cost_s + p.decide_s
         self.on_decision(self.decisions, p.problem, allocation, total, p.cost_s, p.decide_s,
                          hops=allocation.hops, comm_delay=p.delay, agent_seconds=critical,
                          components=p.components)
         self.decisions += 1
-        for aid, tid in handed:
-            self.operator.assign(by_task[tid], by_agent[aid],
-                                 float(p.problem.cost[row[aid], col[tid]]))
+        if not holding:
+            for (aid, tid), c in zip(handed, pair_cost):  # allocation.pairs is handed
+                self.operator.assign(by_task[tid], by_id[aid], c)
+            return
+        # reassign: a vehicle driving to a pickup gives its task up when it gets another task,
+        # or none while its task goes to another vehicle; otherwise it keeps it
+        new_task = dict(handed)
+        taken = set(new_task.values())
+        give = sorted(a for a, t in holding.items() if still(a) and (
+            new_task.get(a, t) != t or (a not in new_task and t in taken)))
+        for a in give:
+            self.operator.give_up(by_id[a])
+        self.reassignments += len(give)
+        for (aid, tid), c in zip(handed, pair_cost):
+            if holding.get(aid) != tid:
+                self.operator.assign(by_task[tid], by_id[aid], c)
+        for a in give:
+            if a not in new_task:
+                self.operator.stand_idle(by_id[a])
 
     def _close_unreachable(self, tasks) -> None:
         """Close tasks no vehicle of the fleet can reach; vehicles never leave their connected
         component of free space, so a task unreachable from every vehicle's cell stays so."""
         now = self.env.now
-        busy = tuple(v.view(now) for v in self.fleet.vehicles if v.busy)
+        busy = self.fleet.views(np.flatnonzero([v.busy for v in self.fleet.vehicles]), now)
         if busy:
             c = self.planner.costs(busy, tuple(t.view() for t in tasks))
             tasks = [t for t, ok in zip(tasks, np.isfinite(c).any(axis=0)) if not ok]

@@ -26,6 +26,10 @@ breakdown      a vehicle fails where it is (its task, if any; ``[faults]``)
 repair         a failed vehicle works again (then ``idle``)
 reopen         a task goes back to open because its vehicle broke down (at its pickup:
                for a passenger on board, where the transfer will pick them up)
+reassign       ``[dispatch] reassign``: a vehicle driving to a pickup gives its task up
+               because a decision gave it another task or none (agent, the task given up;
+               at the vehicle); the task is open again, and the ``assign`` events of the
+               same decision follow (the vehicle's new task, the task's new vehicle)
 =============  ===========================================================================
 """
 
@@ -38,7 +42,7 @@ from dispatch.space import Location
 
 KINDS = ("release", "assign", "depart", "move", "pickup", "dropoff", "complete", "idle", "wait",
          "replan", "expire", "reject", "unreachable", "cancel", "failed", "skipped",
-         "breakdown", "repair", "reopen")
+         "breakdown", "repair", "reopen", "reassign")
 
 
 @dataclass(frozen=True, slots=True)

@@ -46,6 +46,9 @@ SCHEMAS: dict[str, pa.Schema] = {
         ("distance", _F), ("empty_distance", _F), ("occupied_distance", _F),
         # [faults]: vehicle breakdowns; tasks re-opened by one; of those, passengers transferred
         ("failures", _I), ("tasks_reassigned", _I), ("tasks_transferred", _I),
+        # [dispatch] reassign: times a vehicle driving to a pickup gave its task up for another
+        # decision's answer (each a `reassign` event)
+        ("reassignments", _I),
     ]),
     "tasks": pa.schema([
         ("run_id", _S), ("task_id", _I), ("kind", _S), ("x", _F), ("y", _F), ("z", _F),
@@ -127,8 +130,9 @@ class Recorder:
         self.flush_rows = flush_rows
         self.metadata = {"dispatch.version": __version__, "dispatch.run_id": run_id, **metadata}
         self.table_metadata: dict[str, dict[str, str]] = {}
-        self._cols = {name: {f.name: [] for f in schema} for name, schema in SCHEMAS.items()}
-        self._buffered = dict.fromkeys(SCHEMAS, 0)
+        #: buffered rows per table: tuples in schema order without ``run_id`` (the first column)
+        self._rows: dict[str, list[tuple]] = {name: [] for name in SCHEMAS}
+        self._names = {name: tuple(schema.names[1:]) for name, schema in SCHEMAS.items()}
         self._chunks: dict[str, list[Path]] = {name: [] for name in SCHEMAS}
         self._written = dict.fromkeys(SCHEMAS, 0)
         self._closed = False
@@ -156,22 +160,31 @@ class Recorder:
     # ------------------------------------------------------------------ rows
     def add(self, table: str, **row: Any) -> None:
         """Append one row; ``run_id`` is filled in; every other column must be given."""
+        names = self._names[table]
+        try:
+            if len(row) != len(names):
+                raise KeyError
+            values = tuple([row[k] for k in names])
+        except KeyError:
+            row["run_id"] = self.run_id
+            cols = SCHEMAS[table].names
+            missing, extra = set(cols) - row.keys(), row.keys() - set(cols)
+            raise KeyError(f"{table} row: missing {sorted(missing)}, unexpected {sorted(extra)}")
+        self.append(table, values)
+
+    def append(self, table: str, values: tuple) -> None:
+        """Append one row given as a tuple of every column but ``run_id``, in the schema's
+        order (the fast path of :meth:`add`, for the event stream)."""
         if self._closed:
             raise RuntimeError(f"recorder of {self.run_id} is closed (finish or abort)")
-        cols = self._cols[table]
-        row["run_id"] = self.run_id
-        if row.keys() != cols.keys():
-            missing, extra = cols.keys() - row.keys(), row.keys() - cols.keys()
-            raise KeyError(f"{table} row: missing {sorted(missing)}, unexpected {sorted(extra)}")
-        for k, v in row.items():
-            cols[k].append(v)
-        self._buffered[table] += 1
-        if self._buffered[table] >= self.flush_rows:
+        rows = self._rows[table]
+        rows.append(values)
+        if len(rows) >= self.flush_rows:
             self.flush(table)
 
     def buffered(self, table: str) -> int:
         """Rows of ``table`` held in memory (not yet in a chunk file); below ``flush_rows``."""
-        return self._buffered[table]
+        return len(self._rows[table])
 
     def written(self, table: str) -> int:
         """Rows of ``table`` already in chunk files."""
@@ -183,7 +196,13 @@ class Recorder:
 
     def _take(self, table: str) -> pa.Table:
         """The buffered rows of ``table`` as a file-schema table; the buffer is emptied."""
-        cols = self._cols[table]
+        rows = self._rows[table]
+        names = self._names[table]
+        if rows and any(len(r) != len(names) for r in rows):
+            raise ValueError(f"{table} row has {len(next(r for r in rows if len(r) != len(names)))}"
+                             f" values, expected {len(names)} ({', '.join(names)})")
+        cols = dict(zip(names, map(list, zip(*rows)))) if rows else {k: [] for k in names}
+        cols["run_id"] = [self.run_id] * len(rows)
         for k, v in self.partition.items():
             if k in cols and any(x != v for x in cols[k]):
                 bad = next(x for x in cols[k] if x != v)
@@ -191,14 +210,13 @@ class Recorder:
                                  f"{k}={v!r}")
         schema = self.file_schema(table)
         data = pa.Table.from_pydict({f.name: cols[f.name] for f in schema}, schema=schema)
-        self._cols[table] = {f.name: [] for f in SCHEMAS[table]}
-        self._buffered[table] = 0
+        self._rows[table] = []
         return data
 
     def flush(self, table: str | None = None) -> None:
         """Write the buffered rows of ``table`` (of every table if None) as a chunk file."""
         for name in SCHEMAS if table is None else (table,):
-            if self._buffered[name] == 0:
+            if not self._rows[name]:
                 continue
             data = self._take(name)
             path = self.leaf(name) / f"{CHUNK_PREFIX}{len(self._chunks[name]):05d}{CHUNK_SUFFIX}"
@@ -256,8 +274,7 @@ class Recorder:
             try:
                 self.flush(name)
             except Exception:  # noqa: BLE001 - e.g. a row of the wrong type: drop the rest
-                self._cols[name] = {f.name: [] for f in SCHEMAS[name]}
-                self._buffered[name] = 0
+                self._rows[name] = []
 
 
 def write_atomic(table: pa.Table, path: Path) -> None:

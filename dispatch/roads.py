@@ -26,6 +26,7 @@ import functools
 import importlib.resources
 import logging
 from collections.abc import Sequence
+from itertools import accumulate
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -209,18 +210,33 @@ class RoadNetwork(Space):
         except KeyError:
             raise ValueError(f"road network {self.name!r} has no node {node_id!r}") from None
 
+    @cached_property
+    def _node_positions(self) -> list[Position]:
+        """``(x, y, 0.0)`` of every node as Python floats (events are placed one by one)."""
+        return [(float(x), float(y), 0.0) for x, y in self.xy.tolist()]
+
     def position(self, loc: RoadPoint | int) -> Position:
         """``(x, y, 0.0)`` metres: the node's, or for a point part-way along ``prev -> node``
         the straight-segment position at the fraction of the edge's time already driven."""
+        if type(loc) is int and 0 <= loc < self.n:  # the common case: a node
+            return self._node_positions[loc]
         p = self.positions([loc])[0]
         return float(p[0]), float(p[1]), 0.0
+
+    @cached_property
+    def _xyz(self) -> np.ndarray:
+        """``(n, 3)`` node positions, z = 0."""
+        out = np.zeros((self.n, 3))
+        out[:, :2] = self.xy
+        out.setflags(write=False)
+        return out
 
     def positions(self, locs: Sequence[RoadPoint | int] | np.ndarray) -> np.ndarray:
         """``(len(locs), 3)`` positions (see :meth:`position`); vectorized for integer arrays."""
         if isinstance(locs, np.ndarray) and locs.dtype.kind in "iu":
-            out = np.zeros((locs.size, 3))
-            out[:, :2] = self.xy[locs.reshape(-1)]
-            return out
+            return self._xyz[locs.reshape(-1)]
+        if isinstance(locs, (list, tuple)) and all(type(loc) is int for loc in locs):
+            return self._xyz[np.array(locs, dtype=np.int64).reshape(-1)]
         node, prev, rem, _ = _point_arrays(locs)
         out = np.zeros((node.size, 3))
         out[:, :2] = self.xy[node]
@@ -240,9 +256,27 @@ class RoadNetwork(Space):
         keys.setflags(write=False)
         return keys
 
+    @cached_property
+    def _edge_lists(self) -> tuple[list[float], list[float]]:
+        """Edge seconds and metres as Python lists, in CSR order."""
+        return self.time.data.tolist(), self.length.data.tolist()
+
+    @cached_property
+    def _edge_of(self) -> dict[int, int]:
+        """``u * n + v`` -> CSR data index of the edge ``u -> v`` (paths are looked up here)."""
+        return dict(zip(self._keys.tolist(), range(self._keys.size)))
+
     def _edge_index(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """CSR data index of each edge ``u[k] -> v[k]``; ValueError naming the first non-edge."""
         u, v = np.asarray(u, dtype=np.int64), np.asarray(v, dtype=np.int64)
+        keys = self._keys
+        if u.size and keys.size:  # fast path: every pair an edge (a planner's path)
+            lo, hi = min(u.min(), v.min()), max(u.max(), v.max())
+            if lo >= 0 and hi < self.n:
+                key = u * self.n + v
+                k = keys.searchsorted(key)
+                if k.max() < keys.size and (keys[k] == key).all():
+                    return k
         ok = (u >= 0) & (u < self.n) & (v >= 0) & (v < self.n)
         key = np.where(ok, u * self.n + v, -1)
         k = np.minimum(np.searchsorted(self._keys, key), max(self._keys.size - 1, 0))
@@ -264,11 +298,32 @@ class RoadNetwork(Space):
         step must be an edge): cumulative seconds and metres, starting at the start's remaining
         seconds and metres. ValueError otherwise."""
         p = _as_point(start)
-        nodes = np.asarray(nodes, dtype=np.int64).reshape(-1)
+        if isinstance(nodes, list) and nodes and nodes[0] == p.node \
+                and all(type(x) is int for x in nodes):
+            # a planner's path: edges looked up and summed one by one in Python (a path is
+            # short; numpy's per-call overhead would dominate); the sums run in the same order
+            # as a cumsum, so the numbers are the same
+            n, edge_of = self.n, self._edge_of
+            try:
+                ks = [edge_of[a * n + b] for a, b in zip(nodes[:-1], nodes[1:])]
+            except KeyError:
+                ks = None
+            if ks is not None:
+                secs, mets = self._edge_lists
+                times = list(accumulate([max(p.remaining, 0.0), *[secs[k] for k in ks]]))
+                metres = list(accumulate([max(p.remaining_m, 0.0), *[mets[k] for k in ks]]))
+                return Leg(np.array(nodes, dtype=np.int64), np.array(times), np.array(metres),
+                           p.prev if not p.on_node else -1)
+            nodes = np.array(nodes, dtype=np.int64)
+            k = None
+        else:
+            nodes = np.asarray(nodes, dtype=np.int64).reshape(-1)
+            k = None
         if nodes.size == 0 or int(nodes[0]) != p.node:
             raise ValueError(f"a leg from node {p.node} must start there, got path starting "
                              f"{nodes[:1].tolist()}")
-        k = self._edge_index(nodes[:-1], nodes[1:])
+        if k is None:
+            k = self._edge_index(nodes[:-1], nodes[1:])
         times = np.empty(nodes.size)
         metres = np.empty(nodes.size)
         times[0], metres[0] = max(p.remaining, 0.0), max(p.remaining_m, 0.0)

@@ -105,12 +105,13 @@ def make_recorder(spec: RunSpec, out: Path, *, flush_rows: int = DEFAULT_FLUSH_R
 
 
 def run_one(spec: RunSpec, out: Path | None = None, *,
-            flush_rows: int = DEFAULT_FLUSH_ROWS) -> RunResult:
+            flush_rows: int = DEFAULT_FLUSH_ROWS, progress=None) -> RunResult:
     """Simulate one run, streaming its tables into its partition of ``out``.
 
     With ``out=None`` the files go to a temporary folder owned by the returned result (removed
     when it is garbage collected). On an exception the recorder is aborted (chunk files
-    written so far stay, readable) and the exception propagates."""
+    written so far stay, readable) and the exception propagates. ``progress``: see
+    :class:`dispatch.sim.Simulation`."""
     from dispatch.sim import Simulation
 
     tmp = None
@@ -119,7 +120,7 @@ def run_one(spec: RunSpec, out: Path | None = None, *,
         out = Path(tmp.name)
     recorder = make_recorder(spec, out, flush_rows=flush_rows)
     try:
-        summary = Simulation(spec, recorder).run()
+        summary = Simulation(spec, recorder, progress).run()
         files = recorder.finish()
     except BaseException:
         recorder.abort()
@@ -154,6 +155,7 @@ def execute(
     *,
     on_done: Callable[[Any], None] | None = None,
     flush_rows: int = DEFAULT_FLUSH_ROWS,
+    progress=None,
 ) -> list[dict]:
     """Run every spec in order into its partition of ``out`` (the layout of a sweep, markers
     included, so that ``dispatch sweep`` over the folder skips these runs). Each run starts
@@ -161,7 +163,7 @@ def execute(
     Returns the summaries in the order of ``specs``."""
     summaries = []
     for spec in specs:
-        result, _ = _run_and_mark(spec, Path(out), flush_rows)
+        result, _ = _run_and_mark(spec, Path(out), flush_rows, progress)
         summaries.append(result.summary)
         log.info("%s: total cost %.2f s", spec.run_id, result.summary["total_cost"])
         if on_done is not None:
@@ -255,14 +257,14 @@ def record_failure(out: Path, spec: RunSpec, error_type: str, message: str, tb: 
     write_atomic(table, Path(out) / ERRORS / partition_dir(spec) / "part-0.parquet")
 
 
-def _run_and_mark(spec: RunSpec, out: Path, flush_rows: int = DEFAULT_FLUSH_ROWS
-                  ) -> tuple[RunResult, dict[str, int]]:
+def _run_and_mark(spec: RunSpec, out: Path, flush_rows: int = DEFAULT_FLUSH_ROWS,
+                  progress=None) -> tuple[RunResult, dict[str, int]]:
     """Clear ``spec``'s partition of ``out``, run it there from cold caches and write its
     completion marker; returns the result and the marker's files (relative path: size)."""
     started = time.perf_counter()
     clear_partition(out, spec)
     _cold_start()
-    result = run_one(spec, out, flush_rows=flush_rows)
+    result = run_one(spec, out, flush_rows=flush_rows, progress=progress)
     seconds = time.perf_counter() - started
     files = {str(p.relative_to(out)): p.stat().st_size for p in result.files.values()}
     _write_json_atomic({"run_id": spec.run_id, "scenario_sha256": _digest(spec),

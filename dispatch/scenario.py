@@ -133,6 +133,8 @@ class DispatchConfig:
     planner: str = "astar"
     batch_window: float = 0.0  # seconds the dispatcher waits after a wake-up to batch events
     max_rounds: int = 1000  # decision-round limit for decentralized allocators
+    #: decisions also consider vehicles still driving to a pickup (roads; see dispatch.dispatcher)
+    reassign: bool = False
     allocator_params: tuple[tuple[str, Any], ...] = ()
     planner_params: tuple[tuple[str, Any], ...] = ()
 
@@ -433,11 +435,18 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     t.done()
 
     d = root.table("dispatch")
+    reassign = d.get("reassign", False)
+    if not isinstance(reassign, bool):
+        raise d.fail("reassign", f"must be true or false, got {reassign!r}")
+    if reassign and world.roads is None:
+        raise d.fail("reassign", "re-assignment before pickup needs a road network "
+                                 "([world] network)")
     disp = DispatchConfig(
         allocator=d.string("allocator", "hungarian"),
         planner=d.string("planner", "astar" if world.roads is None else "dijkstra"),
         batch_window=d.number("batch_window", 0.0, lo=0.0),
         max_rounds=d.number("max_rounds", 1000, lo=1, integer=True),
+        reassign=reassign,
         allocator_params=d.params("allocator_params"),
         planner_params=d.params("planner_params"),
     )

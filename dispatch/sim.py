@@ -118,11 +118,20 @@ def check_runs(sc: Scenario, planners) -> None:
                                                     "with reservation-based execution yet")
 
 
+#: Simulated-time ticks of a run's progress reports (see :class:`Simulation`).
+PROGRESS_TICKS = 500
+
+
 class Simulation:
     """Everything one run needs; :meth:`run` executes it, recording into ``recorder``, and
-    returns the summary row."""
+    returns the summary row.
 
-    def __init__(self, spec: RunSpec, recorder) -> None:
+    ``progress``, if given, is called as ``progress(sim_time, duration, released, closed)``
+    (seconds; task counts) ``PROGRESS_TICKS`` times over the run's duration and once at the
+    end, from a SimPy process that touches nothing else (the run's results do not depend on
+    it). The CLI draws its progress bar with it; library code prints nothing."""
+
+    def __init__(self, spec: RunSpec, recorder, progress=None) -> None:
         sc = spec.scenario
         self.spec, self.recorder = spec, recorder
         self.env = env = simpy.Environment()
@@ -180,6 +189,16 @@ class Simulation:
         self.faults = (FaultInjector(env, sc.faults, self.fleet, self.operator,
                                      rng_for(spec.seed, STREAM_FAULTS))
                        if sc.faults.vehicles else None)
+        self.progress = progress
+        if progress is not None and math.isfinite(sc.duration) and sc.duration > 0:
+            env.process(self._report(sc.duration))
+
+    def _report(self, duration: float):
+        """Process: report progress every ``duration / PROGRESS_TICKS`` simulated seconds."""
+        tick = duration / PROGRESS_TICKS
+        while True:
+            yield self.env.timeout(tick)
+            self.progress(self.env.now, duration, self.book.released, self.stats.n_tasks)
 
     @property
     def allocator(self) -> Allocator:
@@ -204,8 +223,8 @@ class Simulation:
     # --------------------------------------------------------------- recording
     def _record_event(self, e: Event) -> None:
         x, y, z = NAN3 if e.loc is None else self.space.position(e.loc)
-        self.recorder.add("events", t=e.t, event=e.kind, agent_id=e.agent_id,
-                          task_id=e.task_id, x=x, y=y, z=z)
+        # the events table's columns in order (the recorder's fast path: one row per event)
+        self.recorder.append("events", (e.t, e.kind, e.agent_id, e.task_id, x, y, z))
 
     def _record_task(self, t: Task) -> None:
         x, y, z = self.space.position(t.loc if t.origin is None else t.origin)
@@ -253,6 +272,9 @@ class Simulation:
                     else:
                         v.empty_distance += driven
             self.book.close_all(TaskState.CANCELLED)
+            if self.progress is not None:
+                self.progress(env.now, self.spec.scenario.duration, self.book.released,
+                              self.stats.n_tasks)
             for v in self.vehicles:
                 if v.busy:
                     v.busy_seconds += env.now - v.busy_since

@@ -74,4 +74,5 @@ class RunStats:
             occupied_distance=sum(v.occupied_distance for v in vehicles),
             failures=sum(v.failures for v in vehicles), tasks_reassigned=self.reassigned,
             tasks_transferred=self.transferred,
+            reassignments=getattr(d, "reassignments", 0),
         )

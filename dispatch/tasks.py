@@ -125,6 +125,8 @@ class TaskBook:
         self.released = 0
         self.on_close: list[Callable[[Task], None]] = []
         self._active: dict[int, Task] = {}  # assigned or picked up
+        #: assigned, not yet picked up (a vehicle is driving to its pickup), by id
+        self.assigned: dict[int, Task] = {}
 
     def _move(self, task: Task, state: TaskState) -> None:
         if state not in MOVES.get(task.state, ()):
@@ -134,6 +136,10 @@ class TaskBook:
             del self.open[task.id]
         elif state is TaskState.OPEN or state.terminal:
             del self._active[task.id]
+        if task.state is TaskState.ASSIGNED:
+            del self.assigned[task.id]
+        elif state is TaskState.ASSIGNED:
+            self.assigned[task.id] = task
         task.state = state
 
     def release(self, kind: str, loc: Location, dropoff: Location | None = None, *,
@@ -176,6 +182,18 @@ class TaskBook:
             self.open = dict(sorted(self.open.items()))
         self.bus.emit(self.env.now, "reopen", task.agent_id, task.id, task.loc)
         # the row describes the assignment that holds at the end; the history is in events
+        task.agent_id, task.cost, task.assigned_at = -1, math.nan, math.nan
+
+    def unassign(self, task: Task) -> None:
+        """Give an assigned task (not picked up) back to the pool because the dispatcher
+        re-assigned its vehicle (``[dispatch] reassign``): open again, keeping its release
+        time and deadline; the dispatcher records the ``reassign`` event."""
+        if task.state is not TaskState.ASSIGNED:
+            raise RuntimeError(f"task {task.id} is {task.state.value}, not assigned")
+        self._move(task, TaskState.OPEN)
+        self.open[task.id] = task
+        if next(reversed(self.open)) != max(self.open):  # keep id order (release order)
+            self.open = dict(sorted(self.open.items()))
         task.agent_id, task.cost, task.assigned_at = -1, math.nan, math.nan
 
     def close(self, task: Task, state: TaskState) -> None:

@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import simpy
 
-from dispatch.contracts import AgentView, Planner
+from dispatch.contracts import AgentView, AgentViews, Planner
 from dispatch.errors import PluginError
 from dispatch.events import EventBus
 from dispatch.motion import step_length
@@ -50,7 +50,6 @@ class Vehicle:
     kind: str
     speed: float
     start: Location
-    loc: Location = field(init=False)
     busy: bool = False
     task: Task | None = None
     distance: float = 0.0  # metres travelled
@@ -59,8 +58,7 @@ class Vehicle:
     busy_seconds: float = 0.0
     busy_since: float = 0.0
     completed: int = 0
-    # ---- roads: the leg being driven and when it started
-    leg: Leg | None = field(default=None, repr=False)
+    # ---- roads: when the leg being driven (:attr:`leg`) started
     leg_start: float = 0.0
     #: voxel world: metres of the current path driven so far (counted if it breaks down)
     driven: float = 0.0
@@ -85,9 +83,37 @@ class Vehicle:
     down_since: float = 0.0
     proc: Any = field(default=None, repr=False)  # the SimPy process serving its trip
     _view: AgentView | None = field(default=None, repr=False)
+    # ``loc`` and ``leg`` live here; their setters tell the fleet (its arrays stay current)
+    _loc: Location = field(default=None, init=False, repr=False)
+    _leg: Leg | None = field(default=None, init=False, repr=False)
+    _fleet: Fleet | None = field(default=None, init=False, repr=False)
+    _slot: int = field(default=-1, init=False, repr=False)
 
     def __post_init__(self) -> None:
-        self.loc = self.start
+        self._loc = self.start
+
+    @property
+    def loc(self) -> Location:
+        """Where it is (on roads: the node it last reached, or a road point where it stopped
+        part-way along an edge)."""
+        return self._loc
+
+    @loc.setter
+    def loc(self, value: Location) -> None:
+        self._loc = value
+        if self._fleet is not None:
+            self._fleet._moved(self._slot, value)
+
+    @property
+    def leg(self) -> Leg | None:
+        """Roads: the leg it is driving (None when it stands)."""
+        return self._leg
+
+    @leg.setter
+    def leg(self, value: Leg | None) -> None:
+        self._leg = value
+        if self._fleet is not None:
+            self._fleet.driving[self._slot] = value is not None
 
     @property
     def cell(self):
@@ -133,32 +159,104 @@ class Vehicle:
 
 
 class Fleet:
-    """The run's vehicles by id, and the index of the idle ones."""
+    """The run's vehicles by id, and the index of the idle ones.
+
+    Besides the vehicles it keeps array state, aligned with :attr:`vehicles` (id order) and
+    updated as vehicles change (their ``loc`` / ``leg`` setters and :meth:`set_busy` and
+    friends call in), so that a decision over the idle vehicles costs numpy operations, not a
+    Python loop over the fleet: ``ids``; ``idle_mask``; on roads ``node`` (the node a vehicle
+    stands on, or the end of the edge it stopped on part-way), ``remaining`` (seconds left on
+    that edge, 0 on a node), ``odd`` (its location is not a plain node: a road point, or a
+    voxel cell) and ``driving`` (it has a leg: its location depends on the time)."""
 
     def __init__(self, vehicles: list[Vehicle]) -> None:
         self.vehicles = sorted(vehicles, key=lambda v: v.id)
         self.by_id = {v.id: v for v in self.vehicles}
-        self._idle = set(self.by_id)
+        n = len(self.vehicles)
+        self.ids = np.fromiter((v.id for v in self.vehicles), np.int64, n)
+        self.idle_mask = np.ones(n, dtype=bool)
+        self.node = np.full(n, -1, dtype=np.int64)
+        self.remaining = np.zeros(n)
+        self.odd = np.zeros(n, dtype=bool)
+        self.driving = np.zeros(n, dtype=bool)
+        self.road = n > 0 and all(_is_node(v.loc) or hasattr(v.loc, "node")
+                                  for v in self.vehicles)
+        for i, v in enumerate(self.vehicles):
+            v._fleet, v._slot = self, i
+            self._moved(i, v.loc)
+            self.driving[i] = v.leg is not None
 
     def __len__(self) -> int:
         return len(self.vehicles)
 
+    def _moved(self, i: int, loc: Location) -> None:
+        """Vehicle ``i``'s ``loc`` changed (called by its setter)."""
+        if _is_node(loc):
+            self.node[i], self.remaining[i], self.odd[i] = loc, 0.0, False
+            return
+        node = getattr(loc, "node", None)
+        if node is None:  # a voxel cell: the arrays are unused
+            self.odd[i] = True
+            return
+        self.node[i] = node
+        on_node = loc.on_node  # type: ignore[union-attr]
+        self.remaining[i] = 0.0 if on_node else max(loc.remaining, 0.0)  # type: ignore[union-attr]
+        self.odd[i] = not on_node
+
+    def idle_index(self) -> np.ndarray:
+        """Positions (in :attr:`vehicles`, id order) of the idle vehicles."""
+        return np.flatnonzero(self.idle_mask)
+
     def idle(self) -> list[Vehicle]:
         """Idle vehicles in id order."""
-        return [self.by_id[i] for i in sorted(self._idle)]
+        vs = self.vehicles
+        return [vs[i] for i in np.flatnonzero(self.idle_mask).tolist()]
+
+    def views(self, index: np.ndarray, now: float) -> AgentViews:
+        """The vehicles at positions ``index`` as a decision at ``now`` sees them: a lazy
+        sequence of :class:`AgentView` (built on access) that also carries their ids and, on
+        roads, their nodes and remaining seconds as arrays (see :class:`AgentViews`)."""
+        vs = self.vehicles
+        idx = np.asarray(index, dtype=np.int64)
+
+        def make(k: int) -> AgentView:
+            return vs[int(idx[k])].view(now)
+
+        ascending = bool(idx.size < 2 or (idx[1:] > idx[:-1]).all())  # ids ascend with idx
+        if not self.road:
+            return AgentViews(self.ids[idx], make, ascending=ascending)
+        node, rem = self.node[idx], self.remaining[idx]
+        special = np.flatnonzero(self.driving[idx] | self.odd[idx]).tolist()
+        points = []
+        for k in special:  # driving (a leg: where is it now?) or stopped part-way along an edge
+            loc = vs[int(idx[k])].location(now)
+            if _is_node(loc):
+                node[k], rem[k] = loc, 0.0
+            else:
+                node[k] = loc.node  # type: ignore[union-attr]
+                rem[k] = 0.0 if loc.on_node else max(loc.remaining, 0.0)  # type: ignore[union-attr]
+                if not loc.on_node:  # type: ignore[union-attr]
+                    points.append(k)
+        return AgentViews(self.ids[idx], make, node, rem, np.array(points, dtype=np.int64),
+                          ascending)
 
     def set_busy(self, v: Vehicle) -> None:
         v.busy = True
-        self._idle.discard(v.id)
+        self.idle_mask[v._slot] = False
 
     def set_idle(self, v: Vehicle) -> None:
         v.busy = False
-        self._idle.add(v.id)
+        self.idle_mask[v._slot] = True
 
     def set_failed(self, v: Vehicle) -> None:
         """Out of service: neither idle nor busy until :meth:`set_idle`."""
         v.busy = False
-        self._idle.discard(v.id)
+        self.idle_mask[v._slot] = False
+
+
+def _is_node(loc) -> bool:
+    """A road node index (any integer type, not a bool)."""
+    return isinstance(loc, (int, np.integer)) and not isinstance(loc, bool)
 
 
 # ----------------------------------------------------------------------------- drivers
@@ -267,7 +365,8 @@ class Operator:
                 v.proc = env.process(self._drive_timed(v))
 
     def assign(self, task: Task, v: Vehicle, cost: float) -> None:
-        """Give ``task`` to the idle vehicle ``v`` at the planned ``cost`` (seconds)."""
+        """Give ``task`` to the idle vehicle ``v`` (or one that has just given its task up,
+        :meth:`give_up`) at the planned ``cost`` (seconds)."""
         path = None if self.traffic is not None else self.driver.plan(v, task.loc, self.env.now)
         self.book.assign(task, v.id, cost)
         self.fleet.set_busy(v)
@@ -282,6 +381,8 @@ class Operator:
         """Process: to the pickup, (to the drop-off,) serve, idle. A breakdown interrupts it
         (:meth:`breakdown` has already put the vehicle and its task right)."""
         env = self.env
+        if v.proc is not env.active_process:  # given up before it started ([dispatch] reassign)
+            return
         v.task, v.busy_since = task, env.now
         try:
             self.bus.emit(env.now, "depart", v.id, task.id, v.loc)
@@ -322,15 +423,7 @@ class Operator:
             v.proc.interrupt("breakdown")
             v.proc = None
         if v.leg is not None:  # stop part-way: count what was driven, stand where it got
-            leg, t = v.leg, env.now - v.leg_start
-            driven = float(np.interp(t, np.r_[0.0, leg.times], np.r_[0.0, leg.metres]))
-            v.distance += driven
-            if task is not None and task.state is TaskState.PICKED_UP:
-                v.occupied_distance += driven
-            else:
-                v.empty_distance += driven
-            point = leg.point_at(t)
-            v.loc, v.leg = (point.node if point.on_node else point), None
+            self._stop_leg(v, task)
         elif v.driven:  # voxel: the cells of the path entered so far (distance has them)
             if task is not None and task.state is TaskState.PICKED_UP:
                 v.occupied_distance += v.driven
@@ -353,6 +446,49 @@ class Operator:
         if duration < math.inf:
             env.process(self._repair(v, duration))
         return True
+
+    def _stop_leg(self, v: Vehicle, task: Task | None) -> None:
+        """Roads: ``v`` stops part-way along its leg now: the metres driven so far count (with
+        a passenger when ``task`` is picked up) and it stands where it got (a node, or a road
+        point part-way along an edge)."""
+        leg, t = v.leg, self.env.now - v.leg_start
+        driven = float(np.interp(t, np.r_[0.0, leg.times], np.r_[0.0, leg.metres]))
+        v.distance += driven
+        if task is not None and task.state is TaskState.PICKED_UP:
+            v.occupied_distance += driven
+        else:
+            v.empty_distance += driven
+        point = leg.point_at(t)
+        v.loc, v.leg = (point.node if point.on_node else point), None
+
+    def give_up(self, v: Vehicle) -> Task:
+        """``[dispatch] reassign``: ``v``, driving to its task's pickup, gives the task up now
+        (a decision gave it another task or none): it stops where it is (part-way along an
+        edge included; the metres driven count as empty), its busy time so far counts, its task
+        goes back to open (release time and deadline kept) and a ``reassign`` event names both.
+        It stays busy: the caller hands it its new task or :meth:`stand_idle`. Returns the
+        task given up."""
+        env, task = self.env, v.task
+        assert task is not None and task.state is TaskState.ASSIGNED and self.traffic is None
+        proc = v.proc
+        if proc is not None and proc.is_alive and proc is not env.active_process \
+                and not isinstance(proc.target, simpy.events.Initialize):
+            proc.interrupt("reassign")  # (one not started yet sees it is stale and returns)
+        v.proc = None
+        if v.leg is not None:
+            self._stop_leg(v, task)
+        v.busy_seconds += env.now - v.busy_since
+        v.busy_since = env.now
+        v.task = None
+        self.bus.emit(env.now, "reassign", v.id, task.id, v.loc)
+        self.book.unassign(task)
+        return task
+
+    def stand_idle(self, v: Vehicle) -> None:
+        """``v`` (after :meth:`give_up`, with no new task) is idle where it stopped."""
+        self.fleet.set_idle(v)
+        self.bus.emit(self.env.now, "idle", v.id, -1, v.loc)
+        self.notify()
 
     def _break_after_step(self, v: Vehicle, at: float, duration: float, transfer: bool):
         yield self.env.timeout(at - self.env.now)

@@ -509,3 +509,88 @@ def phast(up_ptr, up_idx, up_w, sw_ptr, sw_idx, sw_w, sources, out, D, stack, se
     for k in range(K):
         for p in range(n):
             out[k, p] = D[p, k]
+
+
+# ==================================================================== paths from a field
+@_jit
+def descend(indptr, indices, data, field, index, start, goal, path):  # pragma: no cover
+    """A fastest path from ``start`` to ``goal`` read off ``field``, the seconds from every node
+    to ``goal`` (``field[index[v]]`` for node ``v``: ``index`` maps nodes to the field's
+    order). From each node it takes the out-edge minimizing edge time + field at its head (the
+    first in CSR order on ties) until it reaches ``goal``. Writes the nodes into ``path``
+    (length >= n) and returns their number, or -1 where no finite step exists or the walk
+    exceeds ``n`` nodes (a field that is not one: the caller falls back to a search)."""
+    n = indptr.size - 1
+    u = start
+    k = 0
+    path[0] = u
+    while u != goal:
+        if k >= n - 1:
+            return -1
+        best = np.inf
+        nxt = -1
+        for e in range(indptr[u], indptr[u + 1]):
+            c = data[e] + field[index[indices[e]]]
+            if c < best:
+                best = c
+                nxt = indices[e]
+        if nxt < 0 or not np.isfinite(best):
+            return -1
+        u = nxt
+        k += 1
+        path[k] = u
+    return k + 1
+
+
+@_jit
+def astar(indptr, indices, data, xy, inv_speed, source, goal, dist, pred, touched, hk, hn,
+          path):  # pragma: no cover - compiled
+    """A fastest path from ``source`` to ``goal`` by A* with the straight-line lower bound
+    ``|xy[v] - xy[goal]| * inv_speed`` (``inv_speed``: 1 / the fastest straight-line speed of
+    any edge, so the bound never overestimates: consistent, and the path is exact). Writes the
+    path's nodes into ``path`` and returns their number (0: unreachable). Scratch: ``dist``
+    (n, all ``inf``, left so), ``pred`` (n), ``touched`` (n), heap ``hk``/``hn`` (nnz + 1)."""
+    gx = xy[goal, 0]
+    gy = xy[goal, 1]
+    dist[source] = 0.0
+    touched[0] = source
+    nt = 1
+    h0 = np.sqrt((xy[source, 0] - gx) ** 2 + (xy[source, 1] - gy) ** 2) * inv_speed
+    size = _hpush(hk, hn, 0, h0, source)
+    found = False
+    while size > 0:
+        f, u, size = _hpop(hk, hn, size)
+        du = dist[u]
+        if u == goal:
+            found = True
+            break
+        hu = np.sqrt((xy[u, 0] - gx) ** 2 + (xy[u, 1] - gy) ** 2) * inv_speed
+        if f > du + hu:
+            continue  # stale entry
+        for e in range(indptr[u], indptr[u + 1]):
+            v = indices[e]
+            nd = du + data[e]
+            if nd < dist[v]:
+                if dist[v] == np.inf:
+                    touched[nt] = v
+                    nt += 1
+                dist[v] = nd
+                pred[v] = u
+                hv = np.sqrt((xy[v, 0] - gx) ** 2 + (xy[v, 1] - gy) ** 2) * inv_speed
+                size = _hpush(hk, hn, size, nd + hv, v)
+    k = 0
+    if found:
+        v = goal
+        while v != source:
+            path[k] = v
+            k += 1
+            v = pred[v]
+        path[k] = source
+        k += 1
+        for i in range(k // 2):  # goal-first -> source-first
+            t = path[i]
+            path[i] = path[k - 1 - i]
+            path[k - 1 - i] = t
+    for i in range(nt):
+        dist[touched[i]] = np.inf
+    return k

@@ -168,6 +168,24 @@ class RoadPlanner(Planner):
         self._hierarchy = hierarchy(space)
         self._index = None if self._hierarchy is None else self._hierarchy.pos
         self._users: dict[int, int] = {}  # node -> number of cached tasks on it
+        t = space.time
+        #: CSR triples (int64 / float64) of the time matrix and of its transpose
+        self._graph = (t.indptr.astype(np.int64), t.indices.astype(np.int64),
+                       np.ascontiguousarray(t.data, dtype=np.float64))
+        tt = t.T.tocsr()
+        tt.sort_indices()
+        self._graph_t = (tt.indptr.astype(np.int64), tt.indices.astype(np.int64),
+                         np.ascontiguousarray(tt.data, dtype=np.float64))
+        self._order = np.arange(space.n, dtype=np.int64) if self._index is None else self._index
+        self._scratch = (np.zeros(space.n, dtype=np.bool_), np.empty(t.nnz + 1),
+                         np.empty(t.nnz + 1, dtype=np.int64), np.empty(space.n, dtype=np.int64))
+        # A*'s bound: straight-line metres over the fastest straight-line speed of any edge
+        rows = np.repeat(np.arange(space.n), np.diff(t.indptr))
+        straight = np.hypot(*(space.xy[t.indices] - space.xy[rows]).T) / t.data
+        fastest = float(straight.max()) if straight.size else 0.0
+        self._inv_speed = 1.0 / fastest if fastest > 0 and np.isfinite(fastest) else 0.0
+        self._astar = (np.full(space.n, np.inf), np.empty(space.n, dtype=np.int64),
+                       np.empty(space.n, dtype=np.int64))
         self.stats.extra.setdefault("fields_computed", 0)
         self.stats.extra.setdefault("field_reuses", 0)
         self.stats.extra.setdefault("forward_searches", 0)
@@ -187,33 +205,29 @@ class RoadPlanner(Planner):
         out = np.full((len(agents), len(tasks)), np.inf)
         if not agents or not tasks:
             return out
-        node, rem = _agent_arrays([a.loc for a in agents])
+        node, rem = _agent_arrays(agents)
         tnode = np.fromiter((int(t.loc) for t in tasks), np.int64, len(tasks))
         cached = np.fromiter((int(n) in self._fields for n in tnode), bool, len(tasks))
         fresh = np.unique(tnode[~cached])
-        agent_nodes, agent_inv = np.unique(node, return_inverse=True)
+        forward = False
+        if fresh.size >= FORWARD_RATIO:  # else fewer than FORWARD_RATIO x any agent count
+            agent_nodes, agent_inv = np.unique(node, return_inverse=True)
+            forward = fresh.size >= FORWARD_RATIO * agent_nodes.size
 
         h, index = self._hierarchy, self._index
         reused = int(cached.sum())
-        if fresh.size >= FORWARD_RATIO * agent_nodes.size:
+        if forward:
             # a few agents, many new tasks: search forward from the agents, cache nothing
             self.stats.extra["forward_searches"] += int(agent_nodes.size)
             cols = np.flatnonzero(~cached)
             if h is None:
-                fwd = self.space.distances_from(agent_nodes)[:, tnode[cols]]
+                fwd = np.stack(self._dijkstra(agent_nodes, to=False))[:, tnode[cols]]
             else:
                 at = index[tnode[cols]]
                 fwd = np.stack([f[at] for f in h.fields(agent_nodes, to=False)])
             out[:, cols] = fwd[agent_inv]
         elif fresh.size:
-            if h is None:
-                fields = []
-                for field in self.space.distances_to(fresh):
-                    field = field.copy()  # own row: a dropped field must not pin its block
-                    field.setflags(write=False)
-                    fields.append(field)
-            else:
-                fields = h.fields(fresh, to=True)
+            fields = self._dijkstra(fresh, to=True) if h is None else h.fields(fresh, to=True)
             self._fields.update(zip(fresh.tolist(), fields))
             self.stats.extra["fields_computed"] += int(fresh.size)
             cached[:] = True
@@ -225,14 +239,48 @@ class RoadPlanner(Planner):
             out[:, t] = self._fields[int(tnode[t])][at]
         for t in hits:  # after reading: re-homing a task may drop a field
             self._remember(tasks[t].id, int(tnode[t]))
+        if getattr(agents, "nodes", None) is not None and not agents.points.size:
+            return out  # everyone on a node: nothing left to drive first
         return out + rem[:, None]
+
+    def _dijkstra(self, nodes: np.ndarray, to: bool) -> list[np.ndarray]:
+        """Complete fields by the compiled Dijkstra (networks without a hierarchy), node
+        order: seconds to (``to``) or from each node; one read-only row each."""
+        want, hk, hn, _ = self._scratch
+        graph = self._graph_t if to else self._graph
+        out = []
+        for s in np.asarray(nodes, dtype=np.int64).tolist():
+            d = np.empty(self.space.n)
+            _road_fast.dijkstra_until(*graph, s, want, 0, d, hk, hn)
+            d.setflags(write=False)
+            out.append(d)
+        return out
 
     def plan(self, agent: Any, goal: int) -> list[int] | None:
         """A fastest node path from the agent's node (``agent.loc.node``, or ``agent.loc``) to
-        ``goal``, both included (``[goal]`` when already there), or None if unreachable."""
+        ``goal``, both included (``[goal]`` when already there), or None if unreachable.
+
+        Where ``goal`` has a cached field (an open task's pickup) it walks down the field,
+        from each node along the edge that keeps to a fastest path (ties: the lowest node
+        index); elsewhere (a drop-off) a compiled A* with the straight-line bound finds it."""
         self.stats.plans += 1
-        leg = self.space.route(agent.loc, int(goal))
-        return None if leg is None else leg.nodes.tolist()
+        loc = agent.loc
+        start = loc.node if isinstance(loc, RoadPoint) else int(loc)
+        goal = int(goal)
+        if start == goal:
+            return [goal]
+        field = self._fields.get(goal)
+        path = self._scratch[3]
+        if field is None:
+            _, hk, hn, _ = self._scratch
+            k = _road_fast.astar(*self._graph, self.space.xy, self._inv_speed, start, goal,
+                                 *self._astar, hk, hn, path)
+            return path[:k].tolist() if k else None
+        k = _road_fast.descend(*self._graph, field, self._order, start, goal, path)
+        if k < 0:  # no finite field value at the start: unreachable (or a broken field)
+            leg = self.space.route(start, goal)
+            return None if leg is None else leg.nodes.tolist()
+        return path[:k].tolist()
 
     def task_closed(self, task_id: Any) -> None:
         """Forget the task; its node's field goes once no other cached task stands on it."""
@@ -247,8 +295,13 @@ class RoadPlanner(Planner):
             self._fields.pop(node, None)
 
 
-def _agent_arrays(locs: Sequence[RoadPoint | int]) -> tuple[np.ndarray, np.ndarray]:
-    """``(node, remaining seconds)`` of agent locations (points or node ints)."""
+def _agent_arrays(agents: Sequence[Any]) -> tuple[np.ndarray, np.ndarray]:
+    """``(node, remaining seconds)`` of the agents' locations (points or node ints): read from
+    the arrays of a :class:`dispatch.contracts.AgentViews` where it has them (no view built)."""
+    nodes = getattr(agents, "nodes", None)
+    if nodes is not None:
+        return nodes, agents.remaining
+    locs = [a.loc for a in agents]
     node = np.empty(len(locs), dtype=np.int64)
     rem = np.zeros(len(locs))
     for i, loc in enumerate(locs):
