@@ -36,7 +36,7 @@ NEED = ("pickup_latitude", "pickup_longitude", "dropoff_latitude", "dropoff_long
         "trip_seconds")
 
 
-def main(src: Path) -> None:
+def main(src: Path, out: Path = OUT) -> None:
     with open(src, newline="") as fh:
         rows = list(csv.DictReader(fh))
     kept = [r for r in rows if all(r[k].strip() for k in NEED)]
@@ -55,8 +55,8 @@ def main(src: Path) -> None:
     print(f"{same} trips snap pickup and drop-off to one node (demand and calibration leave "
           f"them out); {zero} have trip_seconds 0 (calibration leaves them out)")
     hour = np.array([int(r["trip_start_hour"]) for r in kept])
-    OUT.mkdir(parents=True, exist_ok=True)
-    with open(OUT / "trips.csv", "w", newline="") as fh:
+    out.mkdir(parents=True, exist_ok=True)
+    with open(out / "trips.csv", "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["hour", "day", "origin_node", "dest_node", "origin_snap_m", "dest_snap_m",
                     "trip_seconds", "pickup_community_area"])
@@ -65,7 +65,7 @@ def main(src: Path) -> None:
                         f"{so[k]:.1f}", f"{sd[k]:.1f}", int(float(r["trip_seconds"])),
                         r["pickup_community_area"].split(".")[0]])
     factors, trips, widths = calibrate(net, o, d, hour, col["trip_seconds"])
-    with open(OUT / "congestion.csv", "w", newline="") as fh:
+    with open(out / "congestion.csv", "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["hour", "factor", "trips", "pooled_hours"])
         for h in range(24):
@@ -74,7 +74,7 @@ def main(src: Path) -> None:
     print("  " + ", ".join(f"{h}: {factors[h]:.2f}" + (f" [{trips[h]}, +-{widths[h]}]"
                                                        if widths[h] else f" [{trips[h]}]")
                            for h in range(24)))
-    print(f"wrote {OUT / 'trips.csv'} ({len(kept)} rows) and {OUT / 'congestion.csv'}")
+    print(f"wrote {out / 'trips.csv'} ({len(kept)} rows) and {out / 'congestion.csv'}")
 
 
 if __name__ == "__main__":
