@@ -163,10 +163,13 @@ class SweepConfig:
     planner: tuple[str, ...] = ()
     agents: tuple[int, ...] = ()
     seed: tuple[int, ...] = ()
+    #: dispatch.batch_window values; each is its own scenario variant (see Scenario.variants)
+    batch_window: tuple[float, ...] = ()
 
     @property
     def declared(self) -> bool:
-        return bool(self.allocator or self.planner or self.agents or self.seed)
+        return bool(self.allocator or self.planner or self.agents or self.seed
+                    or self.batch_window)
 
 
 @dataclass(frozen=True)
@@ -206,12 +209,23 @@ class Scenario:
         if agents is not None:
             _check_fits(self, agents, "--agents")
         combos = itertools.product(
+            self.variants(),
             dim(allocator, self.sweep.allocator, self.dispatch.allocator),
             dim(planner, self.sweep.planner, self.dispatch.planner),
             dim(agents, self.sweep.agents, self.fleet.agents),
             dim(seed, self.sweep.seed, self.seed),
         )
-        return [RunSpec(self, a, p, n, s) for a, p, n, s in combos]
+        return [RunSpec(v, a, p, n, s) for v, a, p, n, s in combos]
+
+    def variants(self) -> list[Scenario]:
+        """The scenario once per swept ``batch_window`` (or itself when none is swept): each
+        with that window and its own name, ``<name>-immediate`` (0 s) or ``<name>-batch<w>s``,
+        so its runs get their own ``scenario=`` partition and run ids."""
+        if not self.sweep.batch_window:
+            return [self]
+        return [replace(self, name=f"{self.name}-{'immediate' if w == 0 else f'batch{w:g}s'}",
+                        dispatch=replace(self.dispatch, batch_window=w))
+                for w in self.sweep.batch_window]
 
 
 @dataclass(frozen=True)
@@ -473,6 +487,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
         planner=s.str_list("planner"),
         agents=s.int_list("agents", lo=1),
         seed=s.int_list("seed", lo=0, hi=MAX_SEED),
+        batch_window=_windows(s),
     )
     s.done()
     root.done()
@@ -483,6 +498,16 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     for n in sweep.agents or (fleet.agents,):
         _check_fits(sc, n, "sweep.agents" if sweep.agents else "fleet.agents")
     return sc
+
+
+def _windows(s: _Table) -> tuple[float, ...]:
+    """``[sweep] batch_window``: distinct finite seconds >= 0."""
+    v = s.get("batch_window", [])
+    if not isinstance(v, list) or any(isinstance(x, bool) or not isinstance(x, (int, float))
+                                      or not math.isfinite(x) or x < 0 for x in v) \
+            or len(set(v)) != len(v):
+        raise s.fail("batch_window", f"must be a list of distinct seconds >= 0, got {_short(v)}")
+    return tuple(float(x) for x in v)
 
 
 def _parse_empirical(t: _Table, tasks: TaskConfig, world: WorldConfig,

@@ -292,3 +292,27 @@ def test_derivation_script_reproduces_the_shipped_files(tmp_path):
     shipped = ROOT / "dispatch" / "data" / "chicago_taxi"
     for name in ("trips.csv", "congestion.csv"):
         assert (tmp_path / name).read_bytes() == (shipped / name).read_bytes(), name
+
+
+def test_batch_window_is_a_sweep_axis(tmp_path, capsys):
+    write_csv(tmp_path / "trips.csv", ["t", "origin_node", "dest_node"], [(5.0, 2, 0)])
+    write_csv(tmp_path / "fleet.csv", ["vehicle_id", "node"], [(0, 0)])
+    path = road_scenario(tmp_path, tasks='source = "trace"\ntrace = "trips.csv"',
+                         fleet='start = "fleet.csv"',
+                         extra="[sweep]\nbatch_window = [0.0, 30.0]\nallocator = ['fcfs', 'greedy']")
+    specs = load_scenario(path).runs()
+    assert [(s.scenario.name, s.scenario.dispatch.batch_window, s.allocator) for s in specs] == [
+        ("road-immediate", 0.0, "fcfs"), ("road-immediate", 0.0, "greedy"),
+        ("road-batch30s", 30.0, "fcfs"), ("road-batch30s", 30.0, "greedy")]
+    assert len({s.run_id for s in specs}) == 4
+    # the window delays the decision: assigned at release (5 s) or 30 s later
+    for spec, at in ((specs[0], 5.0), (specs[2], 35.0)):
+        task = run_one(spec).tables["tasks"].to_pandas().iloc[0]
+        assert task.assigned_at == at
+    assert cli.main(["run", str(path), "--out", str(tmp_path / "out")]) == 0
+    out = capsys.readouterr().out
+    assert "imm" in out and "30s" in out  # the window beside the allocator (may wrap)
+    bad = road_scenario(tmp_path, tasks='source = "static"', name="bad",
+                        extra="[sweep]\nbatch_window = [30, 30]")
+    assert cli.main(["validate", str(bad)]) == 2
+    assert "sweep.batch_window: must be a list of distinct seconds" in capsys.readouterr().err
