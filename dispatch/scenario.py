@@ -189,6 +189,7 @@ class Scenario:
     sweep: SweepConfig = field(default_factory=SweepConfig)
     comms: CommsConfig = field(default_factory=CommsConfig)
     faults: FaultConfig = field(default_factory=FaultConfig)
+    variant_of: str | None = None  # a batch-window variant: the swept scenario's name
 
     def runs(
         self,
@@ -224,7 +225,7 @@ class Scenario:
         if not self.sweep.batch_window:
             return [self]
         return [replace(self, name=f"{self.name}-{'immediate' if w == 0 else f'batch{w:g}s'}",
-                        dispatch=replace(self.dispatch, batch_window=w))
+                        dispatch=replace(self.dispatch, batch_window=w), variant_of=self.name)
                 for w in self.sweep.batch_window]
 
 

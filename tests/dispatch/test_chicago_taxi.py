@@ -19,7 +19,7 @@ from dispatch.congestion import (NO_CONGESTION, CongestedPlanner, HourlyFactors,
 from dispatch.empirical import (MIN_POOL, WEEKDAYS, draw_day, hour_pools, load_factors,
                                 load_sample, pickup_weights)
 from dispatch.roads import RoadPoint, load_network, manhattan
-from dispatch.runner import run_one
+from dispatch.runner import default_out, run_one
 from dispatch.scenario import load_scenario
 from tests.dispatch.test_trips import road_scenario, write_csv
 
@@ -305,6 +305,7 @@ def test_batch_window_is_a_sweep_axis(tmp_path, capsys):
         ("road-immediate", 0.0, "fcfs"), ("road-immediate", 0.0, "greedy"),
         ("road-batch30s", 30.0, "fcfs"), ("road-batch30s", 30.0, "greedy")]
     assert len({s.run_id for s in specs}) == 4
+    assert default_out(specs[2]) == Path("runs") / "road"  # both variants in one folder
     # the window delays the decision: assigned at release (5 s) or 30 s later
     for spec, at in ((specs[0], 5.0), (specs[2], 35.0)):
         task = run_one(spec).tables["tasks"].to_pandas().iloc[0]
