@@ -50,7 +50,7 @@ class HourlyFactors:
 
     def factor(self, t: float) -> float:
         """The factor of the hour of day that simulated time ``t`` (seconds) falls in."""
-        return self.factors[int(math.floor(t / 3600.0)) % HOURS]
+        return self.factors[math.floor(t / 3600.0) % HOURS]
 
 
 NO_CONGESTION = HourlyFactors((1.0,) * HOURS)

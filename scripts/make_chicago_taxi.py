@@ -27,8 +27,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from dispatch.congestion import calibrate  # noqa: E402
-from dispatch.roads import load_network  # noqa: E402
+from dispatch.congestion import calibrate
+from dispatch.roads import load_network
 
 DEFAULT = ROOT.parent / "shared" / "data" / "taxi" / "chicago_taxi_trips_sample.csv"
 OUT = ROOT / "dispatch" / "data" / "chicago_taxi"

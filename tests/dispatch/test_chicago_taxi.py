@@ -14,10 +14,16 @@ import pytest
 from scipy.stats import chisquare
 
 from dispatch import cli
-from dispatch.congestion import (NO_CONGESTION, CongestedPlanner, HourlyFactors, calibrate,
-                                 scale_leg)
-from dispatch.empirical import (MIN_POOL, WEEKDAYS, draw_day, hour_pools, load_factors,
-                                load_sample, pickup_weights)
+from dispatch.congestion import NO_CONGESTION, CongestedPlanner, HourlyFactors, calibrate, scale_leg
+from dispatch.empirical import (
+    MIN_POOL,
+    WEEKDAYS,
+    draw_day,
+    hour_pools,
+    load_factors,
+    load_sample,
+    pickup_weights,
+)
 from dispatch.roads import RoadPoint, load_network, manhattan
 from dispatch.runner import default_out, run_one
 from dispatch.scenario import load_scenario
@@ -177,8 +183,8 @@ def test_factor_of_time_and_scaled_costs_by_hand():
     leg = net.leg(RoadPoint(1, 0, 7.0, 70.0), [1, 2])  # 7 s left on 0 -> 1, then 10 s
     scaled = scale_leg(leg, 2.0)
     assert scaled.times.tolist() == [7.0, 27.0] and scaled.metres.tolist() == leg.metres.tolist()
-    from planners.road import RoadPlanner
     from dispatch.contracts import AgentView, TaskView
+    from planners.road import RoadPlanner
 
     clock = [10.0]
     planner = CongestedPlanner(RoadPlanner(net), hf, lambda: clock[0])
@@ -191,7 +197,8 @@ def test_factor_of_time_and_scaled_costs_by_hand():
 
 
 def test_a_run_drives_at_the_hours_factor(tmp_path):
-    """One taxi at node 0 of a 3 x 2 grid (0 - 1 - 2 on the first row, 10 s per edge); a trip 2 -> 0 released at 3590 s.
+    """One taxi at node 0 of a 3 x 2 grid (0 - 1 - 2 on the first row, 10 s per edge); a
+    trip 2 -> 0 released at 3590 s.
     Hour 0 doubles times, hour 1 triples them: the pickup leg (20 s free flow) is planned and
     driven at x2 (40 s, pickup at 3630), the drop-off leg departs in hour 1 at x3 (60 s)."""
     write_csv(tmp_path / "trips.csv", ["t", "origin_node", "dest_node"], [(3590.0, 2, 0)])
@@ -299,7 +306,8 @@ def test_batch_window_is_a_sweep_axis(tmp_path, capsys):
     write_csv(tmp_path / "fleet.csv", ["vehicle_id", "node"], [(0, 0)])
     path = road_scenario(tmp_path, tasks='source = "trace"\ntrace = "trips.csv"',
                          fleet='start = "fleet.csv"',
-                         extra="[sweep]\nbatch_window = [0.0, 30.0]\nallocator = ['fcfs', 'greedy']")
+                         extra="[sweep]\nbatch_window = [0.0, 30.0]\n"
+                               "allocator = ['fcfs', 'greedy']")
     specs = load_scenario(path).runs()
     assert [(s.scenario.name, s.scenario.dispatch.batch_window, s.allocator) for s in specs] == [
         ("road-immediate", 0.0, "fcfs"), ("road-immediate", 0.0, "greedy"),
