@@ -3,8 +3,9 @@
 Voxel world: UAVs (the first ``n_uav`` vehicles) in free cells at or below the start altitude,
 UGVs in free ground cells, no two in one cell. Road network: cars on nodes drawn uniformly
 (several may share one, as taxis share a rank), or with ``[fleet] placement = "demand"`` on the
-empirical sample's pickup nodes, each drawn with its share of the trips. A start file (``[fleet] start``) gives each
-vehicle's id and node or position (snapped to the nearest node on roads).
+empirical sample's pickup nodes, each drawn with its share of the trips. A start file
+(``[fleet] start``) gives each vehicle's id and node or position (snapped to the nearest node
+on roads).
 """
 
 from __future__ import annotations
