@@ -2,8 +2,10 @@
 
 Voxel world: UAVs (the first ``n_uav`` vehicles) in free cells at or below the start altitude,
 UGVs in free ground cells, no two in one cell. Road network: cars on nodes drawn uniformly
-(several may share one, as taxis share a rank). A start file (``[fleet] start``) gives each
-vehicle's id and node or position (snapped to the nearest node on roads).
+(several may share one, as taxis share a rank), or with ``[fleet] placement = "demand"`` on the
+empirical sample's pickup nodes, each drawn with its share of the trips. A start file
+(``[fleet] start``) gives each vehicle's id and node or position (snapped to the nearest node
+on roads).
 """
 
 from __future__ import annotations
@@ -30,6 +32,12 @@ def _place_cars(net, spec: RunSpec, rng: np.random.Generator) -> list[Vehicle]:
     rows = fleet.start[: fleet.agents]
     # a car's speed is informational (costs are the network's travel times): its mean speed
     speed = float(net.length.data.sum() / net.time.data.sum())
+    if not rows and fleet.placement == "demand":
+        from dispatch.empirical import load_sample, pickup_weights
+
+        ids, p = pickup_weights(load_sample(), spec.scenario.tasks.weekday)
+        nodes = [net.index_of(int(i)) for i in rng.choice(ids, size=fleet.agents, p=p)]
+        return [Vehicle(i, "car", speed, int(n)) for i, n in enumerate(nodes)]
     if not rows:
         nodes = rng.integers(net.n, size=fleet.agents)
         return [Vehicle(i, "car", speed, int(n)) for i, n in enumerate(nodes)]

@@ -137,7 +137,7 @@ def default_out(spec: RunSpec) -> Path:
     ``..``, no absolute path): results never land outside ``runs/``."""
     from dispatch.scenario import safe_name
 
-    return Path("runs") / safe_name(spec.scenario.name)
+    return Path("runs") / safe_name(spec.scenario.variant_of or spec.scenario.name)
 
 
 def holds_results(out: Path, spec: RunSpec) -> bool:

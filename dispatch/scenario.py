@@ -21,7 +21,7 @@ from dispatch.faults import FaultConfig, read_failures
 from dispatch.traces import Trips, decode_text, read_bytes, read_fleet_start, read_trace
 
 Vec3 = tuple[float, float, float]
-SOURCES = ("static", "periodic", "poisson", "trace")
+SOURCES = ("static", "periodic", "poisson", "trace", "empirical")
 VOXEL_KEYS = ("size", "cell", "obstacles")
 ROAD_KEYS = ("network", "blocks", "block", "speed")
 
@@ -75,6 +75,8 @@ class RoadConfig:
     blocks: tuple[int, int] = (20, 20)  # intersections along x (columns) and y (rows)
     block: float = 200.0  # metres between neighbouring intersections
     speed: float = 10.0  # m/s on every street of the generated grid
+    #: hourly congestion factors (24; see dispatch.congestion); empty: free-flow times
+    congestion: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -106,6 +108,9 @@ class FleetConfig:
     #: ``a`` a road node id (b, c nan) or ``(a, b[, c])`` a position in metres; empty: random
     start: tuple[tuple, ...] = ()
     start_file: Path | None = None
+    #: roads, without a start file: "uniform" nodes, or "demand" (the empirical sample's
+    #: pickup nodes, weighted by their trips)
+    placement: str = "uniform"
 
     @property
     def n_uav(self) -> int:
@@ -125,6 +130,8 @@ class TaskConfig:
     max_wait: float | None = None  # seconds a request accepts to wait for its pickup
     trace: Path | None = None  # trace: CSV or Parquet file of trips (see dispatch.traces)
     trips: Trips | None = None
+    trips_per_day: float | None = None  # empirical: expected trips over the 24 h day
+    weekday: str = "all"  # empirical: the sample's trips of this weekday ("all": every day)
 
 
 @dataclass(frozen=True)
@@ -158,10 +165,13 @@ class SweepConfig:
     planner: tuple[str, ...] = ()
     agents: tuple[int, ...] = ()
     seed: tuple[int, ...] = ()
+    #: dispatch.batch_window values; each is its own scenario variant (see Scenario.variants)
+    batch_window: tuple[float, ...] = ()
 
     @property
     def declared(self) -> bool:
-        return bool(self.allocator or self.planner or self.agents or self.seed)
+        return bool(self.allocator or self.planner or self.agents or self.seed
+                    or self.batch_window)
 
 
 @dataclass(frozen=True)
@@ -181,6 +191,7 @@ class Scenario:
     sweep: SweepConfig = field(default_factory=SweepConfig)
     comms: CommsConfig = field(default_factory=CommsConfig)
     faults: FaultConfig = field(default_factory=FaultConfig)
+    variant_of: str | None = None  # a batch-window variant: the swept scenario's name
 
     def runs(
         self,
@@ -201,12 +212,23 @@ class Scenario:
         if agents is not None:
             _check_fits(self, agents, "--agents")
         combos = itertools.product(
+            self.variants(),
             dim(allocator, self.sweep.allocator, self.dispatch.allocator),
             dim(planner, self.sweep.planner, self.dispatch.planner),
             dim(agents, self.sweep.agents, self.fleet.agents),
             dim(seed, self.sweep.seed, self.seed),
         )
-        return [RunSpec(self, a, p, n, s) for a, p, n, s in combos]
+        return [RunSpec(v, a, p, n, s) for v, a, p, n, s in combos]
+
+    def variants(self) -> list[Scenario]:
+        """The scenario once per swept ``batch_window`` (or itself when none is swept): each
+        with that window and its own name, ``<name>-immediate`` (0 s) or ``<name>-batch<w>s``,
+        so its runs get their own ``scenario=`` partition and run ids."""
+        if not self.sweep.batch_window:
+            return [self]
+        return [replace(self, name=f"{self.name}-{'immediate' if w == 0 else f'batch{w:g}s'}",
+                        dispatch=replace(self.dispatch, batch_window=w), variant_of=self.name)
+                for w in self.sweep.batch_window]
 
 
 @dataclass(frozen=True)
@@ -387,6 +409,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
         uav_speed=f.number("uav_speed", 5.0, gt=0.0),
         ugv_speed=f.number("ugv_speed", 3.0, gt=0.0),
         uav_max_start_altitude=f.number("uav_max_start_altitude", 10.0, lo=0.0),
+        placement=f.string("placement", "uniform", ("uniform", "demand")),
     )
     start = f.get("start", None)
     if start is not None:
@@ -413,7 +436,9 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
         service_time=t.number("service_time", 0.0, lo=0.0),
         ttl=t.number("ttl", None, gt=0.0, optional=True),
     )
-    tasks = replace(tasks, max_wait=t.number("max_wait", None, gt=0.0, optional=True))
+    tasks = replace(tasks, max_wait=t.number("max_wait", 600.0 if source == "empirical"
+                                             else None, gt=0.0, optional=True))
+    tasks = _parse_empirical(t, tasks, world, fleet)
     trace = t.get("trace", None)
     if source == "periodic" and tasks.interval is None:
         raise t.fail("interval", "is required when source = 'periodic'")
@@ -429,7 +454,8 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     elif trace is not None:
         raise t.fail("trace", f"is only used when source = 'trace' (source is {source!r})")
     for k, allowed in (("interval", ("periodic",)), ("rate", ("poisson",)),
-                       ("max_active", ("periodic", "poisson"))):
+                       ("max_active", ("periodic", "poisson")),
+                       ("count", ("static", "periodic", "poisson", "trace"))):
         if getattr(tasks, k) is not None and source not in allowed:
             raise t.fail(k, f"is only used when source is {' or '.join(allowed)} (not {source!r})")
     t.done()
@@ -471,6 +497,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
         planner=s.str_list("planner"),
         agents=s.int_list("agents", lo=1),
         seed=s.int_list("seed", lo=0, hi=MAX_SEED),
+        batch_window=_windows(s),
     )
     s.done()
     root.done()
@@ -481,6 +508,59 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     for n in sweep.agents or (fleet.agents,):
         _check_fits(sc, n, "sweep.agents" if sweep.agents else "fleet.agents")
     return sc
+
+
+def _windows(s: _Table) -> tuple[float, ...]:
+    """``[sweep] batch_window``: distinct finite seconds >= 0."""
+    v = s.get("batch_window", [])
+    if not isinstance(v, list) or any(isinstance(x, bool) or not isinstance(x, (int, float))
+                                      or not math.isfinite(x) or x < 0 for x in v) \
+            or len(set(v)) != len(v):
+        raise s.fail("batch_window", f"must be a list of distinct seconds >= 0, got {_short(v)}")
+    return tuple(float(x) for x in v)
+
+
+def _parse_empirical(t: _Table, tasks: TaskConfig, world: WorldConfig,
+                     fleet: FleetConfig) -> TaskConfig:
+    """``[tasks] source = "empirical"``: ``trips_per_day`` and ``weekday`` (see
+    :mod:`dispatch.empirical`); the sample is snapped to the Chicago network only."""
+    from dispatch.empirical import WEEKDAYS
+
+    if tasks.source != "empirical":
+        for k in ("trips_per_day", "weekday"):
+            if k in t.data:
+                raise t.fail(k, f"is only used when source = 'empirical' (not {tasks.source!r})")
+        if fleet.placement == "demand":
+            raise t.fail("source", "fleet.placement = 'demand' places vehicles on the empirical "
+                                   "sample's pickups; it needs source = 'empirical'")
+        return tasks
+    if world.roads is None or world.roads.network != "chicago":
+        raise t.fail("source", "'empirical' draws trips from the Chicago taxi sample, snapped "
+                               "to the Chicago network: set world.network = 'chicago'")
+    if "trips_per_day" not in t.data:
+        raise t.fail("trips_per_day", "is required when source = 'empirical' (the expected "
+                                      "number of trips over the 24 h day)")
+    return replace(tasks, trips_per_day=t.number("trips_per_day", None, gt=0.0),
+                   weekday=t.string("weekday", "all", ("all", *WEEKDAYS)))
+
+
+def _parse_congestion(w: _Table, network: str) -> tuple[float, ...]:
+    """``[world] congestion``: "chicago_taxi" (the factors calibrated from the taxi sample), a
+    list of 24 factors > 0 (hour 0 first), or false / absent (free-flow times)."""
+    v = w.get("congestion", False)
+    if v is False:
+        return ()
+    if v == "chicago_taxi":
+        from dispatch.empirical import load_factors
+
+        return load_factors().factors
+    ok = isinstance(v, list) and len(v) == 24 and all(
+        not isinstance(x, bool) and isinstance(x, (int, float)) and math.isfinite(x) and x > 0
+        for x in v)
+    if not ok:
+        raise w.fail("congestion", f"must be 'chicago_taxi', false or a list of 24 factors > 0 "
+                                   f"(one per hour of day), got {_short(v)}")
+    return tuple(float(x) for x in v)
 
 
 def _parse_faults(f: _Table, path: Path) -> FaultConfig:
@@ -545,9 +625,9 @@ def _parse_world(w: _Table, path: Path) -> WorldConfig:
         if not isinstance(edge_events, bool):
             raise w.fail("edge_events", f"must be true or false, got {edge_events!r}")
         roads = RoadConfig(network=network, base=path.parent.resolve(), blocks=tuple(blocks),
-                           block=block, speed=speed)
+                           block=block, speed=speed, congestion=_parse_congestion(w, network))
         return WorldConfig(roads=roads, physics=bool(physics), edge_events=edge_events)
-    for k in (*ROAD_KEYS, "edge_events"):
+    for k in (*ROAD_KEYS, "edge_events", "congestion"):
         if k in w.data:
             raise w.fail(k, "describes a road network; set world.network to use one")
     size = w.vec3("size", [50, 50, 30])
@@ -650,5 +730,8 @@ def check_limits(sc: Scenario, specs: list[RunSpec], limits: Limits = LIMITS) ->
         if not ticks <= limits.releases:
             raise refuse(key, f"about {ticks:.3g} releases in {sc.duration:g} s (more than "
                               f"{limits.releases:,}; set tasks.count to cap them)")
+    elif t.source == "empirical" and not t.trips_per_day <= limits.releases:
+        raise refuse("tasks.trips_per_day", f"{t.trips_per_day:.3g} trips a day (more than "
+                                            f"{limits.releases:,})")
     elif t.trips is not None and len(t.trips) > limits.releases:
         raise refuse("tasks.trace", f"{len(t.trips):,} trips (more than {limits.releases:,})")

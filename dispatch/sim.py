@@ -151,7 +151,7 @@ class Simulation:
         roads = sc.world.roads is not None
         if roads:
             demand = RoadDemand(self.space, rng_for(spec.seed, STREAM_TASKS))
-            driver = RoadDriver(self.space, self.planner, bus, sc.world.edge_events)
+            driver = self._road_driver(sc)
         else:
             recorder.table_metadata["obstacles"] = {
                 "dispatch.world_size": json_meta(list(self.space.size)),
@@ -179,11 +179,18 @@ class Simulation:
         self.dispatcher.run_id = driver.run_id = spec.run_id  # named in error messages
         t = sc.tasks
         count = spec.n_static_tasks if t.source == "static" else t.count
+        kind, trips = t.source, t.trips
+        if kind == "empirical":  # the day is drawn now and released as a trace
+            from dispatch.empirical import draw_day, load_sample
+
+            kind = "trace"
+            trips = draw_day(load_sample(), t.trips_per_day, rng_for(spec.seed, STREAM_TASKS),
+                             t.weekday)
         self.source = TaskSource(env, book, demand,
-                                 SourceConfig(t.source, count, t.interval, t.rate, t.max_active,
+                                 SourceConfig(kind, count, t.interval, t.rate, t.max_active,
                                               t.ttl, t.max_wait),
                                  rng_for(spec.seed, STREAM_SOURCE), self.dispatcher.notify,
-                                 t.trips)
+                                 trips)
         self.source.on_done = self._check_finished
         self.operator.on_reopen = self.source.rearm
         self.faults = (FaultInjector(env, sc.faults, self.fleet, self.operator,
@@ -199,6 +206,19 @@ class Simulation:
         while True:
             yield self.env.timeout(tick)
             self.progress(self.env.now, duration, self.book.released, self.stats.n_tasks)
+
+    def _road_driver(self, sc: Scenario) -> RoadDriver:
+        """The road driver; with ``[world] congestion`` the planner's costs and the legs are
+        scaled by the hour's factor (:mod:`dispatch.congestion`)."""
+        factors = sc.world.roads.congestion
+        if not factors:
+            return RoadDriver(self.space, self.planner, self.bus, sc.world.edge_events)
+        from dispatch.congestion import CongestedDriver, CongestedPlanner, HourlyFactors
+
+        hourly = HourlyFactors(factors)
+        self.planner = CongestedPlanner(self.planner, hourly, lambda: self.env.now)
+        self.recorder.metadata["dispatch.congestion"] = json_meta(list(factors))
+        return CongestedDriver(self.space, self.planner, self.bus, sc.world.edge_events, hourly)
 
     @property
     def allocator(self) -> Allocator:

@@ -102,8 +102,9 @@ def render_trips(summaries: list[dict], console=None) -> None:
 
     console = console or Console()
     groups: dict[tuple[str, int], list[dict]] = defaultdict(list)
+    variants = len({s["scenario"] for s in summaries}) > 1  # a swept batch_window
     for s in summaries:
-        groups[(s["allocator"], s["n_agents"])].append(s)
+        groups[(_variant(s) if variants else s["allocator"], s["n_agents"])].append(s)
     runs = max((len(g) for g in groups.values()), default=0)
     t = Table(title=f"Trips, mean over {runs} seed(s): served, rejected, expired, wait "
                     f"(release to pickup), empty and occupied km, deciding seconds")
@@ -126,3 +127,10 @@ def render_trips(summaries: list[dict], console=None) -> None:
                       f"{mean('wait_time_mean'):.1f}", f"{mean('empty_distance') / 1000:.0f}",
                       f"{mean('occupied_distance') / 1000:.0f}", f"{mean('alloc_seconds'):.2f}")
     console.print(t)
+
+
+def _variant(s: dict) -> str:
+    """``fcfs imm`` / ``fcfs 30s``: the allocator and the batch window of a swept-window run
+    (its scenario name ends ``-immediate`` or ``-batch30s``, see ``Scenario.variants``)."""
+    tail = s["scenario"].rpartition("-")[2]
+    return f"{s['allocator']} {'imm' if tail == 'immediate' else tail.removeprefix('batch')}"
