@@ -46,6 +46,9 @@ SCHEMAS: dict[str, pa.Schema] = {
         ("distance", _F), ("empty_distance", _F), ("occupied_distance", _F),
         # [faults]: vehicle breakdowns; tasks re-opened by one; of those, passengers transferred
         ("failures", _I), ("tasks_reassigned", _I), ("tasks_transferred", _I),
+        # [reposition]: the repositioner (stay: idle vehicles wait), the drives it started
+        # toward a target and their metres (part of empty_distance)
+        ("reposition", _S), ("repositions", _I), ("reposition_distance", _F),
     ]),
     "tasks": pa.schema([
         ("run_id", _S), ("task_id", _I), ("kind", _S), ("x", _F), ("y", _F), ("z", _F),
