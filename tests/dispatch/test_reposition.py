@@ -432,3 +432,13 @@ def test_a_folder_mixing_layouts_reads_every_run(tmp_path):
     assert dict(tasks.groupby("run_id").reposition.first()) == got
     for run_id in got:
         assert res.metadata(run_id, "summary")["dispatch.run_id"] == run_id
+
+
+def test_the_vehicle_timeline_shows_repositioning_as_idle_driving(tmp_path):
+    from analysis.timeline import vehicle_intervals
+
+    _, t = run(scenario(tmp_path, trips=[*HOTSPOT, (130.0, 0, 6, None)]))
+    iv = vehicle_intervals(t["events"], t["vehicles"])
+    assert iv[["state", "start", "end", "task_id"]].values.tolist() == [
+        ["idle", 0.0, 100.0, -1], ["reposition", 100.0, 130.0, -1],
+        ["travel", 130.0, 180.0, 3], ["travel", 180.0, 200.0, 3]]
