@@ -137,9 +137,9 @@ def main(argv=None) -> int:
     console = Console()
     results: dict[str, list[dict]] = {"stay": [], "demand": []}
     for seed in range(args.seeds):
-        for policy in results:
+        for policy, rs in results.items():
             with tempfile.TemporaryDirectory() as d:
-                results[policy].append(measure(write_scenario(Path(d), seed, args, policy)))
+                rs.append(measure(write_scenario(Path(d), seed, args, policy)))
     keys = ("served", "lost", "wait", "median", "p90", "empty_km", "repo_km", "moves", "wall")
     t = Table(title=f"Hotspot: {args.hot:.0%} of pickups in a 800 m corner; {args.agents} "
                     f"taxis, {args.allocator}; demand: {args.zone:g} m zones, every "

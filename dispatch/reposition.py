@@ -18,9 +18,11 @@ What the kernel does with a move
     The vehicle drives the fastest path to the target node (empty: its metres count in
     ``empty_distance`` and in the summary's ``reposition_distance``). It stays *idle* all the
     way: the dispatcher may give it a trip at any moment, and it then drives to the pickup from
-    where it is (part-way along an edge included); a later move may re-target it. Events: a
-    ``reposition`` (vehicle; at the target node), then a ``depart`` with task -1 (at where it
-    starts); on arrival an ``idle`` at the target. A breakdown stops it like any drive.
+    where it is (part-way along an edge included); a later move may re-target it. Its arrival
+    wakes the dispatcher (a request it could not reach in time before may be within reach).
+    Events: a ``reposition`` (vehicle; at the target node), then a ``depart`` with task -1 (at
+    where it starts); on arrival an ``idle`` at the target. A breakdown stops it like any
+    drive.
 
 Repositioning moves vehicles on road networks only: a scenario that pairs a non-passive
 repositioner with a voxel world fails validation (:attr:`Repositioner.spaces`).
@@ -31,7 +33,7 @@ from __future__ import annotations
 import logging
 from abc import ABC, abstractmethod
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, ClassVar
 
@@ -148,8 +150,11 @@ class Repositioning:
 
     def __init__(self, env: simpy.Environment, bus: EventBus, fleet: Fleet, driver: RoadDriver,
                  space: RoadNetwork, repositioner: Repositioner, interval: float, horizon: float,
-                 rng: np.random.Generator) -> None:
+                 rng: np.random.Generator, notify: Callable[[], None] = lambda: None) -> None:
         self.env, self.bus, self.fleet, self.driver = env, bus, fleet, driver
+        #: asks the dispatcher for a decision: a vehicle that arrived may now reach a request
+        #: it could not reach in time from where it was
+        self.notify = notify
         self.space, self.repositioner, self.rng = space, repositioner, rng
         self.interval, self.horizon = interval, horizon
         self.run_id = ""  # named in error messages
@@ -251,6 +256,7 @@ class Repositioning:
             return
         self._close(v, trip)
         self.bus.emit(self.env.now, "idle", v.id, -1, v.loc)
+        self.notify()
 
     def _close(self, v: Vehicle, trip: _Trip) -> None:
         if trip.open:

@@ -212,7 +212,8 @@ class Simulation:
             r = sc.reposition
             self.repositioning = Repositioning(env, bus, self.fleet, driver, self.space,
                                                self.repositioner, r.interval, r.horizon,
-                                               rng_for(spec.seed, STREAM_REPOSITION))
+                                               rng_for(spec.seed, STREAM_REPOSITION),
+                                               lambda: self.dispatcher.notify())
             self.repositioning.run_id = spec.run_id
             self.operator.on_assign = self.repositioning.stop
         self.faults = (FaultInjector(env, sc.faults, self.fleet, self.operator,

@@ -317,8 +317,8 @@ def test_bad_configuration_is_one_line_naming_the_key(tmp_path, extra, words):
 
 
 @pytest.mark.parametrize("params, words", [
-    ("zone = -5.0", "repositioner 'demand' rejected its parameters (reposition.demand: "
-                    "zone = -5.0): ValueError: zone must be a number of metres > 0, got -5.0"),
+    ("zone = -5.0", ("repositioner 'demand' rejected its parameters (reposition.demand: "
+                     "zone = -5.0): ValueError: zone must be a number of metres > 0, got -5.0")),
     ("radius = 3", "(reposition.demand: radius = 3): TypeError"),
 ])
 def test_bad_policy_parameters_are_one_line_naming_the_table(tmp_path, params, words):
