@@ -10,10 +10,15 @@ run still going or killed half-way, temporary files) are not read.
 Results of older versions, where a single run wrote ``<table>.parquet`` files
 (``kind == "flat"``), are read too.
 
+A scenario that declares repositioning (``[reposition]``) has one more level,
+``…/planner=…/reposition=…/n_agents=…``; every other layout, older ones included, has none,
+and its runs read as ``reposition = "stay"`` (idle vehicles waited where they were, the only
+behaviour before repositioners existed).
+
 :func:`open_results` takes any number of such folders (or folders that contain them) and gives
 one :class:`Results`, whose :meth:`Results.table` returns a pandas DataFrame in which every
 table carries the run's keys (``scenario``, ``allocator``, ``planner``, ``n_agents``, ``seed``)
-whatever the layout. Only pyarrow and pandas are needed: no torch, no PyBullet, not even the
+and ``reposition`` whatever the layout. Only pyarrow and pandas are needed: no torch, no PyBullet, not even the
 ``dispatch`` package.
 """
 
@@ -30,7 +35,9 @@ import pyarrow.parquet as pq
 
 TABLES = ("summary", "tasks", "assignments", "decisions", "events", "vehicles", "obstacles")
 #: The columns that name a run; every table returned by :meth:`Results.table` has them.
-RUN_KEYS = ("scenario", "allocator", "planner", "n_agents", "seed")
+RUN_KEYS = ("scenario", "allocator", "planner", "n_agents", "seed", "reposition")
+#: Run keys that older results lack, and the value they had.
+DEFAULT_KEYS = {"reposition": "stay"}
 
 
 class NoResultsError(FileNotFoundError):
@@ -151,7 +158,11 @@ class Results:
                         if old.get(c, c) in d.schema.names]
             df = d.to_table(columns=want, filter=flt).to_pandas()
             df = _normalise(df.rename(columns=renames) if renames else df)
-            if name != "summary":
+            if name == "summary":
+                for k, v in DEFAULT_KEYS.items():
+                    if k not in df.columns:
+                        df[k] = v
+            else:
                 df = self._with_keys(df)
             if columns is not None:
                 df = df[[c for c in dict.fromkeys([*columns, *RUN_KEYS, "run_id"])
@@ -230,6 +241,9 @@ def _normalise(df):
     for k in ("allocator", "planner", "scenario"):
         if k in df.columns and str(df[k].dtype) == "category":
             df[k] = df[k].astype(str)
+    for k, v in DEFAULT_KEYS.items():  # a run of an older layout beside newer ones: null
+        if k in df.columns:
+            df[k] = df[k].astype(object).where(df[k].notna(), v).astype(str)
     return df
 
 
@@ -245,6 +259,8 @@ def _run_filter(summary, run_id: str, src: Source) -> ds.Expression | None:
     part = src.dataset("summary").partitioning
     if part is not None and "scenario" in part.schema.names:  # folders since scenario= paths
         expr = expr & (ds.field("scenario") == str(r["scenario"]))
+    if part is not None and "reposition" in part.schema.names:
+        expr = expr & (ds.field("reposition") == str(r["reposition"]))
     return expr
 
 

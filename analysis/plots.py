@@ -18,7 +18,7 @@ from analysis.timeline import STATES, trajectories, vehicle_intervals
 
 DPI = 120
 STATE_COLOURS = {"travel": "#1f77b4", "service": "#2ca02c", "waiting": "#ff7f0e",
-                 "idle": "#d9d9d9", "down": "#d62728"}
+                 "reposition": "#9edae5", "idle": "#d9d9d9", "down": "#d62728"}
 MARKERS = ("o", "s", "^", "D", "v", "P", "X")
 TASK_COLOURS = {"completed": "#2ca02c", "expired": "#d62728", "unreachable": "#7f7f7f",
                 "cancelled": "#9467bd", "rejected": "#ff7f0e", "failed": "#8c564b"}
@@ -193,9 +193,10 @@ def gantt(events: pd.DataFrame, vehicles: pd.DataFrame, path: Path, title: str =
     from matplotlib.patches import Patch
 
     busy = {"travel": "busy: travelling", "service": "busy: serving", "waiting": "waiting",
-            "idle": "idle", "down": "broken down"}
-    fig.legend(handles=[Patch(color=STATE_COLOURS[s], label=busy[s]) for s in STATES],
-               loc="outside lower center", ncol=5, fontsize="small", frameon=False)
+            "reposition": "idle: repositioning", "idle": "idle", "down": "broken down"}
+    shown = [s for s in STATES if s != "reposition" or (iv["state"] == s).any()]
+    fig.legend(handles=[Patch(color=STATE_COLOURS[s], label=busy[s]) for s in shown],
+               loc="outside lower center", ncol=len(shown), fontsize="small", frameon=False)
     return _save(fig, path)
 
 

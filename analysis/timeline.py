@@ -4,7 +4,7 @@ Vehicle events (``agent_id`` >= 0) and what they mean for the vehicle:
 
 * ``assign``  a task was given to it (x, y, z: the task's cell);
 * ``depart``  it leaves for the pickup, or with the passenger for the drop-off (x, y, z: where
-  it is);
+  it is); with task -1 it drives, idle, toward a repositioning target (after a ``reposition``);
 * ``move``    it entered the next cell of its path (x, y, z: that cell; on roads, only with
   ``edge_events``: the node it reached);
 * ``wait``    it holds its cell on the way (a reservation conflict), until its next ``move``;
@@ -14,8 +14,8 @@ Vehicle events (``agent_id`` >= 0) and what they mean for the vehicle:
 * ``idle``    it finished the task and is free again (or was repaired);
 * ``breakdown`` it failed where it is (``[faults]``); ``down`` until its next ``idle``.
 
-:func:`vehicle_intervals` turns them into ``travel`` / ``service`` (both busy), ``waiting`` and
-``idle`` intervals for a Gantt chart; :func:`trajectories` and :func:`positions_at` give where
+:func:`vehicle_intervals` turns them into ``travel`` / ``service`` (both busy), ``waiting``,
+``reposition`` (idle, driving to a repositioning target) and ``idle`` intervals for a Gantt chart; :func:`trajectories` and :func:`positions_at` give where
 each vehicle is, for the 3D view and the rendered animation.
 """
 
@@ -27,7 +27,7 @@ import pandas as pd
 #: Events whose x, y, z are the vehicle's own position (``assign`` and the task-closing events
 #: carry the task's cell instead).
 POSITION_EVENTS = ("depart", "move", "wait", "pickup", "dropoff", "arrive", "idle")
-STATES = ("travel", "service", "waiting", "idle", "down")
+STATES = ("travel", "service", "waiting", "reposition", "idle", "down")
 
 
 def vehicle_intervals(events: pd.DataFrame, vehicles: pd.DataFrame,
@@ -46,7 +46,10 @@ def vehicle_intervals(events: pd.DataFrame, vehicles: pd.DataFrame,
             new = {"assign": "waiting", "depart": "travel", "move": "travel", "wait": "waiting",
                    "pickup": "service", "dropoff": "service", "arrive": "service",
                    "idle": "idle", "breakdown": "down"}.get(ev.event)
-            if new is None or (ev.event == "assign" and state != "idle") or (
+            if ev.task_id < 0 and ev.event in ("depart", "move") and \
+                    state in ("idle", "reposition"):  # idle, driving to a reposition target
+                new = "reposition" if ev.event == "depart" or state == "reposition" else new
+            if new is None or (ev.event == "assign" and state not in ("idle", "reposition")) or (
                     state == "down" and new != "idle"):
                 continue
             if new != state:

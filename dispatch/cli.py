@@ -36,16 +36,17 @@ def _parser() -> argparse.ArgumentParser:
                    help="accept what is past the resource limits (world cells, releases, tasks, "
                         "runs, file sizes)")
 
-    c = sub.add_parser("check", help="check an installed allocator or planner plugin on random "
-                       "problems (valid answers, no mutation, determinism, rng use)")
+    c = sub.add_parser("check", help="check an installed allocator, planner or repositioner "
+                       "plugin on random problems (valid answers, no mutation, determinism, rng "
+                       "use)")
     c.add_argument("name", help="plugin name (see dispatch plugins)")
-    c.add_argument("--kind", choices=("allocator", "planner"),
-                   help="which kind NAME is (needed only when both kinds have that name)")
+    c.add_argument("--kind", choices=("allocator", "planner", "repositioner"),
+                   help="which kind NAME is (needed only when two kinds have that name)")
     c.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="a constructor parameter (VALUE read as TOML, else as a string); repeat")
     c.add_argument("--seed", type=int, default=0, help="seed of the random problems")
 
-    sub.add_parser("plugins", help="list installed allocators and planners")
+    sub.add_parser("plugins", help="list installed allocators, planners and repositioners")
     t = sub.add_parser("train", help="train a learned allocator (e.g. `dispatch train magnnet "
                        "--agents 8`); options after the name go to its trainer (--help)",
                        add_help=False)
@@ -94,9 +95,11 @@ def _specs(args):
         load("allocator", name)
     for name in sorted({s.planner for s in specs}):
         load("planner", name)
+    for name in sorted({s.reposition for s in specs}):
+        load("repositioner", name)
     from dispatch.sim import check_runs
 
-    check_runs(sc, sorted({s.planner for s in specs}))
+    check_runs(sc, sorted({s.planner for s in specs}), sorted({s.reposition for s in specs}))
     build_plugins(sc, specs)
     return sc, specs
 
@@ -107,7 +110,7 @@ def build_plugins(sc, specs) -> None:
     rejects stops here with one line, not in the middle of a sweep; place the first run's fleet
     when a start file places it (its rows are checked against the space)."""
     from dispatch.errors import PluginError
-    from dispatch.sim import make_plugin, space_for
+    from dispatch.sim import make_plugin, make_repositioner, space_for
 
     def build(kind, name, params, *args):
         try:
@@ -117,6 +120,11 @@ def build_plugins(sc, specs) -> None:
 
     for name in sorted({s.allocator for s in specs}):
         build("allocator", name, sc.dispatch.allocator_params)
+    for name in sorted({s.reposition for s in specs}):
+        try:
+            make_repositioner(sc, name)
+        except PluginError as e:
+            raise PluginError(f"{sc.path}: {e}") from e
     planners = sorted({s.planner for s in specs})
     if planners:
         space = space_for(sc.world, specs[0].seed, sc.path)
@@ -240,14 +248,15 @@ def _plugins(args, console) -> int:
 
     from dispatch.registry import describe
 
-    for kind in ("allocator", "planner"):
+    for kind in ("allocator", "planner", "repositioner"):
         t = Table(title=f"{kind}s (entry-point group dispatch.{kind}s)")
         cols = ("name", "target", "spaces", "description")
         for col in cols:
-            if kind == "planner" or col != "spaces":
+            if kind != "allocator" or col != "spaces":
                 t.add_column(col)
         for name, target, spaces, doc in describe(kind):
-            t.add_row(*((name, target, spaces, doc) if kind == "planner" else (name, target, doc)))
+            t.add_row(*((name, target, spaces, doc) if kind != "allocator"
+                        else (name, target, doc)))
         console.print(t)
     return 0
 
@@ -346,17 +355,19 @@ def _check(args, console) -> int:
 
     from dispatch.errors import PluginError
     from dispatch.registry import available, load
-    from dispatch.testing import check_allocator, check_planner
+    from dispatch.testing import check_allocator, check_planner, check_repositioner
 
-    kinds = [k for k in ("allocator", "planner") if args.name in available(k)]
+    all_kinds = ("allocator", "planner", "repositioner")
+    kinds = [k for k in all_kinds if args.name in available(k)]
     if args.kind:
         kinds = [args.kind]
     if not kinds:
-        raise PluginError(f"no allocator or planner named {args.name!r}; installed: "
-                          f"{', '.join(available('allocator'))} (allocators), "
-                          f"{', '.join(available('planner'))} (planners)")
+        raise PluginError(f"no allocator, planner or repositioner named {args.name!r}; "
+                          f"installed: {', '.join(available('allocator'))} (allocators), "
+                          f"{', '.join(available('planner'))} (planners), "
+                          f"{', '.join(available('repositioner'))} (repositioners)")
     if len(kinds) > 1:
-        raise DispatchError(f"{args.name!r} is both an allocator and a planner; say --kind")
+        raise DispatchError(f"{args.name!r} is both {' and '.join(kinds)}; say --kind")
     params = {}
     for item in args.param:
         key, sep, value = item.partition("=")
@@ -369,8 +380,10 @@ def _check(args, console) -> int:
     cls = load(kinds[0], args.name)
     if kinds[0] == "allocator":
         report = check_allocator(cls, seed=args.seed, **params)
-    else:
+    elif kinds[0] == "planner":
         report = check_planner(cls, seed=args.seed, **params)
+    else:
+        report = check_repositioner(cls, seed=args.seed, **params)
     for r in report.results:
         mark = "[green]pass[/]" if r.ok else "[red]FAIL[/]"
         console.print(f"{mark} {r.name}: {r.detail}", highlight=False, soft_wrap=True)

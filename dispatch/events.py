@@ -10,6 +10,7 @@ Event types (``Event.kind``), with the agent and task they name (-1: none):
 release        a task (trip) is released (task; at its pickup)
 assign         the dispatcher hands a task to a vehicle (agent, task; at the pickup)
 depart         a vehicle starts a leg: to a pickup, or with its passenger to the drop-off
+               (or, task -1, toward a repositioning target)
 move           a vehicle enters a cell (voxel world; one per cell) or, with
                ``[output] edge_events``, reaches a node on the way (roads)
 pickup         a vehicle reaches a task's pickup (for the paper's point tasks: the task)
@@ -30,6 +31,9 @@ reassign       ``[dispatch] reassign``: a vehicle driving to a pickup gives its 
                because a decision gave it another task or none (agent, the task given up;
                at the vehicle); the task is open again, and the ``assign`` events of the
                same decision follow (the vehicle's new task, the task's new vehicle)
+reposition     an idle vehicle is sent toward a node by the repositioner (agent; at the
+               target node), followed by a ``depart`` with task -1 where it starts and, on
+               arrival, an ``idle`` there; it stays idle (dispatchable) all the way
 =============  ===========================================================================
 """
 
@@ -42,7 +46,7 @@ from dispatch.space import Location
 
 KINDS = ("release", "assign", "depart", "move", "pickup", "dropoff", "complete", "idle", "wait",
          "replan", "expire", "reject", "unreachable", "cancel", "failed", "skipped",
-         "breakdown", "repair", "reopen", "reassign")
+         "breakdown", "repair", "reopen", "reassign", "reposition")
 
 
 @dataclass(frozen=True, slots=True)

@@ -49,6 +49,9 @@ SCHEMAS: dict[str, pa.Schema] = {
         # [dispatch] reassign: times a vehicle driving to a pickup gave its task up for another
         # decision's answer (each a `reassign` event)
         ("reassignments", _I),
+        # [reposition]: the repositioner (stay: idle vehicles wait), the drives it started
+        # toward a target and their metres (part of empty_distance)
+        ("reposition", _S), ("repositions", _I), ("reposition_distance", _F),
     ]),
     "tasks": pa.schema([
         ("run_id", _S), ("task_id", _I), ("kind", _S), ("x", _F), ("y", _F), ("z", _F),

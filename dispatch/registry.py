@@ -1,7 +1,8 @@
-"""Plugin registry: allocators and planners found by name through entry points.
+"""Plugin registry: allocators, planners and repositioners found by name through entry points.
 
 Built-ins are registered in ``pyproject.toml`` under the same entry-point groups as third-party
-plugins (``dispatch.allocators``, ``dispatch.planners``), so both are first-class. The table
+plugins (``dispatch.allocators``, ``dispatch.planners``, ``dispatch.repositioners``), so both
+are first-class. The table
 below is only a fallback for a source tree that was never installed; it names modules as
 strings, so the kernel still imports no concrete plugin.
 """
@@ -17,7 +18,8 @@ from dispatch.errors import PluginError
 
 log = logging.getLogger(__name__)
 
-GROUPS = {"allocator": "dispatch.allocators", "planner": "dispatch.planners"}
+GROUPS = {"allocator": "dispatch.allocators", "planner": "dispatch.planners",
+          "repositioner": "dispatch.repositioners"}
 _FALLBACK = {
     "allocator": {
         "hungarian": "allocators.hungarian:HungarianAllocator",
@@ -36,12 +38,17 @@ _FALLBACK = {
         "reservation": "planners.reservation:ReservationPlanner",
         "dijkstra": "planners.road:RoadPlanner",
     },
+    "repositioner": {
+        "stay": "repositioners.stay:StayRepositioner",
+        "demand": "repositioners.demand:DemandRepositioner",
+    },
 }
 
 
 @cache
 def available(kind: str) -> dict[str, str]:
-    """Installed plugins of a kind (``"allocator"`` or ``"planner"``): name -> ``module:attr``."""
+    """Installed plugins of a kind (``"allocator"``, ``"planner"`` or ``"repositioner"``):
+    name -> ``module:attr``."""
     found = dict(_FALLBACK[kind])
     for ep in entry_points(group=GROUPS[kind]):
         found[ep.name] = ep.value
@@ -80,13 +87,13 @@ def serving(space: str) -> list[str]:
 
 def describe(kind: str) -> list[tuple[str, str, str, str]]:
     """``(name, target, spaces, first docstring line or load error)`` for each installed
-    plugin (``spaces``: the spaces a planner serves; empty for allocators)."""
+    plugin (``spaces``: the spaces a planner or repositioner serves; empty for allocators)."""
     rows = []
     for name, target in available(kind).items():
         try:
             cls = load(kind, name)
             doc = (cls.__doc__ or "").strip().splitlines()
-            spaces = ", ".join(getattr(cls, "spaces", ())) if kind == "planner" else ""
+            spaces = ", ".join(getattr(cls, "spaces", ())) if kind != "allocator" else ""
             rows.append((name, target, spaces, doc[0] if doc else ""))
         except PluginError as e:
             rows.append((name, target, "", f"BROKEN: {e.__cause__}"))

@@ -3,7 +3,9 @@ sweep (:func:`sweep`) on a local process pool or on Ray.
 
 Every run, whatever the number of runs, is streamed by a :class:`~dispatch.recorder.Recorder`
 into its own Hive partition of ``out`` (``<table>/scenario=…/allocator=…/planner=…/n_agents=…/
-seed=…/part-0.parquet``, so two scenarios can share one folder; chunk files
+seed=…/part-0.parquet``, so two scenarios can share one folder; a scenario that declares
+repositioning, a ``[reposition]`` table or sweep, has a ``reposition=…`` level after
+``planner=…``, and its run ids name the repositioner after the planner; chunk files
 ``_inflight-NNNNN.parquet.chunk`` while it runs) and, once all of its tables are written, gets a completion marker ``out/_runs/<partition>/done.json`` (written
 atomically) that lists the files and their sizes. Rerunning a sweep (or a sweep over the output
 of ``dispatch run``) skips every run whose marker is there, names the same
@@ -92,10 +94,12 @@ def read_table(path: Path, partition: dict[str, Any], name: str) -> pa.Table:
 
 def run_metadata(spec: RunSpec) -> dict[str, str]:
     """The schema metadata every file of a run carries (besides version and run id)."""
+    keys = {"allocator": spec.allocator, "planner": spec.planner, "n_agents": spec.agents,
+            "seed": spec.seed, "scenario": spec.scenario.name}
+    if spec.names_reposition:
+        keys["reposition"] = spec.reposition
     return {"dispatch.scenario": spec.scenario.text, "dispatch.seed": str(spec.seed),
-            "dispatch.spec": json_meta({"allocator": spec.allocator, "planner": spec.planner,
-                                        "n_agents": spec.agents, "seed": spec.seed,
-                                        "scenario": spec.scenario.name})}
+            "dispatch.spec": json_meta(keys)}
 
 
 def make_recorder(spec: RunSpec, out: Path, *, flush_rows: int = DEFAULT_FLUSH_ROWS) -> Recorder:

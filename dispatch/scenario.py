@@ -160,6 +160,28 @@ class CommsConfig:
 
 
 @dataclass(frozen=True)
+class RepositionConfig:
+    """``[reposition]``: what idle vehicles do (see :mod:`dispatch.reposition`).
+
+    ``policy`` names an installed repositioner (``stay``: they wait where they are); a
+    non-passive one is called every ``interval`` seconds and sees the requests released in the
+    last ``horizon`` seconds. ``params`` holds each policy's ``[reposition.<name>]`` table
+    (its constructor's keyword arguments). ``declared``: the file has a ``[reposition]`` table
+    or a ``reposition`` sweep, so run ids and partitions name the repositioner (older layouts,
+    and scenarios without it, keep theirs)."""
+
+    policy: str = "stay"
+    interval: float = 300.0  # seconds between two calls of the repositioner
+    horizon: float = 1800.0  # seconds of released requests it sees
+    params: tuple[tuple[str, tuple[tuple[str, Any], ...]], ...] = ()
+    declared: bool = False
+
+    def params_of(self, name: str) -> tuple[tuple[str, Any], ...]:
+        """The constructor arguments of repositioner ``name``."""
+        return dict(self.params).get(name, ())
+
+
+@dataclass(frozen=True)
 class SweepConfig:
     allocator: tuple[str, ...] = ()
     planner: tuple[str, ...] = ()
@@ -167,11 +189,12 @@ class SweepConfig:
     seed: tuple[int, ...] = ()
     #: dispatch.batch_window values; each is its own scenario variant (see Scenario.variants)
     batch_window: tuple[float, ...] = ()
+    reposition: tuple[str, ...] = ()
 
     @property
     def declared(self) -> bool:
         return bool(self.allocator or self.planner or self.agents or self.seed
-                    or self.batch_window)
+                    or self.batch_window or self.reposition)
 
 
 @dataclass(frozen=True)
@@ -192,6 +215,7 @@ class Scenario:
     comms: CommsConfig = field(default_factory=CommsConfig)
     faults: FaultConfig = field(default_factory=FaultConfig)
     variant_of: str | None = None  # a batch-window variant: the swept scenario's name
+    reposition: RepositionConfig = field(default_factory=RepositionConfig)
 
     def runs(
         self,
@@ -215,10 +239,11 @@ class Scenario:
             self.variants(),
             dim(allocator, self.sweep.allocator, self.dispatch.allocator),
             dim(planner, self.sweep.planner, self.dispatch.planner),
+            dim(None, self.sweep.reposition, self.reposition.policy),
             dim(agents, self.sweep.agents, self.fleet.agents),
             dim(seed, self.sweep.seed, self.seed),
         )
-        return [RunSpec(v, a, p, n, s) for v, a, p, n, s in combos]
+        return [RunSpec(v, a, p, n, s, r) for v, a, p, r, n, s in combos]
 
     def variants(self) -> list[Scenario]:
         """The scenario once per swept ``batch_window`` (or itself when none is swept): each
@@ -233,17 +258,28 @@ class Scenario:
 
 @dataclass(frozen=True)
 class RunSpec:
-    """One run of a scenario: the scenario with allocator, planner, fleet size and seed fixed."""
+    """One run of a scenario: the scenario with allocator, planner, fleet size, seed and
+    repositioner fixed."""
 
     scenario: Scenario
     allocator: str
     planner: str
     agents: int
     seed: int
+    reposition: str = "stay"
+
+    @property
+    def names_reposition(self) -> bool:
+        """Whether the run id and the partition name the repositioner: when the scenario
+        declares repositioning (or the run is not ``stay``), so that files of scenarios
+        without it keep the layout they always had."""
+        return self.scenario.reposition.declared or self.reposition != "stay"
 
     @property
     def run_id(self) -> str:
-        return f"{self.scenario.name}__{self.allocator}__{self.planner}__n{self.agents}__s{self.seed}"
+        r = f"__{self.reposition}" if self.names_reposition else ""
+        return (f"{self.scenario.name}__{self.allocator}__{self.planner}{r}__n{self.agents}"
+                f"__s{self.seed}")
 
     @property
     def fleet(self) -> FleetConfig:
@@ -256,9 +292,13 @@ class RunSpec:
 
     @property
     def partition(self) -> dict[str, Any]:
-        """Hive partition keys of this run inside a sweep's output folder."""
-        return {"scenario": self.scenario.name, "allocator": self.allocator,
-                "planner": self.planner, "n_agents": self.agents, "seed": self.seed}
+        """Hive partition keys of this run inside a sweep's output folder (``reposition``
+        only where :attr:`names_reposition`)."""
+        keys = {"scenario": self.scenario.name, "allocator": self.allocator,
+                "planner": self.planner}
+        if self.names_reposition:
+            keys["reposition"] = self.reposition
+        return {**keys, "n_agents": self.agents, "seed": self.seed}
 
 
 # ----------------------------------------------------------------------------- reading
@@ -498,13 +538,17 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
         agents=s.int_list("agents", lo=1),
         seed=s.int_list("seed", lo=0, hi=MAX_SEED),
         batch_window=_windows(s),
+        reposition=s.str_list("reposition"),
     )
+    declared = "reposition" in root.data
+    reposition = _parse_reposition(root.table("reposition"), sweep, s)
     s.done()
     root.done()
 
     sc = Scenario(name=name, path=path, text=text, description=description, seed=seed,
                   duration=duration, world=world, fleet=fleet, tasks=tasks, dispatch=disp,
-                  sweep=sweep, comms=comms, faults=faults)
+                  sweep=sweep, comms=comms, faults=faults,
+                  reposition=replace(reposition, declared=declared or bool(sweep.reposition)))
     for n in sweep.agents or (fleet.agents,):
         _check_fits(sc, n, "sweep.agents" if sweep.agents else "fleet.agents")
     return sc
@@ -561,6 +605,41 @@ def _parse_congestion(w: _Table, network: str) -> tuple[float, ...]:
         raise w.fail("congestion", f"must be 'chicago_taxi', false or a list of 24 factors > 0 "
                                    f"(one per hour of day), got {_short(v)}")
     return tuple(float(x) for x in v)
+def _parse_reposition(r: _Table, sweep: SweepConfig, s: _Table) -> RepositionConfig:
+    """``[reposition]``: the policy (an installed repositioner), its timer and look-back, and
+    one ``[reposition.<name>]`` table of constructor arguments per policy that runs. Names are
+    checked against the installed repositioners here; a policy's own arguments are checked by
+    its constructor, the space it serves by :func:`dispatch.sim.check_repositioner`
+    (``dispatch validate`` does both)."""
+    from dispatch import registry
+
+    installed = registry.available("repositioner")
+    policy = r.string("policy", "stay")
+    interval = r.number("interval", 300.0, gt=0.0)
+    horizon = r.number("horizon", 1800.0, gt=0.0)
+
+    def known(tab: _Table, key: str, name: str) -> None:
+        if name not in installed:
+            raise tab.fail(key, f"unknown repositioner {name!r}; installed repositioners: "
+                                f"{', '.join(installed) or 'none'}")
+
+    known(r, "policy", policy)
+    for name in sweep.reposition:
+        known(s, "reposition", name)
+    running = set(sweep.reposition or (policy,))
+    params = []
+    for name in sorted(k for k in r.data if k not in ("policy", "interval", "horizon")):
+        if not isinstance(r.data[name], dict):
+            raise r.fail(name, "unknown key (known keys here: horizon, interval, policy, and "
+                               "one [reposition.<name>] table of parameters per repositioner)")
+        known(r, name, name)
+        if name not in running:
+            raise r.fail(name, f"parameters of repositioner {name!r}, which does not run "
+                               f"(running: {', '.join(sorted(running))})")
+        params.append((name, r.params(name)))
+    r.done()
+    return RepositionConfig(policy=policy, interval=interval, horizon=horizon,
+                            params=tuple(params))
 
 
 def _parse_faults(f: _Table, path: Path) -> FaultConfig:

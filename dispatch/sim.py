@@ -29,6 +29,7 @@ from dispatch.events import Event, EventBus
 from dispatch.faults import FaultInjector, blackout_filter
 from dispatch.placement import place_fleet
 from dispatch.recorder import json_meta
+from dispatch.reposition import Repositioner, Repositioning, summary_of
 from dispatch.reservations import Traffic
 from dispatch.scenario import RoadConfig, RunSpec, Scenario, WorldConfig, _short
 from dispatch.space import Space
@@ -39,7 +40,8 @@ from dispatch.world import World, build_world
 
 log = logging.getLogger(__name__)
 
-STREAM_WORLD, STREAM_FLEET, STREAM_TASKS, STREAM_ALLOCATOR, STREAM_SOURCE, STREAM_FAULTS = range(6)
+(STREAM_WORLD, STREAM_FLEET, STREAM_TASKS, STREAM_ALLOCATOR, STREAM_SOURCE, STREAM_FAULTS,
+ STREAM_REPOSITION) = range(7)
 NAN3 = (math.nan, math.nan, math.nan)
 
 __all__ = ["Simulation", "make_plugin", "place_fleet", "rng_for", "space_for", "world_for"]
@@ -83,6 +85,11 @@ def make_plugin(kind: str, name: str, params, *args):
     """Build an allocator or planner from its scenario parameters. Whatever its constructor
     raises (TypeError, ValueError, an error of a library it calls) becomes one PluginError
     naming the plugin, its parameters and the reason."""
+    return _construct(kind, name, params, args, f"dispatch.{kind}_params")
+
+
+def _construct(kind: str, name: str, params, args, key: str):
+    """``make_plugin`` for any kind, the parameters read from the scenario table ``key``."""
     cls = registry.load(kind, name)
     params = dict(params)
     try:
@@ -90,15 +97,35 @@ def make_plugin(kind: str, name: str, params, *args):
     except Exception as e:  # a plugin's constructor may raise anything
         shown = ", ".join(f"{k} = {_short(v)}" for k, v in params.items()) or "none"
         reason = " ".join(str(e).split()) or type(e).__name__
-        key = f"dispatch.{kind}_params"
         raise PluginError(f"{kind} {name!r} rejected its parameters ({key}: {shown}): "
                           f"{type(e).__name__}: {reason}") from e
 
 
-def check_runs(sc: Scenario, planners) -> None:
-    """Validate-time checks that need plugins or the network: every planner serves the
-    scenario's space; a road network loads; a trace names only nodes it has."""
+def make_repositioner(sc: Scenario, name: str) -> Repositioner:
+    """The repositioner ``name`` built from its ``[reposition.<name>]`` table."""
+    return _construct("repositioner", name, sc.reposition.params_of(name), (),
+                      f"reposition.{name}")
+
+
+def check_repositioner(sc: Scenario, name: str) -> None:
+    """ScenarioError unless repositioner ``name`` serves the scenario's space (the kernel moves
+    vehicles on road networks only: a voxel world takes passive ones, such as ``stay``)."""
+    cls = registry.load("repositioner", name)
     space = sc.world.space
+    serves = tuple(getattr(cls, "spaces", ("road",)))
+    if space not in serves or (space != "road" and not getattr(cls, "passive", False)):
+        key = "sweep.reposition" if sc.sweep.reposition else "reposition.policy"
+        raise ScenarioError(sc.path, key, f"repositioner {name!r} moves vehicles on "
+                                          f"{' and '.join(serves)} spaces, not this scenario's "
+                                          f"{space} world (use 'stay' there)")
+
+
+def check_runs(sc: Scenario, planners, repositioners=()) -> None:
+    """Validate-time checks that need plugins or the network: every planner and repositioner
+    serves the scenario's space; a road network loads; a trace names only nodes it has."""
+    space = sc.world.space
+    for name in repositioners:
+        check_repositioner(sc, name)
     for name in planners:
         serves = getattr(registry.load("planner", name), "spaces", ("voxel",))
         if space not in serves:
@@ -141,6 +168,8 @@ class Simulation:
                                            sc.dispatch.allocator_params)
         self.planner: Planner = make_plugin("planner", spec.planner, sc.dispatch.planner_params,
                                             self.space)
+        check_repositioner(sc, spec.reposition)
+        self.repositioner: Repositioner = make_repositioner(sc, spec.reposition)
         self.bus = bus = EventBus()
         self.book = book = TaskBook(env, bus)
         self.fleet = Fleet(place_fleet(self.space, spec, rng_for(spec.seed, STREAM_FLEET)))
@@ -193,6 +222,16 @@ class Simulation:
                                  trips)
         self.source.on_done = self._check_finished
         self.operator.on_reopen = self.source.rearm
+        #: the repositioning timer and drives (None: a passive repositioner, e.g. ``stay``)
+        self.repositioning = None
+        if not self.repositioner.passive:
+            r = sc.reposition
+            self.repositioning = Repositioning(env, bus, self.fleet, driver, self.space,
+                                               self.repositioner, r.interval, r.horizon,
+                                               rng_for(spec.seed, STREAM_REPOSITION),
+                                               lambda: self.dispatcher.notify())
+            self.repositioning.run_id = spec.run_id
+            self.operator.on_assign = self.repositioning.stop
         self.faults = (FaultInjector(env, sc.faults, self.fleet, self.operator,
                                      rng_for(spec.seed, STREAM_FAULTS))
                        if sc.faults.vehicles else None)
@@ -317,9 +356,13 @@ class Simulation:
                                                    else 0.0))
         for b in getattr(self.space, "boxes", ()):
             rec.add("obstacles", x0=b.x0, y0=b.y0, z0=b.z0, x1=b.x1, y1=b.y1, z1=b.z1)
+        if self.repositioning is not None:
+            self.repositioning.finish()
         run = dict(scenario=spec.scenario.name, allocator=spec.allocator, planner=spec.planner,
-                   n_agents=len(self.vehicles), seed=spec.seed, space=self.space.kind)
+                   reposition=spec.reposition, n_agents=len(self.vehicles), seed=spec.seed,
+                   space=self.space.kind)
         summary = self.stats.summary(run=run, vehicles=self.vehicles,
                                      dispatcher=self.dispatcher, sim_time=float(self.env.now))
+        summary.update(summary_of(self.repositioning))
         rec.add("summary", **summary)
         return summary

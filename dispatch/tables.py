@@ -96,7 +96,18 @@ def render(summaries: list[dict], console=None) -> None:
 def render_trips(summaries: list[dict], console=None) -> None:
     """Print the trip table of road-network runs: per allocator and fleet size, the mean over
     seeds of trips released, the share served, rejected and expired, the mean wait (release to
-    pickup), the fleet's empty and occupied kilometres and the wall seconds spent deciding."""
+    pickup), the fleet's empty and occupied kilometres and the wall seconds spent deciding.
+    Runs with a repositioner other than ``stay`` get a table per repositioner (its name and
+    the kilometres it drove in the title)."""
+    by_repositioner: dict[str, list[dict]] = defaultdict(list)
+    for s in summaries:
+        by_repositioner[s.get("reposition", "stay")].append(s)
+    for name in sorted(by_repositioner, key=lambda r: (r != "stay", r)):
+        rows = by_repositioner[name]
+        _render_trips(rows, console, None if set(by_repositioner) == {"stay"} else name)
+
+
+def _render_trips(summaries: list[dict], console, repositioner: str | None) -> None:
     from rich.console import Console
     from rich.table import Table
 
@@ -106,8 +117,12 @@ def render_trips(summaries: list[dict], console=None) -> None:
     for s in summaries:
         groups[(_variant(s) if variants else s["allocator"], s["n_agents"])].append(s)
     runs = max((len(g) for g in groups.values()), default=0)
-    t = Table(title=f"Trips, mean over {runs} seed(s): served, rejected, expired, wait "
-                    f"(release to pickup), empty and occupied km, deciding seconds")
+    title = (f"Trips, mean over {runs} seed(s): served, rejected, expired, wait "
+             f"(release to pickup), empty and occupied km, deciding seconds")
+    if repositioner is not None:
+        km = fmean(s.get("reposition_distance", 0.0) for s in summaries) / 1000
+        title = f"Repositioner {repositioner!r} ({km:.0f} km repositioning per run). " + title
+    t = Table(title=title)
     for col in ("allocator", "N", "trips", "served", "rej.", "exp.", "wait s", "empty km",
                 "occ. km", "dec. s"):
         t.add_column(col, justify="left" if col == "allocator" else "right")

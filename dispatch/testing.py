@@ -9,7 +9,10 @@ it gets wrong, before a simulation does.
     report = check_planner(MyPlanner)                     # on a small voxel world / road grid
     report = check_planner(MyPlanner, space)              # or on a space of your own
 
-From the command line: ``dispatch check NAME`` (an installed allocator or planner).
+    report = check_repositioner(MyRepositioner, zone=500)  # on random views of a road grid
+
+From the command line: ``dispatch check NAME`` (an installed allocator, planner or
+repositioner).
 
 Allocator checks, each on every problem of :func:`allocation_problems` (no agents, no tasks,
 square and rectangular, rows and columns all ``inf``, ids that are not indices, several
@@ -29,6 +32,12 @@ Planner checks on random agents and tasks of the space: ``construct``, ``costs``
 ``(len(agents), len(tasks))``, floats, ``>= 0`` or ``inf``, no ``nan``, also for 0 agents / 0
 tasks), ``plan`` (a path from the agent's location to the goal where the cost is finite),
 ``no-mutation`` (of the space's grid), ``deterministic`` and ``rng`` as above.
+
+Repositioner checks on random views (:func:`reposition_view`) of :func:`small_network`
+(no idle vehicles, no recent requests, vehicles already repositioning, part-way along edges):
+``construct``, ``valid`` (a mapping from idle vehicle ids of the view to node indices),
+``no-mutation`` (of the view), ``deterministic`` and ``rng`` as above. A passive repositioner
+(never called by the kernel) must answer with no moves.
 """
 
 from __future__ import annotations
@@ -45,7 +54,7 @@ from dispatch.contracts import AgentView, Allocation, AllocationProblem, TaskVie
 from dispatch.errors import AllocationError
 
 __all__ = ["CheckResult", "Report", "allocation_problems", "check_allocator", "check_planner",
-           "small_network", "small_world"]
+           "check_repositioner", "reposition_view", "small_network", "small_world"]
 
 
 @dataclass(frozen=True)
@@ -370,3 +379,135 @@ def _check_planner_on(report: Report, cls, space, seed: int, params: dict, tag: 
     report.add("no-mutation" + tag, mutated, "the space is unchanged")
     report.add("deterministic" + tag, differs, "same queries, same costs")
     report.add("rng" + tag, global_rng, "costs do not depend on the global random state")
+
+
+# ----------------------------------------------------------------------------- repositioners
+
+
+def reposition_view(space, vehicles, requests=(), *, time: float = 0.0, horizon: float = 1800.0,
+                    targets=None, seed: int = 0):
+    """A :class:`~dispatch.reposition.RepositionView` built by hand: ``vehicles`` maps idle
+    vehicle ids to where they are (a node or a :class:`~dispatch.roads.RoadPoint`),
+    ``requests`` lists ``(release time, pickup node)`` (all inside the horizon), ``targets``
+    maps vehicles already repositioning to their target node."""
+    from dispatch.reposition import RepositionView, _readonly
+
+    ids = sorted(vehicles)
+    locs = [vehicles[i] for i in ids]
+    targets = targets or {}
+    req = list(requests)
+    nodes = [getattr(p, "node", p) for p in locs]
+    rnodes = _readonly([int(n) for _, n in req], np.int64)
+    return RepositionView(
+        time=float(time), horizon=float(horizon), vehicle_ids=_readonly(ids, np.int64),
+        nodes=_readonly(nodes, np.int64),
+        remaining=_readonly([max(getattr(p, "remaining", 0.0), 0.0) for p in locs], np.float64),
+        targets=_readonly([targets.get(i, -1) for i in ids], np.int64),
+        vehicle_pos=_readonly(space.positions(locs) if locs else np.zeros((0, 3)), np.float64),
+        request_times=_readonly([float(t) for t, _ in req], np.float64), request_nodes=rnodes,
+        request_pos=_readonly(space.positions(rnodes), np.float64), space=space,
+        rng=np.random.default_rng(seed))
+
+
+def _reposition_views(space, seed: int):
+    """Labelled view factories (each call builds the same view with a fresh rng)."""
+    from dispatch.roads import RoadPoint
+
+    g = np.random.default_rng(seed)
+    n = space.n
+
+    def views(label, n_vehicles, n_requests, moving=0, on_edge=0):
+        nodes = g.integers(0, n, n_vehicles).tolist()
+        ids = (g.permutation(1000)[:n_vehicles] + 1000).tolist()
+        vehicles = dict(zip(ids, nodes))
+        for vid in ids[:on_edge]:  # part-way along an edge into its node
+            node = vehicles[vid]
+            prev = int(space._time_t.indices[space._time_t.indptr[node]])
+            secs, metres = space.edge(prev, node)
+            vehicles[vid] = RoadPoint(node, prev, secs / 2, metres / 2)
+        targets = {vid: int(g.integers(0, n)) for vid in ids[on_edge:on_edge + moving]}
+        req = [(float(t), int(v)) for t, v in zip(np.sort(g.uniform(0, 1800, n_requests)),
+                                                  g.integers(0, n, n_requests))]
+        return label, lambda: reposition_view(space, vehicles, req, time=1800.0,
+                                              targets=targets, seed=seed)
+
+    return [views("no idle vehicles", 0, 10), views("no requests", 5, 0),
+            views("one vehicle, one request", 1, 1), views("8 vehicles, 40 requests", 8, 40),
+            views("some repositioning, some on edges", 10, 30, moving=3, on_edge=3),
+            views("many vehicles, few requests", 25, 3)]
+
+
+def _view_snapshot(v) -> tuple:
+    arrays = (v.vehicle_ids, v.nodes, v.remaining, v.targets, v.vehicle_pos, v.request_times,
+              v.request_nodes, v.request_pos)
+    return (v.time, v.horizon, *(a.copy() for a in arrays),
+            *(a.flags.writeable for a in arrays))
+
+
+def check_repositioner(cls, space=None, *, seed: int = 0, **params: Any) -> Report:
+    """Run every repositioner check (see the module docstring) on ``cls(**params)`` with views
+    of ``space`` (default :func:`small_network`)."""
+    from collections.abc import Mapping
+
+    report = Report(getattr(cls, "name", "") or getattr(cls, "__name__", str(cls)))
+    space = space if space is not None else small_network()
+    try:
+        cls(**params)
+    except Exception as e:  # noqa: BLE001
+        report.add("construct", [f"{cls.__name__}(**{params!r}) raised {_err(e)}"], "")
+        return report
+    report.add("construct", [], f"{getattr(cls, '__name__', cls)}(**{params!r})")
+    passive = bool(getattr(cls, "passive", False))
+    invalid, mutated, differs, global_rng = [], [], [], []
+    answers: dict[str, dict] = {}
+    cases = _reposition_views(space, seed)
+    for label, build in cases:
+        view = build()
+        before = _view_snapshot(view)
+        try:
+            _perturb_global_rng(1)
+            moves = cls(**params).reposition(view)
+        except Exception as e:  # noqa: BLE001
+            invalid.append(f"{label}: reposition raised {_err(e)}")
+            continue
+        if not _same(before, _view_snapshot(view)):
+            mutated.append(f"{label}: the view changed during reposition")
+        if not isinstance(moves, Mapping):
+            invalid.append(f"{label}: returned {type(moves).__name__}, not a mapping")
+            continue
+        ids = set(view.vehicle_ids.tolist())
+        bad = [(k, v) for k, v in moves.items()
+               if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k not in ids
+               or isinstance(v, bool) or not isinstance(v, (int, np.integer))
+               or not 0 <= v < space.n]
+        if bad:
+            invalid.append(f"{label}: move {bad[0][0]!r} -> {bad[0][1]!r} names no idle vehicle "
+                           f"of the view or no node of the network")
+            continue
+        if passive and moves:
+            invalid.append(f"{label}: a passive repositioner returned {len(moves)} move(s)")
+            continue
+        answers[label] = dict(moves)
+    for label, build in cases:
+        if label not in answers:
+            continue
+        try:
+            _perturb_global_rng(1)
+            again = dict(cls(**params).reposition(build()))
+            _perturb_global_rng(987654)
+            other = dict(cls(**params).reposition(build()))
+        except Exception as e:  # noqa: BLE001
+            differs.append(f"{label}: a second call raised {_err(e)}")
+            continue
+        if again != answers[label]:
+            differs.append(f"{label}: the same view and seed gave {again}, then "
+                           f"{answers[label]}")
+        elif other != answers[label]:
+            global_rng.append(f"{label}: the moves changed with the global random state; "
+                              f"draw only from view.rng")
+    report.add("valid", invalid, f"{len(cases)} views, every answer a mapping of idle vehicle "
+                                 f"ids to nodes")
+    report.add("no-mutation", mutated, "no view changed")
+    report.add("deterministic", differs, "same view and seed, same moves")
+    report.add("rng", global_rng, "moves do not depend on the global random state")
+    return report

@@ -360,6 +360,8 @@ class Operator:
         self.traffic = traffic
         #: called with a task re-opened by a breakdown (the task source re-arms its expiry)
         self.on_reopen: Callable[[Task], None] = lambda task: None
+        #: called with a vehicle about to be given a task (repositioning stops its drive)
+        self.on_assign: Callable[[Vehicle], None] = lambda v: None
         if traffic is not None:
             for v in fleet.vehicles:
                 v.proc = env.process(self._drive_timed(v))
@@ -367,6 +369,7 @@ class Operator:
     def assign(self, task: Task, v: Vehicle, cost: float) -> None:
         """Give ``task`` to the idle vehicle ``v`` (or one that has just given its task up,
         :meth:`give_up`) at the planned ``cost`` (seconds)."""
+        self.on_assign(v)
         path = None if self.traffic is not None else self.driver.plan(v, task.loc, self.env.now)
         self.book.assign(task, v.id, cost)
         self.fleet.set_busy(v)

@@ -282,7 +282,7 @@ def test_cli_check_bad_param_and_unknown_name(capsys):
     out = capsys.readouterr().out
     assert "FAIL construct" in out and "w (the suboptimality bound)" in out
     assert cli.main(["check", "no_such_plugin"]) == 2
-    assert "no allocator or planner named 'no_such_plugin'" in capsys.readouterr().err
+    assert "no allocator, planner or repositioner named 'no_such_plugin'" in capsys.readouterr().err
 
 
 # ----------------------------------------------------------------------------- inside a run
