@@ -46,6 +46,9 @@ SCHEMAS: dict[str, pa.Schema] = {
         ("distance", _F), ("empty_distance", _F), ("occupied_distance", _F),
         # [faults]: vehicle breakdowns; tasks re-opened by one; of those, passengers transferred
         ("failures", _I), ("tasks_reassigned", _I), ("tasks_transferred", _I),
+        # tasks that had a vehicle when they closed: total_cost / tasks_assigned is the mean
+        # planned cost of an assignment (the dynamic benchmark's per-task cost)
+        ("tasks_assigned", _I),
     ]),
     "tasks": pa.schema([
         ("run_id", _S), ("task_id", _I), ("kind", _S), ("x", _F), ("y", _F), ("z", _F),
