@@ -139,9 +139,11 @@ def test_sweep_prints_all_allocators(make_scenario, cli, tmp_path):
     proc = cli("run", path, "--out", out)
     assert proc.returncode == 0, proc.stderr
     assert "12 run(s)" in proc.stdout
-    header = next(line for line in proc.stdout.splitlines()
-                  if "hungarian" in line and "greedy" in line)
-    assert "random" in header
+    # one row per allocator and N, in each of Tables I and III
+    rows = [line.split() for line in proc.stdout.splitlines()]
+    for alloc in ("hungarian", "greedy", "random"):
+        for n in ("2", "3"):
+            assert sum(r[:2] == [alloc, n] for r in rows) == 2, (alloc, n, proc.stdout)
     assert (out / "summary" / "scenario=tiny" / "allocator=random" / "planner=astar" / "n_agents=2" / "seed=0"
             / "part-0.parquet").is_file()
 
