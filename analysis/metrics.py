@@ -374,36 +374,48 @@ def run_metrics(summary: pd.DataFrame, tasks: pd.DataFrame, vehicles: pd.DataFra
     return out.drop(columns="runs")
 
 
-def hourly_customers(trips: pd.DataFrame, keys: list[str] | None = None) -> pd.DataFrame:
-    """Per group (``keys``, default the allocator groups) and hour of release: the customer
-    columns of :func:`customer_stats` (``trips``: the rows of :func:`trip_table`)."""
+def hourly_customers(trips: pd.DataFrame, keys: list[str] | None = None,
+                     bin_s: float = 3600.0) -> pd.DataFrame:
+    """Per group (``keys``, default the allocator groups) and hour of release (or bin of
+    ``bin_s`` seconds): the customer columns of :func:`customer_stats` (``trips``: the rows of
+    :func:`trip_table`); ``hour`` is the bin's index, ``t_h`` its start in hours."""
     keys = [k for k in (keys or GROUP) if k in trips.columns]
+    t = trips.assign(hour=np.floor(trips["released_at"].to_numpy(dtype=float) / bin_s)
+                     .astype(int))
     rows = []
-    for key, g in trips.groupby([*keys, "hour"], sort=True):
+    for key, g in t.groupby([*keys, "hour"], sort=True):
         row = dict(zip([*keys, "hour"], key))
+        row["t_h"] = row["hour"] * bin_s / 3600
         row.update(customer_stats(g))
         rows.append(row)
     return pd.DataFrame(rows)
 
 
 def hourly_fleet(states: pd.DataFrame, summary: pd.DataFrame,
-                 keys: list[str] | None = None) -> pd.DataFrame:
-    """Per group and clock hour: the mean number of vehicles in each fleet state (vehicle
-    seconds / 3600 / runs) and ``utilization`` (to_pickup + occupied over the time not failed)."""
+                 keys: list[str] | None = None, bin_s: float = 3600.0) -> pd.DataFrame:
+    """Per group and clock hour (or bin of ``bin_s`` seconds; ``hour`` its index, ``t_h`` its
+    start in hours): the mean number of vehicles in each fleet state (its share of the bin's
+    vehicle seconds times the fleet size; a bin cut short by the end of a run counts for the
+    time it covers) and ``utilization`` (to_pickup + occupied over the time not failed)."""
     from analysis.timeline import FLEET_STATES, hourly_states
 
     keys = keys or GROUP
-    h = hourly_states(states)
+    h = hourly_states(states, hour=bin_s)
     if h.empty:
-        return pd.DataFrame(columns=[*keys, "hour", *FLEET_STATES, "utilization"])
+        return pd.DataFrame(columns=[*keys, "hour", "t_h", *FLEET_STATES, "utilization"])
     h = h.merge(summary[list(dict.fromkeys(["run_id", *keys]))], on="run_id", how="left")
     runs = h.groupby(keys)["run_id"].nunique()
     out = h.groupby([*keys, "hour"], sort=True)[list(FLEET_STATES)].sum().reset_index()
-    n = out.set_index(keys).index.map(runs).to_numpy(dtype=float)
-    available = out[list(FLEET_STATES)].sum(axis=1) - out["failed"]
+    out.insert(len(keys) + 1, "t_h", out["hour"] * bin_s / 3600)
+    fleet = (states.merge(summary[list(dict.fromkeys(["run_id", *keys]))], on="run_id",
+                          how="left").drop_duplicates(["run_id", "agent_id"])
+             .groupby(keys).size() / runs)  # vehicles per run
+    size = out.set_index(keys).index.map(fleet).to_numpy(dtype=float)
+    covered = out[list(FLEET_STATES)].sum(axis=1)  # a run's last bin may be cut short
+    available = covered - out["failed"]
     out["utilization"] = ((out["to_pickup"] + out["occupied"]) / available.where(available > 0))
     for st in FLEET_STATES:
-        out[st] = out[st] / 3600 / n
+        out[st] = out[st] / covered.where(covered > 0) * size
     return out
 
 

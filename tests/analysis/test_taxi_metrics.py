@@ -113,11 +113,11 @@ def test_hourly_series_by_hand(tiny_road):
     assert (hc["requests"].iloc[0], hc["rides"].iloc[0], hc["rejections"].iloc[0]) == (4, 3, 1)
     states = fleet_states(events, vehicles, end=50.0)
     hf = M.hourly_fleet(states, s).iloc[0]
-    # vehicle-seconds (/ 3600 in the table): occupied 20 + 10 + 20, to a pickup 10 + 20,
-    # idle 10 + 1 + 9
-    assert hf["occupied"] * 3600 == pytest.approx(50)
-    assert hf["to_pickup"] * 3600 == pytest.approx(30)
-    assert hf["idle"] * 3600 == pytest.approx(20)
+    # vehicle-seconds over the 50 s the run lasted: occupied 20 + 10 + 20, to a pickup
+    # 10 + 20, idle 10 + 1 + 9; as mean vehicles (2 taxis): 1.0, 0.6, 0.4
+    assert hf["occupied"] == pytest.approx(1.0)
+    assert hf["to_pickup"] == pytest.approx(0.6)
+    assert hf["idle"] == pytest.approx(0.4)
     assert hf["utilization"] == pytest.approx(0.8)
 
 
