@@ -224,7 +224,7 @@ def wait_by_group(waits: pd.DataFrame, path: Path, title: str = "") -> Path:
     left.set_title("Wait distribution (ECDF)")
     keep = [i for i, d in enumerate(data) if len(d)]
     if keep:
-        bp = right.boxplot([data[i] for i in keep], vert=False, patch_artist=True,
+        bp = right.boxplot([data[i] for i in keep], orientation="horizontal", patch_artist=True,
                            showfliers=False, widths=0.6)
         for box, i in zip(bp["boxes"], keep):
             box.set_facecolor(colours[labels[i]])
