@@ -387,7 +387,7 @@ def _road_part(res, summary, tasks, vehicles, events, direct, out, written, run_
     TP.wait_by_group(trips.loc[trips["wait"].notna()], out / "wait_by_allocator.png",
                      title=f"{scen}: wait from release to pickup, seeds pooled")
     written += [out / f for f in ROAD_FIGURES]
-    unit = "hour" if bin_s == 3600 else f"{bin_s / 60:g} minutes"
+    unit = "one hour" if bin_s == 3600 else f"{bin_s / 60:g} minutes"
     return [
         ("h2", "Taxi study: customers and fleet"),
         ("p", ("Per allocator and fleet size N, requests pooled over the seeds. Names as "
@@ -404,7 +404,7 @@ def _road_part(res, summary, tasks, vehicles, events, direct, out, written, run_
                "hourly_fleet.csv.")),
         ("table", _taxi_view(taxi, TAXI_COLUMNS)),
         ("img", "map.png"),
-        ("p", f"Over time, in bins of one {unit} (the CSV files are per hour):"),
+        ("p", f"Over time, in bins of {unit} (the CSV files are per hour):"),
         ("img", "hourly.png"), ("img", "fleet_state.png"), ("img", "wait_by_allocator.png"),
     ]
 

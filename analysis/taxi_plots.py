@@ -118,7 +118,7 @@ def hourly(customers: pd.DataFrame, path: Path, *, bin_s: float, runs: dict,
     run), rejection rate, and wait median / p90 per allocator and N. ``customers``: rows of
     :func:`analysis.metrics.hourly_customers` with ``t_h`` (bin start, hours); ``runs``:
     (allocator, N) -> number of runs pooled."""
-    fig = _figure(10, 8.4)
+    fig = _figure(11, 8.4)
     a1, a2, a3 = fig.subplots(3, 1, sharex=True)
     multi_n = customers["n_agents"].nunique() > 1
     keys = [k for k, _ in _groups(customers)]
@@ -148,13 +148,13 @@ def hourly(customers: pd.DataFrame, path: Path, *, bin_s: float, runs: dict,
     unit = "hour" if bin_s == 3600 else f"{bin_s / 60:g} min"
     a1.set_ylabel(f"trips per {unit}\n(mean per run)")
     a1.set_title(title or "Demand, service and waiting over the day")
-    a1.legend(fontsize="x-small", ncol=2, loc="upper left")
+    a1.legend(fontsize="x-small", loc="upper left", bbox_to_anchor=(1.01, 1))
     a2.set_ylabel("rejected (%)\n(at once or expired)")
     a2.set_ylim(bottom=0)
-    a2.legend(fontsize="x-small", ncol=3, loc="upper left")
+    a2.legend(fontsize="x-small", loc="upper left", bbox_to_anchor=(1.01, 1))
     a3.set_ylabel("wait, release → pickup\n(min)")
     a3.set_ylim(bottom=0)
-    a3.legend(fontsize="x-small", ncol=2, loc="upper left")
+    a3.legend(fontsize="x-small", loc="upper left", bbox_to_anchor=(1.01, 1))
     a3.set_xlabel("time of release (h)")
     for ax in (a1, a2, a3):
         ax.grid(True, alpha=0.3)
