@@ -2,7 +2,7 @@
 not hold: the map's edges and the trips' direct free-flow times.
 
 The run's files carry the scenario text (``dispatch.scenario``); its ``[world]`` names the
-network (``"manhattan"`` with ``blocks``, ``block``, ``speed``; ``"chicago"``; or a file). Rebuilding
+network (``"manhattan"`` with ``blocks``, ``block``, ``speed``; ``"chicago"``; a file). Rebuilding
 it needs the ``dispatch`` package (numpy, scipy, networkx; no PyBullet, no torch). Where that
 package is missing, or a network file named relative to the scenario cannot be found from here,
 :func:`road_network` returns None and the callers do without (a map without streets; the

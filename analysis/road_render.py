@@ -19,7 +19,7 @@ from analysis.timeline import FLEET_STATES, fleet_states, positions_at, trajecto
 
 
 def _clock(t: float) -> str:
-    t = int(round(t))
+    t = round(t)
     return f"{t // 3600:02d}:{t // 60 % 60:02d}:{t % 60:02d}"
 
 
@@ -93,8 +93,9 @@ def road_frames(run: dict, network, *, end: float, n_frames: int, size: tuple[in
         open_now = (released <= t) & (t < gone)
         waiting.set_offsets(txy[open_now] if open_now.any() else np.zeros((0, 2)))
         counts = pd.Series(list(by_agent.values())).value_counts()
-        head.set_text(f"{title}   {_clock(t)}   busy {counts.get('to_pickup', 0) + counts.get('occupied', 0)}"
-                      f"/{len(agents)}   waiting {int(open_now.sum())}")
+        busy = counts.get("to_pickup", 0) + counts.get("occupied", 0)
+        head.set_text(f"{title}   {_clock(t)}   busy {busy}/{len(agents)}   "
+                      f"waiting {int(open_now.sum())}")
         canvas.restore_region(background)
         ax.draw_artist(cars)
         ax.draw_artist(waiting)

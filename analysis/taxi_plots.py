@@ -139,7 +139,7 @@ def hourly(customers: pd.DataFrame, path: Path, *, bin_s: float, runs: dict,
             a1.bar(g["t_h"], g["requests"] / n, width=width, align="edge", color="0.85",
                    edgecolor="0.6", linewidth=0.5, label="requests")
             first = False
-        style = dict(color=c, linewidth=lw, marker=mk, markersize=4)
+        style = {"color": c, "linewidth": lw, "marker": mk, "markersize": 4}
         a1.plot(x, g["rides"] / n, label=f"served: {label}", **style)
         a2.plot(x, 100 * g["rejectionRate"], label=label, **style)
         a3.plot(x, g["wait_median"] / 60, label=f"{label}: median", **style)

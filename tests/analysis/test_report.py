@@ -209,7 +209,8 @@ def test_taxi_report_files(road_sweep, tmp_path):
     assert "Taxi study" in text and "Table I" not in text  # no paper tables for taxis
     for col in ("rejectionRate", "wait_p90", "utilization", "emptyRatio", "vkm_per_ride"):
         assert col in text
-    taxi = {r["allocator"]: r for r in csv.DictReader(open(tmp_path / "taxi.csv"))}
+    with open(tmp_path / "taxi.csv", newline="") as f:
+        taxi = {r["allocator"]: r for r in csv.DictReader(f)}
     assert set(taxi) == {"fcfs", "hungarian"}
     for r in taxi.values():
         assert float(r["detour_ratio_mean"]) == pytest.approx(1.0)  # straight, free flow

@@ -95,7 +95,7 @@ def test_vehicle_metrics_by_hand(tiny_road):
 
 
 def test_fleet_states_by_hand(tiny_road):
-    s, _, vehicles, events = _tables(tiny_road)
+    _, _, vehicles, events = _tables(tiny_road)
     st = fleet_states(events, vehicles, end=50.0)
     got = {a: [(r.state, r.start, r.end) for r in g.itertuples()]
            for a, g in st.groupby("agent_id")}

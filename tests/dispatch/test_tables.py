@@ -10,23 +10,60 @@ import pytest
 
 from dispatch.tables import aggregate, print_tables
 
-ALLOCATORS = ["hungarian", "magnnet", "magnnet_edge", "magnnet_match", "auction", "greedy",
-              "fcfs", "random"]
+ALLOCATORS = [
+    "hungarian",
+    "magnnet",
+    "magnnet_edge",
+    "magnnet_match",
+    "auction",
+    "greedy",
+    "fcfs",
+    "random",
+]
 
 
 def _summary(alloc: str, n: int, seed: int, space: str = "voxel") -> dict:
     k = ALLOCATORS.index(alloc)
-    return dict(scenario="paper_dynamic", allocator=alloc, planner="astar", n_agents=n,
-                seed=seed, space=space, n_tasks=12345, total_cost=123456.7 + k * 1000,
-                conflict_free_rate=0.5 + 0.05 * k, alloc_seconds=123.456, tasks_completed=12000,
-                tasks_unfinished=345, makespan=86400.0, decisions=9876, rounds=20000,
-                messages=99999, conflicts=77, cost_seconds=100.0, decide_seconds=23.456,
-                first_decision_cost=1234.5, first_decision_seconds=0.0123,
-                realized_travel=123456.7, wait_time_mean=123.4, tasks_expired=100,
-                tasks_rejected=200, tasks_unreachable=0, tasks_cancelled=45, tasks_failed=0,
-                sim_time=86400.0, comm_delay=0.0, agent_seconds=1.0, distance=123456789.0,
-                empty_distance=23456789.0, occupied_distance=100000000.0, failures=0,
-                tasks_reassigned=0, tasks_transferred=0, tasks_assigned=12100)
+    return {
+        "scenario": "paper_dynamic",
+        "allocator": alloc,
+        "planner": "astar",
+        "n_agents": n,
+        "seed": seed,
+        "space": space,
+        "n_tasks": 12345,
+        "total_cost": 123456.7 + k * 1000,
+        "conflict_free_rate": 0.5 + 0.05 * k,
+        "alloc_seconds": 123.456,
+        "tasks_completed": 12000,
+        "tasks_unfinished": 345,
+        "makespan": 86400.0,
+        "decisions": 9876,
+        "rounds": 20000,
+        "messages": 99999,
+        "conflicts": 77,
+        "cost_seconds": 100.0,
+        "decide_seconds": 23.456,
+        "first_decision_cost": 1234.5,
+        "first_decision_seconds": 0.0123,
+        "realized_travel": 123456.7,
+        "wait_time_mean": 123.4,
+        "tasks_expired": 100,
+        "tasks_rejected": 200,
+        "tasks_unreachable": 0,
+        "tasks_cancelled": 45,
+        "tasks_failed": 0,
+        "sim_time": 86400.0,
+        "comm_delay": 0.0,
+        "agent_seconds": 1.0,
+        "distance": 123456789.0,
+        "empty_distance": 23456789.0,
+        "occupied_distance": 100000000.0,
+        "failures": 0,
+        "tasks_reassigned": 0,
+        "tasks_transferred": 0,
+        "tasks_assigned": 12100,
+    }
 
 
 def _render(summaries, **kw) -> str:
@@ -38,8 +75,9 @@ def _render(summaries, **kw) -> str:
     return buf.getvalue()
 
 
-SWEEP = [_summary(a, n, s) for a, n, s in itertools.product(ALLOCATORS, [4, 8, 12, 20, 100],
-                                                             [0, 1, 2])]
+SWEEP = [
+    _summary(a, n, s) for a, n, s in itertools.product(ALLOCATORS, [4, 8, 12, 20, 100], [0, 1, 2])
+]
 
 
 @pytest.mark.parametrize("kind", ["static", "dynamic", "road", "one voxel", "one road"])
@@ -70,9 +108,18 @@ def test_static_and_dynamic_tables_say_what_they_measure():
 
 
 def test_dynamic_aggregate_by_hand():
-    runs = [dict(_summary("greedy", 4, s), n_tasks=10, tasks_completed=5 + 5 * s,
-                 total_cost=20.0 * (s + 1), tasks_assigned=10, alloc_seconds=0.1 * (s + 1),
-                 decisions=10) for s in (0, 1)]
+    runs = [
+        dict(
+            _summary("greedy", 4, s),
+            n_tasks=10,
+            tasks_completed=5 + 5 * s,
+            total_cost=20.0 * (s + 1),
+            tasks_assigned=10,
+            alloc_seconds=0.1 * (s + 1),
+            decisions=10,
+        )
+        for s in (0, 1)
+    ]
     a = aggregate(runs)[("greedy", 4)]
     assert a["served_share"] == pytest.approx(0.75)  # 5/10 and 10/10
     assert a["cost_per_assignment"] == pytest.approx(3.0)  # 2 and 4 s
