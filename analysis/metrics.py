@@ -1,8 +1,8 @@
 """Metrics as DESIGN.md defines them, grouped by allocator and fleet size N.
 
-Two tables, both pandas DataFrames with one row per (scenario, planner, allocator, n_agents):
+Tables are pandas DataFrames with one row per (scenario, planner, allocator, n_agents):
 
-:func:`allocator_metrics` (the MAGNNET paper's Tables I and III)
+:func:`allocator_metrics` (the MAGNNET paper's Tables I and III, for static scenarios)
     ``runs``; ``total_cost_mean`` / ``total_cost_ci95`` (sum of the planned costs c_ij of the
     assignments, seconds; mean over seeds and the half-width of its 95 % Student-t interval);
     ``gap_mean`` / ``gap_ci95`` (per instance (cost - Hungarian cost) / Hungarian cost, paired
@@ -12,24 +12,50 @@ Two tables, both pandas DataFrames with one row per (scenario, planner, allocato
     decisions of the run); ``rounds_mean``, ``messages_mean``, ``conflicts_mean``,
     ``agent_seconds_mean`` (per-agent critical path of decentralized allocators, where recorded).
 
-:func:`taxi_metrics` (dispatch-style service quality; names as MATSim DRT's
-``drt_customer_stats`` / ``drt_vehicle_stats`` print them, FleetPy's label in brackets)
-    ``requests`` (tasks released), ``rides`` (completed), ``rejections`` (not completed:
-    expired, unreachable or cancelled), ``rejectionRate``, ``service_rate`` = rides / requests
-    [FleetPy "served users [%]"]; ``wait_average``, ``wait_median``, ``wait_p90``, ``wait_p95``,
-    ``wait_max``: release -> arrival of a vehicle, seconds, over every task reached, pooled over
-    the group's runs [FleetPy "waiting time", "waiting time (median)", "waiting time (90%
-    quantile)"]; ``assignment_delay_average``: release -> assignment; ``approach_time_average``:
-    assignment -> arrival; ``detour_time_average``: realized approach time minus planned cost
-    (waits, replans) [FleetPy "detour time"]; ``rel_detour``: the same relative to the planned
-    cost [FleetPy "rel detour"]; ``detourDistanceRatio_mean``: distance driven / straight-line
-    distance per trip (from the events table; obstacles make it > 1); ``vehicles``,
-    ``totalDistance`` (m) [FleetPy "total vkm" x 1000], ``averageDrivenDistance``,
-    ``totalEmptyDistance`` and ``emptyRatio`` [FleetPy "% empty vkm"]: every metre here is driven
-    to reach a task with nothing on board, so empty distance is all distance; ``utilization``:
-    busy seconds / (vehicles x simulated time) [FleetPy "% fleet utilization"].
+:func:`dynamic_metrics` (Tables I and III for dynamic scenarios: per task, never summed)
+    ``served_share`` (completed / released), ``wait_mean`` (release -> pickup, s, over the tasks
+    picked up), ``cost_per_assignment`` (planned seconds from the vehicle to the pickup, mean
+    over the assignments made: ``total_cost / tasks_assigned``), ``conflict_free_rate``,
+    ``decision_ms`` (wall milliseconds per decision, mean), each a mean over seeds with
+    ``_ci95``. Summed planned costs are not comparable across allocators in a dynamic run: each
+    allocator drives its own trajectory through the run, and one that serves fewer tasks sums
+    fewer costs.
 
-:func:`run_metrics` gives the taxi-style columns per run instead of per group.
+:func:`taxi_metrics` (ride-hailing service quality; names as MATSim DRT's
+``drt_customer_stats`` / ``drt_vehicle_stats`` print them where they mean the same thing,
+FleetPy's evaluation label in :data:`FLEETPY_LABELS`), tasks pooled over the group's runs:
+
+    customers
+        ``requests`` (tasks released); ``rides`` (served: completed); ``rejections`` (requests
+        the fleet did not serve in time: ``rejected`` at once (no vehicle could reach the pickup
+        within ``max_wait``), ``expired`` while open (``max_wait`` / ``ttl`` ran out) or
+        ``unreachable``; not counted: ``cancelled`` (the run ended first) and ``failed`` (a
+        breakdown with the passenger aboard)); ``rejectionRate`` = rejections / requests;
+        ``service_rate`` = rides / requests; ``wait_average``, ``wait_median``, ``wait_p90``,
+        ``wait_p95``, ``wait_max``: release -> pickup, seconds, over every request picked up
+        (quantiles by linear interpolation); ``inVehicleTravelTime_mean``: pickup -> drop-off
+        (s, rides with a drop-off); ``directTravelTime_mean``: the trip's free-flow fastest
+        path (s; from the tasks' ``direct_seconds`` when the kernel records it, else from the
+        network rebuilt by :mod:`analysis.network`); ``detour_ratio_mean`` / ``_median``:
+        in-vehicle time / direct free-flow time per ride (1: the direct trip at free flow);
+        ``assignment_delay_average``: release -> assignment; ``approach_time_average``:
+        assignment -> pickup; ``approach_delay_average``: realized approach time minus its
+        planned cost (reservation waits, replans; 0 without them).
+    vehicles
+        ``vehicles``; ``totalDistance``, ``totalEmptyDistance`` (without a passenger: to
+        pickups, repositioning), ``totalPassengerDistanceTraveled`` (with one), metres;
+        ``emptyRatio`` = empty / total distance (only where tasks are trips with a drop-off;
+        NaN for the paper's point tasks, which carry nothing); ``vkm_per_ride`` = total km /
+        rides; ``utilization``: share of the vehicles' available time (simulated time minus
+        time broken down) spent driving to a pickup or with a passenger (states of
+        :func:`analysis.timeline.fleet_states`; repositioning and idle do not count).
+    voxel paths
+        ``path_stretch_mean``: per leg, metres driven / straight line from departure to
+        arrival (from ``move`` events: voxel runs; obstacles make it > 1).
+
+:func:`hourly_customers` and :func:`hourly_fleet` give the per-hour series (customers by the
+hour of their release, the fleet by clock hour); :func:`run_metrics` gives the taxi columns per
+run.
 """
 
 from __future__ import annotations
@@ -43,16 +69,14 @@ from analysis.stats import mean_ci
 
 GROUP = ["scenario", "planner", "allocator", "n_agents"]
 PREFERRED_ORDER = ("hungarian", "magnnet", "magnnet_edge", "magnnet_match", "auction", "greedy",
-                   "random")
+                   "fcfs", "random")
 
-#: FleetPy's labels of the taxi-style columns that have one (for users who compare).
+#: FleetPy's labels of the taxi-style columns that mean the same thing (for users who compare).
 FLEETPY_LABELS = {
     "service_rate": "served users [%]",
     "wait_average": "waiting time",
     "wait_median": "waiting time (median)",
     "wait_p90": "waiting time (90% quantile)",
-    "detour_time_average": "detour time",
-    "rel_detour": "rel detour",
     "utilization": "% fleet utilization",
     "emptyRatio": "% empty vkm",
 }
@@ -120,17 +144,151 @@ def _mean(col) -> float:
     return float(v.mean()) if len(v) else math.nan
 
 
+# --------------------------------------------------------------------------- dynamic benchmarks
+
+
+def dynamic_metrics(summary: pd.DataFrame, level: float = 0.95) -> pd.DataFrame:
+    """Tables I and III of dynamic runs, per task (see the module docstring): per (scenario,
+    planner, allocator, N) the mean over seeds and 95 % half-width of ``served_share``,
+    ``wait_mean``, ``cost_per_assignment``, ``conflict_free_rate`` and ``decision_ms``."""
+    s = summary.copy()
+    n = pd.to_numeric(s["n_tasks"], errors="coerce").astype(float)
+    s["served_share"] = s["tasks_completed"] / n.where(n > 0)
+    s["wait_mean"] = s["wait_time_mean"]
+    assigned = (pd.to_numeric(s["tasks_assigned"], errors="coerce").astype(float)
+                if "tasks_assigned" in s else pd.Series(np.nan, index=s.index))
+    s["cost_per_assignment"] = s["total_cost"] / assigned.where(assigned > 0)
+    d = pd.to_numeric(s["decisions"], errors="coerce").astype(float)
+    s["decision_ms"] = 1000 * s["alloc_seconds"] / d.where(d > 0)
+    rows = []
+    for key, g in s.groupby(GROUP, sort=False):
+        row = dict(zip(GROUP, key))
+        row["runs"] = len(g)
+        for col in ("served_share", "wait_mean", "cost_per_assignment", "conflict_free_rate",
+                    "decision_ms"):
+            m, h, _ = mean_ci(g[col], level)
+            row[f"{col}_mean"], row[f"{col}_ci95"] = m, h
+        row["tasks_mean"] = _mean(g["n_tasks"])
+        rows.append(row)
+    return sort_groups(pd.DataFrame(rows))
+
+
 # --------------------------------------------------------------------------- taxi-style
+
+REJECTED_STATES = ("rejected", "expired", "unreachable")
+
+
+def trip_table(tasks: pd.DataFrame, events: pd.DataFrame | None = None,
+               direct: pd.Series | np.ndarray | None = None) -> pd.DataFrame:
+    """One row per task: the run keys, ``task_id``, ``state``, ``released_at``, ``hour`` (of
+    the release), ``wait`` (release -> pickup), ``dropped_off_at`` (the last ``dropoff`` event
+    of the task, NaN without events), ``in_vehicle`` (pickup -> drop-off), ``direct_seconds``
+    (free-flow fastest path; the tasks' own column if recorded, else ``direct``, else NaN) and
+    ``detour_ratio`` (in_vehicle / direct_seconds, completed trips only)."""
+    keys = [c for c in [*GROUP, "seed", "run_id"] if c in tasks.columns]
+    t = tasks[keys + ["task_id", "state", "released_at", "picked_up_at"]].copy()
+    t["hour"] = np.floor(t["released_at"].to_numpy(dtype=float) / 3600).astype(int)
+    t["wait"] = t["picked_up_at"] - t["released_at"]
+    t["dropped_off_at"] = np.nan
+    if events is not None and len(events) and "run_id" in t:
+        drops = (events.loc[events["event"] == "dropoff"].groupby(["run_id", "task_id"])["t"]
+                 .max().rename("_drop"))
+        if len(drops):
+            t = t.merge(drops, left_on=["run_id", "task_id"], right_index=True, how="left")
+            t["dropped_off_at"] = t.pop("_drop")
+    t["in_vehicle"] = t["dropped_off_at"] - t["picked_up_at"]
+    if "direct_seconds" in tasks.columns and tasks["direct_seconds"].notna().any():
+        t["direct_seconds"] = tasks["direct_seconds"].to_numpy(dtype=float)
+    elif direct is not None:
+        t["direct_seconds"] = np.asarray(direct, dtype=float)
+    else:
+        t["direct_seconds"] = np.nan
+    ok = (t["state"] == "completed") & (t["direct_seconds"] > 0)
+    t["detour_ratio"] = np.where(ok, t["in_vehicle"] / t["direct_seconds"], np.nan)
+    return t
+
+
+def customer_stats(trips: pd.DataFrame) -> dict:
+    """The customer columns of :func:`taxi_metrics` over the rows of :func:`trip_table`."""
+    requests = len(trips)
+    rides = int((trips["state"] == "completed").sum())
+    rejections = int(trips["state"].isin(REJECTED_STATES).sum())
+    wait = trips["wait"].to_numpy(dtype=float)
+    return {
+        "requests": requests, "rides": rides, "rejections": rejections,
+        "rejectionRate": rejections / requests if requests else math.nan,
+        "service_rate": rides / requests if requests else math.nan,
+        "wait_average": _stat(wait, np.mean), "wait_median": _stat(wait, np.median),
+        "wait_p90": _stat(wait, lambda v: np.quantile(v, 0.9)),
+        "wait_p95": _stat(wait, lambda v: np.quantile(v, 0.95)),
+        "wait_max": _stat(wait, np.max),
+        "inVehicleTravelTime_mean": _stat(trips["in_vehicle"].to_numpy(dtype=float), np.mean),
+        "directTravelTime_mean": _stat(
+            trips.loc[trips["state"] == "completed", "direct_seconds"].to_numpy(dtype=float),
+            np.mean),
+        "detour_ratio_mean": _stat(trips["detour_ratio"].to_numpy(dtype=float), np.mean),
+        "detour_ratio_median": _stat(trips["detour_ratio"].to_numpy(dtype=float), np.median),
+    }
+
+
+def _approach(tasks: pd.DataFrame) -> dict:
+    reached = tasks.loc[tasks["picked_up_at"].notna()]
+    assigned = tasks.loc[tasks["assigned_at"].notna() & (tasks["agent_id"] >= 0)]
+    approach = (reached["picked_up_at"] - reached["assigned_at"]).to_numpy(dtype=float)
+    planned = reached["cost"].to_numpy(dtype=float)
+    return {
+        "assignment_delay_average": _stat(
+            (assigned["assigned_at"] - assigned["released_at"]).to_numpy(dtype=float), np.mean),
+        "approach_time_average": _stat(approach, np.mean),
+        "approach_delay_average": _stat(approach - planned, np.mean),
+    }
+
+
+def vehicle_stats(vehicles: pd.DataFrame, states: pd.DataFrame | None, rides: int,
+                  trips_have_dropoff: bool, horizon: dict[str, float]) -> dict:
+    """The vehicle columns of :func:`taxi_metrics`. ``states``: the rows of
+    :func:`analysis.timeline.fleet_states` for these vehicles (None: utilization from the
+    vehicles' ``busy_seconds`` and ``down_seconds`` and ``horizon``, the simulated seconds per
+    run)."""
+    distance = float(vehicles["distance"].sum())
+    has_empty = "empty_distance" in vehicles and vehicles["empty_distance"].notna().all()
+    empty = float(vehicles["empty_distance"].sum()) if has_empty else math.nan
+    occupied = (float(vehicles["occupied_distance"].sum())
+                if "occupied_distance" in vehicles and vehicles["occupied_distance"].notna().all()
+                else math.nan)
+    if states is not None and len(states):
+        secs = (states["end"] - states["start"]).groupby(states["state"]).sum()
+        total = float(secs.sum())
+        available = total - float(secs.get("failed", 0.0))
+        busy = float(secs.get("to_pickup", 0.0) + secs.get("occupied", 0.0))
+    else:
+        cap = vehicles["run_id"].map(horizon).to_numpy(dtype=float)
+        down = (vehicles["down_seconds"].to_numpy(dtype=float) if "down_seconds" in vehicles
+                else np.zeros(len(vehicles)))
+        available = float(np.nansum(cap - np.nan_to_num(down)))
+        busy = float(vehicles["busy_seconds"].sum())
+    n = len(vehicles)
+    return {
+        "vehicles": n, "totalDistance": distance,
+        "averageDrivenDistance": distance / n if n else math.nan,
+        "totalEmptyDistance": empty, "totalPassengerDistanceTraveled": occupied,
+        "emptyRatio": (empty / distance if trips_have_dropoff and distance > 0 else math.nan),
+        "vkm_per_ride": distance / 1000 / rides if rides else math.nan,
+        "utilization": busy / available if available > 0 else math.nan,
+    }
 
 
 def trip_distances(events: pd.DataFrame) -> pd.DataFrame:
-    """Per trip (run, agent, task): distance driven (sum of the move steps from the departure
-    cell) and straight-line distance from the departure cell to the arrival cell, metres."""
+    """Per leg (run, agent, task) with ``move`` events: distance driven (sum of the move steps
+    from the departure cell) and straight-line distance from the departure cell to the arrival
+    cell, metres."""
     cols = ["run_id", "agent_id", "task_id", "driven", "direct"]
     if events.empty:
         return pd.DataFrame(columns=cols)
     e = events.loc[events["event"].isin(["depart", "move"]) & (events["task_id"] >= 0),
                    ["run_id", "t", "event", "agent_id", "task_id", "x", "y", "z"]]
+    if not (e["event"] == "move").any():
+        return pd.DataFrame(columns=cols)
     out = []
     for (run, agent, task), g in e.groupby(["run_id", "agent_id", "task_id"], sort=False):
         p = g[["x", "y", "z"]].to_numpy(dtype=float)
@@ -142,87 +300,123 @@ def trip_distances(events: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(out, columns=cols)
 
 
-def _taxi_row(tasks: pd.DataFrame, vehicles: pd.DataFrame, summary: pd.DataFrame,
-              trips: pd.DataFrame | None) -> dict:
-    requests = len(tasks)
-    rides = int((tasks["state"] == "completed").sum())
-    reached = tasks.loc[tasks["picked_up_at"].notna()]
-    wait = (reached["picked_up_at"] - reached["released_at"]).to_numpy(dtype=float)
-    assigned = tasks.loc[tasks["assigned_at"].notna() & (tasks["agent_id"] >= 0)]
-    approach = (reached["picked_up_at"] - reached["assigned_at"]).to_numpy(dtype=float)
-    planned = reached["cost"].to_numpy(dtype=float)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        rel = np.where(planned > 0, approach / planned - 1.0, np.nan)
-    distance = float(vehicles["distance"].sum())
-    # results written before trips existed have no empty_distance: every metre was empty then
-    empty = (float(vehicles["empty_distance"].sum()) if "empty_distance" in vehicles
-             and vehicles["empty_distance"].notna().all() else distance)
-    horizon = (summary.set_index("run_id")["sim_time"]
-               .reindex(vehicles["run_id"]).to_numpy(dtype=float))
-    capacity = float(np.nansum(horizon))
-    row = {
-        "requests": requests, "rides": rides, "rejections": requests - rides,
-        "rejectionRate": (requests - rides) / requests if requests else math.nan,
-        "service_rate": rides / requests if requests else math.nan,
-        "wait_average": _stat(wait, np.mean), "wait_median": _stat(wait, np.median),
-        "wait_p90": _stat(wait, lambda v: np.quantile(v, 0.9)),
-        "wait_p95": _stat(wait, lambda v: np.quantile(v, 0.95)),
-        "wait_max": _stat(wait, np.max),
-        "assignment_delay_average": _stat(
-            (assigned["assigned_at"] - assigned["released_at"]).to_numpy(dtype=float), np.mean),
-        "approach_time_average": _stat(approach, np.mean),
-        "detour_time_average": _stat(approach - planned, np.mean),
-        "rel_detour": _stat(rel[np.isfinite(rel)], np.mean),
-        "vehicles": len(vehicles), "totalDistance": distance,
-        "averageDrivenDistance": distance / len(vehicles) if len(vehicles) else math.nan,
-        "totalEmptyDistance": empty, "emptyRatio": empty / distance if distance > 0 else math.nan,
-        "utilization": float(vehicles["busy_seconds"].sum()) / capacity if capacity > 0
-        else math.nan,
-    }
-    if trips is not None:
-        ok = trips.loc[trips["direct"] > 0]
-        row["detourDistanceRatio_mean"] = (float((ok["driven"] / ok["direct"]).mean())
-                                           if len(ok) else math.nan)
-    return row
-
-
 def _stat(values: np.ndarray, fn) -> float:
     values = values[np.isfinite(values)]
     return float(fn(values)) if len(values) else math.nan
 
 
-def _taxi(summary, tasks, vehicles, events, keys) -> pd.DataFrame:
-    trips = trip_distances(events) if events is not None else None
+def _states(summary, events, vehicles):
+    from analysis.timeline import fleet_states
+
+    if events is None or events.empty:
+        return None
+    out = []
+    ends = summary.set_index("run_id")["sim_time"].to_dict()
+    for run, v in vehicles.groupby("run_id", sort=False):
+        e = events.loc[events["run_id"] == run] if events["run_id"].nunique() > 1 else events
+        out.append(fleet_states(e, v, end=float(ends.get(run, e["t"].max() if len(e) else 0))))
+    return pd.concat(out, ignore_index=True) if out else None
+
+
+def _taxi(summary, tasks, vehicles, events, keys, direct=None) -> pd.DataFrame:
+    trips = trip_table(tasks, events, direct)
+    states = _states(summary, events, vehicles)
+    stretch = trip_distances(events) if events is not None else None
+    horizon = summary.set_index("run_id")["sim_time"].to_dict()
+    run_keys = summary[list(dict.fromkeys(["run_id", *keys]))].drop_duplicates("run_id")
+
+    def groups(df):
+        if df is None or df.empty:
+            return {}
+        if not set(keys) <= set(df.columns):
+            df = df.merge(run_keys, on="run_id", how="left")
+        return {k if isinstance(k, tuple) else (k,): g
+                for k, g in df.groupby(keys, sort=False)}
+
+    t_groups, tr_groups, v_groups = groups(tasks), groups(trips), groups(vehicles)
+    s_groups, st_groups = groups(states), groups(stretch)
     rows = []
-    t_groups = dict(iter(tasks.groupby(keys, sort=False)))
-    v_groups = dict(iter(vehicles.groupby(keys, sort=False)))
-    trip_groups = {}
-    if trips is not None and len(trips):
-        cols = list(dict.fromkeys(["run_id", *keys]))
-        trips = trips.merge(summary[cols].drop_duplicates("run_id"), on="run_id")
-        trip_groups = dict(iter(trips.groupby(keys, sort=False)))
-    empty_t, empty_v = tasks.iloc[:0], vehicles.iloc[:0]
     for key, s in summary.groupby(keys, sort=False):
-        row = dict(zip(keys, key if isinstance(key, tuple) else (key,)))
+        key = key if isinstance(key, tuple) else (key,)
+        row = dict(zip(keys, key))
         row["runs"] = len(s)
-        tr = trip_groups.get(key, trips.iloc[:0] if trips is not None else None)
-        row.update(_taxi_row(t_groups.get(key, empty_t), v_groups.get(key, empty_v), s, tr))
+        tr = tr_groups.get(key, trips.iloc[:0])
+        ts = t_groups.get(key, tasks.iloc[:0])
+        row.update(customer_stats(tr))
+        row.update(_approach(ts))
+        dropoff = "dropoff_x" in ts and bool(ts["dropoff_x"].notna().any())
+        row.update(vehicle_stats(v_groups.get(key, vehicles.iloc[:0]),
+                                 s_groups.get(key) if states is not None else None,
+                                 row["rides"], dropoff, horizon))
+        st = st_groups.get(key)
+        ok = st.loc[st["direct"] > 0] if st is not None else None
+        row["path_stretch_mean"] = (float((ok["driven"] / ok["direct"]).mean())
+                                    if ok is not None and len(ok) else math.nan)
         rows.append(row)
     return sort_groups(pd.DataFrame(rows))
 
 
 def taxi_metrics(summary: pd.DataFrame, tasks: pd.DataFrame, vehicles: pd.DataFrame,
-                 events: pd.DataFrame | None = None) -> pd.DataFrame:
+                 events: pd.DataFrame | None = None,
+                 direct: pd.Series | np.ndarray | None = None) -> pd.DataFrame:
     """Taxi-style metrics per (scenario, planner, allocator, N), tasks pooled over the group's
-    runs (see the module docstring). ``events`` adds ``detourDistanceRatio_mean``."""
-    return _taxi(summary, tasks, vehicles, events, GROUP)
+    runs (see the module docstring). ``events`` gives in-vehicle times, the fleet states
+    (utilization) and path stretch; ``direct`` (per row of ``tasks``) the trips' free-flow
+    times where the tasks table lacks ``direct_seconds``."""
+    return _taxi(summary, tasks, vehicles, events, GROUP, direct)
 
 
 def run_metrics(summary: pd.DataFrame, tasks: pd.DataFrame, vehicles: pd.DataFrame,
-                events: pd.DataFrame | None = None) -> pd.DataFrame:
+                events: pd.DataFrame | None = None,
+                direct: pd.Series | np.ndarray | None = None) -> pd.DataFrame:
     """Taxi-style metrics per run (the same columns as :func:`taxi_metrics`)."""
-    out = _taxi(summary, tasks, vehicles, events, [*GROUP, "seed", "run_id"])
+    out = _taxi(summary, tasks, vehicles, events, [*GROUP, "seed", "run_id"], direct)
     return out.drop(columns="runs")
+
+
+def hourly_customers(trips: pd.DataFrame, keys: list[str] | None = None,
+                     bin_s: float = 3600.0) -> pd.DataFrame:
+    """Per group (``keys``, default the allocator groups) and hour of release (or bin of
+    ``bin_s`` seconds): the customer columns of :func:`customer_stats` (``trips``: the rows of
+    :func:`trip_table`); ``hour`` is the bin's index, ``t_h`` its start in hours."""
+    keys = [k for k in (keys or GROUP) if k in trips.columns]
+    t = trips.assign(hour=np.floor(trips["released_at"].to_numpy(dtype=float) / bin_s)
+                     .astype(int))
+    rows = []
+    for key, g in t.groupby([*keys, "hour"], sort=True):
+        row = dict(zip([*keys, "hour"], key))
+        row["t_h"] = row["hour"] * bin_s / 3600
+        row.update(customer_stats(g))
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def hourly_fleet(states: pd.DataFrame, summary: pd.DataFrame,
+                 keys: list[str] | None = None, bin_s: float = 3600.0) -> pd.DataFrame:
+    """Per group and clock hour (or bin of ``bin_s`` seconds; ``hour`` its index, ``t_h`` its
+    start in hours): the mean number of vehicles in each fleet state (its share of the bin's
+    vehicle seconds times the fleet size; a bin cut short by the end of a run counts for the
+    time it covers) and ``utilization`` (to_pickup + occupied over the time not failed)."""
+    from analysis.timeline import FLEET_STATES, hourly_states
+
+    keys = keys or GROUP
+    h = hourly_states(states, hour=bin_s)
+    if h.empty:
+        return pd.DataFrame(columns=[*keys, "hour", "t_h", *FLEET_STATES, "utilization"])
+    h = h.merge(summary[list(dict.fromkeys(["run_id", *keys]))], on="run_id", how="left")
+    runs = h.groupby(keys)["run_id"].nunique()
+    out = h.groupby([*keys, "hour"], sort=True)[list(FLEET_STATES)].sum().reset_index()
+    out.insert(len(keys) + 1, "t_h", out["hour"] * bin_s / 3600)
+    fleet = (states.merge(summary[list(dict.fromkeys(["run_id", *keys]))], on="run_id",
+                          how="left").drop_duplicates(["run_id", "agent_id"])
+             .groupby(keys).size() / runs)  # vehicles per run
+    size = out.set_index(keys).index.map(fleet).to_numpy(dtype=float)
+    covered = out[list(FLEET_STATES)].sum(axis=1)  # a run's last bin may be cut short
+    available = covered - out["failed"]
+    out["utilization"] = ((out["to_pickup"] + out["occupied"]) / available.where(available > 0))
+    for st in FLEET_STATES:
+        out[st] = out[st] / covered.where(covered > 0) * size
+    return out
 
 
 def wait_times(tasks: pd.DataFrame) -> pd.DataFrame:

@@ -125,7 +125,7 @@ def alloc_time_vs_n(metrics: pd.DataFrame, path: Path) -> Path:
 
 
 def wait_distribution(waits: pd.DataFrame, path: Path) -> Path:
-    """Left: the empirical CDF of wait times (release -> arrival) per allocator, all N pooled;
+    """Left: the empirical CDF of wait times (release -> pickup) per allocator, all N pooled;
     right: box plots per allocator and N."""
     fig = _figure(10, 4.2)
     left, right = fig.subplots(1, 2)
@@ -136,7 +136,7 @@ def wait_distribution(waits: pd.DataFrame, path: Path) -> Path:
         if len(w):
             left.step(w, np.arange(1, len(w) + 1) / len(w), where="post", label=alloc,
                       color=colours[alloc])
-    left.set_xlabel("wait time: release -> arrival (s)")
+    left.set_xlabel("wait time: release → pickup (s)")
     left.set_ylabel("share of tasks")
     left.set_title("Wait-time distribution (ECDF)")
     left.grid(True, alpha=0.3)

@@ -1,4 +1,5 @@
-"""Drawing a recorded run as an animation from PyBullet camera images (headless).
+"""Drawing a recorded run as an animation: a voxel run from PyBullet camera images (headless),
+a road (taxi) run on its map with matplotlib (:mod:`analysis.road_render`).
 
 The scene is rebuilt from the run's Parquet tables alone: the ground and the obstacle boxes from
 ``obstacles`` (world size in its metadata), the vehicles from ``vehicles`` (start cells) and
@@ -136,7 +137,6 @@ def render_run(source: Results | str | os.PathLike, out: str | os.PathLike | Non
         else:
             run_id = ids[0]
     run = res.run(run_id)
-    world = res.world(run_id)[0]
     s = run["summary"].iloc[0]
     end = float(s["sim_time"]) if len(run["summary"]) else float(run["events"]["t"].max())
     if seconds is None:
@@ -145,6 +145,16 @@ def render_run(source: Results | str | os.PathLike, out: str | os.PathLike | Non
     out = Path(out) if out is not None else res.sources[0].path / f"{run_id}.gif"
     if out.suffix.lower() not in (".gif", ".mp4"):
         raise ValueError(f"{out}: the animation must be a .gif or an .mp4 file")
+    if s.get("space") == "road":  # a taxi run: on its map, with matplotlib
+        from analysis.network import road_network
+        from analysis.road_render import road_frames
+
+        net = road_network(res.metadata(run_id, "tasks"), [src.path for src in res.sources])
+        frames = road_frames(run, net, end=end, n_frames=n_frames, size=size,
+                             title=f"{s['allocator']}, N = {s['n_agents']}")
+        _write(frames, out, fps)
+        return out
+    world = res.world(run_id)[0]
 
     marker = max(0.45 * res.world(run_id)[1], max(world) / 45)
     traj = trajectories(run["events"], run["vehicles"])

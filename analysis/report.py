@@ -6,8 +6,16 @@
 * ``allocators.csv`` (Tables I and III per allocator and N, see
   :func:`analysis.metrics.allocator_metrics`) and ``taxi.csv`` (taxi-style metrics,
   :func:`analysis.metrics.taxi_metrics`), ``runs.csv`` (taxi-style metrics per run);
-* ``cost_vs_n.png``, ``success_vs_n.png``, ``alloc_time_vs_n.png``, ``wait_times.png``,
-  ``timeline.png`` (vehicle Gantt of one run) and ``paths_3d.png`` (that run in 3D).
+* voxel runs of static scenarios: ``cost_vs_n.png``, ``success_vs_n.png``,
+  ``alloc_time_vs_n.png``, ``wait_times.png``, ``timeline.png`` (vehicle Gantt of one run) and
+  ``paths_3d.png`` (that run in 3D);
+* voxel runs of dynamic scenarios (tasks released over time): Tables I and III per task
+  (:func:`analysis.metrics.dynamic_metrics`, ``dynamic.csv``) and ``served_vs_n.png``,
+  ``wait_vs_n.png``, ``cost_per_task_vs_n.png`` instead of ``cost_vs_n.png``;
+* road (taxi) runs: ``hourly_customers.csv`` / ``hourly_fleet.csv`` (per-hour series),
+  ``map.png`` (streets, pickup density, fleet start), ``hourly.png`` (demand, served,
+  rejected, wait percentiles over time), ``fleet_state.png`` (stacked fleet states over time),
+  ``wait_by_allocator.png`` (wait distributions per allocator); see :mod:`analysis.taxi_plots`.
 """
 
 from __future__ import annotations
@@ -26,10 +34,20 @@ from analysis.io import Results, open_results
 FIGURES = ("cost_vs_n.png", "success_vs_n.png", "alloc_time_vs_n.png", "wait_times.png",
            "timeline.png", "paths_3d.png")
 
-TAXI_COLUMNS = ["runs", "requests", "rides", "service_rate", "wait_average", "wait_median",
-                "wait_p90", "wait_max", "assignment_delay_average", "detour_time_average",
-                "detourDistanceRatio_mean", "utilization", "totalDistance",
-                "totalEmptyDistance", "emptyRatio"]
+DYNAMIC_FIGURES = ("served_vs_n.png", "wait_vs_n.png", "cost_per_task_vs_n.png",
+                   "success_vs_n.png", "alloc_time_vs_n.png", "wait_times.png", "timeline.png",
+                   "paths_3d.png")
+ROAD_FIGURES = ("map.png", "hourly.png", "fleet_state.png", "wait_by_allocator.png")
+
+#: The taxi columns the report shows (taxi.csv has them all).
+TAXI_COLUMNS = ["runs", "requests", "rides", "rejectionRate", "wait_average", "wait_median",
+                "wait_p90", "wait_p95", "wait_max", "inVehicleTravelTime_mean",
+                "detour_ratio_mean", "utilization", "emptyRatio", "vkm_per_ride"]
+#: ... for voxel runs (point tasks: no ride, no empty ratio)
+VOXEL_TAXI_COLUMNS = ["runs", "requests", "rides", "rejectionRate", "wait_average",
+                      "wait_median", "wait_p90", "wait_max", "assignment_delay_average",
+                      "approach_delay_average", "path_stretch_mean", "utilization",
+                      "totalDistance"]
 
 
 def default_run(summary: pd.DataFrame, reference: str = "hungarian") -> str:
@@ -94,11 +112,43 @@ def markdown_table(df: pd.DataFrame, digits: int = 2) -> str:
     return "\n".join(lines)
 
 
-def _taxi_view(taxi: pd.DataFrame) -> pd.DataFrame:
+def _taxi_view(taxi: pd.DataFrame, columns: list[str]) -> pd.DataFrame:
     keys = ["allocator", "n_agents"] + [k for k in ("scenario", "planner")
                                          if taxi[k].nunique() > 1]
-    cols = [c for c in TAXI_COLUMNS if c in taxi.columns]
+    cols = [c for c in columns if c in taxi.columns]
     return taxi[keys + cols].rename(columns={"n_agents": "N"})
+
+
+def table_dynamic(dm: pd.DataFrame) -> pd.DataFrame:
+    """Tables I and III of dynamic runs, one row per allocator and N (mean ± 95 % CI)."""
+    rows = []
+    for r in dm.itertuples(index=False):
+        rows.append({"allocator": r.allocator, "N": r.n_agents, "runs": r.runs,
+                     "tasks": _fmt(r.tasks_mean, 0),
+                     "served %": _pm(r.served_share_mean, r.served_share_ci95, 1, 100),
+                     "wait s": _pm(r.wait_mean_mean, r.wait_mean_ci95, 1),
+                     "cost s / assignment": _pm(r.cost_per_assignment_mean,
+                                                r.cost_per_assignment_ci95, 2),
+                     "conflict-free %": _pm(r.conflict_free_rate_mean, math.nan, 1, 100),
+                     "ms / decision": _pm(r.decision_ms_mean, math.nan, 2)})
+    return pd.DataFrame(rows)
+
+
+def task_sources(res: Results, summary: pd.DataFrame) -> dict[str, str]:
+    """Per scenario: its task source (``static``, ``periodic``, ``poisson``, ``trace``), read
+    from the scenario text in one of its runs' files (``static`` where it cannot be read)."""
+    import tomllib
+
+    out = {}
+    for scen, g in summary.groupby("scenario"):
+        source = "static"
+        try:
+            text = res.metadata(str(g["run_id"].iloc[0]), "summary").get("dispatch.scenario", "")
+            source = tomllib.loads(text).get("tasks", {}).get("source", "static")
+        except (KeyError, ValueError):
+            pass
+        out[str(scen)] = str(source)
+    return out
 
 
 def write_report(source: Results | str | os.PathLike | list, out: str | os.PathLike, *,
@@ -115,37 +165,37 @@ def write_report(source: Results | str | os.PathLike | list, out: str | os.PathL
     summary = res.summary
     if summary.empty:
         raise ValueError(f"{res}: no runs in the summary table")
+    if run_id is not None and run_id not in set(summary["run_id"]):
+        raise KeyError(f"no run {run_id!r}; there are {len(summary)} runs, e.g. "
+                       f"{', '.join(summary['run_id'].head(3))}")
+    space = (summary["space"].fillna("voxel") if "space" in summary
+             else pd.Series("voxel", index=summary.index))
+    road = summary.loc[space == "road"]
+    voxel = summary.loc[space != "road"]
     tasks, vehicles = res.table("tasks"), res.table("vehicles")
     events = res.table("events", columns=["run_id", "t", "event", "agent_id", "task_id",
                                           "x", "y", "z"])
-    am = M.allocator_metrics(summary, reference)
-    taxi = M.taxi_metrics(summary, tasks, vehicles, events)
-    per_run = M.run_metrics(summary, tasks, vehicles, events)
+    direct = _direct_times(res, road, tasks) if len(road) else None
     written: list[Path] = []
-    for name, df in (("allocators.csv", am), ("taxi.csv", taxi), ("runs.csv", per_run)):
+    sections = _head(res, summary)
+    if len(voxel):
+        sections += _voxel_part(res, voxel, tasks, vehicles, events, out, written,
+                                run_id if run_id in set(voxel["run_id"]) else None, reference)
+    if len(road):
+        sections += _road_part(res, road, tasks, vehicles, events, direct, out, written,
+                               run_id if run_id in set(road["run_id"]) else None)
+    taxi = M.taxi_metrics(summary, tasks, vehicles, events, direct)
+    per_run = M.run_metrics(summary, tasks, vehicles, events, direct)
+    for name, df in (("taxi.csv", taxi), ("runs.csv", per_run)):
         df.to_csv(out / name, index=False)
-        written.append(out / name)
-
-    plots.cost_vs_n(am, out / "cost_vs_n.png")
-    plots.success_vs_n(am, out / "success_vs_n.png")
-    plots.alloc_time_vs_n(am, out / "alloc_time_vs_n.png")
-    plots.wait_distribution(M.wait_times(tasks), out / "wait_times.png")
-    run_id = run_id or default_run(summary, reference)
-    run = res.run(run_id)
-    try:
-        world = res.world(run_id)[0]
-    except KeyError:
-        world = None
-    s = run["summary"].iloc[0]
-    label = f"{s['allocator']}, N = {s['n_agents']}, seed {s['seed']}"
-    plots.gantt(run["events"], run["vehicles"], out / "timeline.png",
-                title=f"Vehicle timeline: {label}", end=float(s["sim_time"]))
-    plots.paths_3d(run["events"], run["vehicles"], run["obstacles"], run["tasks"],
-                   out / "paths_3d.png", world=world, title=f"Paths and obstacles: {label}")
-    written += [out / f for f in FIGURES]
-
+    at = 1 if written and written[0].name in ("allocators.csv", "dynamic.csv") else 0
+    written[at:at] = [out / "taxi.csv", out / "runs.csv"]
     errors = res.errors()
-    sections = _sections(res, summary, am, taxi, run_id, errors, reference)
+    if len(errors):
+        cols = [c for c in ("run_id", "error_type", "message") if c in errors.columns]
+        sections += [("h2", "Failed runs"), ("table", errors[cols])]
+    sections += [("p", "Files: " + ", ".join(f.name for f in written if f.suffix == ".csv")
+                  + " (every column; runs.csv per run).")]
     report = out / f"report.{fmt}"
     text = _markdown(sections) if fmt == "md" else _html(sections)
     tmp = report.with_name(f".{report.name}.tmp")
@@ -154,49 +204,209 @@ def write_report(source: Results | str | os.PathLike | list, out: str | os.PathL
     return [report, *written]
 
 
-def _sections(res, summary, am, taxi, run_id, errors, reference) -> list:
-    """The report as a list of ("h", text) / ("p", text) / ("table", df) / ("img", file)."""
+def _direct_times(res: Results, road: pd.DataFrame, tasks: pd.DataFrame):
+    """Per row of ``tasks``: the trip's free-flow direct seconds, from the network of its
+    scenario rebuilt by :mod:`analysis.network` (NaN where it cannot be)."""
+    import numpy as np
+
+    from analysis.network import direct_seconds, road_network
+
+    out = np.full(len(tasks), np.nan)
+    if "direct_seconds" in tasks and tasks["direct_seconds"].notna().any():
+        return None  # recorded by the kernel
+    for scen, g in road.groupby("scenario"):
+        try:
+            meta = res.metadata(str(g["run_id"].iloc[0]), "tasks")
+        except KeyError:
+            continue
+        net = road_network(meta, [s.path for s in res.sources])
+        rows = (tasks["scenario"] == scen).to_numpy()
+        if net is not None and rows.any():
+            out[rows] = direct_seconds(tasks.loc[rows], net)
+    return out
+
+
+def _head(res, summary) -> list:
     scen = ", ".join(sorted(summary["scenario"].unique()))
     allocs = ", ".join(M.allocator_order(summary["allocator"].unique()))
     ns = ", ".join(map(str, sorted(summary["n_agents"].unique())))
     seeds = summary["seed"].nunique()
-    s = []
-    s += [("h1", f"Report: {scen}"),
-          ("p", (f"{len(summary)} runs from {', '.join(str(x.path) for x in res.sources)}: "
-                 f"allocators {allocs}; N = {ns}; {seeds} seed(s).")
-                + (f" **{len(errors)} run(s) failed** (see the end)." if len(errors) else ""))]
-    s += [("h2", "Table I: total travel cost"),
-          ("p", ("Sum of the planned travel times c_ij (s) of the assignments made; mean over "
-                 "seeds ± half-width of the 95 % Student-t interval; in brackets the mean gap "
-                 f"to {reference} on the same instance (same seed, N, planner).")),
-          ("table", table_i(am, reference)),
-          ("img", "cost_vs_n.png")]
-    s += [("h2", "Table III: conflict-free success rate and allocation time"),
-          ("p", ("Share of offered tasks assigned without ever being requested by two agents "
-                 "in one round; wall time of the first decision (cost matrix + allocator), mean "
-                 "over seeds.")),
-          ("table", table_iii(am)),
-          ("img", "success_vs_n.png"), ("img", "alloc_time_vs_n.png")]
-    s += [("h2", "Taxi-style metrics"),
-          ("p", ("Names as in MATSim DRT's customer / vehicle stats (FleetPy: service_rate = "
-                 "'served users', wait_* = 'waiting time', utilization = '% fleet "
-                 "utilization'). Wait = release → arrival of the vehicle (s), pooled over the "
-                 "seeds; detourDistanceRatio = distance driven / straight line; utilization = "
-                 "busy seconds / (vehicles × simulated time); every metre is driven to reach a "
-                 "task with nothing on board, so empty distance = distance. All columns: "
-                 "taxi.csv.")),
-          ("table", _taxi_view(taxi)),
+    errors = res.errors()
+    return [("h1", f"Report: {scen}"),
+            ("p", (f"{len(summary)} runs from {', '.join(str(x.path) for x in res.sources)}: "
+                   f"allocators {allocs}; N = {ns}; {seeds} seed(s).")
+             + (f" **{len(errors)} run(s) failed** (see the end)." if len(errors) else ""))]
+
+
+def _voxel_part(res, summary, tasks, vehicles, events, out, written, run_id, reference) -> list:
+    """Tables I and III (static: summed cost and gap; dynamic: per task), their plots, the
+    service metrics, one run in detail."""
+    sources = task_sources(res, summary)
+    dynamic = summary["scenario"].map(sources).fillna("static") != "static"
+    s: list = []
+    static_runs, dynamic_runs = summary.loc[~dynamic], summary.loc[dynamic]
+    if len(static_runs):
+        am = M.allocator_metrics(static_runs, reference)
+        am.to_csv(out / "allocators.csv", index=False)
+        written.append(out / "allocators.csv")
+        plots.cost_vs_n(am, out / "cost_vs_n.png")
+        plots.success_vs_n(am, out / "success_vs_n.png")
+        plots.alloc_time_vs_n(am, out / "alloc_time_vs_n.png")
+        s += [("h2", "Table I: total travel cost"),
+              ("p", ("Sum of the planned travel times c_ij (s) of the assignments made; mean "
+                     "over seeds ± half-width of the 95 % Student-t interval; in brackets the "
+                     f"mean gap to {reference} on the same instance (same seed, N, planner).")),
+              ("table", table_i(am, reference)),
+              ("img", "cost_vs_n.png")]
+        s += [("h2", "Table III: conflict-free success rate and allocation time"),
+              ("p", ("Share of offered tasks assigned without ever being requested by two "
+                     "agents in one round; wall time of the first decision (cost matrix + "
+                     "allocator), mean over seeds.")),
+              ("table", table_iii(am)),
+              ("img", "success_vs_n.png"), ("img", "alloc_time_vs_n.png")]
+        figures = list(FIGURES)
+    if len(dynamic_runs):
+        dm = M.dynamic_metrics(dynamic_runs)
+        dm.to_csv(out / "dynamic.csv", index=False)
+        written.append(out / "dynamic.csv")
+        plots.metric_vs_n(dm, "served_share_mean", out / "served_vs_n.png",
+                          ci="served_share_ci95", scale=100, ylabel="tasks served (%)",
+                          title="Served share vs N (completed / released; mean, 95 % CI)")
+        plots.metric_vs_n(dm, "wait_mean_mean", out / "wait_vs_n.png", ci="wait_mean_ci95",
+                          ylabel="mean wait, release → pickup (s)",
+                          title="Mean wait vs N (mean over seeds, 95 % CI)")
+        plots.metric_vs_n(dm, "cost_per_assignment_mean", out / "cost_per_task_vs_n.png",
+                          ci="cost_per_assignment_ci95",
+                          ylabel="planned cost per assignment (s)",
+                          title="Planned travel time to the task per assignment vs N")
+        plots.metric_vs_n(dm, "conflict_free_rate_mean", out / "success_vs_n.png",
+                          ci="conflict_free_rate_ci95", scale=100, ylim=(-2, 105),
+                          ylabel="conflict-free success rate (%)",
+                          title="Conflict-free success rate vs N (mean, 95 % CI)")
+        plots.metric_vs_n(dm, "decision_ms_mean", out / "alloc_time_vs_n.png",
+                          ci="decision_ms_ci95", log=True,
+                          ylabel="wall time per decision (ms, log scale)",
+                          title="Allocation time per decision vs N")
+        s += [("h2", "Tables I and III (dynamic): per task"),
+              ("p", ("Tasks are released over time, so each allocator drives its own "
+                     "trajectory through the run: summed planned costs are not comparable. "
+                     "Per task instead, mean over seeds ± 95 % half-width: served = completed "
+                     "/ released; wait = release → pickup over the tasks picked up; cost = "
+                     "planned seconds from the vehicle to the task per assignment; "
+                     "conflict-free = share of the offered tasks assigned without a conflict; "
+                     "wall milliseconds per decision (cost matrix + allocator).")),
+              ("table", table_dynamic(dm)),
+              ("img", "served_vs_n.png"), ("img", "wait_vs_n.png"),
+              ("img", "cost_per_task_vs_n.png"), ("img", "success_vs_n.png"),
+              ("img", "alloc_time_vs_n.png")]
+        figures = list(DYNAMIC_FIGURES) if not len(static_runs) else list(FIGURES) + [
+            "served_vs_n.png", "wait_vs_n.png", "cost_per_task_vs_n.png"]
+    ids = set(summary["run_id"])
+    t = tasks.loc[tasks["run_id"].isin(ids)]
+    plots.wait_distribution(M.wait_times(t), out / "wait_times.png")
+    taxi = M.taxi_metrics(summary, t, vehicles.loc[vehicles["run_id"].isin(ids)],
+                          events.loc[events["run_id"].isin(ids)])
+    s += [("h2", "Service metrics"),
+          ("p", ("Wait = release → pickup (s), pooled over the seeds; rejectionRate = "
+                 "(rejected + expired + unreachable) / requests; approach_delay = realized "
+                 "approach time − planned cost (reservation waits, replans); path_stretch = "
+                 "metres driven / straight line per leg; utilization = time driving to a task "
+                 "or serving it / time not broken down. All columns: taxi.csv.")),
+          ("table", _taxi_view(taxi, VOXEL_TAXI_COLUMNS)),
           ("img", "wait_times.png")]
+    run_id = run_id or default_run(summary, reference)
+    run = res.run(run_id)
+    try:
+        world = res.world(run_id)[0]
+    except KeyError:
+        world = None
+    r = run["summary"].iloc[0]
+    label = f"{r['allocator']}, N = {r['n_agents']}, seed {r['seed']}"
+    plots.gantt(run["events"], run["vehicles"], out / "timeline.png",
+                title=f"Vehicle timeline: {label}", end=float(r["sim_time"]))
+    plots.paths_3d(run["events"], run["vehicles"], run["obstacles"], run["tasks"],
+                   out / "paths_3d.png", world=world, title=f"Paths and obstacles: {label}")
     s += [("h2", f"One run in detail: {run_id}"),
           ("p", ("Vehicle timeline (busy = travelling to or serving a task; waiting = holding "
                  "a cell or assigned but not yet moving; idle) and the vehicles' paths among "
                  "the obstacles.")),
           ("img", "timeline.png"), ("img", "paths_3d.png")]
-    if len(errors):
-        cols = [c for c in ("run_id", "error_type", "message") if c in errors.columns]
-        s += [("h2", "Failed runs"), ("table", errors[cols])]
-    s += [("p", "Files: allocators.csv (Tables I/III, all columns), taxi.csv, runs.csv (per run).")]
+    written += [out / f for f in figures]
     return s
+
+
+def _road_part(res, summary, tasks, vehicles, events, direct, out, written, run_id) -> list:
+    """The taxi study: metrics, per-hour series, map, hourly plots, fleet states, waits."""
+    import numpy as np
+
+    from analysis import taxi_plots as TP
+    from analysis.network import road_network
+    from analysis.timeline import fleet_states
+
+    ids = set(summary["run_id"])
+    pick = tasks["run_id"].isin(ids).to_numpy()
+    t = tasks.loc[pick]
+    d = None if direct is None else np.asarray(direct)[pick]
+    v = vehicles.loc[vehicles["run_id"].isin(ids)]
+    e = events.loc[events["run_id"].isin(ids)]
+    taxi = M.taxi_metrics(summary, t, v, e, d)
+    bin_s = TP.time_bin(float(summary["sim_time"].max()))
+    trips = M.trip_table(t, e, d)
+    hc = M.hourly_customers(trips)
+    hc_bins = hc if bin_s == 3600 else M.hourly_customers(trips, bin_s=bin_s)
+    states = []
+    ends = summary.set_index("run_id")["sim_time"].to_dict()
+    for rid, vg in v.groupby("run_id", sort=False):
+        states.append(fleet_states(e.loc[e["run_id"] == rid], vg, end=float(ends[rid])))
+    states = pd.concat(states, ignore_index=True) if states else pd.DataFrame(
+        columns=["run_id", "agent_id", "state", "start", "end"])
+    hf = M.hourly_fleet(states, summary)
+    hf_bins = hf if bin_s == 3600 else M.hourly_fleet(states, summary, bin_s=bin_s)
+    hc.to_csv(out / "hourly_customers.csv", index=False)
+    hf.to_csv(out / "hourly_fleet.csv", index=False)
+    written += [out / "hourly_customers.csv", out / "hourly_fleet.csv"]
+
+    run_id = run_id or default_run(summary)
+    r = summary.loc[summary["run_id"] == run_id].iloc[0]
+    rt, rv = t.loc[t["run_id"] == run_id], v.loc[v["run_id"] == run_id]
+    try:
+        net = road_network(res.metadata(run_id, "tasks"), [s.path for s in res.sources])
+    except KeyError:
+        net = None
+    scen = str(r["scenario"])
+    TP.network_map(out / "map.png", pickups=rt[["x", "y"]].to_numpy(dtype=float),
+                   starts=rv[["x0", "y0"]].to_numpy(dtype=float),
+                   xy=None if net is None else net.xy, edges=None if net is None else net.edges,
+                   title=f"{scen}: streets, pickups of seed {r['seed']} "
+                         f"({len(rt)} requests), fleet start (N = {r['n_agents']})")
+    runs = summary.groupby(["allocator", "n_agents"])["run_id"].nunique().to_dict()
+    TP.hourly(hc_bins, out / "hourly.png", bin_s=bin_s, runs=runs,
+              title=f"{scen}: demand, service and waiting (by time of release)")
+    TP.fleet_state(hf_bins, out / "fleet_state.png", bin_s=bin_s,
+                   title=f"{scen}: fleet state over time (mean vehicles per state)")
+    TP.wait_by_group(trips.loc[trips["wait"].notna()], out / "wait_by_allocator.png",
+                     title=f"{scen}: wait from release to pickup, seeds pooled")
+    written += [out / f for f in ROAD_FIGURES]
+    unit = "one hour" if bin_s == 3600 else f"{bin_s / 60:g} minutes"
+    return [
+        ("h2", "Taxi study: customers and fleet"),
+        ("p", ("Per allocator and fleet size N, requests pooled over the seeds. Names as "
+               "MATSim DRT's customer and vehicle stats print them: rides = served trips; "
+               "rejectionRate = (rejected at once + expired waiting + unreachable) / requests; "
+               "wait = release → pickup (s; median, p90 by linear interpolation); "
+               "inVehicleTravelTime = pickup → drop-off (s); detour_ratio = in-vehicle time / "
+               "the trip's direct free-flow time (1: driven straight at free flow); "
+               "utilization = share of the vehicles' available time (not broken down) driving "
+               "to a pickup or with a passenger (FleetPy's '% fleet utilization'); "
+               "emptyRatio = km without a passenger / all km (FleetPy's '% empty vkm'); "
+               "vkm_per_ride = vehicle km per served trip. All columns: taxi.csv; per hour "
+               "(customers by hour of release, fleet by clock hour): hourly_customers.csv, "
+               "hourly_fleet.csv.")),
+        ("table", _taxi_view(taxi, TAXI_COLUMNS)),
+        ("img", "map.png"),
+        ("p", f"Over time, in bins of {unit} (the CSV files are per hour):"),
+        ("img", "hourly.png"), ("img", "fleet_state.png"), ("img", "wait_by_allocator.png"),
+    ]
 
 
 def _markdown(sections) -> str:

@@ -93,3 +93,87 @@ def positions_at(traj: dict[int, pd.DataFrame], t: float) -> dict[int, np.ndarra
             a = 0.0 if t1 <= t0 else (t - t0) / (t1 - t0)
             out[agent] = xyz[i - 1] + a * (xyz[i] - xyz[i - 1])
     return out
+
+
+# ----------------------------------------------------------------------------- fleet state
+
+#: Fleet states as ride-hailing studies count them (MATSim DRT's occupancy profile, FleetPy's
+#: vehicle states): ``to_pickup`` (assigned, driving empty to a passenger), ``occupied`` (from the
+#: pickup until the vehicle is free again: the ride and the service at its end; for the paper's
+#: point tasks, serving the task), ``repositioning`` (idle, driving empty where a repositioning
+#: policy sends it), ``failed`` (broken down, until repaired), ``idle``.
+FLEET_STATES = ("idle", "to_pickup", "occupied", "repositioning", "failed")
+
+_FLEET_MOVES = {"assign": "to_pickup", "reassign": "to_pickup", "pickup": "occupied",
+                "arrive": "occupied", "idle": "idle", "breakdown": "failed",
+                "reposition": "repositioning"}
+
+
+def fleet_states(events: pd.DataFrame, vehicles: pd.DataFrame,
+                 end: float | None = None) -> pd.DataFrame:
+    """Columns run_id, agent_id, state (one of :data:`FLEET_STATES`), start, end: every
+    vehicle of every run covered from 0 to ``end`` (default: the run's last event) without
+    gaps or overlaps.
+
+    Transitions: ``assign`` / ``reassign`` -> to_pickup (unless occupied or failed);
+    ``pickup`` -> occupied; ``idle`` -> idle; ``breakdown`` -> failed (only ``idle``, after a
+    ``repair``, ends it); ``reposition`` -> repositioning (only from idle)."""
+    cols = ["run_id", "agent_id", "state", "start", "end"]
+    rows = []
+    ev = events.loc[(events["agent_id"] >= 0) & events["event"].isin(list(_FLEET_MOVES))]
+    ev = ev.sort_values(["run_id", "t"], kind="stable")
+    ends = {}
+    if end is None:
+        ends = events.groupby("run_id")["t"].max().to_dict() if len(events) else {}
+    by_run = dict(iter(ev.groupby("run_id", sort=False)))
+    for run, vs in vehicles.groupby("run_id", sort=False):
+        stop = float(end if end is not None else ends.get(run, 0.0))
+        g = by_run.get(run)
+        by_agent = dict(iter(g.groupby("agent_id", sort=False))) if g is not None else {}
+        for agent in sorted(vs["agent_id"].astype(int)):
+            state, since = "idle", 0.0
+            mine = by_agent.get(agent)
+            if mine is not None:
+                for t, kind in zip(mine["t"].to_numpy(dtype=float), mine["event"]):
+                    new = _FLEET_MOVES[kind]
+                    if state == "failed" and new != "idle":
+                        continue
+                    if new == "to_pickup" and state == "occupied":
+                        continue
+                    if new == "repositioning" and state != "idle":
+                        continue
+                    if new != state:
+                        if t > since:
+                            rows.append((run, agent, state, since, min(t, stop)))
+                        state, since = new, t
+            if stop > since:
+                rows.append((run, agent, state, since, stop))
+    return pd.DataFrame(rows, columns=cols)
+
+
+def hourly_states(states: pd.DataFrame, hour: float = 3600.0) -> pd.DataFrame:
+    """Vehicle-seconds per run, clock hour (``hour`` = 0, 1, ...) and state: columns run_id,
+    hour, and one column per state of :data:`FLEET_STATES`. Intervals that span an hour
+    boundary are split."""
+    if states.empty:
+        return pd.DataFrame(columns=["run_id", "hour", *FLEET_STATES])
+    s = states["start"].to_numpy(dtype=float)
+    e = states["end"].to_numpy(dtype=float)
+    h0 = np.floor(s / hour).astype(int)
+    h1 = np.floor(np.maximum(e - 1e-9, s) / hour).astype(int)
+    reps = h1 - h0 + 1
+    idx = np.repeat(np.arange(len(states)), reps)
+    k = np.arange(idx.size) - np.repeat(np.cumsum(reps) - reps, reps)
+    hrs = h0[idx] + k
+    lo = np.maximum(s[idx], hrs * hour)
+    hi = np.minimum(e[idx], (hrs + 1) * hour)
+    df = pd.DataFrame({"run_id": states["run_id"].to_numpy()[idx], "hour": hrs,
+                       "state": states["state"].to_numpy()[idx], "seconds": hi - lo})
+    out = df.pivot_table(index=["run_id", "hour"], columns="state", values="seconds",
+                         aggfunc="sum", fill_value=0.0)
+    for st in FLEET_STATES:
+        if st not in out.columns:
+            out[st] = 0.0
+    out = out[list(FLEET_STATES)].reset_index()
+    out.columns.name = None
+    return out

@@ -162,7 +162,7 @@ def _run(args, console) -> int:
                 progress.update(bar, advance=1, description=result.spec.run_id)
 
             summaries = execute(specs, out, on_done=done)
-    _tables(summaries, console)
+    _tables(summaries, console, sc)
     console.print(f"{len(specs)} run(s) in {time.perf_counter() - started:.1f} s; "
                   f"Parquet written to {out}/", soft_wrap=True)
     return 0
@@ -201,16 +201,13 @@ class _run_progress:
             self.progress.__exit__(*exc)
 
 
-def _tables(summaries, console) -> None:
-    """Paper tables for voxel runs, the trip table for road-network runs."""
-    from dispatch.tables import render, render_trips
+def _tables(summaries, console, sc) -> None:
+    """One run's summary; or paper tables for voxel runs (per task for a dynamic scenario),
+    the trip table for road-network runs."""
+    from dispatch.tables import print_tables
 
-    voxel = [s for s in summaries if s.get("space", "voxel") == "voxel"]
-    roads = [s for s in summaries if s.get("space") == "road"]
-    if voxel:
-        render(voxel, console)
-    if roads:
-        render_trips(roads, console)
+
+    print_tables(summaries, console, dynamic=sc.tasks.source != "static")
 
 
 def _validate(args, console) -> int:
@@ -330,7 +327,7 @@ def _sweep(args, console) -> int:
                          address=args.ray or None, force=args.force, on_done=done)
     summaries = [o.summary for o in outcomes if o.summary is not None]
     if summaries:
-        _tables(summaries, console)
+        _tables(summaries, console, sc)
     failed = [o for o in outcomes if o.status == "failed"]
     for o in failed:
         console.print(f"[red]failed[/]: {o.run_id}: {o.error}", highlight=False, soft_wrap=True)

@@ -52,6 +52,9 @@ SCHEMAS: dict[str, pa.Schema] = {
         # [reposition]: the repositioner (stay: idle vehicles wait), the drives it started
         # toward a target and their metres (part of empty_distance)
         ("reposition", _S), ("repositions", _I), ("reposition_distance", _F),
+        # tasks that had a vehicle when they closed: total_cost / tasks_assigned is the mean
+        # planned cost of an assignment (the dynamic benchmark's per-task cost)
+        ("tasks_assigned", _I),
     ]),
     "tasks": pa.schema([
         ("run_id", _S), ("task_id", _I), ("kind", _S), ("x", _F), ("y", _F), ("z", _F),

@@ -18,6 +18,7 @@ class RunStats:
     def __init__(self) -> None:
         self.count = {s: 0 for s in TaskState}
         self.total_cost = 0.0  # planned cost of every assigned task
+        self.assigned = 0  # tasks that had a vehicle when they closed (total_cost's terms)
         self.offered = 0
         self.clean = 0  # offered, assigned and never in conflict
         self.conflicts = 0
@@ -36,6 +37,7 @@ class RunStats:
         self.transferred += t.transfers > 0
         if t.agent_id >= 0:
             self.total_cost += t.cost
+            self.assigned += 1
         if t.offered:
             self.offered += 1
             self.clean += t.agent_id >= 0 and not t.conflicted
@@ -73,6 +75,6 @@ class RunStats:
             empty_distance=sum(v.empty_distance for v in vehicles),
             occupied_distance=sum(v.occupied_distance for v in vehicles),
             failures=sum(v.failures for v in vehicles), tasks_reassigned=self.reassigned,
-            tasks_transferred=self.transferred,
+            tasks_transferred=self.transferred, tasks_assigned=self.assigned,
             reassignments=getattr(d, "reassignments", 0),
         )

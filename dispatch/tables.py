@@ -1,4 +1,17 @@
-"""Paper-style result tables from run summaries (Tables I and III of the MAGNNET paper)."""
+"""The tables ``dispatch run`` and ``dispatch sweep`` print, from the runs' summaries.
+
+* static voxel scenarios: the MAGNNET paper's Table I (total travel cost, gap to Hungarian) and
+  Table III (conflict-free success rate, allocation time of the first decision);
+* dynamic voxel scenarios (tasks released over time): the same two tables **per task**
+  (served share, mean wait, mean planned cost per assignment; conflict-free rate, milliseconds
+  per decision), because planned costs summed over a run are not comparable between allocators
+  that drive different trajectories and serve different numbers of tasks;
+* road-network runs: the trip table (served, rejected, wait, empty and occupied km);
+* a single run: its own summary, one ``key: value`` line each.
+
+Every table is one row per (allocator, N), grouped by N, with short numeric cells: it fits an
+80-column terminal without cutting a cell (a test renders them at width 80).
+"""
 
 from __future__ import annotations
 
@@ -7,7 +20,7 @@ from collections import defaultdict
 from statistics import fmean
 
 PREFERRED_ORDER = ("hungarian", "magnnet", "magnnet_edge", "magnnet_match", "auction", "greedy",
-                   "random")
+                   "fcfs", "random")
 
 
 def allocator_order(names) -> list[str]:
@@ -16,9 +29,24 @@ def allocator_order(names) -> list[str]:
     return first + sorted(names - set(first))
 
 
+def _mean(rows: list[dict], key: str) -> float:
+    vals = [float(r[key]) for r in rows if r.get(key) is not None and not math.isnan(r[key])]
+    return fmean(vals) if vals else math.nan
+
+
+def _ratio(num: float, den: float) -> float:
+    return num / den if den and not math.isnan(den) and not math.isnan(num) else math.nan
+
+
+def _f(v: float, digits: int = 1, scale: float = 1.0, unit: str = "") -> str:
+    return "-" if v is None or math.isnan(v) else f"{v * scale:.{digits}f}{unit}"
+
+
 def aggregate(summaries: list[dict], reference: str = "hungarian") -> dict[tuple[str, int], dict]:
-    """Per (allocator, n_agents): mean total cost, mean paired gap to ``reference`` (same seed,
-    planner and N), mean conflict-free rate, mean allocation seconds, number of runs."""
+    """Per (allocator, n_agents): mean over seeds of the total cost, the paired gap to
+    ``reference`` (same seed, planner and N), the conflict-free rate, the allocation seconds,
+    and the per-task figures of dynamic runs (served share, wait, cost per assignment, ms per
+    decision); ``runs``."""
     ref = {
         (s["planner"], s["n_agents"], s["seed"]): s["total_cost"]
         for s in summaries if s["allocator"] == reference
@@ -33,72 +61,91 @@ def aggregate(summaries: list[dict], reference: str = "hungarian") -> dict[tuple
             for r in rows
             if (k := (r["planner"], r["n_agents"], r["seed"])) in ref and ref[k] > 0
         ]
-        rates = [r["conflict_free_rate"] for r in rows if not math.isnan(r["conflict_free_rate"])]
         out[key] = {
             "runs": len(rows),
-            "total_cost": fmean(r["total_cost"] for r in rows),
+            "total_cost": _mean(rows, "total_cost"),
             "gap": fmean(gaps) if gaps else math.nan,
-            "conflict_free_rate": fmean(rates) if rates else math.nan,
-            "alloc_seconds": fmean(r["alloc_seconds"] for r in rows),
-            "first_decision_seconds": fmean(r["first_decision_seconds"] for r in rows),
-            "tasks_completed": fmean(r["tasks_completed"] for r in rows),
+            "conflict_free_rate": _mean(rows, "conflict_free_rate"),
+            "alloc_seconds": _mean(rows, "alloc_seconds"),
+            "first_decision_seconds": _mean(rows, "first_decision_seconds"),
+            "tasks_completed": _mean(rows, "tasks_completed"),
+            "n_tasks": _mean(rows, "n_tasks"),
+            "served_share": fmean(_ratio(r["tasks_completed"], r["n_tasks"]) for r in rows),
+            "wait": _mean(rows, "wait_time_mean"),
+            "cost_per_assignment": fmean(
+                _ratio(r["total_cost"], r.get("tasks_assigned", math.nan)) for r in rows),
+            "decision_ms": fmean(1000 * _ratio(r["alloc_seconds"], r["decisions"])
+                                 for r in rows),
         }
     return out
 
 
-def render(summaries: list[dict], console=None) -> None:
-    """Print Table I (total travel cost, gap to Hungarian) and Table III (conflict-free success
-    rate, allocation time) with rich."""
-    from rich.console import Console
+def _new_table(title: str, columns: list[str]):
+    from rich import box
     from rich.table import Table
+
+    t = Table(title=title, box=box.SIMPLE_HEAD, padding=(0, 1), pad_edge=False,
+              title_justify="left")
+    for i, col in enumerate(columns):
+        t.add_column(col, justify="left" if i == 0 else "right", no_wrap=i == 0)
+    return t
+
+
+def _grouped_rows(agg: dict):
+    """(allocator, N, row) in N order, allocators in the paper's order; ``last`` marks the last
+    row of an N (a section ends there)."""
+    sizes = sorted({n for _, n in agg})
+    allocs = allocator_order({a for a, _ in agg})
+    for n in sizes:
+        here = [a for a in allocs if (a, n) in agg]
+        for i, a in enumerate(here):
+            yield a, n, agg[(a, n)], i == len(here) - 1
+
+
+def render(summaries: list[dict], console=None, *, dynamic: bool = False) -> None:
+    """Print Tables I and III (see the module docstring; ``dynamic``: the per-task tables)."""
+    from rich.console import Console
 
     console = console or Console()
     agg = aggregate(summaries)
-    allocs = allocator_order({a for a, _ in agg})
-    sizes = sorted({n for _, n in agg})
-    runs = {n: max(agg[(a, n)]["runs"] for a in allocs if (a, n) in agg) for n in sizes}
-
-    t1 = Table(title="Table I: total travel cost (s), mean over seeds [gap to Hungarian]")
-    t1.add_column("N", justify="right")
-    t1.add_column("runs", justify="right")
-    for a in allocs:
-        t1.add_column(a, justify="right")
-    for n in sizes:
-        cells = []
-        for a in allocs:
-            r = agg.get((a, n))
-            if r is None:
-                cells.append("-")
-            elif a == "hungarian" or math.isnan(r["gap"]):
-                cells.append(f"{r['total_cost']:.1f}")
-            else:
-                # + 0.0 turns a rounding-level -0.0 (equal totals summed in another order) into 0
-                cells.append(f"{r['total_cost']:.1f} [{round(100 * r['gap'], 1) + 0.0:+.1f}%]")
-        t1.add_row(str(n), str(runs[n]), *cells)
+    runs = max((r["runs"] for r in agg.values()), default=0)
+    if dynamic:
+        t1 = _new_table(f"Table I (dynamic): per task, mean over {runs} seed(s); served = "
+                        "completed / released; wait = release to pickup; cost = planned "
+                        "seconds to the pickup per assignment",
+                        ["allocator", "N", "tasks", "served", "wait s", "cost s"])
+        t3 = _new_table("Table III (dynamic): conflict-free success rate and wall time per "
+                        "decision (cost matrix + allocator)",
+                        ["allocator", "N", "conflict-free", "ms/decision"])
+        for a, n, r, last in _grouped_rows(agg):
+            t1.add_row(a, str(n), _f(r["n_tasks"], 0), _f(r["served_share"], 1, 100, "%"),
+                       _f(r["wait"]), _f(r["cost_per_assignment"], 2), end_section=last)
+            t3.add_row(a, str(n), _f(r["conflict_free_rate"], 1, 100, "%"),
+                       _f(r["decision_ms"], 2), end_section=last)
+    else:
+        t1 = _new_table(f"Table I: total travel cost (s, sum of the planned costs), mean over "
+                        f"{runs} seed(s); gap to Hungarian paired by seed",
+                        ["allocator", "N", "runs", "cost s", "gap"])
+        t3 = _new_table("Table III: conflict-free success rate and allocation time of the "
+                        "first decision (cost matrix + allocator)",
+                        ["allocator", "N", "conflict-free", "time ms"])
+        for a, n, r, last in _grouped_rows(agg):
+            gap = ("" if a == "hungarian" or math.isnan(r["gap"])
+                   # + 0.0 turns a rounding-level -0.0 (equal totals in another order) into 0
+                   else f"{round(100 * r['gap'], 1) + 0.0:+.1f}%")
+            t1.add_row(a, str(n), str(r["runs"]), _f(r["total_cost"]), gap, end_section=last)
+            t3.add_row(a, str(n), _f(r["conflict_free_rate"], 1, 100, "%"),
+                       _f(r["first_decision_seconds"], 1, 1000), end_section=last)
     console.print(t1)
-
-    t3 = Table(title="Table III: conflict-free success rate (%) / allocation time (s)")
-    t3.add_column("N", justify="right")
-    for a in allocs:
-        t3.add_column(a, justify="right")
-    for n in sizes:
-        cells = []
-        for a in allocs:
-            r = agg.get((a, n))
-            cells.append("-" if r is None else
-                         f"{100 * r['conflict_free_rate']:.1f} / {r['first_decision_seconds']:.3f}")
-        t3.add_row(str(n), *cells)
     console.print(t3)
-    console.print("allocation time: wall seconds of the first decision (cost matrix + allocator), "
-                  "mean over seeds")
 
 
 def render_trips(summaries: list[dict], console=None) -> None:
     """Print the trip table of road-network runs: per allocator and fleet size, the mean over
-    seeds of trips released, the share served, rejected and expired, the mean wait (release to
-    pickup), the fleet's empty and occupied kilometres and the wall seconds spent deciding.
-    Runs with a repositioner other than ``stay`` get a table per repositioner (its name and
-    the kilometres it drove in the title)."""
+    seeds of trips released, the share served and rejected (at once, or expired waiting), the
+    mean wait (release to pickup), the share of the fleet's kilometres driven empty, the
+    kilometres driven and the wall seconds spent deciding. Runs with a repositioner other than
+    ``stay`` get a table per repositioner (its name and the kilometres it drove in the title)."""
     by_repositioner: dict[str, list[dict]] = defaultdict(list)
     for s in summaries:
         by_repositioner[s.get("reposition", "stay")].append(s)
@@ -109,7 +156,6 @@ def render_trips(summaries: list[dict], console=None) -> None:
 
 def _render_trips(summaries: list[dict], console, repositioner: str | None) -> None:
     from rich.console import Console
-    from rich.table import Table
 
     console = console or Console()
     groups: dict[tuple[str, int], list[dict]] = defaultdict(list)
@@ -117,30 +163,31 @@ def _render_trips(summaries: list[dict], console, repositioner: str | None) -> N
     for s in summaries:
         groups[(_variant(s) if variants else s["allocator"], s["n_agents"])].append(s)
     runs = max((len(g) for g in groups.values()), default=0)
-    title = (f"Trips, mean over {runs} seed(s): served, rejected, expired, wait "
-             f"(release to pickup), empty and occupied km, deciding seconds")
+    title = ("Trips, mean over {runs} seed(s): served and rejected (at once or expired) share "
+             "of the trips, wait from release to pickup (s), share of km driven empty, km "
+             "driven, wall seconds deciding").format(runs=runs)
     if repositioner is not None:
         km = fmean(s.get("reposition_distance", 0.0) for s in summaries) / 1000
         title = f"Repositioner {repositioner!r} ({km:.0f} km repositioning per run). " + title
-    t = Table(title=title)
-    for col in ("allocator", "N", "trips", "served", "rej.", "exp.", "wait s", "empty km",
-                "occ. km", "dec. s"):
-        t.add_column(col, justify="left" if col == "allocator" else "right")
-    for alloc in allocator_order({a for a, _ in groups}):
-        for n in sorted(k for a, k in groups if a == alloc):
-            rows = groups[(alloc, n)]
-
-            def mean(key, rows=rows):
-                vals = [r[key] for r in rows if not math.isnan(r[key])]
-                return fmean(vals) if vals else math.nan
-
-            served = fmean(r["tasks_completed"] / r["n_tasks"] if r["n_tasks"] else math.nan
-                           for r in rows)
-            t.add_row(alloc, str(n), f"{mean('n_tasks'):.0f}",
-                      "-" if math.isnan(served) else f"{100 * served:.1f}%",
-                      f"{mean('tasks_rejected'):.0f}", f"{mean('tasks_expired'):.0f}",
-                      f"{mean('wait_time_mean'):.1f}", f"{mean('empty_distance') / 1000:.0f}",
-                      f"{mean('occupied_distance') / 1000:.0f}", f"{mean('alloc_seconds'):.2f}")
+    t = _new_table(title, ["allocator", "N", "trips", "served", "rej.", "wait", "empty", "km",
+                           "dec. s"])
+    agg = {}
+    for key, rows in groups.items():
+        agg[key] = {
+            "trips": _mean(rows, "n_tasks"),
+            "served": fmean(_ratio(r["tasks_completed"], r["n_tasks"]) for r in rows),
+            "rejected": fmean(_ratio(r["tasks_rejected"] + r["tasks_expired"]
+                                     + r.get("tasks_unreachable", 0), r["n_tasks"])
+                              for r in rows),
+            "wait": _mean(rows, "wait_time_mean"),
+            "empty": fmean(_ratio(r["empty_distance"], r["distance"]) for r in rows),
+            "km": _mean(rows, "distance") / 1000,
+            "dec": _mean(rows, "alloc_seconds"),
+        }
+    for a, n, r, last in _grouped_rows(agg):
+        t.add_row(a, str(n), _f(r["trips"], 0), _f(r["served"], 1, 100, "%"),
+                  _f(r["rejected"], 1, 100, "%"), _f(r["wait"]), _f(r["empty"], 0, 100, "%"),
+                  _f(r["km"], 0), _f(r["dec"], 2), end_section=last)
     console.print(t)
 
 

@@ -160,3 +160,72 @@ def test_polars_reads_the_sweep(small_sweep):
     per = (df.group_by("allocator", "n_agents").agg(pl.len().alias("tasks"))
              .sort("allocator", "n_agents"))
     assert per["tasks"].to_list() == [12] * 6
+
+
+# ----------------------------------------------------------------------------- taxi runs
+
+
+@pytest.fixture(scope="module")
+def road_sweep(tmp_path_factory):
+    """Two allocators on a 6 x 6 grid: 6 taxis, Poisson trips for 40 simulated minutes."""
+    from dispatch.runner import sweep
+    from dispatch.scenario import load_scenario
+
+    d = tmp_path_factory.mktemp("road_sweep")
+    path = d / "grid.toml"
+    path.write_text('name = "grid"\nduration = 2400.0\n[world]\nnetwork = "manhattan"\n'
+                    'blocks = [6, 6]\nblock = 200.0\nspeed = 10.0\n[fleet]\nagents = 6\n'
+                    '[tasks]\nsource = "poisson"\nrate = 0.02\nmax_wait = 180.0\n'
+                    '[dispatch]\nallocator = "fcfs"\nplanner = "dijkstra"\nbatch_window = 10.0\n'
+                    '[sweep]\nallocator = ["fcfs", "hungarian"]\nseed = [0, 1]\n')
+    out = d / "out"
+    outcomes = sweep(load_scenario(path).runs(), out, workers=1)
+    assert all(o.status == "done" for o in outcomes), [o.error for o in outcomes]
+    return out
+
+
+def _not_trivial(path, min_kb=15):
+    assert path.stat().st_size > min_kb * 1024, path
+    with Image.open(path) as img:
+        assert img.width >= 600 and img.height >= 400
+        rgb = img.convert("RGB")
+        assert len(rgb.getcolors(maxcolors=1 << 16) or range(1 << 16)) > 50  # not uniform
+        lo, hi = zip(*rgb.getextrema())
+        assert max(hi) - min(lo) > 100
+
+
+def test_taxi_report_files(road_sweep, tmp_path):
+    from analysis.report import ROAD_FIGURES
+
+    files = write_report(road_sweep, tmp_path)
+    names = [f.name for f in files]
+    assert names[0] == "report.md"
+    for name in ("taxi.csv", "runs.csv", "hourly_customers.csv", "hourly_fleet.csv",
+                 *ROAD_FIGURES):
+        assert name in names and (tmp_path / name).is_file()
+    for name in ROAD_FIGURES:
+        _not_trivial(tmp_path / name)
+    text = (tmp_path / "report.md").read_text()
+    assert "Taxi study" in text and "Table I" not in text  # no paper tables for taxis
+    for col in ("rejectionRate", "wait_p90", "utilization", "emptyRatio", "vkm_per_ride"):
+        assert col in text
+    with open(tmp_path / "taxi.csv", newline="") as f:
+        taxi = {r["allocator"]: r for r in csv.DictReader(f)}
+    assert set(taxi) == {"fcfs", "hungarian"}
+    for r in taxi.values():
+        assert float(r["detour_ratio_mean"]) == pytest.approx(1.0)  # straight, free flow
+        assert 0 < float(r["emptyRatio"]) < 1 and 0 < float(r["utilization"]) <= 1
+
+
+def test_render_a_taxi_run(road_sweep, tmp_path, cli):
+    gif = tmp_path / "taxi.gif"
+    proc = cli("render", road_sweep, "--run-id", "grid__fcfs__dijkstra__n6__s0", "--out", gif,
+               "--fps", "3", "--seconds", "2", "--size", "320x300")
+    assert proc.returncode == 0, proc.stderr
+    with Image.open(gif) as img:
+        assert img.format == "GIF" and img.size == (320, 300)
+        assert 2 <= img.n_frames <= 6
+        img.seek(0)
+        first = img.convert("RGB").tobytes()
+        img.seek(img.n_frames - 1)
+        assert img.convert("RGB").tobytes() != first  # taxis moved, the clock ran

@@ -51,8 +51,10 @@ def test_run_exits_0_and_prints_tables(single_run):
     scenario, out, proc = single_run
     assert proc.returncode == 0, proc.stderr
     assert "Traceback" not in proc.stderr
-    assert "Table I" in proc.stdout and "Table III" in proc.stdout
-    assert "hungarian" in proc.stdout
+    # one run prints its own summary, not a table of means over one seed
+    assert "One run of tiny" in proc.stdout and "mean over" not in proc.stdout
+    assert "hungarian / astar, N = 3, seed 1" in proc.stdout
+    assert "4 released" in proc.stdout
     assert "1 run(s)" in proc.stdout
     assert str(out) in proc.stdout.replace("\n", "")
 
@@ -137,9 +139,11 @@ def test_sweep_prints_all_allocators(make_scenario, cli, tmp_path):
     proc = cli("run", path, "--out", out)
     assert proc.returncode == 0, proc.stderr
     assert "12 run(s)" in proc.stdout
-    header = next(line for line in proc.stdout.splitlines()
-                  if "hungarian" in line and "greedy" in line)
-    assert "random" in header
+    # one row per allocator and N, in each of Tables I and III
+    rows = [line.split() for line in proc.stdout.splitlines()]
+    for alloc in ("hungarian", "greedy", "random"):
+        for n in ("2", "3"):
+            assert sum(r[:2] == [alloc, n] for r in rows) == 2, (alloc, n, proc.stdout)
     assert (out / "summary" / "scenario=tiny" / "allocator=random" / "planner=astar" / "n_agents=2" / "seed=0"
             / "part-0.parquet").is_file()
 

@@ -1,0 +1,126 @@
+"""The CLI's tables at 80 columns: no cell cut short with an ellipsis, every allocator's name in
+full, no line wider than the terminal."""
+
+from __future__ import annotations
+
+import io
+import itertools
+
+import pytest
+
+from dispatch.tables import aggregate, print_tables
+
+ALLOCATORS = [
+    "hungarian",
+    "magnnet",
+    "magnnet_edge",
+    "magnnet_match",
+    "auction",
+    "greedy",
+    "fcfs",
+    "random",
+]
+
+
+def _summary(alloc: str, n: int, seed: int, space: str = "voxel") -> dict:
+    k = ALLOCATORS.index(alloc)
+    return {
+        "scenario": "paper_dynamic",
+        "allocator": alloc,
+        "planner": "astar",
+        "n_agents": n,
+        "seed": seed,
+        "space": space,
+        "n_tasks": 12345,
+        "total_cost": 123456.7 + k * 1000,
+        "conflict_free_rate": 0.5 + 0.05 * k,
+        "alloc_seconds": 123.456,
+        "tasks_completed": 12000,
+        "tasks_unfinished": 345,
+        "makespan": 86400.0,
+        "decisions": 9876,
+        "rounds": 20000,
+        "messages": 99999,
+        "conflicts": 77,
+        "cost_seconds": 100.0,
+        "decide_seconds": 23.456,
+        "first_decision_cost": 1234.5,
+        "first_decision_seconds": 0.0123,
+        "realized_travel": 123456.7,
+        "wait_time_mean": 123.4,
+        "tasks_expired": 100,
+        "tasks_rejected": 200,
+        "tasks_unreachable": 0,
+        "tasks_cancelled": 45,
+        "tasks_failed": 0,
+        "sim_time": 86400.0,
+        "comm_delay": 0.0,
+        "agent_seconds": 1.0,
+        "distance": 123456789.0,
+        "empty_distance": 23456789.0,
+        "occupied_distance": 100000000.0,
+        "failures": 0,
+        "tasks_reassigned": 0,
+        "tasks_transferred": 0,
+        "tasks_assigned": 12100,
+    }
+
+
+def _render(summaries, **kw) -> str:
+    from rich.console import Console
+
+    buf = io.StringIO()
+    console = Console(file=buf, width=80, force_terminal=False, color_system=None)
+    print_tables(summaries, console, **kw)
+    return buf.getvalue()
+
+
+SWEEP = [
+    _summary(a, n, s) for a, n, s in itertools.product(ALLOCATORS, [4, 8, 12, 20, 100], [0, 1, 2])
+]
+
+
+@pytest.mark.parametrize("kind", ["static", "dynamic", "road", "one voxel", "one road"])
+def test_tables_fit_80_columns(kind):
+    if kind == "road":
+        runs = [dict(s, space="road") for s in SWEEP]
+    elif kind.startswith("one"):
+        runs = [dict(SWEEP[0], space=kind.split()[1])]
+    else:
+        runs = SWEEP
+    text = _render(runs, dynamic=kind == "dynamic")
+    assert "…" not in text and "..." not in text, text
+    assert max(len(line) for line in text.splitlines()) <= 80
+    if not kind.startswith("one"):
+        for a in ALLOCATORS:
+            assert f" {a} " in f" {text} ".replace("\n", " "), (a, text)
+        assert "12345" in text  # the widest numbers are whole
+    else:
+        assert "12345 released" in text and "Table" not in text.split("\n")[0]
+
+
+def test_static_and_dynamic_tables_say_what_they_measure():
+    static = _render(SWEEP)
+    dynamic = _render(SWEEP, dynamic=True)
+    assert "Table I: total travel cost" in static and "gap" in static
+    assert "Table I (dynamic): per task" in dynamic and "gap" not in dynamic
+    assert "served" in dynamic and "wait" in dynamic and "ms/decision" in dynamic
+
+
+def test_dynamic_aggregate_by_hand():
+    runs = [
+        dict(
+            _summary("greedy", 4, s),
+            n_tasks=10,
+            tasks_completed=5 + 5 * s,
+            total_cost=20.0 * (s + 1),
+            tasks_assigned=10,
+            alloc_seconds=0.1 * (s + 1),
+            decisions=10,
+        )
+        for s in (0, 1)
+    ]
+    a = aggregate(runs)[("greedy", 4)]
+    assert a["served_share"] == pytest.approx(0.75)  # 5/10 and 10/10
+    assert a["cost_per_assignment"] == pytest.approx(3.0)  # 2 and 4 s
+    assert a["decision_ms"] == pytest.approx(15.0)  # 10 and 20 ms
