@@ -196,3 +196,66 @@ def _variant(s: dict) -> str:
     (its scenario name ends ``-immediate`` or ``-batch30s``, see ``Scenario.variants``)."""
     tail = s["scenario"].rpartition("-")[2]
     return f"{s['allocator']} {'imm' if tail == 'immediate' else tail.removeprefix('batch')}"
+
+
+def render_one(s: dict, console=None, *, dynamic: bool = False) -> None:
+    """Print one run's summary, one ``key: value`` line each (wrapped, never cut)."""
+    from rich.console import Console
+    from rich.table import Table
+
+    console = console or Console()
+    t = Table(title=f"One run of {s['scenario']}", box=None, show_header=False, padding=(0, 1),
+              title_justify="left")
+    t.add_column("key", no_wrap=True, style="bold")
+    t.add_column("value", overflow="fold")
+    n, done = s["n_tasks"], s["tasks_completed"]
+    share = f" ({100 * done / n:.1f} %)" if n else ""
+    road = s.get("space") == "road"
+    t.add_row("run", f"{s['allocator']} / {s['planner']}, N = {s['n_agents']}, seed "
+                     f"{s['seed']}, {s.get('space', 'voxel')}")
+    what = "trips" if road else "tasks"
+    rejected = s["tasks_rejected"] + s["tasks_expired"] + s.get("tasks_unreachable", 0)
+    t.add_row(what, f"{n} released, {done} served{share}; rejected {s['tasks_rejected']} at "
+                    f"once, expired {s['tasks_expired']}, unreachable "
+                    f"{s.get('tasks_unreachable', 0)} (rejections {rejected}); cancelled "
+                    f"{s['tasks_cancelled']}, failed {s.get('tasks_failed', 0)}")
+    t.add_row("wait", f"{_f(s['wait_time_mean'])} s mean, release to pickup")
+    per = _ratio(s["total_cost"], s.get("tasks_assigned", math.nan))
+    if road or dynamic:
+        t.add_row("planned cost", f"{_f(per, 2)} s per assignment (vehicle to pickup)")
+    else:
+        t.add_row("total cost", f"{_f(s['total_cost'])} s (Table I: sum of the planned costs)")
+    if not road:
+        t.add_row("conflict-free", f"{_f(s['conflict_free_rate'], 1, 100)} % of the tasks "
+                                   "offered (Table III)")
+    km = s.get("distance", math.nan) / 1000
+    empty = _ratio(s.get("empty_distance", math.nan), s.get("distance", math.nan))
+    fleet = f"{_f(km, 1)} km driven"
+    if road:
+        fleet += f", {_f(empty, 1, 100)} % of it empty"
+    t.add_row("fleet", fleet)
+    if road and s.get("reposition", "stay") != "stay":
+        t.add_row("repositioning", f"{s['reposition']}: {s.get('repositions', 0)} drives, "
+                                   f"{_f(s.get('reposition_distance', 0.0) / 1000, 1)} km")
+    if s.get("reassignments"):
+        t.add_row("reassigned", f"{s['reassignments']} times a vehicle on its way to a pickup "
+                                "was given another task")
+    t.add_row("deciding", f"{s['decisions']} decisions, {_f(s['alloc_seconds'], 3)} s wall "
+                          f"(first: {_f(s['first_decision_seconds'], 1, 1000)} ms)")
+    t.add_row("simulated", f"{_f(s['sim_time'])} s")
+    console.print(t)
+
+
+def print_tables(summaries: list[dict], console=None, *, dynamic: bool = False) -> None:
+    """What ``dispatch run`` / ``sweep`` print: one run's summary, or the tables of many
+    (voxel and road runs apart)."""
+    if len(summaries) == 1:
+        render_one(summaries[0], console, dynamic=dynamic)
+        return
+    voxel = [s for s in summaries if s.get("space", "voxel") == "voxel"]
+    roads = [s for s in summaries if s.get("space") == "road"]
+    if voxel:
+        render(voxel, console, dynamic=dynamic)
+    if roads:
+        render_trips(roads, console)
+
