@@ -371,7 +371,10 @@ class Planner(ABC):
 
     @abstractmethod
     def costs(self, agents: tuple[AgentView, ...], tasks: tuple[TaskView, ...]) -> np.ndarray:
-        """Return the ``(len(agents), len(tasks))`` float array of travel seconds."""
+        """Return the ``(len(agents), len(tasks))`` float array of travel seconds.
+
+        ``agents`` is a sequence of views (the dispatcher passes an :class:`AgentViews`: a
+        planner may read its ``nodes`` / ``remaining`` arrays instead of building every view)."""
 
     @abstractmethod
     def plan(self, agent: AgentView, goal: Location) -> list[Location] | None:

@@ -279,7 +279,7 @@ class Dispatcher:
         if not idle.size:
             return
         now = self.env.now
-        agents = self.fleet.views(idle, now)
+        agents = self.fleet.views(idle, now, ascending=True)  # flatnonzero, union1d: sorted
         t0 = time.perf_counter()
         try:
             cost = self.planner.costs(agents, tuple(t.view() for t in open_tasks))

@@ -212,17 +212,20 @@ class Fleet:
         vs = self.vehicles
         return [vs[i] for i in np.flatnonzero(self.idle_mask).tolist()]
 
-    def views(self, index: np.ndarray, now: float) -> AgentViews:
+    def views(self, index: np.ndarray, now: float, ascending: bool | None = None
+              ) -> AgentViews:
         """The vehicles at positions ``index`` as a decision at ``now`` sees them: a lazy
         sequence of :class:`AgentView` (built on access) that also carries their ids and, on
-        roads, their nodes and remaining seconds as arrays (see :class:`AgentViews`)."""
+        roads, their nodes and remaining seconds as arrays (see :class:`AgentViews`).
+        ``ascending``: whether ``index`` is strictly increasing, if the caller knows."""
         vs = self.vehicles
         idx = np.asarray(index, dtype=np.int64)
 
         def make(k: int) -> AgentView:
             return vs[int(idx[k])].view(now)
 
-        ascending = bool(idx.size < 2 or (idx[1:] > idx[:-1]).all())  # ids ascend with idx
+        if ascending is None:  # ids ascend with the positions (vehicles are in id order)
+            ascending = bool(idx.size < 2 or (idx[1:] > idx[:-1]).all())
         if not self.road:
             return AgentViews(self.ids[idx], make, ascending=ascending)
         node, rem = self.node[idx], self.remaining[idx]
