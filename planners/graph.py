@@ -18,8 +18,9 @@ length (several fields at once on threads), single pairs by A* with a radix heap
 (``GridGraph.csr``) is built only on request, for references and other tools.
 
 Everything here depends only on the immutable :class:`~dispatch.world.Grid`, so it is cached
-on ``grid.cache``: the graphs (built once per grid and model) and an LRU of distance fields
-bounded both in count and in bytes.
+on ``grid.cache``: the graphs (built once per grid and model) and a :class:`FieldCache` of
+distance fields that owns them, bounded in bytes (the cost path reads fields in place and never
+keeps one, see :func:`field_values`).
 """
 
 from __future__ import annotations
@@ -41,8 +42,9 @@ from planners import _fast
 
 #: Most distance fields kept per grid (both movement models together).
 FIELD_CACHE_MAX_FIELDS = 4096
-#: Most bytes of distance fields kept per grid (a 50x50x30 field is 600 kB).
-FIELD_CACHE_MAX_BYTES = 512 * 2**20
+#: Default bound of a grid's field cache in bytes (a 50x50x30 field is 600 kB, a 200x200x30
+#: one 9.6 MB); the ``astar`` planner's ``field_cache_mb`` sets it per run.
+FIELD_CACHE_MAX_BYTES = 256 * 2**20
 #: Largest node lattice for which :func:`astar` builds (and caches) the per-node move masks;
 #: beyond it (e.g. the 89-million-voxel MovingAI 3D maps) A* reads moves from the occupancy.
 MASK_MAX_NODES = 1 << 23
@@ -208,13 +210,81 @@ def _pool() -> ThreadPoolExecutor | None:
         return pool
 
 
-def distance_fields(grid: Grid, goal_cells, flies: bool) -> list[np.ndarray]:
-    """:func:`distance_field` for several goals at once: ``[field of each goal]``.
+class FieldCache:
+    """The distance fields of one grid, owned here and bounded in bytes.
 
-    The fields not cached yet are computed together, on up to :data:`FIELD_THREADS` threads
-    (the compiled kernel releases the GIL) when the lattice is large enough to pay for it.
+    Promises: the fields it holds never take more than ``max_bytes`` together (a field larger
+    than the bound is not kept at all); the least recently used field goes first; nothing
+    outside this module keeps a reference to a field it holds, except the arrays that
+    :func:`distance_field` / :func:`distance_fields` hand to their callers (read-only), which
+    live as long as the caller keeps them. The cost path (:func:`field_values`) never hands a
+    field out: it reads the values it needs and lets go, so with it the bound holds for the
+    whole process. An evicted field is recomputed on the next request, identically (Dijkstra's
+    float64 distances are the unique fixed point of the relaxations, whatever the order).
     """
-    g = graph(grid, flies)
+
+    def __init__(self, max_bytes: int) -> None:
+        self._lru: OrderedDict = OrderedDict()
+        self.nbytes = 0
+        self.max_bytes = int(max_bytes)
+        self.hits = 0
+        self.misses = 0
+        self.evictions = 0
+
+    def __len__(self) -> int:
+        return len(self._lru)
+
+    def __contains__(self, key) -> bool:
+        return key in self._lru
+
+    def keys(self) -> list:
+        return list(self._lru)
+
+    def get(self, key) -> np.ndarray | None:
+        """The field under ``key`` (made the most recently used), or None."""
+        f = self._lru.get(key)
+        if f is None:
+            self.misses += 1
+            return None
+        self._lru.move_to_end(key)
+        self.hits += 1
+        return f
+
+    def put(self, key, field: np.ndarray) -> None:
+        """Keep ``field`` under ``key``, evicting the least recently used fields first so that
+        the bound holds; a field larger than the bound is not kept."""
+        old = self._lru.pop(key, None)
+        if old is not None:
+            self.nbytes -= old.nbytes
+        if field.nbytes > self.max_bytes:
+            return
+        self._shrink(self.max_bytes - field.nbytes, FIELD_CACHE_MAX_FIELDS - 1)
+        field.setflags(write=False)
+        self._lru[key] = field
+        self.nbytes += field.nbytes
+
+    def resize(self, max_bytes: int) -> None:
+        """Set a new bound, evicting at once what no longer fits."""
+        self.max_bytes = int(max_bytes)
+        self._shrink(self.max_bytes, FIELD_CACHE_MAX_FIELDS)
+
+    def _shrink(self, room: int, slots: int) -> None:
+        """Evict until the fields take at most ``room`` bytes in at most ``slots`` entries."""
+        while self._lru and (self.nbytes > room or len(self._lru) > slots):
+            _, old = self._lru.popitem(last=False)
+            self.nbytes -= old.nbytes
+            self.evictions += 1
+
+
+def field_cache(grid: Grid) -> FieldCache:
+    """The grid's field cache (created with :data:`FIELD_CACHE_MAX_BYTES` on first use)."""
+    cache = grid.cache.get(_FIELDS_KEY)
+    if cache is None:
+        cache = grid.cache[_FIELDS_KEY] = FieldCache(FIELD_CACHE_MAX_BYTES)
+    return cache
+
+
+def _goal_nodes(grid: Grid, g: GridGraph, goal_cells, flies: bool) -> list[int]:
     nodes = []
     for c in goal_cells:
         node = g.node(c)
@@ -224,25 +294,74 @@ def distance_fields(grid: Grid, goal_cells, flies: bool) -> list[np.ndarray]:
             raise ValueError(f"goal cell {tuple(c)} is {where} for a "
                              f"{'UAV' if flies else 'UGV'} distance field")
         nodes.append(node)
-    lru: OrderedDict = grid.cache.setdefault(_FIELDS_KEY, OrderedDict())
-    missing = [n for n in dict.fromkeys(nodes) if (bool(flies), n) not in lru]
-    todo = [n for n in missing if not grid.occupied[g.cell_of(n)]]
+    return nodes
+
+
+def _compute(grid: Grid, g: GridGraph, nodes: list[int]) -> list[np.ndarray]:
+    """Fresh fields (flat, float64) from ``nodes``, on threads when they pay."""
+    todo = [n for n in nodes if not grid.occupied[g.cell_of(n)]]
     pool = _pool() if len(todo) > 1 and g.n_nodes >= PARALLEL_MIN_NODES else None
     compute = partial(_field, g)
     done = dict(zip(todo, pool.map(compute, todo) if pool else map(compute, todo)))
-    for n in missing:
-        field = done[n].reshape(g.shape) if n in done else np.full(g.shape, np.inf)
+    return [done[n] if n in done else np.full(g.n_nodes, np.inf) for n in nodes]
+
+
+def distance_fields(grid: Grid, goal_cells, flies: bool) -> list[np.ndarray]:
+    """:func:`distance_field` for several goals at once: ``[field of each goal]``.
+
+    The fields not cached yet are computed together, on up to :data:`FIELD_THREADS` threads
+    (the compiled kernel releases the GIL) when the lattice is large enough to pay for it.
+    The returned arrays are the cached ones when they fit the cache's bound (see
+    :class:`FieldCache`); a caller that keeps them keeps their memory.
+    """
+    flies = bool(flies)
+    g = graph(grid, flies)
+    nodes = _goal_nodes(grid, g, goal_cells, flies)
+    cache = field_cache(grid)
+    have = {n: cache.get((flies, n)) for n in dict.fromkeys(nodes)}
+    missing = [n for n, f in have.items() if f is None]
+    for n, field in zip(missing, _compute(grid, g, missing)):
+        field = field.reshape(g.shape)
         field.setflags(write=False)
-        lru[(bool(flies), n)] = field
-    out = []
-    for n in nodes:
-        lru.move_to_end((bool(flies), n))
-        out.append(lru[(bool(flies), n)])
-    total = sum(f.nbytes for f in lru.values())
-    while len(lru) > 1 and (len(lru) > FIELD_CACHE_MAX_FIELDS or total > FIELD_CACHE_MAX_BYTES):
-        _, old = lru.popitem(last=False)
-        total -= old.nbytes
-    return out
+        have[n] = field
+        cache.put((flies, n), field)
+    return [have[n] for n in nodes]
+
+
+def field_values(grid: Grid, goal_cells, flies: bool,
+                 at: np.ndarray) -> tuple[np.ndarray, int]:
+    """``out[a, t]``: the distance field of ``goal_cells[t]`` read at node ``at[a]`` (metres).
+
+    Nodes are flat indices in the model's lattice (:class:`GridGraph`). Equal to
+    ``distance_field(grid, goal_cells[t], flies).reshape(-1)[at]``, but no field leaves the
+    cache: fields found there are read in place; missing ones are computed a few at a time
+    (:data:`FIELD_THREADS` together), read, and handed to the cache, so the memory held stays
+    within the cache's bound plus the fields of one batch. Returns ``(values, computed)``:
+    the array and how many fields had to be computed (the others were cached).
+    """
+    flies = bool(flies)
+    g = graph(grid, flies)
+    at = np.asarray(at, dtype=np.int64).reshape(-1)
+    nodes = _goal_nodes(grid, g, goal_cells, flies)
+    out = np.empty((at.size, len(nodes)))
+    cache = field_cache(grid)
+    cols: dict[int, list[int]] = {}
+    for t, n in enumerate(nodes):
+        cols.setdefault(n, []).append(t)
+    missing = []
+    for n, ts in cols.items():
+        f = cache.get((flies, n))
+        if f is None:
+            missing.append(n)
+        else:
+            out[:, ts] = f.reshape(-1)[at][:, None]
+    batch = max(1, FIELD_THREADS)
+    for i in range(0, len(missing), batch):
+        chunk = missing[i : i + batch]
+        for n, field in zip(chunk, _compute(grid, g, chunk)):
+            out[:, cols[n]] = field[at][:, None]
+            cache.put((flies, n), field.reshape(g.shape))
+    return out, len(missing)
 
 
 def distance_field(grid: Grid, goal_cell: Cell, flies: bool) -> np.ndarray:
@@ -253,9 +372,9 @@ def distance_field(grid: Grid, goal_cell: Cell, flies: bool) -> np.ndarray:
     reached, everywhere if the goal cell is blocked. Raises ``ValueError`` if the goal is out of
     bounds or, for UGVs, not on the ground layer. The graph is symmetric, so one Dijkstra run
     from the goal gives the distances to it (exact: the same float64 relaxations as
-    ``scipy.sparse.csgraph.dijkstra`` on :attr:`GridGraph.csr`). Fields are kept in an LRU on
-    ``grid.cache`` (at most :data:`FIELD_CACHE_MAX_FIELDS` fields and
-    :data:`FIELD_CACHE_MAX_BYTES` bytes).
+    ``scipy.sparse.csgraph.dijkstra`` on :attr:`GridGraph.csr`, bit for bit: both reach the
+    unique fixed point of ``d[v] = min over u of fl(d[u] + w(u, v))``). Fields are kept in the
+    grid's :class:`FieldCache` (a byte bound, least recently used evicted first).
     """
     return distance_fields(grid, (goal_cell,), flies)[0]
 

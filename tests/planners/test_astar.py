@@ -121,14 +121,74 @@ def test_distance_field_edge_cases():
         G.distance_field(grid, (99, 0, 0), True)
 
 
-def test_field_cache_is_bounded(monkeypatch):
+def test_field_cache_is_bounded_in_count(monkeypatch):
     monkeypatch.setattr(G, "FIELD_CACHE_MAX_FIELDS", 3)
     grid = random_world(6).grid
     free = grid.free_cells()
     fields = [G.distance_field(grid, tuple(free[i]), True) for i in range(5)]
-    lru = grid.cache[G._FIELDS_KEY]
-    assert len(lru) == 3
-    assert all(any(f is v for v in lru.values()) for f in fields[2:])
+    cache = G.field_cache(grid)
+    assert len(cache) == 3 and cache.evictions == 2
+    assert cache.keys() == [(True, G.graph(grid, True).node(tuple(free[i]))) for i in (2, 3, 4)]
+    assert all(cache.get(k) is f for k, f in zip(cache.keys(), fields[2:]))
+
+
+def test_field_cache_fills_past_its_byte_bound_and_recomputes_identically():
+    """Many decisions over more tasks than the bound holds: the bytes the cache holds never
+    exceed its bound, an evicted field is freed (nobody else keeps it: the planner holds keys,
+    not arrays), and when it is needed again it is recomputed to the same values, which equal
+    scipy's shortest paths."""
+    import gc
+    import weakref
+
+    world = random_world(8, shape=(30, 20, 10), blocked=0.15)
+    grid = world.grid
+    field_bytes = 30 * 20 * 10 * 8
+    planner = AStarPlanner(world, field_cache_mb=3.5 * field_bytes / 2**20)
+    cache = G.field_cache(grid)
+    assert cache.max_bytes == int(3.5 * field_bytes)
+    rng = np.random.default_rng(8)
+    free = grid.free_cells()
+    cells = [tuple(int(v) for v in free[i]) for i in rng.choice(len(free), 12, replace=False)]
+    tasks = tuple(TaskView(t, "air", c, 0.0) for t, c in enumerate(cells))
+    agents = agents_for([tuple(int(v) for v in free[i])
+                         for i in rng.choice(len(free), 25, replace=False)], True, 2.0)
+    g = G.graph(grid, True)
+    want = np.stack([dijkstra(g.csr, indices=g.node(c))[[g.node(a.cell) for a in agents]]
+                     for c in cells], axis=1) / 2.0
+    first = {}
+    evicted = []
+    for rnd in range(4):  # decisions over sliding windows of five open tasks
+        for lo in range(0, len(tasks) - 4):
+            window = tasks[lo : lo + 5]
+            held = {k: weakref.ref(cache.get(k)) for k in cache.keys()}
+            cost = planner.costs(agents, window)
+            np.testing.assert_allclose(cost, want[:, lo : lo + 5], rtol=0, atol=1e-9)
+            for t, task in enumerate(window):
+                if task.id in first:  # recomputed or cached: the very same values
+                    np.testing.assert_array_equal(cost[:, t], first[task.id])
+                first[task.id] = cost[:, t]
+            assert cache.nbytes <= cache.max_bytes
+            assert sum(cache.get(k).nbytes for k in cache.keys()) == cache.nbytes
+            assert len(cache) == 3
+            gc.collect()
+            evicted += [ref for k, ref in held.items() if k not in cache]
+    assert evicted and all(ref() is None for ref in evicted)
+    assert cache.evictions > len(tasks)
+    assert planner.stats.extra["fields_computed"] > len(tasks)  # evicted ones came back
+
+
+def test_field_cache_keeps_nothing_larger_than_its_bound():
+    world = random_world(9)
+    planner = AStarPlanner(world, field_cache_mb=0)
+    free = world.grid.free_cells()
+    task = TaskView(0, "air", tuple(int(v) for v in free[0]), 0.0)
+    agent = AgentView(0, "uav", tuple(int(v) for v in free[-1]), 1.0)
+    one = planner.costs((agent,), (task,))
+    assert len(G.field_cache(world.grid)) == 0
+    np.testing.assert_array_equal(one, planner.costs((agent,), (task,)))
+    assert planner.stats.extra["fields_computed"] == 2
+    with pytest.raises(ValueError, match="field_cache_mb"):
+        AStarPlanner(world, field_cache_mb=-1)
 
 
 # --------------------------------------------------------------------------- A*
@@ -325,19 +385,17 @@ def test_ugv_cannot_serve_air_task():
     assert np.isinf(planner.costs((lifted,), tasks)).all()
 
 
-def test_costs_cached_per_task_until_closed(monkeypatch):
-    import planners.astar as astar_mod
-
+def test_costs_reuse_cached_fields(monkeypatch):
     world = random_world(1)
     free = world.grid.free_cells(layer=0)
     calls = []
-    real = astar_mod.distance_fields
+    real = G._field
 
-    def counting(grid, cells, flies):
-        calls.extend((cell, flies) for cell in cells)
-        return real(grid, cells, flies)
+    def counting(g, node):
+        calls.append((g.flies, node))
+        return real(g, node)
 
-    monkeypatch.setattr(astar_mod, "distance_fields", counting)
+    monkeypatch.setattr(G, "_field", counting)
     planner = AStarPlanner(world)
     agents = (AgentView(0, "uav", tuple(int(v) for v in free[0]), 1.0),
               AgentView(1, "ugv", tuple(int(v) for v in free[1]), 1.0))
@@ -351,11 +409,11 @@ def test_costs_cached_per_task_until_closed(monkeypatch):
     assert planner.stats.extra["field_reuses"] == 6
     planner.task_closed(11)
     planner.task_closed(999)  # unknown ids are fine
-    planner.costs(agents, tasks)
-    assert len(calls) == 8  # only the closed task's fields were fetched again
-    assert calls[6][0] == tasks[1].cell
+    twin = (TaskView(20, "ground", tasks[0].cell, 0.0),)  # another task on a cached cell
+    np.testing.assert_array_equal(planner.costs(agents, tasks + twin)[:, -1], first[:, 0])
+    assert len(calls) == 6
     assert planner.stats.cost_queries == 3
-    assert planner.stats.extra["fields_computed"] == 8
+    assert planner.stats.extra["fields_computed"] == 6
 
 
 def test_empty_and_out_of_bounds_inputs():
