@@ -8,7 +8,8 @@ Nothing here knows about worlds, agents or tasks: :mod:`planners.graph` prepares
   is one FIFO per weight class instead of a heap: keys pushed into a class's FIFO are ``d(u) + w``
   with ``d(u)`` non-decreasing over the settled nodes, so every FIFO stays sorted and the next
   node is the smallest of at most three heads (Dijkstra with K sorted queues, O(1) per
-  operation). It is plain Dijkstra in every other respect — same relaxations, same float64
+  operation). It can also record each node's parent move (one byte a node), from which
+  :func:`chain_values` rebuilds any node's distance bit for bit. It is plain Dijkstra in every other respect — same relaxations, same float64
   sums — so it returns the same distances as ``scipy.sparse.csgraph.dijkstra`` on the
   equivalent graph (equal up to the rounding order of equal-length paths, far below 1e-9).
   A node enters each FIFO at most once (a second push into the same FIFO could not improve
@@ -94,24 +95,38 @@ def _push(qn, qk, c, v, nd, h0, h1, h2, t0, t1, t2, k0, k1, k2):  # pragma: no c
     return t0, t1, t2, k0, k1, k2
 
 
+#: ``parent`` codes of :func:`dijkstra_field` besides a move index: the source, unreached.
+SOURCE = 254
+UNREACHED = 255
+
+
 @_jit
-def dijkstra_field(dirs, deltas, wclass, wvalue, src, dist, qn, qk):  # pragma: no cover
+def dijkstra_field(dirs, deltas, wclass, wvalue, src, dist, qn, qk, parent):  # pragma: no cover
     """Fill ``dist`` (float64, one per node) with the shortest distance from node ``src``.
 
     ``dirs[u]`` has bit ``b`` set when the step to ``u + deltas[b]`` is legal; the step weighs
     ``wvalue[wclass[b]]`` (at most three classes). Unreached nodes get ``inf``. ``src`` must be
-    a valid node index. ``qn`` (int64) and ``qk`` (float64), both ``(3, n)``, are scratch.
+    a valid node index. ``qn`` (int32) and ``qk`` (float64), both ``(3, n)``, are scratch.
+    If ``parent`` (uint8) is not empty it receives, per node ``v``, the move ``b`` whose
+    relaxation set ``dist[v]`` last (so ``dist[v] == dist[v - deltas[b]] + w_b`` exactly, the
+    parent settled with its final value), :data:`SOURCE` at ``src`` and :data:`UNREACHED`
+    elsewhere: one byte a node from which :func:`chain_values` gives back ``dist`` bit for bit.
     Returns the number of nodes settled.
     """
     n = dirs.size
     nb = deltas.size
     full = (np.int64(1) << nb) - 1
     inf = np.inf
+    keep = parent.size > 0
     wmove = np.empty(nb, np.float64)
     for b in range(nb):
         wmove[b] = wvalue[wclass[b]]
     for i in range(n):
         dist[i] = inf
+    if keep:
+        for i in range(n):
+            parent[i] = UNREACHED
+        parent[src] = SOURCE
     h0 = 0
     h1 = 0
     h2 = 0
@@ -158,6 +173,8 @@ def dijkstra_field(dirs, deltas, wclass, wvalue, src, dist, qn, qk):  # pragma: 
                 nd = key + wmove[b]
                 if nd < dist[v]:
                     dist[v] = nd
+                    if keep:
+                        parent[v] = b
                     t0, t1, t2, k0, k1, k2 = _push(qn, qk, wclass[b], v, nd, h0, h1, h2,
                                                    t0, t1, t2, k0, k1, k2)
             continue
@@ -169,9 +186,40 @@ def dijkstra_field(dirs, deltas, wclass, wvalue, src, dist, qn, qk):  # pragma: 
             nd = key + wmove[b]
             if nd < dist[v]:
                 dist[v] = nd
+                if keep:
+                    parent[v] = b
                 t0, t1, t2, k0, k1, k2 = _push(qn, qk, wclass[b], v, nd, h0, h1, h2,
                                                t0, t1, t2, k0, k1, k2)
     return settled
+
+
+@_jit
+def chain_values(parent, deltas, wmove, nodes, out):  # pragma: no cover
+    """``out[i]``: the distance :func:`dijkstra_field` gave node ``nodes[i]``, rebuilt from its
+    ``parent`` codes: the moves back to the source, then the same float64 sums in the same
+    order as the search (from the source outwards), so the value is bit for bit the same.
+    ``wmove[b]`` is the length of move ``b``; ``inf`` where the node was not reached."""
+    stack = np.empty(64, np.uint8)
+    for i in range(nodes.size):
+        v = nodes[i]
+        p = parent[v]
+        if p == UNREACHED:
+            out[i] = np.inf
+            continue
+        depth = 0
+        while p != SOURCE:
+            if depth == stack.size:
+                bigger = np.empty(2 * stack.size, np.uint8)
+                bigger[:depth] = stack[:depth]
+                stack = bigger
+            stack[depth] = p
+            depth += 1
+            v -= deltas[p]
+            p = parent[v]
+        d = 0.0
+        for k in range(depth - 1, -1, -1):
+            d += wmove[stack[k]]
+        out[i] = d
 
 
 @numba.njit(inline="always")

@@ -181,21 +181,29 @@ def graph(grid: Grid, flies: bool) -> GridGraph:
 
 
 _SCRATCH = threading.local()
+_NO_U8 = np.zeros(0, dtype=np.uint8)
 _POOL: dict = {}  # pid -> ThreadPoolExecutor (a forked child must not reuse its parent's)
 _POOL_LOCK = threading.Lock()
 
 
-def _field(g: GridGraph, node: int) -> np.ndarray:
-    """A complete Dijkstra field (metres, flat) from ``node`` over ``g``, compiled."""
+def _wmove(g: GridGraph) -> np.ndarray:
+    """Length of each move in metres, exactly as the Dijkstra kernel adds it."""
+    wvalue = g.cell * np.sqrt(np.arange(1.0, 4.0))  # weight classes: moves along 1, 2, 3 axes
+    return wvalue[g.axes - 1]
+
+
+def _field(g: GridGraph, node: int, parents: bool = False):
+    """A complete Dijkstra field (metres, flat) from ``node`` over ``g``, compiled; with
+    ``parents``, ``(field, parent codes)`` (see :func:`planners._fast.dijkstra_field`)."""
     n = g.n_nodes
     scratch = getattr(_SCRATCH, "queues", None)
     if scratch is None or scratch[0].shape[1] < n:
-        scratch = _SCRATCH.queues = (np.empty((3, n), np.int64), np.empty((3, n)))
-    # weight classes: moves along 1, 2 and 3 axes
+        scratch = _SCRATCH.queues = (np.empty((3, n), np.int32), np.empty((3, n)))
     wvalue = g.cell * np.sqrt(np.arange(1.0, 4.0))
     dist = np.empty(n)
-    _fast.dijkstra_field(g.dirs, g.deltas, g.axes - 1, wvalue, node, dist, *scratch)
-    return dist
+    parent = np.empty(n, np.uint8) if parents else _NO_U8
+    _fast.dijkstra_field(g.dirs, g.deltas, g.axes - 1, wvalue, node, dist, *scratch, parent)
+    return (dist, parent) if parents else dist
 
 
 def _pool() -> ThreadPoolExecutor | None:
@@ -297,13 +305,21 @@ def _goal_nodes(grid: Grid, g: GridGraph, goal_cells, flies: bool) -> list[int]:
     return nodes
 
 
-def _compute(grid: Grid, g: GridGraph, nodes: list[int]) -> list[np.ndarray]:
-    """Fresh fields (flat, float64) from ``nodes``, on threads when they pay."""
+def _compute(grid: Grid, g: GridGraph, nodes: list[int], parents: bool = False) -> list:
+    """Fresh fields (flat, float64) from ``nodes``, on threads when they pay; with
+    ``parents``, ``(field, parent codes)`` pairs."""
     todo = [n for n in nodes if not grid.occupied[g.cell_of(n)]]
     pool = _pool() if len(todo) > 1 and g.n_nodes >= PARALLEL_MIN_NODES else None
-    compute = partial(_field, g)
+    compute = partial(_field, g, parents=parents)
     done = dict(zip(todo, pool.map(compute, todo) if pool else map(compute, todo)))
-    return [done[n] if n in done else np.full(g.n_nodes, np.inf) for n in nodes]
+    out = []
+    for n in nodes:
+        if n in done:
+            out.append(done[n])
+        else:  # a blocked goal: nothing reaches it
+            inf = np.full(g.n_nodes, np.inf)
+            out.append((inf, np.full(g.n_nodes, _fast.UNREACHED, np.uint8)) if parents else inf)
+    return out
 
 
 def distance_fields(grid: Grid, goal_cells, flies: bool) -> list[np.ndarray]:
@@ -318,13 +334,13 @@ def distance_fields(grid: Grid, goal_cells, flies: bool) -> list[np.ndarray]:
     g = graph(grid, flies)
     nodes = _goal_nodes(grid, g, goal_cells, flies)
     cache = field_cache(grid)
-    have = {n: cache.get((flies, n)) for n in dict.fromkeys(nodes)}
+    have = {n: cache.get(("field", flies, n)) for n in dict.fromkeys(nodes)}
     missing = [n for n, f in have.items() if f is None]
     for n, field in zip(missing, _compute(grid, g, missing)):
         field = field.reshape(g.shape)
         field.setflags(write=False)
         have[n] = field
-        cache.put((flies, n), field)
+        cache.put(("field", flies, n), field)
     return [have[n] for n in nodes]
 
 
@@ -332,12 +348,15 @@ def field_values(grid: Grid, goal_cells, flies: bool,
                  at: np.ndarray) -> tuple[np.ndarray, int]:
     """``out[a, t]``: the distance field of ``goal_cells[t]`` read at node ``at[a]`` (metres).
 
-    Nodes are flat indices in the model's lattice (:class:`GridGraph`). Equal to
+    Nodes are flat indices in the model's lattice (:class:`GridGraph`). Bit for bit
     ``distance_field(grid, goal_cells[t], flies).reshape(-1)[at]``, but no field leaves the
-    cache: fields found there are read in place; missing ones are computed a few at a time
+    cache, and what the cache keeps of a goal is its Dijkstra tree, one byte a node (the parent
+    move of each node, an eighth of a float64 field): a value is rebuilt by summing the moves
+    from the goal out along the tree, the very additions Dijkstra made
+    (:func:`planners._fast.chain_values`). Missing trees are computed a few at a time
     (:data:`FIELD_THREADS` together), read, and handed to the cache, so the memory held stays
-    within the cache's bound plus the fields of one batch. Returns ``(values, computed)``:
-    the array and how many fields had to be computed (the others were cached).
+    within the cache's bound plus one batch of fields. Returns ``(values, computed)``: the
+    array and how many goals needed a new Dijkstra run (the others were cached).
     """
     flies = bool(flies)
     g = graph(grid, flies)
@@ -349,18 +368,23 @@ def field_values(grid: Grid, goal_cells, flies: bool,
     for t, n in enumerate(nodes):
         cols.setdefault(n, []).append(t)
     missing = []
+    wmove = None
+    col = np.empty(at.size)
     for n, ts in cols.items():
-        f = cache.get((flies, n))
-        if f is None:
+        tree = cache.get(("tree", flies, n))
+        if tree is None:
             missing.append(n)
-        else:
-            out[:, ts] = f.reshape(-1)[at][:, None]
+            continue
+        if wmove is None:
+            wmove = _wmove(g)
+        _fast.chain_values(tree, g.deltas, wmove, at, col)
+        out[:, ts] = col[:, None]
     batch = max(1, FIELD_THREADS)
     for i in range(0, len(missing), batch):
         chunk = missing[i : i + batch]
-        for n, field in zip(chunk, _compute(grid, g, chunk)):
+        for n, (field, tree) in zip(chunk, _compute(grid, g, chunk, parents=True)):
             out[:, cols[n]] = field[at][:, None]
-            cache.put((flies, n), field.reshape(g.shape))
+            cache.put(("tree", flies, n), tree)
     return out, len(missing)
 
 
@@ -490,6 +514,9 @@ def _warm_up() -> None:
     argument types of real calls: a run's first decision must not pay for numba."""
     grid = Grid(np.zeros((3, 3, 2), dtype=bool), 1.0)
     distance_field(grid, (0, 0, 0), True)
+    for _ in range(2):  # a Dijkstra tree, then values rebuilt from it
+        field_values(grid, [(0, 0, 0)], True, np.array([17]))
+    grid.cache.clear()
     astar(grid, (0, 0, 0), (2, 2, 1), True)
 
 

@@ -128,8 +128,36 @@ def test_field_cache_is_bounded_in_count(monkeypatch):
     fields = [G.distance_field(grid, tuple(free[i]), True) for i in range(5)]
     cache = G.field_cache(grid)
     assert len(cache) == 3 and cache.evictions == 2
-    assert cache.keys() == [(True, G.graph(grid, True).node(tuple(free[i]))) for i in (2, 3, 4)]
+    g = G.graph(grid, True)
+    assert cache.keys() == [("field", True, g.node(tuple(free[i]))) for i in (2, 3, 4)]
     assert all(cache.get(k) is f for k, f in zip(cache.keys(), fields[2:]))
+
+
+@pytest.mark.parametrize("flies", [True, False], ids=["uav", "ugv"])
+@pytest.mark.parametrize("seed", SEEDS)
+def test_values_rebuilt_from_dijkstra_trees_are_bit_identical(seed, flies):
+    """What the cost path caches is a goal's Dijkstra tree (one byte a node); the values rebuilt
+    from it equal the float64 field bit for bit at every node (and scipy's to 1e-9), cold and
+    cached, unreachable nodes included."""
+    world, cells, _, dist = reference(seed, flies)
+    grid = Grid(world.grid.occupied.copy(), world.grid.cell)
+    g = G.graph(grid, flies)
+    every = np.arange(g.n_nodes)
+    rng = np.random.default_rng(600 + seed)
+    goals = [cells[int(i)] for i in rng.choice(len(cells), size=6, replace=False)]
+    cold, computed = G.field_values(grid, goals, flies, every)
+    assert computed == len(set(goals))
+    cached, computed = G.field_values(grid, goals, flies, every)
+    assert computed == 0
+    for t, goal in enumerate(goals):
+        field = G._field(g, g.node(goal)) if grid.is_free(goal) else np.full(len(cells), np.inf)
+        np.testing.assert_array_equal(cold[:, t], field)
+        np.testing.assert_array_equal(cached[:, t], field)
+        want = dist[:, cells.index(goal)] if grid.is_free(goal) else np.inf
+        np.testing.assert_allclose(cached[:, t], want, rtol=0, atol=1e-9)
+    assert np.isinf(cached).any()
+    assert all(k[0] == "tree" and G.field_cache(grid).get(k).dtype == np.uint8
+               for k in G.field_cache(grid).keys())
 
 
 def test_field_cache_fills_past_its_byte_bound_and_recomputes_identically():
@@ -142,10 +170,10 @@ def test_field_cache_fills_past_its_byte_bound_and_recomputes_identically():
 
     world = random_world(8, shape=(30, 20, 10), blocked=0.15)
     grid = world.grid
-    field_bytes = 30 * 20 * 10 * 8
-    planner = AStarPlanner(world, field_cache_mb=3.5 * field_bytes / 2**20)
+    tree_bytes = 30 * 20 * 10  # the cost path keeps one byte a node (a Dijkstra tree)
+    planner = AStarPlanner(world, field_cache_mb=3.5 * tree_bytes / 2**20)
     cache = G.field_cache(grid)
-    assert cache.max_bytes == int(3.5 * field_bytes)
+    assert cache.max_bytes == int(3.5 * tree_bytes)
     rng = np.random.default_rng(8)
     free = grid.free_cells()
     cells = [tuple(int(v) for v in free[i]) for i in rng.choice(len(free), 12, replace=False)]
@@ -391,9 +419,9 @@ def test_costs_reuse_cached_fields(monkeypatch):
     calls = []
     real = G._field
 
-    def counting(g, node):
+    def counting(g, node, parents=False):
         calls.append((g.flies, node))
-        return real(g, node)
+        return real(g, node, parents)
 
     monkeypatch.setattr(G, "_field", counting)
     planner = AStarPlanner(world)
