@@ -101,7 +101,8 @@ UNREACHED = 255
 
 
 @_jit
-def dijkstra_field(dirs, deltas, wclass, wvalue, src, dist, qn, qk, parent):  # pragma: no cover
+def dijkstra_field(dirs, deltas, wclass, wvalue, src, dist, qn, qk, parent,  # pragma: no cover
+                   mark, targets):
     """Fill ``dist`` (float64, one per node) with the shortest distance from node ``src``.
 
     ``dirs[u]`` has bit ``b`` set when the step to ``u + deltas[b]`` is legal; the step weighs
@@ -111,7 +112,12 @@ def dijkstra_field(dirs, deltas, wclass, wvalue, src, dist, qn, qk, parent):  # 
     relaxation set ``dist[v]`` last (so ``dist[v] == dist[v - deltas[b]] + w_b`` exactly, the
     parent settled with its final value), :data:`SOURCE` at ``src`` and :data:`UNREACHED`
     elsewhere: one byte a node from which :func:`chain_values` gives back ``dist`` bit for bit.
-    Returns the number of nodes settled.
+
+    Bounded search: if ``targets > 0``, ``mark`` (uint8, one per node) is nonzero at exactly
+    ``targets`` distinct nodes and the search stops as soon as all of them are settled.
+    Returns the radius ``r``: the key of the last node settled, ``inf`` when the search ran to
+    the end. Every node with ``dist <= r`` has its final value and (if kept) its final parent;
+    the others are unknown (a later settle could still lower them).
     """
     n = dirs.size
     nb = deltas.size
@@ -133,7 +139,7 @@ def dijkstra_field(dirs, deltas, wclass, wvalue, src, dist, qn, qk, parent):  # 
     t0 = 0
     t1 = 0
     t2 = 0
-    settled = 0
+    left = targets
     dist[src] = 0.0
     qn[0, 0] = src
     qk[0, 0] = 0.0
@@ -164,7 +170,10 @@ def dijkstra_field(dirs, deltas, wclass, wvalue, src, dist, qn, qk, parent):  # 
             k2 = qk[2, h2] if h2 < t2 else inf
         if key > dist[u]:
             continue  # stale: u was reached more cheaply through another FIFO
-        settled += 1
+        if left > 0 and mark[u] != 0:
+            left -= 1
+            if left == 0:
+                return key  # every target settled: nothing farther can change them
         m = np.int64(dirs[u])
         if m == full:
             # an interior node (most of them): every move, without scanning bits
@@ -190,7 +199,7 @@ def dijkstra_field(dirs, deltas, wclass, wvalue, src, dist, qn, qk, parent):  # 
                     parent[v] = b
                 t0, t1, t2, k0, k1, k2 = _push(qn, qk, wclass[b], v, nd, h0, h1, h2,
                                                t0, t1, t2, k0, k1, k2)
-    return settled
+    return inf
 
 
 @_jit

@@ -192,18 +192,30 @@ def _wmove(g: GridGraph) -> np.ndarray:
     return wvalue[g.axes - 1]
 
 
-def _field(g: GridGraph, node: int, parents: bool = False):
-    """A complete Dijkstra field (metres, flat) from ``node`` over ``g``, compiled; with
-    ``parents``, ``(field, parent codes)`` (see :func:`planners._fast.dijkstra_field`)."""
+def _field(g: GridGraph, node: int, parents: bool = False, targets: np.ndarray | None = None):
+    """A Dijkstra field (metres, flat) from ``node`` over ``g``, compiled; with ``parents``,
+    ``(field, parent codes, radius)`` (see :func:`planners._fast.dijkstra_field`). With
+    ``targets`` (distinct node indices) the search stops once they are all settled: only
+    values ``<= radius`` are then final."""
     n = g.n_nodes
     scratch = getattr(_SCRATCH, "queues", None)
     if scratch is None or scratch[0].shape[1] < n:
-        scratch = _SCRATCH.queues = (np.empty((3, n), np.int32), np.empty((3, n)))
+        scratch = _SCRATCH.queues = (np.empty((3, n), np.int32), np.empty((3, n)),
+                                     np.zeros(n, np.uint8))
+    qn, qk, mark = scratch
     wvalue = g.cell * np.sqrt(np.arange(1.0, 4.0))
     dist = np.empty(n)
     parent = np.empty(n, np.uint8) if parents else _NO_U8
-    _fast.dijkstra_field(g.dirs, g.deltas, g.axes - 1, wvalue, node, dist, *scratch, parent)
-    return (dist, parent) if parents else dist
+    k = 0 if targets is None else targets.size
+    if k:
+        mark[targets] = 1
+    try:
+        radius = _fast.dijkstra_field(g.dirs, g.deltas, g.axes - 1, wvalue, node, dist, qn, qk,
+                                      parent, mark, k)
+    finally:
+        if k:
+            mark[targets] = 0
+    return (dist, parent, radius) if parents else dist
 
 
 def _pool() -> ThreadPoolExecutor | None:
@@ -267,7 +279,6 @@ class FieldCache:
         if field.nbytes > self.max_bytes:
             return
         self._shrink(self.max_bytes - field.nbytes, FIELD_CACHE_MAX_FIELDS - 1)
-        field.setflags(write=False)
         self._lru[key] = field
         self.nbytes += field.nbytes
 
@@ -305,12 +316,13 @@ def _goal_nodes(grid: Grid, g: GridGraph, goal_cells, flies: bool) -> list[int]:
     return nodes
 
 
-def _compute(grid: Grid, g: GridGraph, nodes: list[int], parents: bool = False) -> list:
+def _compute(grid: Grid, g: GridGraph, nodes: list[int], parents: bool = False,
+             targets: np.ndarray | None = None) -> list:
     """Fresh fields (flat, float64) from ``nodes``, on threads when they pay; with
-    ``parents``, ``(field, parent codes)`` pairs."""
+    ``parents``, ``(field, parent codes, radius)`` triples (bounded by ``targets``)."""
     todo = [n for n in nodes if not grid.occupied[g.cell_of(n)]]
     pool = _pool() if len(todo) > 1 and g.n_nodes >= PARALLEL_MIN_NODES else None
-    compute = partial(_field, g, parents=parents)
+    compute = partial(_field, g, parents=parents, targets=targets)
     done = dict(zip(todo, pool.map(compute, todo) if pool else map(compute, todo)))
     out = []
     for n in nodes:
@@ -318,7 +330,8 @@ def _compute(grid: Grid, g: GridGraph, nodes: list[int], parents: bool = False) 
             out.append(done[n])
         else:  # a blocked goal: nothing reaches it
             inf = np.full(g.n_nodes, np.inf)
-            out.append((inf, np.full(g.n_nodes, _fast.UNREACHED, np.uint8)) if parents else inf)
+            tree = np.full(g.n_nodes, _fast.UNREACHED, np.uint8)
+            out.append((inf, tree, math.inf) if parents else inf)
     return out
 
 
@@ -344,6 +357,20 @@ def distance_fields(grid: Grid, goal_cells, flies: bool) -> list[np.ndarray]:
     return [have[n] for n in nodes]
 
 
+@dataclass(frozen=True, eq=False)
+class _Tree:
+    """A goal's Dijkstra tree as :func:`field_values` caches it: parent codes (one byte a
+    node) of a search that stopped at ``radius`` (``inf``: complete); values above it are
+    unknown."""
+
+    parent: np.ndarray
+    radius: float
+
+    @property
+    def nbytes(self) -> int:
+        return self.parent.nbytes
+
+
 def field_values(grid: Grid, goal_cells, flies: bool,
                  at: np.ndarray) -> tuple[np.ndarray, int]:
     """``out[a, t]``: the distance field of ``goal_cells[t]`` read at node ``at[a]`` (metres).
@@ -353,10 +380,12 @@ def field_values(grid: Grid, goal_cells, flies: bool,
     cache, and what the cache keeps of a goal is its Dijkstra tree, one byte a node (the parent
     move of each node, an eighth of a float64 field): a value is rebuilt by summing the moves
     from the goal out along the tree, the very additions Dijkstra made
-    (:func:`planners._fast.chain_values`). Missing trees are computed a few at a time
-    (:data:`FIELD_THREADS` together), read, and handed to the cache, so the memory held stays
-    within the cache's bound plus one batch of fields. Returns ``(values, computed)``: the
-    array and how many goals needed a new Dijkstra run (the others were cached).
+    (:func:`planners._fast.chain_values`). A new tree's search stops once every node of ``at``
+    is settled (a few idle vehicles near a task need a small part of the grid); a later call
+    that needs a node beyond where it stopped searches again, to the end. Missing trees are computed a few
+    at a time (:data:`FIELD_THREADS` together), read, and handed to the cache, so the memory
+    held stays within the cache's bound plus one batch of fields. Returns
+    ``(values, computed)``: the array and how many Dijkstra searches ran.
     """
     flies = bool(flies)
     g = graph(grid, flies)
@@ -367,25 +396,32 @@ def field_values(grid: Grid, goal_cells, flies: bool,
     cols: dict[int, list[int]] = {}
     for t, n in enumerate(nodes):
         cols.setdefault(n, []).append(t)
-    missing = []
+    fresh, extend = [], []
     wmove = None
     col = np.empty(at.size)
     for n, ts in cols.items():
         tree = cache.get(("tree", flies, n))
         if tree is None:
-            missing.append(n)
+            fresh.append(n)
             continue
         if wmove is None:
             wmove = _wmove(g)
-        _fast.chain_values(tree, g.deltas, wmove, at, col)
-        out[:, ts] = col[:, None]
+        _fast.chain_values(tree.parent, g.deltas, wmove, at, col)
+        if tree.radius == math.inf or (col <= tree.radius).all():
+            out[:, ts] = col[:, None]
+        else:
+            extend.append(n)
     batch = max(1, FIELD_THREADS)
-    for i in range(0, len(missing), batch):
-        chunk = missing[i : i + batch]
-        for n, (field, tree) in zip(chunk, _compute(grid, g, chunk, parents=True)):
-            out[:, cols[n]] = field[at][:, None]
-            cache.put(("tree", flies, n), tree)
-    return out, len(missing)
+    # a new goal's search stops at the nodes asked for; one asked beyond that gets a complete
+    # tree (so no goal is searched more than twice while its tree stays cached)
+    for missing, targets in ((fresh, np.unique(at)), (extend, None)):
+        for i in range(0, len(missing), batch):
+            chunk = missing[i : i + batch]
+            for n, (field, parent, radius) in zip(chunk, _compute(grid, g, chunk, True, targets)):
+                out[:, cols[n]] = field[at][:, None]
+                parent.setflags(write=False)
+                cache.put(("tree", flies, n), _Tree(parent, float(radius)))
+    return out, len(fresh) + len(extend)
 
 
 def distance_field(grid: Grid, goal_cell: Cell, flies: bool) -> np.ndarray:
