@@ -3,15 +3,18 @@
 Nothing here knows about worlds, agents or tasks: :mod:`planners.graph` prepares the arrays
 (per-node legal-move masks, neighbour index deltas, step weights) and calls these kernels.
 
-* :func:`dijkstra_field` — a complete Dijkstra from one source over the implicit grid graph.
+* :func:`dijkstra_field` — Dijkstra from one source over the implicit grid graph, complete or
+  stopped once given target nodes are settled.
   Edge weights take only a few distinct values (1, sqrt 2, sqrt 3 cells), so the priority queue
   is one FIFO per weight class instead of a heap: keys pushed into a class's FIFO are ``d(u) + w``
   with ``d(u)`` non-decreasing over the settled nodes, so every FIFO stays sorted and the next
   node is the smallest of at most three heads (Dijkstra with K sorted queues, O(1) per
   operation). It can also record each node's parent move (one byte a node), from which
-  :func:`chain_values` rebuilds any node's distance bit for bit. It is plain Dijkstra in every other respect — same relaxations, same float64
-  sums — so it returns the same distances as ``scipy.sparse.csgraph.dijkstra`` on the
-  equivalent graph (equal up to the rounding order of equal-length paths, far below 1e-9).
+  :func:`chain_values` rebuilds any node's distance bit for bit. It is plain Dijkstra in every
+  other respect — same relaxations, same float64 sums — so it returns the same distances as
+  ``scipy.sparse.csgraph.dijkstra`` on the equivalent graph, bit for bit: the distances are the
+  unique fixed point of ``d[v] = min over u of fl(d[u] + w(u, v))`` (``fl``: float64 rounding,
+  which never lets ``d[u] + w`` fall to ``d[u]``), whatever order a correct search settles nodes in.
   A node enters each FIFO at most once (a second push into the same FIFO could not improve
   on the first), so each FIFO needs exactly ``n`` slots and nothing is ever reallocated.
   An interior node (every move legal) tries every move in a plain loop; elsewhere only the legal

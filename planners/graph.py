@@ -14,13 +14,13 @@ are in **metres** (step length in cells times ``grid.cell``). Both graphs are sy
 The graph is implicit: a per-node bit mask of legal steps (``GridGraph.dirs``, vectorized with
 numpy) plus the index delta and weight of each step. The searches are compiled
 (:mod:`planners._fast`, numba): distance fields by an exact Dijkstra with one FIFO per step
-length (several fields at once on threads), single pairs by A* with a radix heap. An explicit ``scipy.sparse`` adjacency
-(``GridGraph.csr``) is built only on request, for references and other tools.
+length (several fields at once on threads), single pairs by A* with a radix heap. An explicit
+``scipy.sparse`` adjacency (``GridGraph.csr``) is built only on request, for references and other tools.
 
 Everything here depends only on the immutable :class:`~dispatch.world.Grid`, so it is cached
 on ``grid.cache``: the graphs (built once per grid and model) and a :class:`FieldCache` of
-distance fields that owns them, bounded in bytes (the cost path reads fields in place and never
-keeps one, see :func:`field_values`).
+distance fields that owns them, bounded in bytes (the cost path reads fields in place and
+never keeps one, see :func:`field_values`).
 """
 
 from __future__ import annotations
@@ -257,7 +257,8 @@ class FieldCache:
     def __contains__(self, key) -> bool:
         return key in self._lru
 
-    def keys(self) -> list:
+    def lru_keys(self) -> list:
+        """The keys, least recently used first."""
         return list(self._lru)
 
     def get(self, key) -> np.ndarray | None:
@@ -382,9 +383,9 @@ def field_values(grid: Grid, goal_cells, flies: bool,
     from the goal out along the tree, the very additions Dijkstra made
     (:func:`planners._fast.chain_values`). A new tree's search stops once every node of ``at``
     is settled (a few idle vehicles near a task need a small part of the grid); a later call
-    that needs a node beyond where it stopped searches again, to the end. Missing trees are computed a few
-    at a time (:data:`FIELD_THREADS` together), read, and handed to the cache, so the memory
-    held stays within the cache's bound plus one batch of fields. Returns
+    that needs a node beyond where it stopped searches again, to the end. Missing trees are
+    computed a few at a time (:data:`FIELD_THREADS` together), read, and handed to the cache,
+    so the memory held stays within the cache's bound plus one batch of fields. Returns
     ``(values, computed)``: the array and how many Dijkstra searches ran.
     """
     flies = bool(flies)

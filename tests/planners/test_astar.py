@@ -129,8 +129,8 @@ def test_field_cache_is_bounded_in_count(monkeypatch):
     cache = G.field_cache(grid)
     assert len(cache) == 3 and cache.evictions == 2
     g = G.graph(grid, True)
-    assert cache.keys() == [("field", True, g.node(tuple(free[i]))) for i in (2, 3, 4)]
-    assert all(cache.get(k) is f for k, f in zip(cache.keys(), fields[2:]))
+    assert cache.lru_keys() == [("field", True, g.node(tuple(free[i]))) for i in (2, 3, 4)]
+    assert all(cache.get(k) is f for k, f in zip(cache.lru_keys(), fields[2:]))
 
 
 @pytest.mark.parametrize("flies", [True, False], ids=["uav", "ugv"])
@@ -157,7 +157,7 @@ def test_values_rebuilt_from_dijkstra_trees_are_bit_identical(seed, flies):
         np.testing.assert_allclose(cached[:, t], want, rtol=0, atol=1e-9)
     assert np.isinf(cached).any()
     assert all(k[0] == "tree" and G.field_cache(grid).get(k).parent.dtype == np.uint8
-               for k in G.field_cache(grid).keys())
+               for k in G.field_cache(grid).lru_keys())
 
 
 @pytest.mark.parametrize("flies", [True, False], ids=["uav", "ugv"])
@@ -217,10 +217,10 @@ def test_field_cache_fills_past_its_byte_bound_and_recomputes_identically():
                      for c in cells], axis=1) / 2.0
     first = {}
     evicted = []
-    for rnd in range(4):  # decisions over sliding windows of five open tasks
-        for lo in range(0, len(tasks) - 4):
+    for _ in range(4):  # decisions over sliding windows of five open tasks
+        for lo in range(len(tasks) - 4):
             window = tasks[lo : lo + 5]
-            held = {k: weakref.ref(cache.get(k)) for k in cache.keys()}
+            held = {k: weakref.ref(cache.get(k).parent) for k in cache.lru_keys()}
             cost = planner.costs(agents, window)
             np.testing.assert_allclose(cost, want[:, lo : lo + 5], rtol=0, atol=1e-9)
             for t, task in enumerate(window):
@@ -228,7 +228,7 @@ def test_field_cache_fills_past_its_byte_bound_and_recomputes_identically():
                     np.testing.assert_array_equal(cost[:, t], first[task.id])
                 first[task.id] = cost[:, t]
             assert cache.nbytes <= cache.max_bytes
-            assert sum(cache.get(k).nbytes for k in cache.keys()) == cache.nbytes
+            assert sum(cache.get(k).nbytes for k in cache.lru_keys()) == cache.nbytes
             assert len(cache) == 3
             gc.collect()
             evicted += [ref for k, ref in held.items() if k not in cache]
