@@ -249,6 +249,10 @@ def test_field_cache_keeps_nothing_larger_than_its_bound():
     assert planner.stats.extra["fields_computed"] == 2
     with pytest.raises(ValueError, match="field_cache_mb"):
         AStarPlanner(world, field_cache_mb=-1)
+    from planners.reservation import ReservationPlanner
+
+    ReservationPlanner(world, field_cache_mb=2)
+    assert G.field_cache(world.grid).max_bytes == 2 * 2**20
 
 
 # --------------------------------------------------------------------------- A*
