@@ -3,14 +3,18 @@
 Nothing here knows about worlds, agents or tasks: :mod:`planners.graph` prepares the arrays
 (per-node legal-move masks, neighbour index deltas, step weights) and calls these kernels.
 
-* :func:`dijkstra_field` — a complete Dijkstra from one source over the implicit grid graph.
+* :func:`dijkstra_field` — Dijkstra from one source over the implicit grid graph, complete or
+  stopped once given target nodes are settled.
   Edge weights take only a few distinct values (1, sqrt 2, sqrt 3 cells), so the priority queue
   is one FIFO per weight class instead of a heap: keys pushed into a class's FIFO are ``d(u) + w``
   with ``d(u)`` non-decreasing over the settled nodes, so every FIFO stays sorted and the next
   node is the smallest of at most three heads (Dijkstra with K sorted queues, O(1) per
-  operation). It is plain Dijkstra in every other respect — same relaxations, same float64
-  sums — so it returns the same distances as ``scipy.sparse.csgraph.dijkstra`` on the
-  equivalent graph (equal up to the rounding order of equal-length paths, far below 1e-9).
+  operation). It can also record each node's parent move (one byte a node), from which
+  :func:`chain_values` rebuilds any node's distance bit for bit. It is plain Dijkstra in every
+  other respect — same relaxations, same float64 sums — so it returns the same distances as
+  ``scipy.sparse.csgraph.dijkstra`` on the equivalent graph, bit for bit: the distances are the
+  unique fixed point of ``d[v] = min over u of fl(d[u] + w(u, v))`` (``fl``: float64 rounding,
+  which never lets ``d[u] + w`` fall to ``d[u]``), whatever order a correct search settles nodes in.
   A node enters each FIFO at most once (a second push into the same FIFO could not improve
   on the first), so each FIFO needs exactly ``n`` slots and nothing is ever reallocated.
   An interior node (every move legal) tries every move in a plain loop; elsewhere only the legal
@@ -94,31 +98,51 @@ def _push(qn, qk, c, v, nd, h0, h1, h2, t0, t1, t2, k0, k1, k2):  # pragma: no c
     return t0, t1, t2, k0, k1, k2
 
 
+#: ``parent`` codes of :func:`dijkstra_field` besides a move index: the source, unreached.
+SOURCE = 254
+UNREACHED = 255
+
+
 @_jit
-def dijkstra_field(dirs, deltas, wclass, wvalue, src, dist, qn, qk):  # pragma: no cover
+def dijkstra_field(dirs, deltas, wclass, wvalue, src, dist, qn, qk, parent,  # pragma: no cover
+                   mark, targets):
     """Fill ``dist`` (float64, one per node) with the shortest distance from node ``src``.
 
     ``dirs[u]`` has bit ``b`` set when the step to ``u + deltas[b]`` is legal; the step weighs
     ``wvalue[wclass[b]]`` (at most three classes). Unreached nodes get ``inf``. ``src`` must be
-    a valid node index. ``qn`` (int64) and ``qk`` (float64), both ``(3, n)``, are scratch.
-    Returns the number of nodes settled.
+    a valid node index. ``qn`` (int32) and ``qk`` (float64), both ``(3, n)``, are scratch.
+    If ``parent`` (uint8) is not empty it receives, per node ``v``, the move ``b`` whose
+    relaxation set ``dist[v]`` last (so ``dist[v] == dist[v - deltas[b]] + w_b`` exactly, the
+    parent settled with its final value), :data:`SOURCE` at ``src`` and :data:`UNREACHED`
+    elsewhere: one byte a node from which :func:`chain_values` gives back ``dist`` bit for bit.
+
+    Bounded search: if ``targets > 0``, ``mark`` (uint8, one per node) is nonzero at exactly
+    ``targets`` distinct nodes and the search stops as soon as all of them are settled.
+    Returns the radius ``r``: the key of the last node settled, ``inf`` when the search ran to
+    the end. Every node with ``dist <= r`` has its final value and (if kept) its final parent;
+    the others are unknown (a later settle could still lower them).
     """
     n = dirs.size
     nb = deltas.size
     full = (np.int64(1) << nb) - 1
     inf = np.inf
+    keep = parent.size > 0
     wmove = np.empty(nb, np.float64)
     for b in range(nb):
         wmove[b] = wvalue[wclass[b]]
     for i in range(n):
         dist[i] = inf
+    if keep:
+        for i in range(n):
+            parent[i] = UNREACHED
+        parent[src] = SOURCE
     h0 = 0
     h1 = 0
     h2 = 0
     t0 = 0
     t1 = 0
     t2 = 0
-    settled = 0
+    left = targets
     dist[src] = 0.0
     qn[0, 0] = src
     qk[0, 0] = 0.0
@@ -149,7 +173,10 @@ def dijkstra_field(dirs, deltas, wclass, wvalue, src, dist, qn, qk):  # pragma: 
             k2 = qk[2, h2] if h2 < t2 else inf
         if key > dist[u]:
             continue  # stale: u was reached more cheaply through another FIFO
-        settled += 1
+        if left > 0 and mark[u] != 0:
+            left -= 1
+            if left == 0:
+                return key  # every target settled: nothing farther can change them
         m = np.int64(dirs[u])
         if m == full:
             # an interior node (most of them): every move, without scanning bits
@@ -158,6 +185,8 @@ def dijkstra_field(dirs, deltas, wclass, wvalue, src, dist, qn, qk):  # pragma: 
                 nd = key + wmove[b]
                 if nd < dist[v]:
                     dist[v] = nd
+                    if keep:
+                        parent[v] = b
                     t0, t1, t2, k0, k1, k2 = _push(qn, qk, wclass[b], v, nd, h0, h1, h2,
                                                    t0, t1, t2, k0, k1, k2)
             continue
@@ -169,9 +198,40 @@ def dijkstra_field(dirs, deltas, wclass, wvalue, src, dist, qn, qk):  # pragma: 
             nd = key + wmove[b]
             if nd < dist[v]:
                 dist[v] = nd
+                if keep:
+                    parent[v] = b
                 t0, t1, t2, k0, k1, k2 = _push(qn, qk, wclass[b], v, nd, h0, h1, h2,
                                                t0, t1, t2, k0, k1, k2)
-    return settled
+    return inf
+
+
+@_jit
+def chain_values(parent, deltas, wmove, nodes, out):  # pragma: no cover
+    """``out[i]``: the distance :func:`dijkstra_field` gave node ``nodes[i]``, rebuilt from its
+    ``parent`` codes: the moves back to the source, then the same float64 sums in the same
+    order as the search (from the source outwards), so the value is bit for bit the same.
+    ``wmove[b]`` is the length of move ``b``; ``inf`` where the node was not reached."""
+    stack = np.empty(64, np.uint8)
+    for i in range(nodes.size):
+        v = nodes[i]
+        p = parent[v]
+        if p == UNREACHED:
+            out[i] = np.inf
+            continue
+        depth = 0
+        while p != SOURCE:
+            if depth == stack.size:
+                bigger = np.empty(2 * stack.size, np.uint8)
+                bigger[:depth] = stack[:depth]
+                stack = bigger
+            stack[depth] = p
+            depth += 1
+            v -= deltas[p]
+            p = parent[v]
+        d = 0.0
+        for k in range(depth - 1, -1, -1):
+            d += wmove[stack[k]]
+        out[i] = d
 
 
 @numba.njit(inline="always")

@@ -6,21 +6,22 @@ Promises
       ``agents[a].speed``. It is ``inf`` for a UGV and a task that is not on the ground layer
       (``kind != "ground"`` or ``k != 0``), for an agent whose cell is blocked, out of bounds,
       or (UGV) off the ground layer, and where no path exists.
-    * One distance field per (task, movement model) is computed with Dijkstra from the task's
-      cell the first time a decision needs it and reused at later decisions until
-      :meth:`AStarPlanner.task_closed` is called for that task. The new fields of one decision
-      are computed together (compiled, on threads: :func:`planners.graph.distance_fields`).
-      Fields are also shared through the grid-level LRU of :mod:`planners.graph`, so tasks on
-      the same cell cost one Dijkstra run. A later decision (vehicles moved, tasks unchanged)
-      only reads the cached fields at the agents' cells: a few vectorized gathers.
-    * Fields are float64 (600 kB per task and UAV field on the paper's 50x50x30 world): float32
-      would lose the 1e-9 exactness (its spacing near 100 m is 8e-6).
+    * One distance field per (goal cell, movement model) is computed with Dijkstra from the
+      goal the first time a decision needs it and kept in the grid's
+      :class:`planners.graph.FieldCache`, which owns it: the planner keeps no reference, so the
+      cache's byte bound (``field_cache_mb``) is the memory fields take, whatever the number
+      of open tasks. A later decision (vehicles moved, tasks unchanged) reads the cached fields
+      at the agents' cells in place (:func:`planners.graph.field_values`); tasks on the same
+      cell share one field. A field evicted while its task is still open is computed again,
+      identically. The new fields of one decision are computed a few at a time on threads.
+    * Fields are float64 (600 kB per UAV field on the paper's 50x50x30 world, 9.6 MB on a
+      200x200x30 one): float32 would lose the 1e-9 exactness (its spacing near 100 m is 8e-6).
     * ``plan`` is a true A* search (octile heuristic, consistent) returning an optimal path whose
       length equals the distance-field cost (up to float rounding), or None.
 
 Statistics: ``stats.cost_queries`` counts calls to ``costs``, ``stats.plans`` calls to ``plan``;
-``stats.extra`` holds ``fields_computed`` (fields fetched for a task the first time) and
-``field_reuses`` (fields found in the per-task cache).
+``stats.extra`` holds ``fields_computed`` (Dijkstra runs) and ``field_reuses`` (fields read
+from the cache).
 """
 
 from __future__ import annotations
@@ -29,39 +30,37 @@ import numpy as np
 
 from dispatch.contracts import AgentView, Planner, TaskView
 from dispatch.world import Cell, World
-from planners.graph import astar, distance_fields
+from planners.graph import astar, field_cache, field_values
 
 
 class AStarPlanner(Planner):
-    """Exact grid planner: Dijkstra distance fields for costs, A* for paths."""
+    """Exact grid planner: Dijkstra distance fields for costs, A* for paths.
+
+    ``field_cache_mb`` (default :data:`planners.graph.FIELD_CACHE_MAX_BYTES`, 256 MB) bounds
+    the grid's field cache, which owns every field: the planner keeps no field, only reads
+    them (see module).
+    """
 
     name = "astar"
 
-    def __init__(self, world: World) -> None:
+    def __init__(self, world: World, *, field_cache_mb: float | None = None) -> None:
         super().__init__(world)
-        # task id -> {flies: (task cell, flat field)}
-        self._fields: dict[int, dict[bool, tuple[Cell, np.ndarray]]] = {}
+        if field_cache_mb is not None:
+            mb = float(field_cache_mb)
+            if not mb >= 0 or not np.isfinite(mb):
+                raise ValueError(f"field_cache_mb must be a number of megabytes >= 0, "
+                                 f"got {field_cache_mb!r}")
+            field_cache(world.grid).resize(int(mb * 2**20))
         self.stats.extra.setdefault("fields_computed", 0)
         self.stats.extra.setdefault("field_reuses", 0)
 
-    def _columns(self, tasks, flies: bool) -> list[np.ndarray]:
-        """The flat field of each task under one movement model; new ones computed together."""
-        out: list = [None] * len(tasks)
-        new = []
-        for t, task in enumerate(tasks):
-            hit = self._fields.get(task.id, {}).get(flies)
-            if hit is not None and hit[0] == _cell(task):
-                out[t] = hit[1]
-            else:
-                new.append(t)
-        self.stats.extra["field_reuses"] += len(tasks) - len(new)
-        if new:
-            cells = [_cell(tasks[t]) for t in new]
-            for t, cell, field in zip(new, cells, distance_fields(self.world.grid, cells, flies)):
-                out[t] = field.reshape(-1)
-                self._fields.setdefault(tasks[t].id, {})[flies] = (cell, out[t])
-            self.stats.extra["fields_computed"] += len(new)
-        return out
+    def _values(self, tasks, flies: bool, nodes: np.ndarray) -> np.ndarray:
+        """``(len(nodes), len(tasks))`` field values: task ``t``'s field read at each node."""
+        values, computed = field_values(self.world.grid, [_cell(t) for t in tasks], flies,
+                                        nodes)
+        self.stats.extra["fields_computed"] += computed
+        self.stats.extra["field_reuses"] += len(tasks) - computed
+        return values
 
     def costs(self, agents: tuple[AgentView, ...], tasks: tuple[TaskView, ...]) -> np.ndarray:
         """Return the ``(len(agents), len(tasks))`` array of exact travel seconds (see module)."""
@@ -81,14 +80,14 @@ class AStarPlanner(Planner):
         uav = np.flatnonzero(ok & flies)
         if uav.size and in_bounds:
             node = (safe[uav, 0] * ny + safe[uav, 1]) * nz + safe[uav, 2]
-            cols = self._columns([tasks[t] for t in in_bounds], True)
-            out[np.ix_(uav, in_bounds)] = _gather(cols, node) / speed[uav, None]
+            vals = self._values([tasks[t] for t in in_bounds], True, node)
+            out[np.ix_(uav, in_bounds)] = vals / speed[uav, None]
         ugv = np.flatnonzero(ok & ~flies & (cells[:, 2] == 0))
         ground = [t for t in in_bounds if tasks[t].kind == "ground" and tasks[t].cell[2] == 0]
         if ugv.size and ground:
             node = safe[ugv, 0] * ny + safe[ugv, 1]
-            cols = self._columns([tasks[t] for t in ground], False)
-            out[np.ix_(ugv, ground)] = _gather(cols, node) / speed[ugv, None]
+            vals = self._values([tasks[t] for t in ground], False, node)
+            out[np.ix_(ugv, ground)] = vals / speed[ugv, None]
         return out
 
     def plan(self, agent: AgentView, goal: Cell) -> list[Cell] | None:
@@ -102,19 +101,9 @@ class AStarPlanner(Planner):
         return path
 
     def task_closed(self, task_id: int) -> None:
-        """Drop this planner's fields for the task (the grid-level LRU may still hold them)."""
-        self._fields.pop(task_id, None)
-
+        """Nothing to drop: the planner keeps no field (the grid's cache evicts them)."""
 
 
 def _cell(task: TaskView) -> Cell:
     c = task.cell
     return c if type(c) is tuple else tuple(int(v) for v in c)  # type: ignore[return-value]
-
-
-def _gather(fields: list[np.ndarray], nodes: np.ndarray) -> np.ndarray:
-    """``(len(nodes), len(fields))``: each flat field read at the agents' nodes."""
-    out = np.empty((nodes.size, len(fields)))
-    for t, f in enumerate(fields):
-        out[:, t] = f[nodes]
-    return out

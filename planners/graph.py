@@ -14,12 +14,13 @@ are in **metres** (step length in cells times ``grid.cell``). Both graphs are sy
 The graph is implicit: a per-node bit mask of legal steps (``GridGraph.dirs``, vectorized with
 numpy) plus the index delta and weight of each step. The searches are compiled
 (:mod:`planners._fast`, numba): distance fields by an exact Dijkstra with one FIFO per step
-length (several fields at once on threads), single pairs by A* with a radix heap. An explicit ``scipy.sparse`` adjacency
-(``GridGraph.csr``) is built only on request, for references and other tools.
+length (several fields at once on threads), single pairs by A* with a radix heap. An explicit
+``scipy.sparse`` adjacency (``GridGraph.csr``) is built only on request, for references and other tools.
 
 Everything here depends only on the immutable :class:`~dispatch.world.Grid`, so it is cached
-on ``grid.cache``: the graphs (built once per grid and model) and an LRU of distance fields
-bounded both in count and in bytes.
+on ``grid.cache``: the graphs (built once per grid and model) and a :class:`FieldCache` of
+distance fields that owns them, bounded in bytes (the cost path reads fields in place and
+never keeps one, see :func:`field_values`).
 """
 
 from __future__ import annotations
@@ -41,8 +42,9 @@ from planners import _fast
 
 #: Most distance fields kept per grid (both movement models together).
 FIELD_CACHE_MAX_FIELDS = 4096
-#: Most bytes of distance fields kept per grid (a 50x50x30 field is 600 kB).
-FIELD_CACHE_MAX_BYTES = 512 * 2**20
+#: Default bound of a grid's field cache in bytes (a 50x50x30 field is 600 kB, a 200x200x30
+#: one 9.6 MB); the ``astar`` planner's ``field_cache_mb`` sets it per run.
+FIELD_CACHE_MAX_BYTES = 256 * 2**20
 #: Largest node lattice for which :func:`astar` builds (and caches) the per-node move masks;
 #: beyond it (e.g. the 89-million-voxel MovingAI 3D maps) A* reads moves from the occupancy.
 MASK_MAX_NODES = 1 << 23
@@ -179,21 +181,41 @@ def graph(grid: Grid, flies: bool) -> GridGraph:
 
 
 _SCRATCH = threading.local()
+_NO_U8 = np.zeros(0, dtype=np.uint8)
 _POOL: dict = {}  # pid -> ThreadPoolExecutor (a forked child must not reuse its parent's)
 _POOL_LOCK = threading.Lock()
 
 
-def _field(g: GridGraph, node: int) -> np.ndarray:
-    """A complete Dijkstra field (metres, flat) from ``node`` over ``g``, compiled."""
+def _wmove(g: GridGraph) -> np.ndarray:
+    """Length of each move in metres, exactly as the Dijkstra kernel adds it."""
+    wvalue = g.cell * np.sqrt(np.arange(1.0, 4.0))  # weight classes: moves along 1, 2, 3 axes
+    return wvalue[g.axes - 1]
+
+
+def _field(g: GridGraph, node: int, parents: bool = False, targets: np.ndarray | None = None):
+    """A Dijkstra field (metres, flat) from ``node`` over ``g``, compiled; with ``parents``,
+    ``(field, parent codes, radius)`` (see :func:`planners._fast.dijkstra_field`). With
+    ``targets`` (distinct node indices) the search stops once they are all settled: only
+    values ``<= radius`` are then final."""
     n = g.n_nodes
     scratch = getattr(_SCRATCH, "queues", None)
     if scratch is None or scratch[0].shape[1] < n:
-        scratch = _SCRATCH.queues = (np.empty((3, n), np.int64), np.empty((3, n)))
-    # weight classes: moves along 1, 2 and 3 axes
+        scratch = _SCRATCH.queues = (np.empty((3, n), np.int32), np.empty((3, n)),
+                                     np.zeros(n, np.uint8))
+    qn, qk, mark = scratch
     wvalue = g.cell * np.sqrt(np.arange(1.0, 4.0))
     dist = np.empty(n)
-    _fast.dijkstra_field(g.dirs, g.deltas, g.axes - 1, wvalue, node, dist, *scratch)
-    return dist
+    parent = np.empty(n, np.uint8) if parents else _NO_U8
+    k = 0 if targets is None else targets.size
+    if k:
+        mark[targets] = 1
+    try:
+        radius = _fast.dijkstra_field(g.dirs, g.deltas, g.axes - 1, wvalue, node, dist, qn, qk,
+                                      parent, mark, k)
+    finally:
+        if k:
+            mark[targets] = 0
+    return (dist, parent, radius) if parents else dist
 
 
 def _pool() -> ThreadPoolExecutor | None:
@@ -208,13 +230,81 @@ def _pool() -> ThreadPoolExecutor | None:
         return pool
 
 
-def distance_fields(grid: Grid, goal_cells, flies: bool) -> list[np.ndarray]:
-    """:func:`distance_field` for several goals at once: ``[field of each goal]``.
+class FieldCache:
+    """The distance fields of one grid, owned here and bounded in bytes.
 
-    The fields not cached yet are computed together, on up to :data:`FIELD_THREADS` threads
-    (the compiled kernel releases the GIL) when the lattice is large enough to pay for it.
+    Promises: the fields it holds never take more than ``max_bytes`` together (a field larger
+    than the bound is not kept at all); the least recently used field goes first; nothing
+    outside this module keeps a reference to a field it holds, except the arrays that
+    :func:`distance_field` / :func:`distance_fields` hand to their callers (read-only), which
+    live as long as the caller keeps them. The cost path (:func:`field_values`) never hands a
+    field out: it reads the values it needs and lets go, so with it the bound holds for the
+    whole process. An evicted field is recomputed on the next request, identically (Dijkstra's
+    float64 distances are the unique fixed point of the relaxations, whatever the order).
     """
-    g = graph(grid, flies)
+
+    def __init__(self, max_bytes: int) -> None:
+        self._lru: OrderedDict = OrderedDict()
+        self.nbytes = 0
+        self.max_bytes = int(max_bytes)
+        self.hits = 0
+        self.misses = 0
+        self.evictions = 0
+
+    def __len__(self) -> int:
+        return len(self._lru)
+
+    def __contains__(self, key) -> bool:
+        return key in self._lru
+
+    def lru_keys(self) -> list:
+        """The keys, least recently used first."""
+        return list(self._lru)
+
+    def get(self, key) -> np.ndarray | None:
+        """The field under ``key`` (made the most recently used), or None."""
+        f = self._lru.get(key)
+        if f is None:
+            self.misses += 1
+            return None
+        self._lru.move_to_end(key)
+        self.hits += 1
+        return f
+
+    def put(self, key, field: np.ndarray) -> None:
+        """Keep ``field`` under ``key``, evicting the least recently used fields first so that
+        the bound holds; a field larger than the bound is not kept."""
+        old = self._lru.pop(key, None)
+        if old is not None:
+            self.nbytes -= old.nbytes
+        if field.nbytes > self.max_bytes:
+            return
+        self._shrink(self.max_bytes - field.nbytes, FIELD_CACHE_MAX_FIELDS - 1)
+        self._lru[key] = field
+        self.nbytes += field.nbytes
+
+    def resize(self, max_bytes: int) -> None:
+        """Set a new bound, evicting at once what no longer fits."""
+        self.max_bytes = int(max_bytes)
+        self._shrink(self.max_bytes, FIELD_CACHE_MAX_FIELDS)
+
+    def _shrink(self, room: int, slots: int) -> None:
+        """Evict until the fields take at most ``room`` bytes in at most ``slots`` entries."""
+        while self._lru and (self.nbytes > room or len(self._lru) > slots):
+            _, old = self._lru.popitem(last=False)
+            self.nbytes -= old.nbytes
+            self.evictions += 1
+
+
+def field_cache(grid: Grid) -> FieldCache:
+    """The grid's field cache (created with :data:`FIELD_CACHE_MAX_BYTES` on first use)."""
+    cache = grid.cache.get(_FIELDS_KEY)
+    if cache is None:
+        cache = grid.cache[_FIELDS_KEY] = FieldCache(FIELD_CACHE_MAX_BYTES)
+    return cache
+
+
+def _goal_nodes(grid: Grid, g: GridGraph, goal_cells, flies: bool) -> list[int]:
     nodes = []
     for c in goal_cells:
         node = g.node(c)
@@ -224,25 +314,115 @@ def distance_fields(grid: Grid, goal_cells, flies: bool) -> list[np.ndarray]:
             raise ValueError(f"goal cell {tuple(c)} is {where} for a "
                              f"{'UAV' if flies else 'UGV'} distance field")
         nodes.append(node)
-    lru: OrderedDict = grid.cache.setdefault(_FIELDS_KEY, OrderedDict())
-    missing = [n for n in dict.fromkeys(nodes) if (bool(flies), n) not in lru]
-    todo = [n for n in missing if not grid.occupied[g.cell_of(n)]]
+    return nodes
+
+
+def _compute(grid: Grid, g: GridGraph, nodes: list[int], parents: bool = False,
+             targets: np.ndarray | None = None) -> list:
+    """Fresh fields (flat, float64) from ``nodes``, on threads when they pay; with
+    ``parents``, ``(field, parent codes, radius)`` triples (bounded by ``targets``)."""
+    todo = [n for n in nodes if not grid.occupied[g.cell_of(n)]]
     pool = _pool() if len(todo) > 1 and g.n_nodes >= PARALLEL_MIN_NODES else None
-    compute = partial(_field, g)
+    compute = partial(_field, g, parents=parents, targets=targets)
     done = dict(zip(todo, pool.map(compute, todo) if pool else map(compute, todo)))
-    for n in missing:
-        field = done[n].reshape(g.shape) if n in done else np.full(g.shape, np.inf)
-        field.setflags(write=False)
-        lru[(bool(flies), n)] = field
     out = []
     for n in nodes:
-        lru.move_to_end((bool(flies), n))
-        out.append(lru[(bool(flies), n)])
-    total = sum(f.nbytes for f in lru.values())
-    while len(lru) > 1 and (len(lru) > FIELD_CACHE_MAX_FIELDS or total > FIELD_CACHE_MAX_BYTES):
-        _, old = lru.popitem(last=False)
-        total -= old.nbytes
+        if n in done:
+            out.append(done[n])
+        else:  # a blocked goal: nothing reaches it
+            inf = np.full(g.n_nodes, np.inf)
+            tree = np.full(g.n_nodes, _fast.UNREACHED, np.uint8)
+            out.append((inf, tree, math.inf) if parents else inf)
     return out
+
+
+def distance_fields(grid: Grid, goal_cells, flies: bool) -> list[np.ndarray]:
+    """:func:`distance_field` for several goals at once: ``[field of each goal]``.
+
+    The fields not cached yet are computed together, on up to :data:`FIELD_THREADS` threads
+    (the compiled kernel releases the GIL) when the lattice is large enough to pay for it.
+    The returned arrays are the cached ones when they fit the cache's bound (see
+    :class:`FieldCache`); a caller that keeps them keeps their memory.
+    """
+    flies = bool(flies)
+    g = graph(grid, flies)
+    nodes = _goal_nodes(grid, g, goal_cells, flies)
+    cache = field_cache(grid)
+    have = {n: cache.get(("field", flies, n)) for n in dict.fromkeys(nodes)}
+    missing = [n for n, f in have.items() if f is None]
+    for n, field in zip(missing, _compute(grid, g, missing)):
+        field = field.reshape(g.shape)
+        field.setflags(write=False)
+        have[n] = field
+        cache.put(("field", flies, n), field)
+    return [have[n] for n in nodes]
+
+
+@dataclass(frozen=True, eq=False)
+class _Tree:
+    """A goal's Dijkstra tree as :func:`field_values` caches it: parent codes (one byte a
+    node) of a search that stopped at ``radius`` (``inf``: complete); values above it are
+    unknown."""
+
+    parent: np.ndarray
+    radius: float
+
+    @property
+    def nbytes(self) -> int:
+        return self.parent.nbytes
+
+
+def field_values(grid: Grid, goal_cells, flies: bool,
+                 at: np.ndarray) -> tuple[np.ndarray, int]:
+    """``out[a, t]``: the distance field of ``goal_cells[t]`` read at node ``at[a]`` (metres).
+
+    Nodes are flat indices in the model's lattice (:class:`GridGraph`). Bit for bit
+    ``distance_field(grid, goal_cells[t], flies).reshape(-1)[at]``, but no field leaves the
+    cache, and what the cache keeps of a goal is its Dijkstra tree, one byte a node (the parent
+    move of each node, an eighth of a float64 field): a value is rebuilt by summing the moves
+    from the goal out along the tree, the very additions Dijkstra made
+    (:func:`planners._fast.chain_values`). A new tree's search stops once every node of ``at``
+    is settled (a few idle vehicles near a task need a small part of the grid); a later call
+    that needs a node beyond where it stopped searches again, to the end. Missing trees are
+    computed a few at a time (:data:`FIELD_THREADS` together), read, and handed to the cache,
+    so the memory held stays within the cache's bound plus one batch of fields. Returns
+    ``(values, computed)``: the array and how many Dijkstra searches ran.
+    """
+    flies = bool(flies)
+    g = graph(grid, flies)
+    at = np.asarray(at, dtype=np.int64).reshape(-1)
+    nodes = _goal_nodes(grid, g, goal_cells, flies)
+    out = np.empty((at.size, len(nodes)))
+    cache = field_cache(grid)
+    cols: dict[int, list[int]] = {}
+    for t, n in enumerate(nodes):
+        cols.setdefault(n, []).append(t)
+    fresh, extend = [], []
+    wmove = None
+    col = np.empty(at.size)
+    for n, ts in cols.items():
+        tree = cache.get(("tree", flies, n))
+        if tree is None:
+            fresh.append(n)
+            continue
+        if wmove is None:
+            wmove = _wmove(g)
+        _fast.chain_values(tree.parent, g.deltas, wmove, at, col)
+        if tree.radius == math.inf or (col <= tree.radius).all():
+            out[:, ts] = col[:, None]
+        else:
+            extend.append(n)
+    batch = max(1, FIELD_THREADS)
+    # a new goal's search stops at the nodes asked for; one asked beyond that gets a complete
+    # tree (so no goal is searched more than twice while its tree stays cached)
+    for missing, targets in ((fresh, np.unique(at)), (extend, None)):
+        for i in range(0, len(missing), batch):
+            chunk = missing[i : i + batch]
+            for n, (field, parent, radius) in zip(chunk, _compute(grid, g, chunk, True, targets)):
+                out[:, cols[n]] = field[at][:, None]
+                parent.setflags(write=False)
+                cache.put(("tree", flies, n), _Tree(parent, float(radius)))
+    return out, len(fresh) + len(extend)
 
 
 def distance_field(grid: Grid, goal_cell: Cell, flies: bool) -> np.ndarray:
@@ -253,9 +433,9 @@ def distance_field(grid: Grid, goal_cell: Cell, flies: bool) -> np.ndarray:
     reached, everywhere if the goal cell is blocked. Raises ``ValueError`` if the goal is out of
     bounds or, for UGVs, not on the ground layer. The graph is symmetric, so one Dijkstra run
     from the goal gives the distances to it (exact: the same float64 relaxations as
-    ``scipy.sparse.csgraph.dijkstra`` on :attr:`GridGraph.csr`). Fields are kept in an LRU on
-    ``grid.cache`` (at most :data:`FIELD_CACHE_MAX_FIELDS` fields and
-    :data:`FIELD_CACHE_MAX_BYTES` bytes).
+    ``scipy.sparse.csgraph.dijkstra`` on :attr:`GridGraph.csr`, bit for bit: both reach the
+    unique fixed point of ``d[v] = min over u of fl(d[u] + w(u, v))``). Fields are kept in the
+    grid's :class:`FieldCache` (a byte bound, least recently used evicted first).
     """
     return distance_fields(grid, (goal_cell,), flies)[0]
 
@@ -371,6 +551,9 @@ def _warm_up() -> None:
     argument types of real calls: a run's first decision must not pay for numba."""
     grid = Grid(np.zeros((3, 3, 2), dtype=bool), 1.0)
     distance_field(grid, (0, 0, 0), True)
+    for _ in range(2):  # a Dijkstra tree, then values rebuilt from it
+        field_values(grid, [(0, 0, 0)], True, np.array([17]))
+    grid.cache.clear()
     astar(grid, (0, 0, 0), (2, 2, 1), True)
 
 

@@ -55,8 +55,8 @@ class ReservationPlanner(AStarPlanner):
     reservation_aware = True
 
     def __init__(self, world: World, *, max_expansions: int = 200_000,
-                 retry_after: float = 1.0) -> None:
-        super().__init__(world)
+                 retry_after: float = 1.0, field_cache_mb: float | None = None) -> None:
+        super().__init__(world, field_cache_mb=field_cache_mb)
         if int(max_expansions) < 1:
             raise ValueError(f"max_expansions must be >= 1, got {max_expansions!r}")
         if not float(retry_after) > 0:

@@ -121,14 +121,138 @@ def test_distance_field_edge_cases():
         G.distance_field(grid, (99, 0, 0), True)
 
 
-def test_field_cache_is_bounded(monkeypatch):
+def test_field_cache_is_bounded_in_count(monkeypatch):
     monkeypatch.setattr(G, "FIELD_CACHE_MAX_FIELDS", 3)
     grid = random_world(6).grid
     free = grid.free_cells()
     fields = [G.distance_field(grid, tuple(free[i]), True) for i in range(5)]
-    lru = grid.cache[G._FIELDS_KEY]
-    assert len(lru) == 3
-    assert all(any(f is v for v in lru.values()) for f in fields[2:])
+    cache = G.field_cache(grid)
+    assert len(cache) == 3 and cache.evictions == 2
+    g = G.graph(grid, True)
+    assert cache.lru_keys() == [("field", True, g.node(tuple(free[i]))) for i in (2, 3, 4)]
+    assert all(cache.get(k) is f for k, f in zip(cache.lru_keys(), fields[2:]))
+
+
+@pytest.mark.parametrize("flies", [True, False], ids=["uav", "ugv"])
+@pytest.mark.parametrize("seed", SEEDS)
+def test_values_rebuilt_from_dijkstra_trees_are_bit_identical(seed, flies):
+    """What the cost path caches is a goal's Dijkstra tree (one byte a node); the values rebuilt
+    from it equal the float64 field bit for bit at every node (and scipy's to 1e-9), cold and
+    cached, unreachable nodes included."""
+    world, cells, _, dist = reference(seed, flies)
+    grid = Grid(world.grid.occupied.copy(), world.grid.cell)
+    g = G.graph(grid, flies)
+    every = np.arange(g.n_nodes)
+    rng = np.random.default_rng(600 + seed)
+    goals = [cells[int(i)] for i in rng.choice(len(cells), size=6, replace=False)]
+    cold, computed = G.field_values(grid, goals, flies, every)
+    assert computed == len(set(goals))
+    cached, computed = G.field_values(grid, goals, flies, every)
+    assert computed == 0
+    for t, goal in enumerate(goals):
+        field = G._field(g, g.node(goal)) if grid.is_free(goal) else np.full(len(cells), np.inf)
+        np.testing.assert_array_equal(cold[:, t], field)
+        np.testing.assert_array_equal(cached[:, t], field)
+        want = dist[:, cells.index(goal)] if grid.is_free(goal) else np.inf
+        np.testing.assert_allclose(cached[:, t], want, rtol=0, atol=1e-9)
+    assert np.isinf(cached).any()
+    assert all(k[0] == "tree" and G.field_cache(grid).get(k).parent.dtype == np.uint8
+               for k in G.field_cache(grid).lru_keys())
+
+
+@pytest.mark.parametrize("flies", [True, False], ids=["uav", "ugv"])
+def test_bounded_searches_stop_early_and_extend_exactly(flies):
+    """Values for a few nodes near the goal come from a search that stops once they are
+    settled; asking later for farther nodes searches again; every value equals the full field
+    bit for bit."""
+    world = random_world(10, shape=(40, 30, 20) if flies else (150, 150, 1), blocked=0.2)
+    grid = world.grid
+    g = G.graph(grid, flies)
+    free = grid.free_cells(layer=None if flies else 0)
+    goal = tuple(int(v) for v in free[len(free) // 2])
+    full = G._field(g, g.node(goal))
+    order = np.argsort(full, kind="stable")
+    near = order[1:4]  # the three nodes nearest the goal
+    vals, computed = G.field_values(grid, [goal], flies, near)
+    np.testing.assert_array_equal(vals[:, 0], full[near])
+    tree = G.field_cache(grid).get(("tree", flies, g.node(goal)))
+    assert computed == 1 and tree.radius < np.inf
+    assert (tree.parent == G._fast.UNREACHED).sum() > g.n_nodes // 2  # most never reached
+    again, computed = G.field_values(grid, [goal], flies, near[::-1])
+    assert computed == 0  # within the radius: read from the cached tree
+    np.testing.assert_array_equal(again[:, 0], full[near[::-1]])
+    reach = np.flatnonzero(np.isfinite(full))
+    far = np.concatenate([near, reach[-3:], np.flatnonzero(~np.isfinite(full))[:2]])
+    vals, computed = G.field_values(grid, [goal], flies, far)
+    assert computed == 1  # beyond the radius: searched again
+    np.testing.assert_array_equal(vals[:, 0], full[far])
+    assert G.field_cache(grid).get(("tree", flies, g.node(goal))).radius == np.inf
+    everything, computed = G.field_values(grid, [goal], flies, np.arange(g.n_nodes))
+    assert computed == 0
+    np.testing.assert_array_equal(everything[:, 0], full)
+
+
+def test_field_cache_fills_past_its_byte_bound_and_recomputes_identically():
+    """Many decisions over more tasks than the bound holds: the bytes the cache holds never
+    exceed its bound, an evicted field is freed (nobody else keeps it: the planner holds keys,
+    not arrays), and when it is needed again it is recomputed to the same values, which equal
+    scipy's shortest paths."""
+    import gc
+    import weakref
+
+    world = random_world(8, shape=(30, 20, 10), blocked=0.15)
+    grid = world.grid
+    tree_bytes = 30 * 20 * 10  # the cost path keeps one byte a node (a Dijkstra tree)
+    planner = AStarPlanner(world, field_cache_mb=3.5 * tree_bytes / 2**20)
+    cache = G.field_cache(grid)
+    assert cache.max_bytes == int(3.5 * tree_bytes)
+    rng = np.random.default_rng(8)
+    free = grid.free_cells()
+    cells = [tuple(int(v) for v in free[i]) for i in rng.choice(len(free), 12, replace=False)]
+    tasks = tuple(TaskView(t, "air", c, 0.0) for t, c in enumerate(cells))
+    agents = agents_for([tuple(int(v) for v in free[i])
+                         for i in rng.choice(len(free), 25, replace=False)], True, 2.0)
+    g = G.graph(grid, True)
+    want = np.stack([dijkstra(g.csr, indices=g.node(c))[[g.node(a.cell) for a in agents]]
+                     for c in cells], axis=1) / 2.0
+    first = {}
+    evicted = []
+    for _ in range(4):  # decisions over sliding windows of five open tasks
+        for lo in range(len(tasks) - 4):
+            window = tasks[lo : lo + 5]
+            held = {k: weakref.ref(cache.get(k).parent) for k in cache.lru_keys()}
+            cost = planner.costs(agents, window)
+            np.testing.assert_allclose(cost, want[:, lo : lo + 5], rtol=0, atol=1e-9)
+            for t, task in enumerate(window):
+                if task.id in first:  # recomputed or cached: the very same values
+                    np.testing.assert_array_equal(cost[:, t], first[task.id])
+                first[task.id] = cost[:, t]
+            assert cache.nbytes <= cache.max_bytes
+            assert sum(cache.get(k).nbytes for k in cache.lru_keys()) == cache.nbytes
+            assert len(cache) == 3
+            gc.collect()
+            evicted += [ref for k, ref in held.items() if k not in cache]
+    assert evicted and all(ref() is None for ref in evicted)
+    assert cache.evictions > len(tasks)
+    assert planner.stats.extra["fields_computed"] > len(tasks)  # evicted ones came back
+
+
+def test_field_cache_keeps_nothing_larger_than_its_bound():
+    world = random_world(9)
+    planner = AStarPlanner(world, field_cache_mb=0)
+    free = world.grid.free_cells()
+    task = TaskView(0, "air", tuple(int(v) for v in free[0]), 0.0)
+    agent = AgentView(0, "uav", tuple(int(v) for v in free[-1]), 1.0)
+    one = planner.costs((agent,), (task,))
+    assert len(G.field_cache(world.grid)) == 0
+    np.testing.assert_array_equal(one, planner.costs((agent,), (task,)))
+    assert planner.stats.extra["fields_computed"] == 2
+    with pytest.raises(ValueError, match="field_cache_mb"):
+        AStarPlanner(world, field_cache_mb=-1)
+    from planners.reservation import ReservationPlanner
+
+    ReservationPlanner(world, field_cache_mb=2)
+    assert G.field_cache(world.grid).max_bytes == 2 * 2**20
 
 
 # --------------------------------------------------------------------------- A*
@@ -325,19 +449,17 @@ def test_ugv_cannot_serve_air_task():
     assert np.isinf(planner.costs((lifted,), tasks)).all()
 
 
-def test_costs_cached_per_task_until_closed(monkeypatch):
-    import planners.astar as astar_mod
-
+def test_costs_reuse_cached_fields(monkeypatch):
     world = random_world(1)
     free = world.grid.free_cells(layer=0)
     calls = []
-    real = astar_mod.distance_fields
+    real = G._field
 
-    def counting(grid, cells, flies):
-        calls.extend((cell, flies) for cell in cells)
-        return real(grid, cells, flies)
+    def counting(g, node, parents=False, targets=None):
+        calls.append((g.flies, node))
+        return real(g, node, parents, targets)
 
-    monkeypatch.setattr(astar_mod, "distance_fields", counting)
+    monkeypatch.setattr(G, "_field", counting)
     planner = AStarPlanner(world)
     agents = (AgentView(0, "uav", tuple(int(v) for v in free[0]), 1.0),
               AgentView(1, "ugv", tuple(int(v) for v in free[1]), 1.0))
@@ -351,11 +473,11 @@ def test_costs_cached_per_task_until_closed(monkeypatch):
     assert planner.stats.extra["field_reuses"] == 6
     planner.task_closed(11)
     planner.task_closed(999)  # unknown ids are fine
-    planner.costs(agents, tasks)
-    assert len(calls) == 8  # only the closed task's fields were fetched again
-    assert calls[6][0] == tasks[1].cell
+    twin = (TaskView(20, "ground", tasks[0].cell, 0.0),)  # another task on a cached cell
+    np.testing.assert_array_equal(planner.costs(agents, tasks + twin)[:, -1], first[:, 0])
+    assert len(calls) == 6
     assert planner.stats.cost_queries == 3
-    assert planner.stats.extra["fields_computed"] == 8
+    assert planner.stats.extra["fields_computed"] == 6
 
 
 def test_empty_and_out_of_bounds_inputs():
@@ -548,5 +670,9 @@ def test_costs_on_paper_world_equal_scipy_after_moves():
             free[free[:, 2] == 0][rng.integers(int((free[:, 2] == 0).sum()))])), a.speed)
         for a in agents)
     again = planner.costs(moved, tasks)
-    assert planner.stats.extra["fields_computed"] == computed
+    # searches that stopped short of a moved vehicle ran again, to the end: at most once each
+    assert planner.stats.extra["fields_computed"] <= 2 * computed
     np.testing.assert_allclose(again, want(moved), rtol=0, atol=1e-9)
+    planner.costs(agents, tasks)
+    np.testing.assert_allclose(planner.costs(moved, tasks), want(moved), rtol=0, atol=1e-9)
+    assert planner.stats.extra["fields_computed"] <= 2 * computed

@@ -1,0 +1,197 @@
+"""Voxel-world dispatch at scale: wall time per task, peak RSS, and the fields against scipy.
+
+Two worlds, each run in a fresh process (its peak RSS is its own), ``--repeat`` times:
+
+* **paper**: the world of ``scenarios/paper_dynamic.toml`` (50 x 50 x 30 m, 1 m cells, 10 boxes
+  of 3-10 m footprint and 5-30 m height), 200 vehicles (half UAVs at 5 m/s, half UGVs at
+  3 m/s), Poisson tasks at 5 per second (half on the ground, ttl 120 s), ``hungarian`` batched
+  every 1 s, planner ``astar``, no PyBullet mirror, 2 simulated hours (about 36,000 tasks).
+* **big**: the same fleet and demand in a 200 x 200 x 30 m world with 160 boxes (the paper
+  world's obstacle density), for ``--big-minutes`` simulated minutes (default 10).
+
+Printed per run: tasks, wall seconds, wall and CPU ms per task (whole run, imports and world
+building included; CPU counts every thread, and is the steadier figure on a shared machine),
+peak RSS (and, in the JSON line of each run, wall seconds and seconds inside
+``planner.costs``). Then, in the
+same child process, the reference: **scipy.sparse.csgraph.dijkstra** computes the UAV fields of
+the run's first ``--sample`` task cells on the same graph, and so do our kernels (one thread,
+cache cold); the fields must be equal (bit for bit: both compute the unique fixed point of the
+float64 relaxations), and the ratio scipy / ours is printed with the per-field times.
+
+Usage: ``.venv/bin/python benchmarks/voxel.py [--repeat 3] [--hours 2] [--only paper|big]
+[--field-cache-mb 256]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+import tempfile
+import textwrap
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+SCENARIO = """
+name = "voxel_{world}"
+seed = {seed}
+duration = {duration}
+
+[world]
+size = [{side}, {side}, 30]
+cell = 1.0
+physics = false
+
+[world.obstacles]
+count = {boxes}
+min_size = [3, 3, 5]
+max_size = [10, 10, 30]
+
+[fleet]
+agents = 200
+uav_fraction = 0.5
+uav_speed = 5.0
+ugv_speed = 3.0
+
+[tasks]
+source = "poisson"
+rate = 5.0
+ground_fraction = 0.5
+ttl = 120.0
+
+[dispatch]
+allocator = "hungarian"
+planner = "astar"
+batch_window = 1.0
+{params}
+"""
+
+CHILD = textwrap.dedent("""
+    import json, resource, sys, time
+    t_start = time.perf_counter()
+    from pathlib import Path
+    import numpy as np
+    from dispatch.runner import run_one
+    from dispatch.scenario import load_scenario
+    import planners.astar as A
+    from planners import graph as G
+
+    sample = int(sys.argv[2])
+    cells, cost_s = [], [0.0]
+    real = A.AStarPlanner.costs
+
+    def costs(self, agents, tasks):
+        t0 = time.perf_counter()
+        out = real(self, agents, tasks)
+        cost_s[0] += time.perf_counter() - t0
+        for t in tasks:
+            if len(cells) < sample and t.cell not in cells:
+                cells.append(t.cell)
+        return out
+
+    A.AStarPlanner.costs = costs
+    [spec] = load_scenario(Path(sys.argv[1])).runs()
+    r = run_one(spec)
+    wall = time.perf_counter() - t_start
+    ru = resource.getrusage(resource.RUSAGE_SELF)
+    rss, cpu = ru.ru_maxrss / 1024, ru.ru_utime + ru.ru_stime
+    s = r.summary
+
+    # the reference: scipy's Dijkstra and ours on the same UAV graph, cold cache, one thread
+    from scipy.sparse.csgraph import dijkstra
+    from dispatch.sim import world_for
+    grid = world_for(load_scenario(Path(sys.argv[1])).world, spec.seed).grid
+    g = G.graph(grid, True)
+    nodes = [g.node(c) for c in cells if grid.is_free(c)]
+    csr = g.csr
+    t0 = time.perf_counter()
+    ours = [G._field(g, n) for n in nodes]
+    t_ours = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    ref = [dijkstra(csr, indices=n) for n in nodes]
+    t_ref = time.perf_counter() - t0
+    equal = all(np.array_equal(a, b) for a, b in zip(ours, ref))
+    print(json.dumps({"tasks": int(s["n_tasks"]), "completed": int(s["tasks_completed"]),
+                      "expired": int(s["tasks_expired"]), "decisions": int(s["decisions"]),
+                      "wall": wall, "cpu": cpu, "cost_s": cost_s[0], "rss_mb": rss,
+                      "fields": len(nodes), "ours_ms": 1000 * t_ours / max(1, len(nodes)),
+                      "scipy_ms": 1000 * t_ref / max(1, len(nodes)), "equal": equal}))
+""")
+
+WORLDS = {"paper": {"side": 50, "boxes": 10}, "big": {"side": 200, "boxes": 160}}
+
+
+def measure(world: str, duration: float, seed: int, sample: int, params: str,
+            work: Path) -> dict:
+    scenario = work / f"voxel_{world}.toml"
+    scenario.write_text(SCENARIO.format(world=world, seed=seed, duration=duration,
+                                        params=params, **WORLDS[world]), encoding="utf-8")
+    proc = subprocess.run([sys.executable, "-c", CHILD, str(scenario), str(sample)],
+                          capture_output=True, text=True, cwd=ROOT, check=False,
+                          env={"PYTHONPATH": str(ROOT), **_env()})
+    if proc.returncode != 0:
+        raise SystemExit(f"the {world} run failed:\n{proc.stderr[-3000:]}")
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def _env() -> dict:
+    import os
+
+    return {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+
+
+def main(argv: list[str] | None = None) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--repeat", type=int, default=3)
+    p.add_argument("--hours", type=float, default=2.0, help="simulated hours, paper world")
+    p.add_argument("--big-minutes", type=float, default=10.0,
+                   help="simulated minutes, 200 x 200 x 30 world")
+    p.add_argument("--only", choices=sorted(WORLDS))
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--sample", type=int, default=100, help="fields timed against scipy")
+    p.add_argument("--field-cache-mb", type=float, default=None,
+                   help="the astar planner's field_cache_mb (default: the planner's)")
+    args = p.parse_args(argv)
+    params = ("" if args.field_cache_mb is None else
+              f"\n[dispatch.planner_params]\nfield_cache_mb = {args.field_cache_mb}\n")
+    worlds = [args.only] if args.only else list(WORLDS)
+    durations = {"paper": args.hours * 3600.0, "big": args.big_minutes * 60.0}
+    console = Console()
+    table = Table(title="Voxel dispatch: 200 vehicles, 5 tasks/s, hungarian, astar")
+    for col in ("world", "tasks", "wall ms/task", "cpu ms/task", "peak MB", "field ms",
+                "scipy ms", "ratio"):
+        table.add_column(col, justify="left" if col == "world" else "right")
+    summary = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for world in worlds:
+            runs = []
+            for _ in range(args.repeat):
+                m = measure(world, durations[world], args.seed, args.sample, params, Path(tmp))
+                if not m["equal"]:
+                    raise SystemExit(f"{world}: our fields differ from scipy's")
+                runs.append(m)
+                table.add_row(world, str(m["tasks"]), f"{1000 * m['wall'] / m['tasks']:.2f}",
+                              f"{1000 * m['cpu'] / m['tasks']:.2f}",
+                              f"{m['rss_mb']:.0f}", f"{m['ours_ms']:.2f}",
+                              f"{m['scipy_ms']:.1f}", f"{m['scipy_ms'] / m['ours_ms']:.1f}")
+                console.print(json.dumps({"world": world, **m}))
+            per_task = [1000 * m["wall"] / m["tasks"] for m in runs]
+            cpu = [1000 * m["cpu"] / m["tasks"] for m in runs]
+            rss = [m["rss_mb"] for m in runs]
+            summary.append(f"{world}: wall ms/task min {min(per_task):.2f} median "
+                           f"{statistics.median(per_task):.2f}; cpu ms/task min {min(cpu):.2f} "
+                           f"median {statistics.median(cpu):.2f}; peak RSS MB min "
+                           f"{min(rss):.0f} median {statistics.median(rss):.0f}")
+    console.print(table)
+    for line in summary:
+        console.print(line)
+
+
+if __name__ == "__main__":
+    main()
