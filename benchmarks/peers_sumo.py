@@ -1,6 +1,7 @@
 """``benchmarks/peers.py``'s runner for SUMO's taxi device (run by ``benchmarks/.peers-venv``).
 
-``python benchmarks/peers_sumo.py WORKLOAD_DIR OUT.json``.
+``python benchmarks/peers_sumo.py WORKLOAD_DIR OUT.json [instant]`` (``instant``: the same
+with taxis that accelerate and brake within one step, to measure what acceleration costs).
 
 * Net: ``netgenerate --grid`` with the workload's intersections and block, one lane per
   direction at ``speed`` m/s, junctions ``unregulated`` (no traffic lights, no right of way:
@@ -82,15 +83,18 @@ def first_last_edges(w: Workload, o: int, d: int) -> tuple[tuple[int, int], tupl
     return (o, first), (last, d)
 
 
-def write_routes(w: Workload, t, origin, dest, start, edges, folder: Path) -> Path:
-    """Taxis and persons, sorted by departure, as SUMO routes."""
+def write_routes(w: Workload, t, origin, dest, start, edges, folder: Path,
+                 instant: bool = False) -> Path:
+    """Taxis and persons, sorted by departure, as SUMO routes (``instant``: taxis accelerate
+    and brake at 1000 m/s², i.e. within one step, to measure what acceleration costs)."""
     into = {}
     for (a, b), e in sorted(edges.items()):
         into.setdefault(b, e)
-    path = folder / "taxis.rou.xml"
+    path = folder / ("taxis_instant.rou.xml" if instant else "taxis.rou.xml")
     with open(path, "w") as fh:
+        kinematics = ('accel="1000" decel="1000" emergencyDecel="1000" ' if instant else "")
         fh.write('<routes>\n  <vType id="taxi" vClass="taxi" personCapacity="1" sigma="0" '
-                 'speedFactor="1" speedDev="0" boardingDuration="0">\n'
+                 f'{kinematics}speedFactor="1" speedDev="0" boardingDuration="0">\n'
                  '    <param key="has.taxi.device" value="true"/>\n'
                  '    <param key="device.taxi.pickUpDuration" value="0"/>\n'
                  '    <param key="device.taxi.dropOffDuration" value="0"/>\n  </vType>\n')
@@ -113,11 +117,12 @@ def _child_cpu() -> float:
     return r.ru_utime + r.ru_stime
 
 
-def main(folder: Path, out: Path) -> None:
+def main(folder: Path, out: Path, variant: str = "") -> None:
     w, t, origin, dest, start = read(folder)
     net = build_net(w, folder)
-    routes = write_routes(w, t, origin, dest, start, edge_table(w, net), folder)
-    tripinfo = folder / "sumo_tripinfo.xml"
+    routes = write_routes(w, t, origin, dest, start, edge_table(w, net), folder,
+                          instant=variant == "instant")
+    tripinfo = folder / f"sumo{variant}_tripinfo.xml"
     cmd = [str(BIN / "sumo"), "-n", str(net), "-r", str(routes), "--end", str(w.end),
            "--device.taxi.dispatch-algorithm", "greedy", "--device.taxi.dispatch-period", "1",
            "--device.taxi.idle-algorithm", "stop", "--tripinfo-output", str(tripinfo),
@@ -152,4 +157,4 @@ def main(folder: Path, out: Path) -> None:
 
 
 if __name__ == "__main__":
-    main(Path(sys.argv[1]), Path(sys.argv[2]))
+    main(Path(sys.argv[1]), Path(sys.argv[2]), *sys.argv[3:])
