@@ -79,7 +79,7 @@ def setup() -> None:
     if not peer_python().exists():
         subprocess.run([py, "-m", "venv", str(VENV)], check=True)
     subprocess.run([str(peer_python()), "-m", "pip", "install", "-q", *PINS], check=True)
-    print(f"peers environment ready: {VENV} ({', '.join(PINS)})")
+    print(f"peers environment ready: {VENV}\n  {', '.join(PINS)}")
 
 
 def run_once(sim: str, folder: Path) -> dict:
@@ -209,8 +209,11 @@ def main(argv: list[str] | None = None) -> None:
     if peers and not peer_python().exists():
         sys.exit("peers: no peers environment: run `python benchmarks/peers.py --setup` first "
                  "(or --only ours)")
-    if args.requests < 1 or args.vehicles < 1 or args.repeats < 1 or not args.hours > 0:
-        sys.exit("peers: --requests, --vehicles, --repeats must be >= 1 and --hours > 0")
+    if (args.requests < 1 or args.vehicles < 1 or args.repeats < 1 or not args.hours > 0
+            or (args.peer_requests is not None and args.peer_requests < 1)
+            or not args.drain >= 0):
+        ap.error("--requests, --vehicles, --repeats, --peer-requests must be >= 1, --hours > 0 "
+                 "and --drain >= 0")
     work = args.work or Path(tempfile.mkdtemp(prefix="peers-"))
     w, t, o, d, s = generate(args.requests, args.vehicles, args.hours, args.seed,
                              drain=args.drain)
