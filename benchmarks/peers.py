@@ -53,7 +53,7 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 
-from peers_workload import generate, prefix, write
+from peers_workload import compare_pickups, generate, prefix, write
 
 VENV = HERE / ".peers-venv"
 #: The peers, pinned (RidePy builds from source against Boost; SUMO ships wheels).
@@ -141,8 +141,8 @@ def print_tables(console, title: str, rows: dict[str, dict]) -> None:
     if "ours" not in rows or len(rows) < 2:
         return
     ours = rows["ours"]
-    ratio = Table(title="ratios ours / peer (speed: req/s and req per CPU s, > 1: ours "
-                  "faster)", title_justify="left", pad_edge=False, box=None)
+    console.print("ratios ours / peer (req/s, req/CPU s: > 1 means ours is faster)")
+    ratio = Table(pad_edge=False, box=None)
     for name in ("peer", "req/s", "req/CPU s", "served", "wait mean", "wait p90", "veh km"):
         ratio.add_column(name, justify="left" if name == "peer" else "right", no_wrap=True)
     for sim, r in rows.items():
@@ -158,23 +158,31 @@ def print_tables(console, title: str, rows: dict[str, dict]) -> None:
     console.print(ratio)
 
 
-def explain_sumo(console, rows: dict[str, dict], t) -> None:
+def explain_sumo(console, rows: dict[str, dict], t, folder: Path) -> None:
     """What separates SUMO's greedy waits from ours (same rule, same requests): the parts this
     run can measure, and the ones it can only bound."""
     import numpy as np
 
     gap = rows["sumo"]["wait_mean"] - rows["ours"]["wait_mean"]
     late = float(np.mean(np.ceil(t) - t))
+    c = compare_pickups(folder / "ours.npz", folder / "sumo.npz")
+    same, part = f"{c['same']:.0%}", f"{c['first_parted']:,}"
+    med, mean = f"{c['diff_median']:.1f}", f"{c['diff_mean']:.1f}"
+    leave, board = rows["sumo"]["lag_leave"], rows["sumo"]["lag_board"]
     lines = [
         f"SUMO - ours, mean wait: {gap:+.1f} s. Same rule (first come first served, nearest",
-        "idle taxi by travel time, ties to the lower id); SUMO adds to each wait:",
-        f"  a release is seen at the next whole second: +{late:.2f} s (from the trace);",
-        "  dispatch runs at 1 s steps, a taxi reaches its stop at a step: up to +1 s each;",
-        "  the pick-up is 5 m into the edge: +0.5 s;",
+        f"idle taxi by travel time, ties to the lower id). The same taxi picks up {same}",
+        f"of the requests in both (all before request {part}); on those SUMO waits {med} s",
+        f"longer (median; mean {mean} s): a fixed cost per pick-up. SUMO adds to each wait:",
+        f"  release -> the taxi leaves its stop: +{leave:.1f} s (measured; {late:.2f} s of it",
+        "    the release seen at the next whole second, the rest dispatch and leaving steps);",
+        f"  arrival -> on board (boarding at the next step): +{board:.1f} s (measured);",
+        "  the pick-up 5 m into the edge: +0.5 s; reaching it at a whole step: ~+0.5 s;",
     ]
     if "sumo-instant" in rows:
-        acc = rows["sumo"]["wait_mean"] - rows["sumo-instant"]["wait_mean"]
-        lines.append(f"  accelerating and braking (SUMO - SUMO inst, measured): {acc:+.1f} s;")
+        inst = compare_pickups(folder / "ours.npz", folder / "sumo-instant.npz")["diff_median"]
+        lines.append(f"  accelerating and braking: {c['diff_median'] - inst:+.1f} s (measured: "
+                     f"with SUMO inst it is {inst:.1f} s).")
     else:
         lines.append("  accelerating to 10 m/s at 2.6 m/s^2 and braking at 4.5: about +3 s.")
     lines.append("Past that, timing shifts which taxi is idle first, and assignments part.")
@@ -198,6 +206,8 @@ def main(argv: list[str] | None = None) -> None:
                     help="simulators to run (sumo-instant: SUMO with taxis that accelerate "
                     "and brake within a step, to measure what acceleration costs)")
     ap.add_argument("--work", type=Path, default=None, help="keep the files here")
+    ap.add_argument("--no-full", action="store_true",
+                    help="with --peer-requests: skip our run of the full workload")
     args = ap.parse_args(argv)
     if args.setup:
         setup()
@@ -235,7 +245,7 @@ def main(argv: list[str] | None = None) -> None:
         rows = run_all(args.only, work / "prefix", args.repeats, console.print)
         print_tables(console, f"prefix: {wp.requests:,} requests, {wp.vehicles:,} taxis, "
                      f"{wp.horizon / 3600:.2f} h", rows)
-        if "ours" in args.only:
+        if "ours" in args.only and not args.no_full:
             console.print(f"[full: {w.requests:,} requests, ours only]")
             full = run_all(["ours"], work / "full", args.repeats, console.print)
             print_tables(console, f"full: {w.requests:,} requests, {w.vehicles:,} taxis, "
@@ -250,8 +260,12 @@ def main(argv: list[str] | None = None) -> None:
         rows = run_all(args.only, work / "full", args.repeats, console.print)
         print_tables(console, f"{w.requests:,} requests, {w.vehicles:,} taxis, "
                      f"{w.horizon / 3600:g} h", rows)
+    if "ridepy" in rows:
+        console.print("RidePy's rule differs: each request is queued at once on the taxi "
+                      "whose route\ngrows least (busy taxis included): it drives less, riders "
+                      "wait longer.")
     if "sumo" in rows and "ours" in rows:
-        explain_sumo(console, rows, tp if scaled else t)
+        explain_sumo(console, rows, tp if scaled else t, work / ("prefix" if scaled else "full"))
     console.print(f"files: {work}")
 
 

@@ -16,11 +16,13 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from peers_workload import metrics, read
+from peers_workload import metrics, read, save_pickups
 
 SCENARIO = """\
 name = "peers"
@@ -68,6 +70,9 @@ def main(folder: Path, out: Path, allocator: str = "fcfs") -> None:
                   float(result.summary["distance"]))
     row.update(wall_s=wall, cpu_s=cpu,
                rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
+    order = np.argsort(tasks["task_id"].to_numpy())
+    save_pickups(out.with_suffix(".npz"), tasks["released_at"].to_numpy()[order],
+                 tasks["picked_up_at"].to_numpy()[order], tasks["agent_id"].to_numpy()[order])
     out.write_text(json.dumps(row))
 
 

@@ -26,7 +26,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from peers_workload import metrics, read
+from peers_workload import metrics, read, save_pickups
 
 
 def main(folder: Path, out: Path) -> None:
@@ -58,6 +58,7 @@ def main(folder: Path, out: Path) -> None:
 
     picked = np.full(t.size, np.nan)
     completed = np.full(t.size, np.nan)
+    vehicle = np.full(t.size, -1)
     here = {v: starts[v] for v in starts}
     metres = 0.0
     for ev in events:
@@ -66,11 +67,14 @@ def main(folder: Path, out: Path) -> None:
             r, v = ev["request_id"], ev["vehicle_id"]
             loc = origins[r] if kind == "PickupEvent" else dests[r]
             (picked if kind == "PickupEvent" else completed)[r] = ev["timestamp"]
+            if kind == "PickupEvent":
+                vehicle[r] = v
             metres += (abs(loc[0] - here[v][0]) + abs(loc[1] - here[v][1])) * w.block
             here[v] = loc
     row = metrics(t, picked, completed, metres)
     row.update(wall_s=wall, cpu_s=cpu,
                rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
+    save_pickups(out.with_suffix(".npz"), t, picked, vehicle)
     out.write_text(json.dumps(row))
 
 

@@ -42,7 +42,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from peers_workload import Workload, metrics, read
+from peers_workload import Workload, metrics, read, save_pickups
 
 BIN = Path(sys.executable).parent
 
@@ -111,6 +111,31 @@ def write_routes(w: Workload, t, origin, dest, start, edges, folder: Path,
     return path
 
 
+def stop_lags(stops: Path, t: np.ndarray) -> dict:
+    """From SUMO's stop output, two costs per pick-up the project's model does not have:
+    ``lag_leave``: release -> the dispatched taxi leaves the stop it idled at (the release seen
+    at the next step, the dispatch step, the stop left at a step), over the pick-ups whose taxi
+    was already standing there at the release; ``lag_board``: the taxi
+    reaches the pick-up stop -> the person is on board (boarding happens at the next step)."""
+    last: dict[str, tuple[float, float]] = {}
+    leave, board = [], []
+    for _, el in ET.iterparse(stops):
+        if el.tag != "stopinfo":
+            continue
+        taxi, act = el.get("id"), el.get("actType", "")
+        started, ended = float(el.get("started")), float(el.get("ended", "-1"))
+        if act.startswith("pickup") and taxi in last:
+            person = int(act.split()[1][1:])
+            if last[taxi][0] <= t[person]:
+                leave.append(last[taxi][1] - t[person])
+            if ended >= 0:
+                board.append(ended - started)
+        last[taxi] = (started, ended)
+        el.clear()
+    return {"lag_leave": float(np.mean(leave)) if leave else float("nan"),
+            "lag_board": float(np.mean(board)) if board else float("nan")}
+
+
 def _child_cpu() -> float:
     """CPU seconds (user + system) of the finished children of this process."""
     r = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -123,10 +148,11 @@ def main(folder: Path, out: Path, variant: str = "") -> None:
     routes = write_routes(w, t, origin, dest, start, edge_table(w, net), folder,
                           instant=variant == "instant")
     tripinfo = folder / f"sumo{variant}_tripinfo.xml"
+    stops = folder / f"sumo{variant}_stops.xml"
     cmd = [str(BIN / "sumo"), "-n", str(net), "-r", str(routes), "--end", str(w.end),
            "--device.taxi.dispatch-algorithm", "greedy", "--device.taxi.dispatch-period", "1",
            "--device.taxi.idle-algorithm", "stop", "--tripinfo-output", str(tripinfo),
-           "--tripinfo-output.write-unfinished", "--seed", str(w.seed % 2**31),
+           "--tripinfo-output.write-unfinished", "--stop-output", str(stops), "--seed", str(w.seed % 2**31),
            "--no-step-log", "--no-warnings", "--duration-log.disable"]
     env = dict(os.environ, SUMO_HOME=str(Path(sys.executable).parents[1] / "lib" /
                                          f"python{sys.version_info[0]}.{sys.version_info[1]}" /
@@ -137,6 +163,7 @@ def main(folder: Path, out: Path, variant: str = "") -> None:
 
     picked = np.full(t.size, np.nan)
     completed = np.full(t.size, np.nan)
+    vehicle = np.full(t.size, -1)
     metres = 0.0
     for _, el in ET.iterparse(tripinfo):
         if el.tag == "personinfo":
@@ -144,6 +171,7 @@ def main(folder: Path, out: Path, variant: str = "") -> None:
             ride = el.find("ride")
             if ride is not None and float(ride.get("depart", -1)) >= 0:
                 picked[i] = float(ride.get("depart"))
+                vehicle[i] = int(ride.get("vehicle")[len("taxi"):])
                 if float(ride.get("arrival", -1)) >= 0:
                     completed[i] = float(ride.get("arrival"))
             el.clear()
@@ -153,6 +181,8 @@ def main(folder: Path, out: Path, variant: str = "") -> None:
     row = metrics(t, picked, completed, metres)
     row.update(wall_s=wall, cpu_s=cpu,
                rss_mb=resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024)
+    row.update(stop_lags(stops, t))
+    save_pickups(out.with_suffix(".npz"), t, picked, vehicle)
     out.write_text(json.dumps(row))
 
 

@@ -121,3 +121,22 @@ def metrics(released: np.ndarray, picked_up: np.ndarray, completed: np.ndarray,
         "wait_p90": float(np.percentile(wait, 90)) if wait.size else float("nan"),
         "vehicle_km": vehicle_m / 1000.0,
     }
+
+
+def save_pickups(path: Path, released: np.ndarray, picked_up: np.ndarray,
+                 vehicle: np.ndarray) -> None:
+    """Per request: its wait (``nan``: not picked up) and the vehicle that picked it up (-1)."""
+    np.savez(path, wait=picked_up - released, vehicle=vehicle.astype(np.int64))
+
+
+def compare_pickups(a: Path, b: Path) -> dict:
+    """Requests picked up by the same vehicle id in both runs: their share, the first request
+    where the two part, and the wait difference b - a on them (mean, median)."""
+    x, y = np.load(a), np.load(b)
+    both = np.isfinite(x["wait"]) & np.isfinite(y["wait"])
+    same = both & (x["vehicle"] == y["vehicle"])
+    diff = (y["wait"] - x["wait"])[same]
+    parted = np.flatnonzero(~same)
+    return {"same": float(same.mean()), "first_parted": int(parted[0]) if parted.size else -1,
+            "diff_mean": float(diff.mean()) if diff.size else float("nan"),
+            "diff_median": float(np.median(diff)) if diff.size else float("nan")}
