@@ -231,15 +231,16 @@ def main(argv: list[str] | None = None) -> None:
     k = args.peer_requests if args.peer_requests else args.requests
     scaled = peers and k < args.requests
     rate = w.requests / w.horizon
-    console.print(f"workload: 20 x 20 grid, 200 m blocks, 10 m/s; {w.vehicles:,} taxis "
-                  f"(capacity 1); {w.requests:,} requests over {w.horizon / 3600:g} h "
-                  f"({rate:.3f}/s, {rate * 3600 / w.vehicles:.2f} per vehicle-hour); "
-                  f"drain {args.drain:g} s; seed {args.seed}; {args.repeats} run(s) each")
+    console.print(f"workload: {w.columns} x {w.rows} grid, {w.block:g} m blocks, {w.speed:g} m/s; "
+                  f"{w.vehicles:,} taxis (capacity 1);\n{w.requests:,} requests over "
+                  f"{w.horizon / 3600:g} h ({rate:.3f}/s, {rate * 3600 / w.vehicles:.2f} per "
+                  f"vehicle-hour); drain {args.drain:g} s;\nseed {args.seed}; "
+                  f"{args.repeats} run(s) of each simulator, interleaved")
     if scaled:
         wp, tp, op, dp = prefix(w, t, o, d, k, args.drain)
         write(work / "prefix", wp, tp, op, dp, s)
         console.print(f"PEERS RUN A PREFIX: the first {wp.requests:,} requests "
-                      f"({wp.horizon / 3600:.2f} h) with the same {wp.vehicles:,} taxis: the "
+                      f"({wp.horizon / 3600:.2f} h) with the same {wp.vehicles:,} taxis:\nthe "
                       "same rate per vehicle, a shorter day. Ours runs both.")
         console.print(f"[prefix: {wp.requests:,} requests, {wp.vehicles:,} taxis]")
         rows = run_all(args.only, work / "prefix", args.repeats, console.print)
