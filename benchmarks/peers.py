@@ -175,7 +175,7 @@ def explain_sumo(console, rows: dict[str, dict], t, folder: Path) -> None:
         f"of the requests in both (all before request {part}); on those SUMO waits {med} s",
         f"longer (median; mean {mean} s): a fixed cost per pick-up. SUMO adds to each wait:",
         f"  release -> the taxi leaves its stop: +{leave:.1f} s (measured; {late:.2f} s of it",
-        "    the release seen at the next whole second, the rest dispatch and leaving steps);",
+        "    the release seen at the next whole second, the rest dispatch and leave steps);",
         f"  arrival -> on board (boarding at the next step): +{board:.1f} s (measured);",
         "  the pick-up 5 m into the edge: +0.5 s; reaching it at a whole step: ~+0.5 s;",
     ]
