@@ -215,6 +215,11 @@ def main(argv: list[str] | None = None) -> None:
     from rich.console import Console
 
     console = Console(width=80, highlight=False)
+
+    def log(line: str) -> None:  # progress shows up in a log file too (stdout is buffered there)
+        console.print(line)
+        sys.stdout.flush()
+
     peers = [s for s in args.only if s != "ours"]
     if peers and not peer_python().exists():
         sys.exit("peers: no peers environment: run `python benchmarks/peers.py --setup` first "
@@ -243,12 +248,12 @@ def main(argv: list[str] | None = None) -> None:
                       f"({wp.horizon / 3600:.2f} h) with the same {wp.vehicles:,} taxis:\nthe "
                       "same rate per vehicle, a shorter day. Ours runs both.")
         console.print(f"[prefix: {wp.requests:,} requests, {wp.vehicles:,} taxis]")
-        rows = run_all(args.only, work / "prefix", args.repeats, console.print)
+        rows = run_all(args.only, work / "prefix", args.repeats, log)
         print_tables(console, f"prefix: {wp.requests:,} requests, {wp.vehicles:,} taxis, "
                      f"{wp.horizon / 3600:.2f} h", rows)
         if "ours" in args.only and not args.no_full:
             console.print(f"[full: {w.requests:,} requests, ours only]")
-            full = run_all(["ours"], work / "full", args.repeats, console.print)
+            full = run_all(["ours"], work / "full", args.repeats, log)
             print_tables(console, f"full: {w.requests:,} requests, {w.vehicles:,} taxis, "
                          f"{w.horizon / 3600:g} h (ours only)", full)
             f_rate = w.requests / statistics.median(full["ours"]["walls"])
@@ -258,7 +263,7 @@ def main(argv: list[str] | None = None) -> None:
                               f"{LABEL[sim]} on the PREFIX {p_rate:,.1f} req/s: "
                               f"{f_rate / p_rate:.1f}x")
     else:
-        rows = run_all(args.only, work / "full", args.repeats, console.print)
+        rows = run_all(args.only, work / "full", args.repeats, log)
         print_tables(console, f"{w.requests:,} requests, {w.vehicles:,} taxis, "
                      f"{w.horizon / 3600:g} h", rows)
     if "ridepy" in rows:
