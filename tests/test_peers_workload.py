@@ -1,0 +1,105 @@
+"""The common workload of benchmarks/peers.py: what every simulator is fed must be what it says."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+BENCH = Path(__file__).resolve().parents[1] / "benchmarks"
+sys.path.insert(0, str(BENCH))
+
+import peers_sumo
+import peers_workload as pw
+
+
+def test_generate_is_seeded_and_uniform():
+    w, t, o, d, s = pw.generate(20_000, 300, 2.0, seed=5)
+    again = pw.generate(20_000, 300, 2.0, seed=5)
+    for a, b in zip((t, o, d, s), again[1:]):
+        assert np.array_equal(a, b)
+    assert not np.array_equal(t, pw.generate(20_000, 300, 2.0, seed=6)[1])
+    assert w.requests == t.size == 20_000 and s.size == 300 and w.nodes == 400
+    assert np.all(np.diff(t) >= 0) and t[0] >= 0 and t[-1] < 7200
+    assert np.all(o != d) and o.min() >= 0 and max(o.max(), d.max()) < 400
+    # uniform over the intersections: every node, each count within 5 sigma of 50
+    counts = np.bincount(o, minlength=400)
+    assert abs(counts - 50).max() < 5 * np.sqrt(50)
+    # a Poisson process: inter-arrival times exponential with mean horizon / count
+    gaps = np.diff(t)
+    assert gaps.mean() == pytest.approx(7200 / 20_000, rel=0.03)
+    assert gaps.std() == pytest.approx(gaps.mean(), rel=0.05)
+
+
+def test_write_read_round_trip_and_prefix(tmp_path):
+    w, t, o, d, s = pw.generate(500, 20, 1.0, seed=1, drain=100.0)
+    pw.write(tmp_path, w, t, o, d, s)
+    w2, t2, o2, d2, s2 = pw.read(tmp_path)
+    assert w2 == w and w.end == w.horizon + 100.0
+    assert np.allclose(t2, t, atol=5e-4) and np.array_equal(o2, o) and np.array_equal(d2, d)
+    assert np.array_equal(s2, s)
+    cut, tp, op, dp = pw.prefix(w, t, o, d, 100, drain=50.0)
+    assert cut.requests == 100 and cut.vehicles == 20 and np.array_equal(op, o[:100])
+    assert np.array_equal(tp, t[:100]) and np.array_equal(dp, d[:100])
+    assert cut.horizon == np.ceil(t[99]) and cut.end == cut.horizon + 50.0
+
+
+def test_metrics_by_hand():
+    nan = float("nan")
+    m = pw.metrics(np.array([0.0, 10.0, 20.0, 30.0]), np.array([5.0, 40.0, nan, 31.0]),
+                   np.array([50.0, nan, nan, 60.0]), 12_345.0)
+    assert m["requests"] == 4 and m["served"] == 2 and m["picked"] == 3
+    assert m["wait_mean"] == pytest.approx((5 + 30 + 1) / 3)
+    assert m["wait_p90"] == pytest.approx(np.percentile([5, 30, 1], 90))
+    assert m["vehicle_km"] == pytest.approx(12.345)
+
+
+def test_sumo_stops_lie_on_a_shortest_path():
+    """The person's first edge and drop-off edge are the ends of one monotone shortest path,
+    so neither leg needs a detour (checked against Manhattan distances on every pair)."""
+    w = pw.generate(1, 1, 1.0, seed=0, columns=6, rows=5)[0]
+    c, r = w.node_xy(np.arange(w.nodes))
+    dist = np.abs(c[:, None] - c[None, :]) + np.abs(r[:, None] - r[None, :])
+    for o in range(w.nodes):
+        for d in range(w.nodes):
+            if o == d:
+                continue
+            (a, b), (x, y) = peers_sumo.first_last_edges(w, o, d)
+            assert a == o and y == d and dist[a, b] == 1 and dist[x, y] == 1
+            assert dist[b, d] == dist[o, d] - 1 and dist[o, x] == dist[o, d] - 1
+            if dist[o, d] == 1:  # one edge: picked up 5 m in, dropped at its end
+                assert (a, b) == (x, y)
+            else:  # b, then x: still on a shortest path
+                assert dist[b, x] == dist[o, d] - 2
+
+
+def test_ours_runner_serves_the_workload(tmp_path):
+    """The project's runner reads the workload as trace + start file: every request released,
+    served with the fcfs rule (3 taxis, 12 sparse requests: each waits exactly the grid
+    distance of the nearest idle taxi, computed here by hand)."""
+    w, t, o, d, s = pw.generate(12, 3, 2.0, seed=3, drain=3600.0)
+    pw.write(tmp_path, w, t, o, d, s)
+    out = tmp_path / "ours.json"
+    subprocess.run([sys.executable, str(BENCH / "peers_ours.py"), str(tmp_path), str(out)],
+                   check=True, cwd=BENCH.parent)
+    row = json.loads(out.read_text())
+    assert row["requests"] == 12 and row["served"] == 12 and row["picked"] == 12
+    # replay: at each release, idle taxis are those whose last drop-off is done
+    c, r = w.node_xy(np.arange(w.nodes))
+    dist = (np.abs(c[:, None] - c[None, :]) + np.abs(r[:, None] - r[None, :])) * w.block
+    where, free_at, waits, metres = s.copy(), np.zeros(3), [], 0.0
+    for ti, oi, di in zip(t, o, d):
+        idle = np.flatnonzero(free_at <= ti)
+        assert idle.size, "the test expects an idle taxi at every release"
+        v = idle[np.argmin(dist[where[idle], oi])]
+        pick = dist[where[v], oi] / w.speed
+        waits.append(pick)
+        metres += dist[where[v], oi] + dist[oi, di]
+        free_at[v] = ti + pick + dist[oi, di] / w.speed
+        where[v] = di
+    assert row["wait_mean"] == pytest.approx(np.mean(waits), abs=1e-6)
+    assert row["vehicle_km"] == pytest.approx(metres / 1000)
