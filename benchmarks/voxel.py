@@ -12,9 +12,9 @@ Two worlds, each run in a fresh process (its peak RSS is its own), ``--repeat`` 
 Printed per run: tasks, wall seconds, wall and CPU ms per task (whole run, imports and world
 building included; CPU counts every thread, and is the steadier figure on a shared machine),
 peak RSS (and, in the JSON line of each run, wall seconds and seconds inside
-``planner.costs``). Then, in the
-same child process, the reference: **scipy.sparse.csgraph.dijkstra** computes the UAV fields of
-the run's first ``--sample`` task cells (a tenth as many in the big world) on the same graph, and so do our kernels (one thread,
+``planner.costs``). Then, in the same child process, the reference:
+**scipy.sparse.csgraph.dijkstra** computes the UAV fields of the run's first ``--sample`` task
+cells (a tenth as many in the big world) on the same graph, and so do our kernels (one thread,
 cache cold); the fields must be equal (bit for bit: both compute the unique fixed point of the
 float64 relaxations), and the ratio scipy / ours is printed with the per-field times.
 
