@@ -12,9 +12,9 @@ Two worlds, each run in a fresh process (its peak RSS is its own), ``--repeat`` 
 Printed per run: tasks, wall seconds, wall and CPU ms per task (whole run, imports and world
 building included; CPU counts every thread, and is the steadier figure on a shared machine),
 peak RSS (and, in the JSON line of each run, wall seconds and seconds inside
-``planner.costs``). Then, in the
-same child process, the reference: **scipy.sparse.csgraph.dijkstra** computes the UAV fields of
-the run's first ``--sample`` task cells on the same graph, and so do our kernels (one thread,
+``planner.costs``). Then, in the same child process, the reference:
+**scipy.sparse.csgraph.dijkstra** computes the UAV fields of the run's first ``--sample`` task
+cells (a tenth as many in the big world) on the same graph, and so do our kernels (one thread,
 cache cold); the fields must be equal (bit for bit: both compute the unique fixed point of the
 float64 relaxations), and the ratio scipy / ours is printed with the per-field times.
 
@@ -107,13 +107,16 @@ CHILD = textwrap.dedent("""
     g = G.graph(grid, True)
     nodes = [g.node(c) for c in cells if grid.is_free(c)]
     csr = g.csr
-    t0 = time.perf_counter()
-    ours = [G._field(g, n) for n in nodes]
-    t_ours = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    ref = [dijkstra(csr, indices=n) for n in nodes]
-    t_ref = time.perf_counter() - t0
-    equal = all(np.array_equal(a, b) for a, b in zip(ours, ref))
+    t_ours = t_ref = 0.0
+    equal = True
+    for n in nodes:  # one pair of fields at a time: a 200 x 200 x 30 field is 9.6 MB
+        t0 = time.perf_counter()
+        ours = G._field(g, n)
+        t1 = time.perf_counter()
+        ref = dijkstra(csr, indices=n)
+        t_ref += time.perf_counter() - t1
+        t_ours += t1 - t0
+        equal = equal and np.array_equal(ours, ref)
     print(json.dumps({"tasks": int(s["n_tasks"]), "completed": int(s["tasks_completed"]),
                       "expired": int(s["tasks_expired"]), "decisions": int(s["decisions"]),
                       "wall": wall, "cpu": cpu, "cost_s": cost_s[0], "rss_mb": rss,
@@ -154,7 +157,8 @@ def main(argv: list[str] | None = None) -> None:
                    help="simulated minutes, 200 x 200 x 30 world")
     p.add_argument("--only", choices=sorted(WORLDS))
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--sample", type=int, default=100, help="fields timed against scipy")
+    p.add_argument("--sample", type=int, default=100,
+                   help="fields timed against scipy (a tenth of them in the big world)")
     p.add_argument("--field-cache-mb", type=float, default=None,
                    help="the astar planner's field_cache_mb (default: the planner's)")
     args = p.parse_args(argv)
@@ -172,7 +176,8 @@ def main(argv: list[str] | None = None) -> None:
         for world in worlds:
             runs = []
             for _ in range(args.repeat):
-                m = measure(world, durations[world], args.seed, args.sample, params, Path(tmp))
+                sample = args.sample if world == "paper" else max(1, args.sample // 10)
+                m = measure(world, durations[world], args.seed, sample, params, Path(tmp))
                 if not m["equal"]:
                     raise SystemExit(f"{world}: our fields differ from scipy's")
                 runs.append(m)
