@@ -132,6 +132,9 @@ class CongestedPlanner:
         f = self.congestion.factor(self.clock())
         if f == 1.0 or not len(agents):
             return cost
-        rem = np.fromiter((max(a.loc.remaining, 0.0) if isinstance(a.loc, RoadPoint) else 0.0
-                           for a in agents), np.float64, len(agents))[:, None]
+        rem = getattr(agents, "remaining", None)  # AgentViews: the array, no view built
+        if rem is None:
+            rem = np.fromiter((max(a.loc.remaining, 0.0) if isinstance(a.loc, RoadPoint)
+                               else 0.0 for a in agents), np.float64, len(agents))
+        rem = rem[:, None]
         return rem + (cost - rem) * f

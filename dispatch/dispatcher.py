@@ -240,8 +240,15 @@ class Dispatcher:
         return PluginError(f"{self._where(kind)}: {kind} raised {type(e).__name__}: {reason}")
 
     def notify(self) -> None:
-        """Ask for a decision (idempotent until the dispatcher wakes)."""
-        if not self.wake.triggered:
+        """Ask for a decision (idempotent until the dispatcher wakes).
+
+        Deciding at once (no batching window, no re-assignment), a call while no task is
+        open is dropped: the decision would find nothing to do (a vehicle that becomes idle
+        then costs no wake-up; the next release asks again). Only the order of decisions
+        among events of one same simulated instant could differ, and only when a task is
+        released at exactly the instant an idle vehicle's call would have been answered."""
+        if not self.wake.triggered and (self.book.open or self.cfg.batch_window > 0
+                                        or self.cfg.reassign):
             self.wake.succeed()
 
     def _loop(self):
@@ -281,15 +288,16 @@ class Dispatcher:
         now = self.env.now
         agents = self.fleet.views(idle, now, ascending=True)  # flatnonzero, union1d: sorted
         t0 = time.perf_counter()
+        tasks = tuple([t.view() for t in open_tasks])
         try:
-            cost = self.planner.costs(agents, tuple(t.view() for t in open_tasks))
+            cost = self.planner.costs(agents, tasks)
         except DispatchError:
             raise
         except Exception as e:  # a plugin's bug: one line naming it and where
             raise self._plugin_failed("planner", e) from e
         want = (len(agents), len(open_tasks))
         if not isinstance(cost, np.ndarray) or cost.shape != want \
-                or not np.issubdtype(cost.dtype, np.floating) or np.isnan(cost).any():
+                or cost.dtype.kind != "f" or np.isnan(cost).any():
             got = (f"{type(cost).__name__} {getattr(cost, 'shape', '')} "
                    f"{getattr(cost, 'dtype', '')}").strip()
             raise PluginError(f"{self._where('planner')}: costs() must return a float array of "
@@ -311,6 +319,7 @@ class Dispatcher:
             return
         if not servable.all():
             open_tasks = [t for t, ok in zip(open_tasks, servable) if ok]
+            tasks = tuple([t.view() for t in open_tasks])
             cost = cost[:, servable]
         comms = self.comms
         apos = _positions(self.space, agents)
@@ -323,7 +332,6 @@ class Dispatcher:
             comm = comm_graph(apos, comms.range)
             if self.links is not None:
                 comm = self.links(comm, apos, now)
-        tasks = tuple(t.view() for t in open_tasks)
         problem = AllocationProblem(
             time=now, agents=agents, tasks=tasks,
             cost=np.array(cost, order="C"), comm=comm,

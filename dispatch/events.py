@@ -40,7 +40,7 @@ reposition     an idle vehicle is sent toward a node by the repositioner (agent;
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from typing import NamedTuple
 
 from dispatch.space import Location
 
@@ -49,9 +49,10 @@ KINDS = ("release", "assign", "depart", "move", "pickup", "dropoff", "complete",
          "breakdown", "repair", "reopen", "reassign", "reposition")
 
 
-@dataclass(frozen=True, slots=True)
-class Event:
-    """One thing that happened at simulated time ``t`` (``loc`` where, or None)."""
+class Event(NamedTuple):
+    """One thing that happened at simulated time ``t`` (``loc`` where, or None); immutable.
+    A named tuple: several are made per trip, and it is made twice as fast as a frozen
+    dataclass."""
 
     t: float
     kind: str

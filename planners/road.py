@@ -205,6 +205,8 @@ class RoadPlanner(Planner):
     def costs(self, agents: Sequence[Any], tasks: Sequence[Any]) -> np.ndarray:
         """Return the ``(len(agents), len(tasks))`` array of exact travel seconds (see module)."""
         self.stats.cost_queries += 1
+        if len(tasks) == 1 and getattr(agents, "nodes", None) is not None and len(agents):
+            return self._column(agents, tasks[0])
         out = np.full((len(agents), len(tasks)), np.inf)
         if not agents or not tasks:
             return out
@@ -245,6 +247,28 @@ class RoadPlanner(Planner):
         if getattr(agents, "nodes", None) is not None and not agents.points.size:
             return out  # everyone on a node: nothing left to drive first
         return out + rem[:, None]
+
+    def _column(self, agents: Any, task: Any) -> np.ndarray:
+        """:meth:`costs` of one task (an immediate decision's usual problem) for agents that
+        carry their node arrays: the same numbers and statistics as the general path, with a
+        handful of numpy calls instead of a few dozen."""
+        goal = int(task.loc)
+        field = self._fields.get(goal)
+        if field is None:  # one new node: a field (the forward search needs 4 or more)
+            goals = np.array([goal], dtype=np.int64)
+            h = self._hierarchy
+            field = (self._dijkstra(goals, to=True) if h is None else h.fields(goals, to=True))[0]
+            self._fields[goal] = field
+            self.stats.extra["fields_computed"] += 1
+        else:
+            self.stats.extra["field_reuses"] += 1
+        nodes = agents.nodes
+        out = np.empty((nodes.size, 1))
+        out[:, 0] = field[nodes if self._index is None else self._index[nodes]]
+        self._remember(task.id, goal)
+        if not agents.points.size:
+            return out  # everyone on a node: nothing left to drive first
+        return out + agents.remaining[:, None]
 
     def _dijkstra(self, nodes: np.ndarray, to: bool) -> list[np.ndarray]:
         """Complete fields by the compiled Dijkstra (networks without a hierarchy), node
