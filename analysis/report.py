@@ -13,9 +13,11 @@
   (:func:`analysis.metrics.dynamic_metrics`, ``dynamic.csv``) and ``served_vs_n.png``,
   ``wait_vs_n.png``, ``cost_per_task_vs_n.png`` instead of ``cost_vs_n.png``;
 * road (taxi) runs: ``hourly_customers.csv`` / ``hourly_fleet.csv`` (per-hour series),
-  ``map.png`` (streets, pickup density, fleet start), ``hourly.png`` (demand, served,
-  rejected, wait percentiles over time), ``fleet_state.png`` (stacked fleet states over time),
-  ``wait_by_allocator.png`` (wait distributions per allocator); see :mod:`analysis.taxi_plots`.
+  ``map.png`` (streets, pickup density, fleet start; whole region and zoomed on the demand),
+  ``hourly.png`` (demand, served, rejected, wait percentiles over time), ``fleet_state.png``
+  (stacked fleet states over time), ``wait_by_allocator.png`` (wait distributions); each per
+  series: allocator, N and, where the runs differ in them, scenario variant (a swept batch
+  window) and repositioner (:func:`analysis.taxi_plots.series`).
 """
 
 from __future__ import annotations
