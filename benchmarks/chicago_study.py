@@ -136,8 +136,9 @@ def run_study(a: argparse.Namespace) -> tuple[Path, list]:
     def on_done(o) -> None:
         done[0] += 1
         what = o.status if o.status != "failed" else f"FAILED ({o.error})"
-        print(f"[{done[0]:>3}/{len(specs)}] {o.run_id[:52]:<52} {what:<8} "
-              f"{o.seconds:7.1f} s", flush=True)
+        rid = o.run_id.replace("chicago_study-", "").replace("__dijkstra", "")
+        print(f"[{done[0]:>3}/{len(specs)}] {rid[:46]:<46} {what:<8} {o.seconds:7.1f} s",
+              flush=True)
 
     outcomes = sweep(specs, a.out, workers=a.workers, on_done=on_done)
     print(f"sweep: {time.perf_counter() - started:.1f} s wall", flush=True)
