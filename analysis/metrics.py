@@ -82,6 +82,29 @@ FLEETPY_LABELS = {
 }
 
 
+#: The keys of one series of a taxi study: the allocator groups plus the repositioner (a swept
+#: batch window gives scenario variants, ``<name>-immediate`` / ``<name>-batch30s``).
+SERIES = [*GROUP, "reposition"]
+
+
+def series_keys(df: pd.DataFrame) -> list[str]:
+    """:data:`SERIES` where ``df`` has a ``reposition`` column, else :data:`GROUP`."""
+    return SERIES if "reposition" in df.columns else GROUP
+
+
+def with_series(df: pd.DataFrame, summary: pd.DataFrame) -> pd.DataFrame:
+    """``df`` (rows with ``run_id``) with the series keys it lacks taken from ``summary``; a
+    missing repositioner reads ``stay`` (runs written before repositioning existed)."""
+    keys = series_keys(summary)
+    missing = [k for k in keys if k not in df.columns]
+    if missing and "run_id" in df.columns:
+        df = df.merge(summary[["run_id", *missing]].drop_duplicates("run_id"), on="run_id",
+                      how="left")
+    if "reposition" in df.columns:
+        df = df.assign(reposition=df["reposition"].fillna("stay").astype(str))
+    return df
+
+
 def allocator_order(names) -> list[str]:
     """Allocators in the paper's order (Hungarian first), then the rest alphabetically."""
     names = set(names)
@@ -89,15 +112,47 @@ def allocator_order(names) -> list[str]:
     return first + sorted(names - set(first))
 
 
+def variant_name(scenario: str) -> str:
+    """``imm`` / ``30s`` for a batch-window variant (``<name>-immediate`` /
+    ``<name>-batch30s``, see ``Scenario.variants``), else the scenario's name."""
+    head, _, tail = str(scenario).rpartition("-")
+    if head and tail == "immediate":
+        return "imm"
+    if head and tail.startswith("batch") and tail.endswith("s"):
+        return tail.removeprefix("batch")
+    return str(scenario)
+
+
+def variant_rank(scenario: str) -> tuple:
+    """Immediate first, then batch windows by length, then other scenarios by name."""
+    v = variant_name(scenario)
+    if v == "imm":
+        return (0, 0.0, "")
+    if v != scenario:
+        try:
+            return (0, float(v.removesuffix("s")), "")
+        except ValueError:
+            pass
+    return (1, 0.0, str(scenario))
+
+
 def sort_groups(df: pd.DataFrame) -> pd.DataFrame:
-    """Rows ordered by scenario, planner, allocator (paper order) and N."""
+    """Rows ordered by scenario (batch-window variants: immediate first, then by window),
+    planner, allocator (paper order), N and repositioner (``stay`` first)."""
     if df.empty:
         return df
     rank = {a: i for i, a in enumerate(allocator_order(df["allocator"].unique()))}
-    keys = [k for k in GROUP if k in df.columns]
-    return (df.assign(_rank=df["allocator"].map(rank))
-              .sort_values([k if k != "allocator" else "_rank" for k in keys])
-              .drop(columns="_rank").reset_index(drop=True))
+    keys = [k for k in SERIES if k in df.columns]
+    out = df.assign(_rank=df["allocator"].map(rank))
+    if "reposition" in out:
+        out = out.assign(_rep=out["reposition"].fillna("stay").astype(str)
+                         .map(lambda r: (r != "stay", r)))
+    if "scenario" in out:
+        out = out.assign(_scen=out["scenario"].map(variant_rank))
+    sub = {"allocator": "_rank", "reposition": "_rep", "scenario": "_scen"}
+    return (out.sort_values([sub.get(k, k) for k in keys])
+               .drop(columns=[c for c in ("_rank", "_rep", "_scen") if c in out])
+               .reset_index(drop=True))
 
 
 # --------------------------------------------------------------------------- Tables I and III
@@ -328,8 +383,11 @@ def _taxi(summary, tasks, vehicles, events, keys, direct=None) -> pd.DataFrame:
     def groups(df):
         if df is None or df.empty:
             return {}
-        if not set(keys) <= set(df.columns):
-            df = df.merge(run_keys, on="run_id", how="left")
+        missing = [k for k in keys if k not in df.columns]
+        if missing:
+            df = df.merge(run_keys[["run_id", *missing]], on="run_id", how="left")
+        if "reposition" in keys:
+            df = df.assign(reposition=df["reposition"].fillna("stay").astype(str))
         return {k if isinstance(k, tuple) else (k,): g
                 for k, g in df.groupby(keys, sort=False)}
 
@@ -359,18 +417,22 @@ def _taxi(summary, tasks, vehicles, events, keys, direct=None) -> pd.DataFrame:
 def taxi_metrics(summary: pd.DataFrame, tasks: pd.DataFrame, vehicles: pd.DataFrame,
                  events: pd.DataFrame | None = None,
                  direct: pd.Series | np.ndarray | None = None) -> pd.DataFrame:
-    """Taxi-style metrics per (scenario, planner, allocator, N), tasks pooled over the group's
-    runs (see the module docstring). ``events`` gives in-vehicle times, the fleet states
-    (utilization) and path stretch; ``direct`` (per row of ``tasks``) the trips' free-flow
-    times where the tasks table lacks ``direct_seconds``."""
-    return _taxi(summary, tasks, vehicles, events, GROUP, direct)
+    """Taxi-style metrics per series (scenario, planner, allocator, N and, where the summary
+    names it, repositioner), tasks pooled over the series' runs (see the module docstring).
+    ``events`` gives in-vehicle times, the fleet states (utilization) and path stretch;
+    ``direct`` (per row of ``tasks``) the trips' free-flow times where the tasks table lacks
+    ``direct_seconds``."""
+    summary = with_series(summary, summary)
+    return _taxi(summary, tasks, vehicles, events, series_keys(summary), direct)
 
 
 def run_metrics(summary: pd.DataFrame, tasks: pd.DataFrame, vehicles: pd.DataFrame,
                 events: pd.DataFrame | None = None,
                 direct: pd.Series | np.ndarray | None = None) -> pd.DataFrame:
     """Taxi-style metrics per run (the same columns as :func:`taxi_metrics`)."""
-    out = _taxi(summary, tasks, vehicles, events, [*GROUP, "seed", "run_id"], direct)
+    summary = with_series(summary, summary)
+    out = _taxi(summary, tasks, vehicles, events, [*series_keys(summary), "seed", "run_id"],
+                direct)
     return out.drop(columns="runs")
 
 

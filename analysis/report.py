@@ -13,9 +13,11 @@
   (:func:`analysis.metrics.dynamic_metrics`, ``dynamic.csv``) and ``served_vs_n.png``,
   ``wait_vs_n.png``, ``cost_per_task_vs_n.png`` instead of ``cost_vs_n.png``;
 * road (taxi) runs: ``hourly_customers.csv`` / ``hourly_fleet.csv`` (per-hour series),
-  ``map.png`` (streets, pickup density, fleet start), ``hourly.png`` (demand, served,
-  rejected, wait percentiles over time), ``fleet_state.png`` (stacked fleet states over time),
-  ``wait_by_allocator.png`` (wait distributions per allocator); see :mod:`analysis.taxi_plots`.
+  ``map.png`` (streets, pickup density, fleet start; whole region and zoomed on the demand),
+  ``hourly.png`` (demand, served, rejected, wait percentiles over time), ``fleet_state.png``
+  (stacked fleet states over time), ``wait_by_allocator.png`` (wait distributions); each per
+  series: allocator, N and, where the runs differ in them, scenario variant (a swept batch
+  window) and repositioner (:func:`analysis.taxi_plots.series`).
 """
 
 from __future__ import annotations
@@ -113,8 +115,8 @@ def markdown_table(df: pd.DataFrame, digits: int = 2) -> str:
 
 
 def _taxi_view(taxi: pd.DataFrame, columns: list[str]) -> pd.DataFrame:
-    keys = ["allocator", "n_agents"] + [k for k in ("scenario", "planner")
-                                         if taxi[k].nunique() > 1]
+    keys = ["allocator", "n_agents"] + [k for k in ("scenario", "planner", "reposition")
+                                         if k in taxi and taxi[k].nunique() > 1]
     cols = [c for c in columns if c in taxi.columns]
     return taxi[keys + cols].rename(columns={"n_agents": "N"})
 
@@ -351,17 +353,19 @@ def _road_part(res, summary, tasks, vehicles, events, direct, out, written, run_
     e = events.loc[events["run_id"].isin(ids)]
     taxi = M.taxi_metrics(summary, t, v, e, d)
     bin_s = TP.time_bin(float(summary["sim_time"].max()))
-    trips = M.trip_table(t, e, d)
-    hc = M.hourly_customers(trips)
-    hc_bins = hc if bin_s == 3600 else M.hourly_customers(trips, bin_s=bin_s)
+    summary = M.with_series(summary, summary)
+    keys = M.series_keys(summary)
+    trips = M.with_series(M.trip_table(t, e, d), summary)
+    hc = M.hourly_customers(trips, keys)
+    hc_bins = hc if bin_s == 3600 else M.hourly_customers(trips, keys, bin_s=bin_s)
     states = []
     ends = summary.set_index("run_id")["sim_time"].to_dict()
     for rid, vg in v.groupby("run_id", sort=False):
         states.append(fleet_states(e.loc[e["run_id"] == rid], vg, end=float(ends[rid])))
     states = pd.concat(states, ignore_index=True) if states else pd.DataFrame(
         columns=["run_id", "agent_id", "state", "start", "end"])
-    hf = M.hourly_fleet(states, summary)
-    hf_bins = hf if bin_s == 3600 else M.hourly_fleet(states, summary, bin_s=bin_s)
+    hf = M.hourly_fleet(states, summary, keys)
+    hf_bins = hf if bin_s == 3600 else M.hourly_fleet(states, summary, keys, bin_s=bin_s)
     hc.to_csv(out / "hourly_customers.csv", index=False)
     hf.to_csv(out / "hourly_fleet.csv", index=False)
     written += [out / "hourly_customers.csv", out / "hourly_fleet.csv"]
@@ -373,13 +377,15 @@ def _road_part(res, summary, tasks, vehicles, events, direct, out, written, run_
         net = road_network(res.metadata(run_id, "tasks"), [s.path for s in res.sources])
     except KeyError:
         net = None
-    scen = str(r["scenario"])
+    scen = TP.scenario_title(summary["scenario"].unique())
     TP.network_map(out / "map.png", pickups=rt[["x", "y"]].to_numpy(dtype=float),
                    starts=rv[["x0", "y0"]].to_numpy(dtype=float),
                    xy=None if net is None else net.xy, edges=None if net is None else net.edges,
-                   title=f"{scen}: streets, pickups of seed {r['seed']} "
+                   title=f"{r['scenario']}: streets, pickups of seed {r['seed']} "
                          f"({len(rt)} requests), fleet start (N = {r['n_agents']})")
-    runs = summary.groupby(["allocator", "n_agents"])["run_id"].nunique().to_dict()
+    cols = TP.series_columns(summary)
+    runs = {k if isinstance(k, tuple) else (k,): n
+            for k, n in summary.groupby(cols)["run_id"].nunique().items()}
     TP.hourly(hc_bins, out / "hourly.png", bin_s=bin_s, runs=runs,
               title=f"{scen}: demand, service and waiting (by time of release)")
     TP.fleet_state(hf_bins, out / "fleet_state.png", bin_s=bin_s,
@@ -390,7 +396,8 @@ def _road_part(res, summary, tasks, vehicles, events, direct, out, written, run_
     unit = "one hour" if bin_s == 3600 else f"{bin_s / 60:g} minutes"
     return [
         ("h2", "Taxi study: customers and fleet"),
-        ("p", ("Per allocator and fleet size N, requests pooled over the seeds. Names as "
+        ("p", ("Per series (allocator, fleet size N and, where they differ, scenario variant "
+               "and repositioner), requests pooled over the seeds. Names as "
                "MATSim DRT's customer and vehicle stats print them: rides = served trips; "
                "rejectionRate = (rejected at once + expired waiting + unreachable) / requests; "
                "wait = release → pickup (s; median, p90 by linear interpolation); "

@@ -1,12 +1,15 @@
 """The figures of a taxi (road network) study, drawn with matplotlib's object API (Agg).
 
 * :func:`network_map`: the streets (thin grey), the density of pickups (hexagon bins, log
-  colour scale) and where the fleet starts;
+  colour scale) and where the fleet starts, the whole region and zoomed on the demand;
 * :func:`hourly`: per time bin, demand and served trips, rejection rate, wait percentiles, per
-  allocator (and N);
+  series;
 * :func:`fleet_state`: the fleet's state over time, stacked (idle, to pickup, occupied,
-  repositioning, failed), one panel per allocator and N;
-* :func:`wait_by_group`: wait-time distributions per allocator and N (ECDF and box plots).
+  repositioning, failed), one panel per series;
+* :func:`wait_by_group`: wait-time distributions per series (ECDF and box plots).
+
+A series (:func:`series`) is one allocator, fleet size N, scenario variant (a swept batch
+window), planner and repositioner; its label names what differs between the figure's series.
 
 Each takes DataFrames from :mod:`analysis.metrics` / :mod:`analysis.timeline`, writes one PNG
 and returns its path.
@@ -20,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from analysis.metrics import allocator_order
+from analysis.metrics import allocator_order, variant_name, variant_rank
 from analysis.plots import _colours, _figure, _save
 from analysis.timeline import FLEET_STATES
 
@@ -48,86 +51,172 @@ def _km(ax) -> None:
     ax.set_ylabel("y (km)")
 
 
+def demand_box(pickups: np.ndarray, q: float = 0.01, margin: float = 0.1):
+    """(lo, hi) corners of the box holding the pickups between the ``q`` and ``1 - q``
+    quantiles of x and of y, grown by ``margin`` of its span on every side (at least 500 m),
+    so that a few far-away pickups do not stretch it."""
+    lo = np.quantile(pickups[:, :2], q, axis=0)
+    hi = np.quantile(pickups[:, :2], 1 - q, axis=0)
+    pad = np.maximum(margin * (hi - lo), 500.0)
+    return lo - pad, hi + pad
+
+
+def _map_panel(ax, lo, hi, *, pickups, starts, xy, edges, zoomed: bool):
+    from matplotlib.collections import LineCollection
+    from matplotlib.colors import LogNorm
+
+    if xy is not None and edges is not None and len(edges):
+        segs = np.stack([xy[edges[:, 0], :2], xy[edges[:, 1], :2]], axis=1)
+        if zoomed:  # only the streets with an end in the box: thicker, and fewer to draw
+            inside = ((segs >= lo) & (segs <= hi)).all(axis=2).any(axis=1)
+            segs = segs[inside]
+        lw = 0.25 if len(segs) > 5000 else 0.6
+        ax.add_collection(LineCollection(segs, colors="0.55" if zoomed else "0.6",
+                                         linewidths=lw * (1.6 if zoomed else 1), zorder=1))
+    hb = None
+    if len(pickups):
+        p = pickups
+        if zoomed:
+            p = p[((p[:, :2] >= lo) & (p[:, :2] <= hi)).all(axis=1)]
+        grid = 60 if len(p) > 2000 else 25
+        hb = ax.hexbin(p[:, 0], p[:, 1], gridsize=grid, mincnt=1, cmap="YlOrRd",
+                       norm=LogNorm(), alpha=0.8 if zoomed else 0.85, zorder=2,
+                       extent=(lo[0], hi[0], lo[1], hi[1]))
+    if len(starts):
+        st = starts
+        if zoomed:
+            st = st[((st[:, :2] >= lo) & (st[:, :2] <= hi)).all(axis=1)]
+        ax.scatter(st[:, 0], st[:, 1], s=14 if len(starts) > 200 else 28, marker="^",
+                   facecolor="#1f77b4", edgecolor="white", linewidth=0.4, zorder=3)
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    ax.set_aspect("equal")
+    _km(ax)
+    return hb
+
+
 def network_map(path: Path, *, pickups: np.ndarray, starts: np.ndarray,
                 xy: np.ndarray | None = None, edges: np.ndarray | None = None,
                 title: str = "") -> Path:
     """The map: streets (``xy`` node positions in metres, ``edges`` index pairs; left out when
-    None), pickups as hexagon-binned density (log scale) and the fleet's start positions."""
-    from matplotlib.collections import LineCollection
-    from matplotlib.colors import LogNorm
+    None), pickups as hexagon-binned density (log scale) and the fleet's start positions.
+    Left: the whole region; right (when there are pickups and their :func:`demand_box` is
+    smaller than the region): zoomed on the demand, the box drawn on the left panel."""
     from matplotlib.lines import Line2D
+    from matplotlib.patches import Rectangle
+    from matplotlib.ticker import FuncFormatter
 
-    fig = _figure(7.5, 6.8)
-    ax = fig.add_subplot()
     pts = [p for p in (pickups, starts, xy) if p is not None and len(p)]
     allxy = np.vstack([p[:, :2] for p in pts]) if pts else np.zeros((1, 2))
     lo, hi = allxy.min(axis=0), allxy.max(axis=0)
     span = float(max(hi - lo)) or 1.0
-    if xy is not None and edges is not None and len(edges):
-        segs = np.stack([xy[edges[:, 0], :2], xy[edges[:, 1], :2]], axis=1)
-        lw = 0.25 if len(edges) > 5000 else 0.6
-        ax.add_collection(LineCollection(segs, colors="0.6", linewidths=lw, zorder=1))
-    handles = []
-    if len(pickups):
-        grid = 60 if len(pickups) > 2000 else 25
-        hb = ax.hexbin(pickups[:, 0], pickups[:, 1], gridsize=grid, mincnt=1, cmap="YlOrRd",
-                       norm=LogNorm(), alpha=0.85, zorder=2,
-                       extent=(lo[0], hi[0], lo[1], hi[1]))
-        cb = fig.colorbar(hb, ax=ax, shrink=0.8)
+    lo, hi = lo - 0.03 * span, hi + 0.03 * span
+    box = demand_box(pickups) if len(pickups) >= 10 else None
+    zoom = box is not None and float(np.prod(box[1] - box[0])) < 0.6 * float(np.prod(hi - lo))
+    if zoom:
+        box = (np.maximum(box[0], lo), np.minimum(box[1], hi))
+    fig = _figure(13.5 if zoom else 7.5, 7.0)
+    axes = fig.subplots(1, 2, width_ratios=[1, 1.15]) if zoom else [fig.add_subplot()]
+    kw = {"pickups": pickups, "starts": starts, "xy": xy, "edges": edges}
+    hb = _map_panel(axes[0], lo, hi, zoomed=False, **kw)
+    axes[0].set_title("whole region", fontsize="medium")
+    if zoom:
+        hb = _map_panel(axes[1], box[0], box[1], zoomed=True, **kw)
+        axes[0].add_patch(Rectangle(box[0], *(box[1] - box[0]), fill=False, edgecolor="black",
+                                    linewidth=1.0, linestyle="--", zorder=4))
+        axes[1].set_title("zoomed on the demand (1st–99th percentile of pickups, + 10 %)",
+                          fontsize="medium")
+    if hb is not None:
+        cb = fig.colorbar(hb, ax=axes[-1], shrink=0.8)
         cb.set_label("pickups per hexagon (log scale)")
-        from matplotlib.ticker import FuncFormatter
-
-        plain = FuncFormatter(lambda v, _: f"{v:g}")
-        cb.ax.yaxis.set_major_formatter(plain)
+        cb.ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
         cb.ax.yaxis.set_minor_formatter(FuncFormatter(
             lambda v, _: f"{v:g}" if f"{v:.1e}"[0] in "25" else ""))
+    handles = []
     if len(starts):
-        ax.scatter(starts[:, 0], starts[:, 1], s=14 if len(starts) > 200 else 28, marker="^",
-                   facecolor="#1f77b4", edgecolor="white", linewidth=0.4, zorder=3)
         handles.append(Line2D([], [], marker="^", linestyle="", color="#1f77b4",
                               label=f"fleet start ({len(starts)} vehicles)"))
     if xy is not None:
         handles.append(Line2D([], [], color="0.6", label="streets"))
-    ax.set_xlim(lo[0] - 0.03 * span, hi[0] + 0.03 * span)
-    ax.set_ylim(lo[1] - 0.03 * span, hi[1] + 0.03 * span)
-    ax.set_aspect("equal")
-    _km(ax)
-    ax.set_title(title or "Network, demand and fleet")
     if handles:
-        ax.legend(handles=handles, loc="upper left", fontsize="small", framealpha=0.9)
+        axes[0].legend(handles=handles, loc="upper left", fontsize="small", framealpha=0.9)
+    fig.suptitle(title or "Network, demand and fleet", wrap=True)
     return _save(fig, path)
 
 
-def _group_label(key, multi_n: bool) -> str:
-    alloc, n = key
-    return f"{alloc}, N = {n}" if multi_n else str(alloc)
+#: The columns that tell the series of a taxi study apart, in the order their labels name them.
+SERIES_COLUMNS = ("allocator", "n_agents", "scenario", "planner", "reposition")
 
 
-def _groups(df: pd.DataFrame):
-    """((allocator, N), rows) in the paper's allocator order, then N."""
-    order = allocator_order(df["allocator"].unique()) if len(df) else []
-    rank = {a: i for i, a in enumerate(order)}
-    keys = sorted(df.groupby(["allocator", "n_agents"]).groups, key=lambda k: (rank[k[0]], k[1]))
-    for k in keys:
-        yield k, df.loc[(df["allocator"] == k[0]) & (df["n_agents"] == k[1])]
+def series_columns(df: pd.DataFrame) -> list[str]:
+    """The columns of :data:`SERIES_COLUMNS` that ``df`` has."""
+    return [c for c in SERIES_COLUMNS if c in df.columns]
+
+
+def scenario_title(names) -> str:
+    """The scenarios of a figure, for its title: one name, or the base name of batch-window
+    variants with their windows (``chicago_taxi (imm, 30s)``), or the names joined."""
+    names = sorted({str(n) for n in names}, key=variant_rank)
+    if len(names) == 1:
+        return names[0]
+    bases = {n.rpartition("-")[0] for n in names}
+    if len(bases) == 1 and all(variant_name(n) != n for n in names):
+        return f"{bases.pop()} ({', '.join(variant_name(n) for n in names)})"
+    return ", ".join(names)
+
+
+def series(df: pd.DataFrame) -> list[tuple[tuple, str, pd.DataFrame]]:
+    """(key, label, rows) per series of ``df``: the key is the values of
+    :func:`series_columns` (allocator, N, scenario, planner, repositioner); the label names the
+    allocator and whatever else differs between the series of ``df``: ``N = 500``, the batch
+    window of a scenario variant (``imm``, ``30s``) or the scenario, the planner, and a
+    repositioner other than ``stay`` (``+ demand``), e.g. ``fcfs 30s + demand``. Ordered by
+    allocator (the paper's order), N, scenario, planner, repositioner (``stay`` first)."""
+    if df.empty:
+        return []
+    cols = series_columns(df)
+    d = df.assign(reposition=df["reposition"].fillna("stay").astype(str)) \
+        if "reposition" in cols else df
+    rank = {a: i for i, a in enumerate(allocator_order(d["allocator"].unique()))}
+    varies = {c: d[c].nunique() > 1 for c in cols}
+
+    def order(key):
+        k = dict(zip(cols, key))
+        rep = k.get("reposition", "stay")
+        return (rank[k["allocator"]], k["n_agents"], variant_rank(k.get("scenario", "")),
+                str(k.get("planner", "")), rep != "stay", rep)
+
+    out = []
+    for key, rows in sorted(d.groupby(cols, sort=False), key=lambda kv: order(kv[0])):
+        k = dict(zip(cols, key))
+        parts = [str(k["allocator"])]
+        if varies.get("n_agents"):
+            parts.append(f"N={k['n_agents']}")
+        if varies.get("scenario"):
+            parts.append(variant_name(k["scenario"]))
+        if varies.get("planner"):
+            parts.append(str(k["planner"]))
+        label = " ".join(parts)
+        if varies.get("reposition") and k["reposition"] != "stay":
+            label += f" + {k['reposition']}"
+        out.append((tuple(key), label, rows))
+    return out
 
 
 def hourly(customers: pd.DataFrame, path: Path, *, bin_s: float, runs: dict,
            title: str = "") -> Path:
     """Three panels against time of release: requests and served trips per bin (mean per
-    run), rejection rate, and wait median / p90 per allocator and N. ``customers``: rows of
+    run), rejection rate, and wait median / p90 per series (:func:`series`). ``customers``: rows of
     :func:`analysis.metrics.hourly_customers` with ``t_h`` (bin start, hours); ``runs``:
-    (allocator, N) -> number of runs pooled."""
+    series key (see :func:`series`) -> number of runs pooled."""
     fig = _figure(11, 8.4)
     a1, a2, a3 = fig.subplots(3, 1, sharex=True)
-    multi_n = customers["n_agents"].nunique() > 1
-    keys = [k for k, _ in _groups(customers)]
-    colours = _colours([_group_label(k, multi_n) for k in keys])
+    groups = series(customers)
+    colours = _colours([label for _, label, _ in groups])
     width = bin_s / 3600
     first = True
     markers = ("o", "s", "^", "D", "v", "P", "X", "*")
-    for i, (key, g) in enumerate(_groups(customers)):
-        label = _group_label(key, multi_n)
+    for i, (key, label, g) in enumerate(groups):
         c = colours[label]
         # allocators that decide alike draw on top of each other: the first ones are drawn
         # wider, each with its own marker, so every line stays visible
@@ -161,26 +250,28 @@ def hourly(customers: pd.DataFrame, path: Path, *, bin_s: float, runs: dict,
     return _save(fig, path)
 
 
-def fleet_state(fleet: pd.DataFrame, path: Path, *, bin_s: float, title: str = "") -> Path:
+def fleet_state(fleet: pd.DataFrame, path: Path, *, bin_s: float, title: str = "",
+                max_panels: int = 12) -> Path:
     """Stacked areas of the mean number of vehicles in each fleet state per time bin, one panel
-    per allocator and N (at most 8 panels: the first ones in the paper's order). ``fleet``:
-    rows of :func:`analysis.metrics.hourly_fleet` with ``t_h``."""
-    groups = list(_groups(fleet))[:8]
-    cols = 1 if len(groups) == 1 else 2
-    rows = math.ceil(len(groups) / cols)
-    fig = _figure(10 if cols == 2 else 8, 1.0 + 2.6 * rows)
+    per series (:func:`series`; at most ``max_panels``, the first ones in its order, the title
+    says how many are left out). ``fleet``: rows of :func:`analysis.metrics.hourly_fleet` with
+    ``t_h``."""
+    every = series(fleet)
+    groups = every[:max_panels]
+    cols = 1 if len(groups) == 1 else 2 if len(groups) <= 8 else 3
+    rows = max(1, math.ceil(len(groups) / cols))
+    fig = _figure({1: 8, 2: 10, 3: 13}[cols], 1.4 + 2.4 * rows)
     axes = np.atleast_1d(fig.subplots(rows, cols, sharex=True, sharey=True, squeeze=False)).ravel()
-    multi_n = fleet["n_agents"].nunique() > 1
     width = bin_s / 3600
-    for ax, (key, g) in zip(axes, groups):
+    for ax, (key, label, g) in zip(axes, groups):
         g = g.sort_values("t_h")
         x = np.r_[g["t_h"].to_numpy(dtype=float), g["t_h"].to_numpy(dtype=float)[-1] + width]
         ys = [np.r_[g[s].to_numpy(dtype=float), g[s].to_numpy(dtype=float)[-1]]
               for s in FLEET_STATES]
         ax.stackplot(x, ys, step="post", colors=[FLEET_COLOURS[s] for s in FLEET_STATES],
                      labels=[FLEET_LABELS[s] for s in FLEET_STATES], linewidth=0)
-        ax.set_title(_group_label(key, multi_n) + f" (N = {key[1]})" * (not multi_n),
-                     fontsize="medium")
+        n = dict(zip(series_columns(g), key))["n_agents"]
+        ax.set_title(label if "N=" in label else f"{label} (N = {n})", fontsize="medium")
         ax.grid(True, alpha=0.3)
         ax.set_xlim(x[0], x[-1])
     for ax in axes[len(groups):]:
@@ -191,22 +282,25 @@ def fleet_state(fleet: pd.DataFrame, path: Path, *, bin_s: float, title: str = "
         ax.set_xlabel("time (h)")
         ax.tick_params(labelbottom=True)
     h, lab = axes[0].get_legend_handles_labels()
-    fig.legend(h[::-1], lab[::-1], loc="outside right upper", fontsize="small", frameon=False)
-    fig.suptitle(title or "Fleet state over time (stacked)")
+    # below the panels, in one row: a legend in the upper right corner would run into the title
+    fig.legend(h, lab, loc="outside lower center", ncols=len(lab), fontsize="small",
+               frameon=False)
+    more = len(every) - len(groups)
+    fig.suptitle((title or "Fleet state over time (stacked)")
+                 + (f"\n(the first {len(groups)} of {len(every)} series)" if more else ""))
     return _save(fig, path)
 
 
 def wait_by_group(waits: pd.DataFrame, path: Path, title: str = "") -> Path:
-    """Left: ECDF of the wait (release -> pickup, minutes) per allocator and N; right: box
-    plots (quartiles, whiskers at 1.5 IQR, no fliers) per allocator and N."""
+    """Left: ECDF of the wait (release -> pickup, minutes) per series (:func:`series`);
+    right: box plots (quartiles, whiskers at 1.5 IQR, no fliers) per series."""
     fig = _figure(10.5, 4.6)
     left, right = fig.subplots(1, 2, width_ratios=[1.2, 1])
-    multi_n = waits["n_agents"].nunique() > 1 if len(waits) else False
-    groups = list(_groups(waits)) if len(waits) else []
-    labels = [_group_label(k, multi_n) for k, _ in groups]
+    groups = series(waits)
+    labels = [label for _, label, _ in groups]
     colours = _colours(labels)
     data = []
-    for (key, g), label in zip(groups, labels):
+    for _key, label, g in groups:
         w = np.sort(g["wait"].to_numpy(dtype=float) / 60)
         w = w[np.isfinite(w)]
         data.append(w)
@@ -234,7 +328,7 @@ def wait_by_group(waits: pd.DataFrame, path: Path, title: str = "") -> Path:
         right.set_yticks(range(1, len(keep) + 1), [labels[i] for i in keep], fontsize="small")
         right.invert_yaxis()
     right.set_xlabel("wait (min)")
-    right.set_title("Per allocator (box: quartiles)")
+    right.set_title("Per series (box: quartiles)")
     right.grid(True, axis="x", alpha=0.3)
     if title:
         fig.suptitle(title)

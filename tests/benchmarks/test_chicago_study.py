@@ -1,0 +1,77 @@
+"""benchmarks/chicago_study.py: the derived scenario, the 80-column table and the findings
+paragraph, against hand-made numbers (the study itself is run by hand, not here)."""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from dispatch.scenario import load_scenario
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def study():
+    spec = importlib.util.spec_from_file_location("chicago_study",
+                                                  ROOT / "benchmarks" / "chicago_study.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_derived_scenario(study, tmp_path):
+    a = study.parse_args(["--hours", "3", "--trips-per-day", "1000", "--agents", "20", "40"])
+    path = tmp_path / "s.toml"
+    path.write_text(study.derived_text(a, ["fcfs", "greedy"], ["stay", "demand"]))
+    sc = load_scenario(path)
+    assert sc.duration == 3 * 3600
+    assert sc.tasks.trips_per_day == 1000
+    runs = sc.runs()
+    assert len(runs) == 2 * 2 * 2 * 2  # N x allocator x window x repositioner
+    assert {r.scenario.name for r in runs} == {"chicago_study-immediate",
+                                               "chicago_study-batch30s"}
+    assert {(r.allocator, r.agents, r.reposition) for r in runs} == {
+        (al, n, rp) for al in ("fcfs", "greedy") for n in (20, 40) for rp in ("stay", "demand")}
+    full = study.parse_args([])
+    assert "duration = 93600.0" in study.derived_text(full, ["fcfs"], ["stay"])
+
+
+def _table():
+    rows = []
+    for alloc, base in (("fcfs", 300.0), ("hungarian", 240.0)):
+        for window, dw in (("imm", 0.0), ("30s", 30.0)):
+            for rep, dr in (("stay", 0.0), ("demand", -100.0)):
+                label = f"{alloc} {window}" + (" + demand" if rep == "demand" else "")
+                rows.append({"label": label + " and a very long tail", "allocator": alloc,
+                             "N": 200, "window": window, "reposition": rep, "runs": 1,
+                             "served": 0.8, "rejected": 0.2 - (0.05 if window == "30s" else 0),
+                             "wait_mean": base + dw + dr, "wait_p90": 2 * base,
+                             "utilization": 0.5, "empty": 0.1 + (0.05 if rep == "demand" else 0),
+                             "wall_s": 12.3})
+    return pd.DataFrame(rows)
+
+
+def test_table_fits_80_columns(study):
+    text = study.text_table(_table())
+    assert max(len(line) for line in text.splitlines()) <= 80
+    assert len(text.splitlines()) == 2 + 8
+
+
+def test_findings_by_hand(study):
+    para = study.findings(_table())
+    # best: hungarian imm + demand, 240 - 100 = 140 s; best other allocator: fcfs imm + demand
+    # 200 s, 60 s (30 %) more; worst: fcfs 30s 330 s
+    assert "lowest mean wait hungarian imm + demand and a very long tail (140 s" in para
+    assert "60 s (30 %) below the best other allocator" in para
+    assert "highest fcfs 30s and a very long tail (330 s)" in para
+    # batching: +30 s in all 4 pairs, rejection -5 points in all 4
+    assert "mean wait lower in 0 of 4 pairs (allocator, N, repositioner), change +30 s" in para
+    assert "rejection rate lower in 4 of 4, -5.0 points" in para
+    # repositioning: -100 s in all 4 pairs, empty share +5 points
+    assert "mean wait lower in 4 of 4 pairs (allocator, N, window), change -100 s" in para
+    assert "empty share of the km +5.0 points" in para
