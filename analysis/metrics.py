@@ -42,8 +42,7 @@ import pandas as pd
 from analysis.stats import mean_ci
 
 GROUP = ["scenario", "planner", "allocator", "n_agents"]
-PREFERRED_ORDER = ("hungarian", "magnnet", "magnnet_edge", "magnnet_match", "auction", "greedy",
-                   "random")
+PREFERRED_ORDER = ("hungarian", "local_hungarian", "magnnet", "auction", "greedy", "random")
 
 #: FleetPy's labels of the taxi-style columns that have one (for users who compare).
 FLEETPY_LABELS = {

@@ -46,6 +46,8 @@ SCHEMAS: dict[str, pa.Schema] = {
         ("distance", _F), ("empty_distance", _F), ("occupied_distance", _F),
         # [faults]: vehicle breakdowns; tasks re-opened by one; of those, passengers transferred
         ("failures", _I), ("tasks_reassigned", _I), ("tasks_transferred", _I),
+        # what the allocator says it ran (JSON object of strings; see dispatch.sim.describe)
+        ("allocator_info", _S),
     ]),
     "tasks": pa.schema([
         ("run_id", _S), ("task_id", _I), ("kind", _S), ("x", _F), ("y", _F), ("z", _F),

@@ -13,6 +13,7 @@ same fleet and the same tasks whichever allocator runs: instances are paired acr
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 from functools import lru_cache
@@ -95,6 +96,16 @@ def make_plugin(kind: str, name: str, params, *args):
                           f"{type(e).__name__}: {reason}") from e
 
 
+def describe(allocator) -> str:
+    """What an allocator says it ran, as a JSON object of strings (``"{}"`` if it says
+    nothing): the optional ``describe() -> dict[str, str]`` method of an allocator plugin
+    (e.g. a learned model's name, variant and checkpoint hash). It goes into the summary's
+    ``allocator_info`` column and the ``dispatch.allocator_info`` Parquet metadata."""
+    fn = getattr(allocator, "describe", None)
+    info = fn() if callable(fn) else {}
+    return json.dumps({str(k): str(v) for k, v in dict(info).items()}, sort_keys=True)
+
+
 def check_runs(sc: Scenario, planners) -> None:
     """Validate-time checks that need plugins or the network: every planner serves the
     scenario's space; a road network loads; a trace names only nodes it has."""
@@ -132,6 +143,8 @@ class Simulation:
                                            sc.dispatch.allocator_params)
         self.planner: Planner = make_plugin("planner", spec.planner, sc.dispatch.planner_params,
                                             self.space)
+        self.allocator_info = describe(allocator)
+        recorder.metadata["dispatch.allocator_info"] = self.allocator_info
         self.bus = bus = EventBus()
         self.book = book = TaskBook(env, bus)
         self.fleet = Fleet(place_fleet(self.space, spec, rng_for(spec.seed, STREAM_FLEET)))
@@ -279,5 +292,6 @@ class Simulation:
                    n_agents=len(self.vehicles), seed=spec.seed, space=self.space.kind)
         summary = self.stats.summary(run=run, vehicles=self.vehicles,
                                      dispatcher=self.dispatcher, sim_time=float(self.env.now))
+        summary["allocator_info"] = self.allocator_info
         rec.add("summary", **summary)
         return summary

@@ -6,8 +6,7 @@ import math
 from collections import defaultdict
 from statistics import fmean
 
-PREFERRED_ORDER = ("hungarian", "magnnet", "magnnet_edge", "magnnet_match", "auction", "greedy",
-                   "random")
+PREFERRED_ORDER = ("hungarian", "local_hungarian", "magnnet", "auction", "greedy", "random")
 
 
 def allocator_order(names) -> list[str]:
