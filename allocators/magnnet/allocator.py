@@ -183,7 +183,8 @@ class MagnnetAllocator(DecentralizedAllocator):
         warm = np.array([[1.0, 2.0], [2.0, 1.0]])
         match.scores_of(self.model, warm, np.zeros(2, bool))
         if self.view_model is not None:
-            views.view_scores(self.view_model, warm, np.zeros(2, bool), np.array([0, 1]))
+            views.view_scores(self.view_model, warm, np.zeros(2, bool), np.array([0, 1]),
+                              np.ones(2, bool))
 
     def _init_paper(self, checkpoint) -> None:
         import torch
@@ -252,17 +253,21 @@ class MagnnetAllocator(DecentralizedAllocator):
         groups: dict[bytes, tuple[np.ndarray, list[int]]] = {}
         for k, i in enumerate(agents):
             _, two = two_hop(comm, int(i))
-            members = np.flatnonzero(two & deciding)
             if hears_all[k] or self.view_model is None:
+                members = np.flatnonzero(two & deciding)
                 groups.setdefault(members.tobytes(), (members, []))[1].append(k)
                 continue
-            hop = views.hops_from(comm, int(i), members)
+            # the view model sees every agent within two hops, with whether it still decides:
+            # one that no longer does and is the best for a task it believes open has most
+            # likely taken it (the news may not have reached this agent yet)
+            members = np.flatnonzero(two)
+            hop, active = views.hops_from(comm, int(i), members), deciding[members]
             if self._record is not None:
-                self._record.append((round_, members, tasks, hop))
+                self._record.append((round_, members, tasks, hop, active))
             s, rn, cn = views.view_scores(self.view_model, problem.cost[np.ix_(members, tasks)],
-                                          flies[members], hop)
+                                          flies[members], hop, active)
             req = views.view_request(s, rn, cn, int(np.searchsorted(members, i)),
-                                     self.view_confidence, force=late)
+                                     self.view_confidence, force=late, active=active)
             out[k] = tasks[req] if req >= 0 else req
         # agents that share a view share one forward pass (one for everyone on a complete graph)
         for members, ks in groups.values():

@@ -44,8 +44,9 @@ from allocators.magnnet.match import EDGE_FEATURES, EdgeLayer, MatchPolicy, edge
 
 log = logging.getLogger(__name__)
 
-#: Extra input features per edge of the view model: hop of the agent / 2, n_view / m_open.
-VIEW_FEATURES = 2
+#: Extra input features per edge of the view model: hop of the agent / 2, whether the agent is
+#: still deciding, deciding agents of the view / open tasks.
+VIEW_FEATURES = 3
 
 
 class ViewPolicy(nn.Module):
@@ -80,12 +81,15 @@ class ViewPolicy(nn.Module):
         self.out.load_state_dict(match.out.state_dict())
         return self
 
-    def forward(self, cost, mask, flies, hop, frac):
-        """``cost, mask (B, n, m)``, ``flies (B, n)``, ``hop (B, n)`` (0, 1 or 2),
-        ``frac (B,)``."""
+    def forward(self, cost, mask, flies, hop, active):
+        """``cost, mask (B, n, m)``, ``flies (B, n)``, ``hop (B, n)`` (0, 1 or 2), ``active
+        (B, n)`` (the agent is still deciding)."""
         _, n, m = cost.shape
+        act = active.float()
+        frac = act.sum(1) / mask.any(1).sum(1).clamp(min=1)
         extra = torch.stack([(hop.float() / 2)[:, :, None].expand(-1, -1, m),
-                             frac.float()[:, None, None].expand(-1, n, m)], -1)
+                             act[:, :, None].expand(-1, -1, m),
+                             frac[:, None, None].expand(-1, n, m)], -1)
         f = torch.cat([edge_features(cost, mask, flies), extra], -1)
         h = self.inp(torch.where(mask[..., None], f, torch.zeros_like(f)))
         for layer in self.gnn:
@@ -108,13 +112,14 @@ def hops_from(comm: np.ndarray, i: int, members: np.ndarray) -> np.ndarray:
 
 
 @torch.no_grad()
-def view_scores(model: ViewPolicy, cost: np.ndarray, flies: np.ndarray, hop: np.ndarray):
+def view_scores(model: ViewPolicy, cost: np.ndarray, flies: np.ndarray, hop: np.ndarray,
+                active: np.ndarray):
     """``(scores (n, m) with -inf where infeasible, row_null (n,), col_null (m,))`` of one
     view."""
     c, mask = scaled(cost)
-    frac = torch.tensor([cost.shape[0] / max(cost.shape[1], 1)])
     s, rn, cn = model(c, mask, torch.from_numpy(np.asarray(flies, bool))[None],
-                      torch.from_numpy(np.asarray(hop))[None], frac)
+                      torch.from_numpy(np.asarray(hop))[None],
+                      torch.from_numpy(np.asarray(active, bool))[None])
     s = np.where(mask[0].numpy(), s[0].numpy().astype(np.float64), -np.inf)
     return s, rn[0].numpy().astype(np.float64), cn[0].numpy().astype(np.float64)
 
@@ -125,15 +130,21 @@ def _softmax(x: np.ndarray) -> np.ndarray:
 
 
 def view_request(scores: np.ndarray, row_null: np.ndarray, col_null: np.ndarray, r: int,
-                 confidence: float, force: bool) -> int:
+                 confidence: float, force: bool, active: np.ndarray | None = None) -> int:
     """The request of the view's agent ``r``: its best task, when the pair is mutual best
     (null heads included) and both softmaxes give it at least ``confidence``; else ``-2``
-    (wait), or ``-1`` when it has no feasible task. With ``force`` its best task."""
+    (wait), or ``-1`` when it has no feasible task. With ``force`` its best task among those
+    whose best-scoring agent is not one that stopped deciding (``active`` False: it has most
+    likely taken it), or its best task if there is none."""
     row = scores[r]
     if not np.isfinite(row).any():
         return -1
     j = int(row.argmax())
     if force:
+        if active is not None:
+            free = np.isfinite(row) & active[scores.argmax(0)]
+            if free.any():
+                return int(np.where(free, row, -np.inf).argmax())
         return j
     pr = _softmax(np.append(np.where(np.isfinite(row), row, -1e9), row_null[r]))
     col = scores[:, j]
@@ -187,7 +198,7 @@ def label(problem, alloc, views) -> list[tuple]:
     won = [(q.round, q.agent_id, q.task_id) for q in alloc.requests if q.won]
     teacher: dict[int, tuple[np.ndarray, np.ndarray]] = {}
     out = []
-    for r, members, tasks, hop in views:
+    for r, members, tasks, hop, active in views:
         if r not in teacher:
             free_a, free_t = np.ones(n, bool), np.ones(m, bool)
             for rr, a, t in won:  # ids are indices in training problems
@@ -201,10 +212,11 @@ def label(problem, alloc, views) -> list[tuple]:
         at, ta = teacher[r]
         pos_t = {int(t): k for k, t in enumerate(tasks)}
         pos_a = {int(a): k for k, a in enumerate(members)}
-        rt = np.array([pos_t.get(int(at[a]), len(tasks)) for a in members])
+        rt = np.array([pos_t.get(int(at[a]), len(tasks)) if act else len(tasks)
+                       for a, act in zip(members, active)])
         ct = np.array([pos_a.get(int(ta[t]), len(members)) for t in tasks])
         out.append((problem.cost[np.ix_(members, tasks)], problem_flies(problem)[members],
-                    hop, rt, ct))
+                    hop, active, rt, ct))
     return out
 
 
@@ -213,10 +225,10 @@ def problem_flies(problem) -> np.ndarray:
 
 
 def view_loss(model: ViewPolicy, sample) -> torch.Tensor:
-    cost, flies, hop, rt, ct = sample
+    cost, flies, hop, active, rt, ct = sample
     c, mask = scaled(cost)
-    frac = torch.tensor([cost.shape[0] / max(cost.shape[1], 1)])
-    s, rn, cn = model(c, mask, torch.from_numpy(flies)[None], torch.from_numpy(hop)[None], frac)
+    s, rn, cn = model(c, mask, torch.from_numpy(flies)[None], torch.from_numpy(hop)[None],
+                      torch.from_numpy(active)[None])
     row = torch.cat([s[0], rn[0][:, None]], 1)
     col = torch.cat([s[0].T, cn[0][:, None]], 1)
     f = nn.functional.cross_entropy
