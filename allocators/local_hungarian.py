@@ -27,8 +27,10 @@ VIEWS = ("two_hop", "component")
 
 
 class LocalHungarianAllocator(DecentralizedAllocator):
-    """Each agent solves the assignment over its own view and requests its part (Ismail et
-    al. 2017); conflicts settled by the shared rule."""
+    """Each agent solves the assignment over its two-hop view and requests its own part.
+
+    The decentralized Hungarian baseline of Ismail et al. 2017; conflicts settled by the shared
+    rule (see the module doc)."""
 
     name = "local_hungarian"
 

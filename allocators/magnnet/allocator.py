@@ -13,9 +13,9 @@ Variants (``[dispatch.allocator_params] variant = ...``):
     is mutual best and confident (conflict-free by construction, since every such agent shares
     the one view). An agent that does not hear the whole fleet acts on its two-hop view with
     the view model ``view.pt`` (:mod:`allocators.magnnet.views`: the match network plus the
-    view's hop and size features and "not mine / outside my view" heads, trained CTDE with
-    DAgger for partial views); it waits while unsure and requests its best task from round
-    ``patience`` on. ``partial = "match"`` runs ``match.pt`` on partial views instead (what
+    view's hop, status and size features and "not mine / outside my view" heads, trained
+    CTDE with DAgger for partial views); it waits while unsure and must request from round
+    ``view_patience`` on. ``partial = "match"`` runs ``match.pt`` on partial views instead (what
     the plugin did before the view model: an ablation).
 ``"paper"``
     The paper's network exactly (two 6-unit graph convolutions, MLP actor over
@@ -30,7 +30,10 @@ Other parameters: ``checkpoint`` (a ``model.pt`` of ``dispatch train magnnet`` r
 shipped one of the variant: a match model for ``match``, a paper model of one size for
 ``paper``/``paper_nb``), ``view_checkpoint`` (replaces ``view.pt``), ``confidence`` (default
 0.8: row and column softmax a pair needs before an agent that hears everyone requests it),
-``view_confidence`` (default 0.5: the same for the view model), ``patience`` (default 3).
+``view_confidence`` (default 0.5: the same for the view model), ``patience`` (default 3: the
+round from which the match model on partial views, ``partial = "match"``, requests regardless),
+``view_patience`` (default 8: the round from which the view model requests its part of its
+view's assignment, and from twice that its best task regardless).
 
 Every model is read from disk and run once (warm-up) in the constructor, so a decision never
 includes imports or file reads. Loaded models are cached per file for the process;
@@ -127,22 +130,26 @@ def _number(value, name: str, low: float, high: float) -> float:
 
 
 class MagnnetAllocator(DecentralizedAllocator):
-    """MAGNNET (Ratnabala et al. 2025): a graph network per agent over what reaches it;
-    variant ``match`` (default, any size) or the paper's ``paper`` / ``paper_nb`` (per N)."""
+    """MAGNNET: a trained graph-network policy per agent (variant match, paper or paper_nb).
+
+    Ratnabala et al. 2025. Variant ``match`` (default, any size) or the paper's network,
+    ``paper`` / ``paper_nb`` (one checkpoint per N = M); see the module doc."""
 
     name = "magnnet"
 
     def __init__(self, variant: str = "match", checkpoint: str | None = None,
                  view_checkpoint: str | None = None, partial: str = "view",
                  confidence: float = 0.8, view_confidence: float = 0.5,
-                 patience: int = 3) -> None:
+                 patience: int = 3, view_patience: int = 8) -> None:
         if variant not in VARIANTS:
             raise TypeError(f"variant must be one of {', '.join(VARIANTS)}, got {variant!r}")
         if partial not in PARTIAL:
             raise TypeError(f"partial must be one of {', '.join(PARTIAL)}, got {partial!r}")
-        if isinstance(patience, bool) or not isinstance(patience, int) or patience < 0:
-            raise TypeError(f"patience must be a non-negative integer, got {patience!r}")
+        for name, value in (("patience", patience), ("view_patience", view_patience)):
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise TypeError(f"{name} must be a non-negative integer, got {value!r}")
         self.variant, self.partial, self.patience = variant, partial, patience
+        self.view_patience = view_patience
         self.confidence = _number(confidence, "confidence", 0.0, 1.0)
         self.view_confidence = _number(view_confidence, "view_confidence", 0.0, 1.0)
         if variant != "match" and (view_checkpoint is not None or partial != "view"):
@@ -267,7 +274,8 @@ class MagnnetAllocator(DecentralizedAllocator):
             s, rn, cn = views.view_scores(self.view_model, problem.cost[np.ix_(members, tasks)],
                                           flies[members], hop, active)
             req = views.view_request(s, rn, cn, int(np.searchsorted(members, i)),
-                                     self.view_confidence, force=late, active=active)
+                                     self.view_confidence, force=round_ >= self.view_patience,
+                                     active=active, last=round_ >= 2 * self.view_patience)
             out[k] = tasks[req] if req >= 0 else req
         # agents that share a view share one forward pass (one for everyone on a complete graph)
         for members, ks in groups.values():

@@ -2,7 +2,8 @@
 
 Output folder: ``model.pt`` (checkpoint, loadable with ``weights_only=True``), ``log.parquet``
 (one row per update: ``charts/...`` and ``losses/...`` scalars), ``reward.png`` (the paper's
-Figure 3: mean reward against training steps) and ``entropy.png`` (Figure 4).
+Figure 3: mean reward against training steps) and ``entropy.png`` (Figure 4) for the PPO
+variants; ``loss.png`` (imitation loss and validation curve) for ``match`` and ``view``.
 """
 
 from __future__ import annotations
@@ -34,6 +35,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--iterations", type=int, default=None, help="view: DAgger iterations")
     p.add_argument("--episodes", type=int, default=None,
                    help="view: decisions played per DAgger iteration")
+    p.add_argument("--patience", type=int, default=None,
+                   help="view: round from which the played policy must request (default 5)")
+    p.add_argument("--confidence", type=float, default=None,
+                   help="view: softmax a pair needs before the played policy requests it")
+    p.add_argument("--init", type=Path, default=None,
+                   help="view: continue from this view checkpoint instead of match.pt")
     p.add_argument("--steps", type=int, default=d.total_steps, help="PPO environment steps")
     p.add_argument("--bc-updates", type=int, default=1500,
                    help="imitation warm-start updates before PPO (0: pure PPO as in the paper)")
@@ -215,9 +222,14 @@ def _run_view(args, console=None) -> int:
 
     torch.set_num_threads(2)
     d = ViewConfig()
+    from allocators.magnnet.ppo import PPOConfig
+
     cfg = dataclasses.replace(d, iterations=args.iterations or d.iterations,
                               episodes=args.episodes or d.episodes,
-                              updates=args.updates or d.updates, seed=args.seed)
+                              updates=args.updates or d.updates, seed=args.seed,
+                              patience=d.patience if args.patience is None else args.patience,
+                              confidence=args.confidence or d.confidence,
+                              lr=d.lr if args.lr == PPOConfig().lr else args.lr)
     out = args.out or Path("runs") / "train" / "magnnet_view"
     out.mkdir(parents=True, exist_ok=True)
     p20, p50 = load_pool(20, 600, "train", workers=2), load_pool(50, 200, "train", workers=2)
@@ -227,10 +239,12 @@ def _run_view(args, console=None) -> int:
     with torch.random.fork_rng():  # seeded initial weights, without touching global state
         torch.manual_seed(cfg.seed)
         model = ViewPolicy().init_from(match)
+    if args.init is not None:
+        model.load_state_dict(load_checkpoint(args.init)[0].state_dict())
 
     def make(m):
         return MagnnetAllocator.with_models(match, m, view_confidence=cfg.confidence,
-                                            patience=cfg.patience)
+                                            view_patience=cfg.patience)
 
     def validate(m):
         r20 = evaluate_views(lambda: make(m), v20, 20.0)
@@ -260,7 +274,8 @@ def _run_view(args, console=None) -> int:
     from allocators.magnnet.views import config_dict
 
     save_checkpoint(model, out / "model.pt", None,
-                    {"wall_s": wall, "view": config_dict(cfg), "from": "match.pt",
+                    {"wall_s": wall, "view": config_dict(cfg),
+                     "from": str(args.init) if args.init else "match.pt",
                      "val": {k: v for k, v in (best or {}).items() if k.startswith("val/")},
                      "world_size": p20.world_size.tolist(),
                      "pool": "train seeds from 1000000: N=20 (500) and N=50 (170) instances "

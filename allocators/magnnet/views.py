@@ -26,8 +26,9 @@ that round and retrains on everything collected so far.
 Execution (:func:`view_request`): the deciding agent requests its best task when the pair is
 mutual best in its view (the task's best agent, the outside head included, is itself) and both
 softmaxes (row and column, null heads included) give it at least ``confidence``; otherwise it
-waits (:data:`dispatch.decentralized.WAIT`). From round ``patience`` on it requests its best
-task regardless, so a decision never stalls.
+waits (:data:`dispatch.decentralized.WAIT`). From round ``patience`` on it must request: its
+part of the view's best-score assignment (every agent of a view computes the same one), and
+from twice that round its best task regardless, so a decision never stalls.
 """
 
 from __future__ import annotations
@@ -124,28 +125,49 @@ def view_scores(model: ViewPolicy, cost: np.ndarray, flies: np.ndarray, hop: np.
     return s, rn[0].numpy().astype(np.float64), cn[0].numpy().astype(np.float64)
 
 
+def _forced(scores: np.ndarray, r: int, active: np.ndarray | None, last: bool) -> int:
+    from scipy.optimize import linear_sum_assignment
+
+    n, m = scores.shape
+    act = np.ones(n, bool) if active is None else np.asarray(active, bool)
+    free = np.isfinite(scores).any(0) & act[scores.argmax(0)]
+    if not (free & np.isfinite(scores[r])).any():
+        free = np.isfinite(scores[r])
+    rows, cols = np.flatnonzero(act), np.flatnonzero(free)
+    sub = scores[np.ix_(rows, cols)]
+    ok = np.isfinite(sub)
+    low = sub[ok].min() if ok.any() else 0.0
+    a, t = linear_sum_assignment(np.where(ok, sub - low + 1.0, 0.0), maximize=True)
+    for i, k in zip(rows[a], cols[t]):
+        if i == r and np.isfinite(scores[r, k]):
+            return int(k)
+    return int(np.where(free, scores[r], -np.inf).argmax()) if last else -2
+
+
 def _softmax(x: np.ndarray) -> np.ndarray:
     e = np.exp(x - x.max())
     return e / e.sum()
 
 
 def view_request(scores: np.ndarray, row_null: np.ndarray, col_null: np.ndarray, r: int,
-                 confidence: float, force: bool, active: np.ndarray | None = None) -> int:
+                 confidence: float, force: bool, active: np.ndarray | None = None,
+                 last: bool = True) -> int:
     """The request of the view's agent ``r``: its best task, when the pair is mutual best
     (null heads included) and both softmaxes give it at least ``confidence``; else ``-2``
-    (wait), or ``-1`` when it has no feasible task. With ``force`` its best task among those
-    whose best-scoring agent is not one that stopped deciding (``active`` False: it has most
-    likely taken it), or its best task if there is none."""
+    (wait), or ``-1`` when it has no feasible task.
+
+    With ``force`` the agent must request: it leaves out the tasks whose best-scoring agent
+    stopped deciding (``active`` False: that agent has most likely taken it), solves the
+    assignment of the view's deciding agents to the other tasks that maximizes the total score
+    (every agent of a view computes the same one, so neighbours do not all rush to one task)
+    and requests its part; left out of it, it waits (unless ``last``) or requests its best
+    such task."""
     row = scores[r]
     if not np.isfinite(row).any():
         return -1
     j = int(row.argmax())
     if force:
-        if active is not None:
-            free = np.isfinite(row) & active[scores.argmax(0)]
-            if free.any():
-                return int(np.where(free, row, -np.inf).argmax())
-        return j
+        return _forced(scores, r, active, last)
     pr = _softmax(np.append(np.where(np.isfinite(row), row, -1e9), row_null[r]))
     col = scores[:, j]
     pc = _softmax(np.append(np.where(np.isfinite(col), col, -1e9), col_null[j]))
@@ -159,18 +181,19 @@ def view_request(scores: np.ndarray, row_null: np.ndarray, col_null: np.ndarray,
 
 @dataclass(frozen=True)
 class ViewConfig:
-    """DAgger training of the view model (defaults: the shipped ``view.pt``)."""
+    """DAgger training of the view model (defaults: the first stage of the shipped
+    ``view.pt``; its second stage continues with ``iterations=3, patience=8, lr=5e-4``)."""
 
-    iterations: int = 6
-    episodes: int = 60          # played per iteration
-    updates: int = 400          # gradient steps per iteration
+    iterations: int = 4
+    episodes: int = 40          # played per iteration
+    updates: int = 200          # gradient steps per iteration
     batch: int = 16             # views per gradient step
     lr: float = 1e-3
     sizes: tuple[int, ...] = (8, 12, 20, 30, 50)
     ranges: tuple[float, ...] = (10.0, 15.0, 20.0, 20.0, 25.0, 30.0)
     loss_share: float = 0.25    # episodes played with 30 % message loss
     confidence: float = 0.5
-    patience: int = 3
+    patience: int = 5
     max_views: int = 60_000     # the dataset keeps the most recent views
     seed: int = 0
 

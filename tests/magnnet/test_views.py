@@ -146,7 +146,7 @@ def test_dagger_lowers_the_loss_on_a_fixed_seed():
 
     def make(m):
         return mod.MagnnetAllocator.with_models(match, m, view_confidence=cfg.confidence,
-                                                patience=cfg.patience)
+                                                view_patience=cfg.patience)
 
     p = sub_problem(pool, 0, 8, 20.0, 0.0, np.random.default_rng(0))
     alloc, views = play_problem(p, make(view))
