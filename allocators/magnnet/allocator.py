@@ -32,7 +32,7 @@ shipped one of the variant: a match model for ``match``, a paper model of one si
 0.8: row and column softmax a pair needs before an agent that hears everyone requests it),
 ``view_confidence`` (default 0.5: the same for the view model), ``patience`` (default 3: the
 round from which the match model on partial views, ``partial = "match"``, requests regardless),
-``view_patience`` (default 8: the round from which the view model requests its part of its
+``view_patience`` (default 12: the round from which the view model requests its part of its
 view's assignment, and from twice that its best task regardless).
 
 Every model is read from disk and run once (warm-up) in the constructor, so a decision never
@@ -140,7 +140,7 @@ class MagnnetAllocator(DecentralizedAllocator):
     def __init__(self, variant: str = "match", checkpoint: str | None = None,
                  view_checkpoint: str | None = None, partial: str = "view",
                  confidence: float = 0.8, view_confidence: float = 0.5,
-                 patience: int = 3, view_patience: int = 8) -> None:
+                 patience: int = 3, view_patience: int = 12) -> None:
         if variant not in VARIANTS:
             raise TypeError(f"variant must be one of {', '.join(VARIANTS)}, got {variant!r}")
         if partial not in PARTIAL:

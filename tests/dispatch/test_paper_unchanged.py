@@ -14,10 +14,9 @@ rows of allocator ``magnnet:paper_nb``, reproduced by ``variant = "paper_nb"``; 
 complete graph of this scenario: Hungarian's assignment in one round, plus its N requests).
 """
 
-import dataclasses
-
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
