@@ -68,8 +68,8 @@ import pandas as pd
 from analysis.stats import mean_ci
 
 GROUP = ["scenario", "planner", "allocator", "n_agents"]
-PREFERRED_ORDER = ("hungarian", "magnnet", "magnnet_edge", "magnnet_match", "auction", "greedy",
-                   "fcfs", "random")
+PREFERRED_ORDER = ("hungarian", "local_hungarian", "magnnet", "auction", "greedy", "fcfs",
+                   "random")
 
 #: FleetPy's labels of the taxi-style columns that mean the same thing (for users who compare).
 FLEETPY_LABELS = {

@@ -50,7 +50,7 @@ from dispatch.demand import VoxelDemand
 ROOT = Path(__file__).resolve().parents[1]
 SIZES = (4, 8, 12, 20, 50, 100)
 RANGES = (None, 20.0, 10.0)
-ALLOCATORS = ("hungarian", "auction", "magnnet_match", "greedy")
+ALLOCATORS = ("hungarian", "auction", "magnnet", "greedy")
 
 
 def load_planner():

@@ -1,29 +1,28 @@
-"""Reproduce the MAGNNET paper's Tables I and III on unseen instances.
+"""Reproduce the MAGNNET paper's Tables I and III on unseen instances, with any range and loss.
 
 Instances: the first decision of ``scenarios/paper_static.toml`` (exact A* costs, UAV/UGV mix,
 M = N tasks) for evaluation seeds 2 000 000 + k (training used seeds from 1 000 000; see
 :mod:`allocators.magnnet.problems`), cached under ``.cache/magnnet``. Every allocator answers
-the same :class:`~dispatch.contracts.AllocationProblem` (complete communication graph, as in the
-paper's static scenario).
+the same :class:`~dispatch.contracts.AllocationProblem`: the paper's complete communication
+graph by default, or the graph of ``--comm-range`` metres between the agents' positions, with
+``--loss`` (probability that one reception of a broadcast is lost).
 
-Printed per N: mean total travel cost (Table I) and mean gap to Hungarian over instances,
-share of instances fully assigned, conflict-free success rate (Table III: tasks assigned to
-exactly one agent without ever being in conflict, over all tasks) and allocation time (wall
-seconds of the whole decision on this machine, and the per-agent critical path for the
-decentralized methods).
+Printed per N and allocator: mean total travel cost (Table I), mean gap to Hungarian, share of
+instances fully assigned, conflict-free success (Table III: tasks assigned to exactly one agent
+without ever being in conflict, over all tasks), mean decision rounds and messages, and the
+per-agent critical path of compute (ms; agents think in parallel on their own hardware; for
+centralized methods the whole call). Allocators are built (models loaded, warmed up) before
+any timing, and the model cache is cleared first so every process starts cold the same way.
 
-MAGNNET variants (see :mod:`allocators.magnnet.allocator`): ``paper`` is the paper's model
-exactly (actor input ``[status, M costs, 6-dim embedding]``); ``paper_nb`` adds per-task
-features from the neighbours' broadcast cost vectors to the actor input (our addition);
-``edge`` is the size-agnostic edge scorer, whose near-zero gap comes mainly from a hand-written
-edge feature (each agent's own Hungarian solve over its and its one-hop neighbours' costs), so
-learning adds little there; ``edge_noassign`` is the same model trained the same way without
-that feature (the ablation). ``magnnet_match`` (:mod:`allocators.magnnet.match`) is a
-size-agnostic agent-task graph network trained by imitation of the optimal assignment, with
-mutual-best requests (our addition; no hand-written solver in its input).
+Allocators (``name`` or ``name:variant``): ``hungarian`` (reference), ``local_hungarian``
+(each agent solves its two-hop view), ``magnnet`` (default: the match model on full views,
+the DAgger-trained view model on partial views; see :mod:`allocators.magnnet.allocator`),
+``magnnet:match_only`` (the match model on partial views too: what ``magnnet`` did before the
+view model; an ablation), ``magnnet:paper`` / ``magnnet:paper_nb`` (the paper's network, per
+N = M; left out where no checkpoint ships), ``auction`` (CBBA), ``greedy``, ``random``.
 
     .venv/bin/python benchmarks/paper_tables.py [--count 100] [--sizes 4 8 12 20]
-        [--big-sizes 50 100] [--big-count 100]
+        [--big-sizes 50 100] [--big-count 100] [--comm-range 20] [--loss 0.3]
 """
 
 from __future__ import annotations
@@ -38,9 +37,14 @@ from dispatch.registry import load
 
 PAPER = {  # Table I and III of the paper: (MAGNNET cost, gap %, success %)
     4: (20.3, 0.0, 100), 8: (61.2, 1.5, 100), 12: (134.7, 2.1, 90), 20: (321.5, 26.4, 80)}
+SMALL = ["hungarian", "local_hungarian", "magnnet", "magnnet:match_only", "magnnet:paper",
+         "magnnet:paper_nb", "auction", "greedy", "random"]
+BIG = ["hungarian", "local_hungarian", "magnnet", "magnnet:match_only", "auction", "greedy",
+       "random"]
 
 
-def problem_of(pool, k: int, seed: int, comm_range: float | None = None) -> AllocationProblem:
+def problem_of(pool, k: int, seed: int, comm_range: float | None = None,
+               loss: float = 0.0) -> AllocationProblem:
     cost = pool.cost[k]
     n, m = cost.shape
     agents = tuple(AgentView(i, "uav" if pool.flies[k, i] else "ugv",
@@ -52,30 +56,39 @@ def problem_of(pool, k: int, seed: int, comm_range: float | None = None) -> Allo
 
     return AllocationProblem(0.0, agents, tasks, cost.copy(),
                              comm_graph(pool.agent_pos[k], comm_range),
-                             np.random.default_rng(seed))
+                             np.random.default_rng(seed), loss=loss,
+                             agent_pos=pool.agent_pos[k].astype(float),
+                             task_pos=pool.task_pos[k].astype(float))
 
 
-def _available(name: str, n: int) -> bool:
-    """MAGNNET variants whose checkpoint for this size does not ship are left out (noted)."""
-    if not name.startswith("magnnet:"):
-        return True
+def build(name: str, n: int):
+    """The allocator of a table name, or None (printed) where a paper checkpoint is missing."""
+    plugin, _, variant = name.partition(":")
+    cls = load("allocator", plugin)
+    if plugin != "magnnet" or not variant:
+        return cls()
+    if variant == "match_only":
+        return cls(partial="match")
     from allocators.magnnet.allocator import shipped
 
-    path = shipped(name.split(":")[1], n)
-    if not path.exists():
-        print(f"(no checkpoint {path.name}: {name} left out at N={n})")
-    return path.exists()
+    if not shipped(variant, n).exists():
+        print(f"(no checkpoint {shipped(variant, n).name}: {name} left out at N={n})")
+        return None
+    return cls(variant=variant)
 
 
-def evaluate(pool, names, comm_range: float | None = None) -> dict:
-    allocs = {name: load("allocator", name.split(":")[0])(*name.split(":")[1:])
-              for name in names if _available(name, pool.cost.shape[1])}
-    res = {name: {"cost": [], "gap": [], "complete": [], "success": [], "time": [],
-                  "agent_time": []} for name in allocs}
+def evaluate(pool, names, comm_range: float | None = None, loss: float = 0.0) -> dict:
+    n = pool.cost.shape[1]
+    from allocators.magnnet.allocator import clear_model_cache
+
+    clear_model_cache()
+    allocs = {name: a for name in names if (a := build(name, n)) is not None}
+    keys = ("cost", "gap", "complete", "success", "rounds", "messages", "time", "agent_time")
+    res = {name: {k: [] for k in keys} for name in allocs}
     for k in range(len(pool)):
         ref = None
         for name, alloc in allocs.items():
-            p = problem_of(pool, k, int(pool.seeds[k]), comm_range)
+            p = problem_of(pool, k, int(pool.seeds[k]), comm_range, loss)
             t0 = time.perf_counter()
             a = alloc.allocate(p)
             dt = time.perf_counter() - t0
@@ -89,6 +102,8 @@ def evaluate(pool, names, comm_range: float | None = None) -> dict:
             r["gap"].append((total - ref) / ref if ref > 0 else 0.0)
             r["complete"].append(len(a.pairs) == min(p.n_agents, p.n_tasks))
             r["success"].append(ok / p.n_tasks)
+            r["rounds"].append(a.rounds)
+            r["messages"].append(a.messages)
             r["time"].append(dt)
             r["agent_time"].append(max(a.agent_seconds) if a.agent_seconds else dt)
     return {name: {k: float(np.mean(v)) for k, v in r.items()} for name, r in res.items()}
@@ -105,35 +120,36 @@ def main(argv=None) -> int:
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--comm-range", type=float, default=None,
                    help="communication range in metres (default: unlimited, as in the paper)")
+    p.add_argument("--loss", type=float, default=0.0,
+                   help="probability that one reception of a broadcast is lost")
+    p.add_argument("--allocators", nargs="*", default=None,
+                   help="table names (default: all; see the module docstring)")
     args = p.parse_args(argv)
-    base = ["hungarian", "magnnet:paper", "magnnet:paper_nb", "magnnet:edge",
-            "magnnet:edge_noassign", "magnnet_match", "greedy", "random"]
     rows = []
-    for n in args.sizes:
-        pool = load_pool(n, args.count, "eval", workers=args.workers)
-        rows.append((n, len(pool), evaluate(pool, base, args.comm_range)))
-    for n in args.big_sizes:
-        pool = load_pool(n, args.big_count, "eval", workers=args.workers)
-        rows.append((n, len(pool), evaluate(pool, ["hungarian", "magnnet:edge",
-                                                   "magnnet:edge_noassign", "magnnet_match",
-                                                   "greedy", "random"],
-                                            args.comm_range)))
-    print(f"communication range: {args.comm_range or 'unlimited'}")
-    print("Table I: mean total travel cost (s) [mean gap to Hungarian]; "
-          "Table III: conflict-free success (%), complete (%), allocation time (ms)")
-    hdr = f"{'N':>4} {'inst':>5} {'method':<22} {'cost':>9} {'gap %':>7} {'success %':>10} " \
-          f"{'complete %':>11} {'time ms':>8} {'agent ms':>9}"
+    for sizes, count, names in ((args.sizes, args.count, SMALL),
+                                (args.big_sizes, args.big_count, BIG)):
+        if args.allocators:  # the gap is to Hungarian: it always runs, first
+            names = ["hungarian"] + [x for x in args.allocators
+                                     if x != "hungarian" and (x in names or ":" not in x)]
+        for n in sizes:
+            pool = load_pool(n, count, "eval", workers=args.workers)
+            rows.append((n, len(pool), evaluate(pool, names, args.comm_range, args.loss)))
+    print(f"communication range: {args.comm_range or 'unlimited'} m, loss {args.loss:g}")
+    print("cost: mean total travel (s); gap to Hungarian; cf: conflict-free success; "
+          "all: instances fully assigned; ms: per-agent compute critical path")
+    hdr = (f"{'N':>3} {'method':<18} {'cost':>8} {'gap %':>6} {'cf %':>6} {'all %':>6} "
+           f"{'rounds':>6} {'msgs':>7} {'ms':>8}")
     print(hdr)
     print("-" * len(hdr))
     for n, count, res in rows:
         for name, r in res.items():
-            print(f"{n:>4} {count:>5} {name:<22} {r['cost']:>9.2f} {100 * r['gap']:>7.2f} "
-                  f"{100 * r['success']:>10.1f} {100 * r['complete']:>11.1f} "
-                  f"{1e3 * r['time']:>8.2f} {1e3 * r['agent_time']:>9.3f}")
-        if n in PAPER:
+            print(f"{n:>3} {name:<18} {r['cost']:>8.2f} {100 * r['gap']:>6.2f} "
+                  f"{100 * r['success']:>6.1f} {100 * r['complete']:>6.1f} {r['rounds']:>6.1f} "
+                  f"{r['messages']:>7.1f} {1e3 * r['agent_time']:>8.3f}")
+        if n in PAPER and args.comm_range is None and not args.loss:
             c, g, s = PAPER[n]
-            print(f"{'':>4} {'':>5} {'paper MAGNNET':<22} {c:>9.1f} {g:>7.1f} {s:>10.1f}")
-        print()
+            print(f"{'':>3} {'paper MAGNNET':<18} {c:>8.1f} {g:>6.1f} {s:>6.1f}")
+        print(f"{'':>3} ({count} instances)")
     return 0
 
 

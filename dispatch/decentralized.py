@@ -1,11 +1,13 @@
 """The paper's decision rounds and conflict rule, shared by every decentralized allocator.
 
 In each round every agent that is still unassigned and still believes it has a feasible open
-task either rejects (``-1``; the paper's action 0) or requests one task it believes open. A task
+task either rejects (``-1``; the paper's action 0), waits (:data:`WAIT`: it requests nothing this
+round but wants to decide later) or requests one task it believes open. A task
 requested by several agents in the same round is a *conflict*: it goes to the requester with the
 smallest cost (ties to the lowest agent index), the others stay unassigned and may request again
-next round. Rounds repeat until no agent has anything left to request, no agent requests, or
-``problem.max_rounds``.
+next round. Rounds repeat until no agent has anything left to request, no agent requests or
+waits, or ``problem.max_rounds``. A round in which agents only wait sends no request (relays
+still travel); an allocator that waits must stop waiting after a bounded number of rounds.
 
 Putting the loop here means every decentralized method is measured the same way: the same
 rounds, the same request log, the same conflict counting, the same communication model.
@@ -32,7 +34,7 @@ Communication model (see :mod:`dispatch.comms`)
       On a complete graph without loss every agent hears every request, nobody relays, and the
       rounds, requests and messages are exactly those of a global-knowledge loop.
     * **Latency.** A round is a request hop and an answer hop: ``hops = 2 * rounds`` (rounds in
-      which someone requested); the dispatcher turns that into simulated time.
+      which someone requested or waited); the dispatcher turns that into simulated time.
     * **Compute time.** Each call of ``choose`` is timed and its seconds shared evenly among the
       agents it decided for: ``Allocation.agent_seconds``.
 """
@@ -47,6 +49,10 @@ import numpy as np
 from dispatch.comms import Channel, relay_needed
 from dispatch.contracts import Allocation, AllocationProblem, Allocator, Request
 from dispatch.errors import AllocationError
+
+#: What :meth:`DecentralizedAllocator.choose` returns for an agent that requests nothing this
+#: round but is not done: unlike ``-1`` it keeps the rounds going when nobody requests.
+WAIT = -2
 
 
 class DecentralizedAllocator(Allocator):
@@ -75,7 +81,7 @@ class DecentralizedAllocator(Allocator):
 
         Returns:
             An int array aligned with ``agents``: a task index that is open in ``open_tasks``
-            and feasible for that agent, or ``-1`` to reject.
+            and feasible for that agent, ``-1`` to reject, or :data:`WAIT`.
         """
 
     def allocate(self, problem: AllocationProblem) -> Allocation:
@@ -125,7 +131,7 @@ def run_rounds(
                                    seconds)
         rounds = r + 1
         asked = choice >= 0
-        if not asked.any():
+        if not asked.any() and not (choice == WAIT).any():
             break
         req_agents, req_tasks = deciding[asked], choice[asked]
         for a, t in zip(req_agents, req_tasks):

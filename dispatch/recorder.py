@@ -59,6 +59,8 @@ SCHEMAS: dict[str, pa.Schema] = {
         # tasks that had a vehicle when they closed: total_cost / tasks_assigned is the mean
         # planned cost of an assignment (the dynamic benchmark's per-task cost)
         ("tasks_assigned", _I),
+        # what the allocator says it ran (JSON object of strings; see dispatch.sim.describe)
+        ("allocator_info", _S),
     ]),
     "tasks": pa.schema([
         ("run_id", _S), ("task_id", _I), ("kind", _S), ("x", _F), ("y", _F), ("z", _F),

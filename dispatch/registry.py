@@ -28,8 +28,7 @@ _FALLBACK = {
         "random": "allocators.randomized:RandomAllocator",
         "auction": "allocators.auction:AuctionAllocator",
         "magnnet": "allocators.magnnet.allocator:MagnnetAllocator",
-        "magnnet_edge": "allocators.magnnet.allocator:MagnnetEdgeAllocator",
-        "magnnet_match": "allocators.magnnet.allocator:MagnnetMatchAllocator",
+        "local_hungarian": "allocators.local_hungarian:LocalHungarianAllocator",
     },
     "planner": {
         "astar": "planners.astar:AStarPlanner",

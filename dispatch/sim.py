@@ -13,6 +13,7 @@ same fleet and the same tasks whichever allocator runs: instances are paired acr
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 from functools import lru_cache
@@ -101,6 +102,16 @@ def _construct(kind: str, name: str, params, args, key: str):
                           f"{type(e).__name__}: {reason}") from e
 
 
+def describe(allocator) -> str:
+    """What an allocator says it ran, as a JSON object of strings (``"{}"`` if it says
+    nothing): the optional ``describe() -> dict[str, str]`` method of an allocator plugin
+    (e.g. a learned model's name, variant and checkpoint hash). It goes into the summary's
+    ``allocator_info`` column and the ``dispatch.allocator_info`` Parquet metadata."""
+    fn = getattr(allocator, "describe", None)
+    info = fn() if callable(fn) else {}
+    return json.dumps({str(k): str(v) for k, v in dict(info).items()}, sort_keys=True)
+
+
 def make_repositioner(sc: Scenario, name: str) -> Repositioner:
     """The repositioner ``name`` built from its ``[reposition.<name>]`` table."""
     return _construct("repositioner", name, sc.reposition.params_of(name), (),
@@ -170,6 +181,8 @@ class Simulation:
                                             self.space)
         check_repositioner(sc, spec.reposition)
         self.repositioner: Repositioner = make_repositioner(sc, spec.reposition)
+        self.allocator_info = describe(allocator)
+        recorder.metadata["dispatch.allocator_info"] = self.allocator_info
         self.bus = bus = EventBus()
         self.book = book = TaskBook(env, bus)
         self.fleet = Fleet(place_fleet(self.space, spec, rng_for(spec.seed, STREAM_FLEET)))
@@ -361,5 +374,6 @@ class Simulation:
         summary = self.stats.summary(run=run, vehicles=self.vehicles,
                                      dispatcher=self.dispatcher, sim_time=float(self.env.now))
         summary.update(summary_of(self.repositioning))
+        summary["allocator_info"] = self.allocator_info
         rec.add("summary", **summary)
         return summary

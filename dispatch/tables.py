@@ -19,8 +19,8 @@ import math
 from collections import defaultdict
 from statistics import fmean
 
-PREFERRED_ORDER = ("hungarian", "magnnet", "magnnet_edge", "magnnet_match", "auction", "greedy",
-                   "fcfs", "random")
+PREFERRED_ORDER = ("hungarian", "local_hungarian", "magnnet", "auction", "greedy", "fcfs",
+                   "random")
 
 
 def allocator_order(names) -> list[str]:

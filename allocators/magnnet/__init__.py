@@ -8,13 +8,15 @@ Modules, in reading order:
   real runs draw them (world, fleet, tasks, A* costs), cached;
 * :mod:`~allocators.magnnet.game` — the game for one instance (numpy) and batched (torch);
 * :mod:`~allocators.magnnet.env` — the PettingZoo ``ParallelEnv``;
-* :mod:`~allocators.magnnet.model` — the paper's network and the size-agnostic edge scorer;
+* :mod:`~allocators.magnnet.model` — the paper's network;
 * :mod:`~allocators.magnnet.match` — MAGNNET-match: a size-agnostic agent-task graph
   network trained to imitate the optimal assignment, with mutual-best requests;
+* :mod:`~allocators.magnnet.views` — the view model for partial views (limited range), trained
+  CTDE with DAgger against the optimal assignment of the whole remaining problem;
 * :mod:`~allocators.magnnet.ppo` — PPO (CTDE), GAE, the imitation warm start, checkpoints;
 * :mod:`~allocators.magnnet.train` — ``dispatch train magnnet``;
-* :mod:`~allocators.magnnet.allocator` — the ``magnnet`` / ``magnnet_edge`` /
-  ``magnnet_match`` plugins.
+* :mod:`~allocators.magnnet.allocator` — the ``magnnet`` plugin (variants ``match``,
+  ``paper``, ``paper_nb``).
 
 torch is imported by the modules that need it, never by the kernel.
 """

@@ -1,49 +1,66 @@
 """The ``magnnet`` allocator plugin: trained MAGNNET policies, executed decentralized.
 
-Each deciding agent builds the observation of :mod:`allocators.magnnet.game` from what it knows
-(its own costs, task positions and which tasks it believes open, and what its communication
-neighbours broadcast), runs the graph network over its neighbourhood and takes the most likely
-action of its policy: reject, or request one task. Rounds and conflicts are the shared ones of
-:class:`~dispatch.decentralized.DecentralizedAllocator`. For speed every deciding agent of a
-call is evaluated in one batched pass over the problem's graph; the network only mixes
-information along communication links (two hops), so each agent's action is the one it would
-compute alone from its own neighbourhood (tests check it).
+One plugin, one name; its ``variant`` says which network runs, and the run's ``summary``
+(column ``allocator_info``) and Parquet metadata record the model, the variant and the
+checkpoint files with their SHA-256 (see :meth:`MagnnetAllocator.describe`).
 
-Parameters (``[dispatch.allocator_params]``):
-    variant: ``"paper"`` (the paper's model exactly, one checkpoint per size N = M),
-        ``"paper_nb"`` (the paper's model plus per-task features from the neighbours' cost
-        vectors in the actor's input: our addition, one checkpoint per size), ``"edge"`` (the
-        size-agnostic edge-scoring model, any N and M), ``"edge_noassign"`` (the edge model
-        without its hand-written local-assignment feature: an ablation) or ``"auto"``
-        (default: ``paper_nb`` when a checkpoint for the problem's N x M ships, else the edge
-        model).
-    checkpoint: path of a checkpoint to use instead of the shipped ones.
+Variants (``[dispatch.allocator_params] variant = ...``):
 
-Checkpoints ship in ``allocators/magnnet/checkpoints`` (``paper_n{N}.pt``,
-``paper_nb_n{N}.pt``, ``edge.pt``, ``edge_noassign.pt``, ``match.pt``).
+``"match"`` (default)
+    The size-agnostic agent-task graph network (:mod:`allocators.magnnet.match`), trained by
+    imitation of the optimal assignment; any ``N`` and ``M``. An agent that hears the whole
+    fleet scores the whole problem with ``match.pt`` and requests its best task when the pair
+    is mutual best and confident (conflict-free by construction, since every such agent shares
+    the one view). An agent that does not hear the whole fleet acts on its two-hop view with
+    the view model ``view.pt`` (:mod:`allocators.magnnet.views`: the match network plus the
+    view's hop, status and size features and "not mine / outside my view" heads, trained
+    CTDE with DAgger for partial views); it waits while unsure and must request from round
+    ``view_patience`` on. ``partial = "match"`` runs ``match.pt`` on partial views instead (what
+    the plugin did before the view model: an ablation).
+``"paper"``
+    The paper's network exactly (two 6-unit graph convolutions, MLP actor over
+    ``[status, M costs, embedding]``), trained with the paper's PPO; one checkpoint per size
+    ``N = M`` (``paper_n{N}.pt``). A problem of a size without a checkpoint is an error.
+``"paper_nb"``
+    The paper's network plus per-task features from the neighbours' broadcast cost vectors in
+    the actor's input (our addition); one checkpoint per size (``paper_nb_n{N}.pt``), same
+    rule. Before the plugin was unified this was what ``magnnet`` ran at ``N = M``.
 
-The ``magnnet_match`` plugin (:class:`MagnnetMatchAllocator`) runs the size-agnostic
-agent-task graph network of :mod:`allocators.magnnet.match`, trained to imitate the optimal
-assignment, with mutual-best requests.
+Other parameters: ``checkpoint`` (a ``model.pt`` of ``dispatch train magnnet`` replacing the
+shipped one of the variant: a match model for ``match``, a paper model of one size for
+``paper``/``paper_nb``), ``view_checkpoint`` (replaces ``view.pt``), ``confidence`` (default
+0.8: row and column softmax a pair needs before an agent that hears everyone requests it),
+``view_confidence`` (default 0.5: the same for the view model), ``patience`` (default 3: the
+round from which the match model on partial views, ``partial = "match"``, requests regardless),
+``view_patience`` (default 12: the round from which the view model requests its part of its
+view's assignment, and from twice that its best task regardless).
+
+Every model is read from disk and run once (warm-up) in the constructor, so a decision never
+includes imports or file reads. Loaded models are cached per file for the process;
+:func:`clear_model_cache` empties the cache (benchmarks that measure a cold start call it).
 """
 
 from __future__ import annotations
 
+import hashlib
+import re
 from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 
 from dispatch.contracts import AllocationProblem
-from dispatch.decentralized import DecentralizedAllocator
+from dispatch.decentralized import WAIT, DecentralizedAllocator
 from dispatch.errors import AllocationError
 
 CHECKPOINTS = Path(__file__).resolve().parent / "checkpoints"
 #: Positions are divided by the size of the world the shipped models were trained in.
 TRAIN_WORLD = np.array([50.0, 50.0, 30.0], np.float32)
+VARIANTS = ("match", "paper", "paper_nb")
+PARTIAL = ("view", "match")
 
 
-@lru_cache(maxsize=16)
+@lru_cache(maxsize=32)
 def _load(path: str):
     import torch
 
@@ -52,16 +69,21 @@ def _load(path: str):
     torch.set_num_threads(1)
     model, ck = load_checkpoint(path)
     size = np.asarray(ck.get("extra", {}).get("world_size", TRAIN_WORLD), np.float32)
-    return model, size
+    return model, size, _sha(path)
 
 
-VARIANTS = ("auto", "paper", "paper_nb", "edge", "edge_noassign")
+def _sha(path: str) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
 
 
-def check_checkpoint(checkpoint, allocator: str, match: bool) -> str:
-    """Check a ``checkpoint`` parameter when the allocator is built (not in its first
-    decision): a path to a file that loads with ``torch.load(weights_only=True)`` as a model
-    of the right kind (``match`` or not). ValueError naming the file and what is wrong."""
+def clear_model_cache() -> None:
+    """Forget every loaded model: the next allocator built reads its files again."""
+    _load.cache_clear()
+
+
+def load_model(checkpoint, allocator: str, kinds: tuple[str, ...]):
+    """``(model, world size, sha)`` of a checkpoint file whose model is of one of ``kinds``.
+    ValueError naming the file and what is wrong (missing, not a checkpoint, wrong kind)."""
     import os
 
     if isinstance(checkpoint, bool) or not isinstance(checkpoint, (str, os.PathLike)) \
@@ -71,163 +93,221 @@ def check_checkpoint(checkpoint, allocator: str, match: bool) -> str:
     if not path.is_file():
         raise ValueError(f"checkpoint {path}: no such file")
     try:
-        model, _ = _load(str(path))
+        model, size, sha = _load(str(path))
     except Exception as e:  # noqa: BLE001 - torch and the model raise many kinds
         first = (str(e).strip().splitlines() or [""])[0][:200]
         raise ValueError(f"checkpoint {path} is not a MAGNNET checkpoint (torch.load with "
                          f"weights_only=True and the model failed: {type(e).__name__}: "
                          f"{first})") from None
     kind = getattr(model, "variant", None)
-    if match and kind != "match":
-        raise ValueError(f"checkpoint {path} holds a model of kind {kind!r}; {allocator} needs a "
-                         "'match' one (dispatch train magnnet --variant match)")
-    if not match and kind == "match":
-        raise ValueError(f"checkpoint {path} holds a model of kind 'match'; use it with "
-                         "allocator = 'magnnet_match'")
-    return str(path)
+    if kind == "paper" and getattr(model, "task_features", 0):
+        kind = "paper_nb"
+    if kind not in kinds:
+        raise ValueError(f"checkpoint {path} holds a model of kind {kind!r}; {allocator} needs "
+                         f"{' or '.join(repr(k) for k in kinds)} here")
+    return model, size, sha
 
 
 def shipped(variant: str, n: int | None = None) -> Path:
+    """The shipped checkpoint of a variant (``paper``/``paper_nb``: of size ``n``)."""
     if variant in ("paper", "paper_nb"):
         return CHECKPOINTS / f"{variant}_n{n}.pt"
     return CHECKPOINTS / f"{variant}.pt"
 
 
+def shipped_sizes(variant: str) -> list[int]:
+    """The sizes ``N = M`` for which a checkpoint of ``variant`` ships."""
+    pat = re.compile(rf"{re.escape(variant)}_n(\d+)\.pt$")
+    return sorted(int(m.group(1)) for p in CHECKPOINTS.glob(f"{variant}_n*.pt")
+                  if (m := pat.match(p.name)))
+
+
+def _number(value, name: str, low: float, high: float) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) \
+            or not low <= value <= high:
+        raise TypeError(f"{name} must be a number in [{low:g}, {high:g}], got {value!r}")
+    return float(value)
+
+
 class MagnnetAllocator(DecentralizedAllocator):
-    """MAGNNET (Ratnabala et al. 2025): GNN + MLP policy per agent, trained with CTDE PPO."""
+    """MAGNNET: a trained graph-network policy per agent (variant match, paper or paper_nb).
+
+    Ratnabala et al. 2025. Variant ``match`` (default, any size) or the paper's network,
+    ``paper`` / ``paper_nb`` (one checkpoint per N = M); see the module doc."""
 
     name = "magnnet"
 
-    def __init__(self, variant: str = "auto", checkpoint: str | None = None) -> None:
+    def __init__(self, variant: str = "match", checkpoint: str | None = None,
+                 view_checkpoint: str | None = None, partial: str = "view",
+                 confidence: float = 0.8, view_confidence: float = 0.5,
+                 patience: int = 3, view_patience: int = 12) -> None:
         if variant not in VARIANTS:
-            raise TypeError(f"variant must be one of {VARIANTS}, got {variant!r}")
-        self.variant = variant
-        if checkpoint is not None:
-            check_checkpoint(checkpoint, self.name, match=False)
-        self.checkpoint = checkpoint
-
-    def model_for(self, n: int, m: int):
-        if self.checkpoint is not None:
-            path = Path(self.checkpoint)
-        elif self.variant in ("edge", "edge_noassign"):
-            path = shipped(self.variant)
-        elif self.variant == "auto":
-            path = shipped("paper_nb", n)
-            if n != m or not path.exists():
-                path = shipped("edge")
+            raise TypeError(f"variant must be one of {', '.join(VARIANTS)}, got {variant!r}")
+        if partial not in PARTIAL:
+            raise TypeError(f"partial must be one of {', '.join(PARTIAL)}, got {partial!r}")
+        for name, value in (("patience", patience), ("view_patience", view_patience)):
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise TypeError(f"{name} must be a non-negative integer, got {value!r}")
+        self.variant, self.partial, self.patience = variant, partial, patience
+        self.view_patience = view_patience
+        self.confidence = _number(confidence, "confidence", 0.0, 1.0)
+        self.view_confidence = _number(view_confidence, "view_confidence", 0.0, 1.0)
+        if variant != "match" and (view_checkpoint is not None or partial != "view"):
+            raise TypeError(f"view_checkpoint and partial apply to variant 'match' only, not "
+                            f"{variant!r}")
+        self._record = None  # DAgger: a list that collects the views decided on
+        self.files: dict[str, str] = {}  # checkpoint file -> sha, of what this allocator loaded
+        if variant == "match":
+            self._init_match(checkpoint, view_checkpoint)
         else:
-            path = shipped(self.variant, n)
-        if not path.exists():
-            raise AllocationError(f"magnnet: no checkpoint at {path} (variant {self.variant!r}, "
-                                  f"N={n}, M={m}); train one with `dispatch train magnnet`")
-        model, size = _load(str(path))
-        if model.variant.startswith("paper") and (model.n_agents, model.n_tasks) != (n, m):
-            raise AllocationError(
-                f"magnnet: checkpoint {path.name} is for N={model.n_agents}, M={model.n_tasks}, "
-                f"the problem is N={n}, M={m}; use variant='edge' for other sizes")
+            self._init_paper(checkpoint)
+
+    @classmethod
+    def with_models(cls, match_model, view_model, **params) -> MagnnetAllocator:
+        """The ``match`` variant around models in memory (training: DAgger plays the model
+        it is fitting)."""
+        alloc = cls(partial="match", **params)
+        alloc.model, alloc.view_model, alloc.partial = match_model, view_model, "view"
+        alloc.files = {"(in memory)": "-"}
+        return alloc
+
+    # ------------------------------------------------------------------ loading
+    def _use(self, path, kinds):
+        model, size, sha = load_model(path, self.name, kinds)
+        self.files[Path(path).name] = sha
         return model, size
 
-    def choose(self, problem: AllocationProblem, agents: np.ndarray, open_tasks: np.ndarray,
-               round_: int) -> np.ndarray:
+    def _init_match(self, checkpoint, view_checkpoint) -> None:
+        from allocators.magnnet import match, views
+
+        self._match_mod, self._views_mod = match, views
+        self.model, _ = self._use(checkpoint or _exists(shipped("match")), ("match",))
+        self.view_model = None
+        if self.partial == "view":
+            self.view_model, _ = self._use(view_checkpoint or _exists(shipped("view")),
+                                           ("view",))
+        # warm-up: torch's first call of each kernel is slow; pay it here, not in a decision
+        warm = np.array([[1.0, 2.0], [2.0, 1.0]])
+        match.scores_of(self.model, warm, np.zeros(2, bool))
+        if self.view_model is not None:
+            views.view_scores(self.view_model, warm, np.zeros(2, bool), np.array([0, 1]),
+                              np.ones(2, bool))
+
+    def _init_paper(self, checkpoint) -> None:
         import torch
 
+        self._torch = torch
+        self.paper: dict[int, tuple] = {}
+        if checkpoint is not None:
+            model, size = self._use(checkpoint, (self.variant,))
+            self.paper[model.n_agents] = (model, size)
+        else:
+            for n in shipped_sizes(self.variant):
+                model, size = self._use(shipped(self.variant, n), (self.variant,))
+                self.paper[n] = (model, size)
+        if not self.paper:
+            raise ValueError(f"no checkpoint of variant {self.variant!r} ships; train one "
+                             f"with `dispatch train magnnet --variant {self.variant}`")
+        for model, size in self.paper.values():  # warm-up
+            n = model.n_agents
+            p = _dummy(n)
+            with torch.no_grad():
+                model(observe(p, np.arange(n), np.ones(n, bool), size))
+
+    def describe(self) -> dict[str, str]:
+        """What ran: ``model``, ``variant`` and ``checkpoint`` (``file@sha256[:16]`` of every
+        file this allocator loaded, comma-separated)."""
+        model = {"match": "magnnet-match" + ("+view" if self.partial == "view" else ""),
+                 "paper": "magnnet-paper", "paper_nb": "magnnet-paper+nb"}[self.variant]
+        return {"model": model, "variant": self.variant,
+                "checkpoint": ",".join(f"{k}@{v}" for k, v in sorted(self.files.items()))}
+
+    # ------------------------------------------------------------------ deciding
+    def choose(self, problem: AllocationProblem, agents: np.ndarray, open_tasks: np.ndarray,
+               round_: int) -> np.ndarray:
+        if self.variant == "match":
+            return self._choose_match(problem, agents, open_tasks, round_)
+        return self._choose_paper(problem, agents, open_tasks)
+
+    def _choose_paper(self, problem, agents, open_tasks) -> np.ndarray:
         n, m = problem.cost.shape
-        model, size = self.model_for(n, m)
+        if n != m or n not in self.paper:
+            sizes = ", ".join(str(k) for k in sorted(self.paper))
+            raise AllocationError(
+                f"magnnet variant {self.variant!r}: no checkpoint for N={n} agents, M={m} "
+                f"tasks (its checkpoints are for N = M in {{{sizes}}}); the default variant "
+                "'match' serves any size")
+        model, size = self.paper[n]
         obs = observe(problem, agents, open_tasks, size)
-        with torch.no_grad():
+        with self._torch.no_grad():
             logits, _ = model(obs)
         act = logits[0].argmax(-1).numpy()[agents]
         return np.where(act > 0, act - 1, -1)
 
-
-class MagnnetEdgeAllocator(MagnnetAllocator):
-    """MAGNNET, size-agnostic variant: scores every agent-task edge; one model for any N, M."""
-
-    name = "magnnet_edge"
-
-    def __init__(self, checkpoint: str | None = None) -> None:
-        super().__init__("edge", checkpoint)
-
-
-class MagnnetMatchAllocator(DecentralizedAllocator):
-    """MAGNNET-match: edge scores from a bipartite graph network over each agent's view, and
-    mutual-best requests (see :mod:`allocators.magnnet.match`).
-
-    An agent's view is the deciding agents within two communication hops and the tasks it
-    believes open; it computes the scores of its whole view (its neighbours' cost vectors come
-    over the links) and requests its best task only if no agent of the view scores that task
-    higher and, if it hears the whole fleet (so that every agent shares its view), the model
-    is confident of the pair (see :func:`~allocators.magnnet.match.mutual_best`). An agent that
-    does not hear the whole fleet skips the confidence test and requests its best task
-    regardless from round ``patience`` on, so a decision under partial communication cannot
-    stall; the conflict rule settles what follows.
-
-    Parameters (``[dispatch.allocator_params]``): ``checkpoint`` (default: the shipped
-    ``match.pt``), ``confidence`` (in ``[0, 1]``, default 0.8; 0: plain mutual best),
-    ``patience`` (default 3).
-    """
-
-    name = "magnnet_match"
-
-    def __init__(self, checkpoint: str | None = None, confidence: float = 0.8,
-                 patience: int = 3) -> None:
-        if isinstance(patience, bool) or not isinstance(patience, int) or patience < 0:
-            raise TypeError(f"patience must be a non-negative integer, got {patience!r}")
-        if (isinstance(confidence, bool) or not isinstance(confidence, (int, float))
-                or not 0.0 <= confidence <= 1.0):
-            raise TypeError(f"confidence must be a number in [0, 1], got {confidence!r}")
-        if checkpoint is not None:
-            check_checkpoint(checkpoint, self.name, match=True)
-        self.checkpoint = checkpoint
-        self.confidence = float(confidence)
-        self.patience = patience
-
-    def model(self):
-        path = Path(self.checkpoint) if self.checkpoint is not None else shipped("match")
-        if not path.exists():
-            raise AllocationError(f"magnnet_match: no checkpoint at {path}; train one with "
-                                  "`dispatch train magnnet --variant match`")
-        model, _ = _load(str(path))
-        if model.variant != "match":
-            raise AllocationError(f"magnnet_match: {path.name} holds a {model.variant!r} "
-                                  "model, not a 'match' one")
-        return model
-
-    def choose(self, problem: AllocationProblem, agents: np.ndarray, open_tasks: np.ndarray,
-               round_: int) -> np.ndarray:
+    def _choose_match(self, problem, agents, open_tasks, round_) -> np.ndarray:
         from allocators.magnnet.game import two_hop
-        from allocators.magnnet.match import mutual_best, scores_of
 
-        model = self.model()
+        match, views = self._match_mod, self._views_mod
         comm = problem.comm.astype(bool)
         deciding = np.zeros(problem.cost.shape[0], bool)
         deciding[agents] = True
         flies = np.array([a.flies for a in problem.agents], bool)
         tasks = np.flatnonzero(open_tasks)
         out = np.full(len(agents), -1, np.int64)
-        views: dict[bytes, tuple[np.ndarray, list[int]]] = {}
-        for k, i in enumerate(agents):
-            _, two = two_hop(comm, int(i))
-            members = np.flatnonzero(two & deciding)
-            views.setdefault(members.tobytes(), (members, []))[1].append(k)
-        # an agent that hears every vehicle directly knows its view is everyone's: no forcing
+        # an agent that hears every vehicle directly knows its view is everyone's
         hears_all = comm[agents].all(axis=1)
         late = round_ >= self.patience
+        groups: dict[bytes, tuple[np.ndarray, list[int]]] = {}
+        for k, i in enumerate(agents):
+            _, two = two_hop(comm, int(i))
+            if hears_all[k] or self.view_model is None:
+                members = np.flatnonzero(two & deciding)
+                groups.setdefault(members.tobytes(), (members, []))[1].append(k)
+                continue
+            # the view model sees every agent within two hops, with whether it still decides:
+            # one that no longer does and is the best for a task it believes open has most
+            # likely taken it (the news may not have reached this agent yet)
+            members = np.flatnonzero(two)
+            hop, active = views.hops_from(comm, int(i), members), deciding[members]
+            if self._record is not None:
+                self._record.append((round_, members, tasks, hop, active))
+            s, rn, cn = views.view_scores(self.view_model, problem.cost[np.ix_(members, tasks)],
+                                          flies[members], hop, active)
+            req = views.view_request(s, rn, cn, int(np.searchsorted(members, i)),
+                                     self.view_confidence, force=round_ >= self.view_patience,
+                                     active=active, last=round_ >= 2 * self.view_patience)
+            out[k] = tasks[req] if req >= 0 else req
         # agents that share a view share one forward pass (one for everyone on a complete graph)
-        for members, ks in views.values():
-            scores = scores_of(model, problem.cost[np.ix_(members, tasks)], flies[members])
+        for members, ks in groups.values():
+            scores = match.scores_of(self.model, problem.cost[np.ix_(members, tasks)],
+                                     flies[members])
             ks = np.asarray(ks)
-            # waiting for confidence pays only where every agent shares one view; with partial
-            # views it only delays agents while others go ahead
+            # waiting for confidence pays only where every agent shares one view (partial
+            # views with partial = "match": requests regardless from round `patience` on)
             for full in (True, False):
                 sel = ks[hears_all[ks] == full]
                 if sel.size == 0:
                     continue
-                req = mutual_best(scores, np.searchsorted(members, agents[sel]),
-                                  force=late and not full,
-                                  confidence=self.confidence if full else 0.0)
+                req = match.mutual_best(scores, np.searchsorted(members, agents[sel]),
+                                        force=late and not full,
+                                        confidence=self.confidence if full else 0.0)
                 out[sel] = np.where(req >= 0, tasks[np.maximum(req, 0)], -1)
         return out
+
+
+def _exists(path: Path) -> Path:
+    if not path.exists():
+        raise ValueError(f"no checkpoint at {path}; train one with `dispatch train magnnet`")
+    return path
+
+
+def _dummy(n: int) -> AllocationProblem:
+    from dispatch.contracts import AgentView, TaskView
+
+    agents = tuple(AgentView(i, "uav" if i % 2 else "ugv", (i, 0, 0), 3.0) for i in range(n))
+    tasks = tuple(TaskView(j, "ground", (j, 1, 0), 0.0) for j in range(n))
+    return AllocationProblem(0.0, agents, tasks, np.ones((n, n)), np.ones((n, n), bool),
+                             np.random.default_rng(0))
 
 
 def observe(problem: AllocationProblem, agents: np.ndarray, open_tasks: np.ndarray,

@@ -1,4 +1,4 @@
-"""MAGNNET's networks, as Section III of the paper describes them, plus our size-agnostic one.
+"""MAGNNET's networks, as Section III of the paper describes them.
 
 Inputs are the observation tensors of :mod:`allocators.magnnet.game`, batched:
 ``agents (B, N, 5)`` = ``[status, flies, x, y, z]``, ``cost (B, N, M)`` (scaled, capped),
@@ -146,83 +146,6 @@ class MagnnetPolicy(nn.Module):
         return self.critic(torch.cat([z.reshape(b, -1), obs["tasks"].reshape(b, -1)], -1))[:, 0]
 
 
-class EdgePolicy(nn.Module):
-    """Size-agnostic MAGNNET: one score per agent-task edge, so one model serves any N and M.
-
-    The same two graph-convolution layers (``hidden`` units) embed agents and tasks, with agent
-    node features ``[status, flies, x, y, z, own min cost, own mean cost]`` instead of a cost
-    vector of length M. Each available edge ``(i, j)`` is scored by an MLP over ``z_i``,
-    ``g_j`` and edge features that agent ``i`` computes from its own costs and those its
-    one-hop neighbours broadcast (see :func:`edge_features`); a second MLP over ``z_i`` scores
-    rejecting. A softmax over ``{reject} + edges`` is the policy. The critic pools embeddings.
-
-    Honest note: edge feature 8 (each agent's own optimal assignment over what it knows, a
-    hand-written solver) carries most of this model's quality: on a complete graph it *is* the
-    optimal assignment, and the policy mostly learns to follow it. ``assignment=False``
-    (variant ``"edge_noassign"``) drops it, as an ablation.
-    """
-
-    EDGE_F = 9
-
-    def __init__(self, hidden: int = 16, mlp: int = 64, assignment: bool = True) -> None:
-        super().__init__()
-        self.hidden, self.mlp, self.assignment = hidden, mlp, assignment
-        self.EDGE_F = 9 if assignment else 8
-        self.gnn = nn.ModuleList([
-            HeteroGraphConv(AGENT_F + 2, TASK_F, 2, hidden),
-            HeteroGraphConv(hidden, hidden, 2, hidden),
-        ])
-        self.scorer = nn.Sequential(nn.Linear(2 * hidden + self.EDGE_F, mlp), nn.ReLU(),
-                                    nn.Linear(mlp, mlp), nn.ReLU(), nn.Linear(mlp, 1))
-        self.rejecter = nn.Sequential(nn.Linear(hidden + AGENT_F + 2, mlp), nn.ReLU(),
-                                      nn.Linear(mlp, 1))
-        self.critic = nn.Sequential(nn.Linear(3 * hidden + 2, mlp), nn.ReLU(), nn.Linear(mlp, 1))
-
-    @property
-    def variant(self) -> str:
-        return "edge" if self.assignment else "edge_noassign"
-
-    def config(self) -> dict:
-        cfg = {"variant": "edge", "hidden": self.hidden, "mlp": self.mlp}
-        if not self.assignment:
-            cfg["assignment"] = False
-        return cfg
-
-    def embed(self, obs):
-        cost, avail = obs["cost"], obs["available"].bool()
-        x = torch.cat([obs["agents"], _row_stats(cost, avail)], -1)
-        h, g, e, adj = x, obs["tasks"], _edges(obs), obs["adjacency"]
-        for layer in self.gnn:
-            h, g = layer(h, g, e, adj)
-        return h, g, x
-
-    def forward(self, obs):
-        z, g, x = self.embed(obs)
-        n, m = z.shape[1], g.shape[1]
-        f = edge_features(obs, self.assignment)
-        inp = torch.cat([z[:, :, None].expand(-1, -1, m, -1),
-                         g[:, None].expand(-1, n, -1, -1), f], -1)
-        scores = self.scorer(inp)[..., 0]
-        reject = self.rejecter(torch.cat([z, x], -1))
-        return _mask(scores, reject, obs["available"]), z
-
-    def value(self, obs, z):
-        _, g, _ = self.embed(obs)
-        pooled = torch.cat([z.mean(1), z.amax(1), g.mean(1),
-                            obs["agents"][..., 0].mean(1, keepdim=True),
-                            obs["tasks"][..., 0].mean(1, keepdim=True)], -1)
-        return self.critic(pooled)[:, 0]
-
-
-def _row_stats(cost, avail):
-    cap = rules.COST_CAP
-    any_ = avail.any(-1, keepdim=True)
-    mn = torch.where(avail, cost, torch.full_like(cost, cap)).amin(-1, keepdim=True)
-    mean = (torch.where(avail, cost, torch.zeros_like(cost)).sum(-1, keepdim=True)
-            / avail.sum(-1, keepdim=True).clamp(min=1))
-    return torch.cat([torch.where(any_, mn, cap), torch.where(any_, mean, cap)], -1)
-
-
 #: Number of per-task features :func:`neighbour_task_features` returns.
 NB_FEATURES = 6
 
@@ -282,89 +205,18 @@ def neighbour_task_features(obs) -> torch.Tensor:
     return f.clamp(-cap, cap)
 
 
-def edge_features(obs, assignment: bool = True) -> torch.Tensor:
-    """Per edge ``(i, j)``, from agent ``i``'s costs and its one-hop neighbours' broadcasts:
-
-    0. ``c_ij``; 1. ``c_ij - min_j' c_ij'`` (how far ``j`` is from ``i``'s best);
-    2. ``c_ij - min_k c_kj`` over deciding neighbours ``k != i`` (negative: ``i`` is cheapest);
-    3. ``min_k (c_kj - min_j' c_kj')`` over those neighbours cheaper than ``i`` for ``j`` (0:
-       ``j`` is the best task of a cheaper neighbour); 4. how many neighbours are cheaper for
-       ``j`` (/10); 5. how many deciding neighbours have ``j`` as their best task (/10);
-    6. ``i``'s regret (second-best minus best cost); 7. open tasks per deciding neighbour;
-    8. whether ``(i, j)`` is in the optimal assignment that ``i`` computes over the costs it
-    knows: its own and its deciding one-hop neighbours' (:func:`local_assignment`).
-    Shape ``(B, N, M, 9)`` (``(B, N, M, 8)`` without feature 8 when ``assignment`` is false:
-    the ablation); costs in the scaled units of the observations.
-    """
-    cap = rules.COST_CAP
-    cost, avail = obs["cost"], obs["available"].bool()
-    adj = obs["adjacency"].bool()
-    n = cost.shape[1]
-    status = obs["agents"][..., 0] > 0.5
-    eye = torch.eye(n, dtype=torch.bool)
-    nb = adj & ~eye & status[:, None, :]  # (B, i, k): deciding neighbours k of i
-    c = torch.where(avail, cost, torch.full_like(cost, cap))
-    rowmin = c.amin(-1, keepdim=True)
-    two = torch.topk(c, min(2, c.shape[-1]), dim=-1, largest=False).values
-    regret = (two[..., -1:] - two[..., :1]) if c.shape[-1] > 1 else torch.zeros_like(rowmin)
-    # neighbour costs as seen by i: (B, i, k, j)
-    ck = torch.where(nb[..., None], c[:, None], torch.full_like(c[:, None], cap))
-    colmin = ck.amin(2)
-    cheaper = (ck < c[:, :, None]) & nb[..., None]
-    slack = (c - rowmin)[:, None]  # (B, 1, k, j): how far j is from k's best
-    slack_cheaper = torch.where(cheaper, slack.expand_as(ck), torch.full_like(ck, cap)).amin(2)
-    is_best = (c <= rowmin + 1e-6) & avail  # (B, k, j)
-    best_count = (nb[..., None] & is_best[:, None]).sum(2).float()
-    n_open = obs["tasks"][..., 0].sum(-1)[:, None, None]
-    n_dec = (nb.sum(-1).float() + 1.0)[..., None]
-    feats = [c, c - rowmin, c - colmin, slack_cheaper, cheaper.sum(2).float() / 10.0,
-             best_count / 10.0, regret.expand_as(c), (n_open / n_dec).expand_as(c) / 10.0]
-    if assignment:
-        feats.append(local_assignment(obs).float())
-    return torch.stack(feats, -1)
-
-
-def local_assignment(obs) -> torch.Tensor:
-    """``(B, N, M)`` bool: for each deciding agent ``i``, the pairs ``(i, j)`` of an optimal
-    assignment of the tasks ``i`` believes open to ``i`` and its deciding one-hop neighbours,
-    computed from their costs alone (what reaches ``i``). On a complete graph every agent finds
-    the same (global) optimum. Agents with the same neighbourhood share one solve."""
-    import numpy as np
-
-    from allocators.hungarian import optimal_pairs
-
-    cost = obs["cost"].detach().numpy()
-    avail = obs["available"].bool().numpy()
-    adj = obs["adjacency"].detach().numpy() > 0.5
-    status = obs["agents"][..., 0].detach().numpy() > 0.5
-    B, n, m = cost.shape
-    out = np.zeros((B, n, m), bool)
-    for b in range(B):
-        seen: dict[bytes, dict[int, int]] = {}
-        for i in np.flatnonzero(status[b]):
-            rows = np.flatnonzero(adj[b, i] & status[b])
-            rows = np.union1d(rows, [i])
-            key = rows.tobytes()
-            pairs = seen.get(key)
-            if pairs is None:
-                c = np.where(avail[b][rows], cost[b][rows], np.inf)
-                pairs = {int(rows[a]): t for a, t in optimal_pairs(c)}
-                seen[key] = pairs
-            if i in pairs:
-                out[b, i, pairs[i]] = True
-    return torch.from_numpy(out)
-
-
 def build(config: dict) -> nn.Module:
     """A model from its :meth:`config` (what a checkpoint stores beside the weights)."""
     cfg = dict(config)
     variant = cfg.pop("variant")
     if variant == "paper":
         return MagnnetPolicy(**cfg)
-    if variant == "edge":
-        return EdgePolicy(**cfg)
     if variant == "match":
         from allocators.magnnet.match import MatchPolicy
 
         return MatchPolicy(**cfg)
+    if variant == "view":
+        from allocators.magnnet.views import ViewPolicy
+
+        return ViewPolicy(**cfg)
     raise ValueError(f"unknown MAGNNET variant {variant!r}")

@@ -97,14 +97,25 @@ def cache_dir() -> Path:
     return Path(os.environ.get("MAGNNET_CACHE", ROOT / ".cache" / "magnnet"))
 
 
+def _read(path: Path) -> Pool:
+    z = np.load(path)
+    return Pool(z["cost"], z["agent_pos"], z["task_pos"], z["flies"], z["seeds"],
+                z["world_size"])
+
+
 def load_pool(n_agents: int, count: int, split: str = "train", workers: int = 1) -> Pool:
     """A cached pool (``split`` ``"train"`` or ``"eval"``), built on first use."""
     seed0 = {"train": TRAIN_SEED0, "eval": EVAL_SEED0}[split]
     path = cache_dir() / f"{split}_n{n_agents}_c{count}.npz"
+    if not path.exists():  # a bigger cached pool holds the same seeds first
+        bigger = sorted((int(q.stem.rsplit("_c", 1)[1]), q)
+                        for q in cache_dir().glob(f"{split}_n{n_agents}_c*.npz")
+                        if q.stem.rsplit("_c", 1)[1].isdigit()
+                        and int(q.stem.rsplit("_c", 1)[1]) > count)
+        if bigger:
+            return _read(bigger[0][1]).take(slice(0, count))
     if path.exists():
-        z = np.load(path)
-        return Pool(z["cost"], z["agent_pos"], z["task_pos"], z["flies"], z["seeds"],
-                    z["world_size"])
+        return _read(path)
     log.info("building %s pool: %d instances of N=%d", split, count, n_agents)
     pool = build_pool(n_agents, count, seed0, workers=workers)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -2,7 +2,8 @@
 
 Output folder: ``model.pt`` (checkpoint, loadable with ``weights_only=True``), ``log.parquet``
 (one row per update: ``charts/...`` and ``losses/...`` scalars), ``reward.png`` (the paper's
-Figure 3: mean reward against training steps) and ``entropy.png`` (Figure 4).
+Figure 3: mean reward against training steps) and ``entropy.png`` (Figure 4) for the PPO
+variants; ``loss.png`` (imitation loss and validation curve) for ``match`` and ``view``.
 """
 
 from __future__ import annotations
@@ -20,15 +21,26 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
     d = PPOConfig()
     p.add_argument("--agents", type=int, default=8, help="N (= M tasks) of the paper model")
-    p.add_argument("--variant", choices=["paper", "paper_nb", "edge", "edge_noassign", "match"],
-                   default="paper_nb",
-                   help="paper: the paper's model exactly; paper_nb: plus per-task neighbour "
-                        "features in the actor (ours); edge: size-agnostic; edge_noassign: "
-                        "edge without its local-assignment feature (ablation); match: "
-                        "size-agnostic agent-task graph network trained by imitation of the "
-                        "optimal assignment (ours; --agents and the PPO options do not apply)")
-    p.add_argument("--updates", type=int, default=6000,
-                   help="match variant: imitation updates (gradient steps)")
+    p.add_argument("--variant", choices=["paper", "paper_nb", "match", "view"],
+                   default="paper",
+                   help="paper: the paper's model exactly, PPO; paper_nb: plus per-task "
+                        "neighbour features in the actor (ours); match: size-agnostic "
+                        "agent-task graph network trained by imitation of the optimal "
+                        "assignment (ours; --agents and the PPO options do not apply); view: "
+                        "the match network for partial views (2-hop, limited range), DAgger "
+                        "from match.pt (ours; --iterations, --episodes, --updates)")
+    p.add_argument("--updates", type=int, default=None,
+                   help="match: imitation updates (default 6000); view: per DAgger iteration "
+                        "(default 300)")
+    p.add_argument("--iterations", type=int, default=None, help="view: DAgger iterations")
+    p.add_argument("--episodes", type=int, default=None,
+                   help="view: decisions played per DAgger iteration")
+    p.add_argument("--patience", type=int, default=None,
+                   help="view: round from which the played policy must request (default 5)")
+    p.add_argument("--confidence", type=float, default=None,
+                   help="view: softmax a pair needs before the played policy requests it")
+    p.add_argument("--init", type=Path, default=None,
+                   help="view: continue from this view checkpoint instead of match.pt")
     p.add_argument("--steps", type=int, default=d.total_steps, help="PPO environment steps")
     p.add_argument("--bc-updates", type=int, default=1500,
                    help="imitation warm-start updates before PPO (0: pure PPO as in the paper)")
@@ -54,13 +66,15 @@ def run(args, console=None) -> int:
     import torch
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from allocators.magnnet.model import NB_FEATURES, EdgePolicy, MagnnetPolicy
+    from allocators.magnnet.model import NB_FEATURES, MagnnetPolicy
     from allocators.magnnet.ppo import (PPOConfig, evaluate, save_checkpoint, score, train,
                                         validation_set)
     from allocators.magnnet.problems import load_pool
 
     if args.variant == "match":
         return _run_match(args, console)
+    if args.variant == "view":
+        return _run_view(args, console)
     torch.set_num_threads(1)
     n = args.agents
     out = args.out or Path("runs") / "train" / f"magnnet_{args.variant}_n{n}"
@@ -79,12 +93,8 @@ def run(args, console=None) -> int:
         def validate(model):
             res = evaluate(model, val)
             return {**res, "score": score(res)}
-    if args.variant in ("paper", "paper_nb"):
-        tf = NB_FEATURES if args.variant == "paper_nb" else 0
-        model, sizes = MagnnetPolicy(n, n, task_features=tf), None
-    else:
-        model = EdgePolicy(assignment=args.variant == "edge")
-        sizes = [(k, k) for k in (4, 8, 12, 20) if k <= pool_n]
+    tf = NB_FEATURES if args.variant == "paper_nb" else 0
+    model, sizes = MagnnetPolicy(n, n, task_features=tf), None
     started = time.perf_counter()
     total = cfg.bc_updates + cfg.total_steps // (max(1, cfg.batch_size // cfg.n_envs)
                                                  * cfg.n_envs)
@@ -102,7 +112,7 @@ def run(args, console=None) -> int:
                 progress.update(bar, advance=1, description=desc)
 
         rows = train(model, pool, n, n, cfg, on_update, sizes=sizes,
-                     comm_ranges=(10.0, 40.0) if args.variant.startswith("edge") else None,
+                     comm_ranges=None,
                      validate=validate)
     wall = time.perf_counter() - started
     steps = rows[-1]["env_steps"] if rows else 0
@@ -149,7 +159,7 @@ def _run_match(args, console=None) -> int:
     from allocators.magnnet.problems import load_pool
 
     torch.set_num_threads(2)
-    cfg = MatchConfig(updates=args.updates, seed=args.seed)
+    cfg = MatchConfig(updates=args.updates or MatchConfig.updates, seed=args.seed)
     out = args.out or Path("runs") / "train" / "magnnet_match"
     out.mkdir(parents=True, exist_ok=True)
     full = load_pool(20, args.pool, "train", workers=2)
@@ -190,6 +200,129 @@ def _run_match(args, console=None) -> int:
                 f"{100 * best['val/gap']:.2f} % on {n_val} held-out N=20 instances)")
     (console.print if console else print)(msg)
     return 0
+
+
+def _run_view(args, console=None) -> int:
+    """DAgger training of :class:`~allocators.magnnet.views.ViewPolicy` from ``match.pt``
+    (CTDE: the teacher solves the whole remaining problem, the student sees one agent's
+    two-hop view): ``model.pt``, ``log.parquet`` (one row per update and per validation) and
+    ``loss.png``. Validation: 40 held-out N = 20 and 20 held-out N = 50 training instances at
+    a 20 m range; the weights of the iteration closest to the targets are kept."""
+    import dataclasses
+
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+    import torch
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from allocators.magnnet.allocator import MagnnetAllocator, shipped
+    from allocators.magnnet.ppo import load_checkpoint, save_checkpoint
+    from allocators.magnnet.problems import load_pool
+    from allocators.magnnet.views import ViewConfig, ViewPolicy, evaluate_views, train_views
+
+    torch.set_num_threads(2)
+    d = ViewConfig()
+    from allocators.magnnet.ppo import PPOConfig
+
+    cfg = dataclasses.replace(d, iterations=args.iterations or d.iterations,
+                              episodes=args.episodes or d.episodes,
+                              updates=args.updates or d.updates, seed=args.seed,
+                              patience=d.patience if args.patience is None else args.patience,
+                              confidence=args.confidence or d.confidence,
+                              lr=d.lr if args.lr == PPOConfig().lr else args.lr)
+    out = args.out or Path("runs") / "train" / "magnnet_view"
+    out.mkdir(parents=True, exist_ok=True)
+    p20, p50 = load_pool(20, 600, "train", workers=2), load_pool(50, 200, "train", workers=2)
+    pools = [p20.take(slice(0, 500)), p50.take(slice(0, 170))]
+    v20, v50 = p20.take(slice(500, 540)), p50.take(slice(170, 190))
+    match, _ = load_checkpoint(shipped("match"))
+    with torch.random.fork_rng():  # seeded initial weights, without touching global state
+        torch.manual_seed(cfg.seed)
+        model = ViewPolicy().init_from(match)
+    if args.init is not None:
+        model.load_state_dict(load_checkpoint(args.init)[0].state_dict())
+
+    def make(m):
+        return MagnnetAllocator.with_models(match, m, view_confidence=cfg.confidence,
+                                            view_patience=cfg.patience)
+
+    def validate(m):
+        r20 = evaluate_views(lambda: make(m), v20, 20.0)
+        r50 = evaluate_views(lambda: make(m), v50, 20.0)
+        # distance to the targets (gap <= 5 / 6 %, conflict-free >= 95 %), worst of each size
+        score = (max(r20["gap"] / 0.05, (1 - r20["conflict_free"]) / 0.05)
+                 + max(r50["gap"] / 0.06, (1 - r50["conflict_free"]) / 0.05))
+        return {"gap20": r20["gap"], "cf20": r20["conflict_free"], "gap50": r50["gap"],
+                "cf50": r50["conflict_free"], "score": score}
+
+    started = time.perf_counter()
+    with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}"
+                  "/{task.total}"), TimeElapsedColumn(), console=console) as progress:
+        bar = progress.add_task("magnnet view", total=cfg.iterations * cfg.updates)
+
+        def on_row(row):
+            if row["phase"] == "val":
+                progress.update(bar, description=f"val gap {100 * row['val/gap20']:.1f} % / "
+                                                 f"{100 * row['val/cf20']:.0f} % cf (N=20)")
+            else:
+                progress.advance(bar)
+
+        rows = train_views(model, pools, cfg, make, on_row, validate=validate)
+    wall = time.perf_counter() - started
+    vals = [r for r in rows if r["phase"] == "val"]
+    best = min(vals, key=lambda r: r["val/score"]) if vals else None
+    from allocators.magnnet.views import config_dict
+
+    save_checkpoint(model, out / "model.pt", None,
+                    {"wall_s": wall, "view": config_dict(cfg),
+                     "from": str(args.init) if args.init else "match.pt",
+                     "val": {k: v for k, v in (best or {}).items() if k.startswith("val/")},
+                     "world_size": p20.world_size.tolist(),
+                     "pool": "train seeds from 1000000: N=20 (500) and N=50 (170) instances "
+                             "for DAgger, 40 + 20 held out for validation at 20 m"})
+    keys = sorted({k for r in rows for k in r})
+    pq.write_table(pa.table({k: [r.get(k) for r in rows] for k in keys}), out / "log.parquet")
+    _view_figure(rows, out)
+    msg = f"trained in {wall:.1f} s, {cfg.iterations} DAgger iterations; checkpoint " \
+          f"{out / 'model.pt'}"
+    if best:
+        msg += (f"\nkept weights of iteration {best['iteration']} (20 m range: N=20 gap "
+                f"{100 * best['val/gap20']:.2f} %, conflict-free {100 * best['val/cf20']:.1f} %; "
+                f"N=50 gap {100 * best['val/gap50']:.2f} %, conflict-free "
+                f"{100 * best['val/cf50']:.1f} %)")
+    (console.print if console else print)(msg)
+    return 0
+
+
+def _view_figure(rows, out: Path) -> None:
+    import numpy as np
+
+    plt = _pyplot()
+    if plt is None:
+        return
+    fit = [r for r in rows if r["phase"] == "dagger"]
+    val = [r for r in rows if r["phase"] == "val"]
+    fig, ax = plt.subplots(1, 2, figsize=(9, 3.2))
+    loss = np.array([r["losses/imitation"] for r in fit])
+    k = max(1, len(loss) // 50)
+    if len(loss):
+        smooth = np.convolve(loss, np.ones(k) / k, mode="valid")
+        ax[0].plot(np.arange(len(smooth)) + k - 1, smooth)
+    ax[0].set_xlabel("update")
+    ax[0].set_ylabel(f"imitation loss (mean of {k})")
+    it = [r["iteration"] for r in val]
+    for key, lab in (("val/gap20", "gap N=20"), ("val/gap50", "gap N=50")):
+        ax[1].plot(it, [100 * r[key] for r in val], marker="o", label=lab)
+    for key, lab in (("val/cf20", "conflicted N=20"), ("val/cf50", "conflicted N=50")):
+        ax[1].plot(it, [100 * (1 - r[key]) for r in val], marker="x", ls="--", label=lab)
+    ax[1].set_xlabel("DAgger iteration")
+    ax[1].set_ylabel("% at 20 m range (validation)")
+    ax[1].legend(fontsize=7)
+    for a in ax:
+        a.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(out / "loss.png", dpi=120)
+    plt.close(fig)
 
 
 def _pyplot():

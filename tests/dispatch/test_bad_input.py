@@ -52,9 +52,7 @@ def test_planner_parameters_rejected_at_validate(tmp_path, capsys, dispatch, wor
     ("magnnet", "text", "is not a MAGNNET checkpoint"),
     ("magnnet", 3, "must be the path of a model.pt"),
     ("magnnet", "missing", "no such file"),
-    ("magnnet", str(CHECKPOINTS / "match.pt"), "model of kind 'match'"),
-    ("magnnet_match", str(CHECKPOINTS / "edge.pt"), "needs a 'match' one"),
-    ("magnnet_edge", "text", "is not a MAGNNET checkpoint"),
+    ("magnnet", str(CHECKPOINTS / "paper_n4.pt"), "model of kind 'paper'"),
 ])
 def test_checkpoint_checked_when_built(tmp_path, capsys, allocator, checkpoint, words):
     (tmp_path / "notes.pt").write_text("not a checkpoint\n", encoding="utf-8")
@@ -68,7 +66,7 @@ def test_checkpoint_checked_when_built(tmp_path, capsys, allocator, checkpoint, 
 
 
 def test_good_checkpoint_validates(tmp_path, capsys):
-    path = write_scenario(tmp_path, dispatch={"allocator": "magnnet_match"},
+    path = write_scenario(tmp_path, dispatch={"allocator": "magnnet"},
                           extra=f'[dispatch.allocator_params]\ncheckpoint = '
                                 f'"{CHECKPOINTS / "match.pt"}"\n')
     code, text, _ = validate(path, capsys=capsys)

@@ -150,10 +150,10 @@ PLANNER_PARAMS = [("rstar", {"w": 0.5}), ("rstar", {"w": 2.0}), ("rrt_star", {"m
 ALLOCATOR_PARAMS = [("auction", {"bundle_size": 0}), ("auction", {"bundle_size": 2}),
                     ("auction", {"time_scale": -1}), ("magnnet", {"variant": "nope"}),
                     ("magnnet", {"checkpoint": "notes.txt"}), ("magnnet", {"checkpoint": 3}),
-                    ("magnnet", {"checkpoint": "MATCH"}), ("magnnet_match", {"checkpoint": "EDGE"}),
-                    ("magnnet_match", {"confidence": 2}), ("magnnet_match", {"patience": -1}),
+                    ("magnnet", {"checkpoint": "MATCH"}), ("magnnet", {"checkpoint": "PAPER"}),
+                    ("magnnet", {"confidence": 2}), ("magnnet", {"patience": -1}),
                     ("hungarian", {"x": 1}), ("random", {}), ("greedy", {}), ("fcfs", {}),
-                    ("magnnet_edge", {}), ("nosuch", {})]
+                    ("local_hungarian", {"view": "all"}), ("nosuch", {})]
 CHECKPOINTS = ROOT / "allocators" / "magnnet" / "checkpoints"
 
 
@@ -230,7 +230,7 @@ def mutate_doc(rng: random.Random, doc: dict, data: Path) -> str:
             else:
                 name, params = rng.choice(ALLOCATOR_PARAMS)
                 params = {k: {"MATCH": str(CHECKPOINTS / "match.pt"),
-                              "EDGE": str(CHECKPOINTS / "edge.pt"),
+                              "PAPER": str(CHECKPOINTS / "paper_n4.pt"),
                               "notes.txt": str(data / "notes.txt")}.get(v, v)
                           if isinstance(v, str) else v for k, v in params.items()}
                 d["allocator"], d["allocator_params"] = name, params

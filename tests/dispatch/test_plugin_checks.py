@@ -18,7 +18,7 @@ from dispatch.testing import check_allocator, check_planner
 from tests.conftest import ROOT
 
 BUILTIN_ALLOCATORS = ["hungarian", "fcfs", "greedy", "random", "auction", "magnnet",
-                      "magnnet_edge", "magnnet_match"]
+                      "local_hungarian"]
 BUILTIN_PLANNERS = ["astar", "rrt_star", "rstar", "reservation", "dijkstra"]
 
 
@@ -33,17 +33,20 @@ def test_every_builtin_allocator_passes(name):
 @pytest.mark.parametrize("name,params", [
     ("auction", {"bundle_size": 2}),  # found by the checker: CBBA bundles crashed on 0 tasks
     ("auction", {"bundle_size": 3, "time_scale": 5.0}),
-    ("magnnet", {"variant": "edge_noassign"}),
-    ("magnnet_match", {"confidence": 0.0, "patience": 0}),
+    ("magnnet", {"partial": "match"}),
+    ("magnnet", {"confidence": 0.0, "patience": 0}),
+    ("local_hungarian", {"view": "component", "patience": 0}),
 ])
 def test_builtin_allocators_with_parameters_pass(name, params):
     report = check_allocator(load("allocator", name), **params)
     assert report.ok, str(report)
 
 
-def test_a_variant_that_serves_only_some_sizes_is_reported():
-    """``paper_nb`` ships checkpoints for N = M in (4, 8, 12, 20) only: the checker says so."""
-    report = check_allocator(load("allocator", "magnnet"), variant="paper_nb")
+@pytest.mark.parametrize("variant", ["paper", "paper_nb"])
+def test_a_variant_that_serves_only_some_sizes_is_reported(variant):
+    """The paper's variants ship checkpoints for N = M in (4, 8, 12, 20) only: the checker
+    says so (an error, never a fallback to another model)."""
+    report = check_allocator(load("allocator", "magnnet"), variant=variant)
     failed = {r.name: r.detail for r in report.failed()}
     assert set(failed) == {"valid"} and "no checkpoint" in failed["valid"]
 

@@ -270,8 +270,7 @@ def test_validate_line_survives_long_paths(tmp_path, capsys):
 
 def test_paper_static_sweep_expansion():
     sc = load_scenario(ROOT / "scenarios" / "paper_static.toml")
-    assert sc.sweep.allocator == ("hungarian", "magnnet", "magnnet_edge", "magnnet_match",
-                                  "greedy", "random")
+    assert sc.sweep.allocator == ("hungarian", "magnnet", "local_hungarian", "greedy", "random")
     assert sc.sweep.agents == (4, 8, 12, 20)
     n_seeds = len(sc.sweep.seed)
     assert n_seeds >= 1

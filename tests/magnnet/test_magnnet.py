@@ -12,7 +12,7 @@ pytest.importorskip("pettingzoo")
 from allocators.magnnet import rules  # noqa: E402
 from allocators.magnnet.env import MagnnetEnv, random_instance, random_pool  # noqa: E402
 from allocators.magnnet.game import BatchedGame, global_obs  # noqa: E402
-from allocators.magnnet.model import EdgePolicy, MagnnetPolicy  # noqa: E402
+from allocators.magnnet.model import MagnnetPolicy  # noqa: E402
 from allocators.magnnet.ppo import PPOConfig, gae, train  # noqa: E402
 
 
@@ -84,7 +84,7 @@ def test_gae_hand_computed():
 def test_training_raises_reward():
     torch.set_num_threads(1)
     pool = random_pool(0, 100, 3)
-    model = EdgePolicy(hidden=8, mlp=32)
+    model = MagnnetPolicy(3, 3, mlp=32)
     cfg = PPOConfig(lr=3e-3, total_steps=256 * 12, batch_size=256, n_envs=32, epochs=4, seed=0)
     rows = train(model, pool, 3, 3, cfg)
     ret = [r["charts/episode_return"] for r in rows]
@@ -100,12 +100,10 @@ def _model(cls, n):
     from allocators.magnnet.model import NB_FEATURES
 
     return {"paper": lambda: MagnnetPolicy(n, n),
-            "paper_nb": lambda: MagnnetPolicy(n, n, task_features=NB_FEATURES),
-            "edge": lambda: EdgePolicy(),
-            "edge_noassign": lambda: EdgePolicy(assignment=False)}[cls]()
+            "paper_nb": lambda: MagnnetPolicy(n, n, task_features=NB_FEATURES)}[cls]()
 
 
-@pytest.mark.parametrize("cls", ["paper", "paper_nb", "edge", "edge_noassign"])
+@pytest.mark.parametrize("cls", ["paper", "paper_nb"])
 def test_action_ignores_agents_beyond_two_hops(cls):
     """Agents on a line 0-1-2-3-4-5: agent 0's logits do not change when agent 3, 4 or 5
     changes (position, costs, status), and do change when agent 2 changes."""
@@ -136,7 +134,7 @@ def test_action_ignores_agents_beyond_two_hops(cls):
     assert not torch.allclose(logits_of(c2, apos), base)
 
 
-@pytest.mark.parametrize("cls", ["paper_nb", "edge"])
+@pytest.mark.parametrize("cls", ["paper", "paper_nb"])
 def test_allocator_is_local_and_valid(cls):
     """The plugin's choices on a problem equal each agent's own local-view computation."""
     from allocators.magnnet.allocator import observe
@@ -180,10 +178,8 @@ def test_shipped_checkpoints_load_and_beat_random(n):
         ck = torch.load(_shipped(name), weights_only=True)
         assert ck["config"]["n_agents"] == n
         load_checkpoint(_shipped(name))
-    load_checkpoint(_shipped("edge.pt"))
-    assert load_checkpoint(_shipped("edge_noassign.pt"))[0].variant == "edge_noassign"
     rng = np.random.default_rng(123)
-    allocs = {v: load("allocator", "magnnet")(v) for v in ("auto", "paper", "paper_nb")}
+    allocs = {v: load("allocator", "magnnet")(v) for v in ("match", "paper", "paper_nb")}
     allocs["random"] = RandomAllocator()
     wins = dict.fromkeys(allocs, 0.0)
     for k in range(10):
@@ -193,7 +189,7 @@ def test_shipped_checkpoints_load_and_beat_random(n):
             a = alloc.allocate(p)
             assert_valid(p, a)
             wins[name] += total_cost(p, a) + 100.0 * (n - len(a.pairs))
-    for v in ("auto", "paper", "paper_nb"):
+    for v in ("match", "paper", "paper_nb"):
         assert wins[v] < wins["random"], v
 
 

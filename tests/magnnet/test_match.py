@@ -112,7 +112,7 @@ def test_allocator_is_conflict_free_on_complete_graphs():
     """Every agent shares the one view: no task is ever requested twice; N >= M assigns all."""
     from dispatch.registry import load
 
-    alloc = load("allocator", "magnnet_match")()
+    alloc = load("allocator", "magnnet")()
     rng = np.random.default_rng(2)
     for k, (n, m) in enumerate(itertools.product((1, 3, 8), (1, 4, 8))):
         cost, *_ = random_instance(rng, n, m)
@@ -132,7 +132,7 @@ def test_patience_never_forces_agents_that_hear_everyone():
     conflicts, even with ``patience = 0``."""
     from dispatch.registry import load
 
-    alloc = load("allocator", "magnnet_match")(patience=0)
+    alloc = load("allocator", "magnnet")(patience=0)
     rng = np.random.default_rng(8)
     for k in range(5):
         cost, *_ = random_instance(rng, 12, 12)
@@ -141,13 +141,14 @@ def test_patience_never_forces_agents_that_hear_everyone():
         assert len(assert_valid(p, a)) == 12 and not a.conflicted_tasks()
 
 
-def test_action_ignores_agents_beyond_two_hops(monkeypatch):
-    """Line 0-1-2-3-4-5: agent 0's request is a function of agents 0-2 only."""
+def test_action_ignores_agents_beyond_two_hops():
+    """Line 0-1-2-3-4-5: agent 0's request is a function of agents 0-2 only (match model on
+    partial views; the view model has its own test in test_views.py)."""
     from allocators.magnnet import allocator as mod
 
     model = _model(3)
-    monkeypatch.setattr(mod.MagnnetMatchAllocator, "model", lambda self: model)
-    alloc = mod.MagnnetMatchAllocator()
+    alloc = mod.MagnnetAllocator(partial="match")
+    alloc.model = model
     n = 6
     comm = np.eye(n, dtype=bool) | np.eye(n, k=1, dtype=bool) | np.eye(n, k=-1, dtype=bool)
     rng = np.random.default_rng(4)
@@ -176,7 +177,7 @@ def test_no_communication_still_assigns_everything():
     the conflict rule settles the rest; nothing is lost."""
     from dispatch.registry import load
 
-    alloc = load("allocator", "magnnet_match")()
+    alloc = load("allocator", "magnnet")()
     rng = np.random.default_rng(5)
     cost, *_ = random_instance(rng, 8, 6)
     p = dataclasses.replace(make_problem(cost), comm=np.eye(8, dtype=bool))
@@ -211,8 +212,8 @@ def test_play_matches_the_plugin():
     from allocators.magnnet import allocator as mod
 
     model = _model(6)
-    alloc = mod.MagnnetMatchAllocator()
-    alloc.model = lambda: model
+    alloc = mod.MagnnetAllocator()
+    alloc.model = model
     rng = np.random.default_rng(7)
     for _ in range(5):
         cost, *_, flies, _ = random_instance(rng, 6, 6)
@@ -225,7 +226,7 @@ def test_play_matches_the_plugin():
 
 def test_shipped_checkpoint_loads_and_beats_greedy():
     from allocators.greedy import GreedyAllocator
-    from allocators.magnnet.allocator import CHECKPOINTS, MagnnetMatchAllocator
+    from allocators.magnnet.allocator import CHECKPOINTS, MagnnetAllocator
     from allocators.magnnet.ppo import load_checkpoint
 
     path = CHECKPOINTS / "match.pt"
@@ -237,7 +238,7 @@ def test_shipped_checkpoint_loads_and_beats_greedy():
     for k in range(20):
         cost, *_ = random_instance(rng, 10, 10)
         p = make_problem(cost, seed=k)
-        a = MagnnetMatchAllocator().allocate(p)
+        a = MagnnetAllocator().allocate(p)
         assert len(assert_valid(p, a)) == 10 and not a.conflicted_tasks()
         ours += total_cost(p, a)
         greedy += total_cost(p, GreedyAllocator().allocate(make_problem(cost, seed=k)))
@@ -247,15 +248,15 @@ def test_shipped_checkpoint_loads_and_beats_greedy():
 
 
 def test_bad_parameters_are_clear_errors(tmp_path):
-    from allocators.magnnet.allocator import MagnnetMatchAllocator
+    from allocators.magnnet.allocator import MagnnetAllocator
 
     with pytest.raises(TypeError, match="patience"):
-        MagnnetMatchAllocator(patience=-1)
+        MagnnetAllocator(patience=-1)
     with pytest.raises(TypeError, match="confidence"):
-        MagnnetMatchAllocator(confidence=1.5)
+        MagnnetAllocator(confidence=1.5)
     # a checkpoint is checked when the allocator is built, not in its first decision
     with pytest.raises(ValueError, match="no such file"):
-        MagnnetMatchAllocator(checkpoint=str(tmp_path / "none.pt"))
+        MagnnetAllocator(checkpoint=str(tmp_path / "none.pt"))
     (tmp_path / "text.pt").write_text("not a model\n", encoding="utf-8")
     with pytest.raises(ValueError, match="not a MAGNNET checkpoint"):
-        MagnnetMatchAllocator(checkpoint=str(tmp_path / "text.pt"))
+        MagnnetAllocator(checkpoint=str(tmp_path / "text.pt"))
