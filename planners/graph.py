@@ -15,7 +15,8 @@ The graph is implicit: a per-node bit mask of legal steps (``GridGraph.dirs``, v
 numpy) plus the index delta and weight of each step. The searches are compiled
 (:mod:`planners._fast`, numba): distance fields by an exact Dijkstra with one FIFO per step
 length (several fields at once on threads), single pairs by A* with a radix heap. An explicit
-``scipy.sparse`` adjacency (``GridGraph.csr``) is built only on request, for references and other tools.
+``scipy.sparse`` adjacency (``GridGraph.csr``) is built only on request, for references and
+other tools.
 
 Everything here depends only on the immutable :class:`~dispatch.world.Grid`, so it is cached
 on ``grid.cache``: the graphs (built once per grid and model) and a :class:`FieldCache` of
@@ -372,8 +373,8 @@ class _Tree:
         return self.parent.nbytes
 
 
-def field_values(grid: Grid, goal_cells, flies: bool,
-                 at: np.ndarray) -> tuple[np.ndarray, int]:
+def field_values(grid: Grid, goal_cells, flies: bool, at: np.ndarray,
+                 bounded: bool = False) -> tuple[np.ndarray, int]:
     """``out[a, t]``: the distance field of ``goal_cells[t]`` read at node ``at[a]`` (metres).
 
     Nodes are flat indices in the model's lattice (:class:`GridGraph`). Bit for bit
@@ -381,9 +382,13 @@ def field_values(grid: Grid, goal_cells, flies: bool,
     cache, and what the cache keeps of a goal is its Dijkstra tree, one byte a node (the parent
     move of each node, an eighth of a float64 field): a value is rebuilt by summing the moves
     from the goal out along the tree, the very additions Dijkstra made
-    (:func:`planners._fast.chain_values`). A new tree's search stops once every node of ``at``
-    is settled (a few idle vehicles near a task need a small part of the grid); a later call
-    that needs a node beyond where it stopped searches again, to the end. Missing trees are
+    (:func:`planners._fast.chain_values`). With ``bounded``, a new tree's search stops once
+    every node of ``at`` is settled (a few idle vehicles near a task need a small part of the
+    grid); a later call that needs a node beyond where it stopped searches again, to the end.
+    Off by default: with 200 vehicles at 5 tasks/s on the paper's world the idle vehicles are
+    spread everywhere (99.5 % of the grid settled anyway) and the searches repeated for
+    vehicles that turned idle beyond the radius cost more (5141 searches against 4690).
+    Missing trees are
     computed a few at a time (:data:`FIELD_THREADS` together), read, and handed to the cache,
     so the memory held stays within the cache's bound plus one batch of fields. Returns
     ``(values, computed)``: the array and how many Dijkstra searches ran.
@@ -415,7 +420,7 @@ def field_values(grid: Grid, goal_cells, flies: bool,
     batch = max(1, FIELD_THREADS)
     # a new goal's search stops at the nodes asked for; one asked beyond that gets a complete
     # tree (so no goal is searched more than twice while its tree stays cached)
-    for missing, targets in ((fresh, np.unique(at)), (extend, None)):
+    for missing, targets in ((fresh, np.unique(at) if bounded else None), (extend, None)):
         for i in range(0, len(missing), batch):
             chunk = missing[i : i + batch]
             for n, (field, parent, radius) in zip(chunk, _compute(grid, g, chunk, True, targets)):

@@ -173,17 +173,17 @@ def test_bounded_searches_stop_early_and_extend_exactly(flies):
     full = G._field(g, g.node(goal))
     order = np.argsort(full, kind="stable")
     near = order[1:4]  # the three nodes nearest the goal
-    vals, computed = G.field_values(grid, [goal], flies, near)
+    vals, computed = G.field_values(grid, [goal], flies, near, bounded=True)
     np.testing.assert_array_equal(vals[:, 0], full[near])
     tree = G.field_cache(grid).get(("tree", flies, g.node(goal)))
     assert computed == 1 and tree.radius < np.inf
     assert (tree.parent == G._fast.UNREACHED).sum() > g.n_nodes // 2  # most never reached
-    again, computed = G.field_values(grid, [goal], flies, near[::-1])
+    again, computed = G.field_values(grid, [goal], flies, near[::-1], bounded=True)
     assert computed == 0  # within the radius: read from the cached tree
     np.testing.assert_array_equal(again[:, 0], full[near[::-1]])
     reach = np.flatnonzero(np.isfinite(full))
     far = np.concatenate([near, reach[-3:], np.flatnonzero(~np.isfinite(full))[:2]])
-    vals, computed = G.field_values(grid, [goal], flies, far)
+    vals, computed = G.field_values(grid, [goal], flies, far, bounded=True)
     assert computed == 1  # beyond the radius: searched again
     np.testing.assert_array_equal(vals[:, 0], full[far])
     assert G.field_cache(grid).get(("tree", flies, g.node(goal))).radius == np.inf
