@@ -36,11 +36,10 @@ Statistics: ``stats.cost_queries``, ``stats.plans``; ``stats.extra`` holds ``fie
 
 from __future__ import annotations
 
-from collections import OrderedDict
-
 import os
 import threading
 import weakref
+from collections import OrderedDict
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
