@@ -1,6 +1,7 @@
 """The dispatcher: a SimPy process that turns idle vehicles and open tasks into assignments.
 
-It wakes when a task is released or a vehicle becomes idle, waits the optional batching window
+It wakes when a task is released or a vehicle becomes idle (deciding at once, only while a
+task is open: see :meth:`Dispatcher.notify`), waits the optional batching window
 (a zero window still lets every event of the same instant land first), builds an
 :class:`AllocationProblem` with the planner's cost matrix and the communication graph of the idle
 vehicles (from their positions and the scenario's ``[comms] range``; see :mod:`dispatch.comms`),

@@ -3,10 +3,11 @@
 Each table has a fixed schema (below), so an empty table is still a valid, typed file. One
 layout whatever the number of runs: ``OUT/<table>/allocator=…/planner=…/n_agents=…/seed=…/
 part-0.parquet`` (Hive; the partition columns live in the path, not in the files). While a run
-goes, rows are flushed every ``flush_rows`` rows into whole chunk files ``_inflight-NNNNN.parquet.chunk``
-next to it (ignored by Hive readers, readable one by one after a crash); at the end they are
-merged into ``part-0.parquet``. Every file is written to a temporary name and renamed into place,
-so a reader never sees half a file. The schema metadata of every file holds the scenario text,
+goes, rows are flushed every ``flush_rows`` rows into whole chunk files
+``_inflight-NNNNN.parquet.chunk`` next to it (ignored by Hive readers, readable one by one after
+a crash; lz4, cheap to write and read back); at the end they are merged into ``part-0.parquet``
+(zstd). Every file is written to a temporary name and renamed into place, so a reader never
+sees half a file. The schema metadata of every file holds the scenario text,
 the seed, the run id and the package version; ``obstacles`` also holds the world's size and
 cell size so a run can be redrawn.
 """

@@ -39,6 +39,7 @@ from __future__ import annotations
 import os
 import threading
 import weakref
+from collections import OrderedDict
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
@@ -54,6 +55,10 @@ from planners import _road_fast
 #: the same either way (1.2-1.3 ms on Chicago, each direction); a field is reused at every later
 #: decision the task stays open, so fields win unless the uncached side is clearly larger.
 FORWARD_RATIO = 4
+#: Bytes of fields kept after their last task closed (least recently used first out): a later
+#: task on the same node, or a drop-off there (networks with a hierarchy), reads the kept field
+#: instead of another search. Taxi demand comes back to the same nodes all day.
+RETIRED_FIELD_BYTES = 128 * 2**20
 #: Fields computed together by one PHAST sweep (its inner loop runs over them).
 PHAST_BLOCK = 8
 #: Threads running PHAST blocks at once (1: never in parallel).
@@ -171,6 +176,10 @@ class RoadPlanner(Planner):
         self._hierarchy = hierarchy(space)
         self._index = None if self._hierarchy is None else self._hierarchy.pos
         self._users: dict[int, int] = {}  # node -> number of cached tasks on it
+        #: node -> field whose tasks all closed, least recently used first (bounded: see
+        #: RETIRED_FIELD_BYTES); the same numbers a new search would give
+        self._retired: OrderedDict[int, np.ndarray] = OrderedDict()
+        self._retired_bytes = 0
         t = space.time
         #: CSR triples (int64 / float64) of the time matrix and of its transpose
         self._graph = (t.indptr.astype(np.int64), t.indices.astype(np.int64),
@@ -232,9 +241,14 @@ class RoadPlanner(Planner):
                 fwd = np.stack([f[at] for f in h.fields(agent_nodes, to=False)])
             out[:, cols] = fwd[agent_inv]
         elif fresh.size:
-            fields = self._dijkstra(fresh, to=True) if h is None else h.fields(fresh, to=True)
-            self._fields.update(zip(fresh.tolist(), fields))
-            self.stats.extra["fields_computed"] += int(fresh.size)
+            if self._retired:  # (after the choice above: forward sums may round otherwise)
+                fresh = np.array([n for n in fresh.tolist() if self._revive(n) is None],
+                                 dtype=np.int64)
+            if fresh.size:
+                fields = (self._dijkstra(fresh, to=True) if h is None
+                          else h.fields(fresh, to=True))
+                self._fields.update(zip(fresh.tolist(), fields))
+                self.stats.extra["fields_computed"] += int(fresh.size)
             cached[:] = True
         self.stats.extra["field_reuses"] += reused
 
@@ -254,6 +268,8 @@ class RoadPlanner(Planner):
         handful of numpy calls instead of a few dozen."""
         goal = int(task.loc)
         field = self._fields.get(goal)
+        if field is None:
+            field = self._revive(goal)
         if field is None:  # one new node: a field (the forward search needs 4 or more)
             goals = np.array([goal], dtype=np.int64)
             h = self._hierarchy
@@ -269,6 +285,28 @@ class RoadPlanner(Planner):
         if not agents.points.size:
             return out  # everyone on a node: nothing left to drive first
         return out + agents.remaining[:, None]
+
+    def _revive(self, node: int) -> np.ndarray | None:
+        """The kept field of ``node`` back among the open tasks' fields, or None."""
+        field = self._retired.pop(node, None)
+        if field is not None:
+            self._retired_bytes -= field.nbytes
+            self._fields[node] = field
+            self.stats.extra["fields_revived"] = self.stats.extra.get("fields_revived", 0) + 1
+        return field
+
+    def _retire(self, node: int, field: np.ndarray) -> None:
+        """Keep ``node``'s field (most recently used) within :data:`RETIRED_FIELD_BYTES`."""
+        old = self._retired.pop(node, None)
+        if old is not None:
+            self._retired_bytes -= old.nbytes
+        if field.base is not None and field.base.nbytes > field.nbytes:
+            field = field.copy()  # a row of a PHAST block: keep the row, not the block
+            field.setflags(write=False)
+        self._retired[node] = field
+        self._retired_bytes += field.nbytes
+        while self._retired_bytes > RETIRED_FIELD_BYTES and self._retired:
+            self._retired_bytes -= self._retired.popitem(last=False)[1].nbytes
 
     def _dijkstra(self, nodes: np.ndarray, to: bool) -> list[np.ndarray]:
         """Complete fields by the compiled Dijkstra (networks without a hierarchy), node
@@ -303,8 +341,12 @@ class RoadPlanner(Planner):
         if field is None and self._hierarchy is not None:
             # one PHAST field to the goal, walked down: on Chicago several times cheaper than
             # A*, whose straight-line bound is weak there (its fastest edge, in straight-line
-            # terms, is 194 m/s: a coordinate quirk)
-            field = self._hierarchy.fields(np.array([goal]), to=True)[0]
+            # terms, is 194 m/s: a coordinate quirk); kept with the retired fields (the same
+            # numbers: the walk is the same whichever copy it reads)
+            field = self._retired.get(goal)
+            if field is None:
+                field = self._hierarchy.fields(np.array([goal]), to=True)[0]
+            self._retire(goal, field)
         if field is None:
             _, hk, hn, _ = self._scratch
             k = _road_fast.astar(*self._graph, self.space.xy, self._inv_speed, start, goal,
@@ -326,7 +368,9 @@ class RoadPlanner(Planner):
             self._users[node] = left
         else:
             self._users.pop(node, None)
-            self._fields.pop(node, None)
+            field = self._fields.pop(node, None)
+            if field is not None:
+                self._retire(node, field)
 
 
 def _agent_arrays(agents: Sequence[Any]) -> tuple[np.ndarray, np.ndarray]:

@@ -61,3 +61,31 @@ def test_validate_finds_pairs_by_id_without_a_dict_over_the_agents():
         validate(problem, Allocation(pairs=((11, 0),)))
     with pytest.raises(AllocationError, match="unknown agent id 'x'"):
         validate(problem, Allocation(pairs=(("x", 0),)))
+
+
+def test_one_task_cost_column_equals_scipy_and_the_general_path():
+    """The road planner's one-task fast path (an immediate decision) gives the numbers of
+    scipy's Dijkstra plus the seconds left on an edge, and those of its general path."""
+    from scipy.sparse.csgraph import dijkstra
+
+    from dispatch.congestion import CongestedPlanner, HourlyFactors
+    from dispatch.contracts import TaskView
+    from planners.road import RoadPlanner
+
+    net = manhattan(5, 5, 100.0, 10.0)
+    fleet = _fleet()
+    fleet.by_id[7].loc = RoadPoint(node=12, prev=11, remaining=2.5, remaining_m=25.0)
+    views = fleet.views(fleet.idle_index(), 0.0)
+    nodes = [v.loc.node if isinstance(v.loc, RoadPoint) else v.loc for v in views]
+    rem = np.array([v.loc.remaining if isinstance(v.loc, RoadPoint) else 0.0 for v in views])
+    for goal in (24, 3, 24):  # a new field, another, then a cached one
+        task = TaskView(goal, "ground", goal, 0.0)
+        got = RoadPlanner(net).costs(views, (task,))
+        want = dijkstra(net.time, indices=nodes)[:, [goal]] + rem[:, None]
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
+        general = RoadPlanner(net).costs(list(views), (task,))  # plain views: general path
+        np.testing.assert_array_equal(got, general)
+        # congestion reads the remaining-seconds array: the same as from the views
+        congested = CongestedPlanner(RoadPlanner(net), HourlyFactors((2.0,) * 24), lambda: 0.0)
+        np.testing.assert_allclose(congested.costs(views, (task,)),
+                                   rem[:, None] + (want - rem[:, None]) * 2.0, atol=1e-9)

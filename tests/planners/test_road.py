@@ -132,7 +132,8 @@ def test_plan_path_time_equals_cost(chicago):
     assert planner.stats.plans == 37
 
 
-def test_task_closed_drops_the_cache_shared_nodes_last():
+def test_task_closed_drops_the_cache_shared_nodes_last(monkeypatch):
+    monkeypatch.setattr(road, "RETIRED_FIELD_BYTES", 0)  # keep nothing after closing
     net = manhattan(6, 6)
     planner = RoadPlanner(net)
     agents = [Agent(0, "ugv", 0), Agent(1, "ugv", RoadPoint(8, 7, 3.0, 30.0))]
@@ -147,6 +148,29 @@ def test_task_closed_drops_the_cache_shared_nodes_last():
     assert not planner._fields and not planner._node_of
     planner.costs(agents, tasks[:1])
     assert planner.stats.extra["fields_computed"] == 3  # recomputed after closing
+
+
+def test_closed_fields_are_kept_bounded_and_revived_exact(monkeypatch):
+    net = manhattan(6, 6)
+    field_bytes = net.n * 8
+    monkeypatch.setattr(road, "RETIRED_FIELD_BYTES", 3 * field_bytes)  # room for 3 fields
+    planner = RoadPlanner(net)
+    agents = [Agent(0, "ugv", 0), Agent(1, "ugv", RoadPoint(8, 7, 3.0, 30.0))]
+    nodes = [20, 35, 3, 11, 20, 35]
+    for k, node in enumerate(nodes[:4]):  # four tasks, each closed after its decision
+        planner.costs(agents, [Task(k, "ground", node)])
+        planner.task_closed(k)
+        assert planner._retired_bytes <= 3 * field_bytes
+    assert list(planner._retired) == [35, 3, 11]  # the oldest (20) went first
+    assert planner.stats.extra["fields_computed"] == 4
+    tasks = [Task(10, "ground", 35), Task(11, "ground", 20), Task(12, "ground", 11)]
+    got = planner.costs(agents, tasks)  # 35, 11 revived, 20 computed again
+    assert planner.stats.extra["fields_computed"] == 5
+    assert planner.stats.extra["fields_revived"] == 2
+    assert set(planner._fields) == {35, 20, 11} and list(planner._retired) == [3]
+    np.testing.assert_array_equal(got, _expected(net, agents, tasks))
+    path = planner.plan(agents[0], 35)  # a revived field is walked as a fresh one would be
+    assert path[0] == 0 and path[-1] == 35
 
 
 def test_refuses_a_non_road_space_and_is_registered():
