@@ -244,7 +244,8 @@ def findings(t: pd.DataFrame) -> str:
             s += (f", {d:.0f} s ({100 * d / nxt['wait_mean']:.0f} %) below the best other "
                   f"allocator, {nxt['label']} ({nxt['wait_mean']:.0f} s)")
         worst = g.iloc[-1]
-        s += f"; highest {worst['label']} ({worst['wait_mean']:.0f} s)."
+        s += (f"; highest {worst['label']} ({worst['wait_mean']:.0f} s)." if len(g) > 1
+              else ".")
         out.append(s)
     windows = [w for w in t["window"].unique() if w != "imm"]
     if "imm" in set(t["window"]) and windows:
