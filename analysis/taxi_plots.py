@@ -235,7 +235,7 @@ def hourly(customers: pd.DataFrame, path: Path, *, bin_s: float, runs: dict,
         a3.plot(x, g["wait_p90"] / 60, linestyle="--", **{**style, "marker": None})
     unit = "hour" if bin_s == 3600 else f"{bin_s / 60:g} min"
     a1.set_ylabel(f"trips per {unit}\n(bars: requests; lines:\nserved, mean per run)")
-    a1.set_title(title or "Demand, service and waiting over the day")
+    fig.suptitle(title or "Demand, service and waiting over the day")  # above the legend
     a2.set_ylabel("rejected (%)\n(at once or expired)")
     a2.set_ylim(bottom=0)
     a3.set_ylabel("wait, release → pickup (min)\nsolid: median, dashed: p90")
