@@ -243,7 +243,7 @@ def hourly(customers: pd.DataFrame, path: Path, *, bin_s: float, runs: dict,
     # one legend for the three panels (a series has the same colour and marker in each), in
     # two columns past 20 series so that a whole study's series fit beside the panels
     h, lab = a1.get_legend_handles_labels()
-    fig.legend(h, lab, loc="outside right upper", fontsize="x-small",
+    fig.legend(h, lab, loc="outside right center", fontsize="x-small",
                ncols=1 if len(lab) <= 20 else 2, frameon=False)
     a3.set_xlabel("time of release (h)")
     for ax in (a1, a2, a3):
