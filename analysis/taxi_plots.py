@@ -229,21 +229,22 @@ def hourly(customers: pd.DataFrame, path: Path, *, bin_s: float, runs: dict,
                    edgecolor="0.6", linewidth=0.5, label="requests")
             first = False
         style = {"color": c, "linewidth": lw, "marker": mk, "markersize": 4}
-        a1.plot(x, g["rides"] / n, label=f"served: {label}", **style)
-        a2.plot(x, 100 * g["rejectionRate"], label=label, **style)
-        a3.plot(x, g["wait_median"] / 60, label=f"{label}: median", **style)
-        a3.plot(x, g["wait_p90"] / 60, linestyle="--", label=f"{label}: p90",
-                **{**style, "marker": None})
+        a1.plot(x, g["rides"] / n, label=label, **style)
+        a2.plot(x, 100 * g["rejectionRate"], **style)
+        a3.plot(x, g["wait_median"] / 60, **style)
+        a3.plot(x, g["wait_p90"] / 60, linestyle="--", **{**style, "marker": None})
     unit = "hour" if bin_s == 3600 else f"{bin_s / 60:g} min"
-    a1.set_ylabel(f"trips per {unit}\n(mean per run)")
-    a1.set_title(title or "Demand, service and waiting over the day")
-    a1.legend(fontsize="x-small", loc="upper left", bbox_to_anchor=(1.01, 1))
+    a1.set_ylabel(f"trips per {unit}\n(bars: requests; lines:\nserved, mean per run)")
+    fig.suptitle(title or "Demand, service and waiting over the day")  # above the legend
     a2.set_ylabel("rejected (%)\n(at once or expired)")
     a2.set_ylim(bottom=0)
-    a2.legend(fontsize="x-small", loc="upper left", bbox_to_anchor=(1.01, 1))
-    a3.set_ylabel("wait, release → pickup\n(min)")
+    a3.set_ylabel("wait, release → pickup (min)\nsolid: median, dashed: p90")
     a3.set_ylim(bottom=0)
-    a3.legend(fontsize="x-small", loc="upper left", bbox_to_anchor=(1.01, 1))
+    # one legend for the three panels (a series has the same colour and marker in each), in
+    # two columns past 20 series so that a whole study's series fit beside the panels
+    h, lab = a1.get_legend_handles_labels()
+    fig.legend(h, lab, loc="outside right center", fontsize="x-small",
+               ncols=1 if len(lab) <= 20 else 2, frameon=False)
     a3.set_xlabel("time of release (h)")
     for ax in (a1, a2, a3):
         ax.grid(True, alpha=0.3)
@@ -251,16 +252,17 @@ def hourly(customers: pd.DataFrame, path: Path, *, bin_s: float, runs: dict,
 
 
 def fleet_state(fleet: pd.DataFrame, path: Path, *, bin_s: float, title: str = "",
-                max_panels: int = 12) -> Path:
+                max_panels: int = 40) -> Path:
     """Stacked areas of the mean number of vehicles in each fleet state per time bin, one panel
     per series (:func:`series`; at most ``max_panels``, the first ones in its order, the title
     says how many are left out). ``fleet``: rows of :func:`analysis.metrics.hourly_fleet` with
     ``t_h``."""
     every = series(fleet)
     groups = every[:max_panels]
-    cols = 1 if len(groups) == 1 else 2 if len(groups) <= 8 else 3
-    rows = max(1, math.ceil(len(groups) / cols))
-    fig = _figure({1: 8, 2: 10, 3: 13}[cols], 1.4 + 2.4 * rows)
+    k = len(groups)
+    cols = 1 if k == 1 else 2 if k <= 8 else 3 if k <= 18 else 4
+    rows = max(1, math.ceil(k / cols))
+    fig = _figure({1: 8, 2: 10, 3: 13, 4: 16}[cols], 1.4 + (2.4 if cols <= 2 else 2.1) * rows)
     axes = np.atleast_1d(fig.subplots(rows, cols, sharex=True, sharey=True, squeeze=False)).ravel()
     width = bin_s / 3600
     for ax, (key, label, g) in zip(axes, groups):
@@ -294,9 +296,9 @@ def fleet_state(fleet: pd.DataFrame, path: Path, *, bin_s: float, title: str = "
 def wait_by_group(waits: pd.DataFrame, path: Path, title: str = "") -> Path:
     """Left: ECDF of the wait (release -> pickup, minutes) per series (:func:`series`);
     right: box plots (quartiles, whiskers at 1.5 IQR, no fliers) per series."""
-    fig = _figure(10.5, 4.6)
-    left, right = fig.subplots(1, 2, width_ratios=[1.2, 1])
     groups = series(waits)
+    fig = _figure(10.5 if len(groups) <= 10 else 13, max(4.6, 1.4 + 0.24 * len(groups)))
+    left, right = fig.subplots(1, 2, width_ratios=[1.2, 1])
     labels = [label for _, label, _ in groups]
     colours = _colours(labels)
     data = []
@@ -313,9 +315,10 @@ def wait_by_group(waits: pd.DataFrame, path: Path, title: str = "") -> Path:
     left.set_ylim(0, 1.01)
     left.set_xlim(left=0)
     left.grid(True, alpha=0.3)
-    if groups:
+    if groups and len(groups) <= 10:
         left.legend(fontsize="x-small", loc="lower right")
-    left.set_title("Wait distribution (ECDF)")
+    left.set_title("Wait distribution (ECDF)" if len(groups) <= 10 else
+                   "Wait distribution (ECDF; colours as in the box plot)")
     keep = [i for i, d in enumerate(data) if len(d)]
     if keep:
         bp = right.boxplot([data[i] for i in keep], orientation="horizontal", patch_artist=True,

@@ -173,7 +173,8 @@ def study_table(out: Path) -> pd.DataFrame:
     for key, label, g in series(taxi):
         r = g.iloc[0]
         rows.append({
-            "label": label, "allocator": r["allocator"], "N": int(r["n_agents"]),
+            "label": re.sub(r" N=\d+", "", label),  # N has its own column
+            "allocator": r["allocator"], "N": int(r["n_agents"]),
             "window": M.variant_name(r["scenario"]), "reposition": r["reposition"],
             "runs": int(r["runs"]), "served": r["service_rate"], "rejected": r["rejectionRate"],
             "wait_mean": r["wait_average"], "wait_p90": r["wait_p90"],
@@ -241,10 +242,14 @@ def findings(t: pd.DataFrame) -> str:
         if len(other):
             nxt = other.iloc[0]
             d = nxt["wait_mean"] - best["wait_mean"]
-            s += (f", {d:.0f} s ({100 * d / nxt['wait_mean']:.0f} %) below the best other "
-                  f"allocator, {nxt['label']} ({nxt['wait_mean']:.0f} s)")
+            if d < 0.5:  # e.g. immediate dispatch: one request at a time, the same choice
+                s += f", tied with {nxt['label']} ({nxt['wait_mean']:.0f} s)"
+            else:
+                s += (f", {d:.0f} s ({100 * d / nxt['wait_mean']:.0f} %) below the best "
+                      f"other allocator, {nxt['label']} ({nxt['wait_mean']:.0f} s)")
         worst = g.iloc[-1]
-        s += f"; highest {worst['label']} ({worst['wait_mean']:.0f} s)."
+        s += (f"; highest {worst['label']} ({worst['wait_mean']:.0f} s)." if len(g) > 1
+              else ".")
         out.append(s)
     windows = [w for w in t["window"].unique() if w != "imm"]
     if "imm" in set(t["window"]) and windows:
