@@ -165,11 +165,11 @@ def _render_trips(summaries: list[dict], console, repositioner: str | None) -> N
     runs = max((len(g) for g in groups.values()), default=0)
     title = ("Trips, mean over {runs} seed(s): served and rejected (at once or expired) share "
              "of the trips, wait from release to pickup (s), share of km driven empty, km "
-             "driven, wall seconds deciding").format(runs=runs)
+             "driven (thousands), wall seconds deciding").format(runs=runs)
     if repositioner is not None:
         km = fmean(s.get("reposition_distance", 0.0) for s in summaries) / 1000
         title = f"Repositioner {repositioner!r} ({km:.0f} km repositioning per run). " + title
-    t = _new_table(title, ["allocator", "N", "trips", "served", "rej.", "wait", "empty", "km",
+    t = _new_table(title, ["allocator", "N", "trips", "served", "rej.", "wait", "empty", "k km",
                            "dec. s"])
     agg = {}
     for key, rows in groups.items():
@@ -181,13 +181,13 @@ def _render_trips(summaries: list[dict], console, repositioner: str | None) -> N
                               for r in rows),
             "wait": _mean(rows, "wait_time_mean"),
             "empty": fmean(_ratio(r["empty_distance"], r["distance"]) for r in rows),
-            "km": _mean(rows, "distance") / 1000,
+            "km": _mean(rows, "distance") / 1e6,  # thousands of km: a city day fits 80 columns
             "dec": _mean(rows, "alloc_seconds"),
         }
     for a, n, r, last in _grouped_rows(agg):
         t.add_row(a, str(n), _f(r["trips"], 0), _f(r["served"], 1, 100, "%"),
                   _f(r["rejected"], 1, 100, "%"), _f(r["wait"]), _f(r["empty"], 0, 100, "%"),
-                  _f(r["km"], 0), _f(r["dec"], 2), end_section=last)
+                  _f(r["km"], 1), _f(r["dec"], 2), end_section=last)
     console.print(t)
 
 
