@@ -192,6 +192,29 @@ def _perturb_global_rng(k: int) -> None:
         torch.manual_seed(k)
 
 
+def _replay(label: str, call: Callable[[], Any], first: Any, differs: list[str],
+            global_rng: list[str], *, same: Callable[[Any, Any], bool] = lambda a, b: a == b,
+            show: Callable[[Any], str] = str, given: str = "input") -> None:
+    """Replay a check: ``call()`` (a fresh plugin on a fresh copy of the ``given`` input) must
+    give ``first`` again, and again under another global random state. A call that raises or
+    answers otherwise is appended to ``differs``; one whose answer follows the global random
+    state, to ``global_rng``."""
+    try:
+        _perturb_global_rng(1)
+        again = call()
+        _perturb_global_rng(987654)
+        other = call()
+    except Exception as e:  # noqa: BLE001 - any exception is a failure of the plugin
+        differs.append(f"{label}: a second call raised {_err(e)}")
+        return
+    if not same(again, first):
+        differs.append(f"{label}: the same {given} gave {show(again)}, then {show(first)}")
+    elif not same(other, first):
+        global_rng.append(f"{label}: the answer changed with the global random state "
+                          f"({show(first)} vs {show(other)}); draw only from the seeded "
+                          f"generator it is given")
+
+
 # ----------------------------------------------------------------------------- allocators
 
 
@@ -229,22 +252,9 @@ def check_allocator(cls, *, seed: int = 0, **params: Any) -> Report:
             stuck.append(f"{label}: no pair assigned though some pair is finite")
         answers[label] = _answer(allocation)
     for label, build in problems:
-        if label not in answers:
-            continue
-        try:
-            _perturb_global_rng(1)
-            again = _answer(cls(**params).allocate(build()))
-            _perturb_global_rng(987654)
-            other = _answer(cls(**params).allocate(build()))
-        except Exception as e:  # noqa: BLE001
-            differs.append(f"{label}: a second call raised {_err(e)}")
-            continue
-        if again != answers[label]:
-            differs.append(f"{label}: the same problem and seed gave {again[0]}, "
-                           f"then {answers[label][0]}")
-        elif other != answers[label]:
-            global_rng.append(f"{label}: the answer changed with the global random state "
-                              f"({answers[label][0]} vs {other[0]}); draw only from problem.rng")
+        if label in answers:
+            _replay(label, lambda: _answer(cls(**params).allocate(build())), answers[label],
+                    differs, global_rng, show=lambda a: str(a[0]), given="problem and seed")
     n = len(problems)
     report.add("valid", invalid, f"{n} problems, every answer accepted")
     report.add("progress", stuck, "assigns a pair whenever one is finite")
@@ -360,18 +370,9 @@ def _check_planner_on(report: Report, cls, space, seed: int, params: dict, tag: 
                 if not path or path[-1] != t.loc or (space.kind == "voxel" and path[0] != start):
                     bad_plans.append(f"{label}: agent {a.id} -> task {t.id}: cost {c[i, j]:.3g}"
                                      f" but plan gave {path if not path else (path[0], path[-1])}")
-        try:
-            _perturb_global_rng(1)
-            again = _costs(cls(space, **params), agents, tasks)
-            _perturb_global_rng(987654)
-            other = _costs(cls(space, **params), agents, tasks)
-        except Exception as e:  # noqa: BLE001
-            differs.append(f"{label}: a second call raised {_err(e)}")
-            continue
-        if not np.array_equal(again, c):
-            differs.append(f"{label}: the same queries gave other costs")
-        elif not np.array_equal(other, c):
-            global_rng.append(f"{label}: costs changed with the global random state")
+        _replay(label, lambda: _costs(cls(space, **params), agents, tasks), c, differs,
+                global_rng, same=np.array_equal, show=lambda c: f"costs {c.ravel()[:4]}",
+                given="queries")
     mutated = [] if occupied is None or np.array_equal(occupied, grid.occupied) else \
         ["the world's grid changed"]
     report.add("costs" + tag, bad_costs, f"{len(shapes)} query sets, shapes and values valid")
@@ -489,22 +490,9 @@ def check_repositioner(cls, space=None, *, seed: int = 0, **params: Any) -> Repo
             continue
         answers[label] = dict(moves)
     for label, build in cases:
-        if label not in answers:
-            continue
-        try:
-            _perturb_global_rng(1)
-            again = dict(cls(**params).reposition(build()))
-            _perturb_global_rng(987654)
-            other = dict(cls(**params).reposition(build()))
-        except Exception as e:  # noqa: BLE001
-            differs.append(f"{label}: a second call raised {_err(e)}")
-            continue
-        if again != answers[label]:
-            differs.append(f"{label}: the same view and seed gave {again}, then "
-                           f"{answers[label]}")
-        elif other != answers[label]:
-            global_rng.append(f"{label}: the moves changed with the global random state; "
-                              f"draw only from view.rng")
+        if label in answers:
+            _replay(label, lambda: dict(cls(**params).reposition(build())), answers[label],
+                    differs, global_rng, given="view and seed")
     report.add("valid", invalid, f"{len(cases)} views, every answer a mapping of idle vehicle "
                                  f"ids to nodes")
     report.add("no-mutation", mutated, "no view changed")
