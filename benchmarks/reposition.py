@@ -62,6 +62,10 @@ def write_scenario(d: Path, seed: int, args, policy: str) -> Path:
     (d / "fleet.csv").write_text("vehicle_id,node\n"
                                  + "".join(f"{i},{n}\n" for i, n in enumerate(fleet)))
     path = d / f"{policy}.toml"
+    # the policy's own parameters only where it takes them (`stay` takes none)
+    params = (f"interval = {args.interval!r}\nhorizon = {args.horizon!r}\n[reposition.demand]\n"
+              f"zone = {args.zone!r}\nmax_moves = {args.max_moves}\n"
+              if policy == "demand" else "")
     path.write_text(f'''name = "hotspot_{seed}"
 seed = {seed}
 duration = 9000.0
@@ -80,30 +84,7 @@ max_wait = 600.0
 allocator = "{args.allocator}"
 [reposition]
 policy = "{policy}"
-interval = {args.interval!r}
-horizon = {args.horizon!r}
-[reposition.demand]
-zone = {args.zone!r}
-max_moves = {args.max_moves}
-''' if policy == "demand" else f'''name = "hotspot_{seed}"
-seed = {seed}
-duration = 9000.0
-[world]
-network = "manhattan"
-blocks = [{COLUMNS}, {ROWS}]
-block = 200.0
-speed = 10.0
-[fleet]
-start = "fleet.csv"
-[tasks]
-source = "trace"
-trace = "trips.csv"
-max_wait = 600.0
-[dispatch]
-allocator = "{args.allocator}"
-[reposition]
-policy = "{policy}"
-''')
+{params}''')
     return path
 
 
