@@ -243,7 +243,8 @@ def _run_view(args, console=None) -> int:
         model.load_state_dict(load_checkpoint(args.init)[0].state_dict())
 
     def make(m):
-        return MagnnetAllocator.with_models(match, m, view_confidence=cfg.confidence,
+        return MagnnetAllocator.with_models(match, m, view_hops=2,  # view.pt: 2-hop views only
+                                            view_confidence=cfg.confidence,
                                             view_patience=cfg.patience)
 
     def validate(m):

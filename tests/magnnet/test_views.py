@@ -145,7 +145,8 @@ def test_dagger_lowers_the_loss_on_a_fixed_seed():
                      ranges=(20.0,), loss_share=0.5, seed=0)
 
     def make(m):
-        return mod.MagnnetAllocator.with_models(match, m, view_confidence=cfg.confidence,
+        return mod.MagnnetAllocator.with_models(match, m, view_hops=2,
+                                                view_confidence=cfg.confidence,
                                                 view_patience=cfg.patience)
 
     p = sub_problem(pool, 0, 8, 20.0, 0.0, np.random.default_rng(0))
