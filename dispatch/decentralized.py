@@ -33,8 +33,14 @@ Communication model (see :mod:`dispatch.comms`)
       it is addressed to the arbiter) + relay-only broadcasts (only by agents with neighbours).
       On a complete graph without loss every agent hears every request, nobody relays, and the
       rounds, requests and messages are exactly those of a global-knowledge loop.
+    * **Claims (optional).** An allocator whose :meth:`~DecentralizedAllocator.claim_steps` is
+      positive precedes each round's requests by that many claim exchanges (see
+      :func:`run_rounds`): intended requests are broadcast and relayed, a dearer claim on a task
+      yields before it reaches the arbiter. Each exchange is one broadcast per agent with news
+      (counted in ``messages``) and one hop. The default is none: nothing else changes.
     * **Latency.** A round is a request hop and an answer hop: ``hops = 2 * rounds`` (rounds in
-      which someone requested or waited); the dispatcher turns that into simulated time.
+      which someone requested or waited), plus one per claim exchange; the dispatcher turns that
+      into simulated time.
     * **Compute time.** Each call of ``choose`` is timed and its seconds shared evenly among the
       agents it decided for: ``Allocation.agent_seconds``.
 """
@@ -112,14 +118,16 @@ def run_rounds(
             agents that are not deciding are ignored.
         known: optional ``(N, M)`` boolean "agent knows this task is taken" to start from.
         start_round: number of the first round in the request log (rounds already spent).
-        claim_steps: before each round's requests, up to this many *claim exchanges*: every
-            agent about to request (that has neighbours) broadcasts its intended task, one
-            message and one hop per exchange (``loss`` applies); an agent that hears a neighbour
-            claim the same task at a smaller cost (ties to the lower index: the arbiter's own
-            rule, so the loser would have lost) yields and is asked again (``choose``) with the
-            tasks it heard claimed by cheaper neighbours removed from what it believes open.
-            Exchanges stop early when nobody yields. Information travels one hop per exchange,
-            so a request depends on what ``choose`` sees plus ``claim_steps`` hops.
+        claim_steps: before each round's requests, up to this many *claim exchanges*. Each
+            agent keeps, per task, the cheapest claim (intended request) it knows of: its own
+            and those its neighbours broadcast. In an exchange every agent whose table changed
+            since its last broadcast (and that has neighbours) broadcasts it: one message each,
+            one hop per exchange, ``loss`` applies. A claimant that learns of a cheaper claim on
+            its task (ties to the lower index: the arbiter's own rule, so it would have lost)
+            yields and is asked again (``choose``) with the tasks it knows claimed cheaper
+            removed from what it believes open (nothing left: it waits). Exchanges stop when
+            nobody has news. Claims travel one hop per exchange, so a request depends on what
+            ``choose`` sees plus ``claim_steps`` hops.
     """
     n, m = problem.cost.shape
     feasible = problem.feasible

@@ -11,8 +11,23 @@ Variants (``[dispatch.allocator_params] variant = ...``):
     imitation of the optimal assignment; any ``N`` and ``M``. An agent that hears the whole
     fleet scores the whole problem with ``match.pt`` and requests its best task when the pair
     is mutual best and confident (conflict-free by construction, since every such agent shares
-    the one view). An agent that does not hear the whole fleet acts on its two-hop view with
-    the view model ``view.pt`` (:mod:`allocators.magnnet.views`: the match network plus the
+    the one view).
+
+    Under a limited range each decision starts with ``view_hops`` (default 6) flooding steps
+    (:func:`flood`): every agent with news broadcasts what it knows (its own and the others'
+    cost vectors and neighbour lists), so an agent learns everyone within ``view_hops`` hops.
+    One that then sees its whole component (no member it knows of has a neighbour outside)
+    knows what every other agent of the component knows in round 0 (the same agents, every
+    task open), plays the match model's decision rounds on the component (:func:`match.plan`)
+    and requests its own part: the agents of a component request one conflict-free plan, and
+    conflicts can only come from another component. The flooding is counted in ``messages``
+    (one per agent with news and neighbours per step) and ``hops`` (``view_hops``); the
+    two-hop view gathering of the rule below was never counted, as before.
+    ``view_hops = 2`` turns this off (the rule of the previous version, ``magnnet:view2`` in
+    ``benchmarks/paper_tables.py``).
+
+    An agent that does not know its whole component (and every agent after round 0) acts on its
+    two-hop view with the view model ``view.pt`` (:mod:`allocators.magnnet.views`: the match network plus the
     view's hop, status and size features and "not mine / outside my view" heads, trained
     CTDE with DAgger for partial views); it waits while unsure and must request from round
     ``view_patience`` on. ``partial = "match"`` runs ``match.pt`` on partial views instead (what
@@ -33,7 +48,10 @@ shipped one of the variant: a match model for ``match``, a paper model of one si
 ``view_confidence`` (default 0.5: the same for the view model), ``patience`` (default 3: the
 round from which the match model on partial views, ``partial = "match"``, requests regardless),
 ``view_patience`` (default 12: the round from which the view model requests its part of its
-view's assignment, and from twice that its best task regardless).
+view's assignment, and from twice that its best task regardless), ``view_hops`` (default 6,
+at least 2: see above), ``claims`` (default 0: claim exchanges before each round's requests,
+:func:`dispatch.decentralized.run_rounds`; measured: they raise the conflict-free share of the
+two-hop rule but not its gap, and add nothing once the views are flooded).
 
 Every model is read from disk and run once (warm-up) in the constructor, so a decision never
 includes imports or file reads. Loaded models are cached per file for the process;
@@ -221,11 +239,15 @@ class MagnnetAllocator(DecentralizedAllocator):
 
     def describe(self) -> dict[str, str]:
         """What ran: ``model``, ``variant`` and ``checkpoint`` (``file@sha256[:16]`` of every
-        file this allocator loaded, comma-separated)."""
+        file this allocator loaded, comma-separated); for ``match`` also the decision rule
+        under limited range (``view_hops``, ``claims``)."""
         model = {"match": "magnnet-match" + ("+view" if self.partial == "view" else ""),
                  "paper": "magnnet-paper", "paper_nb": "magnnet-paper+nb"}[self.variant]
-        return {"model": model, "variant": self.variant,
-                "checkpoint": ",".join(f"{k}@{v}" for k, v in sorted(self.files.items()))}
+        out = {"model": model, "variant": self.variant,
+               "checkpoint": ",".join(f"{k}@{v}" for k, v in sorted(self.files.items()))}
+        if self.variant == "match":
+            out.update(view_hops=str(self.view_hops), claims=str(self.claims))
+        return out
 
     # ------------------------------------------------------------------ deciding
     def claim_steps(self, problem: AllocationProblem) -> int:
