@@ -259,7 +259,7 @@ def _exchange_claims(problem, choose, channel, has_nb, deciding, believed_open, 
         got = channel.deliver(senders)
         messages += int(senders.size)
         hops += 1
-        table_c, table_a = send_c, send_a
+        table_c, table_a = send_c.copy(), send_a.copy()  # what is sent stays as it was sent
         for k in senders.tolist():
             rec = np.flatnonzero(got[k])
             if rec.size:

@@ -363,3 +363,24 @@ def test_claims_travel_one_hop_per_exchange_and_the_dearer_claim_yields():
     assert two.messages == 3 + 3 + 3 and two.hops == 2 + 2
     none = _Cheapest(0).allocate(p)
     assert none == run_rounds(p, _Cheapest(0).choose)
+
+
+@pytest.mark.parametrize("steps", [1, 2, 3])
+@pytest.mark.parametrize("d", [1, 2, 3, 4])
+def test_a_claim_reaches_exactly_as_many_hops_as_there_are_exchanges(steps, d):
+    """Line 0-1-...-d: agent 0 claims task 0 at cost 3, agent d at cost 5 (the agents between
+    claim their own cheap tasks). Agent d yields in round 0 exactly when d <= steps, in both
+    directions of the line (news never travels two hops in one exchange)."""
+    n = d + 1
+    cost = np.full((n, n), 9.0)
+    for k in range(1, d):
+        cost[k, k] = 1.0
+    cost[0, 0], cost[d, 0], cost[d, d] = 3.0, 5.0, 6.0
+    line = np.eye(n, dtype=bool) | np.eye(n, k=1, dtype=bool) | np.eye(n, k=-1, dtype=bool)
+    for flip in (False, True):
+        order = np.arange(n)[::-1] if flip else np.arange(n)
+        p = dataclasses.replace(make_problem(cost[np.ix_(order, np.arange(n))]), comm=line)
+        a = _Cheapest(steps).allocate(p)
+        far = 100 + int(np.flatnonzero(order == d)[0])
+        first = {q.agent_id: q.task_id for q in a.requests if q.round == 0}
+        assert (first[far] == 500) == (d > steps)

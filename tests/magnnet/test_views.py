@@ -305,12 +305,13 @@ def test_agents_that_know_their_component_request_its_plan():
     assert six.hops - 2 * six.rounds == 6 and two.hops == 2 * two.rounds
 
 
+@pytest.mark.parametrize("end", [0, 11])
 @pytest.mark.parametrize("view_hops,claims", [(2, 0), (3, 0), (2, 2), (3, 1)])
-def test_requests_ignore_agents_beyond_view_hops_plus_claims(view_hops, claims):
-    """Line 0-1-...-11 (no agent knows its whole component): agent 0's round-0 request is the
-    same whatever agents more than ``view_hops + claims`` hops away look like: views reach two
-    hops (the view model; the flooded views only tell an agent whether it knows its
-    component), claims travel one hop per exchange."""
+def test_requests_ignore_agents_beyond_view_hops_plus_claims(view_hops, claims, end):
+    """Line 0-1-...-11 (no agent knows its whole component): the round-0 request of an agent
+    at either end is the same whatever agents more than ``view_hops + claims`` hops away look
+    like: views reach two hops (the view model; the flooded views only tell an agent whether
+    it knows its component), claims travel one hop per exchange, in either direction."""
     match, view = _models(3)
     alloc = mod.MagnnetAllocator.with_models(match, view, view_confidence=0.0,
                                              view_hops=view_hops, claims=claims)
@@ -318,12 +319,13 @@ def test_requests_ignore_agents_beyond_view_hops_plus_claims(view_hops, claims):
     rng = np.random.default_rng(4)
     cost = rng.uniform(1, 20, (n, n))
     p = dataclasses.replace(make_problem(cost), comm=_line(n))
-    base = _round0(alloc, p).get(0)
+    base = _round0(alloc, p).get(end)
     for _ in range(4):
         c = cost.copy()
         far = np.arange(view_hops + claims + 1, n)
+        far = far if end == 0 else n - 1 - far
         c[far] = rng.uniform(0.1, 30, (far.size, n))
-        assert _round0(alloc, dataclasses.replace(p, cost=c)).get(0) == base
+        assert _round0(alloc, dataclasses.replace(p, cost=c)).get(end) == base
 
 
 @pytest.mark.parametrize("params,msg", [({"view_hops": 1}, "view_hops must be an integer >= 2"),
