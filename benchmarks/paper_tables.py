@@ -9,16 +9,19 @@ graph by default, or the graph of ``--comm-range`` metres between the agents' po
 
 Printed per N and allocator: mean total travel cost (Table I), mean gap to Hungarian, share of
 instances fully assigned, conflict-free success (Table III: tasks assigned to exactly one agent
-without ever being in conflict, over all tasks), mean decision rounds and messages, and the
+without ever being in conflict, over all tasks), mean decision rounds, messages and sequential
+message hops (``magnnet``'s include its view flooding), and the
 per-agent critical path of compute (ms; agents think in parallel on their own hardware; for
 centralized methods the whole call). Allocators are built (models loaded, warmed up) before
 any timing, and the model cache is cleared first so every process starts cold the same way.
 
 Allocators (``name`` or ``name:variant``): ``hungarian`` (reference), ``local_hungarian``
-(each agent solves its two-hop view), ``magnnet`` (default: the match model on full views,
-the DAgger-trained view model on partial views; see :mod:`allocators.magnnet.allocator`),
-``magnnet:match_only`` (the match model on partial views too: what ``magnnet`` did before the
-view model; an ablation), ``magnnet:paper`` / ``magnnet:paper_nb`` (the paper's network, per
+(each agent solves its two-hop view), ``local_hungarian:component`` (each agent solves its
+component; shown as ``local_hung:comp``), ``magnnet`` (default: views flooded to 6 hops,
+component plans of the match model, the DAgger-trained view model otherwise; see
+:mod:`allocators.magnnet.allocator`), ``magnnet:view2`` (``view_hops = 2``: the rule before
+the flooding), ``magnnet:match_only`` (the match model on two-hop partial views too: what
+``magnnet`` did before the view model; an ablation), ``magnnet:paper`` / ``magnnet:paper_nb`` (the paper's network, per
 N = M; left out where no checkpoint ships), ``auction`` (CBBA), ``greedy``, ``random``.
 
     .venv/bin/python benchmarks/paper_tables.py [--count 100] [--sizes 4 8 12 20]
