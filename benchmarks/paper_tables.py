@@ -9,16 +9,19 @@ graph by default, or the graph of ``--comm-range`` metres between the agents' po
 
 Printed per N and allocator: mean total travel cost (Table I), mean gap to Hungarian, share of
 instances fully assigned, conflict-free success (Table III: tasks assigned to exactly one agent
-without ever being in conflict, over all tasks), mean decision rounds and messages, and the
+without ever being in conflict, over all tasks), mean decision rounds, messages and sequential
+message hops (``magnnet``'s include its view flooding), and the
 per-agent critical path of compute (ms; agents think in parallel on their own hardware; for
 centralized methods the whole call). Allocators are built (models loaded, warmed up) before
 any timing, and the model cache is cleared first so every process starts cold the same way.
 
 Allocators (``name`` or ``name:variant``): ``hungarian`` (reference), ``local_hungarian``
-(each agent solves its two-hop view), ``magnnet`` (default: the match model on full views,
-the DAgger-trained view model on partial views; see :mod:`allocators.magnnet.allocator`),
-``magnnet:match_only`` (the match model on partial views too: what ``magnnet`` did before the
-view model; an ablation), ``magnnet:paper`` / ``magnnet:paper_nb`` (the paper's network, per
+(each agent solves its two-hop view), ``local_hungarian:component`` (each agent solves its
+component; shown as ``local_hung:comp``), ``magnnet`` (default: views flooded to 6 hops,
+component plans of the match model, the DAgger-trained view model otherwise; see
+:mod:`allocators.magnnet.allocator`), ``magnnet:view2`` (``view_hops = 2``: the rule before
+the flooding), ``magnnet:match_only`` (the match model on two-hop partial views too: what
+``magnnet`` did before the view model; an ablation), ``magnnet:paper`` / ``magnnet:paper_nb`` (the paper's network, per
 N = M; left out where no checkpoint ships), ``auction`` (CBBA), ``greedy``, ``random``.
 
     .venv/bin/python benchmarks/paper_tables.py [--count 100] [--sizes 4 8 12 20]
@@ -37,10 +40,13 @@ from dispatch.registry import load
 
 PAPER = {  # Table I and III of the paper: (MAGNNET cost, gap %, success %)
     4: (20.3, 0.0, 100), 8: (61.2, 1.5, 100), 12: (134.7, 2.1, 90), 20: (321.5, 26.4, 80)}
-SMALL = ["hungarian", "local_hungarian", "magnnet", "magnnet:match_only", "magnnet:paper",
-         "magnnet:paper_nb", "auction", "greedy", "random"]
-BIG = ["hungarian", "local_hungarian", "magnnet", "magnnet:match_only", "auction", "greedy",
-       "random"]
+SMALL = ["hungarian", "local_hungarian", "local_hungarian:component", "magnnet",
+         "magnnet:view2", "magnnet:match_only", "magnnet:paper", "magnnet:paper_nb", "auction",
+         "greedy", "random"]
+BIG = ["hungarian", "local_hungarian", "local_hungarian:component", "magnnet", "magnnet:view2",
+       "magnnet:match_only", "auction", "greedy", "random"]
+#: Shorter labels where a table name does not fit the method column.
+LABEL = {"local_hungarian:component": "local_hung:comp"}
 
 
 def problem_of(pool, k: int, seed: int, comm_range: float | None = None,
@@ -65,10 +71,14 @@ def build(name: str, n: int):
     """The allocator of a table name, or None (printed) where a paper checkpoint is missing."""
     plugin, _, variant = name.partition(":")
     cls = load("allocator", plugin)
+    if plugin == "local_hungarian" and variant:
+        return cls(view=variant)
     if plugin != "magnnet" or not variant:
         return cls()
     if variant == "match_only":
-        return cls(partial="match")
+        return cls(partial="match", view_hops=2)
+    if variant == "view2":
+        return cls(view_hops=2)
     from allocators.magnnet.allocator import shipped
 
     if not shipped(variant, n).exists():
@@ -83,7 +93,8 @@ def evaluate(pool, names, comm_range: float | None = None, loss: float = 0.0) ->
 
     clear_model_cache()
     allocs = {name: a for name in names if (a := build(name, n)) is not None}
-    keys = ("cost", "gap", "complete", "success", "rounds", "messages", "time", "agent_time")
+    keys = ("cost", "gap", "complete", "success", "rounds", "messages", "hops", "time",
+            "agent_time")
     res = {name: {k: [] for k in keys} for name in allocs}
     for k in range(len(pool)):
         ref = None
@@ -104,6 +115,7 @@ def evaluate(pool, names, comm_range: float | None = None, loss: float = 0.0) ->
             r["success"].append(ok / p.n_tasks)
             r["rounds"].append(a.rounds)
             r["messages"].append(a.messages)
+            r["hops"].append(a.hops)
             r["time"].append(dt)
             r["agent_time"].append(max(a.agent_seconds) if a.agent_seconds else dt)
     return {name: {k: float(np.mean(v)) for k, v in r.items()} for name, r in res.items()}
@@ -137,18 +149,19 @@ def main(argv=None) -> int:
     print(f"communication range: {args.comm_range or 'unlimited'} m, loss {args.loss:g}")
     print("cost: mean total travel (s); gap to Hungarian; cf: conflict-free success; "
           "all: instances fully assigned; ms: per-agent compute critical path")
-    hdr = (f"{'N':>3} {'method':<18} {'cost':>8} {'gap %':>6} {'cf %':>6} {'all %':>6} "
-           f"{'rounds':>6} {'msgs':>7} {'ms':>8}")
+    hdr = (f"{'N':>3} {'method':<18} {'cost':>7} {'gap %':>6} {'cf %':>6} {'all %':>6} "
+           f"{'rounds':>6} {'msgs':>6} {'hops':>5} {'ms':>7}")
     print(hdr)
     print("-" * len(hdr))
     for n, count, res in rows:
         for name, r in res.items():
-            print(f"{n:>3} {name:<18} {r['cost']:>8.2f} {100 * r['gap']:>6.2f} "
-                  f"{100 * r['success']:>6.1f} {100 * r['complete']:>6.1f} {r['rounds']:>6.1f} "
-                  f"{r['messages']:>7.1f} {1e3 * r['agent_time']:>8.3f}")
+            print(f"{n:>3} {LABEL.get(name, name):<18} {r['cost']:>7.1f} "
+                  f"{100 * r['gap']:>6.2f} {100 * r['success']:>6.1f} "
+                  f"{100 * r['complete']:>6.1f} {r['rounds']:>6.1f} {r['messages']:>6.0f} "
+                  f"{r['hops']:>5.1f} {1e3 * r['agent_time']:>7.2f}")
         if n in PAPER and args.comm_range is None and not args.loss:
             c, g, s = PAPER[n]
-            print(f"{'':>3} {'paper MAGNNET':<18} {c:>8.1f} {g:>6.1f} {s:>6.1f}")
+            print(f"{'':>3} {'paper MAGNNET':<18} {c:>7.1f} {g:>6.1f} {s:>6.1f}")
         print(f"{'':>3} ({count} instances)")
     return 0
 

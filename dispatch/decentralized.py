@@ -33,8 +33,14 @@ Communication model (see :mod:`dispatch.comms`)
       it is addressed to the arbiter) + relay-only broadcasts (only by agents with neighbours).
       On a complete graph without loss every agent hears every request, nobody relays, and the
       rounds, requests and messages are exactly those of a global-knowledge loop.
+    * **Claims (optional).** An allocator whose :meth:`~DecentralizedAllocator.claim_steps` is
+      positive precedes each round's requests by that many claim exchanges (see
+      :func:`run_rounds`): intended requests are broadcast and relayed, a dearer claim on a task
+      yields before it reaches the arbiter. Each exchange is one broadcast per agent with news
+      (counted in ``messages``) and one hop. The default is none: nothing else changes.
     * **Latency.** A round is a request hop and an answer hop: ``hops = 2 * rounds`` (rounds in
-      which someone requested or waited); the dispatcher turns that into simulated time.
+      which someone requested or waited), plus one per claim exchange; the dispatcher turns that
+      into simulated time.
     * **Compute time.** Each call of ``choose`` is timed and its seconds shared evenly among the
       agents it decided for: ``Allocation.agent_seconds``.
 """
@@ -84,8 +90,13 @@ class DecentralizedAllocator(Allocator):
             and feasible for that agent, ``-1`` to reject, or :data:`WAIT`.
         """
 
+    def claim_steps(self, problem: AllocationProblem) -> int:
+        """How many claim exchanges (see :func:`run_rounds`, ``claim_steps``) precede each
+        round's requests; 0 (the default): none, agents request what ``choose`` said."""
+        return 0
+
     def allocate(self, problem: AllocationProblem) -> Allocation:
-        return run_rounds(problem, self.choose)
+        return run_rounds(problem, self.choose, claim_steps=self.claim_steps(problem))
 
 
 def run_rounds(
@@ -95,6 +106,7 @@ def run_rounds(
     first: np.ndarray | None = None,
     known: np.ndarray | None = None,
     start_round: int = 0,
+    claim_steps: int = 0,
 ) -> Allocation:
     """Run decision rounds with the conflict rule and the communication model.
 
@@ -106,6 +118,16 @@ def run_rounds(
             agents that are not deciding are ignored.
         known: optional ``(N, M)`` boolean "agent knows this task is taken" to start from.
         start_round: number of the first round in the request log (rounds already spent).
+        claim_steps: before each round's requests, up to this many *claim exchanges*. Each
+            agent keeps, per task, the cheapest claim (intended request) it knows of: its own
+            and those its neighbours broadcast. In an exchange every agent whose table changed
+            since its last broadcast (and that has neighbours) broadcasts it: one message each,
+            one hop per exchange, ``loss`` applies. A claimant that learns of a cheaper claim on
+            its task (ties to the lower index: the arbiter's own rule, so it would have lost)
+            yields and is asked again (``choose``) with the tasks it knows claimed cheaper
+            removed from what it believes open (nothing left: it waits). Exchanges stop when
+            nobody has news. Claims travel one hop per exchange, so a request depends on what
+            ``choose`` sees plus ``claim_steps`` hops.
     """
     n, m = problem.cost.shape
     feasible = problem.feasible
@@ -129,6 +151,12 @@ def run_rounds(
         else:
             choice = _choose_local(problem, choose, deciding, believed_open, start_round + r,
                                    seconds)
+        if claim_steps and not (r == 0 and first is not None):
+            sent, steps = _exchange_claims(problem, choose, channel, has_nb, deciding,
+                                           believed_open, choice, start_round + r, seconds,
+                                           claim_steps)
+            messages += sent
+            hops += steps
         rounds = r + 1
         asked = choice >= 0
         if not asked.any() and not (choice == WAIT).any():
@@ -198,6 +226,69 @@ def _choose_local(problem, choose, deciding, believed_open, round_, seconds) -> 
             )
         choice[pos] = c
     return choice
+
+
+def _exchange_claims(problem, choose, channel, has_nb, deciding, believed_open, choice, round_,
+                     seconds, steps: int) -> tuple[int, int]:
+    """The claim exchanges of one round (see :func:`run_rounds`); updates ``choice`` in place
+    and returns ``(messages, hops)``.
+
+    Each agent keeps, per task, the cheapest claim it knows of (cost, agent): its own, and what
+    its neighbours' last broadcasts held. An exchange is one broadcast of that table by every
+    agent that knows a claim (and has neighbours), so claims travel one hop per exchange."""
+    cost = problem.cost
+    n, m = cost.shape
+    inf = np.inf
+    messages = hops = 0
+    table_c = np.full((n, m), inf)  # cheapest claim known per (agent, task)
+    table_a = np.full((n, m), n, dtype=np.int64)  # its claimant (n: none)
+    sent_c, sent_a = table_c.copy(), table_a.copy()  # what each agent broadcast last
+    for _ in range(steps):
+        own_c, own_a = np.full((n, m), inf), np.full((n, m), n, dtype=np.int64)
+        claim = choice >= 0
+        cl, ct = deciding[claim], choice[claim]
+        own_c[cl, ct], own_a[cl, ct] = cost[cl, ct], cl
+        # what each agent broadcasts: its own claim merged with what it knew
+        send_c, send_a = _cheaper(table_c, table_a, own_c, own_a)
+        # only an agent whose table changed since its last broadcast has news
+        fresh = ((send_c != sent_c) | (send_a != sent_a)).any(axis=1)
+        senders = np.flatnonzero(fresh & has_nb)
+        if senders.size == 0:
+            break
+        sent_c[senders], sent_a[senders] = send_c[senders], send_a[senders]
+        got = channel.deliver(senders)
+        messages += int(senders.size)
+        hops += 1
+        table_c, table_a = send_c.copy(), send_a.copy()  # what is sent stays as it was sent
+        for k in senders.tolist():
+            rec = np.flatnonzero(got[k])
+            if rec.size:
+                table_c[rec], table_a[rec] = _cheaper(table_c[rec], table_a[rec],
+                                                      send_c[k][None, :], send_a[k][None, :])
+        # a claimant yields to a cheaper claim it knows on its task
+        lose = claim & (table_a[deciding, np.maximum(choice, 0)] != deciding)
+        if not lose.any():
+            continue
+        losers = np.flatnonzero(lose)
+        again = deciding[losers]
+        mine = cost[again]
+        beaten = believed_open.copy()
+        beaten[again] = (table_c[again] < mine) | ((table_c[again] == mine)
+                                                   & (table_a[again] < again[:, None]))
+        belief = believed_open.copy()
+        belief[again] &= ~beaten[again]
+        new = np.full(len(losers), WAIT, dtype=np.int64)  # nothing left this round: wait
+        ok = (belief[again] & problem.feasible[again]).any(axis=1)
+        if ok.any():
+            new[ok] = _choose_local(problem, choose, again[ok], belief, round_, seconds)
+        choice[losers] = new
+    return messages, hops
+
+
+def _cheaper(c1, a1, c2, a2):
+    """Entry-wise the cheaper of two claim tables (ties to the lower agent index)."""
+    take = (c2 < c1) | ((c2 == c1) & (a2 < a1))
+    return np.where(take, c2, c1), np.where(take, a2, a1)
 
 
 def _resolve(cost: np.ndarray, agents: np.ndarray, tasks: np.ndarray) -> dict[int, int]:

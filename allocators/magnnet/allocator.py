@@ -11,8 +11,23 @@ Variants (``[dispatch.allocator_params] variant = ...``):
     imitation of the optimal assignment; any ``N`` and ``M``. An agent that hears the whole
     fleet scores the whole problem with ``match.pt`` and requests its best task when the pair
     is mutual best and confident (conflict-free by construction, since every such agent shares
-    the one view). An agent that does not hear the whole fleet acts on its two-hop view with
-    the view model ``view.pt`` (:mod:`allocators.magnnet.views`: the match network plus the
+    the one view).
+
+    Under a limited range each decision starts with ``view_hops`` (default 6) flooding steps
+    (:func:`flood`): every agent with news broadcasts what it knows (its own and the others'
+    cost vectors and neighbour lists), so an agent learns everyone within ``view_hops`` hops.
+    One that then sees its whole component (no member it knows of has a neighbour outside)
+    knows what every other agent of the component knows in round 0 (the same agents, every
+    task open), plays the match model's decision rounds on the component (:func:`match.plan`)
+    and requests its own part: the agents of a component request one conflict-free plan, and
+    conflicts can only come from another component. The flooding is counted in ``messages``
+    (one per agent with news and neighbours per step) and ``hops`` (``view_hops``); the
+    two-hop view gathering of the rule below was never counted, as before.
+    ``view_hops = 2`` turns this off (the rule of the previous version, ``magnnet:view2`` in
+    ``benchmarks/paper_tables.py``).
+
+    An agent that does not know its whole component (and every agent after round 0) acts on its
+    two-hop view with the view model ``view.pt`` (:mod:`allocators.magnnet.views`: the match network plus the
     view's hop, status and size features and "not mine / outside my view" heads, trained
     CTDE with DAgger for partial views); it waits while unsure and must request from round
     ``view_patience`` on. ``partial = "match"`` runs ``match.pt`` on partial views instead (what
@@ -33,7 +48,10 @@ shipped one of the variant: a match model for ``match``, a paper model of one si
 ``view_confidence`` (default 0.5: the same for the view model), ``patience`` (default 3: the
 round from which the match model on partial views, ``partial = "match"``, requests regardless),
 ``view_patience`` (default 12: the round from which the view model requests its part of its
-view's assignment, and from twice that its best task regardless).
+view's assignment, and from twice that its best task regardless), ``view_hops`` (default 6,
+at least 2: see above), ``claims`` (default 0: claim exchanges before each round's requests,
+:func:`dispatch.decentralized.run_rounds`; measured: they raise the conflict-free share of the
+two-hop rule but not its gap, and add nothing once the views are flooded).
 
 Every model is read from disk and run once (warm-up) in the constructor, so a decision never
 includes imports or file reads. Loaded models are cached per file for the process;
@@ -140,16 +158,21 @@ class MagnnetAllocator(DecentralizedAllocator):
     def __init__(self, variant: str = "match", checkpoint: str | None = None,
                  view_checkpoint: str | None = None, partial: str = "view",
                  confidence: float = 0.8, view_confidence: float = 0.5,
-                 patience: int = 3, view_patience: int = 12) -> None:
+                 patience: int = 3, view_patience: int = 12, view_hops: int = 6,
+                 claims: int = 0) -> None:
         if variant not in VARIANTS:
             raise TypeError(f"variant must be one of {', '.join(VARIANTS)}, got {variant!r}")
         if partial not in PARTIAL:
             raise TypeError(f"partial must be one of {', '.join(PARTIAL)}, got {partial!r}")
-        for name, value in (("patience", patience), ("view_patience", view_patience)):
+        for name, value in (("patience", patience), ("view_patience", view_patience),
+                            ("claims", claims)):
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:
                 raise TypeError(f"{name} must be a non-negative integer, got {value!r}")
+        if isinstance(view_hops, bool) or not isinstance(view_hops, int) or view_hops < 2:
+            raise TypeError(f"view_hops must be an integer >= 2, got {view_hops!r}")
         self.variant, self.partial, self.patience = variant, partial, patience
-        self.view_patience = view_patience
+        self.view_patience, self.claims, self.view_hops = view_patience, claims, view_hops
+        self._plans, self._known, self._complete = {}, None, None  # per decision (allocate)
         self.confidence = _number(confidence, "confidence", 0.0, 1.0)
         self.view_confidence = _number(view_confidence, "view_confidence", 0.0, 1.0)
         if variant != "match" and (view_checkpoint is not None or partial != "view"):
@@ -216,13 +239,45 @@ class MagnnetAllocator(DecentralizedAllocator):
 
     def describe(self) -> dict[str, str]:
         """What ran: ``model``, ``variant`` and ``checkpoint`` (``file@sha256[:16]`` of every
-        file this allocator loaded, comma-separated)."""
+        file this allocator loaded, comma-separated); for ``match`` also the decision rule
+        under limited range (``view_hops``, ``claims``)."""
         model = {"match": "magnnet-match" + ("+view" if self.partial == "view" else ""),
                  "paper": "magnnet-paper", "paper_nb": "magnnet-paper+nb"}[self.variant]
-        return {"model": model, "variant": self.variant,
-                "checkpoint": ",".join(f"{k}@{v}" for k, v in sorted(self.files.items()))}
+        out = {"model": model, "variant": self.variant,
+               "checkpoint": ",".join(f"{k}@{v}" for k, v in sorted(self.files.items()))}
+        if self.variant == "match":
+            out.update(view_hops=str(self.view_hops), claims=str(self.claims))
+        return out
 
     # ------------------------------------------------------------------ deciding
+    def claim_steps(self, problem: AllocationProblem) -> int:
+        """Claim exchanges before each round's requests (``claims``), where some agent does
+        not hear the whole fleet (on a complete graph every view is the same: none needed)."""
+        if self.variant != "match" or problem.comm.all():
+            return 0
+        return self.claims
+
+    def allocate(self, problem):
+        from dataclasses import replace
+
+        self._plans, self._known, self._complete = {}, None, None
+        sent = steps = 0
+        if self.variant == "match" and self.view_hops > 2 and not problem.comm.all():
+            self._known, sent = flood(problem, self.view_hops)
+            steps = self.view_hops
+            # an agent knows its view holds its whole component when no member it knows of
+            # has a neighbour outside it (every member's neighbour list came with its costs)
+            k = self._known.astype(np.int64)
+            outside = (k @ problem.comm.astype(np.int64)) > 0
+            self._complete = ~(outside & ~self._known).any(axis=1)
+        try:
+            alloc = super().allocate(problem)
+        finally:
+            self._known = self._complete = None
+        if steps:
+            alloc = replace(alloc, messages=alloc.messages + sent, hops=alloc.hops + steps)
+        return alloc
+
     def choose(self, problem: AllocationProblem, agents: np.ndarray, open_tasks: np.ndarray,
                round_: int) -> np.ndarray:
         if self.variant == "match":
@@ -260,6 +315,18 @@ class MagnnetAllocator(DecentralizedAllocator):
         groups: dict[bytes, tuple[np.ndarray, list[int]]] = {}
         for k, i in enumerate(agents):
             _, two = two_hop(comm, int(i))
+            if round_ == 0 and open_tasks.all() and self._complete is not None \
+                    and self._complete[i]:
+                # round 0: every agent that knows its whole component knows the same (all of
+                # it, every task open) and computes the same plan; its part is its request
+                comp = np.flatnonzero(self._known[i])
+                key = comp.tobytes()
+                if key not in self._plans:
+                    self._plans[key] = match.plan(self.model, problem.cost[np.ix_(comp, tasks)],
+                                                  flies[comp], self.confidence)
+                j = self._plans[key][int(np.searchsorted(comp, i))]
+                out[k] = tasks[j] if j >= 0 else -2
+                continue
             if hears_all[k] or self.view_model is None:
                 members = np.flatnonzero(two & deciding)
                 groups.setdefault(members.tobytes(), (members, []))[1].append(k)
@@ -293,6 +360,31 @@ class MagnnetAllocator(DecentralizedAllocator):
                                         confidence=self.confidence if full else 0.0)
                 out[sel] = np.where(req >= 0, tasks[np.maximum(req, 0)], -1)
         return out
+
+
+def flood(problem: AllocationProblem, hops: int) -> tuple[np.ndarray, int]:
+    """What ``hops`` synchronous flooding steps spread: ``known[i, j]``, agent ``i`` holds
+    agent ``j``'s cost vector and neighbour list, and the broadcasts sent. In each step every
+    agent with neighbours that learned something since its last broadcast sends one (all it
+    knows); each reception is lost with ``problem.loss`` (drawn from ``problem.rng``)."""
+    from dispatch.comms import Channel
+
+    n = len(problem.comm)
+    channel = Channel(problem.comm, problem.loss, problem.rng)
+    has_nb = channel.has_neighbours()
+    known = np.eye(n, dtype=bool)
+    news = np.ones(n, bool)
+    sent = 0
+    for _ in range(hops):
+        senders = np.flatnonzero(news & has_nb)
+        if senders.size == 0:
+            break
+        got = channel.deliver(senders)
+        sent += int(senders.size)
+        new = known | ((got.T.astype(np.int64) @ known.astype(np.int64)) > 0)
+        news = (new != known).any(axis=1)
+        known = new
+    return known, sent
 
 
 def _exists(path: Path) -> Path:

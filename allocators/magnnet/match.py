@@ -262,6 +262,27 @@ def imitation_loss(scores: torch.Tensor, row_target: torch.Tensor,
     return (lr * rw).sum() / rw.sum().clamp(min=1) + (lc * cw).sum() / cw.sum().clamp(min=1)
 
 
+def plan(model: MatchPolicy, cost: np.ndarray, flies: np.ndarray,
+         confidence: float = CONFIDENCE) -> np.ndarray:
+    """The task of each agent (``-1``: none) when the decision rounds are played on a
+    complete graph (see :func:`play`): what every agent that knows the whole ``cost``
+    computes alike."""
+    n, m = cost.shape
+    out = np.full(n, -1, np.int64)
+    free_a, free_t = np.ones(n, bool), np.ones(m, bool)
+    while True:
+        a_idx, t_idx = np.flatnonzero(free_a), np.flatnonzero(free_t)
+        sub = cost[np.ix_(a_idx, t_idx)]
+        if not np.isfinite(sub).any():
+            return out
+        req = mutual_best(scores_of(model, sub, flies[a_idx]), np.arange(len(a_idx)),
+                          confidence=confidence)
+        for r, j in enumerate(req):
+            if j >= 0:
+                out[a_idx[r]] = t_idx[j]
+                free_a[a_idx[r]], free_t[t_idx[j]] = False, False
+
+
 def play(model: MatchPolicy, cost: np.ndarray, flies: np.ndarray,
          confidence: float = CONFIDENCE) -> tuple[float, int, int]:
     """Decision rounds on a complete graph, as the plugin plays them: ``(total cost, agents

@@ -39,6 +39,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="view: round from which the played policy must request (default 5)")
     p.add_argument("--confidence", type=float, default=None,
                    help="view: softmax a pair needs before the played policy requests it")
+    p.add_argument("--view-hops", type=int, default=2,
+                   help="view: view_hops of the played plugin (2, the default: two-hop views "
+                        "only, as the shipped view.pt was trained; 6: the plugin's default "
+                        "rule, so DAgger visits the states after the component plans)")
+    p.add_argument("--threads", type=int, default=2, help="view: torch threads")
     p.add_argument("--init", type=Path, default=None,
                    help="view: continue from this view checkpoint instead of match.pt")
     p.add_argument("--steps", type=int, default=d.total_steps, help="PPO environment steps")
@@ -220,7 +225,9 @@ def _run_view(args, console=None) -> int:
     from allocators.magnnet.problems import load_pool
     from allocators.magnnet.views import ViewConfig, ViewPolicy, evaluate_views, train_views
 
-    torch.set_num_threads(2)
+    if args.view_hops < 2 or args.threads < 1:
+        raise SystemExit("--view-hops must be >= 2 and --threads >= 1")
+    torch.set_num_threads(args.threads)
     d = ViewConfig()
     from allocators.magnnet.ppo import PPOConfig
 
@@ -243,7 +250,8 @@ def _run_view(args, console=None) -> int:
         model.load_state_dict(load_checkpoint(args.init)[0].state_dict())
 
     def make(m):
-        return MagnnetAllocator.with_models(match, m, view_confidence=cfg.confidence,
+        return MagnnetAllocator.with_models(match, m, view_hops=args.view_hops,
+                                            view_confidence=cfg.confidence,
                                             view_patience=cfg.patience)
 
     def validate(m):
@@ -276,6 +284,7 @@ def _run_view(args, console=None) -> int:
     save_checkpoint(model, out / "model.pt", None,
                     {"wall_s": wall, "view": config_dict(cfg),
                      "from": str(args.init) if args.init else "match.pt",
+                     "view_hops": args.view_hops,
                      "val": {k: v for k, v in (best or {}).items() if k.startswith("val/")},
                      "world_size": p20.world_size.tolist(),
                      "pool": "train seeds from 1000000: N=20 (500) and N=50 (170) instances "

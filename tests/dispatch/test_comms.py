@@ -22,6 +22,7 @@ from dispatch.comms import (
     relay_needed,
 )
 from dispatch.contracts import Allocation, Request
+from dispatch.decentralized import DecentralizedAllocator, run_rounds
 from dispatch import registry
 from dispatch.errors import PluginError, ScenarioError
 from dispatch.runner import run_one
@@ -329,3 +330,57 @@ def test_same_seed_same_run_under_loss(make_scenario):
             else b.tables[name]
         # bit for bit: Table.equals never finds NaN equal to NaN (tasks.dropoff_* are NaN)
         assert bitwise(ta).equals(bitwise(tb)), name
+
+
+class _Cheapest(DecentralizedAllocator):
+    """Each agent requests its cheapest task it believes open; ``steps`` claim exchanges."""
+
+    def __init__(self, steps: int) -> None:
+        self.steps = steps
+
+    def claim_steps(self, problem):
+        return self.steps
+
+    def choose(self, problem, agents, open_tasks, round_):
+        c = np.where(open_tasks[None, :], problem.cost[agents], np.inf)
+        return np.where(np.isfinite(c).any(1), c.argmin(1), -1)
+
+
+def test_claims_travel_one_hop_per_exchange_and_the_dearer_claim_yields():
+    """Line 0-1-2; agents 0 and 2 both want task 0 (costs 5 and 3), agent 1 wants task 1.
+    One exchange: 0 and 2 do not hear each other, both request task 0 (a conflict, 0 asks
+    again in round 1). Two exchanges: agent 1 passes 2's cheaper claim on, 0 yields and, with
+    tasks 0 and 1 claimed cheaper, takes task 2: one round, no conflict, 3 + 3 claim
+    broadcasts, 3 requests, hops 2 + 2 (by hand)."""
+    cost = np.array([[5.0, 8.0, 9.0], [9.0, 1.0, 9.0], [3.0, 9.0, 9.0]])
+    comm = np.eye(3, dtype=bool) | np.eye(3, k=1, dtype=bool) | np.eye(3, k=-1, dtype=bool)
+    p = dataclasses.replace(make_problem(cost), comm=comm)
+    one = _Cheapest(1).allocate(p)
+    assert one.conflicted_tasks() == {500} and one.rounds == 2
+    two = _Cheapest(2).allocate(p)
+    assert sorted(two.pairs) == [(100, 502), (101, 501), (102, 500)]
+    assert two.conflicted_tasks() == set() and two.rounds == 1
+    assert two.messages == 3 + 3 + 3 and two.hops == 2 + 2
+    none = _Cheapest(0).allocate(p)
+    assert none == run_rounds(p, _Cheapest(0).choose)
+
+
+@pytest.mark.parametrize("steps", [1, 2, 3])
+@pytest.mark.parametrize("d", [1, 2, 3, 4])
+def test_a_claim_reaches_exactly_as_many_hops_as_there_are_exchanges(steps, d):
+    """Line 0-1-...-d: agent 0 claims task 0 at cost 3, agent d at cost 5 (the agents between
+    claim their own cheap tasks). Agent d yields in round 0 exactly when d <= steps, in both
+    directions of the line (news never travels two hops in one exchange)."""
+    n = d + 1
+    cost = np.full((n, n), 9.0)
+    for k in range(1, d):
+        cost[k, k] = 1.0
+    cost[0, 0], cost[d, 0], cost[d, d] = 3.0, 5.0, 6.0
+    line = np.eye(n, dtype=bool) | np.eye(n, k=1, dtype=bool) | np.eye(n, k=-1, dtype=bool)
+    for flip in (False, True):
+        order = np.arange(n)[::-1] if flip else np.arange(n)
+        p = dataclasses.replace(make_problem(cost[np.ix_(order, np.arange(n))]), comm=line)
+        a = _Cheapest(steps).allocate(p)
+        far = 100 + int(np.flatnonzero(order == d)[0])
+        first = {q.agent_id: q.task_id for q in a.requests if q.round == 0}
+        assert (first[far] == 500) == (d > steps)

@@ -145,7 +145,8 @@ def test_dagger_lowers_the_loss_on_a_fixed_seed():
                      ranges=(20.0,), loss_share=0.5, seed=0)
 
     def make(m):
-        return mod.MagnnetAllocator.with_models(match, m, view_confidence=cfg.confidence,
+        return mod.MagnnetAllocator.with_models(match, m, view_hops=2,
+                                                view_confidence=cfg.confidence,
                                                 view_patience=cfg.patience)
 
     p = sub_problem(pool, 0, 8, 20.0, 0.0, np.random.default_rng(0))
@@ -238,3 +239,98 @@ def test_run_summary_and_metadata_record_the_model(tmp_path):
             assert "paper_n4.pt@" in info["checkpoint"]
         else:
             assert info == {}
+
+
+def _round0(alloc, p) -> dict[int, int]:
+    """Agent index -> task index requested in round 0 (ids of make_problem are offsets)."""
+    return {q.agent_id - 100: q.task_id - 500 for q in alloc.allocate(p).requests
+            if q.round == 0}
+
+
+def test_flood_spreads_views_one_hop_per_step():
+    """Without loss, ``known`` after H steps is exactly "within H hops" (scipy's shortest
+    paths); on a line of 5, 3 steps cost 5 + 5 + 5 broadcasts (everyone learns something in
+    each of the first two steps); with loss it knows no more, and the same seed repeats."""
+    from dispatch.comms import hop_distances
+
+    rng = np.random.default_rng(3)
+    for _ in range(10):
+        n = int(rng.integers(2, 12))
+        comm = rng.random((n, n)) < 0.25
+        comm = comm | comm.T | np.eye(n, dtype=bool)
+        p = dataclasses.replace(make_problem(np.ones((n, n))), comm=comm)
+        hd = hop_distances(comm)
+        for h in (1, 2, 4):
+            known, _ = mod.flood(p, h)
+            np.testing.assert_array_equal(known, (hd >= 0) & (hd <= h))
+            lossy = [mod.flood(dataclasses.replace(p, loss=0.4, rng=np.random.default_rng(s)),
+                               h) for s in (7, 7)]
+            assert not (lossy[0][0] & ~known).any()
+            np.testing.assert_array_equal(lossy[0][0], lossy[1][0])
+    p = dataclasses.replace(make_problem(np.ones((5, 5))), comm=_line(5))
+    assert mod.flood(p, 3)[1] == 15
+
+
+def test_agents_that_know_their_component_request_its_plan():
+    """Two components (line 0-1-2, pair 3-4): with view_hops 6 every agent knows its whole
+    component, and in round 0 requests its part of the match model's plan of that component
+    (computed here directly); what the other component looks like changes nothing. The
+    flooding is counted: 6 hops more, and a broadcast per agent with news per step."""
+    from allocators.magnnet.match import plan
+
+    match, view = _models(5)
+    alloc = mod.MagnnetAllocator.with_models(match, view)
+    rng = np.random.default_rng(8)
+    cost = rng.uniform(1, 20, (5, 5))
+    comm = np.zeros((5, 5), bool)
+    comm[:3, :3] = _line(3)
+    comm[3:, 3:] = True
+    p = dataclasses.replace(make_problem(cost), comm=comm)
+    flies = np.array([a.flies for a in p.agents])
+    want = plan(match, cost[:3], flies[:3], alloc.confidence)
+    got = _round0(alloc, p)
+    assert {a: got.get(a) for a in range(3)} == {a: int(t) for a, t in enumerate(want)
+                                                 if t >= 0}
+    for _ in range(3):
+        c = cost.copy()
+        c[3:] = rng.uniform(0.1, 30, (2, 5))
+        g = _round0(alloc, dataclasses.replace(p, cost=c))
+        assert {a: g.get(a) for a in range(3)} == {a: got.get(a) for a in range(3)}
+    two = mod.MagnnetAllocator.with_models(match, view, view_hops=2).allocate(p)
+    six = alloc.allocate(p)
+    _, sent = mod.flood(p, 6)
+    # step 1: all send; all learned something, so step 2: all again; there only agents 0 and 2
+    # learn (of each other), so step 3: those two; then nobody has news
+    assert sent == 5 + 5 + 2
+    assert six.hops - 2 * six.rounds == 6 and two.hops == 2 * two.rounds
+
+
+@pytest.mark.parametrize("end", [0, 11])
+@pytest.mark.parametrize("view_hops,claims", [(2, 0), (3, 0), (2, 2), (3, 1)])
+def test_requests_ignore_agents_beyond_view_hops_plus_claims(view_hops, claims, end):
+    """Line 0-1-...-11 (no agent knows its whole component): the round-0 request of an agent
+    at either end is the same whatever agents more than ``view_hops + claims`` hops away look
+    like: views reach two hops (the view model; the flooded views only tell an agent whether
+    it knows its component), claims travel one hop per exchange, in either direction."""
+    match, view = _models(3)
+    alloc = mod.MagnnetAllocator.with_models(match, view, view_confidence=0.0,
+                                             view_hops=view_hops, claims=claims)
+    n = 12
+    rng = np.random.default_rng(4)
+    cost = rng.uniform(1, 20, (n, n))
+    p = dataclasses.replace(make_problem(cost), comm=_line(n))
+    base = _round0(alloc, p).get(end)
+    for _ in range(4):
+        c = cost.copy()
+        far = np.arange(view_hops + claims + 1, n)
+        far = far if end == 0 else n - 1 - far
+        c[far] = rng.uniform(0.1, 30, (far.size, n))
+        assert _round0(alloc, dataclasses.replace(p, cost=c)).get(end) == base
+
+
+@pytest.mark.parametrize("params,msg", [({"view_hops": 1}, "view_hops must be an integer >= 2"),
+                                        ({"view_hops": 2.5}, "view_hops must be"),
+                                        ({"claims": -1}, "claims must be a non-negative")])
+def test_bad_rule_parameters(params, msg):
+    with pytest.raises(TypeError, match=msg):
+        mod.MagnnetAllocator(**params)
