@@ -365,3 +365,24 @@ def test_nearest_equals_brute_force(chicago):
     d = np.linalg.norm(pts[:, None, :] - chicago.xy[None, :, :], axis=2)
     np.testing.assert_allclose(dist, d.min(axis=1))
     np.testing.assert_allclose(d[np.arange(200), idx], d.min(axis=1))
+
+
+def test_positions_point_by_point_equal_vectorized_bit_for_bit(chicago):
+    """A short list (the per-vehicle calls of a decision) takes a pure-Python path; it must
+    give exactly the floats of the vectorized path, edge starts and ends included."""
+    from dispatch.roads import _FEW_POINTS
+
+    rng = np.random.default_rng(11)
+    pts = _mid_edge_points(chicago, rng, 200)
+    ends = [RoadPoint(p.node, p.prev, 1e9, 0.0) for p in pts[:5]]  # past the edge: clipped
+    locs: list = pts + ends + [RoadPoint(p.node, p.prev, 0.0) for p in pts[:5]] \
+        + [int(x) for x in rng.integers(0, chicago.n, 5)]
+    assert len(locs) > _FEW_POINTS
+    many = chicago.positions(locs)
+    one = np.vstack([chicago.positions([loc]) for loc in locs])
+    assert one.shape == many.shape and np.array_equal(one, many)
+    few = chicago.positions(locs[:_FEW_POINTS])
+    assert np.array_equal(few, many[:_FEW_POINTS])
+    np.testing.assert_array_equal(chicago.positions(ends[:1])[0, :2], chicago.xy[ends[0].prev])
+    with pytest.raises(ValueError, match="no edge"):
+        chicago.positions([RoadPoint(int(pts[0].node), int(pts[0].node), 3.0)])
