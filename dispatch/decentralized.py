@@ -113,7 +113,7 @@ def run_rounds(
     # broadcast reaches every other agent and nobody relays, so a round's news is one OR over
     # the senders (the same beliefs as the general delivery below, without N x N work per
     # sender). Taxi studies decide among hundreds of idle vehicles at every request.
-    complete = problem.loss <= 0 and bool(np.asarray(problem.comm).all())
+    complete = _everyone_hears(problem)
     channel = None if complete else Channel(problem.comm, problem.loss, problem.rng)
     has_nb = np.full(n, n > 1) if complete else channel.has_neighbours()
     need_relay = None if complete or not n else relay_needed(problem.comm)
@@ -183,6 +183,11 @@ def run_rounds(
     )
     return Allocation(pairs=pairs, rounds=rounds, requests=tuple(requests), messages=messages,
                       hops=hops, agent_seconds=tuple(float(x) for x in seconds))
+
+
+def _everyone_hears(problem: AllocationProblem) -> bool:
+    """Whether every broadcast reaches every other agent: a complete graph, no loss."""
+    return problem.loss <= 0 and bool(np.asarray(problem.comm).all())
 
 
 def _choose_local(problem, choose, deciding, believed_open, round_, seconds) -> np.ndarray:
