@@ -31,11 +31,14 @@ import hashlib
 import json
 import logging
 import os
+import signal
 import tempfile
+import threading
 import time
 import traceback
 from collections import deque
 from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -450,11 +453,67 @@ def sweep(
             stream = ((i, run_partition(spec, out)) for i, spec in todo)
         else:
             stream = _on_pool(todo, out, workers)
-        for i, outcome in stream:
-            outcomes[i] = outcome
-            if on_done is not None:
-                on_done(outcome)
+        with _sigterm_exits():
+            try:
+                for i, outcome in stream:
+                    outcomes[i] = outcome
+                    if on_done is not None:
+                        on_done(outcome)
+            finally:
+                close = getattr(stream, "close", None)
+                if close is not None:  # a pool's generator: stops its workers now, if any run
+                    close()
     return [outcomes[i] for i in range(len(specs))]
+
+
+class SweepTerminated(SystemExit):
+    """Raised in a sweep when its process gets SIGTERM (exit status 143, as the signal's
+    default), so that ``finally`` blocks run: the pool's workers are stopped, not orphaned."""
+
+
+@contextmanager
+def _sigterm_exits():
+    """While in the block (in the main thread), SIGTERM raises :class:`SweepTerminated`
+    instead of ending the process at once; the previous handler is put back after."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, _frame):
+        raise SweepTerminated(128 + signum)
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _exit_with_parent(parent: int) -> None:
+    """Pool worker initializer: a daemon thread ends this worker when its parent is gone (a
+    parent killed with SIGKILL runs no cleanup; its workers must not go on writing)."""
+    def watch() -> None:
+        while True:
+            time.sleep(0.5)
+            if os.getppid() != parent:
+                os._exit(1)
+
+    threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
+
+
+def _stop_workers(pool) -> None:
+    """Terminate the processes of a ProcessPoolExecutor now (SIGTERM, then SIGKILL for any
+    still alive after 5 s): their runs are abandoned half-way, to be redone by a rerun."""
+    procs = list((getattr(pool, "_processes", None) or {}).values())
+    for proc in procs:
+        if proc.is_alive():
+            proc.terminate()
+    deadline = time.monotonic() + 5.0
+    for proc in procs:
+        proc.join(max(0.0, deadline - time.monotonic()))
+        if proc.is_alive():
+            proc.kill()
+            proc.join(1.0)
 
 
 def _crashed(out: Path, spec: RunSpec, e: BaseException) -> Outcome:
@@ -474,7 +533,8 @@ def _on_pool(todo, out: Path, workers: int) -> Iterator[tuple[int, Outcome]]:
     ctx = multiprocessing.get_context("spawn")
     pending = deque(todo)
     while pending:
-        pool = ProcessPoolExecutor(max_workers=min(workers, len(pending)), mp_context=ctx)
+        pool = ProcessPoolExecutor(max_workers=min(workers, len(pending)), mp_context=ctx,
+                                   initializer=_exit_with_parent, initargs=(os.getpid(),))
         running: dict = {}
         try:
             broken = False
@@ -492,6 +552,9 @@ def _on_pool(todo, out: Path, workers: int) -> Iterator[tuple[int, Outcome]]:
                         yield i, _crashed(out, spec, e)
             for i, spec in running.values():  # the pool broke under them
                 yield i, _crashed(out, spec, BrokenProcessPool("the process pool broke"))
+        except BaseException:  # SIGTERM, Ctrl-C, the consumer stopped: no orphan workers
+            _stop_workers(pool)
+            raise
         finally:
             pool.shutdown(wait=True, cancel_futures=True)
 

@@ -286,3 +286,49 @@ def test_cli_sweep_bad_arguments(tiny_scenario, cli, tmp_path):
     proc = cli("sweep", tiny_scenario, "--allocator", "nosuch", "--out", tmp_path / "x")
     assert proc.returncode == 2 and "nosuch" in proc.stderr
     assert not (tmp_path / "x").exists()
+
+
+def _pool_sweep_with_workers(tmp_path):
+    """A ``dispatch sweep`` on 2 worker processes, returned once both workers are up (the
+    parent and its spawned children, as psutil processes)."""
+    psutil = pytest.importorskip("psutil")
+    scenario = write_scenario(
+        tmp_path, world={"size": [40, 40, 8]}, obstacles={"count": 6, "max_size": [6, 6, 8]},
+        fleet={"agents": 10}, tasks={"ground_fraction": 1.0},
+        sweep={"allocator": ["hungarian", "greedy", "random"], "seed": list(range(40))})
+    proc = _sweep_cli(scenario, "--out", tmp_path / "out", "--workers", "2")
+    parent = psutil.Process(proc.pid)
+    deadline = time.monotonic() + 120
+    workers = []
+    while time.monotonic() < deadline and proc.poll() is None:
+        workers = [c for c in parent.children(recursive=True)
+                   if "spawn_main" in " ".join(c.cmdline())]
+        if len(workers) >= 2 and len(markers(tmp_path / "out")) >= 1:
+            break
+        time.sleep(0.05)
+    assert proc.poll() is None and len(workers) >= 2, "the pool never ran two workers"
+    return proc, parent, parent.children(recursive=True), psutil
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_cli_sweep_terminated_stops_its_workers(tmp_path, sig):
+    """SIGTERM (or Ctrl-C's SIGINT) to a pool sweep ends it and its worker processes: none
+    is left running (writing the partitions of its run) after the sweep has exited."""
+    proc, _parent, children, psutil = _pool_sweep_with_workers(tmp_path)
+    proc.send_signal(sig)
+    proc.communicate(timeout=60)
+    assert proc.returncode != 0
+    if sig == signal.SIGTERM:
+        assert proc.returncode == 128 + signal.SIGTERM
+    _gone, alive = psutil.wait_procs(children, timeout=10)
+    assert alive == [], f"processes left running: {[p.pid for p in alive]}"
+
+
+def test_pool_workers_exit_when_the_sweep_is_killed(tmp_path):
+    """Even SIGKILL, which runs no cleanup in the sweep, leaves no worker behind: each worker
+    ends itself once its parent is gone."""
+    proc, _parent, children, psutil = _pool_sweep_with_workers(tmp_path)
+    proc.send_signal(signal.SIGKILL)
+    proc.communicate(timeout=60)
+    _gone, alive = psutil.wait_procs(children, timeout=15)
+    assert alive == [], f"processes left running: {[p.pid for p in alive]}"
