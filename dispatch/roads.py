@@ -22,15 +22,14 @@ other and travel times between nodes are finite. Shortest paths are
 
 from __future__ import annotations
 
-from bisect import bisect_right
-
 import functools
 import importlib.resources
 import logging
+from bisect import bisect_right
 from collections.abc import Sequence
-from itertools import accumulate
 from dataclasses import dataclass
 from functools import cached_property
+from itertools import accumulate
 from pathlib import Path
 from typing import Any, ClassVar
 
