@@ -440,14 +440,20 @@ def hourly_customers(trips: pd.DataFrame, keys: list[str] | None = None,
                      bin_s: float = 3600.0) -> pd.DataFrame:
     """Per group (``keys``, default the allocator groups) and hour of release (or bin of
     ``bin_s`` seconds): the customer columns of :func:`customer_stats` (``trips``: the rows of
-    :func:`trip_table`); ``hour`` is the bin's index, ``t_h`` its start in hours."""
+    :func:`trip_table`); ``hour`` is the bin's index, ``t_h`` its start in hours; ``runs`` the
+    number of runs pooled in the group (over all its bins, from ``run_id``; 1 without it):
+    the counts (``requests``, ``rides``, ``rejections``) are sums over those runs, so
+    ``requests / runs`` is the mean per run."""
     keys = [k for k in (keys or GROUP) if k in trips.columns]
     t = trips.assign(hour=np.floor(trips["released_at"].to_numpy(dtype=float) / bin_s)
                      .astype(int))
+    runs = (t.groupby(keys)["run_id"].nunique() if keys and "run_id" in t.columns else None)
     rows = []
     for key, g in t.groupby([*keys, "hour"], sort=True):
         row = dict(zip([*keys, "hour"], key))
         row["t_h"] = row["hour"] * bin_s / 3600
+        group = key[:-1] if len(keys) > 1 else key[0]
+        row["runs"] = 1 if runs is None else int(runs.loc[group])
         row.update(customer_stats(g))
         rows.append(row)
     return pd.DataFrame(rows)

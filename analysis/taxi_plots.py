@@ -203,38 +203,65 @@ def series(df: pd.DataFrame) -> list[tuple[tuple, str, pd.DataFrame]]:
     return out
 
 
-def hourly(customers: pd.DataFrame, path: Path, *, bin_s: float, runs: dict,
+def per_run(customers: pd.DataFrame,
+            runs: dict | None = None) -> list[tuple[str, pd.DataFrame]]:
+    """(label, rows) per series (:func:`series`), rows sorted by ``t_h``, with ``requests``
+    and ``rides`` as the mean per run of the series: divided by the series' ``runs`` column
+    (:func:`analysis.metrics.hourly_customers` writes it), else by ``runs[key]`` (series key
+    -> number of runs pooled), else left as they are (one run). What :func:`hourly` draws."""
+    out = []
+    for key, label, g in series(customers):
+        if "runs" in g.columns:
+            n = g["runs"].to_numpy(dtype=float)
+        else:
+            n = float((runs or {}).get(key, 1))
+        g = g.assign(requests=g["requests"] / n, rides=g["rides"] / n).sort_values("t_h")
+        out.append((label, g))
+    return out
+
+
+def _same_demand(groups: list[tuple[str, pd.DataFrame]]) -> bool:
+    """Whether every series has the same requests per run in every bin."""
+    ref = groups[0][1].set_index("t_h")["requests"]
+    return all(g.set_index("t_h")["requests"].reindex(ref.index).equals(ref)
+               and len(g) == len(ref) for _, g in groups[1:])
+
+
+def hourly(customers: pd.DataFrame, path: Path, *, bin_s: float, runs: dict | None = None,
            title: str = "") -> Path:
     """Three panels against time of release: requests and served trips per bin (mean per
-    run), rejection rate, and wait median / p90 per series (:func:`series`). ``customers``: rows of
+    run, :func:`per_run`), rejection rate, and wait median / p90 per series (:func:`series`).
+    The requests are one set of bars when every series has the same (the seeds' demand, as
+    in a study of allocators), else a dotted line per series. ``customers``: rows of
     :func:`analysis.metrics.hourly_customers` with ``t_h`` (bin start, hours); ``runs``:
-    series key (see :func:`series`) -> number of runs pooled."""
+    series key -> number of runs pooled, for rows without a ``runs`` column."""
     fig = _figure(11, 8.4)
     a1, a2, a3 = fig.subplots(3, 1, sharex=True)
-    groups = series(customers)
-    colours = _colours([label for _, label, _ in groups])
+    groups = per_run(customers, runs)
+    colours = _colours([label for label, _ in groups])
     width = bin_s / 3600
-    first = True
     markers = ("o", "s", "^", "D", "v", "P", "X", "*")
-    for i, (key, label, g) in enumerate(groups):
+    same = bool(groups) and _same_demand(groups)
+    if same:  # one set of bars: the demand every series saw
+        g = groups[0][1]
+        a1.bar(g["t_h"], g["requests"], width=width, align="edge", color="0.85",
+               edgecolor="0.6", linewidth=0.5, label="requests")
+    for i, (label, g) in enumerate(groups):
         c = colours[label]
         # allocators that decide alike draw on top of each other: the first ones are drawn
         # wider, each with its own marker, so every line stays visible
         lw, mk = max(3.2 - 0.6 * i, 1.0), markers[i % len(markers)]
-        n = runs.get(key, 1)
-        g = g.sort_values("t_h")
         x = g["t_h"].to_numpy(dtype=float) + width / 2
-        if first:  # the demand is the same for every allocator of a seed: one set of bars
-            a1.bar(g["t_h"], g["requests"] / n, width=width, align="edge", color="0.85",
-                   edgecolor="0.6", linewidth=0.5, label="requests")
-            first = False
+        if not same:  # series of different demand: each its own requests
+            a1.plot(x, g["requests"], color=c, linewidth=1.0, linestyle=":")
         style = {"color": c, "linewidth": lw, "marker": mk, "markersize": 4}
-        a1.plot(x, g["rides"] / n, label=label, **style)
+        a1.plot(x, g["rides"], label=label, **style)
         a2.plot(x, 100 * g["rejectionRate"], **style)
         a3.plot(x, g["wait_median"] / 60, **style)
         a3.plot(x, g["wait_p90"] / 60, linestyle="--", **{**style, "marker": None})
     unit = "hour" if bin_s == 3600 else f"{bin_s / 60:g} min"
-    a1.set_ylabel(f"trips per {unit}\n(bars: requests; lines:\nserved, mean per run)")
+    a1.set_ylabel(f"trips per {unit}, mean per run\n(" + ("bars" if same else "dotted")
+                  + ": requests;\nlines: served)")
     fig.suptitle(title or "Demand, service and waiting over the day")  # above the legend
     a2.set_ylabel("rejected (%)\n(at once or expired)")
     a2.set_ylim(bottom=0)

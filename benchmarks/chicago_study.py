@@ -8,8 +8,12 @@ construct is skipped with a message) x ``--batch-windows`` (default 0 = immediat
 the scenario variants ``chicago_study-immediate`` / ``chicago_study-batch30s``) x
 ``--repositioners`` (default ``stay demand``) x ``--agents`` (default 500 1000). The derived
 scenario is written to ``<out>/chicago_study.toml`` and run through the normal resumable sweep
-(:func:`dispatch.runner.sweep`) on ``--workers`` processes (default 2): rerunning the same
-command skips every run already complete in ``--out``, so an interrupted study resumes.
+(:func:`dispatch.runner.sweep`) on ``--workers`` processes (default 2): rerunning skips every
+run already complete in ``--out``, so an interrupted study resumes, and a rerun with other
+``--allocators`` / ``--repositioners`` / ``--agents`` / ``--batch-windows`` adds only the runs
+missing from the folder (a run is the same run whatever lists it was swept in:
+:func:`dispatch.runner.run_digest`); the table and the report cover every run of the folder.
+SIGTERM or Ctrl-C stops the study's worker processes with it.
 
 ``--hours H`` (default 24) runs a shorter day for a quick look: the trips are still drawn for a
 whole day (the sample's hour profile), the run stops at H h, so only the first H hours are

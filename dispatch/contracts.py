@@ -293,15 +293,22 @@ class Allocation:
 
     def conflicted_tasks(self) -> set[int]:
         """Ids of tasks requested by more than one agent in some round, or requested again in a
-        later round than the one it was won in (an agent that did not hear of the win)."""
-        seen: dict[tuple[int, int], int] = {}
-        won: dict[int, int] = {}
-        for r in self.requests:
-            seen[(r.round, r.task_id)] = seen.get((r.round, r.task_id), 0) + 1
-            if r.won:
-                won[r.task_id] = min(r.round, won.get(r.task_id, r.round))
-        late = {r.task_id for r in self.requests if r.task_id in won and r.round > won[r.task_id]}
-        return {task for (_, task), n in seen.items() if n > 1} | late
+        later round than the one it was won in (an agent that did not hear of the win).
+        Computed once per answer (the dispatcher and the recorder both ask; a taxi decision
+        logs hundreds of requests); a fresh set is returned each time."""
+        done = self.__dict__.get("_conflicted")
+        if done is None:
+            seen: dict[tuple[int, int], int] = {}
+            won: dict[int, int] = {}
+            for r in self.requests:
+                seen[(r.round, r.task_id)] = seen.get((r.round, r.task_id), 0) + 1
+                if r.won:
+                    won[r.task_id] = min(r.round, won.get(r.task_id, r.round))
+            late = {r.task_id for r in self.requests
+                    if r.task_id in won and r.round > won[r.task_id]}
+            done = frozenset({task for (_, task), n in seen.items() if n > 1} | late)
+            object.__setattr__(self, "_conflicted", done)  # frozen: a cache, not a field
+        return set(done)
 
 
 class Allocator(ABC):

@@ -131,9 +131,15 @@ def run_rounds(
     """
     n, m = problem.cost.shape
     feasible = problem.feasible
-    channel = Channel(problem.comm, problem.loss, problem.rng)
-    has_nb = channel.has_neighbours()
-    need_relay = relay_needed(problem.comm) if n else np.zeros((0, 0), bool)
+    agent_ids, task_ids = problem.agent_ids, problem.task_ids  # ids without building views
+    # Everyone hears everyone and nothing is lost (unlimited range, the default): every
+    # broadcast reaches every other agent and nobody relays, so a round's news is one OR over
+    # the senders (the same beliefs as the general delivery below, without N x N work per
+    # sender). Taxi studies decide among hundreds of idle vehicles at every request.
+    complete = _everyone_hears(problem)
+    channel = None if complete else Channel(problem.comm, problem.loss, problem.rng)
+    has_nb = np.full(n, n > 1) if complete else channel.has_neighbours()
+    need_relay = None if complete or not n else relay_needed(problem.comm)
     known = np.zeros((n, m), dtype=bool) if known is None else np.array(known, dtype=bool)
     agent_task = np.full(n, -1, dtype=np.int64)
     taken = np.zeros(m, dtype=bool)  # the arbiters' truth
@@ -162,18 +168,24 @@ def run_rounds(
         if not asked.any() and not (choice == WAIT).any():
             break
         req_agents, req_tasks = deciding[asked], choice[asked]
-        for a, t in zip(req_agents, req_tasks):
-            if t >= m or not believed_open[a, t] or not feasible[a, t]:
-                raise AllocationError(
-                    f"agent {problem.agents[a].id} requested task index {t}, which is not an "
-                    "open task it can serve"
-                )
+        ok = req_tasks < m
+        ok[ok] = believed_open[req_agents[ok], req_tasks[ok]] \
+            & feasible[req_agents[ok], req_tasks[ok]]
+        if not ok.all():
+            k = int(np.flatnonzero(~ok)[0])
+            raise AllocationError(
+                f"agent {problem.agents[req_agents[k]].id} requested task index "
+                f"{req_tasks[k]}, which is not an open task it can serve"
+            )
         fresh = ~taken[req_tasks]
         winners = _resolve(problem.cost, req_agents[fresh], req_tasks[fresh])
-        for a, t in zip(req_agents, req_tasks):
-            won = winners.get(int(t)) == a
-            requests.append(Request(start_round + r, problem.agents[a].id, problem.tasks[t].id,
-                                    float(problem.cost[a, t]), won))
+        # the log, built from whole arrays (a taxi decision logs hundreds of requests)
+        rnd = start_round + r
+        for a, t, aid, tid, c in zip(req_agents.tolist(), req_tasks.tolist(),
+                                     agent_ids[req_agents].tolist(),
+                                     task_ids[req_tasks].tolist(),
+                                     problem.cost[req_agents, req_tasks].tolist()):
+            requests.append(Request(rnd, aid, tid, c, winners.get(t) == a))
         for t, a in winners.items():
             agent_task[a] = t
             taken[t] = True
@@ -186,6 +198,11 @@ def run_rounds(
         relay_only = relay_only[~np.isin(relay_only, req_agents)]
         messages += int(req_agents.size + relay_only.size)
         senders = np.union1d(req_agents, relay_only)
+        if complete:  # relay stays empty: a sender's own news is already in its row
+            if senders.size and n > 1:
+                known |= news[senders].any(axis=0)[None, :]
+            hops += 2
+            continue
         got = channel.deliver(senders)
         relay = np.zeros((n, m), dtype=bool)
         for k in senders:
@@ -196,11 +213,20 @@ def run_rounds(
             known[rec] |= news[k][None, :]
             relay[rec] |= new & need_relay[k, rec][:, None]
         hops += 2
-    pairs = tuple(
-        (problem.agents[a].id, problem.tasks[t].id) for a, t in enumerate(agent_task) if t >= 0
-    )
+    got = np.flatnonzero(agent_task >= 0)
+    pairs = tuple(zip(agent_ids[got].tolist(), task_ids[agent_task[got]].tolist()))
     return Allocation(pairs=pairs, rounds=rounds, requests=tuple(requests), messages=messages,
-                      hops=hops, agent_seconds=tuple(float(x) for x in seconds))
+                      hops=hops, agent_seconds=tuple(seconds.tolist()))
+
+
+def _everyone_hears(problem: AllocationProblem) -> bool:
+    """Whether every broadcast reaches every other agent: a complete graph, no loss."""
+    if problem.loss > 0:
+        return False
+    comm = np.asarray(problem.comm)
+    if comm.size and not any(comm.strides):  # one value broadcast (the dispatcher's "all")
+        return bool(comm.flat[0])
+    return bool(comm.all())
 
 
 def _choose_local(problem, choose, deciding, believed_open, round_, seconds) -> np.ndarray:
@@ -293,9 +319,9 @@ def _cheaper(c1, a1, c2, a2):
 
 def _resolve(cost: np.ndarray, agents: np.ndarray, tasks: np.ndarray) -> dict[int, int]:
     """The conflict rule: for each requested task, the requester with the smallest cost."""
-    winners: dict[int, int] = {}
-    for a, t in zip(agents.tolist(), tasks.tolist()):
-        best = winners.get(t)
-        if best is None or (cost[a, t], a) < (cost[best, t], best):
-            winners[t] = a
-    return winners
+    best: dict[int, tuple[float, int]] = {}  # task -> (cost, agent) of its best requester
+    for a, t, c in zip(agents.tolist(), tasks.tolist(), cost[agents, tasks].tolist()):
+        held = best.get(t)
+        if held is None or (c, a) < held:
+            best[t] = (c, a)
+    return {t: a for t, (_, a) in best.items()}

@@ -8,9 +8,14 @@ repositioning, a ``[reposition]`` table or sweep, has a ``reposition=…`` level
 ``planner=…``, and its run ids name the repositioner after the planner; chunk files
 ``_inflight-NNNNN.parquet.chunk`` while it runs) and, once all of its tables are written, gets a completion marker ``out/_runs/<partition>/done.json`` (written
 atomically) that lists the files and their sizes. Rerunning a sweep (or a sweep over the output
-of ``dispatch run``) skips every run whose marker is there, names the same
-scenario text and whose files are all present with those sizes; any other run (never started,
-killed half-way, failed, or its files touched since) is cleared and run again. A run that raises
+of ``dispatch run``) skips every run whose marker is there, names the same run of the same
+scenario and whose files are all present with those sizes; any other run (never started,
+killed half-way, failed, or its files touched since) is cleared and run again. "The same run"
+is :func:`run_digest`: the scenario's settings outside ``[sweep]`` (parsed, so comments and
+layout do not count) and the run's own point (allocator, planner, repositioner, N, seed,
+batch window). Adding a value to a sweep list therefore runs only the new runs, and removing
+one leaves its runs in the folder (:func:`foreign_runs` does not count them as another
+scenario's). A run that raises
 is recorded in the ``errors`` table (same partition layout: run_id, scenario, error_type,
 message, traceback, seconds) and the sweep goes on; its error partition is removed once it
 succeeds. Folders starting with ``_`` are ignored by pyarrow, DuckDB's and polars' Hive readers.
@@ -26,11 +31,14 @@ import hashlib
 import json
 import logging
 import os
+import signal
 import tempfile
+import threading
 import time
 import traceback
 from collections import deque
 from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -204,16 +212,81 @@ def marker_path(out: Path, spec: RunSpec) -> Path:
 
 
 def _digest(spec: RunSpec) -> str:
+    """SHA-256 of the whole scenario text (the markers' ``scenario_sha256``)."""
     return hashlib.sha256(spec.scenario.text.encode()).hexdigest()
 
 
+#: Keys a sweep (or a run's point) sets: left out of a scenario's base settings
+_POINT_KEYS = {"": ("seed", "sweep"), "fleet": ("agents",),
+               "dispatch": ("allocator", "planner", "batch_window"), "reposition": ("policy",)}
+
+
+def _base_settings(text: str) -> dict | None:
+    """The settings of a scenario text without its ``[sweep]`` and without the keys a run's
+    point overrides (None: the text does not parse)."""
+    import tomllib
+
+    try:
+        doc = tomllib.loads(text)
+    except (tomllib.TOMLDecodeError, TypeError):
+        return None
+    for table, keys in _POINT_KEYS.items():
+        t = doc if not table else doc.get(table)
+        if isinstance(t, dict):
+            for k in keys:
+                t.pop(k, None)
+    return doc
+
+
+def _sha(obj) -> str:
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def base_digest(text: str) -> str | None:
+    """SHA-256 of :func:`_base_settings` (None: the text does not parse)."""
+    doc = _base_settings(text)
+    return None if doc is None else _sha(doc)
+
+
+def run_digest(spec: RunSpec, text: str | None = None) -> str | None:
+    """What identifies a run's results: SHA-256 of the base settings of ``text`` (default:
+    the spec's scenario text) and the spec's point. Two scenario texts that differ only in
+    their ``[sweep]`` lists, comments or the values a sweep overrides give their common runs
+    the same digest. None: the text does not parse."""
+    doc = _base_settings(spec.scenario.text if text is None else text)
+    if doc is None:
+        return None
+    return _sha({"base": doc, "run_id": spec.run_id, "seed": spec.seed, "agents": spec.agents,
+                 "allocator": spec.allocator, "planner": spec.planner,
+                 "reposition": spec.reposition,
+                 "batch_window": float(spec.scenario.dispatch.batch_window)})
+
+
+def _stored_text(out: Path, partition: Path) -> str | None:
+    """The scenario text a finished run was made from (its summary file's metadata)."""
+    try:
+        meta = pq.read_schema(Path(out) / "summary" / partition / "part-0.parquet").metadata
+        return meta[b"dispatch.scenario"].decode()
+    except (OSError, KeyError, TypeError, AttributeError, pa.ArrowException):
+        return None
+
+
 def is_complete(out: Path, spec: RunSpec) -> bool:
-    """Whether ``spec``'s partition was finished by a sweep of the same scenario text and all
-    of its files are still there, whole."""
+    """Whether ``spec``'s partition was finished by a sweep of the same run (the same scenario
+    text, or one whose :func:`run_digest` for this run is the same) and all of its files are
+    still there, whole."""
     try:
         marker = json.loads(marker_path(out, spec).read_text(encoding="utf-8"))
-        if marker["run_id"] != spec.run_id or marker["scenario_sha256"] != _digest(spec):
+        if marker["run_id"] != spec.run_id:
             return False
+        if marker["scenario_sha256"] != _digest(spec):  # another text: is it the same run?
+            want = run_digest(spec)
+            got = marker.get("run_sha256")
+            if got is None:  # a marker written before run digests: ask the run's own text
+                text = _stored_text(out, partition_dir(spec))
+                got = None if text is None else run_digest(spec, text)
+            if want is None or got != want:
+                return False
         for rel, size in marker["files"].items():
             if (Path(out) / rel).stat().st_size != size:
                 return False
@@ -272,6 +345,8 @@ def _run_and_mark(spec: RunSpec, out: Path, flush_rows: int = DEFAULT_FLUSH_ROWS
     seconds = time.perf_counter() - started
     files = {str(p.relative_to(out)): p.stat().st_size for p in result.files.values()}
     _write_json_atomic({"run_id": spec.run_id, "scenario_sha256": _digest(spec),
+                        "run_sha256": run_digest(spec),
+                        "base_sha256": base_digest(spec.scenario.text),
                         "version": __version__, "seconds": seconds, "files": files},
                        marker_path(out, spec))
     return result, files
@@ -306,15 +381,24 @@ def _cold_start() -> None:
 
 
 def foreign_runs(out: Path, specs: list[RunSpec]) -> list[str]:
-    """Run ids of complete partitions in ``out`` written from another scenario text than
-    ``specs``' (another scenario, or an earlier version of this one): readers of ``out`` will
-    see them next to this sweep's runs."""
+    """Run ids of complete partitions in ``out`` written from another scenario than
+    ``specs``' (another scenario, or another version of this one: other settings outside
+    ``[sweep]``): readers of ``out`` will see them next to this sweep's runs. Runs of the same
+    scenario with another sweep list (a value since dropped from it) are not foreign."""
     texts = {_digest(s) for s in specs}
+    bases = {base_digest(t) for t in {s.scenario.text for s in specs}} - {None}
     found = []
-    for m in sorted((Path(out) / MARKERS).rglob("done.json")):
+    root = Path(out) / MARKERS
+    for m in sorted(root.rglob("done.json")):
         try:
             marker = json.loads(m.read_text(encoding="utf-8"))
-            if marker["scenario_sha256"] not in texts:
+            if marker["scenario_sha256"] in texts:
+                continue
+            base = marker.get("base_sha256")
+            if base is None:  # a marker written before base digests
+                text = _stored_text(out, m.parent.relative_to(root))
+                base = None if text is None else base_digest(text)
+            if base is None or base not in bases:
                 found.append(marker["run_id"])
         except (OSError, ValueError, KeyError, TypeError):
             continue
@@ -369,11 +453,67 @@ def sweep(
             stream = ((i, run_partition(spec, out)) for i, spec in todo)
         else:
             stream = _on_pool(todo, out, workers)
-        for i, outcome in stream:
-            outcomes[i] = outcome
-            if on_done is not None:
-                on_done(outcome)
+        with _sigterm_exits():
+            try:
+                for i, outcome in stream:
+                    outcomes[i] = outcome
+                    if on_done is not None:
+                        on_done(outcome)
+            finally:
+                close = getattr(stream, "close", None)
+                if close is not None:  # a pool's generator: stops its workers now, if any run
+                    close()
     return [outcomes[i] for i in range(len(specs))]
+
+
+class SweepTerminated(SystemExit):
+    """Raised in a sweep when its process gets SIGTERM (exit status 143, as the signal's
+    default), so that ``finally`` blocks run: the pool's workers are stopped, not orphaned."""
+
+
+@contextmanager
+def _sigterm_exits():
+    """While in the block (in the main thread), SIGTERM raises :class:`SweepTerminated`
+    instead of ending the process at once; the previous handler is put back after."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, _frame):
+        raise SweepTerminated(128 + signum)
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _exit_with_parent(parent: int) -> None:
+    """Pool worker initializer: a daemon thread ends this worker when its parent is gone (a
+    parent killed with SIGKILL runs no cleanup; its workers must not go on writing)."""
+    def watch() -> None:
+        while True:
+            time.sleep(0.5)
+            if os.getppid() != parent:
+                os._exit(1)
+
+    threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
+
+
+def _stop_workers(pool) -> None:
+    """Terminate the processes of a ProcessPoolExecutor now (SIGTERM, then SIGKILL for any
+    still alive after 5 s): their runs are abandoned half-way, to be redone by a rerun."""
+    procs = list((getattr(pool, "_processes", None) or {}).values())
+    for proc in procs:
+        if proc.is_alive():
+            proc.terminate()
+    deadline = time.monotonic() + 5.0
+    for proc in procs:
+        proc.join(max(0.0, deadline - time.monotonic()))
+        if proc.is_alive():
+            proc.kill()
+            proc.join(1.0)
 
 
 def _crashed(out: Path, spec: RunSpec, e: BaseException) -> Outcome:
@@ -393,7 +533,8 @@ def _on_pool(todo, out: Path, workers: int) -> Iterator[tuple[int, Outcome]]:
     ctx = multiprocessing.get_context("spawn")
     pending = deque(todo)
     while pending:
-        pool = ProcessPoolExecutor(max_workers=min(workers, len(pending)), mp_context=ctx)
+        pool = ProcessPoolExecutor(max_workers=min(workers, len(pending)), mp_context=ctx,
+                                   initializer=_exit_with_parent, initargs=(os.getpid(),))
         running: dict = {}
         try:
             broken = False
@@ -411,6 +552,9 @@ def _on_pool(todo, out: Path, workers: int) -> Iterator[tuple[int, Outcome]]:
                         yield i, _crashed(out, spec, e)
             for i, spec in running.values():  # the pool broke under them
                 yield i, _crashed(out, spec, BrokenProcessPool("the process pool broke"))
+        except BaseException:  # SIGTERM, Ctrl-C, the consumer stopped: no orphan workers
+            _stop_workers(pool)
+            raise
         finally:
             pool.shutdown(wait=True, cancel_futures=True)
 

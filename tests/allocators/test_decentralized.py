@@ -207,3 +207,24 @@ def test_names_and_flags():
     assert RandomAllocator.name == "random" and RandomAllocator.decentralized
     with pytest.raises(TypeError):
         GreedyAllocator(bogus=1)
+
+
+@pytest.mark.parametrize("cls", DECENTRALIZED)
+def test_complete_graph_shortcut_gives_the_general_delivery_answer(cls, monkeypatch):
+    """Everyone hearing everyone without loss takes a shortcut (one OR over the senders per
+    round, no relay matrix); it must give exactly what the general broadcast delivery gives:
+    pairs, request log, rounds, messages and hops."""
+    from dispatch import decentralized
+
+    def answers():
+        out = []
+        for seed, n, m, p_inf in _shapes():
+            a = cls().allocate(random_problem(seed, n, m, p_inf, integer=seed % 2 == 0))
+            out.append((a.pairs, a.requests, a.rounds, a.messages, a.hops))
+        return out
+
+    fast = answers()
+    monkeypatch.setattr(decentralized, "_everyone_hears", lambda problem: False)
+    general = answers()
+    assert fast == general
+    assert sum(len(f[1]) for f in fast) > 500  # the log is not empty: requests were compared

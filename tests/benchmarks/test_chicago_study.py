@@ -75,3 +75,26 @@ def test_findings_by_hand(study):
     # repositioning: -100 s in all 4 pairs, empty share +5 points
     assert "mean wait lower in 4 of 4 pairs (allocator, N, window), change -100 s" in para
     assert "empty share of the km +5.0 points" in para
+
+
+def test_rerun_with_other_lists_resumes_the_runs_it_shares(study, tmp_path):
+    """Calling the study again with other --allocators / --repositioners / --agents writes
+    another derived text, but a run both calls make is the same run (run_digest), under the
+    same scenario names: the sweep skips it and adds only the missing ones."""
+    from dispatch.runner import run_digest
+
+    def specs(args, allocs, reps, name):
+        a = study.parse_args(["--hours", "1", *args])
+        path = tmp_path / name
+        path.write_text(study.derived_text(a, allocs, reps))
+        return {s.run_id: s for s in load_scenario(path).runs()}
+
+    first = specs(["--agents", "500", "1000"], ["fcfs", "greedy", "hungarian"], ["stay"], "a")
+    second = specs(["--agents", "1000"], ["hungarian", "greedy"], ["demand", "stay"], "b")
+    shared = sorted(set(first) & set(second))
+    assert len(shared) == 2 * 2 * 1 * 1  # hungarian, greedy x 2 windows x N = 1000 x stay
+    assert {first[r].scenario.name for r in shared} == {"chicago_study-immediate",
+                                                         "chicago_study-batch30s"}
+    for r in shared:
+        assert run_digest(first[r]) == run_digest(second[r])
+    assert len({run_digest(s) for s in second.values()}) == len(second)

@@ -365,3 +365,62 @@ def test_nearest_equals_brute_force(chicago):
     d = np.linalg.norm(pts[:, None, :] - chicago.xy[None, :, :], axis=2)
     np.testing.assert_allclose(dist, d.min(axis=1))
     np.testing.assert_allclose(d[np.arange(200), idx], d.min(axis=1))
+
+
+def test_positions_point_by_point_equal_vectorized_bit_for_bit(chicago):
+    """A short list (the per-vehicle calls of a decision) takes a pure-Python path; it must
+    give exactly the floats of the vectorized path, edge starts and ends included."""
+    from dispatch.roads import _FEW_POINTS
+
+    rng = np.random.default_rng(11)
+    pts = _mid_edge_points(chicago, rng, 200)
+    ends = [RoadPoint(p.node, p.prev, 1e9, 0.0) for p in pts[:5]]  # past the edge: clipped
+    locs: list = pts + ends + [RoadPoint(p.node, p.prev, 0.0) for p in pts[:5]] \
+        + [int(x) for x in rng.integers(0, chicago.n, 5)]
+    assert len(locs) > _FEW_POINTS
+    many = chicago.positions(locs)
+    one = np.vstack([chicago.positions([loc]) for loc in locs])
+    assert one.shape == many.shape and np.array_equal(one, many)
+    few = chicago.positions(locs[:_FEW_POINTS])
+    assert np.array_equal(few, many[:_FEW_POINTS])
+    np.testing.assert_array_equal(chicago.positions(ends[:1])[0, :2], chicago.xy[ends[0].prev])
+    with pytest.raises(ValueError, match="no edge"):
+        chicago.positions([RoadPoint(int(pts[0].node), int(pts[0].node), 3.0)])
+
+
+def _point_at_numpy(leg: Leg, t: float) -> RoadPoint:
+    """Leg.point_at as it was written on the arrays (the reference for the list version)."""
+    times, nodes = leg.times, leg.nodes
+    if t >= times[-1]:
+        return RoadPoint(int(nodes[-1]))
+    t = max(float(t), 0.0)
+    i = int(np.searchsorted(times, t, side="right"))
+    if i == 0:
+        rem = float(times[0]) - t
+        return RoadPoint(int(nodes[0]), leg.prev, rem, float(leg.metres[0]) * rem / float(times[0]))
+    if t == times[i - 1]:
+        return RoadPoint(int(nodes[i - 1]))
+    span = float(times[i] - times[i - 1])
+    rem = float(times[i]) - t
+    return RoadPoint(int(nodes[i]), int(nodes[i - 1]), rem,
+                     float(leg.metres[i] - leg.metres[i - 1]) * rem / span)
+
+
+def test_point_at_equals_the_array_computation_bit_for_bit(chicago):
+    """point_at works on cached Python lists; every field must equal the numpy computation
+    exactly, at node arrival times, between them, before the start and past the end."""
+    rng = np.random.default_rng(12)
+    starts = _mid_edge_points(chicago, rng, 20) + [int(x) for x in rng.integers(0, chicago.n, 20)]
+    checked = 0
+    for start in starts:
+        goal = int(rng.integers(0, chicago.n))
+        leg = chicago.route(start, goal)
+        if leg is None or leg.nodes.size < 2:
+            continue
+        ts = np.r_[-1.0, 0.0, leg.times, leg.times[-1] + 5.0,
+                   rng.uniform(0.0, leg.seconds, 30)]
+        for t in ts.tolist():
+            got, want = leg.point_at(t), _point_at_numpy(leg, t)
+            assert got == want and type(got.node) is int and type(got.prev) is int
+            checked += 1
+    assert checked > 500

@@ -286,3 +286,101 @@ def test_cli_sweep_bad_arguments(tiny_scenario, cli, tmp_path):
     proc = cli("sweep", tiny_scenario, "--allocator", "nosuch", "--out", tmp_path / "x")
     assert proc.returncode == 2 and "nosuch" in proc.stderr
     assert not (tmp_path / "x").exists()
+
+
+def _pool_sweep_with_workers(tmp_path):
+    """A ``dispatch sweep`` on 2 worker processes, returned once both workers are up (the
+    parent and its spawned children, as psutil processes)."""
+    psutil = pytest.importorskip("psutil")
+    scenario = write_scenario(
+        tmp_path, world={"size": [40, 40, 8]}, obstacles={"count": 6, "max_size": [6, 6, 8]},
+        fleet={"agents": 10}, tasks={"ground_fraction": 1.0},
+        sweep={"allocator": ["hungarian", "greedy", "random"], "seed": list(range(40))})
+    proc = _sweep_cli(scenario, "--out", tmp_path / "out", "--workers", "2")
+    parent = psutil.Process(proc.pid)
+    deadline = time.monotonic() + 120
+    workers = []
+    while time.monotonic() < deadline and proc.poll() is None:
+        workers = [c for c in parent.children(recursive=True)
+                   if "spawn_main" in " ".join(c.cmdline())]
+        if len(workers) >= 2 and len(markers(tmp_path / "out")) >= 1:
+            break
+        time.sleep(0.05)
+    assert proc.poll() is None and len(workers) >= 2, "the pool never ran two workers"
+    return proc, parent, parent.children(recursive=True), psutil
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_cli_sweep_terminated_stops_its_workers(tmp_path, sig):
+    """SIGTERM (or Ctrl-C's SIGINT) to a pool sweep ends it and its worker processes: none
+    is left running (writing the partitions of its run) after the sweep has exited."""
+    proc, _parent, children, psutil = _pool_sweep_with_workers(tmp_path)
+    proc.send_signal(sig)
+    proc.communicate(timeout=60)
+    assert proc.returncode != 0
+    if sig == signal.SIGTERM:
+        assert proc.returncode == 128 + signal.SIGTERM
+    _gone, alive = psutil.wait_procs(children, timeout=10)
+    assert alive == [], f"processes left running: {[p.pid for p in alive]}"
+
+
+def test_pool_workers_exit_when_the_sweep_is_killed(tmp_path):
+    """Even SIGKILL, which runs no cleanup in the sweep, leaves no worker behind: each worker
+    ends itself once its parent is gone."""
+    proc, _parent, children, psutil = _pool_sweep_with_workers(tmp_path)
+    proc.send_signal(signal.SIGKILL)
+    proc.communicate(timeout=60)
+    _gone, alive = psutil.wait_procs(children, timeout=15)
+    assert alive == [], f"processes left running: {[p.pid for p in alive]}"
+
+
+def test_changed_sweep_lists_resume_the_same_runs(tmp_path):
+    """A sweep rerun with other [sweep] lists (and other comments) skips the runs it shares
+    with the first one and runs only the new ones; runs of values dropped since stay and are
+    not counted as another scenario's; a change outside [sweep] still redoes everything."""
+    from dispatch.runner import run_digest
+
+    first = write_scenario(tmp_path, "a.toml", sweep={"allocator": ["hungarian"], "seed": [0]})
+    out = tmp_path / "out"
+    specs_a = load_scenario(first).runs()
+    assert [o.status for o in sweep(specs_a, out, workers=1)] == ["done"]
+    second = tmp_path / "b.toml"
+    second.write_text("# the same study, more allocators\n" + first.read_text().replace(
+        'allocator = ["hungarian"]', 'allocator = ["greedy", "hungarian"]  # two now'))
+    specs_b = load_scenario(second).runs()
+    assert run_digest(specs_b[1]) == run_digest(specs_a[0])
+    assert run_digest(specs_b[0]) != run_digest(specs_a[0])
+    before = markers(out)
+    outcomes = sweep(specs_b, out, workers=1)
+    assert [(o.run_id, o.status) for o in outcomes] == [
+        ("tiny__greedy__astar__n3__s0", "done"), ("tiny__hungarian__astar__n3__s0", "skipped")]
+    assert {m: t for m, t in markers(out).items() if m in before} == before  # not redone
+    assert foreign_runs(out, specs_b) == []
+    assert foreign_runs(out, specs_a) == []  # greedy: the same scenario, not a foreign one
+    changed = tmp_path / "c.toml"
+    changed.write_text(second.read_text().replace("duration = 300.0", "duration = 200.0"))
+    specs_c = load_scenario(changed).runs()
+    assert sorted(foreign_runs(out, specs_c)) == sorted(s.run_id for s in specs_b)
+    assert [o.status for o in sweep(specs_c, out, workers=1)] == ["done", "done"]
+
+
+def test_markers_without_run_digest_resume_from_the_runs_own_text(tmp_path):
+    """Markers written before run digests (scenario_sha256 only) of another text of the same
+    runs: the run's own scenario text (in its Parquet metadata) decides."""
+    first = write_scenario(tmp_path, "a.toml", sweep={"allocator": ["hungarian"], "seed": [0]})
+    out = tmp_path / "out"
+    spec = load_scenario(first).runs()[0]
+    sweep([spec], out, workers=1)
+    path = marker_path(out, spec)
+    old = json.loads(path.read_text())
+    for k in ("run_sha256", "base_sha256"):
+        del old[k]
+    path.write_text(json.dumps(old))
+    second = tmp_path / "b.toml"
+    second.write_text(first.read_text().replace('seed = [0]', 'seed = [0, 1]'))
+    specs = load_scenario(second).runs()
+    assert [o.status for o in sweep(specs, out, workers=1)] == ["skipped", "done"]
+    assert foreign_runs(out, specs) == []
+    third = tmp_path / "c.toml"
+    third.write_text(second.read_text().replace("duration = 300.0", "duration = 200.0"))
+    assert not is_complete(out, load_scenario(third).runs()[0])
