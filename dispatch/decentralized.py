@@ -137,7 +137,9 @@ def run_rounds(
     # the senders (the same beliefs as the general delivery below, without N x N work per
     # sender). Taxi studies decide among hundreds of idle vehicles at every request.
     complete = _everyone_hears(problem)
-    channel = None if complete else Channel(problem.comm, problem.loss, problem.rng)
+    # claim exchanges deliver through the channel even on a complete graph
+    channel = None if complete and not claim_steps else Channel(problem.comm, problem.loss,
+                                                                problem.rng)
     has_nb = np.full(n, n > 1) if complete else channel.has_neighbours()
     need_relay = None if complete or not n else relay_needed(problem.comm)
     known = np.zeros((n, m), dtype=bool) if known is None else np.array(known, dtype=bool)
