@@ -9,6 +9,8 @@ first come first served". Centralized and deterministic: it draws nothing from `
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from dispatch.contracts import Allocation, AllocationProblem, Allocator
@@ -31,20 +33,23 @@ def fcfs_pairs(problem: AllocationProblem) -> list[tuple[int, int]]:
     n, m = cost.shape
     if n == 0 or m == 0:
         return []
-    # lexsort keys, last one primary: tasks by (release time, id); agents by id among ties
-    task_order = np.lexsort((problem.task_ids, [t.released_at for t in problem.tasks]))
+    if m == 1:  # one request (an immediate decision's usual problem): no order to sort out
+        order = [0]
+    else:
+        # lexsort keys, last one primary: tasks by (release time, id); agents by id among ties
+        order = np.lexsort((problem.task_ids, [t.released_at for t in problem.tasks])).tolist()
     agent_ids = problem.agent_ids
     ascending = getattr(problem.agents, "ascending", False) or n < 2 \
         or bool((agent_ids[1:] > agent_ids[:-1]).all())
     taken = np.zeros(n, dtype=bool)
     pairs = []
-    for t in task_order.tolist():
+    for t in order:
         col = cost[:, t]
         if pairs:
             col = np.where(taken, np.inf, col)
         a = int(np.argmin(col))  # the first of the minima: the lowest id when ids ascend
-        best = col[a]
-        if not np.isfinite(best):
+        best = float(col[a])
+        if not math.isfinite(best):
             continue
         if not ascending:
             ties = np.flatnonzero(col == best)

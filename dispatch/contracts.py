@@ -157,6 +157,27 @@ class TaskView:
         return self.loc
 
 
+class _Positions:
+    """An ``(K, 3)`` positions field of :class:`AllocationProblem` that may be given as an array
+    or as a zero-argument callable returning it (the dispatcher's: most allocators never read
+    positions, so a decision does not compute them unless someone does). Either way, reading
+    the field gives the read-only array, checked for its shape on first read."""
+
+    def __set_name__(self, owner, name: str) -> None:
+        self.name, self.key = name, "_" + name
+
+    def __get__(self, obj, objtype=None):
+        if obj is None:
+            return None  # the field's default (dataclasses read it from the class)
+        value = obj.__dict__[self.key]
+        if callable(value):
+            value = obj.__dict__[self.key] = obj._checked(self.name, value())
+        return value
+
+    def __set__(self, obj, value) -> None:
+        obj.__dict__[self.key] = value
+
+
 @dataclass(frozen=True, eq=False)
 class AllocationProblem:
     """One decision: idle agents, open tasks, and the cost matrix between them (read-only).
@@ -177,7 +198,8 @@ class AllocationProblem:
     ``agents`` is a sequence of views: the dispatcher passes an :class:`AgentViews` (lazy, with
     arrays), hand-made problems may pass a tuple; :attr:`agent_ids` / :attr:`task_ids` give the
     ids as arrays either way. With an unlimited communication range ``comm`` is a read-only
-    all-True broadcast array (no ``N x N`` memory).
+    all-True broadcast array (no ``N x N`` memory). ``agent_pos`` / ``task_pos`` may be given as
+    zero-argument callables (the dispatcher does): computed when first read, then kept.
     """
 
     time: float
@@ -190,20 +212,15 @@ class AllocationProblem:
     loss: float = 0.0
     latency: float = 0.0
     cell_size: float = 1.0
-    agent_pos: np.ndarray | None = None
-    task_pos: np.ndarray | None = None
+    agent_pos: np.ndarray | None = _Positions()  # type: ignore[assignment]
+    task_pos: np.ndarray | None = _Positions()  # type: ignore[assignment]
 
     def __post_init__(self) -> None:
         n, m = len(self.agents), len(self.tasks)
-        for name, views in (("agent_pos", self.agents), ("task_pos", self.tasks)):
-            arr = getattr(self, name)
-            if arr is None:  # a voxel problem built by hand (tests, training): cell centres
-                arr = (np.array([v.loc for v in views], float).reshape(len(views), 3)
-                       + 0.5) * self.cell_size
-                object.__setattr__(self, name, arr)
-            if arr.shape != (len(views), 3):
-                raise ValueError(f"{name} has shape {arr.shape}, expected {(len(views), 3)}")
-            arr.setflags(write=False)
+        for name in ("agent_pos", "task_pos"):
+            arr = self.__dict__["_" + name]
+            if not callable(arr):
+                self.__dict__["_" + name] = self._checked(name, arr)
         if self.cost.shape != (n, m):
             raise ValueError(f"cost has shape {self.cost.shape}, expected {(n, m)}")
         if self.comm.shape != (n, n):
@@ -214,6 +231,18 @@ class AllocationProblem:
             raise ValueError(f"latency must be >= 0, got {self.latency!r}")
         self.cost.setflags(write=False)
         self.comm.setflags(write=False)
+
+    def _checked(self, name: str, arr: np.ndarray | None) -> np.ndarray:
+        """Positions field ``name`` as kept: read-only, of shape ``(K, 3)`` (ValueError
+        otherwise); None for a voxel problem built by hand (tests, training): cell centres."""
+        views = self.agents if name == "agent_pos" else self.tasks
+        if arr is None:
+            arr = (np.array([v.loc for v in views], float).reshape(len(views), 3)
+                   + 0.5) * self.cell_size
+        if arr.shape != (len(views), 3):
+            raise ValueError(f"{name} has shape {arr.shape}, expected {(len(views), 3)}")
+        arr.setflags(write=False)
+        return arr
 
     @property
     def n_agents(self) -> int:
@@ -294,6 +323,8 @@ class Allocation:
     def conflicted_tasks(self) -> set[int]:
         """Ids of tasks requested by more than one agent in some round, or requested again in a
         later round than the one it was won in (an agent that did not hear of the win)."""
+        if len(self.requests) < 2:  # a conflict takes two requests
+            return set()
         seen: dict[tuple[int, int], int] = {}
         won: dict[int, int] = {}
         for r in self.requests:

@@ -236,6 +236,12 @@ class Dispatcher:
         run = f", run {self.run_id}" if self.run_id else ""
         return f"{kind} {name!r}{run}, decision {self.decisions}, t = {self.env.now:.6g} s"
 
+    def _bad_costs(self, cost, want: tuple[int, int]) -> PluginError:
+        got = (f"{type(cost).__name__} {getattr(cost, 'shape', '')} "
+               f"{getattr(cost, 'dtype', '')}").strip()
+        return PluginError(f"{self._where('planner')}: costs() must return a float array of "
+                           f"shape {want} without nan, got {got}")
+
     def _plugin_failed(self, kind: str, e: Exception) -> PluginError:
         reason = _line(e) or "(no message)"
         return PluginError(f"{self._where(kind)}: {kind} raised {type(e).__name__}: {reason}")
@@ -297,17 +303,21 @@ class Dispatcher:
         except Exception as e:  # a plugin's bug: one line naming it and where
             raise self._plugin_failed("planner", e) from e
         want = (len(agents), len(open_tasks))
-        if not isinstance(cost, np.ndarray) or cost.shape != want \
-                or cost.dtype.kind != "f" or np.isnan(cost).any():
-            got = (f"{type(cost).__name__} {getattr(cost, 'shape', '')} "
-                   f"{getattr(cost, 'dtype', '')}").strip()
-            raise PluginError(f"{self._where('planner')}: costs() must return a float array of "
-                              f"shape {want} without nan, got {got}")
-        servable = np.isfinite(cost).any(axis=0)
-        if not servable.all():
-            self._close_unreachable([t for t, ok in zip(open_tasks, servable) if not ok])
+        if not isinstance(cost, np.ndarray) or cost.shape != want or cost.dtype.kind != "f":
+            raise self._bad_costs(cost, want)
+        finite = np.isfinite(cost)
+        if finite.all():  # the usual case: every pair servable, no nan (nan is not finite)
+            servable = None
+        else:
+            if np.isnan(cost).any():
+                raise self._bad_costs(cost, want)
+            servable = finite.any(axis=0)
+            if not servable.all():
+                self._close_unreachable([t for t, ok in zip(open_tasks, servable) if not ok])
         deadlines = [t.deadline for t in open_tasks]
         if any(d < math.inf for d in deadlines):
+            if servable is None:
+                servable = np.ones(len(open_tasks), dtype=bool)
             cost = np.where(now + cost <= np.array(deadlines) + 1e-9, cost, np.inf)
             late = servable & ~np.isfinite(cost).any(axis=0)
             for t, bad in zip(open_tasks, late):
@@ -316,29 +326,40 @@ class Dispatcher:
             servable &= ~late
         cost_s = time.perf_counter() - t0
         self.cost_seconds += cost_s
-        if not servable.any():
-            return
-        if not servable.all():
-            open_tasks = [t for t, ok in zip(open_tasks, servable) if ok]
-            tasks = tuple([t.view() for t in open_tasks])
-            cost = cost[:, servable]
-        comms = self.comms
-        apos = _positions(self.space, agents)
+        if servable is not None:
+            if not servable.any():
+                return
+            if not servable.all():
+                open_tasks = [t for t, ok in zip(open_tasks, servable) if ok]
+                tasks = tuple([t.view() for t in open_tasks])
+                cost = cost[:, servable]
+        comms, space = self.comms, self.space
         unlimited = comms.range is None or math.isinf(comms.range)
         if unlimited and self.links is None:  # everyone hears everyone: no N x N matrix
             comm = self._everyone.get(len(agents))
             if comm is None:
                 comm = self._everyone[len(agents)] = np.broadcast_to(np.True_, (len(agents),) * 2)
+            nodes = getattr(agents, "nodes", None)
+            if nodes is not None and not agents.points.size:
+                def apos():  # node positions (fixed now), computed if someone reads them
+                    return space.positions(nodes)
+            else:  # views read now (a vehicle's view is built from its state when first read)
+                apos = _positions(space, agents)
         else:
+            apos = _positions(space, agents)
             comm = comm_graph(apos, comms.range)
             if self.links is not None:
                 comm = self.links(comm, apos, now)
+
+        def tpos():
+            return space.positions([t.loc for t in tasks])
+
         problem = AllocationProblem(
             time=now, agents=agents, tasks=tasks,
             cost=np.array(cost, order="C"), comm=comm,
             rng=self.rng, max_rounds=self.cfg.max_rounds,
             loss=comms.loss, latency=comms.latency, cell_size=self.cell_size,
-            agent_pos=apos, task_pos=self.space.positions([t.loc for t in tasks]),
+            agent_pos=apos, task_pos=tpos,
         )
         t1 = time.perf_counter()
         cost_given = problem.cost
