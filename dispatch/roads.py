@@ -262,6 +262,19 @@ class RoadNetwork(Space):
         return self.time.data.tolist(), self.length.data.tolist()
 
     @cached_property
+    def _leg_sums(self):
+        """The compiled :func:`dispatch._compiled.leg_sums` where ``time`` and ``length`` share
+        one canonical sparsity pattern (sorted, no duplicate edges: each step has one edge), else
+        None (legs are summed in Python)."""
+        t, m = self.time, self.length
+        if not (np.array_equal(t.indptr, m.indptr) and np.array_equal(t.indices, m.indices)
+                and bool((np.diff(self._keys) > 0).all())):
+            return None
+        from dispatch._compiled import leg_sums
+
+        return leg_sums
+
+    @cached_property
     def _edge_of(self) -> dict[int, int]:
         """``u * n + v`` -> CSR data index of the edge ``u -> v`` (paths are looked up here)."""
         return dict(zip(self._keys.tolist(), range(self._keys.size)))
@@ -298,6 +311,16 @@ class RoadNetwork(Space):
         step must be an edge): cumulative seconds and metres, starting at the start's remaining
         seconds and metres. ValueError otherwise."""
         p = _as_point(start)
+        sums = self._leg_sums
+        if sums is not None:  # compiled: one call instead of a Python loop over the edges
+            arr = np.asarray(nodes, dtype=np.int64).reshape(-1)
+            if arr.size and int(arr[0]) == p.node:
+                t = self.time
+                times, metres, ok = sums(t.indptr, t.indices, t.data, self.length.data, arr,
+                                         max(p.remaining, 0.0), max(p.remaining_m, 0.0))
+                if ok:
+                    return Leg(arr, times, metres, p.prev if not p.on_node else -1)
+            nodes = arr  # not a path from the start: the checks below say why
         if isinstance(nodes, list) and nodes and nodes[0] == p.node \
                 and all(type(x) is int for x in nodes):
             # a planner's path: edges looked up and summed one by one in Python (a path is
