@@ -211,10 +211,10 @@ class Recorder:
         """The buffered rows of ``table`` as a file-schema table; the buffer is emptied."""
         rows = self._rows[table]
         names = self._names[table]
-        if rows and any(len(r) != len(names) for r in rows):
+        if rows and set(map(len, rows)) != {len(names)}:
             raise ValueError(f"{table} row has {len(next(r for r in rows if len(r) != len(names)))}"
                              f" values, expected {len(names)} ({', '.join(names)})")
-        cols = dict(zip(names, map(list, zip(*rows)))) if rows else {k: [] for k in names}
+        cols = dict(zip(names, zip(*rows))) if rows else {k: () for k in names}
         cols["run_id"] = [self.run_id] * len(rows)
         for k, v in self.partition.items():
             if k in cols and any(x != v for x in cols[k]):
@@ -222,7 +222,8 @@ class Recorder:
                 raise ValueError(f"{table} row has {k}={bad!r}, but the run's partition is "
                                  f"{k}={v!r}")
         schema = self.file_schema(table)
-        data = pa.Table.from_pydict({f.name: cols[f.name] for f in schema}, schema=schema)
+        data = pa.Table.from_arrays([pa.array(cols[f.name], f.type) for f in schema],
+                                    schema=schema)
         self._rows[table] = []
         return data
 
