@@ -29,7 +29,6 @@ import math
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from functools import cached_property
 from typing import ClassVar, Literal, Protocol
 
 import numpy as np
@@ -63,6 +62,10 @@ class AgentView:
         return self.loc
 
 
+_NO_POINTS = np.zeros(0, dtype=np.int64)
+_NO_POINTS.setflags(write=False)
+
+
 class AgentViews(Sequence[AgentView]):
     """The agents of a decision: a read-only sequence of :class:`AgentView`, each built the
     first time it is read (a decision over a thousand idle vehicles need not build a thousand
@@ -88,10 +91,12 @@ class AgentViews(Sequence[AgentView]):
         self._make = make
         self._views: list[AgentView | None] | None = None
         self.nodes, self.remaining = nodes, remaining
-        self.points = np.zeros(0, dtype=np.int64) if points is None else points
-        for a in (nodes, remaining, self.points):
-            if a is not None:
-                a.setflags(write=False)
+        self.points = _NO_POINTS if points is None or not points.size else points
+        if nodes is not None:
+            nodes.setflags(write=False)
+        if remaining is not None:
+            remaining.setflags(write=False)
+        self.points.setflags(write=False)
 
     @classmethod
     def of(cls, views) -> AgentViews:
@@ -248,20 +253,28 @@ class AllocationProblem:
     def n_agents(self) -> int:
         return len(self.agents)
 
-    @cached_property
+    # agent_ids / task_ids are cached by hand: functools.cached_property takes a lock on
+    # every first read, and a run builds a problem per decision
+    @property
     def agent_ids(self) -> np.ndarray:
         """The agents' ids (int64, aligned with ``agents``; read-only)."""
-        ids = getattr(self.agents, "ids", None)
+        ids = self.__dict__.get("_agent_ids")
         if ids is None:
-            ids = np.fromiter((a.id for a in self.agents), np.int64, len(self.agents))
-            ids.setflags(write=False)
+            ids = getattr(self.agents, "ids", None)
+            if ids is None:
+                ids = np.fromiter((a.id for a in self.agents), np.int64, len(self.agents))
+                ids.setflags(write=False)
+            self.__dict__["_agent_ids"] = ids
         return ids
 
-    @cached_property
+    @property
     def task_ids(self) -> np.ndarray:
         """The tasks' ids (int64, aligned with ``tasks``; read-only)."""
-        ids = np.fromiter((t.id for t in self.tasks), np.int64, len(self.tasks))
-        ids.setflags(write=False)
+        ids = self.__dict__.get("_task_ids")
+        if ids is None:
+            ids = self.__dict__["_task_ids"] = np.fromiter((t.id for t in self.tasks), np.int64,
+                                                           len(self.tasks))
+            ids.setflags(write=False)
         return ids
 
     @property

@@ -95,9 +95,10 @@ def _positions(space: Space, agents) -> np.ndarray:
     return out
 
 
-def validate(problem: AllocationProblem, allocation: Allocation) -> None:
+def validate(problem: AllocationProblem, allocation: Allocation) -> list[tuple[int, int]]:
     """Raise AllocationError unless every pair names a known agent and task, no agent or task
-    appears twice, and no pair has infinite cost (and the counters are whole numbers >= 0)."""
+    appears twice, and no pair has infinite cost (and the counters are whole numbers >= 0).
+    Returns each pair's ``(row, column)`` in the problem (its indices into ``cost``)."""
     if not isinstance(allocation, Allocation):
         raise AllocationError(f"allocator returned {type(allocation).__name__}, not an Allocation")
     for k in ("rounds", "messages", "hops"):
@@ -115,6 +116,7 @@ def validate(problem: AllocationProblem, allocation: Allocation) -> None:
     hint = ("; pairs name agents and tasks by id, not by index (Allocation.centralized "
             "turns index pairs into id pairs)")
     n_agents, n_tasks = len(problem.agent_ids), len(problem.task_ids)
+    index = []
     for pair in pairs:
         try:
             aid, tid = pair
@@ -139,6 +141,8 @@ def validate(problem: AllocationProblem, allocation: Allocation) -> None:
             raise AllocationError(f"agent {aid} cannot serve task {tid} (infinite cost)")
         seen_agents.add(aid)
         seen_tasks.add(tid)
+        index.append((i, j))
+    return index
 
 
 def _finders(problem: AllocationProblem):
@@ -197,6 +201,7 @@ class _Pending:
     delay: float
     components: int
     holder: dict = field(default_factory=dict)  # reassign: task id -> vehicle id at decision
+    index: list = field(default_factory=list)  # each pair's (row, column) in the problem
 
 
 class Dispatcher:
@@ -377,7 +382,7 @@ class Dispatcher:
                                   "writable problem.cost (the problem is read-only; work on a "
                                   "copy)")
         try:
-            validate(problem, allocation)
+            index = validate(problem, allocation)
         except AllocationError as e:
             raise AllocationError(f"{self._where('allocator')}: {e}") from None
         self.decide_seconds += decide_s
@@ -388,7 +393,7 @@ class Dispatcher:
             t.conflicted = t.conflicted or t.id in conflicted
         n_comp = 1 if comm.strides == (0, 0) else components(comm)[0]
         self._pending = _Pending(problem, allocation, open_tasks, cost_s, decide_s, delay,
-                                 n_comp, holder)
+                                 n_comp, holder, index)
         if delay <= 0:
             self._hand_out()
 
@@ -400,34 +405,38 @@ class Dispatcher:
         by_task = {t.id: t for t in p.tasks}
         by_id = self.fleet.by_id
         holding = {a: t for t, a in p.holder.items()}  # vehicle -> its task at the decision
-
-        def still(a: int) -> bool:  # a vehicle of the decision, as it was then
-            v = by_id[a]
-            if a not in holding:
-                return not v.busy
-            return v.task is not None and v.task.id == holding[a] \
-                and v.task.state is TaskState.ASSIGNED
-
-        def available(t: int) -> bool:  # a task of the decision, as it was then
-            task = by_task[t]
-            return task.state is TaskState.OPEN if t not in p.holder else (
-                task.state is TaskState.ASSIGNED and task.agent_id == p.holder[t])
-
-        handed = tuple((a, t) for a, t in p.allocation.pairs if available(t) and still(a))
         allocation = p.allocation
-        if len(handed) != len(allocation.pairs):
-            log.debug("decision %d: %d pair(s) not handed out (task closed while deciding)",
-                      self.decisions, len(allocation.pairs) - len(handed))
-            allocation = replace(allocation, pairs=handed)
-            self.notify()
+        cost = p.problem.cost
+        if not holding and all(by_task[t].state is TaskState.OPEN and not by_id[a].busy
+                               for a, t in allocation.pairs):  # (always so without latency)
+            handed = tuple(allocation.pairs)
+            pair_cost = [float(cost[i, j]) for i, j in p.index]
+        else:
+            def still(a: int) -> bool:  # a vehicle of the decision, as it was then
+                v = by_id[a]
+                if a not in holding:
+                    return not v.busy
+                return v.task is not None and v.task.id == holding[a] \
+                    and v.task.state is TaskState.ASSIGNED
+
+            def available(t: int) -> bool:  # a task of the decision, as it was then
+                task = by_task[t]
+                return task.state is TaskState.OPEN if t not in p.holder else (
+                    task.state is TaskState.ASSIGNED and task.agent_id == p.holder[t])
+
+            handed = tuple((a, t) for a, t in allocation.pairs if available(t) and still(a))
+            if len(handed) != len(allocation.pairs):
+                log.debug("decision %d: %d pair(s) not handed out (task closed while deciding)",
+                          self.decisions, len(allocation.pairs) - len(handed))
+                allocation = replace(allocation, pairs=handed)
+                self.notify()
+            row, col = _finders(p.problem)
+            pair_cost = [float(cost[row(a), col(t)]) for a, t in allocation.pairs]
         critical = max(allocation.agent_seconds, default=p.decide_s)
         self.rounds += allocation.rounds
         self.messages += allocation.messages
         self.comm_delay += p.delay
         self.agent_seconds += critical
-        row, col = _finders(p.problem)
-        cost = p.problem.cost
-        pair_cost = [float(cost[row(a), col(t)]) for a, t in allocation.pairs]
         total = float(sum(pair_cost))
         if self.decisions == 0:
             self.first_cost, self.first_seconds = total, p.cost_s + p.decide_s

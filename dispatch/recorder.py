@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -194,6 +195,22 @@ class Recorder:
         rows.append(values)
         if len(rows) >= self.flush_rows:
             self.flush(table)
+
+    def appender(self, table: str) -> Callable[[tuple], None]:
+        """``append(values)`` for one table: :meth:`append` with the table bound (the event
+        stream's recorder calls it several times per trip)."""
+        rows_of, limit = self._rows, self.flush_rows
+        rows_of[table]  # KeyError now for an unknown table
+
+        def append(values: tuple) -> None:
+            if self._closed:
+                raise RuntimeError(f"recorder of {self.run_id} is closed (finish or abort)")
+            rows = rows_of[table]
+            rows.append(values)
+            if len(rows) >= limit:
+                self.flush(table)
+
+        return append
 
     def buffered(self, table: str) -> int:
         """Rows of ``table`` held in memory (not yet in a chunk file); below ``flush_rows``."""

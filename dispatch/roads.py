@@ -211,15 +211,16 @@ class RoadNetwork(Space):
             raise ValueError(f"road network {self.name!r} has no node {node_id!r}") from None
 
     @cached_property
-    def _node_positions(self) -> list[Position]:
-        """``(x, y, 0.0)`` of every node as Python floats (events are placed one by one)."""
+    def node_positions(self) -> list[Position]:
+        """``(x, y, 0.0)`` of every node as Python floats (events are placed one by one):
+        ``position(i)`` of node ``i`` is ``node_positions[i]``."""
         return [(float(x), float(y), 0.0) for x, y in self.xy.tolist()]
 
     def position(self, loc: RoadPoint | int) -> Position:
         """``(x, y, 0.0)`` metres: the node's, or for a point part-way along ``prev -> node``
         the straight-segment position at the fraction of the edge's time already driven."""
         if type(loc) is int and 0 <= loc < self.n:  # the common case: a node
-            return self._node_positions[loc]
+            return self.node_positions[loc]
         p = self.positions([loc])[0]
         return float(p[0]), float(p[1]), 0.0
 
@@ -275,6 +276,13 @@ class RoadNetwork(Space):
         return leg_sums
 
     @cached_property
+    def _leg_csr(self) -> tuple[np.ndarray, ...]:
+        """``(indptr, indices, seconds, metres)`` for :attr:`_leg_sums`: private writable copies
+        (numba's call is cheaper with writable arrays; nothing writes to them)."""
+        t = self.time
+        return t.indptr.copy(), t.indices.copy(), t.data.copy(), self.length.data.copy()
+
+    @cached_property
     def _edge_of(self) -> dict[int, int]:
         """``u * n + v`` -> CSR data index of the edge ``u -> v`` (paths are looked up here)."""
         return dict(zip(self._keys.tolist(), range(self._keys.size)))
@@ -315,9 +323,8 @@ class RoadNetwork(Space):
         if sums is not None:  # compiled: one call instead of a Python loop over the edges
             arr = np.asarray(nodes, dtype=np.int64).reshape(-1)
             if arr.size and int(arr[0]) == p.node:
-                t = self.time
-                times, metres, ok = sums(t.indptr, t.indices, t.data, self.length.data, arr,
-                                         max(p.remaining, 0.0), max(p.remaining_m, 0.0))
+                times, metres, ok = sums(*self._leg_csr, arr, max(p.remaining, 0.0),
+                                         max(p.remaining_m, 0.0))
                 if ok:
                     return Leg(arr, times, metres, p.prev if not p.on_node else -1)
             nodes = arr  # not a path from the start: the checks below say why

@@ -228,6 +228,7 @@ class Simulation:
             driver = CellDriver(self.space, self.planner, bus)
             if sc.world.physics:
                 self._mirror()
+        self._record_event = self._event_recorder()
         bus.subscribe(self._record_event)
         book.on_close += [lambda t: self.planner.task_closed(t.id), self.stats.closed,
                           self._record_task, self._check_finished]
@@ -317,10 +318,25 @@ class Simulation:
             self.finished.succeed()
 
     # --------------------------------------------------------------- recording
-    def _record_event(self, e: Event) -> None:
-        x, y, z = NAN3 if e.loc is None else self.space.position(e.loc)
-        # the events table's columns in order (the recorder's fast path: one row per event)
-        self.recorder.append("events", (e.t, e.kind, e.agent_id, e.task_id, x, y, z))
+    def _event_recorder(self):
+        """The subscriber that writes each event as a row of the ``events`` table (several per
+        trip: the recorder's table and, on roads, the nodes' positions are bound once)."""
+        append, position = self.recorder.appender("events"), self.space.position
+        nodes = getattr(self.space, "node_positions", None)
+        n = len(nodes) if nodes is not None else 0
+
+        def record(e: Event) -> None:
+            loc = e.loc
+            if loc is None:
+                x, y, z = NAN3
+            elif type(loc) is int and 0 <= loc < n:  # a road node (as space.position reads it)
+                x, y, z = nodes[loc]
+            else:
+                x, y, z = position(loc)
+            # the events table's columns in order (the recorder's fast path: one row per event)
+            append((e.t, e.kind, e.agent_id, e.task_id, x, y, z))
+
+        return record
 
     def _record_task(self, t: Task) -> None:
         x, y, z = self.space.position(t.loc if t.origin is None else t.origin)
@@ -329,7 +345,7 @@ class Simulation:
         self.recorder.append("tasks", (
             t.id, t.kind, x, y, z, dx, dy, dz, t.released_at, t.max_wait, t.snap_m,
             t.dropoff_snap_m, t.assigned_at, t.agent_id, t.cost, t.picked_up_at, t.completed_at,
-            t.state.value, t.conflicted, t.closed_at, t.reassigned, t.transfers))
+            t.state._value_, t.conflicted, t.closed_at, t.reassigned, t.transfers))
 
     def _record_decision(self, index: int, problem: AllocationProblem, allocation: Allocation,
                          total: float, cost_s: float, decide_s: float, *, hops: int = 0,

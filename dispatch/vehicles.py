@@ -205,7 +205,7 @@ class Fleet:
 
     def idle_index(self) -> np.ndarray:
         """Positions (in :attr:`vehicles`, id order) of the idle vehicles."""
-        return np.flatnonzero(self.idle_mask)
+        return self.idle_mask.nonzero()[0]
 
     def idle(self) -> list[Vehicle]:
         """Idle vehicles in id order."""
@@ -229,7 +229,9 @@ class Fleet:
         if not self.road:
             return AgentViews(self.ids[idx], make, ascending=ascending)
         node, rem = self.node[idx], self.remaining[idx]
-        special = np.flatnonzero(self.driving[idx] | self.odd[idx]).tolist()
+        special = (self.driving[idx] | self.odd[idx]).nonzero()[0].tolist()
+        if not special:  # every one stands on a node
+            return AgentViews(self.ids[idx], make, node, rem, _NO_POINTS, ascending)
         points = []
         for k in special:  # driving (a leg: where is it now?) or stopped part-way along an edge
             loc = vs[int(idx[k])].location(now)
@@ -255,6 +257,10 @@ class Fleet:
         """Out of service: neither idle nor busy until :meth:`set_idle`."""
         v.busy = False
         self.idle_mask[v._slot] = False
+
+
+_NO_POINTS = np.zeros(0, dtype=np.int64)
+_NO_POINTS.setflags(write=False)
 
 
 def _is_node(loc) -> bool:
