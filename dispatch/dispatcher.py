@@ -175,14 +175,15 @@ def _rows(ids: np.ndarray, ascending: bool = False) -> Callable[[object], int]:
     order = None if ascending or ids.size < 2 or bool((ids[1:] > ids[:-1]).all()) \
         else np.argsort(ids)
     keys = ids if order is None else ids[order]
+    size = keys.size
 
     def find(x) -> int:
         if isinstance(x, (float, np.floating)) and float(x).is_integer():
             x = int(x)
         if not isinstance(x, (int, np.integer)) or not -2**63 <= x < 2**63:
             return -1
-        k = int(np.searchsorted(keys, x))
-        if k >= keys.size or keys[k] != x:
+        k = int(keys.searchsorted(x))
+        if k >= size or keys[k] != x:
             return -1
         return k if order is None else int(order[k])
 

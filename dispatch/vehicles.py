@@ -367,6 +367,10 @@ class Operator:
         self.env, self.bus, self.book, self.fleet = env, bus, book, fleet
         self.driver, self.service_time, self.notify = driver, service_time, notify
         self.traffic = traffic
+        #: the driver's legs are RoadDriver.drive's one timeout each (no edge events): _serve
+        #: drives them itself, without a generator per leg
+        self._plain_legs = isinstance(driver, RoadDriver) and not driver.edge_events \
+            and type(driver).drive is RoadDriver.drive
         #: called with a task re-opened by a breakdown (the task source re-arms its expiry)
         self.on_reopen: Callable[[Task], None] = lambda task: None
         #: called with a vehicle about to be given a task (repositioning stops its drive)
@@ -396,17 +400,36 @@ class Operator:
         if v.proc is not env.active_process:  # given up before it started ([dispatch] reassign)
             return
         v.task, v.busy_since = task, env.now
+        emit, plain = self.bus.emit, self._plain_legs
         try:
-            self.bus.emit(env.now, "depart", v.id, task.id, v.loc)
+            emit(env.now, "depart", v.id, task.id, v.loc)
             if task.state is TaskState.ASSIGNED:  # not a passenger already on board
-                v.empty_distance += yield from self.driver.drive(env, v, path, task.id)
+                if plain:  # RoadDriver.drive without edge events, inlined (two legs a trip)
+                    v.leg, v.leg_start = path, env.now
+                    yield env.timeout(path.seconds)
+                    metres = path.length
+                    v.leg, v.loc = None, int(path.nodes[-1])
+                    v.distance += metres
+                    v.empty_distance += metres
+                else:
+                    v.empty_distance += yield from self.driver.drive(env, v, path, task.id)
                 self.book.picked_up(task)
             if task.dropoff is not None:
                 leg = self.driver.plan(v, task.dropoff, env.now)
-                self.bus.emit(env.now, "depart", v.id, task.id, v.loc)
-                v.occupied_distance += yield from self.driver.drive(env, v, leg, task.id)
-                self.bus.emit(env.now, "dropoff", v.id, task.id, v.loc)
-            yield from self._finish(v, task)
+                emit(env.now, "depart", v.id, task.id, v.loc)
+                if plain:
+                    v.leg, v.leg_start = leg, env.now
+                    yield env.timeout(leg.seconds)
+                    metres = leg.length
+                    v.leg, v.loc = None, int(leg.nodes[-1])
+                    v.distance += metres
+                    v.occupied_distance += metres
+                else:
+                    v.occupied_distance += yield from self.driver.drive(env, v, leg, task.id)
+                emit(env.now, "dropoff", v.id, task.id, v.loc)
+            if self.service_time > 0:
+                yield env.timeout(self.service_time)
+            self._complete(v, task)
         except simpy.Interrupt:
             return
 
@@ -524,6 +547,11 @@ class Operator:
     def _finish(self, v: Vehicle, task: Task):
         if self.service_time > 0:
             yield self.env.timeout(self.service_time)
+        self._complete(v, task)
+
+    def _complete(self, v: Vehicle, task: Task) -> None:
+        """``v`` has served ``task`` (after the service time): the task completes, ``v`` is
+        idle."""
         v.busy_seconds += self.env.now - v.busy_since
         v.task = None
         v.completed += 1
