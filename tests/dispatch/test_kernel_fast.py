@@ -59,3 +59,41 @@ def test_compiled_legs_reject_what_the_python_path_rejects():
         net.leg(0, [1, 2])
     with pytest.raises(ValueError, match="no edge"):
         net.leg(0, [0, 1, 99])  # not a node
+
+
+def test_recorder_columns_equal_pa_array():
+    """The recorder's numpy-built columns are the arrays ``pa.array`` makes, and whatever is
+    not a plain float / int / bool / str column still goes through ``pa.array`` (same result,
+    same errors)."""
+    import pyarrow as pa
+
+    from dispatch.recorder import arrow_column
+
+    nan, inf = float("nan"), float("inf")
+    cases = [
+        ((1.5, nan, -inf, 0.0, -0.0, 1e308), pa.float64()),
+        ((), pa.float64()),
+        ((3, -2**63, 2**63 - 1, 0), pa.int64()),
+        ((True, False, True, True, False, False, True, False, True), pa.bool_()),
+        (("release", "", "dépôt ✓", "x" * 300), pa.string()),
+        ((1, 2.5), pa.float64()),  # an int in a float column: pa.array's conversion
+        ((None, 1.0), pa.float64()),  # a null
+        ((np.float64(2.0), 1.0), pa.float64()),
+        ((True, 1), pa.int64()),
+    ]
+    for values, typ in cases:
+        try:
+            want = pa.array(values, typ)
+        except (pa.ArrowInvalid, pa.ArrowTypeError, TypeError, OverflowError) as e:
+            with pytest.raises(type(e)):
+                arrow_column(values, typ)
+            continue
+        got = arrow_column(values, typ)
+        got.validate(full=True)
+        assert got.type == want.type and got.null_count == want.null_count
+        gl, wl = got.to_pylist(), want.to_pylist()
+        assert len(gl) == len(wl)
+        for a, b in zip(gl, wl):  # equal values, NaN where NaN, the sign of a zero kept
+            assert repr(a) == repr(b)
+    with pytest.raises(OverflowError):
+        arrow_column((2**64,), pa.int64())
