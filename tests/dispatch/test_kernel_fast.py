@@ -97,3 +97,15 @@ def test_recorder_columns_equal_pa_array():
             assert repr(a) == repr(b)
     with pytest.raises(OverflowError):
         arrow_column((2**64,), pa.int64())
+
+
+@pytest.mark.parametrize("value", ["city_day-fcfs__s0", "", "é ✓"])
+@pytest.mark.parametrize("n", [0, 1, 7])
+def test_recorder_constant_column(value, n):
+    import pyarrow as pa
+
+    from dispatch.recorder import _Same, arrow_column
+
+    got = arrow_column(_Same(value, n), pa.string())
+    got.validate(full=True)
+    assert got.equals(pa.array([value] * n, pa.string()))
