@@ -162,7 +162,7 @@ def check_runs(sc: Scenario, planners, repositioners=()) -> None:
 PROGRESS_TICKS = 500
 #: Allocations between two young-generation collections of the garbage collector while a run
 #: goes (Python's default is 700; see :func:`run_gc`).
-RUN_GC_YOUNG = 10_000
+RUN_GC_YOUNG = 50_000
 
 
 @contextmanager
