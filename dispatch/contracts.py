@@ -287,6 +287,15 @@ class AllocationProblem:
         return np.isfinite(self.cost)
 
 
+def _frozen(cls, **fields):
+    """An instance of the frozen dataclass ``cls`` (no ``__post_init__``, no slots) from all
+    of its fields: what ``cls(**fields)`` makes, without the field-by-field
+    ``object.__setattr__`` of a frozen ``__init__`` (an immediate decision makes two)."""
+    obj = object.__new__(cls)
+    obj.__dict__.update(fields)
+    return obj
+
+
 @dataclass(frozen=True)
 class Request:
     """One agent's request for one task in one decision round, and whether it won."""
@@ -326,12 +335,16 @@ class Allocation:
     def centralized(cls, problem: AllocationProblem, index_pairs) -> Allocation:
         """Build the answer of a centralized method from ``(agent_index, task_index)`` pairs."""
         pairs, reqs = [], []
-        agent_ids, task_ids = problem.agent_ids, problem.task_ids
+        agent_ids, task_ids, cost = problem.agent_ids, problem.task_ids, problem.cost
         for a, t in index_pairs:
             aid, tid = int(agent_ids[a]), int(task_ids[t])
             pairs.append((aid, tid))
-            reqs.append(Request(0, aid, tid, float(problem.cost[a, t]), True))
-        return cls(pairs=tuple(pairs), rounds=1, requests=tuple(reqs), messages=0)
+            reqs.append(_frozen(Request, round=0, agent_id=aid, task_id=tid,
+                                cost=float(cost[a, t]), won=True))
+        if cls is not Allocation:  # a subclass may add fields or checks: its own __init__
+            return cls(pairs=tuple(pairs), rounds=1, requests=tuple(reqs), messages=0)
+        return _frozen(cls, pairs=tuple(pairs), rounds=1, requests=tuple(reqs), messages=0,
+                       hops=0, agent_seconds=())
 
     def conflicted_tasks(self) -> set[int]:
         """Ids of tasks requested by more than one agent in some round, or requested again in a

@@ -112,8 +112,11 @@ class Vehicle:
     @leg.setter
     def leg(self, value: Leg | None) -> None:
         self._leg = value
-        if self._fleet is not None:
-            self._fleet.driving[self._slot] = value is not None
+        fleet = self._fleet
+        if fleet is not None:
+            i = self._slot
+            fleet.driving[i] = value is not None
+            fleet.special[i] = value is not None or fleet._odd[i]
 
     @property
     def cell(self):
@@ -179,12 +182,15 @@ class Fleet:
         self.remaining = np.zeros(n)
         self.odd = np.zeros(n, dtype=bool)
         self.driving = np.zeros(n, dtype=bool)
+        #: driving or odd: where it is needs a look at the vehicle (kept with the two)
+        self.special = np.zeros(n, dtype=bool)
+        self._odd = [False] * n  # odd, as Python bools (read by the leg setter)
         self.road = n > 0 and all(_is_node(v.loc) or hasattr(v.loc, "node")
                                   for v in self.vehicles)
         for i, v in enumerate(self.vehicles):
             v._fleet, v._slot = self, i
-            self._moved(i, v.loc)
             self.driving[i] = v.leg is not None
+            self._moved(i, v.loc)
 
     def __len__(self) -> int:
         return len(self.vehicles)
@@ -193,15 +199,19 @@ class Fleet:
         """Vehicle ``i``'s ``loc`` changed (called by its setter)."""
         if _is_node(loc):
             self.node[i], self.remaining[i], self.odd[i] = loc, 0.0, False
-            return
-        node = getattr(loc, "node", None)
-        if node is None:  # a voxel cell: the arrays are unused
-            self.odd[i] = True
-            return
-        self.node[i] = node
-        on_node = loc.on_node  # type: ignore[union-attr]
-        self.remaining[i] = 0.0 if on_node else max(loc.remaining, 0.0)  # type: ignore[union-attr]
-        self.odd[i] = not on_node
+            odd = False
+        else:
+            node = getattr(loc, "node", None)
+            if node is None:  # a voxel cell: the arrays are unused
+                odd = True
+            else:
+                self.node[i] = node
+                on_node = loc.on_node  # type: ignore[union-attr]
+                self.remaining[i] = 0.0 if on_node else max(loc.remaining, 0.0)  # type: ignore[union-attr]
+                odd = not on_node
+            self.odd[i] = odd
+        self._odd[i] = odd
+        self.special[i] = odd or self.vehicles[i]._leg is not None
 
     def idle_index(self) -> np.ndarray:
         """Positions (in :attr:`vehicles`, id order) of the idle vehicles."""
@@ -229,7 +239,7 @@ class Fleet:
         if not self.road:
             return AgentViews(self.ids[idx], make, ascending=ascending)
         node, rem = self.node[idx], self.remaining[idx]
-        special = (self.driving[idx] | self.odd[idx]).nonzero()[0].tolist()
+        special = self.special[idx].nonzero()[0].tolist()
         if not special:  # every one stands on a node
             return AgentViews(self.ids[idx], make, node, rem, _NO_POINTS, ascending)
         points = []

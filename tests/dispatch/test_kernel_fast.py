@@ -109,3 +109,50 @@ def test_recorder_constant_column(value, n):
     got = arrow_column(_Same(value, n), pa.string())
     got.validate(full=True)
     assert got.equals(pa.array([value] * n, pa.string()))
+
+
+def test_centralized_allocation_equals_the_constructed_one():
+    from dispatch.contracts import Allocation, AllocationProblem, Request
+
+    rng = np.random.default_rng(5)
+    cost = rng.uniform(1, 9, (4, 3))
+    problem = AllocationProblem(0.0, (), (), np.zeros((0, 0)), np.zeros((0, 0), bool), rng)
+    object.__setattr__(problem, "cost", cost)  # a bare problem: only ids and costs are read
+    problem.__dict__["_agent_ids"] = np.array([10, 11, 12, 13])
+    problem.__dict__["_task_ids"] = np.array([7, 8, 9])
+    got = Allocation.centralized(problem, [(2, 0), (0, 2)])
+    want = Allocation(pairs=((12, 7), (10, 9)), rounds=1, messages=0,
+                      requests=(Request(0, 12, 7, float(cost[2, 0]), True),
+                                Request(0, 10, 9, float(cost[0, 2]), True)))
+    assert got == want and got.__dict__ == want.__dict__
+    assert [r.__dict__ for r in got.requests] == [r.__dict__ for r in want.requests]
+    assert hash(got.requests[0]) == hash(want.requests[0])
+
+
+@pytest.mark.parametrize("reassign", [False, True])
+def test_fleet_arrays_follow_the_vehicles(tmp_path, reassign):
+    """``special`` stays ``driving | odd`` through trips, breakdowns (vehicles stopped
+    part-way along an edge) and re-assignments, checked after every event."""
+    from dispatch.runner import make_recorder
+    from dispatch.scenario import load_scenario
+    from dispatch.sim import Simulation
+
+    path = tmp_path / "f.toml"
+    path.write_text(
+        'name = "f"\nseed = 4\nduration = 4000.0\n[world]\nnetwork = "manhattan"\n'
+        'blocks = [6, 5]\nblock = 150.0\nspeed = 10.0\n[fleet]\nagents = 6\n[tasks]\n'
+        'source = "poisson"\nrate = 0.05\ncount = 120\n[dispatch]\nallocator = "hungarian"\n'
+        f'planner = "dijkstra"\nreassign = {"true" if reassign else "false"}\n'
+        '[faults]\nrate = 2.0\nrepair = 120.0\non_board = "transfer"\n', encoding="utf-8")
+    spec = load_scenario(path).runs()[0]
+    sim = Simulation(spec, make_recorder(spec, tmp_path / "out"))
+    fleet, seen = sim.fleet, set()
+
+    def check(e):
+        seen.add(e.kind)
+        assert np.array_equal(fleet.special, fleet.driving | fleet.odd)
+        assert fleet._odd == fleet.odd.tolist()
+
+    sim.bus.subscribe(check)
+    sim.run()
+    assert {"breakdown", "dropoff"} <= seen and (not reassign or "reassign" in seen)
