@@ -148,6 +148,7 @@ class Recorder:
         #: buffered rows per table: tuples in schema order without ``run_id`` (the first column)
         self._rows: dict[str, list[tuple]] = {name: [] for name in SCHEMAS}
         self._names = {name: tuple(schema.names[1:]) for name, schema in SCHEMAS.items()}
+        self._columns: dict[str, Callable[[list], dict]] = {}  # see appender()
         self._chunks: dict[str, list[Path]] = {name: [] for name in SCHEMAS}
         self._written = dict.fromkeys(SCHEMAS, 0)
         self._closed = False
@@ -197,11 +198,17 @@ class Recorder:
         if len(rows) >= self.flush_rows:
             self.flush(table)
 
-    def appender(self, table: str) -> Callable[[tuple], None]:
+    def appender(self, table: str, columns: Callable[[list], dict] | None = None
+                 ) -> Callable[[Any], None]:
         """``append(values)`` for one table: :meth:`append` with the table bound (the event
-        stream's recorder calls it several times per trip)."""
+        stream's recorder calls it several times per trip). With ``columns`` the items appended
+        may be anything: when they are written, ``columns(items)`` turns the list of them into
+        the table's columns (a dict: every column but ``run_id``, each a sequence of Python
+        values or a numpy array), so the work per row can be done once per chunk, vectorized."""
         rows_of, limit = self._rows, self.flush_rows
         rows_of[table]  # KeyError now for an unknown table
+        if columns is not None:
+            self._columns[table] = columns
 
         def append(values: tuple) -> None:
             if self._closed:
@@ -229,10 +236,17 @@ class Recorder:
         """The buffered rows of ``table`` as a file-schema table; the buffer is emptied."""
         rows = self._rows[table]
         names = self._names[table]
-        if rows and set(map(len, rows)) != {len(names)}:
+        columns = self._columns.get(table)
+        if columns is not None:
+            cols = dict(columns(rows))
+            if sorted(cols) != sorted(names) or any(len(c) != len(rows) for c in cols.values()):
+                raise ValueError(f"{table}: columns() gave {sorted(cols)} for {len(rows)} rows, "
+                                 f"expected {', '.join(names)}")
+        elif rows and set(map(len, rows)) != {len(names)}:
             raise ValueError(f"{table} row has {len(next(r for r in rows if len(r) != len(names)))}"
                              f" values, expected {len(names)} ({', '.join(names)})")
-        cols = dict(zip(names, zip(*rows))) if rows else {k: () for k in names}
+        else:
+            cols = dict(zip(names, zip(*rows))) if rows else {k: () for k in names}
         cols["run_id"] = _Same(self.run_id, len(rows))
         for k, v in self.partition.items():
             if k in cols and any(x != v for x in cols[k]):
@@ -330,6 +344,9 @@ def arrow_column(values, typ: pa.DataType) -> pa.Array:
     ints in a float column, values out of range) goes through ``pa.array``, which converts or
     rejects it as it always did."""
     n = len(values)
+    if isinstance(values, np.ndarray) and values.ndim == 1 and (
+            (typ == _F and values.dtype == np.float64) or (typ == _I and values.dtype == np.int64)):
+        return pa.Array.from_buffers(typ, n, [None, pa.py_buffer(np.ascontiguousarray(values))])
     if isinstance(values, _Same) and typ == _S and type(values.value) is str:
         one = values.value.encode()
         offsets = np.arange(n + 1, dtype=np.int64) * len(one)

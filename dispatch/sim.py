@@ -320,23 +320,38 @@ class Simulation:
     # --------------------------------------------------------------- recording
     def _event_recorder(self):
         """The subscriber that writes each event as a row of the ``events`` table (several per
-        trip: the recorder's table and, on roads, the nodes' positions are bound once)."""
-        append, position = self.recorder.appender("events"), self.space.position
+        trip): it keeps the event itself; its position is looked up when the chunk is written,
+        for the whole chunk at once (on roads, a gather from the nodes' positions)."""
+        position = self.space.position
         nodes = getattr(self.space, "node_positions", None)
         n = len(nodes) if nodes is not None else 0
+        xyz = np.array(nodes, dtype=np.float64).reshape(-1, 3) if nodes is not None else None
 
-        def record(e: Event) -> None:
-            loc = e.loc
-            if loc is None:
-                x, y, z = NAN3
-            elif type(loc) is int and 0 <= loc < n:  # a road node (as space.position reads it)
-                x, y, z = nodes[loc]
+        def columns(events: list) -> dict:
+            k = len(events)
+            t, kind, agent, task, locs = zip(*events) if k else ((),) * 5
+            types = set(map(type, locs))
+            idx = None
+            if xyz is not None and k and types <= {int, type(None)}:
+                idx = np.fromiter(locs if type(None) not in types else
+                                  [-1 if loc is None else loc for loc in locs], np.int64, k)
+                none = np.array([loc is None for loc in locs]) if type(None) in types else None
+                bad = (idx < 0) if none is None else ((idx < 0) & ~none)
+                if bad.any() or idx.max() >= n:  # not plain nodes: placed one by one below
+                    idx = None
+            if idx is not None:  # nodes (and None): the same floats as space.position gives
+                pos = xyz[np.maximum(idx, 0)]
+                if none is not None:
+                    pos[none] = np.nan
+                x, y, z = pos[:, 0].copy(), pos[:, 1].copy(), pos[:, 2].copy()
             else:
-                x, y, z = position(loc)
-            # the events table's columns in order (the recorder's fast path: one row per event)
-            append((e.t, e.kind, e.agent_id, e.task_id, x, y, z))
+                x, y, z = zip(*(NAN3 if loc is None else
+                                nodes[loc] if type(loc) is int and 0 <= loc < n else
+                                position(loc) for loc in locs)) if k else ((), (), ())
+            return {"t": t, "event": kind, "agent_id": agent, "task_id": task,
+                    "x": x, "y": y, "z": z}
 
-        return record
+        return self.recorder.appender("events", columns)
 
     def _record_task(self, t: Task) -> None:
         x, y, z = self.space.position(t.loc if t.origin is None else t.origin)

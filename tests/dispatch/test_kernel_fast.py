@@ -156,3 +156,53 @@ def test_fleet_arrays_follow_the_vehicles(tmp_path, reassign):
     sim.bus.subscribe(check)
     sim.run()
     assert {"breakdown", "dropoff"} <= seen and (not reassign or "reassign" in seen)
+
+
+@pytest.mark.parametrize("flush_rows", [7, 10_000])
+def test_event_rows_placed_per_chunk_equal_per_event_positions(tmp_path, flush_rows):
+    """The events table places each event where ``space.position(loc)`` says (nodes, road
+    points of vehicles stopped part-way by a breakdown, no place at all: NaN), whether a chunk
+    holds a few events or all of them."""
+    import math
+
+    import pyarrow.parquet as pq
+
+    from dispatch.roads import RoadPoint
+    from dispatch.runner import make_recorder
+    from dispatch.scenario import load_scenario
+    from dispatch.sim import Simulation
+
+    path = tmp_path / "e.toml"
+    path.write_text(
+        'name = "e"\nseed = 2\nduration = 3000.0\n[world]\nnetwork = "manhattan"\n'
+        'blocks = [5, 4]\nblock = 150.0\nspeed = 10.0\n[fleet]\nagents = 5\n[tasks]\n'
+        'source = "poisson"\nrate = 0.05\ncount = 80\nmax_active = 3\n[dispatch]\n'
+        'allocator = "fcfs"\nplanner = "dijkstra"\n'
+        '[faults]\nrate = 3.0\nrepair = 100.0\non_board = "transfer"\n', encoding="utf-8")
+    spec = load_scenario(path).runs()[0]
+    rec = make_recorder(spec, tmp_path / "out", flush_rows=flush_rows)
+    sim = Simulation(spec, rec)
+    seen = []
+    sim.bus.subscribe(lambda e: seen.append(
+        (e.t, e.kind, e.agent_id, e.task_id,
+         *((math.nan,) * 3 if e.loc is None else sim.space.position(e.loc)), e.loc)))
+    sim.run()
+    files = rec.finish()
+    got = pq.read_table(files["events"]).to_pylist()
+    assert len(got) == len(seen) > 100
+    kinds = {type(s[-1]) for s in seen}
+    assert {int, RoadPoint, type(None)} <= kinds  # every kind of place occurs
+    for row, want in zip(got, seen):
+        assert (row["t"], row["event"], row["agent_id"], row["task_id"]) == want[:4]
+        for k, v in zip("xyz", want[4:7]):
+            assert repr(row[k]) == repr(float(v))
+
+
+def test_appender_columns_must_name_every_column(tmp_path):
+    from dispatch.recorder import Recorder
+
+    rec = Recorder(tmp_path, "r", {}, {})
+    append = rec.appender("events", lambda items: {"t": [i for i in items]})
+    append(1.0)
+    with pytest.raises(ValueError, match="columns\\(\\) gave"):
+        rec.flush("events")
