@@ -220,6 +220,20 @@ class AllocationProblem:
     agent_pos: np.ndarray | None = _Positions()  # type: ignore[assignment]
     task_pos: np.ndarray | None = _Positions()  # type: ignore[assignment]
 
+    @classmethod
+    def made(cls, time: float, agents, tasks, cost: np.ndarray, comm: np.ndarray,
+             rng: np.random.Generator, max_rounds: int, loss: float, latency: float,
+             cell_size: float, agent_pos, task_pos) -> AllocationProblem:
+        """The problem ``cls(...)`` of these fields (all of them, positionally) makes, checked
+        the same way, without the field-by-field ``object.__setattr__`` of a frozen
+        ``__init__`` (the dispatcher makes one per decision)."""
+        obj = object.__new__(cls)
+        obj.__dict__.update(time=time, agents=agents, tasks=tasks, cost=cost, comm=comm, rng=rng,
+                            max_rounds=max_rounds, loss=loss, latency=latency,
+                            cell_size=cell_size, _agent_pos=agent_pos, _task_pos=task_pos)
+        obj.__post_init__()
+        return obj
+
     def __post_init__(self) -> None:
         n, m = len(self.agents), len(self.tasks)
         for name in ("agent_pos", "task_pos"):

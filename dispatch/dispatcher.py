@@ -61,7 +61,7 @@ from dispatch.comms import comm_graph, components
 from dispatch.contracts import Allocation, AllocationProblem, Allocator, Planner
 from dispatch.errors import AllocationError, DispatchError, PluginError
 from dispatch.space import Space
-from dispatch.tasks import TaskBook, TaskState
+from dispatch.tasks import OPEN, TaskBook, TaskState
 
 if TYPE_CHECKING:
     import simpy
@@ -360,13 +360,9 @@ class Dispatcher:
         def tpos():
             return space.positions([t.loc for t in tasks])
 
-        problem = AllocationProblem(
-            time=now, agents=agents, tasks=tasks,
-            cost=np.array(cost, order="C"), comm=comm,
-            rng=self.rng, max_rounds=self.cfg.max_rounds,
-            loss=comms.loss, latency=comms.latency, cell_size=self.cell_size,
-            agent_pos=apos, task_pos=tpos,
-        )
+        problem = AllocationProblem.made(now, agents, tasks, np.array(cost, order="C"), comm,
+                                         self.rng, self.cfg.max_rounds, comms.loss,
+                                         comms.latency, self.cell_size, apos, tpos)
         t1 = time.perf_counter()
         cost_given = problem.cost
         try:
@@ -408,7 +404,7 @@ class Dispatcher:
         holding = {a: t for t, a in p.holder.items()}  # vehicle -> its task at the decision
         allocation = p.allocation
         cost = p.problem.cost
-        if not holding and all(by_task[t].state is TaskState.OPEN and not by_id[a].busy
+        if not holding and all(by_task[t].state is OPEN and not by_id[a].busy
                                for a, t in allocation.pairs):  # (always so without latency)
             handed = tuple(allocation.pairs)
             pair_cost = [float(cost[i, j]) for i, j in p.index]

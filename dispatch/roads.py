@@ -318,16 +318,23 @@ class RoadNetwork(Space):
         """The drive from ``start`` along ``nodes`` (``nodes[0]`` must be the start's node; each
         step must be an edge): cumulative seconds and metres, starting at the start's remaining
         seconds and metres. ValueError otherwise."""
-        p = _as_point(start)
         sums = self._leg_sums
         if sums is not None:  # compiled: one call instead of a Python loop over the edges
+            if type(start) is int:  # a node (the usual start): no point to build
+                node, rem, rem_m, prev = start, 0.0, 0.0, -1
+            else:
+                p = _as_point(start)
+                node, rem, rem_m = p.node, max(p.remaining, 0.0), max(p.remaining_m, 0.0)
+                prev = p.prev if not p.on_node else -1
             arr = np.asarray(nodes, dtype=np.int64).reshape(-1)
-            if arr.size and int(arr[0]) == p.node:
-                times, metres, ok = sums(*self._leg_csr, arr, max(p.remaining, 0.0),
-                                         max(p.remaining_m, 0.0))
-                if ok:
-                    return Leg(arr, times, metres, p.prev if not p.on_node else -1)
+            if arr.size and int(arr[0]) == node:
+                times, metres, ok = sums(*self._leg_csr, arr, rem, rem_m)
+                if ok:  # Leg(arr, times, metres, prev), without a frozen __init__
+                    leg = object.__new__(Leg)
+                    leg.__dict__.update(nodes=arr, times=times, metres=metres, prev=prev)
+                    return leg
             nodes = arr  # not a path from the start: the checks below say why
+        p = _as_point(start)
         if isinstance(nodes, list) and nodes and nodes[0] == p.node \
                 and all(type(x) is int for x in nodes):
             # a planner's path: edges looked up and summed one by one in Python (a path is

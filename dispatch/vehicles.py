@@ -33,7 +33,7 @@ from dispatch.events import EventBus
 from dispatch.motion import step_length
 from dispatch.reservations import EPS, step_seconds
 from dispatch.space import Location
-from dispatch.tasks import Task, TaskBook, TaskState
+from dispatch.tasks import ASSIGNED, COMPLETED, Task, TaskBook, TaskState
 
 if TYPE_CHECKING:
     from dispatch.reservations import Traffic
@@ -413,7 +413,7 @@ class Operator:
         emit, plain = self.bus.emit, self._plain_legs
         try:
             emit(env.now, "depart", v.id, task.id, v.loc)
-            if task.state is TaskState.ASSIGNED:  # not a passenger already on board
+            if task.state is ASSIGNED:  # not a passenger already on board
                 if plain:  # RoadDriver.drive without edge events, inlined (two legs a trip)
                     v.leg, v.leg_start = path, env.now
                     yield env.timeout(path.seconds)
@@ -566,7 +566,7 @@ class Operator:
         v.task = None
         v.completed += 1
         self.fleet.set_idle(v)
-        self.book.close(task, TaskState.COMPLETED)
+        self.book.close(task, COMPLETED)
         self.bus.emit(self.env.now, "idle", v.id, -1, v.loc)
         self.notify()
 

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import dataclasses
 from itertools import accumulate
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from dispatch.roads import RoadPoint, load_network, manhattan
+from dispatch.roads import Leg, RoadPoint, load_network, manhattan
 
 
 @pytest.fixture(scope="module")
@@ -49,6 +50,8 @@ def test_compiled_legs_equal_python_sums_bit_for_bit(which, chicago):
         assert leg.nodes.tolist() == nodes
         assert leg.times.tolist() == times and leg.metres.tolist() == metres  # exact
         assert leg.prev == (start.prev if isinstance(start, RoadPoint) else -1)
+        assert set(leg.__dict__) == {f.name for f in dataclasses.fields(Leg)}  # every field
+        assert leg.seconds == times[-1] and leg.length == metres[-1]
 
 
 def test_compiled_legs_reject_what_the_python_path_rejects():
@@ -206,3 +209,25 @@ def test_appender_columns_must_name_every_column(tmp_path):
     append(1.0)
     with pytest.raises(ValueError, match="columns\\(\\) gave"):
         rec.flush("events")
+
+
+def test_problem_made_equals_the_constructed_one():
+    import dataclasses
+
+    from dispatch.contracts import AgentView, AllocationProblem, TaskView
+
+    agents = (AgentView(3, "ugv", (0, 0, 0), 1.0), AgentView(5, "uav", (1, 0, 2), 2.0))
+    tasks = (TaskView(9, "ground", (2, 1, 0), 0.0),)
+    rng = np.random.default_rng(0)
+    args = (4.0, agents, tasks, np.array([[1.0], [2.0]]), np.ones((2, 2), bool), rng, 7, 0.1,
+            0.5, 2.0)
+    made = AllocationProblem.made(*(a.copy() if isinstance(a, np.ndarray) else a for a in args),
+                                  None, lambda: np.zeros((1, 3)))
+    built = AllocationProblem(*args, agent_pos=None, task_pos=np.zeros((1, 3)))
+    for f in dataclasses.fields(AllocationProblem):  # every field, the same value
+        a, b = getattr(made, f.name), getattr(built, f.name)
+        assert (np.array_equal(a, b) if isinstance(a, np.ndarray) else a == b), f.name
+    assert set(made.__dict__) == set(built.__dict__)
+    assert not made.cost.flags.writeable and not made.agent_pos.flags.writeable
+    with pytest.raises(ValueError, match="cost has shape"):
+        AllocationProblem.made(*args[:3], np.ones((3, 1)), *args[4:], None, None)
