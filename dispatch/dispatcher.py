@@ -311,10 +311,12 @@ class Dispatcher:
         want = (len(agents), len(open_tasks))
         if not isinstance(cost, np.ndarray) or cost.shape != want or cost.dtype.kind != "f":
             raise self._bad_costs(cost, want)
-        finite = np.isfinite(cost)
-        if finite.all():  # the usual case: every pair servable, no nan (nan is not finite)
+        # the usual case: a finite sum, so no inf and no nan (either would make the sum one):
+        # every pair servable (a sum that overflows takes the element-wise checks below)
+        if math.isfinite(cost.sum()):
             servable = None
         else:
+            finite = np.isfinite(cost)
             if np.isnan(cost).any():
                 raise self._bad_costs(cost, want)
             servable = finite.any(axis=0)

@@ -288,6 +288,9 @@ class RoadPlanner(Planner):
         straight = np.hypot(*(space.xy[t.indices] - space.xy[rows]).T) / t.data
         fastest = float(straight.max()) if straight.size else 0.0
         self._inv_speed = 1.0 / fastest if fastest > 0 and np.isfinite(fastest) else 0.0
+        #: a writable copy of the nodes' coordinates for A* (numba calls with read-only
+        #: arrays cost more; nothing writes to it)
+        self._xy = np.array(space.xy, dtype=np.float64)
         self._astar = (np.full(space.n, np.inf), np.empty(space.n, dtype=np.int64),
                        np.empty(space.n, dtype=np.int64))
         self.stats.extra.setdefault("fields_computed", 0)
@@ -441,7 +444,7 @@ class RoadPlanner(Planner):
             self._retire(goal, field)
         if field is None:
             _, hk, hn, _ = self._scratch
-            k = _road_fast.astar(*self._graph, self.space.xy, self._inv_speed, start, goal,
+            k = _road_fast.astar(*self._graph, self._xy, self._inv_speed, start, goal,
                                  *self._astar, hk, hn, path)
             return path[:k].tolist() if k else None
         k = _road_fast.descend(*self._graph, field, self._order, start, goal, path)
