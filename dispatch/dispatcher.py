@@ -313,7 +313,7 @@ class Dispatcher:
             raise self._bad_costs(cost, want)
         # the usual case: a finite sum, so no inf and no nan (either would make the sum one):
         # every pair servable (a sum that overflows takes the element-wise checks below)
-        if math.isfinite(cost.sum()):
+        if math.isfinite(np.add.reduce(cost, axis=None)):
             servable = None
         else:
             finite = np.isfinite(cost)
