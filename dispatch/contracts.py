@@ -251,6 +251,17 @@ class AllocationProblem:
         self.cost.setflags(write=False)
         self.comm.setflags(write=False)
 
+    def __getstate__(self) -> dict:
+        """Pickled with its positions computed (a callable given for them may not pickle)."""
+        state = dict(self.__dict__)
+        state["_agent_pos"], state["_task_pos"] = self.agent_pos, self.task_pos
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        for name in ("cost", "comm", "_agent_pos", "_task_pos"):  # read-only again
+            state[name].setflags(write=False)
+
     def _checked(self, name: str, arr: np.ndarray | None) -> np.ndarray:
         """Positions field ``name`` as kept: read-only, of shape ``(K, 3)`` (ValueError
         otherwise); None for a voxel problem built by hand (tests, training): cell centres."""

@@ -231,3 +231,27 @@ def test_problem_made_equals_the_constructed_one():
     assert not made.cost.flags.writeable and not made.agent_pos.flags.writeable
     with pytest.raises(ValueError, match="cost has shape"):
         AllocationProblem.made(*args[:3], np.ones((3, 1)), *args[4:], None, None)
+
+
+def test_problem_with_lazy_positions_pickles():
+    import pickle
+
+    from dispatch.contracts import AgentView, AllocationProblem, TaskView
+
+    agents = (AgentView(3, "ugv", (0, 0, 0), 1.0),)
+    tasks = (TaskView(9, "ground", (2, 1, 0), 0.0),)
+    calls = []
+
+    def where():  # a local function: not picklable itself
+        calls.append(1)
+        return np.full((1, 3), 7.0)
+
+    p = AllocationProblem.made(1.0, agents, tasks, np.ones((1, 1)), np.ones((1, 1), bool),
+                               np.random.default_rng(1), 5, 0.0, 0.0, 1.0, where, None)
+    assert calls == []  # not computed until read
+    q = pickle.loads(pickle.dumps(p))
+    assert calls == [1]
+    assert np.array_equal(q.agent_pos, np.full((1, 3), 7.0)) and not q.agent_pos.flags.writeable
+    assert np.array_equal(q.task_pos, p.task_pos) and np.array_equal(q.cost, p.cost)
+    assert not q.cost.flags.writeable and not q.comm.flags.writeable
+    assert q.time == 1.0 and q.max_rounds == 5 and q.agents == agents
