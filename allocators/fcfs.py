@@ -9,6 +9,8 @@ first come first served". Centralized and deterministic: it draws nothing from `
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from dispatch.contracts import Allocation, AllocationProblem, Allocator
@@ -31,20 +33,32 @@ def fcfs_pairs(problem: AllocationProblem) -> list[tuple[int, int]]:
     n, m = cost.shape
     if n == 0 or m == 0:
         return []
+    if m == 1:  # one request (an immediate decision's usual problem): the soonest vehicle
+        col = cost[:, 0]
+        a = int(col.argmin())  # the first of the minima: the lowest id when ids ascend
+        best = float(col[a])
+        if not math.isfinite(best):
+            return []
+        if not (getattr(problem.agents, "ascending", False) or n < 2):
+            agent_ids = problem.agent_ids
+            if not bool((agent_ids[1:] > agent_ids[:-1]).all()):
+                ties = np.flatnonzero(col == best)
+                a = int(ties[np.argmin(agent_ids[ties])])
+        return [(a, 0)]
     # lexsort keys, last one primary: tasks by (release time, id); agents by id among ties
-    task_order = np.lexsort((problem.task_ids, [t.released_at for t in problem.tasks]))
+    order = np.lexsort((problem.task_ids, [t.released_at for t in problem.tasks])).tolist()
     agent_ids = problem.agent_ids
     ascending = getattr(problem.agents, "ascending", False) or n < 2 \
         or bool((agent_ids[1:] > agent_ids[:-1]).all())
     taken = np.zeros(n, dtype=bool)
     pairs = []
-    for t in task_order.tolist():
+    for t in order:
         col = cost[:, t]
         if pairs:
             col = np.where(taken, np.inf, col)
         a = int(np.argmin(col))  # the first of the minima: the lowest id when ids ascend
-        best = col[a]
-        if not np.isfinite(best):
+        best = float(col[a])
+        if not math.isfinite(best):
             continue
         if not ascending:
             ties = np.flatnonzero(col == best)

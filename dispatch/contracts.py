@@ -29,7 +29,6 @@ import math
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from functools import cached_property
 from typing import ClassVar, Literal, Protocol
 
 import numpy as np
@@ -63,6 +62,10 @@ class AgentView:
         return self.loc
 
 
+_NO_POINTS = np.zeros(0, dtype=np.int64)
+_NO_POINTS.setflags(write=False)
+
+
 class AgentViews(Sequence[AgentView]):
     """The agents of a decision: a read-only sequence of :class:`AgentView`, each built the
     first time it is read (a decision over a thousand idle vehicles need not build a thousand
@@ -88,10 +91,12 @@ class AgentViews(Sequence[AgentView]):
         self._make = make
         self._views: list[AgentView | None] | None = None
         self.nodes, self.remaining = nodes, remaining
-        self.points = np.zeros(0, dtype=np.int64) if points is None else points
-        for a in (nodes, remaining, self.points):
-            if a is not None:
-                a.setflags(write=False)
+        self.points = _NO_POINTS if points is None or not points.size else points
+        if nodes is not None:
+            nodes.setflags(write=False)
+        if remaining is not None:
+            remaining.setflags(write=False)
+        self.points.setflags(write=False)
 
     @classmethod
     def of(cls, views) -> AgentViews:
@@ -157,6 +162,27 @@ class TaskView:
         return self.loc
 
 
+class _Positions:
+    """An ``(K, 3)`` positions field of :class:`AllocationProblem` that may be given as an array
+    or as a zero-argument callable returning it (the dispatcher's: most allocators never read
+    positions, so a decision does not compute them unless someone does). Either way, reading
+    the field gives the read-only array, checked for its shape on first read."""
+
+    def __set_name__(self, owner, name: str) -> None:
+        self.name, self.key = name, "_" + name
+
+    def __get__(self, obj, objtype=None):
+        if obj is None:
+            return None  # the field's default (dataclasses read it from the class)
+        value = obj.__dict__[self.key]
+        if callable(value):
+            value = obj.__dict__[self.key] = obj._checked(self.name, value())
+        return value
+
+    def __set__(self, obj, value) -> None:
+        obj.__dict__[self.key] = value
+
+
 @dataclass(frozen=True, eq=False)
 class AllocationProblem:
     """One decision: idle agents, open tasks, and the cost matrix between them (read-only).
@@ -177,7 +203,8 @@ class AllocationProblem:
     ``agents`` is a sequence of views: the dispatcher passes an :class:`AgentViews` (lazy, with
     arrays), hand-made problems may pass a tuple; :attr:`agent_ids` / :attr:`task_ids` give the
     ids as arrays either way. With an unlimited communication range ``comm`` is a read-only
-    all-True broadcast array (no ``N x N`` memory).
+    all-True broadcast array (no ``N x N`` memory). ``agent_pos`` / ``task_pos`` may be given as
+    zero-argument callables (the dispatcher does): computed when first read, then kept.
     """
 
     time: float
@@ -190,20 +217,29 @@ class AllocationProblem:
     loss: float = 0.0
     latency: float = 0.0
     cell_size: float = 1.0
-    agent_pos: np.ndarray | None = None
-    task_pos: np.ndarray | None = None
+    agent_pos: np.ndarray | None = _Positions()  # type: ignore[assignment]
+    task_pos: np.ndarray | None = _Positions()  # type: ignore[assignment]
+
+    @classmethod
+    def made(cls, time: float, agents, tasks, cost: np.ndarray, comm: np.ndarray,
+             rng: np.random.Generator, max_rounds: int, loss: float, latency: float,
+             cell_size: float, agent_pos, task_pos) -> AllocationProblem:
+        """The problem ``cls(...)`` of these fields (all of them, positionally) makes, checked
+        the same way, without the field-by-field ``object.__setattr__`` of a frozen
+        ``__init__`` (the dispatcher makes one per decision)."""
+        obj = object.__new__(cls)
+        obj.__dict__.update(time=time, agents=agents, tasks=tasks, cost=cost, comm=comm, rng=rng,
+                            max_rounds=max_rounds, loss=loss, latency=latency,
+                            cell_size=cell_size, _agent_pos=agent_pos, _task_pos=task_pos)
+        obj.__post_init__()
+        return obj
 
     def __post_init__(self) -> None:
         n, m = len(self.agents), len(self.tasks)
-        for name, views in (("agent_pos", self.agents), ("task_pos", self.tasks)):
-            arr = getattr(self, name)
-            if arr is None:  # a voxel problem built by hand (tests, training): cell centres
-                arr = (np.array([v.loc for v in views], float).reshape(len(views), 3)
-                       + 0.5) * self.cell_size
-                object.__setattr__(self, name, arr)
-            if arr.shape != (len(views), 3):
-                raise ValueError(f"{name} has shape {arr.shape}, expected {(len(views), 3)}")
-            arr.setflags(write=False)
+        for name in ("agent_pos", "task_pos"):
+            arr = self.__dict__["_" + name]
+            if not callable(arr):
+                self.__dict__["_" + name] = self._checked(name, arr)
         if self.cost.shape != (n, m):
             raise ValueError(f"cost has shape {self.cost.shape}, expected {(n, m)}")
         if self.comm.shape != (n, n):
@@ -215,24 +251,55 @@ class AllocationProblem:
         self.cost.setflags(write=False)
         self.comm.setflags(write=False)
 
+    def __getstate__(self) -> dict:
+        """Pickled with its positions computed (a callable given for them may not pickle)."""
+        state = dict(self.__dict__)
+        state["_agent_pos"], state["_task_pos"] = self.agent_pos, self.task_pos
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        for name in ("cost", "comm", "_agent_pos", "_task_pos"):  # read-only again
+            state[name].setflags(write=False)
+
+    def _checked(self, name: str, arr: np.ndarray | None) -> np.ndarray:
+        """Positions field ``name`` as kept: read-only, of shape ``(K, 3)`` (ValueError
+        otherwise); None for a voxel problem built by hand (tests, training): cell centres."""
+        views = self.agents if name == "agent_pos" else self.tasks
+        if arr is None:
+            arr = (np.array([v.loc for v in views], float).reshape(len(views), 3)
+                   + 0.5) * self.cell_size
+        if arr.shape != (len(views), 3):
+            raise ValueError(f"{name} has shape {arr.shape}, expected {(len(views), 3)}")
+        arr.setflags(write=False)
+        return arr
+
     @property
     def n_agents(self) -> int:
         return len(self.agents)
 
-    @cached_property
+    # agent_ids / task_ids are cached by hand: functools.cached_property takes a lock on
+    # every first read, and a run builds a problem per decision
+    @property
     def agent_ids(self) -> np.ndarray:
         """The agents' ids (int64, aligned with ``agents``; read-only)."""
-        ids = getattr(self.agents, "ids", None)
+        ids = self.__dict__.get("_agent_ids")
         if ids is None:
-            ids = np.fromiter((a.id for a in self.agents), np.int64, len(self.agents))
-            ids.setflags(write=False)
+            ids = getattr(self.agents, "ids", None)
+            if ids is None:
+                ids = np.fromiter((a.id for a in self.agents), np.int64, len(self.agents))
+                ids.setflags(write=False)
+            self.__dict__["_agent_ids"] = ids
         return ids
 
-    @cached_property
+    @property
     def task_ids(self) -> np.ndarray:
         """The tasks' ids (int64, aligned with ``tasks``; read-only)."""
-        ids = np.fromiter((t.id for t in self.tasks), np.int64, len(self.tasks))
-        ids.setflags(write=False)
+        ids = self.__dict__.get("_task_ids")
+        if ids is None:
+            ids = self.__dict__["_task_ids"] = np.fromiter((t.id for t in self.tasks), np.int64,
+                                                           len(self.tasks))
+            ids.setflags(write=False)
         return ids
 
     @property
@@ -243,6 +310,15 @@ class AllocationProblem:
     def feasible(self) -> np.ndarray:
         """Boolean ``(N, M)`` mask of pairs with finite cost."""
         return np.isfinite(self.cost)
+
+
+def _frozen(cls, **fields):
+    """An instance of the frozen dataclass ``cls`` (no ``__post_init__``, no slots) from all
+    of its fields: what ``cls(**fields)`` makes, without the field-by-field
+    ``object.__setattr__`` of a frozen ``__init__`` (an immediate decision makes two)."""
+    obj = object.__new__(cls)
+    obj.__dict__.update(fields)
+    return obj
 
 
 @dataclass(frozen=True)
@@ -284,18 +360,24 @@ class Allocation:
     def centralized(cls, problem: AllocationProblem, index_pairs) -> Allocation:
         """Build the answer of a centralized method from ``(agent_index, task_index)`` pairs."""
         pairs, reqs = [], []
-        agent_ids, task_ids = problem.agent_ids, problem.task_ids
+        agent_ids, task_ids, cost = problem.agent_ids, problem.task_ids, problem.cost
         for a, t in index_pairs:
             aid, tid = int(agent_ids[a]), int(task_ids[t])
             pairs.append((aid, tid))
-            reqs.append(Request(0, aid, tid, float(problem.cost[a, t]), True))
-        return cls(pairs=tuple(pairs), rounds=1, requests=tuple(reqs), messages=0)
+            reqs.append(_frozen(Request, round=0, agent_id=aid, task_id=tid,
+                                cost=float(cost[a, t]), won=True))
+        if cls is not Allocation:  # a subclass may add fields or checks: its own __init__
+            return cls(pairs=tuple(pairs), rounds=1, requests=tuple(reqs), messages=0)
+        return _frozen(cls, pairs=tuple(pairs), rounds=1, requests=tuple(reqs), messages=0,
+                       hops=0, agent_seconds=())
 
     def conflicted_tasks(self) -> set[int]:
         """Ids of tasks requested by more than one agent in some round, or requested again in a
         later round than the one it was won in (an agent that did not hear of the win).
         Computed once per answer (the dispatcher and the recorder both ask; a taxi decision
         logs hundreds of requests); a fresh set is returned each time."""
+        if len(self.requests) < 2:  # a conflict takes two requests
+            return set()
         done = self.__dict__.get("_conflicted")
         if done is None:
             seen: dict[tuple[int, int], int] = {}

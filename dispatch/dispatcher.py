@@ -61,7 +61,7 @@ from dispatch.comms import comm_graph, components
 from dispatch.contracts import Allocation, AllocationProblem, Allocator, Planner
 from dispatch.errors import AllocationError, DispatchError, PluginError
 from dispatch.space import Space
-from dispatch.tasks import TaskBook, TaskState
+from dispatch.tasks import OPEN, TaskBook, TaskState
 
 if TYPE_CHECKING:
     import simpy
@@ -95,9 +95,10 @@ def _positions(space: Space, agents) -> np.ndarray:
     return out
 
 
-def validate(problem: AllocationProblem, allocation: Allocation) -> None:
+def validate(problem: AllocationProblem, allocation: Allocation) -> list[tuple[int, int]]:
     """Raise AllocationError unless every pair names a known agent and task, no agent or task
-    appears twice, and no pair has infinite cost (and the counters are whole numbers >= 0)."""
+    appears twice, and no pair has infinite cost (and the counters are whole numbers >= 0).
+    Returns each pair's ``(row, column)`` in the problem (its indices into ``cost``)."""
     if not isinstance(allocation, Allocation):
         raise AllocationError(f"allocator returned {type(allocation).__name__}, not an Allocation")
     for k in ("rounds", "messages", "hops"):
@@ -115,6 +116,7 @@ def validate(problem: AllocationProblem, allocation: Allocation) -> None:
     hint = ("; pairs name agents and tasks by id, not by index (Allocation.centralized "
             "turns index pairs into id pairs)")
     n_agents, n_tasks = len(problem.agent_ids), len(problem.task_ids)
+    index = []
     for pair in pairs:
         try:
             aid, tid = pair
@@ -139,6 +141,8 @@ def validate(problem: AllocationProblem, allocation: Allocation) -> None:
             raise AllocationError(f"agent {aid} cannot serve task {tid} (infinite cost)")
         seen_agents.add(aid)
         seen_tasks.add(tid)
+        index.append((i, j))
+    return index
 
 
 def _finders(problem: AllocationProblem):
@@ -171,14 +175,15 @@ def _rows(ids: np.ndarray, ascending: bool = False) -> Callable[[object], int]:
     order = None if ascending or ids.size < 2 or bool((ids[1:] > ids[:-1]).all()) \
         else np.argsort(ids)
     keys = ids if order is None else ids[order]
+    size = keys.size
 
     def find(x) -> int:
         if isinstance(x, (float, np.floating)) and float(x).is_integer():
             x = int(x)
         if not isinstance(x, (int, np.integer)) or not -2**63 <= x < 2**63:
             return -1
-        k = int(np.searchsorted(keys, x))
-        if k >= keys.size or keys[k] != x:
+        k = int(keys.searchsorted(x))
+        if k >= size or keys[k] != x:
             return -1
         return k if order is None else int(order[k])
 
@@ -197,6 +202,7 @@ class _Pending:
     delay: float
     components: int
     holder: dict = field(default_factory=dict)  # reassign: task id -> vehicle id at decision
+    index: list = field(default_factory=list)  # each pair's (row, column) in the problem
 
 
 class Dispatcher:
@@ -235,6 +241,12 @@ class Dispatcher:
         name = getattr(plugin, "name", "") or type(plugin).__name__
         run = f", run {self.run_id}" if self.run_id else ""
         return f"{kind} {name!r}{run}, decision {self.decisions}, t = {self.env.now:.6g} s"
+
+    def _bad_costs(self, cost, want: tuple[int, int]) -> PluginError:
+        got = (f"{type(cost).__name__} {getattr(cost, 'shape', '')} "
+               f"{getattr(cost, 'dtype', '')}").strip()
+        return PluginError(f"{self._where('planner')}: costs() must return a float array of "
+                           f"shape {want} without nan, got {got}")
 
     def _plugin_failed(self, kind: str, e: Exception) -> PluginError:
         reason = _line(e) or "(no message)"
@@ -297,17 +309,23 @@ class Dispatcher:
         except Exception as e:  # a plugin's bug: one line naming it and where
             raise self._plugin_failed("planner", e) from e
         want = (len(agents), len(open_tasks))
-        if not isinstance(cost, np.ndarray) or cost.shape != want \
-                or cost.dtype.kind != "f" or np.isnan(cost).any():
-            got = (f"{type(cost).__name__} {getattr(cost, 'shape', '')} "
-                   f"{getattr(cost, 'dtype', '')}").strip()
-            raise PluginError(f"{self._where('planner')}: costs() must return a float array of "
-                              f"shape {want} without nan, got {got}")
-        servable = np.isfinite(cost).any(axis=0)
-        if not servable.all():
-            self._close_unreachable([t for t, ok in zip(open_tasks, servable) if not ok])
+        if not isinstance(cost, np.ndarray) or cost.shape != want or cost.dtype.kind != "f":
+            raise self._bad_costs(cost, want)
+        # the usual case: a finite sum, so no inf and no nan (either would make the sum one):
+        # every pair servable (a sum that overflows takes the element-wise checks below)
+        if math.isfinite(np.add.reduce(cost, axis=None)):
+            servable = None
+        else:
+            finite = np.isfinite(cost)
+            if np.isnan(cost).any():
+                raise self._bad_costs(cost, want)
+            servable = finite.any(axis=0)
+            if not servable.all():
+                self._close_unreachable([t for t, ok in zip(open_tasks, servable) if not ok])
         deadlines = [t.deadline for t in open_tasks]
         if any(d < math.inf for d in deadlines):
+            if servable is None:
+                servable = np.ones(len(open_tasks), dtype=bool)
             cost = np.where(now + cost <= np.array(deadlines) + 1e-9, cost, np.inf)
             late = servable & ~np.isfinite(cost).any(axis=0)
             for t, bad in zip(open_tasks, late):
@@ -316,30 +334,37 @@ class Dispatcher:
             servable &= ~late
         cost_s = time.perf_counter() - t0
         self.cost_seconds += cost_s
-        if not servable.any():
-            return
-        if not servable.all():
-            open_tasks = [t for t, ok in zip(open_tasks, servable) if ok]
-            tasks = tuple([t.view() for t in open_tasks])
-            cost = cost[:, servable]
-        comms = self.comms
-        apos = _positions(self.space, agents)
+        if servable is not None:
+            if not servable.any():
+                return
+            if not servable.all():
+                open_tasks = [t for t, ok in zip(open_tasks, servable) if ok]
+                tasks = tuple([t.view() for t in open_tasks])
+                cost = cost[:, servable]
+        comms, space = self.comms, self.space
         unlimited = comms.range is None or math.isinf(comms.range)
         if unlimited and self.links is None:  # everyone hears everyone: no N x N matrix
             comm = self._everyone.get(len(agents))
             if comm is None:
                 comm = self._everyone[len(agents)] = np.broadcast_to(np.True_, (len(agents),) * 2)
+            nodes = getattr(agents, "nodes", None)
+            if nodes is not None and not agents.points.size:
+                def apos():  # node positions (fixed now), computed if someone reads them
+                    return space.positions(nodes)
+            else:  # views read now (a vehicle's view is built from its state when first read)
+                apos = _positions(space, agents)
         else:
+            apos = _positions(space, agents)
             comm = comm_graph(apos, comms.range)
             if self.links is not None:
                 comm = self.links(comm, apos, now)
-        problem = AllocationProblem(
-            time=now, agents=agents, tasks=tasks,
-            cost=np.array(cost, order="C"), comm=comm,
-            rng=self.rng, max_rounds=self.cfg.max_rounds,
-            loss=comms.loss, latency=comms.latency, cell_size=self.cell_size,
-            agent_pos=apos, task_pos=self.space.positions([t.loc for t in tasks]),
-        )
+
+        def tpos():
+            return space.positions([t.loc for t in tasks])
+
+        problem = AllocationProblem.made(now, agents, tasks, np.array(cost, order="C"), comm,
+                                         self.rng, self.cfg.max_rounds, comms.loss,
+                                         comms.latency, self.cell_size, apos, tpos)
         t1 = time.perf_counter()
         cost_given = problem.cost
         try:
@@ -356,7 +381,7 @@ class Dispatcher:
                                   "writable problem.cost (the problem is read-only; work on a "
                                   "copy)")
         try:
-            validate(problem, allocation)
+            index = validate(problem, allocation)
         except AllocationError as e:
             raise AllocationError(f"{self._where('allocator')}: {e}") from None
         self.decide_seconds += decide_s
@@ -367,7 +392,7 @@ class Dispatcher:
             t.conflicted = t.conflicted or t.id in conflicted
         n_comp = 1 if comm.strides == (0, 0) else components(comm)[0]
         self._pending = _Pending(problem, allocation, open_tasks, cost_s, decide_s, delay,
-                                 n_comp, holder)
+                                 n_comp, holder, index)
         if delay <= 0:
             self._hand_out()
 
@@ -379,34 +404,38 @@ class Dispatcher:
         by_task = {t.id: t for t in p.tasks}
         by_id = self.fleet.by_id
         holding = {a: t for t, a in p.holder.items()}  # vehicle -> its task at the decision
-
-        def still(a: int) -> bool:  # a vehicle of the decision, as it was then
-            v = by_id[a]
-            if a not in holding:
-                return not v.busy
-            return v.task is not None and v.task.id == holding[a] \
-                and v.task.state is TaskState.ASSIGNED
-
-        def available(t: int) -> bool:  # a task of the decision, as it was then
-            task = by_task[t]
-            return task.state is TaskState.OPEN if t not in p.holder else (
-                task.state is TaskState.ASSIGNED and task.agent_id == p.holder[t])
-
-        handed = tuple((a, t) for a, t in p.allocation.pairs if available(t) and still(a))
         allocation = p.allocation
-        if len(handed) != len(allocation.pairs):
-            log.debug("decision %d: %d pair(s) not handed out (task closed while deciding)",
-                      self.decisions, len(allocation.pairs) - len(handed))
-            allocation = replace(allocation, pairs=handed)
-            self.notify()
+        cost = p.problem.cost
+        if not holding and all(by_task[t].state is OPEN and not by_id[a].busy
+                               for a, t in allocation.pairs):  # (always so without latency)
+            handed = tuple(allocation.pairs)
+            pair_cost = [float(cost[i, j]) for i, j in p.index]
+        else:
+            def still(a: int) -> bool:  # a vehicle of the decision, as it was then
+                v = by_id[a]
+                if a not in holding:
+                    return not v.busy
+                return v.task is not None and v.task.id == holding[a] \
+                    and v.task.state is TaskState.ASSIGNED
+
+            def available(t: int) -> bool:  # a task of the decision, as it was then
+                task = by_task[t]
+                return task.state is TaskState.OPEN if t not in p.holder else (
+                    task.state is TaskState.ASSIGNED and task.agent_id == p.holder[t])
+
+            handed = tuple((a, t) for a, t in allocation.pairs if available(t) and still(a))
+            if len(handed) != len(allocation.pairs):
+                log.debug("decision %d: %d pair(s) not handed out (task closed while deciding)",
+                          self.decisions, len(allocation.pairs) - len(handed))
+                allocation = replace(allocation, pairs=handed)
+                self.notify()
+            row, col = _finders(p.problem)
+            pair_cost = [float(cost[row(a), col(t)]) for a, t in allocation.pairs]
         critical = max(allocation.agent_seconds, default=p.decide_s)
         self.rounds += allocation.rounds
         self.messages += allocation.messages
         self.comm_delay += p.delay
         self.agent_seconds += critical
-        row, col = _finders(p.problem)
-        cost = p.problem.cost
-        pair_cost = [float(cost[row(a), col(t)]) for a, t in allocation.pairs]
         total = float(sum(pair_cost))
         if self.decisions == 0:
             self.first_cost, self.first_seconds = total, p.cost_s + p.decide_s

@@ -62,6 +62,7 @@ class Event(NamedTuple):
 
 
 Subscriber = Callable[[Event], None]
+_new = tuple.__new__
 
 
 class EventBus:
@@ -87,6 +88,7 @@ class EventBus:
              loc: Location | None = None) -> None:
         subs = self._by_kind[kind]
         if subs:
-            ev = Event(float(t), kind, agent_id, task_id, loc)
+            # tuple.__new__: Event(...) would run the named tuple's Python-level __new__
+            ev = _new(Event, (float(t), kind, agent_id, task_id, loc))
             for fn in subs:
                 fn(ev)

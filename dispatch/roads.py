@@ -218,15 +218,16 @@ class RoadNetwork(Space):
             raise ValueError(f"road network {self.name!r} has no node {node_id!r}") from None
 
     @cached_property
-    def _node_positions(self) -> list[Position]:
-        """``(x, y, 0.0)`` of every node as Python floats (events are placed one by one)."""
+    def node_positions(self) -> list[Position]:
+        """``(x, y, 0.0)`` of every node as Python floats (events are placed one by one):
+        ``position(i)`` of node ``i`` is ``node_positions[i]``."""
         return [(float(x), float(y), 0.0) for x, y in self.xy.tolist()]
 
     def position(self, loc: RoadPoint | int) -> Position:
         """``(x, y, 0.0)`` metres: the node's, or for a point part-way along ``prev -> node``
         the straight-segment position at the fraction of the edge's time already driven."""
         if type(loc) is int and 0 <= loc < self.n:  # the common case: a node
-            return self._node_positions[loc]
+            return self.node_positions[loc]
         p = self.positions([loc])[0]
         return float(p[0]), float(p[1]), 0.0
 
@@ -293,6 +294,26 @@ class RoadNetwork(Space):
         return self.time.data.tolist(), self.length.data.tolist()
 
     @cached_property
+    def _leg_sums(self):
+        """The compiled :func:`dispatch._compiled.leg_sums` where ``time`` and ``length`` share
+        one canonical sparsity pattern (sorted, no duplicate edges: each step has one edge), else
+        None (legs are summed in Python)."""
+        t, m = self.time, self.length
+        if not (np.array_equal(t.indptr, m.indptr) and np.array_equal(t.indices, m.indices)
+                and bool((np.diff(self._keys) > 0).all())):
+            return None
+        from dispatch._compiled import leg_sums
+
+        return leg_sums
+
+    @cached_property
+    def _leg_csr(self) -> tuple[np.ndarray, ...]:
+        """``(indptr, indices, seconds, metres)`` for :attr:`_leg_sums`: private writable copies
+        (numba's call is cheaper with writable arrays; nothing writes to them)."""
+        t = self.time
+        return t.indptr.copy(), t.indices.copy(), t.data.copy(), self.length.data.copy()
+
+    @cached_property
     def _edge_of(self) -> dict[int, int]:
         """``u * n + v`` -> CSR data index of the edge ``u -> v`` (paths are looked up here)."""
         return dict(zip(self._keys.tolist(), range(self._keys.size)))
@@ -328,6 +349,22 @@ class RoadNetwork(Space):
         """The drive from ``start`` along ``nodes`` (``nodes[0]`` must be the start's node; each
         step must be an edge): cumulative seconds and metres, starting at the start's remaining
         seconds and metres. ValueError otherwise."""
+        sums = self._leg_sums
+        if sums is not None:  # compiled: one call instead of a Python loop over the edges
+            if type(start) is int:  # a node (the usual start): no point to build
+                node, rem, rem_m, prev = start, 0.0, 0.0, -1
+            else:
+                p = _as_point(start)
+                node, rem, rem_m = p.node, max(p.remaining, 0.0), max(p.remaining_m, 0.0)
+                prev = p.prev if not p.on_node else -1
+            arr = np.asarray(nodes, dtype=np.int64).reshape(-1)
+            if arr.size and int(arr[0]) == node:
+                times, metres, ok = sums(*self._leg_csr, arr, rem, rem_m)
+                if ok:  # Leg(arr, times, metres, prev), without a frozen __init__
+                    leg = object.__new__(Leg)
+                    leg.__dict__.update(nodes=arr, times=times, metres=metres, prev=prev)
+                    return leg
+            nodes = arr  # not a path from the start: the checks below say why
         p = _as_point(start)
         if isinstance(nodes, list) and nodes and nodes[0] == p.node \
                 and all(type(x) is int for x in nodes):

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 
-from dispatch.tasks import Task, TaskState
+from dispatch.tasks import COMPLETED, Task, TaskState
 
 
 class RunStats:
@@ -46,7 +46,7 @@ class RunStats:
             self.picked += 1
             self.waits += t.picked_up_at - t.released_at
             self.travel += t.picked_up_at - t.assigned_at
-        if t.state is TaskState.COMPLETED:
+        if t.state is COMPLETED:
             self.makespan = max(self.makespan, t.completed_at)
 
     def summary(self, *, run: dict, vehicles, dispatcher, sim_time: float) -> dict:

@@ -51,6 +51,10 @@ class TaskState(str, Enum):
         return self in TERMINAL
 
 
+# the states as module constants: ``TaskState.OPEN`` is a lookup through the enum's metaclass,
+# several times slower than a global, and the hot paths read states a dozen times per trip
+OPEN, ASSIGNED, PICKED_UP, COMPLETED = (TaskState.OPEN, TaskState.ASSIGNED, TaskState.PICKED_UP,
+                                        TaskState.COMPLETED)
 TERMINAL = frozenset({TaskState.COMPLETED, TaskState.EXPIRED, TaskState.REJECTED,
                       TaskState.UNREACHABLE, TaskState.CANCELLED, TaskState.FAILED})
 #: the event emitted when a task enters a terminal state
@@ -132,13 +136,13 @@ class TaskBook:
         if state not in MOVES.get(task.state, ()):
             raise RuntimeError(f"task {task.id} cannot go from {task.state.value} to "
                                f"{state.value}")
-        if task.state is TaskState.OPEN:
+        if task.state is OPEN:
             del self.open[task.id]
-        elif state is TaskState.OPEN or state.terminal:
+        elif state is OPEN or state in TERMINAL:
             del self._active[task.id]
-        if task.state is TaskState.ASSIGNED:
+        if task.state is ASSIGNED:
             del self.assigned[task.id]
-        elif state is TaskState.ASSIGNED:
+        elif state is ASSIGNED:
             self.assigned[task.id] = task
         task.state = state
 
@@ -154,13 +158,13 @@ class TaskBook:
         return task
 
     def assign(self, task: Task, agent_id: int, cost: float) -> None:
-        self._move(task, TaskState.ASSIGNED)
+        self._move(task, ASSIGNED)
         self._active[task.id] = task
         task.assigned_at, task.agent_id, task.cost = float(self.env.now), agent_id, cost
         self.bus.emit(self.env.now, "assign", agent_id, task.id, task.loc)
 
     def picked_up(self, task: Task) -> None:
-        self._move(task, TaskState.PICKED_UP)
+        self._move(task, PICKED_UP)
         self._active[task.id] = task
         if math.isnan(task.picked_up_at):  # a transferred passenger keeps their first pickup
             task.picked_up_at = float(self.env.now)
@@ -169,8 +173,8 @@ class TaskBook:
     def reopen(self, task: Task, pickup: Location | None = None) -> None:
         """Give a task back to the pool because its vehicle broke down: an assigned one as it
         was; a picked-up one (a transfer) with its new pickup where the passenger waits."""
-        transfer = task.state is TaskState.PICKED_UP
-        self._move(task, TaskState.OPEN)
+        transfer = task.state is PICKED_UP
+        self._move(task, OPEN)
         task.reassigned += 1
         if transfer:
             task.transfers += 1
@@ -188,9 +192,9 @@ class TaskBook:
         """Give an assigned task (not picked up) back to the pool because the dispatcher
         re-assigned its vehicle (``[dispatch] reassign``): open again, keeping its release
         time and deadline; the dispatcher records the ``reassign`` event."""
-        if task.state is not TaskState.ASSIGNED:
+        if task.state is not ASSIGNED:
             raise RuntimeError(f"task {task.id} is {task.state.value}, not assigned")
-        self._move(task, TaskState.OPEN)
+        self._move(task, OPEN)
         self.open[task.id] = task
         if next(reversed(self.open)) != max(self.open):  # keep id order (release order)
             self.open = dict(sorted(self.open.items()))
@@ -198,15 +202,15 @@ class TaskBook:
 
     def close(self, task: Task, state: TaskState) -> None:
         """Move ``task`` to the terminal ``state`` and hand it to the ``on_close`` callables."""
-        if not state.terminal:
+        if state not in TERMINAL:
             raise ValueError(f"{state.value} is not a terminal state")
         self._move(task, state)
         now = float(self.env.now)
         task.closed_at = now
-        if state is TaskState.COMPLETED:
+        if state is COMPLETED:
             task.completed_at = now
         self.live -= 1
-        where = task.dropoff if state is TaskState.COMPLETED and task.dropoff is not None \
+        where = task.dropoff if state is COMPLETED and task.dropoff is not None \
             else task.loc
         self.bus.emit(now, CLOSE_EVENT[state], task.agent_id, task.id, where)
         for fn in self.on_close:
@@ -317,7 +321,7 @@ class TaskSource:
 
     def _expire(self, task: Task, after: float):
         yield self.env.timeout(after)
-        if task.state is TaskState.OPEN and not task.transfers:
+        if task.state is OPEN and not task.transfers:
             self.book.close(task, TaskState.EXPIRED)
 
     def _run(self):

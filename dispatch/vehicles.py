@@ -33,7 +33,7 @@ from dispatch.events import EventBus
 from dispatch.motion import step_length
 from dispatch.reservations import EPS, step_seconds
 from dispatch.space import Location
-from dispatch.tasks import Task, TaskBook, TaskState
+from dispatch.tasks import ASSIGNED, COMPLETED, Task, TaskBook, TaskState
 
 if TYPE_CHECKING:
     from dispatch.reservations import Traffic
@@ -112,8 +112,11 @@ class Vehicle:
     @leg.setter
     def leg(self, value: Leg | None) -> None:
         self._leg = value
-        if self._fleet is not None:
-            self._fleet.driving[self._slot] = value is not None
+        fleet = self._fleet
+        if fleet is not None:
+            i = self._slot
+            fleet.driving[i] = value is not None
+            fleet.special[i] = value is not None or fleet._odd[i]
 
     @property
     def cell(self):
@@ -179,12 +182,15 @@ class Fleet:
         self.remaining = np.zeros(n)
         self.odd = np.zeros(n, dtype=bool)
         self.driving = np.zeros(n, dtype=bool)
+        #: driving or odd: where it is needs a look at the vehicle (kept with the two)
+        self.special = np.zeros(n, dtype=bool)
+        self._odd = [False] * n  # odd, as Python bools (read by the leg setter)
         self.road = n > 0 and all(_is_node(v.loc) or hasattr(v.loc, "node")
                                   for v in self.vehicles)
         for i, v in enumerate(self.vehicles):
             v._fleet, v._slot = self, i
-            self._moved(i, v.loc)
             self.driving[i] = v.leg is not None
+            self._moved(i, v.loc)
 
     def __len__(self) -> int:
         return len(self.vehicles)
@@ -193,19 +199,23 @@ class Fleet:
         """Vehicle ``i``'s ``loc`` changed (called by its setter)."""
         if _is_node(loc):
             self.node[i], self.remaining[i], self.odd[i] = loc, 0.0, False
-            return
-        node = getattr(loc, "node", None)
-        if node is None:  # a voxel cell: the arrays are unused
-            self.odd[i] = True
-            return
-        self.node[i] = node
-        on_node = loc.on_node  # type: ignore[union-attr]
-        self.remaining[i] = 0.0 if on_node else max(loc.remaining, 0.0)  # type: ignore[union-attr]
-        self.odd[i] = not on_node
+            odd = False
+        else:
+            node = getattr(loc, "node", None)
+            if node is None:  # a voxel cell: the arrays are unused
+                odd = True
+            else:
+                self.node[i] = node
+                on_node = loc.on_node  # type: ignore[union-attr]
+                self.remaining[i] = 0.0 if on_node else max(loc.remaining, 0.0)  # type: ignore[union-attr]
+                odd = not on_node
+            self.odd[i] = odd
+        self._odd[i] = odd
+        self.special[i] = odd or self.vehicles[i]._leg is not None
 
     def idle_index(self) -> np.ndarray:
         """Positions (in :attr:`vehicles`, id order) of the idle vehicles."""
-        return np.flatnonzero(self.idle_mask)
+        return self.idle_mask.nonzero()[0]
 
     def idle(self) -> list[Vehicle]:
         """Idle vehicles in id order."""
@@ -229,7 +239,9 @@ class Fleet:
         if not self.road:
             return AgentViews(self.ids[idx], make, ascending=ascending)
         node, rem = self.node[idx], self.remaining[idx]
-        special = np.flatnonzero(self.driving[idx] | self.odd[idx]).tolist()
+        special = self.special[idx].nonzero()[0].tolist()
+        if not special:  # every one stands on a node
+            return AgentViews(self.ids[idx], make, node, rem, _NO_POINTS, ascending)
         points = []
         for k in special:  # driving (a leg: where is it now?) or stopped part-way along an edge
             loc = vs[int(idx[k])].location(now)
@@ -255,6 +267,10 @@ class Fleet:
         """Out of service: neither idle nor busy until :meth:`set_idle`."""
         v.busy = False
         self.idle_mask[v._slot] = False
+
+
+_NO_POINTS = np.zeros(0, dtype=np.int64)
+_NO_POINTS.setflags(write=False)
 
 
 def _is_node(loc) -> bool:
@@ -361,6 +377,10 @@ class Operator:
         self.env, self.bus, self.book, self.fleet = env, bus, book, fleet
         self.driver, self.service_time, self.notify = driver, service_time, notify
         self.traffic = traffic
+        #: the driver's legs are RoadDriver.drive's one timeout each (no edge events): _serve
+        #: drives them itself, without a generator per leg
+        self._plain_legs = isinstance(driver, RoadDriver) and not driver.edge_events \
+            and type(driver).drive is RoadDriver.drive
         #: called with a task re-opened by a breakdown (the task source re-arms its expiry)
         self.on_reopen: Callable[[Task], None] = lambda task: None
         #: called with a vehicle about to be given a task (repositioning stops its drive)
@@ -390,17 +410,36 @@ class Operator:
         if v.proc is not env.active_process:  # given up before it started ([dispatch] reassign)
             return
         v.task, v.busy_since = task, env.now
+        emit, plain = self.bus.emit, self._plain_legs
         try:
-            self.bus.emit(env.now, "depart", v.id, task.id, v.loc)
-            if task.state is TaskState.ASSIGNED:  # not a passenger already on board
-                v.empty_distance += yield from self.driver.drive(env, v, path, task.id)
+            emit(env.now, "depart", v.id, task.id, v.loc)
+            if task.state is ASSIGNED:  # not a passenger already on board
+                if plain:  # RoadDriver.drive without edge events, inlined (two legs a trip)
+                    v.leg, v.leg_start = path, env.now
+                    yield env.timeout(path.seconds)
+                    metres = path.length
+                    v.leg, v.loc = None, int(path.nodes[-1])
+                    v.distance += metres
+                    v.empty_distance += metres
+                else:
+                    v.empty_distance += yield from self.driver.drive(env, v, path, task.id)
                 self.book.picked_up(task)
             if task.dropoff is not None:
                 leg = self.driver.plan(v, task.dropoff, env.now)
-                self.bus.emit(env.now, "depart", v.id, task.id, v.loc)
-                v.occupied_distance += yield from self.driver.drive(env, v, leg, task.id)
-                self.bus.emit(env.now, "dropoff", v.id, task.id, v.loc)
-            yield from self._finish(v, task)
+                emit(env.now, "depart", v.id, task.id, v.loc)
+                if plain:
+                    v.leg, v.leg_start = leg, env.now
+                    yield env.timeout(leg.seconds)
+                    metres = leg.length
+                    v.leg, v.loc = None, int(leg.nodes[-1])
+                    v.distance += metres
+                    v.occupied_distance += metres
+                else:
+                    v.occupied_distance += yield from self.driver.drive(env, v, leg, task.id)
+                emit(env.now, "dropoff", v.id, task.id, v.loc)
+            if self.service_time > 0:
+                yield env.timeout(self.service_time)
+            self._complete(v, task)
         except simpy.Interrupt:
             return
 
@@ -518,11 +557,16 @@ class Operator:
     def _finish(self, v: Vehicle, task: Task):
         if self.service_time > 0:
             yield self.env.timeout(self.service_time)
+        self._complete(v, task)
+
+    def _complete(self, v: Vehicle, task: Task) -> None:
+        """``v`` has served ``task`` (after the service time): the task completes, ``v`` is
+        idle."""
         v.busy_seconds += self.env.now - v.busy_since
         v.task = None
         v.completed += 1
         self.fleet.set_idle(v)
-        self.book.close(task, TaskState.COMPLETED)
+        self.book.close(task, COMPLETED)
         self.bus.emit(self.env.now, "idle", v.id, -1, v.loc)
         self.notify()
 

@@ -14,8 +14,10 @@ Promises
       computed the first time a decision needs it and kept until :meth:`RoadPlanner.task_closed`;
       tasks on one node share one field. A later decision only gathers at the agents' nodes.
     * Fields are computed by PHAST on a contraction hierarchy of the network
-      (:mod:`planners._road_fast`): built once per network object and process (about 4 s on
-      Chicago's 11,180 nodes, kept while the network lives), then each field is an upward search
+      (:mod:`planners._road_fast`): built once per network object and process (about 4-7 s on
+      Chicago's 11,180 nodes, kept while the network lives; its contraction is cached on disk,
+      so later processes on the machine read it in milliseconds: :func:`hierarchy_cache`),
+      then each field is an upward search
       plus one linear sweep, ``PHAST_BLOCK`` fields per sweep, blocks on ``FIELD_THREADS``
       threads. On Chicago a field costs about 70 us against about 1.3 ms for a scipy Dijkstra.
       Networks below ``CH_MIN_NODES`` nodes use scipy's Dijkstra (the hierarchy would not pay).
@@ -36,12 +38,16 @@ Statistics: ``stats.cost_queries``, ``stats.plans``; ``stats.extra`` holds ``fie
 
 from __future__ import annotations
 
+import hashlib
+import logging
 import os
+import tempfile
 import threading
 import weakref
 from collections import OrderedDict
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -49,6 +55,8 @@ import numpy as np
 from dispatch.contracts import Planner
 from dispatch.roads import RoadNetwork, RoadPoint
 from planners import _road_fast
+
+log = logging.getLogger(__name__)
 
 #: Forward searches (one per distinct agent node, nothing cached) replace backward fields when
 #: the uncached task nodes outnumber the agent nodes by at least this factor. One search costs
@@ -78,12 +86,14 @@ class Hierarchy:
     positions). Fields come back in position order: ``field[pos[node]]``.
     """
 
-    def __init__(self, net: RoadNetwork) -> None:
-        t = net.time
-        rank, eu, ev, ew = _road_fast.ch_contract(t.indptr.astype(np.int64),
-                                                  t.indices.astype(np.int64),
-                                                  np.ascontiguousarray(t.data, dtype=np.float64),
-                                                  CH_SETTLE_LIMIT, True)
+    def __init__(self, net: RoadNetwork, contracted=None) -> None:
+        """The hierarchy of ``net``: contracted now, or from ``contracted``, the
+        ``(rank, eu, ev, ew)`` arrays an earlier contraction of the same network gave (see
+        :func:`hierarchy`'s disk cache)."""
+        if contracted is None:
+            contracted = contract(net)
+        rank, eu, ev, ew = contracted
+        self.contracted = contracted
         n = net.n
         self.n = n
         self.pos = (n - 1 - rank).astype(np.int64)
@@ -125,16 +135,98 @@ _H_LOCK = threading.Lock()
 _POOL: dict = {}  # pid -> ThreadPoolExecutor (a forked child must not reuse its parent's)
 
 
+def contract(net: RoadNetwork) -> tuple[np.ndarray, ...]:
+    """``(rank, eu, ev, ew)``: each node's rank and the hierarchy's edges ``eu -> ev`` of
+    weight ``ew`` (:func:`planners._road_fast.ch_contract`; deterministic: the same network
+    gives the same arrays)."""
+    t = net.time
+    return _road_fast.ch_contract(t.indptr.astype(np.int64), t.indices.astype(np.int64),
+                                  np.ascontiguousarray(t.data, dtype=np.float64),
+                                  CH_SETTLE_LIMIT, True)
+
+
 def hierarchy(net: RoadNetwork) -> Hierarchy | None:
-    """The network's :class:`Hierarchy` (built on first use, kept while the network lives), or
-    None below ``CH_MIN_NODES`` nodes."""
+    """The network's :class:`Hierarchy` (kept while the network lives), or None below
+    ``CH_MIN_NODES`` nodes. Its contraction (about 7 CPU seconds on Chicago: the whole cold
+    start of a run there) is read from the disk cache when an earlier process wrote it for the
+    same network (see :func:`hierarchy_cache`), else computed and written there."""
     if net.n < CH_MIN_NODES:
         return None
     with _H_LOCK:
         h = _HIERARCHIES.get(net)
         if h is None:
-            h = _HIERARCHIES[net] = Hierarchy(net)
+            path = hierarchy_cache(net)
+            contracted = _read_contracted(path, net.n) if path is not None else None
+            h = _HIERARCHIES[net] = Hierarchy(net, contracted)
+            if path is not None and contracted is None:
+                _write_contracted(path, h.contracted)
         return h
+
+
+#: Bumped whenever :func:`contract` would give other arrays for the same network (the
+#: contraction's rules or parameters): cached hierarchies of another version are not read.
+CH_FORMAT = 1
+
+
+def hierarchy_cache(net: RoadNetwork) -> Path | None:
+    """Where the contraction of ``net`` is cached: a file named by a hash of the network's
+    travel-time graph and of the contraction's version and parameters, in the folder
+    ``$DISPATCH_CACHE_DIR`` (``off``, or empty: no cache), else ``$XDG_CACHE_HOME/dispatch``,
+    else ``~/.cache/dispatch``. A file is only ever written whole (temporary name, then a
+    rename) and read back checked, so processes may share the folder; one that cannot be read
+    is computed again."""
+    folder = os.environ.get("DISPATCH_CACHE_DIR")
+    if folder is not None and folder.strip().lower() in ("", "off", "0", "none"):
+        return None
+    if folder is None:
+        base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+        folder = os.path.join(base, "dispatch")
+    t = net.time
+    digest = hashlib.sha256()
+    digest.update(f"ch{CH_FORMAT}/{CH_SETTLE_LIMIT}/{net.n}/".encode())
+    for a in (t.indptr.astype(np.int64), t.indices.astype(np.int64),
+              np.ascontiguousarray(t.data, dtype=np.float64)):
+        digest.update(np.ascontiguousarray(a).tobytes())
+    return Path(folder) / "hierarchies" / f"{digest.hexdigest()[:32]}.npz"
+
+
+def _read_contracted(path: Path, n: int) -> tuple[np.ndarray, ...] | None:
+    """The cached ``(rank, eu, ev, ew)`` at ``path``, or None (absent, unreadable, not one)."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            rank, eu, ev, ew = (z[k] for k in ("rank", "eu", "ev", "ew"))
+    except FileNotFoundError:
+        return None
+    except Exception as e:  # noqa: BLE001 - a damaged file: computed again, and replaced
+        log.warning("ignoring the cached road hierarchy %s (%s: %s)", path, type(e).__name__, e)
+        return None
+    m = eu.size
+    if not (rank.shape == (n,) and ev.shape == (m,) and ew.shape == (m,)
+            and rank.dtype.kind == eu.dtype.kind == ev.dtype.kind == "i" and ew.dtype.kind == "f"
+            and np.array_equal(np.sort(rank), np.arange(n))
+            and (m == 0 or (min(eu.min(), ev.min()) >= 0 and max(eu.max(), ev.max()) < n))):
+        log.warning("ignoring the cached road hierarchy %s (not one of %d nodes)", path, n)
+        return None
+    return rank, eu, ev, ew
+
+
+def _write_contracted(path: Path, contracted) -> None:
+    """Write ``(rank, eu, ev, ew)`` to ``path`` atomically; a folder that cannot be written
+    only costs the next process the contraction (logged)."""
+    rank, eu, ev, ew = contracted
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".npz", dir=path.parent)
+        try:
+            with os.fdopen(fd, "wb") as f:
+                np.savez(f, rank=rank, eu=eu, ev=ev, ew=ew)
+            os.chmod(tmp, 0o644)  # (mkstemp makes it private; a cache others may read)
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+    except OSError as e:
+        log.info("road hierarchy not cached (%s: %s)", type(e).__name__, e)
 
 
 def _pool() -> ThreadPoolExecutor | None:
@@ -196,6 +288,9 @@ class RoadPlanner(Planner):
         straight = np.hypot(*(space.xy[t.indices] - space.xy[rows]).T) / t.data
         fastest = float(straight.max()) if straight.size else 0.0
         self._inv_speed = 1.0 / fastest if fastest > 0 and np.isfinite(fastest) else 0.0
+        #: a writable copy of the nodes' coordinates for A* (numba calls with read-only
+        #: arrays cost more; nothing writes to it)
+        self._xy = np.array(space.xy, dtype=np.float64)
         self._astar = (np.full(space.n, np.inf), np.empty(space.n, dtype=np.int64),
                        np.empty(space.n, dtype=np.int64))
         self.stats.extra.setdefault("fields_computed", 0)
@@ -349,7 +444,7 @@ class RoadPlanner(Planner):
             self._retire(goal, field)
         if field is None:
             _, hk, hn, _ = self._scratch
-            k = _road_fast.astar(*self._graph, self.space.xy, self._inv_speed, start, goal,
+            k = _road_fast.astar(*self._graph, self._xy, self._inv_speed, start, goal,
                                  *self._astar, hk, hn, path)
             return path[:k].tolist() if k else None
         k = _road_fast.descend(*self._graph, field, self._order, start, goal, path)

@@ -26,6 +26,19 @@ TINY_TASKS = {"source": "static", "ground_fraction": 0.5}
 TINY_DISPATCH = {"allocator": "hungarian", "planner": "astar"}
 
 
+@pytest.fixture(autouse=True, scope="session")
+def _private_cache_dir(tmp_path_factory):
+    """The session's own disk cache (``DISPATCH_CACHE_DIR``: road hierarchies): tests neither
+    read what an earlier process cached nor write into the user's home."""
+    old = os.environ.get("DISPATCH_CACHE_DIR")
+    os.environ["DISPATCH_CACHE_DIR"] = str(tmp_path_factory.mktemp("dispatch-cache"))
+    yield
+    if old is None:
+        os.environ.pop("DISPATCH_CACHE_DIR", None)
+    else:
+        os.environ["DISPATCH_CACHE_DIR"] = old
+
+
 def toml_value(v) -> str:
     """A TOML literal for a str, bool, int, float or list of those (enough for scenarios)."""
     if isinstance(v, bool):

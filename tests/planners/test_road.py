@@ -292,3 +292,52 @@ def test_stop_dijkstra_kernel_is_exact_at_wanted_nodes(chicago):
             assert settled <= chicago.n
         if k == 1:
             assert settled == 1
+
+
+# ----------------------------------------------------------------------------- disk cache
+
+
+def test_hierarchy_disk_cache_round_trip(tmp_path, monkeypatch, caplog):
+    """A hierarchy written by one process is read by the next (a new network object of the
+    same graph) and is the same as a fresh contraction: same arrays, same fields; a damaged
+    file is contracted again and replaced; ``off`` caches nothing."""
+    monkeypatch.setenv("DISPATCH_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(road, "CH_MIN_NODES", 0)
+    first = manhattan(23, 19, block=110.0, speed=8.0)
+    path = road.hierarchy_cache(first)
+    assert path.parent == tmp_path / "hierarchies" and not path.exists()
+    h1 = road.hierarchy(first)
+    assert path.is_file()
+    written = path.read_bytes()
+
+    calls = []
+    monkeypatch.setattr(road, "contract", lambda net: calls.append(net) or road_contract(net))
+    second = manhattan(23, 19, block=110.0, speed=8.0)  # another object, the same graph
+    assert road.hierarchy_cache(second) == path
+    h2 = road.hierarchy(second)
+    assert calls == [] and h2 is not h1  # read from the file, not contracted
+    fresh = road_contract(second)
+    for a, b, c in zip(h1.contracted, h2.contracted, fresh):
+        assert np.array_equal(a, b) and np.array_equal(a, c) and a.dtype == c.dtype
+    nodes = np.arange(0, second.n, 7)
+    for f1, f2 in zip(h1.fields(nodes, to=True), h2.fields(nodes, to=True)):
+        assert np.array_equal(f1, f2)
+    _close(np.stack(h2.fields(nodes, to=True))[:, h2.pos],
+           dijkstra(second.time.T.tocsr(), indices=nodes))
+
+    other = manhattan(23, 19, block=111.0, speed=8.0)  # other times: another file
+    assert road.hierarchy_cache(other) != path
+
+    path.write_bytes(b"not an npz file")
+    third = manhattan(23, 19, block=110.0, speed=8.0)
+    with caplog.at_level("WARNING", logger="planners.road"):
+        h3 = road.hierarchy(third)
+    assert len(calls) == 1 and "ignoring the cached road hierarchy" in caplog.text
+    assert all(np.array_equal(a, b) for a, b in zip(h3.contracted, fresh))
+    assert path.read_bytes() == written  # replaced by a good one
+
+    monkeypatch.setenv("DISPATCH_CACHE_DIR", "off")
+    assert road.hierarchy_cache(third) is None
+
+
+road_contract = road.contract

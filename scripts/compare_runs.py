@@ -1,0 +1,78 @@
+"""Are two result folders the same run? Table by table, row by row, value by value.
+
+Compares every ``part-0.parquet`` under folder A with the file at the same relative path under
+folder B (``dispatch run --out A`` before a change, ``--out B`` after it): same files, same
+columns, same rows in the same order, every value exactly equal (NaN equal to NaN), leaving out
+only the wall-clock columns (:data:`dispatch.recorder.TIMING_COLUMNS`, which differ between
+identical runs). Prints one line per file and exits 1 at the first difference it describes.
+
+Run: ``PYTHONPATH=. .venv/bin/python scripts/compare_runs.py runs/before runs/after``.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from dispatch.recorder import TIMING_COLUMNS  # noqa: E402
+
+
+def files(folder: Path) -> dict[Path, Path]:
+    return {p.relative_to(folder): p for p in sorted(folder.rglob("part-0.parquet"))}
+
+
+def differ(a: Path, b: Path) -> str | None:
+    """None if the two files hold the same rows (timing columns aside), else what differs."""
+    ta, tb = pq.read_table(a), pq.read_table(b)
+    if ta.column_names != tb.column_names:
+        return f"columns {ta.column_names} != {tb.column_names}"
+    if ta.num_rows != tb.num_rows:
+        return f"{ta.num_rows} rows != {tb.num_rows} rows"
+    for name in ta.column_names:
+        if name in TIMING_COLUMNS:
+            continue
+        x = ta.column(name).to_numpy(zero_copy_only=False)
+        y = tb.column(name).to_numpy(zero_copy_only=False)
+        if x.dtype.kind == "f":
+            same = (x == y) | (np.isnan(x) & np.isnan(y))
+        else:
+            same = x == y
+        if not np.all(same):
+            k = int(np.flatnonzero(~same)[0])
+            return (f"column {name!r}: {int((~same).sum())} value(s) differ, first at row {k}: "
+                    f"{x[k]!r} != {y[k]!r}")
+    return None
+
+
+def main() -> int:
+    if len(sys.argv) != 3:
+        print(__doc__.strip().splitlines()[-1])
+        return 2
+    a, b = Path(sys.argv[1]), Path(sys.argv[2])
+    fa, fb = files(a), files(b)
+    if not fa:
+        print(f"no part-0.parquet under {a}")
+        return 1
+    if fa.keys() != fb.keys():
+        print(f"different files: only in A {sorted(map(str, fa.keys() - fb.keys()))}, "
+              f"only in B {sorted(map(str, fb.keys() - fa.keys()))}")
+        return 1
+    for rel in fa:
+        why = differ(fa[rel], fb[rel])
+        rows = pq.ParquetFile(fa[rel]).metadata.num_rows
+        print(f"{'same' if why is None else 'DIFFERENT'}  {rel}  ({rows} rows)"
+              + ("" if why is None else f": {why}"))
+        if why is not None:
+            return 1
+    print(f"{len(fa)} files, all the same (wall-clock columns left out)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
