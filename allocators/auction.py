@@ -62,6 +62,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from allocators import _cbba_fast
 from dispatch.comms import Channel, components
 from dispatch.contracts import Allocation, AllocationProblem, Allocator
 from dispatch.decentralized import run_rounds
@@ -245,13 +246,14 @@ class _CBBA:
             bids = np.where(self.feasible[idx], -self.cost[idx], -np.inf)
             h = self.feasible[idx] & better(bids, idx[:, None], self.y[idx], self.z[idx])
             pick = np.argmax(np.where(h, bids, -np.inf), axis=1)
-            for row, i in enumerate(idx):
-                if h[row].any():
-                    j = int(pick[row])
-                    self.bundles[i] = [j]
-                    self.paths[i] = [j]
-                    self.y[i, j], self.z[i, j] = bids[row, j], i
-                    changed = True
+            bidding = h.any(axis=1)
+            rows, who = np.flatnonzero(bidding), idx[bidding]
+            js = pick[rows]
+            for i, j in zip(who.tolist(), js.tolist()):
+                self.bundles[i] = [j]
+                self.paths[i] = [j]
+            self.y[who, js], self.z[who, js] = bids[rows, js], who
+            changed = bool(rows.size)
             self.seconds[idx] += (time.perf_counter() - t0) / idx.size
             return changed
         for i in range(self.n):
@@ -280,7 +282,18 @@ class _CBBA:
 
     # -------------------------------------------------------------- phase 2
     def exchange(self, got: np.ndarray, now: int) -> None:
-        """Every receiver applies the broadcasts it got (``got[k, i]``), sender by sender."""
+        """Every receiver applies the broadcasts it got (``got[k, i]``), sender by sender
+        (compiled: :func:`allocators._cbba_fast.exchange`, the rules of :meth:`_apply`)."""
+        t0 = time.perf_counter()
+        y0, z0, s0 = self.y.copy(), self.z.copy(), self.s.copy()  # what was sent
+        work = _cbba_fast.exchange(self.y, self.z, self.s, np.ascontiguousarray(got, bool),
+                                   y0, z0, s0, now)
+        total = work.sum()
+        if total:  # each agent's share of the time, by the broadcasts it processed
+            self.seconds += (time.perf_counter() - t0) * work / total
+
+    def exchange_reference(self, got: np.ndarray, now: int) -> None:
+        """:meth:`exchange` in numpy, sender by sender (the reference the tests compare with)."""
         y0, z0, s0 = self.y.copy(), self.z.copy(), self.s.copy()  # what was sent
         for k in range(self.n):
             rec = np.flatnonzero(got[k])
@@ -348,6 +361,13 @@ class _CBBA:
     def release_outbid(self) -> bool:
         """Drop from each bundle the first task the agent lost and every task after it."""
         changed = False
+        if self.L == 1:  # one task per bundle: drop it where the agent is no longer its winner
+            held = np.array([b[0] if b else NONE for b in self.bundles], dtype=np.int64)
+            agents = np.flatnonzero(held >= 0)
+            lost = agents[self.z[agents, held[agents]] != agents]
+            for i in lost.tolist():
+                self.bundles[i], self.paths[i] = [], []
+            return bool(lost.size)
         for i in range(self.n):
             b = self.bundles[i]
             if not b:

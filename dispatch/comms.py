@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.sparse import csr_matrix
+from scipy.spatial import cKDTree
 from scipy.sparse.csgraph import connected_components, shortest_path
 
 
@@ -51,8 +52,15 @@ def comm_graph(positions, comm_range: float | None) -> np.ndarray:
         return np.ones((n, n), dtype=bool)
     if comm_range < 0 or math.isnan(comm_range):
         raise ValueError(f"communication range must be >= 0, got {comm_range!r}")
-    d = np.linalg.norm(pos[:, None, :] - pos[None, :, :], axis=-1)
-    adj = d <= comm_range + 1e-9
+    adj = np.zeros((n, n), dtype=bool)
+    if n > 1:
+        # candidate pairs from a k-d tree (a fleet of 1,000 vehicles: no N x N distances),
+        # then the same test as a dense comparison would make, pair by pair
+        pairs = cKDTree(pos).query_pairs(comm_range + 1e-6, output_type="ndarray")
+        if len(pairs):
+            a, b = pairs[:, 0], pairs[:, 1]
+            ok = np.linalg.norm(pos[a] - pos[b], axis=-1) <= comm_range + 1e-9
+            adj[a[ok], b[ok]] = adj[b[ok], a[ok]] = True
     np.fill_diagonal(adj, True)
     return adj
 
@@ -98,10 +106,15 @@ def relay_needed(comm: np.ndarray) -> np.ndarray:
     This is the self-pruning rule of neighbour-knowledge flooding (each agent knows its
     neighbours' neighbours): on a complete graph nobody ever relays.
     """
+    n = len(comm)
+    if n == 0 or np.all(comm):  # a complete graph: every broadcast already reaches everyone
+        return np.zeros((n, n), dtype=bool)
     nb = neighbours(comm)
     reach = np.array(comm, dtype=bool)  # a's broadcast covers a's neighbours and a itself
-    # need[a, b] = b hears a, and any_c nb[b, c] & ~reach[a, c]
-    return ((nb.astype(np.int64) @ (~reach).T.astype(np.int64)).T > 0) & nb
+    # need[a, b] = b hears a, and any_c nb[b, c] & ~reach[a, c], i.e. b has more neighbours
+    # than it shares with a's reach; the counts by a float32 product (exact below 2**24)
+    common = nb.astype(np.float32) @ reach.astype(np.float32).T  # common[b, a]
+    return nb & (nb.sum(axis=1)[None, :] > common.T)
 
 
 @dataclass

@@ -369,3 +369,36 @@ def test_parameters_names_and_registry():
             AuctionAllocator(**bad)
     with pytest.raises(PluginError, match="rejected its parameters"):
         make_plugin("allocator", "auction", (("bundle_size", -1),))
+
+
+# ----------------------------------------------------------------------------- compiled consensus
+
+
+@pytest.mark.parametrize("bundle_size", [1, 3])
+def test_compiled_exchange_equals_the_numpy_reference(bundle_size, monkeypatch):
+    """The compiled consensus (allocators._cbba_fast) gives exactly the state, rounds and
+    messages of the numpy reference of CBBA's Table 1, on limited-range graphs (connected or
+    not), with and without message loss."""
+    from allocators import auction
+
+    def run(p, reference):
+        if reference:
+            monkeypatch.setattr(auction._CBBA, "exchange", auction._CBBA.exchange_reference)
+        else:
+            monkeypatch.undo()
+        alloc = AuctionAllocator(bundle_size=bundle_size)
+        a = alloc.allocate(p)
+        return alloc.last, a
+
+    rng = np.random.default_rng(7)
+    for seed in range(60):
+        n, m = int(rng.integers(2, 14)), int(rng.integers(1, 10))
+        kw = dict(comm_range=float(rng.choice([5.0, 10.0, 15.0, 100.0])),
+                  loss=float(rng.choice([0.0, 0.3])), p_inf=0.1)
+        fast_res, fast = run(spatial_problem(seed, n, m, **kw), reference=False)
+        ref_res, ref = run(spatial_problem(seed, n, m, **kw), reference=True)
+        monkeypatch.undo()
+        assert np.array_equal(fast_res.y, ref_res.y) and np.array_equal(fast_res.z, ref_res.z)
+        assert fast_res.bundles == ref_res.bundles and fast_res.paths == ref_res.paths
+        assert (fast.pairs, fast.rounds, fast.messages, fast.hops, fast.requests) == \
+            (ref.pairs, ref.rounds, ref.messages, ref.hops, ref.requests)
