@@ -260,3 +260,30 @@ def test_bad_parameters_are_clear_errors(tmp_path):
     (tmp_path / "text.pt").write_text("not a model\n", encoding="utf-8")
     with pytest.raises(ValueError, match="not a MAGNNET checkpoint"):
         MagnnetAllocator(checkpoint=str(tmp_path / "text.pt"))
+
+
+def test_sparse_scores_equal_the_dense_network_on_sparse_problems():
+    """Large sparse problems are scored edge by edge (match.sparse_scores): the same scores as
+    the dense network on every feasible edge (up to float sums) and the same requests."""
+    import torch
+
+    from allocators.magnnet import match
+    from allocators.magnnet.allocator import MagnnetAllocator
+
+    model = MagnnetAllocator(partial="match").model
+    rng = np.random.default_rng(3)
+    for n, m, density in [(300, 12, 0.05), (120, 30, 0.2), (60, 1, 0.3), (40, 60, 0.1)]:
+        cost = rng.uniform(20.0, 600.0, (n, m)) / 40.0
+        cost[rng.random((n, m)) > density] = np.inf
+        cost[0, 0] = 1.0  # at least one edge
+        flies = rng.random(n) < 0.5
+        c, mask = match.scaled(cost)
+        with torch.no_grad():
+            dense = model(c, mask, torch.from_numpy(flies)[None])[0].numpy().astype(float)
+        dense = np.where(mask[0].numpy(), dense, -np.inf)
+        sparse = match.sparse_scores(model, cost, flies)
+        f = np.isfinite(dense)
+        assert np.array_equal(f, np.isfinite(sparse))
+        assert np.abs(dense[f] - sparse[f]).max() < 1e-3
+        rows = np.arange(n)
+        assert np.array_equal(match.mutual_best(dense, rows), match.mutual_best(sparse, rows))
