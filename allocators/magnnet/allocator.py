@@ -63,7 +63,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dispatch.contracts import AllocationProblem
+from dispatch.contracts import AgentViews, AllocationProblem
 from dispatch.decentralized import WAIT, DecentralizedAllocator
 from dispatch.errors import AllocationError
 
@@ -287,13 +287,21 @@ class MagnnetAllocator(DecentralizedAllocator):
         kept &= finite
         return np.where(kept, cost, np.inf), kept.any(axis=1)
 
-    def _flies(self, problem) -> np.ndarray:
-        """Which agents fly, read once per problem (views are built lazily)."""
-        cached = getattr(self, "_flies_cache", None)
-        if cached is None or cached[0] is not problem:
-            cached = self._flies_cache = (problem, np.array([a.flies for a in problem.agents],
-                                                            bool))
-        return cached[1]
+    def _flies(self, problem, rows: np.ndarray) -> np.ndarray:
+        """Whether the agents at ``rows`` fly. A run's vehicles (the dispatcher's
+        :class:`AgentViews`) are read once per vehicle id: a vehicle keeps its kind, and views
+        are built lazily (a thousand per decision is slow)."""
+        if not isinstance(problem.agents, AgentViews):  # views built already (hand-made)
+            return np.array([problem.agents[r].flies for r in rows.tolist()], bool)
+        known = self.__dict__.setdefault("_flies_by_id", {})
+        ids = problem.agent_ids[rows].tolist()
+        out = np.empty(len(ids), bool)
+        for k, (r, a) in enumerate(zip(rows.tolist(), ids)):
+            f = known.get(a)
+            if f is None:
+                f = known[a] = bool(problem.agents[r].flies)
+            out[k] = f
+        return out
 
     def _choose_paper(self, problem, agents, open_tasks) -> np.ndarray:
         n, m = problem.cost.shape
@@ -317,7 +325,6 @@ class MagnnetAllocator(DecentralizedAllocator):
         comm = problem.comm
         deciding = np.zeros(problem.cost.shape[0], bool)
         deciding[agents] = True
-        flies = self._flies(problem)
         tasks = np.flatnonzero(open_tasks)
         out = np.full(len(agents), -1, np.int64)
         # an agent that hears every vehicle directly knows its view is everyone's
@@ -344,7 +351,7 @@ class MagnnetAllocator(DecentralizedAllocator):
             if self._record is not None:
                 self._record.append((round_, members, tasks, hop, active))
             cost, _ = self._costs(problem.cost[np.ix_(members, tasks)], candidates=False)
-            s, rn, cn = views.view_scores(self.view_model, cost, flies[members], hop, active)
+            s, rn, cn = views.view_scores(self.view_model, cost, self._flies(problem, members), hop, active)
             req = views.view_request(s, rn, cn, int(np.searchsorted(members, i)),
                                      self.view_confidence, force=round_ >= self.view_patience,
                                      active=active, last=round_ >= 2 * self.view_patience)
@@ -353,10 +360,11 @@ class MagnnetAllocator(DecentralizedAllocator):
         for members, ks in groups.values():
             cost, keep = self._costs(problem.cost[np.ix_(members, tasks)])
             if keep is None:
-                scores = match.scores_of(self.model, cost, flies[members])
+                scores = match.scores_of(self.model, cost, self._flies(problem, members))
             else:  # candidates only (the others request nothing this round)
                 scores = np.full(cost.shape, -np.inf)
-                scores[keep] = match.scores_of(self.model, cost[keep], flies[members[keep]])
+                scores[keep] = match.scores_of(self.model, cost[keep],
+                                                self._flies(problem, members[keep]))
             ks = np.asarray(ks)
             # waiting for confidence pays only where every agent shares one view (partial
             # views with partial = "match": requests regardless from round `patience` on)
