@@ -15,6 +15,7 @@ import numba
 import numpy as np
 
 NONE = -1
+_BIG = np.iinfo(np.int64).max
 
 
 def _jit(fn):
@@ -25,25 +26,12 @@ def _jit(fn):
         return numba.njit(cache=False, nogil=True)(fn)
 
 
-@numba.njit(inline="always")
-def _better(ya, za, yb, zb):
-    """Bid (ya, by za) beats (yb, by zb): higher value, ties to the lower index (-1 last)."""
-    big = np.iinfo(np.int64).max
-    a = big if za < 0 else za
-    b = big if zb < 0 else zb
-    return (ya > yb) or (ya == yb and a < b)
-
-
-@numba.njit(inline="always")
-def _heard(s, s0, order, cnt, i, x, now, got, k):
-    """Agent ``i``'s timestamp for agent ``x`` after applying the ``cnt`` broadcasts
-    ``order[:cnt]`` (senders before ``k``), as the sender-by-sender updates would have left it:
-    ``now`` for a sender it heard (and for itself once it heard anyone), else the largest of
-    its own value and those senders' values."""
-    if x < 0:
-        return -1
-    if (x < k and got[x, i]) or (x == i and cnt > 0):
-        return now
+@numba.njit
+def _fold(s, s0, order, cnt, i, x):
+    """Agent ``i``'s timestamp for agent ``x`` (not one of its senders so far, not itself)
+    after applying the ``cnt`` broadcasts ``order[:cnt]``, as the sender-by-sender updates
+    would have left it: the largest of its own value and those senders' values. (A sender it
+    heard reads ``now``, inline in :func:`exchange`.)"""
     v = s[i, x]
     for t in range(cnt):
         w = s0[order[t], x]
@@ -60,7 +48,7 @@ def exchange(y, z, s, got, y0, z0, s0, now):
 
     Receiver by receiver (each changes only its own row, so this equals the sender-major order
     of the reference); a receiver's timestamps are folded in once at its end, and read in
-    between only where a rule needs one (:func:`_heard`)."""
+    between only where a rule needs one (:func:`_fold`)."""
     n, m = y.shape
     work = np.zeros(n, np.int64)
     # per column, the largest and second largest sent timestamp (and the row of the largest)
@@ -77,10 +65,11 @@ def exchange(y, z, s, got, y0, z0, s0, now):
             elif v > top2[q]:
                 top2[q] = v
     order = np.empty(n, np.int64)
+    heard = got.T.copy()  # heard[i, k] = got[k, i], read row by row
     for i in range(n):
         cnt = 0
         for k in range(n):
-            if not got[k, i]:
+            if not heard[i, k]:
                 continue
             for j in range(m):
                 yk = y0[k, j]
@@ -89,47 +78,53 @@ def exchange(y, z, s, got, y0, z0, s0, now):
                 zi = z[i, j]
                 if yi == yk and zi == zk:  # every rule leaves an agreed entry as it is
                     continue
-                k_is_k = zk == k
-                k_is_i = zk == i
-                k_none = zk == NONE
-                k_m = not (k_is_k or k_is_i or k_none)
-                i_is_i = zi == i
-                i_is_k = zi == k
-                i_none = zi == NONE
-                i_other = not (i_is_i or i_is_k or i_none)
-                i_same = i_other and zi == zk
-                i_n = i_other and not i_same
-                beats = _better(yk, zk, yi, zi)
-                newer_m = False
-                older_m = False
-                if k_m:
+                # CBBA's Table 1 as a decision tree on (sender's winner, receiver's winner);
+                # timestamps read only on the branches that compare them: i's value for an
+                # agent it heard this round is now, else folded from its senders so far
+                beats = yk > yi or (yk == yi and (zk if zk >= 0 else _BIG)
+                                    < (zi if zi >= 0 else _BIG))
+                upd = False
+                reset = False
+                if zk == k:
+                    if zi == i:
+                        upd = beats
+                    elif zi == k or zi == NONE:
+                        upd = True
+                    else:
+                        s_in = now if zi < k and heard[i, zi] else _fold(s, s0, order, cnt, i, zi)
+                        upd = s0[k, zi] > s_in or beats
+                elif zk == i:
+                    if zi == k:
+                        reset = True
+                    elif zi != i and zi != NONE:
+                        s_in = now if zi < k and heard[i, zi] else _fold(s, s0, order, cnt, i, zi)
+                        reset = s0[k, zi] > s_in
+                elif zk == NONE:
+                    if zi == k:
+                        upd = True
+                    elif zi != i and zi != NONE:
+                        s_in = now if zi < k and heard[i, zi] else _fold(s, s0, order, cnt, i, zi)
+                        upd = s0[k, zi] > s_in
+                else:  # k believes a third agent m = zk wins
                     s_km = s0[k, zk]
-                    s_im = _heard(s, s0, order, cnt, i, zk, now, got, k)
+                    s_im = now if zk < k and heard[i, zk] else _fold(s, s0, order, cnt, i, zk)
                     newer_m = s_km > s_im
-                    older_m = s_im > s_km
-                newer_n = False
-                if i_other:
-                    s_kn = s0[k, zi]
-                    s_in = _heard(s, s0, order, cnt, i, zi, now, got, k)
-                    newer_n = s_kn > s_in
-                update = (
-                    (k_is_k and ((i_is_i and beats) or i_is_k
-                                 or (i_other and (newer_n or beats)) or i_none))
-                    or (k_m and ((i_is_i and newer_m and beats) or (i_is_k and newer_m)
-                                 or (i_same and newer_m)
-                                 or (i_n and newer_m and (newer_n or beats))
-                                 or (i_none and newer_m)))
-                    or (k_none and (i_is_k or (i_other and newer_n)))
-                )
-                if update:
+                    if zi == i:
+                        upd = newer_m and beats
+                    elif zi == k:
+                        upd = newer_m
+                        reset = not newer_m
+                    elif zi == NONE or zi == zk:
+                        upd = newer_m
+                    else:  # i believes a fourth agent n = zi wins
+                        s_in = now if zi < k and heard[i, zi] else _fold(s, s0, order, cnt, i, zi)
+                        newer_n = s0[k, zi] > s_in
+                        upd = newer_m and (newer_n or beats)
+                        reset = newer_n and s_im > s_km
+                if upd:
                     y[i, j] = yk
                     z[i, j] = zk
-                    continue
-                reset = (
-                    (k_is_i and (i_is_k or (i_other and newer_n)))
-                    or (k_m and ((i_is_k and not newer_m) or (i_n and newer_n and older_m)))
-                )
-                if reset:
+                elif reset:
                     y[i, j] = -np.inf
                     z[i, j] = NONE
             order[cnt] = k

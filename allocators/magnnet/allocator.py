@@ -351,7 +351,8 @@ class MagnnetAllocator(DecentralizedAllocator):
             if self._record is not None:
                 self._record.append((round_, members, tasks, hop, active))
             cost, _ = self._costs(problem.cost[np.ix_(members, tasks)], candidates=False)
-            s, rn, cn = views.view_scores(self.view_model, cost, self._flies(problem, members), hop, active)
+            s, rn, cn = views.view_scores(self.view_model, cost, self._flies(problem, members),
+                                          hop, active)
             req = views.view_request(s, rn, cn, int(np.searchsorted(members, i)),
                                      self.view_confidence, force=round_ >= self.view_patience,
                                      active=active, last=round_ >= 2 * self.view_patience)
