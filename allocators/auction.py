@@ -175,7 +175,7 @@ class _CBBA:
         self.feasible = np.isfinite(self.cost)
         self.y = np.full((n, m), -np.inf)
         self.z = np.full((n, m), NONE, dtype=np.int64)
-        self.s = np.full((n, n), -1, dtype=np.int64)
+        self.s = np.zeros((0, 0), dtype=np.int64)  # made by run() (N x N; not for one task)
         self.bundles: list[list[int]] = [[] for _ in range(n)]
         self.paths: list[list[int]] = [[] for _ in range(n)]
         self.seconds = np.zeros(n)
@@ -396,8 +396,35 @@ class _CBBA:
                 return False
         return True
 
+    def one_task(self) -> CBBAResult | None:
+        """CBAA's result for one task on a complete graph without loss, without simulating it
+        (immediate dispatch: a request at a time to a fleet of idle taxis), or None where
+        that does not apply. Round 0: every agent that can serve the task bids; every agent
+        hears every bid and keeps the best (highest bid, ties to the lower index: the
+        cheapest agent); round 1 changes nothing and they agree. The same state, rounds and
+        messages as :meth:`run` (the tests compare)."""
+        p = self.p
+        if self.L != 1 or self.m != 1 or p.loss > 0 or self.n == 0 or not np.all(p.comm):
+            return None
+        t0 = time.perf_counter()
+        feasible = self.feasible[:, 0]
+        if not feasible.any():  # nobody bids; everyone agrees on nothing at once
+            return CBBAResult(y=self.y, z=self.z, bundles=self.bundles, paths=self.paths,
+                              rounds=0, messages=0, converged=True, seconds=self.seconds)
+        best = int(np.argmin(np.where(feasible, self.cost[:, 0], np.inf)))
+        self.y[:, 0], self.z[:, 0] = -self.cost[best, 0], best
+        self.bundles[best], self.paths[best] = [0], [0]
+        self.seconds += (time.perf_counter() - t0) / self.n
+        return CBBAResult(y=self.y, z=self.z, bundles=self.bundles, paths=self.paths,
+                          rounds=1, messages=self.n if self.n > 1 else 0, converged=True,
+                          seconds=self.seconds)
+
     def run(self) -> CBBAResult:
         p = self.p
+        shortcut = self.one_task()
+        if shortcut is not None:
+            return shortcut
+        self.s = np.full((self.n, self.n), -1, dtype=np.int64)
         channel = Channel(p.comm, p.loss, p.rng)
         _, labels = components(p.comm)
         everyone = np.arange(self.n)

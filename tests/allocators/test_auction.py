@@ -402,3 +402,31 @@ def test_compiled_exchange_equals_the_numpy_reference(bundle_size, monkeypatch):
         assert fast_res.bundles == ref_res.bundles and fast_res.paths == ref_res.paths
         assert (fast.pairs, fast.rounds, fast.messages, fast.hops, fast.requests) == \
             (ref.pairs, ref.rounds, ref.messages, ref.hops, ref.requests)
+
+
+def test_one_task_shortcut_equals_the_simulated_auction(monkeypatch):
+    """One task on a complete graph without loss (immediate dispatch) is answered without
+    simulating the rounds: the same state, pairs, rounds, messages and requests as the
+    simulation (ties and infeasible agents included)."""
+    from allocators import auction
+
+    rng = np.random.default_rng(5)
+    for trial in range(80):
+        n = int(rng.integers(1, 30))
+        cost = rng.choice([3.0, 5.0, 7.0, np.inf], size=(n, 1))  # ties, some infeasible
+        if trial % 10 == 0:
+            cost[:] = np.inf
+        p = make_problem(cost)
+        fast_alloc = AuctionAllocator()
+        fast = fast_alloc.allocate(p)
+        monkeypatch.setattr(auction._CBBA, "one_task", lambda self: None)
+        ref_alloc = AuctionAllocator()
+        ref = ref_alloc.allocate(make_problem(cost))
+        monkeypatch.undo()
+        assert np.array_equal(fast_alloc.last.y, ref_alloc.last.y)
+        assert np.array_equal(fast_alloc.last.z, ref_alloc.last.z)
+        assert fast_alloc.last.bundles == ref_alloc.last.bundles
+        assert (fast.pairs, fast.rounds, fast.messages, fast.hops, fast.requests) == \
+            (ref.pairs, ref.rounds, ref.messages, ref.hops, ref.requests)
+        if np.isfinite(cost).any():  # the cheapest agent, ties to the lowest index
+            assert fast.pairs == ((p.agents[int(np.argmin(cost[:, 0]))].id, p.tasks[0].id),)
