@@ -250,11 +250,15 @@ class MagnnetAllocator(DecentralizedAllocator):
 
     def describe(self) -> dict[str, str]:
         """What ran: ``model``, ``variant`` and ``checkpoint`` (``file@sha256[:16]`` of every
-        file this allocator loaded, comma-separated)."""
+        file this allocator loaded, comma-separated); for ``match`` also ``cost_scale`` and
+        ``candidates``."""
         model = {"match": "magnnet-match" + ("+view" if self.partial == "view" else ""),
                  "paper": "magnnet-paper", "paper_nb": "magnnet-paper+nb"}[self.variant]
-        return {"model": model, "variant": self.variant,
-                "checkpoint": ",".join(f"{k}@{v}" for k, v in sorted(self.files.items()))}
+        out = {"model": model, "variant": self.variant,
+               "checkpoint": ",".join(f"{k}@{v}" for k, v in sorted(self.files.items()))}
+        if self.variant == "match":  # how taxi-scale views are brought to the training range
+            out.update(cost_scale=str(self.cost_scale), candidates=str(self.candidates))
+        return out
 
     # ------------------------------------------------------------------ deciding
     def choose(self, problem: AllocationProblem, agents: np.ndarray, open_tasks: np.ndarray,
