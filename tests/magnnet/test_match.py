@@ -287,3 +287,34 @@ def test_sparse_scores_equal_the_dense_network_on_sparse_problems():
         assert np.abs(dense[f] - sparse[f]).max() < 1e-3
         rows = np.arange(n)
         assert np.array_equal(match.mutual_best(dense, rows), match.mutual_best(sparse, rows))
+
+
+def test_taxi_scale_views_are_rescaled_and_cut_to_candidates_paper_views_untouched():
+    """cost_scale/candidates "auto": a view of paper-scale costs (seconds) is fed as it is; a
+    view whose median cost exceeds TRAIN_MAX_S (taxis minutes away) is rescaled to the
+    training median, and each task keeps only the edges of its CANDIDATES cheapest agents
+    (checked against a per-column sort)."""
+    from allocators.magnnet import allocator as mod
+
+    alloc = mod.MagnnetAllocator(partial="match")
+    rng = np.random.default_rng(2)
+    paper = rng.uniform(1.0, 25.0, (20, 20))
+    same, keep = alloc._costs(paper)
+    assert keep is None and np.array_equal(same, paper)
+    taxi = rng.uniform(60.0, 600.0, (50, 6))
+    taxi[rng.random(taxi.shape) < 0.3] = np.inf
+    cost, keep = alloc._costs(taxi)
+    scale = mod.TRAIN_MEDIAN_S / np.median(taxi[np.isfinite(taxi)])
+    for j in range(taxi.shape[1]):
+        col = taxi[:, j]
+        cheapest = np.argsort(col, kind="stable")[:mod.CANDIDATES]
+        cheapest = cheapest[np.isfinite(col[cheapest])]
+        assert set(np.flatnonzero(np.isfinite(cost[:, j]))) == set(cheapest.tolist())
+        assert np.allclose(cost[cheapest, j], col[cheapest] * scale)
+    assert np.array_equal(keep, np.isfinite(cost).any(axis=1))
+    raw, keep = mod.MagnnetAllocator(partial="match", cost_scale=1, candidates=0)._costs(taxi)
+    assert keep is None and np.array_equal(raw, taxi)
+    for bad in ({"cost_scale": 0}, {"cost_scale": "big"}, {"candidates": -1},
+                {"candidates": 2.5}):
+        with pytest.raises(TypeError):
+            mod.MagnnetAllocator(partial="match", **bad)
