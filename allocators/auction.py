@@ -62,6 +62,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from allocators import _cbba_fast
 from dispatch.comms import Channel, components
 from dispatch.contracts import Allocation, AllocationProblem, Allocator
 from dispatch.decentralized import run_rounds
@@ -174,7 +175,7 @@ class _CBBA:
         self.feasible = np.isfinite(self.cost)
         self.y = np.full((n, m), -np.inf)
         self.z = np.full((n, m), NONE, dtype=np.int64)
-        self.s = np.full((n, n), -1, dtype=np.int64)
+        self.s = np.zeros((0, 0), dtype=np.int64)  # made by run() (N x N; not for one task)
         self.bundles: list[list[int]] = [[] for _ in range(n)]
         self.paths: list[list[int]] = [[] for _ in range(n)]
         self.seconds = np.zeros(n)
@@ -245,13 +246,14 @@ class _CBBA:
             bids = np.where(self.feasible[idx], -self.cost[idx], -np.inf)
             h = self.feasible[idx] & better(bids, idx[:, None], self.y[idx], self.z[idx])
             pick = np.argmax(np.where(h, bids, -np.inf), axis=1)
-            for row, i in enumerate(idx):
-                if h[row].any():
-                    j = int(pick[row])
-                    self.bundles[i] = [j]
-                    self.paths[i] = [j]
-                    self.y[i, j], self.z[i, j] = bids[row, j], i
-                    changed = True
+            bidding = h.any(axis=1)
+            rows, who = np.flatnonzero(bidding), idx[bidding]
+            js = pick[rows]
+            for i, j in zip(who.tolist(), js.tolist()):
+                self.bundles[i] = [j]
+                self.paths[i] = [j]
+            self.y[who, js], self.z[who, js] = bids[rows, js], who
+            changed = bool(rows.size)
             self.seconds[idx] += (time.perf_counter() - t0) / idx.size
             return changed
         for i in range(self.n):
@@ -280,7 +282,18 @@ class _CBBA:
 
     # -------------------------------------------------------------- phase 2
     def exchange(self, got: np.ndarray, now: int) -> None:
-        """Every receiver applies the broadcasts it got (``got[k, i]``), sender by sender."""
+        """Every receiver applies the broadcasts it got (``got[k, i]``), sender by sender
+        (compiled: :func:`allocators._cbba_fast.exchange`, the rules of :meth:`_apply`)."""
+        t0 = time.perf_counter()
+        y0, z0, s0 = self.y.copy(), self.z.copy(), self.s.copy()  # what was sent
+        work = _cbba_fast.exchange(self.y, self.z, self.s, np.ascontiguousarray(got, bool),
+                                   y0, z0, s0, now)
+        total = work.sum()
+        if total:  # each agent's share of the time, by the broadcasts it processed
+            self.seconds += (time.perf_counter() - t0) * work / total
+
+    def exchange_reference(self, got: np.ndarray, now: int) -> None:
+        """:meth:`exchange` in numpy, sender by sender (the reference the tests compare with)."""
         y0, z0, s0 = self.y.copy(), self.z.copy(), self.s.copy()  # what was sent
         for k in range(self.n):
             rec = np.flatnonzero(got[k])
@@ -348,6 +361,13 @@ class _CBBA:
     def release_outbid(self) -> bool:
         """Drop from each bundle the first task the agent lost and every task after it."""
         changed = False
+        if self.L == 1:  # one task per bundle: drop it where the agent is no longer its winner
+            held = np.array([b[0] if b else NONE for b in self.bundles], dtype=np.int64)
+            agents = np.flatnonzero(held >= 0)
+            lost = agents[self.z[agents, held[agents]] != agents]
+            for i in lost.tolist():
+                self.bundles[i], self.paths[i] = [], []
+            return bool(lost.size)
         for i in range(self.n):
             b = self.bundles[i]
             if not b:
@@ -376,8 +396,35 @@ class _CBBA:
                 return False
         return True
 
+    def one_task(self) -> CBBAResult | None:
+        """CBAA's result for one task on a complete graph without loss, without simulating it
+        (immediate dispatch: a request at a time to a fleet of idle taxis), or None where
+        that does not apply. Round 0: every agent that can serve the task bids; every agent
+        hears every bid and keeps the best (highest bid, ties to the lower index: the
+        cheapest agent); round 1 changes nothing and they agree. The same state, rounds and
+        messages as :meth:`run` (the tests compare)."""
+        p = self.p
+        if self.L != 1 or self.m != 1 or p.loss > 0 or self.n == 0 or not np.all(p.comm):
+            return None
+        t0 = time.perf_counter()
+        feasible = self.feasible[:, 0]
+        if not feasible.any():  # nobody bids; everyone agrees on nothing at once
+            return CBBAResult(y=self.y, z=self.z, bundles=self.bundles, paths=self.paths,
+                              rounds=0, messages=0, converged=True, seconds=self.seconds)
+        best = int(np.argmin(np.where(feasible, self.cost[:, 0], np.inf)))
+        self.y[:, 0], self.z[:, 0] = -self.cost[best, 0], best
+        self.bundles[best], self.paths[best] = [0], [0]
+        self.seconds += (time.perf_counter() - t0) / self.n
+        return CBBAResult(y=self.y, z=self.z, bundles=self.bundles, paths=self.paths,
+                          rounds=1, messages=self.n if self.n > 1 else 0, converged=True,
+                          seconds=self.seconds)
+
     def run(self) -> CBBAResult:
         p = self.p
+        shortcut = self.one_task()
+        if shortcut is not None:
+            return shortcut
+        self.s = np.full((self.n, self.n), -1, dtype=np.int64)
         channel = Channel(p.comm, p.loss, p.rng)
         _, labels = components(p.comm)
         everyone = np.arange(self.n)

@@ -55,15 +55,18 @@ class LocalHungarianAllocator(DecentralizedAllocator):
 
     def choose(self, problem: AllocationProblem, agents: np.ndarray, open_tasks: np.ndarray,
                round_: int) -> np.ndarray:
-        comm = problem.comm.astype(bool)
+        comm = problem.comm
         deciding = np.zeros(problem.n_agents, bool)
         deciding[agents] = True
-        labels = components(comm)[1] if self.view == "component" else None
+        # everyone hears everyone (a city's fleet without a range): one view, no N x N work
+        everyone = bool(comm[agents].all())
+        labels = components(comm)[1] if self.view == "component" and not everyone else None
         tasks = np.flatnonzero(open_tasks)
         out = np.full(len(agents), -1, np.int64)
         solved: dict[bytes, dict[int, int]] = {}  # agents of one view compute one answer
         for k, i in enumerate(agents):
-            members = self.members(comm, int(i), deciding, labels)
+            members = (np.flatnonzero(deciding) if everyone
+                       else self.members(comm, int(i), deciding, labels))
             key = members.tobytes()
             if key not in solved:
                 pairs = optimal_pairs(problem.cost[np.ix_(members, tasks)])

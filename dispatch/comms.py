@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.sparse import csr_matrix
+from scipy.spatial import cKDTree
 from scipy.sparse.csgraph import connected_components, shortest_path
 
 
@@ -51,8 +52,15 @@ def comm_graph(positions, comm_range: float | None) -> np.ndarray:
         return np.ones((n, n), dtype=bool)
     if comm_range < 0 or math.isnan(comm_range):
         raise ValueError(f"communication range must be >= 0, got {comm_range!r}")
-    d = np.linalg.norm(pos[:, None, :] - pos[None, :, :], axis=-1)
-    adj = d <= comm_range + 1e-9
+    adj = np.zeros((n, n), dtype=bool)
+    if n > 1:
+        # candidate pairs from a k-d tree (a fleet of 1,000 vehicles: no N x N distances),
+        # then the same test as a dense comparison would make, pair by pair
+        pairs = cKDTree(pos).query_pairs(comm_range + 1e-6, output_type="ndarray")
+        if len(pairs):
+            a, b = pairs[:, 0], pairs[:, 1]
+            ok = np.linalg.norm(pos[a] - pos[b], axis=-1) <= comm_range + 1e-9
+            adj[a[ok], b[ok]] = adj[b[ok], a[ok]] = True
     np.fill_diagonal(adj, True)
     return adj
 

@@ -369,3 +369,64 @@ def test_parameters_names_and_registry():
             AuctionAllocator(**bad)
     with pytest.raises(PluginError, match="rejected its parameters"):
         make_plugin("allocator", "auction", (("bundle_size", -1),))
+
+
+# ----------------------------------------------------------------------------- compiled consensus
+
+
+@pytest.mark.parametrize("bundle_size", [1, 3])
+def test_compiled_exchange_equals_the_numpy_reference(bundle_size, monkeypatch):
+    """The compiled consensus (allocators._cbba_fast) gives exactly the state, rounds and
+    messages of the numpy reference of CBBA's Table 1, on limited-range graphs (connected or
+    not), with and without message loss."""
+    from allocators import auction
+
+    def run(p, reference):
+        if reference:
+            monkeypatch.setattr(auction._CBBA, "exchange", auction._CBBA.exchange_reference)
+        else:
+            monkeypatch.undo()
+        alloc = AuctionAllocator(bundle_size=bundle_size)
+        a = alloc.allocate(p)
+        return alloc.last, a
+
+    rng = np.random.default_rng(7)
+    for seed in range(60):
+        n, m = int(rng.integers(2, 14)), int(rng.integers(1, 10))
+        kw = dict(comm_range=float(rng.choice([5.0, 10.0, 15.0, 100.0])),
+                  loss=float(rng.choice([0.0, 0.3])), p_inf=0.1)
+        fast_res, fast = run(spatial_problem(seed, n, m, **kw), reference=False)
+        ref_res, ref = run(spatial_problem(seed, n, m, **kw), reference=True)
+        monkeypatch.undo()
+        assert np.array_equal(fast_res.y, ref_res.y) and np.array_equal(fast_res.z, ref_res.z)
+        assert fast_res.bundles == ref_res.bundles and fast_res.paths == ref_res.paths
+        assert (fast.pairs, fast.rounds, fast.messages, fast.hops, fast.requests) == \
+            (ref.pairs, ref.rounds, ref.messages, ref.hops, ref.requests)
+
+
+def test_one_task_shortcut_equals_the_simulated_auction(monkeypatch):
+    """One task on a complete graph without loss (immediate dispatch) is answered without
+    simulating the rounds: the same state, pairs, rounds, messages and requests as the
+    simulation (ties and infeasible agents included)."""
+    from allocators import auction
+
+    rng = np.random.default_rng(5)
+    for trial in range(80):
+        n = int(rng.integers(1, 30))
+        cost = rng.choice([3.0, 5.0, 7.0, np.inf], size=(n, 1))  # ties, some infeasible
+        if trial % 10 == 0:
+            cost[:] = np.inf
+        p = make_problem(cost)
+        fast_alloc = AuctionAllocator()
+        fast = fast_alloc.allocate(p)
+        monkeypatch.setattr(auction._CBBA, "one_task", lambda self: None)
+        ref_alloc = AuctionAllocator()
+        ref = ref_alloc.allocate(make_problem(cost))
+        monkeypatch.undo()
+        assert np.array_equal(fast_alloc.last.y, ref_alloc.last.y)
+        assert np.array_equal(fast_alloc.last.z, ref_alloc.last.z)
+        assert fast_alloc.last.bundles == ref_alloc.last.bundles
+        assert (fast.pairs, fast.rounds, fast.messages, fast.hops, fast.requests) == \
+            (ref.pairs, ref.rounds, ref.messages, ref.hops, ref.requests)
+        if np.isfinite(cost).any():  # the cheapest agent, ties to the lowest index
+            assert fast.pairs == ((p.agents[int(np.argmin(cost[:, 0]))].id, p.tasks[0].id),)

@@ -101,6 +101,27 @@ def test_relay_needed_is_self_pruning():
     assert need[1, 0] and not need[0, 1]  # the hub forwards a leaf's news, leaves never do
 
 
+def test_comm_graph_and_relays_equal_the_dense_definitions_on_random_fleets():
+    """The k-d tree graph and the float32 relay product give exactly the dense answers:
+    distance <= range (boundary included) and need[a, b] = b hears a and has a neighbour a
+    does not reach."""
+    rng = np.random.default_rng(11)
+    for trial in range(30):
+        n = int(rng.integers(1, 60))
+        pos = np.zeros((n, 3))
+        pos[:, :2] = rng.integers(0, 40, (n, 2))  # integer grid: many distances exactly r
+        r = float(rng.choice([0.0, 1.0, 3.0, 5.0, 10.0, 100.0]))
+        d = np.linalg.norm(pos[:, None] - pos[None, :], axis=-1)
+        dense = d <= r + 1e-9
+        np.fill_diagonal(dense, True)
+        adj = comm_graph(pos, r)
+        assert np.array_equal(adj, dense)
+        nb = adj & ~np.eye(n, dtype=bool)
+        want = np.array([[nb[a, b] and bool((nb[b] & ~adj[a]).any()) for b in range(n)]
+                         for a in range(n)], dtype=bool).reshape(n, n)
+        assert np.array_equal(relay_needed(adj), want)
+
+
 def test_channel_counts_broadcasts_and_drops_with_the_given_rng():
     g = np.ones((4, 4), bool)
     rng = np.random.default_rng(0)

@@ -260,3 +260,61 @@ def test_bad_parameters_are_clear_errors(tmp_path):
     (tmp_path / "text.pt").write_text("not a model\n", encoding="utf-8")
     with pytest.raises(ValueError, match="not a MAGNNET checkpoint"):
         MagnnetAllocator(checkpoint=str(tmp_path / "text.pt"))
+
+
+def test_sparse_scores_equal_the_dense_network_on_sparse_problems():
+    """Large sparse problems are scored edge by edge (match.sparse_scores): the same scores as
+    the dense network on every feasible edge (up to float sums) and the same requests."""
+    import torch
+
+    from allocators.magnnet import match
+    from allocators.magnnet.allocator import MagnnetAllocator
+
+    model = MagnnetAllocator(partial="match").model
+    rng = np.random.default_rng(3)
+    for n, m, density in [(300, 12, 0.05), (120, 30, 0.2), (60, 1, 0.3), (40, 60, 0.1)]:
+        cost = rng.uniform(20.0, 600.0, (n, m)) / 40.0
+        cost[rng.random((n, m)) > density] = np.inf
+        cost[0, 0] = 1.0  # at least one edge
+        flies = rng.random(n) < 0.5
+        c, mask = match.scaled(cost)
+        with torch.no_grad():
+            dense = model(c, mask, torch.from_numpy(flies)[None])[0].numpy().astype(float)
+        dense = np.where(mask[0].numpy(), dense, -np.inf)
+        sparse = match.sparse_scores(model, cost, flies)
+        f = np.isfinite(dense)
+        assert np.array_equal(f, np.isfinite(sparse))
+        assert np.abs(dense[f] - sparse[f]).max() < 1e-3
+        rows = np.arange(n)
+        assert np.array_equal(match.mutual_best(dense, rows), match.mutual_best(sparse, rows))
+
+
+def test_taxi_scale_views_are_rescaled_and_cut_to_candidates_paper_views_untouched():
+    """cost_scale/candidates "auto": a view of paper-scale costs (seconds) is fed as it is; a
+    view whose median cost exceeds TRAIN_MAX_S (taxis minutes away) is rescaled to the
+    training median, and each task keeps only the edges of its CANDIDATES cheapest agents
+    (checked against a per-column sort)."""
+    from allocators.magnnet import allocator as mod
+
+    alloc = mod.MagnnetAllocator(partial="match")
+    rng = np.random.default_rng(2)
+    paper = rng.uniform(1.0, 25.0, (20, 20))
+    same, keep = alloc._costs(paper)
+    assert keep is None and np.array_equal(same, paper)
+    taxi = rng.uniform(60.0, 600.0, (50, 6))
+    taxi[rng.random(taxi.shape) < 0.3] = np.inf
+    cost, keep = alloc._costs(taxi)
+    scale = mod.TRAIN_MEDIAN_S / np.median(taxi[np.isfinite(taxi)])
+    for j in range(taxi.shape[1]):
+        col = taxi[:, j]
+        cheapest = np.argsort(col, kind="stable")[:mod.CANDIDATES]
+        cheapest = cheapest[np.isfinite(col[cheapest])]
+        assert set(np.flatnonzero(np.isfinite(cost[:, j]))) == set(cheapest.tolist())
+        assert np.allclose(cost[cheapest, j], col[cheapest] * scale)
+    assert np.array_equal(keep, np.isfinite(cost).any(axis=1))
+    raw, keep = mod.MagnnetAllocator(partial="match", cost_scale=1, candidates=0)._costs(taxi)
+    assert keep is None and np.array_equal(raw, taxi)
+    for bad in ({"cost_scale": 0}, {"cost_scale": "big"}, {"candidates": -1},
+                {"candidates": 2.5}):
+        with pytest.raises(TypeError):
+            mod.MagnnetAllocator(partial="match", **bad)
