@@ -281,6 +281,15 @@ def _is_node(loc) -> bool:
 # ----------------------------------------------------------------------------- drivers
 
 
+def _arrive(v: Vehicle, leg) -> float:
+    """End a plain road leg (driven without edge events): the vehicle stands at the leg's last
+    node; returns the leg's metres, already added to ``v.distance``."""
+    metres = leg.length
+    v.leg, v.loc = None, int(leg.nodes[-1])
+    v.distance += metres
+    return metres
+
+
 def _plan(planner: Planner, agent: AgentView, goal, now: float, run_id: str):
     """``planner.plan``, with a planner's own exception turned into one PluginError line that
     names the planner, the run, the vehicle and the simulated time."""
@@ -417,10 +426,7 @@ class Operator:
                 if plain:  # RoadDriver.drive without edge events, inlined (two legs a trip)
                     v.leg, v.leg_start = path, env.now
                     yield env.timeout(path.seconds)
-                    metres = path.length
-                    v.leg, v.loc = None, int(path.nodes[-1])
-                    v.distance += metres
-                    v.empty_distance += metres
+                    v.empty_distance += _arrive(v, path)
                 else:
                     v.empty_distance += yield from self.driver.drive(env, v, path, task.id)
                 self.book.picked_up(task)
@@ -430,10 +436,7 @@ class Operator:
                 if plain:
                     v.leg, v.leg_start = leg, env.now
                     yield env.timeout(leg.seconds)
-                    metres = leg.length
-                    v.leg, v.loc = None, int(leg.nodes[-1])
-                    v.distance += metres
-                    v.occupied_distance += metres
+                    v.occupied_distance += _arrive(v, leg)
                 else:
                     v.occupied_distance += yield from self.driver.drive(env, v, leg, task.id)
                 emit(env.now, "dropoff", v.id, task.id, v.loc)
