@@ -192,6 +192,19 @@ def _perturb_global_rng(k: int) -> None:
         torch.manual_seed(k)
 
 
+def _constructed(cls, params: dict) -> Report:
+    """A fresh report for ``cls`` holding its "construct" check: ``cls(**params)`` must not
+    raise (``report.ok`` says whether it did not)."""
+    report = Report(getattr(cls, "name", "") or getattr(cls, "__name__", str(cls)))
+    try:
+        cls(**params)
+    except Exception as e:  # noqa: BLE001 - any exception is a failure of the plugin
+        report.add("construct", [f"{cls.__name__}(**{params!r}) raised {_err(e)}"], "")
+        return report
+    report.add("construct", [], f"{getattr(cls, '__name__', cls)}(**{params!r})")
+    return report
+
+
 def _replay(label: str, call: Callable[[], Any], first: Any, differs: list[str],
             global_rng: list[str], *, same: Callable[[Any, Any], bool] = lambda a, b: a == b,
             show: Callable[[Any], str] = str, given: str = "input") -> None:
@@ -222,13 +235,9 @@ def check_allocator(cls, *, seed: int = 0, **params: Any) -> Report:
     """Run every allocator check (see the module docstring) on ``cls(**params)``."""
     from dispatch.dispatcher import validate
 
-    report = Report(getattr(cls, "name", "") or getattr(cls, "__name__", str(cls)))
-    try:
-        cls(**params)
-    except Exception as e:  # noqa: BLE001
-        report.add("construct", [f"{cls.__name__}(**{params!r}) raised {_err(e)}"], "")
+    report = _constructed(cls, params)
+    if not report.ok:
         return report
-    report.add("construct", [], f"{getattr(cls, '__name__', cls)}(**{params!r})")
     problems = allocation_problems(seed)
     invalid, stuck, mutated, differs, global_rng = [], [], [], [], []
     answers: dict[str, tuple] = {}
@@ -450,14 +459,10 @@ def check_repositioner(cls, space=None, *, seed: int = 0, **params: Any) -> Repo
     of ``space`` (default :func:`small_network`)."""
     from collections.abc import Mapping
 
-    report = Report(getattr(cls, "name", "") or getattr(cls, "__name__", str(cls)))
-    space = space if space is not None else small_network()
-    try:
-        cls(**params)
-    except Exception as e:  # noqa: BLE001
-        report.add("construct", [f"{cls.__name__}(**{params!r}) raised {_err(e)}"], "")
+    report = _constructed(cls, params)
+    if not report.ok:
         return report
-    report.add("construct", [], f"{getattr(cls, '__name__', cls)}(**{params!r})")
+    space = space if space is not None else small_network()
     passive = bool(getattr(cls, "passive", False))
     invalid, mutated, differs, global_rng = [], [], [], []
     answers: dict[str, dict] = {}
