@@ -231,6 +231,13 @@ def _by(t: pd.DataFrame, col: str, a: str, b: str, keys: list[str]) -> pd.DataFr
     return t.loc[t[col] == a].merge(t.loc[t[col] == b], on=keys, suffixes=("_a", "_b"))
 
 
+def _wait_change(j: pd.DataFrame, pairs: str) -> str:
+    """How the mean wait changes from the ``_b`` to the ``_a`` rows of a :func:`_by` join."""
+    dw = j["wait_mean_a"] - j["wait_mean_b"]
+    return (f"mean wait lower in {int((dw < 0).sum())} of {len(j)} pairs {pairs}, change "
+            f"{dw.mean():+.0f} s on average ({dw.min():+.0f} to {dw.max():+.0f})")
+
+
 def findings(t: pd.DataFrame) -> str:
     """A paragraph computed from the study table: the lowest mean wait per N (and its margin
     over the next allocator), what the longest batch window changes against immediate
@@ -260,25 +267,21 @@ def findings(t: pd.DataFrame) -> str:
         w = max(windows, key=lambda v: float(v.removesuffix("s")) if v.endswith("s") else 0)
         j = _by(t, "window", w, "imm", ["allocator", "N", "reposition"])
         if len(j):
-            dw = j["wait_mean_a"] - j["wait_mean_b"]
             dr = j["rejected_a"] - j["rejected_b"]
             out.append(
-                f"Batching every {w} instead of immediately: mean wait lower in "
-                f"{int((dw < 0).sum())} of {len(j)} pairs (allocator, N, repositioner), "
-                f"change {dw.mean():+.0f} s on average ({dw.min():+.0f} to {dw.max():+.0f}); "
+                f"Batching every {w} instead of immediately: "
+                f"{_wait_change(j, '(allocator, N, repositioner)')}; "
                 f"rejection rate lower in {int((dr < 0).sum())} of {len(j)}, "
                 f"{100 * dr.mean():+.1f} points on average ({100 * dr.min():+.1f} to "
                 f"{100 * dr.max():+.1f}).")
     for rep in [r for r in t["reposition"].unique() if r != "stay"]:
         j = _by(t, "reposition", rep, "stay", ["allocator", "N", "window"])
         if len(j):
-            dw = j["wait_mean_a"] - j["wait_mean_b"]
             dr = j["rejected_a"] - j["rejected_b"]
             de = j["empty_a"] - j["empty_b"]
             out.append(
-                f"Repositioning with {rep!r} instead of 'stay': mean wait lower in "
-                f"{int((dw < 0).sum())} of {len(j)} pairs (allocator, N, window), change "
-                f"{dw.mean():+.0f} s on average ({dw.min():+.0f} to {dw.max():+.0f}); "
+                f"Repositioning with {rep!r} instead of 'stay': "
+                f"{_wait_change(j, '(allocator, N, window)')}; "
                 f"rejection rate {100 * dr.mean():+.1f} points on average; empty share of "
                 f"the km {100 * de.mean():+.1f} points.")
     return " ".join(out) if out else "No series to compare."
