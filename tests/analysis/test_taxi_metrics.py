@@ -29,24 +29,12 @@ from analysis import metrics as M
 from analysis.io import open_results
 from analysis.network import direct_seconds, road_network
 from analysis.timeline import FLEET_STATES, fleet_states, hourly_states
-from dispatch.runner import execute
-from dispatch.scenario import load_scenario
+from tests.analysis.helpers import run_tiny_road
 
 
 @pytest.fixture(scope="module")
 def tiny_road(tmp_path_factory):
-    d = tmp_path_factory.mktemp("tiny_road")
-    (d / "trips.csv").write_text("t,origin_node,dest_node,max_wait\n0,0,2,\n1,3,5,\n"
-                                 "2,4,3,5\n30,1,0,\n")
-    (d / "fleet.csv").write_text("vehicle_id,node\n0,0\n1,5\n")
-    path = d / "tiny_road.toml"
-    path.write_text('name = "tiny_road"\nduration = 1000.0\n[world]\nnetwork = "manhattan"\n'
-                    'blocks = [3, 2]\nblock = 100.0\nspeed = 10.0\n[fleet]\n'
-                    'start = "fleet.csv"\n[tasks]\nsource = "trace"\ntrace = "trips.csv"\n'
-                    '[dispatch]\nallocator = "fcfs"\nplanner = "dijkstra"\n')
-    out = d / "out"
-    execute(load_scenario(path).runs(), out)
-    return open_results(out)
+    return open_results(run_tiny_road(tmp_path_factory.mktemp("tiny_road"), "tiny_road"))
 
 
 def _tables(res):

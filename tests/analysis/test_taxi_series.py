@@ -17,26 +17,16 @@ from analysis import metrics as M
 from analysis import taxi_plots as TP
 from analysis.io import open_results
 from analysis.report import write_report
-from dispatch.runner import execute
 from dispatch.scenario import load_scenario
+from tests.analysis.helpers import run_tiny_road
 
 LABELS = ["fcfs imm", "fcfs imm + demand", "fcfs 30s", "fcfs 30s + demand"]
 
 
 @pytest.fixture(scope="module")
 def swept(tmp_path_factory):
-    d = tmp_path_factory.mktemp("tiny_swept")
-    (d / "trips.csv").write_text("t,origin_node,dest_node,max_wait\n0,0,2,\n1,3,5,\n"
-                                 "2,4,3,5\n30,1,0,\n")
-    (d / "fleet.csv").write_text("vehicle_id,node\n0,0\n1,5\n")
-    path = d / "tiny.toml"
-    path.write_text('name = "tiny"\nduration = 1000.0\n[world]\nnetwork = "manhattan"\n'
-                    'blocks = [3, 2]\nblock = 100.0\nspeed = 10.0\n[fleet]\n'
-                    'start = "fleet.csv"\n[tasks]\nsource = "trace"\ntrace = "trips.csv"\n'
-                    '[dispatch]\nallocator = "fcfs"\nplanner = "dijkstra"\n'
-                    '[sweep]\nbatch_window = [0.0, 30.0]\nreposition = ["stay", "demand"]\n')
-    out = d / "out"
-    execute(load_scenario(path).runs(), out)
+    out = run_tiny_road(tmp_path_factory.mktemp("tiny_swept"), "tiny",
+                        '[sweep]\nbatch_window = [0.0, 30.0]\nreposition = ["stay", "demand"]\n')
     return open_results(out), out
 
 
