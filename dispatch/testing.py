@@ -262,7 +262,7 @@ def check_allocator(cls, *, seed: int = 0, **params: Any) -> Report:
         answers[label] = _answer(allocation)
     for label, build in problems:
         if label in answers:
-            _replay(label, lambda: _answer(cls(**params).allocate(build())), answers[label],
+            _replay(label, lambda b=build: _answer(cls(**params).allocate(b())), answers[label],
                     differs, global_rng, show=lambda a: str(a[0]), given="problem and seed")
     n = len(problems)
     report.add("valid", invalid, f"{n} problems, every answer accepted")
@@ -379,7 +379,7 @@ def _check_planner_on(report: Report, cls, space, seed: int, params: dict, tag: 
                 if not path or path[-1] != t.loc or (space.kind == "voxel" and path[0] != start):
                     bad_plans.append(f"{label}: agent {a.id} -> task {t.id}: cost {c[i, j]:.3g}"
                                      f" but plan gave {path if not path else (path[0], path[-1])}")
-        _replay(label, lambda: _costs(cls(space, **params), agents, tasks), c, differs,
+        _replay(label, lambda a=agents, t=tasks: _costs(cls(space, **params), a, t), c, differs,
                 global_rng, same=np.array_equal, show=lambda c: f"costs {c.ravel()[:4]}",
                 given="queries")
     mutated = [] if occupied is None or np.array_equal(occupied, grid.occupied) else \
@@ -496,7 +496,7 @@ def check_repositioner(cls, space=None, *, seed: int = 0, **params: Any) -> Repo
         answers[label] = dict(moves)
     for label, build in cases:
         if label in answers:
-            _replay(label, lambda: dict(cls(**params).reposition(build())), answers[label],
+            _replay(label, lambda b=build: dict(cls(**params).reposition(b())), answers[label],
                     differs, global_rng, given="view and seed")
     report.add("valid", invalid, f"{len(cases)} views, every answer a mapping of idle vehicle "
                                  f"ids to nodes")
