@@ -146,6 +146,8 @@ def test_random_road_scenarios_with_breakdowns(tmp_path):
 def test_500_random_road_and_200_voxel_scenarios_with_breakdowns(tmp_path):
     road = pd.DataFrame([run_random(tmp_path, seed) for seed in range(1000, 1500)]).sum()
     voxel = pd.DataFrame([run_random_voxel(tmp_path, s) for s in range(1000, 1200)]).sum()
+    for name, totals in (("road", road), ("voxel", voxel)):  # the closing note's counts
+        print(f"\nfaults, {name}: " + ", ".join(f"{k} {int(v)}" for k, v in totals.items()))
     assert road["faults"] > 200 and voxel["faults"] > 100
 
 

@@ -4,8 +4,8 @@ process, output captured). Each gives ``ok`` (exit 0) or one error line (exit 2,
 DispatchError); any other exception fails the test.
 
 The ``slow`` part runs (``dispatch run``, one run per file: the first of its sweep) every file
-that validates, in a subprocess under a time limit (20 s) and a memory limit (2 GiB address
-space): no traceback, no hang.
+that validates, in a subprocess under a time limit (30 CPU seconds, 120 s wall) and a memory
+limit (2 GiB address space): no traceback, no hang.
 
 Mutations: wrong types, missing and unknown keys, huge / negative / zero / NaN / inf numbers,
 seeds past int64, sections swapped, renamed or replaced by a scalar, deep nesting, bad
@@ -25,6 +25,7 @@ import os
 import random
 import re
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -42,7 +43,8 @@ from tests.conftest import ROOT
 SCENARIOS = ROOT / "scenarios"
 N_FILES = 1100
 SEED = 20261123
-RUN_TIMEOUT_S = 20
+RUN_CPU_S = 30  # a hang is judged by CPU time: on a loaded machine wall time says little
+RUN_TIMEOUT_S = 4 * RUN_CPU_S  # wall: a run blocked without using CPU is a hang too
 RUN_MEMORY_BYTES = 2 * 2**30
 MAX_SHIP_DURATION = 600.0  # bases are shortened so that a run that validates is quick
 
@@ -451,6 +453,7 @@ def _limit_memory() -> None:  # in the child, before exec
     import resource
 
     resource.setrlimit(resource.RLIMIT_AS, (RUN_MEMORY_BYTES, RUN_MEMORY_BYTES))
+    resource.setrlimit(resource.RLIMIT_CPU, (RUN_CPU_S, RUN_CPU_S + 5))
 
 
 def run_case(case: Case, out: Path) -> tuple[str, str]:
@@ -463,6 +466,8 @@ def run_case(case: Case, out: Path) -> tuple[str, str]:
                               env=env, cwd=case.path.parent, preexec_fn=_limit_memory,
                               check=False)
     except subprocess.TimeoutExpired:
+        return "hang", ""
+    if proc.returncode in (-signal.SIGXCPU, -signal.SIGKILL):  # past the CPU limit
         return "hang", ""
     text = proc.stdout + proc.stderr
     if "Traceback" in text:
@@ -483,7 +488,7 @@ def test_fuzz_runs_no_traceback_no_hang(fuzzed, tmp_path):
     counts = Counter(r for r, _ in results)
     print(f"\nfuzz runs: {len(ok)} files that validate: {counts['run']} ran, "
           f"{counts['error']} one-line errors, {counts['traceback']} tracebacks, "
-          f"{counts['hang']} hangs (> {RUN_TIMEOUT_S} s), {counts['other']} other")
+          f"{counts['hang']} hangs (> {RUN_CPU_S} CPU s), {counts['other']} other")
     bad = [f"{c.path} ({c.mutation}) {c.overrides}: {r}: {m}"
            for c, (r, m) in zip(ok, results) if r in ("traceback", "hang", "other")]
     assert not bad, "\n\n".join(bad[:10])
