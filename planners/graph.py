@@ -36,6 +36,7 @@ from functools import cache, cached_property, partial
 
 import numpy as np
 from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import connected_components
 
 from dispatch.motion import offsets
 from dispatch.world import Cell, Grid
@@ -60,6 +61,10 @@ _GRAPH_KEY = "planners.graph.graph"
 _FIELDS_KEY = "planners.graph.fields"
 _PADDED_KEY = "planners.graph.padded"
 _SCRATCH_KEY = "planners.graph.astar_scratch"
+_LABELS_KEY = "planners.graph.components"
+#: Lattice bounds are scaled by this so that float rounding never lifts one above the exact
+#: shortest-path length (a path's float sum is within ~1e-14 relative of its real length).
+BOUND_SCALE = 1.0 - 1e-12
 
 
 def _lattice(grid: Grid, flies: bool) -> tuple[int, int, int]:
@@ -181,6 +186,39 @@ def graph(grid: Grid, flies: bool) -> GridGraph:
     return g
 
 
+def components(grid: Grid, flies: bool) -> np.ndarray:
+    """Per node of the model's lattice (flat, see :class:`GridGraph`), the label of its
+    connected component of the movement graph (int32, read-only); ``-1`` for blocked nodes.
+    Two free nodes are joined by a legal path iff their labels are equal (the graph is
+    symmetric). Computed once per grid and model (scipy's ``connected_components``), cached."""
+    per = grid.cache.setdefault(_LABELS_KEY, {})
+    labels = per.get(bool(flies))
+    if labels is None:
+        g = graph(grid, flies)
+        csr = g.__dict__.get("csr")
+        if csr is None:  # built for this alone, not kept (26 edges a node)
+            csr = GridGraph.csr.func(g)
+        _, labels = connected_components(csr, directed=False)
+        labels = labels.astype(np.int32)
+        occ = grid.occupied if flies else grid.occupied[:, :, :1]
+        labels[occ.reshape(-1)] = -1
+        labels.setflags(write=False)
+        per[bool(flies)] = labels
+    return labels
+
+
+def lattice_bound(a: np.ndarray, b: np.ndarray, cell: float) -> np.ndarray:
+    """``out[i, j]``: a lower bound in metres of the shortest 26-connected path from cell
+    ``a[i]`` to cell ``b[j]`` (``(N, 3)`` and ``(M, 3)`` integer arrays): the obstacle-free
+    lattice distance (sorted absolute offsets ``p >= q >= r``: ``sqrt3 r + sqrt2 (q - r) +
+    (p - q)`` cells) times ``cell`` times :data:`BOUND_SCALE`. It is never above the exact
+    length (every legal path is a lattice path), and 0 only for equal cells."""
+    d = np.abs(a[:, None, :].astype(np.int64) - b[None, :, :].astype(np.int64))
+    d.sort(axis=2)
+    r, q, p = d[..., 0], d[..., 1], d[..., 2]
+    return (math.sqrt(3) * r + math.sqrt(2) * (q - r) + (p - q)) * (cell * BOUND_SCALE)
+
+
 _SCRATCH = threading.local()
 _NO_U8 = np.zeros(0, dtype=np.uint8)
 _POOL: dict = {}  # pid -> ThreadPoolExecutor (a forked child must not reuse its parent's)
@@ -261,6 +299,11 @@ class FieldCache:
     def lru_keys(self) -> list:
         """The keys, least recently used first."""
         return list(self._lru)
+
+    def peek(self, key):
+        """The entry under ``key`` or None, without counting a hit or a miss or making it
+        the most recently used."""
+        return self._lru.get(key)
 
     def get(self, key) -> np.ndarray | None:
         """The field under ``key`` (made the most recently used), or None."""
