@@ -73,9 +73,10 @@ class AStarPlanner(Planner):
         free and in bounds (UGVs: on the ground layer), nodes their flat lattice indices."""
         grid = self.world.grid
         nx, ny, nz = grid.shape
-        cells = np.array([a.cell for a in agents], dtype=np.int64).reshape(-1, 3)
-        speed = np.array([a.speed for a in agents], dtype=float)
-        flies = np.array([a.flies for a in agents], dtype=bool)
+        views = list(agents)  # one pass: each view of a lazy sequence is built on access
+        cells = np.array([a.loc for a in views], dtype=np.int64).reshape(-1, 3)
+        speed = np.array([a.speed for a in views], dtype=float)
+        flies = np.array([a.kind == "uav" for a in views], dtype=bool)
         inside = ((cells >= 0) & (cells < (nx, ny, nz))).all(axis=1)
         safe = np.where(inside[:, None], cells, 0)
         ok = inside & ~grid.occupied[safe[:, 0], safe[:, 1], safe[:, 2]]
@@ -179,7 +180,7 @@ class AStarPlanner(Planner):
             memo = self._pairs.setdefault(task.id, {})
             d = memo.get(node)
             if d is None:
-                d = memo[node] = astar(grid, cell, _cell(task), True)[0]
+                d = memo[node] = astar(grid, cell, _cell(task), True, path=False)[0]
                 self.stats.extra["astar_pairs"] += 1
             out[k] = d / agent.speed
         return out

@@ -544,7 +544,8 @@ def _scratch(grid: Grid, flies: bool, n: int):
     return hit[0], np.uint32(hit[1]), hit[2], hit[3]
 
 
-def astar(grid: Grid, start: Cell, goal: Cell, flies: bool) -> tuple[float, list[Cell] | None]:
+def astar(grid: Grid, start: Cell, goal: Cell, flies: bool,
+          path: bool = True) -> tuple[float, list[Cell] | None]:
     """A* from ``start`` to ``goal`` under one movement model: ``(metres, cells)``.
 
     Returns the shortest path length in metres and the path as cells from ``start`` to
@@ -554,7 +555,8 @@ def astar(grid: Grid, start: Cell, goal: Cell, flies: bool) -> tuple[float, list
     in ``f`` go to the larger ``g``; the path is optimal (equal to the distance field up to
     float rounding). Compiled (:func:`planners._fast.astar`); on lattices larger than
     :data:`MASK_MAX_NODES` whose move masks are not cached yet, moves are read from a padded
-    copy of the occupancy instead of building the masks.
+    copy of the occupancy instead of building the masks. With ``path=False`` only the length
+    is wanted: the cells are not returned (None).
     """
     nx, ny, nz = _lattice(grid, flies)
     s3 = tuple(int(v) for v in start)
@@ -583,7 +585,7 @@ def astar(grid: Grid, start: Cell, goal: Cell, flies: bool) -> tuple[float, list
                                 pad, sn, tn, seen, gen, gbuf, pbuf)
     if cells.shape[0] == 0:
         return math.inf, None
-    return float(length) * grid.cell, list(map(tuple, cells.tolist()))
+    return float(length) * grid.cell, list(map(tuple, cells.tolist())) if path else None
 
 
 @cache
