@@ -240,8 +240,8 @@ def main(argv: list[str] | None = None) -> None:
                 "scipy ms", "ratio"):
         table.add_column(col, justify="left" if col == "world" else "right")
     lazy_table = Table(title="Exact vs lazy costs, same seed: ms, UAV fields and A* searches "
-                             "per task, rounds per decision, peak MB, mean wait s")
-    for col in ("run", "wall", "cpu", "fields", "A*", "rounds", "MB", "done", "expired",
+                             "per task, rounds per decision, peak MB, tasks completed and expired, mean wait s")
+    for col in ("run", "wall", "cpu", "fields", "A*", "rounds", "MB", "done", "exp",
                 "wait"):
         lazy_table.add_column(col, justify="left" if col == "run" else "right")
     summary = []
