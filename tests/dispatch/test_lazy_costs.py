@@ -263,3 +263,26 @@ def test_lazy_costs_without_support_fall_back_with_a_warning(tmp_path, caplog):
             results.append(inv.run_scenario(path))
     assert "lazy_costs is on but" in caplog.text
     assert results[0].summary["total_cost"] == results[1].summary["total_cost"]
+
+
+def test_check_planner_checks_the_bounds():
+    """``check_planner`` passes ``astar``'s bounds and catches bounds above the costs and
+    exact marks on entries that are not exact."""
+    from dispatch.testing import check_planner
+
+    assert check_planner(AStarPlanner).ok
+
+    class TooHigh(AStarPlanner):
+        def bounds(self, agents, tasks):
+            lower, known = super().bounds(agents, tasks)
+            return lower * 1.5 + 0.1, known
+
+    class FalselyExact(AStarPlanner):
+        def bounds(self, agents, tasks):
+            lower, known = super().bounds(agents, tasks)
+            return lower * 0.5, np.ones_like(known)
+
+    for cls, why in ((TooHigh, "above its cost"), (FalselyExact, "marked exact")):
+        report = check_planner(cls)
+        assert not report.ok
+        assert why in str(report)
