@@ -16,6 +16,13 @@ Planners
     Planners may cache anything that depends only on the static world and the task's goal cell
     (the grid is immutable); :meth:`Planner.task_closed` tells them when a task's cache can go.
 
+Lazy exact costs
+    A planner that sets ``lower_bounds = True`` implements :meth:`Planner.bounds` (lower bounds
+    of the costs, with a mask of the entries that are exact) and :meth:`Planner.exact` (the
+    exact costs of given pairs); an allocator that sets ``minimizes_total_cost = True`` promises
+    a maximum-cardinality, minimum-total-cost answer. With both and ``[dispatch] lazy_costs``
+    the dispatcher decides on the bounds and certifies the answer (:mod:`dispatch.lazy`).
+
 Reservation-aware planners
     A planner that sets ``reservation_aware = True`` and implements :meth:`Planner.plan_timed`
     makes the kernel execute routes with reservations (:mod:`dispatch.reservations`: the time

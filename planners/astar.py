@@ -19,9 +19,16 @@ Promises
     * ``plan`` is a true A* search (octile heuristic, consistent) returning an optimal path whose
       length equals the distance-field cost (up to float rounding), or None.
 
-Statistics: ``stats.cost_queries`` counts calls to ``costs``, ``stats.plans`` calls to ``plan``;
+    * Lazy costs (``[dispatch] lazy_costs``, :mod:`dispatch.lazy`): ``bounds`` gives lower
+      bounds without any UAV field (the obstacle-free 26-connected lattice distance, scaled by
+      ``1 - 1e-12`` so that rounding never lifts it above the exact length; ``inf`` across
+      connected components of free space, computed once per grid), ``exact`` computes single
+      pairs by A* and remembers them per task and vehicle cell until the task closes.
+
+Statistics: ``stats.cost_queries`` counts calls to ``costs`` and ``bounds``, ``stats.plans`` calls to ``plan``;
 ``stats.extra`` holds ``fields_computed`` (Dijkstra runs) and ``field_reuses`` (fields read
-from the cache).
+from the cache), ``astar_pairs`` (pairs ``exact`` searched) and ``pair_reuses`` (remembered
+pairs ``bounds`` gave as exact).
 """
 
 from __future__ import annotations
