@@ -36,7 +36,6 @@ from functools import cache, cached_property, partial
 
 import numpy as np
 from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import connected_components
 
 from dispatch.motion import offsets
 from dispatch.world import Cell, Grid
@@ -188,20 +187,17 @@ def graph(grid: Grid, flies: bool) -> GridGraph:
 
 def components(grid: Grid, flies: bool) -> np.ndarray:
     """Per node of the model's lattice (flat, see :class:`GridGraph`), the label of its
-    connected component of the movement graph (int32, read-only); ``-1`` for blocked nodes.
+    connected component of the movement graph (int64, read-only); ``-1`` for blocked nodes.
     Two free nodes are joined by a legal path iff their labels are equal (the graph is
-    symmetric). Computed once per grid and model (scipy's ``connected_components``), cached."""
+    symmetric). Computed once per grid and model by a compiled flood fill over the move masks
+    (:func:`planners._fast.flood_components`: no adjacency matrix is built), cached."""
     per = grid.cache.setdefault(_LABELS_KEY, {})
     labels = per.get(bool(flies))
     if labels is None:
         g = graph(grid, flies)
-        csr = g.__dict__.get("csr")
-        if csr is None:  # built for this alone, not kept (26 edges a node)
-            csr = GridGraph.csr.func(g)
-        _, labels = connected_components(csr, directed=False)
-        labels = labels.astype(np.int32)
         occ = grid.occupied if flies else grid.occupied[:, :, :1]
-        labels[occ.reshape(-1)] = -1
+        labels = np.where(occ.reshape(-1), -1, -2).astype(np.int64)
+        _fast.flood_components(g.dirs, g.deltas, labels, np.empty(labels.size, np.int64))
         labels.setflags(write=False)
         per[bool(flies)] = labels
     return labels
@@ -605,6 +601,7 @@ def _warm_up() -> None:
         field_values(grid, [(0, 0, 0)], True, np.array([17]))
     grid.cache.clear()
     astar(grid, (0, 0, 0), (2, 2, 1), True)
+    components(grid, True)
 
 
 _warm_up()
