@@ -35,6 +35,13 @@ open again (release time and deadline kept) and the hand-out's ``assign`` events
 vehicle left without a task is idle where it stopped. A vehicle that gets nothing while its
 task gets no one keeps its task. The summary counts ``reassignments``.
 
+Lazy exact costs (``[dispatch] lazy_costs = true``, with a planner that computes lower bounds
+and an allocator that minimizes the total cost): the decision starts from the planner's lower
+bounds and computes exact costs only for the pairs an optimal answer needs, in the certificate
+loop of :mod:`dispatch.lazy`; tasks become unreachable, rejected or left out exactly as with
+exact costs. The recorded problem's cost matrix then holds bounds beside the exact costs of
+the pairs handed out.
+
 Cost per decision. The idle vehicles come from the fleet's arrays as an
 :class:`~dispatch.contracts.AgentViews` (views built only when read), the answer is checked
 pair by pair (no dict over all agents), and with an unlimited communication range the
@@ -397,25 +404,10 @@ class Dispatcher:
             allocation, decide_s, index = self._ask(problem)
             return problem, allocation, decide_s, index
 
-        if lazy:  # the certificate loop (dispatch.lazy); computing exact pairs is cost time
-            deadlines = np.array([t.deadline for t in open_tasks])
-            spent = [0.0]
-
-            def timed(cost):
-                t = time.perf_counter()
-                answer = ask(cost)
-                spent[0] += time.perf_counter() - t
-                return answer
-
-            t2 = time.perf_counter()
-            (problem, allocation, _, index), rounds, pairs = certify(
-                timed, cost, exact, self._exact(agents, tasks), now, deadlines)
-            decide_s = spent[0]
-            extra = time.perf_counter() - t2 - decide_s
-            cost_s += extra
-            self.cost_seconds += extra
-            self.lazy_rounds += rounds
-            self.lazy_pairs += pairs
+        if lazy:
+            problem, allocation, decide_s, index, extra = self._certified(
+                ask, cost, exact, agents, tasks, np.array([t.deadline for t in open_tasks]), now)
+            cost_s += extra  # computing exact pairs is cost time
         else:
             problem, allocation, decide_s, index = ask(cost)
         self.decide_seconds += decide_s
@@ -429,6 +421,27 @@ class Dispatcher:
                                  n_comp, holder, index)
         if delay <= 0:
             self._hand_out()
+
+    def _certified(self, ask, cost, exact, agents, tasks, deadlines, now: float):
+        """The certificate loop of lazy costs (:func:`dispatch.lazy.certify`) around ``ask``:
+        ``(problem, allocation, allocator seconds, pair indices, seconds spent computing exact
+        pairs)``; the latter are added to :attr:`cost_seconds`."""
+        spent = [0.0]
+
+        def timed(c):
+            t = time.perf_counter()
+            answer = ask(c)
+            spent[0] += time.perf_counter() - t
+            return answer
+
+        t0 = time.perf_counter()
+        (problem, allocation, _, index), rounds, pairs = certify(
+            timed, cost, exact, self._exact(agents, tasks), now, deadlines)
+        extra = time.perf_counter() - t0 - spent[0]
+        self.cost_seconds += extra
+        self.lazy_rounds += rounds
+        self.lazy_pairs += pairs
+        return problem, allocation, spent[0], index, extra
 
     def _exact(self, agents, tasks):
         """``compute(rows, cols)``: the planner's exact costs of those pairs (lazy costs)."""
