@@ -412,8 +412,8 @@ def _check_bounds(cls, space, params: dict, agents, tasks, c: np.ndarray,
     except Exception as e:  # noqa: BLE001
         return [f"{label}: bounds or exact raised {_err(e)}"]
     if lower.shape != c.shape or known.shape != c.shape or known.dtype != bool:
-        return [f"{label}: bounds gave shapes {lower.shape} / {known.shape} "
-                f"({known.dtype}), expected {c.shape} and bool"]
+        return [(f"{label}: bounds gave shapes {lower.shape} / {known.shape} "
+                 f"({known.dtype}), expected {c.shape} and bool")]
     finite = np.isfinite(c)
     slack = 1e-9 * np.where(finite, np.abs(c), 0.0)
     with np.errstate(invalid="ignore"):  # inf - inf where both are inf: not compared

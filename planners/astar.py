@@ -129,7 +129,7 @@ class AStarPlanner(Planner):
         grid = self.world.grid
         if uav.size and in_bounds:
             tcells = np.array([tasks[t].cell for t in in_bounds], dtype=np.int64).reshape(-1, 3)
-            nx, ny, nz = grid.shape
+            _, ny, nz = grid.shape
             tnode = (tcells[:, 0] * ny + tcells[:, 1]) * nz + tcells[:, 2]
             labels = components(grid, True)
             la, lt = labels[uav_node], labels[tnode]
@@ -175,7 +175,7 @@ class AStarPlanner(Planner):
         cols = np.asarray(cols, dtype=np.int64).reshape(-1)
         out = np.empty(rows.size)
         grid = self.world.grid
-        nx, ny, nz = grid.shape
+        _, ny, nz = grid.shape
         for k, (r, c) in enumerate(zip(rows.tolist(), cols.tolist())):
             agent, task = agents[r], tasks[c]
             cell = tuple(int(v) for v in agent.cell)
