@@ -264,7 +264,7 @@ def main(argv: list[str] | None = None) -> None:
                     if not m["equal"]:
                         raise SystemExit(f"{world}: our fields differ from scipy's")
                     runs[lazy].append(m)
-                    name = "  +lazy" if lazy else world
+                    name = " lazy" if lazy else world
                     table.add_row(name, str(m["tasks"]),
                                   f"{1000 * m['wall'] / m['tasks']:.2f}",
                                   f"{1000 * m['cpu'] / m['tasks']:.2f}",
