@@ -23,6 +23,7 @@ class HungarianAllocator(Allocator):
 
     name = "hungarian"
     decentralized = False
+    minimizes_total_cost = True  # maximum cardinality, then minimum total cost; no rng
 
     def allocate(self, problem: AllocationProblem) -> Allocation:
         return Allocation.centralized(problem, optimal_pairs(problem.cost))

@@ -18,8 +18,16 @@ cells (a tenth as many in the big world) on the same graph, and so do our kernel
 cache cold); the fields must be equal (bit for bit: both compute the unique fixed point of the
 float64 relaxations), and the ratio scipy / ours is printed with the per-field times.
 
+With ``--lazy`` each world also runs with ``[dispatch] lazy_costs = true`` on the same seed
+(:mod:`dispatch.lazy`: decisions on lower bounds, exact costs by A* only for the pairs the
+optimal answer needs), and a second table puts the two side by side: wall and CPU ms per task,
+UAV distance fields and A* searches per task, certificate rounds (allocator calls) per decision,
+peak RSS, tasks completed and expired, mean wait. ``--verify`` adds one more lazy run (not
+timed) that checks every decision against ``hungarian`` on the exact matrix (fields on a copy of
+the grid): how many decisions chose other pairs (ties) and the worst relative gap of the total.
+
 Usage: ``.venv/bin/python benchmarks/voxel.py [--repeat 3] [--hours 2] [--only paper|big]
-[--field-cache-mb 256]``.
+[--field-cache-mb 256] [--lazy [--verify]]``.
 """
 
 from __future__ import annotations
@@ -66,6 +74,7 @@ ttl = 120.0
 allocator = "hungarian"
 planner = "astar"
 batch_window = 1.0
+lazy_costs = {lazy}
 {params}
 """
 
@@ -79,9 +88,53 @@ CHILD = textwrap.dedent("""
     import planners.astar as A
     from planners import graph as G
 
-    sample = int(sys.argv[2])
+    sample, verify = int(sys.argv[2]), sys.argv[3] == "verify"
     cells, cost_s = [], [0.0]
     real = A.AStarPlanner.costs
+    # the counters: the dispatcher (certificate rounds, exact pairs) and UAV fields computed
+    import dispatch.dispatcher as D
+    kept, uav_fields, check = {}, [0], {"decisions": 0, "differ": 0, "worst": 0.0}
+    real_values = A.field_values
+
+    def field_values(grid, goals, flies, at, bounded=False):
+        out, computed = real_values(grid, goals, flies, at, bounded)
+        uav_fields[0] += computed if flies else 0
+        return out, computed
+
+    A.field_values = field_values
+    real_init = D.Dispatcher.__init__
+
+    def init(self, *args, **kw):
+        real_init(self, *args, **kw)
+        kept["d"] = self
+        if verify:  # each decision against hungarian on the exact matrix (fields, own grid)
+            from allocators.hungarian import optimal_pairs
+            from dispatch.world import Grid, World
+            w = self.space
+            ref = A.AStarPlanner(World(size=w.size, grid=Grid(np.array(w.grid.occupied),
+                                                                w.grid.cell), boxes=()))
+            record = self.on_decision
+
+            def on_decision(index, problem, allocation, total, *a, **k):
+                c = real(ref, problem.agents, problem.tasks)
+                dl = np.array([t.deadline for t in problem.tasks])
+                c = np.where(problem.time + c <= dl + 1e-9, c, np.inf)
+                want = optimal_pairs(c)
+                rows, cols = D._finders(problem)
+                got = [(rows(a), cols(t)) for a, t in allocation.pairs]
+                lazy_total = float(sum(c[i, j] for i, j in got))
+                best = float(sum(c[i, j] for i, j in want))
+                check["decisions"] += 1
+                check["differ"] += sorted(got) != sorted(want)
+                if len(got) != len(want):
+                    check["worst"] = float("inf")
+                elif best > 0:
+                    check["worst"] = max(check["worst"], abs(lazy_total - best) / best)
+                return record(index, problem, allocation, total, *a, **k)
+
+            self.on_decision = on_decision
+
+    D.Dispatcher.__init__ = init
 
     def costs(self, agents, tasks):
         t0 = time.perf_counter()
@@ -93,6 +146,15 @@ CHILD = textwrap.dedent("""
         return out
 
     A.AStarPlanner.costs = costs
+    real_bounds = A.AStarPlanner.bounds
+
+    def bounds(self, agents, tasks):
+        for t in tasks:
+            if len(cells) < sample and t.cell not in cells:
+                cells.append(t.cell)
+        return real_bounds(self, agents, tasks)
+
+    A.AStarPlanner.bounds = bounds
     [spec] = load_scenario(Path(sys.argv[1])).runs()
     r = run_one(spec)
     wall = time.perf_counter() - t_start
@@ -117,10 +179,16 @@ CHILD = textwrap.dedent("""
         t_ref += time.perf_counter() - t1
         t_ours += t1 - t0
         equal = equal and np.array_equal(ours, ref)
+    d = kept["d"]
+    extra = d.planner.stats.extra
     print(json.dumps({"tasks": int(s["n_tasks"]), "completed": int(s["tasks_completed"]),
                       "expired": int(s["tasks_expired"]), "decisions": int(s["decisions"]),
-                      "wall": wall, "cpu": cpu, "cost_s": cost_s[0], "rss_mb": rss,
-                      "fields": len(nodes), "ours_ms": 1000 * t_ours / max(1, len(nodes)),
+                      "wait": float(s["wait_time_mean"]), "lazy": d.lazy,
+                      "uav_fields": uav_fields[0], "fields": int(extra["fields_computed"]),
+                      "astar": int(extra.get("astar_pairs", 0)), "rounds": d.lazy_rounds,
+                      "lazy_decisions": d.decisions if d.lazy else 0, "check": check,
+                      "wall": wall, "cpu": cpu, "cost_s": d.cost_seconds, "rss_mb": rss,
+                      "ref_fields": len(nodes), "ours_ms": 1000 * t_ours / max(1, len(nodes)),
                       "scipy_ms": 1000 * t_ref / max(1, len(nodes)), "equal": equal}))
 """)
 
@@ -128,11 +196,13 @@ WORLDS = {"paper": {"side": 50, "boxes": 10}, "big": {"side": 200, "boxes": 160}
 
 
 def measure(world: str, duration: float, seed: int, sample: int, params: str,
-            work: Path) -> dict:
+            work: Path, lazy: bool = False, verify: bool = False) -> dict:
     scenario = work / f"voxel_{world}.toml"
     scenario.write_text(SCENARIO.format(world=world, seed=seed, duration=duration,
-                                        params=params, **WORLDS[world]), encoding="utf-8")
-    proc = subprocess.run([sys.executable, "-c", CHILD, str(scenario), str(sample)],
+                                        params=params, lazy="true" if lazy else "false",
+                                        **WORLDS[world]), encoding="utf-8")
+    proc = subprocess.run([sys.executable, "-c", CHILD, str(scenario), str(sample),
+                           "verify" if verify else "-"],
                           capture_output=True, text=True, cwd=ROOT, check=False,
                           env={"PYTHONPATH": str(ROOT), **_env()})
     if proc.returncode != 0:
@@ -161,39 +231,78 @@ def main(argv: list[str] | None = None) -> None:
                    help="fields timed against scipy (a tenth of them in the big world)")
     p.add_argument("--field-cache-mb", type=float, default=None,
                    help="the astar planner's field_cache_mb (default: the planner's)")
+    p.add_argument("--lazy", action="store_true",
+                   help="also run each world with [dispatch] lazy_costs = true (same seed)")
+    p.add_argument("--verify", action="store_true",
+                   help="with --lazy: one more lazy run that checks every decision against "
+                        "hungarian on the exact matrix (not timed)")
     args = p.parse_args(argv)
     params = ("" if args.field_cache_mb is None else
               f"\n[dispatch.planner_params]\nfield_cache_mb = {args.field_cache_mb}\n")
     worlds = [args.only] if args.only else list(WORLDS)
     durations = {"paper": args.hours * 3600.0, "big": args.big_minutes * 60.0}
+    modes = [False, True] if args.lazy else [False]
     console = Console()
     table = Table(title="Voxel dispatch: 200 vehicles, 5 tasks/s, hungarian, astar")
     for col in ("world", "tasks", "wall ms/task", "cpu ms/task", "peak MB", "field ms",
                 "scipy ms", "ratio"):
         table.add_column(col, justify="left" if col == "world" else "right")
+    lazy_table = Table(title="Exact vs lazy costs, same seed: ms, UAV fields and A* searches "
+                             "per task, rounds per decision, peak MB, tasks completed and expired, mean wait s")
+    for col in ("run", "wall", "cpu", "fields", "A*", "rounds", "MB", "done", "exp",
+                "wait"):
+        lazy_table.add_column(col, justify="left" if col == "run" else "right")
     summary = []
     with tempfile.TemporaryDirectory() as tmp:
         for world in worlds:
-            runs = []
+            runs: dict[bool, list] = {False: [], True: []}
+            sample = args.sample if world == "paper" else max(1, args.sample // 10)
             for _ in range(args.repeat):
-                sample = args.sample if world == "paper" else max(1, args.sample // 10)
-                m = measure(world, durations[world], args.seed, sample, params, Path(tmp))
-                if not m["equal"]:
-                    raise SystemExit(f"{world}: our fields differ from scipy's")
-                runs.append(m)
-                table.add_row(world, str(m["tasks"]), f"{1000 * m['wall'] / m['tasks']:.2f}",
-                              f"{1000 * m['cpu'] / m['tasks']:.2f}",
-                              f"{m['rss_mb']:.0f}", f"{m['ours_ms']:.2f}",
-                              f"{m['scipy_ms']:.1f}", f"{m['scipy_ms'] / m['ours_ms']:.1f}")
-                console.print(json.dumps({"world": world, **m}))
-            per_task = [1000 * m["wall"] / m["tasks"] for m in runs]
-            cpu = [1000 * m["cpu"] / m["tasks"] for m in runs]
-            rss = [m["rss_mb"] for m in runs]
-            summary.append(f"{world}: wall ms/task min {min(per_task):.2f} median "
-                           f"{statistics.median(per_task):.2f}; cpu ms/task min {min(cpu):.2f} "
-                           f"median {statistics.median(cpu):.2f}; peak RSS MB min "
-                           f"{min(rss):.0f} median {statistics.median(rss):.0f}")
+                for lazy in modes:
+                    m = measure(world, durations[world], args.seed, sample, params, Path(tmp),
+                                lazy)
+                    if not m["equal"]:
+                        raise SystemExit(f"{world}: our fields differ from scipy's")
+                    runs[lazy].append(m)
+                    name = " lazy" if lazy else world
+                    table.add_row(name, str(m["tasks"]),
+                                  f"{1000 * m['wall'] / m['tasks']:.2f}",
+                                  f"{1000 * m['cpu'] / m['tasks']:.2f}",
+                                  f"{m['rss_mb']:.0f}", f"{m['ours_ms']:.2f}",
+                                  f"{m['scipy_ms']:.1f}",
+                                  f"{m['scipy_ms'] / m['ours_ms']:.1f}")
+                    n = m["tasks"]
+                    lazy_table.add_row(name, f"{1000 * m['wall'] / n:.2f}",
+                                       f"{1000 * m['cpu'] / n:.2f}", f"{m['uav_fields'] / n:.3f}",
+                                       f"{m['astar'] / n:.2f}",
+                                       f"{m['rounds'] / max(1, m['lazy_decisions']):.2f}",
+                                       f"{m['rss_mb']:.0f}", str(m["completed"]),
+                                       str(m["expired"]), f"{m['wait']:.3f}")
+                    console.print(json.dumps({"world": world, **m}))
+            for lazy in modes:
+                got = runs[lazy]
+                per_task = [1000 * m["wall"] / m["tasks"] for m in got]
+                cpu = [1000 * m["cpu"] / m["tasks"] for m in got]
+                rss = [m["rss_mb"] for m in got]
+                summary.append(f"{world}{' lazy' if lazy else ''}: wall ms/task min "
+                               f"{min(per_task):.2f} median {statistics.median(per_task):.2f}; "
+                               f"cpu ms/task min {min(cpu):.2f} median "
+                               f"{statistics.median(cpu):.2f}; peak RSS MB min {min(rss):.0f} "
+                               f"median {statistics.median(rss):.0f}")
+            if args.lazy:
+                ratio = [e["cpu"] / lz["cpu"] for e, lz in zip(runs[False], runs[True])]
+                summary.append(f"{world}: exact / lazy cpu per run, min {min(ratio):.2f} "
+                               f"median {statistics.median(ratio):.2f}")
+            if args.lazy and args.verify:
+                m = measure(world, durations[world], args.seed, 1, params, Path(tmp), True,
+                            verify=True)
+                c = m["check"]
+                summary.append(f"{world} lazy, checked against hungarian on the exact matrix: "
+                               f"{c['decisions']} decisions, {c['differ']} with other pairs "
+                               f"(ties), worst relative total gap {c['worst']:.2e}")
     console.print(table)
+    if args.lazy:
+        console.print(lazy_table)
     for line in summary:
         console.print(line)
 

@@ -16,6 +16,13 @@ Planners
     Planners may cache anything that depends only on the static world and the task's goal cell
     (the grid is immutable); :meth:`Planner.task_closed` tells them when a task's cache can go.
 
+Lazy exact costs
+    A planner that sets ``lower_bounds = True`` implements :meth:`Planner.bounds` (lower bounds
+    of the costs, with a mask of the entries that are exact) and :meth:`Planner.exact` (the
+    exact costs of given pairs); an allocator that sets ``minimizes_total_cost = True`` promises
+    a maximum-cardinality, minimum-total-cost answer. With both and ``[dispatch] lazy_costs``
+    the dispatcher decides on the bounds and certifies the answer (:mod:`dispatch.lazy`).
+
 Reservation-aware planners
     A planner that sets ``reservation_aware = True`` and implements :meth:`Planner.plan_timed`
     makes the kernel execute routes with reservations (:mod:`dispatch.reservations`: the time
@@ -404,6 +411,12 @@ class Allocator(ABC):
     name: ClassVar[str] = ""
     #: True for methods whose agents decide from local information (reported in summaries).
     decentralized: ClassVar[bool] = False
+    #: True for methods whose answer is always a maximum-cardinality assignment of finite-cost
+    #: pairs with the smallest total cost among those, drawing nothing from ``problem.rng``
+    #: (``hungarian``). The dispatcher may then decide on lower bounds of the costs and
+    #: certify the answer (see :mod:`dispatch.lazy`); a method that claims it wrongly gets
+    #: answers that are not optimal for the exact costs.
+    minimizes_total_cost: ClassVar[bool] = False
 
     @abstractmethod
     def allocate(self, problem: AllocationProblem) -> Allocation:
@@ -446,6 +459,9 @@ class Planner(ABC):
     spaces: ClassVar[tuple[str, ...]] = ("voxel",)
     #: True for planners that implement :meth:`plan_timed` (execution with reservations).
     reservation_aware: ClassVar[bool] = False
+    #: True for planners that implement :meth:`bounds` and :meth:`exact` (lazy exact costs:
+    #: see :mod:`dispatch.lazy`).
+    lower_bounds: ClassVar[bool] = False
     #: Seconds after which a vehicle that found no timed route tries again (it also tries when
     #: other vehicles' reservations are released). Used only when ``reservation_aware``.
     retry_after: float = 1.0
@@ -486,6 +502,20 @@ class Planner(ABC):
         A planner should return the earliest-arriving such route (SIPP does).
         """
         raise NotImplementedError(f"planner {self.name!r} is not reservation-aware")
+
+    def bounds(self, agents, tasks: tuple[TaskView, ...]) -> tuple[np.ndarray, np.ndarray]:
+        """``(lower, exact)``, two ``(len(agents), len(tasks))`` arrays, for planners that set
+        :attr:`lower_bounds`: ``lower[a, t] <= costs(agents, tasks)[a, t]`` for every pair (the
+        cost as :meth:`costs` would compute it), and ``exact[a, t]`` (bool) True where
+        ``lower[a, t]`` *is* that cost. An ``inf`` in ``lower`` must be exact (the pair can
+        never be served): the dispatcher closes tasks as unreachable from it."""
+        raise NotImplementedError(f"planner {self.name!r} computes no lower bounds")
+
+    def exact(self, agents, tasks: tuple[TaskView, ...], rows: np.ndarray,
+              cols: np.ndarray) -> np.ndarray:
+        """``costs(agents, tasks)[rows, cols]`` (a 1-D float array), computing only those
+        pairs; for planners that set :attr:`lower_bounds`."""
+        raise NotImplementedError(f"planner {self.name!r} computes no lower bounds")
 
     def task_closed(self, task_id: int) -> None:
         """Forget anything cached for a task that will never be asked about again."""

@@ -35,6 +35,13 @@ open again (release time and deadline kept) and the hand-out's ``assign`` events
 vehicle left without a task is idle where it stopped. A vehicle that gets nothing while its
 task gets no one keeps its task. The summary counts ``reassignments``.
 
+Lazy exact costs (``[dispatch] lazy_costs = true``, with a planner that computes lower bounds
+and an allocator that minimizes the total cost): the decision starts from the planner's lower
+bounds and computes exact costs only for the pairs an optimal answer needs, in the certificate
+loop of :mod:`dispatch.lazy`; tasks become unreachable, rejected or left out exactly as with
+exact costs. The recorded problem's cost matrix then holds bounds beside the exact costs of
+the pairs handed out.
+
 Cost per decision. The idle vehicles come from the fleet's arrays as an
 :class:`~dispatch.contracts.AgentViews` (views built only when read), the answer is checked
 pair by pair (no dict over all agents), and with an unlimited communication range the
@@ -60,6 +67,7 @@ import numpy as np
 from dispatch.comms import comm_graph, components
 from dispatch.contracts import Allocation, AllocationProblem, Allocator, Planner
 from dispatch.errors import AllocationError, DispatchError, PluginError
+from dispatch.lazy import certify, resolve_open
 from dispatch.space import Space
 from dispatch.tasks import OPEN, TaskBook, TaskState
 
@@ -230,6 +238,16 @@ class Dispatcher:
         self.first_cost = math.nan  # the first decision's total cost and wall seconds
         self.first_seconds = math.nan
         self._pending: _Pending | None = None
+        #: [dispatch] lazy_costs, with a planner and an allocator that support it
+        self.lazy = bool(getattr(cfg, "lazy_costs", False))
+        if self.lazy and not (getattr(planner, "lower_bounds", False)
+                              and getattr(allocator, "minimizes_total_cost", False)):
+            log.warning("lazy_costs is on but planner %r computes no lower bounds or allocator "
+                        "%r does not minimize the total cost: exact costs are used",
+                        planner.name, allocator.name)
+            self.lazy = False
+        self.lazy_rounds = 0  # lazy costs: allocator calls (one per certificate round)
+        self.lazy_pairs = 0  # lazy costs: pairs whose exact cost was computed
         self._everyone: dict[int, np.ndarray] = {}  # n -> read-only all-True (n, n), no memory
         #: the run's id, for error messages (set by the simulation)
         self.run_id = ""
@@ -302,8 +320,14 @@ class Dispatcher:
         agents = self.fleet.views(idle, now, ascending=True)  # flatnonzero, union1d: sorted
         t0 = time.perf_counter()
         tasks = tuple([t.view() for t in open_tasks])
+        lazy = self.lazy
+        exact = None  # lazy costs: which entries of ``cost`` are exact (the others are bounds)
         try:
-            cost = self.planner.costs(agents, tasks)
+            if lazy:
+                cost, exact = self.planner.bounds(agents, tasks)
+                exact = np.array(exact, dtype=bool) if isinstance(exact, np.ndarray) else exact
+            else:
+                cost = self.planner.costs(agents, tasks)
         except DispatchError:
             raise
         except Exception as e:  # a plugin's bug: one line naming it and where
@@ -311,6 +335,10 @@ class Dispatcher:
         want = (len(agents), len(open_tasks))
         if not isinstance(cost, np.ndarray) or cost.shape != want or cost.dtype.kind != "f":
             raise self._bad_costs(cost, want)
+        if lazy and not (isinstance(exact, np.ndarray) and exact.shape == want
+                         and exact.dtype == bool):
+            raise PluginError(f"{self._where('planner')}: bounds() must return a bool array "
+                              f"of shape {want} as its second item")
         # the usual case: a finite sum, so no inf and no nan (either would make the sum one):
         # every pair servable (a sum that overflows takes the element-wise checks below)
         if math.isfinite(np.add.reduce(cost, axis=None)):
@@ -326,7 +354,12 @@ class Dispatcher:
         if any(d < math.inf for d in deadlines):
             if servable is None:
                 servable = np.ones(len(open_tasks), dtype=bool)
-            cost = np.where(now + cost <= np.array(deadlines) + 1e-9, cost, np.inf)
+            deadlines = np.array(deadlines)
+            cost = np.where(now + cost <= deadlines + 1e-9, cost, np.inf)
+            if lazy:  # late by its bound is late exactly; feasibility of each task made exact
+                exact = exact | ~np.isfinite(cost)
+                self.lazy_pairs += resolve_open(cost, exact, self._exact(agents, tasks), now,
+                                                deadlines)
             late = servable & ~np.isfinite(cost).any(axis=0)
             for t, bad in zip(open_tasks, late):
                 if bad and not t.offered:
@@ -341,6 +374,8 @@ class Dispatcher:
                 open_tasks = [t for t, ok in zip(open_tasks, servable) if ok]
                 tasks = tuple([t.view() for t in open_tasks])
                 cost = cost[:, servable]
+                if lazy:
+                    exact = exact[:, servable]
         comms, space = self.comms, self.space
         unlimited = comms.range is None or math.isinf(comms.range)
         if unlimited and self.links is None:  # everyone hears everyone: no N x N matrix
@@ -362,9 +397,71 @@ class Dispatcher:
         def tpos():
             return space.positions([t.loc for t in tasks])
 
-        problem = AllocationProblem.made(now, agents, tasks, np.array(cost, order="C"), comm,
-                                         self.rng, self.cfg.max_rounds, comms.loss,
-                                         comms.latency, self.cell_size, apos, tpos)
+        def ask(cost: np.ndarray):
+            problem = AllocationProblem.made(now, agents, tasks, np.array(cost, order="C"),
+                                             comm, self.rng, self.cfg.max_rounds, comms.loss,
+                                             comms.latency, self.cell_size, apos, tpos)
+            allocation, decide_s, index = self._ask(problem)
+            return problem, allocation, decide_s, index
+
+        if lazy:
+            problem, allocation, decide_s, index, extra = self._certified(
+                ask, cost, exact, agents, tasks, np.array([t.deadline for t in open_tasks]), now)
+            cost_s += extra  # computing exact pairs is cost time
+        else:
+            problem, allocation, decide_s, index = ask(cost)
+        self.decide_seconds += decide_s
+        delay = allocation.hops * comms.latency
+        conflicted = allocation.conflicted_tasks() if allocation.requests else set()
+        for t in open_tasks:
+            t.offered = True
+            t.conflicted = t.conflicted or t.id in conflicted
+        n_comp = 1 if comm.strides == (0, 0) else components(comm)[0]
+        self._pending = _Pending(problem, allocation, open_tasks, cost_s, decide_s, delay,
+                                 n_comp, holder, index)
+        if delay <= 0:
+            self._hand_out()
+
+    def _certified(self, ask, cost, exact, agents, tasks, deadlines, now: float):
+        """The certificate loop of lazy costs (:func:`dispatch.lazy.certify`) around ``ask``:
+        ``(problem, allocation, allocator seconds, pair indices, seconds spent computing exact
+        pairs)``; the latter are added to :attr:`cost_seconds`."""
+        spent = [0.0]
+
+        def timed(c):
+            t = time.perf_counter()
+            answer = ask(c)
+            spent[0] += time.perf_counter() - t
+            return answer
+
+        t0 = time.perf_counter()
+        (problem, allocation, _, index), rounds, pairs = certify(
+            timed, cost, exact, self._exact(agents, tasks), now, deadlines)
+        extra = time.perf_counter() - t0 - spent[0]
+        self.cost_seconds += extra
+        self.lazy_rounds += rounds
+        self.lazy_pairs += pairs
+        return problem, allocation, spent[0], index, extra
+
+    def _exact(self, agents, tasks):
+        """``compute(rows, cols)``: the planner's exact costs of those pairs (lazy costs)."""
+        def compute(rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+            try:
+                values = self.planner.exact(agents, tasks, rows, cols)
+            except DispatchError:
+                raise
+            except Exception as e:  # a plugin's bug: one line naming it and where
+                raise self._plugin_failed("planner", e) from e
+            values = np.asarray(values, dtype=float).reshape(-1)
+            if values.shape != rows.shape or np.isnan(values).any():
+                raise PluginError(f"{self._where('planner')}: exact() must return "
+                                  f"{rows.size} costs without nan, got {values.shape}")
+            return values
+        return compute
+
+    def _ask(self, problem: AllocationProblem):
+        """The allocator's answer to ``problem``, checked: ``(allocation, seconds it took,
+        each pair's (row, column))``."""
         t1 = time.perf_counter()
         cost_given = problem.cost
         try:
@@ -384,17 +481,7 @@ class Dispatcher:
             index = validate(problem, allocation)
         except AllocationError as e:
             raise AllocationError(f"{self._where('allocator')}: {e}") from None
-        self.decide_seconds += decide_s
-        delay = allocation.hops * comms.latency
-        conflicted = allocation.conflicted_tasks() if allocation.requests else set()
-        for t in open_tasks:
-            t.offered = True
-            t.conflicted = t.conflicted or t.id in conflicted
-        n_comp = 1 if comm.strides == (0, 0) else components(comm)[0]
-        self._pending = _Pending(problem, allocation, open_tasks, cost_s, decide_s, delay,
-                                 n_comp, holder, index)
-        if delay <= 0:
-            self._hand_out()
+        return allocation, decide_s, index
 
     def _hand_out(self) -> None:
         """Record the pending decision and give each vehicle its task (see the module doc)."""
@@ -469,7 +556,9 @@ class Dispatcher:
         now = self.env.now
         busy = self.fleet.views(np.flatnonzero([v.busy for v in self.fleet.vehicles]), now)
         if busy:
-            c = self.planner.costs(busy, tuple(t.view() for t in tasks))
+            views = tuple(t.view() for t in tasks)  # lazy: an inf bound is an inf cost
+            c = self.planner.bounds(busy, views)[0] if self.lazy else \
+                self.planner.costs(busy, views)
             tasks = [t for t, ok in zip(tasks, np.isfinite(c).any(axis=0)) if not ok]
         for t in tasks:
             self.book.close(t, TaskState.UNREACHABLE)

@@ -142,6 +142,9 @@ class DispatchConfig:
     max_rounds: int = 1000  # decision-round limit for decentralized allocators
     #: decisions also consider vehicles still driving to a pickup (roads; see dispatch.dispatcher)
     reassign: bool = False
+    #: decide on the planner's lower bounds and compute exact costs only for the pairs an
+    #: optimal answer needs (see dispatch.lazy); used when the planner and allocator support it
+    lazy_costs: bool = False
     allocator_params: tuple[tuple[str, Any], ...] = ()
     planner_params: tuple[tuple[str, Any], ...] = ()
 
@@ -507,12 +510,16 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     if reassign and world.roads is None:
         raise d.fail("reassign", "re-assignment before pickup needs a road network "
                                  "([world] network)")
+    lazy = d.get("lazy_costs", False)
+    if not isinstance(lazy, bool):
+        raise d.fail("lazy_costs", f"must be true or false, got {lazy!r}")
     disp = DispatchConfig(
         allocator=d.string("allocator", "hungarian"),
         planner=d.string("planner", "astar" if world.roads is None else "dijkstra"),
         batch_window=d.number("batch_window", 0.0, lo=0.0),
         max_rounds=d.number("max_rounds", 1000, lo=1, integer=True),
         reassign=reassign,
+        lazy_costs=lazy,
         allocator_params=d.params("allocator_params"),
         planner_params=d.params("planner_params"),
     )

@@ -31,7 +31,10 @@ communication components, message loss):
 Planner checks on random agents and tasks of the space: ``construct``, ``costs`` (shape
 ``(len(agents), len(tasks))``, floats, ``>= 0`` or ``inf``, no ``nan``, also for 0 agents / 0
 tasks), ``plan`` (a path from the agent's location to the goal where the cost is finite),
-``no-mutation`` (of the space's grid), ``deterministic`` and ``rng`` as above.
+``no-mutation`` (of the space's grid), ``deterministic`` and ``rng`` as above; for a planner
+that sets ``lower_bounds``, ``bounds`` (each bound ``<=`` the cost, ``inf`` exactly where the
+cost is, entries marked exact equal to it, and ``exact`` equal to the costs, all to 1e-9
+relative, each on a fresh instance).
 
 Repositioner checks on random views (:func:`reposition_view`) of :func:`small_network`
 (no idle vehicles, no recent requests, vehicles already repositioning, part-way along edges):
@@ -348,7 +351,8 @@ def _check_planner_on(report: Report, cls, space, seed: int, params: dict, tag: 
     grid = getattr(space, "grid", None)
     occupied = None if grid is None else np.array(grid.occupied, copy=True)
     shapes = [(0, 3), (3, 0), (0, 0), (1, 1), (4, 6), (6, 2)]
-    bad_costs, bad_plans, differs, global_rng = [], [], [], []
+    bad_costs, bad_plans, differs, global_rng, bad_bounds = [], [], [], [], []
+    bounded = bool(getattr(cls, "lower_bounds", False))
     for k, (n, m) in enumerate(shapes):
         agents, tasks = _planner_queries(space, seed * 100 + k, n, m)
         label = f"{n} agents x {m} tasks"
@@ -379,6 +383,8 @@ def _check_planner_on(report: Report, cls, space, seed: int, params: dict, tag: 
                 if not path or path[-1] != t.loc or (space.kind == "voxel" and path[0] != start):
                     bad_plans.append(f"{label}: agent {a.id} -> task {t.id}: cost {c[i, j]:.3g}"
                                      f" but plan gave {path if not path else (path[0], path[-1])}")
+        if bounded:
+            bad_bounds += _check_bounds(cls, space, params, agents, tasks, c, label)
         _replay(label, lambda a=agents, t=tasks: _costs(cls(space, **params), a, t), c, differs,
                 global_rng, same=np.array_equal, show=lambda c: f"costs {c.ravel()[:4]}",
                 given="queries")
@@ -389,6 +395,43 @@ def _check_planner_on(report: Report, cls, space, seed: int, params: dict, tag: 
     report.add("no-mutation" + tag, mutated, "the space is unchanged")
     report.add("deterministic" + tag, differs, "same queries, same costs")
     report.add("rng" + tag, global_rng, "costs do not depend on the global random state")
+    if bounded:
+        report.add("bounds" + tag, bad_bounds, "lower bounds below the costs, exact ones equal")
+
+
+def _check_bounds(cls, space, params: dict, agents, tasks, c: np.ndarray,
+                  label: str) -> list[str]:
+    """What is wrong with a ``lower_bounds`` planner's ``bounds`` and ``exact`` against the
+    costs ``c`` of the same queries (each asked of a fresh instance)."""
+    bad = []
+    try:
+        lower, known = cls(space, **params).bounds(agents, tasks)
+        lower, known = np.asarray(lower, dtype=float), np.asarray(known)
+        rows, cols = np.divmod(np.arange(c.size), max(1, c.shape[1]))
+        ex = np.asarray(cls(space, **params).exact(agents, tasks, rows, cols), dtype=float)
+    except Exception as e:  # noqa: BLE001
+        return [f"{label}: bounds or exact raised {_err(e)}"]
+    if lower.shape != c.shape or known.shape != c.shape or known.dtype != bool:
+        return [(f"{label}: bounds gave shapes {lower.shape} / {known.shape} "
+                 f"({known.dtype}), expected {c.shape} and bool")]
+    finite = np.isfinite(c)
+    slack = 1e-9 * np.where(finite, np.abs(c), 0.0)
+    with np.errstate(invalid="ignore"):  # inf - inf where both are inf: not compared
+        return bad + _bound_faults(lower, known, ex, c, finite, slack, label)
+
+
+def _bound_faults(lower, known, ex, c, finite, slack, label: str) -> list[str]:
+    bad = []
+    if not np.array_equal(np.isinf(lower), ~finite):
+        bad.append(f"{label}: a bound is inf where the cost is finite or the other way round")
+    elif (lower[finite] > c[finite] + slack[finite]).any():
+        bad.append(f"{label}: a bound is above its cost")
+    elif (np.abs(lower - c)[known & finite] > slack[known & finite]).any():
+        bad.append(f"{label}: an entry marked exact differs from its cost")
+    if ex.shape != (c.size,) or not np.array_equal(np.isinf(ex), ~finite.ravel()) or \
+            (np.abs(ex - c.ravel())[finite.ravel()] > slack.ravel()[finite.ravel()]).any():
+        bad.append(f"{label}: exact() differs from costs()")
+    return bad
 
 
 # ----------------------------------------------------------------------------- repositioners

@@ -234,6 +234,37 @@ def chain_values(parent, deltas, wmove, nodes, out):  # pragma: no cover
         out[i] = d
 
 
+@_jit
+def flood_components(dirs, deltas, labels, stack):  # pragma: no cover - compiled
+    """Label the connected components of the implicit grid graph, in place: ``labels`` holds
+    ``-2`` for every node to label and ``-1`` for the others (blocked; left alone); each node
+    of the first kind gets the index of its component (0, 1, ... in order of their smallest
+    node), reached through the legal moves of ``dirs`` (bit ``b``: move ``deltas[b]``; the
+    graph is symmetric). ``stack`` is scratch of ``labels.size`` int64 slots (each node is
+    pushed once). Returns the number of components."""
+    nb = deltas.size
+    label = 0
+    for s in range(labels.size):
+        if labels[s] != -2:
+            continue
+        labels[s] = label
+        stack[0] = s
+        top = 1
+        while top > 0:
+            top -= 1
+            u = stack[top]
+            m = np.int64(dirs[u])
+            for b in range(nb):
+                if (m >> b) & 1:
+                    v = u + deltas[b]
+                    if labels[v] == -2:
+                        labels[v] = label
+                        stack[top] = v
+                        top += 1
+        label += 1
+    return label
+
+
 @numba.njit(inline="always")
 def _octile(x, y, z):  # pragma: no cover - compiled
     """Octile distance in cells of the absolute offsets ``x, y, z``."""

@@ -60,6 +60,10 @@ _GRAPH_KEY = "planners.graph.graph"
 _FIELDS_KEY = "planners.graph.fields"
 _PADDED_KEY = "planners.graph.padded"
 _SCRATCH_KEY = "planners.graph.astar_scratch"
+_LABELS_KEY = "planners.graph.components"
+#: Lattice bounds are scaled by this so that float rounding never lifts one above the exact
+#: shortest-path length (a path's float sum is within ~1e-14 relative of its real length).
+BOUND_SCALE = 1.0 - 1e-12
 
 
 def _lattice(grid: Grid, flies: bool) -> tuple[int, int, int]:
@@ -181,6 +185,36 @@ def graph(grid: Grid, flies: bool) -> GridGraph:
     return g
 
 
+def components(grid: Grid, flies: bool) -> np.ndarray:
+    """Per node of the model's lattice (flat, see :class:`GridGraph`), the label of its
+    connected component of the movement graph (int64, read-only); ``-1`` for blocked nodes.
+    Two free nodes are joined by a legal path iff their labels are equal (the graph is
+    symmetric). Computed once per grid and model by a compiled flood fill over the move masks
+    (:func:`planners._fast.flood_components`: no adjacency matrix is built), cached."""
+    per = grid.cache.setdefault(_LABELS_KEY, {})
+    labels = per.get(bool(flies))
+    if labels is None:
+        g = graph(grid, flies)
+        occ = grid.occupied if flies else grid.occupied[:, :, :1]
+        labels = np.where(occ.reshape(-1), -1, -2).astype(np.int64)
+        _fast.flood_components(g.dirs, g.deltas, labels, np.empty(labels.size, np.int64))
+        labels.setflags(write=False)
+        per[bool(flies)] = labels
+    return labels
+
+
+def lattice_bound(a: np.ndarray, b: np.ndarray, cell: float) -> np.ndarray:
+    """``out[i, j]``: a lower bound in metres of the shortest 26-connected path from cell
+    ``a[i]`` to cell ``b[j]`` (``(N, 3)`` and ``(M, 3)`` integer arrays): the obstacle-free
+    lattice distance (sorted absolute offsets ``p >= q >= r``: ``sqrt3 r + sqrt2 (q - r) +
+    (p - q)`` cells) times ``cell`` times :data:`BOUND_SCALE`. It is never above the exact
+    length (every legal path is a lattice path), and 0 only for equal cells."""
+    d = np.abs(a[:, None, :].astype(np.int64) - b[None, :, :].astype(np.int64))
+    d.sort(axis=2)
+    r, q, p = d[..., 0], d[..., 1], d[..., 2]
+    return (math.sqrt(3) * r + math.sqrt(2) * (q - r) + (p - q)) * (cell * BOUND_SCALE)
+
+
 _SCRATCH = threading.local()
 _NO_U8 = np.zeros(0, dtype=np.uint8)
 _POOL: dict = {}  # pid -> ThreadPoolExecutor (a forked child must not reuse its parent's)
@@ -261,6 +295,11 @@ class FieldCache:
     def lru_keys(self) -> list:
         """The keys, least recently used first."""
         return list(self._lru)
+
+    def peek(self, key):
+        """The entry under ``key`` or None, without counting a hit or a miss or making it
+        the most recently used."""
+        return self._lru.get(key)
 
     def get(self, key) -> np.ndarray | None:
         """The field under ``key`` (made the most recently used), or None."""
@@ -501,7 +540,8 @@ def _scratch(grid: Grid, flies: bool, n: int):
     return hit[0], np.uint32(hit[1]), hit[2], hit[3]
 
 
-def astar(grid: Grid, start: Cell, goal: Cell, flies: bool) -> tuple[float, list[Cell] | None]:
+def astar(grid: Grid, start: Cell, goal: Cell, flies: bool,
+          path: bool = True) -> tuple[float, list[Cell] | None]:
     """A* from ``start`` to ``goal`` under one movement model: ``(metres, cells)``.
 
     Returns the shortest path length in metres and the path as cells from ``start`` to
@@ -511,7 +551,8 @@ def astar(grid: Grid, start: Cell, goal: Cell, flies: bool) -> tuple[float, list
     in ``f`` go to the larger ``g``; the path is optimal (equal to the distance field up to
     float rounding). Compiled (:func:`planners._fast.astar`); on lattices larger than
     :data:`MASK_MAX_NODES` whose move masks are not cached yet, moves are read from a padded
-    copy of the occupancy instead of building the masks.
+    copy of the occupancy instead of building the masks. With ``path=False`` only the length
+    is wanted: the cells are not returned (None).
     """
     nx, ny, nz = _lattice(grid, flies)
     s3 = tuple(int(v) for v in start)
@@ -540,7 +581,7 @@ def astar(grid: Grid, start: Cell, goal: Cell, flies: bool) -> tuple[float, list
                                 pad, sn, tn, seen, gen, gbuf, pbuf)
     if cells.shape[0] == 0:
         return math.inf, None
-    return float(length) * grid.cell, list(map(tuple, cells.tolist()))
+    return float(length) * grid.cell, list(map(tuple, cells.tolist())) if path else None
 
 
 @cache
@@ -560,6 +601,7 @@ def _warm_up() -> None:
         field_values(grid, [(0, 0, 0)], True, np.array([17]))
     grid.cache.clear()
     astar(grid, (0, 0, 0), (2, 2, 1), True)
+    components(grid, True)
 
 
 _warm_up()
