@@ -371,6 +371,10 @@ def _view_figure(rows, out: Path) -> None:
         ax[1].plot(it, [100 * r[key] for r in val], marker="o", label=lab)
     for key, lab in (("val/cf20", "conflicted N=20"), ("val/cf50", "conflicted N=50")):
         ax[1].plot(it, [100 * (1 - r[key]) for r in val], marker="x", ls="--", label=lab)
+    for k in range(1, len(fit)):  # where a later stage starts (fresh data, its own rate)
+        if fit[k].get("stage", 1) != fit[k - 1].get("stage", 1):
+            ax[0].axvline(k, color="grey", ls=":")
+            ax[1].axvline(fit[k]["iteration"] - 0.5, color="grey", ls=":")
     ax[1].set_xlabel("DAgger iteration")
     ax[1].set_ylabel("% at 20 m range (validation)")
     ax[1].legend(fontsize=7)
