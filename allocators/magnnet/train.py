@@ -15,6 +15,10 @@ from pathlib import Path
 
 log = logging.getLogger(__name__)
 
+#: The view model's second DAgger stage (``dispatch train magnnet --variant view`` runs both):
+#: the played policy waits longer before it must request, and the steps are half as large.
+STAGE2 = {"iterations": 3, "patience": 8, "lr": 5e-4}
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from allocators.magnnet.ppo import PPOConfig
@@ -32,7 +36,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--updates", type=int, default=None,
                    help="match: imitation updates (default 6000); view: per DAgger iteration "
                         "(default 300)")
-    p.add_argument("--iterations", type=int, default=None, help="view: DAgger iterations")
+    p.add_argument("--iterations", type=int, default=None,
+                   help="view: DAgger iterations of the first stage (default 4)")
+    p.add_argument("--stage2", type=int, default=STAGE2["iterations"],
+                   help="view: DAgger iterations of the second stage, from the first stage's "
+                        "kept weights with --stage2-patience and --stage2-lr and a fresh "
+                        "dataset (0: one stage)")
+    p.add_argument("--stage2-patience", type=int, default=STAGE2["patience"],
+                   help="view: the played policy's patience in the second stage")
+    p.add_argument("--stage2-lr", type=float, default=STAGE2["lr"],
+                   help="view: learning rate of the second stage")
     p.add_argument("--episodes", type=int, default=None,
                    help="view: decisions played per DAgger iteration")
     p.add_argument("--patience", type=int, default=None,
@@ -210,10 +223,14 @@ def _run_match(args, console=None) -> int:
 def _run_view(args, console=None) -> int:
     """DAgger training of :class:`~allocators.magnnet.views.ViewPolicy` from ``match.pt``
     (CTDE: the teacher solves the whole remaining problem, the student sees one agent's
-    two-hop view): ``model.pt``, ``log.parquet`` (one row per update and per validation) and
+    two-hop view), in two stages (the second from the first's kept weights, with
+    :data:`STAGE2`'s patience and learning rate and a fresh dataset): ``model.pt``,
+    ``log.parquet`` (one row per update and per validation, with its ``stage``) and
     ``loss.png``. Validation: 40 held-out N = 20 and 20 held-out N = 50 training instances at
-    a 20 m range; the weights of the iteration closest to the targets are kept."""
+    a 20 m range; the weights of the iteration closest to the targets, over both stages, are
+    kept."""
     import dataclasses
+    import resource
 
     import pyarrow as pa
     import pyarrow.parquet as pq
@@ -221,22 +238,26 @@ def _run_view(args, console=None) -> int:
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
     from allocators.magnnet.allocator import MagnnetAllocator, shipped
-    from allocators.magnnet.ppo import load_checkpoint, save_checkpoint
+    from allocators.magnnet.ppo import PPOConfig, load_checkpoint, save_checkpoint
     from allocators.magnnet.problems import load_pool
-    from allocators.magnnet.views import ViewConfig, ViewPolicy, evaluate_views, train_views
+    from allocators.magnnet.views import (ViewConfig, ViewPolicy, config_dict, evaluate_views,
+                                          train_views)
 
     if args.view_hops < 2 or args.threads < 1:
         raise SystemExit("--view-hops must be >= 2 and --threads >= 1")
+    if args.stage2 < 0 or args.stage2_patience < 0 or not args.stage2_lr > 0:
+        raise SystemExit("--stage2 and --stage2-patience must be >= 0, --stage2-lr > 0")
     torch.set_num_threads(args.threads)
     d = ViewConfig()
-    from allocators.magnnet.ppo import PPOConfig
-
     cfg = dataclasses.replace(d, iterations=args.iterations or d.iterations,
                               episodes=args.episodes or d.episodes,
                               updates=args.updates or d.updates, seed=args.seed,
                               patience=d.patience if args.patience is None else args.patience,
                               confidence=args.confidence or d.confidence,
                               lr=d.lr if args.lr == PPOConfig().lr else args.lr)
+    stages = [cfg] + ([dataclasses.replace(cfg, iterations=args.stage2,
+                                           patience=args.stage2_patience, lr=args.stage2_lr)]
+                      if args.stage2 else [])
     out = args.out or Path("runs") / "train" / "magnnet_view"
     out.mkdir(parents=True, exist_ok=True)
     p20, p50 = load_pool(20, 600, "train", workers=2), load_pool(50, 200, "train", workers=2)
@@ -249,11 +270,6 @@ def _run_view(args, console=None) -> int:
     if args.init is not None:
         model.load_state_dict(load_checkpoint(args.init)[0].state_dict())
 
-    def make(m):
-        return MagnnetAllocator.with_models(match, m, view_hops=args.view_hops,
-                                            view_confidence=cfg.confidence,
-                                            view_patience=cfg.patience)
-
     def validate(m):
         r20 = evaluate_views(lambda: make(m), v20, 20.0)
         r50 = evaluate_views(lambda: make(m), v50, 20.0)
@@ -263,42 +279,73 @@ def _run_view(args, console=None) -> int:
         return {"gap20": r20["gap"], "cf20": r20["conflict_free"], "gap50": r50["gap"],
                 "cf50": r50["conflict_free"], "score": score}
 
-    started = time.perf_counter()
+    def cpu_s():
+        r = resource.getrusage(resource.RUSAGE_SELF)
+        return r.ru_utime + r.ru_stime
+
+    started, cpu0 = time.perf_counter(), cpu_s()
+    rows: list = []
+    best, best_state = None, None
     with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}"
                   "/{task.total}"), TimeElapsedColumn(), console=console) as progress:
-        bar = progress.add_task("magnnet view", total=cfg.iterations * cfg.updates)
+        bar = progress.add_task("magnnet view",
+                                total=sum(c.iterations * c.updates for c in stages))
+        for stage, scfg in enumerate(stages, 1):
+            it0 = 1 + max((r["iteration"] for r in rows), default=-1)
+            up0 = 1 + max((r["update"] for r in rows), default=-1)
+            t0 = time.perf_counter() - started
 
-        def on_row(row):
-            if row["phase"] == "val":
-                progress.update(bar, description=f"val gap {100 * row['val/gap20']:.1f} % / "
-                                                 f"{100 * row['val/cf20']:.0f} % cf (N=20)")
-            else:
-                progress.advance(bar)
+            def make(m, scfg=scfg):
+                return MagnnetAllocator.with_models(match, m, view_hops=args.view_hops,
+                                                    view_confidence=scfg.confidence,
+                                                    view_patience=scfg.patience)
 
-        rows = train_views(model, pools, cfg, make, on_row, validate=validate)
-    wall = time.perf_counter() - started
+            def on_row(row, stage=stage, it0=it0, up0=up0, t0=t0):
+                # one log across the stages: iterations, updates and wall time run on
+                row.update(stage=stage, iteration=row["iteration"] + it0,
+                           update=row["update"] + up0, wall_s=row["wall_s"] + t0)
+                rows.append(row)
+                if row["phase"] == "val":
+                    progress.update(bar, description=f"val gap {100 * row['val/gap20']:.1f} % "
+                                                     f"/ {100 * row['val/cf20']:.0f} % cf "
+                                                     "(N=20)")
+                else:
+                    progress.advance(bar)
+
+            stage_rows = train_views(model, pools, scfg, make, on_row, validate=validate)
+            vals = [r for r in stage_rows if r["phase"] == "val"]
+            if vals and (best is None or min(r["val/score"] for r in vals) < best):
+                best = min(r["val/score"] for r in vals)
+                best_state = {k: v.clone() for k, v in model.state_dict().items()}
+    if best_state is not None:  # the best over both stages (the last need not improve)
+        model.load_state_dict(best_state)
+    wall, cpu = time.perf_counter() - started, cpu_s() - cpu0
     vals = [r for r in rows if r["phase"] == "val"]
-    best = min(vals, key=lambda r: r["val/score"]) if vals else None
-    from allocators.magnnet.views import config_dict
-
+    kept = min(vals, key=lambda r: r["val/score"]) if vals else None
     save_checkpoint(model, out / "model.pt", None,
-                    {"wall_s": wall, "view": config_dict(cfg),
+                    {"wall_s": wall, "cpu_s": cpu, "threads": args.threads,
+                     "view": config_dict(cfg),
+                     "stages": [{"iterations": c.iterations, "patience": c.patience,
+                                 "lr": c.lr} for c in stages],
                      "from": str(args.init) if args.init else "match.pt",
                      "view_hops": args.view_hops,
-                     "val": {k: v for k, v in (best or {}).items() if k.startswith("val/")},
+                     "val": {k: v for k, v in (kept or {}).items() if k.startswith("val/")},
+                     "curve": [{k: v for k, v in r.items() if k.startswith("val/")
+                                or k in ("stage", "iteration", "wall_s")} for r in vals],
                      "world_size": p20.world_size.tolist(),
                      "pool": "train seeds from 1000000: N=20 (500) and N=50 (170) instances "
                              "for DAgger, 40 + 20 held out for validation at 20 m"})
     keys = sorted({k for r in rows for k in r})
     pq.write_table(pa.table({k: [r.get(k) for r in rows] for k in keys}), out / "log.parquet")
     _view_figure(rows, out)
-    msg = f"trained in {wall:.1f} s, {cfg.iterations} DAgger iterations; checkpoint " \
-          f"{out / 'model.pt'}"
-    if best:
-        msg += (f"\nkept weights of iteration {best['iteration']} (20 m range: N=20 gap "
-                f"{100 * best['val/gap20']:.2f} %, conflict-free {100 * best['val/cf20']:.1f} %; "
-                f"N=50 gap {100 * best['val/gap50']:.2f} %, conflict-free "
-                f"{100 * best['val/cf50']:.1f} %)")
+    msg = (f"trained in {wall:.1f} s ({cpu:.1f} CPU s on {args.threads} torch threads), "
+           f"{' + '.join(str(c.iterations) for c in stages)} DAgger iterations; checkpoint "
+           f"{out / 'model.pt'}")
+    if kept:
+        msg += (f"\nkept weights of stage {kept['stage']} iteration {kept['iteration']} "
+                f"(20 m range: N=20 gap {100 * kept['val/gap20']:.2f} %, conflict-free "
+                f"{100 * kept['val/cf20']:.1f} %; N=50 gap {100 * kept['val/gap50']:.2f} %, "
+                f"conflict-free {100 * kept['val/cf50']:.1f} %)")
     (console.print if console else print)(msg)
     return 0
 
@@ -324,6 +371,10 @@ def _view_figure(rows, out: Path) -> None:
         ax[1].plot(it, [100 * r[key] for r in val], marker="o", label=lab)
     for key, lab in (("val/cf20", "conflicted N=20"), ("val/cf50", "conflicted N=50")):
         ax[1].plot(it, [100 * (1 - r[key]) for r in val], marker="x", ls="--", label=lab)
+    for k in range(1, len(fit)):  # where a later stage starts (fresh data, its own rate)
+        if fit[k].get("stage", 1) != fit[k - 1].get("stage", 1):
+            ax[0].axvline(k, color="grey", ls=":")
+            ax[1].axvline(fit[k]["iteration"] - 0.5, color="grey", ls=":")
     ax[1].set_xlabel("DAgger iteration")
     ax[1].set_ylabel("% at 20 m range (validation)")
     ax[1].legend(fontsize=7)

@@ -307,6 +307,8 @@ def train_views(model: ViewPolicy, pools, cfg: ViewConfig, make_allocator, on_ro
     current model (``make_allocator(model)`` gives the plugin that plays them), label every
     view with the teacher, and fit the model on the views collected so far. Returns the log
     rows; with ``validate(model) -> dict`` the weights with the best ``score`` are kept."""
+    from allocators.magnnet.view_batch import batch_loss, prepare
+
     rng = np.random.default_rng(cfg.seed)
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
     data: list = []
@@ -324,14 +326,14 @@ def train_views(model: ViewPolicy, pools, cfg: ViewConfig, make_allocator, on_ro
             loss = 0.3 if rng.random() < cfg.loss_share else 0.0
             p = sub_problem(pool, int(rng.integers(len(pool))), n, rr, loss, rng)
             alloc, views = play_problem(p, policy)
-            data.extend(label(p, alloc, views))
+            data.extend(prepare(s) for s in label(p, alloc, views))
         data = data[-cfg.max_views:]
         play_s = time.perf_counter() - t0
         model.train()
         losses = []
         for _ in range(cfg.updates):
             idx = rng.integers(len(data), size=cfg.batch)
-            loss = sum(view_loss(model, data[i]) for i in idx) / cfg.batch
+            loss = batch_loss(model, [data[i] for i in idx])  # = mean of view_loss
             opt.zero_grad()
             loss.backward()
             nn.utils.clip_grad_norm_(model.parameters(), 1.0)
