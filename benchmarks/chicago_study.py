@@ -15,6 +15,14 @@ missing from the folder (a run is the same run whatever lists it was swept in:
 :func:`dispatch.runner.run_digest`); the table and the report cover every run of the folder.
 SIGTERM or Ctrl-C stops the study's worker processes with it.
 
+``--comm-range METRES`` gives the vehicles a radio range: the derived scenario gets a ``[comms]``
+table with ``range = METRES`` (see :mod:`dispatch.comms`: the idle vehicles of a decision within
+that straight-line distance of each other hear each other). Decentralized allocators
+(``auction``, ``magnnet``, ``local_hungarian``) then decide on what reaches them over that graph
+and may conflict; centralized ones (``fcfs``, ``greedy``, ``hungarian``) ignore it. Omitted:
+unlimited range, the scenario as it ships. A range is part of the derived scenario, so its runs
+are other runs than the unlimited ones (use another ``--out``).
+
 ``--hours H`` (default 24) runs a shorter day for a quick look: the trips are still drawn for a
 whole day (the sample's hour profile), the run stops at H h, so only the first H hours are
 released; requests still open or aboard at the end count as cancelled, not rejected. A full day
@@ -62,6 +70,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--batch-windows", type=float, nargs="+", default=[0.0, 30.0])
     p.add_argument("--repositioners", nargs="+", default=["stay", "demand"])
     p.add_argument("--seeds", type=int, nargs="+", default=[0])
+    p.add_argument("--comm-range", type=float, default=None, metavar="METRES",
+                   help="radio range of the vehicles ([comms] range; default: unlimited)")
     p.add_argument("--no-report", action="store_true", help="skip `dispatch report`")
     a = p.parse_args(argv)
     if not 0 < a.hours <= 24:
@@ -70,6 +80,8 @@ def parse_args(argv=None) -> argparse.Namespace:
         p.error("--trips-per-day, --agents and --workers must be positive")
     if min(a.batch_windows) < 0:
         p.error("--batch-windows must be >= 0")
+    if a.comm_range is not None and not 0 <= a.comm_range < math.inf:
+        p.error(f"--comm-range must be a finite number of metres >= 0, got {a.comm_range:g}")
     return a
 
 
@@ -107,6 +119,12 @@ def derived_text(a: argparse.Namespace, allocators: list[str], repositioners: li
     def arr(xs, fmt):
         return "[" + ", ".join(fmt(x) for x in xs) + "]"
 
+    if getattr(a, "comm_range", None) is not None:
+        if re.search(r"^\[comms\]", text, flags=re.M):
+            raise SystemExit(f"{SCENARIO} has a [comms] table already; --comm-range would "
+                             "need to edit it")
+        text += ("[comms]  # benchmarks/chicago_study.py --comm-range\n"
+                 f"range = {a.comm_range:.1f}\n\n")
     return text + (
         "[sweep]  # benchmarks/chicago_study.py\n"
         f"agents = {arr(a.agents, str)}\n"
