@@ -387,6 +387,48 @@ class MagnnetAllocator(DecentralizedAllocator):
         rows = kept.any(axis=1)
         return np.where(kept, cost, np.inf)[rows], rows
 
+    def _view_skips(self, cost: np.ndarray, agents: np.ndarray, two: np.ndarray,
+                    deciding: np.ndarray) -> np.ndarray:
+        """Per deciding agent (``agents``, with its two-hop rows ``two`` and the ``cost`` of
+        every agent on this round's open tasks): True where :meth:`_view_costs` would cut the
+        agent out of its own view (it requests nothing this round), found for all agents at
+        once and without building their views. Exact: an agent is cut when its view is wide
+        (median of its finite costs above :data:`TRAIN_MAX_S`; counted, and computed only
+        where the two middle values straddle it) and on no task it is among the ``k``
+        cheapest deciding agents of its view (ties to the lower index, as the stable sort).
+        All False with ``view_candidates = 0`` (no cut)."""
+        a = len(agents)
+        vc = self.view_candidates
+        if vc == 0 or a == 0:
+            return np.zeros(a, bool)
+        k = CANDIDATES if vc == "auto" else vc
+        finite = np.isfinite(cost)
+        if vc == "auto":
+            two_f = two.astype(np.float32)
+            t = two_f @ finite.sum(axis=1).astype(np.float32)
+            g = two_f @ (finite & (cost > TRAIN_MAX_S)).sum(axis=1).astype(np.float32)
+            odd = t % 2 == 1
+            wide = np.where(odd, g >= (t + 1) / 2, g >= t / 2 + 1) & (t > 0)
+            unsure = ~odd & (g == t / 2) & (t > 0)
+            for r in np.flatnonzero(unsure):  # the two middle values straddle the bound
+                v = cost[two[r]]
+                wide[r] = float(np.median(v[np.isfinite(v)])) > TRAIN_MAX_S
+        else:
+            wide = np.ones(a, bool)
+        # rank of each agent on each task among the deciding agents of its view
+        act = deciding & finite.any(axis=1)
+        cand = np.zeros(a, bool)
+        idx = np.arange(len(cost))
+        for j in range(cost.shape[1]):
+            c = np.where(finite[:, j] & act, cost[:, j], np.inf)
+            mine = cost[agents, j]
+            before = (c[None, :] < mine[:, None]) | ((c[None, :] == mine[:, None])
+                                                     & (idx[None, :] < agents[:, None]))
+            rank = (before & two).sum(axis=1)
+            cand |= np.isfinite(mine) & (rank < k)
+        n_view = two.sum(axis=1)
+        return wide & ~cand & (n_view > k)
+
     def _two_hop(self, comm: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """``two[k]``: the agents within two hops of agent ``rows[k]`` (itself included), as
         :func:`allocators.magnnet.game.two_hop`; computed once per agent and decision, by
@@ -461,6 +503,8 @@ class MagnnetAllocator(DecentralizedAllocator):
         else:
             agents_left = enumerate(agents)
             two_rows = self._two_hop(comm, agents)
+            if self.view_model is not None:
+                skip = self._view_skips(problem.cost[:, tasks], agents, two_rows, deciding)
         pending = []  # the view model's views of this round, scored together below
         for k, i in agents_left:
             two = two_rows[k]
@@ -485,6 +529,8 @@ class MagnnetAllocator(DecentralizedAllocator):
             # the view model sees every agent within two hops, with whether it still decides:
             # one that no longer does and is the best for a task it believes open has most
             # likely taken it (the news may not have reached this agent yet)
+            if skip[k]:
+                continue  # cut out of its own view (as _view_costs would): nothing this round
             members = np.flatnonzero(two)
             hop, active = views.hops_from(comm, int(i), members), deciding[members]
             cost, rows = self._view_costs(problem.cost[np.ix_(members, tasks)], active)
