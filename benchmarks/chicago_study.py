@@ -178,8 +178,11 @@ def wall_seconds(out: Path) -> dict[str, float]:
 
 def study_table(out: Path) -> pd.DataFrame:
     """Per series: ``label``, ``N``, ``served`` and ``rejected`` (shares of the requests),
-    ``wait_mean`` / ``wait_p90`` (s), ``utilization``, ``empty`` (share of km), ``wall_s``
-    (mean wall seconds per run), plus the keys ``allocator``, ``window`` (``imm`` / ``30s``)
+    ``wait_mean`` / ``wait_p90`` (s), ``utilization``, ``empty`` (share of km),
+    ``conflicts`` (tasks requested by two vehicles in one round at least once: only
+    decentralized allocators under a limited range, and ``greedy``, have any) and
+    ``conflict_free`` (share of the tasks offered that were assigned without ever being in
+    conflict), means over seeds, ``wall_s`` (mean wall seconds per run), plus the keys ``allocator``, ``window`` (``imm`` / ``30s``)
     and ``reposition``; rows in the report's series order."""
     from analysis import metrics as M
     from analysis.io import open_results
@@ -191,6 +194,7 @@ def study_table(out: Path) -> pd.DataFrame:
     secs = wall_seconds(out)
     summary = summary.assign(wall_s=summary["run_id"].map(secs))
     wall = summary.groupby(KEYS)["wall_s"].mean()
+    confl = summary.groupby(KEYS)[["conflicts", "conflict_free_rate"]].mean()
     rows = []
     for key, label, g in series(taxi):
         r = g.iloc[0]
@@ -201,6 +205,9 @@ def study_table(out: Path) -> pd.DataFrame:
             "runs": int(r["runs"]), "served": r["service_rate"], "rejected": r["rejectionRate"],
             "wait_mean": r["wait_average"], "wait_p90": r["wait_p90"],
             "utilization": r["utilization"], "empty": r["emptyRatio"],
+            "conflicts": confl["conflicts"].get(tuple(r[k] for k in KEYS), math.nan),
+            "conflict_free": confl["conflict_free_rate"].get(tuple(r[k] for k in KEYS),
+                                                             math.nan),
             "wall_s": wall.get(tuple(r[k] for k in KEYS), math.nan)})
     return pd.DataFrame(rows)
 
@@ -213,22 +220,28 @@ def _num(v: float, digits: int = 0) -> str:
     return "-" if not math.isfinite(v) else f"{v:.{digits}f}"
 
 
-COLUMNS = [("series", 25, "label"), ("N", 5, "N"), ("served", 7, "served"),
-           ("rej.", 6, "rejected"), ("wait", 5, "wait_mean"), ("p90", 5, "wait_p90"),
-           ("util", 6, "utilization"), ("empty", 6, "empty"), ("wall s", 7, "wall_s")]
+#: (header, width in the terminal table, column); ``conflict-free`` only in study.md
+COLUMNS = [("series", 20, "label"), ("N", 4, "N"), ("served", 6, "served"),
+           ("rej.", 6, "rejected"), ("wait", 4, "wait_mean"), ("p90", 4, "wait_p90"),
+           ("util", 6, "utilization"), ("empty", 6, "empty"), ("confl.", 6, "conflicts"),
+           ("conflict-free", 0, "conflict_free"), ("wall s", 7, "wall_s")]
 
 
 def _cells(r) -> list[str]:
     return [str(r["label"]), str(r["N"]), _pct(r["served"]), _pct(r["rejected"]),
             _num(r["wait_mean"]), _num(r["wait_p90"]), _pct(r["utilization"]),
-            _pct(r["empty"]), _num(r["wall_s"], 1)]
+            _pct(r["empty"]), _num(r.get("conflicts", math.nan)),
+            _pct(r.get("conflict_free", math.nan)), _num(r["wall_s"], 1)]
 
 
 def text_table(t: pd.DataFrame) -> str:
-    """The study table in at most 80 columns (a long series label is cut with '…')."""
+    """The study table in at most 80 columns (a long series label is cut with '…'; the
+    conflict-free share only in :func:`markdown_table`)."""
     def line(cells):
         out = []
         for (_, w, _), c in zip(COLUMNS, cells):
+            if w == 0:
+                continue
             c = c if len(c) <= w else c[:w - 1] + "…"
             out.append(c.ljust(w) if not out else c.rjust(w))
         return " ".join(out)
