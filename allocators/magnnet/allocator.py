@@ -61,7 +61,20 @@ conflict rule still reads the real costs; a number: seconds per model second, 1 
 ``candidates`` (default ``"auto"``: on such a view, each task keeps only the edges of its
 :data:`CANDIDATES` cheapest agents, and only agents kept by some task are scored and may request
 this round; the others are considered again next round, when the pairs settled leave room; an
-integer: always that many, 0: everyone).
+integer: always that many, 0: everyone), ``view_candidates`` (default ``"auto"``: the same cut
+for the view model's two-hop views, on a view out of the training range: each task keeps its
+:data:`CANDIDATES` cheapest deciding agents of the view, and the agents that stopped deciding
+and are no dearer than those; an agent cut out of its own view requests nothing that round and
+needs no network call; an integer: always that many; 0: the whole view, the rule before it. On
+a city's taxis at 2 km a two-hop view holds hundreds of taxis, ten times the training views:
+on five night decisions of the Chicago study at N = 500 the whole views gave 375 % mean gap to
+the optimal assignment in 18 rounds, the cut views 81 % in 4, at a twentieth of the compute.
+On the paper's instances (costs of seconds) nothing is cut: its results do not change).
+
+Under a limited range a decision round scores the views of all its agents in one pass
+(:func:`allocators.magnnet.views.view_scores_many`: the same numbers as one call per view, up
+to the order of float sums), the agents a cut leaves out are found for all agents at once, and
+the two-hop neighbourhoods and the flooding are float32 matrix products (exact counts).
 
 Large sparse problems (a request reaches a few percent of a city's idle taxis within its
 ``max_wait``) are scored on their feasible edges only
