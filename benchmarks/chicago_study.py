@@ -30,8 +30,10 @@ released; requests still open or aboard at the end count as cancelled, not rejec
 
 Then it prints (80 columns) and writes ``<out>/study.md``: per series (allocator, N, batch
 window, repositioner) the share of the requests served, the rejection rate, the wait (release
-to pickup) mean and p90, the fleet utilization, the empty share of the km and the run's wall
-seconds (mean over seeds, from the sweep's completion markers), followed by a paragraph
+to pickup) mean and p90, the fleet utilization, the empty share of the km, the conflicts
+(tasks requested by two vehicles in one round at least once; ``study.md`` also the
+conflict-free share of the tasks offered) and the run's wall seconds (mean over seeds, from the
+sweep's completion markers), followed by a paragraph
 computed from the table: who has the lowest mean wait per N and by how much, what batching
 every 30 s changes, and what repositioning changes. Finally it writes the report
 (``dispatch report``: ``<out>/report/``, the plots).
@@ -39,6 +41,8 @@ every 30 s changes, and what repositioning changes. Finally it writes the report
 Run: ``PYTHONPATH=. .venv/bin/python benchmarks/chicago_study.py --hours 3 --trips-per-day 40000
 --agents 200 400 --out runs/chicago_quick`` (a quick look), or without options (the full study:
 40 runs of a simulated day; see the report of the helper that wrote this for a time estimate).
+Under a 2 km radio range: ``--comm-range 2000 --allocators magnnet auction local_hungarian
+--repositioners stay --batch-windows 30 --out runs/chicago_range2km``.
 """
 
 from __future__ import annotations
@@ -325,12 +329,17 @@ def main(argv=None) -> int:
     failed = [o for o in outcomes if o.status == "failed"]
     t = study_table(a.out)
     hours = "a simulated day" if a.hours >= 24 else f"the first {a.hours:g} simulated hours"
+    radio = ("unlimited radio range" if a.comm_range is None
+             else f"radio range {a.comm_range:g} m (decentralized allocators decide on what "
+                  "reaches them; centralized ones ignore it)")
     intro = (f"Chicago taxi study ({path.name}): {hours}, {a.trips_per_day:g} trips per day, "
-             f"seeds {a.seeds}. Per series (allocator, N, batch window, repositioner): share "
+             f"{radio}, seeds {a.seeds}. Per series (allocator, N, batch window, repositioner): share "
              "of the requests served and rejected (at once or expired), mean and p90 wait "
              "from release to pickup (s), fleet utilization (driving to a pickup or with a "
-             "passenger), empty share of the km, wall seconds per run (mean over seeds; the "
-             "first run of each worker process also pays for loading the road network).")
+             "passenger), empty share of the km, conflicts (tasks requested by two vehicles in one "
+             "round at least once) and the conflict-free share of the tasks offered, wall "
+             "seconds per run (mean over seeds; the first run of each worker process also "
+             "pays for loading the road network).")
     para = findings(t)
     print()
     print(text_table(t))
