@@ -186,8 +186,9 @@ def study_table(out: Path) -> pd.DataFrame:
     ``conflicts`` (tasks requested by two vehicles in one round at least once: only
     decentralized allocators under a limited range, and ``greedy``, have any) and
     ``conflict_free`` (share of the tasks offered that were assigned without ever being in
-    conflict), means over seeds, ``wall_s`` (mean wall seconds per run), plus the keys ``allocator``, ``window`` (``imm`` / ``30s``)
-    and ``reposition``; rows in the report's series order."""
+    conflict), means over seeds, ``wall_s`` (mean wall seconds per run), plus the keys
+    ``allocator``, ``window`` (``imm`` / ``30s``) and ``reposition``; rows in the report's
+    series order."""
     from analysis import metrics as M
     from analysis.io import open_results
     from analysis.taxi_plots import series
@@ -333,7 +334,8 @@ def main(argv=None) -> int:
              else f"radio range {a.comm_range:g} m (decentralized allocators decide on what "
                   "reaches them; centralized ones ignore it)")
     intro = (f"Chicago taxi study ({path.name}): {hours}, {a.trips_per_day:g} trips per day, "
-             f"{radio}, seeds {a.seeds}. Per series (allocator, N, batch window, repositioner): share "
+             f"{radio}, seeds {a.seeds}. Per series (allocator, N, batch window, "
+             "repositioner): share "
              "of the requests served and rejected (at once or expired), mean and p90 wait "
              "from release to pickup (s), fleet utilization (driving to a pickup or with a "
              "passenger), empty share of the km, conflicts (tasks requested by two vehicles in one "
