@@ -15,6 +15,14 @@ missing from the folder (a run is the same run whatever lists it was swept in:
 :func:`dispatch.runner.run_digest`); the table and the report cover every run of the folder.
 SIGTERM or Ctrl-C stops the study's worker processes with it.
 
+``--comm-range METRES`` gives the vehicles a radio range: the derived scenario gets a ``[comms]``
+table with ``range = METRES`` (see :mod:`dispatch.comms`: the idle vehicles of a decision within
+that straight-line distance of each other hear each other). Decentralized allocators
+(``auction``, ``magnnet``, ``local_hungarian``) then decide on what reaches them over that graph
+and may conflict; centralized ones (``fcfs``, ``greedy``, ``hungarian``) ignore it. Omitted:
+unlimited range, the scenario as it ships. A range is part of the derived scenario, so its runs
+are other runs than the unlimited ones (use another ``--out``).
+
 ``--hours H`` (default 24) runs a shorter day for a quick look: the trips are still drawn for a
 whole day (the sample's hour profile), the run stops at H h, so only the first H hours are
 released; requests still open or aboard at the end count as cancelled, not rejected. A full day
@@ -22,8 +30,10 @@ released; requests still open or aboard at the end count as cancelled, not rejec
 
 Then it prints (80 columns) and writes ``<out>/study.md``: per series (allocator, N, batch
 window, repositioner) the share of the requests served, the rejection rate, the wait (release
-to pickup) mean and p90, the fleet utilization, the empty share of the km and the run's wall
-seconds (mean over seeds, from the sweep's completion markers), followed by a paragraph
+to pickup) mean and p90, the fleet utilization, the empty share of the km, the conflicts
+(tasks requested by two vehicles in one round at least once; ``study.md`` also the
+conflict-free share of the tasks offered) and the run's wall seconds (mean over seeds, from the
+sweep's completion markers), followed by a paragraph
 computed from the table: who has the lowest mean wait per N and by how much, what batching
 every 30 s changes, and what repositioning changes. Finally it writes the report
 (``dispatch report``: ``<out>/report/``, the plots).
@@ -31,6 +41,8 @@ every 30 s changes, and what repositioning changes. Finally it writes the report
 Run: ``PYTHONPATH=. .venv/bin/python benchmarks/chicago_study.py --hours 3 --trips-per-day 40000
 --agents 200 400 --out runs/chicago_quick`` (a quick look), or without options (the full study:
 40 runs of a simulated day; see the report of the helper that wrote this for a time estimate).
+Under a 2 km radio range: ``--comm-range 2000 --allocators magnnet auction local_hungarian
+--repositioners stay --batch-windows 30 --out runs/chicago_range2km``.
 """
 
 from __future__ import annotations
@@ -62,6 +74,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--batch-windows", type=float, nargs="+", default=[0.0, 30.0])
     p.add_argument("--repositioners", nargs="+", default=["stay", "demand"])
     p.add_argument("--seeds", type=int, nargs="+", default=[0])
+    p.add_argument("--comm-range", type=float, default=None, metavar="METRES",
+                   help="radio range of the vehicles ([comms] range; default: unlimited)")
     p.add_argument("--no-report", action="store_true", help="skip `dispatch report`")
     a = p.parse_args(argv)
     if not 0 < a.hours <= 24:
@@ -70,6 +84,8 @@ def parse_args(argv=None) -> argparse.Namespace:
         p.error("--trips-per-day, --agents and --workers must be positive")
     if min(a.batch_windows) < 0:
         p.error("--batch-windows must be >= 0")
+    if a.comm_range is not None and not 0 <= a.comm_range < math.inf:
+        p.error(f"--comm-range must be a finite number of metres >= 0, got {a.comm_range:g}")
     return a
 
 
@@ -107,6 +123,12 @@ def derived_text(a: argparse.Namespace, allocators: list[str], repositioners: li
     def arr(xs, fmt):
         return "[" + ", ".join(fmt(x) for x in xs) + "]"
 
+    if getattr(a, "comm_range", None) is not None:
+        if re.search(r"^\[comms\]", text, flags=re.M):
+            raise SystemExit(f"{SCENARIO} has a [comms] table already; --comm-range would "
+                             "need to edit it")
+        text += ("[comms]  # benchmarks/chicago_study.py --comm-range\n"
+                 f"range = {a.comm_range:.1f}\n\n")
     return text + (
         "[sweep]  # benchmarks/chicago_study.py\n"
         f"agents = {arr(a.agents, str)}\n"
@@ -160,9 +182,13 @@ def wall_seconds(out: Path) -> dict[str, float]:
 
 def study_table(out: Path) -> pd.DataFrame:
     """Per series: ``label``, ``N``, ``served`` and ``rejected`` (shares of the requests),
-    ``wait_mean`` / ``wait_p90`` (s), ``utilization``, ``empty`` (share of km), ``wall_s``
-    (mean wall seconds per run), plus the keys ``allocator``, ``window`` (``imm`` / ``30s``)
-    and ``reposition``; rows in the report's series order."""
+    ``wait_mean`` / ``wait_p90`` (s), ``utilization``, ``empty`` (share of km),
+    ``conflicts`` (tasks requested by two vehicles in one round at least once: only
+    decentralized allocators under a limited range, and ``greedy``, have any) and
+    ``conflict_free`` (share of the tasks offered that were assigned without ever being in
+    conflict), means over seeds, ``wall_s`` (mean wall seconds per run), plus the keys
+    ``allocator``, ``window`` (``imm`` / ``30s``) and ``reposition``; rows in the report's
+    series order."""
     from analysis import metrics as M
     from analysis.io import open_results
     from analysis.taxi_plots import series
@@ -173,6 +199,7 @@ def study_table(out: Path) -> pd.DataFrame:
     secs = wall_seconds(out)
     summary = summary.assign(wall_s=summary["run_id"].map(secs))
     wall = summary.groupby(KEYS)["wall_s"].mean()
+    confl = summary.groupby(KEYS)[["conflicts", "conflict_free_rate"]].mean()
     rows = []
     for key, label, g in series(taxi):
         r = g.iloc[0]
@@ -183,6 +210,9 @@ def study_table(out: Path) -> pd.DataFrame:
             "runs": int(r["runs"]), "served": r["service_rate"], "rejected": r["rejectionRate"],
             "wait_mean": r["wait_average"], "wait_p90": r["wait_p90"],
             "utilization": r["utilization"], "empty": r["emptyRatio"],
+            "conflicts": confl["conflicts"].get(tuple(r[k] for k in KEYS), math.nan),
+            "conflict_free": confl["conflict_free_rate"].get(tuple(r[k] for k in KEYS),
+                                                             math.nan),
             "wall_s": wall.get(tuple(r[k] for k in KEYS), math.nan)})
     return pd.DataFrame(rows)
 
@@ -195,22 +225,28 @@ def _num(v: float, digits: int = 0) -> str:
     return "-" if not math.isfinite(v) else f"{v:.{digits}f}"
 
 
-COLUMNS = [("series", 25, "label"), ("N", 5, "N"), ("served", 7, "served"),
-           ("rej.", 6, "rejected"), ("wait", 5, "wait_mean"), ("p90", 5, "wait_p90"),
-           ("util", 6, "utilization"), ("empty", 6, "empty"), ("wall s", 7, "wall_s")]
+#: (header, width in the terminal table, column); ``conflict-free`` only in study.md
+COLUMNS = [("series", 20, "label"), ("N", 4, "N"), ("served", 6, "served"),
+           ("rej.", 6, "rejected"), ("wait", 4, "wait_mean"), ("p90", 4, "wait_p90"),
+           ("util", 6, "utilization"), ("empty", 6, "empty"), ("confl.", 6, "conflicts"),
+           ("conflict-free", 0, "conflict_free"), ("wall s", 7, "wall_s")]
 
 
 def _cells(r) -> list[str]:
     return [str(r["label"]), str(r["N"]), _pct(r["served"]), _pct(r["rejected"]),
             _num(r["wait_mean"]), _num(r["wait_p90"]), _pct(r["utilization"]),
-            _pct(r["empty"]), _num(r["wall_s"], 1)]
+            _pct(r["empty"]), _num(r.get("conflicts", math.nan)),
+            _pct(r.get("conflict_free", math.nan)), _num(r["wall_s"], 1)]
 
 
 def text_table(t: pd.DataFrame) -> str:
-    """The study table in at most 80 columns (a long series label is cut with '…')."""
+    """The study table in at most 80 columns (a long series label is cut with '…'; the
+    conflict-free share only in :func:`markdown_table`)."""
     def line(cells):
         out = []
         for (_, w, _), c in zip(COLUMNS, cells):
+            if w == 0:
+                continue
             c = c if len(c) <= w else c[:w - 1] + "…"
             out.append(c.ljust(w) if not out else c.rjust(w))
         return " ".join(out)
@@ -294,12 +330,18 @@ def main(argv=None) -> int:
     failed = [o for o in outcomes if o.status == "failed"]
     t = study_table(a.out)
     hours = "a simulated day" if a.hours >= 24 else f"the first {a.hours:g} simulated hours"
+    radio = ("unlimited radio range" if a.comm_range is None
+             else f"radio range {a.comm_range:g} m (decentralized allocators decide on what "
+                  "reaches them; centralized ones ignore it)")
     intro = (f"Chicago taxi study ({path.name}): {hours}, {a.trips_per_day:g} trips per day, "
-             f"seeds {a.seeds}. Per series (allocator, N, batch window, repositioner): share "
+             f"{radio}, seeds {a.seeds}. Per series (allocator, N, batch window, "
+             "repositioner): share "
              "of the requests served and rejected (at once or expired), mean and p90 wait "
              "from release to pickup (s), fleet utilization (driving to a pickup or with a "
-             "passenger), empty share of the km, wall seconds per run (mean over seeds; the "
-             "first run of each worker process also pays for loading the road network).")
+             "passenger), empty share of the km, conflicts (tasks requested by two vehicles in one "
+             "round at least once) and the conflict-free share of the tasks offered, wall "
+             "seconds per run (mean over seeds; the first run of each worker process also "
+             "pays for loading the road network).")
     para = findings(t)
     print()
     print(text_table(t))

@@ -98,3 +98,40 @@ def test_rerun_with_other_lists_resumes_the_runs_it_shares(study, tmp_path):
     for r in shared:
         assert run_digest(first[r]) == run_digest(second[r])
     assert len({run_digest(s) for s in second.values()}) == len(second)
+
+
+def test_comm_range_sets_the_radio_range_and_makes_other_runs(study, tmp_path):
+    """``--comm-range 2000`` gives the derived scenario ``[comms] range = 2000``; without it
+    the range stays unlimited; the runs of the two are different runs (other digests)."""
+    from dispatch.runner import run_digest
+
+    def load(args, name):
+        a = study.parse_args(["--hours", "1", "--agents", "500", *args])
+        path = tmp_path / name
+        path.write_text(study.derived_text(a, ["auction"], ["stay"]))
+        return load_scenario(path)
+
+    ranged, free = load(["--comm-range", "2000"], "r.toml"), load([], "f.toml")
+    assert ranged.comms.range == 2000.0
+    assert free.comms.range is None
+    digests = {run_digest(s) for s in free.runs()}
+    assert not digests & {run_digest(s) for s in ranged.runs()}
+    for bad in ("-5", "inf", "nan"):
+        with pytest.raises(SystemExit):
+            study.parse_args(["--comm-range", bad])
+
+
+def test_table_shows_conflicts(study):
+    """The terminal table has the conflicts (tasks), the Markdown table also the conflict-free
+    share; '-' where a run folder has none (older tables)."""
+    t = _table().assign(conflicts=[0, 8712, 3, 0, 1, 2, 3, 4],
+                        conflict_free=[1.0, 0.5, 0.875, 1, 1, 1, 1, 1])
+    text = study.text_table(t)
+    assert max(len(line) for line in text.splitlines()) <= 80
+    head, _, first, second, *_ = text.splitlines()
+    assert "confl." in head and "conflict-free" not in head
+    assert first.split()[-2:] == ["0", "12.3"] and second.split()[-2:] == ["8712", "12.3"]
+    md = study.markdown_table(t).splitlines()
+    assert "| conflict-free |" in md[0]
+    assert "| 8712 | 50.0% | 12.3 |" in md[3]
+    assert "| - | - | 12.3 |" in study.markdown_table(_table()).splitlines()[2]
