@@ -98,7 +98,7 @@ from pathlib import Path
 import numpy as np
 
 from dispatch.contracts import AgentViews, AllocationProblem
-from dispatch.decentralized import WAIT, DecentralizedAllocator
+from dispatch.decentralized import DecentralizedAllocator
 from dispatch.errors import AllocationError
 
 CHECKPOINTS = Path(__file__).resolve().parent / "checkpoints"

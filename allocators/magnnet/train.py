@@ -78,7 +78,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args, console=None) -> int:
-    import numpy as np
     import pyarrow as pa
     import pyarrow.parquet as pq
     import torch

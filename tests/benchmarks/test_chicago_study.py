@@ -3,7 +3,6 @@ paragraph, against hand-made numbers (the study itself is run by hand, not here)
 
 from __future__ import annotations
 
-import argparse
 import importlib.util
 from pathlib import Path
 
