@@ -349,16 +349,7 @@ class MagnnetAllocator(DecentralizedAllocator):
         """A view's costs as the model reads them, and the rows of its candidate agents (None:
         every row): in the units the models were trained in (``cost_scale``), each task's
         edges cut to its ``candidates`` cheapest agents (ties to the lower row)."""
-        finite = np.isfinite(cost)
-        wide = False  # out of the training range (a city's taxis: minutes away)
-        if finite.any() and "auto" in (self.cost_scale, self.candidates):
-            median = float(np.median(cost[finite]))
-            wide = median > TRAIN_MAX_S
-        if self.cost_scale == "auto":
-            if wide:
-                cost = cost * (TRAIN_MEDIAN_S / median)
-        elif self.cost_scale != 1:
-            cost = cost / self.cost_scale
+        cost, finite, wide = self._rescaled(cost, self.candidates)
         k = (CANDIDATES if wide else 0) if self.candidates == "auto" else self.candidates
         if not candidates or k == 0 or cost.shape[0] <= k:
             return cost, None
@@ -369,6 +360,23 @@ class MagnnetAllocator(DecentralizedAllocator):
         kept &= finite
         return np.where(kept, cost, np.inf), kept.any(axis=1)
 
+    def _rescaled(self, cost: np.ndarray, cut) -> tuple[np.ndarray, np.ndarray, bool]:
+        """``cost`` in the units the models were trained in (``cost_scale``), which entries
+        are finite, and whether the view is out of the training range (median finite cost
+        above :data:`TRAIN_MAX_S`: a city's taxis, minutes away; only looked at where
+        ``cost_scale`` or the cut setting ``cut`` is ``"auto"``)."""
+        finite = np.isfinite(cost)
+        wide, median = False, 0.0
+        if finite.any() and "auto" in (self.cost_scale, cut):
+            median = float(np.median(cost[finite]))
+            wide = median > TRAIN_MAX_S
+        if self.cost_scale == "auto":
+            if wide:
+                cost = cost * (TRAIN_MEDIAN_S / median)
+        elif self.cost_scale != 1:
+            cost = cost / self.cost_scale
+        return cost, finite, wide
+
     def _view_costs(self, cost: np.ndarray, active: np.ndarray):
         """A partial view's costs as the view model reads them (``cost_scale``, as
         :meth:`_costs`), and the rows it keeps (None: every row). On a view out of the training
@@ -378,16 +386,7 @@ class MagnnetAllocator(DecentralizedAllocator):
         (they have most likely taken something: the model reads them as it was trained to);
         a row without a kept edge leaves the view, and an agent that leaves its own view
         requests nothing this round (as an agent that no task keeps under ``candidates``)."""
-        finite = np.isfinite(cost)
-        wide, median = False, 0.0
-        if finite.any() and "auto" in (self.cost_scale, self.view_candidates):
-            median = float(np.median(cost[finite]))
-            wide = median > TRAIN_MAX_S
-        if self.cost_scale == "auto":
-            if wide:
-                cost = cost * (TRAIN_MEDIAN_S / median)
-        elif self.cost_scale != 1:
-            cost = cost / self.cost_scale
+        cost, finite, wide = self._rescaled(cost, self.view_candidates)
         vc = self.view_candidates
         k = (CANDIDATES if wide else 0) if vc == "auto" else vc
         if k == 0 or cost.shape[0] <= k:
