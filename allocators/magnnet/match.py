@@ -90,6 +90,22 @@ def edge_features(cost: torch.Tensor, mask: torch.Tensor, flies: torch.Tensor) -
     return torch.where(mask[..., None], f, torch.zeros_like(f))
 
 
+def aggregates(h: torch.Tensor, mask: torch.Tensor, keepdim: bool):
+    """The masked mean and max of the edge states ``h (B, n, m, H)`` over each agent's row and
+    each task's column: ``(row_mean, row_max, col_mean, col_max)``; an agent (task) without
+    any available edge aggregates to 0, not to the fill value."""
+    mf = mask[..., None].to(h.dtype)
+    hm = h * mf
+    low = torch.where(mask[..., None], h, torch.full_like(h, -1e4))
+
+    def along(dim: int):
+        count = mf.sum(dim, keepdim=keepdim)
+        return (hm.sum(dim, keepdim=keepdim) / count.clamp(min=1),
+                low.amax(dim, keepdim=keepdim).clamp(min=-1e3) * (count > 0))
+
+    return (*along(2), *along(1))
+
+
 class EdgeLayer(nn.Module):
     """One round of message passing on the complete bipartite agent-task graph."""
 
@@ -100,14 +116,7 @@ class EdgeLayer(nn.Module):
         self.norm = nn.LayerNorm(hidden)
 
     def forward(self, h: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
-        mf = mask[..., None].to(h.dtype)
-        hm = h * mf
-        low = torch.where(mask[..., None], h, torch.full_like(h, -1e4))
-        row_mean = hm.sum(2, keepdim=True) / mf.sum(2, keepdim=True).clamp(min=1)
-        col_mean = hm.sum(1, keepdim=True) / mf.sum(1, keepdim=True).clamp(min=1)
-        # an agent (task) without any available edge aggregates to 0, not to the fill value
-        row_max = low.amax(2, keepdim=True).clamp(min=-1e3) * (mf.sum(2, keepdim=True) > 0)
-        col_max = low.amax(1, keepdim=True).clamp(min=-1e3) * (mf.sum(1, keepdim=True) > 0)
+        row_mean, row_max, col_mean, col_max = aggregates(h, mask, keepdim=True)
         x = torch.cat([h, row_mean.expand_as(h), row_max.expand_as(h),
                        col_mean.expand_as(h), col_max.expand_as(h)], -1)
         return self.norm(h + self.mlp(x))

@@ -24,7 +24,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from allocators.magnnet.match import edge_features, scaled
+from allocators.magnnet.match import aggregates, edge_features, scaled
 
 
 @torch.no_grad()
@@ -52,13 +52,7 @@ def _layer(layer, h: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
     split by input block: the row and column aggregates go through their blocks of the weight
     once per row and per column, not once per edge (the same sum in another order; a third of
     the multiply-adds)."""
-    mf = mask[..., None].to(h.dtype)
-    hm = h * mf
-    low = torch.where(mask[..., None], h, torch.full_like(h, -1e4))
-    row_mean = hm.sum(2, keepdim=True) / mf.sum(2, keepdim=True).clamp(min=1)
-    col_mean = hm.sum(1, keepdim=True) / mf.sum(1, keepdim=True).clamp(min=1)
-    row_max = low.amax(2, keepdim=True).clamp(min=-1e3) * (mf.sum(2, keepdim=True) > 0)
-    col_max = low.amax(1, keepdim=True).clamp(min=-1e3) * (mf.sum(1, keepdim=True) > 0)
+    row_mean, row_max, col_mean, col_max = aggregates(h, mask, keepdim=True)
     first, second = layer.mlp[0], layer.mlp[2]
     w = first.weight.split(h.shape[-1], dim=1)  # blocks of [h, row mean, row max, col ...]
     row = torch.cat([row_mean, row_max], -1) @ torch.cat(w[1:3], 1).T
@@ -74,15 +68,7 @@ def forward_features(model, f: torch.Tensor, mask: torch.Tensor):
     h = model.inp(f)
     for layer in model.gnn:
         h = _layer(layer, h, mask)
-    s = model.out(h)[..., 0]
-    mf = mask[..., None].to(h.dtype)
-    low = torch.where(mask[..., None], h, torch.full_like(h, -1e4))
-    row = torch.cat([(h * mf).sum(2) / mf.sum(2).clamp(min=1),
-                     low.amax(2).clamp(min=-1e3) * (mf.sum(2) > 0)], -1)
-    col = torch.cat([(h * mf).sum(1) / mf.sum(1).clamp(min=1),
-                     low.amax(1).clamp(min=-1e3) * (mf.sum(1) > 0)], -1)
-    return (torch.where(mask, s, torch.full_like(s, -1e4)), model.row_null(row)[..., 0],
-            model.col_null(col)[..., 0])
+    return model.heads(h, mask)
 
 
 def _chunks(prepared: list, waste: float) -> list[list]:

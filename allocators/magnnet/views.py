@@ -41,7 +41,8 @@ import numpy as np
 import torch
 from torch import nn
 
-from allocators.magnnet.match import EDGE_FEATURES, EdgeLayer, MatchPolicy, edge_features, scaled
+from allocators.magnnet.match import (EDGE_FEATURES, EdgeLayer, MatchPolicy, aggregates,
+                                     edge_features, scaled)
 
 log = logging.getLogger(__name__)
 
@@ -95,13 +96,14 @@ class ViewPolicy(nn.Module):
         h = self.inp(torch.where(mask[..., None], f, torch.zeros_like(f)))
         for layer in self.gnn:
             h = layer(h, mask)
+        return self.heads(h, mask)
+
+    def heads(self, h: torch.Tensor, mask: torch.Tensor):
+        """``(scores, row_null, col_null)`` from the last layer's edge states ``h``."""
         s = self.out(h)[..., 0]
-        mf = mask[..., None].to(h.dtype)
-        low = torch.where(mask[..., None], h, torch.full_like(h, -1e4))
-        row = torch.cat([(h * mf).sum(2) / mf.sum(2).clamp(min=1),
-                         low.amax(2).clamp(min=-1e3) * (mf.sum(2) > 0)], -1)
-        col = torch.cat([(h * mf).sum(1) / mf.sum(1).clamp(min=1),
-                         low.amax(1).clamp(min=-1e3) * (mf.sum(1) > 0)], -1)
+        row_mean, row_max, col_mean, col_max = aggregates(h, mask, keepdim=False)
+        row = torch.cat([row_mean, row_max], -1)
+        col = torch.cat([col_mean, col_max], -1)
         return (torch.where(mask, s, torch.full_like(s, -1e4)), self.row_null(row)[..., 0],
                 self.col_null(col)[..., 0])
 
