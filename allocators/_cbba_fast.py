@@ -27,11 +27,20 @@ def _jit(fn):
 
 
 @numba.njit
+def _stamp(s, s0, order, cnt, heard, now, i, k, x):
+    """Agent ``i``'s timestamp for agent ``x`` while it processes sender ``k``: ``now`` for a
+    sender it heard before ``k``, else :func:`_fold`."""
+    if x < k and heard[i, x]:
+        return now
+    return _fold(s, s0, order, cnt, i, x)
+
+
+@numba.njit
 def _fold(s, s0, order, cnt, i, x):
     """Agent ``i``'s timestamp for agent ``x`` (not one of its senders so far, not itself)
     after applying the ``cnt`` broadcasts ``order[:cnt]``, as the sender-by-sender updates
     would have left it: the largest of its own value and those senders' values. (A sender it
-    heard reads ``now``, inline in :func:`exchange`.)"""
+    heard reads ``now``: :func:`_stamp`.)"""
     v = s[i, x]
     for t in range(cnt):
         w = s0[order[t], x]
@@ -91,23 +100,23 @@ def exchange(y, z, s, got, y0, z0, s0, now):
                     elif zi == k or zi == NONE:
                         upd = True
                     else:
-                        s_in = now if zi < k and heard[i, zi] else _fold(s, s0, order, cnt, i, zi)
+                        s_in = _stamp(s, s0, order, cnt, heard, now, i, k, zi)
                         upd = s0[k, zi] > s_in or beats
                 elif zk == i:
                     if zi == k:
                         reset = True
                     elif zi != i and zi != NONE:
-                        s_in = now if zi < k and heard[i, zi] else _fold(s, s0, order, cnt, i, zi)
+                        s_in = _stamp(s, s0, order, cnt, heard, now, i, k, zi)
                         reset = s0[k, zi] > s_in
                 elif zk == NONE:
                     if zi == k:
                         upd = True
                     elif zi != i and zi != NONE:
-                        s_in = now if zi < k and heard[i, zi] else _fold(s, s0, order, cnt, i, zi)
+                        s_in = _stamp(s, s0, order, cnt, heard, now, i, k, zi)
                         upd = s0[k, zi] > s_in
                 else:  # k believes a third agent m = zk wins
                     s_km = s0[k, zk]
-                    s_im = now if zk < k and heard[i, zk] else _fold(s, s0, order, cnt, i, zk)
+                    s_im = _stamp(s, s0, order, cnt, heard, now, i, k, zk)
                     newer_m = s_km > s_im
                     if zi == i:
                         upd = newer_m and beats
@@ -117,7 +126,7 @@ def exchange(y, z, s, got, y0, z0, s0, now):
                     elif zi == NONE or zi == zk:
                         upd = newer_m
                     else:  # i believes a fourth agent n = zi wins
-                        s_in = now if zi < k and heard[i, zi] else _fold(s, s0, order, cnt, i, zi)
+                        s_in = _stamp(s, s0, order, cnt, heard, now, i, k, zi)
                         newer_n = s0[k, zi] > s_in
                         upd = newer_m and (newer_n or beats)
                         reset = newer_n and s_im > s_km
