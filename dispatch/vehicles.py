@@ -34,7 +34,7 @@ from dispatch.motion import step_length
 from dispatch.reservations import EPS, step_seconds
 from dispatch.space import Location
 from dispatch.stops import DROPOFF, PICKUP, Stop, occupancies, schedule
-from dispatch.tasks import ASSIGNED, COMPLETED, Task, TaskBook, TaskState
+from dispatch.tasks import ASSIGNED, COMPLETED, PICKED_UP as PICKED_UP_STATE, Task, TaskBook, TaskState
 
 if TYPE_CHECKING:
     from dispatch.reservations import Traffic
@@ -561,10 +561,16 @@ class Operator:
             v.stops.pop(0)
             task = stop.task
             if stop.kind is PICKUP:
+                if v.load and stop.passengers:  # a shared ride: it and those on board
+                    task.shared = True
+                    for s in v.stops:
+                        if s.kind is DROPOFF and s.task.state is PICKED_UP_STATE:
+                            s.task.shared = True
                 v.load += stop.passengers
                 book.picked_up(task)
             else:
                 v.load += stop.passengers
+                task.dropped_at = env.now
                 emit(env.now, "dropoff", v.id, task.id, v.loc)
             if not stop.completes:
                 continue
