@@ -58,14 +58,14 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from dispatch.comms import comm_graph, components
-from dispatch.contracts import Allocation, AllocationProblem, Allocator, Planner
+from dispatch.contracts import Allocation, AllocationProblem, Allocator, Planner, StopView
 from dispatch.errors import AllocationError, DispatchError, PluginError
 from dispatch.lazy import certify, resolve_open
 from dispatch.space import Space
@@ -197,6 +197,33 @@ def _rows(ids: np.ndarray, ascending: bool = False) -> Callable[[object], int]:
         return k if order is None else int(order[k])
 
     return find
+
+
+class _Plans(Mapping):
+    """:attr:`AllocationProblem.plans`: the stop lists of a decision's agents that have one,
+    read from the vehicles when asked (within the decision: nothing moves meanwhile)."""
+
+    def __init__(self, fleet: Fleet, operator: Operator, slots: np.ndarray) -> None:
+        self._vehicles = [fleet.vehicles[k] for k in slots.tolist()]
+        self._operator = operator
+        self._ids = {v.id: v for v in self._vehicles if v.stops}
+        self._cache: dict[int, tuple] = {}
+
+    def __getitem__(self, agent_id: int) -> tuple[StopView, ...]:
+        got = self._cache.get(agent_id)
+        if got is None:
+            v = self._ids[agent_id]
+            times = self._operator.plan_arrays(v)[0]
+            got = self._cache[agent_id] = tuple(
+                StopView(s.kind, s.task.id, s.loc, s.passengers, s.latest, s.occupancy, t)
+                for s, t in zip(v.stops, times))
+        return got
+
+    def __iter__(self):
+        return iter(self._ids)
+
+    def __len__(self) -> int:
+        return len(self._ids)
 
 
 @dataclass
@@ -436,10 +463,12 @@ class Dispatcher:
         def tpos():
             return space.positions([t.loc for t in tasks])
 
+        plans = _Plans(self.fleet, self.operator, idle) if self.pooled else None
+
         def ask(cost: np.ndarray):
             problem = AllocationProblem.made(now, agents, tasks, np.array(cost, order="C"),
                                              comm, self.rng, self.cfg.max_rounds, comms.loss,
-                                             comms.latency, self.cell_size, apos, tpos)
+                                             comms.latency, self.cell_size, apos, tpos, plans)
             allocation, decide_s, index = self._ask(problem)
             return problem, allocation, decide_s, index
 

@@ -525,8 +525,10 @@ class RoadPlanner(Planner):
 
 def _loc_arrays(locs: Sequence[Any]) -> tuple[np.ndarray, np.ndarray]:
     """``(node, remaining seconds)`` of locations (node ints or road points)."""
-    if all(type(x) is int for x in locs):  # nodes (a plan's stops): no point to unpack
+    try:  # nodes only (a plan's stops): nothing to unpack
         return np.array(locs, dtype=np.int64), np.zeros(len(locs))
+    except TypeError:  # road points among them
+        pass
     node = np.empty(len(locs), dtype=np.int64)
     rem = np.zeros(len(locs))
     for i, loc in enumerate(locs):

@@ -227,3 +227,38 @@ def test_capacity_one_never_shares(tmp_path):
     assert not (tables["events"].event == "insert").any()
     assert math.isclose(tables["vehicles"].passenger_distance.sum(),
                         tables["vehicles"].occupied_distance.sum())
+
+
+def test_allocators_read_the_plans_read_only(tmp_path):
+    """``problem.plans`` holds the stop list of each busy agent of a pooled decision, as the
+    vehicle has it (kinds, requests, occupancies, planned times in order), and cannot be
+    changed through it."""
+    from allocators.hungarian import HungarianAllocator
+    from dispatch.runner import make_recorder
+    from dispatch.sim import Simulation
+
+    write_csv(tmp_path / "trips.csv", ["t", "origin_node", "dest_node"],
+              [(0.0, 0, 4), (1.0, 1, 3)])
+    write_csv(tmp_path / "fleet.csv", ["vehicle_id", "node"], [(0, 0)])
+    path = road_scenario(tmp_path, tasks='source = "trace"\ntrace = "trips.csv"',
+                         fleet='start = "fleet.csv"\ncapacity = 2')
+    [spec] = load_scenario(path).runs()
+    sim = Simulation(spec, make_recorder(spec, tmp_path / "out"))
+    seen = []
+
+    class Spy(HungarianAllocator):
+        def allocate(self, problem):
+            seen.append({a: problem.plans[a] for a in problem.plans})
+            with pytest.raises(TypeError):
+                problem.plans[0] = ()  # type: ignore[index]
+            return super().allocate(problem)
+
+    sim.allocator = Spy()
+    sim.run()
+    assert seen[0] == {}  # the first request: the taxi is idle
+    [(agent, stops)] = seen[1].items()
+    assert agent == 0
+    # A was picked up at once where the taxi stood: its drop-off is what is left
+    assert [(s.kind, s.task_id, s.loc, s.passengers, s.occupancy) for s in stops] == [
+        ("dropoff", 0, 4, -1, 0)]
+    assert stops[0].eta == pytest.approx(40.0)
