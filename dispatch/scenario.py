@@ -623,8 +623,11 @@ def _within_snap(t: _Table, trips: Trips, world: WorldConfig, max_snap: float) -
         net = load_network(r.network, base=r.base, blocks=r.blocks, block=r.block,
                            speed=r.speed)
         kept = within_snap(trips, net, max_snap)
-    except ValueError as e:
+    except (ValueError, OSError) as e:
         raise ScenarioError(t.file, "world.network", str(e)) from None
+    except Exception as e:  # noqa: BLE001 - a malformed file raises whatever its parser raises
+        raise ScenarioError(t.file, "world.network", f"{r.network} cannot be read "
+                                                     f"({type(e).__name__}: {e})") from None
     if not len(kept):
         raise t.fail("max_snap", f"leaves no trip of {trips.path.name}: every one has a pickup "
                                  f"or drop-off farther than {max_snap:g} m from a node of "

@@ -237,7 +237,8 @@ def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
             wanted = [c for c in LAYOUTS[space][0][1] if c not in columns]
         else:
             wanted = [" or ".join("(" + ", ".join(lay[1]) + ")" for lay in LAYOUTS[space])]
-        missing = ([] if layout else wanted) + ([] if tcol else ["release_time (or t)"])
+        missing = ([] if layout else wanted) + (
+            [] if tcol else ["release_time (or t, or departure_time)"])
         raise ScenarioError(path, "<header>", f"missing column(s): {', '.join(missing)}")
     name, pick, drop = layout
     has_dest = all(c in columns for c in drop)
