@@ -376,3 +376,19 @@ def test_max_snap_and_start_need_a_road_trace(tmp_path):
     path.write_text('[tasks]\nsource = "poisson"\nrate = 1.0\nstart = "2014-12-21T00:00"\n')
     with pytest.raises(ScenarioError, match=r"tasks.start: is only used when source = 'trace'"):
         load_scenario(path)
+
+
+def test_parquet_timestamps_as_departure_time(tmp_path):
+    import datetime as dt
+
+    import pyarrow as pa
+
+    when = [dt.datetime(2014, 12, 21, 0, 0), dt.datetime(2014, 12, 21, 1, 30, 15)]
+    pq.write_table(pa.table({"o_lat": [TIMES_SQUARE[0], HARLEM[0]],
+                             "o_lon": [TIMES_SQUARE[1], HARLEM[1]],
+                             "d_lat": [HARLEM[0], TIMES_SQUARE[0]],
+                             "d_lon": [HARLEM[1], TIMES_SQUARE[1]],
+                             "departure_time": pa.array(when, pa.timestamp("s")),
+                             "passengers": [1, 2]}), tmp_path / "trips.parquet")
+    sc = load_scenario(_scenario(tmp_path, f'trace = "trips.parquet"\nstart = "{START}"'))
+    assert sc.tasks.trips.t.tolist() == [0.0, 5415.0]
