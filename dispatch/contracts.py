@@ -517,5 +517,18 @@ class Planner(ABC):
         pairs; for planners that set :attr:`lower_bounds`."""
         raise NotImplementedError(f"planner {self.name!r} computes no lower bounds")
 
+    #: True for planners that implement :meth:`between` (shared rides and drop-off limits
+    #: need it: the kernel routes between the stops of a plan).
+    travel_times: ClassVar[bool] = False
+
+    def between(self, sources: Sequence[Location], targets: Sequence[Location],
+                pairwise: bool = False) -> np.ndarray:
+        """Travel seconds from each of ``sources`` (locations: on roads nodes or road points)
+        to each of ``targets`` (nodes), as :meth:`costs` counts them: a ``(len(sources),
+        len(targets))`` array, or with ``pairwise`` the 1-D array of ``sources[k] ->
+        targets[k]``. For planners that set :attr:`travel_times`."""
+        raise NotImplementedError(f"planner {self.name!r} computes no travel times between "
+                                  "locations")
+
     def task_closed(self, task_id: int) -> None:
         """Forget anything cached for a task that will never be asked about again."""

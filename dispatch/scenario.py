@@ -25,6 +25,7 @@ from dispatch.traces import (
     decode_text,
     parse_datetime,
     read_bytes,
+    read_fleet_capacities,
     read_fleet_start,
     read_trace,
     shipped_trace,
@@ -124,6 +125,15 @@ class FleetConfig:
     #: roads, without a start file: "uniform" nodes, or "demand" (the empirical sample's
     #: pickup nodes, weighted by their trips)
     placement: str = "uniform"
+    #: seats per vehicle (``[fleet] capacity``); a start file's ``capacity`` column per vehicle
+    #: (row order; 0: the fleet's)
+    capacity: int = 1
+    capacities: tuple[int, ...] = ()
+
+    @property
+    def pooled(self) -> bool:
+        """Some vehicle has more than one seat: busy vehicles take part in decisions."""
+        return self.capacity > 1 or any(c > 1 for c in self.capacities)
 
     @property
     def n_uav(self) -> int:
@@ -141,6 +151,8 @@ class TaskConfig:
     service_time: float = 0.0  # seconds a vehicle spends at the task after arriving
     ttl: float | None = None  # seconds an unassigned task waits before it expires
     max_wait: float | None = None  # seconds a request accepts to wait for its pickup
+    #: seconds of delay a request accepts at its drop-off, over release + direct drive time
+    max_delay: float | None = None
     trace: Path | None = None  # trace: CSV or Parquet file of trips (see dispatch.traces)
     trips: Trips | None = None
     trips_per_day: float | None = None  # empirical: expected trips over the 24 h day
@@ -163,6 +175,9 @@ class DispatchConfig:
     #: decide on the planner's lower bounds and compute exact costs only for the pairs an
     #: optimal answer needs (see dispatch.lazy); used when the planner and allocator support it
     lazy_costs: bool = False
+    #: what a pair's cost is: "pickup_time" (seconds until the pickup) or "added_time" (how
+    #: much longer the vehicle's whole plan gets; see dispatch.stops)
+    objective: str = "pickup_time"
     allocator_params: tuple[tuple[str, Any], ...] = ()
     planner_params: tuple[tuple[str, Any], ...] = ()
 
@@ -471,6 +486,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
         ugv_speed=f.number("ugv_speed", 3.0, gt=0.0),
         uav_max_start_altitude=f.number("uav_max_start_altitude", 10.0, lo=0.0),
         placement=f.string("placement", "uniform", ("uniform", "demand")),
+        capacity=f.number("capacity", 1, lo=1, hi=10_000, integer=True),
     )
     start = f.get("start", None)
     if start is not None:
@@ -482,7 +498,8 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
         if agents > len(rows):
             raise f.fail("agents", f"{agents} vehicles but the start file {start} places "
                                    f"{len(rows)}")
-        fleet = replace(fleet, agents=agents, start=rows, start_file=start_path)
+        fleet = replace(fleet, agents=agents, start=rows, start_file=start_path,
+                        capacities=read_fleet_capacities(start_path, max_bytes)[:agents])
     f.done()
 
     t = root.table("tasks")
@@ -498,7 +515,8 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
         ttl=t.number("ttl", None, gt=0.0, optional=True),
     )
     tasks = replace(tasks, max_wait=t.number("max_wait", 600.0 if source == "empirical"
-                                             else None, gt=0.0, optional=True))
+                                             else None, gt=0.0, optional=True),
+                    max_delay=t.number("max_delay", None, lo=0.0, optional=True))
     tasks = _parse_empirical(t, tasks, world, fleet)
     trace = t.get("trace", None)
     if source == "periodic" and tasks.interval is None:
@@ -544,10 +562,12 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
         max_rounds=d.number("max_rounds", 1000, lo=1, integer=True),
         reassign=reassign,
         lazy_costs=lazy,
+        objective=d.string("objective", "pickup_time", ("pickup_time", "added_time")),
         allocator_params=d.params("allocator_params"),
         planner_params=d.params("planner_params"),
     )
     d.done()
+    _check_pooling(path, world, fleet, tasks, disp)
 
     c = root.table("comms")
     comms = CommsConfig(
@@ -583,6 +603,31 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     for n in sweep.agents or (fleet.agents,):
         _check_fits(sc, n, "sweep.agents" if sweep.agents else "fleet.agents")
     return sc
+
+
+def _check_pooling(path: Path, world: WorldConfig, fleet: FleetConfig, tasks: TaskConfig,
+                   disp: DispatchConfig) -> None:
+    """Shared rides (a capacity above 1) and drop-off limits are for road networks; a pooled
+    fleet decides with exact costs and without re-assignment before pickup."""
+    pooled = fleet.pooled
+    if world.roads is None:
+        if pooled:
+            key = "fleet.capacity" if fleet.capacity > 1 else "fleet.start"
+            raise ScenarioError(path, key, "shared rides (a capacity above 1) need a road "
+                                           "network ([world] network)")
+        if tasks.max_delay is not None:
+            raise ScenarioError(path, "tasks.max_delay", "a drop-off delay limit needs a road "
+                                                         "network ([world] network)")
+        if disp.objective != "pickup_time":
+            raise ScenarioError(path, "dispatch.objective", "added_time needs a road network "
+                                                            "([world] network)")
+    if pooled and disp.reassign:
+        raise ScenarioError(path, "dispatch.reassign", "re-assignment before pickup is for "
+                                                       "vehicles of capacity 1")
+    trips = tasks.trips
+    if trips is not None and trips.passengers is not None and len(trips) and world.roads is None \
+            and int(trips.passengers.max()) > 1:
+        raise ScenarioError(path, "tasks.trace", "passengers above 1 need a road network")
 
 
 def _parse_start(t: _Table, source: str) -> datetime | None:

@@ -3,8 +3,9 @@
 A **trace** (CSV or Parquet) holds one trip per row: its release time ``t`` (or
 ``release_time``, seconds; or ``departure_time``, a date-time read as seconds from the
 scenario's ``[tasks] start``), its pickup and, optionally, its drop-off, and an optional
-``max_wait`` (seconds; blank: the scenario's). Other columns (``request_id``, ``passengers``,
-...) are ignored here. Where things are, by space:
+``max_wait`` and ``max_delay`` (seconds; blank: the scenario's) and ``passengers`` (a whole
+number >= 1; blank: 1). Other columns (``request_id``, ...) are ignored. Where things are, by
+space:
 
 * voxel world: ``x, y, z`` (metres; the pickup), optionally ``dest_x, dest_y, dest_z``;
 * road network, one of: ``origin_node, dest_node`` (node ids of the network);
@@ -67,6 +68,11 @@ class Trips:
     dest: np.ndarray | None
     max_wait: np.ndarray
     row: np.ndarray  # each trip's 1-based data row in the file (for error messages)
+    #: riders per trip (``passengers`` column; 1 where absent or blank)
+    passengers: np.ndarray | None = None
+    #: seconds of delay over the direct drive each trip accepts (``max_delay``; nan: the
+    #: scenario's)
+    max_delay: np.ndarray | None = None
     #: trips of the file left out, as ``(reason, count)`` pairs (before ``[tasks] start``;
     #: farther than ``[tasks] max_snap`` from the network): stored with the results
     dropped: tuple[tuple[str, int], ...] = ()
@@ -259,10 +265,22 @@ def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
     dest = _numbers(path, columns, drop) if has_dest else None
     max_wait = (_numbers(path, columns, ("max_wait",), blank_ok=True)[:, 0]
                 if "max_wait" in columns else np.full(len(t), math.nan))
+    max_delay = (_numbers(path, columns, ("max_delay",), blank_ok=True)[:, 0]
+                 if "max_delay" in columns else np.full(len(t), math.nan))
+    passengers = (_numbers(path, columns, ("passengers",), blank_ok=True)[:, 0]
+                  if "passengers" in columns else np.ones(len(t)))
     early = t < 0 if tcol == DATETIME_COLUMN else np.zeros(len(t), dtype=bool)
     for i in range(len(t)):
         if early[i]:
             continue  # before start: left out below, not checked
+        if max_delay[i] < 0:
+            raise ScenarioError(path, f"row {i + 1}", f"max_delay {max_delay[i]} is negative")
+        p = passengers[i]
+        if p != p:
+            passengers[i] = 1.0
+        elif p < 1 or p != int(p) or p > 2**31:
+            raise ScenarioError(path, f"row {i + 1}", f"passengers = {p} is not a whole "
+                                                      f"number >= 1")
         if t[i] < 0:
             raise ScenarioError(path, f"row {i + 1}", f"release time {t[i]} is negative")
         if max_wait[i] <= 0:
@@ -286,7 +304,8 @@ def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
                     raise ScenarioError(path, f"row {i + 1}", f"{c} = {v} is not a coordinate")
     order = np.argsort(t, kind="stable")
     trips = Trips(path, name, t[order], origin[order],
-                  None if dest is None else dest[order], max_wait[order], order + 1)
+                  None if dest is None else dest[order], max_wait[order], order + 1,
+                  passengers[order].astype(np.int64), max_delay[order])
     if early.any():
         trips = trips.subset(~early[order], f"departed before tasks.start ({start.isoformat()})")
     if early.any() and not len(trips):
@@ -365,3 +384,22 @@ def read_fleet_start(path: Path, space: str, max_bytes: int | None = None
             p[2] = 0.0
         rows.append((int(vid), *p))
     return tuple(rows)
+
+
+def read_fleet_capacities(path: Path, max_bytes: int | None = None) -> tuple[int, ...]:
+    """The optional ``capacity`` column of a fleet start file (seats per vehicle, in row
+    order; blank: the scenario's ``[fleet] capacity``, given as 0); empty if there is none."""
+    columns = _read_columns(path, max_bytes)
+    if "capacity" not in columns:
+        return ()
+    seats = _numbers(path, columns, ("capacity",), blank_ok=True)[:, 0]
+    out = []
+    for i, c in enumerate(seats, 1):
+        if c != c:
+            out.append(0)
+        elif c < 1 or c != int(c) or c > 10_000:
+            raise ScenarioError(path, f"row {i}", f"capacity = {c} is not a whole number of "
+                                                  "seats in [1, 10000]")
+        else:
+            out.append(int(c))
+    return tuple(out)

@@ -254,6 +254,7 @@ class RoadPlanner(Planner):
 
     name = "dijkstra"
     spaces = ("road",)
+    travel_times = True
 
     def __init__(self, space: RoadNetwork) -> None:
         if not isinstance(space, RoadNetwork):
@@ -381,6 +382,46 @@ class RoadPlanner(Planner):
             return out  # everyone on a node: nothing left to drive first
         return out + agents.remaining[:, None]
 
+    def between(self, sources: Sequence[Any], targets: Sequence[Any],
+                pairwise: bool = False) -> np.ndarray:
+        """Exact travel seconds from ``sources`` (nodes or road points) to ``targets`` (nodes):
+        each target's field (an open task's, a kept one, or a new one that is then kept with
+        the retired fields: drop-offs and stops come back) gathered at the sources' nodes,
+        plus what a source part-way along an edge has left of it."""
+        node, rem = _loc_arrays(sources)
+        tnode = np.fromiter((int(t) for t in targets), np.int64, len(targets))
+        if pairwise and node.size != tnode.size:
+            raise ValueError("pairwise travel times need as many sources as targets")
+        at = node if self._index is None else self._index[node]
+        fields: dict[int, np.ndarray] = {}
+        fresh = []
+        for n in np.unique(tnode).tolist():
+            f = self._fields.get(n)
+            if f is None:
+                f = self._retired.get(n)
+                if f is not None:
+                    self._retired.move_to_end(n)
+            if f is None:
+                fresh.append(n)
+            else:
+                fields[n] = f
+        if fresh:
+            h = self._hierarchy
+            nodes = np.array(fresh, dtype=np.int64)
+            new = self._dijkstra(nodes, to=True) if h is None else h.fields(nodes, to=True)
+            self.stats.extra["fields_computed"] += len(fresh)
+            for n, f in zip(fresh, new):
+                self._retire(n, f)
+                fields[n] = self._retired[n]
+        if pairwise:
+            out = np.fromiter((fields[n][a] for n, a in zip(tnode.tolist(), at.tolist())),
+                              np.float64, tnode.size)
+            return out + rem
+        out = np.empty((node.size, tnode.size))
+        for k, n in enumerate(tnode.tolist()):
+            out[:, k] = fields[n][at]
+        return out + rem[:, None]
+
     def _revive(self, node: int) -> np.ndarray | None:
         """The kept field of ``node`` back among the open tasks' fields, or None."""
         field = self._retired.pop(node, None)
@@ -466,6 +507,18 @@ class RoadPlanner(Planner):
             field = self._fields.pop(node, None)
             if field is not None:
                 self._retire(node, field)
+
+
+def _loc_arrays(locs: Sequence[Any]) -> tuple[np.ndarray, np.ndarray]:
+    """``(node, remaining seconds)`` of locations (node ints or road points)."""
+    node = np.empty(len(locs), dtype=np.int64)
+    rem = np.zeros(len(locs))
+    for i, loc in enumerate(locs):
+        if isinstance(loc, RoadPoint):
+            node[i], rem[i] = loc.node, max(loc.remaining, 0.0)
+        else:
+            node[i] = int(loc)
+    return node, rem
 
 
 def _agent_arrays(agents: Sequence[Any]) -> tuple[np.ndarray, np.ndarray]:
