@@ -424,8 +424,9 @@ class Dispatcher:
             if nodes is not None and not agents.points.size:
                 def apos():  # node positions (fixed now), computed if someone reads them
                     return space.positions(nodes)
-            else:  # views read now (a vehicle's view is built from its state when first read)
-                apos = _positions(space, agents)
+            else:  # read if someone asks, within the decision (nothing moves meanwhile)
+                def apos():
+                    return _positions(space, agents)
         else:
             apos = _positions(space, agents)
             comm = comm_graph(apos, comms.range)
@@ -627,17 +628,7 @@ class Dispatcher:
     def _roomy(self) -> np.ndarray:
         """Positions of the busy vehicles with a free seat somewhere in their plan (shared
         rides: they are candidates for new requests)."""
-        fleet = self.fleet
-        out = []
-        for k in np.flatnonzero(fleet.busy_mask).tolist():
-            v = fleet.vehicles[k]
-            low = v.load
-            for s in v.stops:
-                if s.occupancy < low:
-                    low = s.occupancy
-            if low < v.capacity:
-                out.append(k)
-        return np.array(out, dtype=np.int64)
+        return np.flatnonzero(self.fleet.busy_mask & self.fleet.room)
 
     def _insertions(self, cost: np.ndarray, slots: np.ndarray, tasks: list, now: float,
                     holders: set) -> tuple[np.ndarray, dict]:
@@ -684,14 +675,15 @@ class Dispatcher:
         remap[used] = np.arange(used.size)
         off, s_arr, s_svc, s_latest, s_occ, locs = [0], [], [], [], [], []
         load = []
+        plan_of = self.operator.plan_arrays
         for k in used.tolist():
             v = vehicles[busy[k]]
-            times, stops = self.operator.plan_arrays(v)
+            times, svcs, latest, occ, where = plan_of(v)
             s_arr += times
-            s_svc += [svc if s.completes else 0.0 for s in stops]
-            s_latest += [s.latest for s in stops]
-            s_occ += [s.occupancy for s in stops]
-            locs += [s.loc for s in stops]
+            s_svc += svcs
+            s_latest += latest
+            s_occ += occ
+            locs += where
             off.append(len(locs))
             load.append(v.load)
         ucols = np.unique(cols)

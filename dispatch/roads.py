@@ -117,18 +117,39 @@ class Leg:
         """Metres from the start point to the last node."""
         return float(self.metres[-1])
 
+    def _lists(self) -> tuple[list, list, list]:
+        # Python lists (made once per leg): a vehicle's position is asked at every decision
+        # while it drives, and bisect on a list is ~10x cheaper than numpy calls on scalars;
+        # the arithmetic is the same IEEE double operations as on the arrays
+        cached = self.__dict__.get("_as_lists")
+        if cached is None:
+            cached = tuple(np.asarray(a).tolist() for a in (self.times, self.nodes, self.metres))
+            object.__setattr__(self, "_as_lists", cached)
+        return cached
+
+    def next_at(self, t: float) -> tuple[int, float, bool]:
+        """``(node, remaining, on_node)`` of :meth:`point_at` (the node it stands on or drives
+        to, the seconds left to it, whether it stands on it; remaining 0 then), without
+        building the point: a decision asks it of every driving vehicle."""
+        times, nodes, _ = self._lists()
+        if t >= times[-1]:
+            return nodes[-1], 0.0, True
+        t = max(float(t), 0.0)
+        i = bisect_right(times, t)
+        if i == 0:
+            rem = times[0] - t
+            on = self.prev < 0 or rem <= 0.0
+            return nodes[0], 0.0 if on else rem, on
+        if t == times[i - 1]:
+            return nodes[i - 1], 0.0, True
+        rem = times[i] - t
+        return nodes[i], rem if rem > 0.0 else 0.0, rem <= 0.0
+
     def point_at(self, t: float) -> RoadPoint:
         """Where a vehicle driving the leg is ``t`` seconds after its start: linear in time along
         the edge it is on; the last node from ``t >= seconds`` on; a node when ``t`` is exactly
         the arrival time there."""
-        # Python lists (made once per leg): a vehicle's position is asked at every decision
-        # while it drives, and bisect on a list is ~10x cheaper than numpy calls on scalars;
-        # the arithmetic is the same IEEE double operations as on the arrays
-        cached = self.__dict__.get("_lists")
-        if cached is None:
-            cached = tuple(np.asarray(a).tolist() for a in (self.times, self.nodes, self.metres))
-            object.__setattr__(self, "_lists", cached)
-        times, nodes, metres = cached
+        times, nodes, metres = self._lists()
         if t >= times[-1]:
             return RoadPoint(nodes[-1])
         t = max(float(t), 0.0)

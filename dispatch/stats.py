@@ -54,12 +54,12 @@ class RunStats:
         if t.state is COMPLETED:
             self.makespan = max(self.makespan, t.completed_at)
             direct = t.direct_time
-            if t.dropoff is not None and direct == direct:
+            if t.dropoff is not None and direct == direct and t.dropped_at == t.dropped_at:
                 self.rides += 1
                 self.shared += t.shared
-                self.delay += t.completed_at - t.released_at - direct
+                self.delay += t.dropped_at - t.released_at - direct
                 if direct > 0:
-                    self.detour += (t.completed_at - t.picked_up_at) / direct
+                    self.detour += (t.dropped_at - t.picked_up_at) / direct
                     self.detours += 1
 
     def summary(self, *, run: dict, vehicles, dispatcher, sim_time: float) -> dict:

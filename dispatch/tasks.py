@@ -104,6 +104,7 @@ class Task:
     max_delay: float = math.nan  # seconds of delay over the direct drive the request accepts
     direct_time: float = math.nan  # free-flow fastest seconds from pickup to drop-off
     shared: bool = False  # another request was on board during its ride
+    dropped_at: float = math.nan  # when its passengers got off (before any service time)
 
     @property
     def cell(self):

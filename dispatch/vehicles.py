@@ -34,7 +34,7 @@ from dispatch.motion import step_length
 from dispatch.reservations import EPS, step_seconds
 from dispatch.space import Location
 from dispatch.stops import DROPOFF, PICKUP, Stop, occupancies, schedule
-from dispatch.tasks import ASSIGNED, COMPLETED, Task, TaskBook, TaskState
+from dispatch.tasks import ASSIGNED, COMPLETED, PICKED_UP as PICKED_UP_STATE, Task, TaskBook, TaskState
 
 if TYPE_CHECKING:
     from dispatch.reservations import Traffic
@@ -69,6 +69,8 @@ class Vehicle:
     serving: Task | None = field(default=None, repr=False)  # ... that task
     #: the stop its current drive goes to (None: standing, serving or idle)
     heading: Any = field(default=None, repr=False)
+    plan_version: int = 0  # bumped at every change of the plan or of the drive along it
+    plan_cache: Any = field(default=None, repr=False)  # (key, arrays) of Operator.plan_arrays
     busy_seconds: float = 0.0
     busy_since: float = 0.0
     completed: int = 0
@@ -209,6 +211,8 @@ class Fleet:
         self.ids = np.fromiter((v.id for v in self.vehicles), np.int64, n)
         self.idle_mask = np.ones(n, dtype=bool)
         self.busy_mask = np.zeros(n, dtype=bool)
+        #: a free seat somewhere in its plan (kept by Operator.changed)
+        self.room = np.ones(n, dtype=bool)
         self.node = np.full(n, -1, dtype=np.int64)
         self.remaining = np.zeros(n)
         self.odd = np.zeros(n, dtype=bool)
@@ -275,7 +279,14 @@ class Fleet:
             return AgentViews(self.ids[idx], make, node, rem, _NO_POINTS, ascending)
         points = []
         for k in special:  # driving (a leg: where is it now?) or stopped part-way along an edge
-            loc = vs[int(idx[k])].location(now)
+            v = vs[int(idx[k])]
+            leg = v._leg
+            if leg is not None:  # (Leg.point_at's numbers, without building the point)
+                node[k], rem[k], on = leg.next_at(now - v.leg_start)
+                if not on:
+                    points.append(k)
+                continue
+            loc = v.loc
             if _is_node(loc):
                 node[k], rem[k] = loc, 0.0
             else:
@@ -478,6 +489,7 @@ class Operator:
                     new[1].leg = task.direct_time
             v.stops = new
             occupancies(v.load, v.stops)
+            self.changed(v)
             v.proc = env.process(self._run(v, path, new[0]))
             return
         i, j, pick, drop, shift1, shift2 = at  # type: ignore[misc]
@@ -496,6 +508,7 @@ class Operator:
         self._set_legs(v, plan, times)
         v.stops = plan
         occupancies(v.load, v.stops)
+        self.changed(v)
         self.bus.emit(env.now, "insert", v.id, task.id, v.loc)
         if i == 0 and v.heading is not None and v.proc is not None and v.proc.is_alive:
             v.proc.interrupt("reroute")  # its next stop is the new pickup
@@ -520,9 +533,31 @@ class Operator:
             s.leg = arrive - t
             t = arrive + (self.service_time if s.completes else 0.0)
 
-    def plan_arrays(self, v: Vehicle) -> tuple[list[float], list[Stop]]:
-        """``(planned arrival times, stops)`` of ``v``'s plan, for a decision (read only)."""
-        return self._times(v), v.stops
+    def plan_arrays(self, v: Vehicle) -> tuple[list, list, list, list, list]:
+        """``v``'s plan as a decision reads it: planned arrival times, service seconds after
+        each stop, latest times, occupancies after each stop, locations (lists; kept until
+        the plan or the vehicle's state changes: :meth:`changed`)."""
+        now = self.env.now
+        key = (v.plan_version, now if v.heading is None and v.free_at <= now else None)
+        cached = v.plan_cache
+        if cached is not None and cached[0] == key:
+            return cached[1]
+        svc, stops = self.service_time, v.stops
+        arrays = (self._times(v), [svc if s.completes else 0.0 for s in stops],
+                  [s.latest for s in stops], [s.occupancy for s in stops],
+                  [s.loc for s in stops])
+        v.plan_cache = (key, arrays)
+        return arrays
+
+    def changed(self, v: Vehicle) -> None:
+        """``v``'s plan or its progress along it changed: what decisions cached of it goes,
+        and the fleet learns whether it has a free seat somewhere in its plan."""
+        v.plan_version += 1
+        low = v.load
+        for s in v.stops:
+            if s.occupancy < low:
+                low = s.occupancy
+        self.fleet.room[v._slot] = low < v.capacity
 
     def _run(self, v: Vehicle, path, first: Stop):
         """Process: drive ``v``'s plan stop by stop until it is empty, then idle. ``path``
@@ -542,6 +577,7 @@ class Operator:
                     path = self.driver.plan(v, stop.loc, env.now)
                 first = None
                 v.heading = stop
+                v.plan_version += 1  # (its first stop's time is now the leg's)
                 emit(env.now, "depart", v.id, stop.task.id, v.loc)
                 if plain:  # RoadDriver.drive without edge events, inlined (two legs a trip)
                     v.leg, v.leg_start = path, env.now
@@ -556,16 +592,24 @@ class Operator:
                 if v.leg is not None:
                     stop_leg(v, env.now)
                 v.heading, path = None, None
+                v.plan_version += 1
                 continue
             v.heading, path = None, None
             v.stops.pop(0)
             task = stop.task
             if stop.kind is PICKUP:
+                if v.load and stop.passengers:  # a shared ride: it and those on board
+                    task.shared = True
+                    for s in v.stops:
+                        if s.kind is DROPOFF and s.task.state is PICKED_UP_STATE:
+                            s.task.shared = True
                 v.load += stop.passengers
                 book.picked_up(task)
             else:
                 v.load += stop.passengers
+                task.dropped_at = env.now
                 emit(env.now, "dropoff", v.id, task.id, v.loc)
+            self.changed(v)
             if not stop.completes:
                 continue
             if self.service_time > 0:
@@ -634,6 +678,7 @@ class Operator:
             v.busy_seconds += env.now - v.busy_since
         v.failed, v.failures, v.down_since, v.task = True, v.failures + 1, env.now, None
         v.stops, v.load, v.serving, v.heading = [], 0, None, None
+        self.changed(v)
         self.fleet.set_failed(v)
         self.bus.emit(env.now, "breakdown", v.id, tasks[0].id if tasks else -1, v.loc)
         for task in tasks:
@@ -669,6 +714,7 @@ class Operator:
         v.busy_seconds += env.now - v.busy_since
         v.busy_since = env.now
         v.stops, v.heading = [], None
+        self.changed(v)
         self.bus.emit(env.now, "reassign", v.id, task.id, v.loc)
         self.book.unassign(task)
         return task
