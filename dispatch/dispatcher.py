@@ -674,6 +674,12 @@ class Dispatcher:
         n_req = np.array([0 if t.dropoff is None else t.passengers for t in tasks], np.int64)
         point = np.array([t.dropoff is None for t in tasks])
         pd = np.array([0.0 if t.dropoff is None else t.direct_time for t in tasks])
+        if getattr(self.planner, "inner", None) is not None and not point.all():
+            # a congested planner (dispatch.congestion): the drive at this hour, not free flow
+            trips = np.flatnonzero(~point)
+            pd[trips] = self.planner.between([tasks[k].loc for k in trips.tolist()],
+                                             [tasks[k].dropoff for k in trips.tolist()],
+                                             pairwise=True)
         svc_p = np.where(point, svc, 0.0)
         svc_d = np.where(point, 0.0, svc)
         vehicles = [fleet.vehicles[k] for k in slots.tolist()]
