@@ -513,6 +513,77 @@ class Operator:
         if i == 0 and v.heading is not None and v.proc is not None and v.proc.is_alive:
             v.proc.interrupt("reroute")  # its next stop is the new pickup
 
+    def route_times(self, v: Vehicle, rows: list[tuple]) -> tuple[list[float] | None, str]:
+        """Planned arrival times if ``v`` drove the stops ``rows`` (:func:`dispatch.dispatcher.
+        route_stops`: kind, task id, location, passengers, latest time, completes) from where
+        it is now, on the planner's travel times, or ``(None, why)`` where a stop would be
+        late or the vehicle over its capacity. A stop of its plan that is already planned
+        late (traffic ran slower than planned) may stay as late as it is."""
+        env, planner = self.env, self.driver.planner
+        now = env.now
+        old = {(s.kind, s.task.id): s for s in v.stops}
+        planned = dict(zip([(s.kind, s.task.id) for s in v.stops], self._times(v)))
+        first = old.get((rows[0][0], rows[0][1]))
+        if first is not None and v.heading is first and v.leg is not None:
+            t = v.leg_start + v.leg.seconds
+        else:
+            t = max(now, v.free_at) + float(planner.between([v.location(now)], [rows[0][2]])[0, 0])
+        legs = (planner.between([r[2] for r in rows[:-1]], [r[2] for r in rows[1:]],
+                                pairwise=True) if len(rows) > 1 else [])
+        times, occ = [], v.load
+        for k, (kind, tid, loc, pax, latest, completes) in enumerate(rows):
+            if k:
+                t += float(legs[k - 1])
+            mine = old.get((kind, tid))
+            if completes is None:
+                completes = mine.completes
+            occ += pax
+            if occ > v.capacity:
+                return None, f"{occ} on board after {kind} of request {tid} (capacity " \
+                             f"{v.capacity})"
+            limit = latest if mine is None else max(latest, planned[(kind, tid)])
+            if t > limit + 1e-9:
+                return None, f"{kind} of request {tid} at {t:.6g} s, after its latest " \
+                             f"{latest:.6g} s"
+            times.append(t)
+            if completes:
+                t += self.service_time
+        return times, ""
+
+    def follow(self, v: Vehicle, rows: list[tuple], times: list[float], tasks: dict,
+               costs: dict) -> None:
+        """A multi-request decision (``Allocation.routes``): ``v`` gets the requests ``tasks``
+        (task id -> Task, each handed at ``costs[task id]``) and drives the stops ``rows`` in
+        that order (planned arrival ``times``, checked by :meth:`route_times`)."""
+        env = self.env
+        old = {(s.kind, s.task.id): s for s in v.stops}
+        empty = not v.stops and v.serving is None
+        head = v.stops[0] if v.stops else None
+        stops = []
+        for kind, tid, loc, pax, latest, completes in rows:
+            s = old.get((kind, tid))
+            if s is None:
+                s = Stop(kind, tasks[tid], loc, pax, latest, bool(completes))
+            stops.append(s)
+        if empty:
+            self.on_assign(v)
+            path = self.driver.plan(v, stops[0].loc, env.now)
+        for tid, task in tasks.items():
+            self.book.assign(task, v.id, costs[tid])
+        self._set_legs(v, stops, times)
+        v.stops = stops
+        occupancies(v.load, v.stops)
+        self.changed(v)
+        if empty:
+            self.fleet.set_busy(v)
+            v.proc = env.process(self._run(v, path, stops[0]))
+            return
+        for tid in tasks:
+            self.bus.emit(env.now, "insert", v.id, tid, v.loc)
+        if stops[0] is not head and v.heading is not None and v.proc is not None \
+                and v.proc.is_alive:
+            v.proc.interrupt("reroute")
+
     def _times(self, v: Vehicle) -> list[float]:
         """Planned arrival times at ``v``'s stops (from the leg it drives, or from when it
         can leave where it stands)."""
