@@ -29,6 +29,7 @@ _FALLBACK = {
         "auction": "allocators.auction:AuctionAllocator",
         "magnnet": "allocators.magnnet.allocator:MagnnetAllocator",
         "local_hungarian": "allocators.local_hungarian:LocalHungarianAllocator",
+        "rtv": "allocators.rtv:RtvAllocator",
     },
     "planner": {
         "astar": "planners.astar:AStarPlanner",

@@ -1,0 +1,475 @@
+"""RTV: batched multi-request assignment (Alonso-Mora et al., PNAS 2017; FleetPy's RV/RTV).
+
+Each decision (a batch of open requests, the idle vehicles and the busy ones with a free seat):
+
+1. **Pairwise shareability** (the RR graph): two requests are shareable when a vehicle standing
+   at one of their pickups now could serve both within their limits (a necessary condition
+   for any vehicle: a real one arrives there later; drives obey the triangle inequality).
+2. **Feasible groups per vehicle** (the RTV graph): size 1, the requests whose insertion cost
+   in ``problem.cost`` is finite (the ``max_requests`` cheapest per vehicle); size ``k``, each
+   union of a feasible ``(k-1)``-group with one more of the vehicle's requests whose every
+   ``(k-1)``-subgroup is feasible for the vehicle and whose pairs are shareable (feasibility
+   is closed under taking subgroups, so nothing feasible is missed), up to the vehicle's
+   seats. Each candidate gets its best stop order: every order of the group's pickups and
+   drop-offs merged into the vehicle's plan (the plan's own order kept), on the planner's
+   travel times (``problem.travel``), compiled (:mod:`allocators._rtv_kernel`).
+3. **Assignment**: at most one group per vehicle, each request in at most one group, the most
+   requests served, then the least total cost: an integer program on
+   :func:`scipy.optimize.milp` (HiGHS) with a time limit; the greedy assignment (largest
+   groups first, then cheapest) is the fallback and the floor (the better of the two is
+   taken). A batch whose groups are all single requests is a linear assignment
+   (:func:`allocators.hungarian.optimal_pairs`, exact).
+
+Costs (``objective``): ``delay`` (default): the new requests' delays (drop-off time - release -
+direct drive) plus how much later the plan's own drop-offs come; ``added_time``: how much later
+the vehicle's plan ends.
+
+Bounds and what they cut (``stats``, also :meth:`describe`): ``max_requests`` candidate requests
+per vehicle (``pairs_cut``: feasible pairs left out), ``max_groups`` groups per vehicle
+(``groups_cut``: candidate groups never evaluated), ``max_nodes`` search nodes per candidate
+order (``orders_cut``), ``time_limit`` seconds per batch for the groups and the integer
+program (``levels_cut``: vehicles whose larger groups were not grown; ``ilp_time_limit``:
+programs stopped at the limit; ``greedy``: batches decided greedily).
+
+Exactness: with no bound cutting (small batches), the answer serves as many requests as any
+assignment of groups and, among those, has the least total cost (tested against brute force).
+
+Limitation of the problem's contract: a vehicle in its service time at its last stop (a busy
+vehicle without a plan) cannot be told from an idle one; with ``service_time > 0`` such vehicles
+are assumed to leave after a full service time (conservative).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import numpy as np
+
+from dispatch.contracts import Allocation, AllocationProblem, Allocator, Request
+
+OBJECTIVES = {"delay": 0, "added_time": 1}
+TOL = 5e-10  # (the kernel checks limits with +1e-9; half of it absorbs rounding differences)
+
+
+def _positive_int(name: str, v, allow_none: bool = False):
+    if v is None and allow_none:
+        return v
+    if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+        raise TypeError(f"{name} must be a positive integer{' or None' if allow_none else ''}, "
+                        f"got {v!r}")
+    return v
+
+
+class RtvAllocator(Allocator):
+    """Batch pooling by the request-trip-vehicle graph and an integer program (see the module
+    docstring). Deterministic: draws nothing from ``problem.rng``."""
+
+    name = "rtv"
+    decentralized = False
+    multi_request = True
+
+    def __init__(self, objective: str = "delay", max_group: int | None = None,
+                 max_requests: int = 24, max_groups: int = 200, max_nodes: int = 50_000,
+                 time_limit: float = 10.0, solver: str = "milp") -> None:
+        if objective not in OBJECTIVES:
+            raise TypeError(f"objective must be one of {', '.join(OBJECTIVES)}, got {objective!r}")
+        if solver not in ("milp", "greedy"):
+            raise TypeError(f"solver must be 'milp' or 'greedy', got {solver!r}")
+        if isinstance(time_limit, bool) or not isinstance(time_limit, (int, float)) \
+                or not time_limit > 0:
+            raise TypeError(f"time_limit must be a number of seconds > 0, got {time_limit!r}")
+        self.objective = objective
+        self.max_group = _positive_int("max_group", max_group, allow_none=True)
+        self.max_requests = _positive_int("max_requests", max_requests)
+        self.max_groups = _positive_int("max_groups", max_groups)
+        self.max_nodes = _positive_int("max_nodes", max_nodes)
+        self.time_limit = float(time_limit)
+        self.solver = solver
+        self.stats = dict(batches=0, seconds=0.0, seconds_max=0.0, groups=0, groups_feasible=0,
+                          largest_group=0, pairs_cut=0, groups_cut=0, orders_cut=0,
+                          levels_cut=0, ilp=0, ilp_time_limit=0, ilp_failed=0, greedy=0,
+                          assignment=0, multi=0)
+
+    def describe(self) -> dict[str, str]:
+        out = {"objective": self.objective, "max_group": str(self.max_group),
+               "max_requests": str(self.max_requests), "max_groups": str(self.max_groups),
+               "max_nodes": str(self.max_nodes), "time_limit": str(self.time_limit),
+               "solver": self.solver}
+        if self.stats["batches"]:
+            out.update({k: (f"{v:.3f}" if isinstance(v, float) else str(v))
+                        for k, v in self.stats.items()})
+        return out
+
+    # ------------------------------------------------------------------ the decision
+    def allocate(self, problem: AllocationProblem) -> Allocation:
+        t_start = time.perf_counter()
+        n, m = problem.n_agents, problem.n_tasks
+        if not n or not m or not np.isfinite(problem.cost).any():
+            return Allocation(pairs=())
+        self.stats["batches"] += 1
+        try:
+            return self._allocate(problem, t_start)
+        finally:
+            dt = time.perf_counter() - t_start
+            self.stats["seconds"] += dt
+            self.stats["seconds_max"] = max(self.stats["seconds_max"], dt)
+
+    def _allocate(self, problem: AllocationProblem, t_start: float) -> Allocation:
+        from allocators.hungarian import optimal_pairs
+
+        cost = problem.cost
+        if problem.travel is None:  # no routing between arbitrary places: one request each
+            return Allocation.centralized(problem, optimal_pairs(cost))
+        b = _Batch(problem, self)
+        if b.empty:
+            return Allocation(pairs=())
+        groups, gveh, gcost, gorder = b.groups(t_start)
+        self.stats["groups_feasible"] += len(gveh)
+        if not len(gveh):
+            return Allocation(pairs=())
+        chosen = self._assign(b, groups, gveh, gcost, t_start)
+        return b.answer(chosen, groups, gveh, gorder)
+
+    def _assign(self, b, groups, gveh, gcost, t_start: float) -> list[int]:
+        """Indices of the chosen (vehicle, group) candidates."""
+        sizes = (groups >= 0).sum(axis=1)
+        if sizes.max() == 1:  # a linear assignment: exact
+            from allocators.hungarian import optimal_pairs
+
+            self.stats["assignment"] += 1
+            c = np.full((b.nv, b.m), np.inf)
+            c[gveh, groups[:, 0]] = gcost
+            where = {(int(j), int(r)): g for g, (j, r) in enumerate(zip(gveh, groups[:, 0]))}
+            return [where[(j, r)] for j, r in optimal_pairs(c)]
+        greedy = _greedy(groups, gveh, gcost, sizes)
+        if self.solver == "greedy":
+            self.stats["greedy"] += 1
+            return greedy
+        left = self.time_limit - (time.perf_counter() - t_start)
+        got = _milp(groups, gveh, gcost, sizes, b.nv, b.m, max(left, 0.2))
+        if got is None:
+            self.stats["ilp_failed"] += 1
+            self.stats["greedy"] += 1
+            return greedy
+        chosen, status = got
+        self.stats["ilp"] += 1
+        if status == 1:
+            self.stats["ilp_time_limit"] += 1
+
+        def value(sel):
+            return (-int(sizes[sel].sum()), float(gcost[sel].sum())) if len(sel) else (0, 0.0)
+
+        if value(greedy) < value(chosen):
+            self.stats["greedy"] += 1
+            return greedy
+        return chosen
+
+
+def _greedy(groups, gveh, gcost, sizes) -> list[int]:
+    """Largest groups first, then the cheapest; a group whose vehicle or any request is taken
+    is skipped."""
+    order = np.lexsort((gcost, -sizes))
+    used_v: set[int] = set()
+    used_r: set[int] = set()
+    out = []
+    for g in order.tolist():
+        j = int(gveh[g])
+        if j in used_v:
+            continue
+        rs = [int(r) for r in groups[g] if r >= 0]
+        if any(r in used_r for r in rs):
+            continue
+        used_v.add(j)
+        used_r.update(rs)
+        out.append(g)
+    return out
+
+
+def _milp(groups, gveh, gcost, sizes, nv: int, m: int, time_limit: float):
+    """The integer program: ``(chosen candidates, status)`` (status 0 optimal, 1 stopped at the
+    time limit with a solution) or None (no solution)."""
+    from scipy.optimize import Bounds, LinearConstraint, milp
+    from scipy.sparse import csr_array
+
+    G = len(gveh)
+    # most requests first: one more request outweighs any difference in cost
+    scale = float(np.abs(gcost).sum()) + 1.0
+    c = gcost / scale - sizes
+    rows, cols = [gveh.astype(np.int64)], [np.arange(G)]
+    gi, ki = np.nonzero(groups >= 0)
+    rows.append(nv + groups[gi, ki].astype(np.int64))
+    cols.append(gi)
+    a = csr_array((np.ones(sum(len(r) for r in rows)), (np.concatenate(rows),
+                                                        np.concatenate(cols))),
+                  shape=(nv + m, G))
+    try:
+        res = milp(c, constraints=LinearConstraint(a, -np.inf, 1.0), integrality=np.ones(G),
+                   bounds=Bounds(0.0, 1.0),
+                   options={"time_limit": float(time_limit), "mip_rel_gap": 1e-9})
+    except Exception:  # noqa: BLE001 - the greedy answer stands in
+        return None
+    if res.x is None:
+        return None
+    return np.flatnonzero(res.x > 0.5).tolist(), (0 if res.status == 0 else 1)
+
+
+class _Batch:
+    """One decision's arrays: candidate vehicles (rows with a finite pair), requests, the plans,
+    the drives between everything a group's order may visit."""
+
+    def __init__(self, problem: AllocationProblem, alloc: RtvAllocator) -> None:
+        self.problem, self.alloc = problem, alloc
+        cost = problem.cost
+        finite = np.isfinite(cost)
+        vrows = np.flatnonzero(finite.any(axis=1))
+        self.vrows = vrows
+        self.nv = nv = vrows.size
+        self.empty = not nv
+        if self.empty:
+            return
+        tasks = problem.tasks
+        self.m = m = len(tasks)
+        now = float(problem.time)
+        self.now = now
+        travel = problem.travel
+        svc = self.svc = float(problem.service_time)
+        caps = (np.ones(problem.n_agents, np.int64) if problem.capacity is None
+                else np.asarray(problem.capacity, np.int64))
+        self.cap = caps[vrows]
+        ids = problem.agent_ids
+        self.aids = ids[vrows]
+        plans = problem.plans
+        self.plans = [plans.get(int(a), ()) if len(plans) else () for a in self.aids.tolist()]
+        # requests
+        self.hasdrop = np.array([t.dropoff is not None for t in tasks])
+        self.pax = np.array([t.passengers if t.dropoff is not None else 0 for t in tasks],
+                            np.int64)
+        self.lp = np.array([t.deadline for t in tasks], float)
+        self.ld = np.array([t.dropoff_deadline if t.dropoff is not None else math.inf
+                            for t in tasks], float)
+        self.rel = np.array([t.released_at for t in tasks], float)
+        new_locs = []
+        for t in tasks:
+            new_locs += [t.loc, t.loc if t.dropoff is None else t.dropoff]
+        nn = np.asarray(travel(new_locs, new_locs), float)
+        self.nn = np.ascontiguousarray(nn)
+        self.direct = np.where(self.hasdrop, nn[2 * np.arange(m), 2 * np.arange(m) + 1], 0.0)
+        # vehicles: where they are (a node and the seconds left to it, or a location)
+        agents = problem.agents
+        nodes = getattr(agents, "nodes", None)
+        if nodes is not None:
+            src = nodes[vrows].tolist()
+            rem = np.asarray(agents.remaining, float)[vrows]
+        else:
+            src = [agents[int(k)].loc for k in vrows.tolist()]
+            rem = np.zeros(nv)
+        self.vn = np.ascontiguousarray(np.asarray(travel(src, new_locs), float) + rem[:, None])
+        # plans, flat
+        off = [0]
+        flat = []
+        for p in self.plans:
+            flat += p
+            off.append(len(flat))
+        self.off = np.array(off, np.int64)
+        S = len(flat)
+        self.p_pax = np.array([s.passengers for s in flat], np.int64)
+        self.p_eta = np.array([s.eta for s in flat], float)
+        self.p_limit = np.maximum(np.array([s.latest for s in flat], float), self.p_eta)
+        self.p_drop = np.array([s.kind == "dropoff" for s in flat], bool)
+        completes = []
+        for p in self.plans:
+            drops = {s.task_id for s in p if s.kind == "dropoff"}
+            completes += [s.kind == "dropoff" or s.task_id not in drops for s in p]
+        self.p_svc = np.where(np.array(completes, bool), svc, 0.0) if S else np.zeros(0)
+        load = np.zeros(nv, np.int64)
+        start = np.full(nv, now)
+        first_eta = np.full(nv, now)
+        old_end = np.full(nv, now)
+        if S:
+            plocs = [s.loc for s in flat]
+            self.pn = np.ascontiguousarray(np.asarray(travel(plocs, new_locs), float))
+            self.np_ = np.ascontiguousarray(np.asarray(travel(new_locs, plocs), float))
+            self.pp = np.zeros(S)
+            if S > 1:
+                self.pp[:-1] = np.asarray(travel(plocs[:-1], plocs[1:], pairwise=True), float)
+            has = np.flatnonzero(self.off[1:] > self.off[:-1])
+            firsts = self.off[has]
+            lasts = self.off[has + 1] - 1
+            to_first = np.asarray(travel([src[k] for k in has.tolist()],
+                                         [plocs[k] for k in firsts.tolist()], pairwise=True),
+                                  float) + rem[has]
+            first_eta[has] = self.p_eta[firsts]
+            start[has] = np.maximum(now, self.p_eta[firsts] - to_first)
+            load[has] = [flat[k].occupancy - flat[k].passengers for k in firsts.tolist()]
+            old_end[has] = self.p_eta[lasts] + self.p_svc[lasts]
+        else:
+            self.pn = np.zeros((0, 2 * m))
+            self.np_ = np.zeros((2 * m, 0))
+            self.pp = np.zeros(0)
+        if svc > 0:  # a plan-less vehicle may be in service at its last stop (module doc)
+            bare = self.off[1:] == self.off[:-1]
+            start[bare] = now + svc
+            old_end[bare] = now + svc
+        self.start, self.first_eta, self.load, self.old_end = start, first_eta, load, old_end
+        # candidate requests per vehicle: the cheapest max_requests finite pairs
+        sub = cost[vrows]
+        self.cand: list[np.ndarray] = []
+        cut = 0
+        k = alloc.max_requests
+        for j in range(nv):
+            row = sub[j]
+            ok = np.flatnonzero(np.isfinite(row))
+            if ok.size > k:
+                cut += ok.size - k
+                ok = ok[np.argsort(row[ok], kind="stable")[:k]]
+                ok.sort()
+            self.cand.append(ok)
+        alloc.stats["pairs_cut"] += cut
+        from allocators._rtv_kernel import pair_shareable
+
+        self.rr = pair_shareable(now, self.nn, self.pax, self.lp, self.ld, svc,
+                                 int(self.cap.max()), TOL)
+        point = ~self.hasdrop
+        if point.any():  # point tasks: no pair test
+            self.rr[point, :] = True
+            self.rr[:, point] = True
+            np.fill_diagonal(self.rr, False)
+
+    def evaluate(self, groups: np.ndarray, gveh: np.ndarray):
+        """Best orders of candidates ``groups`` (rows of request indices, -1 padded) on the
+        vehicles ``gveh``: ``(cost, order codes, cut)``."""
+        from allocators._rtv_kernel import best_orders
+
+        G, K = groups.shape
+        plan_len = int((self.off[1:] - self.off[:-1]).max()) if self.nv else 0
+        L = plan_len + 2 * K
+        cost = np.empty(G)
+        order = np.full((G, max(L, 1)), -99, np.int64)
+        cut = np.zeros(G, bool)
+        if G:
+            best_orders(np.ascontiguousarray(groups, np.int64), np.ascontiguousarray(gveh,
+                                                                                     np.int64),
+                        self.start, self.first_eta, self.load, self.cap, self.off, self.p_pax,
+                        self.p_limit, self.p_svc, self.p_eta, self.p_drop, self.pp, self.vn,
+                        self.pn, self.np_, self.nn, self.pax, self.lp, self.ld, self.rel,
+                        self.direct, self.hasdrop, self.old_end, self.svc,
+                        OBJECTIVES[self.alloc.objective], self.alloc.max_nodes, TOL, cost,
+                        order, cut)
+        return cost, order, cut
+
+    def groups(self, t_start: float):
+        """All feasible (vehicle, group) candidates: ``(groups (G, K) -1 padded, vehicles,
+        costs, orders)``."""
+        alloc, stats = self.alloc, self.alloc.stats
+        kmax = int(self.cap.max()) if alloc.max_group is None else min(alloc.max_group,
+                                                                        int(self.cap.max()))
+        # size 1
+        gveh = np.concatenate([np.full(c.size, j, np.int64) for j, c in enumerate(self.cand)])
+        g1 = np.concatenate(self.cand).astype(np.int64)[:, None]
+        cost, order, cut = self.evaluate(g1, gveh)
+        stats["groups"] += len(gveh)
+        stats["orders_cut"] += int(cut.sum())
+        ok = np.isfinite(cost)
+        out = [(g1[ok], gveh[ok], cost[ok], order[ok])]
+        stats["largest_group"] = max(stats["largest_group"], 1 if ok.any() else 0)
+        feasible: list[set] = [set() for _ in range(self.nv)]
+        for j, r in zip(gveh[ok].tolist(), g1[ok, 0].tolist()):
+            feasible[j].add((r,))
+        count = [len(f) for f in feasible]
+        rr = self.rr
+        pax, cap = self.pax, self.cap
+        for k in range(2, kmax + 1):
+            if time.perf_counter() - t_start > alloc.time_limit * 0.5:
+                stats["levels_cut"] += sum(1 for f in feasible if len(f) > 1)
+                break
+            cand_rows, cand_veh = [], []
+            for j in range(self.nv):
+                prev = feasible[j]
+                if len(prev) < k or cap[j] < 2:  # a k-group needs k feasible (k-1)-subgroups
+                    continue
+                singles = sorted({r for g in prev for r in g})
+                room = alloc.max_groups - count[j]
+                got = []
+                for g in sorted(prev):
+                    last = g[-1]
+                    gp = int(pax[list(g)].sum())
+                    for r in singles:
+                        if r <= last or not rr[last, r] or gp + pax[r] > cap[j]:
+                            continue
+                        if not all(rr[q, r] for q in g[:-1]):
+                            continue
+                        new = g + (r,)
+                        if k > 2 and not all(new[:i] + new[i + 1:] in prev for i in range(k - 1)):
+                            continue
+                        got.append(new)
+                if not got:
+                    continue
+                if len(got) > room:
+                    stats["groups_cut"] += len(got) - room
+                    if room <= 0:
+                        continue
+                    c1 = self.problem.cost[self.vrows[j]]
+                    got.sort(key=lambda g: (sum(c1[r] for r in g), g))
+                    got = got[:room]
+                cand_rows += got
+                cand_veh += [j] * len(got)
+            if not cand_rows:
+                break
+            gk = np.array(cand_rows, np.int64)
+            gv = np.array(cand_veh, np.int64)
+            cost, order, cut = self.evaluate(gk, gv)
+            stats["groups"] += len(gv)
+            stats["orders_cut"] += int(cut.sum())
+            ok = np.isfinite(cost)
+            if not ok.any():
+                break
+            stats["largest_group"] = max(stats["largest_group"], k)
+            out.append((gk[ok], gv[ok], cost[ok], order[ok]))
+            nxt: list[set] = [set() for _ in range(self.nv)]
+            for j, g in zip(gv[ok].tolist(), gk[ok].tolist()):
+                nxt[j].add(tuple(g))
+                count[j] += 1
+            feasible = nxt
+        K = max(g.shape[1] for g, *_ in out)
+        L = max(o.shape[1] for *_, o in out)
+        groups = np.concatenate([np.pad(g, ((0, 0), (0, K - g.shape[1])), constant_values=-1)
+                                 for g, *_ in out])
+        orders = np.concatenate([np.pad(o, ((0, 0), (0, L - o.shape[1])), constant_values=-99)
+                                 for *_, o in out])
+        return (groups, np.concatenate([v for _, v, _, _ in out]),
+                np.concatenate([c for _, _, c, _ in out]), orders)
+
+    def answer(self, chosen, groups, gveh, gorder) -> Allocation:
+        """The allocation of the chosen candidates: pairs, and each vehicle's whole route."""
+        problem = self.problem
+        tids = problem.task_ids
+        pairs, reqs, routes = [], [], {}
+        multi = 0
+        for g in sorted(chosen, key=lambda g: int(gveh[g])):
+            j = int(gveh[g])
+            aid = int(self.aids[j])
+            rs = [int(r) for r in groups[g] if r >= 0]
+            plan = self.plans[j]
+            route = []
+            for code in gorder[g].tolist():
+                if code == -99:
+                    break
+                if code < 0:
+                    s = plan[-code - 1]
+                    route.append((s.kind, int(s.task_id)))
+                else:
+                    tid = int(tids[rs[code // 2]])
+                    route.append(("pickup" if code % 2 == 0 else "dropoff", tid))
+            routes[aid] = tuple(route)
+            multi += len(rs) > 1
+            for r in rs:
+                tid = int(tids[r])
+                pairs.append((aid, tid))
+                reqs.append(Request(round=0, agent_id=aid, task_id=tid,
+                                    cost=float(problem.cost[self.vrows[j], r]), won=True))
+        self.alloc.stats["multi"] += multi
+        return Allocation(pairs=tuple(pairs), rounds=1, requests=tuple(reqs), messages=0,
+                          routes=routes)
+
+
+__all__ = ["RtvAllocator"]
