@@ -6,7 +6,8 @@ Each decision (a batch of open requests, the idle vehicles and the busy ones wit
    at one of their pickups now could serve both within their limits (a necessary condition
    for any vehicle: a real one arrives there later; drives obey the triangle inequality).
 2. **Feasible groups per vehicle** (the RTV graph): size 1, the requests whose insertion cost
-   in ``problem.cost`` is finite (the ``max_requests`` cheapest per vehicle); size ``k``, each
+   in ``problem.cost`` is finite (the ``max_vehicles`` cheapest vehicles of each request,
+   the ``max_requests`` cheapest requests of each vehicle); size ``k``, each
    union of a feasible ``(k-1)``-group with one more of the vehicle's requests whose every
    ``(k-1)``-subgroup is feasible for the vehicle and whose pairs are shareable (feasibility
    is closed under taking subgroups, so nothing feasible is missed), up to the vehicle's
@@ -24,8 +25,9 @@ Costs (``objective``): ``delay`` (default): the new requests' delays (drop-off t
 direct drive) plus how much later the plan's own drop-offs come; ``added_time``: how much later
 the vehicle's plan ends.
 
-Bounds and what they cut (``stats``, also :meth:`describe`): ``max_requests`` candidate requests
-per vehicle (``pairs_cut``: feasible pairs left out), ``max_groups`` groups per vehicle
+Bounds and what they cut (``stats``, also :meth:`describe`): ``max_vehicles`` candidate vehicles
+per request (the cheapest; None: all) and ``max_requests`` candidate requests per vehicle
+(``pairs_cut``: feasible pairs left out by either), ``max_groups`` groups per vehicle
 (``groups_cut``: candidate groups never evaluated), ``max_nodes`` search nodes per candidate
 order (``orders_cut``), ``time_limit`` seconds per batch for the groups and the integer
 program (``levels_cut``: vehicles whose larger groups were not grown; ``ilp_time_limit``:
@@ -69,7 +71,8 @@ class RtvAllocator(Allocator):
     multi_request = True
 
     def __init__(self, objective: str = "delay", max_group: int | None = None,
-                 max_requests: int = 24, max_groups: int = 200, max_nodes: int = 50_000,
+                 max_vehicles: int | None = 30, max_requests: int = 24,
+                 max_groups: int = 200, max_nodes: int = 50_000,
                  time_limit: float = 10.0, solver: str = "milp") -> None:
         if objective not in OBJECTIVES:
             raise TypeError(f"objective must be one of {', '.join(OBJECTIVES)}, got {objective!r}")
@@ -80,6 +83,7 @@ class RtvAllocator(Allocator):
             raise TypeError(f"time_limit must be a number of seconds > 0, got {time_limit!r}")
         self.objective = objective
         self.max_group = _positive_int("max_group", max_group, allow_none=True)
+        self.max_vehicles = _positive_int("max_vehicles", max_vehicles, allow_none=True)
         self.max_requests = _positive_int("max_requests", max_requests)
         self.max_groups = _positive_int("max_groups", max_groups)
         self.max_nodes = _positive_int("max_nodes", max_nodes)
@@ -87,11 +91,12 @@ class RtvAllocator(Allocator):
         self.solver = solver
         self.stats = dict(batches=0, seconds=0.0, seconds_max=0.0, groups=0, groups_feasible=0,
                           largest_group=0, pairs_cut=0, groups_cut=0, orders_cut=0,
-                          levels_cut=0, ilp=0, ilp_time_limit=0, ilp_failed=0, greedy=0,
+                          levels_cut=0, ilp=0, lp_whole=0, ilp_time_limit=0, ilp_failed=0, greedy=0,
                           assignment=0, multi=0)
 
     def describe(self) -> dict[str, str]:
         out = {"objective": self.objective, "max_group": str(self.max_group),
+               "max_vehicles": str(self.max_vehicles),
                "max_requests": str(self.max_requests), "max_groups": str(self.max_groups),
                "max_nodes": str(self.max_nodes), "time_limit": str(self.time_limit),
                "solver": self.solver}
@@ -155,6 +160,8 @@ class RtvAllocator(Allocator):
         self.stats["ilp"] += 1
         if status == 1:
             self.stats["ilp_time_limit"] += 1
+        elif status == 2:
+            self.stats["lp_whole"] += 1
 
         def value(sel):
             return (-int(sizes[sel].sum()), float(gcost[sel].sum())) if len(sel) else (0, 0.0)
@@ -187,8 +194,9 @@ def _greedy(groups, gveh, gcost, sizes) -> list[int]:
 
 def _milp(groups, gveh, gcost, sizes, nv: int, m: int, time_limit: float):
     """The integer program: ``(chosen candidates, status)`` (status 0 optimal, 1 stopped at the
-    time limit with a solution) or None (no solution)."""
-    from scipy.optimize import Bounds, LinearConstraint, milp
+    time limit with a solution, 2 the relaxation's optimum was whole) or None (no
+    solution)."""
+    from scipy.optimize import Bounds, LinearConstraint, linprog, milp
     from scipy.sparse import csr_array
 
     G = len(gveh)
@@ -202,10 +210,20 @@ def _milp(groups, gveh, gcost, sizes, nv: int, m: int, time_limit: float):
     a = csr_array((np.ones(sum(len(r) for r in rows)), (np.concatenate(rows),
                                                         np.concatenate(cols))),
                   shape=(nv + m, G))
+    t0 = time.perf_counter()
+    try:  # the relaxation first: when its optimum is whole, it is the program's (and cheap)
+        lp = linprog(c, A_ub=a, b_ub=np.ones(nv + m), bounds=(0.0, 1.0), method="highs",
+                     options={"time_limit": float(time_limit)})
+    except Exception:  # noqa: BLE001 - the program below decides
+        lp = None
+    if lp is not None and lp.status == 0 and lp.x is not None:
+        x = lp.x
+        if np.all((x < 1e-7) | (x > 1.0 - 1e-7)):
+            return np.flatnonzero(x > 0.5).tolist(), 2
+    left = max(float(time_limit) - (time.perf_counter() - t0), 0.1)
     try:
         res = milp(c, constraints=LinearConstraint(a, -np.inf, 1.0), integrality=np.ones(G),
-                   bounds=Bounds(0.0, 1.0),
-                   options={"time_limit": float(time_limit), "mip_rel_gap": 1e-9})
+                   bounds=Bounds(0.0, 1.0), options={"time_limit": left, "mip_rel_gap": 1e-9})
     except Exception:  # noqa: BLE001 - the greedy answer stands in
         return None
     if res.x is None:
@@ -221,6 +239,19 @@ class _Batch:
         self.problem, self.alloc = problem, alloc
         cost = problem.cost
         finite = np.isfinite(cost)
+        kv = alloc.max_vehicles
+        if kv is not None and cost.shape[0] > kv:  # each request: its kv cheapest vehicles
+            count = finite.sum(axis=0)
+            over = np.flatnonzero(count > kv)
+            if over.size:
+                sub = np.where(finite[:, over], cost[:, over], np.inf)
+                keep = np.argpartition(sub, kv - 1, axis=0)[:kv]
+                mask = np.zeros_like(sub, dtype=bool)
+                np.put_along_axis(mask, keep, True, axis=0)
+                finite = finite.copy()
+                finite[:, over] &= mask
+                alloc.stats["pairs_cut"] += int((count[over] - kv).sum())
+        self.finite = finite
         vrows = np.flatnonzero(finite.any(axis=1))
         self.vrows = vrows
         self.nv = nv = vrows.size
@@ -312,7 +343,7 @@ class _Batch:
             old_end[bare] = now + svc
         self.start, self.first_eta, self.load, self.old_end = start, first_eta, load, old_end
         # candidate requests per vehicle: the cheapest max_requests finite pairs
-        sub = cost[vrows]
+        sub = np.where(finite[vrows], cost[vrows], np.inf)
         self.cand: list[np.ndarray] = []
         cut = 0
         k = alloc.max_requests
@@ -377,7 +408,7 @@ class _Batch:
             feasible[j].add((r,))
         count = [len(f) for f in feasible]
         rr = self.rr
-        pax, cap = self.pax, self.cap
+        cap = self.cap
         for k in range(2, kmax + 1):
             if time.perf_counter() - t_start > alloc.time_limit * 0.5:
                 stats["levels_cut"] += sum(1 for f in feasible if len(f) > 1)
@@ -385,16 +416,15 @@ class _Batch:
             cand_rows, cand_veh = [], []
             for j in range(self.nv):
                 prev = feasible[j]
-                if len(prev) < k or cap[j] < 2:  # a k-group needs k feasible (k-1)-subgroups
+                if len(prev) < k or cap[j] < k:  # a k-group needs k feasible (k-1)-subgroups
                     continue
                 singles = sorted({r for g in prev for r in g})
                 room = alloc.max_groups - count[j]
                 got = []
                 for g in sorted(prev):
                     last = g[-1]
-                    gp = int(pax[list(g)].sum())
                     for r in singles:
-                        if r <= last or not rr[last, r] or gp + pax[r] > cap[j]:
+                        if r <= last or not rr[last, r]:
                             continue
                         if not all(rr[q, r] for q in g[:-1]):
                             continue

@@ -28,6 +28,12 @@ communication components, message loss):
 ``rng``         the answer does not change when the global ``random`` / ``numpy.random`` state
                 does (randomness only from ``problem.rng``).
 
+An allocator that sets ``multi_request`` (batch pooling) is also run on the shared-ride
+problems of :func:`pooled_problems` (vehicles with plans, seats, ``problem.travel`` on
+:func:`small_network`); ``valid`` then also checks each route of ``Allocation.routes`` as the
+dispatcher does (the agent's plan and new requests once each, every pickup before its drop-off,
+the capacity and every limit on the problem's travel times: :func:`route_schedule`).
+
 Planner checks on random agents and tasks of the space: ``construct``, ``costs`` (shape
 ``(len(agents), len(tasks))``, floats, ``>= 0`` or ``inf``, no ``nan``, also for 0 agents / 0
 tasks), ``plan`` (a path from the agent's location to the goal where the cost is finite),
@@ -57,7 +63,8 @@ from dispatch.contracts import AgentView, Allocation, AllocationProblem, TaskVie
 from dispatch.errors import AllocationError
 
 __all__ = ["CheckResult", "Report", "allocation_problems", "check_allocator", "check_planner",
-           "check_repositioner", "reposition_view", "small_network", "small_world"]
+           "check_repositioner", "pooled_problem", "pooled_problems", "reposition_view",
+           "route_schedule", "small_network", "small_world"]
 
 
 @dataclass(frozen=True)
@@ -164,6 +171,149 @@ def allocation_problems(seed: int = 0) -> list[tuple[str, Callable[[], Allocatio
     ]
 
 
+def pooled_problem(seed: int, n: int, m: int, capacity: int = 3, *, busy: float = 0.5,
+                   service: float = 0.0, max_pax: int = 1
+                   ) -> tuple[str, Callable[[], AllocationProblem]]:
+    """A pooled road decision (shared rides) on :func:`small_network`, as a factory like
+    :func:`_problem`'s: ``n`` vehicles of ``capacity`` seats at random intersections, about
+    ``busy`` of them with a plan (a request on board, one to pick up, or both; planned times
+    from where the vehicle stands, limits some seconds later), ``m`` new requests (pickup,
+    drop-off, up to ``max_pax`` riders, pickup within 60-200 s of the release, drop-off within
+    30-300 s of the direct drive), ``problem.travel`` the road planner's, costs as a pooled
+    decision has them: seconds to the pickup of the request's earliest feasible insertion into
+    the vehicle's plan (``inf`` where none is feasible)."""
+    from dispatch.contracts import StopView
+    from planners.road import RoadPlanner
+
+    net = small_network()
+    travel = RoadPlanner(net).between
+    g = np.random.default_rng([seed, n, m, capacity, 7])
+    now = 100.0
+    nodes = g.integers(0, 30, n).tolist()  # (the grid's 30 intersections)
+    a_ids = (g.permutation(100)[:n] + 10).tolist()
+    plans: dict[int, tuple] = {}
+    for i in range(n):
+        if g.random() >= busy:
+            continue
+        kinds = [("dropoff", 9000 + 10 * i)] if g.random() < 0.7 else []
+        if g.random() < 0.7:
+            kinds.insert(int(g.integers(0, len(kinds) + 1)), ("pickup", 9001 + 10 * i))
+            at = kinds.index(("pickup", 9001 + 10 * i))
+            kinds.insert(int(g.integers(at + 1, len(kinds) + 1)), ("dropoff", 9001 + 10 * i))
+        if not kinds:
+            continue
+        locs = g.integers(0, 30, len(kinds)).tolist()
+        load = 1 if ("dropoff", 9000 + 10 * i) in kinds else 0
+        occ, t, here, stops = load, now, nodes[i], []
+        for (kind, tid), loc in zip(kinds, locs):
+            t += float(travel([here], [loc])[0, 0])
+            occ += 1 if kind == "pickup" else -1
+            stops.append(StopView(kind, tid, loc, 1 if kind == "pickup" else -1,
+                                  t + float(g.uniform(0, 150)), occ, t))
+            if kind == "dropoff":
+                t += service
+            here = loc
+        if max(load, *(s.occupancy for s in stops)) <= capacity:
+            plans[a_ids[i]] = tuple(stops)
+    picks = g.integers(0, 30, m).tolist()
+    drops = [int((p + g.integers(1, 30)) % 30) for p in picks]
+    direct = travel(picks, drops, pairwise=True) if m else np.zeros(0)
+    t_ids = (g.permutation(1000)[:m] + 5000).tolist()
+    tasks = []
+    for k in range(m):
+        rel = now - float(g.uniform(0, 30))
+        tasks.append(TaskView(t_ids[k], "trip", picks[k], rel, drops[k],
+                              rel + float(g.uniform(60, 200)), int(g.integers(1, max_pax + 1)),
+                              rel + float(direct[k]) + float(g.uniform(30, 300))))
+    agents = tuple(AgentView(a_ids[i], "car", nodes[i], 10.0) for i in range(n))
+    cost = travel(nodes, picks) if n and m else np.zeros((n, m))
+    cost = np.where(now + cost <= np.array([t.deadline for t in tasks]), cost, np.inf) \
+        if n and m else cost
+    apos, tpos = net.positions(nodes) if n else np.zeros((0, 3)), \
+        net.positions(picks) if m else np.zeros((0, 3))
+    seats = np.full(n, capacity, np.int64)
+
+    def build(drives: bool = False) -> AllocationProblem:
+        return AllocationProblem(time=now, agents=agents, tasks=tuple(tasks),
+                                 cost=np.ascontiguousarray(drive if drives else cost, float),
+                                 comm=np.ones((n, n), bool), rng=np.random.default_rng(seed),
+                                 max_rounds=200, agent_pos=apos.copy(), task_pos=tpos.copy(),
+                                 plans=dict(plans), capacity=seats.copy(),
+                                 service_time=service, travel=travel)
+
+    # the costs a pooled decision has: the earliest pickup (seconds from now) of the request's
+    # cheapest feasible insertion into the vehicle's plan, inf where none is feasible
+    from dispatch.dispatcher import route_stops
+
+    drive, cost = cost, np.full((n, m), np.inf)
+    draft = build(drives=True)
+    for i, a in enumerate(agents):
+        keys = [(st.kind, st.task_id) for st in plans.get(a.id, ())]
+        for k, t in enumerate(tasks):
+            for p in range(len(keys) + 1):
+                for q in range(p, len(keys) + 1):
+                    route = keys[:p] + [("pickup", t.id)] + keys[p:q] + [("dropoff", t.id)] \
+                        + keys[q:]
+                    times, _ = route_schedule(draft, a.id, route_stops(draft, a.id, route,
+                                                                       {t.id: t}))
+                    if times is not None:
+                        cost[i, k] = min(cost[i, k], times[p] - now)
+
+    return f"pooled {n} x {m}, capacity {capacity}", build
+
+
+def pooled_problems(seed: int = 0) -> list[tuple[str, Callable[[], AllocationProblem]]]:
+    """The shared-ride problems :func:`check_allocator` adds for multi-request allocators."""
+    s = seed * 1000
+    return [pooled_problem(s + 1, 1, 1, 2), pooled_problem(s + 2, 3, 6, 3),
+            pooled_problem(s + 3, 2, 8, 4, busy=0.0), pooled_problem(s + 4, 6, 10, 4, busy=1.0),
+            pooled_problem(s + 5, 4, 5, 2, service=10.0, max_pax=2),
+            pooled_problem(s + 6, 5, 0, 2), pooled_problem(s + 7, 0, 4, 2)]
+
+
+def route_schedule(problem: AllocationProblem, aid: int, rows: list[tuple]
+                   ) -> tuple[list[float] | None, str]:
+    """Planned arrival times of agent ``aid`` driving the stop rows ``rows`` (of
+    :func:`dispatch.dispatcher.route_stops`) from where it is, on ``problem.travel``, or
+    ``(None, why)``: what :meth:`dispatch.vehicles.Operator.route_times` checks, from the
+    problem alone (the vehicle leaves now, or when its first planned stop's time says)."""
+    travel = problem.travel
+    k = int(np.flatnonzero(problem.agent_ids == aid)[0])
+    loc = problem.agents[k].loc
+    cap = 1 if problem.capacity is None else int(problem.capacity[k])
+    plan = problem.plans.get(aid, ())
+    now = problem.time
+    ready, load = now, 0
+    if plan:
+        ready = max(now, plan[0].eta - float(travel([loc], [plan[0].loc])[0, 0]))
+        load = plan[0].occupancy - plan[0].passengers
+    mine = {(s.kind, s.task_id): s for s in plan}
+    drops = {s.task_id for s in plan if s.kind == "dropoff"}
+    if plan and (rows[0][0], rows[0][1]) == (plan[0].kind, plan[0].task_id):
+        t = plan[0].eta
+    else:
+        t = ready + float(travel([loc], [rows[0][2]])[0, 0])
+    legs = travel([r[2] for r in rows[:-1]], [r[2] for r in rows[1:]], pairwise=True) \
+        if len(rows) > 1 else []
+    times, occ = [], load
+    for i, (kind, tid, where, pax, latest, completes) in enumerate(rows):
+        if i:
+            t += float(legs[i - 1])
+        old = mine.get((kind, tid))
+        if completes is None:
+            completes = kind == "dropoff" or tid not in drops
+        occ += pax
+        if occ > cap:
+            return None, f"{occ} on board after {kind} of request {tid} (capacity {cap})"
+        limit = latest if old is None else max(latest, old.eta)
+        if t > limit + 1e-9:
+            return None, f"{kind} of request {tid} at {t:.6g} s, after its latest {latest:.6g} s"
+        times.append(t)
+        if completes:
+            t += problem.service_time
+    return times, ""
+
+
 def _snapshot(p: AllocationProblem) -> tuple:
     return (p.time, p.agents, p.tasks, p.cost.copy(), p.comm.copy(), p.max_rounds, p.loss,
             p.latency, p.cell_size, p.agent_pos.copy(), p.task_pos.copy(),
@@ -182,7 +332,28 @@ def _same(a: tuple, b: tuple) -> bool:
 
 
 def _answer(a: Allocation) -> tuple:
-    return (tuple(map(tuple, a.pairs)), a.rounds, a.requests, a.messages, a.hops)
+    return (tuple(map(tuple, a.pairs)), a.rounds, a.requests, a.messages, a.hops,
+            tuple(sorted((k, tuple(map(tuple, v))) for k, v in dict(getattr(a, "routes", None) or {}).items())))
+
+
+def _check_routes(problem: AllocationProblem, allocation: Allocation) -> None:
+    """AllocationError unless each route of a multi-request answer holds its agent's plan and
+    new requests once each, pickups first, within the capacity and every limit."""
+    from dispatch.dispatcher import route_stops
+
+    routes = getattr(allocation, "routes", None) or {}
+    if not routes:
+        return
+    by_task = {t.id: t for t in problem.tasks}
+    new: dict = {}
+    for aid, tid in allocation.pairs:
+        new.setdefault(aid, {})[tid] = by_task[tid]
+    for aid, route in routes.items():
+        rows = route_stops(problem, aid, route, new.get(aid, {}))
+        if rows:
+            _, why = route_schedule(problem, aid, rows)
+            if why:
+                raise AllocationError(f"route of agent {aid} is infeasible: {why}")
 
 
 def _perturb_global_rng(k: int) -> None:
@@ -242,6 +413,9 @@ def check_allocator(cls, *, seed: int = 0, **params: Any) -> Report:
     if not report.ok:
         return report
     problems = allocation_problems(seed)
+    multi = bool(getattr(cls, "multi_request", False))
+    if multi:  # batch pooling: shared-ride problems, routes checked as the dispatcher does
+        problems += pooled_problems(seed)
     invalid, stuck, mutated, differs, global_rng = [], [], [], [], []
     answers: dict[str, tuple] = {}
     for label, build in problems:
@@ -256,7 +430,8 @@ def check_allocator(cls, *, seed: int = 0, **params: Any) -> Report:
         if not _same(before, _snapshot(problem)):
             mutated.append(f"{label}: the problem changed during allocate")
         try:
-            validate(problem, allocation)
+            validate(problem, allocation, multi)
+            _check_routes(problem, allocation)
         except AllocationError as e:
             invalid.append(f"{label}: {e}")
             continue
