@@ -106,9 +106,8 @@ def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, 
                 if occ > cap[j]:
                     continue
                 add = 0.0
-                if p_drop[s]:
-                    if objective == 0:
-                        add = t - p_eta[s]
+                if p_drop[s] and objective == 0:
+                    add = t - p_eta[s]
                 nodes += 1
                 st_time[d + 1] = t + p_svc[s]
                 st_occ[d + 1] = occ

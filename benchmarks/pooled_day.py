@@ -39,7 +39,7 @@ METHODS = {"hungarian_30": ("hungarian", 30.0), "hungarian_0": ("hungarian", Non
 def scenario_text(allocator: str, window: float | None, requests: int, hours: float,
                   vehicles: int, capacity: int, seed: int, params: str = "") -> str:
     rate = requests / DAY
-    count = int(round(rate * hours * 3600.0))
+    count = round(rate * hours * 3600.0)
     batch = f"batch_window = {window}\n" if window else ""
     extra = f"\n[dispatch.allocator_params]\n{params}\n" if params else ""
     return (f'name = "pooled_day"\nseed = {seed}\nduration = {hours * 3600.0 + 3600.0}\n'

@@ -95,7 +95,7 @@ def brute_force(problem, objective="delay"):
             c = best(k, sub)
             if c is not None:
                 rest = solve(k + 1, used | sub)
-                cand = (rest[0] + bin(sub).count("1"), rest[1] + c)
+                cand = (rest[0] + sub.bit_count(), rest[1] + c)
                 if cand[0] > top[0] or (cand[0] == top[0] and cand[1] < top[1] - 1e-9):
                     top = cand
             sub = (sub - 1) & free
