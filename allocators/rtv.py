@@ -149,22 +149,23 @@ class RtvAllocator(Allocator):
             c[gveh, groups[:, 0]] = gcost
             where = {(int(j), int(r)): g for g, (j, r) in enumerate(zip(gveh, groups[:, 0]))}
             return [where[(j, r)] for j, r in optimal_pairs(c)]
-        greedy = _greedy(groups, gveh, gcost, sizes)
         if self.solver == "greedy":
             self.stats["greedy"] += 1
-            return greedy
+            return _greedy(groups, gveh, gcost, sizes)
         left = self.time_limit - (time.perf_counter() - t_start)
         got = _milp(groups, gveh, gcost, sizes, b.nv, b.m, max(left, 0.2))
         if got is None:
             self.stats["ilp_failed"] += 1
             self.stats["greedy"] += 1
-            return greedy
+            return _greedy(groups, gveh, gcost, sizes)
         chosen, status = got
         self.stats["ilp"] += 1
+        if status == 2:  # the relaxation's optimum, whole: optimal
+            self.stats["lp_whole"] += 1
+            return chosen
         if status == 1:
             self.stats["ilp_time_limit"] += 1
-        elif status == 2:
-            self.stats["lp_whole"] += 1
+        greedy = _greedy(groups, gveh, gcost, sizes)
 
         def value(sel):
             return (-int(sizes[sel].sum()), float(gcost[sel].sum())) if len(sel) else (0, 0.0)

@@ -4,6 +4,7 @@ random pooled runs checked for the stop-list invariants."""
 
 from __future__ import annotations
 
+import dataclasses
 from functools import cache
 from pathlib import Path
 
@@ -67,6 +68,14 @@ def _route_cost(problem, aid, route, new, objective):
 def brute_force(problem, objective="delay"):
     """``(requests served, least total cost)`` over every assignment of groups of new requests
     (at most a vehicle's seats each) to vehicles, each group in its best stop order."""
+    travel = problem.travel
+
+    @cache
+    def between(sources, targets, pairwise=False):
+        return travel(list(sources), list(targets), pairwise=pairwise)
+
+    problem = dataclasses.replace(problem, travel=lambda s, t, pairwise=False: between(
+        tuple(s), tuple(t), pairwise))
     tasks = problem.tasks
     m = len(tasks)
     aids = problem.agent_ids.tolist()
