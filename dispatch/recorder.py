@@ -69,6 +69,8 @@ SCHEMAS: dict[str, pa.Schema] = {
         # time, s) and detour ratio (in-vehicle time / direct time) over completed trips
         ("passenger_distance", _F), ("occupancy", _F), ("shared_rate", _F),
         ("delay_mean", _F), ("detour_ratio", _F),
+        # [dispatch] objective: what a pair's cost (total_cost's terms) measures
+        ("objective", _S),
     ]),
     "tasks": pa.schema([
         ("run_id", _S), ("task_id", _I), ("kind", _S), ("x", _F), ("y", _F), ("z", _F),

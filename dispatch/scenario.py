@@ -8,18 +8,31 @@ See ``scenarios/README.md`` for every key with its default.
 from __future__ import annotations
 
 import itertools
+import logging
 import math
 import re
 import reprlib
 import tomllib
 from dataclasses import dataclass, field, replace
+from datetime import datetime
 from pathlib import Path
 from typing import Any
 
 from dispatch.errors import ScenarioError
 from dispatch.faults import FaultConfig, read_failures
-from dispatch.traces import (Trips, decode_text, read_bytes, read_fleet_capacities,
-                             read_fleet_start, read_trace)
+from dispatch.traces import (
+    Trips,
+    decode_text,
+    parse_datetime,
+    read_bytes,
+    read_fleet_capacities,
+    read_fleet_start,
+    read_trace,
+    shipped_trace,
+    within_snap,
+)
+
+log = logging.getLogger(__name__)
 
 Vec3 = tuple[float, float, float]
 SOURCES = ("static", "periodic", "poisson", "trace", "empirical")
@@ -144,6 +157,11 @@ class TaskConfig:
     trips: Trips | None = None
     trips_per_day: float | None = None  # empirical: expected trips over the 24 h day
     weekday: str = "all"  # empirical: the sample's trips of this weekday ("all": every day)
+    #: trace: the date-time of second 0 (a trace's departure_time is read from it)
+    start: datetime | None = None
+    #: trace on roads: metres a pickup / drop-off may lie from the nearest node (farther:
+    #: the trip is left out before the run, counted in trips.dropped); None: no bound
+    max_snap: float | None = None
 
 
 @dataclass(frozen=True)
@@ -505,13 +523,19 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
         raise t.fail("interval", "is required when source = 'periodic'")
     if source == "poisson" and tasks.rate is None:
         raise t.fail("rate", "is required when source = 'poisson'")
+    start, max_snap = _parse_start(t, source), _parse_max_snap(t, source, world)
     if source == "trace":
         if not isinstance(trace, str) or not trace:
             raise t.fail("trace", "is required when source = 'trace' (a CSV or Parquet file)")
-        trace_path = (path.parent / trace).resolve()
+        trace_path = shipped_trace(trace) or (path.parent / trace).resolve()
         trips = read_trace(trace_path, world.space, world.size if world.roads is None else None,
-                           max_bytes)
-        tasks = replace(tasks, trace=trace_path, trips=trips)
+                           max_bytes, start=start)
+        if max_snap is not None:
+            trips = _within_snap(t, trips, world, max_snap)
+        for reason, n in trips.dropped:
+            log.warning("%s: %d of %d trips left out: %s", trace_path.name, n,
+                        n + len(trips), reason)
+        tasks = replace(tasks, trace=trace_path, trips=trips, start=start, max_snap=max_snap)
     elif trace is not None:
         raise t.fail("trace", f"is only used when source = 'trace' (source is {source!r})")
     for k, allowed in (("interval", ("periodic",)), ("rate", ("poisson",)),
@@ -604,6 +628,56 @@ def _check_pooling(path: Path, world: WorldConfig, fleet: FleetConfig, tasks: Ta
     if trips is not None and trips.passengers is not None and len(trips) and world.roads is None \
             and int(trips.passengers.max()) > 1:
         raise ScenarioError(path, "tasks.trace", "passengers above 1 need a road network")
+
+
+def _parse_start(t: _Table, source: str) -> datetime | None:
+    """``[tasks] start``: the date-time of second 0 of a trace of ``departure_time`` date-times
+    (an ISO 8601 string such as "2014-12-21T00:00", or a TOML date-time)."""
+    v = t.get("start", None)
+    if v is None:
+        return None
+    if source != "trace":
+        raise t.fail("start", f"is only used when source = 'trace' (not {source!r})")
+    try:
+        return parse_datetime(v)
+    except (TypeError, ValueError):
+        raise t.fail("start", f"must be a date-time such as \"2014-12-21T00:00\", got "
+                              f"{_short(v)}") from None
+
+
+def _parse_max_snap(t: _Table, source: str, world: WorldConfig) -> float | None:
+    """``[tasks] max_snap``: metres (> 0) a trace's pickup or drop-off may lie from the road
+    network's nearest node."""
+    v = t.number("max_snap", None, gt=0.0, optional=True)
+    if v is not None and (source != "trace" or world.roads is None):
+        raise t.fail("max_snap", "is only used with a trace on a road network "
+                                 "(source = 'trace', [world] network)")
+    return v
+
+
+def _within_snap(t: _Table, trips: Trips, world: WorldConfig, max_snap: float) -> Trips:
+    """The trace's trips within ``max_snap`` metres of the network (loaded here: it is cached
+    for the run); ScenarioError when none is left or the network cannot be loaded."""
+    from dispatch.roads import load_network
+
+    if trips.layout == "node":
+        raise t.fail("max_snap", "is only used with a trace of coordinates (its trips name "
+                                 "network nodes)")
+    r = world.roads
+    try:
+        net = load_network(r.network, base=r.base, blocks=r.blocks, block=r.block,
+                           speed=r.speed)
+        kept = within_snap(trips, net, max_snap)
+    except (ValueError, OSError) as e:
+        raise ScenarioError(t.file, "world.network", str(e)) from None
+    except Exception as e:  # noqa: BLE001 - a malformed file raises whatever its parser raises
+        raise ScenarioError(t.file, "world.network", f"{r.network} cannot be read "
+                                                     f"({type(e).__name__}: {e})") from None
+    if not len(kept):
+        raise t.fail("max_snap", f"leaves no trip of {trips.path.name}: every one has a pickup "
+                                 f"or drop-off farther than {max_snap:g} m from a node of "
+                                 f"{net.name}")
+    return kept
 
 
 def _windows(s: _Table) -> tuple[float, ...]:

@@ -435,5 +435,6 @@ class Simulation:
                                      dispatcher=self.dispatcher, sim_time=float(self.env.now))
         summary.update(summary_of(self.repositioning))
         summary["allocator_info"] = self.allocator_info
+        summary["objective"] = spec.scenario.dispatch.objective
         rec.add("summary", **summary)
         return summary

@@ -69,6 +69,8 @@ class Vehicle:
     serving: Task | None = field(default=None, repr=False)  # ... that task
     #: the stop its current drive goes to (None: standing, serving or idle)
     heading: Any = field(default=None, repr=False)
+    plan_version: int = 0  # bumped at every change of the plan or of the drive along it
+    plan_cache: Any = field(default=None, repr=False)  # (key, arrays) of Operator.plan_arrays
     busy_seconds: float = 0.0
     busy_since: float = 0.0
     completed: int = 0
@@ -209,6 +211,8 @@ class Fleet:
         self.ids = np.fromiter((v.id for v in self.vehicles), np.int64, n)
         self.idle_mask = np.ones(n, dtype=bool)
         self.busy_mask = np.zeros(n, dtype=bool)
+        #: a free seat somewhere in its plan (kept by Operator.changed)
+        self.room = np.ones(n, dtype=bool)
         self.node = np.full(n, -1, dtype=np.int64)
         self.remaining = np.zeros(n)
         self.odd = np.zeros(n, dtype=bool)
@@ -275,7 +279,14 @@ class Fleet:
             return AgentViews(self.ids[idx], make, node, rem, _NO_POINTS, ascending)
         points = []
         for k in special:  # driving (a leg: where is it now?) or stopped part-way along an edge
-            loc = vs[int(idx[k])].location(now)
+            v = vs[int(idx[k])]
+            leg = v._leg
+            if leg is not None:  # (Leg.point_at's numbers, without building the point)
+                node[k], rem[k], on = leg.next_at(now - v.leg_start)
+                if not on:
+                    points.append(k)
+                continue
+            loc = v.loc
             if _is_node(loc):
                 node[k], rem[k] = loc, 0.0
             else:
@@ -478,6 +489,7 @@ class Operator:
                     new[1].leg = task.direct_time
             v.stops = new
             occupancies(v.load, v.stops)
+            self.changed(v)
             v.proc = env.process(self._run(v, path, new[0]))
             return
         i, j, pick, drop, shift1, shift2 = at  # type: ignore[misc]
@@ -496,9 +508,81 @@ class Operator:
         self._set_legs(v, plan, times)
         v.stops = plan
         occupancies(v.load, v.stops)
+        self.changed(v)
         self.bus.emit(env.now, "insert", v.id, task.id, v.loc)
         if i == 0 and v.heading is not None and v.proc is not None and v.proc.is_alive:
             v.proc.interrupt("reroute")  # its next stop is the new pickup
+
+    def route_times(self, v: Vehicle, rows: list[tuple]) -> tuple[list[float] | None, str]:
+        """Planned arrival times if ``v`` drove the stops ``rows`` (:func:`dispatch.dispatcher.
+        route_stops`: kind, task id, location, passengers, latest time, completes) from where
+        it is now, on the planner's travel times, or ``(None, why)`` where a stop would be
+        late or the vehicle over its capacity. A stop of its plan that is already planned
+        late (traffic ran slower than planned) may stay as late as it is."""
+        env, planner = self.env, self.driver.planner
+        now = env.now
+        old = {(s.kind, s.task.id): s for s in v.stops}
+        planned = dict(zip([(s.kind, s.task.id) for s in v.stops], self._times(v)))
+        first = old.get((rows[0][0], rows[0][1]))
+        if first is not None and v.heading is first and v.leg is not None:
+            t = v.leg_start + v.leg.seconds
+        else:
+            t = max(now, v.free_at) + float(planner.between([v.location(now)], [rows[0][2]])[0, 0])
+        legs = (planner.between([r[2] for r in rows[:-1]], [r[2] for r in rows[1:]],
+                                pairwise=True) if len(rows) > 1 else [])
+        times, occ = [], v.load
+        for k, (kind, tid, loc, pax, latest, completes) in enumerate(rows):
+            if k:
+                t += float(legs[k - 1])
+            mine = old.get((kind, tid))
+            if completes is None:
+                completes = mine.completes
+            occ += pax
+            if occ > v.capacity:
+                return None, f"{occ} on board after {kind} of request {tid} (capacity " \
+                             f"{v.capacity})"
+            limit = latest if mine is None else max(latest, planned[(kind, tid)])
+            if t > limit + 1e-9:
+                return None, f"{kind} of request {tid} at {t:.6g} s, after its latest " \
+                             f"{latest:.6g} s"
+            times.append(t)
+            if completes:
+                t += self.service_time
+        return times, ""
+
+    def follow(self, v: Vehicle, rows: list[tuple], times: list[float], tasks: dict,
+               costs: dict) -> None:
+        """A multi-request decision (``Allocation.routes``): ``v`` gets the requests ``tasks``
+        (task id -> Task, each handed at ``costs[task id]``) and drives the stops ``rows`` in
+        that order (planned arrival ``times``, checked by :meth:`route_times`)."""
+        env = self.env
+        old = {(s.kind, s.task.id): s for s in v.stops}
+        empty = not v.stops and v.serving is None
+        head = v.stops[0] if v.stops else None
+        stops = []
+        for kind, tid, loc, pax, latest, completes in rows:
+            s = old.get((kind, tid))
+            if s is None:
+                s = Stop(kind, tasks[tid], loc, pax, latest, bool(completes))
+            stops.append(s)
+        if empty:
+            self.on_assign(v)
+            path = self.driver.plan(v, stops[0].loc, env.now)
+        for tid, task in tasks.items():
+            self.book.assign(task, v.id, costs[tid])
+        self._set_legs(v, stops, times)
+        v.stops = stops
+        occupancies(v.load, v.stops)
+        self.changed(v)
+        if empty:
+            self.fleet.set_busy(v)
+            v.proc = env.process(self._run(v, path, stops[0]))
+            return
+        for tid in tasks:
+            self.bus.emit(env.now, "insert", v.id, tid, v.loc)
+        if stops[0] is not head and v.heading is not None and v.proc is not None \
+                and v.proc.is_alive:
+            v.proc.interrupt("reroute")
 
     def _times(self, v: Vehicle) -> list[float]:
         """Planned arrival times at ``v``'s stops (from the leg it drives, or from when it
@@ -520,9 +604,31 @@ class Operator:
             s.leg = arrive - t
             t = arrive + (self.service_time if s.completes else 0.0)
 
-    def plan_arrays(self, v: Vehicle) -> tuple[list[float], list[Stop]]:
-        """``(planned arrival times, stops)`` of ``v``'s plan, for a decision (read only)."""
-        return self._times(v), v.stops
+    def plan_arrays(self, v: Vehicle) -> tuple[list, list, list, list, list]:
+        """``v``'s plan as a decision reads it: planned arrival times, service seconds after
+        each stop, latest times, occupancies after each stop, locations (lists; kept until
+        the plan or the vehicle's state changes: :meth:`changed`)."""
+        now = self.env.now
+        key = (v.plan_version, now if v.heading is None and v.free_at <= now else None)
+        cached = v.plan_cache
+        if cached is not None and cached[0] == key:
+            return cached[1]
+        svc, stops = self.service_time, v.stops
+        arrays = (self._times(v), [svc if s.completes else 0.0 for s in stops],
+                  [s.latest for s in stops], [s.occupancy for s in stops],
+                  [s.loc for s in stops])
+        v.plan_cache = (key, arrays)
+        return arrays
+
+    def changed(self, v: Vehicle) -> None:
+        """``v``'s plan or its progress along it changed: what decisions cached of it goes,
+        and the fleet learns whether it has a free seat somewhere in its plan."""
+        v.plan_version += 1
+        low = v.load
+        for s in v.stops:
+            if s.occupancy < low:
+                low = s.occupancy
+        self.fleet.room[v._slot] = low < v.capacity
 
     def _run(self, v: Vehicle, path, first: Stop):
         """Process: drive ``v``'s plan stop by stop until it is empty, then idle. ``path``
@@ -542,6 +648,7 @@ class Operator:
                     path = self.driver.plan(v, stop.loc, env.now)
                 first = None
                 v.heading = stop
+                v.plan_version += 1  # (its first stop's time is now the leg's)
                 emit(env.now, "depart", v.id, stop.task.id, v.loc)
                 if plain:  # RoadDriver.drive without edge events, inlined (two legs a trip)
                     v.leg, v.leg_start = path, env.now
@@ -556,6 +663,7 @@ class Operator:
                 if v.leg is not None:
                     stop_leg(v, env.now)
                 v.heading, path = None, None
+                v.plan_version += 1
                 continue
             v.heading, path = None, None
             v.stops.pop(0)
@@ -572,6 +680,7 @@ class Operator:
                 v.load += stop.passengers
                 task.dropped_at = env.now
                 emit(env.now, "dropoff", v.id, task.id, v.loc)
+            self.changed(v)
             if not stop.completes:
                 continue
             if self.service_time > 0:
@@ -640,6 +749,7 @@ class Operator:
             v.busy_seconds += env.now - v.busy_since
         v.failed, v.failures, v.down_since, v.task = True, v.failures + 1, env.now, None
         v.stops, v.load, v.serving, v.heading = [], 0, None, None
+        self.changed(v)
         self.fleet.set_failed(v)
         self.bus.emit(env.now, "breakdown", v.id, tasks[0].id if tasks else -1, v.loc)
         for task in tasks:
@@ -675,6 +785,7 @@ class Operator:
         v.busy_seconds += env.now - v.busy_since
         v.busy_since = env.now
         v.stops, v.heading = [], None
+        self.changed(v)
         self.bus.emit(env.now, "reassign", v.id, task.id, v.loc)
         self.book.unassign(task)
         return task
