@@ -95,8 +95,8 @@ def main(folder: Path, out: Path, allocator: str = "fcfs", objective: str = "pic
         offered = np.isfinite(run_direct)
         if not np.allclose(run_direct[offered], direct[offered], rtol=0, atol=1e-6):
             raise SystemExit("peers_ours: the run's direct times are not the workload's")
-        rides = dict(direct=direct, shared=tasks["shared"].to_numpy(zero_copy_only=False),
-                     passenger_m=float(result.summary["passenger_distance"]))
+        rides = {"direct": direct, "shared": tasks["shared"].to_numpy(zero_copy_only=False),
+                 "passenger_m": float(result.summary["passenger_distance"])}
     row = metrics(tasks["released_at"].to_numpy(), tasks["picked_up_at"].to_numpy(), completed,
                   float(result.summary["distance"]), **rides)
     row.update(wall_s=wall, cpu_s=cpu,

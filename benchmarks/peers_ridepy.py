@@ -160,7 +160,7 @@ def main(folder: Path, out: Path, space_name: str = "manhattan") -> None:
     passenger_m = float(np.nansum(ride)) * w.speed
     rides = {}
     if w.capacity > 1 or w.max_delay is not None:
-        rides = dict(direct=w.direct(origin, dest), shared=shared, passenger_m=passenger_m)
+        rides = {"direct": w.direct(origin, dest), "shared": shared, "passenger_m": passenger_m}
     row = metrics(t, picked, completed, vehicle_m, **rides)
     row.update(wall_s=wall, cpu_s=cpu,
                rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,

@@ -35,8 +35,10 @@ Why the runs part (measured with ``--jitter 0.05``: unique shortest paths, ``our
 same (vehicle, planned pickup and drop-off times) up to the first tie, and one run (capacity 2,
 276 of 1,000 requests rejected) is the same throughout. The ties are exact in arithmetic and
 common on a grid, where a new stop often lies on a path the vehicle drives anyway: two vehicles
-whose added times differ by 1e-13 s (RidePy takes the first vehicle unless the other is smaller
-in its own rounding), or two positions of equal cost (ours takes the earlier pickup, comparing
+of equal added time (ours computes it from clock times, the plan's end after minus before, so
+equal ones come out a few ulp apart and ``hungarian`` takes the smaller, not the first vehicle;
+RidePy sums drive times and takes the first vehicle unless the other is smaller in its
+rounding: at 1,000 vehicles the runs part at the fifth request this way), or two positions of equal cost (ours takes the earlier pickup, comparing
 pickup times without a tolerance, so a pickup 1 ulp earlier at a later position wins; RidePy
 the first position unless a later one is smaller in its rounding). After a tie the runs are
 different simulations of the same rule, so their means differ by chance (a few per cent at a

@@ -136,7 +136,7 @@ def test_limits_and_jittered_streets(tmp_path):
     assert np.allclose(lp, t + 120.0) and np.allclose(ld, t + l1 + 300.0)
     jw, jt, jo, jd, js = pw.generate(50, 3, 1.0, seed=2, columns=5, rows=4, jitter=0.1)
     assert np.array_equal(jt, t) and np.array_equal(jo, o) and np.array_equal(js, s)
-    u, v, metres = jw.streets()
+    u, _, metres = jw.streets()
     assert u.size == 4 * 4 + 5 * 3 and np.all(np.abs(metres / w.block - 1) <= 0.1)
     assert len(set(metres.tolist())) == metres.size
     direct = jw.direct(jo, jd)
