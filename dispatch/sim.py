@@ -33,7 +33,7 @@ from dispatch.faults import FaultInjector, blackout_filter
 from dispatch.placement import place_fleet
 from dispatch.recorder import json_meta
 from dispatch.reposition import Repositioner, Repositioning, summary_of
-from dispatch.reservations import Traffic
+from dispatch.reservations import Hands, TimedExecution, Traffic
 from dispatch.scenario import RoadConfig, RunSpec, Scenario, WorldConfig, _short
 from dispatch.space import Space
 from dispatch.stats import RunStats
@@ -243,10 +243,15 @@ class Simulation:
         #: reservation-based execution, with a reservation-aware planner only
         self.traffic = (Traffic(env, self.planner, self.space.grid, self.vehicles, bus.emit)
                         if self.planner.reservation_aware else None)
+        timed = None
+        if self.traffic is not None:
+            def timed(op: Operator) -> TimedExecution:
+                return TimedExecution(self.traffic, Hands(
+                    book, self.fleet, sc.tasks.service_time, op.notify, op.breakdown))
         self.finished = env.event()
         self.dispatcher: Dispatcher
         self.operator = Operator(env, bus, book, self.fleet, driver, sc.tasks.service_time,
-                                 lambda: self.dispatcher.notify(), self.traffic)
+                                 lambda: self.dispatcher.notify(), timed)
         self.dispatcher = Dispatcher(env, book, self.fleet, self.operator, self.planner,
                                      allocator, self.space, sc.dispatch, sc.comms,
                                      rng_for(spec.seed, STREAM_ALLOCATOR), self._record_decision,
@@ -406,7 +411,8 @@ class Simulation:
             for v in self.vehicles:
                 if v.busy:
                     v.busy_seconds += env.now - v.busy_since
-                v.end_wait(env.now)
+            if self.operator.timed is not None:
+                self.operator.timed.end(env.now)
             return self._finish()
         finally:
             if self.physics is not None:
@@ -414,13 +420,18 @@ class Simulation:
 
     def _finish(self) -> dict:
         rec, spec = self.recorder, self.spec
+        timed = self.operator.timed
+
+        def counts(v) -> dict:  # reservation-based execution's, 0 without it
+            return timed.counts(v) if timed is not None else {"waits": 0, "replans": 0,
+                                                              "wait_seconds": 0.0}
+
         for v in self.vehicles:
             x, y, z = self.space.position(v.start)
             rec.add("vehicles", agent_id=v.id, kind=v.kind, speed=v.speed, x0=x, y0=y, z0=z,
                     distance=v.distance, empty_distance=v.empty_distance,
                     occupied_distance=v.occupied_distance, busy_seconds=v.busy_seconds,
-                    tasks_completed=v.completed, waits=v.waits, replans=v.replans,
-                    wait_seconds=v.wait_seconds, failures=v.failures,
+                    tasks_completed=v.completed, **counts(v), failures=v.failures,
                     down_seconds=v.down_seconds + (self.env.now - v.down_since if v.failed
                                                    else 0.0),
                     capacity=v.capacity, passenger_distance=v.passenger_distance)
