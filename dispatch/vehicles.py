@@ -36,7 +36,7 @@ from dispatch.events import EventBus
 from dispatch.motion import step_length
 from dispatch.space import Location
 from dispatch.stops import DROPOFF, PICKUP, Stop, occupancies, schedule
-from dispatch.tasks import ASSIGNED, COMPLETED, PICKED_UP as PICKED_UP_STATE, Task, TaskBook, TaskState
+from dispatch.tasks import COMPLETED, PICKED_UP as PICKED_UP_STATE, Task, TaskBook, TaskState
 
 if TYPE_CHECKING:
     from dispatch.reservations import TimedExecution
