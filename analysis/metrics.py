@@ -65,11 +65,16 @@ import math
 import numpy as np
 import pandas as pd
 
+from analysis import compare
+from analysis.compare import (  # noqa: F401 (re-exported: one order, one variant naming)
+    PREFERRED_ORDER,
+    allocator_order,
+    variant_name,
+    variant_rank,
+)
 from analysis.stats import mean_ci
 
 GROUP = ["scenario", "planner", "allocator", "n_agents"]
-PREFERRED_ORDER = ("hungarian", "local_hungarian", "magnnet", "auction", "greedy", "fcfs",
-                   "random")
 
 #: FleetPy's labels of the taxi-style columns that mean the same thing (for users who compare).
 FLEETPY_LABELS = {
@@ -105,37 +110,6 @@ def with_series(df: pd.DataFrame, summary: pd.DataFrame) -> pd.DataFrame:
     return df
 
 
-def allocator_order(names) -> list[str]:
-    """Allocators in the paper's order (Hungarian first), then the rest alphabetically."""
-    names = set(names)
-    first = [n for n in PREFERRED_ORDER if n in names]
-    return first + sorted(names - set(first))
-
-
-def variant_name(scenario: str) -> str:
-    """``imm`` / ``30s`` for a batch-window variant (``<name>-immediate`` /
-    ``<name>-batch30s``, see ``Scenario.variants``), else the scenario's name."""
-    head, _, tail = str(scenario).rpartition("-")
-    if head and tail == "immediate":
-        return "imm"
-    if head and tail.startswith("batch") and tail.endswith("s"):
-        return tail.removeprefix("batch")
-    return str(scenario)
-
-
-def variant_rank(scenario: str) -> tuple:
-    """Immediate first, then batch windows by length, then other scenarios by name."""
-    v = variant_name(scenario)
-    if v == "imm":
-        return (0, 0.0, "")
-    if v != scenario:
-        try:
-            return (0, float(v.removesuffix("s")), "")
-        except ValueError:
-            pass
-    return (1, 0.0, str(scenario))
-
-
 def sort_groups(df: pd.DataFrame) -> pd.DataFrame:
     """Rows ordered by scenario (batch-window variants: immediate first, then by window),
     planner, allocator (paper order), N and repositioner (``stay`` first)."""
@@ -159,17 +133,11 @@ def sort_groups(df: pd.DataFrame) -> pd.DataFrame:
 
 
 def paired_gaps(summary: pd.DataFrame, reference: str = "hungarian") -> pd.Series:
-    """Per run: (total cost - reference's total cost) / reference's total cost on the same
-    instance (scenario, planner, N, seed); NaN where there is no reference run or it costs 0."""
-    inst = ["scenario", "planner", "n_agents", "seed"]
-    ref = (summary.loc[summary["allocator"] == reference, [*inst, "total_cost"]]
-                  .drop_duplicates(inst).rename(columns={"total_cost": "_ref"}))
-    merged = summary[inst + ["total_cost"]].merge(ref, on=inst, how="left")
-    with np.errstate(divide="ignore", invalid="ignore"):
-        gap = (merged["total_cost"] - merged["_ref"]) / merged["_ref"]
-    gap[~(merged["_ref"] > 0)] = math.nan
-    gap.index = summary.index
-    return gap
+    """Per run: its gap to the ``reference`` allocator's run on the same instance (scenario,
+    planner, repositioner, N, seed), as :func:`analysis.compare.paired_gaps` defines it (the
+    CLI's tables use the same); NaN where there is no reference run or it costs 0."""
+    gaps = compare.paired_gaps(summary.to_dict("records"), reference)
+    return pd.Series(gaps, index=summary.index, dtype=float)
 
 
 def allocator_metrics(summary: pd.DataFrame, reference: str = "hungarian",

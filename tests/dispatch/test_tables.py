@@ -124,3 +124,48 @@ def test_dynamic_aggregate_by_hand():
     assert a["served_share"] == pytest.approx(0.75)  # 5/10 and 10/10
     assert a["cost_per_assignment"] == pytest.approx(3.0)  # 2 and 4 s
     assert a["decision_ms"] == pytest.approx(15.0)  # 10 and 20 ms
+
+
+def _variant_runs() -> list[dict]:
+    """Two batch-window variants of one scenario (``-immediate`` and ``-batch30s``): Hungarian
+    costs 100 in one and 80 in the other, greedy 10 % more than Hungarian in both."""
+    out = []
+    for scenario, ref in (("chicago-immediate", 100.0), ("chicago-batch30s", 80.0)):
+        for alloc, factor in (("hungarian", 1.0), ("greedy", 1.1)):
+            for seed in (0, 1):
+                out.append({**_summary("hungarian", 8, seed), "scenario": scenario,
+                            "allocator": alloc, "total_cost": ref * factor * (1 + seed)})
+    return out
+
+
+def test_gap_is_paired_within_a_batch_window_variant():
+    """The reference is the Hungarian run of the same scenario (variant), planner, N and seed:
+    Hungarian is 0 % from itself and greedy +10 % in both variants (it was keyed without the
+    scenario, so one variant's Hungarian was the other's reference: -20 % / +25 %)."""
+    agg = aggregate(_variant_runs())
+    assert set(agg) == {("hungarian imm", 8), ("hungarian 30s", 8), ("greedy imm", 8),
+                        ("greedy 30s", 8)}
+    for label in ("hungarian imm", "hungarian 30s"):
+        assert agg[(label, 8)]["gap"] == pytest.approx(0.0)
+    for label in ("greedy imm", "greedy 30s"):
+        assert agg[(label, 8)]["gap"] == pytest.approx(0.1)
+    text = _render(_variant_runs())
+    assert "+10.0%" in text and "-20" not in text and "+25" not in text
+
+
+def test_tables_and_analysis_share_one_gap_and_order():
+    """The CLI's tables and analysis.metrics compute the same paired gaps and the same
+    allocator order (one definition: analysis.compare)."""
+    pd = pytest.importorskip("pandas")
+    from analysis import compare
+    from analysis import metrics as M
+    from dispatch import tables
+
+    runs = _variant_runs()
+    assert list(M.paired_gaps(pd.DataFrame(runs))) == pytest.approx(compare.paired_gaps(runs))
+    assert tables.allocator_order is compare.allocator_order is M.allocator_order
+    am = M.allocator_metrics(pd.DataFrame(runs)).set_index(["scenario", "allocator"])
+    agg = aggregate(runs)
+    for (scenario, alloc), row in am.iterrows():
+        label = f"{alloc} {M.variant_name(scenario)}"
+        assert row["gap_mean"] == pytest.approx(agg[(label, 8)]["gap"])
