@@ -122,12 +122,56 @@ def open_results(*paths: str | os.PathLike) -> Results:
     return Results(sources)
 
 
+@dataclass(frozen=True)
+class Duplicate:
+    """A run found in two results folders: read from ``kept``, not from ``dropped``."""
+
+    run_id: str
+    kept: Path
+    dropped: Path
+
+
 class Results:
-    """Tables of one or more results folders, read on demand."""
+    """Tables of one or more results folders, read on demand. A run (by its run id) found in
+    several folders is read from the first only (:attr:`duplicates` lists the others)."""
 
     def __init__(self, sources: list[Source]) -> None:
-        self.sources = sources
+        seen: set[Path] = set()
+        self.sources = []  # a folder named twice (or inside another one named) is read once
+        for src in sources:
+            real = src.path.resolve()
+            if real not in seen:
+                seen.add(real)
+                self.sources.append(src)
         self._summary = None
+        self._owner: dict[str, int] | None = None
+        self._duplicates: list[Duplicate] = []
+
+    @property
+    def duplicates(self) -> list[Duplicate]:
+        """Runs found in more than one folder: each is read from the first folder that holds
+        it (in the order given) and not from the others, so it counts once."""
+        self._owners()
+        return list(self._duplicates)
+
+    def _owners(self) -> dict[str, int]:
+        """run id -> index of the first source whose summary holds it (read once)."""
+        if self._owner is None:
+            owner: dict[str, int] = {}
+            dups: list[Duplicate] = []
+            for i, src in enumerate(self.sources):
+                if not src.has("summary"):
+                    continue
+                ids = src.dataset("summary").to_table(columns=["run_id"]).column("run_id")
+                for rid in ids.to_pylist():
+                    if rid in owner:
+                        if owner[rid] != i:
+                            dups.append(Duplicate(rid, self.sources[owner[rid]].path,
+                                                  src.path))
+                    else:
+                        owner[rid] = i
+            self._owner, self._duplicates = owner, dups
+        return self._owner
 
     def __repr__(self) -> str:
         return f"Results({[str(s.path) for s in self.sources]})"
@@ -157,6 +201,10 @@ class Results:
                 want = [old.get(c, c) for c in dict.fromkeys([*columns, "run_id"])
                         if old.get(c, c) in d.schema.names]
             df = d.to_table(columns=want, filter=flt).to_pandas()
+            if self._has_duplicates() and "run_id" in df.columns:
+                owner, i = self._owners(), self.sources.index(src)
+                df = df.loc[df["run_id"].map(lambda r: owner.get(r, i) == i).to_numpy(bool)]
+                df = df.reset_index(drop=True)
             df = _normalise(df.rename(columns=renames) if renames else df)
             if name == "summary":
                 for k, v in DEFAULT_KEYS.items():
@@ -213,6 +261,9 @@ class Results:
         return tuple(json.loads(meta["dispatch.world_size"])), float(meta["dispatch.cell"])
 
     # ------------------------------------------------------------------ helpers
+    def _has_duplicates(self) -> bool:
+        return len(self.sources) > 1 and bool(self.duplicates)
+
     def _with_keys(self, df):
         missing = [k for k in RUN_KEYS if k not in df.columns]
         if not missing or "run_id" not in df.columns:

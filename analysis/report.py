@@ -237,7 +237,16 @@ def _head(res, summary) -> list:
     return [("h1", f"Report: {scen}"),
             ("p", (f"{len(summary)} runs from {', '.join(str(x.path) for x in res.sources)}: "
                    f"allocators {allocs}; N = {ns}; {seeds} seed(s).")
-             + (f" **{len(errors)} run(s) failed** (see the end)." if len(errors) else ""))]
+             + (f" **{len(errors)} run(s) failed** (see the end)." if len(errors) else "")
+             + (f" {duplicates_note(res)}." if res.duplicates else ""))]
+
+
+def duplicates_note(res: Results) -> str:
+    """One line on the runs found in more than one folder (counted once), e.g. for the CLI."""
+    d = res.duplicates
+    more = f" and {len(d) - 1} more" if len(d) > 1 else ""
+    return (f"{len(d)} run(s) found in more than one folder, counted once (read from the first "
+            f"folder that holds them): {d[0].run_id} in {d[0].kept} and {d[0].dropped}{more}")
 
 
 def _voxel_part(res, summary, tasks, vehicles, events, out, written, run_id, reference) -> list:

@@ -402,10 +402,17 @@ def _analysis_call(fn, *args, **kwargs):
 
 
 def _report(args, console) -> int:
-    from analysis.report import write_report
+    from rich.console import Console
+
+    from analysis.io import open_results
+    from analysis.report import duplicates_note, write_report
 
     out = args.out or args.runs[0] / "report"
-    files = _analysis_call(write_report, list(args.runs), out, fmt=args.format, run_id=args.run)
+    res = _analysis_call(open_results, *args.runs)
+    if res.duplicates:  # the same run in two folders: counted once, and said so
+        Console(stderr=True, soft_wrap=True).print(
+            f"[yellow]warning[/]: {duplicates_note(res)}", highlight=False, soft_wrap=True)
+    files = _analysis_call(write_report, res, out, fmt=args.format, run_id=args.run)
     console.print(f"report: {files[0]}", highlight=False, soft_wrap=True)
     console.print("files: " + ", ".join(f.name for f in files[1:]), highlight=False,
                   soft_wrap=True)

@@ -229,3 +229,37 @@ def test_render_a_taxi_run(road_sweep, tmp_path, cli):
         first = img.convert("RGB").tobytes()
         img.seek(img.n_frames - 1)
         assert img.convert("RGB").tobytes() != first  # taxis moved, the clock ran
+
+
+def _copy_one_run(sweep_dir, dest, part="allocator=greedy/planner=astar/n_agents=3/seed=0"):
+    """A results folder holding one run of ``sweep_dir`` (as ``dispatch run`` of that run
+    would write it into another --out)."""
+    import shutil
+
+    for table in sweep_dir.iterdir():
+        for src in table.glob(f"scenario=*/{part}"):
+            shutil.copytree(src, dest / src.relative_to(sweep_dir))
+    return dest
+
+
+def test_a_run_in_two_folders_counts_once(small_sweep, tmp_path, cli):
+    """``dispatch report runs/a runs/b`` with a run in both: one row per run id, and a warning
+    with the count (it counted twice: N = 3 showed 10 runs and greedy's mean moved)."""
+    from analysis.io import open_results
+
+    one = _copy_one_run(small_sweep, tmp_path / "one")
+    res = open_results(small_sweep, one)
+    assert len(res.summary) == 18 and res.summary["run_id"].is_unique
+    assert [d.run_id for d in res.duplicates] == ["tiny__greedy__astar__n3__s0"]
+    tasks = res.table("tasks")
+    alone = open_results(small_sweep).table("tasks")
+    assert len(tasks) == len(alone)
+    assert open_results(small_sweep, small_sweep).duplicates == []  # one folder named twice
+    proc = cli("report", small_sweep, one, "--out", tmp_path / "rep")
+    assert proc.returncode == 0, proc.stderr
+    assert "warning" in proc.stderr and "1 run(s) found in more than one folder" in proc.stderr
+    text = (tmp_path / "rep" / "report.md").read_text()
+    assert "18 runs from" in text and "counted once" in text
+    with open(tmp_path / "rep" / "allocators.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert {int(r["runs"]) for r in rows} == {3}
