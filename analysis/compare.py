@@ -25,10 +25,15 @@ INSTANCE = ("scenario", "planner", "reposition", "batch_window", "n_agents", "se
 
 
 def allocator_order(names: Iterable[str]) -> list[str]:
-    """Allocators in the paper's order (Hungarian first), then the rest alphabetically."""
-    names = {str(n) for n in names}
-    first = [n for n in PREFERRED_ORDER if n in names]
-    return first + sorted(names - set(first))
+    """Allocators in the paper's order (Hungarian first), then the rest alphabetically; a
+    named variant (``magnnet:paper``) right after its allocator."""
+    rank = {n: i for i, n in enumerate(PREFERRED_ORDER)}
+
+    def key(name: str) -> tuple:
+        base, _, variant = name.partition(":")
+        return (rank.get(base, len(rank)), base, variant)
+
+    return sorted({str(n) for n in names}, key=key)
 
 
 def instance_key(run: Mapping) -> tuple:

@@ -16,7 +16,11 @@ from dispatch.errors import DispatchError
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="dispatch", description=__doc__)
     p.add_argument("--version", action="version", version=f"dispatch {__version__}")
-    p.add_argument("-v", "--verbose", action="store_true", help="log progress of every run")
+    p.add_argument("-v", "--verbose", action="store_true",
+                   help="log progress of every run; an error prints its traceback too")
+    p.add_argument("--debug", action="store_true",
+                   help="debug logging; an error (a plugin's included) prints its whole "
+                        "traceback, the plugin's own frames among them")
     sub = p.add_subparsers(dest="command", required=True)
 
     r = sub.add_parser("run", help="run a scenario (every combination of its sweep)")
@@ -58,9 +62,10 @@ def _parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
-                        format="%(levelname)s %(name)s: %(message)s")
+    level = logging.DEBUG if args.debug else logging.INFO if args.verbose else logging.WARNING
+    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
     from rich.console import Console
+    from rich.markup import escape
 
     # Status and error lines stay one line whatever the terminal width (paths are long; scripts
     # and users grep them); only tables are laid out to the width.
@@ -71,7 +76,14 @@ def main(argv: list[str] | None = None) -> int:
                 "report": _report, "render": _render, "train": _train,
                 "check": _check}[args.command](args, console)
     except DispatchError as e:
-        err.print(f"[bold red]error:[/] {e}", highlight=False, soft_wrap=True)
+        if args.debug or args.verbose:  # the chain: where a plugin raised, then where we caught
+            import traceback
+
+            sys.stderr.write("".join(traceback.format_exception(e)))
+            sys.stderr.flush()
+        # the message as written: no markup ("[dispatch]") nor emoji (":x:") read into it
+        err.print(f"[bold red]error:[/] {escape(str(e))}", highlight=False, soft_wrap=True,
+                  emoji=False)
         return 2
     except KeyboardInterrupt:
         err.print("interrupted")
@@ -82,6 +94,7 @@ def _specs(args):
     """Parse the scenario and expand its runs, checking all that can be checked before a run:
     the file, the resource limits (unless ``--force``), the plugins (each distinct allocator
     and planner is built once with the scenario's parameters) and the space they serve."""
+    from dispatch.errors import PluginError
     from dispatch.registry import load
     from dispatch.scenario import check_limits, load_scenario
 
@@ -91,17 +104,31 @@ def _specs(args):
                     agents=getattr(args, "agents", None), seed=getattr(args, "seed", None))
     if not force:
         check_limits(sc, specs)
-    for name in sorted({s.allocator for s in specs}):
-        load("allocator", name)
-    for name in sorted({s.planner for s in specs}):
-        load("planner", name)
-    for name in sorted({s.reposition for s in specs}):
-        load("repositioner", name)
+    for kind, attr, default in (("allocator", "allocator", sc.dispatch.allocator),
+                                ("planner", "planner", sc.dispatch.planner),
+                                ("repositioner", "reposition", sc.reposition.policy)):
+        for name in sorted({getattr(s, attr) for s in specs}):
+            try:
+                load(kind, name)
+            except PluginError as e:  # name the file and the key that names the plugin
+                raise PluginError(f"{sc.path}: {_key_of(args, sc, kind, attr, name, default)}: "
+                                  f"{e}") from e
     from dispatch.sim import check_runs
 
     check_runs(sc, sorted({s.planner for s in specs}), sorted({s.reposition for s in specs}))
     build_plugins(sc, specs)
     return sc, specs
+
+
+def _key_of(args, sc, kind: str, attr: str, name: str, default: str) -> str:
+    """Where ``name`` came from: a command-line option, the sweep's list or the file's key."""
+    if getattr(args, attr, None) == name:
+        return f"--{attr}"
+    if name in getattr(sc.sweep, attr, ()):
+        return f"sweep.{attr}"
+    if kind == "repositioner":
+        return "reposition.policy"
+    return f"dispatch.{attr}" if name == default else attr
 
 
 def build_plugins(sc, specs) -> None:
@@ -116,10 +143,14 @@ def build_plugins(sc, specs) -> None:
         try:
             make_plugin(kind, name, params, *args)
         except PluginError as e:  # name the file too: "file: key: reason"
-            raise PluginError(f"{sc.path}: dispatch.{kind}_params: {e}") from e
+            tables = dict(sc.dispatch.allocator_tables) if kind == "allocator" else {}
+            own = [k for k in (name, name.partition(":")[0]) if k in tables]
+            key = f"dispatch.{kind}_params" + ("" if not own else f'."{own[0]}"'
+                                               if ":" in own[0] else f".{own[0]}")
+            raise PluginError(f"{sc.path}: {key}: {e}") from e
 
     for name in sorted({s.allocator for s in specs}):
-        build("allocator", name, sc.dispatch.allocator_params)
+        build("allocator", name, sc.dispatch.params_for(name))
     for name in sorted({s.reposition for s in specs}):
         try:
             make_repositioner(sc, name)
@@ -241,19 +272,24 @@ def _train(args, console) -> int:
 
 
 def _plugins(args, console) -> int:
+    """One table per kind: name, spaces served (planners, repositioners) and the description
+    (plain text, never empty) with the entry point's target on a line of its own below it, so
+    that neither is cut in an 80-column terminal."""
     from rich.table import Table
+    from rich.text import Text
 
     from dispatch.registry import describe
 
     for kind in ("allocator", "planner", "repositioner"):
-        t = Table(title=f"{kind}s (entry-point group dispatch.{kind}s)")
-        cols = ("name", "target", "spaces", "description")
-        for col in cols:
-            if kind != "allocator" or col != "spaces":
-                t.add_column(col)
+        t = Table(title=f"{kind}s (entry-point group dispatch.{kind}s)", title_justify="left")
+        t.add_column("name", no_wrap=True)
+        if kind != "allocator":
+            t.add_column("spaces")
+        t.add_column("description; target (module:object)", overflow="fold")
         for name, target, spaces, doc in describe(kind):
-            t.add_row(*((name, target, spaces, doc) if kind != "allocator"
-                        else (name, target, doc)))
+            cell = Text(doc)
+            cell.append("\n" + target, style="dim")
+            t.add_row(Text(name), *([Text(spaces)] if kind != "allocator" else []), cell)
         console.print(t)
     return 0
 
