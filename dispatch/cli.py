@@ -30,6 +30,9 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--planner", help="planner name (overrides the file and its sweep)")
     r.add_argument("--agents", type=int, help="fleet size N (overrides the file and its sweep)")
     r.add_argument("--seed", type=int, help="seed (overrides the file and its sweep)")
+    r.add_argument("--duration", type=float, metavar="SECONDS",
+                   help="simulated seconds before the run stops (overrides the file's "
+                        "duration; the scenario text stored with the results says so)")
     r.add_argument("--force", action="store_true",
                    help="overwrite earlier results of these runs in the output folder, and run "
                         "past the resource limits (world cells, releases, tasks, runs, sizes)")
@@ -100,6 +103,8 @@ def _specs(args):
 
     force = getattr(args, "force", False)
     sc = load_scenario(args.scenario, force=force)
+    if getattr(args, "duration", None) is not None:
+        sc = with_duration(sc, args.duration, force=force)
     specs = sc.runs(allocator=getattr(args, "allocator", None), planner=getattr(args, "planner", None),
                     agents=getattr(args, "agents", None), seed=getattr(args, "seed", None))
     if not force:
@@ -118,6 +123,38 @@ def _specs(args):
     check_runs(sc, sorted({s.planner for s in specs}), sorted({s.reposition for s in specs}))
     build_plugins(sc, specs)
     return sc, specs
+
+
+def with_duration(sc, seconds: float, *, force: bool = False):
+    """``sc`` with ``duration = seconds``, parsed again from its text with that line
+    replaced (or added), so that the text stored with the results, the digests that tell runs
+    apart and every bound that depends on the duration agree with what runs."""
+    import math
+    import re
+    import tomllib
+
+    from dispatch.errors import ScenarioError
+    from dispatch.scenario import LIMITS, parse_scenario
+
+    if not math.isfinite(seconds) or seconds <= 0:
+        raise ScenarioError(sc.path, "--duration", f"must be a number of seconds > 0, got "
+                                                   f"{seconds!r}")
+    line = f"duration = {seconds!r}  # dispatch run --duration"
+    first_table = re.search(r"(?m)^[ \t]*\[", sc.text)
+    cut = first_table.start() if first_table else len(sc.text)
+    head, rest = sc.text[:cut], sc.text[cut:]
+    if re.search(r"(?m)^[ \t]*duration[ \t]*=", head):
+        text = re.sub(r"(?m)^[ \t]*duration[ \t]*=.*$", lambda m: line, head, count=1) + rest
+    else:
+        text = line + "\n" + sc.text
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError:
+        doc = {}
+    if doc.get("duration") != seconds:  # a duration written in a way the above cannot replace
+        raise ScenarioError(sc.path, "--duration", "cannot override the file's duration; "
+                                                   "edit the file")
+    return parse_scenario(doc, sc.path, text, limits=None if force else LIMITS)
 
 
 def _key_of(args, sc, kind: str, attr: str, name: str, default: str) -> str:

@@ -186,3 +186,73 @@ def test_magnnet_paper_beside_hungarian_validates(tmp_path):
     proc = dispatch("validate", path)
     assert proc.returncode == 0, proc.stderr
     assert "2 run(s)" in proc.stdout
+
+
+def test_no_pybullet_banner_in_any_output(tmp_path):
+    """PyBullet's build banner (printed by C code at import, to stdout or stderr by build)
+    opens no command's output; C-level prints inside quiet_c_output go nowhere, Python's
+    before and after are kept in order."""
+    path = write_scenario(tmp_path)
+    proc = dispatch("run", path, "--out", tmp_path / "out")
+    assert proc.returncode == 0, proc.stderr
+    assert "pybullet build time" not in proc.stdout + proc.stderr
+    code = textwrap.dedent('''
+        import ctypes, sys
+        from dispatch.physics import quiet_c_output
+        print("before", flush=False)
+        with quiet_c_output():
+            libc = ctypes.CDLL(None)
+            libc.printf(b"C on stdout\\n")
+            libc.dprintf(2, b"C on stderr\\n")
+            import pybullet
+            pybullet.disconnect(pybullet.connect(pybullet.DIRECT))
+        print("after")
+    ''')
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get(
+        "PYTHONPATH", "")])}
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          env=env, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout == "before\nafter\n" and proc.stderr == ""
+
+
+def test_run_duration_overrides_the_file(tmp_path):
+    from analysis.io import open_results
+
+    path = write_scenario(tmp_path, duration=300.0,
+                          tasks={"source": "periodic", "interval": 2.0, "service_time": 0.5})
+    proc = dispatch("run", path, "--duration", "20", "--out", tmp_path / "out")
+    assert proc.returncode == 0, proc.stderr
+    res = open_results(tmp_path / "out")
+    s = res.summary.iloc[0]
+    assert s["sim_time"] <= 20.0 and s["n_tasks"] <= 11
+    meta = res.metadata(s["run_id"], "summary")
+    assert "duration = 20.0  # dispatch run --duration" in meta["dispatch.scenario"]
+    assert "duration = 300.0" not in meta["dispatch.scenario"]
+    for bad in ("0", "-5", "nan", "inf"):
+        proc = dispatch("run", path, "--duration", bad, "--out", tmp_path / "no")
+        assert proc.returncode == 2 and "--duration: must be a number of seconds > 0" \
+            in proc.stderr, (bad, proc.stderr)
+    nodur = tmp_path / "nodur.toml"  # no duration key: one is added
+    nodur.write_text("\n".join(line for line in path.read_text().splitlines()
+                               if not line.startswith("duration")))
+    proc = dispatch("run", nodur, "--duration", "10", "--out", tmp_path / "out2")
+    assert proc.returncode == 0, proc.stderr
+    assert open_results(tmp_path / "out2").summary.iloc[0]["sim_time"] <= 10.0
+
+
+def test_readme_run_counts_match_validate():
+    """Every `dispatch run scenarios/X.toml  # ... (N runs)` line of the README says as many
+    runs as the file expands to (paper_static is 200, not 240)."""
+    import re
+
+    from dispatch.scenario import load_scenario
+
+    found = 0
+    for line in (ROOT / "README.md").read_text(encoding="utf-8").splitlines():
+        m = re.match(r"dispatch (?:run|sweep|validate) (scenarios/\S+\.toml)\s+#.*\((\d+) runs?\)",
+                     line)
+        if m:
+            found += 1
+            assert len(load_scenario(ROOT / m.group(1)).runs()) == int(m.group(2)), line
+    assert found
