@@ -29,9 +29,10 @@ FleetPy's evaluation label in :data:`FLEETPY_LABELS`), tasks pooled over the gro
         ``requests`` (tasks released); ``rides`` (served: completed); ``rejections`` (requests
         the fleet did not serve in time: ``rejected`` at once (no vehicle could reach the pickup
         within ``max_wait``), ``expired`` while open (``max_wait`` / ``ttl`` ran out) or
-        ``unreachable``; not counted: ``cancelled`` (the run ended first) and ``failed`` (a
-        breakdown with the passenger aboard)); ``rejectionRate`` = rejections / requests;
-        ``service_rate`` = rides / requests; ``wait_average``, ``wait_median``, ``wait_p90``,
+        ``unreachable``); ``cancelled`` (open or aboard when the run ended) and ``failed`` (a
+        breakdown with the passenger aboard), so that rides + rejections + cancelled + failed
+        = requests; ``rejectionRate`` = rejections / requests; ``service_rate`` = rides /
+        requests; ``cancelRate`` = cancelled / requests; ``wait_average``, ``wait_median``, ``wait_p90``,
         ``wait_p95``, ``wait_max``: release -> pickup, seconds, over every request picked up
         (quantiles by linear interpolation); ``inVehicleTravelTime_mean``: pickup -> drop-off
         (s, rides with a drop-off); ``directTravelTime_mean``: the trip's free-flow fastest
@@ -236,11 +237,14 @@ def customer_stats(trips: pd.DataFrame) -> dict:
     requests = len(trips)
     rides = int((trips["state"] == "completed").sum())
     rejections = int(trips["state"].isin(REJECTED_STATES).sum())
+    cancelled = int((trips["state"] == "cancelled").sum())
     wait = trips["wait"].to_numpy(dtype=float)
     return {
         "requests": requests, "rides": rides, "rejections": rejections,
+        "cancelled": cancelled, "failed": int((trips["state"] == "failed").sum()),
         "rejectionRate": rejections / requests if requests else math.nan,
         "service_rate": rides / requests if requests else math.nan,
+        "cancelRate": cancelled / requests if requests else math.nan,
         "wait_average": _stat(wait, np.mean), "wait_median": _stat(wait, np.median),
         "wait_p90": _stat(wait, lambda v: np.quantile(v, 0.9)),
         "wait_p95": _stat(wait, lambda v: np.quantile(v, 0.95)),
@@ -391,7 +395,46 @@ def taxi_metrics(summary: pd.DataFrame, tasks: pd.DataFrame, vehicles: pd.DataFr
     ``direct`` (per row of ``tasks``) the trips' free-flow times where the tasks table lacks
     ``direct_seconds``."""
     summary = with_series(summary, summary)
-    return _taxi(summary, tasks, vehicles, events, series_keys(summary), direct)
+    keys = series_keys(summary)
+    out = _taxi(summary, tasks, vehicles, events, keys, direct)
+    ci = seed_intervals(summary, keys)
+    return out.merge(ci, on=keys, how="left") if len(out) and len(ci) else out
+
+
+#: The taxi columns with a 95 % interval over seeds (``<column>_ci95``), and how one run's value
+#: is computed from its summary row.
+RUN_VALUES = {
+    "service_rate": lambda s: s["tasks_completed"] / s["n_tasks"],
+    "rejectionRate": lambda s: (s["tasks_rejected"] + s["tasks_expired"]
+                                + s.get("tasks_unreachable", 0)) / s["n_tasks"],
+    "cancelRate": lambda s: s["tasks_cancelled"] / s["n_tasks"],
+    "wait_average": lambda s: s["wait_time_mean"],
+    "emptyRatio": lambda s: s["empty_distance"] / s["distance"],
+}
+
+
+def seed_intervals(summary: pd.DataFrame, keys: list[str] | None = None,
+                   level: float = 0.95) -> pd.DataFrame:
+    """Per series (``keys``): for each column of :data:`RUN_VALUES`, the half-width of the
+    ``level`` Student-t interval of the mean over the series' runs (seeds) of the run's value
+    (``<column>_ci95``; NaN with one run). The taxi tables show them as ``mean ± half-width``;
+    the means themselves pool the tasks of the runs, which for equal-sized runs is the same
+    mean."""
+    keys = keys or series_keys(summary)
+    rows = []
+    with np.errstate(divide="ignore", invalid="ignore"):
+        values = {}
+        for col, fn in RUN_VALUES.items():
+            try:
+                values[col] = pd.to_numeric(fn(summary), errors="coerce").astype(float)
+            except KeyError:  # an older summary without that column
+                continue
+    for key, idx in summary.groupby(keys, sort=False).groups.items():
+        row = dict(zip(keys, key if isinstance(key, tuple) else (key,)))
+        for col, v in values.items():
+            row[f"{col}_ci95"] = mean_ci(v.loc[idx], level)[1]
+        rows.append(row)
+    return pd.DataFrame(rows, columns=[*keys, *(f"{c}_ci95" for c in values)])
 
 
 def run_metrics(summary: pd.DataFrame, tasks: pd.DataFrame, vehicles: pd.DataFrame,

@@ -42,9 +42,10 @@ DYNAMIC_FIGURES = ("served_vs_n.png", "wait_vs_n.png", "cost_per_task_vs_n.png",
 ROAD_FIGURES = ("map.png", "hourly.png", "fleet_state.png", "wait_by_allocator.png")
 
 #: The taxi columns the report shows (taxi.csv has them all).
-TAXI_COLUMNS = ["runs", "requests", "rides", "rejectionRate", "wait_average", "wait_median",
-                "wait_p90", "wait_p95", "wait_max", "inVehicleTravelTime_mean",
-                "detour_ratio_mean", "utilization", "emptyRatio", "vkm_per_ride"]
+TAXI_COLUMNS = ["runs", "requests", "rides", "rejections", "cancelled", "failed", "service_rate",
+                "rejectionRate", "cancelRate", "wait_average", "wait_median", "wait_p90",
+                "wait_p95", "wait_max", "inVehicleTravelTime_mean", "detour_ratio_mean",
+                "utilization", "emptyRatio", "vkm_per_ride"]
 #: ... for voxel runs (point tasks: no ride, no empty ratio)
 VOXEL_TAXI_COLUMNS = ["runs", "requests", "rides", "rejectionRate", "wait_average",
                       "wait_median", "wait_p90", "wait_max", "assignment_delay_average",
@@ -118,7 +119,13 @@ def _taxi_view(taxi: pd.DataFrame, columns: list[str]) -> pd.DataFrame:
     keys = ["allocator", "n_agents"] + [k for k in ("scenario", "planner", "reposition")
                                          if k in taxi and taxi[k].nunique() > 1]
     cols = [c for c in columns if c in taxi.columns]
-    return taxi[keys + cols].rename(columns={"n_agents": "N"})
+    view = taxi[keys + cols].rename(columns={"n_agents": "N"})
+    for c in cols:  # mean ± half-width of the 95 % interval over seeds, where there is one
+        ci = f"{c}_ci95"
+        if ci in taxi.columns and taxi[ci].notna().any():
+            digits = 1 if c == "wait_average" else 3
+            view[c] = [_pm(float(m), float(h), digits) for m, h in zip(taxi[c], taxi[ci])]
+    return view
 
 
 def table_dynamic(dm: pd.DataFrame) -> pd.DataFrame:
@@ -408,8 +415,13 @@ def _road_part(res, summary, tasks, vehicles, events, direct, out, written, run_
         ("p", ("Per series (allocator, fleet size N and, where they differ, scenario variant "
                "and repositioner), requests pooled over the seeds. Names as "
                "MATSim DRT's customer and vehicle stats print them: rides = served trips; "
-               "rejectionRate = (rejected at once + expired waiting + unreachable) / requests; "
+               "rejections = rejected at once + expired waiting + unreachable; cancelled = "
+               "still open or aboard when the run ended; failed = aboard a vehicle that broke "
+               "down (rides + rejections + cancelled + failed = requests); service_rate, "
+               "rejectionRate, cancelRate = rides, rejections, cancelled / requests; "
                "wait = release → pickup (s; median, p90 by linear interpolation); "
+               "a ± gives the half-width of the 95 % Student-t interval of the mean over "
+               "seeds (the runs' own values; none with one seed); "
                "inVehicleTravelTime = pickup → drop-off (s); detour_ratio = in-vehicle time / "
                "the trip's direct free-flow time (1: driven straight at free flow); "
                "utilization = share of the vehicles' available time (not broken down) driving "

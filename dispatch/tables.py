@@ -83,12 +83,13 @@ def aggregate(summaries: list[dict], reference: str = "hungarian") -> dict[tuple
     return out
 
 
-def _new_table(title: str, columns: list[str]):
+def _new_table(title: str, columns: list[str], collapse: bool = False):
     from rich import box
     from rich.table import Table
 
-    t = Table(title=title, box=box.SIMPLE_HEAD, padding=(0, 1), pad_edge=False,
-              title_justify="left")
+    # collapse: one space between columns (the box's own divider), for the widest tables
+    t = Table(title=title, box=box.SIMPLE_HEAD, padding=(0, 0) if collapse else (0, 1),
+              pad_edge=False, title_justify="left")
     for i, col in enumerate(columns):
         t.add_column(col, justify="left" if i == 0 else "right", no_wrap=i == 0)
     return t
@@ -172,14 +173,15 @@ def _render_trips(summaries: list[dict], console, repositioner: str | None) -> N
     for s in summaries:
         groups[(_label(s, variants), s["n_agents"])].append(s)
     runs = max((len(g) for g in groups.values()), default=0)
-    title = ("Trips, mean over {runs} seed(s): served and rejected (at once or expired) share "
-             "of the trips, wait from release to pickup (s), share of km driven empty, km "
-             "driven (thousands), wall seconds deciding").format(runs=runs)
+    title = ("Trips, mean over {runs} seed(s): served, rejected (at once or expired) and "
+             "cancelled (open or aboard at the end) share of the trips, wait from release to "
+             "pickup (s), share of km driven empty, km driven (thousands), wall seconds "
+             "deciding").format(runs=runs)
     if repositioner is not None:
         km = fmean(s.get("reposition_distance", 0.0) for s in summaries) / 1000
         title = f"Repositioner {repositioner!r} ({km:.0f} km repositioning per run). " + title
-    t = _new_table(title, ["allocator", "N", "trips", "served", "rej.", "wait", "empty", "k km",
-                           "dec. s"])
+    t = _new_table(title, ["allocator", "N", "trips", "served", "rej.", "canc.", "wait",
+                           "empty", "k km", "dec. s"], collapse=True)
     agg = {}
     for key, rows in groups.items():
         agg[key] = {
@@ -190,6 +192,7 @@ def _render_trips(summaries: list[dict], console, repositioner: str | None) -> N
             "rejected": fmean(_ratio(r["tasks_rejected"] + r["tasks_expired"]
                                      + r.get("tasks_unreachable", 0), r["n_tasks"])
                               for r in rows),
+            "cancelled": fmean(_ratio(r["tasks_cancelled"], r["n_tasks"]) for r in rows),
             "wait": _mean(rows, "wait_time_mean"),
             "empty": fmean(_ratio(r["empty_distance"], r["distance"]) for r in rows),
             "km": _mean(rows, "distance") / 1e6,  # thousands of km: a city day fits 80 columns
@@ -197,7 +200,8 @@ def _render_trips(summaries: list[dict], console, repositioner: str | None) -> N
         }
     for a, n, r, last in _grouped_rows(agg):
         t.add_row(a, str(n), _f(r["trips"], 0), _f(r["served"], 1, 100, "%"),
-                  _f(r["rejected"], 1, 100, "%"), _f(r["wait"]), _f(r["empty"], 0, 100, "%"),
+                  _f(r["rejected"], 1, 100, "%"), _f(r["cancelled"], 1, 100, "%"),
+                  _f(r["wait"]), _f(r["empty"], 0, 100, "%"),
                   _f(r["km"], 1), _f(r["dec"], 2), end_section=last)
     console.print(t)
 

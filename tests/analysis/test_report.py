@@ -263,3 +263,30 @@ def test_a_run_in_two_folders_counts_once(small_sweep, tmp_path, cli):
     with open(tmp_path / "rep" / "allocators.csv", newline="") as f:
         rows = list(csv.DictReader(f))
     assert {int(r["runs"]) for r in rows} == {3}
+
+
+def test_taxi_table_adds_up_and_has_intervals_over_seeds(road_sweep, tmp_path):
+    """rides + rejections + cancelled + failed = requests per series; the 95 % interval over
+    the two seeds of each share and of the mean wait is the Student-t one of the runs' own
+    values; the report shows them as mean ± half-width."""
+    import math as m
+
+    from analysis import metrics as M
+    from analysis.io import open_results
+    from analysis.stats import mean_ci
+
+    res = open_results(road_sweep)
+    taxi = M.taxi_metrics(res.summary, res.table("tasks"), res.table("vehicles"))
+    for _, r in taxi.iterrows():
+        assert r["rides"] + r["rejections"] + r["cancelled"] + r["failed"] == r["requests"]
+        assert r["service_rate"] + r["rejectionRate"] + r["cancelRate"] == pytest.approx(
+            1 - r["failed"] / r["requests"])
+        runs = res.summary.loc[res.summary["allocator"] == r["allocator"]]
+        assert len(runs) == 2
+        served = runs["tasks_completed"] / runs["n_tasks"]
+        assert r["service_rate_ci95"] == pytest.approx(mean_ci(served)[1])
+        assert r["wait_average_ci95"] == pytest.approx(mean_ci(runs["wait_time_mean"])[1])
+        assert m.isfinite(r["cancelRate_ci95"])
+    write_report(road_sweep, tmp_path)
+    text = (tmp_path / "report.md").read_text()
+    assert "cancelled" in text and "cancelRate" in text and " ± " in text

@@ -169,3 +169,21 @@ def test_tables_and_analysis_share_one_gap_and_order():
     for (scenario, alloc), row in am.iterrows():
         label = f"{alloc} {M.variant_name(scenario)}"
         assert row["gap_mean"] == pytest.approx(agg[(label, 8)]["gap"])
+
+
+def test_trip_table_shows_cancelled_and_fits_with_variant_labels():
+    """The trip table has a cancelled column (served + rejected + cancelled + failed add up
+    to the trips) and fits 80 columns uncut with the longest labels (a swept batch window)."""
+    rows = []
+    for a, n, s in itertools.product(["local_hungarian", "magnnet_match", "fcfs"],
+                                     [100, 1000], [0, 1]):
+        for scenario in ("chicago-immediate", "chicago-batch30s"):
+            rows.append({**_summary("hungarian", n, s, "road"), "allocator": a,
+                         "scenario": scenario, "n_tasks": 1000, "tasks_completed": 900,
+                         "tasks_rejected": 40, "tasks_expired": 20, "tasks_unreachable": 0,
+                         "tasks_cancelled": 38, "tasks_failed": 2})
+    text = _render(rows)
+    assert "…" not in text and max(map(len, text.splitlines())) <= 80
+    line = next(ln for ln in text.splitlines() if ln.split()[:2] == ["local_hungarian", "30s"])
+    assert line.split()[4:7] == ["90.0%", "6.0%", "3.8%"], line
+    assert "canc." in text
