@@ -162,9 +162,11 @@ def task_sources(res: Results, summary: pd.DataFrame) -> dict[str, str]:
 
 def write_report(source: Results | str | os.PathLike | list, out: str | os.PathLike, *,
                  fmt: str = "md", run_id: str | None = None,
-                 reference: str = "hungarian") -> list[Path]:
+                 reference: str = "hungarian", series=None) -> list[Path]:
     """Write the report of ``source`` (a :class:`Results` or one or more folders) into
-    ``out``; returns the files written (the report first)."""
+    ``out``; returns the files written (the report first). ``series``: glob patterns of the
+    series the taxi figures draw (``"hungarian*"``, ``"* 30s*"``; see
+    :func:`analysis.taxi_plots.select`; all when None); the tables keep every series."""
     if fmt not in ("md", "html"):
         raise ValueError(f"report format must be 'md' or 'html', got {fmt!r}")
     res = source if isinstance(source, Results) else open_results(
@@ -191,7 +193,7 @@ def write_report(source: Results | str | os.PathLike | list, out: str | os.PathL
         sections += _voxel_part(res, voxel, tasks, vehicles, events, out, written,
                                 run_id if run_id in set(voxel["run_id"]) else None, reference)
     if len(road):
-        sections += _road_part(res, road, tasks, vehicles, events, direct, out, written,
+        sections += _road_part(res, road, tasks, vehicles, events, direct, out, written, series,
                                run_id if run_id in set(road["run_id"]) else None)
     taxi = M.taxi_metrics(summary, tasks, vehicles, events, direct)
     per_run = M.run_metrics(summary, tasks, vehicles, events, direct)
@@ -353,7 +355,8 @@ def _voxel_part(res, summary, tasks, vehicles, events, out, written, run_id, ref
     return s
 
 
-def _road_part(res, summary, tasks, vehicles, events, direct, out, written, run_id) -> list:
+def _road_part(res, summary, tasks, vehicles, events, direct, out, written, only,
+               run_id) -> list:
     """The taxi study: metrics, per-hour series, map, hourly plots, fleet states, waits."""
     import numpy as np
 
@@ -402,11 +405,11 @@ def _road_part(res, summary, tasks, vehicles, events, direct, out, written, run_
     cols = TP.series_columns(summary)
     runs = {k if isinstance(k, tuple) else (k,): n
             for k, n in summary.groupby(cols)["run_id"].nunique().items()}
-    TP.hourly(hc_bins, out / "hourly.png", bin_s=bin_s, runs=runs,
+    TP.hourly(hc_bins, out / "hourly.png", bin_s=bin_s, runs=runs, only=only,
               title=f"{scen}: demand, service and waiting (by time of release)")
-    TP.fleet_state(hf_bins, out / "fleet_state.png", bin_s=bin_s,
+    TP.fleet_state(hf_bins, out / "fleet_state.png", bin_s=bin_s, only=only,
                    title=f"{scen}: fleet state over time (mean vehicles per state)")
-    TP.wait_by_group(trips.loc[trips["wait"].notna()], out / "wait_by_allocator.png",
+    TP.wait_by_group(trips.loc[trips["wait"].notna()], out / "wait_by_allocator.png", only=only,
                      title=f"{scen}: wait from release to pickup, seeds pooled")
     written += [out / f for f in ROAD_FIGURES]
     unit = "one hour" if bin_s == 3600 else f"{bin_s / 60:g} minutes"

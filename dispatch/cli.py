@@ -359,6 +359,10 @@ def _add_analysis_parsers(sub) -> None:
     r.add_argument("--out", type=Path, help="report folder (default: RUNS/report/)")
     r.add_argument("--format", choices=("md", "html"), default="md")
     r.add_argument("--run", metavar="RUN_ID", help="the run shown in detail (timeline, 3D)")
+    r.add_argument("--series", action="append", metavar="PATTERN",
+                   help="taxi figures: draw only the series whose label matches this glob "
+                        "(e.g. 'hungarian*', '* 30s*', '*+ demand'); repeat for more; the "
+                        "tables keep every series")
 
     g = sub.add_parser("render", help="draw a run as an animated GIF from PyBullet images")
     g.add_argument("run", type=Path, metavar="RUN",
@@ -485,7 +489,8 @@ def _report(args, console) -> int:
     if res.duplicates:  # the same run in two folders: counted once, and said so
         Console(stderr=True, soft_wrap=True).print(
             f"[yellow]warning[/]: {duplicates_note(res)}", highlight=False, soft_wrap=True)
-    files = _analysis_call(write_report, res, out, fmt=args.format, run_id=args.run)
+    files = _analysis_call(write_report, res, out, fmt=args.format, run_id=args.run,
+                           series=args.series)
     console.print(f"report: {files[0]}", highlight=False, soft_wrap=True)
     console.print("files: " + ", ".join(f.name for f in files[1:]), highlight=False,
                   soft_wrap=True)

@@ -290,3 +290,12 @@ def test_taxi_table_adds_up_and_has_intervals_over_seeds(road_sweep, tmp_path):
     write_report(road_sweep, tmp_path)
     text = (tmp_path / "report.md").read_text()
     assert "cancelled" in text and "cancelRate" in text and " ± " in text
+
+
+def test_cli_report_series_filter(road_sweep, tmp_path, cli):
+    proc = cli("report", road_sweep, "--series", "hungarian*", "--out", tmp_path / "a")
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "a" / "hourly.png").is_file()
+    proc = cli("report", road_sweep, "--series", "nosuch*", "--out", tmp_path / "b")
+    assert proc.returncode == 2 and "no series matches 'nosuch*'" in proc.stderr
+    assert "fcfs" in proc.stderr and "Traceback" not in proc.stderr
