@@ -121,7 +121,7 @@ def _specs(args):
     from dispatch.sim import check_runs
 
     check_runs(sc, sorted({s.planner for s in specs}), sorted({s.reposition for s in specs}))
-    build_plugins(sc, specs)
+    build_plugins(sc, specs, force=force)
     return sc, specs
 
 
@@ -168,7 +168,7 @@ def _key_of(args, sc, kind: str, attr: str, name: str, default: str) -> str:
     return f"dispatch.{attr}" if name == default else attr
 
 
-def build_plugins(sc, specs) -> None:
+def build_plugins(sc, specs, *, force: bool = False) -> None:
     """Build every distinct allocator and planner of ``specs`` once (constructors are cheap;
     a planner is built on the space of the first run's seed), so that a parameter the plugin
     rejects stops here with one line, not in the middle of a sweep; place the first run's fleet
@@ -178,7 +178,7 @@ def build_plugins(sc, specs) -> None:
 
     def build(kind, name, params, *args):
         try:
-            make_plugin(kind, name, params, *args)
+            return make_plugin(kind, name, params, *args)
         except PluginError as e:  # name the file too: "file: key: reason"
             tables = dict(sc.dispatch.allocator_tables) if kind == "allocator" else {}
             own = [k for k in (name, name.partition(":")[0]) if k in tables]
@@ -197,7 +197,11 @@ def build_plugins(sc, specs) -> None:
     if planners:
         space = space_for(sc.world, specs[0].seed, sc.path)
         for name in planners:
-            build("planner", name, sc.dispatch.planner_params, space)
+            planner = build("planner", name, sc.dispatch.planner_params, space)
+            if not force:  # its own work bound (dispatch.budget), e.g. rrt_star's iterations
+                from dispatch.budget import check_planner_budget
+
+                check_planner_budget(sc, specs, planner, name)
         if sc.fleet.start:  # a start file's rows: known nodes, inside the world, one per cell
             from dispatch.sim import STREAM_FLEET, place_fleet, rng_for
 
@@ -222,11 +226,15 @@ def _run(args, console) -> int:
         with _run_progress(console, specs[0]) as report:
             summaries = execute(specs, out, progress=report)
     else:
+        finished = []
         with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                      TimeElapsedColumn(), console=console, transient=True) as progress:
+                      TimeElapsedColumn(), console=console, transient=True) as progress, \
+                _Heartbeat(console, lambda: f"{sc.name}: {len(finished)} of {len(specs)} "
+                           "runs done" + (f" (last: {finished[-1]})" if finished else "")):
             bar = progress.add_task(f"{sc.name}", total=len(specs))
 
             def done(result):
+                finished.append(result.spec.run_id)
                 progress.update(bar, advance=1, description=result.spec.run_id)
 
             summaries = execute(specs, out, on_done=done)
@@ -236,18 +244,85 @@ def _run(args, console) -> int:
     return 0
 
 
+def heartbeat_seconds() -> float:
+    """Wall seconds between two progress lines when the output is not a terminal: 60, or
+    ``DISPATCH_HEARTBEAT_S``."""
+    try:
+        v = float(os.environ.get("DISPATCH_HEARTBEAT_S", "60"))
+    except ValueError:
+        return 60.0
+    return v if v > 0 else 60.0
+
+
+class _Heartbeat:
+    """While a command runs with its output not on a terminal (a log file, a pipe, a batch
+    job), a line on stderr every :func:`heartbeat_seconds` wall seconds saying where it is
+    (``what()``), so that a long run is never silent; nothing on a terminal, where the
+    progress bar says it."""
+
+    def __init__(self, console, what) -> None:
+        self.on = not console.is_terminal
+        self.what = what
+        self.started = time.perf_counter()
+
+    def __enter__(self):
+        if self.on:
+            import threading
+
+            self.stop = threading.Event()
+            self.thread = threading.Thread(target=self._beat, name="dispatch-heartbeat",
+                                           daemon=True)
+            self.thread.start()
+        return self
+
+    def _beat(self) -> None:
+        every = heartbeat_seconds()
+        while not self.stop.wait(every):
+            wall = time.perf_counter() - self.started
+            try:
+                line = self.what()
+            except Exception as e:  # noqa: BLE001 - a progress line must never stop a run
+                line = f"({type(e).__name__})"
+            sys.stderr.write(f"[{wall:6.0f} s] {line}\n")
+            sys.stderr.flush()
+
+    def __exit__(self, *exc) -> None:
+        if self.on:
+            self.stop.set()
+            self.thread.join()
+
+
 class _run_progress:
     """Context manager: a progress bar of one run (simulated time out of the duration, wall
-    time, requests released and closed), shown only on a terminal; yields the callback for
-    :class:`dispatch.sim.Simulation` (None when not shown, so the run adds no process)."""
+    time, requests released and closed) on a terminal, else a line a minute on stderr
+    (:class:`_Heartbeat`); yields the callback for :class:`dispatch.sim.Simulation`."""
 
     def __init__(self, console, spec) -> None:
         self.console, self.spec = console, spec
         self.progress = None
+        self.beat = None
 
     def __enter__(self):
         if not self.console.is_terminal:
-            return None
+            import math
+
+            state = {"now": 0.0, "duration": self.spec.scenario.duration, "released": 0,
+                     "closed": 0, "reports": 0}
+
+            def report(now: float, duration: float, released: int, closed: int) -> None:
+                state.update(now=now, duration=duration, released=released, closed=closed,
+                             reports=state["reports"] + 1)
+
+            def what() -> str:
+                d = state["duration"]
+                share = f" ({100 * state['now'] / d:.1f} %)" if d and math.isfinite(d) else ""
+                line = (f"{self.spec.run_id}: simulated {state['now']:,.1f} of {d:,.1f} s"
+                        f"{share}; {state['released']:,} tasks released, {state['closed']:,} "
+                        "closed")
+                return line if state["reports"] else line + " (still in its first steps)"
+
+            self.beat = _Heartbeat(self.console, what).__enter__()
+            return report
         from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
         self.progress = Progress(TextColumn("{task.description}"), BarColumn(),
@@ -265,6 +340,8 @@ class _run_progress:
         return report
 
     def __exit__(self, *exc) -> None:
+        if self.beat is not None:
+            self.beat.__exit__(*exc)
         if self.progress is not None:
             self.progress.__exit__(*exc)
 
@@ -392,7 +469,11 @@ def _sweep(args, console) -> int:
     started = time.perf_counter()
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                   TextColumn("{task.fields[tally]}"), TimeElapsedColumn(), console=console,
-                  transient=True) as progress:
+                  transient=True) as progress, \
+            _Heartbeat(console, lambda: f"{sc.name}: {sum(counts.values())} of {len(specs)} "
+                       "runs finished (" + (", ".join(f"{v} {k}" for k, v in
+                                                      sorted(counts.items())) or "none yet")
+                       + f") on {where}"):
         bar = progress.add_task(sc.name, total=len(specs), tally="")
 
         def done(o):

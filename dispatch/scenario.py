@@ -890,3 +890,6 @@ def check_limits(sc: Scenario, specs: list[RunSpec], limits: Limits = LIMITS) ->
                                             f"{limits.releases:,})")
     elif t.trips is not None and len(t.trips) > limits.releases:
         raise refuse("tasks.trace", f"{len(t.trips):,} trips (more than {limits.releases:,})")
+    from dispatch.budget import check_work  # work bounds: runs that would not finish
+
+    check_work(sc, specs, refuse)
