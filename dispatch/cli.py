@@ -54,6 +54,14 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--seed", type=int, default=0, help="seed of the random problems")
 
     sub.add_parser("plugins", help="list installed allocators, planners and repositioners")
+    n = sub.add_parser("new", help="write a new plugin package (`dispatch new allocator NAME`): "
+                       "installs with pip and passes `dispatch check NAME`")
+    n.add_argument("kind", choices=("allocator",))
+    n.add_argument("name", help="the plugin's name (lower-case letters, digits, _)")
+    n.add_argument("--out", type=Path, default=Path("."),
+                   help="folder to write dispatch-NAME/ into (default: here)")
+    n.add_argument("--force", action="store_true", help="overwrite the files of an existing "
+                   "dispatch-NAME/")
     t = sub.add_parser("train", help="train a learned allocator (e.g. `dispatch train magnnet "
                        "--agents 8`); options after the name go to its trainer (--help)",
                        add_help=False)
@@ -77,7 +85,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return {"run": _run, "validate": _validate, "plugins": _plugins, "sweep": _sweep,
                 "report": _report, "render": _render, "train": _train,
-                "check": _check}[args.command](args, console)
+                "check": _check, "new": _new}[args.command](args, console)
     except DispatchError as e:
         if args.debug or args.verbose:  # the chain: where a plugin raised, then where we caught
             import traceback
@@ -547,6 +555,17 @@ def _check(args, console) -> int:
     console.print(f"{kinds[0]} {args.name!r} ({cls.__module__}.{cls.__qualname__}) {verdict}",
                   highlight=False, soft_wrap=True)
     return 0 if report.ok else 1
+
+
+def _new(args, console) -> int:
+    """``dispatch new allocator NAME``: see :mod:`dispatch.scaffold`."""
+    from dispatch.scaffold import new_allocator
+
+    root = new_allocator(args.name, args.out, force=args.force)
+    console.print(f"wrote {root}/ (pyproject.toml, dispatch_{args.name}/allocator.py, tests, "
+                  f"README.md); next: pip install -e {root} && dispatch check {args.name}",
+                  highlight=False, soft_wrap=True)
+    return 0
 
 
 def _analysis_call(fn, *args, **kwargs):
