@@ -203,7 +203,8 @@ class Results:
             df = d.to_table(columns=want, filter=flt).to_pandas()
             if self._has_duplicates() and "run_id" in df.columns:
                 owner, i = self._owners(), self.sources.index(src)
-                df = df.loc[df["run_id"].map(lambda r: owner.get(r, i) == i).to_numpy(bool)]
+                mine = [owner.get(r, i) == i for r in df["run_id"]]
+                df = df.loc[mine]
                 df = df.reset_index(drop=True)
             df = _normalise(df.rename(columns=renames) if renames else df)
             if name == "summary":

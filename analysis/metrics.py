@@ -32,8 +32,8 @@ FleetPy's evaluation label in :data:`FLEETPY_LABELS`), tasks pooled over the gro
         ``unreachable``); ``cancelled`` (open or aboard when the run ended) and ``failed`` (a
         breakdown with the passenger aboard), so that rides + rejections + cancelled + failed
         = requests; ``rejectionRate`` = rejections / requests; ``service_rate`` = rides /
-        requests; ``cancelRate`` = cancelled / requests; ``wait_average``, ``wait_median``, ``wait_p90``,
-        ``wait_p95``, ``wait_max``: release -> pickup, seconds, over every request picked up
+        requests; ``cancelRate`` = cancelled / requests; ``wait_average``, ``wait_median``,
+        ``wait_p90``, ``wait_p95``, ``wait_max``: release -> pickup, seconds, over every request picked up
         (quantiles by linear interpolation); ``inVehicleTravelTime_mean``: pickup -> drop-off
         (s, rides with a drop-off); ``directTravelTime_mean``: the trip's free-flow fastest
         path (s; from the tasks' ``direct_seconds`` when the kernel records it, else from the

@@ -32,8 +32,8 @@ Then it prints (80 columns) and writes ``<out>/study.md``: per series (allocator
 window, repositioner) the share of the requests served, rejected and cancelled (open or aboard
 at the end: served + rejected + cancelled + failed = 100 %), the wait (release to pickup) mean
 and p90, each share and the mean wait with the half-width of its 95 % Student-t interval over
-the seeds (``--seeds``, default 0 1 2), the fleet utilization, the empty share of the km, the conflicts
-(tasks requested by two vehicles in one round at least once; ``study.md`` also the
+the seeds (``--seeds``, default 0 1 2), the fleet utilization, the empty share of the km, the
+conflicts (tasks requested by two vehicles in one round at least once; ``study.md`` also the
 conflict-free share of the tasks offered) and the run's wall seconds (mean over seeds, from the
 sweep's completion markers), followed by a paragraph
 computed from the table: who has the lowest mean wait per N and by how much, what batching

@@ -46,8 +46,8 @@ test = ["pytest>=8"]
 packages = ["{pkg}"]
 '''
 
-ALLOCATOR = '''"""The {name} allocator: the globally cheapest feasible (vehicle, task) pair first, until no
-vehicle or task is left (a greedy matching). Edit :meth:`{cls}.allocate`.
+ALLOCATOR = '''"""The {name} allocator: the globally cheapest feasible (vehicle, task) pair
+first, until no vehicle or task is left (a greedy matching). Edit :meth:`{cls}.allocate`.
 
 The contract (:class:`dispatch.contracts.Allocator`): ``allocate(problem)`` gets a read-only
 :class:`~dispatch.contracts.AllocationProblem` (``problem.cost``: the N x M travel seconds of
@@ -89,7 +89,8 @@ class {cls}(Allocator):
         return Allocation.centralized(problem, pairs)  # index pairs -> (agent id, task id)
 '''
 
-TEST = '''"""The simulator's own plugin checks (valid answers, no mutation, determinism, rng use)."""
+TEST = '''"""The simulator's own plugin checks (valid answers, no mutation, determinism, rng
+use)."""
 
 from dispatch.testing import check_allocator
 
