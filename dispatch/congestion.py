@@ -127,6 +127,20 @@ class CongestedPlanner:
     def __getattr__(self, name: str) -> Any:  # name, stats, spaces, plan, task_closed, ...
         return getattr(self.inner, name)
 
+    def between(self, sources: Sequence[Any], targets: Sequence[Any],
+                pairwise: bool = False) -> np.ndarray:
+        """The wrapped planner's travel times at the hour's factor (the remaining part of an
+        edge a source is on is not scaled, as in :meth:`costs`)."""
+        cost = self.inner.between(sources, targets, pairwise)
+        f = self.congestion.factor(self.clock())
+        if f == 1.0 or not len(sources):
+            return cost
+        rem = np.fromiter((max(a.remaining, 0.0) if isinstance(a, RoadPoint) else 0.0
+                           for a in sources), np.float64, len(sources))
+        if not pairwise:
+            rem = rem[:, None]
+        return rem + (cost - rem) * f
+
     def costs(self, agents: Sequence[Any], tasks: Sequence[Any]) -> np.ndarray:
         cost = self.inner.costs(agents, tasks)
         f = self.congestion.factor(self.clock())

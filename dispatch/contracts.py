@@ -34,9 +34,9 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import ClassVar, Literal, Protocol
+from typing import ClassVar, Literal, NamedTuple, Protocol
 
 import numpy as np
 
@@ -190,6 +190,20 @@ class _Positions:
         obj.__dict__[self.key] = value
 
 
+class StopView(NamedTuple):
+    """One stop of an agent's plan as a decision sees it (shared rides): ``kind`` (``pickup``
+    or ``dropoff``), the request's id, where, the passengers it adds (negative: removes),
+    the latest time it may be reached, the occupancy after it and its planned arrival time."""
+
+    kind: str
+    task_id: int
+    loc: Location
+    passengers: int
+    latest: float
+    occupancy: int
+    eta: float
+
+
 @dataclass(frozen=True, eq=False)
 class AllocationProblem:
     """One decision: idle agents, open tasks, and the cost matrix between them (read-only).
@@ -226,18 +240,22 @@ class AllocationProblem:
     cell_size: float = 1.0
     agent_pos: np.ndarray | None = _Positions()  # type: ignore[assignment]
     task_pos: np.ndarray | None = _Positions()  # type: ignore[assignment]
+    #: shared rides: the current stop list of each agent that has one, by agent id (a
+    #: read-only mapping of tuples of :class:`StopView`); empty when no agent has a plan
+    plans: Mapping[int, tuple[StopView, ...]] = field(default_factory=dict)
 
     @classmethod
     def made(cls, time: float, agents, tasks, cost: np.ndarray, comm: np.ndarray,
              rng: np.random.Generator, max_rounds: int, loss: float, latency: float,
-             cell_size: float, agent_pos, task_pos) -> AllocationProblem:
+             cell_size: float, agent_pos, task_pos, plans=None) -> AllocationProblem:
         """The problem ``cls(...)`` of these fields (all of them, positionally) makes, checked
         the same way, without the field-by-field ``object.__setattr__`` of a frozen
         ``__init__`` (the dispatcher makes one per decision)."""
         obj = object.__new__(cls)
         obj.__dict__.update(time=time, agents=agents, tasks=tasks, cost=cost, comm=comm, rng=rng,
                             max_rounds=max_rounds, loss=loss, latency=latency,
-                            cell_size=cell_size, _agent_pos=agent_pos, _task_pos=task_pos)
+                            cell_size=cell_size, _agent_pos=agent_pos, _task_pos=task_pos,
+                            plans={} if plans is None else plans)
         obj.__post_init__()
         return obj
 
@@ -521,6 +539,19 @@ class Planner(ABC):
         """``costs(agents, tasks)[rows, cols]`` (a 1-D float array), computing only those
         pairs; for planners that set :attr:`lower_bounds`."""
         raise NotImplementedError(f"planner {self.name!r} computes no lower bounds")
+
+    #: True for planners that implement :meth:`between` (shared rides and drop-off limits
+    #: need it: the kernel routes between the stops of a plan).
+    travel_times: ClassVar[bool] = False
+
+    def between(self, sources: Sequence[Location], targets: Sequence[Location],
+                pairwise: bool = False) -> np.ndarray:
+        """Travel seconds from each of ``sources`` (locations: on roads nodes or road points)
+        to each of ``targets`` (nodes), as :meth:`costs` counts them: a ``(len(sources),
+        len(targets))`` array, or with ``pairwise`` the 1-D array of ``sources[k] ->
+        targets[k]``. For planners that set :attr:`travel_times`."""
+        raise NotImplementedError(f"planner {self.name!r} computes no travel times between "
+                                  "locations")
 
     def task_closed(self, task_id: int) -> None:
         """Forget anything cached for a task that will never be asked about again."""

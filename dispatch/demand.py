@@ -43,7 +43,9 @@ class VoxelDemand(Demand):
             cell = self.grid.cell_of(trips.origin[i])
             drop = None if trips.dest is None else self.grid.cell_of(trips.dest[i])
             kind = "ground" if cell[2] == 0 and (drop is None or drop[2] == 0) else "air"
-            out.append(Request(kind, cell, drop, float(trips.max_wait[i])))
+            out.append(Request(kind, cell, drop, float(trips.max_wait[i]),
+                               passengers=_int(trips.passengers, i),
+                               max_delay=_float(trips.max_delay, i)))
         return out
 
     def valid(self, loc) -> bool:
@@ -67,8 +69,17 @@ class RoadDemand(Demand):
         nan = math.nan
         return [Request("trip", int(origin[i]), None if dest is None else int(dest[i]),
                         float(trips.max_wait[i]), float(snap_o[i]),
-                        nan if snap_d is None else float(snap_d[i]))
+                        nan if snap_d is None else float(snap_d[i]),
+                        _int(trips.passengers, i), _float(trips.max_delay, i))
                 for i in range(len(trips))]
+
+
+def _int(column, i: int) -> int:
+    return 1 if column is None else int(column[i])
+
+
+def _float(column, i: int) -> float:
+    return math.nan if column is None else float(column[i])
 
 
 def _nodes(net, trips: Trips, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

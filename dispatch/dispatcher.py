@@ -58,17 +58,18 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from dispatch.comms import comm_graph, components
-from dispatch.contracts import Allocation, AllocationProblem, Allocator, Planner
+from dispatch.contracts import Allocation, AllocationProblem, Allocator, Planner, StopView
 from dispatch.errors import AllocationError, DispatchError, PluginError
 from dispatch.lazy import certify, resolve_open
 from dispatch.space import Space
+from dispatch.stops import OBJECTIVES, PICKUP_TIME, insertion_costs
 from dispatch.tasks import OPEN, TaskBook, TaskState
 
 if TYPE_CHECKING:
@@ -198,6 +199,33 @@ def _rows(ids: np.ndarray, ascending: bool = False) -> Callable[[object], int]:
     return find
 
 
+class _Plans(Mapping):
+    """:attr:`AllocationProblem.plans`: the stop lists of a decision's agents that have one,
+    read from the vehicles when asked (within the decision: nothing moves meanwhile)."""
+
+    def __init__(self, fleet: Fleet, operator: Operator, slots: np.ndarray) -> None:
+        self._vehicles = [fleet.vehicles[k] for k in slots.tolist()]
+        self._operator = operator
+        self._ids = {v.id: v for v in self._vehicles if v.stops}
+        self._cache: dict[int, tuple] = {}
+
+    def __getitem__(self, agent_id: int) -> tuple[StopView, ...]:
+        got = self._cache.get(agent_id)
+        if got is None:
+            v = self._ids[agent_id]
+            times = self._operator.plan_arrays(v)[0]
+            got = self._cache[agent_id] = tuple(
+                StopView(s.kind, s.task.id, s.loc, s.passengers, s.latest, s.occupancy, t)
+                for s, t in zip(v.stops, times))
+        return got
+
+    def __iter__(self):
+        return iter(self._ids)
+
+    def __len__(self) -> int:
+        return len(self._ids)
+
+
 @dataclass
 class _Pending:
     """A decision taken and validated, waiting for its hand-out (after the comms delay)."""
@@ -211,6 +239,9 @@ class _Pending:
     components: int
     holder: dict = field(default_factory=dict)  # reassign: task id -> vehicle id at decision
     index: list = field(default_factory=list)  # each pair's (row, column) in the problem
+    #: shared rides: (row, column) of a pair whose vehicle has a plan -> where its stops go
+    #: (see :class:`dispatch.stops.Insertions`)
+    inserts: dict = field(default_factory=dict)
 
 
 class Dispatcher:
@@ -219,7 +250,8 @@ class Dispatcher:
     def __init__(self, env: simpy.Environment, book: TaskBook, fleet: Fleet, operator: Operator,
                  planner: Planner, allocator: Allocator, space: Space, cfg: DispatchConfig,
                  comms: CommsConfig, rng: np.random.Generator,
-                 on_decision: Callable[..., None], links=None) -> None:
+                 on_decision: Callable[..., None], links=None, *, pooled: bool = False,
+                 max_delay: bool = False) -> None:
         self.env, self.book, self.fleet, self.operator = env, book, fleet, operator
         self.planner, self.allocator, self.space = planner, allocator, space
         self.cfg, self.comms, self.rng, self.on_decision = cfg, comms, rng, on_decision
@@ -245,6 +277,21 @@ class Dispatcher:
             log.warning("lazy_costs is on but planner %r computes no lower bounds or allocator "
                         "%r does not minimize the total cost: exact costs are used",
                         planner.name, allocator.name)
+            self.lazy = False
+        #: the vehicles have plans to insert into (a capacity above 1), requests have drop-off
+        #: limits or the objective is the added time: costs are insertion costs (dispatch.stops)
+        self.pooled = bool(pooled)
+        self.plans = self.pooled or cfg.objective != "pickup_time" or bool(max_delay)
+        self.objective = OBJECTIVES[cfg.objective]
+        #: the planner routes between any two locations (direct times, insertions)
+        self.routes = bool(getattr(planner, "travel_times", False))
+        if self.plans and not self.routes:
+            raise PluginError(f"planner {planner.name!r} computes no travel times between "
+                              "locations (Planner.between): shared rides, max_delay and the "
+                              "added_time objective need them")
+        if self.lazy and self.plans:
+            log.warning("lazy_costs is off: shared rides, max_delay and the added_time "
+                        "objective cost insertions exactly")
             self.lazy = False
         self.lazy_rounds = 0  # lazy costs: allocator calls (one per certificate round)
         self.lazy_pairs = 0  # lazy costs: pairs whose exact cost was computed
@@ -305,7 +352,11 @@ class Dispatcher:
         held = self.book.assigned if self.cfg.reassign else {}
         if not self.book.open and not held:
             return
+        if self.routes:
+            self._direct_times()
         idle = self.fleet.idle_index()
+        if self.pooled:  # busy vehicles with a free seat somewhere in their plan take part
+            idle = np.union1d(idle, self._roomy())
         holder: dict[int, int] = {}  # task id -> the vehicle driving to its pickup
         if held:  # [dispatch] reassign: vehicles driving to a pickup take part, with their tasks
             holder = {t.id: t.agent_id for t in held.values()}
@@ -351,7 +402,17 @@ class Dispatcher:
             if not servable.all():
                 self._close_unreachable([t for t, ok in zip(open_tasks, servable) if not ok])
         deadlines = [t.deadline for t in open_tasks]
-        if any(d < math.inf for d in deadlines):
+        inserts: dict = {}
+        if self.plans:
+            if servable is None:
+                servable = np.ones(len(open_tasks), dtype=bool)
+            cost, inserts = self._insertions(cost, idle, open_tasks, now, set(holder.values()))
+            late = servable & ~np.isfinite(cost).any(axis=0)
+            for t, bad in zip(open_tasks, late):
+                if bad and not t.offered:
+                    self.book.close(t, TaskState.REJECTED)
+            servable &= ~late
+        elif any(d < math.inf for d in deadlines):
             if servable is None:
                 servable = np.ones(len(open_tasks), dtype=bool)
             deadlines = np.array(deadlines)
@@ -371,6 +432,10 @@ class Dispatcher:
             if not servable.any():
                 return
             if not servable.all():
+                if inserts:  # their columns move left
+                    col = np.cumsum(servable) - 1
+                    inserts = {(r, int(col[c])): at for (r, c), at in inserts.items()
+                               if servable[c]}
                 open_tasks = [t for t, ok in zip(open_tasks, servable) if ok]
                 tasks = tuple([t.view() for t in open_tasks])
                 cost = cost[:, servable]
@@ -386,8 +451,9 @@ class Dispatcher:
             if nodes is not None and not agents.points.size:
                 def apos():  # node positions (fixed now), computed if someone reads them
                     return space.positions(nodes)
-            else:  # views read now (a vehicle's view is built from its state when first read)
-                apos = _positions(space, agents)
+            else:  # read if someone asks, within the decision (nothing moves meanwhile)
+                def apos():
+                    return _positions(space, agents)
         else:
             apos = _positions(space, agents)
             comm = comm_graph(apos, comms.range)
@@ -397,10 +463,12 @@ class Dispatcher:
         def tpos():
             return space.positions([t.loc for t in tasks])
 
+        plans = _Plans(self.fleet, self.operator, idle) if self.pooled else None
+
         def ask(cost: np.ndarray):
             problem = AllocationProblem.made(now, agents, tasks, np.array(cost, order="C"),
                                              comm, self.rng, self.cfg.max_rounds, comms.loss,
-                                             comms.latency, self.cell_size, apos, tpos)
+                                             comms.latency, self.cell_size, apos, tpos, plans)
             allocation, decide_s, index = self._ask(problem)
             return problem, allocation, decide_s, index
 
@@ -418,7 +486,7 @@ class Dispatcher:
             t.conflicted = t.conflicted or t.id in conflicted
         n_comp = 1 if comm.strides == (0, 0) else components(comm)[0]
         self._pending = _Pending(problem, allocation, open_tasks, cost_s, decide_s, delay,
-                                 n_comp, holder, index)
+                                 n_comp, holder, index, inserts)
         if delay <= 0:
             self._hand_out()
 
@@ -493,17 +561,26 @@ class Dispatcher:
         holding = {a: t for t, a in p.holder.items()}  # vehicle -> its task at the decision
         allocation = p.allocation
         cost = p.problem.cost
-        if not holding and all(by_task[t].state is OPEN and not by_id[a].busy
-                               for a, t in allocation.pairs):  # (always so without latency)
+        if not holding and (p.delay <= 0 or all(by_task[t].state is OPEN and not by_id[a].busy
+                                                for a, t in allocation.pairs)):
+            # (without latency nothing changed since the decision; with it, a pooled pair
+            # whose vehicle moved on is stale: the slow path below drops it)
             handed = tuple(allocation.pairs)
             pair_cost = [float(cost[i, j]) for i, j in p.index]
+            if p.inserts:
+                at = [p.inserts.get(ij) for ij in p.index]
+                for (aid, tid), c, a in zip(handed, pair_cost, at):
+                    self.operator.assign(by_task[tid], by_id[aid], c, a)
+                self._recorded(p, allocation, pair_cost)
+                return
         else:
             def still(a: int) -> bool:  # a vehicle of the decision, as it was then
                 v = by_id[a]
                 if a not in holding:
                     return not v.busy
-                return v.task is not None and v.task.id == holding[a] \
-                    and v.task.state is TaskState.ASSIGNED
+                task = self.operator.holds(v)
+                return task is not None and task.id == holding[a] \
+                    and task.state is TaskState.ASSIGNED
 
             def available(t: int) -> bool:  # a task of the decision, as it was then
                 task = by_task[t]
@@ -511,6 +588,10 @@ class Dispatcher:
                     task.state is TaskState.ASSIGNED and task.agent_id == p.holder[t])
 
             handed = tuple((a, t) for a, t in allocation.pairs if available(t) and still(a))
+            if p.inserts:  # a pooled pair is stale once its vehicle has moved on: dropped
+                row, col = _finders(p.problem)
+                handed = tuple((a, t) for a, t in handed
+                               if (row(a), col(t)) not in p.inserts)
             if len(handed) != len(allocation.pairs):
                 log.debug("decision %d: %d pair(s) not handed out (task closed while deciding)",
                           self.decisions, len(allocation.pairs) - len(handed))
@@ -518,6 +599,15 @@ class Dispatcher:
                 self.notify()
             row, col = _finders(p.problem)
             pair_cost = [float(cost[row(a), col(t)]) for a, t in allocation.pairs]
+        self._recorded(p, allocation, pair_cost)
+        if not holding:
+            for (aid, tid), c in zip(handed, pair_cost):  # allocation.pairs is handed
+                self.operator.assign(by_task[tid], by_id[aid], c)
+            return
+        self._reassign(p, holding, handed, pair_cost, still)
+
+    def _recorded(self, p: _Pending, allocation: Allocation, pair_cost: list[float]) -> None:
+        """Count and record a decision's hand-out (``allocation`` as handed out)."""
         critical = max(allocation.agent_seconds, default=p.decide_s)
         self.rounds += allocation.rounds
         self.messages += allocation.messages
@@ -530,10 +620,12 @@ class Dispatcher:
                          hops=allocation.hops, comm_delay=p.delay, agent_seconds=critical,
                          components=p.components)
         self.decisions += 1
-        if not holding:
-            for (aid, tid), c in zip(handed, pair_cost):  # allocation.pairs is handed
-                self.operator.assign(by_task[tid], by_id[aid], c)
-            return
+
+    def _reassign(self, p: _Pending, holding: dict, handed: tuple, pair_cost: list[float],
+                  still) -> None:
+        """The hand-out of a decision with re-assignment before pickup."""
+        by_task = {t.id: t for t in p.tasks}
+        by_id = self.fleet.by_id
         # reassign: a vehicle driving to a pickup gives its task up when it gets another task,
         # or none while its task goes to another vehicle; otherwise it keeps it
         new_task = dict(handed)
@@ -549,6 +641,104 @@ class Dispatcher:
         for a in give:
             if a not in new_task:
                 self.operator.stand_idle(by_id[a])
+
+    def _direct_times(self) -> None:
+        """Set the free-flow direct drive time of open requests that have none yet (the first
+        decision that considers a request; a congested planner's inner, free-flow one)."""
+        need = [t for t in self.book.open.values()
+                if t.dropoff is not None and t.direct_time != t.direct_time]
+        if not need:
+            return
+        free = getattr(self.planner, "inner", self.planner)
+        times = free.between([t.loc for t in need], [t.dropoff for t in need], pairwise=True)
+        for t, x in zip(need, np.asarray(times, dtype=float).tolist()):
+            t.direct_time = x
+
+    def _roomy(self) -> np.ndarray:
+        """Positions of the busy vehicles with a free seat somewhere in their plan (shared
+        rides: they are candidates for new requests)."""
+        return np.flatnonzero(self.fleet.busy_mask & self.fleet.room)
+
+    def _insertions(self, cost: np.ndarray, slots: np.ndarray, tasks: list, now: float,
+                    holders: set) -> tuple[np.ndarray, dict]:
+        """The decision's costs with plans (see :mod:`dispatch.stops`): for a vehicle with an
+        empty plan (idle, or about to give its task up) the request's pickup and drop-off in
+        that order; for a busy one the cheapest feasible insertion into its plan; ``inf``
+        where none keeps the capacity and every limit. ``cost`` holds the drives from each
+        vehicle to each pickup. Returns ``(costs by the objective, {(row, col): where the
+        stops go})`` for the busy vehicles' finite pairs."""
+        fleet, svc = self.fleet, self.operator.service_time
+        m = len(tasks)
+        lp = np.array([t.deadline for t in tasks])
+        ld = np.array([t.dropoff_deadline for t in tasks])
+        n_req = np.array([0 if t.dropoff is None else t.passengers for t in tasks], np.int64)
+        point = np.array([t.dropoff is None for t in tasks])
+        pd = np.array([0.0 if t.dropoff is None else t.direct_time for t in tasks])
+        svc_p = np.where(point, svc, 0.0)
+        svc_d = np.where(point, 0.0, svc)
+        vehicles = [fleet.vehicles[k] for k in slots.tolist()]
+        cap = np.array([v.capacity for v in vehicles], np.int64)
+        planned = np.array([bool(v.stops) or v.serving is not None for v in vehicles])
+        if holders:  # [dispatch] reassign: a holder decides as if its plan were empty
+            planned &= ~np.array([v.id in holders for v in vehicles])
+        out = np.full(cost.shape, np.inf)
+        empty = np.flatnonzero(~planned)
+        if empty.size:
+            c = cost[empty]
+            arr_p = now + c
+            arr_d = arr_p + svc_p + pd
+            ok = (arr_p <= lp + 1e-9) & (arr_d <= ld + 1e-9) & (n_req <= cap[empty, None])
+            value = c if self.objective == PICKUP_TIME else c + svc_p + pd + svc_d
+            out[empty] = np.where(ok, value, np.inf)
+        busy = np.flatnonzero(planned)
+        if not busy.size:
+            return out, {}
+        ready = np.array([max(now, vehicles[k].free_at) for k in busy.tolist()])
+        rows, cols = np.nonzero((ready[:, None] + cost[busy] <= lp + 1e-9)
+                                & (n_req <= cap[busy, None]))
+        if not rows.size:
+            return out, {}
+        # the busy vehicles' plans, flat; requests by column
+        used = np.unique(rows)
+        remap = np.full(busy.size, -1, np.int64)
+        remap[used] = np.arange(used.size)
+        off, s_arr, s_svc, s_latest, s_occ, locs = [0], [], [], [], [], []
+        load = []
+        plan_of = self.operator.plan_arrays
+        for k in used.tolist():
+            v = vehicles[busy[k]]
+            times, svcs, latest, occ, where = plan_of(v)
+            s_arr += times
+            s_svc += svcs
+            s_latest += latest
+            s_occ += occ
+            locs += where
+            off.append(len(locs))
+            load.append(v.load)
+        ucols = np.unique(cols)
+        cmap = np.full(m, -1, np.int64)
+        cmap[ucols] = np.arange(ucols.size)
+        picks = [tasks[c].loc for c in ucols.tolist()]
+        drops = [tasks[c].loc if tasks[c].dropoff is None else tasks[c].dropoff
+                 for c in ucols.tolist()]
+        between = self.planner.between
+        g = len(locs)
+        if g:
+            to_p, from_p = between(locs, picks), between(picks, locs)
+            to_d, from_d = between(locs, drops), between(drops, locs)
+        else:
+            to_p = to_d = np.zeros((0, ucols.size))
+            from_p = from_d = np.zeros((ucols.size, 0))
+        vrow = busy[rows]
+        ins = insertion_costs(
+            remap[rows], cmap[cols], ready[used], cost[vrow, cols], off, s_arr, s_svc,
+            s_latest, s_occ, load, cap[busy[used]], to_p, from_p, to_d, from_d, pd[ucols],
+            n_req[ucols], lp[ucols], ld[ucols], svc_p[ucols], svc_d[ucols], self.objective)
+        out[vrow, cols] = ins.cost
+        inserts = {(int(r), int(c)): ins.of(q)
+                   for q, (r, c) in enumerate(zip(vrow.tolist(), cols.tolist()))
+                   if ins.cost[q] < math.inf}
+        return out, inserts
 
     def _close_unreachable(self, tasks) -> None:
         """Close tasks no vehicle of the fleet can reach; vehicles never leave their connected

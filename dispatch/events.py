@@ -34,6 +34,8 @@ reassign       ``[dispatch] reassign``: a vehicle driving to a pickup gives its 
 reposition     an idle vehicle is sent toward a node by the repositioner (agent; at the
                target node), followed by a ``depart`` with task -1 where it starts and, on
                arrival, an ``idle`` there; it stays idle (dispatchable) all the way
+insert         shared rides: a decision inserted a request's stops into a busy vehicle's
+               plan (agent, the request; at the vehicle), after the request's ``assign``
 =============  ===========================================================================
 """
 
@@ -46,7 +48,7 @@ from dispatch.space import Location
 
 KINDS = ("release", "assign", "depart", "move", "pickup", "dropoff", "complete", "idle", "wait",
          "replan", "expire", "reject", "unreachable", "cancel", "failed", "skipped",
-         "breakdown", "repair", "reopen", "reassign", "reposition")
+         "breakdown", "repair", "reopen", "reassign", "reposition", "insert")
 
 
 class Event(NamedTuple):

@@ -22,9 +22,13 @@ from dispatch.vehicles import Vehicle
 
 def place_fleet(space: Space, spec: RunSpec, rng: np.random.Generator) -> list[Vehicle]:
     """The run's vehicles at their start locations (see the module docstring)."""
-    if space.kind == "road":
-        return _place_cars(space, spec, rng)
-    return _place_voxel(space, spec, rng)
+    vehicles = (_place_cars if space.kind == "road" else _place_voxel)(space, spec, rng)
+    fleet = spec.fleet
+    if fleet.capacity != 1 or fleet.capacities:
+        seats = fleet.capacities
+        for k, v in enumerate(vehicles):  # start-file rows are in the vehicles' order
+            v.capacity = seats[k] if k < len(seats) and seats[k] else fleet.capacity
+    return vehicles
 
 
 def _place_cars(net, spec: RunSpec, rng: np.random.Generator) -> list[Vehicle]:

@@ -64,6 +64,13 @@ SCHEMAS: dict[str, pa.Schema] = {
         ("tasks_assigned", _I),
         # what the allocator says it ran (JSON object of strings; see dispatch.sim.describe)
         ("allocator_info", _S),
+        # shared rides: passenger-metres; occupancy = passenger_distance / distance (MATSim
+        # DRT's); share of completed rides shared; mean delay (drop-off - release - direct
+        # time, s) and detour ratio (in-vehicle time / direct time) over completed trips
+        ("passenger_distance", _F), ("occupancy", _F), ("shared_rate", _F),
+        ("delay_mean", _F), ("detour_ratio", _F),
+        # [dispatch] objective: what a pair's cost (total_cost's terms) measures
+        ("objective", _S),
     ]),
     "tasks": pa.schema([
         ("run_id", _S), ("task_id", _I), ("kind", _S), ("x", _F), ("y", _F), ("z", _F),
@@ -74,6 +81,9 @@ SCHEMAS: dict[str, pa.Schema] = {
         ("closed_at", _F),
         # times it went back to open after a breakdown; of those, with the passenger aboard
         ("reassigned", _I), ("transfers", _I),
+        # shared rides: riders; free-flow seconds pickup -> drop-off; the request's delay
+        # limit; whether another request was on board during its ride
+        ("passengers", _I), ("direct_time", _F), ("max_delay", _F), ("shared", _B),
     ]),
     "assignments": pa.schema([
         ("run_id", _S), ("decision", _I), ("round", _I), ("agent_id", _I), ("task_id", _I),
@@ -100,6 +110,8 @@ SCHEMAS: dict[str, pa.Schema] = {
         ("waits", _I), ("replans", _I), ("wait_seconds", _F),
         # breakdowns ([faults]) and seconds out of service
         ("failures", _I), ("down_seconds", _F),
+        # seats; passenger-metres (metres times passengers on board)
+        ("capacity", _I), ("passenger_distance", _F),
     ]),
     "obstacles": pa.schema([
         ("run_id", _S), ("x0", _F), ("y0", _F), ("z0", _F), ("x1", _F), ("y1", _F), ("z1", _F),

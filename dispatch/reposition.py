@@ -40,6 +40,7 @@ from typing import TYPE_CHECKING, ClassVar
 import numpy as np
 
 from dispatch.errors import PluginError
+from dispatch.vehicles import stop_leg
 
 if TYPE_CHECKING:
     import simpy
@@ -250,7 +251,7 @@ class Repositioning:
         import simpy
 
         try:
-            v.empty_distance += yield from self.driver.drive(self.env, v, leg, -1)
+            yield from self.driver.drive(self.env, v, leg, -1)  # counts its metres
         except simpy.Interrupt:  # stop() or a breakdown has already counted what was driven
             self._close(v, trip)
             return
@@ -274,12 +275,7 @@ class Repositioning:
             return
         env = self.env
         if v.leg is not None:
-            leg, t = v.leg, env.now - v.leg_start
-            driven = float(np.interp(t, np.r_[0.0, leg.times], np.r_[0.0, leg.metres]))
-            v.distance += driven
-            v.empty_distance += driven
-            point = leg.point_at(t)
-            v.loc, v.leg = (point.node if point.on_node else point), None
+            stop_leg(v, env.now)
         self._close(v, trip)
         if trip.proc is not None and trip.proc.is_alive and trip.proc is not env.active_process:
             trip.proc.interrupt("stopped")

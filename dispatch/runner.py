@@ -106,8 +106,12 @@ def run_metadata(spec: RunSpec) -> dict[str, str]:
             "seed": spec.seed, "scenario": spec.scenario.name}
     if spec.names_reposition:
         keys["reposition"] = spec.reposition
-    return {"dispatch.scenario": spec.scenario.text, "dispatch.seed": str(spec.seed),
+    meta = {"dispatch.scenario": spec.scenario.text, "dispatch.seed": str(spec.seed),
             "dispatch.spec": json_meta(keys)}
+    trips = spec.scenario.tasks.trips
+    if trips is not None and trips.dropped:  # trips of the trace left out before the run
+        meta["dispatch.trips_dropped"] = json_meta({r: n for r, n in trips.dropped})
+    return meta
 
 
 def make_recorder(spec: RunSpec, out: Path, *, flush_rows: int = DEFAULT_FLUSH_ROWS) -> Recorder:

@@ -8,17 +8,31 @@ See ``scenarios/README.md`` for every key with its default.
 from __future__ import annotations
 
 import itertools
+import logging
 import math
 import re
 import reprlib
 import tomllib
 from dataclasses import dataclass, field, replace
+from datetime import datetime
 from pathlib import Path
 from typing import Any
 
 from dispatch.errors import ScenarioError
 from dispatch.faults import FaultConfig, read_failures
-from dispatch.traces import Trips, decode_text, read_bytes, read_fleet_start, read_trace
+from dispatch.traces import (
+    Trips,
+    decode_text,
+    parse_datetime,
+    read_bytes,
+    read_fleet_capacities,
+    read_fleet_start,
+    read_trace,
+    shipped_trace,
+    within_snap,
+)
+
+log = logging.getLogger(__name__)
 
 Vec3 = tuple[float, float, float]
 SOURCES = ("static", "periodic", "poisson", "trace", "empirical")
@@ -111,6 +125,15 @@ class FleetConfig:
     #: roads, without a start file: "uniform" nodes, or "demand" (the empirical sample's
     #: pickup nodes, weighted by their trips)
     placement: str = "uniform"
+    #: seats per vehicle (``[fleet] capacity``); a start file's ``capacity`` column per vehicle
+    #: (row order; 0: the fleet's)
+    capacity: int = 1
+    capacities: tuple[int, ...] = ()
+
+    @property
+    def pooled(self) -> bool:
+        """Some vehicle has more than one seat: busy vehicles take part in decisions."""
+        return self.capacity > 1 or any(c > 1 for c in self.capacities)
 
     @property
     def n_uav(self) -> int:
@@ -128,10 +151,17 @@ class TaskConfig:
     service_time: float = 0.0  # seconds a vehicle spends at the task after arriving
     ttl: float | None = None  # seconds an unassigned task waits before it expires
     max_wait: float | None = None  # seconds a request accepts to wait for its pickup
+    #: seconds of delay a request accepts at its drop-off, over release + direct drive time
+    max_delay: float | None = None
     trace: Path | None = None  # trace: CSV or Parquet file of trips (see dispatch.traces)
     trips: Trips | None = None
     trips_per_day: float | None = None  # empirical: expected trips over the 24 h day
     weekday: str = "all"  # empirical: the sample's trips of this weekday ("all": every day)
+    #: trace: the date-time of second 0 (a trace's departure_time is read from it)
+    start: datetime | None = None
+    #: trace on roads: metres a pickup / drop-off may lie from the nearest node (farther:
+    #: the trip is left out before the run, counted in trips.dropped); None: no bound
+    max_snap: float | None = None
 
 
 @dataclass(frozen=True)
@@ -145,6 +175,9 @@ class DispatchConfig:
     #: decide on the planner's lower bounds and compute exact costs only for the pairs an
     #: optimal answer needs (see dispatch.lazy); used when the planner and allocator support it
     lazy_costs: bool = False
+    #: what a pair's cost is: "pickup_time" (seconds until the pickup) or "added_time" (how
+    #: much longer the vehicle's whole plan gets; see dispatch.stops)
+    objective: str = "pickup_time"
     allocator_params: tuple[tuple[str, Any], ...] = ()
     planner_params: tuple[tuple[str, Any], ...] = ()
     #: ``[dispatch.allocator_params.<name>]`` tables: parameters of one allocator (``magnnet``)
@@ -481,6 +514,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
         ugv_speed=f.number("ugv_speed", 3.0, gt=0.0),
         uav_max_start_altitude=f.number("uav_max_start_altitude", 10.0, lo=0.0),
         placement=f.string("placement", "uniform", ("uniform", "demand")),
+        capacity=f.number("capacity", 1, lo=1, hi=10_000, integer=True),
     )
     start = f.get("start", None)
     if start is not None:
@@ -492,7 +526,8 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
         if agents > len(rows):
             raise f.fail("agents", f"{agents} vehicles but the start file {start} places "
                                    f"{len(rows)}")
-        fleet = replace(fleet, agents=agents, start=rows, start_file=start_path)
+        fleet = replace(fleet, agents=agents, start=rows, start_file=start_path,
+                        capacities=read_fleet_capacities(start_path, max_bytes)[:agents])
     f.done()
 
     t = root.table("tasks")
@@ -508,20 +543,27 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
         ttl=t.number("ttl", None, gt=0.0, optional=True),
     )
     tasks = replace(tasks, max_wait=t.number("max_wait", 600.0 if source == "empirical"
-                                             else None, gt=0.0, optional=True))
+                                             else None, gt=0.0, optional=True),
+                    max_delay=t.number("max_delay", None, lo=0.0, optional=True))
     tasks = _parse_empirical(t, tasks, world, fleet)
     trace = t.get("trace", None)
     if source == "periodic" and tasks.interval is None:
         raise t.fail("interval", "is required when source = 'periodic'")
     if source == "poisson" and tasks.rate is None:
         raise t.fail("rate", "is required when source = 'poisson'")
+    start, max_snap = _parse_start(t, source), _parse_max_snap(t, source, world)
     if source == "trace":
         if not isinstance(trace, str) or not trace:
             raise t.fail("trace", "is required when source = 'trace' (a CSV or Parquet file)")
-        trace_path = (path.parent / trace).resolve()
+        trace_path = shipped_trace(trace) or (path.parent / trace).resolve()
         trips = read_trace(trace_path, world.space, world.size if world.roads is None else None,
-                           max_bytes)
-        tasks = replace(tasks, trace=trace_path, trips=trips)
+                           max_bytes, start=start)
+        if max_snap is not None:
+            trips = _within_snap(t, trips, world, max_snap)
+        for reason, n in trips.dropped:
+            log.warning("%s: %d of %d trips left out: %s", trace_path.name, n,
+                        n + len(trips), reason)
+        tasks = replace(tasks, trace=trace_path, trips=trips, start=start, max_snap=max_snap)
     elif trace is not None:
         raise t.fail("trace", f"is only used when source = 'trace' (source is {source!r})")
     for k, allowed in (("interval", ("periodic",)), ("rate", ("poisson",)),
@@ -548,10 +590,12 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
         max_rounds=d.number("max_rounds", 1000, lo=1, integer=True),
         reassign=reassign,
         lazy_costs=lazy,
+        objective=d.string("objective", "pickup_time", ("pickup_time", "added_time")),
         allocator_params=d.params("allocator_params"),
         planner_params=d.params("planner_params"),
     )
     d.done()
+    _check_pooling(path, world, fleet, tasks, disp)
 
     c = root.table("comms")
     comms = CommsConfig(
@@ -588,6 +632,81 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     for n in sweep.agents or (fleet.agents,):
         _check_fits(sc, n, "sweep.agents" if sweep.agents else "fleet.agents")
     return sc
+
+
+def _check_pooling(path: Path, world: WorldConfig, fleet: FleetConfig, tasks: TaskConfig,
+                   disp: DispatchConfig) -> None:
+    """Shared rides (a capacity above 1) and drop-off limits are for road networks; a pooled
+    fleet decides with exact costs and without re-assignment before pickup."""
+    pooled = fleet.pooled
+    if world.roads is None:
+        if pooled:
+            key = "fleet.capacity" if fleet.capacity > 1 else "fleet.start"
+            raise ScenarioError(path, key, "shared rides (a capacity above 1) need a road "
+                                           "network ([world] network)")
+        if tasks.max_delay is not None:
+            raise ScenarioError(path, "tasks.max_delay", "a drop-off delay limit needs a road "
+                                                         "network ([world] network)")
+        if disp.objective != "pickup_time":
+            raise ScenarioError(path, "dispatch.objective", "added_time needs a road network "
+                                                            "([world] network)")
+    if pooled and disp.reassign:
+        raise ScenarioError(path, "dispatch.reassign", "re-assignment before pickup is for "
+                                                       "vehicles of capacity 1")
+    trips = tasks.trips
+    if trips is not None and trips.passengers is not None and len(trips) and world.roads is None \
+            and int(trips.passengers.max()) > 1:
+        raise ScenarioError(path, "tasks.trace", "passengers above 1 need a road network")
+
+
+def _parse_start(t: _Table, source: str) -> datetime | None:
+    """``[tasks] start``: the date-time of second 0 of a trace of ``departure_time`` date-times
+    (an ISO 8601 string such as "2014-12-21T00:00", or a TOML date-time)."""
+    v = t.get("start", None)
+    if v is None:
+        return None
+    if source != "trace":
+        raise t.fail("start", f"is only used when source = 'trace' (not {source!r})")
+    try:
+        return parse_datetime(v)
+    except (TypeError, ValueError):
+        raise t.fail("start", f"must be a date-time such as \"2014-12-21T00:00\", got "
+                              f"{_short(v)}") from None
+
+
+def _parse_max_snap(t: _Table, source: str, world: WorldConfig) -> float | None:
+    """``[tasks] max_snap``: metres (> 0) a trace's pickup or drop-off may lie from the road
+    network's nearest node."""
+    v = t.number("max_snap", None, gt=0.0, optional=True)
+    if v is not None and (source != "trace" or world.roads is None):
+        raise t.fail("max_snap", "is only used with a trace on a road network "
+                                 "(source = 'trace', [world] network)")
+    return v
+
+
+def _within_snap(t: _Table, trips: Trips, world: WorldConfig, max_snap: float) -> Trips:
+    """The trace's trips within ``max_snap`` metres of the network (loaded here: it is cached
+    for the run); ScenarioError when none is left or the network cannot be loaded."""
+    from dispatch.roads import load_network
+
+    if trips.layout == "node":
+        raise t.fail("max_snap", "is only used with a trace of coordinates (its trips name "
+                                 "network nodes)")
+    r = world.roads
+    try:
+        net = load_network(r.network, base=r.base, blocks=r.blocks, block=r.block,
+                           speed=r.speed)
+        kept = within_snap(trips, net, max_snap)
+    except (ValueError, OSError) as e:
+        raise ScenarioError(t.file, "world.network", str(e)) from None
+    except Exception as e:  # noqa: BLE001 - a malformed file raises whatever its parser raises
+        raise ScenarioError(t.file, "world.network", f"{r.network} cannot be read "
+                                                     f"({type(e).__name__}: {e})") from None
+    if not len(kept):
+        raise t.fail("max_snap", f"leaves no trip of {trips.path.name}: every one has a pickup "
+                                 f"or drop-off farther than {max_snap:g} m from a node of "
+                                 f"{net.name}")
+    return kept
 
 
 def _windows(s: _Table) -> tuple[float, ...]:

@@ -38,7 +38,7 @@ from dispatch.scenario import RoadConfig, RunSpec, Scenario, WorldConfig, _short
 from dispatch.space import Space
 from dispatch.stats import RunStats
 from dispatch.tasks import SourceConfig, Task, TaskBook, TaskSource, TaskState
-from dispatch.vehicles import CellDriver, Fleet, Operator, RoadDriver
+from dispatch.vehicles import CellDriver, Fleet, Operator, RoadDriver, stop_leg
 from dispatch.world import World, build_world
 
 log = logging.getLogger(__name__)
@@ -158,6 +158,14 @@ def check_runs(sc: Scenario, planners, repositioners=()) -> None:
                                                     "with reservation-based execution yet")
 
 
+def _has_max_delay(sc: Scenario) -> bool:
+    """Some request of the scenario has a drop-off delay limit (the file's or its trace's)."""
+    trips = sc.tasks.trips
+    return sc.tasks.max_delay is not None or (
+        trips is not None and trips.max_delay is not None
+        and bool(np.isfinite(trips.max_delay).any()))
+
+
 #: Simulated-time ticks of a run's progress reports (see :class:`Simulation`).
 PROGRESS_TICKS = 500
 #: Allocations between two young-generation collections of the garbage collector while a run
@@ -242,7 +250,9 @@ class Simulation:
         self.dispatcher = Dispatcher(env, book, self.fleet, self.operator, self.planner,
                                      allocator, self.space, sc.dispatch, sc.comms,
                                      rng_for(spec.seed, STREAM_ALLOCATOR), self._record_decision,
-                                     blackout_filter(sc.faults))
+                                     blackout_filter(sc.faults),
+                                     pooled=any(v.capacity > 1 for v in self.vehicles),
+                                     max_delay=_has_max_delay(sc))
         self.dispatcher.run_id = driver.run_id = spec.run_id  # named in error messages
         t = sc.tasks
         count = spec.n_static_tasks if t.source == "static" else t.count
@@ -255,7 +265,7 @@ class Simulation:
                              t.weekday)
         self.source = TaskSource(env, book, demand,
                                  SourceConfig(kind, count, t.interval, t.rate, t.max_active,
-                                              t.ttl, t.max_wait),
+                                              t.ttl, t.max_wait, t.max_delay),
                                  rng_for(spec.seed, STREAM_SOURCE), self.dispatcher.notify,
                                  trips)
         self.source.on_done = self._check_finished
@@ -360,7 +370,8 @@ class Simulation:
         self.recorder.append("tasks", (
             t.id, t.kind, x, y, z, dx, dy, dz, t.released_at, t.max_wait, t.snap_m,
             t.dropoff_snap_m, t.assigned_at, t.agent_id, t.cost, t.picked_up_at, t.completed_at,
-            t.state._value_, t.conflicted, t.closed_at, t.reassigned, t.transfers))
+            t.state._value_, t.conflicted, t.closed_at, t.reassigned, t.transfers,
+            t.passengers, t.direct_time, t.max_delay, t.shared))
 
     def _record_decision(self, index: int, problem: AllocationProblem, allocation: Allocation,
                          total: float, cost_s: float, decide_s: float, *, hops: int = 0,
@@ -387,13 +398,7 @@ class Simulation:
                 env.run(until=env.any_of([self.finished, horizon]))
             for v in self.vehicles:  # the part of a leg driven before the horizon counts
                 if v.leg is not None:
-                    leg, t = v.leg, env.now - v.leg_start
-                    driven = float(np.interp(t, np.r_[0.0, leg.times], np.r_[0.0, leg.metres]))
-                    v.distance += driven
-                    if v.task is not None and v.task.state is TaskState.PICKED_UP:
-                        v.occupied_distance += driven
-                    else:
-                        v.empty_distance += driven
+                    stop_leg(v, env.now)
             self.book.close_all(TaskState.CANCELLED)
             if self.progress is not None:
                 self.progress(env.now, self.spec.scenario.duration, self.book.released,
@@ -417,7 +422,8 @@ class Simulation:
                     tasks_completed=v.completed, waits=v.waits, replans=v.replans,
                     wait_seconds=v.wait_seconds, failures=v.failures,
                     down_seconds=v.down_seconds + (self.env.now - v.down_since if v.failed
-                                                   else 0.0))
+                                                   else 0.0),
+                    capacity=v.capacity, passenger_distance=v.passenger_distance)
         for b in getattr(self.space, "boxes", ()):
             rec.add("obstacles", x0=b.x0, y0=b.y0, z0=b.z0, x1=b.x1, y1=b.y1, z1=b.z1)
         if self.repositioning is not None:
@@ -429,5 +435,6 @@ class Simulation:
                                      dispatcher=self.dispatcher, sim_time=float(self.env.now))
         summary.update(summary_of(self.repositioning))
         summary["allocator_info"] = self.allocator_info
+        summary["objective"] = spec.scenario.dispatch.objective
         rec.add("summary", **summary)
         return summary

@@ -29,6 +29,11 @@ class RunStats:
         self.n_tasks = 0
         self.reassigned = 0  # tasks re-opened at least once by a breakdown
         self.transferred = 0  # ... with the passenger on board
+        self.rides = 0  # completed trips with a drop-off and a direct time
+        self.shared = 0  # ... of those, shared
+        self.delay = 0.0  # ... their delay over the direct drive (s)
+        self.detour = 0.0  # ... their in-vehicle time over the direct drive
+        self.detours = 0  # ... those with a direct time > 0
 
     def closed(self, t: Task) -> None:
         self.n_tasks += 1
@@ -48,6 +53,14 @@ class RunStats:
             self.travel += t.picked_up_at - t.assigned_at
         if t.state is COMPLETED:
             self.makespan = max(self.makespan, t.completed_at)
+            direct = t.direct_time
+            if t.dropoff is not None and direct == direct and t.dropped_at == t.dropped_at:
+                self.rides += 1
+                self.shared += t.shared
+                self.delay += t.dropped_at - t.released_at - direct
+                if direct > 0:
+                    self.detour += (t.dropped_at - t.picked_up_at) / direct
+                    self.detours += 1
 
     def summary(self, *, run: dict, vehicles, dispatcher, sim_time: float) -> dict:
         """The summary row: ``run`` holds the run's keys (scenario, allocator, planner,
@@ -55,6 +68,8 @@ class RunStats:
         c, d = self.count, dispatcher
         n_uav = sum(1 for v in vehicles if v.kind == "uav")
         n_ugv = sum(1 for v in vehicles if v.kind == "ugv")
+        pax = sum(v.passenger_distance for v in vehicles)
+        dist = sum(v.distance for v in vehicles)
         return dict(
             **run, n_tasks=self.n_tasks, total_cost=self.total_cost,
             conflict_free_rate=self.clean / self.offered if self.offered else math.nan,
@@ -77,4 +92,8 @@ class RunStats:
             failures=sum(v.failures for v in vehicles), tasks_reassigned=self.reassigned,
             tasks_transferred=self.transferred, tasks_assigned=self.assigned,
             reassignments=getattr(d, "reassignments", 0),
+            passenger_distance=pax, occupancy=pax / dist if dist > 0 else math.nan,
+            shared_rate=self.shared / self.rides if self.rides else math.nan,
+            delay_mean=self.delay / self.rides if self.rides else math.nan,
+            detour_ratio=self.detour / self.detours if self.detours else math.nan,
         )

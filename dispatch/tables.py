@@ -204,6 +204,30 @@ def _render_trips(summaries: list[dict], console, repositioner: str | None) -> N
                   _f(r["wait"]), _f(r["empty"], 0, 100, "%"),
                   _f(r["km"], 1), _f(r["dec"], 2), end_section=last)
     console.print(t)
+    if any(_pooled(r) for r in summaries):
+        _render_shared(groups, runs, console)
+
+
+def _pooled(s: dict) -> bool:
+    """A run whose vehicles could carry more than one request (some ride was shared, or more
+    passenger-metres than occupied metres)."""
+    return bool(s.get("shared_rate", 0.0) == s.get("shared_rate", 0.0)
+                and s.get("shared_rate", 0.0) > 0) or s.get("occupancy", 0.0) > 1.0
+
+
+def _render_shared(groups: dict, runs: int, console) -> None:
+    """The shared-ride table of pooled runs (MATSim DRT's occupancy)."""
+    title = (f"Shared rides, mean over {runs} seed(s): occupancy (passenger-km / vehicle-km), "
+             "share of completed rides shared, delay (drop-off - release - direct drive, s), "
+             "detour (in-vehicle time / direct drive)")
+    t = _new_table(title, ["allocator", "N", "occupancy", "shared", "delay", "detour"])
+    agg = {key: {"occ": _mean(rows, "occupancy"), "shared": _mean(rows, "shared_rate"),
+                 "delay": _mean(rows, "delay_mean"), "detour": _mean(rows, "detour_ratio")}
+           for key, rows in groups.items()}
+    for a, n, r, last in _grouped_rows(agg):
+        t.add_row(a, str(n), _f(r["occ"], 2), _f(r["shared"], 1, 100, "%"), _f(r["delay"]),
+                  _f(r["detour"], 2), end_section=last)
+    console.print(t)
 
 
 def render_one(s: dict, console=None, *, dynamic: bool = False) -> None:
@@ -230,7 +254,9 @@ def render_one(s: dict, console=None, *, dynamic: bool = False) -> None:
     t.add_row("wait", f"{_f(s['wait_time_mean'])} s mean, release to pickup")
     per = _ratio(s["total_cost"], s.get("tasks_assigned", math.nan))
     if road or dynamic:
-        t.add_row("planned cost", f"{_f(per, 2)} s per assignment (vehicle to pickup)")
+        what = ("time added to the vehicle's plan" if s.get("objective") == "added_time"
+                else "vehicle to pickup")
+        t.add_row("planned cost", f"{_f(per, 2)} s per assignment ({what})")
     else:
         t.add_row("total cost", f"{_f(s['total_cost'])} s (Table I: sum of the planned costs)")
     if not road:
@@ -242,6 +268,11 @@ def render_one(s: dict, console=None, *, dynamic: bool = False) -> None:
     if road:
         fleet += f", {_f(empty, 1, 100)} % of it empty"
     t.add_row("fleet", fleet)
+    if road and _pooled(s):
+        t.add_row("shared rides", f"occupancy {_f(s['occupancy'], 2)} (passenger-km / "
+                                  f"vehicle-km), {_f(s['shared_rate'], 1, 100)} % of rides "
+                                  f"shared, delay {_f(s['delay_mean'])} s mean, detour ratio "
+                                  f"{_f(s['detour_ratio'], 2)}")
     if road and s.get("reposition", "stay") != "stay":
         t.add_row("repositioning", f"{s['reposition']}: {s.get('repositions', 0)} drives, "
                                    f"{_f(s.get('reposition_distance', 0.0) / 1000, 1)} km")

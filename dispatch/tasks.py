@@ -9,8 +9,12 @@ without one). Life cycle::
 ``expired``: its ``ttl`` or ``max_wait`` ran out while it was open; ``rejected``: when the
 dispatcher first considered it, no vehicle could reach its pickup within its ``max_wait``;
 ``unreachable``: no vehicle of the fleet can ever reach it; ``cancelled``: the run ended first;
-``failed``: its vehicle broke down with the passenger on board. A vehicle holds its tasks in a
-list (capacity 1 today), so pooling adds states to a vehicle, not to a task.
+``failed``: its vehicle broke down with the passenger on board. A vehicle holds its tasks as
+stops of its plan (:mod:`dispatch.stops`), so pooling adds stops to a vehicle, not states to a
+task. A request carries ``passengers`` (default 1) and two limits (Alonso-Mora et al.): pickup by
+release + ``max_wait``, drop-off by release + ``direct_time`` + ``max_delay`` (``direct_time``:
+the free-flow fastest drive from pickup to drop-off, set by the dispatcher when the request is
+first considered).
 
 The :class:`TaskBook` keeps only live tasks, indexed (open ones in id order): no step scans the
 history of the run. A task leaving the book is handed to the ``on_close`` subscribers (the
@@ -96,6 +100,11 @@ class Task:
     reassigned: int = 0  # times it went back to open because its vehicle broke down
     transfers: int = 0  # ... of those, with the passenger on board (picked up again elsewhere)
     origin: Location | None = None  # the requested pickup (``loc`` moves on a transfer)
+    passengers: int = 1
+    max_delay: float = math.nan  # seconds of delay over the direct drive the request accepts
+    direct_time: float = math.nan  # free-flow fastest seconds from pickup to drop-off
+    shared: bool = False  # another request was on board during its ride
+    dropped_at: float = math.nan  # when its passengers got off (before any service time)
 
     @property
     def cell(self):
@@ -109,6 +118,14 @@ class Task:
         if math.isnan(self.max_wait) or self.transfers:
             return math.inf
         return self.released_at + self.max_wait
+
+    @property
+    def dropoff_deadline(self) -> float:
+        """Latest drop-off time the request accepts (inf without a max_delay or a direct time,
+        and once a breakdown made it a transfer)."""
+        if math.isnan(self.max_delay) or math.isnan(self.direct_time) or self.transfers:
+            return math.inf
+        return self.released_at + self.direct_time + self.max_delay
 
     def view(self) -> TaskView:
         return TaskView(self.id, self.kind, self.loc, self.released_at,  # type: ignore[arg-type]
@@ -148,9 +165,14 @@ class TaskBook:
 
     def release(self, kind: str, loc: Location, dropoff: Location | None = None, *,
                 max_wait: float = math.nan, snap_m: float = math.nan,
-                dropoff_snap_m: float = math.nan) -> Task:
+                dropoff_snap_m: float = math.nan, passengers: int = 1,
+                max_delay: float = math.nan) -> Task:
         task = Task(self.released, kind, loc, float(self.env.now), dropoff, max_wait, snap_m,
                     dropoff_snap_m)
+        if passengers != 1:
+            task.passengers = passengers
+        if max_delay == max_delay:
+            task.max_delay = max_delay
         self.released += 1
         self.live += 1
         self.open[task.id] = task
@@ -235,6 +257,8 @@ class Request:
     max_wait: float = math.nan
     snap_m: float = math.nan
     dropoff_snap_m: float = math.nan
+    passengers: int = 1
+    max_delay: float = math.nan
 
 
 class Demand:
@@ -267,6 +291,7 @@ class SourceConfig:
     max_active: int | None
     ttl: float | None
     max_wait: float | None
+    max_delay: float | None = None
 
 
 class TaskSource:
@@ -290,8 +315,11 @@ class TaskSource:
     def release(self, req: Request) -> Task:
         wait = req.max_wait if not math.isnan(req.max_wait) else (
             self.cfg.max_wait if self.cfg.max_wait is not None else math.nan)
+        delay = req.max_delay if not math.isnan(req.max_delay) else (
+            self.cfg.max_delay if self.cfg.max_delay is not None else math.nan)
         task = self.book.release(req.kind, req.loc, req.dropoff, max_wait=wait,
-                                 snap_m=req.snap_m, dropoff_snap_m=req.dropoff_snap_m)
+                                 snap_m=req.snap_m, dropoff_snap_m=req.dropoff_snap_m,
+                                 passengers=req.passengers, max_delay=delay)
         if not self.demand.valid(req.loc) or (req.dropoff is not None
                                               and not self.demand.valid(req.dropoff)):
             log.warning("task %d lies in an obstacle; closed as unreachable", task.id)

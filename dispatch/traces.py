@@ -1,15 +1,20 @@
 """Input files of a scenario: trip traces and fleet start files, validated row by row.
 
 A **trace** (CSV or Parquet) holds one trip per row: its release time ``t`` (or
-``release_time``, seconds), its pickup and, optionally, its drop-off, and an optional
-``max_wait`` (seconds; blank: the scenario's). Where things are, by space:
+``release_time``, seconds; or ``departure_time``, a date-time read as seconds from the
+scenario's ``[tasks] start``), its pickup and, optionally, its drop-off, and an optional
+``max_wait`` and ``max_delay`` (seconds; blank: the scenario's) and ``passengers`` (a whole
+number >= 1; blank: 1). Other columns (``request_id``, ...) are ignored. Where things are, by
+space:
 
 * voxel world: ``x, y, z`` (metres; the pickup), optionally ``dest_x, dest_y, dest_z``;
 * road network, one of: ``origin_node, dest_node`` (node ids of the network);
   ``origin_x, origin_y, dest_x, dest_y`` (metres in the network's coordinates); or
-  ``pickup_latitude, pickup_longitude, dropoff_latitude, dropoff_longitude`` (WGS 84, projected
-  to the network's CRS). Positions are snapped to the nearest node at run time and the snapping
-  distance is recorded per trip.
+  ``pickup_latitude, pickup_longitude, dropoff_latitude, dropoff_longitude`` or ``o_lat, o_lon,
+  d_lat, d_lon`` (WGS 84, projected to the network's CRS). Positions are snapped to the nearest
+  node at run time and the snapping distance is recorded per trip; with ``[tasks] max_snap``
+  the trips with a pickup or drop-off farther than that from every node are left out before
+  the run (:func:`within_snap`, a warning names the count).
 
 A **fleet start file** (CSV) has ``vehicle_id`` (a unique integer, the vehicle's ``agent_id``)
 and either ``node`` (roads) or ``x, y`` (and ``z`` in a voxel world; metres).
@@ -26,14 +31,17 @@ import io
 import math
 import os
 import stat
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
+from datetime import date, datetime
 from pathlib import Path
 
 import numpy as np
 
 from dispatch.errors import ScenarioError
 
-TIME_COLUMNS = ("t", "release_time")
+TIME_COLUMNS = ("t", "release_time", "departure_time")
+#: the time column given as date-times (seconds from ``[tasks] start``)
+DATETIME_COLUMN = "departure_time"
 #: the column sets a trace may use, by space: (name, pickup columns, drop-off columns)
 LAYOUTS = {
     "voxel": (("xyz", ("x", "y", "z"), ("dest_x", "dest_y", "dest_z")),),
@@ -42,6 +50,7 @@ LAYOUTS = {
         ("metres", ("origin_x", "origin_y"), ("dest_x", "dest_y")),
         ("latlon", ("pickup_latitude", "pickup_longitude"),
          ("dropoff_latitude", "dropoff_longitude")),
+        ("latlon", ("o_lat", "o_lon"), ("d_lat", "d_lon")),  # latitude first, as above
     ),
 }
 
@@ -59,9 +68,29 @@ class Trips:
     dest: np.ndarray | None
     max_wait: np.ndarray
     row: np.ndarray  # each trip's 1-based data row in the file (for error messages)
+    #: riders per trip (``passengers`` column; 1 where absent or blank)
+    passengers: np.ndarray | None = None
+    #: seconds of delay over the direct drive each trip accepts (``max_delay``; nan: the
+    #: scenario's)
+    max_delay: np.ndarray | None = None
+    #: trips of the file left out, as ``(reason, count)`` pairs (before ``[tasks] start``;
+    #: farther than ``[tasks] max_snap`` from the network): stored with the results
+    dropped: tuple[tuple[str, int], ...] = ()
 
     def __len__(self) -> int:
         return len(self.t)
+
+    def subset(self, keep: np.ndarray, reason: str) -> Trips:
+        """The trips where ``keep`` (a boolean mask) holds, the others counted under
+        ``reason`` in :attr:`dropped` (every per-trip array is cut alike)."""
+        keep = np.asarray(keep, dtype=bool)
+        n_out = int(keep.size - keep.sum())
+        if n_out == 0:
+            return self
+        cut = {f.name: getattr(self, f.name)[keep] for f in fields(self)
+               if isinstance(getattr(self, f.name), np.ndarray)
+               and getattr(self, f.name).shape[:1] == keep.shape}
+        return replace(self, **cut, dropped=self.dropped + ((reason, n_out),))
 
 
 #: byte order marks of encodings other than UTF-8 (longest first: UTF-32 LE starts as UTF-16 LE)
@@ -159,10 +188,53 @@ def _numbers(path: Path, columns: dict[str, list], names, *, blank_ok: bool = Fa
     return out
 
 
+def parse_datetime(v) -> datetime:
+    """A date-time of a trace cell or a scenario key: a ``datetime`` (a ``date`` is its
+    midnight) or an ISO 8601 string (``2014-12-21 08:30:00``, ``2014-12-21T08:30``, with or
+    without a UTC offset). ValueError otherwise."""
+    if isinstance(v, datetime):
+        return v
+    if isinstance(v, date):
+        return datetime(v.year, v.month, v.day)
+    if isinstance(v, str) and v.strip():
+        return datetime.fromisoformat(v.strip())
+    raise ValueError(f"not a date-time: {v!r}")
+
+
+def _seconds_since(path: Path, values: list, start: datetime) -> np.ndarray:
+    """Seconds from ``start`` of each date-time of the ``departure_time`` column (a naive one
+    and an aware one: the naive one is read in the other's time zone); a bad cell names its
+    1-based data row."""
+    out = np.empty(len(values))
+    seen: dict = {}  # traces repeat their times (to the minute): parse each once
+    for i, v in enumerate(values):
+        key = v if isinstance(v, str) else None
+        got = seen.get(key) if key is not None else None
+        if got is None:
+            try:
+                d = parse_datetime(v)
+            except (TypeError, ValueError):
+                raise ScenarioError(path, f"row {i + 1}", f"{DATETIME_COLUMN} {v!r} is not a "
+                                    "date-time (ISO 8601, e.g. 2014-12-21 08:30:00)") from None
+            s0 = start
+            if (d.tzinfo is None) != (s0.tzinfo is None):
+                if d.tzinfo is None:
+                    d = d.replace(tzinfo=s0.tzinfo)
+                else:
+                    s0 = s0.replace(tzinfo=d.tzinfo)
+            got = (d - s0).total_seconds()
+            if key is not None:
+                seen[key] = got
+        out[i] = got
+    return out
+
+
 def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
-               max_bytes: int | None = None) -> Trips:
+               max_bytes: int | None = None, *, start: datetime | None = None) -> Trips:
     """Read and validate a trip trace for a ``space`` (``"voxel"``: ``size`` is the world's);
-    a file of more than ``max_bytes`` is refused before it is read."""
+    a file of more than ``max_bytes`` is refused before it is read. A ``departure_time``
+    column (date-times) needs ``start``: times are seconds from it, and trips departing before
+    it are left out (counted in :attr:`Trips.dropped`)."""
     columns = _read_columns(path, max_bytes)
     tcol = next((c for c in TIME_COLUMNS if c in columns), None)
     layout = next((lay for lay in LAYOUTS[space] if all(c in columns for c in lay[1])), None)
@@ -171,18 +243,44 @@ def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
             wanted = [c for c in LAYOUTS[space][0][1] if c not in columns]
         else:
             wanted = [" or ".join("(" + ", ".join(lay[1]) + ")" for lay in LAYOUTS[space])]
-        missing = ([] if layout else wanted) + ([] if tcol else ["release_time (or t)"])
+        missing = ([] if layout else wanted) + (
+            [] if tcol else ["release_time (or t, or departure_time)"])
         raise ScenarioError(path, "<header>", f"missing column(s): {', '.join(missing)}")
     name, pick, drop = layout
     has_dest = all(c in columns for c in drop)
     if not has_dest and any(c in columns for c in drop):
         raise ScenarioError(path, "<header>", f"drop-off needs all of {', '.join(drop)}")
-    t = _numbers(path, columns, (tcol,))[:, 0]
+    if tcol == DATETIME_COLUMN:
+        if start is None:
+            raise ScenarioError(path, DATETIME_COLUMN, "holds date-times: set [tasks] start "
+                                "(e.g. start = \"2014-12-21T00:00\") in the scenario, the "
+                                "time the run's second 0 stands for")
+        t = _seconds_since(path, columns[tcol], start)
+    else:
+        if start is not None:
+            raise ScenarioError(path, tcol, "gives times in seconds; [tasks] start is only used "
+                                            f"with a {DATETIME_COLUMN} column of date-times")
+        t = _numbers(path, columns, (tcol,))[:, 0]
     origin = _numbers(path, columns, pick)
     dest = _numbers(path, columns, drop) if has_dest else None
     max_wait = (_numbers(path, columns, ("max_wait",), blank_ok=True)[:, 0]
                 if "max_wait" in columns else np.full(len(t), math.nan))
+    max_delay = (_numbers(path, columns, ("max_delay",), blank_ok=True)[:, 0]
+                 if "max_delay" in columns else np.full(len(t), math.nan))
+    passengers = (_numbers(path, columns, ("passengers",), blank_ok=True)[:, 0]
+                  if "passengers" in columns else np.ones(len(t)))
+    early = t < 0 if tcol == DATETIME_COLUMN else np.zeros(len(t), dtype=bool)
     for i in range(len(t)):
+        if early[i]:
+            continue  # before start: left out below, not checked
+        if max_delay[i] < 0:
+            raise ScenarioError(path, f"row {i + 1}", f"max_delay {max_delay[i]} is negative")
+        p = passengers[i]
+        if p != p:
+            passengers[i] = 1.0
+        elif p < 1 or p != int(p) or p > 2**31:
+            raise ScenarioError(path, f"row {i + 1}", f"passengers = {p} is not a whole "
+                                                      f"number >= 1")
         if t[i] < 0:
             raise ScenarioError(path, f"row {i + 1}", f"release time {t[i]} is negative")
         if max_wait[i] <= 0:
@@ -201,11 +299,56 @@ def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
         if name == "latlon":
             for c, v in zip(pick + (drop if has_dest else ()),
                             (*origin[i], *(dest[i] if has_dest else ()))):
-                if not -180 <= v <= 180 or ("latitude" in c and not -90 <= v <= 90):
+                if not -180 <= v <= 180 or (c.endswith(("latitude", "lat"))
+                                            and not -90 <= v <= 90):
                     raise ScenarioError(path, f"row {i + 1}", f"{c} = {v} is not a coordinate")
     order = np.argsort(t, kind="stable")
-    return Trips(path, name, t[order], origin[order],
-                 None if dest is None else dest[order], max_wait[order], order + 1)
+    trips = Trips(path, name, t[order], origin[order],
+                  None if dest is None else dest[order], max_wait[order], order + 1,
+                  passengers[order].astype(np.int64), max_delay[order])
+    if early.any():
+        trips = trips.subset(~early[order], f"departed before tasks.start ({start.isoformat()})")
+    if early.any() and not len(trips):
+        raise ScenarioError(path, DATETIME_COLUMN, f"no trip departs at or after tasks.start "
+                                                   f"({start.isoformat()})")
+    return trips
+
+
+def snap_distances(trips: Trips, network) -> np.ndarray:
+    """Per trip, metres from its pickup or drop-off (the farther) to the nearest node of
+    ``network`` (0 for a trace of node ids)."""
+    if trips.layout == "node":
+        return np.zeros(len(trips))
+    far = np.zeros(len(trips))
+    for cols in (trips.origin, trips.dest):
+        if cols is None:
+            continue
+        xy = cols[:, :2] if trips.layout == "metres" else \
+            network.lonlat_to_xy(cols[:, 1], cols[:, 0])  # latitude, longitude columns
+        far = np.maximum(far, network.nearest(xy)[1])
+    return far
+
+
+def within_snap(trips: Trips, network, max_snap: float) -> Trips:
+    """The trips whose pickup and drop-off both lie within ``max_snap`` metres of a node of
+    ``network``; the others are left out, counted in :attr:`Trips.dropped` (a point across a
+    river from every street is not a request this network can serve)."""
+    far = snap_distances(trips, network)
+    return trips.subset(far <= max_snap, f"pickup or drop-off farther than tasks.max_snap = "
+                                         f"{max_snap:g} m from the network")
+
+
+#: traces shipped with the package, by the name a scenario's ``[tasks] trace`` may give
+SHIPPED_TRACES = {"nyc_taxi_2014-12-21": "data/nyc_manhattan/nyc_taxi_2014-12-21_20k.csv"}
+
+
+def shipped_trace(name: str) -> Path | None:
+    """The path of a trace shipped with the package (:data:`SHIPPED_TRACES`), or None."""
+    if name not in SHIPPED_TRACES:
+        return None
+    import importlib.resources
+
+    return Path(str(importlib.resources.files("dispatch") / SHIPPED_TRACES[name]))
 
 
 def read_fleet_start(path: Path, space: str, max_bytes: int | None = None
@@ -241,3 +384,22 @@ def read_fleet_start(path: Path, space: str, max_bytes: int | None = None
             p[2] = 0.0
         rows.append((int(vid), *p))
     return tuple(rows)
+
+
+def read_fleet_capacities(path: Path, max_bytes: int | None = None) -> tuple[int, ...]:
+    """The optional ``capacity`` column of a fleet start file (seats per vehicle, in row
+    order; blank: the scenario's ``[fleet] capacity``, given as 0); empty if there is none."""
+    columns = _read_columns(path, max_bytes)
+    if "capacity" not in columns:
+        return ()
+    seats = _numbers(path, columns, ("capacity",), blank_ok=True)[:, 0]
+    out = []
+    for i, c in enumerate(seats, 1):
+        if c != c:
+            out.append(0)
+        elif c < 1 or c != int(c) or c > 10_000:
+            raise ScenarioError(path, f"row {i}", f"capacity = {c} is not a whole number of "
+                                                  "seats in [1, 10000]")
+        else:
+            out.append(int(c))
+    return tuple(out)

@@ -33,7 +33,8 @@ from dispatch.events import EventBus
 from dispatch.motion import step_length
 from dispatch.reservations import EPS, step_seconds
 from dispatch.space import Location
-from dispatch.tasks import ASSIGNED, COMPLETED, Task, TaskBook, TaskState
+from dispatch.stops import DROPOFF, PICKUP, Stop, occupancies, schedule
+from dispatch.tasks import ASSIGNED, COMPLETED, PICKED_UP as PICKED_UP_STATE, Task, TaskBook, TaskState
 
 if TYPE_CHECKING:
     from dispatch.reservations import Traffic
@@ -51,17 +52,30 @@ class Vehicle:
     speed: float
     start: Location
     busy: bool = False
+    #: seats (``[fleet] capacity``); a request of more passengers than this never rides in it
+    capacity: int = 1
+    #: the plan: stops still to make, in order (see :mod:`dispatch.stops`); the vehicle's
+    #: process drives it, decisions insert into it, breakdowns and re-assignments remove from it
+    stops: list = field(default_factory=list, repr=False)
+    load: int = 0  # passengers on board
+    #: with reservations (the voxel world's timed execution, capacity 1): the task it serves
     task: Task | None = None
     distance: float = 0.0  # metres travelled
     empty_distance: float = 0.0  # ... without a passenger (to pickups, repositioning)
-    occupied_distance: float = 0.0  # ... with one (pickup to drop-off)
+    occupied_distance: float = 0.0  # ... with one or more on board
+    passenger_distance: float = 0.0  # passenger-metres: metres times passengers on board
+    #: in service at a stop until then (the stop's task completes at that time)
+    free_at: float = -math.inf
+    serving: Task | None = field(default=None, repr=False)  # ... that task
+    #: the stop its current drive goes to (None: standing, serving or idle)
+    heading: Any = field(default=None, repr=False)
+    plan_version: int = 0  # bumped at every change of the plan or of the drive along it
+    plan_cache: Any = field(default=None, repr=False)  # (key, arrays) of Operator.plan_arrays
     busy_seconds: float = 0.0
     busy_since: float = 0.0
     completed: int = 0
     # ---- roads: when the leg being driven (:attr:`leg`) started
     leg_start: float = 0.0
-    #: voxel world: metres of the current path driven so far (counted if it breaks down)
-    driven: float = 0.0
     # ---- execution with reservations (see dispatch.reservations)
     #: timed route ``[(t, cell), ...]``; ``route[0]`` is the cell it stands in (or is stepping
     #: into, with the step's arrival time); a one-cell route holds that cell indefinitely
@@ -131,6 +145,24 @@ class Vehicle:
     def flies(self) -> bool:
         return self.kind == "uav"
 
+    def drove(self, metres: float) -> None:
+        """Count ``metres`` driven with the passengers now on board: the one place where a
+        vehicle's distances grow."""
+        self.distance += metres
+        if self.load:
+            self.occupied_distance += metres
+            self.passenger_distance += metres * self.load
+        else:
+            self.empty_distance += metres
+
+    def tasks(self) -> list[Task]:
+        """The tasks of its plan (the one in service first), each once, in plan order."""
+        out = [] if self.serving is None else [self.serving]
+        for s in self.stops:
+            if s.task not in out:
+                out.append(s.task)
+        return out
+
     def location(self, now: float) -> Location:
         """Where it is at ``now``: on a leg, the road point reached by then."""
         if self.leg is not None:
@@ -178,6 +210,9 @@ class Fleet:
         n = len(self.vehicles)
         self.ids = np.fromiter((v.id for v in self.vehicles), np.int64, n)
         self.idle_mask = np.ones(n, dtype=bool)
+        self.busy_mask = np.zeros(n, dtype=bool)
+        #: a free seat somewhere in its plan (kept by Operator.changed)
+        self.room = np.ones(n, dtype=bool)
         self.node = np.full(n, -1, dtype=np.int64)
         self.remaining = np.zeros(n)
         self.odd = np.zeros(n, dtype=bool)
@@ -244,7 +279,14 @@ class Fleet:
             return AgentViews(self.ids[idx], make, node, rem, _NO_POINTS, ascending)
         points = []
         for k in special:  # driving (a leg: where is it now?) or stopped part-way along an edge
-            loc = vs[int(idx[k])].location(now)
+            v = vs[int(idx[k])]
+            leg = v._leg
+            if leg is not None:  # (Leg.point_at's numbers, without building the point)
+                node[k], rem[k], on = leg.next_at(now - v.leg_start)
+                if not on:
+                    points.append(k)
+                continue
+            loc = v.loc
             if _is_node(loc):
                 node[k], rem[k] = loc, 0.0
             else:
@@ -258,15 +300,18 @@ class Fleet:
     def set_busy(self, v: Vehicle) -> None:
         v.busy = True
         self.idle_mask[v._slot] = False
+        self.busy_mask[v._slot] = True
 
     def set_idle(self, v: Vehicle) -> None:
         v.busy = False
         self.idle_mask[v._slot] = True
+        self.busy_mask[v._slot] = False
 
     def set_failed(self, v: Vehicle) -> None:
         """Out of service: neither idle nor busy until :meth:`set_idle`."""
         v.busy = False
         self.idle_mask[v._slot] = False
+        self.busy_mask[v._slot] = False
 
 
 _NO_POINTS = np.zeros(0, dtype=np.int64)
@@ -281,13 +326,14 @@ def _is_node(loc) -> bool:
 # ----------------------------------------------------------------------------- drivers
 
 
-def _arrive(v: Vehicle, leg) -> float:
-    """End a plain road leg (driven without edge events): the vehicle stands at the leg's last
-    node; returns the leg's metres, already added to ``v.distance``."""
-    metres = leg.length
-    v.leg, v.loc = None, int(leg.nodes[-1])
-    v.distance += metres
-    return metres
+def stop_leg(v: Vehicle, now: float) -> None:
+    """Roads: ``v`` stops part-way along its leg at ``now``: the metres driven so far count
+    (with the passengers on board) and it stands where it got (a node, or a road point
+    part-way along an edge)."""
+    leg, t = v.leg, now - v.leg_start
+    v.drove(float(np.interp(t, np.r_[0.0, leg.times], np.r_[0.0, leg.metres])))
+    point = leg.point_at(t)
+    v.loc, v.leg = (point.node if point.on_node else point), None
 
 
 def _plan(planner: Planner, agent: AgentView, goal, now: float, run_id: str):
@@ -323,18 +369,19 @@ class CellDriver:
                               "cost was finite")
         return path
 
+    @staticmethod
+    def goal(path):
+        return path[-1]
+
     def drive(self, env: simpy.Environment, v: Vehicle, path, task_id: int):
-        """Process fragment: follow ``path``; returns the metres driven."""
-        cell_m, v.driven = self.world.cell, 0.0
+        """Process fragment: follow ``path`` (each cell entered counts at once)."""
+        cell_m = self.world.cell
         for nxt in path[1:]:
             step = step_length(v.loc, nxt) * cell_m
             yield env.timeout(step / v.speed)
             v.loc = nxt
-            v.distance += step
-            v.driven += step
+            v.drove(step)
             self.bus.emit(env.now, "move", v.id, task_id, nxt)
-        metres, v.driven = v.driven, 0.0
-        return metres
 
 
 class RoadDriver:
@@ -358,8 +405,13 @@ class RoadDriver:
             raise _plan_error(self.planner, agent, goal, now, self.run_id,
                               f"gave a path that is not one: {e}") from None
 
+    @staticmethod
+    def goal(leg):
+        return int(leg.nodes[-1])
+
     def drive(self, env: simpy.Environment, v: Vehicle, leg: Leg, task_id: int):
-        """Process fragment: drive ``leg``; returns the metres driven."""
+        """Process fragment: drive ``leg`` (its metres count on arrival; a cut leg counts
+        what was driven: :func:`stop_leg`)."""
         v.leg, v.leg_start = leg, env.now
         if self.edge_events:
             start = env.now
@@ -369,16 +421,17 @@ class RoadDriver:
         else:
             yield env.timeout(leg.seconds)
         v.leg, v.loc = None, int(leg.nodes[-1])
-        v.distance += leg.length
-        return leg.length
+        v.drove(leg.length)
 
 
 # ----------------------------------------------------------------------------- operations
 
 
 class Operator:
-    """Hands tasks to vehicles and runs their trips (one SimPy process per trip, or, with
-    reservations, one ``drive`` process per vehicle for the whole run)."""
+    """Hands requests to vehicles (inserting their stops into the vehicle's plan) and drives
+    each busy vehicle's plan with one SimPy process: the process is the loop, the stop list
+    is the state. With reservations (voxel, capacity 1) one ``drive`` process per vehicle
+    follows a timed route instead (see :mod:`dispatch.reservations`)."""
 
     def __init__(self, env: simpy.Environment, bus: EventBus, book: TaskBook, fleet: Fleet,
                  driver, service_time: float, notify: Callable[[], None],
@@ -386,8 +439,8 @@ class Operator:
         self.env, self.bus, self.book, self.fleet = env, bus, book, fleet
         self.driver, self.service_time, self.notify = driver, service_time, notify
         self.traffic = traffic
-        #: the driver's legs are RoadDriver.drive's one timeout each (no edge events): _serve
-        #: drives them itself, without a generator per leg
+        #: the driver's legs are RoadDriver.drive's one timeout each (no edge events): the
+        #: plan's process drives them itself, without a generator per leg
         self._plain_legs = isinstance(driver, RoadDriver) and not driver.edge_events \
             and type(driver).drive is RoadDriver.drive
         #: called with a task re-opened by a breakdown (the task source re-arms its expiry)
@@ -398,71 +451,220 @@ class Operator:
             for v in fleet.vehicles:
                 v.proc = env.process(self._drive_timed(v))
 
-    def assign(self, task: Task, v: Vehicle, cost: float) -> None:
-        """Give ``task`` to the idle vehicle ``v`` (or one that has just given its task up,
-        :meth:`give_up`) at the planned ``cost`` (seconds)."""
-        self.on_assign(v)
-        path = None if self.traffic is not None else self.driver.plan(v, task.loc, self.env.now)
-        self.book.assign(task, v.id, cost)
-        self.fleet.set_busy(v)
-        if self.traffic is None:
-            v.proc = self.env.process(self._serve(v, task, path))
-        else:  # its drive process follows the route; the task's cost is its priority
-            v.task, v.busy_since = task, self.env.now
-            self.bus.emit(self.env.now, "depart", v.id, task.id, v.loc)
-            self.traffic.request(v)
+    # ------------------------------------------------------------------ the plan
+    def _stops(self, task: Task) -> list[Stop]:
+        """The stops of ``task``: its pickup (which completes a point task) and drop-off."""
+        n = task.passengers
+        if task.dropoff is None:
+            return [Stop(PICKUP, task, task.loc, 0, task.deadline, True)]
+        return [Stop(PICKUP, task, task.loc, n, task.deadline, False),
+                Stop(DROPOFF, task, task.dropoff, -n, task.dropoff_deadline, True)]
 
-    def _serve(self, v: Vehicle, task: Task, path):
-        """Process: to the pickup, (to the drop-off,) serve, idle. A breakdown interrupts it
-        (:meth:`breakdown` has already put the vehicle and its task right)."""
+    def assign(self, task: Task, v: Vehicle, cost: float, at: tuple | None = None) -> None:
+        """Give ``task`` to ``v`` at the decision's ``cost``: an idle vehicle (or one that has
+        just given its task up, :meth:`give_up`) starts a plan of the task's stops; a busy one
+        (pooling) gets them inserted where ``at`` says, ``(i, j, pickup_at, dropoff_at,
+        shift1, shift2)`` of :class:`dispatch.stops.Insertions`, and re-routes if its next
+        stop changed."""
+        env = self.env
+        if self.traffic is not None:  # its drive process follows the route; cost = priority
+            self.on_assign(v)
+            self.book.assign(task, v.id, cost)
+            self.fleet.set_busy(v)
+            v.task, v.busy_since = task, env.now
+            self.bus.emit(env.now, "depart", v.id, task.id, v.loc)
+            self.traffic.request(v)
+            return
+        new = self._stops(task)
+        if not v.stops and v.serving is None:  # an empty plan: the vehicle sets out now
+            self.on_assign(v)
+            path = self.driver.plan(v, task.loc, env.now)
+            self.book.assign(task, v.id, cost)
+            self.fleet.set_busy(v)
+            if at is not None:  # the planned times of the decision
+                self._set_legs(v, new, [at[2], at[3]][:len(new)])
+            else:  # (legs only matter to later insertions: pooled runs always pass ``at``)
+                new[0].leg = float(getattr(path, "seconds", 0.0))
+                if len(new) > 1:
+                    new[1].leg = task.direct_time
+            v.stops = new
+            occupancies(v.load, v.stops)
+            self.changed(v)
+            v.proc = env.process(self._run(v, path, new[0]))
+            return
+        i, j, pick, drop, shift1, shift2 = at  # type: ignore[misc]
+        self.book.assign(task, v.id, cost)
+        old = v.stops
+        times = self._times(v)  # the stops after the new ones are reached later
+        for k in range(len(old)):
+            times[k] += 0.0 if k < i else (shift1 if k < j else shift2)
+        if len(new) == 1:  # a point task: its one stop
+            plan = old[:i] + new + old[i:]
+            times = times[:i] + [pick] + times[i:]
+        else:
+            p, d = new
+            plan = old[:i] + [p] + old[i:j] + [d] + old[j:]
+            times = times[:i] + [pick] + times[i:j] + [drop] + times[j:]
+        self._set_legs(v, plan, times)
+        v.stops = plan
+        occupancies(v.load, v.stops)
+        self.changed(v)
+        self.bus.emit(env.now, "insert", v.id, task.id, v.loc)
+        if i == 0 and v.heading is not None and v.proc is not None and v.proc.is_alive:
+            v.proc.interrupt("reroute")  # its next stop is the new pickup
+
+    def _times(self, v: Vehicle) -> list[float]:
+        """Planned arrival times at ``v``'s stops (from the leg it drives, or from when it
+        can leave where it stands)."""
+        stops = v.stops
+        if not stops:
+            return []
+        if v.heading is stops[0] and v.leg is not None:
+            first = v.leg_start + v.leg.seconds
+        else:
+            first = max(self.env.now, v.free_at) + stops[0].leg
+        return schedule(first, stops, self.service_time)
+
+    def _set_legs(self, v: Vehicle, plan: list[Stop], times: list[float]) -> None:
+        """Each stop's ``leg`` from planned arrival ``times`` (what is not driving or service
+        between two arrivals is the drive)."""
+        t = max(self.env.now, v.free_at)
+        for s, arrive in zip(plan, times):
+            s.leg = arrive - t
+            t = arrive + (self.service_time if s.completes else 0.0)
+
+    def plan_arrays(self, v: Vehicle) -> tuple[list, list, list, list, list]:
+        """``v``'s plan as a decision reads it: planned arrival times, service seconds after
+        each stop, latest times, occupancies after each stop, locations (lists; kept until
+        the plan or the vehicle's state changes: :meth:`changed`)."""
+        now = self.env.now
+        key = (v.plan_version, now if v.heading is None and v.free_at <= now else None)
+        cached = v.plan_cache
+        if cached is not None and cached[0] == key:
+            return cached[1]
+        svc, stops = self.service_time, v.stops
+        arrays = (self._times(v), [svc if s.completes else 0.0 for s in stops],
+                  [s.latest for s in stops], [s.occupancy for s in stops],
+                  [s.loc for s in stops])
+        v.plan_cache = (key, arrays)
+        return arrays
+
+    def changed(self, v: Vehicle) -> None:
+        """``v``'s plan or its progress along it changed: what decisions cached of it goes,
+        and the fleet learns whether it has a free seat somewhere in its plan."""
+        v.plan_version += 1
+        low = v.load
+        for s in v.stops:
+            if s.occupancy < low:
+                low = s.occupancy
+        self.fleet.room[v._slot] = low < v.capacity
+
+    def _run(self, v: Vehicle, path, first: Stop):
+        """Process: drive ``v``'s plan stop by stop until it is empty, then idle. ``path``
+        was planned to ``first`` at the assignment. A decision that puts a new stop first
+        interrupts a drive (``reroute``: it stops where it is and drives to the new first
+        stop); a breakdown or a re-assignment interrupts it for good (they have already put
+        the vehicle and its tasks right)."""
         env = self.env
         if v.proc is not env.active_process:  # given up before it started ([dispatch] reassign)
             return
-        v.task, v.busy_since = task, env.now
-        emit, plain = self.bus.emit, self._plain_legs
-        try:
-            emit(env.now, "depart", v.id, task.id, v.loc)
-            if task.state is ASSIGNED:  # not a passenger already on board
+        v.busy_since = env.now
+        emit, plain, book = self.bus.emit, self._plain_legs, self.book
+        while v.stops:
+            stop = v.stops[0]
+            try:
+                if path is None or stop is not first:
+                    path = self.driver.plan(v, stop.loc, env.now)
+                first = None
+                v.heading = stop
+                v.plan_version += 1  # (its first stop's time is now the leg's)
+                emit(env.now, "depart", v.id, stop.task.id, v.loc)
                 if plain:  # RoadDriver.drive without edge events, inlined (two legs a trip)
                     v.leg, v.leg_start = path, env.now
                     yield env.timeout(path.seconds)
-                    v.empty_distance += _arrive(v, path)
+                    v.leg, v.loc = None, int(path.nodes[-1])
+                    v.drove(path.length)
                 else:
-                    v.empty_distance += yield from self.driver.drive(env, v, path, task.id)
-                self.book.picked_up(task)
-            if task.dropoff is not None:
-                leg = self.driver.plan(v, task.dropoff, env.now)
-                emit(env.now, "depart", v.id, task.id, v.loc)
-                if plain:
-                    v.leg, v.leg_start = leg, env.now
-                    yield env.timeout(leg.seconds)
-                    v.occupied_distance += _arrive(v, leg)
-                else:
-                    v.occupied_distance += yield from self.driver.drive(env, v, leg, task.id)
+                    yield from self.driver.drive(env, v, path, stop.task.id)
+            except simpy.Interrupt as i:
+                if i.cause != "reroute":
+                    return
+                if v.leg is not None:
+                    stop_leg(v, env.now)
+                v.heading, path = None, None
+                v.plan_version += 1
+                continue
+            v.heading, path = None, None
+            v.stops.pop(0)
+            task = stop.task
+            if stop.kind is PICKUP:
+                if v.load and stop.passengers:  # a shared ride: it and those on board
+                    task.shared = True
+                    for s in v.stops:
+                        if s.kind is DROPOFF and s.task.state is PICKED_UP_STATE:
+                            s.task.shared = True
+                v.load += stop.passengers
+                book.picked_up(task)
+            else:
+                v.load += stop.passengers
+                task.dropped_at = env.now
                 emit(env.now, "dropoff", v.id, task.id, v.loc)
+            self.changed(v)
+            if not stop.completes:
+                continue
             if self.service_time > 0:
-                yield env.timeout(self.service_time)
-            self._complete(v, task)
-        except simpy.Interrupt:
-            return
+                v.serving, v.free_at = task, env.now + self.service_time
+                try:
+                    yield env.timeout(self.service_time)
+                except simpy.Interrupt:  # a breakdown in service: breakdown() did the rest
+                    return
+                v.serving = None
+            v.completed += 1
+            if v.stops:
+                book.close(task, COMPLETED)
+            else:
+                self._complete(v, task)
+                return
+        # emptied by a re-routing that removed every stop: nothing left to do
+        self._go_idle(v)
 
+    def _complete(self, v: Vehicle, task: Task) -> None:
+        """``v`` has served ``task``, its last stop (after the service time): the task
+        completes, ``v`` is idle."""
+        v.busy_seconds += self.env.now - v.busy_since
+        v.proc, v.heading = None, None
+        self.fleet.set_idle(v)
+        self.book.close(task, COMPLETED)
+        self.bus.emit(self.env.now, "idle", v.id, -1, v.loc)
+        self.notify()
+
+    def _go_idle(self, v: Vehicle) -> None:
+        v.busy_seconds += self.env.now - v.busy_since
+        v.proc, v.heading = None, None
+        self.fleet.set_idle(v)
+        self.bus.emit(self.env.now, "idle", v.id, -1, v.loc)
+        self.notify()
+
+    # ------------------------------------------------------------------ faults, re-assignment
     def breakdown(self, v: Vehicle, duration: float, transfer: bool) -> bool:
         """``v`` fails now, where it is (on roads possibly part-way along an edge: the part of
-        the leg driven counts). Its trip goes back to open if the passenger is not on board;
-        with one on board it is re-opened for a transfer at the vehicle's position (on roads:
-        the node it was driving to) when ``transfer``, else it ends ``failed``. It is out of
-        service for ``duration`` seconds (``inf``: for good). False if it had already failed
-        (or, with reservations, never: faults are refused there at validate time)."""
+        the leg driven counts). Its plan is dropped: each request not yet picked up goes back
+        to open; each one on board is re-opened for a transfer at the vehicle's position (on
+        roads: the node it was driving to) when ``transfer``, else it ends ``failed``. It is
+        out of service for ``duration`` seconds (``inf``: for good). False if it had already
+        failed (or, with reservations, never: faults are refused there at validate time)."""
         if v.failed or v.breaking:
             return False
-        env, task = self.env, v.task
+        env = self.env
         if self.traffic is not None and v.step is not None and v.step[3] > env.now + EPS:
             # a step is never interrupted (its cells are reserved hard): it breaks down on
             # arrival in the step's cell, so it never moves while failed
             v.breaking = True
             env.process(self._break_after_step(v, v.step[3], duration, transfer))
             return True
+        tasks = [v.task] if self.traffic is not None and v.task is not None else v.tasks()
         if self.traffic is not None:  # its drive process lives on: stop serving, hold the cell
+            task = v.task
             if v.arrived and task is not None and v.proc is not env.active_process:
                 v.proc.interrupt("breakdown")  # in service at the task's cell
             v.end_wait(env.now)
@@ -471,52 +673,36 @@ class Operator:
             v.proc.interrupt("breakdown")
             v.proc = None
         if v.leg is not None:  # stop part-way: count what was driven, stand where it got
-            self._stop_leg(v, task)
-        elif v.driven:  # voxel: the cells of the path entered so far (distance has them)
-            if task is not None and task.state is TaskState.PICKED_UP:
-                v.occupied_distance += v.driven
-            else:
-                v.empty_distance += v.driven
-            v.driven = 0.0
+            stop_leg(v, env.now)
         if v.busy:
             v.busy_seconds += env.now - v.busy_since
         v.failed, v.failures, v.down_since, v.task = True, v.failures + 1, env.now, None
+        v.stops, v.load, v.serving, v.heading = [], 0, None, None
+        self.changed(v)
         self.fleet.set_failed(v)
-        self.bus.emit(env.now, "breakdown", v.id, -1 if task is None else task.id, v.loc)
-        if task is not None:
+        self.bus.emit(env.now, "breakdown", v.id, tasks[0].id if tasks else -1, v.loc)
+        for task in tasks:
             if task.state is TaskState.PICKED_UP and not transfer:
                 self.book.close(task, TaskState.FAILED)
             else:
                 where = getattr(v.loc, "node", v.loc)  # a passenger waits at a node
                 self.book.reopen(task, where)
                 self.on_reopen(task)
+        if tasks:
             self.notify()
         if duration < math.inf:
             env.process(self._repair(v, duration))
         return True
 
-    def _stop_leg(self, v: Vehicle, task: Task | None) -> None:
-        """Roads: ``v`` stops part-way along its leg now: the metres driven so far count (with
-        a passenger when ``task`` is picked up) and it stands where it got (a node, or a road
-        point part-way along an edge)."""
-        leg, t = v.leg, self.env.now - v.leg_start
-        driven = float(np.interp(t, np.r_[0.0, leg.times], np.r_[0.0, leg.metres]))
-        v.distance += driven
-        if task is not None and task.state is TaskState.PICKED_UP:
-            v.occupied_distance += driven
-        else:
-            v.empty_distance += driven
-        point = leg.point_at(t)
-        v.loc, v.leg = (point.node if point.on_node else point), None
-
     def give_up(self, v: Vehicle) -> Task:
-        """``[dispatch] reassign``: ``v``, driving to its task's pickup, gives the task up now
-        (a decision gave it another task or none): it stops where it is (part-way along an
-        edge included; the metres driven count as empty), its busy time so far counts, its task
-        goes back to open (release time and deadline kept) and a ``reassign`` event names both.
-        It stays busy: the caller hands it its new task or :meth:`stand_idle`. Returns the
-        task given up."""
-        env, task = self.env, v.task
+        """``[dispatch] reassign`` (capacity 1): ``v``, driving to its task's pickup, gives
+        the task up now (a decision gave it another task or none): it stops where it is
+        (part-way along an edge included; the metres driven count as empty), its busy time so
+        far counts, its task goes back to open (release time and deadline kept) and a
+        ``reassign`` event names both. It stays busy: the caller hands it its new task or
+        :meth:`stand_idle`. Returns the task given up."""
+        env = self.env
+        task = v.stops[0].task if v.stops else None
         assert task is not None and task.state is TaskState.ASSIGNED and self.traffic is None
         proc = v.proc
         if proc is not None and proc.is_alive and proc is not env.active_process \
@@ -524,13 +710,21 @@ class Operator:
             proc.interrupt("reassign")  # (one not started yet sees it is stale and returns)
         v.proc = None
         if v.leg is not None:
-            self._stop_leg(v, task)
+            stop_leg(v, env.now)
         v.busy_seconds += env.now - v.busy_since
         v.busy_since = env.now
-        v.task = None
+        v.stops, v.heading = [], None
+        self.changed(v)
         self.bus.emit(env.now, "reassign", v.id, task.id, v.loc)
         self.book.unassign(task)
         return task
+
+    def holds(self, v: Vehicle) -> Task | None:
+        """The task ``v`` drives to pick up (capacity 1, ``[dispatch] reassign``), or None."""
+        if self.traffic is not None:
+            return v.task
+        s = v.stops[0] if v.stops else None
+        return s.task if s is not None and s.kind is PICKUP else None
 
     def stand_idle(self, v: Vehicle) -> None:
         """``v`` (after :meth:`give_up`, with no new task) is idle where it stopped."""
@@ -558,13 +752,9 @@ class Operator:
         self.notify()
 
     def _finish(self, v: Vehicle, task: Task):
+        """With reservations: serve ``task`` at its cell (the service time), then idle."""
         if self.service_time > 0:
             yield self.env.timeout(self.service_time)
-        self._complete(v, task)
-
-    def _complete(self, v: Vehicle, task: Task) -> None:
-        """``v`` has served ``task`` (after the service time): the task completes, ``v`` is
-        idle."""
         v.busy_seconds += self.env.now - v.busy_since
         v.task = None
         v.completed += 1
@@ -622,6 +812,5 @@ class Operator:
             yield env.timeout(max(arr - env.now, 0.0))
             metres = step_length(v.loc, nxt) * cell_m
             v.loc = nxt
-            v.distance += metres
-            v.empty_distance += metres  # to a task, or parking: never with a passenger here
+            v.drove(metres)  # to a task, or parking: never with a passenger here
             self.bus.emit(env.now, "move", v.id, -1 if v.task is None else v.task.id, nxt)

@@ -254,6 +254,7 @@ class RoadPlanner(Planner):
 
     name = "dijkstra"
     spaces = ("road",)
+    travel_times = True
 
     def __init__(self, space: RoadNetwork) -> None:
         if not isinstance(space, RoadNetwork):
@@ -381,6 +382,60 @@ class RoadPlanner(Planner):
             return out  # everyone on a node: nothing left to drive first
         return out + agents.remaining[:, None]
 
+    def between(self, sources: Sequence[Any], targets: Sequence[Any],
+                pairwise: bool = False) -> np.ndarray:
+        """Exact travel seconds from ``sources`` (nodes or road points) to ``targets`` (nodes),
+        plus what a source part-way along an edge has left of it. With fewer distinct
+        sources than targets (a new request against the stops of a fleet's plans) one forward
+        field per source node is gathered at the targets; otherwise each target's field (an
+        open task's, a kept one, or a new one, then kept with the retired fields: drop-offs
+        and stops come back) is gathered at the sources."""
+        node, rem = _loc_arrays(sources)
+        tnode = _loc_arrays(targets)[0]
+        if pairwise and node.size != tnode.size:
+            raise ValueError("pairwise travel times need as many sources as targets")
+        snodes, sinv = np.unique(node, return_inverse=True)
+        tnodes, tinv = np.unique(tnode, return_inverse=True)
+        index = self._index
+        if not pairwise and snodes.size < tnodes.size:
+            fwd = self._forward(snodes)  # (distinct sources, n)
+            at = tnode if index is None else index[tnode]
+            return fwd[sinv][:, at] + rem[:, None]
+        fields = [self._to(n) for n in tnodes.tolist()]
+        at = node if index is None else index[node]
+        if pairwise:
+            out = np.fromiter((fields[k][a] for k, a in zip(tinv.tolist(), at.tolist())),
+                              np.float64, tnode.size)
+            return out + rem
+        out = np.empty((node.size, tnode.size))
+        for k, f in enumerate(fields):
+            out[:, tinv == k] = f[at][:, None]
+        return out + rem[:, None]
+
+    def _to(self, n: int) -> np.ndarray:
+        """The field of seconds to node ``n``: an open task's, a kept one, or a new one (kept)."""
+        f = self._fields.get(n)
+        if f is not None:
+            return f
+        f = self._retired.get(n)
+        if f is not None:
+            self._retired.move_to_end(n)
+            return f
+        h = self._hierarchy
+        nodes = np.array([n], dtype=np.int64)
+        f = (self._dijkstra(nodes, to=True) if h is None else h.fields(nodes, to=True))[0]
+        self.stats.extra["fields_computed"] += 1
+        self._retire(n, f)
+        return self._retired[n]
+
+    def _forward(self, nodes: np.ndarray) -> np.ndarray:
+        """Fields of seconds from each of ``nodes`` (rows; indexed like the backward fields)."""
+        h = self._hierarchy
+        self.stats.extra["forward_searches"] += int(nodes.size)
+        if h is None:
+            return np.stack(self._dijkstra(nodes, to=False))
+        return np.stack(h.fields(nodes, to=False))
+
     def _revive(self, node: int) -> np.ndarray | None:
         """The kept field of ``node`` back among the open tasks' fields, or None."""
         field = self._retired.pop(node, None)
@@ -466,6 +521,22 @@ class RoadPlanner(Planner):
             field = self._fields.pop(node, None)
             if field is not None:
                 self._retire(node, field)
+
+
+def _loc_arrays(locs: Sequence[Any]) -> tuple[np.ndarray, np.ndarray]:
+    """``(node, remaining seconds)`` of locations (node ints or road points)."""
+    try:  # nodes only (a plan's stops): nothing to unpack
+        return np.array(locs, dtype=np.int64), np.zeros(len(locs))
+    except TypeError:  # road points among them
+        pass
+    node = np.empty(len(locs), dtype=np.int64)
+    rem = np.zeros(len(locs))
+    for i, loc in enumerate(locs):
+        if isinstance(loc, RoadPoint):
+            node[i], rem[i] = loc.node, max(loc.remaining, 0.0)
+        else:
+            node[i] = int(loc)
+    return node, rem
 
 
 def _agent_arrays(agents: Sequence[Any]) -> tuple[np.ndarray, np.ndarray]:

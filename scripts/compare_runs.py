@@ -6,7 +6,10 @@ columns, same rows in the same order, every value exactly equal (NaN equal to Na
 only the wall-clock columns (:data:`dispatch.recorder.TIMING_COLUMNS`, which differ between
 identical runs). Prints one line per file and exits 1 at the first difference it describes.
 
-Run: ``PYTHONPATH=. .venv/bin/python scripts/compare_runs.py runs/before runs/after``.
+With ``--common`` the columns only B has (a version that added columns) are listed and left
+out; every column both have must still hold the same values.
+
+Run: ``PYTHONPATH=. .venv/bin/python scripts/compare_runs.py [--common] runs/before runs/after``.
 """
 
 from __future__ import annotations
@@ -27,9 +30,12 @@ def files(folder: Path) -> dict[Path, Path]:
     return {p.relative_to(folder): p for p in sorted(folder.rglob("part-0.parquet"))}
 
 
-def differ(a: Path, b: Path) -> str | None:
-    """None if the two files hold the same rows (timing columns aside), else what differs."""
+def differ(a: Path, b: Path, common: bool = False) -> str | None:
+    """None if the two files hold the same rows (timing columns aside), else what differs;
+    ``common``: only the columns of A, which B must all have (B may have more)."""
     ta, tb = pq.read_table(a), pq.read_table(b)
+    if common and set(ta.column_names) <= set(tb.column_names):
+        tb = tb.select(ta.column_names)
     if ta.column_names != tb.column_names:
         return f"columns {ta.column_names} != {tb.column_names}"
     if ta.num_rows != tb.num_rows:
@@ -51,10 +57,13 @@ def differ(a: Path, b: Path) -> str | None:
 
 
 def main() -> int:
-    if len(sys.argv) != 3:
+    args = sys.argv[1:]
+    common = "--common" in args
+    args = [x for x in args if x != "--common"]
+    if len(args) != 2:
         print(__doc__.strip().splitlines()[-1])
         return 2
-    a, b = Path(sys.argv[1]), Path(sys.argv[2])
+    a, b = Path(args[0]), Path(args[1])
     fa, fb = files(a), files(b)
     if not fa:
         print(f"no part-0.parquet under {a}")
@@ -64,7 +73,11 @@ def main() -> int:
               f"only in B {sorted(map(str, fb.keys() - fa.keys()))}")
         return 1
     for rel in fa:
-        why = differ(fa[rel], fb[rel])
+        why = differ(fa[rel], fb[rel], common)
+        if common and why is None:
+            new = sorted(set(pq.read_schema(fb[rel]).names) - set(pq.read_schema(fa[rel]).names))
+            if new:
+                print(f"      new in B, left out: {', '.join(new)}")
         rows = pq.ParquetFile(fa[rel]).metadata.num_rows
         print(f"{'same' if why is None else 'DIFFERENT'}  {rel}  ({rows} rows)"
               + ("" if why is None else f": {why}"))

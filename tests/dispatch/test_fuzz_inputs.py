@@ -38,6 +38,7 @@ from pathlib import Path
 import pytest
 
 from dispatch import cli
+from dispatch.traces import SHIPPED_TRACES, shipped_trace
 from tests.conftest import ROOT
 
 SCENARIOS = ROOT / "scenarios"
@@ -122,6 +123,9 @@ def _bases() -> dict[str, dict]:
         fleet = doc.setdefault("fleet", {})
         if fleet.get("agents", 0) > 100:
             fleet["agents"] = 100
+        tasks = doc.get("tasks", {})
+        if tasks.get("trace") in SHIPPED_TRACES:  # a packaged trace, by name: its first rows
+            tasks["trace"] = f"data/{tasks['trace']}.csv"  # in the case's folder (mutable)
         bases[p.stem] = doc
     # a voxel trace and a voxel start file (no shipped scenario has them)
     vt = tomllib.loads((SCENARIOS / "paper_dynamic.toml").read_text(encoding="utf-8"))
@@ -137,6 +141,15 @@ def _bases() -> dict[str, dict]:
 VOXEL_TRACE = "t,x,y,z,dest_x,dest_y,dest_z,max_wait\n" + "".join(
     f"{i * 3.5},{1.5 + i % 40},{2.5 + (i * 7) % 40},0.5,{10.5 + i % 30},{20.5},0.5,\n"
     for i in range(30))
+def shipped_heads(rows: int = 40) -> dict[str, str]:
+    """The header and first ``rows`` rows of each trace shipped with the package."""
+    out = {}
+    for name in SHIPPED_TRACES:
+        with shipped_trace(name).open(encoding="utf-8") as fh:
+            out[name] = "".join(line for _, line in zip(range(rows + 1), fh))
+    return out
+
+
 VOXEL_FLEET = "vehicle_id,x,y,z\n" + "".join(f"{i},{0.5 + i},{0.5},0.5\n" for i in range(6))
 
 BAD_NUMBERS = [0, -1, -1.5, 0.0, 1e300, -1e300, 10**30, 2**63, 2**64, -(2**63), 1e-300,
@@ -352,6 +365,8 @@ def generate(root: Path, n: int = N_FILES, seed: int = SEED) -> list[Case]:
             shutil.copy(f, data / f.name)
         (data / "voxel_trace.csv").write_text(VOXEL_TRACE, encoding="utf-8")
         (data / "voxel_fleet.csv").write_text(VOXEL_FLEET, encoding="utf-8")
+        for name, text in shipped_heads().items():
+            (data / f"{name}.csv").write_text(text, encoding="utf-8")
         (data / "notes.txt").write_text("not a checkpoint\n", encoding="utf-8")
         base = rng.choice(names)
         doc = json.loads(json.dumps(bases[base]))  # a deep copy
