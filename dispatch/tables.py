@@ -99,11 +99,12 @@ def _grouped_rows(agg: dict):
     """(allocator, N, row) in N order, allocators in the paper's order; ``last`` marks the last
     row of an N (a section ends there)."""
     sizes = sorted({n for _, n in agg})
-    rank = {a: i for i, a in enumerate(allocator_order(r["allocator"] for r in agg.values()))}
+    alloc = {a: r.get("allocator", a) for (a, _), r in agg.items()}
+    scen = {a: r.get("scenario", "") for (a, _), r in agg.items()}
+    rank = {a: i for i, a in enumerate(allocator_order(alloc.values()))}
 
     def order(label):
-        r = next(r for (a, _), r in agg.items() if a == label)
-        return rank[r["allocator"]], variant_rank(r["scenario"]), label
+        return rank[alloc[label]], variant_rank(scen[label]), label
 
     labels = sorted({a for a, _ in agg}, key=order)
     for n in sizes:
@@ -221,7 +222,8 @@ def _render_shared(groups: dict, runs: int, console) -> None:
              "share of completed rides shared, delay (drop-off - release - direct drive, s), "
              "detour (in-vehicle time / direct drive)")
     t = _new_table(title, ["allocator", "N", "occupancy", "shared", "delay", "detour"])
-    agg = {key: {"occ": _mean(rows, "occupancy"), "shared": _mean(rows, "shared_rate"),
+    agg = {key: {"allocator": rows[0]["allocator"], "scenario": rows[0]["scenario"],
+                 "occ": _mean(rows, "occupancy"), "shared": _mean(rows, "shared_rate"),
                  "delay": _mean(rows, "delay_mean"), "detour": _mean(rows, "detour_ratio")}
            for key, rows in groups.items()}
     for a, n, r, last in _grouped_rows(agg):

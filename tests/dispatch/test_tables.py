@@ -187,3 +187,18 @@ def test_trip_table_shows_cancelled_and_fits_with_variant_labels():
     line = next(ln for ln in text.splitlines() if ln.split()[:2] == ["local_hungarian", "30s"])
     assert line.split()[4:7] == ["90.0%", "6.0%", "3.8%"], line
     assert "canc." in text
+
+
+def test_shared_ride_table_with_variants():
+    """Pooled road runs get the shared-ride table too, rows ordered and labelled as the trip
+    table's (allocator, then batch window)."""
+    rows = [{**_summary("hungarian", 10, s, "road"), "allocator": a, "scenario": sc,
+             "shared_rate": 0.3, "occupancy": 1.4, "delay_mean": 60.0, "detour_ratio": 1.2}
+            for a in ("fcfs", "hungarian") for sc in ("c-immediate", "c-batch30s")
+            for s in (0, 1)]
+    text = _render(rows)
+    shared = text[text.index("Shared rides"):]
+    labels = [ln.split()[:2] for ln in shared.splitlines() if ln.split()[:1] in (["fcfs"],
+                                                                              ["hungarian"])]
+    assert labels == [["hungarian", "imm"], ["hungarian", "30s"], ["fcfs", "imm"],
+                      ["fcfs", "30s"]]
