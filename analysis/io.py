@@ -146,6 +146,7 @@ class Results:
         self._summary = None
         self._owner: dict[str, int] | None = None
         self._duplicates: list[Duplicate] = []
+        self._dropped: set[tuple[str, str]] = set()
 
     @property
     def duplicates(self) -> list[Duplicate]:
@@ -155,22 +156,34 @@ class Results:
         return list(self._duplicates)
 
     def _owners(self) -> dict[str, int]:
-        """run id -> index of the first source whose summary holds it (read once)."""
+        """run id -> index of the first source whose summary holds it (read once). A run id
+        in a later source is the same run (not read again) when its summary file carries the
+        same scenario text and seed; another run that happens to share the id (a scenario of
+        the same name, edited) is read as before."""
         if self._owner is None:
             owner: dict[str, int] = {}
             dups: list[Duplicate] = []
+            idents: dict[int, dict[str, tuple]] = {}
+
+            def ident(i: int, rid: str) -> tuple | None:
+                if i not in idents:
+                    idents[i] = _run_identities(self.sources[i])
+                return idents[i].get(rid)
+
             for i, src in enumerate(self.sources):
                 if not src.has("summary"):
                     continue
                 ids = src.dataset("summary").to_table(columns=["run_id"]).column("run_id")
                 for rid in ids.to_pylist():
-                    if rid in owner:
-                        if owner[rid] != i:
+                    if rid not in owner:
+                        owner[rid] = i
+                    elif owner[rid] != i:
+                        first = ident(owner[rid], rid)
+                        if first is not None and first == ident(i, rid):
                             dups.append(Duplicate(rid, self.sources[owner[rid]].path,
                                                   src.path))
-                    else:
-                        owner[rid] = i
             self._owner, self._duplicates = owner, dups
+            self._dropped = {(d.run_id, str(d.dropped)) for d in dups}
         return self._owner
 
     def __repr__(self) -> str:
@@ -202,8 +215,8 @@ class Results:
                         if old.get(c, c) in d.schema.names]
             df = d.to_table(columns=want, filter=flt).to_pandas()
             if self._has_duplicates() and "run_id" in df.columns:
-                owner, i = self._owners(), self.sources.index(src)
-                mine = [owner.get(r, i) == i for r in df["run_id"]]
+                here = str(src.path)
+                mine = [(r, here) not in self._dropped for r in df["run_id"]]
                 df = df.loc[mine]
                 df = df.reset_index(drop=True)
             df = _normalise(df.rename(columns=renames) if renames else df)
@@ -297,6 +310,22 @@ def _normalise(df):
         if k in df.columns:
             df[k] = df[k].astype(object).where(df[k].notna(), v).astype(str)
     return df
+
+
+def _run_identities(src: Source) -> dict[str, tuple]:
+    """run id -> (scenario text, seed) of each summary file of ``src`` (schema metadata; runs
+    of a flat folder: its one file)."""
+    out = {}
+    d = src.dataset("summary")
+    for frag in d.get_fragments():
+        meta = frag.physical_schema.metadata or {}
+        rid = meta.get(b"dispatch.run_id")
+        if rid is None:
+            ids = frag.to_table(columns=["run_id"]).column("run_id").to_pylist()
+            rid = ids[0].encode() if len(ids) == 1 else None
+        if rid is not None:
+            out[rid.decode()] = (meta.get(b"dispatch.scenario"), meta.get(b"dispatch.seed"))
+    return out
 
 
 def _run_filter(summary, run_id: str, src: Source) -> ds.Expression | None:

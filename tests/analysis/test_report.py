@@ -299,3 +299,12 @@ def test_cli_report_series_filter(road_sweep, tmp_path, cli):
     proc = cli("report", road_sweep, "--series", "nosuch*", "--out", tmp_path / "b")
     assert proc.returncode == 2 and "no series matches 'nosuch*'" in proc.stderr
     assert "fcfs" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_a_run_id_shared_by_two_scenario_texts_is_not_a_duplicate(single_run, small_sweep):
+    """The single run (tiny, hungarian, N = 3, seed 2, Poisson tasks) and the small sweep's
+    run of that id (static tasks) are two runs of two texts: both are read, no warning."""
+    from analysis.io import open_results
+
+    res = open_results(single_run, small_sweep)
+    assert res.duplicates == [] and len(res.summary) == 19
