@@ -463,6 +463,8 @@ def _add_analysis_parsers(sub) -> None:
 def _sweep(args, console) -> int:
     from collections import Counter
 
+    from rich.markup import escape
+
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from dispatch.runner import default_out, foreign_runs, sweep
@@ -496,7 +498,11 @@ def _sweep(args, console) -> int:
         _tables(summaries, console, sc)
     failed = [o for o in outcomes if o.status == "failed"]
     for o in failed:
-        console.print(f"[red]failed[/]: {o.run_id}: {o.error}", highlight=False, soft_wrap=True)
+        if (args.verbose or args.debug) and o.traceback:  # where the run (a plugin) raised
+            sys.stderr.write(o.traceback)
+            sys.stderr.flush()
+        console.print(f"[red]failed[/]: {o.run_id}: {escape(o.error)}", highlight=False,
+                      soft_wrap=True)
     console.print(f"{len(specs)} run(s): {counts['done']} run, {counts['skipped']} already "
                   f"complete, {len(failed)} failed; {time.perf_counter() - started:.1f} s on "
                   f"{where}; Parquet written to {out}/", highlight=False, soft_wrap=True)

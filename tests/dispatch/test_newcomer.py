@@ -73,6 +73,18 @@ def test_a_plugin_that_raises_shows_its_traceback_with_v_or_debug(plugin_site, t
         assert proc.stderr.strip().splitlines()[-1].startswith("error:"), flag
 
 
+def test_a_failing_run_of_a_sweep_shows_its_traceback_with_v(plugin_site, tmp_path):
+    path = write_scenario(tmp_path, sweep={"allocator": ["greedy", "boom"]})
+    plain = dispatch("sweep", path, "--workers", "1", "--out", tmp_path / "a", site=plugin_site)
+    assert plain.returncode == 1
+    assert "failed: tiny__boom__astar__n3__s0: PluginError" in plain.stdout
+    assert "Traceback" not in plain.stdout + plain.stderr
+    proc = dispatch("-v", "sweep", path, "--workers", "1", "--out", tmp_path / "b",
+                    site=plugin_site)
+    assert proc.returncode == 1
+    assert "Traceback" in proc.stderr and "_explode" in proc.stderr
+
+
 def test_plugins_descriptions_plain_never_empty_targets_whole(plugin_site):
     proc = dispatch("plugins", site=plugin_site, columns=80)
     assert proc.returncode == 0, proc.stderr
