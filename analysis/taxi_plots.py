@@ -395,10 +395,15 @@ def _hourly_panels(groups: list, path: Path, *, bin_s: float, title: str) -> Pat
         ax.sharey(axes[2, 0])
     for ax in axes[0::3].ravel():
         ax.sharey(axes[0, 0])
+    everywhere = twins(groups, _hourly_values)
+    panel_of = {label: name for name, members in panels for _k, label, _g in members}
     for p, (name, members) in enumerate(panels):
         r, c = divmod(p, ncol)
         a1, a2, a3 = axes[3 * r, c], axes[3 * r + 1, c], axes[3 * r + 2, c]
         same_as = twins(members, _hourly_values)
+        others = {panel_of.get(everywhere.get(label)) for _k, label, _g in members}
+        if len(others) == 1 and None not in others:  # the whole panel repeats another
+            name = f"{name} (= {others.pop()})"
         if same:
             g = members[0][2]
             a1.bar(g["t_h"], g["requests"], width=width, align="edge", color="0.88",
@@ -534,11 +539,11 @@ def wait_by_group(waits: pd.DataFrame, path: Path, title: str = "", only=None) -
         left, right = fig.subplots(1, 2, width_ratios=[1.2, 1])
         colours = _colours(labels)
 
-    def ecdf(ax, label, i):
+    def ecdf(ax, label, i, same):
         w = waits_of[label]
         if not len(w):
             return
-        twin = same_as.get(label)
+        twin = same.get(label)
         if many:  # in a panel: allocator names (the panel's title says the rest)
             label_shown = _allocator_of_label(label, groups)
             twin_shown = _allocator_of_label(twin, groups) if twin else None
@@ -552,10 +557,16 @@ def wait_by_group(waits: pd.DataFrame, path: Path, title: str = "", only=None) -
                       + (f" = {twin_shown}" if twin else ""))
 
     if many:
+        panel_of = {label: name for name, members in panels for _k, label, _g in members}
         for ax, (name, members) in zip(lefts, panels):
+            here = twins(members, lambda g: np.sort(g["wait"].to_numpy(dtype=float)))
             for i, (_k, label, _g) in enumerate(members):
-                ecdf(ax, label, i)
-            ax.set_title(name, fontsize="small")
+                ecdf(ax, label, i, here)
+            # a whole panel identical to another one (a repositioner that never moved, say)
+            others = {panel_of.get(same_as.get(label)) for _k, label, _g in members}
+            twin_panel = others.pop() if len(others) == 1 else None
+            ax.set_title(name + (f"\n(identical to {twin_panel})" if twin_panel else ""),
+                         fontsize="small")
             ax.grid(True, alpha=0.3)
             ax.legend(fontsize="xx-small", loc="lower right")
             ax.set_ylim(0, 1.01)
@@ -568,7 +579,7 @@ def wait_by_group(waits: pd.DataFrame, path: Path, title: str = "", only=None) -
                           "repositioner; dashed: identical to another series", fontsize="small")
     else:
         for i, label in enumerate(labels):
-            ecdf(left, label, i)
+            ecdf(left, label, i, same_as)
         left.set_xlabel("wait, release → pickup (min)")
         left.set_ylabel("share of the requests picked up")
         left.set_ylim(0, 1.01)
