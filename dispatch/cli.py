@@ -11,6 +11,7 @@ from pathlib import Path
 
 from dispatch import __version__
 from dispatch.errors import DispatchError
+from dispatch.progress import Heartbeat
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -237,7 +238,7 @@ def _run(args, console) -> int:
         finished = []
         with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                       TimeElapsedColumn(), console=console, transient=True) as progress, \
-                _Heartbeat(console, lambda: f"{sc.name}: {len(finished)} of {len(specs)} "
+                Heartbeat(console, lambda: f"{sc.name}: {len(finished)} of {len(specs)} "
                            "runs done" + (f" (last: {finished[-1]})" if finished else "")):
             bar = progress.add_task(f"{sc.name}", total=len(specs))
 
@@ -252,58 +253,11 @@ def _run(args, console) -> int:
     return 0
 
 
-def heartbeat_seconds() -> float:
-    """Wall seconds between two progress lines when the output is not a terminal: 60, or
-    ``DISPATCH_HEARTBEAT_S``."""
-    try:
-        v = float(os.environ.get("DISPATCH_HEARTBEAT_S", "60"))
-    except ValueError:
-        return 60.0
-    return v if v > 0 else 60.0
-
-
-class _Heartbeat:
-    """While a command runs with its output not on a terminal (a log file, a pipe, a batch
-    job), a line on stderr every :func:`heartbeat_seconds` wall seconds saying where it is
-    (``what()``), so that a long run is never silent; nothing on a terminal, where the
-    progress bar says it."""
-
-    def __init__(self, console, what) -> None:
-        self.on = not console.is_terminal
-        self.what = what
-        self.started = time.perf_counter()
-
-    def __enter__(self):
-        if self.on:
-            import threading
-
-            self.stop = threading.Event()
-            self.thread = threading.Thread(target=self._beat, name="dispatch-heartbeat",
-                                           daemon=True)
-            self.thread.start()
-        return self
-
-    def _beat(self) -> None:
-        every = heartbeat_seconds()
-        while not self.stop.wait(every):
-            wall = time.perf_counter() - self.started
-            try:
-                line = self.what()
-            except Exception as e:  # noqa: BLE001 - a progress line must never stop a run
-                line = f"({type(e).__name__})"
-            sys.stderr.write(f"[{wall:6.0f} s] {line}\n")
-            sys.stderr.flush()
-
-    def __exit__(self, *exc) -> None:
-        if self.on:
-            self.stop.set()
-            self.thread.join()
-
-
 class _run_progress:
     """Context manager: a progress bar of one run (simulated time out of the duration, wall
     time, requests released and closed) on a terminal, else a line a minute on stderr
-    (:class:`_Heartbeat`); yields the callback for :class:`dispatch.sim.Simulation`."""
+    (:class:`dispatch.progress.Heartbeat`); yields the callback for
+    :class:`dispatch.sim.Simulation`."""
 
     def __init__(self, console, spec) -> None:
         self.console, self.spec = console, spec
@@ -329,7 +283,7 @@ class _run_progress:
                         "closed")
                 return line if state["reports"] else line + " (still in its first steps)"
 
-            self.beat = _Heartbeat(self.console, what).__enter__()
+            self.beat = Heartbeat(self.console, what).__enter__()
             return report
         from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
@@ -464,7 +418,6 @@ def _sweep(args, console) -> int:
     from collections import Counter
 
     from rich.markup import escape
-
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from dispatch.runner import default_out, foreign_runs, sweep
@@ -480,7 +433,7 @@ def _sweep(args, console) -> int:
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                   TextColumn("{task.fields[tally]}"), TimeElapsedColumn(), console=console,
                   transient=True) as progress, \
-            _Heartbeat(console, lambda: f"{sc.name}: {sum(counts.values())} of {len(specs)} "
+            Heartbeat(console, lambda: f"{sc.name}: {sum(counts.values())} of {len(specs)} "
                        "runs finished (" + (", ".join(f"{v} {k}" for k, v in
                                                       sorted(counts.items())) or "none yet")
                        + f") on {where}"):
