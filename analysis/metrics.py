@@ -210,7 +210,8 @@ def trip_table(tasks: pd.DataFrame, events: pd.DataFrame | None = None,
     (free-flow fastest path; the tasks' own column if recorded, else ``direct``, else NaN) and
     ``detour_ratio`` (in_vehicle / direct_seconds, completed trips only)."""
     keys = [c for c in [*GROUP, "seed", "run_id"] if c in tasks.columns]
-    t = tasks[keys + ["task_id", "state", "released_at", "picked_up_at"]].copy()
+    t = tasks[keys + ["task_id", "state", "released_at", "picked_up_at"]
+              + (["shared"] if "shared" in tasks else [])].copy()
     t["hour"] = np.floor(t["released_at"].to_numpy(dtype=float) / 3600).astype(int)
     t["wait"] = t["picked_up_at"] - t["released_at"]
     t["dropped_off_at"] = np.nan
@@ -223,6 +224,9 @@ def trip_table(tasks: pd.DataFrame, events: pd.DataFrame | None = None,
     t["in_vehicle"] = t["dropped_off_at"] - t["picked_up_at"]
     if "direct_seconds" in tasks.columns and tasks["direct_seconds"].notna().any():
         t["direct_seconds"] = tasks["direct_seconds"].to_numpy(dtype=float)
+    elif "direct_time" in tasks.columns and tasks["direct_time"].notna().any():
+        # the simulator's own free-flow time (set when a decision first considers the trip)
+        t["direct_seconds"] = tasks["direct_time"].to_numpy(dtype=float)
     elif direct is not None:
         t["direct_seconds"] = np.asarray(direct, dtype=float)
     else:
@@ -255,6 +259,13 @@ def customer_stats(trips: pd.DataFrame) -> dict:
             np.mean),
         "detour_ratio_mean": _stat(trips["detour_ratio"].to_numpy(dtype=float), np.mean),
         "detour_ratio_median": _stat(trips["detour_ratio"].to_numpy(dtype=float), np.median),
+        # shared rides: rides during which another request was on board; delay = drop-off -
+        # release - direct free-flow time (s), over the rides
+        "shared_rate": (float(trips.loc[trips["state"] == "completed", "shared"].mean())
+                        if "shared" in trips and rides else math.nan),
+        "delay_mean": _stat((trips["dropped_off_at"] - trips["released_at"]
+                             - trips["direct_seconds"]).to_numpy(dtype=float)[
+                                 (trips["state"] == "completed").to_numpy()], np.mean),
     }
 
 
@@ -280,14 +291,17 @@ def vehicle_stats(vehicles: pd.DataFrame, states: pd.DataFrame | None, rides: in
     distance = float(vehicles["distance"].sum())
     has_empty = "empty_distance" in vehicles and vehicles["empty_distance"].notna().all()
     empty = float(vehicles["empty_distance"].sum()) if has_empty else math.nan
-    occupied = (float(vehicles["occupied_distance"].sum())
-                if "occupied_distance" in vehicles and vehicles["occupied_distance"].notna().all()
-                else math.nan)
+    # MATSim DRT's totalPassengerDistanceTraveled: passenger-metres (with one-seat vehicles
+    # the occupied metres, which is what results written before shared rides hold)
+    pax = "passenger_distance" if "passenger_distance" in vehicles else "occupied_distance"
+    occupied = (float(vehicles[pax].sum())
+                if pax in vehicles and vehicles[pax].notna().all() else math.nan)
     if states is not None and len(states):
         secs = (states["end"] - states["start"]).groupby(states["state"]).sum()
         total = float(secs.sum())
         available = total - float(secs.get("failed", 0.0))
-        busy = float(secs.get("to_pickup", 0.0) + secs.get("occupied", 0.0))
+        busy = float(secs.get("to_pickup", 0.0) + sum(secs.get(k, 0.0) for k in
+                                                       ("occupied", "occupied_2", "occupied_3+")))
     else:
         cap = vehicles["run_id"].map(horizon).to_numpy(dtype=float)
         down = (vehicles["down_seconds"].to_numpy(dtype=float) if "down_seconds" in vehicles
@@ -299,6 +313,7 @@ def vehicle_stats(vehicles: pd.DataFrame, states: pd.DataFrame | None, rides: in
         "vehicles": n, "totalDistance": distance,
         "averageDrivenDistance": distance / n if n else math.nan,
         "totalEmptyDistance": empty, "totalPassengerDistanceTraveled": occupied,
+        "occupancy": occupied / distance if distance > 0 else math.nan,
         "emptyRatio": (empty / distance if trips_have_dropoff and distance > 0 else math.nan),
         "vkm_per_ride": distance / 1000 / rides if rides else math.nan,
         "utilization": busy / available if available > 0 else math.nan,
@@ -492,7 +507,8 @@ def hourly_fleet(states: pd.DataFrame, summary: pd.DataFrame,
     size = out.set_index(keys).index.map(fleet).to_numpy(dtype=float)
     covered = out[list(FLEET_STATES)].sum(axis=1)  # a run's last bin may be cut short
     available = covered - out["failed"]
-    out["utilization"] = ((out["to_pickup"] + out["occupied"]) / available.where(available > 0))
+    busy = out["to_pickup"] + out[["occupied", "occupied_2", "occupied_3+"]].sum(axis=1)
+    out["utilization"] = busy / available.where(available > 0)
     for st in FLEET_STATES:
         out[st] = out[st] / covered.where(covered > 0) * size
     return out

@@ -46,6 +46,14 @@ TAXI_COLUMNS = ["runs", "requests", "rides", "rejections", "cancelled", "failed"
                 "rejectionRate", "cancelRate", "wait_average", "wait_median", "wait_p90",
                 "wait_p95", "wait_max", "inVehicleTravelTime_mean", "detour_ratio_mean",
                 "utilization", "emptyRatio", "vkm_per_ride"]
+#: ... and of shared rides, where some ride was shared (occupancy: passenger-km / vehicle-km)
+SHARED_COLUMNS = ["occupancy", "shared_rate", "delay_mean"]
+
+
+def _pooled(taxi: pd.DataFrame) -> bool:
+    return bool("shared_rate" in taxi and (taxi["shared_rate"].fillna(0) > 0).any())
+
+
 #: ... for voxel runs (point tasks: no ride, no empty ratio)
 VOXEL_TAXI_COLUMNS = ["runs", "requests", "rides", "rejectionRate", "wait_average",
                       "wait_median", "wait_p90", "wait_max", "assignment_delay_average",
@@ -380,9 +388,12 @@ def _road_part(res, summary, tasks, vehicles, events, direct, out, written, only
     states = []
     ends = summary.set_index("run_id")["sim_time"].to_dict()
     for rid, vg in v.groupby("run_id", sort=False):
-        states.append(fleet_states(e.loc[e["run_id"] == rid], vg, end=float(ends[rid])))
+        mine = t.loc[t["run_id"] == rid]
+        riders = (mine.set_index("task_id")["passengers"] if "passengers" in mine else None)
+        states.append(fleet_states(e.loc[e["run_id"] == rid], vg, end=float(ends[rid]),
+                                   passengers=riders))
     states = pd.concat(states, ignore_index=True) if states else pd.DataFrame(
-        columns=["run_id", "agent_id", "state", "start", "end"])
+        columns=["run_id", "agent_id", "state", "start", "end", "onboard"])
     hf = M.hourly_fleet(states, summary, keys)
     hf_bins = hf if bin_s == 3600 else M.hourly_fleet(states, summary, keys, bin_s=bin_s)
     hc.to_csv(out / "hourly_customers.csv", index=False)
@@ -430,10 +441,13 @@ def _road_part(res, summary, tasks, vehicles, events, direct, out, written, only
                "utilization = share of the vehicles' available time (not broken down) driving "
                "to a pickup or with a passenger (FleetPy's '% fleet utilization'); "
                "emptyRatio = km without a passenger / all km (FleetPy's '% empty vkm'); "
-               "vkm_per_ride = vehicle km per served trip. All columns: taxi.csv; per hour "
+               "vkm_per_ride = vehicle km per served trip; with shared rides occupancy = "
+               "passenger-km / vehicle-km (MATSim DRT's), shared_rate = share of the rides "
+               "during which another request was on board, delay_mean = drop-off - release - "
+               "direct free-flow time (s). All columns: taxi.csv; per hour "
                "(customers by hour of release, fleet by clock hour): hourly_customers.csv, "
                "hourly_fleet.csv.")),
-        ("table", _taxi_view(taxi, TAXI_COLUMNS)),
+        ("table", _taxi_view(taxi, TAXI_COLUMNS + (SHARED_COLUMNS if _pooled(taxi) else []))),
         ("img", "map.png"),
         ("p", f"Over time, in bins of {unit} (the CSV files are per hour):"),
         ("img", "hourly.png"), ("img", "fleet_state.png"), ("img", "wait_by_allocator.png"),

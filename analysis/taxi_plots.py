@@ -28,9 +28,11 @@ from analysis.plots import _colours, _figure, _save
 from analysis.timeline import FLEET_STATES
 
 FLEET_COLOURS = {"idle": "#c7c7c7", "to_pickup": "#ff7f0e", "occupied": "#1f77b4",
+                 "occupied_2": "#17becf", "occupied_3+": "#2ca02c",
                  "repositioning": "#9467bd", "failed": "#d62728"}
 FLEET_LABELS = {"idle": "idle", "to_pickup": "driving to a pickup", "occupied":
-                "with a passenger", "repositioning": "repositioning", "failed": "broken down"}
+                "1 on board", "occupied_2": "2 on board", "occupied_3+": "3+ on board",
+                "repositioning": "repositioning", "failed": "broken down"}
 
 
 def time_bin(horizon_s: float) -> float:
@@ -471,21 +473,24 @@ def fleet_state(fleet: pd.DataFrame, path: Path, *, bin_s: float, title: str = "
     :func:`analysis.metrics.hourly_fleet` with ``t_h``."""
     every = select(series(fleet), only)
     groups = every[:max_panels]
-    same_as = twins(groups, lambda g: g.sort_values("t_h")[["t_h", *FLEET_STATES]]
-                    .to_numpy(dtype=float))
+    same_as = twins(groups, lambda g: g.sort_values("t_h")[
+        ["t_h", *(c for c in FLEET_STATES if c in g.columns)]].to_numpy(dtype=float))
     k = len(groups)
     cols = 1 if k == 1 else 2 if k <= 8 else 3 if k <= 18 else 4
     rows = max(1, math.ceil(k / cols))
     fig = _figure({1: 8, 2: 10, 3: 13, 4: 16}[cols], 1.4 + (2.4 if cols <= 2 else 2.1) * rows)
     axes = np.atleast_1d(fig.subplots(rows, cols, sharex=True, sharey=True, squeeze=False)).ravel()
     width = bin_s / 3600
+    # by passengers on board: the shared-ride states only where some vehicle had them
+    shown = [s for s in FLEET_STATES if s not in ("occupied_2", "occupied_3+")
+             or (s in fleet and (fleet[s].fillna(0) > 0).any())]
     for ax, (key, label, g) in zip(axes, groups):
         g = g.sort_values("t_h")
         x = np.r_[g["t_h"].to_numpy(dtype=float), g["t_h"].to_numpy(dtype=float)[-1] + width]
         ys = [np.r_[g[s].to_numpy(dtype=float), g[s].to_numpy(dtype=float)[-1]]
-              for s in FLEET_STATES]
-        ax.stackplot(x, ys, step="post", colors=[FLEET_COLOURS[s] for s in FLEET_STATES],
-                     labels=[FLEET_LABELS[s] for s in FLEET_STATES], linewidth=0)
+              for s in shown]
+        ax.stackplot(x, ys, step="post", colors=[FLEET_COLOURS[s] for s in shown],
+                     labels=[FLEET_LABELS[s] for s in shown], linewidth=0)
         n = dict(zip(series_columns(g), key))["n_agents"]
         name = label if "N=" in label else f"{label} (N = {n})"
         ax.set_title(name + (f"\n(= {same_as[label]})" if label in same_as else ""),
@@ -501,7 +506,7 @@ def fleet_state(fleet: pd.DataFrame, path: Path, *, bin_s: float, title: str = "
         ax.tick_params(labelbottom=True)
     h, lab = axes[0].get_legend_handles_labels()
     # below the panels, in one row: a legend in the upper right corner would run into the title
-    fig.legend(h, lab, loc="outside lower center", ncols=len(lab), fontsize="small",
+    fig.legend(h, lab, loc="outside lower center", ncols=min(len(lab), 4), fontsize="small",
                frameon=False)
     more = len(every) - len(groups)
     fig.suptitle((title or "Fleet state over time (stacked)")

@@ -98,56 +98,86 @@ def positions_at(traj: dict[int, pd.DataFrame], t: float) -> dict[int, np.ndarra
 # ----------------------------------------------------------------------------- fleet state
 
 #: Fleet states as ride-hailing studies count them (MATSim DRT's occupancy profile, FleetPy's
-#: vehicle states): ``to_pickup`` (assigned, driving empty to a passenger), ``occupied`` (from the
-#: pickup until the vehicle is free again: the ride and the service at its end; for the paper's
-#: point tasks, serving the task), ``repositioning`` (idle, driving empty where a repositioning
+#: vehicle states), by passengers on board: ``to_pickup`` (a request assigned, nobody on
+#: board), ``occupied`` (one on board, or the service at the end of a ride; for the paper's
+#: point tasks, serving the task), ``occupied_2`` and ``occupied_3+`` (shared rides: two, three
+#: or more passengers on board), ``repositioning`` (idle, driving empty where a repositioning
 #: policy sends it), ``failed`` (broken down, until repaired), ``idle``.
-FLEET_STATES = ("idle", "to_pickup", "occupied", "repositioning", "failed")
+FLEET_STATES = ("idle", "to_pickup", "occupied", "occupied_2", "occupied_3+", "repositioning",
+                "failed")
+#: the states of a vehicle with one or more on board (or serving)
+OCCUPIED = ("occupied", "occupied_2", "occupied_3+")
 
-_FLEET_MOVES = {"assign": "to_pickup", "reassign": "to_pickup", "pickup": "occupied",
-                "arrive": "occupied", "idle": "idle", "breakdown": "failed",
-                "reposition": "repositioning"}
+_FLEET_EVENTS = ("assign", "reassign", "pickup", "arrive", "dropoff", "idle", "breakdown",
+                 "reposition")
+
+
+def _occupied(onboard: int) -> str:
+    return "occupied" if onboard <= 1 else "occupied_2" if onboard == 2 else "occupied_3+"
 
 
 def fleet_states(events: pd.DataFrame, vehicles: pd.DataFrame,
-                 end: float | None = None) -> pd.DataFrame:
-    """Columns run_id, agent_id, state (one of :data:`FLEET_STATES`), start, end: every
-    vehicle of every run covered from 0 to ``end`` (default: the run's last event) without
-    gaps or overlaps.
+                 end: float | None = None, passengers=None) -> pd.DataFrame:
+    """Columns run_id, agent_id, state (one of :data:`FLEET_STATES`), start, end, onboard
+    (passengers on board): every vehicle of every run covered from 0 to ``end`` (default: the
+    run's last event) without gaps or overlaps. ``passengers``: riders per task id (a mapping
+    or Series; default 1 each: the tasks table's ``passengers`` column gives them).
 
-    Transitions: ``assign`` / ``reassign`` -> to_pickup (unless occupied or failed);
-    ``pickup`` -> occupied; ``idle`` -> idle; ``breakdown`` -> failed (only ``idle``, after a
-    ``repair``, ends it); ``reposition`` -> repositioning (only from idle)."""
-    cols = ["run_id", "agent_id", "state", "start", "end"]
+    Transitions: ``assign`` -> to_pickup (from idle or repositioning); ``pickup`` -> occupied
+    by the passengers on board; ``dropoff`` -> occupied by those left, or to_pickup when nobody
+    is left and a pickup is pending, else (the service at the end of a ride) occupied until
+    ``idle``; ``breakdown`` -> failed (only ``idle``, after a ``repair``, ends it);
+    ``reposition`` -> repositioning (only from idle)."""
+    cols = ["run_id", "agent_id", "state", "start", "end", "onboard"]
     rows = []
-    ev = events.loc[(events["agent_id"] >= 0) & events["event"].isin(list(_FLEET_MOVES))]
+    ev = events.loc[(events["agent_id"] >= 0) & events["event"].isin(list(_FLEET_EVENTS))]
     ev = ev.sort_values(["run_id", "t"], kind="stable")
     ends = {}
     if end is None:
         ends = events.groupby("run_id")["t"].max().to_dict() if len(events) else {}
+    riders = {} if passengers is None else {int(k): int(v) for k, v in dict(passengers).items()}
     by_run = dict(iter(ev.groupby("run_id", sort=False)))
     for run, vs in vehicles.groupby("run_id", sort=False):
         stop = float(end if end is not None else ends.get(run, 0.0))
         g = by_run.get(run)
         by_agent = dict(iter(g.groupby("agent_id", sort=False))) if g is not None else {}
         for agent in sorted(vs["agent_id"].astype(int)):
-            state, since = "idle", 0.0
+            state, since, onboard, pending = "idle", 0.0, 0, set()
+            shown = 0  # onboard of the open interval
             mine = by_agent.get(agent)
             if mine is not None:
-                for t, kind in zip(mine["t"].to_numpy(dtype=float), mine["event"]):
-                    new = _FLEET_MOVES[kind]
-                    if state == "failed" and new != "idle":
+                for t, kind, task in zip(mine["t"].to_numpy(dtype=float), mine["event"],
+                                         mine["task_id"].to_numpy(dtype=np.int64)):
+                    task = int(task)
+                    new = state
+                    if state == "failed" and kind != "idle":
                         continue
-                    if new == "to_pickup" and state == "occupied":
-                        continue
-                    if new == "repositioning" and state != "idle":
-                        continue
-                    if new != state:
+                    if kind == "assign":
+                        pending.add(task)
+                        if state in ("idle", "repositioning"):
+                            new = "to_pickup"
+                    elif kind == "reassign":
+                        pending.discard(task)
+                    elif kind in ("pickup", "arrive"):
+                        pending.discard(task)
+                        onboard += riders.get(task, 1)
+                        new = _occupied(onboard)
+                    elif kind == "dropoff":
+                        onboard = max(onboard - riders.get(task, 1), 0)
+                        new = (_occupied(onboard) if onboard else
+                               "to_pickup" if pending else "occupied")
+                    elif kind == "idle":
+                        new, onboard, pending = "idle", 0, set()
+                    elif kind == "breakdown":
+                        new, onboard, pending = "failed", 0, set()
+                    elif kind == "reposition" and state == "idle":
+                        new = "repositioning"
+                    if new != state or onboard != shown:
                         if t > since:
-                            rows.append((run, agent, state, since, min(t, stop)))
-                        state, since = new, t
+                            rows.append((run, agent, state, since, min(t, stop), shown))
+                        state, since, shown = new, t, onboard
             if stop > since:
-                rows.append((run, agent, state, since, stop))
+                rows.append((run, agent, state, since, stop, shown))
     return pd.DataFrame(rows, columns=cols)
 
 

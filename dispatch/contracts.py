@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import ClassVar, Literal, NamedTuple, Protocol
 
@@ -162,6 +162,10 @@ class TaskView:
     released_at: float
     dropoff: Location | None = None
     deadline: float = math.inf
+    #: shared rides: riders, and the latest drop-off time the request accepts (release +
+    #: direct free-flow time + ``max_delay``; ``inf`` without a ``max_delay``)
+    passengers: int = 1
+    dropoff_deadline: float = math.inf
 
     @property
     def cell(self) -> Cell:
@@ -243,11 +247,19 @@ class AllocationProblem:
     #: shared rides: the current stop list of each agent that has one, by agent id (a
     #: read-only mapping of tuples of :class:`StopView`); empty when no agent has a plan
     plans: Mapping[int, tuple[StopView, ...]] = field(default_factory=dict)
+    #: shared rides: seats per agent (aligned with ``agents``; None: one each), the seconds a
+    #: vehicle spends at a stop that completes a request, and ``travel(sources, targets)``:
+    #: seconds between locations (a ``(len(sources), len(targets))`` array; None where the
+    #: planner cannot route between arbitrary locations)
+    capacity: np.ndarray | None = None
+    service_time: float = 0.0
+    travel: Callable[..., np.ndarray] | None = None
 
     @classmethod
     def made(cls, time: float, agents, tasks, cost: np.ndarray, comm: np.ndarray,
              rng: np.random.Generator, max_rounds: int, loss: float, latency: float,
-             cell_size: float, agent_pos, task_pos, plans=None) -> AllocationProblem:
+             cell_size: float, agent_pos, task_pos, plans=None, capacity=None,
+             service_time: float = 0.0, travel=None) -> AllocationProblem:
         """The problem ``cls(...)`` of these fields (all of them, positionally) makes, checked
         the same way, without the field-by-field ``object.__setattr__`` of a frozen
         ``__init__`` (the dispatcher makes one per decision)."""
@@ -255,7 +267,8 @@ class AllocationProblem:
         obj.__dict__.update(time=time, agents=agents, tasks=tasks, cost=cost, comm=comm, rng=rng,
                             max_rounds=max_rounds, loss=loss, latency=latency,
                             cell_size=cell_size, _agent_pos=agent_pos, _task_pos=task_pos,
-                            plans={} if plans is None else plans)
+                            plans={} if plans is None else plans, capacity=capacity,
+                            service_time=service_time, travel=travel)
         obj.__post_init__()
         return obj
 
@@ -380,6 +393,13 @@ class Allocation:
     messages: int = 0
     hops: int = 0
     agent_seconds: tuple[float, ...] = field(default=(), compare=False)  # wall clock
+    #: allocators that set :attr:`Allocator.multi_request` (batch pooling, e.g. RTV): the new
+    #: stop order of each agent given one or more requests, by agent id: every stop of its
+    #: current plan (``problem.plans``) and the pickup and drop-off of each of its new
+    #: requests, as ``(kind, task_id)`` pairs (``"pickup"`` / ``"dropoff"``) in driving order.
+    #: The dispatcher checks it (each request's pickup before its drop-off, the capacity and
+    #: every limit on the network's travel times) and the vehicle drives it.
+    routes: Mapping[int, tuple[tuple[str, int], ...]] = field(default_factory=dict)
 
     @classmethod
     def centralized(cls, problem: AllocationProblem, index_pairs) -> Allocation:
@@ -435,6 +455,11 @@ class Allocator(ABC):
     #: certify the answer (see :mod:`dispatch.lazy`); a method that claims it wrongly gets
     #: answers that are not optimal for the exact costs.
     minimizes_total_cost: ClassVar[bool] = False
+    #: True for batch-pooling methods that may give one agent several requests in one
+    #: decision (``Allocation.routes`` then says in which order it serves them); the
+    #: dispatcher gives them ``problem.travel`` to route between any locations. Others give
+    #: an agent at most one request, inserted where the decision's cost says.
+    multi_request: ClassVar[bool] = False
 
     @abstractmethod
     def allocate(self, problem: AllocationProblem) -> Allocation:

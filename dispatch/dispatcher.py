@@ -104,9 +104,13 @@ def _positions(space: Space, agents) -> np.ndarray:
     return out
 
 
-def validate(problem: AllocationProblem, allocation: Allocation) -> list[tuple[int, int]]:
+def validate(problem: AllocationProblem, allocation: Allocation,
+             multi: bool = False) -> list[tuple[int, int]]:
     """Raise AllocationError unless every pair names a known agent and task, no agent or task
     appears twice, and no pair has infinite cost (and the counters are whole numbers >= 0).
+    With ``multi`` (an allocator that sets ``multi_request``) an agent may appear in several
+    pairs, and a pair of infinite single-request cost is allowed, when ``allocation.routes``
+    gives the agent's stop order (checked by :func:`route_stops`).
     Returns each pair's ``(row, column)`` in the problem (its indices into ``cost``)."""
     if not isinstance(allocation, Allocation):
         raise AllocationError(f"allocator returned {type(allocation).__name__}, not an Allocation")
@@ -120,6 +124,9 @@ def validate(problem: AllocationProblem, allocation: Allocation) -> list[tuple[i
         raise AllocationError(f"Allocation.pairs must be a sequence of (agent_id, task_id) "
                               f"pairs, got {type(allocation.pairs).__name__}") from None
     agent_row, task_col = _finders(problem)
+    routes = getattr(allocation, "routes", None) or {}
+    if routes and not multi:
+        raise AllocationError("Allocation.routes is for allocators that set multi_request")
     seen_agents: set[int] = set()
     seen_tasks: set[int] = set()
     hint = ("; pairs name agents and tasks by id, not by index (Allocation.centralized "
@@ -144,14 +151,60 @@ def validate(problem: AllocationProblem, allocation: Allocation) -> list[tuple[i
                                   f"{_ids(problem.task_ids.tolist())}){hint if by_index else ''}")
         if tid in seen_tasks:
             raise AllocationError(f"task {tid} is given to more than one agent")
-        if aid in seen_agents:
-            raise AllocationError(f"agent {aid} is given more than one task")
-        if not math.isfinite(problem.cost[i, j]):
+        routed = multi and aid in routes
+        if aid in seen_agents and not routed:
+            raise AllocationError(f"agent {aid} is given more than one task"
+                                  + (" without a route (Allocation.routes)" if multi else ""))
+        if not routed and not math.isfinite(problem.cost[i, j]):
             raise AllocationError(f"agent {aid} cannot serve task {tid} (infinite cost)")
         seen_agents.add(aid)
         seen_tasks.add(tid)
         index.append((i, j))
+    for aid in routes:
+        if aid not in seen_agents:
+            raise AllocationError(f"Allocation.routes names agent {aid!r}, which is given no "
+                                  "task in pairs")
     return index
+
+
+def route_stops(problem: AllocationProblem, aid: int, route, new: dict) -> list[tuple]:
+    """Agent ``aid``'s new stop order from ``Allocation.routes`` as ``(kind, task_id, loc,
+    passengers, latest, completes)`` rows, or AllocationError: it must hold every stop of the
+    agent's plan (``problem.plans``) and the pickup and drop-off of each request of ``new``
+    (task id -> TaskView given to it), each once, every pickup before its drop-off."""
+    plan = {(s.kind, s.task_id): s for s in problem.plans.get(aid, ())}
+    try:
+        keys = [(str(k), int(t)) for k, t in route]
+    except (TypeError, ValueError):
+        raise AllocationError(f"route of agent {aid} must be (kind, task_id) pairs, got "
+                              f"{route!r:.200}") from None
+    want = set(plan)
+    for tid, t in new.items():
+        want.add(("pickup", tid))
+        if t.dropoff is not None:
+            want.add(("dropoff", tid))
+    if len(keys) != len(set(keys)) or set(keys) != want:
+        missing, extra = sorted(want - set(keys)), sorted(set(keys) - want)
+        raise AllocationError(f"route of agent {aid} must hold its plan's stops and its new "
+                              f"requests' pickups and drop-offs once each (missing {missing}, "
+                              f"unexpected {extra}, or repeated)")
+    where = {k: n for n, k in enumerate(keys)}
+    rows = []
+    for kind, tid in keys:
+        if kind == "dropoff" and where.get(("pickup", tid), -1) > where[(kind, tid)]:
+            raise AllocationError(f"route of agent {aid}: request {tid}'s drop-off comes "
+                                  "before its pickup")
+        s = plan.get((kind, tid))
+        if s is not None:
+            rows.append((kind, tid, s.loc, s.passengers, s.latest, None))
+            continue
+        t = new[tid]
+        point = t.dropoff is None
+        if kind == "pickup":
+            rows.append((kind, tid, t.loc, 0 if point else t.passengers, t.deadline, point))
+        else:
+            rows.append((kind, tid, t.dropoff, -t.passengers, t.dropoff_deadline, True))
+    return rows
 
 
 def _finders(problem: AllocationProblem):
@@ -464,11 +517,15 @@ class Dispatcher:
             return space.positions([t.loc for t in tasks])
 
         plans = _Plans(self.fleet, self.operator, idle) if self.pooled else None
+        seats = (np.array([self.fleet.vehicles[k].capacity for k in idle.tolist()])
+                 if self.pooled else None)
+        travel = self.planner.between if self.routes else None
 
         def ask(cost: np.ndarray):
             problem = AllocationProblem.made(now, agents, tasks, np.array(cost, order="C"),
                                              comm, self.rng, self.cfg.max_rounds, comms.loss,
-                                             comms.latency, self.cell_size, apos, tpos, plans)
+                                             comms.latency, self.cell_size, apos, tpos, plans,
+                                             seats, self.operator.service_time, travel)
             allocation, decide_s, index = self._ask(problem)
             return problem, allocation, decide_s, index
 
@@ -545,11 +602,33 @@ class Dispatcher:
             raise AllocationError(f"{self._where('allocator')}: the allocator replaced or made "
                                   "writable problem.cost (the problem is read-only; work on a "
                                   "copy)")
+        multi = bool(getattr(self.allocator, "multi_request", False))
         try:
-            index = validate(problem, allocation)
+            index = validate(problem, allocation, multi)
+            routes = self._routes(problem, allocation) if multi and allocation.routes else {}
         except AllocationError as e:
             raise AllocationError(f"{self._where('allocator')}: {e}") from None
+        if routes:
+            object.__setattr__(allocation, "_checked_routes", routes)  # (a cache, frozen)
         return allocation, decide_s, index
+
+    def _routes(self, problem: AllocationProblem, allocation: Allocation) -> dict:
+        """The routes of a multi-request answer, checked: agent id -> (stop rows of
+        :func:`route_stops`, planned arrival times); AllocationError where a route breaks the
+        capacity or a limit."""
+        by_task = {t.id: t for t in problem.tasks}
+        new: dict[int, dict] = {}
+        for aid, tid in allocation.pairs:
+            new.setdefault(aid, {})[tid] = by_task[tid]
+        out = {}
+        for aid, route in allocation.routes.items():
+            rows = route_stops(problem, aid, route, new.get(aid, {}))
+            v = self.fleet.by_id[int(aid)]
+            times, why = self.operator.route_times(v, rows)
+            if why:
+                raise AllocationError(f"route of agent {aid} is infeasible: {why}")
+            out[int(aid)] = (rows, times)
+        return out
 
     def _hand_out(self) -> None:
         """Record the pending decision and give each vehicle its task (see the module doc)."""
@@ -567,6 +646,10 @@ class Dispatcher:
             # whose vehicle moved on is stale: the slow path below drops it)
             handed = tuple(allocation.pairs)
             pair_cost = [float(cost[i, j]) for i, j in p.index]
+            routes = allocation.__dict__.get("_checked_routes")
+            if routes:
+                self._follow(p, allocation, routes, pair_cost)
+                return
             if p.inserts:
                 at = [p.inserts.get(ij) for ij in p.index]
                 for (aid, tid), c, a in zip(handed, pair_cost, at):
@@ -588,6 +671,9 @@ class Dispatcher:
                     task.state is TaskState.ASSIGNED and task.agent_id == p.holder[t])
 
             handed = tuple((a, t) for a, t in allocation.pairs if available(t) and still(a))
+            routes = allocation.__dict__.get("_checked_routes") or {}
+            if routes:  # a route planned before the deliberation is stale: dropped
+                handed = tuple((a, t) for a, t in handed if a not in routes)
             if p.inserts:  # a pooled pair is stale once its vehicle has moved on: dropped
                 row, col = _finders(p.problem)
                 handed = tuple((a, t) for a, t in handed
@@ -605,6 +691,31 @@ class Dispatcher:
                 self.operator.assign(by_task[tid], by_id[aid], c)
             return
         self._reassign(p, holding, handed, pair_cost, still)
+
+    def _follow(self, p: _Pending, allocation: Allocation, routes: dict,
+                pair_cost: list[float]) -> None:
+        """Hand out a multi-request answer: routed agents drive their routes (a routed pair's
+        cost is the seconds from the decision to its planned pickup), the others get their
+        one request as usual."""
+        by_task = {t.id: t for t in p.tasks}
+        by_id = self.fleet.by_id
+        now = self.env.now
+        mine: dict[int, dict] = {}
+        for k, (aid, tid) in enumerate(allocation.pairs):
+            if aid in routes:
+                rows, times = routes[aid]
+                at = next(t for (kind, task, *_), t in zip(rows, times)
+                          if kind == "pickup" and task == tid)
+                pair_cost[k] = at - now
+                mine.setdefault(aid, {})[tid] = pair_cost[k]
+        self._recorded(p, allocation, pair_cost)
+        for (aid, tid), c, ij in zip(allocation.pairs, pair_cost, p.index):
+            if aid not in routes:
+                self.operator.assign(by_task[tid], by_id[aid], c, p.inserts.get(ij))
+        for aid, costs in mine.items():
+            rows, times = routes[aid]
+            self.operator.follow(by_id[aid], rows, times, {t: by_task[t] for t in costs},
+                                 costs)
 
     def _recorded(self, p: _Pending, allocation: Allocation, pair_cost: list[float]) -> None:
         """Count and record a decision's hand-out (``allocation`` as handed out)."""
@@ -674,6 +785,12 @@ class Dispatcher:
         n_req = np.array([0 if t.dropoff is None else t.passengers for t in tasks], np.int64)
         point = np.array([t.dropoff is None for t in tasks])
         pd = np.array([0.0 if t.dropoff is None else t.direct_time for t in tasks])
+        if getattr(self.planner, "inner", None) is not None and not point.all():
+            # a congested planner (dispatch.congestion): the drive at this hour, not free flow
+            trips = np.flatnonzero(~point)
+            pd[trips] = self.planner.between([tasks[k].loc for k in trips.tolist()],
+                                             [tasks[k].dropoff for k in trips.tolist()],
+                                             pairwise=True)
         svc_p = np.where(point, svc, 0.0)
         svc_d = np.where(point, 0.0, svc)
         vehicles = [fleet.vehicles[k] for k in slots.tolist()]

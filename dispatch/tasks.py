@@ -128,8 +128,11 @@ class Task:
         return self.released_at + self.direct_time + self.max_delay
 
     def view(self) -> TaskView:
+        if self.passengers == 1 and self.max_delay != self.max_delay:  # (the usual case)
+            return TaskView(self.id, self.kind, self.loc,  # type: ignore[arg-type]
+                            self.released_at, self.dropoff, self.deadline)
         return TaskView(self.id, self.kind, self.loc, self.released_at,  # type: ignore[arg-type]
-                        self.dropoff, self.deadline)
+                        self.dropoff, self.deadline, self.passengers, self.dropoff_deadline)
 
 
 class TaskBook:

@@ -545,12 +545,4 @@ def _agent_arrays(agents: Sequence[Any]) -> tuple[np.ndarray, np.ndarray]:
     nodes = getattr(agents, "nodes", None)
     if nodes is not None:
         return nodes, agents.remaining
-    locs = [a.loc for a in agents]
-    node = np.empty(len(locs), dtype=np.int64)
-    rem = np.zeros(len(locs))
-    for i, loc in enumerate(locs):
-        if isinstance(loc, RoadPoint):
-            node[i], rem[i] = loc.node, max(loc.remaining, 0.0)
-        else:
-            node[i] = int(loc)
-    return node, rem
+    return _loc_arrays([a.loc for a in agents])

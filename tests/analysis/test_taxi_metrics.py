@@ -79,7 +79,11 @@ def test_vehicle_metrics_by_hand(tiny_road):
     assert m["emptyRatio"] == pytest.approx(300 / 800)
     assert m["vkm_per_ride"] == pytest.approx(0.8 / 3)
     assert m["utilization"] == pytest.approx(80 / 100)
-    assert np.isnan(m["detour_ratio_mean"])  # no network given, no direct_seconds recorded
+    # no network given: the run's own direct_time column (free-flow) gives the detour ratio
+    assert m["detour_ratio_mean"] == pytest.approx(1.0)
+    assert m["occupancy"] == pytest.approx(500 / 800)  # one-seat taxis: occupied / all km
+    older = M.taxi_metrics(s, tasks.drop(columns=["direct_time"]), vehicles, events).iloc[0]
+    assert np.isnan(older["detour_ratio_mean"])  # results written before it: no direct time
 
 
 def test_fleet_states_by_hand(tiny_road):

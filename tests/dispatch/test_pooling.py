@@ -262,3 +262,64 @@ def test_allocators_read_the_plans_read_only(tmp_path):
     assert [(s.kind, s.task_id, s.loc, s.passengers, s.occupancy) for s in stops] == [
         ("dropoff", 0, 4, -1, 0)]
     assert stops[0].eta == pytest.approx(40.0)
+
+
+def _two_requests_one_taxi(tmp_path, route, capacity=2):
+    """Two requests released together, one taxi, an allocator that gives it both along
+    ``route`` (``Allocation.routes``); returns the run's tables or raises its error."""
+    from dispatch.contracts import Allocation, Allocator
+    from dispatch.runner import make_recorder
+    from dispatch.sim import Simulation
+
+    write_csv(tmp_path / "trips.csv", ["t", "origin_node", "dest_node"],
+              [(0.0, 1, 4), (0.0, 2, 3)])
+    write_csv(tmp_path / "fleet.csv", ["vehicle_id", "node"], [(0, 0)])
+    path = road_scenario(tmp_path, tasks='source = "trace"\ntrace = "trips.csv"\n'
+                                         'max_wait = 100.0\nmax_delay = 100.0',
+                         fleet=f'start = "fleet.csv"\ncapacity = {capacity}',
+                         network='network = "manhattan"\nblocks = [5, 2]\nblock = 100.0\n'
+                                 'speed = 10.0')
+    [spec] = load_scenario(path).runs()
+    sim = Simulation(spec, make_recorder(spec, tmp_path / "out"))
+
+    class Both(Allocator):
+        name = "both"
+        multi_request = True
+
+        def allocate(self, problem):
+            if not len(problem.tasks):
+                return Allocation(pairs=())
+            return Allocation(pairs=((0, 0), (0, 1)), routes={0: route})
+
+    sim.allocator = Both()
+    sim.run()
+    sim.recorder.finish()
+    import pyarrow.parquet as pq
+    return {n: pq.read_table(next((tmp_path / "out" / n).rglob("part-0.parquet"))).to_pandas()
+            for n in ("tasks", "events")}
+
+
+def test_a_multi_request_route_is_driven(tmp_path):
+    """0 -> pick A at 1 -> pick B at 2 -> drop B at 3 -> drop A at 4 (10 s a block)."""
+    route = (("pickup", 0), ("pickup", 1), ("dropoff", 1), ("dropoff", 0))
+    got = _two_requests_one_taxi(tmp_path, route)
+    tasks = got["tasks"].set_index("task_id").sort_index()
+    assert list(tasks.state) == ["completed", "completed"]
+    assert list(tasks.agent_id) == [0, 0] and tasks.shared.all()
+    assert tasks.picked_up_at.tolist() == pytest.approx([10.0, 20.0])
+    assert tasks.completed_at.tolist() == pytest.approx([40.0, 30.0])
+    assert tasks.cost.tolist() == pytest.approx([10.0, 20.0])  # seconds to the planned pickup
+
+
+@pytest.mark.parametrize("route, capacity, why", [
+    ((("dropoff", 0), ("pickup", 0), ("pickup", 1), ("dropoff", 1)), 2, "before its pickup"),
+    ((("pickup", 0), ("pickup", 1), ("dropoff", 1)), 2, "missing"),
+    ((("pickup", 0), ("pickup", 1), ("dropoff", 1), ("dropoff", 0)), 1, "capacity"),
+    ((("pickup", 0), ("dropoff", 0), ("pickup", 1), ("dropoff", 1), ("pickup", 0)), 2,
+     "once each"),
+])
+def test_a_bad_route_is_refused(tmp_path, route, capacity, why):
+    from dispatch.errors import AllocationError
+
+    with pytest.raises(AllocationError, match=why):
+        _two_requests_one_taxi(tmp_path, route, capacity)
