@@ -257,10 +257,16 @@ class _Plans(Mapping):
     read from the vehicles when asked (within the decision: nothing moves meanwhile)."""
 
     def __init__(self, fleet: Fleet, operator: Operator, slots: np.ndarray) -> None:
-        self._vehicles = [fleet.vehicles[k] for k in slots.tolist()]
-        self._operator = operator
-        self._ids = {v.id: v for v in self._vehicles if v.stops}
+        self._fleet, self._slots, self._operator = fleet, slots, operator
+        self._by_id: dict | None = None  # agent id -> vehicle, of those with stops (on use)
         self._cache: dict[int, tuple] = {}
+
+    @property
+    def _ids(self) -> dict:
+        if self._by_id is None:
+            vs = self._fleet.vehicles
+            self._by_id = {v.id: v for v in (vs[k] for k in self._slots.tolist()) if v.stops}
+        return self._by_id
 
     def __getitem__(self, agent_id: int) -> tuple[StopView, ...]:
         got = self._cache.get(agent_id)
@@ -517,8 +523,7 @@ class Dispatcher:
             return space.positions([t.loc for t in tasks])
 
         plans = _Plans(self.fleet, self.operator, idle) if self.pooled else None
-        seats = (np.array([self.fleet.vehicles[k].capacity for k in idle.tolist()])
-                 if self.pooled else None)
+        seats = self.fleet.capacity[idle] if self.pooled else None
         travel = self.planner.between if self.routes else None
 
         def ask(cost: np.ndarray):
@@ -793,11 +798,10 @@ class Dispatcher:
                                              pairwise=True)
         svc_p = np.where(point, svc, 0.0)
         svc_d = np.where(point, 0.0, svc)
-        vehicles = [fleet.vehicles[k] for k in slots.tolist()]
-        cap = np.array([v.capacity for v in vehicles], np.int64)
-        planned = np.array([bool(v.stops) or v.serving is not None for v in vehicles])
+        cap = fleet.capacity[slots]
+        planned = fleet.busy_mask[slots]  # (a busy vehicle has stops or is serving)
         if holders:  # [dispatch] reassign: a holder decides as if its plan were empty
-            planned &= ~np.array([v.id in holders for v in vehicles])
+            planned = planned & ~np.isin(fleet.ids[slots], list(holders))
         out = np.full(cost.shape, np.inf)
         empty = np.flatnonzero(~planned)
         if empty.size:
@@ -810,7 +814,7 @@ class Dispatcher:
         busy = np.flatnonzero(planned)
         if not busy.size:
             return out, {}
-        ready = np.array([max(now, vehicles[k].free_at) for k in busy.tolist()])
+        ready = np.maximum(fleet.free_at[slots[busy]], now)
         rows, cols = np.nonzero((ready[:, None] + cost[busy] <= lp + 1e-9)
                                 & (n_req <= cap[busy, None]))
         if not rows.size:
@@ -822,8 +826,9 @@ class Dispatcher:
         off, s_arr, s_svc, s_latest, s_occ, locs = [0], [], [], [], [], []
         load = []
         plan_of = self.operator.plan_arrays
-        for k in used.tolist():
-            v = vehicles[busy[k]]
+        vehicles = fleet.vehicles
+        for k in slots[busy[used]].tolist():
+            v = vehicles[k]
             times, svcs, latest, occ, where = plan_of(v)
             s_arr += times
             s_svc += svcs
