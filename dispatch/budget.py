@@ -107,7 +107,7 @@ def check_planner_budget(sc, specs, planner, name: str) -> None:
     that use it are within its own bound; raise ScenarioError (key
     ``dispatch.planner_params``) with its sentence when not."""
     from dispatch.errors import ScenarioError
-    from dispatch.scenario import FORCE_HINT
+    from dispatch.errors import FORCE_HINT
 
     budget = getattr(planner, "budget", None)
     if not callable(budget):

@@ -18,7 +18,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-from dispatch.errors import ScenarioError
+from dispatch.errors import FORCE_HINT, ScenarioError
 from dispatch.faults import FaultConfig, read_failures
 from dispatch.traces import (
     Trips,
@@ -60,7 +60,6 @@ class Limits:
 
 
 LIMITS = Limits()
-FORCE_HINT = "use --force to run anyway"
 
 
 def safe_name(name: str, fallback: str = "scenario") -> str:
