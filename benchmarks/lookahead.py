@@ -39,7 +39,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from dispatch.value import scenario_for  # noqa: E402
+from dispatch.value import scenario_for
 
 SERIES = ("hungarian", "hungarian + demand", "hungarian + value", "hungarian + value + demand",
           "magnnet")
@@ -90,8 +90,8 @@ def table(rows: list[dict]) -> str:
     import pandas as pd
 
     df = pd.DataFrame(rows)
-    out = [f"{'series':<27}{'N':>5} {'seeds':>5}  {'served %':>13}  {'wait s':>12}  "
-           f"{'d served pts':>13}  {'d wait %':>11}  {'pass. km':>8}"]
+    out = [(f"{'series':<27}{'N':>5} {'seeds':>5}  {'served %':>13}  {'wait s':>12}  "
+            f"{'d served pts':>13}  {'d wait %':>11}  {'pass. km':>8}")]
     for n, g in df.groupby("n_agents"):
         for name in [s for s in SERIES if s in set(g["series"])]:
             ref = "hungarian + demand" if "demand" in name and name != "hungarian + demand" \

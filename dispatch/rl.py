@@ -48,7 +48,7 @@ import collections
 import math
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import simpy
@@ -61,7 +61,7 @@ from dispatch.scenario import RunSpec, Scenario, SweepConfig, load_scenario
 from dispatch.tasks import TaskState
 from dispatch.zones import Zones
 
-__all__ = ["DispatchEnv", "FleetEnv", "Decisions", "pairs_from_choices"]
+__all__ = ["Decisions", "DispatchEnv", "FleetEnv", "pairs_from_choices"]
 
 
 # ------------------------------------------------------------------------------ the driver
@@ -407,7 +407,7 @@ class DispatchEnv(_Common, _GymEnv):
     ``pickups``, ``lost``, ``wait_seconds``.
     """
 
-    metadata = {"render_modes": []}
+    metadata: ClassVar[dict] = {"render_modes": []}
 
     def __init__(self, scenario, seed: int = 0, *, agents: int | None = None,
                  max_agents: int | None = None, max_tasks: int = 32,
@@ -533,7 +533,8 @@ class FleetEnv(_Common, _ParallelEnv):
     evenly). All agents stay for the whole episode (a day) and end together.
     """
 
-    metadata = {"render_modes": [], "name": "dispatch_fleet_v0", "is_parallelizable": True}
+    metadata: ClassVar[dict] = {"render_modes": [], "name": "dispatch_fleet_v0",
+                                "is_parallelizable": True}
 
     def __init__(self, scenario, seed: int = 0, *, agents: int | None = None,
                  max_tasks: int = 16, batch_window: float | None = None,

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import math
 import sys
 import time
@@ -45,6 +46,7 @@ import numpy as np
 from dispatch.zones import Zones
 
 ROOT = Path(__file__).resolve().parents[1]
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -59,6 +61,7 @@ class ZoneValue:
     weight: float  # seconds of cost per unit of value
     trip_fit: np.ndarray  # (24, 2): per hour, trip seconds = a + b * straight-line metres
     meta: dict
+    _warned: bool = False
 
     # ------------------------------------------------------------------ using it
     def value(self, zone: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -86,10 +89,15 @@ class ZoneValue:
         nodes = getattr(problem.agents, "nodes", None)
         if nodes is None:
             nodes = [getattr(a.loc, "node", a.loc) for a in problem.agents]
+        picks = [t.loc for t in problem.tasks]
+        drops = [t.loc if t.dropoff is None else t.dropoff for t in problem.tasks]
+        if not all(isinstance(x, (int, np.integer)) for x in (*picks, *drops, *nodes)):
+            if not self._warned:  # not road nodes (a voxel world): the value does not apply
+                log.warning("the learned value applies to road networks only: costs unchanged")
+                self._warned = True
+            return cost
         nodes = np.asarray(nodes, dtype=np.int64)
-        picks = np.array([t.loc for t in problem.tasks], np.int64)
-        drops = np.array([t.loc if t.dropoff is None else t.dropoff for t in problem.tasks],
-                         np.int64)
+        picks, drops = np.array(picks, np.int64), np.array(drops, np.int64)
         if max(nodes.max(initial=0), picks.max(initial=0), drops.max(initial=0)) \
                 >= len(self.node_xy):
             raise ValueError("the value was learned on another network (a node id beyond its "
@@ -241,7 +249,7 @@ def train(scenario: str | Path, out: str | Path, *, agents: int = 500, batch_win
     space = space_for(sc.world, 0, sc.path)
     node_xy = np.asarray(space.node_positions, dtype=float)[:, :2]
     zones = Zones(node_xy, zone)
-    n_bins = int(math.ceil(sc.duration / bin_s))
+    n_bins = math.ceil(sc.duration / bin_s)
     gamma = 0.5 ** (1.0 / half_life)
     t0 = time.perf_counter()
     value: ZoneValue | None = None
@@ -282,7 +290,7 @@ def train(scenario: str | Path, out: str | Path, *, agents: int = 500, batch_win
         fit = fit_trips(pd.concat(trips))
         meta = {"scenario": str(scenario), "agents": agents, "batch_window": batch_window,
                 "seeds": list(seeds), "iterations": it + 1, "half_life": half_life,
-                "zone": zone, "shrink": shrink, "transitions": int(len(tr["z"])),
+                "zone": zone, "shrink": shrink, "transitions": len(tr["z"]),
                 "sweeps": sweeps, "seconds": round(time.perf_counter() - t0, 1),
                 "days": history}
         value = ZoneValue(zones, node_xy, bin_s, table, gamma, weight, fit, meta)

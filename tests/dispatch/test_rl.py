@@ -12,10 +12,10 @@ import pytest
 pytest.importorskip("gymnasium")
 pytest.importorskip("pettingzoo")
 
-from allocators.hungarian import HungarianAllocator  # noqa: E402
-from dispatch.rl import DispatchEnv, FleetEnv, pairs_from_choices  # noqa: E402
-from dispatch.runner import run_one  # noqa: E402
-from dispatch.scenario import load_scenario  # noqa: E402
+from allocators.hungarian import HungarianAllocator
+from dispatch.rl import DispatchEnv, FleetEnv, pairs_from_choices
+from dispatch.runner import run_one
+from dispatch.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 MANHATTAN = ROOT / "scenarios" / "manhattan.toml"
@@ -73,7 +73,7 @@ def test_stepping_hungarian_reproduces_a_hungarian_run():
     while not done:
         problem = env.problem
         assert problem.n_tasks <= 64 and problem.n_agents <= env.max_agents
-        _, r, term, trunc, info = env.step(env.action_of(hungarian.allocate(problem)))
+        _, r, term, trunc, _ = env.step(env.action_of(hungarian.allocate(problem)))
         done, steps, total = term or trunc, steps + 1, total + r
     assert env.problem is None and steps > 50
     sc = load_scenario(MANHATTAN)
@@ -121,5 +121,5 @@ def test_fleet_env_local_views_and_masks():
         own = obs[name][7:15]
         ok = mask[1:].astype(bool)
         actions[name] = int(np.argmin(np.where(ok, own, np.inf))) + 1 if ok.any() else 0
-    _, rewards, term, trunc, _ = env.step(actions)
+    _, rewards, term, _, _ = env.step(actions)
     assert set(rewards) == set(env.agents) and not any(term.values())

@@ -30,7 +30,7 @@ def test_td_learns_the_discounted_trips_of_a_chain():
     # zone 0 at t=0: a trip (reward 1) to zone 1 ending at t=100; then idle to the end
     tr = {"z": np.array([0, 1]), "t": np.array([0.0, 100.0]), "r": np.array([1.0, 0.0]),
           "z2": np.array([1, -1]), "t2": np.array([100.0, 3600.0])}
-    table, sweeps = td_learn(tr, 2, 2, 1800.0, gamma=0.5 ** (1 / 3600), shrink=0.0)
+    table, _ = td_learn(tr, 2, 2, 1800.0, gamma=0.5 ** (1 / 3600), shrink=0.0)
     assert table[0, 0] == pytest.approx(1.0)
     assert table[1, 0] == pytest.approx(0.0)
     # a second trip from zone 1 makes zone 0 worth 1 + discounted 1
