@@ -16,8 +16,8 @@ round: approximate policy iteration).
 
 In the assignment (``hungarian`` with ``value = "path.npz"``) a pair's cost becomes
 
-    cost[i, j] - weight * (gamma^(cost[i, j] + trip_j) * V(zone(dropoff_j), now + cost[i, j] + trip_j)
-                           - V(zone(vehicle_i), now))
+    dt = cost[i, j] + trip_j
+    cost[i, j] - weight * (gamma^dt * V(zone(dropoff_j), now + dt) - V(zone(vehicle_i), now))
 
 with ``trip_j`` the trip's expected drive (a fit of the simulated trips' durations on the
 straight-line distance from pickup to drop-off, per hour of the day) and ``weight`` seconds per
@@ -165,7 +165,8 @@ def transitions(tasks, vehicles, zones: Zones, end: float) -> dict[str, np.ndarr
 
 
 def td_learn(tr: dict[str, np.ndarray], n_zones: int, n_bins: int, bin_s: float, gamma: float,
-             shrink: float = 5.0, tol: float = 1e-4, max_sweeps: int = 500) -> tuple[np.ndarray, int]:
+             shrink: float = 5.0, tol: float = 1e-4,
+             max_sweeps: int = 500) -> tuple[np.ndarray, int]:
     """Batch TD(0) over the transitions (see the module doc): ``(table, sweeps)``."""
     keep = tr["z"] >= 0
     z, t, r, z2, t2 = (tr[k][keep] for k in ("z", "t", "r", "z2", "t2"))
