@@ -58,7 +58,6 @@ from dispatch.contracts import Allocation, AllocationProblem, Allocator
 from dispatch.dispatcher import DecisionDeferred
 from dispatch.errors import AllocationError, ScenarioError
 from dispatch.scenario import RunSpec, Scenario, SweepConfig, load_scenario
-from dispatch.tasks import TaskState
 from dispatch.zones import Zones
 
 __all__ = ["Decisions", "DispatchEnv", "FleetEnv", "pairs_from_choices"]
@@ -238,21 +237,18 @@ class Decisions:
         return {"pickups": self._pickups, "lost": self._lost}
 
     def _finish(self) -> None:
-        """The end of :meth:`dispatch.sim.Simulation.run` (kept in step with it)."""
-        from dispatch.vehicles import stop_leg
-
+        """The end of the run: :meth:`dispatch.sim.Simulation.run` itself, its SimPy run made
+        a no-op (this driver has already stepped the run to the stop ``Simulation.run`` would
+        reach: ``until`` processed or an empty queue), so the legs driven, the requests left
+        open (cancelled), the vehicles' times and the summary come out exactly as in a run."""
         sim, env = self.sim, self.env
-        self.terminated = sim.finished.triggered
+        self.terminated = bool(sim.finished.triggered)
         self.truncated = not self.terminated
-        for v in sim.vehicles:
-            if v.leg is not None:
-                stop_leg(v, env.now)
-        sim.book.close_all(TaskState.CANCELLED)
-        for v in sim.vehicles:
-            if v.busy:
-                v.busy_seconds += env.now - v.busy_since
-            v.end_wait(env.now)
-        self.summary = sim._finish()
+        env.run = lambda until=None: None  # an instance attribute, removed below
+        try:
+            self.summary = sim.run()
+        finally:
+            del env.run
 
 
 def pairs_from_choices(problem: AllocationProblem, choice: np.ndarray,
