@@ -285,6 +285,19 @@ class _Plans(Mapping):
         return len(self._ids)
 
 
+class DecisionDeferred(BaseException):
+    """Raised by an allocator's ``allocate`` to answer the decision later, from outside the
+    simulation (:mod:`dispatch.rl`): the dispatcher's loop waits for ``resume`` (an event
+    the deferring code triggers at the same simulated instant, once it holds the answer) and
+    then decides again (see :meth:`Dispatcher._decide_or_defer`). A ``BaseException`` so
+    that the dispatcher's wrapping of plugin errors lets it through; raise it only before
+    the problem's state is touched (``allocate`` is the last step before the hand-out)."""
+
+    def __init__(self, resume: simpy.Event) -> None:
+        super().__init__("decision deferred")
+        self.resume = resume
+
+
 @dataclass
 class _Pending:
     """A decision taken and validated, waiting for its hand-out (after the comms delay)."""
@@ -394,10 +407,24 @@ class Dispatcher:
             yield self.wake
             yield env.timeout(window)
             self.wake = env.event()
-            self.decide()
+            yield from self._decide_or_defer()
             if self._pending is not None:
                 yield env.timeout(self._pending.delay)
                 self._hand_out()
+
+    def _decide_or_defer(self):
+        """:meth:`decide`, or, when the allocator defers it (:class:`DecisionDeferred`: the
+        answer comes from outside the simulation, see :mod:`dispatch.rl`), wait for the
+        deferring allocator's ``resume`` event and decide again: nothing moved meanwhile (the
+        event is triggered at the same instant, ahead of the events already queued), so the
+        same problem is built again and the allocator now answers it. The hook that lets
+        :mod:`dispatch.rl` drive decisions step by step without threads; a run with an
+        ordinary allocator goes through :meth:`decide` exactly as before."""
+        try:
+            self.decide()
+        except DecisionDeferred as d:
+            yield d.resume
+            self.decide()
 
     def decide(self) -> None:
         """One decision over the idle vehicles and the open tasks (nothing if either is empty).
