@@ -407,12 +407,14 @@ def validation_set(pool, n: int, m: int, count: int, seed: int = 12345):
 
 
 def score(res: dict) -> float:
-    """Validation score (lower is better): the gap plus the shares of tasks not assigned
-    conflict-free and of instances left incomplete (each such point weighs as much as a point
-    of gap). An all-reject policy assigns nothing and scores 2 + 1, not 1 (its tasks are never
+    """Validation score (lower is better): the gap plus the share of tasks not assigned
+    conflict-free plus three times the share of instances left incomplete (a point of
+    conflicts weighs as much as a point of gap; an instance the deterministic policy leaves
+    with a task unassigned, because every deciding agent rejected in one round, three times
+    as much). An all-reject policy assigns nothing and scores 1 + 1 + 3 (its tasks are never
     in conflict, but never assigned either)."""
     gap = res["gap"] if res["gap"] == res["gap"] else 1.0
-    return gap + (1.0 - res["success"]) + (1.0 - res["complete"])
+    return gap + (1.0 - res["success"]) + 3.0 * (1.0 - res["complete"])
 
 
 def save_checkpoint(model, path, cfg: PPOConfig | None = None, extra: dict | None = None):

@@ -458,6 +458,20 @@ def _figures(rows, out: Path) -> None:
         fig.tight_layout()
         fig.savefig(out / name, dpi=120)
         plt.close(fig)
+    val = [r for r in rows if r["phase"] == "val" and "val/success" in r]
+    if val:  # the deterministic policy on held-out training instances (what picks the weights)
+        fig, ax = plt.subplots(figsize=(5, 3.2))
+        xv = [r["env_steps"] for r in val]
+        ax.plot(xv, [100 * r["val/gap"] for r in val], label="gap to optimal %")
+        ax.plot(xv, [100 * r["val/success"] for r in val], label="conflict-free %")
+        ax.plot(xv, [100 * r["val/complete"] for r in val], label="fully assigned %")
+        ax.set_xlabel("environment steps")
+        ax.set_ylabel("validation (argmax policy)")
+        ax.legend(fontsize=7)
+        ax.grid(alpha=0.3)
+        fig.tight_layout()
+        fig.savefig(out / "validation.png", dpi=120)
+        plt.close(fig)
 
 
 def main(argv=None) -> int:
