@@ -85,6 +85,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--pool", type=int, default=600, help="training instances (cached A* costs)")
     p.add_argument("--val", type=int, default=100,
                    help="of those, held out for validation (picks the final weights; 0: none)")
+    p.add_argument("--reject-penalty", type=float, default=None,
+                   help="paper/paper_nb: R_REJECT, the reward of rejecting while the cheapest "
+                        "deciding contender for an open task (default: rules.R_REJECT)")
+    p.add_argument("--losers-only", action=argparse.BooleanOptionalAction, default=None,
+                   help="paper/paper_nb: only the losers of a contested task pay R_CONFLICT "
+                        "(default: rules.CONFLICT_LOSERS_ONLY)")
     p.add_argument("--critic-warmup", type=int, default=RECIPE["critic_warmup"],
                    help="PPO updates at the start that fit only the critic")
     p.add_argument("--ent", type=float, default=d.ent_coef, help="entropy coefficient")
@@ -107,6 +113,15 @@ def run(args, console=None) -> int:
     if args.variant == "view":
         return _run_view(args, console)
     torch.set_num_threads(1)
+    from allocators.magnnet import rules
+
+    if args.reject_penalty is not None:  # this process only: the game reads rules at each step
+        rules.R_REJECT = args.reject_penalty
+    if args.losers_only is not None:
+        rules.CONFLICT_LOSERS_ONLY = args.losers_only
+    reward = {k: getattr(rules, k) for k in ("R_WIN", "R_COST", "R_CONFLICT", "R_REJECT",
+                                               "R_TEAM", "TEAM_SHARPNESS", "R_STALL",
+                                               "CONFLICT_LOSERS_ONLY")}
     n = args.agents
     out = args.out or Path("runs") / "train" / f"magnnet_{args.variant}_n{n}"
     out.mkdir(parents=True, exist_ok=True)
@@ -161,6 +176,7 @@ def run(args, console=None) -> int:
     best_val = min(vals, key=lambda r: r["val/score"]) if vals else None
     save_checkpoint(model, out / "model.pt", cfg,
                     {"wall_s": wall, "env_steps": steps, "ppo_wall_s": ppo_wall,
+                     "reward": reward,
                      "ppo_env_steps": ppo_steps,
                      "val": {k: v for k, v in (best_val or {}).items() if k.startswith("val/")},
                      "world_size": pool.world_size.tolist(),
