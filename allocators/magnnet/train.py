@@ -271,7 +271,7 @@ def _run_view(args, console=None) -> int:
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
     from allocators.magnnet.allocator import MagnnetAllocator, shipped
-    from allocators.magnnet.ppo import PPOConfig, load_checkpoint, save_checkpoint
+    from allocators.magnnet.ppo import load_checkpoint, save_checkpoint
     from allocators.magnnet.problems import load_pool
     from allocators.magnnet.views import (ViewConfig, ViewPolicy, config_dict, evaluate_views,
                                           train_views)

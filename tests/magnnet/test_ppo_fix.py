@@ -9,12 +9,11 @@ import pytest
 torch = pytest.importorskip("torch")
 pytest.importorskip("pettingzoo")
 
-from allocators.magnnet import rules  # noqa: E402
-from allocators.magnnet.env import random_pool  # noqa: E402
-from allocators.magnnet.game import BatchedGame, Game  # noqa: E402
-from allocators.magnnet.model import MagnnetPolicy  # noqa: E402
-from allocators.magnnet.ppo import (PPOConfig, Sampler, collect, evaluate,  # noqa: E402
-                                    ppo_update, score)
+from allocators.magnnet import rules
+from allocators.magnnet.env import random_pool
+from allocators.magnnet.game import BatchedGame, Game
+from allocators.magnnet.model import MagnnetPolicy
+from allocators.magnnet.ppo import PPOConfig, Sampler, collect, evaluate, ppo_update, score
 
 # costs (seconds): agent 0 is the cheapest for both tasks
 COST = np.array([[1.0, 2.0], [3.0, 4.0]])
@@ -111,7 +110,7 @@ def test_bonus_reaches_early_leavers():
     cost = np.array([[1.0, 5.0], [2.0, 3.0]])  # optimum: 0 -> 0, 1 -> 1 (total 4)
     _, bg = _games(cost)
     bg.step(torch.tensor([[1, 0]]))
-    r, _, acted, _, done, _ = bg.step(torch.tensor([[0, 2]]))
+    _, _, acted, _, done, _ = bg.step(torch.tensor([[0, 2]]))
     assert bool(done[0]) and not bool(acted[0, 0])
     assert float(bg.last_bonus[0]) == pytest.approx(rules.R_TEAM)
 
