@@ -64,17 +64,18 @@ import heapq
 import itertools
 import math
 from collections.abc import Callable, Iterable
-from typing import TYPE_CHECKING, NamedTuple
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 from dispatch.contracts import AgentView
 from dispatch.motion import step_is_legal, step_length
+from dispatch.tasks import COMPLETED as _COMPLETED
 from dispatch.world import Cell
 
-if TYPE_CHECKING:
-    import simpy
+import simpy
 
+if TYPE_CHECKING:
     from dispatch.contracts import Planner
-    from dispatch.vehicles import Vehicle
     from dispatch.world import Grid
 
 #: Seconds by which two reservations of one cell may overlap without conflicting (float noise).
@@ -208,35 +209,72 @@ class TableView:
         return any(overlaps(s, e, a, b) for c, s, e in cells for a, b in self.blocked(c))
 
 
-class Traffic:
-    """The run's reservation table and the conflict rule (see the module docstring).
+@dataclass(eq=False)
+class Timed:
+    """What reservation-based execution keeps of one vehicle (owned by :class:`Traffic`, not
+    by the vehicle): its timed ``route`` (``route[0]`` is the cell it stands in, or is stepping
+    into with the step's arrival time; a one-cell route holds that cell indefinitely), the
+    ``step`` being executed ``(from, to, departure, arrival)``, the task it serves, whether it
+    has ``arrived`` there (its reservations are hard then), the SimPy event ``changed`` that
+    fires when its route is replaced, when it last asked for a route, a breakdown waiting for
+    the end of its step, and the counts of the ``vehicles`` table (waits, replans, seconds
+    standing on the way). Its id, kind, speed and cell are the vehicle's."""
 
-    Each vehicle's ``drive`` process follows ``vehicle.route`` and calls :meth:`start_step`
-    when it commits to a step; :meth:`request` is called when a vehicle is given a task and
-    when a waiting vehicle tries again. ``vehicle.changed`` fires when a request changed that
-    vehicle's route, and :attr:`released` whenever a request changed the table or a vehicle
-    became idle (:meth:`notify`).
+    vehicle: Any
+    route: Route
+    changed: Any
+    task: Any = None
+    step: tuple | None = None
+    arrived: bool = False
+    last_try: float = -INF
+    waits: int = 0
+    replans: int = 0
+    wait_seconds: float = 0.0
+    waiting_since: float | None = None
+    breaking: bool = False
+
+    # the vehicle's own, read through (the conflict rule reads them off the record)
+    id = property(lambda self: self.vehicle.id)
+    kind = property(lambda self: self.vehicle.kind)
+    speed = property(lambda self: self.vehicle.speed)
+    flies = property(lambda self: self.vehicle.flies)
+    cell = property(lambda self: self.vehicle.loc)
+
+
+class Traffic:
+    """The run's reservation table, the conflict rule (see the module docstring) and the
+    vehicles' timed drives.
+
+    Each vehicle's drive process (:meth:`start`, one per vehicle for the whole run) follows
+    its :class:`Timed` record's ``route`` and calls :meth:`start_step` when it commits to a
+    step; :meth:`request` is called when a vehicle is given a task and when a waiting vehicle
+    tries again. A record's ``changed`` fires when a request changed that vehicle's route, and
+    :attr:`released` whenever a request changed the table or a vehicle became idle
+    (:meth:`notify`).
     """
 
     def __init__(self, env: simpy.Environment, planner: Planner, grid: Grid, vehicles,
                  emit: Callable[..., None]) -> None:
         self.env, self.planner, self.grid, self.emit = env, planner, grid, emit
         self.table = ReservationTable()
-        self.vehicles = {v.id: v for v in vehicles}
+        #: vehicle id -> its record
+        self.vehicles = {v.id: Timed(v, [(0.0, v.loc)], env.event()) for v in vehicles}
         self.retry_after = float(self.planner.retry_after)
         self.released = self.env.event()
-        for v in vehicles:
-            v.route = [(0.0, v.cell)]
-            v.changed = self.env.event()
-            self._reserve(v)
+        for t in self.vehicles.values():
+            self._reserve(t)
+
+    def of(self, v) -> Timed:
+        """The record of vehicle ``v``."""
+        return self.vehicles[v.id]
 
     # --------------------------------------------------------------- classification
     @staticmethod
-    def priority(v: Vehicle) -> tuple[float, int]:
+    def priority(v: Timed) -> tuple[float, int]:
         """Lower goes first: the task's cost, then the id; idle vehicles last."""
         return (INF if v.task is None else v.task.cost, v.id)
 
-    def _keeps(self, w: Vehicle, steps: float) -> tuple[Callable[[Entry], bool], dict]:
+    def _keeps(self, w: Timed, steps: float) -> tuple[Callable[[Entry], bool], dict]:
         """What ``w`` plans around: hard reservations (executing steps, serving vehicles) and
         those of higher-priority vehicles; plus every lower-priority vehicle's *inertia*: its
         commit cell for the time of ``steps`` straight steps (it cannot leave faster than one;
@@ -257,21 +295,21 @@ class Traffic:
                 inertia.setdefault(c, []).append((t, t + steps * self.grid.cell / o.speed))
         return keep, inertia
 
-    def commit_point(self, v: Vehicle) -> tuple[float, Cell]:
+    def commit_point(self, v: Timed) -> tuple[float, Cell]:
         """Where and when ``v`` can next change its mind: the end of the step it is executing,
         or its cell now."""
         t, c = v.route[0]
         return max(t, self.env.now), c
 
     # --------------------------------------------------------------- table
-    def _reserve(self, v: Vehicle) -> None:
+    def _reserve(self, v: Timed) -> None:
         self.table.clear(v.id)
         if v.step is not None and v.step[3] > self.env.now:
             a, b, dep, arr = v.step
             self.table.add(v.id, ((c, dep, arr) for c in step_box(a, b)), committed=True)
         self.table.add(v.id, occupancy(v.route, v.speed, self.grid.cell))
 
-    def start_step(self, v: Vehicle) -> tuple[Cell, float]:
+    def start_step(self, v: Timed) -> tuple[Cell, float]:
         """``v`` leaves ``route[0]`` for ``route[1]`` now; returns (next cell, arrival time)."""
         (_, a), (arr, b) = v.route[0], v.route[1]
         v.step = (a, b, self.env.now, arr)
@@ -279,7 +317,7 @@ class Traffic:
         self._reserve(v)
         return b, arr
 
-    def _plan(self, v: Vehicle, t0: float, cell: Cell, view: TableView) -> Route | None:
+    def _plan(self, v: Timed, t0: float, cell: Cell, view: TableView) -> Route | None:
         """The planner's timed route for ``v`` from ``cell`` at ``t0`` (to its task, or to
         any cell it may keep if idle), checked; or None."""
         goal = None if v.task is None else v.task.cell
@@ -302,7 +340,7 @@ class Traffic:
         return route
 
     # --------------------------------------------------------------- the conflict rule
-    def request(self, v: Vehicle) -> None:
+    def request(self, v: Timed) -> None:
         """Give ``v`` a route to its task, displacing lower-priority and idle vehicles; else
         a route around everyone; else it keeps the route it has (a one-cell route: it waits)."""
         v.last_try = self.env.now
@@ -319,7 +357,7 @@ class Traffic:
         if route is not None or moved:
             self.notify()
 
-    def _make_way(self, v: Vehicle, t: float, c: Cell) -> bool:
+    def _make_way(self, v: Timed, t: float, c: Cell) -> bool:
         """Park the idle vehicles standing on ``v``'s untimed shortest path (or a step's box of
         it) somewhere off that path, each around every reservation (so nothing else changes);
         True if any moved. The last resort of :meth:`request`: an idle vehicle in a passage
@@ -348,7 +386,7 @@ class Traffic:
                 moved = True
         return moved
 
-    def _settle(self, v: Vehicle, steps: float) -> bool:
+    def _settle(self, v: Timed, steps: float) -> bool:
         """Plan ``v`` and, in priority order, everything it displaces; False (and nothing
         changed) if some displaced vehicle can neither move nor stay."""
         saved: dict[int, Route] = {}
@@ -397,7 +435,7 @@ class Traffic:
             w.route = route
             self._reserve(w)
 
-    def hold(self, v: Vehicle) -> None:
+    def hold(self, v: Timed) -> None:
         """``v`` broke down: it stops at its commit point (the end of the step it is executing,
         or its cell), its later reservations are released and its cell is held hard (nobody
         plans through it, nobody asks it to make way) until it is repaired."""
@@ -408,7 +446,7 @@ class Traffic:
         self._wake(v)
         self.notify()
 
-    def _wake(self, v: Vehicle) -> None:
+    def _wake(self, v: Timed) -> None:
         if not v.changed.triggered:
             v.changed.succeed()
 
@@ -417,3 +455,170 @@ class Traffic:
         (and so displaceable)."""
         ev, self.released = self.released, self.env.event()
         ev.succeed()
+
+
+# ----------------------------------------------------------------------------- timed drives
+
+
+class Hands:
+    """What the timed drives need of the run (the operator's): the task book, the fleet's
+    index, the service time, the dispatcher's wake-up and a breakdown to finish later."""
+
+    def __init__(self, book, fleet, service_time: float, notify: Callable[[], None],
+                 breakdown: Callable[..., bool]) -> None:
+        self.book, self.fleet, self.service_time = book, fleet, service_time
+        self.notify, self.breakdown = notify, breakdown
+
+
+def _start(traffic: Traffic, hands: Hands) -> None:
+    for t in traffic.vehicles.values():
+        t.vehicle.proc = traffic.env.process(_drive(traffic, hands, t))
+
+
+def begin_wait(traffic: Traffic, t: Timed) -> None:
+    """It stands in its cell on the way to its task (until its next step starts)."""
+    if t.waiting_since is None:
+        now = traffic.env.now
+        t.waiting_since = now
+        t.waits += 1
+        traffic.emit(now, "wait", t.id, t.task.id, t.cell)
+
+
+def end_wait(t: Timed, now: float) -> None:
+    """Its wait (if any) ends now."""
+    if t.waiting_since is not None:
+        t.wait_seconds += now - t.waiting_since
+        t.waiting_since = None
+
+
+def _finish(traffic: Traffic, hands: Hands, t: Timed):
+    """Serve the task at its cell (the service time), then idle."""
+    env, v, task = traffic.env, t.vehicle, t.task
+    if hands.service_time > 0:
+        yield env.timeout(hands.service_time)
+    v.busy_seconds += env.now - v.busy_since
+    t.task = None
+    v.completed += 1
+    hands.fleet.set_idle(v)
+    hands.book.close(task, _COMPLETED)
+    traffic.emit(env.now, "idle", v.id, -1, v.loc)
+    hands.notify()
+
+
+def _drive(traffic: Traffic, hands: Hands, t: Timed):
+    """Process (one per vehicle for the whole run): follow the timed route that the traffic
+    keeps for this vehicle, whatever it is for: its task (then serve it), parking out of
+    someone's way while idle, or holding its cell (a one-cell route). Without a route to its
+    task it waits and asks again."""
+    env, cell_m, v = traffic.env, traffic.grid.cell, t.vehicle
+    while True:
+        if t.changed.triggered:
+            t.changed = env.event()
+        route, task = t.route, t.task
+        if v.failed or t.breaking:  # broken down (Traffic.hold): stand until repaired
+            try:
+                yield t.changed
+            except simpy.Interrupt:
+                pass
+            continue
+        if len(route) == 1:
+            if task is None:  # idle: stay until told to move
+                yield t.changed
+            elif v.loc == task.loc:
+                t.arrived = True
+                hands.book.picked_up(task)
+                try:
+                    yield from _finish(traffic, hands, t)
+                except simpy.Interrupt:  # broke down while serving: breakdown() did the rest
+                    continue
+                t.arrived = False
+                traffic.notify()  # idle now: it can be asked to make way
+            else:  # no route to the task: hold the cell, retry on a release or a timer
+                begin_wait(traffic, t)
+                yield env.any_of([env.timeout(traffic.retry_after), t.changed,
+                                  traffic.released])
+                if t.route is route and t.last_try < env.now:  # once per instant
+                    traffic.request(t)
+            continue
+        (_, here), (arr, nxt) = route[0], route[1]
+        dep = arr - step_seconds(here, nxt, v.speed, cell_m)
+        if dep > env.now + EPS:
+            if task is not None:
+                begin_wait(traffic, t)
+            yield env.any_of([env.timeout(dep - env.now), t.changed])
+            continue
+        end_wait(t, env.now)
+        nxt, arr = traffic.start_step(t)
+        yield env.timeout(max(arr - env.now, 0.0))
+        metres = step_length(v.loc, nxt) * cell_m
+        v.loc = nxt
+        v.drove(metres)  # to a task, or parking: never with a passenger here
+        traffic.emit(env.now, "move", v.id, -1 if t.task is None else t.task.id, nxt)
+
+
+def _after_step(traffic: Traffic, t: Timed, again: Callable[[], Any]):
+    yield traffic.env.timeout(t.step[3] - traffic.env.now)
+    t.breaking = False
+    again()
+
+
+class TimedExecution:
+    """The operator's side of reservation-based execution (voxel world, capacity 1): hands a
+    task to a vehicle's timed drive, breaks one down and repairs it."""
+
+    def __init__(self, traffic: Traffic, hands: Hands) -> None:
+        self.traffic, self.hands = traffic, hands
+        _start(traffic, hands)
+
+    @property
+    def env(self):
+        return self.traffic.env
+
+    def assign(self, v, task) -> None:
+        """``v`` (marked busy by the operator) now drives to ``task``; its cost is its
+        priority."""
+        t = self.traffic.of(v)
+        t.task, v.busy_since = task, self.env.now
+        self.traffic.emit(self.env.now, "depart", v.id, task.id, v.loc)
+        self.traffic.request(t)
+
+    def task_of(self, v):
+        return self.traffic.of(v).task
+
+    def breaking(self, v) -> bool:
+        return self.traffic.of(v).breaking
+
+    def stop(self, v, again: Callable[[], Any]) -> list | None:
+        """``v`` breaks down: None if it is executing a step (a step is never interrupted:
+        ``again`` runs on arrival in the step's cell, so it never moves while failed); else
+        it stops serving, holds its cell hard, and the task it had is returned (in a list)."""
+        env, t = self.env, self.traffic.of(v)
+        if t.step is not None and t.step[3] > env.now + EPS:
+            t.breaking = True
+            env.process(_after_step(self.traffic, t, again))
+            return None
+        task = t.task
+        if t.arrived and task is not None and v.proc is not env.active_process:
+            v.proc.interrupt("breakdown")  # in service at the task's cell
+        end_wait(t, env.now)
+        self.traffic.hold(t)
+        t.task = None
+        return [] if task is None else [task]
+
+    def repaired(self, v) -> None:
+        t = self.traffic.of(v)
+        t.arrived = False  # displaceable again, like any idle vehicle
+        self.traffic.notify()
+        if not t.changed.triggered:
+            t.changed.succeed()
+
+    def end(self, now: float) -> None:
+        """The run is over: open waits end now."""
+        for t in self.traffic.vehicles.values():
+            end_wait(t, now)
+
+    def counts(self, v) -> dict:
+        """The ``vehicles`` table's waits, replans and wait_seconds of ``v``."""
+        t = self.traffic.of(v)
+        return {"waits": t.waits, "replans": t.replans, "wait_seconds": t.wait_seconds}
+

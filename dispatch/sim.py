@@ -24,16 +24,17 @@ import numpy as np
 import simpy
 
 from dispatch import registry
-from dispatch.contracts import Allocation, AllocationProblem, Allocator, Planner
+from dispatch.contracts import Allocator, Planner
 from dispatch.demand import RoadDemand, VoxelDemand
 from dispatch.dispatcher import Dispatcher
 from dispatch.errors import PluginError, ScenarioError
-from dispatch.events import Event, EventBus
+from dispatch.events import EventBus
 from dispatch.faults import FaultInjector, blackout_filter
 from dispatch.placement import place_fleet
 from dispatch.recorder import json_meta
+from dispatch.recording import DecisionWriter, TaskWriter, event_writer, write_vehicles
 from dispatch.reposition import Repositioner, Repositioning, summary_of
-from dispatch.reservations import Traffic
+from dispatch.reservations import Hands, TimedExecution, Traffic
 from dispatch.scenario import RoadConfig, RunSpec, Scenario, WorldConfig, _short
 from dispatch.space import Space
 from dispatch.stats import RunStats
@@ -45,7 +46,6 @@ log = logging.getLogger(__name__)
 
 (STREAM_WORLD, STREAM_FLEET, STREAM_TASKS, STREAM_ALLOCATOR, STREAM_SOURCE, STREAM_FAULTS,
  STREAM_REPOSITION) = range(7)
-NAN3 = (math.nan, math.nan, math.nan)
 
 __all__ = ["Simulation", "make_plugin", "place_fleet", "rng_for", "space_for", "world_for"]
 
@@ -236,17 +236,24 @@ class Simulation:
             driver = CellDriver(self.space, self.planner, bus)
             if sc.world.physics:
                 self._mirror()
-        self._record_event = self._event_recorder()
+        self._record_event = event_writer(recorder, self.space)
         bus.subscribe(self._record_event)
+        self._record_task = TaskWriter(recorder, self.space)
+        self._record_decision = DecisionWriter(recorder)
         book.on_close += [lambda t: self.planner.task_closed(t.id), self.stats.closed,
                           self._record_task, self._check_finished]
         #: reservation-based execution, with a reservation-aware planner only
         self.traffic = (Traffic(env, self.planner, self.space.grid, self.vehicles, bus.emit)
                         if self.planner.reservation_aware else None)
+        timed = None
+        if self.traffic is not None:
+            def timed(op: Operator) -> TimedExecution:
+                return TimedExecution(self.traffic, Hands(
+                    book, self.fleet, sc.tasks.service_time, op.notify, op.breakdown))
         self.finished = env.event()
         self.dispatcher: Dispatcher
         self.operator = Operator(env, bus, book, self.fleet, driver, sc.tasks.service_time,
-                                 lambda: self.dispatcher.notify(), self.traffic)
+                                 lambda: self.dispatcher.notify(), timed)
         self.dispatcher = Dispatcher(env, book, self.fleet, self.operator, self.planner,
                                      allocator, self.space, sc.dispatch, sc.comms,
                                      rng_for(spec.seed, STREAM_ALLOCATOR), self._record_decision,
@@ -327,66 +334,6 @@ class Simulation:
         if self.source.finished and not self.finished.triggered and self.book.live == 0:
             self.finished.succeed()
 
-    # --------------------------------------------------------------- recording
-    def _event_recorder(self):
-        """The subscriber that writes each event as a row of the ``events`` table (several per
-        trip): it keeps the event itself; its position is looked up when the chunk is written,
-        for the whole chunk at once (on roads, a gather from the nodes' positions)."""
-        position = self.space.position
-        nodes = getattr(self.space, "node_positions", None)
-        n = len(nodes) if nodes is not None else 0
-        xyz = np.array(nodes, dtype=np.float64).reshape(-1, 3) if nodes is not None else None
-
-        def columns(events: list) -> dict:
-            k = len(events)
-            t, kind, agent, task, locs = zip(*events) if k else ((),) * 5
-            types = set(map(type, locs))
-            idx = None
-            if xyz is not None and k and types <= {int, type(None)}:
-                idx = np.fromiter(locs if type(None) not in types else
-                                  [-1 if loc is None else loc for loc in locs], np.int64, k)
-                none = np.array([loc is None for loc in locs]) if type(None) in types else None
-                bad = (idx < 0) if none is None else ((idx < 0) & ~none)
-                if bad.any() or idx.max() >= n:  # not plain nodes: placed one by one below
-                    idx = None
-            if idx is not None:  # nodes (and None): the same floats as space.position gives
-                pos = xyz[np.maximum(idx, 0)]
-                if none is not None:
-                    pos[none] = np.nan
-                x, y, z = pos[:, 0].copy(), pos[:, 1].copy(), pos[:, 2].copy()
-            else:
-                x, y, z = zip(*(NAN3 if loc is None else
-                                nodes[loc] if type(loc) is int and 0 <= loc < n else
-                                position(loc) for loc in locs)) if k else ((), (), ())
-            return {"t": t, "event": kind, "agent_id": agent, "task_id": task,
-                    "x": x, "y": y, "z": z}
-
-        return self.recorder.appender("events", columns)
-
-    def _record_task(self, t: Task) -> None:
-        x, y, z = self.space.position(t.loc if t.origin is None else t.origin)
-        dx, dy, dz = NAN3 if t.dropoff is None else self.space.position(t.dropoff)
-        # the tasks table's columns in order (the recorder's fast path: one row per task)
-        self.recorder.append("tasks", (
-            t.id, t.kind, x, y, z, dx, dy, dz, t.released_at, t.max_wait, t.snap_m,
-            t.dropoff_snap_m, t.assigned_at, t.agent_id, t.cost, t.picked_up_at, t.completed_at,
-            t.state._value_, t.conflicted, t.closed_at, t.reassigned, t.transfers,
-            t.passengers, t.direct_time, t.max_delay, t.shared))
-
-    def _record_decision(self, index: int, problem: AllocationProblem, allocation: Allocation,
-                         total: float, cost_s: float, decide_s: float, *, hops: int = 0,
-                         comm_delay: float = 0.0, agent_seconds: float = math.nan,
-                         components: int = 1) -> None:
-        # rows as tuples in the tables' column order (the recorder's fast path)
-        append, alloc_s = self.recorder.append, cost_s + decide_s
-        for r in allocation.requests:
-            append("assignments", (index, r.round, r.agent_id, r.task_id, r.cost, r.won,
-                                   alloc_s))
-        append("decisions", (index, float(problem.time), problem.n_agents, problem.n_tasks,
-                             len(allocation.pairs), allocation.rounds, allocation.messages,
-                             len(allocation.conflicted_tasks()), total, cost_s, decide_s, hops,
-                             comm_delay, agent_seconds, components))
-
     # --------------------------------------------------------------- running
     def run(self) -> dict:
         """Run until every task is terminal and the source is done, or the horizon; record
@@ -406,7 +353,8 @@ class Simulation:
             for v in self.vehicles:
                 if v.busy:
                     v.busy_seconds += env.now - v.busy_since
-                v.end_wait(env.now)
+            if self.operator.timed is not None:
+                self.operator.timed.end(env.now)
             return self._finish()
         finally:
             if self.physics is not None:
@@ -414,16 +362,13 @@ class Simulation:
 
     def _finish(self) -> dict:
         rec, spec = self.recorder, self.spec
-        for v in self.vehicles:
-            x, y, z = self.space.position(v.start)
-            rec.add("vehicles", agent_id=v.id, kind=v.kind, speed=v.speed, x0=x, y0=y, z0=z,
-                    distance=v.distance, empty_distance=v.empty_distance,
-                    occupied_distance=v.occupied_distance, busy_seconds=v.busy_seconds,
-                    tasks_completed=v.completed, waits=v.waits, replans=v.replans,
-                    wait_seconds=v.wait_seconds, failures=v.failures,
-                    down_seconds=v.down_seconds + (self.env.now - v.down_since if v.failed
-                                                   else 0.0),
-                    capacity=v.capacity, passenger_distance=v.passenger_distance)
+        timed = self.operator.timed
+
+        def counts(v) -> dict:  # reservation-based execution's, 0 without it
+            return timed.counts(v) if timed is not None else {"waits": 0, "replans": 0,
+                                                              "wait_seconds": 0.0}
+
+        write_vehicles(rec, self.space, self.vehicles, float(self.env.now), counts)
         for b in getattr(self.space, "boxes", ()):
             rec.add("obstacles", x0=b.x0, y0=b.y0, z0=b.z0, x1=b.x1, y1=b.y1, z1=b.z1)
         if self.repositioning is not None:

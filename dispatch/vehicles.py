@@ -1,7 +1,11 @@
-"""Vehicles, the fleet, and the SimPy processes that drive them through their trips.
+"""Vehicles, the fleet, and the SimPy processes that drive them along their plans.
 
-A vehicle given a trip drives to the pickup (empty), picks the passenger up, drives to the
-drop-off (occupied; point tasks have none), spends the service time there and becomes idle.
+A vehicle's plan is data: its stop list (:mod:`dispatch.stops`), which it owns. The
+:class:`Operator` inserts a decision's stops into it and one SimPy process per busy vehicle
+drives it stop by stop: to each stop, pick up or drop off (with capacity above 1 several
+requests ride at once), the service time where a request completes, idle when the list is
+empty. A breakdown or a re-assignment removes stops; nothing else changes the plan. What a
+vehicle drove, and with how many on board, is counted in one place (:meth:`Vehicle.drove`).
 How it drives depends on the space, through a *driver*:
 
 * :class:`CellDriver` (voxel world): cell by cell along the planner's path, a ``move`` event
@@ -10,11 +14,10 @@ How it drives depends on the space, through a *driver*:
   ``dropoff``), not per edge; where a vehicle is part-way through a leg is interpolated from
   its route when someone asks (:meth:`Vehicle.location`).
 
-With a reservation-aware planner (voxel only) a vehicle instead follows a *timed* route that
-the run's :class:`dispatch.reservations.Traffic` keeps conflict-free: it may stand in a cell
-before a step (a ``wait``), its route may be replaced by a higher-priority vehicle's request (a
-``replan``), without any route it holds its cell and retries, and an idle vehicle may move out
-of the way (its ``move`` events have task id -1).
+With a reservation-aware planner (voxel only, capacity 1) a vehicle instead follows a *timed*
+route that the run's :class:`dispatch.reservations.Traffic` keeps conflict-free and owns (with
+the rest of that execution's state: :class:`dispatch.reservations.Timed`); the operator reaches
+it through :class:`dispatch.reservations.TimedExecution`.
 """
 
 from __future__ import annotations
@@ -31,13 +34,12 @@ from dispatch.contracts import AgentView, AgentViews, Planner
 from dispatch.errors import PluginError
 from dispatch.events import EventBus
 from dispatch.motion import step_length
-from dispatch.reservations import EPS, step_seconds
 from dispatch.space import Location
 from dispatch.stops import DROPOFF, PICKUP, Stop, occupancies, schedule
-from dispatch.tasks import ASSIGNED, COMPLETED, PICKED_UP as PICKED_UP_STATE, Task, TaskBook, TaskState
+from dispatch.tasks import COMPLETED, PICKED_UP as PICKED_UP_STATE, Task, TaskBook, TaskState
 
 if TYPE_CHECKING:
-    from dispatch.reservations import Traffic
+    from dispatch.reservations import TimedExecution
     from dispatch.roads import Leg, RoadNetwork
     from dispatch.world import World
 
@@ -58,8 +60,6 @@ class Vehicle:
     #: process drives it, decisions insert into it, breakdowns and re-assignments remove from it
     stops: list = field(default_factory=list, repr=False)
     load: int = 0  # passengers on board
-    #: with reservations (the voxel world's timed execution, capacity 1): the task it serves
-    task: Task | None = None
     distance: float = 0.0  # metres travelled
     empty_distance: float = 0.0  # ... without a passenger (to pickups, repositioning)
     occupied_distance: float = 0.0  # ... with one or more on board
@@ -76,22 +76,8 @@ class Vehicle:
     completed: int = 0
     # ---- roads: when the leg being driven (:attr:`leg`) started
     leg_start: float = 0.0
-    # ---- execution with reservations (see dispatch.reservations)
-    #: timed route ``[(t, cell), ...]``; ``route[0]`` is the cell it stands in (or is stepping
-    #: into, with the step's arrival time); a one-cell route holds that cell indefinitely
-    route: list = field(default_factory=list, repr=False)
-    #: the step being executed: (from cell, to cell, departure, arrival)
-    step: tuple | None = field(default=None, repr=False)
-    arrived: bool = False  # serving its task at the task's cell: its reservations are hard
-    changed: Any = field(default=None, repr=False)  # SimPy event: its route was replaced
-    last_try: float = -math.inf  # when it last asked for a route
-    waits: int = 0
-    replans: int = 0
-    wait_seconds: float = 0.0
-    waiting_since: float | None = None
     # ---- faults (see dispatch.faults)
     failed: bool = False
-    breaking: bool = False  # with reservations: breaks down at the end of its current step
     failures: int = 0
     down_seconds: float = 0.0
     down_since: float = 0.0
@@ -179,19 +165,6 @@ class Vehicle:
             v = self._view = AgentView(self.id, self.kind, self.loc, self.speed)  # type: ignore[arg-type]
         return v
 
-    def begin_wait(self, now: float, bus: EventBus) -> None:
-        """It stands in its cell on the way to its task (until its next step starts)."""
-        if self.waiting_since is None:
-            self.waiting_since = now
-            self.waits += 1
-            bus.emit(now, "wait", self.id, self.task.id, self.loc)  # type: ignore[union-attr]
-
-    def end_wait(self, now: float) -> None:
-        """Its wait (if any) ends now."""
-        if self.waiting_since is not None:
-            self.wait_seconds += now - self.waiting_since
-            self.waiting_since = None
-
 
 class Fleet:
     """The run's vehicles by id, and the index of the idle ones.
@@ -213,6 +186,9 @@ class Fleet:
         self.busy_mask = np.zeros(n, dtype=bool)
         #: a free seat somewhere in its plan (kept by Operator.changed)
         self.room = np.ones(n, dtype=bool)
+        #: seats; the end of the service it is in (-inf: none), as the vehicles have them
+        self.capacity = np.fromiter((v.capacity for v in self.vehicles), np.int64, n)
+        self.free_at = np.full(n, -np.inf)
         self.node = np.full(n, -1, dtype=np.int64)
         self.remaining = np.zeros(n)
         self.odd = np.zeros(n, dtype=bool)
@@ -435,10 +411,9 @@ class Operator:
 
     def __init__(self, env: simpy.Environment, bus: EventBus, book: TaskBook, fleet: Fleet,
                  driver, service_time: float, notify: Callable[[], None],
-                 traffic: Traffic | None = None) -> None:
+                 timed: Callable[[Operator], TimedExecution] | None = None) -> None:
         self.env, self.bus, self.book, self.fleet = env, bus, book, fleet
         self.driver, self.service_time, self.notify = driver, service_time, notify
-        self.traffic = traffic
         #: the driver's legs are RoadDriver.drive's one timeout each (no edge events): the
         #: plan's process drives them itself, without a generator per leg
         self._plain_legs = isinstance(driver, RoadDriver) and not driver.edge_events \
@@ -447,9 +422,8 @@ class Operator:
         self.on_reopen: Callable[[Task], None] = lambda task: None
         #: called with a vehicle about to be given a task (repositioning stops its drive)
         self.on_assign: Callable[[Vehicle], None] = lambda v: None
-        if traffic is not None:
-            for v in fleet.vehicles:
-                v.proc = env.process(self._drive_timed(v))
+        #: reservation-based execution (voxel, capacity 1; see dispatch.reservations), or None
+        self.timed: TimedExecution | None = None if timed is None else timed(self)
 
     # ------------------------------------------------------------------ the plan
     def _stops(self, task: Task) -> list[Stop]:
@@ -467,13 +441,11 @@ class Operator:
         shift1, shift2)`` of :class:`dispatch.stops.Insertions`, and re-routes if its next
         stop changed."""
         env = self.env
-        if self.traffic is not None:  # its drive process follows the route; cost = priority
+        if self.timed is not None:  # its drive process follows the route; cost = priority
             self.on_assign(v)
             self.book.assign(task, v.id, cost)
             self.fleet.set_busy(v)
-            v.task, v.busy_since = task, env.now
-            self.bus.emit(env.now, "depart", v.id, task.id, v.loc)
-            self.traffic.request(v)
+            self.timed.assign(v, task)
             return
         new = self._stops(task)
         if not v.stops and v.serving is None:  # an empty plan: the vehicle sets out now
@@ -685,6 +657,7 @@ class Operator:
                 continue
             if self.service_time > 0:
                 v.serving, v.free_at = task, env.now + self.service_time
+                self.fleet.free_at[v._slot] = v.free_at
                 try:
                     yield env.timeout(self.service_time)
                 except simpy.Interrupt:  # a breakdown in service: breakdown() did the rest
@@ -724,30 +697,24 @@ class Operator:
         roads: the node it was driving to) when ``transfer``, else it ends ``failed``. It is
         out of service for ``duration`` seconds (``inf``: for good). False if it had already
         failed (or, with reservations, never: faults are refused there at validate time)."""
-        if v.failed or v.breaking:
+        timed = self.timed
+        if v.failed or (timed is not None and timed.breaking(v)):
             return False
         env = self.env
-        if self.traffic is not None and v.step is not None and v.step[3] > env.now + EPS:
-            # a step is never interrupted (its cells are reserved hard): it breaks down on
-            # arrival in the step's cell, so it never moves while failed
-            v.breaking = True
-            env.process(self._break_after_step(v, v.step[3], duration, transfer))
-            return True
-        tasks = [v.task] if self.traffic is not None and v.task is not None else v.tasks()
-        if self.traffic is not None:  # its drive process lives on: stop serving, hold the cell
-            task = v.task
-            if v.arrived and task is not None and v.proc is not env.active_process:
-                v.proc.interrupt("breakdown")  # in service at the task's cell
-            v.end_wait(env.now)
-            self.traffic.hold(v)
-        elif v.proc is not None and v.proc.is_alive and v.proc is not env.active_process:
-            v.proc.interrupt("breakdown")
-            v.proc = None
+        if timed is not None:  # its drive process lives on: stop serving, hold the cell
+            tasks = timed.stop(v, lambda: self.breakdown(v, duration, transfer))
+            if tasks is None:  # it breaks down at the end of the step it is executing
+                return True
+        else:
+            tasks = v.tasks()
+            if v.proc is not None and v.proc.is_alive and v.proc is not env.active_process:
+                v.proc.interrupt("breakdown")
+                v.proc = None
         if v.leg is not None:  # stop part-way: count what was driven, stand where it got
             stop_leg(v, env.now)
         if v.busy:
             v.busy_seconds += env.now - v.busy_since
-        v.failed, v.failures, v.down_since, v.task = True, v.failures + 1, env.now, None
+        v.failed, v.failures, v.down_since = True, v.failures + 1, env.now
         v.stops, v.load, v.serving, v.heading = [], 0, None, None
         self.changed(v)
         self.fleet.set_failed(v)
@@ -774,7 +741,7 @@ class Operator:
         :meth:`stand_idle`. Returns the task given up."""
         env = self.env
         task = v.stops[0].task if v.stops else None
-        assert task is not None and task.state is TaskState.ASSIGNED and self.traffic is None
+        assert task is not None and task.state is TaskState.ASSIGNED and self.timed is None
         proc = v.proc
         if proc is not None and proc.is_alive and proc is not env.active_process \
                 and not isinstance(proc.target, simpy.events.Initialize):
@@ -792,8 +759,8 @@ class Operator:
 
     def holds(self, v: Vehicle) -> Task | None:
         """The task ``v`` drives to pick up (capacity 1, ``[dispatch] reassign``), or None."""
-        if self.traffic is not None:
-            return v.task
+        if self.timed is not None:
+            return self.timed.task_of(v)
         s = v.stops[0] if v.stops else None
         return s.task if s is not None and s.kind is PICKUP else None
 
@@ -803,85 +770,13 @@ class Operator:
         self.bus.emit(self.env.now, "idle", v.id, -1, v.loc)
         self.notify()
 
-    def _break_after_step(self, v: Vehicle, at: float, duration: float, transfer: bool):
-        yield self.env.timeout(at - self.env.now)
-        v.breaking = False
-        self.breakdown(v, duration, transfer)
-
     def _repair(self, v: Vehicle, duration: float):
         yield self.env.timeout(duration)
         v.failed = False
-        if self.traffic is not None:
-            v.arrived = False  # displaceable again, like any idle vehicle
-            self.traffic.notify()
-            if not v.changed.triggered:
-                v.changed.succeed()
+        if self.timed is not None:
+            self.timed.repaired(v)
         v.down_seconds += self.env.now - v.down_since
         self.fleet.set_idle(v)
         self.bus.emit(self.env.now, "repair", v.id, -1, v.loc)
         self.bus.emit(self.env.now, "idle", v.id, -1, v.loc)
         self.notify()
-
-    def _finish(self, v: Vehicle, task: Task):
-        """With reservations: serve ``task`` at its cell (the service time), then idle."""
-        if self.service_time > 0:
-            yield self.env.timeout(self.service_time)
-        v.busy_seconds += self.env.now - v.busy_since
-        v.task = None
-        v.completed += 1
-        self.fleet.set_idle(v)
-        self.book.close(task, COMPLETED)
-        self.bus.emit(self.env.now, "idle", v.id, -1, v.loc)
-        self.notify()
-
-    def _drive_timed(self, v: Vehicle):
-        """Process (with reservations, one per vehicle for the whole run): follow the timed
-        route that the traffic keeps for this vehicle, whatever it is for: its task (then serve
-        it), parking out of someone's way while idle, or holding its cell (a one-cell route).
-        Without a route to its task it waits and asks again (see
-        :class:`dispatch.reservations.Traffic`)."""
-        env, traffic, cell_m = self.env, self.traffic, self.driver.world.cell
-        assert traffic is not None
-        while True:
-            if v.changed.triggered:
-                v.changed = env.event()
-            route, task = v.route, v.task
-            if v.failed or v.breaking:  # broken down (Traffic.hold): stand until repaired
-                try:
-                    yield v.changed
-                except simpy.Interrupt:
-                    pass
-                continue
-            if len(route) == 1:
-                if task is None:  # idle: stay until told to move
-                    yield v.changed
-                elif v.loc == task.loc:
-                    v.arrived = True
-                    self.book.picked_up(task)
-                    try:
-                        yield from self._finish(v, task)
-                    except simpy.Interrupt:  # broke down while serving: breakdown() did the rest
-                        continue
-                    v.arrived = False
-                    traffic.notify()  # idle now: it can be asked to make way
-                else:  # no route to the task: hold the cell, retry on a release or a timer
-                    v.begin_wait(env.now, self.bus)
-                    yield env.any_of([env.timeout(traffic.retry_after), v.changed,
-                                      traffic.released])
-                    if v.route is route and v.last_try < env.now:  # once per instant
-                        traffic.request(v)
-                continue
-            (_, here), (arr, nxt) = route[0], route[1]
-            dep = arr - step_seconds(here, nxt, v.speed, cell_m)
-            if dep > env.now + EPS:
-                if task is not None:
-                    v.begin_wait(env.now, self.bus)
-                yield env.any_of([env.timeout(dep - env.now), v.changed])
-                continue
-            v.end_wait(env.now)
-            nxt, arr = traffic.start_step(v)
-            yield env.timeout(max(arr - env.now, 0.0))
-            metres = step_length(v.loc, nxt) * cell_m
-            v.loc = nxt
-            v.drove(metres)  # to a task, or parking: never with a passenger here
-            self.bus.emit(env.now, "move", v.id, -1 if v.task is None else v.task.id, nxt)

@@ -26,7 +26,7 @@ def _case(rng: np.random.Generator):
     # a plan of up to 3 requests (6 stops) built by appending pickups and drop-offs in a
     # random interleaving that never exceeds the capacity
     n_req = int(rng.integers(0, 4))
-    pending, plan, load0, on_board = [], [], 0, []
+    pending, load0, on_board = [], 0, []
     loc = 1
     for _ in range(n_req):
         n = int(rng.integers(1, cap + 1))

@@ -184,12 +184,12 @@ def test_run_one_without_out_cleans_up(tiny_scenario):
 
 def test_failing_run_is_aborted(tmp_path, monkeypatch):
     """An exception half-way: the chunks written so far stay (readable), no part-0 file."""
-    from dispatch.sim import Simulation
+    from dispatch.recording import DecisionWriter
 
     path = write_scenario(tmp_path, tasks={"source": "periodic", "interval": 0.5, "count": 40,
                                            "ttl": 1.0})
     [spec] = load_scenario(path).runs()
-    real, calls = Simulation._record_decision, []
+    real, calls = DecisionWriter.__call__, []
 
     def failing(self, *args, **kwargs):
         calls.append(1)
@@ -197,7 +197,7 @@ def test_failing_run_is_aborted(tmp_path, monkeypatch):
             raise RuntimeError("boom")
         return real(self, *args, **kwargs)
 
-    monkeypatch.setattr(Simulation, "_record_decision", failing)
+    monkeypatch.setattr(DecisionWriter, "__call__", failing)
     with pytest.raises(RuntimeError, match="boom"):
         run_one(spec, tmp_path / "out", flush_rows=5)
     files = sorted((tmp_path / "out").rglob("*.parquet*"))
@@ -279,3 +279,18 @@ def test_dispatch_run_writes_the_one_layout_and_readme_reads_it(tiny_scenario, c
     assert (row["allocator"], row["planner"], int(row["n_agents"]), int(row["seed"])) == (
         "hungarian", "astar", 3, 0)
     assert row["run_id"] == "tiny__hungarian__astar__n3__s0" and row["n_tasks"] == 3
+
+
+def test_rows_are_tied_to_columns_by_name():
+    """Every column of the tables written during a run says what it holds (a schema column
+    without a source, or a source without a column, fails at once, naming it)."""
+    from dispatch import recording
+
+    for table, cols in (("tasks", recording.TASK_COLUMNS),
+                        ("decisions", recording.DECISION_COLUMNS),
+                        ("assignments", recording.ASSIGNMENT_COLUMNS),
+                        ("vehicles", recording.VEHICLE_COLUMNS)):
+        assert set(cols) == set(SCHEMAS[table].names) - {"run_id"}, table
+    with pytest.raises(KeyError, match="shared"):
+        recording.row_builder("tasks", {k: v for k, v in recording.TASK_COLUMNS.items()
+                                        if k != "shared"}, "t, p, d")
