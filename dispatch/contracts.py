@@ -254,12 +254,15 @@ class AllocationProblem:
     capacity: np.ndarray | None = None
     service_time: float = 0.0
     travel: Callable[..., np.ndarray] | None = None
+    #: shared rides: when each agent can leave where it is (the decision's time, or the end
+    #: of the service it is in); None: the decision's time for all
+    ready: np.ndarray | None = None
 
     @classmethod
     def made(cls, time: float, agents, tasks, cost: np.ndarray, comm: np.ndarray,
              rng: np.random.Generator, max_rounds: int, loss: float, latency: float,
              cell_size: float, agent_pos, task_pos, plans=None, capacity=None,
-             service_time: float = 0.0, travel=None) -> AllocationProblem:
+             service_time: float = 0.0, travel=None, ready=None) -> AllocationProblem:
         """The problem ``cls(...)`` of these fields (all of them, positionally) makes, checked
         the same way, without the field-by-field ``object.__setattr__`` of a frozen
         ``__init__`` (the dispatcher makes one per decision)."""
@@ -268,7 +271,7 @@ class AllocationProblem:
                             max_rounds=max_rounds, loss=loss, latency=latency,
                             cell_size=cell_size, _agent_pos=agent_pos, _task_pos=task_pos,
                             plans={} if plans is None else plans, capacity=capacity,
-                            service_time=service_time, travel=travel)
+                            service_time=service_time, travel=travel, ready=ready)
         obj.__post_init__()
         return obj
 
@@ -414,7 +417,7 @@ class Allocation:
         if cls is not Allocation:  # a subclass may add fields or checks: its own __init__
             return cls(pairs=tuple(pairs), rounds=1, requests=tuple(reqs), messages=0)
         return _frozen(cls, pairs=tuple(pairs), rounds=1, requests=tuple(reqs), messages=0,
-                       hops=0, agent_seconds=())
+                       hops=0, agent_seconds=(), routes={})
 
     def conflicted_tasks(self) -> set[int]:
         """Ids of tasks requested by more than one agent in some round, or requested again in a

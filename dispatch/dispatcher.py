@@ -252,6 +252,48 @@ def _rows(ids: np.ndarray, ascending: bool = False) -> Callable[[object], int]:
     return find
 
 
+class _Inserts:
+    """Where a decision's stops go, for its busy vehicles' feasible pairs, by ``(row, col)``:
+    kept as the arrays the insertion computed and looked up only for the pairs handed out (a
+    pooled batch has thousands of feasible pairs and hands out a few dozen)."""
+
+    def __init__(self, ins, rows: np.ndarray, cols: np.ndarray, m: int) -> None:
+        ok = np.isfinite(ins.cost)
+        self._ins, self._q = ins, np.flatnonzero(ok)
+        self._rows, self._cols, self._m = rows[ok], cols[ok], m
+        self._keys = None
+
+    def __bool__(self) -> bool:
+        return bool(self._q.size)
+
+    def kept(self, servable: np.ndarray) -> _Inserts:
+        """The same, for the columns of ``servable`` only (renumbered as they are kept)."""
+        col = np.cumsum(servable) - 1
+        keep = servable[self._cols]
+        out = object.__new__(_Inserts)
+        out._ins, out._q = self._ins, self._q[keep]
+        out._rows, out._cols = self._rows[keep], col[self._cols[keep]]
+        out._m, out._keys = int(servable.sum()), None
+        return out
+
+    def _find(self, key) -> int:
+        if self._keys is None:
+            keys = self._rows.astype(np.int64) * self._m + self._cols
+            order = np.argsort(keys, kind="stable")
+            self._keys, self._order = keys[order], order
+        r, c = key
+        k = int(r) * self._m + int(c)
+        i = int(np.searchsorted(self._keys, k))
+        return int(self._order[i]) if i < self._keys.size and self._keys[i] == k else -1
+
+    def get(self, key, default=None):
+        i = self._find(key)
+        return default if i < 0 else self._ins.of(int(self._q[i]))
+
+    def __contains__(self, key) -> bool:
+        return self._find(key) >= 0
+
+
 class _Plans(Mapping):
     """:attr:`AllocationProblem.plans`: the stop lists of a decision's agents that have one,
     read from the vehicles when asked (within the decision: nothing moves meanwhile)."""
@@ -313,7 +355,7 @@ class _Pending:
     index: list = field(default_factory=list)  # each pair's (row, column) in the problem
     #: shared rides: (row, column) of a pair whose vehicle has a plan -> where its stops go
     #: (see :class:`dispatch.stops.Insertions`)
-    inserts: dict = field(default_factory=dict)
+    inserts: _Inserts | dict = field(default_factory=dict)
 
 
 class Dispatcher:
@@ -519,9 +561,7 @@ class Dispatcher:
                 return
             if not servable.all():
                 if inserts:  # their columns move left
-                    col = np.cumsum(servable) - 1
-                    inserts = {(r, int(col[c])): at for (r, c), at in inserts.items()
-                               if servable[c]}
+                    inserts = inserts.kept(servable)
                 open_tasks = [t for t, ok in zip(open_tasks, servable) if ok]
                 tasks = tuple([t.view() for t in open_tasks])
                 cost = cost[:, servable]
@@ -551,13 +591,15 @@ class Dispatcher:
 
         plans = _Plans(self.fleet, self.operator, idle) if self.pooled else None
         seats = self.fleet.capacity[idle] if self.pooled else None
+        ready = np.maximum(self.fleet.free_at[idle], now) if self.pooled else None
         travel = self.planner.between if self.routes else None
 
         def ask(cost: np.ndarray):
             problem = AllocationProblem.made(now, agents, tasks, np.array(cost, order="C"),
                                              comm, self.rng, self.cfg.max_rounds, comms.loss,
                                              comms.latency, self.cell_size, apos, tpos, plans,
-                                             seats, self.operator.service_time, travel)
+                                             seats, self.operator.service_time, travel,
+                                             ready)
             allocation, decide_s, index = self._ask(problem)
             return problem, allocation, decide_s, index
 
@@ -884,10 +926,7 @@ class Dispatcher:
             s_latest, s_occ, load, cap[busy[used]], to_p, from_p, to_d, from_d, pd[ucols],
             n_req[ucols], lp[ucols], ld[ucols], svc_p[ucols], svc_d[ucols], self.objective)
         out[vrow, cols] = ins.cost
-        inserts = {(int(r), int(c)): ins.of(q)
-                   for q, (r, c) in enumerate(zip(vrow.tolist(), cols.tolist()))
-                   if ins.cost[q] < math.inf}
-        return out, inserts
+        return out, _Inserts(ins, vrow, cols, m)
 
     def _close_unreachable(self, tasks) -> None:
         """Close tasks no vehicle of the fleet can reach; vehicles never leave their connected

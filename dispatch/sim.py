@@ -379,7 +379,8 @@ class Simulation:
         summary = self.stats.summary(run=run, vehicles=self.vehicles,
                                      dispatcher=self.dispatcher, sim_time=float(self.env.now))
         summary.update(summary_of(self.repositioning))
-        summary["allocator_info"] = self.allocator_info
+        # what the allocator says at the end (a learned model's name, a batch method's counts)
+        summary["allocator_info"] = describe(self.dispatcher.allocator)
         summary["objective"] = spec.scenario.dispatch.objective
         rec.add("summary", **summary)
         return summary
