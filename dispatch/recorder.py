@@ -117,7 +117,7 @@ SCHEMAS: dict[str, pa.Schema] = {
         ("kwh_drawn", _F), ("kwh_charged", _F), ("charge_seconds", _F), ("queue_seconds", _F),
         ("soc_min", _F), ("soc_end", _F),
     ]),
-    # [chargers] (written only by runs with [fleet.energy]): one row per station
+    # [chargers] with [fleet.energy]: one row per station (no rows without)
     "chargers": pa.schema([
         ("run_id", _S), ("station_id", _S), ("node", _I), ("x", _F), ("y", _F), ("plugs", _I),
         ("kw", _F), ("kwh_delivered", _F), ("busy_plug_hours", _F), ("visits", _I),
@@ -127,10 +127,6 @@ SCHEMAS: dict[str, pa.Schema] = {
         ("run_id", _S), ("x0", _F), ("y0", _F), ("z0", _F), ("x1", _F), ("y1", _F), ("z1", _F),
     ]),
 }
-
-#: Tables written only when a run asks for them (:attr:`Recorder.optional`): runs without
-#: the feature they record leave no file of them
-OPTIONAL_TABLES = {"chargers"}
 
 #: Columns that hold wall-clock measurements: they differ between identical runs.
 TIMING_COLUMNS = {"alloc_seconds", "cost_seconds", "decide_seconds", "first_decision_seconds",
@@ -178,8 +174,6 @@ class Recorder:
         self._chunks: dict[str, list[Path]] = {name: [] for name in SCHEMAS}
         self._written = dict.fromkeys(SCHEMAS, 0)
         self._closed = False
-        #: the :data:`OPTIONAL_TABLES` this run writes
-        self.optional: set[str] = set()
         self._open: list[tuple[pq.ParquetWriter, Path]] = []  # writers of finish(), if any
         for name in SCHEMAS:  # chunks of an earlier run of this partition killed half-way
             leaf = self.leaf(name)
@@ -310,8 +304,6 @@ class Recorder:
             raise RuntimeError(f"recorder of {self.run_id} is closed (finish or abort)")
         files = {}
         for name in SCHEMAS:
-            if name in OPTIONAL_TABLES and name not in self.optional:
-                continue
             schema = self.file_schema(name)
             rest = self._take(name)
             path = self.leaf(name) / FINAL_NAME

@@ -329,7 +329,6 @@ class Simulation:
         self.operator.strand = self.charging.strand
         if self.repositioning is not None:
             self.charging.on_assign = self.repositioning.stop
-        self.recorder.optional.add("chargers")
 
     def _road_driver(self, sc: Scenario) -> RoadDriver:
         """The road driver; with ``[world] congestion`` the planner's costs and the legs are
