@@ -73,6 +73,8 @@ class EnergyConfig:
     reserve: float = 0.1
     max_charge_kw: float = math.inf
     socs: tuple[float, ...] = ()
+    #: seconds between two rows per vehicle of the ``soc`` table
+    sample: float = 900.0
 
     def wh_per_metre(self, speed: float) -> float:
         """Wh per metre at ``speed`` (m/s; 0 or nan: the constant, or the table's mean)."""
@@ -298,6 +300,17 @@ class Energy:
         need = (plan_s[:, None] + drive + direct[None, :]) * self.kwh_per_second
         ok = self.kwh[slots][:, None] - need >= self.reserve_kwh
         return np.where(ok, cost, np.inf)
+
+    def sampler(self, append: Callable[[tuple], None]):
+        """Process: every ``sample`` seconds from 0, one ``soc`` row per vehicle."""
+        ids = [v.id for v in self.fleet.vehicles]
+        while True:
+            self.settle_all()
+            t = float(self.env.now)
+            cap = self.cfg.battery_kwh
+            for vid, k in zip(ids, (self.kwh / cap).tolist()):
+                append((t, vid, k))
+            yield self.env.timeout(self.cfg.sample)
 
     def settle_all(self) -> None:
         for v in self.fleet.vehicles:

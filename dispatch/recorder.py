@@ -117,6 +117,9 @@ SCHEMAS: dict[str, pa.Schema] = {
         ("kwh_drawn", _F), ("kwh_charged", _F), ("charge_seconds", _F), ("queue_seconds", _F),
         ("soc_min", _F), ("soc_end", _F),
     ]),
+    # [fleet.energy]: every vehicle's state of charge (0-1) every [fleet.energy] sample
+    # seconds from 0 (no rows without energy)
+    "soc": pa.schema([("run_id", _S), ("t", _F), ("agent_id", _I), ("soc", _F)]),
     # [chargers] with [fleet.energy]: one row per station (no rows without)
     "chargers": pa.schema([
         ("run_id", _S), ("station_id", _S), ("node", _I), ("x", _F), ("y", _F), ("plugs", _I),

@@ -976,7 +976,8 @@ def _parse_energy(e: _Table, fleet: FleetConfig, world: WorldConfig):
         idle_kwh_per_hour=e.number("idle_kwh_per_hour", 0.0, lo=0.0),
         soc0=e.number("soc0", 1.0, lo=0.0, hi=1.0), reserve=e.number("reserve", 0.1, lo=0.0,
                                                                      hi=1.0),
-        max_charge_kw=e.number("max_charge_kw", 1e9, gt=0.0), socs=socs)
+        max_charge_kw=e.number("max_charge_kw", 1e9, gt=0.0), socs=socs,
+        sample=e.number("sample", 900.0, gt=0.0))
     e.done()
     return cfg
 

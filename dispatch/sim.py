@@ -319,6 +319,7 @@ class Simulation:
         ref = float(net.length.sum() / net.time.sum()) if hasattr(net, "length") else 10.0
         self.energy = Energy(sc.fleet.energy, self.fleet, self.env, ref)
         self.dispatcher.energy_filter = self.energy.filter
+        self.env.process(self.energy.sampler(self.recorder.appender("soc")))
         cfg = sc.charging
         strategy = make_charger(sc, cfg.strategy) if cfg.stations else None
         self.charging = Charging(self.env, self.bus, self.fleet, self.operator, self.energy,
