@@ -84,7 +84,7 @@ def main() -> int:
     df["drop_points"] = base - df["served_%"]
     out.mkdir(parents=True, exist_ok=True)
     df.to_csv(out / "study.csv", index=False)
-    print(df.to_markdown(index=False, floatfmt=".2f"))
+    print(df.to_string(index=False, float_format=lambda x: f"{x:.2f}"))
     print(f"smallest DCFC plugs per station with a drop < 1 point: {enough}")
     return 0
 

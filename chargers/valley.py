@@ -1,8 +1,9 @@
 """``valley``: plan charging against the hourly demand. While the requests of the last full
 hour are below ``valley`` times the mean hourly count so far (a demand valley: nights,
 mid-mornings), idle vehicles below ``high`` charge to ``high`` at the station of least drive +
-queue time, at most ``share`` of the idle vehicles at once; otherwise only those below
-``low`` go (``threshold``'s rule). The demand is the run's own, as released so far."""
+queue time, at most ``share`` of the idle vehicles at once and no more than the plugs free
+(not taken, nobody queueing), lowest state of charge first; otherwise only those below ``low``
+go (``threshold``'s rule). The demand is the run's own, as released so far."""
 
 from __future__ import annotations
 
@@ -36,7 +37,9 @@ class ValleyCharging(ChargingStrategy):
         if self.in_valley(view):
             rows = np.flatnonzero(view.soc < self.high - 0.05)
             rows = rows[np.argsort(view.soc[rows], kind="stable")]
-            rows = rows[:max(1, int(self.share * view.n_vehicles))]
+            free = int(np.maximum(view.plugs - view.in_use - view.waiting, 0).sum())
+            rows = rows[:min(max(1, int(self.share * view.n_vehicles)), free)]
+            rows = np.union1d(rows, np.flatnonzero(view.soc < self.low))
         else:
             rows = np.flatnonzero(view.soc < self.low)
         best = view.best_station(rows, self.high)

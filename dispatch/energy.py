@@ -372,6 +372,9 @@ class ChargingView:
     space: Any
     rng: np.random.Generator
     charge_seconds: Callable[[float, float, float], float] = field(repr=False)
+    #: (stations, nodes) shortest drive seconds from every node to each station (None:
+    #: computed on demand from ``space``)
+    to_stations: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def n_vehicles(self) -> int:
@@ -383,7 +386,9 @@ class ChargingView:
         rows = np.arange(self.n_vehicles) if rows is None else np.asarray(rows, np.int64)
         if rows.size == 0:
             return np.zeros((0, self.station_nodes.size))
-        t = self.space.distances_to(self.station_nodes)  # (stations, nodes)
+        t = self.to_stations
+        if t is None:
+            t = self.space.distances_to(self.station_nodes)  # (stations, nodes)
         return t[:, self.nodes[rows]].T + self.remaining[rows][:, None]
 
     def queue_seconds(self, target: float = 0.8) -> np.ndarray:
@@ -443,6 +448,10 @@ class Charging:
             self.stations.append(Station(row.station_id, k, int(node), row.plugs, kw,
                                          simpy.Resource(env, capacity=row.plugs)))
         self.by_id = {s.id: s for s in self.stations}
+        #: (stations, nodes) drive seconds from each node to each station (static network)
+        self.to_stations = (space.distances_to([s.node for s in self.stations])
+                            if self.stations else np.zeros((0, space.n)))
+        self.to_stations.setflags(write=False)
         self.hourly = np.zeros(1, np.int64)
         self.strandings = 0
         self.visits: dict[int, Any] = {}  # vehicle id -> its visit process
@@ -483,7 +492,8 @@ class Charging:
             waiting=ro([s.waiting for s in st], np.int64), kw=ro([s.kw for s in st], float),
             released_by_hour=ro(self.hourly, np.int64),
             battery_kwh=self.energy.cfg.battery_kwh, reserve=self.energy.cfg.reserve,
-            space=self.space, rng=self.rng, charge_seconds=self.seconds)
+            space=self.space, rng=self.rng, charge_seconds=self.seconds,
+            to_stations=self.to_stations)
 
     def _fail(self, why: str) -> PluginError:
         name = getattr(self.strategy, "name", "") or type(self.strategy).__name__
@@ -615,7 +625,7 @@ class Charging:
     def nearest_station(self, node: int) -> Station | None:
         if not self.stations:
             return None
-        t = self.space.distances_to([s.node for s in self.stations])[:, node]
+        t = self.to_stations[:, node]
         return self.stations[int(np.argmin(t))]
 
     def strand(self, v: Vehicle) -> None:

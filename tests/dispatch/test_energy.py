@@ -236,12 +236,17 @@ def test_threshold_picks_least_drive_plus_queue():
 def test_valley_charges_only_in_valleys():
     from chargers.valley import ValleyCharging
 
-    v = dict(charging_views())["mixed, busy stations"]()
+    v = dict(charging_views())["low batteries"]()  # 3 free plugs, socs in [0, 0.3)
+    ids = v.vehicle_ids.tolist()
     # hours 0-4 released 10, 20, 30, 40, 30: at 5 h the last full hour (30) is above 0.8 x
     # the mean (26): a peak, only those below low go
-    got = ValleyCharging(low=0.2, high=0.9).decide(v)
-    assert all(v.soc[list(v.vehicle_ids).index(k)] < 0.2 for k in got)
-    assert ValleyCharging(low=0.2, high=0.9, valley=2.0).decide(v).keys() > got.keys()
+    got = ValleyCharging(low=0.05, high=0.9).decide(v)
+    assert set(got) == {i for i, x in zip(ids, v.soc) if x < 0.05}
+    # a valley (30 < 2.0 x 26): the 3 lowest (as many as the free plugs), and those below low
+    got = ValleyCharging(low=0.05, high=0.9, valley=2.0).decide(v)
+    lowest = {ids[k] for k in np.argsort(v.soc, kind="stable")[:3]}
+    assert set(got) == lowest | {i for i, x in zip(ids, v.soc) if x < 0.05}
+    assert all(t == 0.9 for _, t in got.values())
 
 
 def test_bad_configuration_is_one_clear_error(tmp_path):
