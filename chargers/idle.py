@@ -24,6 +24,7 @@ class IdleCharging(ChargingStrategy):
     def decide(self, view: ChargingView) -> dict:
         out = {}
         low = np.flatnonzero(view.soc < self.low)
+        low = low[np.argsort(view.soc[low], kind="stable")]  # the lowest first
         for r, s in zip(low.tolist(), view.best_station(low, self.high).tolist()):
             out[int(view.vehicle_ids[r])] = (view.station_ids[int(s)], self.high)
         rows = np.flatnonzero((view.soc >= self.low) & (view.soc < self.high - 0.05))

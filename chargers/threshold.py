@@ -24,6 +24,7 @@ class ThresholdCharging(ChargingStrategy):
 
     def decide(self, view: ChargingView) -> dict:
         rows = np.flatnonzero(view.soc < self.low)
+        rows = rows[np.argsort(view.soc[rows], kind="stable")]  # the lowest first
         best = view.best_station(rows, self.high)
         return {int(view.vehicle_ids[r]): (view.station_ids[int(s)], self.high)
                 for r, s in zip(rows.tolist(), best.tolist())}

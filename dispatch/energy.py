@@ -333,6 +333,7 @@ class Station:
     queue_seconds: float = 0.0  # vehicle-seconds queued
     visits: int = 0
     queued: int = 0  # visits that had to wait
+    coming: int = 0  # vehicles driving to it on a visit
 
     @property
     def waiting(self) -> int:
@@ -375,6 +376,8 @@ class ChargingView:
     #: (stations, nodes) shortest drive seconds from every node to each station (None:
     #: computed on demand from ``space``)
     to_stations: np.ndarray | None = field(default=None, repr=False)
+    #: vehicles driving to each station on a visit (None: none)
+    coming: np.ndarray | None = None
 
     @property
     def n_vehicles(self) -> int:
@@ -391,18 +394,36 @@ class ChargingView:
             t = self.space.distances_to(self.station_nodes)  # (stations, nodes)
         return t[:, self.nodes[rows]].T + self.remaining[rows][:, None]
 
-    def queue_seconds(self, target: float = 0.8) -> np.ndarray:
-        """A rough wait at each station: vehicles waiting (plus one if every plug is taken)
-        times a mean charge (from 20 % to ``target``) divided by the plugs."""
+    def queue_seconds(self, target: float = 0.8, extra=None) -> np.ndarray:
+        """A rough wait at each station for a vehicle sent now: the vehicles ahead of it
+        (charging, queueing, on their way, and ``extra`` more) beyond the plugs, times a mean
+        charge (from 20 % to ``target``) divided by the plugs."""
         mean = np.array([self.charge_seconds(0.2, target, kw) for kw in self.kw.tolist()])
-        full = self.in_use >= self.plugs
-        return np.where(full, (self.waiting + 1) * mean / self.plugs, 0.0)
+        ahead = self.in_use + self.waiting
+        if self.coming is not None:
+            ahead = ahead + self.coming
+        if extra is not None:
+            ahead = ahead + extra
+        return np.maximum(ahead - self.plugs + 1, 0) * mean / self.plugs
 
     def best_station(self, rows, target: float = 0.8) -> np.ndarray:
-        """For each vehicle of ``rows`` the station row of least drive + queue seconds."""
-        if len(rows) == 0:
+        """For each vehicle of ``rows``, in that order, the station row of least drive + queue
+        seconds, counting the vehicles sent before it in the queues (so that one call does not
+        send every vehicle to the same station)."""
+        rows = np.asarray(rows, np.int64)
+        if rows.size == 0:
             return np.zeros(0, np.int64)
-        return np.argmin(self.travel_times(rows) + self.queue_seconds(target)[None, :], axis=1)
+        t = self.travel_times(rows)
+        extra = np.zeros(self.station_nodes.size, np.int64)
+        mean = np.array([self.charge_seconds(0.2, target, kw) for kw in self.kw.tolist()])
+        base = self.in_use + self.waiting + (0 if self.coming is None else self.coming)
+        out = np.empty(rows.size, np.int64)
+        for k in range(rows.size):
+            q = np.maximum(base + extra - self.plugs + 1, 0) * mean / self.plugs
+            s = int(np.argmin(t[k] + q))
+            out[k] = s
+            extra[s] += 1
+        return out
 
 
 class ChargingStrategy(ABC):
@@ -490,6 +511,7 @@ class Charging:
             station_ids=tuple(s.id for s in st), station_nodes=ro([s.node for s in st], np.int64),
             plugs=ro([s.plugs for s in st], np.int64), in_use=ro([s.in_use for s in st], np.int64),
             waiting=ro([s.waiting for s in st], np.int64), kw=ro([s.kw for s in st], float),
+            coming=ro([s.coming for s in st], np.int64),
             released_by_hour=ro(self.hourly, np.int64),
             battery_kwh=self.energy.cfg.battery_kwh, reserve=self.energy.cfg.reserve,
             space=self.space, rng=self.rng, charge_seconds=self.seconds,
@@ -546,6 +568,8 @@ class Charging:
         req = None
         t_q = t_c = None
         a = 0.0
+        station.coming += 1
+        coming = True
         try:
             if v.location(env.now) != station.node:
                 leg = self.op.driver.plan(v, station.node, env.now)
@@ -559,9 +583,12 @@ class Charging:
                     stop_leg(v, env.now)
                     self.visits.pop(v.id, None)
                     v.stops = []
+                    station.coming -= 1
                     self.strand(v)
                     return
                 yield from self.op.driver.drive(env, v, leg, -1)
+            station.coming -= 1
+            coming = False
             bat.settle()
             req = station.resource.request()
             station.visits += 1
@@ -587,6 +614,8 @@ class Charging:
             req = None
             emit(env.now, "charge_end", v.id, -1, station.node)
         except simpy.Interrupt:  # a breakdown: it has put the vehicle right
+            if coming:
+                station.coming -= 1
             if t_q is not None:
                 waited = env.now - t_q
                 bat.queue_seconds += waited

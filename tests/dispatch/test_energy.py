@@ -210,27 +210,38 @@ def test_strategies_pass_check_charger(name):
     assert report.ok, str(report)
 
 
+def tiny_view(socs, in_use=(0, 0), waiting=(0, 0)):
+    """Vehicles at node 0 of a 6 x 5 grid (100 m blocks, 10 m/s); station a (1 plug) at node
+    0, b (1 plug) at node 10, 5 edges = 50 s away; 50 kW, 50 kWh: a mean charge (20 % -> 80 %)
+    takes 2,160 s."""
+    from dispatch.energy import ChargingView
+    from dispatch.testing import small_network
+
+    n = len(socs)
+    ro = np.asarray
+    return ChargingView(
+        time=0.0, vehicle_ids=ro(np.arange(n) + 1), nodes=ro(np.zeros(n, np.int64)),
+        remaining=ro(np.zeros(n)), soc=ro(socs, float), station_ids=("a", "b"),
+        station_nodes=ro([0, 10]), plugs=ro([1, 1]), in_use=ro(in_use), waiting=ro(waiting),
+        kw=ro([50.0, 50.0]), released_by_hour=ro([0]), battery_kwh=50.0, reserve=0.1,
+        space=small_network(), rng=np.random.default_rng(0),
+        charge_seconds=lambda a, b, kw: charge_seconds(a, b, 50.0, kw, 0.8, 0.2))
+
+
 def test_threshold_picks_least_drive_plus_queue():
     from chargers.threshold import ThresholdCharging
 
-    views = dict(charging_views())
-    v = views["low batteries"]()
-    got = ThresholdCharging(low=0.5, high=0.8).decide(v)
-    assert set(got) == set(v.vehicle_ids.tolist())  # all below 0.5
-    t = v.travel_times()
-    for k, vid in enumerate(v.vehicle_ids.tolist()):  # free stations: the nearest
-        assert got[vid] == (v.station_ids[int(np.argmin(t[k]))], 0.8)
-    busy = views["mixed, busy stations"]()
-    got = ThresholdCharging(low=0.3, high=0.8).decide(busy)
-    q = busy.queue_seconds(0.8)
-    assert (q > 0).all()  # every plug taken
-    t = busy.travel_times()
-    for k, vid in enumerate(busy.vehicle_ids.tolist()):
-        if busy.soc[k] < 0.3:
-            assert got[vid][0] == busy.station_ids[int(np.argmin(t[k] + q))]
-        else:
-            assert vid not in got
-    assert ThresholdCharging().decide(views["full batteries"]()) == {}
+    v = tiny_view([0.1, 0.15, 0.05, 0.5])
+    assert v.travel_times()[0].tolist() == [0.0, 50.0]
+    # lowest first: vehicle 3 (5 %) -> a (0 s); vehicle 1 -> a would wait 2,160 s, b is 50 s
+    # away -> b; vehicle 2 -> a (2,160 s) beats b (50 + 2,160 s); vehicle 4 is above low
+    got = ThresholdCharging(low=0.2, high=0.8).decide(v)
+    assert got == {3: ("a", 0.8), 1: ("b", 0.8), 2: ("a", 0.8)}
+    # a's plug taken and one queueing: the first goes to b, the next one to b's queue
+    # (50 + 2,160 s) rather than a's (2 x 2,160 s)
+    got = ThresholdCharging(low=0.2, high=0.8).decide(tiny_view([0.1, 0.15], (1, 0), (1, 0)))
+    assert got == {1: ("b", 0.8), 2: ("b", 0.8)}
+    assert ThresholdCharging().decide(tiny_view([0.5, 0.9])) == {}
 
 
 def test_valley_charges_only_in_valleys():
