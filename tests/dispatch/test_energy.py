@@ -268,3 +268,14 @@ def test_bad_configuration_is_one_clear_error(tmp_path):
                            extra='[charging]\nstrategy = "nope"\n', name="b"))
     with pytest.raises(ScenarioError, match="soc0"):
         load_scenario(grid(tmp_path, "soc0 = 2.0", [(1.0, 1, 2)], name="c"))
+
+
+def test_a_strategy_rejecting_its_parameters_stops_validation(tmp_path):
+    from dispatch.cli import build_plugins
+    from dispatch.errors import PluginError
+
+    p = grid(tmp_path, "battery_kwh = 1.0", [(1.0, 1, 2)],
+             extra="[charging.threshold]\nlow = 0.9\nhigh = 0.5\n")
+    sc = load_scenario(p)
+    with pytest.raises(PluginError, match="charging.threshold: high = 0.5, low = 0.9"):
+        build_plugins(sc, sc.runs())
