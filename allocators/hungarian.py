@@ -25,8 +25,26 @@ class HungarianAllocator(Allocator):
     decentralized = False
     minimizes_total_cost = True  # maximum cardinality, then minimum total cost; no rng
 
+    def __init__(self, value: str | None = None, value_weight: float | None = None) -> None:
+        """``value``: a learned value of where vehicles end up (a file of ``dispatch train
+        value``, see :mod:`dispatch.value`): each pair's cost becomes its cost less the
+        discounted value of the vehicle's zone and time after the trip, plus its value now
+        (``value_weight`` seconds per unit of value; default: the file's). Still maximum
+        cardinality, then the minimum of these costs; the cost recorded for a pair stays
+        its travel time."""
+        self.value = None
+        self.value_weight = None if value_weight is None else float(value_weight)
+        if value is not None:
+            from dispatch.value import ZoneValue
+
+            self.value = ZoneValue.load(value)
+            self.minimizes_total_cost = False  # of the adjusted costs, not problem.cost
+
     def allocate(self, problem: AllocationProblem) -> Allocation:
-        return Allocation.centralized(problem, optimal_pairs(problem.cost))
+        if self.value is None:
+            return Allocation.centralized(problem, optimal_pairs(problem.cost))
+        cost = self.value.adjusted(problem, self.value_weight)
+        return Allocation.centralized(problem, optimal_pairs(cost))
 
 
 def optimal_pairs(cost: np.ndarray) -> list[tuple[int, int]]:

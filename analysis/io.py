@@ -122,12 +122,69 @@ def open_results(*paths: str | os.PathLike) -> Results:
     return Results(sources)
 
 
+@dataclass(frozen=True)
+class Duplicate:
+    """A run found in two results folders: read from ``kept``, not from ``dropped``."""
+
+    run_id: str
+    kept: Path
+    dropped: Path
+
+
 class Results:
-    """Tables of one or more results folders, read on demand."""
+    """Tables of one or more results folders, read on demand. A run (by its run id) found in
+    several folders is read from the first only (:attr:`duplicates` lists the others)."""
 
     def __init__(self, sources: list[Source]) -> None:
-        self.sources = sources
+        seen: set[Path] = set()
+        self.sources = []  # a folder named twice (or inside another one named) is read once
+        for src in sources:
+            real = src.path.resolve()
+            if real not in seen:
+                seen.add(real)
+                self.sources.append(src)
         self._summary = None
+        self._owner: dict[str, int] | None = None
+        self._duplicates: list[Duplicate] = []
+        self._dropped: set[tuple[str, str]] = set()
+
+    @property
+    def duplicates(self) -> list[Duplicate]:
+        """Runs found in more than one folder: each is read from the first folder that holds
+        it (in the order given) and not from the others, so it counts once."""
+        self._owners()
+        return list(self._duplicates)
+
+    def _owners(self) -> dict[str, int]:
+        """run id -> index of the first source whose summary holds it (read once). A run id
+        in a later source is the same run (not read again) when its summary file carries the
+        same scenario text and seed; another run that happens to share the id (a scenario of
+        the same name, edited) is read as before."""
+        if self._owner is None:
+            owner: dict[str, int] = {}
+            dups: list[Duplicate] = []
+            idents: dict[int, dict[str, tuple]] = {}
+
+            def ident(i: int, rid: str) -> tuple | None:
+                if i not in idents:
+                    idents[i] = _run_identities(self.sources[i])
+                return idents[i].get(rid)
+
+            for i, src in enumerate(self.sources):
+                if not src.has("summary"):
+                    continue
+                ids = src.dataset("summary").to_table(columns=["run_id"]).column("run_id")
+                for rid in ids.to_pylist():
+                    if rid not in owner:
+                        owner[rid] = i
+                    elif owner[rid] != i:
+                        first = ident(owner[rid], rid)
+                        if first is not None and first == ident(i, rid):
+                            dups.append(Duplicate(rid, self.sources[owner[rid]].path,
+                                                  src.path))
+            self._owner, self._duplicates = owner, dups
+            self._dropped = {(d.run_id, str(d.dropped)) for d in dups}
+        return self._owner
 
     def __repr__(self) -> str:
         return f"Results({[str(s.path) for s in self.sources]})"
@@ -157,6 +214,11 @@ class Results:
                 want = [old.get(c, c) for c in dict.fromkeys([*columns, "run_id"])
                         if old.get(c, c) in d.schema.names]
             df = d.to_table(columns=want, filter=flt).to_pandas()
+            if self._has_duplicates() and "run_id" in df.columns:
+                here = str(src.path)
+                mine = [(r, here) not in self._dropped for r in df["run_id"]]
+                df = df.loc[mine]
+                df = df.reset_index(drop=True)
             df = _normalise(df.rename(columns=renames) if renames else df)
             if name == "summary":
                 for k, v in DEFAULT_KEYS.items():
@@ -213,6 +275,9 @@ class Results:
         return tuple(json.loads(meta["dispatch.world_size"])), float(meta["dispatch.cell"])
 
     # ------------------------------------------------------------------ helpers
+    def _has_duplicates(self) -> bool:
+        return len(self.sources) > 1 and bool(self.duplicates)
+
     def _with_keys(self, df):
         missing = [k for k in RUN_KEYS if k not in df.columns]
         if not missing or "run_id" not in df.columns:
@@ -245,6 +310,22 @@ def _normalise(df):
         if k in df.columns:
             df[k] = df[k].astype(object).where(df[k].notna(), v).astype(str)
     return df
+
+
+def _run_identities(src: Source) -> dict[str, tuple]:
+    """run id -> (scenario text, seed) of each summary file of ``src`` (schema metadata; runs
+    of a flat folder: its one file)."""
+    out = {}
+    d = src.dataset("summary")
+    for frag in d.get_fragments():
+        meta = frag.physical_schema.metadata or {}
+        rid = meta.get(b"dispatch.run_id")
+        if rid is None:
+            ids = frag.to_table(columns=["run_id"]).column("run_id").to_pylist()
+            rid = ids[0].encode() if len(ids) == 1 else None
+        if rid is not None:
+            out[rid.decode()] = (meta.get(b"dispatch.scenario"), meta.get(b"dispatch.seed"))
+    return out
 
 
 def _run_filter(summary, run_id: str, src: Source) -> ds.Expression | None:

@@ -29,10 +29,11 @@ FleetPy's evaluation label in :data:`FLEETPY_LABELS`), tasks pooled over the gro
         ``requests`` (tasks released); ``rides`` (served: completed); ``rejections`` (requests
         the fleet did not serve in time: ``rejected`` at once (no vehicle could reach the pickup
         within ``max_wait``), ``expired`` while open (``max_wait`` / ``ttl`` ran out) or
-        ``unreachable``; not counted: ``cancelled`` (the run ended first) and ``failed`` (a
-        breakdown with the passenger aboard)); ``rejectionRate`` = rejections / requests;
-        ``service_rate`` = rides / requests; ``wait_average``, ``wait_median``, ``wait_p90``,
-        ``wait_p95``, ``wait_max``: release -> pickup, seconds, over every request picked up
+        ``unreachable``); ``cancelled`` (open or aboard when the run ended) and ``failed`` (a
+        breakdown with the passenger aboard), so that rides + rejections + cancelled + failed
+        = requests; ``rejectionRate`` = rejections / requests; ``service_rate`` = rides /
+        requests; ``cancelRate`` = cancelled / requests; ``wait_average``, ``wait_median``,
+        ``wait_p90``, ``wait_p95``, ``wait_max``: release -> pickup, seconds, over every request picked up
         (quantiles by linear interpolation); ``inVehicleTravelTime_mean``: pickup -> drop-off
         (s, rides with a drop-off); ``directTravelTime_mean``: the trip's free-flow fastest
         path (s; from the tasks' ``direct_seconds`` when the kernel records it, else from the
@@ -65,11 +66,16 @@ import math
 import numpy as np
 import pandas as pd
 
+from analysis import compare
+from analysis.compare import (  # noqa: F401 (re-exported: one order, one variant naming)
+    PREFERRED_ORDER,
+    allocator_order,
+    variant_name,
+    variant_rank,
+)
 from analysis.stats import mean_ci
 
 GROUP = ["scenario", "planner", "allocator", "n_agents"]
-PREFERRED_ORDER = ("hungarian", "local_hungarian", "magnnet", "auction", "greedy", "fcfs",
-                   "random")
 
 #: FleetPy's labels of the taxi-style columns that mean the same thing (for users who compare).
 FLEETPY_LABELS = {
@@ -105,37 +111,6 @@ def with_series(df: pd.DataFrame, summary: pd.DataFrame) -> pd.DataFrame:
     return df
 
 
-def allocator_order(names) -> list[str]:
-    """Allocators in the paper's order (Hungarian first), then the rest alphabetically."""
-    names = set(names)
-    first = [n for n in PREFERRED_ORDER if n in names]
-    return first + sorted(names - set(first))
-
-
-def variant_name(scenario: str) -> str:
-    """``imm`` / ``30s`` for a batch-window variant (``<name>-immediate`` /
-    ``<name>-batch30s``, see ``Scenario.variants``), else the scenario's name."""
-    head, _, tail = str(scenario).rpartition("-")
-    if head and tail == "immediate":
-        return "imm"
-    if head and tail.startswith("batch") and tail.endswith("s"):
-        return tail.removeprefix("batch")
-    return str(scenario)
-
-
-def variant_rank(scenario: str) -> tuple:
-    """Immediate first, then batch windows by length, then other scenarios by name."""
-    v = variant_name(scenario)
-    if v == "imm":
-        return (0, 0.0, "")
-    if v != scenario:
-        try:
-            return (0, float(v.removesuffix("s")), "")
-        except ValueError:
-            pass
-    return (1, 0.0, str(scenario))
-
-
 def sort_groups(df: pd.DataFrame) -> pd.DataFrame:
     """Rows ordered by scenario (batch-window variants: immediate first, then by window),
     planner, allocator (paper order), N and repositioner (``stay`` first)."""
@@ -159,17 +134,11 @@ def sort_groups(df: pd.DataFrame) -> pd.DataFrame:
 
 
 def paired_gaps(summary: pd.DataFrame, reference: str = "hungarian") -> pd.Series:
-    """Per run: (total cost - reference's total cost) / reference's total cost on the same
-    instance (scenario, planner, N, seed); NaN where there is no reference run or it costs 0."""
-    inst = ["scenario", "planner", "n_agents", "seed"]
-    ref = (summary.loc[summary["allocator"] == reference, [*inst, "total_cost"]]
-                  .drop_duplicates(inst).rename(columns={"total_cost": "_ref"}))
-    merged = summary[inst + ["total_cost"]].merge(ref, on=inst, how="left")
-    with np.errstate(divide="ignore", invalid="ignore"):
-        gap = (merged["total_cost"] - merged["_ref"]) / merged["_ref"]
-    gap[~(merged["_ref"] > 0)] = math.nan
-    gap.index = summary.index
-    return gap
+    """Per run: its gap to the ``reference`` allocator's run on the same instance (scenario,
+    planner, repositioner, N, seed), as :func:`analysis.compare.paired_gaps` defines it (the
+    CLI's tables use the same); NaN where there is no reference run or it costs 0."""
+    gaps = compare.paired_gaps(summary.to_dict("records"), reference)
+    return pd.Series(gaps, index=summary.index, dtype=float)
 
 
 def allocator_metrics(summary: pd.DataFrame, reference: str = "hungarian",
@@ -272,11 +241,14 @@ def customer_stats(trips: pd.DataFrame) -> dict:
     requests = len(trips)
     rides = int((trips["state"] == "completed").sum())
     rejections = int(trips["state"].isin(REJECTED_STATES).sum())
+    cancelled = int((trips["state"] == "cancelled").sum())
     wait = trips["wait"].to_numpy(dtype=float)
     return {
         "requests": requests, "rides": rides, "rejections": rejections,
+        "cancelled": cancelled, "failed": int((trips["state"] == "failed").sum()),
         "rejectionRate": rejections / requests if requests else math.nan,
         "service_rate": rides / requests if requests else math.nan,
+        "cancelRate": cancelled / requests if requests else math.nan,
         "wait_average": _stat(wait, np.mean), "wait_median": _stat(wait, np.median),
         "wait_p90": _stat(wait, lambda v: np.quantile(v, 0.9)),
         "wait_p95": _stat(wait, lambda v: np.quantile(v, 0.95)),
@@ -438,7 +410,46 @@ def taxi_metrics(summary: pd.DataFrame, tasks: pd.DataFrame, vehicles: pd.DataFr
     ``direct`` (per row of ``tasks``) the trips' free-flow times where the tasks table lacks
     ``direct_seconds``."""
     summary = with_series(summary, summary)
-    return _taxi(summary, tasks, vehicles, events, series_keys(summary), direct)
+    keys = series_keys(summary)
+    out = _taxi(summary, tasks, vehicles, events, keys, direct)
+    ci = seed_intervals(summary, keys)
+    return out.merge(ci, on=keys, how="left") if len(out) and len(ci) else out
+
+
+#: The taxi columns with a 95 % interval over seeds (``<column>_ci95``), and how one run's value
+#: is computed from its summary row.
+RUN_VALUES = {
+    "service_rate": lambda s: s["tasks_completed"] / s["n_tasks"],
+    "rejectionRate": lambda s: (s["tasks_rejected"] + s["tasks_expired"]
+                                + s.get("tasks_unreachable", 0)) / s["n_tasks"],
+    "cancelRate": lambda s: s["tasks_cancelled"] / s["n_tasks"],
+    "wait_average": lambda s: s["wait_time_mean"],
+    "emptyRatio": lambda s: s["empty_distance"] / s["distance"],
+}
+
+
+def seed_intervals(summary: pd.DataFrame, keys: list[str] | None = None,
+                   level: float = 0.95) -> pd.DataFrame:
+    """Per series (``keys``): for each column of :data:`RUN_VALUES`, the half-width of the
+    ``level`` Student-t interval of the mean over the series' runs (seeds) of the run's value
+    (``<column>_ci95``; NaN with one run). The taxi tables show them as ``mean ± half-width``;
+    the means themselves pool the tasks of the runs, which for equal-sized runs is the same
+    mean."""
+    keys = keys or series_keys(summary)
+    rows = []
+    with np.errstate(divide="ignore", invalid="ignore"):
+        values = {}
+        for col, fn in RUN_VALUES.items():
+            try:
+                values[col] = pd.to_numeric(fn(summary), errors="coerce").astype(float)
+            except KeyError:  # an older summary without that column
+                continue
+    for key, idx in summary.groupby(keys, sort=False).groups.items():
+        row = dict(zip(keys, key if isinstance(key, tuple) else (key,)))
+        for col, v in values.items():
+            row[f"{col}_ci95"] = mean_ci(v.loc[idx], level)[1]
+        rows.append(row)
+    return pd.DataFrame(rows, columns=[*keys, *(f"{c}_ci95" for c in values)])
 
 
 def run_metrics(summary: pd.DataFrame, tasks: pd.DataFrame, vehicles: pd.DataFrame,

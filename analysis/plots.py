@@ -40,9 +40,15 @@ def _save(fig, path: Path) -> Path:
 
 
 def _colours(names) -> dict:
+    """A colour per name, none used twice: tab10 up to 10 names, tab20 up to 20, past that
+    evenly spaced along a perceptually ordered map (turbo). Figures with many series draw
+    small multiples instead (:mod:`analysis.taxi_plots`), where colours stay few."""
     from matplotlib import colormaps
 
     names = list(names)
+    if len(names) > 20:
+        cmap = colormaps["turbo"]
+        return {n: cmap(0.05 + 0.9 * i / (len(names) - 1)) for i, n in enumerate(names)}
     cmap = colormaps["tab10" if len(names) <= 10 else "tab20"]
     return {n: cmap(i % cmap.N) for i, n in enumerate(names)}
 

@@ -36,19 +36,42 @@ TASK_ASSIGNED = (0.95, 0.80, 0.10, 1)
 HIDDEN = (0.0, 0.0, -1e4)
 
 
-def _pybullet():
-    """Import pybullet without its build banner on the C-level stderr."""
-    fd = os.dup(2)
-    try:
-        with open(os.devnull, "w") as devnull:
-            os.dup2(devnull.fileno(), 2)
-            import pybullet
+@contextlib.contextmanager
+def _quiet_c_output():
+    """C-level stdout and stderr to the null device inside the block (PyBullet's build banner
+    at import, its lines at connect); Python's and C's buffers flushed around it. The same as
+    ``dispatch.physics.quiet_c_output``: analysis does not import ``dispatch``."""
+    import sys
 
-            with contextlib.suppress(Exception):
-                ctypes.CDLL(None).fflush(None)
+    def c_flush() -> None:
+        with contextlib.suppress(Exception):
+            ctypes.CDLL(None).fflush(None)
+
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    c_flush()
+    saved = {}
+    for fd in (1, 2):
+        with contextlib.suppress(OSError):
+            saved[fd] = os.dup(fd)
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        for fd in saved:
+            os.dup2(null, fd)
+        yield
     finally:
-        os.dup2(fd, 2)
-        os.close(fd)
+        c_flush()
+        for fd, copy in saved.items():
+            os.dup2(copy, fd)
+            os.close(copy)
+        os.close(null)
+
+
+def _pybullet():
+    """Import pybullet without its build banner (C-level stdout or stderr)."""
+    with _quiet_c_output():
+        import pybullet
     return pybullet
 
 
@@ -57,7 +80,8 @@ class _Scene:
 
     def __init__(self, world, obstacles, vehicles, tasks, marker: float) -> None:
         self.p = p = _pybullet()
-        self.c = p.connect(p.DIRECT)
+        with _quiet_c_output():
+            self.c = p.connect(p.DIRECT)
         w, d, _ = world
         self._box((0, 0, -0.1), (w, d, 0.0), GROUND)
         for b in obstacles.itertuples(index=False):

@@ -42,9 +42,10 @@ DYNAMIC_FIGURES = ("served_vs_n.png", "wait_vs_n.png", "cost_per_task_vs_n.png",
 ROAD_FIGURES = ("map.png", "hourly.png", "fleet_state.png", "wait_by_allocator.png")
 
 #: The taxi columns the report shows (taxi.csv has them all).
-TAXI_COLUMNS = ["runs", "requests", "rides", "rejectionRate", "wait_average", "wait_median",
-                "wait_p90", "wait_p95", "wait_max", "inVehicleTravelTime_mean",
-                "detour_ratio_mean", "utilization", "emptyRatio", "vkm_per_ride"]
+TAXI_COLUMNS = ["runs", "requests", "rides", "rejections", "cancelled", "failed", "service_rate",
+                "rejectionRate", "cancelRate", "wait_average", "wait_median", "wait_p90",
+                "wait_p95", "wait_max", "inVehicleTravelTime_mean", "detour_ratio_mean",
+                "utilization", "emptyRatio", "vkm_per_ride"]
 #: ... and of shared rides, where some ride was shared (occupancy: passenger-km / vehicle-km)
 SHARED_COLUMNS = ["occupancy", "shared_rate", "delay_mean"]
 
@@ -126,7 +127,13 @@ def _taxi_view(taxi: pd.DataFrame, columns: list[str]) -> pd.DataFrame:
     keys = ["allocator", "n_agents"] + [k for k in ("scenario", "planner", "reposition")
                                          if k in taxi and taxi[k].nunique() > 1]
     cols = [c for c in columns if c in taxi.columns]
-    return taxi[keys + cols].rename(columns={"n_agents": "N"})
+    view = taxi[keys + cols].rename(columns={"n_agents": "N"})
+    for c in cols:  # mean ± half-width of the 95 % interval over seeds, where there is one
+        ci = f"{c}_ci95"
+        if ci in taxi.columns and taxi[ci].notna().any():
+            digits = 1 if c == "wait_average" else 3
+            view[c] = [_pm(float(m), float(h), digits) for m, h in zip(taxi[c], taxi[ci])]
+    return view
 
 
 def table_dynamic(dm: pd.DataFrame) -> pd.DataFrame:
@@ -163,9 +170,11 @@ def task_sources(res: Results, summary: pd.DataFrame) -> dict[str, str]:
 
 def write_report(source: Results | str | os.PathLike | list, out: str | os.PathLike, *,
                  fmt: str = "md", run_id: str | None = None,
-                 reference: str = "hungarian") -> list[Path]:
+                 reference: str = "hungarian", series=None) -> list[Path]:
     """Write the report of ``source`` (a :class:`Results` or one or more folders) into
-    ``out``; returns the files written (the report first)."""
+    ``out``; returns the files written (the report first). ``series``: glob patterns of the
+    series the taxi figures draw (``"hungarian*"``, ``"* 30s*"``; see
+    :func:`analysis.taxi_plots.select`; all when None); the tables keep every series."""
     if fmt not in ("md", "html"):
         raise ValueError(f"report format must be 'md' or 'html', got {fmt!r}")
     res = source if isinstance(source, Results) else open_results(
@@ -192,7 +201,7 @@ def write_report(source: Results | str | os.PathLike | list, out: str | os.PathL
         sections += _voxel_part(res, voxel, tasks, vehicles, events, out, written,
                                 run_id if run_id in set(voxel["run_id"]) else None, reference)
     if len(road):
-        sections += _road_part(res, road, tasks, vehicles, events, direct, out, written,
+        sections += _road_part(res, road, tasks, vehicles, events, direct, out, written, series,
                                run_id if run_id in set(road["run_id"]) else None)
     taxi = M.taxi_metrics(summary, tasks, vehicles, events, direct)
     per_run = M.run_metrics(summary, tasks, vehicles, events, direct)
@@ -245,7 +254,16 @@ def _head(res, summary) -> list:
     return [("h1", f"Report: {scen}"),
             ("p", (f"{len(summary)} runs from {', '.join(str(x.path) for x in res.sources)}: "
                    f"allocators {allocs}; N = {ns}; {seeds} seed(s).")
-             + (f" **{len(errors)} run(s) failed** (see the end)." if len(errors) else ""))]
+             + (f" **{len(errors)} run(s) failed** (see the end)." if len(errors) else "")
+             + (f" {duplicates_note(res)}." if res.duplicates else ""))]
+
+
+def duplicates_note(res: Results) -> str:
+    """One line on the runs found in more than one folder (counted once), e.g. for the CLI."""
+    d = res.duplicates
+    more = f" and {len(d) - 1} more" if len(d) > 1 else ""
+    return (f"{len(d)} run(s) found in more than one folder, counted once (read from the first "
+            f"folder that holds them): {d[0].run_id} in {d[0].kept} and {d[0].dropped}{more}")
 
 
 def _voxel_part(res, summary, tasks, vehicles, events, out, written, run_id, reference) -> list:
@@ -345,7 +363,8 @@ def _voxel_part(res, summary, tasks, vehicles, events, out, written, run_id, ref
     return s
 
 
-def _road_part(res, summary, tasks, vehicles, events, direct, out, written, run_id) -> list:
+def _road_part(res, summary, tasks, vehicles, events, direct, out, written, only,
+               run_id) -> list:
     """The taxi study: metrics, per-hour series, map, hourly plots, fleet states, waits."""
     import numpy as np
 
@@ -397,11 +416,11 @@ def _road_part(res, summary, tasks, vehicles, events, direct, out, written, run_
     cols = TP.series_columns(summary)
     runs = {k if isinstance(k, tuple) else (k,): n
             for k, n in summary.groupby(cols)["run_id"].nunique().items()}
-    TP.hourly(hc_bins, out / "hourly.png", bin_s=bin_s, runs=runs,
+    TP.hourly(hc_bins, out / "hourly.png", bin_s=bin_s, runs=runs, only=only,
               title=f"{scen}: demand, service and waiting (by time of release)")
-    TP.fleet_state(hf_bins, out / "fleet_state.png", bin_s=bin_s,
+    TP.fleet_state(hf_bins, out / "fleet_state.png", bin_s=bin_s, only=only,
                    title=f"{scen}: fleet state over time (mean vehicles per state)")
-    TP.wait_by_group(trips.loc[trips["wait"].notna()], out / "wait_by_allocator.png",
+    TP.wait_by_group(trips.loc[trips["wait"].notna()], out / "wait_by_allocator.png", only=only,
                      title=f"{scen}: wait from release to pickup, seeds pooled")
     written += [out / f for f in ROAD_FIGURES]
     from analysis.energy_plots import energy_section
@@ -414,8 +433,13 @@ def _road_part(res, summary, tasks, vehicles, events, direct, out, written, run_
         ("p", ("Per series (allocator, fleet size N and, where they differ, scenario variant "
                "and repositioner), requests pooled over the seeds. Names as "
                "MATSim DRT's customer and vehicle stats print them: rides = served trips; "
-               "rejectionRate = (rejected at once + expired waiting + unreachable) / requests; "
+               "rejections = rejected at once + expired waiting + unreachable; cancelled = "
+               "still open or aboard when the run ended; failed = aboard a vehicle that broke "
+               "down (rides + rejections + cancelled + failed = requests); service_rate, "
+               "rejectionRate, cancelRate = rides, rejections, cancelled / requests; "
                "wait = release → pickup (s; median, p90 by linear interpolation); "
+               "a ± gives the half-width of the 95 % Student-t interval of the mean over "
+               "seeds (the runs' own values; none with one seed); "
                "inVehicleTravelTime = pickup → drop-off (s); detour_ratio = in-vehicle time / "
                "the trip's direct free-flow time (1: driven straight at free flow); "
                "utilization = share of the vehicles' available time (not broken down) driving "

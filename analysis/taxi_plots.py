@@ -194,18 +194,96 @@ def series(df: pd.DataFrame) -> list[tuple[tuple, str, pd.DataFrame]]:
     out = []
     for key, rows in sorted(d.groupby(cols, sort=False), key=lambda kv: order(kv[0])):
         k = dict(zip(cols, key))
-        parts = [str(k["allocator"])]
-        if varies.get("n_agents"):
-            parts.append(f"N={k['n_agents']}")
-        if varies.get("scenario"):
-            parts.append(variant_name(k["scenario"]))
-        if varies.get("planner"):
-            parts.append(str(k["planner"]))
-        label = " ".join(parts)
-        if varies.get("reposition") and k["reposition"] != "stay":
-            label += f" + {k['reposition']}"
+        rest = panel_name(k, varies)
+        label = f"{k['allocator']} {rest}" if rest else str(k["allocator"])
         out.append((tuple(key), label, rows))
     return out
+
+
+def panel_name(k: dict, varies: dict) -> str:
+    """What tells a series apart besides its allocator: ``N=500 30s + demand`` (empty when
+    only the allocator differs); the title of its panel in small multiples."""
+    parts = []
+    if varies.get("n_agents"):
+        parts.append(f"N={k['n_agents']}")
+    if varies.get("scenario"):
+        parts.append(variant_name(k["scenario"]))
+    if varies.get("planner"):
+        parts.append(str(k["planner"]))
+    name = " ".join(parts)
+    if varies.get("reposition") and k.get("reposition", "stay") != "stay":
+        name += f" + {k['reposition']}"
+    return name.strip()
+
+
+#: More series than this and the per-time and wait figures switch to small multiples: one
+#: panel per combination of N, batch window, planner and repositioner, the allocators in it
+#: coloured alike in every panel.
+MANY = 8
+
+
+def select(groups: list, patterns) -> list:
+    """The series of ``groups`` (:func:`series` triples) whose label matches one of the glob
+    ``patterns`` (``fnmatch``, case-insensitive: ``"hungarian*"``, ``"* 30s*"``,
+    ``"*+ demand"``); all of them when ``patterns`` is empty or None."""
+    from fnmatch import fnmatch
+
+    if not patterns:
+        return groups
+    pats = [p.lower() for p in ([patterns] if isinstance(patterns, str) else patterns)]
+    kept = [g for g in groups if any(fnmatch(g[1].lower(), p) for p in pats)]
+    if groups and not kept:
+        raise ValueError(f"no series matches {', '.join(map(repr, pats))}; the series: "
+                         f"{', '.join(g[1] for g in groups[:12])}"
+                         + (f" and {len(groups) - 12} more" if len(groups) > 12 else ""))
+    return kept
+
+
+def twins(groups: list, values) -> dict[str, str]:
+    """label -> the label of the first earlier series with the same ``values(rows)`` (arrays
+    equal, NaN equal to NaN): series that lie exactly on each other in a figure, e.g. two
+    allocators that decide alike one request at a time. The figures mark them."""
+    seen: list[tuple[str, np.ndarray]] = []
+    out = {}
+    for _key, label, rows in groups:
+        v = np.asarray(values(rows), dtype=float)
+        for other, w in seen:
+            if v.shape == w.shape and np.array_equal(v, w, equal_nan=True):
+                out[label] = other
+                break
+        else:
+            seen.append((label, v))
+    return out
+
+
+def _panels(groups: list) -> list[tuple[str, list]]:
+    """``groups`` split into small multiples: (panel title, its series) in series order."""
+    if not groups:
+        return []
+    cols = series_columns(groups[0][2])
+    keys = [dict(zip(cols, key)) for key, _, _ in groups]
+    varies = {c: len({str(k.get(c)) for k in keys}) > 1 for c in cols}
+    panels: dict[str, list] = {}
+    for k, g in zip(keys, groups):
+        name = panel_name(k, varies)
+        if varies.get("reposition") and k.get("reposition", "stay") == "stay":
+            name = f"{name} (stay)".strip()  # the panel beside '+ demand' names its own
+        panels.setdefault(name or "all series", []).append(g)
+    return list(panels.items())
+
+
+def _allocator_styles(groups: list) -> tuple[dict, dict]:
+    """A colour and a marker per allocator (the same in every panel)."""
+    allocs = allocator_order({dict(zip(series_columns(g), k))["allocator"]
+                              for k, _, g in groups})
+    colours = _colours(allocs)
+    markers = ("o", "s", "^", "D", "v", "P", "X", "*", "h", "<")
+    return colours, {a: markers[i % len(markers)] for i, a in enumerate(allocs)}
+
+
+def _allocator_of(group) -> str:
+    key, _, rows = group
+    return str(dict(zip(series_columns(rows), key))["allocator"])
 
 
 def per_run(customers: pd.DataFrame,
@@ -232,38 +310,56 @@ def _same_demand(groups: list[tuple[str, pd.DataFrame]]) -> bool:
                and len(g) == len(ref) for _, g in groups[1:])
 
 
+def _hourly_values(g: pd.DataFrame) -> np.ndarray:
+    return g[["t_h", "requests", "rides", "rejectionRate", "wait_median", "wait_p90"]] \
+        .to_numpy(dtype=float)
+
+
 def hourly(customers: pd.DataFrame, path: Path, *, bin_s: float, runs: dict | None = None,
-           title: str = "") -> Path:
+           title: str = "", only=None) -> Path:
     """Three panels against time of release: requests and served trips per bin (mean per
     run, :func:`per_run`), rejection rate, and wait median / p90 per series (:func:`series`).
     The requests are one set of bars when every series has the same (the seeds' demand, as
     in a study of allocators), else a dotted line per series. ``customers``: rows of
     :func:`analysis.metrics.hourly_customers` with ``t_h`` (bin start, hours); ``runs``:
-    series key -> number of runs pooled, for rows without a ``runs`` column."""
+    series key -> number of runs pooled, for rows without a ``runs`` column; ``only``: glob
+    patterns of the series to draw (:func:`select`).
+
+    A series identical to an earlier one (:func:`twins`) is drawn dashed over it and its
+    legend entry says ``= <the other>``. Past :data:`MANY` series the figure is small
+    multiples (:func:`_hourly_panels`)."""
+    labelled = {label: g for label, g in per_run(customers, runs)}
+    groups = [(k, label, labelled[label]) for k, label, _ in select(series(customers), only)]
+    if len(groups) > MANY and len(_panels(groups)) > 1:
+        return _hourly_panels(groups, path, bin_s=bin_s, title=title)
+    same_as = twins(groups, _hourly_values)
     fig = _figure(11, 8.4)
     a1, a2, a3 = fig.subplots(3, 1, sharex=True)
-    groups = per_run(customers, runs)
-    colours = _colours([label for label, _ in groups])
+    colours = _colours([label for _, label, _ in groups])
     width = bin_s / 3600
     markers = ("o", "s", "^", "D", "v", "P", "X", "*")
-    same = bool(groups) and _same_demand(groups)
+    pairs = [(label, g) for _, label, g in groups]
+    same = bool(pairs) and _same_demand(pairs)
     if same:  # one set of bars: the demand every series saw
-        g = groups[0][1]
+        g = pairs[0][1]
         a1.bar(g["t_h"], g["requests"], width=width, align="edge", color="0.85",
                edgecolor="0.6", linewidth=0.5, label="requests")
-    for i, (label, g) in enumerate(groups):
+    for i, (label, g) in enumerate(pairs):
         c = colours[label]
         # allocators that decide alike draw on top of each other: the first ones are drawn
-        # wider, each with its own marker, so every line stays visible
+        # wider, each with its own marker, and an identical series dashed, so every line
+        # stays visible
         lw, mk = max(3.2 - 0.6 * i, 1.0), markers[i % len(markers)]
         x = g["t_h"].to_numpy(dtype=float) + width / 2
         if not same:  # series of different demand: each its own requests
             a1.plot(x, g["requests"], color=c, linewidth=1.0, linestyle=":")
-        style = {"color": c, "linewidth": lw, "marker": mk, "markersize": 4}
-        a1.plot(x, g["rides"], label=label, **style)
+        twin = same_as.get(label)
+        style = {"color": c, "linewidth": 1.4 if twin else lw, "marker": mk, "markersize": 4,
+                 "linestyle": (0, (4, 2)) if twin else "-", "zorder": 3 if twin else 2}
+        a1.plot(x, g["rides"], label=f"{label} (= {twin})" if twin else label, **style)
         a2.plot(x, 100 * g["rejectionRate"], **style)
         a3.plot(x, g["wait_median"] / 60, **style)
-        a3.plot(x, g["wait_p90"] / 60, linestyle="--", **{**style, "marker": None})
+        a3.plot(x, g["wait_p90"] / 60, **{**style, "linestyle": "--", "marker": None})
     unit = "hour" if bin_s == 3600 else f"{bin_s / 60:g} min"
     a1.set_ylabel(f"trips per {unit}, mean per run\n(" + ("bars" if same else "dotted")
                   + ": requests;\nlines: served)")
@@ -272,8 +368,7 @@ def hourly(customers: pd.DataFrame, path: Path, *, bin_s: float, runs: dict | No
     a2.set_ylim(bottom=0)
     a3.set_ylabel("wait, release → pickup (min)\nsolid: median, dashed: p90")
     a3.set_ylim(bottom=0)
-    # one legend for the three panels (a series has the same colour and marker in each), in
-    # two columns past 20 series so that a whole study's series fit beside the panels
+    # one legend for the three panels (a series has the same colour and marker in each)
     h, lab = a1.get_legend_handles_labels()
     fig.legend(h, lab, loc="outside right center", fontsize="x-small",
                ncols=1 if len(lab) <= 20 else 2, frameon=False)
@@ -283,14 +378,106 @@ def hourly(customers: pd.DataFrame, path: Path, *, bin_s: float, runs: dict | No
     return _save(fig, path)
 
 
+def _hourly_panels(groups: list, path: Path, *, bin_s: float, title: str) -> Path:
+    """:func:`hourly` as small multiples: a column of three panels (served trips, rejection
+    rate, wait median and p90) per combination of N, batch window and repositioner
+    (:func:`_panels`), at most four columns a row; in each the allocators, coloured and marked
+    alike in every panel; a series identical to another of its panel dashed, the panel saying
+    which."""
+    from matplotlib.lines import Line2D
+
+    panels = _panels(groups)
+    ncol = min(4, len(panels))
+    nrow = math.ceil(len(panels) / ncol)
+    fig = _figure(3.9 * ncol + 1.8, 1.2 + 5.6 * nrow)
+    axes = fig.subplots(3 * nrow, ncol, sharex=True, squeeze=False)
+    colours, markers = _allocator_styles(groups)
+    width = bin_s / 3600
+    same = _same_demand([(label, g) for _, label, g in groups])
+    for ax in axes[1::3].ravel():
+        ax.sharey(axes[1, 0])
+    for ax in axes[2::3].ravel():
+        ax.sharey(axes[2, 0])
+    for ax in axes[0::3].ravel():
+        ax.sharey(axes[0, 0])
+    everywhere = twins(groups, _hourly_values)
+    panel_of = {label: name for name, members in panels for _k, label, _g in members}
+    for p, (name, members) in enumerate(panels):
+        r, c = divmod(p, ncol)
+        a1, a2, a3 = axes[3 * r, c], axes[3 * r + 1, c], axes[3 * r + 2, c]
+        same_as = twins(members, _hourly_values)
+        others = {panel_of.get(everywhere.get(label)) for _k, label, _g in members}
+        if len(others) == 1 and None not in others:  # the whole panel repeats another
+            name = f"{name} (= {others.pop()})"
+        if same:
+            g = members[0][2]
+            a1.bar(g["t_h"], g["requests"], width=width, align="edge", color="0.88",
+                   edgecolor="0.7", linewidth=0.4)
+        for grp in members:
+            _, label, g = grp
+            alloc = _allocator_of(grp)
+            twin = same_as.get(label)
+            style = {"color": colours[alloc], "marker": markers[alloc], "markersize": 3,
+                     "linewidth": 1.2 if twin else 2.0, "zorder": 3 if twin else 2,
+                     "linestyle": (0, (3, 2)) if twin else "-"}
+            x = g["t_h"].to_numpy(dtype=float) + width / 2
+            if not same:
+                a1.plot(x, g["requests"], color=colours[alloc], linewidth=0.8, linestyle=":")
+            a1.plot(x, g["rides"], **style)
+            a2.plot(x, 100 * g["rejectionRate"], **style)
+            a3.plot(x, g["wait_median"] / 60, **style)
+            a3.plot(x, g["wait_p90"] / 60, **{**style, "linewidth": 0.9, "linestyle": "--",
+                                              "marker": None})
+        a1.set_title(name, fontsize="medium")
+        if same_as:
+            a1.text(0.02, 0.97, "identical: " + "; ".join(
+                f"{_short(a)} = {_short(b)}" for a, b in same_as.items()),
+                transform=a1.transAxes, va="top", fontsize="x-small",
+                bbox={"facecolor": "white", "alpha": 0.8, "edgecolor": "0.7"})
+        for ax in (a1, a2, a3):
+            ax.grid(True, alpha=0.3)
+        a2.set_ylim(bottom=0)
+        a3.set_ylim(bottom=0)
+    for p in range(len(panels), nrow * ncol):
+        r, c = divmod(p, ncol)
+        for k in range(3):
+            axes[3 * r + k, c].set_visible(False)
+    unit = "hour" if bin_s == 3600 else f"{bin_s / 60:g} min"
+    for r in range(nrow):
+        axes[3 * r, 0].set_ylabel(f"served per {unit}\n(mean per run)")
+        axes[3 * r + 1, 0].set_ylabel("rejected (%)")
+        axes[3 * r + 2, 0].set_ylabel("wait (min)\nmedian, p90 --")
+    for ax in axes[-1]:
+        ax.set_xlabel("time of release (h)")
+    handles = [Line2D([], [], color=colours[a], marker=markers[a], linewidth=2, label=a)
+               for a in colours]
+    handles.append(Line2D([], [], color="0.3", linestyle=(0, (3, 2)),
+                          label="identical to another\nseries of its panel"))
+    if same:
+        from matplotlib.patches import Patch
+
+        handles.append(Patch(facecolor="0.88", edgecolor="0.7", label="requests"))
+    fig.legend(handles=handles, loc="outside right center", fontsize="small", frameon=False)
+    fig.suptitle((title or "Demand, service and waiting over the day")
+                 + f"\n{len(groups)} series, one panel per fleet size / window / repositioner")
+    return _save(fig, path)
+
+
+def _short(label: str) -> str:
+    return label.split(" ")[0]
+
+
 def fleet_state(fleet: pd.DataFrame, path: Path, *, bin_s: float, title: str = "",
-                max_panels: int = 40) -> Path:
+                max_panels: int = 40, only=None) -> Path:
     """Stacked areas of the mean number of vehicles in each fleet state per time bin, one panel
-    per series (:func:`series`; at most ``max_panels``, the first ones in its order, the title
-    says how many are left out). ``fleet``: rows of :func:`analysis.metrics.hourly_fleet` with
-    ``t_h``."""
-    every = series(fleet)
+    per series (:func:`series`, those matching ``only``: :func:`select`; at most
+    ``max_panels``, the first ones in its order, the title says how many are left out); a
+    series identical to an earlier one says so in its title. ``fleet``: rows of
+    :func:`analysis.metrics.hourly_fleet` with ``t_h``."""
+    every = select(series(fleet), only)
     groups = every[:max_panels]
+    same_as = twins(groups, lambda g: g.sort_values("t_h")[
+        ["t_h", *(c for c in FLEET_STATES if c in g.columns)]].to_numpy(dtype=float))
     k = len(groups)
     cols = 1 if k == 1 else 2 if k <= 8 else 3 if k <= 18 else 4
     rows = max(1, math.ceil(k / cols))
@@ -308,7 +495,9 @@ def fleet_state(fleet: pd.DataFrame, path: Path, *, bin_s: float, title: str = "
         ax.stackplot(x, ys, step="post", colors=[FLEET_COLOURS[s] for s in shown],
                      labels=[FLEET_LABELS[s] for s in shown], linewidth=0)
         n = dict(zip(series_columns(g), key))["n_agents"]
-        ax.set_title(label if "N=" in label else f"{label} (N = {n})", fontsize="medium")
+        name = label if "N=" in label else f"{label} (N = {n})"
+        ax.set_title(name + (f"\n(= {same_as[label]})" if label in same_as else ""),
+                     fontsize="medium")
         ax.grid(True, alpha=0.3)
         ax.set_xlim(x[0], x[-1])
     for ax in axes[len(groups):]:
@@ -328,32 +517,86 @@ def fleet_state(fleet: pd.DataFrame, path: Path, *, bin_s: float, title: str = "
     return _save(fig, path)
 
 
-def wait_by_group(waits: pd.DataFrame, path: Path, title: str = "") -> Path:
-    """Left: ECDF of the wait (release -> pickup, minutes) per series (:func:`series`);
-    right: box plots (quartiles, whiskers at 1.5 IQR, no fliers) per series."""
-    groups = series(waits)
-    fig = _figure(10.5 if len(groups) <= 10 else 13, max(4.6, 1.4 + 0.24 * len(groups)))
-    left, right = fig.subplots(1, 2, width_ratios=[1.2, 1])
+def wait_by_group(waits: pd.DataFrame, path: Path, title: str = "", only=None) -> Path:
+    """Left: ECDF of the wait (release -> pickup, minutes) per series (:func:`series`, those
+    matching ``only``: :func:`select`); right: box plots (quartiles, whiskers at 1.5 IQR, no
+    fliers) per series. A series with exactly the waits of an earlier one (:func:`twins`) is
+    drawn dashed and labelled ``= <the other>``. Past :data:`MANY` series the ECDFs are small
+    multiples (one panel per N / window / repositioner, allocators coloured alike)."""
+    groups = select(series(waits), only)
     labels = [label for _, label, _ in groups]
-    colours = _colours(labels)
     data = []
-    for _key, label, g in groups:
+    for _key, _label, g in groups:
         w = np.sort(g["wait"].to_numpy(dtype=float) / 60)
-        w = w[np.isfinite(w)]
-        data.append(w)
-        if len(w):
-            left.step(w, np.arange(1, len(w) + 1) / len(w), where="post", color=colours[label],
-                      linewidth=max(3.0 - 0.6 * len(data), 1.0) + 0.6,
-                      label=f"{label} (median {np.median(w):.1f} min)")
-    left.set_xlabel("wait, release → pickup (min)")
-    left.set_ylabel("share of the requests picked up")
-    left.set_ylim(0, 1.01)
-    left.set_xlim(left=0)
-    left.grid(True, alpha=0.3)
-    if groups and len(groups) <= 10:
-        left.legend(fontsize="x-small", loc="lower right")
-    left.set_title("Wait distribution (ECDF)" if len(groups) <= 10 else
-                   "Wait distribution (ECDF; colours as in the box plot)")
+        data.append(w[np.isfinite(w)])
+    waits_of = dict(zip(labels, data))
+    same_as = twins(groups, lambda g: np.sort(g["wait"].to_numpy(dtype=float)))
+    panels = _panels(groups) if len(groups) > MANY else []
+    many = len(panels) > 1
+    fig = _figure(10.5 if len(groups) <= 10 else 15 if many else 13,
+                  max(4.6, 1.4 + 0.24 * len(groups)))
+    if many:
+        left_fig, right_fig = fig.subfigures(1, 2, width_ratios=[1.5, 1])
+        ncol = min(3, len(panels))
+        nrow = math.ceil(len(panels) / ncol)
+        lefts = left_fig.subplots(nrow, ncol, sharex=True, sharey=True, squeeze=False).ravel()
+        right = right_fig.subplots()
+        colours_a, _ = _allocator_styles(groups)
+        colours = {label: colours_a[_allocator_of(g)] for g, label in zip(groups, labels)}
+    else:
+        left, right = fig.subplots(1, 2, width_ratios=[1.2, 1])
+        colours = _colours(labels)
+
+    def ecdf(ax, label, i, same):
+        w = waits_of[label]
+        if not len(w):
+            return
+        twin = same.get(label)
+        if many:  # in a panel: allocator names (the panel's title says the rest)
+            label_shown = _allocator_of_label(label, groups)
+            twin_shown = _allocator_of_label(twin, groups) if twin else None
+            width = 1.8
+        else:
+            label_shown, twin_shown, width = label, twin, max(3.0 - 0.6 * i, 1.0) + 0.6
+        ax.step(w, np.arange(1, len(w) + 1) / len(w), where="post", color=colours[label],
+                linewidth=1.3 if twin else width,
+                linestyle=(0, (3, 2)) if twin else "-", zorder=3 if twin else 2,
+                label=f"{label_shown} (median {np.median(w):.1f} min)"
+                      + (f" = {twin_shown}" if twin else ""))
+
+    if many:
+        panel_of = {label: name for name, members in panels for _k, label, _g in members}
+        for ax, (name, members) in zip(lefts, panels):
+            here = twins(members, lambda g: np.sort(g["wait"].to_numpy(dtype=float)))
+            for i, (_k, label, _g) in enumerate(members):
+                ecdf(ax, label, i, here)
+            # a whole panel identical to another one (a repositioner that never moved, say)
+            others = {panel_of.get(same_as.get(label)) for _k, label, _g in members}
+            twin_panel = others.pop() if len(others) == 1 else None
+            ax.set_title(name + (f"\n(identical to {twin_panel})" if twin_panel else ""),
+                         fontsize="small")
+            ax.grid(True, alpha=0.3)
+            ax.legend(fontsize="xx-small", loc="lower right")
+            ax.set_ylim(0, 1.01)
+            ax.set_xlim(left=0)
+        for ax in lefts[len(panels):]:
+            ax.set_visible(False)
+        left_fig.supxlabel("wait, release → pickup (min)", fontsize="small")
+        left_fig.supylabel("share of the requests picked up", fontsize="small")
+        left_fig.suptitle("Wait distribution (ECDF), one panel per N / window / "
+                          "repositioner; dashed: identical to another series", fontsize="small")
+    else:
+        for i, label in enumerate(labels):
+            ecdf(left, label, i, same_as)
+        left.set_xlabel("wait, release → pickup (min)")
+        left.set_ylabel("share of the requests picked up")
+        left.set_ylim(0, 1.01)
+        left.set_xlim(left=0)
+        left.grid(True, alpha=0.3)
+        if groups and len(groups) <= 10:
+            left.legend(fontsize="x-small", loc="lower right")
+        left.set_title("Wait distribution (ECDF)" if len(groups) <= 10 else
+                       "Wait distribution (ECDF; colours as in the box plot)")
     keep = [i for i, d in enumerate(data) if len(d)]
     if keep:
         bp = right.boxplot([data[i] for i in keep], orientation="horizontal", patch_artist=True,
@@ -361,13 +604,26 @@ def wait_by_group(waits: pd.DataFrame, path: Path, title: str = "") -> Path:
         for box, i in zip(bp["boxes"], keep):
             box.set_facecolor(colours[labels[i]])
             box.set_alpha(0.6)
+            if labels[i] in same_as:
+                box.set_hatch("///")
         for med in bp["medians"]:
             med.set_color("black")
-        right.set_yticks(range(1, len(keep) + 1), [labels[i] for i in keep], fontsize="small")
+        right.set_yticks(range(1, len(keep) + 1),
+                         [labels[i] + (f"  (= {same_as[labels[i]]})" if labels[i] in same_as
+                                       else "") for i in keep], fontsize="small")
         right.invert_yaxis()
     right.set_xlabel("wait (min)")
-    right.set_title("Per series (box: quartiles)")
+    right.set_title("Per series (box: quartiles;\nhatched: identical to another)"
+                    if same_as else "Per series (box: quartiles)", loc="right",
+                    fontsize="medium")
     right.grid(True, axis="x", alpha=0.3)
     if title:
         fig.suptitle(title)
     return _save(fig, path)
+
+
+def _allocator_of_label(label: str, groups: list) -> str:
+    for g in groups:
+        if g[1] == label:
+            return _allocator_of(g)
+    return label

@@ -29,9 +29,11 @@ released; requests still open or aboard at the end count as cancelled, not rejec
 (H = 24) runs 26 h, as the scenario does, so the last trips can finish.
 
 Then it prints (80 columns) and writes ``<out>/study.md``: per series (allocator, N, batch
-window, repositioner) the share of the requests served, the rejection rate, the wait (release
-to pickup) mean and p90, the fleet utilization, the empty share of the km, the conflicts
-(tasks requested by two vehicles in one round at least once; ``study.md`` also the
+window, repositioner) the share of the requests served, rejected and cancelled (open or aboard
+at the end: served + rejected + cancelled + failed = 100 %), the wait (release to pickup) mean
+and p90, each share and the mean wait with the half-width of its 95 % Student-t interval over
+the seeds (``--seeds``, default 0 1 2), the fleet utilization, the empty share of the km, the
+conflicts (tasks requested by two vehicles in one round at least once; ``study.md`` also the
 conflict-free share of the tasks offered) and the run's wall seconds (mean over seeds, from the
 sweep's completion markers), followed by a paragraph
 computed from the table: who has the lowest mean wait per N and by how much, what batching
@@ -73,7 +75,8 @@ def parse_args(argv=None) -> argparse.Namespace:
                    default=["fcfs", "greedy", "hungarian", "auction", "magnnet"])
     p.add_argument("--batch-windows", type=float, nargs="+", default=[0.0, 30.0])
     p.add_argument("--repositioners", nargs="+", default=["stay", "demand"])
-    p.add_argument("--seeds", type=int, nargs="+", default=[0])
+    p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2],
+                   help="seeds (default 0 1 2: the tables give 95 %% intervals over them)")
     p.add_argument("--comm-range", type=float, default=None, metavar="METRES",
                    help="radio range of the vehicles ([comms] range; default: unlimited)")
     p.add_argument("--no-report", action="store_true", help="skip `dispatch report`")
@@ -181,8 +184,10 @@ def wall_seconds(out: Path) -> dict[str, float]:
 
 
 def study_table(out: Path) -> pd.DataFrame:
-    """Per series: ``label``, ``N``, ``served`` and ``rejected`` (shares of the requests),
-    ``wait_mean`` / ``wait_p90`` (s), ``utilization``, ``empty`` (share of km),
+    """Per series: ``label``, ``N``, ``served``, ``rejected``, ``cancelled`` and
+    ``failed_share`` (shares of the requests; they add up to 1), ``wait_mean`` / ``wait_p90``
+    (s), ``served_ci``, ``rejected_ci``, ``cancelled_ci``, ``wait_mean_ci`` (half-widths of the
+    95 % intervals over seeds, NaN with one seed), ``utilization``, ``empty`` (share of km),
     ``conflicts`` (tasks requested by two vehicles in one round at least once: only
     decentralized allocators under a limited range, and ``greedy``, have any) and
     ``conflict_free`` (share of the tasks offered that were assigned without ever being in
@@ -208,6 +213,12 @@ def study_table(out: Path) -> pd.DataFrame:
             "allocator": r["allocator"], "N": int(r["n_agents"]),
             "window": M.variant_name(r["scenario"]), "reposition": r["reposition"],
             "runs": int(r["runs"]), "served": r["service_rate"], "rejected": r["rejectionRate"],
+            "cancelled": r.get("cancelRate", math.nan), "failed_share": (
+                r.get("failed", 0) / r["requests"] if r["requests"] else math.nan),
+            "served_ci": r.get("service_rate_ci95", math.nan),
+            "rejected_ci": r.get("rejectionRate_ci95", math.nan),
+            "cancelled_ci": r.get("cancelRate_ci95", math.nan),
+            "wait_mean_ci": r.get("wait_average_ci95", math.nan),
             "wait_mean": r["wait_average"], "wait_p90": r["wait_p90"],
             "utilization": r["utilization"], "empty": r["emptyRatio"],
             "conflicts": confl["conflicts"].get(tuple(r[k] for k in KEYS), math.nan),
@@ -225,23 +236,45 @@ def _num(v: float, digits: int = 0) -> str:
     return "-" if not math.isfinite(v) else f"{v:.{digits}f}"
 
 
-#: (header, width in the terminal table, column); ``conflict-free`` only in study.md
-COLUMNS = [("series", 20, "label"), ("N", 4, "N"), ("served", 6, "served"),
-           ("rej.", 6, "rejected"), ("wait", 4, "wait_mean"), ("p90", 4, "wait_p90"),
-           ("util", 6, "utilization"), ("empty", 6, "empty"), ("confl.", 6, "conflicts"),
-           ("conflict-free", 0, "conflict_free"), ("wall s", 7, "wall_s")]
+def _pm(r, col: str, *, pct: bool, digits: int, md: bool) -> str:
+    """``mean±half-width`` of the 95 % interval over seeds (``<col>_ci``; the mean alone with
+    one seed); percentages without their sign in the terminal (the header says %)."""
+    v, h = float(r.get(col, math.nan)), float(r.get(f"{col}_ci", math.nan))
+    if not math.isfinite(v):
+        return "-"
+    scale = 100 if pct else 1
+    m = f"{scale * v:.{digits}f}" + ("%" if pct and md else "")
+    if not math.isfinite(h):
+        return m
+    return f"{m} ± {scale * h:.{digits}f}" if md else f"{m}±{scale * h:.{digits}f}"
 
 
-def _cells(r) -> list[str]:
-    return [str(r["label"]), str(r["N"]), _pct(r["served"]), _pct(r["rejected"]),
-            _num(r["wait_mean"]), _num(r["wait_p90"]), _pct(r["utilization"]),
-            _pct(r["empty"]), _num(r.get("conflicts", math.nan)),
-            _pct(r.get("conflict_free", math.nan)), _num(r["wall_s"], 1)]
+#: (header, width in the terminal table (0: only in study.md), cell of a row (md: for
+#: study.md)); served + rejected + cancelled (+ failed) add up to the requests.
+COLUMNS = [
+    ("series", 17, lambda r, md: str(r["label"])),
+    ("N", 4, lambda r, md: str(r["N"])),
+    ("served%", 9, lambda r, md: _pm(r, "served", pct=True, digits=1, md=md)),
+    ("rej%", 5, lambda r, md: _pm(r, "rejected", pct=True, digits=1, md=md) if md
+     else _num(100 * r["rejected"], 1)),
+    ("canc%", 5, lambda r, md: _pm(r, "cancelled", pct=True, digits=1, md=md) if md
+     else _num(100 * r.get("cancelled", math.nan), 1)),
+    ("wait s", 7, lambda r, md: _pm(r, "wait_mean", pct=False, digits=0, md=md)),
+    ("p90", 0, lambda r, md: _num(r["wait_p90"])),
+    ("util%", 5, lambda r, md: _pct(r["utilization"]) if md else _num(100 * r["utilization"], 1)),
+    ("empty%", 0, lambda r, md: _pct(r["empty"])),
+    ("emp%", 4, lambda r, md: _num(100 * r["empty"], 0)),
+    ("confl.", 6, lambda r, md: _num(r.get("conflicts", math.nan))),
+    ("conflict-free", 0, lambda r, md: _pct(r.get("conflict_free", math.nan))),
+    ("wall s", 7, lambda r, md: _num(r["wall_s"], 1)),
+]
+MD_SKIP = {"emp%"}  # the terminal's short form of a study.md column
 
 
 def text_table(t: pd.DataFrame) -> str:
     """The study table in at most 80 columns (a long series label is cut with '…'; the
-    conflict-free share only in :func:`markdown_table`)."""
+    p90 wait, the intervals of the rejected and cancelled shares and the conflict-free share
+    only in :func:`markdown_table`)."""
     def line(cells):
         out = []
         for (_, w, _), c in zip(COLUMNS, cells):
@@ -252,13 +285,15 @@ def text_table(t: pd.DataFrame) -> str:
         return " ".join(out)
 
     head = line([c for c, _, _ in COLUMNS])
-    return "\n".join([head, "-" * len(head), *(line(_cells(r)) for _, r in t.iterrows())])
+    rows = [line([f(r, False) for _, _, f in COLUMNS]) for _, r in t.iterrows()]
+    return "\n".join([head, "-" * len(head), *rows])
 
 
 def markdown_table(t: pd.DataFrame) -> str:
-    head = "| " + " | ".join(c for c, _, _ in COLUMNS) + " |"
-    rule = "|" + "|".join("---" for _ in COLUMNS) + "|"
-    return "\n".join([head, rule, *("| " + " | ".join(_cells(r)) + " |"
+    cols = [c for c in COLUMNS if c[0] not in MD_SKIP]
+    head = "| " + " | ".join(c for c, _, _ in cols) + " |"
+    rule = "|" + "|".join("---" for _ in cols) + "|"
+    return "\n".join([head, rule, *("| " + " | ".join(f(r, True) for _, _, f in cols) + " |"
                                     for _, r in t.iterrows())])
 
 
@@ -336,12 +371,15 @@ def main(argv=None) -> int:
     intro = (f"Chicago taxi study ({path.name}): {hours}, {a.trips_per_day:g} trips per day, "
              f"{radio}, seeds {a.seeds}. Per series (allocator, N, batch window, "
              "repositioner): share "
-             "of the requests served and rejected (at once or expired), mean and p90 wait "
+             "of the requests served, rejected (at once or expired) and cancelled (open or "
+             "aboard when the run ended; with the few failed these add up to 100 %), mean and "
+             "p90 wait "
              "from release to pickup (s), fleet utilization (driving to a pickup or with a "
              "passenger), empty share of the km, conflicts (tasks requested by two vehicles in one "
              "round at least once) and the conflict-free share of the tasks offered, wall "
              "seconds per run (mean over seeds; the first run of each worker process also "
-             "pays for loading the road network).")
+             "pays for loading the road network). A ± is the half-width of the 95 % "
+             "Student-t interval of the mean over the seeds.")
     para = findings(t)
     print()
     print(text_table(t))

@@ -82,36 +82,45 @@ def setup() -> None:
     print(f"peers environment ready: {VENV}\n  {', '.join(PINS)}")
 
 
-def run_once(sim: str, folder: Path) -> dict:
+def command(sim: str, folder: Path, out: Path, ours: tuple[str, ...] = ()) -> list[str]:
+    """The command line of one run of ``sim`` (``ours``: the project's runner's arguments
+    after the two paths: allocator, objective; ``ridepy-grid``: RidePy on its graph space)."""
+    if sim == "ours":
+        return [sys.executable, str(HERE / "peers_ours.py"), str(folder), str(out), *ours]
+    if sim == "sumo-instant":
+        return [str(peer_python()), str(HERE / "peers_sumo.py"), str(folder), str(out), "instant"]
+    if sim == "ridepy-grid":
+        return [str(peer_python()), str(HERE / "peers_ridepy.py"), str(folder), str(out), "grid"]
+    return [str(peer_python()), str(HERE / f"peers_{sim}.py"), str(folder), str(out)]
+
+
+def run_once(sim: str, folder: Path, ours: tuple[str, ...] = ()) -> dict:
     """One run of ``sim`` on the workload in ``folder``, in a fresh process; its JSON row."""
     out = folder / f"{sim}.json"
     out.unlink(missing_ok=True)
-    if sim == "ours":
-        cmd = [sys.executable, str(HERE / "peers_ours.py"), str(folder), str(out)]
-    elif sim == "sumo-instant":
-        cmd = [str(peer_python()), str(HERE / "peers_sumo.py"), str(folder), str(out), "instant"]
-    else:
-        cmd = [str(peer_python()), str(HERE / f"peers_{sim}.py"), str(folder), str(out)]
-    proc = subprocess.run(cmd, check=False, cwd=ROOT, capture_output=True, text=True)
+    proc = subprocess.run(command(sim, folder, out, ours), check=False, cwd=ROOT,
+                          capture_output=True, text=True)
     if proc.returncode != 0:
         tail = (proc.stderr or proc.stdout).strip().splitlines()[-1:] or ["(no output)"]
         raise RuntimeError(f"{sim} failed (exit {proc.returncode}): {tail[0]}")
     return json.loads(out.read_text())
 
 
-def run_all(sims: list[str], folder: Path, repeats: int, log) -> dict[str, dict]:
+def run_all(sims: list[str], folder: Path, repeats: int, log, ours: tuple[str, ...] = (),
+            label: dict[str, str] | None = None) -> dict[str, dict]:
     """``repeats`` interleaved runs of each simulator: the first run's metrics (they are
     deterministic; a change between runs is reported) with every run's wall and CPU seconds."""
+    label = label or LABEL
     rows: dict[str, dict] = {}
     for k in range(repeats):
         for sim in sims:
-            r = run_once(sim, folder)
-            log(f"  {LABEL[sim]:<9} run {k + 1}/{repeats}: {r['wall_s']:7.1f} s wall, "
+            r = run_once(sim, folder, ours)
+            log(f"  {label[sim]:<11} run {k + 1}/{repeats}: {r['wall_s']:7.1f} s wall, "
                 f"{r['cpu_s']:7.1f} s CPU")
             if sim not in rows:
                 rows[sim] = dict(r, walls=[], cpus=[], rss=[])
             elif any(r[m] != rows[sim][m] for m in ("served", "picked", "wait_mean")):
-                log(f"  note: {LABEL[sim]} metrics changed between runs")
+                log(f"  note: {label[sim]} metrics changed between runs")
             rows[sim]["walls"].append(r["wall_s"])
             rows[sim]["cpus"].append(r["cpu_s"])
             rows[sim]["rss"].append(r["rss_mb"])

@@ -1,9 +1,15 @@
 """``benchmarks/peers.py``'s runner for this project: ``fcfs`` + ``dijkstra`` on the workload.
 
 Run by the project's interpreter in a fresh process (its peak RSS is its own):
-``python benchmarks/peers_ours.py WORKLOAD_DIR OUT.json``. The workload's trips become the
+``python benchmarks/peers_ours.py WORKLOAD_DIR OUT.json [ALLOCATOR [OBJECTIVE]]`` (default
+``fcfs``, ``pickup_time``). The workload's trips become the
 scenario's trace and its starts the fleet's start file, so this run and the peers' see the same
-requests and starts; requests wait without limit (no ``max_wait``), as the peers' do. The wall
+requests and starts; requests wait without limit (no ``max_wait``), as the peers' do, unless the
+workload gives limits. A workload of shared rides (``benchmarks/pooling.py``) sets ``[fleet]
+capacity``, ``[tasks] max_wait`` and ``max_delay`` from the workload (decisions at once: no
+batch window), and the row gets the shared-ride metrics (``peers_workload.metrics``): the
+direct times are the workload's (checked against the run's ``direct_time`` column), shared
+from the tasks' ``shared`` column, passenger-metres from the summary. The wall
 time is :func:`dispatch.runner.run_one`'s: the network built, the day simulated, every table
 written to Parquet (module imports excluded, as the peers' are; compiled code loaded from
 numba's cache or compiled on first use is inside the clock).
@@ -11,6 +17,7 @@ numba's cache or compiled on first use is inside the clock).
 
 from __future__ import annotations
 
+import importlib
 import json
 import resource
 import sys
@@ -31,40 +38,46 @@ seed = {seed}
 duration = {end}
 
 [world]
-network = "manhattan"
-blocks = [{columns}, {rows}]
-block = {block}
-speed = {speed}
-
+{network}
 [fleet]
 start = "fleet.csv"
+capacity = {capacity}
 
 [tasks]
 source = "trace"
 trace = "trips.csv"
-
+{limits}
 [dispatch]
 allocator = "{allocator}"
 planner = "dijkstra"
+objective = "{objective}"
 """
 
 
-def main(folder: Path, out: Path, allocator: str = "fcfs") -> None:
+def main(folder: Path, out: Path, allocator: str = "fcfs", objective: str = "pickup_time"
+         ) -> None:
     # imported before the clock starts (run_one imports the simulation lazily, and pyarrow
     # imports pandas on the recorder's first table): the peers' imports are not timed either
     import pandas  # noqa: F401
     import pyarrow.compute as pc
 
-    import allocators.fcfs  # noqa: F401
+    importlib.import_module(f"allocators.{allocator}")
     import dispatch.sim  # noqa: F401
     import planners.road  # noqa: F401
     from dispatch.runner import run_one
     from dispatch.scenario import load_scenario
 
-    w = read(folder)[0]
+    w, t, origin, dest, _ = read(folder)
+    limits = "".join(f"{key} = {value}\n" for key, value in
+                     (("max_wait", w.max_wait), ("max_delay", w.max_delay)) if value is not None)
     scenario = folder / f"ours_{allocator}.toml"
-    scenario.write_text(SCENARIO.format(seed=w.seed, end=w.end, columns=w.columns, rows=w.rows,
-                                        block=w.block, speed=w.speed, allocator=allocator))
+    network = ('network = "grid.graphml"\n' if w.jitter else
+               f'network = "manhattan"\nblocks = [{w.columns}, {w.rows}]\nblock = {w.block}\n'
+               f'speed = {w.speed}\n')
+    scenario.write_text(SCENARIO.format(seed=w.seed, end=w.end, network=network,
+                                        allocator=allocator,
+                                        capacity=w.capacity, limits=limits,
+                                        objective=objective))
     [spec] = load_scenario(scenario, force=True).runs()
     t0, c0 = time.perf_counter(), time.process_time()
     result = run_one(spec, folder / f"ours_{allocator}_out")
@@ -73,11 +86,23 @@ def main(folder: Path, out: Path, allocator: str = "fcfs") -> None:
     done = pc.equal(tasks["state"], "completed").to_numpy(zero_copy_only=False)
     completed = tasks["completed_at"].to_numpy().copy()
     completed[~done] = float("nan")
-    row = metrics(tasks["released_at"].to_numpy(), tasks["picked_up_at"].to_numpy(), completed,
-                  float(result.summary["distance"]))
-    row.update(wall_s=wall, cpu_s=cpu,
-               rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
     order = np.argsort(tasks["task_id"].to_numpy())
+    rides = {}
+    if w.capacity > 1 or w.max_delay is not None:
+        direct = np.empty(t.size)
+        direct[order] = w.direct(origin, dest)  # task ids are the trace's row order
+        run_direct = tasks["direct_time"].to_numpy()
+        offered = np.isfinite(run_direct)
+        if not np.allclose(run_direct[offered], direct[offered], rtol=0, atol=1e-6):
+            raise SystemExit("peers_ours: the run's direct times are not the workload's")
+        rides = {"direct": direct, "shared": tasks["shared"].to_numpy(zero_copy_only=False),
+                 "passenger_m": float(result.summary["passenger_distance"])}
+    row = metrics(tasks["released_at"].to_numpy(), tasks["picked_up_at"].to_numpy(), completed,
+                  float(result.summary["distance"]), **rides)
+    row.update(wall_s=wall, cpu_s=cpu,
+               rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+               rejected=int(result.summary["tasks_rejected"]),
+               expired=int(result.summary["tasks_expired"]))
     save_pickups(out.with_suffix(".npz"), tasks["released_at"].to_numpy()[order],
                  tasks["picked_up_at"].to_numpy()[order], tasks["agent_id"].to_numpy()[order])
     out.write_text(json.dumps(row))

@@ -11,12 +11,17 @@ from pathlib import Path
 
 from dispatch import __version__
 from dispatch.errors import DispatchError
+from dispatch.progress import Heartbeat
 
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="dispatch", description=__doc__)
     p.add_argument("--version", action="version", version=f"dispatch {__version__}")
-    p.add_argument("-v", "--verbose", action="store_true", help="log progress of every run")
+    p.add_argument("-v", "--verbose", action="store_true",
+                   help="log progress of every run; an error prints its traceback too")
+    p.add_argument("--debug", action="store_true",
+                   help="debug logging; an error (a plugin's included) prints its whole "
+                        "traceback, the plugin's own frames among them")
     sub = p.add_subparsers(dest="command", required=True)
 
     r = sub.add_parser("run", help="run a scenario (every combination of its sweep)")
@@ -26,6 +31,9 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--planner", help="planner name (overrides the file and its sweep)")
     r.add_argument("--agents", type=int, help="fleet size N (overrides the file and its sweep)")
     r.add_argument("--seed", type=int, help="seed (overrides the file and its sweep)")
+    r.add_argument("--duration", type=float, metavar="SECONDS",
+                   help="simulated seconds before the run stops (overrides the file's "
+                        "duration; the scenario text stored with the results says so)")
     r.add_argument("--force", action="store_true",
                    help="overwrite earlier results of these runs in the output folder, and run "
                         "past the resource limits (world cells, releases, tasks, runs, sizes)")
@@ -47,6 +55,14 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--seed", type=int, default=0, help="seed of the random problems")
 
     sub.add_parser("plugins", help="list installed allocators, planners and repositioners")
+    n = sub.add_parser("new", help="write a new plugin package (`dispatch new allocator NAME`): "
+                       "installs with pip and passes `dispatch check NAME`")
+    n.add_argument("kind", choices=("allocator",))
+    n.add_argument("name", help="the plugin's name (lower-case letters, digits, _)")
+    n.add_argument("--out", type=Path, default=Path("."),
+                   help="folder to write dispatch-NAME/ into (default: here)")
+    n.add_argument("--force", action="store_true", help="overwrite the files of an existing "
+                   "dispatch-NAME/")
     t = sub.add_parser("train", help="train a learned allocator (e.g. `dispatch train magnnet "
                        "--agents 8`); options after the name go to its trainer (--help)",
                        add_help=False)
@@ -58,9 +74,10 @@ def _parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
-                        format="%(levelname)s %(name)s: %(message)s")
+    level = logging.DEBUG if args.debug else logging.INFO if args.verbose else logging.WARNING
+    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
     from rich.console import Console
+    from rich.markup import escape
 
     # Status and error lines stay one line whatever the terminal width (paths are long; scripts
     # and users grep them); only tables are laid out to the width.
@@ -69,9 +86,16 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return {"run": _run, "validate": _validate, "plugins": _plugins, "sweep": _sweep,
                 "report": _report, "render": _render, "train": _train,
-                "check": _check}[args.command](args, console)
+                "check": _check, "new": _new}[args.command](args, console)
     except DispatchError as e:
-        err.print(f"[bold red]error:[/] {e}", highlight=False, soft_wrap=True)
+        if args.debug or args.verbose:  # the chain: where a plugin raised, then where we caught
+            import traceback
+
+            sys.stderr.write("".join(traceback.format_exception(e)))
+            sys.stderr.flush()
+        # the message as written: no markup ("[dispatch]") nor emoji (":x:") read into it
+        err.print(f"[bold red]error:[/] {escape(str(e))}", highlight=False, soft_wrap=True,
+                  emoji=False)
         return 2
     except KeyboardInterrupt:
         err.print("interrupted")
@@ -82,29 +106,78 @@ def _specs(args):
     """Parse the scenario and expand its runs, checking all that can be checked before a run:
     the file, the resource limits (unless ``--force``), the plugins (each distinct allocator
     and planner is built once with the scenario's parameters) and the space they serve."""
+    from dispatch.errors import PluginError
     from dispatch.registry import load
     from dispatch.scenario import check_limits, load_scenario
 
     force = getattr(args, "force", False)
     sc = load_scenario(args.scenario, force=force)
+    if getattr(args, "duration", None) is not None:
+        sc = with_duration(sc, args.duration, force=force)
     specs = sc.runs(allocator=getattr(args, "allocator", None), planner=getattr(args, "planner", None),
                     agents=getattr(args, "agents", None), seed=getattr(args, "seed", None))
     if not force:
         check_limits(sc, specs)
-    for name in sorted({s.allocator for s in specs}):
-        load("allocator", name)
-    for name in sorted({s.planner for s in specs}):
-        load("planner", name)
-    for name in sorted({s.reposition for s in specs}):
-        load("repositioner", name)
+    for kind, attr, default in (("allocator", "allocator", sc.dispatch.allocator),
+                                ("planner", "planner", sc.dispatch.planner),
+                                ("repositioner", "reposition", sc.reposition.policy)):
+        for name in sorted({getattr(s, attr) for s in specs}):
+            try:
+                load(kind, name)
+            except PluginError as e:  # name the file and the key that names the plugin
+                raise PluginError(f"{sc.path}: {_key_of(args, sc, kind, attr, name, default)}: "
+                                  f"{e}") from e
     from dispatch.sim import check_runs
 
     check_runs(sc, sorted({s.planner for s in specs}), sorted({s.reposition for s in specs}))
-    build_plugins(sc, specs)
+    build_plugins(sc, specs, force=force)
     return sc, specs
 
 
-def build_plugins(sc, specs) -> None:
+def with_duration(sc, seconds: float, *, force: bool = False):
+    """``sc`` with ``duration = seconds``, parsed again from its text with that line
+    replaced (or added), so that the text stored with the results, the digests that tell runs
+    apart and every bound that depends on the duration agree with what runs."""
+    import math
+    import re
+    import tomllib
+
+    from dispatch.errors import ScenarioError
+    from dispatch.scenario import LIMITS, parse_scenario
+
+    if not math.isfinite(seconds) or seconds <= 0:
+        raise ScenarioError(sc.path, "--duration", f"must be a number of seconds > 0, got "
+                                                   f"{seconds!r}")
+    line = f"duration = {seconds!r}  # dispatch run --duration"
+    first_table = re.search(r"(?m)^[ \t]*\[", sc.text)
+    cut = first_table.start() if first_table else len(sc.text)
+    head, rest = sc.text[:cut], sc.text[cut:]
+    if re.search(r"(?m)^[ \t]*duration[ \t]*=", head):
+        text = re.sub(r"(?m)^[ \t]*duration[ \t]*=.*$", lambda m: line, head, count=1) + rest
+    else:
+        text = line + "\n" + sc.text
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError:
+        doc = {}
+    if doc.get("duration") != seconds:  # a duration written in a way the above cannot replace
+        raise ScenarioError(sc.path, "--duration", "cannot override the file's duration; "
+                                                   "edit the file")
+    return parse_scenario(doc, sc.path, text, limits=None if force else LIMITS)
+
+
+def _key_of(args, sc, kind: str, attr: str, name: str, default: str) -> str:
+    """Where ``name`` came from: a command-line option, the sweep's list or the file's key."""
+    if getattr(args, attr, None) == name:
+        return f"--{attr}"
+    if name in getattr(sc.sweep, attr, ()):
+        return f"sweep.{attr}"
+    if kind == "repositioner":
+        return "reposition.policy"
+    return f"dispatch.{attr}" if name == default else attr
+
+
+def build_plugins(sc, specs, *, force: bool = False) -> None:
     """Build every distinct allocator and planner of ``specs`` once (constructors are cheap;
     a planner is built on the space of the first run's seed), so that a parameter the plugin
     rejects stops here with one line, not in the middle of a sweep; place the first run's fleet
@@ -114,12 +187,16 @@ def build_plugins(sc, specs) -> None:
 
     def build(kind, name, params, *args):
         try:
-            make_plugin(kind, name, params, *args)
+            return make_plugin(kind, name, params, *args)
         except PluginError as e:  # name the file too: "file: key: reason"
-            raise PluginError(f"{sc.path}: dispatch.{kind}_params: {e}") from e
+            tables = dict(sc.dispatch.allocator_tables) if kind == "allocator" else {}
+            own = [k for k in (name, name.partition(":")[0]) if k in tables]
+            key = f"dispatch.{kind}_params" + ("" if not own else f'."{own[0]}"'
+                                               if ":" in own[0] else f".{own[0]}")
+            raise PluginError(f"{sc.path}: {key}: {e}") from e
 
     for name in sorted({s.allocator for s in specs}):
-        build("allocator", name, sc.dispatch.allocator_params)
+        build("allocator", name, sc.dispatch.params_for(name))
     for name in sorted({s.reposition for s in specs}):
         try:
             make_repositioner(sc, name)
@@ -136,7 +213,11 @@ def build_plugins(sc, specs) -> None:
     if planners:
         space = space_for(sc.world, specs[0].seed, sc.path)
         for name in planners:
-            build("planner", name, sc.dispatch.planner_params, space)
+            planner = build("planner", name, sc.dispatch.planner_params, space)
+            if not force:  # its own work bound (dispatch.budget), e.g. rrt_star's iterations
+                from dispatch.budget import check_planner_budget
+
+                check_planner_budget(sc, specs, planner, name)
         if sc.fleet.start:  # a start file's rows: known nodes, inside the world, one per cell
             from dispatch.sim import STREAM_FLEET, place_fleet, rng_for
 
@@ -161,11 +242,15 @@ def _run(args, console) -> int:
         with _run_progress(console, specs[0]) as report:
             summaries = execute(specs, out, progress=report)
     else:
+        finished = []
         with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                      TimeElapsedColumn(), console=console, transient=True) as progress:
+                      TimeElapsedColumn(), console=console, transient=True) as progress, \
+                Heartbeat(console, lambda: f"{sc.name}: {len(finished)} of {len(specs)} "
+                           "runs done" + (f" (last: {finished[-1]})" if finished else "")):
             bar = progress.add_task(f"{sc.name}", total=len(specs))
 
             def done(result):
+                finished.append(result.spec.run_id)
                 progress.update(bar, advance=1, description=result.spec.run_id)
 
             summaries = execute(specs, out, on_done=done)
@@ -177,16 +262,36 @@ def _run(args, console) -> int:
 
 class _run_progress:
     """Context manager: a progress bar of one run (simulated time out of the duration, wall
-    time, requests released and closed), shown only on a terminal; yields the callback for
-    :class:`dispatch.sim.Simulation` (None when not shown, so the run adds no process)."""
+    time, requests released and closed) on a terminal, else a line a minute on stderr
+    (:class:`dispatch.progress.Heartbeat`); yields the callback for
+    :class:`dispatch.sim.Simulation`."""
 
     def __init__(self, console, spec) -> None:
         self.console, self.spec = console, spec
         self.progress = None
+        self.beat = None
 
     def __enter__(self):
         if not self.console.is_terminal:
-            return None
+            import math
+
+            state = {"now": 0.0, "duration": self.spec.scenario.duration, "released": 0,
+                     "closed": 0, "reports": 0}
+
+            def report(now: float, duration: float, released: int, closed: int) -> None:
+                state.update(now=now, duration=duration, released=released, closed=closed,
+                             reports=state["reports"] + 1)
+
+            def what() -> str:
+                d = state["duration"]
+                share = f" ({100 * state['now'] / d:.1f} %)" if d and math.isfinite(d) else ""
+                line = (f"{self.spec.run_id}: simulated {state['now']:,.1f} of {d:,.1f} s"
+                        f"{share}; {state['released']:,} tasks released, {state['closed']:,} "
+                        "closed")
+                return line if state["reports"] else line + " (still in its first steps)"
+
+            self.beat = Heartbeat(self.console, what).__enter__()
+            return report
         from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
         self.progress = Progress(TextColumn("{task.description}"), BarColumn(),
@@ -204,6 +309,8 @@ class _run_progress:
         return report
 
     def __exit__(self, *exc) -> None:
+        if self.beat is not None:
+            self.beat.__exit__(*exc)
         if self.progress is not None:
             self.progress.__exit__(*exc)
 
@@ -226,7 +333,7 @@ def _validate(args, console) -> int:
     return 0
 
 
-TRAINERS = {"magnnet": "allocators.magnnet.train"}  # fallback for a never-installed tree
+TRAINERS = {"magnnet": "allocators.magnnet.train", "value": "dispatch.value"}  # fallback for a never-installed tree
 
 
 def _train(args, console) -> int:
@@ -248,19 +355,24 @@ def _train(args, console) -> int:
 
 
 def _plugins(args, console) -> int:
+    """One table per kind: name, spaces served (planners, repositioners) and the description
+    (plain text, never empty) with the entry point's target on a line of its own below it, so
+    that neither is cut in an 80-column terminal."""
     from rich.table import Table
+    from rich.text import Text
 
     from dispatch.registry import describe
 
     for kind in ("allocator", "planner", "repositioner", "charger"):
-        t = Table(title=f"{kind}s (entry-point group dispatch.{kind}s)")
-        cols = ("name", "target", "spaces", "description")
-        for col in cols:
-            if kind != "allocator" or col != "spaces":
-                t.add_column(col)
+        t = Table(title=f"{kind}s (entry-point group dispatch.{kind}s)", title_justify="left")
+        t.add_column("name", no_wrap=True)
+        if kind != "allocator":
+            t.add_column("spaces")
+        t.add_column("description; target (module:object)", overflow="fold")
         for name, target, spaces, doc in describe(kind):
-            t.add_row(*((name, target, spaces, doc) if kind != "allocator"
-                        else (name, target, doc)))
+            cell = Text(doc)
+            cell.append("\n" + target, style="dim")
+            t.add_row(Text(name), *([Text(spaces)] if kind != "allocator" else []), cell)
         console.print(t)
     return 0
 
@@ -293,6 +405,10 @@ def _add_analysis_parsers(sub) -> None:
     r.add_argument("--out", type=Path, help="report folder (default: RUNS/report/)")
     r.add_argument("--format", choices=("md", "html"), default="md")
     r.add_argument("--run", metavar="RUN_ID", help="the run shown in detail (timeline, 3D)")
+    r.add_argument("--series", action="append", metavar="PATTERN",
+                   help="taxi figures: draw only the series whose label matches this glob "
+                        "(e.g. 'hungarian*', '* 30s*', '*+ demand'); repeat for more; the "
+                        "tables keep every series")
 
     g = sub.add_parser("render", help="draw a run as an animated GIF from PyBullet images")
     g.add_argument("run", type=Path, metavar="RUN",
@@ -308,6 +424,7 @@ def _add_analysis_parsers(sub) -> None:
 def _sweep(args, console) -> int:
     from collections import Counter
 
+    from rich.markup import escape
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from dispatch.runner import default_out, foreign_runs, sweep
@@ -322,7 +439,11 @@ def _sweep(args, console) -> int:
     started = time.perf_counter()
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                   TextColumn("{task.fields[tally]}"), TimeElapsedColumn(), console=console,
-                  transient=True) as progress:
+                  transient=True) as progress, \
+            Heartbeat(console, lambda: f"{sc.name}: {sum(counts.values())} of {len(specs)} "
+                       "runs finished (" + (", ".join(f"{v} {k}" for k, v in
+                                                      sorted(counts.items())) or "none yet")
+                       + f") on {where}"):
         bar = progress.add_task(sc.name, total=len(specs), tally="")
 
         def done(o):
@@ -337,7 +458,11 @@ def _sweep(args, console) -> int:
         _tables(summaries, console, sc)
     failed = [o for o in outcomes if o.status == "failed"]
     for o in failed:
-        console.print(f"[red]failed[/]: {o.run_id}: {o.error}", highlight=False, soft_wrap=True)
+        if (args.verbose or args.debug) and o.traceback:  # where the run (a plugin) raised
+            sys.stderr.write(o.traceback)
+            sys.stderr.flush()
+        console.print(f"[red]failed[/]: {o.run_id}: {escape(o.error)}", highlight=False,
+                      soft_wrap=True)
     console.print(f"{len(specs)} run(s): {counts['done']} run, {counts['skipped']} already "
                   f"complete, {len(failed)} failed; {time.perf_counter() - started:.1f} s on "
                   f"{where}; Parquet written to {out}/", highlight=False, soft_wrap=True)
@@ -400,6 +525,17 @@ def _check(args, console) -> int:
     return 0 if report.ok else 1
 
 
+def _new(args, console) -> int:
+    """``dispatch new allocator NAME``: see :mod:`dispatch.scaffold`."""
+    from dispatch.scaffold import new_allocator
+
+    root = new_allocator(args.name, args.out, force=args.force)
+    console.print(f"wrote {root}/ (pyproject.toml, dispatch_{args.name}/allocator.py, tests, "
+                  f"README.md); next: pip install -e {root} && dispatch check {args.name}",
+                  highlight=False, soft_wrap=True)
+    return 0
+
+
 def _analysis_call(fn, *args, **kwargs):
     """Call into the analysis package; its input errors become one clean DispatchError."""
     from analysis.io import NoResultsError
@@ -411,10 +547,18 @@ def _analysis_call(fn, *args, **kwargs):
 
 
 def _report(args, console) -> int:
-    from analysis.report import write_report
+    from rich.console import Console
+
+    from analysis.io import open_results
+    from analysis.report import duplicates_note, write_report
 
     out = args.out or args.runs[0] / "report"
-    files = _analysis_call(write_report, list(args.runs), out, fmt=args.format, run_id=args.run)
+    res = _analysis_call(open_results, *args.runs)
+    if res.duplicates:  # the same run in two folders: counted once, and said so
+        Console(stderr=True, soft_wrap=True).print(
+            f"[yellow]warning[/]: {duplicates_note(res)}", highlight=False, soft_wrap=True)
+    files = _analysis_call(write_report, res, out, fmt=args.format, run_id=args.run,
+                           series=args.series)
     console.print(f"report: {files[0]}", highlight=False, soft_wrap=True)
     console.print("files: " + ", ".join(f.name for f in files[1:]), highlight=False,
                   soft_wrap=True)

@@ -508,6 +508,11 @@ class Planner(ABC):
     #: Seconds after which a vehicle that found no timed route tries again (it also tries when
     #: other vehicles' reservations are released). Used only when ``reservation_aware``.
     retry_after: float = 1.0
+    #: Optional: ``budget(*, agents, tasks, duration) -> str | None``, a sentence saying why a
+    #: run of that many vehicles and (expected) tasks over that many simulated seconds would
+    #: not finish with this planner's parameters, None when it would; ``dispatch validate``
+    #: refuses the run with it (``--force`` runs anyway). See :mod:`dispatch.budget`.
+    budget = None
 
     def __init__(self, space: Space) -> None:
         if space.kind not in self.spaces:

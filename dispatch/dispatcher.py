@@ -257,10 +257,16 @@ class _Plans(Mapping):
     read from the vehicles when asked (within the decision: nothing moves meanwhile)."""
 
     def __init__(self, fleet: Fleet, operator: Operator, slots: np.ndarray) -> None:
-        self._vehicles = [fleet.vehicles[k] for k in slots.tolist()]
-        self._operator = operator
-        self._ids = {v.id: v for v in self._vehicles if v.stops}
+        self._fleet, self._slots, self._operator = fleet, slots, operator
+        self._by_id: dict | None = None  # agent id -> vehicle, of those with stops (on use)
         self._cache: dict[int, tuple] = {}
+
+    @property
+    def _ids(self) -> dict:
+        if self._by_id is None:
+            vs = self._fleet.vehicles
+            self._by_id = {v.id: v for v in (vs[k] for k in self._slots.tolist()) if v.stops}
+        return self._by_id
 
     def __getitem__(self, agent_id: int) -> tuple[StopView, ...]:
         got = self._cache.get(agent_id)
@@ -277,6 +283,19 @@ class _Plans(Mapping):
 
     def __len__(self) -> int:
         return len(self._ids)
+
+
+class DecisionDeferred(BaseException):
+    """Raised by an allocator's ``allocate`` to answer the decision later, from outside the
+    simulation (:mod:`dispatch.rl`): the dispatcher's loop waits for ``resume`` (an event
+    the deferring code triggers at the same simulated instant, once it holds the answer) and
+    then decides again (see :meth:`Dispatcher._decide_or_defer`). A ``BaseException`` so
+    that the dispatcher's wrapping of plugin errors lets it through; raise it only before
+    the problem's state is touched (``allocate`` is the last step before the hand-out)."""
+
+    def __init__(self, resume: simpy.Event) -> None:
+        super().__init__("decision deferred")
+        self.resume = resume
 
 
 @dataclass
@@ -391,10 +410,24 @@ class Dispatcher:
             yield self.wake
             yield env.timeout(window)
             self.wake = env.event()
-            self.decide()
+            yield from self._decide_or_defer()
             if self._pending is not None:
                 yield env.timeout(self._pending.delay)
                 self._hand_out()
+
+    def _decide_or_defer(self):
+        """:meth:`decide`, or, when the allocator defers it (:class:`DecisionDeferred`: the
+        answer comes from outside the simulation, see :mod:`dispatch.rl`), wait for the
+        deferring allocator's ``resume`` event and decide again: nothing moved meanwhile (the
+        event is triggered at the same instant, ahead of the events already queued), so the
+        same problem is built again and the allocator now answers it. The hook that lets
+        :mod:`dispatch.rl` drive decisions step by step without threads; a run with an
+        ordinary allocator goes through :meth:`decide` exactly as before."""
+        try:
+            self.decide()
+        except DecisionDeferred as d:
+            yield d.resume
+            self.decide()
 
     def decide(self) -> None:
         """One decision over the idle vehicles and the open tasks (nothing if either is empty).
@@ -523,8 +556,7 @@ class Dispatcher:
             return space.positions([t.loc for t in tasks])
 
         plans = _Plans(self.fleet, self.operator, idle) if self.pooled else None
-        seats = (np.array([self.fleet.vehicles[k].capacity for k in idle.tolist()])
-                 if self.pooled else None)
+        seats = self.fleet.capacity[idle] if self.pooled else None
         travel = self.planner.between if self.routes else None
 
         def ask(cost: np.ndarray):
@@ -799,11 +831,10 @@ class Dispatcher:
                                              pairwise=True)
         svc_p = np.where(point, svc, 0.0)
         svc_d = np.where(point, 0.0, svc)
-        vehicles = [fleet.vehicles[k] for k in slots.tolist()]
-        cap = np.array([v.capacity for v in vehicles], np.int64)
-        planned = np.array([bool(v.stops) or v.serving is not None for v in vehicles])
+        cap = fleet.capacity[slots]
+        planned = fleet.busy_mask[slots]  # (a busy vehicle has stops or is serving)
         if holders:  # [dispatch] reassign: a holder decides as if its plan were empty
-            planned &= ~np.array([v.id in holders for v in vehicles])
+            planned = planned & ~np.isin(fleet.ids[slots], list(holders))
         out = np.full(cost.shape, np.inf)
         empty = np.flatnonzero(~planned)
         if empty.size:
@@ -816,7 +847,7 @@ class Dispatcher:
         busy = np.flatnonzero(planned)
         if not busy.size:
             return out, {}
-        ready = np.array([max(now, vehicles[k].free_at) for k in busy.tolist()])
+        ready = np.maximum(fleet.free_at[slots[busy]], now)
         rows, cols = np.nonzero((ready[:, None] + cost[busy] <= lp + 1e-9)
                                 & (n_req <= cap[busy, None]))
         if not rows.size:
@@ -828,8 +859,9 @@ class Dispatcher:
         off, s_arr, s_svc, s_latest, s_occ, locs = [0], [], [], [], [], []
         load = []
         plan_of = self.operator.plan_arrays
-        for k in used.tolist():
-            v = vehicles[busy[k]]
+        vehicles = fleet.vehicles
+        for k in slots[busy[used]].tolist():
+            v = vehicles[k]
             times, svcs, latest, occ, where = plan_of(v)
             s_arr += times
             s_svc += svcs

@@ -28,3 +28,7 @@ class AllocationError(DispatchError):
 
 class WorldError(DispatchError):
     """A world cannot be built from its configuration (e.g. obstacles do not fit)."""
+
+
+#: what a refusal for size or work says a user can do about it
+FORCE_HINT = "use --force to run anyway"

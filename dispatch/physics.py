@@ -17,19 +17,52 @@ UAV_RADIUS = 0.3  # of a cell: a vehicle body fits well inside its cell
 UGV_HALF = (0.35, 0.35, 0.25)
 
 
-def import_pybullet():
-    """The pybullet module, imported without its build-time banner on the C-level stderr."""
-    fd = os.dup(2)
-    try:
-        with open(os.devnull, "w") as devnull:
-            os.dup2(devnull.fileno(), 2)
-            import pybullet
+@contextlib.contextmanager
+def quiet_c_output(fds: tuple[int, ...] = (1, 2)):
+    """Inside the block, what C code writes to stdout and stderr (file descriptors 1 and 2)
+    goes to the null device: PyBullet prints its build banner (``pybullet build time: ...``)
+    with ``printf`` at import, to stdout or stderr depending on the build, and may print at
+    ``connect``. Python's own buffered output is flushed before and C's after, so nothing of
+    either is lost or reordered; a descriptor that is closed is left alone."""
+    import sys
 
+    def c_flush() -> None:
+        with contextlib.suppress(Exception):
             ctypes.CDLL(None).fflush(None)
+
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    c_flush()
+    saved = {}
+    for fd in fds:
+        with contextlib.suppress(OSError):
+            saved[fd] = os.dup(fd)
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        for fd in saved:
+            os.dup2(null, fd)
+        yield
     finally:
-        os.dup2(fd, 2)
-        os.close(fd)
+        c_flush()
+        for fd, copy in saved.items():
+            os.dup2(copy, fd)
+            os.close(copy)
+        os.close(null)
+
+
+def import_pybullet():
+    """The pybullet module, imported without its build-time banner (see
+    :func:`quiet_c_output`)."""
+    with quiet_c_output():
+        import pybullet
     return pybullet
+
+
+def connect_direct(p, gui: bool = False) -> int:
+    """``p.connect(DIRECT)`` (or GUI) without what the C library prints on connecting."""
+    with quiet_c_output():
+        return p.connect(p.GUI if gui else p.DIRECT)
 
 
 class Physics:
@@ -38,7 +71,7 @@ class Physics:
     def __init__(self, world: World, gui: bool = False) -> None:
         self.p = p = import_pybullet()
         self.world = world
-        self.client = p.connect(p.GUI if gui else p.DIRECT)
+        self.client = connect_direct(p, gui)
         self.obstacles: list[int] = []
         self.vehicles: dict[int, int] = {}
         for box in world.boxes:

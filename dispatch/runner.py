@@ -201,6 +201,7 @@ class Outcome:
     error: str = ""
     seconds: float = 0.0
     files: list[str] = field(default_factory=list)
+    traceback: str = ""  # of a failed run (also in the errors table); -v / --debug print it
 
     @property
     def run_id(self) -> str:
@@ -367,8 +368,10 @@ def run_partition(spec: RunSpec, out: str | Path) -> Outcome:
     except Exception as e:  # noqa: BLE001 - any failure of one run is recorded, not raised
         seconds = time.perf_counter() - started
         log.warning("%s failed: %s: %s", spec.run_id, type(e).__name__, e)
-        record_failure(out, spec, type(e).__name__, str(e), traceback.format_exc(), seconds)
-        return Outcome(spec, "failed", error=f"{type(e).__name__}: {e}", seconds=seconds)
+        tb = traceback.format_exc()
+        record_failure(out, spec, type(e).__name__, str(e), tb, seconds)
+        return Outcome(spec, "failed", error=f"{type(e).__name__}: {e}", seconds=seconds,
+                       traceback=tb)
     seconds = time.perf_counter() - started
     return Outcome(spec, "done", summary={"run_id": spec.run_id, **result.summary},
                    seconds=seconds, files=sorted(files))

@@ -18,7 +18,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-from dispatch.errors import ScenarioError
+from dispatch.errors import FORCE_HINT, ScenarioError
 from dispatch.faults import FaultConfig, read_failures
 from dispatch.traces import (
     Trips,
@@ -60,7 +60,6 @@ class Limits:
 
 
 LIMITS = Limits()
-FORCE_HINT = "use --force to run anyway"
 
 
 def safe_name(name: str, fallback: str = "scenario") -> str:
@@ -182,6 +181,20 @@ class DispatchConfig:
     objective: str = "pickup_time"
     allocator_params: tuple[tuple[str, Any], ...] = ()
     planner_params: tuple[tuple[str, Any], ...] = ()
+    #: ``[dispatch.allocator_params.<name>]`` tables: parameters of one allocator (``magnnet``)
+    #: or of a named variant (``"magnnet:paper"``), over the flat ones (see :meth:`params_for`)
+    allocator_tables: tuple[tuple[str, tuple[tuple[str, Any], ...]], ...] = ()
+
+    def params_for(self, allocator: str) -> tuple[tuple[str, Any], ...]:
+        """The constructor arguments of ``allocator`` (a name, or ``name:variant``): the flat
+        ``[dispatch.allocator_params]`` keys, then its own table's, then its variant's."""
+        tables = dict(self.allocator_tables)
+        base = allocator.partition(":")[0]
+        merged = dict(self.allocator_params)
+        merged.update(tables.get(base, ()))
+        if base != allocator:
+            merged.update(tables.get(allocator, ()))
+        return tuple(sorted(merged.items()))
 
 
 @dataclass(frozen=True)
@@ -283,7 +296,16 @@ class Scenario:
             dim(agents, self.sweep.agents, self.fleet.agents),
             dim(seed, self.sweep.seed, self.seed),
         )
-        return [RunSpec(v, a, p, n, s, r) for v, a, p, r, n, s in combos]
+        return [RunSpec(v.for_allocator(a), a, p, n, s, r) for v, a, p, r, n, s in combos]
+
+    def for_allocator(self, allocator: str) -> Scenario:
+        """The scenario as a run of ``allocator`` sees it: ``dispatch.allocator_params`` holds
+        that allocator's parameters (:meth:`DispatchConfig.params_for`); itself without
+        per-allocator tables."""
+        if not self.dispatch.allocator_tables:
+            return self
+        return replace(self, dispatch=replace(self.dispatch,
+                                              allocator_params=self.dispatch.params_for(allocator)))
 
     def variants(self) -> list[Scenario]:
         """The scenario once per swept ``batch_window`` (or itself when none is swept): each
@@ -435,6 +457,11 @@ class _Table:
         if not isinstance(v, dict):
             raise self.fail(k, "must be a table of parameters")
         return tuple(sorted(v.items()))
+
+    def params_all(self) -> tuple[tuple[str, Any], ...]:
+        """This whole table as sorted parameters."""
+        self.used.update(self.data)
+        return tuple(sorted(self.data.items()))
 
     def done(self) -> None:
         unknown = sorted(set(self.data) - self.used)
@@ -597,6 +624,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
         batch_window=_windows(s),
         reposition=s.str_list("reposition"),
     )
+    disp = _parse_allocators(d, s, disp, sweep)
     declared = "reposition" in root.data
     reposition = _parse_reposition(root.table("reposition"), sweep, s)
     charging = _parse_charging(root, path, fleet, faults)
@@ -739,6 +767,46 @@ def _parse_congestion(w: _Table, network: str) -> tuple[float, ...]:
         raise w.fail("congestion", f"must be 'chicago_taxi', false or a list of 24 factors > 0 "
                                    f"(one per hour of day), got {_short(v)}")
     return tuple(float(x) for x in v)
+def _parse_allocators(d: _Table, s: _Table, disp: DispatchConfig,
+                      sweep: SweepConfig) -> DispatchConfig:
+    """The allocators a file names (``dispatch.allocator``, ``sweep.allocator``), checked
+    against the installed ones (an unknown name suggests the closest), and
+    ``[dispatch.allocator_params]`` split into the flat keys (every allocator gets them) and
+    one table per allocator or named variant (``[dispatch.allocator_params.magnnet]``,
+    ``[dispatch.allocator_params."magnnet:paper"]``); a variant ``name:v`` in a list needs its
+    table."""
+    from dispatch import registry
+
+    installed = registry.available("allocator")
+    p = _Table(d.file, d.key("allocator_params") + ".", dict(disp.allocator_params))
+    named = {disp.allocator, *sweep.allocator}
+
+    def known(tab: _Table, key: str, name: str) -> None:
+        base, colon, variant = name.partition(":")
+        if base not in installed:
+            raise tab.fail(key, registry.unknown("allocator", name))
+        if colon and not variant:
+            raise tab.fail(key, f"{name!r}: a named variant is 'allocator:variant'")
+
+    flat, tables = [], []
+    for k, v in disp.allocator_params:
+        if isinstance(v, dict) and (k.partition(":")[0] in installed or ":" in k or k in named):
+            quoted = f'"{k}"' if ":" in k else k  # as the file writes the table's name
+            known(p, quoted, k)
+            tables.append((k, _Table(d.file, p.key(quoted) + ".", v).params_all()))
+        else:
+            flat.append((k, v))
+    for tab, names in ((d, (disp.allocator,)), (s, sweep.allocator)):
+        for name in names:
+            known(tab, "allocator", name)
+            if ":" in name and name not in dict(tables):
+                raise tab.fail("allocator", f"{name!r} names a variant of "
+                                            f"{name.partition(':')[0]!r} without parameters: "
+                                            f"add a [dispatch.allocator_params.\"{name}\"] "
+                                            "table")
+    return replace(disp, allocator_params=tuple(flat), allocator_tables=tuple(tables))
+
+
 def _parse_reposition(r: _Table, sweep: SweepConfig, s: _Table) -> RepositionConfig:
     """``[reposition]``: the policy (an installed repositioner), its timer and look-back, and
     one ``[reposition.<name>]`` table of constructor arguments per policy that runs. Names are
@@ -949,6 +1017,9 @@ def check_limits(sc: Scenario, specs: list[RunSpec], limits: Limits = LIMITS) ->
                                             f"{limits.releases:,})")
     elif t.trips is not None and len(t.trips) > limits.releases:
         raise refuse("tasks.trace", f"{len(t.trips):,} trips (more than {limits.releases:,})")
+    from dispatch.budget import check_work  # work bounds: runs that would not finish
+
+    check_work(sc, specs, refuse)
 
 
 def _parse_energy(e: _Table, fleet: FleetConfig, world: WorldConfig):

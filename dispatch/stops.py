@@ -139,7 +139,7 @@ def _insert_pairs(rows, cols, ready, first_tt, off, s_arr, s_svc, s_latest, s_oc
                     end_new = leave_d
                 if ok:
                     c = arr_p - t0 if objective == 0 else end_new - end_old
-                    if c < best - 1e-12 or (c <= best + 1e-12 and arr_p < bpick):
+                    if c < best - 1e-12 or (c <= best + 1e-12 and arr_p < bpick - tol):
                         best, bi, bj, bpick, bdrop, bs1, bs2 = c, i, i, arr_p, arr_d, 0.0, delta
             if i == k:
                 continue
@@ -164,7 +164,7 @@ def _insert_pairs(rows, cols, ready, first_tt, off, s_arr, s_svc, s_latest, s_oc
                 else:
                     end_new = leave_d
                 c = arr_p - t0 if objective == 0 else end_new - end_old
-                if c < best - 1e-12 or (c <= best + 1e-12 and arr_p < bpick):
+                if c < best - 1e-12 or (c <= best + 1e-12 and arr_p < bpick - tol):
                     best, bi, bj, bpick, bdrop = c, i, j, arr_p, arr_d
                     bs1, bs2 = delta1, delta1 + delta2
         out_cost[q], out_i[q], out_j[q], out_pick[q] = best, bi, bj, bpick
@@ -220,8 +220,8 @@ def insertion_costs(rows, cols, ready, first_tt, off, s_arr, s_svc, s_latest, s_
     ``to_d[g, r]``, ``from_d[r, g]``; ``pd_tt[r]`` pickup -> drop-off. Request: ``req_n``
     passengers, pickup by ``req_lp``, drop-off by ``req_ld``, service at pickup / drop-off.
     ``objective``: :data:`PICKUP_TIME` (cost = pickup time - ready time) or :data:`ADDED_TIME`
-    (cost = how much later the plan ends). Ties go to the earlier pickup, then to the first
-    positions. A plan already late somewhere (traffic ran slower than planned) takes no
+    (cost = how much later the plan ends). Ties (within 1e-12 s) go to the pickup earlier by
+    more than 1e-9 s, then to the first positions. A plan already late somewhere (traffic ran slower than planned) takes no
     insertion that delays the late stop further."""
     m = len(rows)
     out = (np.full(m, np.inf), np.full(m, -1, dtype=np.int64), np.full(m, -1, dtype=np.int64),
@@ -274,6 +274,6 @@ def brute_force_insertion(ready: float, first_tt, stops: list[tuple], load: int,
             arrivals, end = got
             pick = arrivals[i]
             c = pick - ready if objective == PICKUP_TIME else end - end_old
-            if c < best[0] - 1e-12 or (c <= best[0] + 1e-12 and pick < best[3]):
+            if c < best[0] - 1e-12 or (c <= best[0] + 1e-12 and pick < best[3] - 1e-9):
                 best = (c, i, j, pick)
     return best

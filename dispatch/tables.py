@@ -19,14 +19,9 @@ import math
 from collections import defaultdict
 from statistics import fmean
 
-PREFERRED_ORDER = ("hungarian", "local_hungarian", "magnnet", "auction", "greedy", "fcfs",
-                   "random")
-
-
-def allocator_order(names) -> list[str]:
-    names = set(names)
-    first = [n for n in PREFERRED_ORDER if n in names]
-    return first + sorted(names - set(first))
+# One allocator order, one paired gap and one naming of batch-window variants for the CLI's
+# tables and the analysis package (standard library only; see its docstring).
+from analysis.compare import allocator_order, paired_gaps, variant_name, variant_rank
 
 
 def _mean(rows: list[dict], key: str) -> float:
@@ -42,29 +37,37 @@ def _f(v: float, digits: int = 1, scale: float = 1.0, unit: str = "") -> str:
     return "-" if v is None or math.isnan(v) else f"{v * scale:.{digits}f}{unit}"
 
 
+def _label(s: dict, variants: bool) -> str:
+    """A table row's name: the allocator, and its batch window when the runs hold several
+    batch-window variants (``fcfs imm``, ``fcfs 30s``; see ``Scenario.variants``)."""
+    if not variants:
+        return s["allocator"]
+    v = variant_name(s["scenario"])
+    return f"{s['allocator']} {v}" if v != s["scenario"] else s["allocator"]
+
+
 def aggregate(summaries: list[dict], reference: str = "hungarian") -> dict[tuple[str, int], dict]:
-    """Per (allocator, n_agents): mean over seeds of the total cost, the paired gap to
-    ``reference`` (same seed, planner and N), the conflict-free rate, the allocation seconds,
-    and the per-task figures of dynamic runs (served share, wait, cost per assignment, ms per
+    """Per (row, n_agents), a row being the allocator (and its batch window where the runs
+    hold several variants): mean over seeds of the total cost, the paired gap to
+    ``reference`` (:func:`analysis.compare.paired_gaps`: the same scenario, planner,
+    repositioner, N and seed), the conflict-free rate, the allocation seconds, and the
+    per-task figures of dynamic runs (served share, wait, cost per assignment, ms per
     decision); ``runs``."""
-    ref = {
-        (s["planner"], s["n_agents"], s["seed"]): s["total_cost"]
-        for s in summaries if s["allocator"] == reference
-    }
-    groups: dict[tuple[str, int], list[dict]] = defaultdict(list)
-    for s in summaries:
-        groups[(s["allocator"], s["n_agents"])].append(s)
+    variants = len({s["scenario"] for s in summaries}) > 1
+    gaps = paired_gaps(summaries, reference)
+    groups: dict[tuple[str, int], list[tuple[dict, float]]] = defaultdict(list)
+    for s, g in zip(summaries, gaps, strict=True):
+        groups[(_label(s, variants), s["n_agents"])].append((s, g))
     out = {}
-    for key, rows in groups.items():
-        gaps = [
-            (r["total_cost"] - ref[k]) / ref[k]
-            for r in rows
-            if (k := (r["planner"], r["n_agents"], r["seed"])) in ref and ref[k] > 0
-        ]
+    for key, pairs in groups.items():
+        rows = [s for s, _ in pairs]
+        gs = [g for _, g in pairs if not math.isnan(g)]
         out[key] = {
+            "allocator": rows[0]["allocator"],
+            "scenario": rows[0]["scenario"],
             "runs": len(rows),
             "total_cost": _mean(rows, "total_cost"),
-            "gap": fmean(gaps) if gaps else math.nan,
+            "gap": fmean(gs) if gs else math.nan,
             "conflict_free_rate": _mean(rows, "conflict_free_rate"),
             "alloc_seconds": _mean(rows, "alloc_seconds"),
             "first_decision_seconds": _mean(rows, "first_decision_seconds"),
@@ -80,12 +83,13 @@ def aggregate(summaries: list[dict], reference: str = "hungarian") -> dict[tuple
     return out
 
 
-def _new_table(title: str, columns: list[str]):
+def _new_table(title: str, columns: list[str], collapse: bool = False):
     from rich import box
     from rich.table import Table
 
-    t = Table(title=title, box=box.SIMPLE_HEAD, padding=(0, 1), pad_edge=False,
-              title_justify="left")
+    # collapse: one space between columns (the box's own divider), for the widest tables
+    t = Table(title=title, box=box.SIMPLE_HEAD, padding=(0, 0) if collapse else (0, 1),
+              pad_edge=False, title_justify="left")
     for i, col in enumerate(columns):
         t.add_column(col, justify="left" if i == 0 else "right", no_wrap=i == 0)
     return t
@@ -95,9 +99,16 @@ def _grouped_rows(agg: dict):
     """(allocator, N, row) in N order, allocators in the paper's order; ``last`` marks the last
     row of an N (a section ends there)."""
     sizes = sorted({n for _, n in agg})
-    allocs = allocator_order({a for a, _ in agg})
+    alloc = {a: r.get("allocator", a) for (a, _), r in agg.items()}
+    scen = {a: r.get("scenario", "") for (a, _), r in agg.items()}
+    rank = {a: i for i, a in enumerate(allocator_order(alloc.values()))}
+
+    def order(label):
+        return rank[alloc[label]], variant_rank(scen[label]), label
+
+    labels = sorted({a for a, _ in agg}, key=order)
     for n in sizes:
-        here = [a for a in allocs if (a, n) in agg]
+        here = [a for a in labels if (a, n) in agg]
         for i, a in enumerate(here):
             yield a, n, agg[(a, n)], i == len(here) - 1
 
@@ -130,7 +141,7 @@ def render(summaries: list[dict], console=None, *, dynamic: bool = False) -> Non
                         "first decision (cost matrix + allocator)",
                         ["allocator", "N", "conflict-free", "time ms"])
         for a, n, r, last in _grouped_rows(agg):
-            gap = ("" if a == "hungarian" or math.isnan(r["gap"])
+            gap = ("" if r["allocator"] == "hungarian" or math.isnan(r["gap"])
                    # + 0.0 turns a rounding-level -0.0 (equal totals in another order) into 0
                    else f"{round(100 * r['gap'], 1) + 0.0:+.1f}%")
             t1.add_row(a, str(n), str(r["runs"]), _f(r["total_cost"]), gap, end_section=last)
@@ -161,24 +172,28 @@ def _render_trips(summaries: list[dict], console, repositioner: str | None) -> N
     groups: dict[tuple[str, int], list[dict]] = defaultdict(list)
     variants = len({s["scenario"] for s in summaries}) > 1  # a swept batch_window
     for s in summaries:
-        groups[(_variant(s) if variants else s["allocator"], s["n_agents"])].append(s)
+        groups[(_label(s, variants), s["n_agents"])].append(s)
     runs = max((len(g) for g in groups.values()), default=0)
-    title = ("Trips, mean over {runs} seed(s): served and rejected (at once or expired) share "
-             "of the trips, wait from release to pickup (s), share of km driven empty, km "
-             "driven (thousands), wall seconds deciding").format(runs=runs)
+    title = ("Trips, mean over {runs} seed(s): served, rejected (at once or expired) and "
+             "cancelled (open or aboard at the end) share of the trips, wait from release to "
+             "pickup (s), share of km driven empty, km driven (thousands), wall seconds "
+             "deciding").format(runs=runs)
     if repositioner is not None:
         km = fmean(s.get("reposition_distance", 0.0) for s in summaries) / 1000
         title = f"Repositioner {repositioner!r} ({km:.0f} km repositioning per run). " + title
-    t = _new_table(title, ["allocator", "N", "trips", "served", "rej.", "wait", "empty", "k km",
-                           "dec. s"])
+    t = _new_table(title, ["allocator", "N", "trips", "served", "rej.", "canc.", "wait",
+                           "empty", "k km", "dec. s"], collapse=True)
     agg = {}
     for key, rows in groups.items():
         agg[key] = {
+            "allocator": rows[0]["allocator"],
+            "scenario": rows[0]["scenario"],
             "trips": _mean(rows, "n_tasks"),
             "served": fmean(_ratio(r["tasks_completed"], r["n_tasks"]) for r in rows),
             "rejected": fmean(_ratio(r["tasks_rejected"] + r["tasks_expired"]
                                      + r.get("tasks_unreachable", 0), r["n_tasks"])
                               for r in rows),
+            "cancelled": fmean(_ratio(r["tasks_cancelled"], r["n_tasks"]) for r in rows),
             "wait": _mean(rows, "wait_time_mean"),
             "empty": fmean(_ratio(r["empty_distance"], r["distance"]) for r in rows),
             "km": _mean(rows, "distance") / 1e6,  # thousands of km: a city day fits 80 columns
@@ -186,7 +201,8 @@ def _render_trips(summaries: list[dict], console, repositioner: str | None) -> N
         }
     for a, n, r, last in _grouped_rows(agg):
         t.add_row(a, str(n), _f(r["trips"], 0), _f(r["served"], 1, 100, "%"),
-                  _f(r["rejected"], 1, 100, "%"), _f(r["wait"]), _f(r["empty"], 0, 100, "%"),
+                  _f(r["rejected"], 1, 100, "%"), _f(r["cancelled"], 1, 100, "%"),
+                  _f(r["wait"]), _f(r["empty"], 0, 100, "%"),
                   _f(r["km"], 1), _f(r["dec"], 2), end_section=last)
     console.print(t)
     if any(_pooled(r) for r in summaries):
@@ -206,20 +222,14 @@ def _render_shared(groups: dict, runs: int, console) -> None:
              "share of completed rides shared, delay (drop-off - release - direct drive, s), "
              "detour (in-vehicle time / direct drive)")
     t = _new_table(title, ["allocator", "N", "occupancy", "shared", "delay", "detour"])
-    agg = {key: {"occ": _mean(rows, "occupancy"), "shared": _mean(rows, "shared_rate"),
+    agg = {key: {"allocator": rows[0]["allocator"], "scenario": rows[0]["scenario"],
+                 "occ": _mean(rows, "occupancy"), "shared": _mean(rows, "shared_rate"),
                  "delay": _mean(rows, "delay_mean"), "detour": _mean(rows, "detour_ratio")}
            for key, rows in groups.items()}
     for a, n, r, last in _grouped_rows(agg):
         t.add_row(a, str(n), _f(r["occ"], 2), _f(r["shared"], 1, 100, "%"), _f(r["delay"]),
                   _f(r["detour"], 2), end_section=last)
     console.print(t)
-
-
-def _variant(s: dict) -> str:
-    """``fcfs imm`` / ``fcfs 30s``: the allocator and the batch window of a swept-window run
-    (its scenario name ends ``-immediate`` or ``-batch30s``, see ``Scenario.variants``)."""
-    tail = s["scenario"].rpartition("-")[2]
-    return f"{s['allocator']} {'imm' if tail == 'immediate' else tail.removeprefix('batch')}"
 
 
 def render_one(s: dict, console=None, *, dynamic: bool = False) -> None:

@@ -190,6 +190,9 @@ class Fleet:
         self.busy_mask = np.zeros(n, dtype=bool)
         #: a free seat somewhere in its plan (kept by Operator.changed)
         self.room = np.ones(n, dtype=bool)
+        #: seats; the end of the service it is in (-inf: none), as the vehicles have them
+        self.capacity = np.fromiter((v.capacity for v in self.vehicles), np.int64, n)
+        self.free_at = np.full(n, -np.inf)
         self.node = np.full(n, -1, dtype=np.int64)
         self.remaining = np.zeros(n)
         self.odd = np.zeros(n, dtype=bool)
@@ -669,6 +672,7 @@ class Operator:
                 continue
             if self.service_time > 0:
                 v.serving, v.free_at = task, env.now + self.service_time
+                self.fleet.free_at[v._slot] = v.free_at
                 try:
                     yield env.timeout(self.service_time)
                 except simpy.Interrupt:  # a breakdown in service: breakdown() did the rest

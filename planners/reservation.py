@@ -66,6 +66,22 @@ class ReservationPlanner(AStarPlanner):
         for k in ("timed_plans", "timed_failures", "expansions", "waits_planned"):
             self.stats.extra.setdefault(k, 0)
 
+    #: Retries of blocked vehicles in one run past which ``dispatch validate`` refuses it
+    #: (see :meth:`budget`).
+    MAX_RUN_RETRIES = 2_000_000
+
+    def budget(self, *, agents: int, tasks: float, duration: float) -> str | None:
+        """Why a run would not finish (None: it would): a vehicle that finds no timed route
+        tries again every ``retry_after`` seconds, so vehicles kept waiting make up to
+        ``agents × duration / retry_after`` retries, each a search (see
+        :mod:`dispatch.budget`)."""
+        retries = agents * duration / self.retry_after
+        if retries <= self.MAX_RUN_RETRIES:
+            return None
+        return (f"retry_after = {self.retry_after:g} s lets {agents:,} vehicles make up to "
+                f"{retries:.3g} retries in {duration:g} s (more than "
+                f"{self.MAX_RUN_RETRIES:,}): a larger retry_after or a shorter duration")
+
     def plan_timed(self, agent: AgentView, goal: Cell | None, reservations: Reservations,
                    t0: float) -> list[tuple[float, Cell]] | None:
         """The earliest-arriving timed route from ``agent.cell`` at ``t0`` to ``goal`` (or,

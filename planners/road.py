@@ -394,13 +394,14 @@ class RoadPlanner(Planner):
         tnode = _loc_arrays(targets)[0]
         if pairwise and node.size != tnode.size:
             raise ValueError("pairwise travel times need as many sources as targets")
-        snodes, sinv = np.unique(node, return_inverse=True)
-        tnodes, tinv = np.unique(tnode, return_inverse=True)
         index = self._index
-        if not pairwise and snodes.size < tnodes.size:
+        # only the smaller side is made distinct (the other may be a whole fleet's stops)
+        if not pairwise and node.size < tnode.size:
+            snodes, sinv = np.unique(node, return_inverse=True)
             fwd = self._forward(snodes)  # (distinct sources, n)
             at = tnode if index is None else index[tnode]
             return fwd[sinv][:, at] + rem[:, None]
+        tnodes, tinv = np.unique(tnode, return_inverse=True)
         fields = [self._to(n) for n in tnodes.tolist()]
         at = node if index is None else index[node]
         if pairwise:
@@ -408,8 +409,8 @@ class RoadPlanner(Planner):
                               np.float64, tnode.size)
             return out + rem
         out = np.empty((node.size, tnode.size))
-        for k, f in enumerate(fields):
-            out[:, tinv == k] = f[at][:, None]
+        for p, k in enumerate(tinv.tolist()):
+            out[:, p] = fields[k][at]
         return out + rem[:, None]
 
     def _to(self, n: int) -> np.ndarray:
@@ -545,12 +546,4 @@ def _agent_arrays(agents: Sequence[Any]) -> tuple[np.ndarray, np.ndarray]:
     nodes = getattr(agents, "nodes", None)
     if nodes is not None:
         return nodes, agents.remaining
-    locs = [a.loc for a in agents]
-    node = np.empty(len(locs), dtype=np.int64)
-    rem = np.zeros(len(locs))
-    for i, loc in enumerate(locs):
-        if isinstance(loc, RoadPoint):
-            node[i], rem[i] = loc.node, max(loc.remaining, 0.0)
-        else:
-            node[i] = int(loc)
-    return node, rem
+    return _loc_arrays([a.loc for a in agents])

@@ -254,6 +254,22 @@ class RRTStarPlanner(Planner):
                   "snap_repairs"):
             self.stats.extra.setdefault(k, 0)
 
+    #: Tree iterations of one run past which ``dispatch validate`` refuses it (see
+    #: :meth:`budget`): about 20 s on one core (an iteration scans every node of its tree).
+    MAX_RUN_ITERATIONS = 60_000
+
+    def budget(self, *, agents: int, tasks: float, duration: float) -> str | None:
+        """Why a run of ``tasks`` tasks would not finish (None: it would): each task's goal
+        grows a tree of ``max_iterations`` iterations per movement model that serves it
+        (two for a ground task), so a run costs about ``2 × tasks × max_iterations``
+        iterations (see :mod:`dispatch.budget`)."""
+        work = 2 * tasks * self.max_iterations
+        if work <= self.MAX_RUN_ITERATIONS:
+            return None
+        return (f"about {work:.3g} tree iterations (2 trees x {tasks:,.0f} tasks x "
+                f"max_iterations = {self.max_iterations:,}; more than "
+                f"{self.MAX_RUN_ITERATIONS:,}, about 20 s): lower max_iterations or use astar")
+
     # ------------------------------------------------------------------ plumbing
     @property
     def rays(self) -> RayWorld:

@@ -326,10 +326,10 @@ class RayWorld:
     """
 
     def __init__(self, world: World, clearance: float) -> None:
-        from dispatch.physics import import_pybullet
+        from dispatch.physics import connect_direct, import_pybullet
 
         self.p = p = import_pybullet()
-        self.client = p.connect(p.DIRECT)
+        self.client = connect_direct(p)
         self._finalizer = weakref.finalize(self, _disconnect, p, self.client)
         boxes = collision_boxes(world)
         r = float(clearance)

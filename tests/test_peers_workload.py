@@ -103,3 +103,75 @@ def test_ours_runner_serves_the_workload(tmp_path):
         where[v] = di
     assert row["wait_mean"] == pytest.approx(np.mean(waits), abs=1e-6)
     assert row["vehicle_km"] == pytest.approx(metres / 1000)
+
+
+def test_ride_metrics_by_hand():
+    """Shared-ride metrics over the requests served: detour = in-vehicle / direct time, delay =
+    drop-off - release - direct time, shared share, occupancy = passenger-km / vehicle-km."""
+    nan = float("nan")
+    released = np.array([0.0, 10.0, 20.0])
+    picked = np.array([5.0, 15.0, nan])
+    done = np.array([45.0, 75.0, nan])
+    direct = np.array([20.0, 30.0, 40.0])
+    m = pw.metrics(released, picked, done, 2_000.0, direct=direct,
+                   shared=np.array([True, False, True]), passenger_m=3_000.0)
+    assert m["served"] == 2 and m["served_share"] == pytest.approx(2 / 3)
+    assert m["detour_mean"] == pytest.approx((40 / 20 + 60 / 30) / 2)
+    assert m["delay_mean"] == pytest.approx(((45 - 0 - 20) + (75 - 10 - 30)) / 2)
+    assert m["shared_rate"] == pytest.approx(0.5)  # the unserved third is not counted
+    assert m["occupancy"] == pytest.approx(1.5) and m["passenger_km"] == pytest.approx(3.0)
+
+
+def test_limits_and_jittered_streets(tmp_path):
+    """The windows are release + max_wait and release + direct + max_delay; direct times are
+    Manhattan distances on the plain grid and Dijkstra's on jittered streets, and the GraphML
+    the project reads gives the same fastest times."""
+    from dispatch.roads import read_graphml
+
+    w, t, o, d, s = pw.generate(50, 3, 1.0, seed=2, columns=5, rows=4, max_wait=120.0,
+                                max_delay=300.0)
+    lp, ld = w.latest(t, o, d)
+    (ox, oy), (dx, dy) = w.node_xy(o), w.node_xy(d)
+    l1 = (np.abs(ox - dx) + np.abs(oy - dy)) * w.block / w.speed
+    assert np.allclose(lp, t + 120.0) and np.allclose(ld, t + l1 + 300.0)
+    jw, jt, jo, jd, js = pw.generate(50, 3, 1.0, seed=2, columns=5, rows=4, jitter=0.1)
+    assert np.array_equal(jt, t) and np.array_equal(jo, o) and np.array_equal(js, s)
+    u, _, metres = jw.streets()
+    assert u.size == 4 * 4 + 5 * 3 and np.all(np.abs(metres / w.block - 1) <= 0.1)
+    assert len(set(metres.tolist())) == metres.size
+    direct = jw.direct(jo, jd)
+    assert not np.allclose(direct, l1) and np.all(np.abs(direct / l1 - 1) <= 0.1 + 1e-12)
+    pw.write(tmp_path, jw, jt, jo, jd, js)
+    net = read_graphml(tmp_path / "grid.graphml")
+    from scipy.sparse.csgraph import dijkstra
+
+    times = dijkstra(net.time)
+    idx = [net.index_of(i) for i in range(jw.nodes)]
+    assert np.allclose(times[np.ix_(idx, idx)][jo, jd], direct, rtol=0, atol=1e-9)
+    assert pw.read(tmp_path)[0] == jw
+
+
+def test_ridepy_driven_seconds_is_the_union_per_vehicle():
+    import peers_ridepy
+
+    vehicle = np.array([0, 0, 1, 0, -1, 1])
+    start = np.array([0.0, 5.0, 1.0, 20.0, 0.0, 2.0])
+    stop = np.array([10.0, 8.0, 3.0, 25.0, 99.0, 4.0])
+    # vehicle 0: [0, 10] and [20, 25]; vehicle 1: [1, 4]; -1 is left out
+    assert peers_ridepy.driven_seconds(vehicle, start, stop) == pytest.approx(10 + 5 + 3)
+
+
+def test_ours_runner_pools(tmp_path):
+    """A 4-seat workload through the project's runner with the added-time objective: every
+    request within its limits or rejected, and the shared-ride metrics consistent."""
+    w, t, o, d, s = pw.generate(60, 3, 0.25, seed=4, drain=2000.0, capacity=4, max_wait=300.0,
+                                max_delay=300.0)
+    pw.write(tmp_path, w, t, o, d, s)
+    out = tmp_path / "ours.json"
+    subprocess.run([sys.executable, str(BENCH / "peers_ours.py"), str(tmp_path), str(out),
+                    "hungarian", "added_time"], check=True, cwd=BENCH.parent)
+    row = json.loads(out.read_text())
+    assert row["served"] + row["rejected"] == 60 and row["served"] > 0
+    assert 0 <= row["wait_mean"] <= 300 and 0 <= row["delay_mean"] <= 300
+    assert row["detour_mean"] >= 1 - 1e-9 and 0 < row["shared_rate"] <= 1
+    assert row["occupancy"] == pytest.approx(row["passenger_km"] / row["vehicle_km"])

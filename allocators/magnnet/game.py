@@ -82,7 +82,8 @@ class Game:
         for i in np.flatnonzero(req >= 0):
             t = int(req[i])
             if count[t] > 1:
-                rewards[i] += rules.R_CONFLICT
+                if not rules.CONFLICT_LOSERS_ONLY or winners[t] != i:
+                    rewards[i] += rules.R_CONFLICT
                 self.conflicted[t] = True
         for t, i in winners.items():
             self.agent_task[i] = t
@@ -93,6 +94,8 @@ class Game:
         finished = (not now_dec.any()) or not (req >= 0).any()
         truncated = (not finished) and self.round >= self.max_rounds
         self.done = finished or truncated
+        if self.done:
+            rewards[now_dec] += rules.R_STALL
         team = float(rewards.sum())
         if self.done:
             bonus = rules.team_bonus(int((self.agent_task >= 0).sum()), self.total(),
@@ -240,7 +243,6 @@ class BatchedGame:
         onehot.scatter_(2, t[..., None], ok[..., None])
         count = onehot.sum(1)  # (B, M)
         contested = torch.gather(count, 1, t) > 1
-        rewards += torch.where(ok & contested, rules.R_CONFLICT, 0.0)
         self.conflicted |= count > 1
         masked = torch.where(onehot, self.cost, torch.full_like(self.cost, float("inf")))
         win_agent = masked.argmin(1)  # (B, M): first minimum = lowest index on ties
@@ -249,6 +251,8 @@ class BatchedGame:
         won.scatter_(1, win_agent[:, None, :], has_req[:, None, :])
         won &= onehot
         agent_won = won.any(2)
+        pays = ok & contested & ~agent_won if rules.CONFLICT_LOSERS_ONLY else ok & contested
+        rewards += torch.where(pays, rules.R_CONFLICT, 0.0)
         self.agent_task = torch.where(agent_won, won.float().argmax(2), self.agent_task)
         self.taken |= has_req
         c_win = torch.gather(self.cost, 2, t[..., None])[..., 0]
@@ -259,6 +263,7 @@ class BatchedGame:
         finished = ~now_dec.any(1) | ~ok.any(1)
         truncated = ~finished & (self.round >= self.max_rounds)
         done = finished | truncated
+        rewards += torch.where(done[:, None] & now_dec, rules.R_STALL, 0.0)
         team = rewards.sum(1)
         n_assigned = (self.agent_task >= 0).sum(1)
         total = self.totals()
@@ -268,5 +273,6 @@ class BatchedGame:
                             torch.zeros_like(gap))
         rewards += torch.where(dec, bonus[:, None], torch.zeros_like(rewards))
         team += bonus
+        self.last_bonus = bonus.float()
         ended = torch.where(done[:, None], dec, dec & ~now_dec)
         return rewards.float(), team.float(), dec, ended, done, truncated

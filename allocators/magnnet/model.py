@@ -88,6 +88,9 @@ class MagnnetPolicy(nn.Module):
     ``z_i``; the actor is an MLP over ``[status, M costs, z_i]`` (input ``M + 7``) with one
     hidden layer of 128 and a softmax over ``{reject, task 1 .. task M}``; the centralized
     critic is an MLP (128 hidden) over all embeddings and task states, used in training only.
+    With ``agent_values`` (ours, training only: the actor is unchanged) the critic's output
+    layer gives one value per agent instead of the team's one (per-agent credit, see
+    :class:`~allocators.magnnet.ppo.PPOConfig` ``credit``).
 
     ``task_features=0`` is that model exactly (variant ``"paper"``). With
     ``task_features=K > 0`` (variant ``"paper_nb"``, **our addition**, not in the paper) the
@@ -98,10 +101,11 @@ class MagnnetPolicy(nn.Module):
     """
 
     def __init__(self, n_agents: int, n_tasks: int, hidden: int = 6, mlp: int = 128,
-                 task_features: int = 0) -> None:
+                 task_features: int = 0, agent_values: bool = False) -> None:
         super().__init__()
         self.n_agents, self.n_tasks, self.hidden, self.mlp = n_agents, n_tasks, hidden, mlp
         self.task_features = task_features
+        self.agent_values = agent_values
         self.gnn = nn.ModuleList([
             HeteroGraphConv(AGENT_F + n_tasks, TASK_F, 2, hidden),
             HeteroGraphConv(hidden, hidden, 2, hidden),
@@ -110,7 +114,7 @@ class MagnnetPolicy(nn.Module):
             nn.Linear(n_tasks * (1 + task_features) + 1 + hidden, mlp), nn.ReLU(),
             nn.Linear(mlp, n_tasks + 1))
         self.critic = nn.Sequential(nn.Linear(n_agents * hidden + n_tasks * TASK_F, mlp),
-                                    nn.ReLU(), nn.Linear(mlp, 1))
+                                    nn.ReLU(), nn.Linear(mlp, n_agents if agent_values else 1))
 
     @property
     def variant(self) -> str:
@@ -121,6 +125,8 @@ class MagnnetPolicy(nn.Module):
                "hidden": self.hidden, "mlp": self.mlp}
         if self.task_features:
             cfg["task_features"] = self.task_features
+        if self.agent_values:
+            cfg["agent_values"] = True
         return cfg
 
     def embed(self, obs):
@@ -142,8 +148,11 @@ class MagnnetPolicy(nn.Module):
         return _mask(out[..., 1:], out[..., :1], obs["available"]), z
 
     def value(self, obs, z):
+        """The centralized critic: ``(B,)`` (the team's value), or ``(B, N)`` (each agent's
+        value, from the same global input) when built with ``agent_values``."""
         b = z.shape[0]
-        return self.critic(torch.cat([z.reshape(b, -1), obs["tasks"].reshape(b, -1)], -1))[:, 0]
+        v = self.critic(torch.cat([z.reshape(b, -1), obs["tasks"].reshape(b, -1)], -1))
+        return v if self.agent_values else v[:, 0]
 
 
 #: Number of per-task features :func:`neighbour_task_features` returns.

@@ -76,6 +76,13 @@ class PPOConfig:
     """seed of torch and of the instance draws."""
     val_every: int = 20
     """PPO updates between two validations (when ``train`` gets a ``validate`` function)."""
+    credit: str = "team"
+    """``"team"``: every acting agent of a round gets the round's team advantage (the team
+    reward, one critic value). ``"agent"`` (ours): each agent's advantage comes from its own
+    reward stream (its win, conflict, reject and stall rewards, plus the team bonus, which
+    reaches every agent of the episode at its end) against its own value from the
+    centralized critic (built with ``agent_values``): an agent is credited with what it did,
+    not with what the other agents did in the same round."""
 
 
 def gae(rewards, values, dones, last_value, gamma: float, lam: float):
@@ -169,7 +176,11 @@ def collect(model, game: BatchedGame, sampler: Sampler, steps: int, stats: dict)
         logp_l.append(lp)
         acted_l.append(acted)
         val_l.append(v)
-        rew_l.append(team)
+        if v.dim() == 2:  # per-agent credit: the bonus reaches the agents that left early too
+            rew_l.append(rew + torch.where(done[:, None] & ~acted, game.last_bonus[:, None],
+                                           torch.zeros_like(rew)))
+        else:
+            rew_l.append(team)
         done_l.append(done.float())
         ep_ret += team
         if done.any():
@@ -196,14 +207,22 @@ def ppo_update(model, optimizer, batch, cfg: PPOConfig, actor: bool = True) -> d
     """The PPO update on one batch from :func:`collect`: ``cfg.epochs`` passes in minibatches of
     ``cfg.minibatch_size`` environment steps. Returns mean losses and entropy. With
     ``actor=False`` only the value loss is minimized (critic warm-up)."""
-    adv, ret = gae(batch["rewards"], batch["values"], batch["dones"], batch["last_value"],
+    dones = batch["dones"]
+    per_agent = batch["values"].dim() == 3  # (T, B, N): one value per agent
+    if per_agent:
+        dones = dones[..., None].expand_as(batch["values"])
+    adv, ret = gae(batch["rewards"], batch["values"], dones, batch["last_value"],
                    cfg.gamma, cfg.gae_lambda)
-    T, B = adv.shape
+    T, B = adv.shape[:2]
     flat = lambda x: x.reshape(T * B, *x.shape[2:])  # noqa: E731
     obs = {k: flat(v) for k, v in batch["obs"].items()}
     actions, old_lp, acted = flat(batch["actions"]), flat(batch["logp"]), flat(batch["acted"])
     adv, ret = flat(adv), flat(ret)
-    adv = (adv - adv.mean()) / (adv.std() + 1e-8)
+    if per_agent:  # normalized over the decisions taken (the steps of agents that acted)
+        sel = adv[acted]
+        adv = (adv - sel.mean()) / (sel.std() + 1e-8)
+    else:
+        adv = (adv - adv.mean()) / (adv.std() + 1e-8)
     logs = {"losses/policy": [], "losses/value": [], "losses/entropy": [], "losses/approx_kl": []}
     for _ in range(cfg.epochs):
         perm = torch.randperm(T * B)
@@ -217,7 +236,7 @@ def ppo_update(model, optimizer, batch, cfg: PPOConfig, actor: bool = True) -> d
             mask = acted[idx].float()
             cnt = mask.sum().clamp(min=1.0)
             ratio = torch.exp(lp - old_lp[idx])
-            a = adv[idx][:, None]
+            a = adv[idx] if per_agent else adv[idx][:, None]
             pg = -torch.min(ratio * a, ratio.clamp(1 - cfg.clip, 1 + cfg.clip) * a)
             pg = (pg * mask).sum() / cnt
             entropy = (ent * mask).sum() / cnt
@@ -388,10 +407,14 @@ def validation_set(pool, n: int, m: int, count: int, seed: int = 12345):
 
 
 def score(res: dict) -> float:
-    """Validation score (lower is better): the gap plus the shares of tasks in conflict and of
-    instances left incomplete (each such point weighs as much as a point of gap)."""
+    """Validation score (lower is better): the gap plus the share of tasks not assigned
+    conflict-free plus three times the share of instances left incomplete (a point of
+    conflicts weighs as much as a point of gap; an instance the deterministic policy leaves
+    with a task unassigned, because every deciding agent rejected in one round, three times
+    as much). An all-reject policy assigns nothing and scores 1 + 1 + 3 (its tasks are never
+    in conflict, but never assigned either)."""
     gap = res["gap"] if res["gap"] == res["gap"] else 1.0
-    return gap + (1.0 - res["conflict_free"]) + (1.0 - res["complete"])
+    return gap + (1.0 - res["success"]) + 3.0 * (1.0 - res["complete"])
 
 
 def save_checkpoint(model, path, cfg: PPOConfig | None = None, extra: dict | None = None):
@@ -414,8 +437,10 @@ def load_checkpoint(path):
 def evaluate(model, pool, comm=None) -> dict[str, float]:
     """Play every instance of ``pool`` once with the model's most likely actions (as the plugin
     does) on a complete communication graph (or ``comm (B, N, N)``); mean gap to the optimal
-    total over fully assigned instances, share fully assigned, and conflict-free rate (tasks
-    never requested by two agents in one round, over all tasks)."""
+    total over fully assigned instances, share fully assigned, conflict-free rate (tasks
+    never requested by two agents in one round, over all tasks: a task nobody requested
+    counts as conflict-free) and ``success`` (the benchmark's conflict-free success: tasks
+    assigned without ever being in conflict, over all tasks)."""
     b, n, m = pool.cost.shape
     game = BatchedGame(b, n, m)
     game.load(np.arange(b), pool.cost, pool.agent_pos, pool.task_pos, pool.flies,
@@ -436,4 +461,5 @@ def evaluate(model, pool, comm=None) -> dict[str, float]:
     full = (game.agent_task >= 0).sum(1) >= game.opt_count
     return {"gap": float(gap[full].mean()) if full.any() else float("nan"),
             "complete": float(full.float().mean()),
-            "conflict_free": float(1.0 - game.conflicted.float().mean())}
+            "conflict_free": float(1.0 - game.conflicted.float().mean()),
+            "success": float((game.taken & ~game.conflicted).float().mean())}

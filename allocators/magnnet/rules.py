@@ -23,6 +23,10 @@ Rewards (per agent, per round), the paper's shaping with our magnitudes:
   cheapest deciding contender (ties to the lowest index) for some task it could request, i.e.
   it holds back a task it would win. Waiting while a cheaper agent contends for one's tasks is
   free (that is how agents avoid conflicts over several rounds);
+* at the last round, ``R_STALL`` to every agent that is still deciding (unassigned while an
+  open task it can serve is left): the episode ended with it idle, so its rejects were
+  "without a valid reason" (the paper's penalty against stagnation; without it a policy that
+  rejects everything ends the episode at no cost and PPO finds that first, see the README);
 * at the last round, ``R_TEAM * exp(-TEAM_SHARPNESS * gap)`` to every agent still in the game
   when the episode ends with as many tasks assigned as the optimum assigns, ``gap`` the total
   cost's relative gap to the optimal (Hungarian) assignment; the *team* reward used by the
@@ -37,9 +41,13 @@ import numpy as np
 
 R_WIN = 1.0
 R_COST = 1.0
-R_CONFLICT = -0.5
+R_CONFLICT = -2.0
 R_REJECT = -0.05
 R_TEAM = 2.0
+R_STALL = -2.0
+#: ``True``: only the requesters that lose a contested task pay ``R_CONFLICT`` (the cheapest
+#: requester won it as the paper rewards); ``False``: every requester of it pays.
+CONFLICT_LOSERS_ONLY = False
 TEAM_SHARPNESS = 10.0
 
 #: Costs are divided by this many seconds in the observations; ``inf`` and unavailable tasks

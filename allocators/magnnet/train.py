@@ -19,6 +19,12 @@ log = logging.getLogger(__name__)
 #: the played policy waits longer before it must request, and the steps are half as large.
 STAGE2 = {"iterations": 3, "patience": 8, "lr": 5e-4}
 
+#: PPO recipe of the shipped ``paper_n{N}.pt`` (``dispatch train magnnet --variant paper``):
+#: pure PPO from random weights (no imitation), the paper's hyperparameters except the
+#: learning rate (the paper's 1e-5 does not move the policy in 500k steps here: the README's
+#: ablation), with the reward of :mod:`allocators.magnnet.rules`.
+RECIPE = {"lr": 3e-4, "steps": 500_000, "bc_updates": 0, "critic_warmup": 0}
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from allocators.magnnet.ppo import PPOConfig
@@ -59,19 +65,33 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--threads", type=int, default=2, help="view: torch threads")
     p.add_argument("--init", type=Path, default=None,
                    help="view: continue from this view checkpoint instead of match.pt")
-    p.add_argument("--steps", type=int, default=d.total_steps, help="PPO environment steps")
-    p.add_argument("--bc-updates", type=int, default=1500,
-                   help="imitation warm-start updates before PPO (0: pure PPO as in the paper)")
+    p.add_argument("--steps", type=int, default=RECIPE["steps"],
+                   help="PPO environment steps (rounds of one game)")
+    p.add_argument("--bc-updates", type=int, default=RECIPE["bc_updates"],
+                   help="imitation warm-start updates before PPO (0, the default: pure PPO "
+                        "from random weights, as in the paper; the checkpoints shipped before "
+                        "issue 19 had 300)")
     p.add_argument("--bc-defer", action=argparse.BooleanOptionalAction, default=True,
                    help="warm-start target: agents with a cheaper contender for their optimal "
                         "task wait a round (see ppo.optimal_targets)")
-    p.add_argument("--lr", type=float, default=d.lr)
+    p.add_argument("--lr", type=float, default=None,
+                   help=f"PPO learning rate (default {RECIPE['lr']:g}; the paper's {d.lr:g} "
+                        "learns nothing in our step budget)")
+    p.add_argument("--credit", choices=["team", "agent"], default=d.credit,
+                   help="PPO advantages: team (one per round, the team reward; default) or "
+                        "agent (each agent's own reward stream and value; see PPOConfig)")
     p.add_argument("--envs", type=int, default=d.n_envs)
     p.add_argument("--seed", type=int, default=d.seed)
     p.add_argument("--pool", type=int, default=600, help="training instances (cached A* costs)")
     p.add_argument("--val", type=int, default=100,
                    help="of those, held out for validation (picks the final weights; 0: none)")
-    p.add_argument("--critic-warmup", type=int, default=20,
+    p.add_argument("--reject-penalty", type=float, default=None,
+                   help="paper/paper_nb: R_REJECT, the reward of rejecting while the cheapest "
+                        "deciding contender for an open task (default: rules.R_REJECT)")
+    p.add_argument("--losers-only", action=argparse.BooleanOptionalAction, default=None,
+                   help="paper/paper_nb: only the losers of a contested task pay R_CONFLICT "
+                        "(default: rules.CONFLICT_LOSERS_ONLY)")
+    p.add_argument("--critic-warmup", type=int, default=RECIPE["critic_warmup"],
                    help="PPO updates at the start that fit only the critic")
     p.add_argument("--ent", type=float, default=d.ent_coef, help="entropy coefficient")
     p.add_argument("--out", type=Path, default=None, help="output folder")
@@ -93,12 +113,22 @@ def run(args, console=None) -> int:
     if args.variant == "view":
         return _run_view(args, console)
     torch.set_num_threads(1)
+    from allocators.magnnet import rules
+
+    if args.reject_penalty is not None:  # this process only: the game reads rules at each step
+        rules.R_REJECT = args.reject_penalty
+    if args.losers_only is not None:
+        rules.CONFLICT_LOSERS_ONLY = args.losers_only
+    reward = {k: getattr(rules, k) for k in ("R_WIN", "R_COST", "R_CONFLICT", "R_REJECT",
+                                               "R_TEAM", "TEAM_SHARPNESS", "R_STALL",
+                                               "CONFLICT_LOSERS_ONLY")}
     n = args.agents
     out = args.out or Path("runs") / "train" / f"magnnet_{args.variant}_n{n}"
     out.mkdir(parents=True, exist_ok=True)
-    cfg = PPOConfig(lr=args.lr, total_steps=args.steps, bc_updates=args.bc_updates,
-                    n_envs=args.envs, seed=args.seed, bc_defer=args.bc_defer,
-                    critic_warmup=args.critic_warmup, ent_coef=args.ent)
+    cfg = PPOConfig(lr=RECIPE["lr"] if args.lr is None else args.lr, total_steps=args.steps,
+                    bc_updates=args.bc_updates, n_envs=args.envs, seed=args.seed,
+                    bc_defer=args.bc_defer, critic_warmup=args.critic_warmup,
+                    ent_coef=args.ent, credit=args.credit)
     pool_n = max(20, n)
     full = load_pool(pool_n, args.pool, "train", workers=2)
     n_val = min(args.val, len(full) // 2)
@@ -111,7 +141,10 @@ def run(args, console=None) -> int:
             res = evaluate(model, val)
             return {**res, "score": score(res)}
     tf = NB_FEATURES if args.variant == "paper_nb" else 0
-    model, sizes = MagnnetPolicy(n, n, task_features=tf), None
+    with torch.random.fork_rng():  # seeded initial weights, without touching global state
+        torch.manual_seed(cfg.seed)
+        model = MagnnetPolicy(n, n, task_features=tf, agent_values=cfg.credit == "agent")
+    sizes = None
     started = time.perf_counter()
     total = cfg.bc_updates + cfg.total_steps // (max(1, cfg.batch_size // cfg.n_envs)
                                                  * cfg.n_envs)
@@ -143,6 +176,7 @@ def run(args, console=None) -> int:
     best_val = min(vals, key=lambda r: r["val/score"]) if vals else None
     save_checkpoint(model, out / "model.pt", cfg,
                     {"wall_s": wall, "env_steps": steps, "ppo_wall_s": ppo_wall,
+                     "reward": reward,
                      "ppo_env_steps": ppo_steps,
                      "val": {k: v for k, v in (best_val or {}).items() if k.startswith("val/")},
                      "world_size": pool.world_size.tolist(),
@@ -237,7 +271,7 @@ def _run_view(args, console=None) -> int:
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
     from allocators.magnnet.allocator import MagnnetAllocator, shipped
-    from allocators.magnnet.ppo import PPOConfig, load_checkpoint, save_checkpoint
+    from allocators.magnnet.ppo import load_checkpoint, save_checkpoint
     from allocators.magnnet.problems import load_pool
     from allocators.magnnet.views import (ViewConfig, ViewPolicy, config_dict, evaluate_views,
                                           train_views)
@@ -253,7 +287,7 @@ def _run_view(args, console=None) -> int:
                               updates=args.updates or d.updates, seed=args.seed,
                               patience=d.patience if args.patience is None else args.patience,
                               confidence=args.confidence or d.confidence,
-                              lr=d.lr if args.lr == PPOConfig().lr else args.lr)
+                              lr=d.lr if args.lr is None else args.lr)
     stages = [cfg] + ([dataclasses.replace(cfg, iterations=args.stage2,
                                            patience=args.stage2_patience, lr=args.stage2_lr)]
                       if args.stage2 else [])
@@ -435,10 +469,26 @@ def _figures(rows, out: Path) -> None:
         fig, ax = plt.subplots(figsize=(5, 3.2))
         ax.plot(x, [r[key] for r in ppo])
         ax.set_xlabel("environment steps")
+        ax.ticklabel_format(axis="x", style="sci", scilimits=(3, 3))
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
         fig.tight_layout()
         fig.savefig(out / name, dpi=120)
+        plt.close(fig)
+    val = [r for r in rows if r["phase"] == "val" and "val/success" in r]
+    if val:  # the deterministic policy on held-out training instances (what picks the weights)
+        fig, ax = plt.subplots(figsize=(5, 3.2))
+        xv = [r["env_steps"] for r in val]
+        ax.plot(xv, [100 * r["val/gap"] for r in val], label="gap to optimal %")
+        ax.plot(xv, [100 * r["val/success"] for r in val], label="conflict-free %")
+        ax.plot(xv, [100 * r["val/complete"] for r in val], label="fully assigned %")
+        ax.set_xlabel("environment steps")
+        ax.ticklabel_format(axis="x", style="sci", scilimits=(3, 3))
+        ax.set_ylabel("validation (argmax policy)")
+        ax.legend(fontsize=7)
+        ax.grid(alpha=0.3)
+        fig.tight_layout()
+        fig.savefig(out / "validation.png", dpi=120)
         plt.close(fig)
 
 

@@ -229,3 +229,82 @@ def test_render_a_taxi_run(road_sweep, tmp_path, cli):
         first = img.convert("RGB").tobytes()
         img.seek(img.n_frames - 1)
         assert img.convert("RGB").tobytes() != first  # taxis moved, the clock ran
+
+
+def _copy_one_run(sweep_dir, dest, part="allocator=greedy/planner=astar/n_agents=3/seed=0"):
+    """A results folder holding one run of ``sweep_dir`` (as ``dispatch run`` of that run
+    would write it into another --out)."""
+    import shutil
+
+    for table in sweep_dir.iterdir():
+        for src in table.glob(f"scenario=*/{part}"):
+            shutil.copytree(src, dest / src.relative_to(sweep_dir))
+    return dest
+
+
+def test_a_run_in_two_folders_counts_once(small_sweep, tmp_path, cli):
+    """``dispatch report runs/a runs/b`` with a run in both: one row per run id, and a warning
+    with the count (it counted twice: N = 3 showed 10 runs and greedy's mean moved)."""
+    from analysis.io import open_results
+
+    one = _copy_one_run(small_sweep, tmp_path / "one")
+    res = open_results(small_sweep, one)
+    assert len(res.summary) == 18 and res.summary["run_id"].is_unique
+    assert [d.run_id for d in res.duplicates] == ["tiny__greedy__astar__n3__s0"]
+    tasks = res.table("tasks")
+    alone = open_results(small_sweep).table("tasks")
+    assert len(tasks) == len(alone)
+    assert open_results(small_sweep, small_sweep).duplicates == []  # one folder named twice
+    proc = cli("report", small_sweep, one, "--out", tmp_path / "rep")
+    assert proc.returncode == 0, proc.stderr
+    assert "warning" in proc.stderr and "1 run(s) found in more than one folder" in proc.stderr
+    text = (tmp_path / "rep" / "report.md").read_text()
+    assert "18 runs from" in text and "counted once" in text
+    with open(tmp_path / "rep" / "allocators.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert {int(r["runs"]) for r in rows} == {3}
+
+
+def test_taxi_table_adds_up_and_has_intervals_over_seeds(road_sweep, tmp_path):
+    """rides + rejections + cancelled + failed = requests per series; the 95 % interval over
+    the two seeds of each share and of the mean wait is the Student-t one of the runs' own
+    values; the report shows them as mean ± half-width."""
+    import math as m
+
+    from analysis import metrics as M
+    from analysis.io import open_results
+    from analysis.stats import mean_ci
+
+    res = open_results(road_sweep)
+    taxi = M.taxi_metrics(res.summary, res.table("tasks"), res.table("vehicles"))
+    for _, r in taxi.iterrows():
+        assert r["rides"] + r["rejections"] + r["cancelled"] + r["failed"] == r["requests"]
+        assert r["service_rate"] + r["rejectionRate"] + r["cancelRate"] == pytest.approx(
+            1 - r["failed"] / r["requests"])
+        runs = res.summary.loc[res.summary["allocator"] == r["allocator"]]
+        assert len(runs) == 2
+        served = runs["tasks_completed"] / runs["n_tasks"]
+        assert r["service_rate_ci95"] == pytest.approx(mean_ci(served)[1])
+        assert r["wait_average_ci95"] == pytest.approx(mean_ci(runs["wait_time_mean"])[1])
+        assert m.isfinite(r["cancelRate_ci95"])
+    write_report(road_sweep, tmp_path)
+    text = (tmp_path / "report.md").read_text()
+    assert "cancelled" in text and "cancelRate" in text and " ± " in text
+
+
+def test_cli_report_series_filter(road_sweep, tmp_path, cli):
+    proc = cli("report", road_sweep, "--series", "hungarian*", "--out", tmp_path / "a")
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "a" / "hourly.png").is_file()
+    proc = cli("report", road_sweep, "--series", "nosuch*", "--out", tmp_path / "b")
+    assert proc.returncode == 2 and "no series matches 'nosuch*'" in proc.stderr
+    assert "fcfs" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_a_run_id_shared_by_two_scenario_texts_is_not_a_duplicate(single_run, small_sweep):
+    """The single run (tiny, hungarian, N = 3, seed 2, Poisson tasks) and the small sweep's
+    run of that id (static tasks) are two runs of two texts: both are read, no warning."""
+    from analysis.io import open_results
+
+    res = open_results(single_run, small_sweep)
+    assert res.duplicates == [] and len(res.summary) == 19

@@ -151,3 +151,117 @@ def test_hourly_plot_of_series_with_different_demand_draws_each_its_own():
            for label, g in taxi_plots.per_run(hc)}
     assert got == {"fcfs low": ([800.0], [700.0]), "fcfs high": ([1600.0], [1500.0])}
     assert not taxi_plots._same_demand(taxi_plots.per_run(hc))
+
+
+# ----------------------------------------------------------------------------- 40 series
+
+
+def _forty():
+    """40 series (5 allocators x N 500, 1000 x immediate / 30 s x stay / demand) of made-up
+    hourly customers, fleet states and waits; greedy and fcfs identical under immediate
+    dispatch (one request at a time: the same choice)."""
+    import numpy as np
+
+    allocs = ["fcfs", "greedy", "hungarian", "auction", "magnnet"]
+    hc, hf, wt = [], [], []
+    for a in allocs:
+        for n in (500, 1000):
+            for sc in ("study-immediate", "study-batch30s"):
+                for rep in ("stay", "demand"):
+                    like = "fcfs" if a == "greedy" and sc.endswith("immediate") else a
+                    k = allocs.index(like) + (5 if n == 500 else 0) + (10 if "30" in sc else 0)
+                    rng = np.random.default_rng(k + (20 if rep == "demand" else 0))
+                    keys = dict(allocator=a, n_agents=n, scenario=sc, planner="dijkstra",
+                                reposition=rep)
+                    for h in range(6):
+                        hc.append({**keys, "hour": h, "t_h": float(h), "runs": 3,
+                                   "requests": 300.0, "rides": 280.0 - k,
+                                   "rejectionRate": 0.01 * k + rng.uniform(0, 0.01),
+                                   "wait_median": 100.0 + k, "wait_p90": 200.0 + k})
+                        hf.append({**keys, "hour": h, "t_h": float(h), "idle": n / 2 - k,
+                                   "to_pickup": n / 4, "occupied": n / 4 + k,
+                                   "repositioning": 0.0, "failed": 0.0})
+                    wt += [{**keys, "wait": w} for w in rng.gamma(2.0, 60 + k, size=50)]
+    return pd.DataFrame(hc), pd.DataFrame(hf), pd.DataFrame(wt)
+
+
+def _capture(monkeypatch):
+    from analysis import taxi_plots
+
+    figures = {}
+    real = taxi_plots._save
+
+    def keep(fig, path):
+        figures[Path(path).name] = fig
+        return real(fig, path)
+
+    monkeypatch.setattr(taxi_plots, "_save", keep)
+    return figures
+
+
+def test_forty_series_are_small_multiples_with_twins_marked(tmp_path, monkeypatch):
+    """hourly.png and the wait ECDF of 40 series: one panel per N / window / repositioner
+    (8), the 5 allocators coloured alike in each (no colour reused within a panel), the
+    identical series (greedy = fcfs, immediate) marked; fleet_state.png says which panel
+    repeats which."""
+    from analysis import taxi_plots as TP
+
+    figures = _capture(monkeypatch)
+    hc, hf, wt = _forty()
+    assert len(TP.series(hc)) == 40
+    TP.hourly(hc, tmp_path / "hourly.png", bin_s=3600)
+    fig = figures["hourly.png"]
+    visible = [ax for ax in fig.axes if ax.get_visible()]
+    assert len(visible) == 8 * 3
+    titles = sorted(ax.get_title() for ax in visible if ax.get_title())
+    assert len(titles) == 8 and "N=500 imm (stay)" in titles and "N=1000 30s + demand" in titles
+    for ax in visible[::3][:1]:
+        colours = [tuple(ln.get_color()) if not isinstance(ln.get_color(), str)
+                   else ln.get_color() for ln in ax.get_lines()]
+        assert len(set(colours)) == 5  # five allocators, five colours
+    notes = [t.get_text() for ax in visible for t in ax.texts]
+    assert notes.count("identical: fcfs = greedy") == 4  # the immediate panels
+    legend = [t.get_text() for lg in fig.legends for t in lg.get_texts()]
+    assert {"hungarian", "magnnet", "auction", "greedy", "fcfs"} <= set(legend)
+
+    TP.wait_by_group(wt, tmp_path / "wait.png")
+    fig = figures["wait.png"]
+    ecdf = [ax for ax in fig.get_axes() if ax.get_visible() and ax.get_title()
+            and "N=" in ax.get_title()]
+    assert len(ecdf) == 8
+    labels = [t.get_text() for ax in ecdf for t in ax.get_legend().get_texts()]
+    assert sum(lab.endswith("= greedy") for lab in labels) == 4
+    box = [ax for ax in fig.get_axes() if "Per series" in ax.get_title(loc="right")][0]
+    ticks = [t.get_text() for t in box.get_yticklabels()]
+    assert len(ticks) == 40 and "fcfs N=500 imm  (= greedy N=500 imm)" in ticks
+
+    TP.fleet_state(hf, tmp_path / "fleet.png", bin_s=3600)
+    titles = [ax.get_title() for ax in figures["fleet.png"].axes if ax.get_visible()]
+    assert len(titles) == 40 and "fcfs N=500 imm\n(= greedy N=500 imm)" in titles
+    for name in ("hourly.png", "wait.png", "fleet.png"):
+        assert (tmp_path / name).stat().st_size > 50_000
+
+
+def test_series_filter(tmp_path, monkeypatch):
+    from analysis import taxi_plots as TP
+
+    figures = _capture(monkeypatch)
+    hc, _, wt = _forty()
+    groups = TP.series(hc)
+    assert [g[1] for g in TP.select(groups, ["hungarian*"])] == [
+        g[1] for g in groups if g[1].startswith("hungarian")]
+    assert len(TP.select(groups, ["* 30s*", "fcfs*"])) == 20 + 4
+    assert TP.select(groups, None) == groups
+    with pytest.raises(ValueError, match="no series matches 'nosuch'"):
+        TP.select(groups, ["nosuch"])
+    TP.hourly(hc, tmp_path / "h.png", bin_s=3600, only=["hungarian N=500*", "fcfs N=500*"])
+    top = figures["h.png"].axes[0]  # 8 series: one panel set, as before
+    assert sorted(ln.get_label() for ln in top.get_lines()) == sorted(
+        g[1] for g in TP.select(groups, ["hungarian N=500*", "fcfs N=500*"]))
+
+
+def test_colours_never_reused():
+    from analysis.plots import _colours
+
+    for n in (5, 15, 40):
+        assert len(set(_colours([f"s{i}" for i in range(n)]).values())) == n

@@ -31,9 +31,10 @@ def test_derived_scenario(study, tmp_path):
     assert sc.duration == 3 * 3600
     assert sc.tasks.trips_per_day == 1000
     runs = sc.runs()
-    assert len(runs) == 2 * 2 * 2 * 2  # N x allocator x window x repositioner
+    assert len(runs) == 2 * 2 * 2 * 2 * 3  # N x allocator x window x repositioner x seed
     assert {r.scenario.name for r in runs} == {"chicago_study-immediate",
                                                "chicago_study-batch30s"}
+    assert {r.seed for r in runs} == {0, 1, 2}
     assert {(r.allocator, r.agents, r.reposition) for r in runs} == {
         (al, n, rp) for al in ("fcfs", "greedy") for n in (20, 40) for rp in ("stay", "demand")}
     full = study.parse_args([])
@@ -91,7 +92,8 @@ def test_rerun_with_other_lists_resumes_the_runs_it_shares(study, tmp_path):
     first = specs(["--agents", "500", "1000"], ["fcfs", "greedy", "hungarian"], ["stay"], "a")
     second = specs(["--agents", "1000"], ["hungarian", "greedy"], ["demand", "stay"], "b")
     shared = sorted(set(first) & set(second))
-    assert len(shared) == 2 * 2 * 1 * 1  # hungarian, greedy x 2 windows x N = 1000 x stay
+    assert len(shared) == 2 * 2 * 1 * 1 * 3  # hungarian, greedy x 2 windows x N = 1000 x stay
+    # x 3 seeds
     assert {first[r].scenario.name for r in shared} == {"chicago_study-immediate",
                                                          "chicago_study-batch30s"}
     for r in shared:
@@ -134,3 +136,20 @@ def test_table_shows_conflicts(study):
     assert "| conflict-free |" in md[0]
     assert "| 8712 | 50.0% | 12.3 |" in md[3]
     assert "| - | - | 12.3 |" in study.markdown_table(_table()).splitlines()[2]
+
+
+def test_three_seeds_intervals_and_cancelled(study):
+    """Three seeds by default; the table shows the cancelled share (served + rejected +
+    cancelled add up) and 95 % intervals over seeds (terminal: served and wait; study.md:
+    served, rejected, cancelled and wait), still within 80 columns."""
+    assert study.parse_args([]).seeds == [0, 1, 2]
+    t = _table().assign(served=0.75, rejected=0.2, cancelled=0.05, served_ci=0.012,
+                        rejected_ci=0.01, cancelled_ci=0.004, wait_mean_ci=12.4)
+    text = study.text_table(t)
+    assert max(len(line) for line in text.splitlines()) <= 80
+    head, _, first, *_ = text.splitlines()
+    assert "canc%" in head and "served%" in head
+    assert first.split()[-8:-4] == ["75.0±1.2", "20.0", "5.0", "300±12"], first
+    md = study.markdown_table(t).splitlines()
+    assert "| canc% |" in md[0] and "| p90 |" in md[0]
+    assert "| 75.0% ± 1.2 | 20.0% ± 1.0 | 5.0% ± 0.4 | 300 ± 12 |" in md[2]

@@ -124,3 +124,81 @@ def test_dynamic_aggregate_by_hand():
     assert a["served_share"] == pytest.approx(0.75)  # 5/10 and 10/10
     assert a["cost_per_assignment"] == pytest.approx(3.0)  # 2 and 4 s
     assert a["decision_ms"] == pytest.approx(15.0)  # 10 and 20 ms
+
+
+def _variant_runs() -> list[dict]:
+    """Two batch-window variants of one scenario (``-immediate`` and ``-batch30s``): Hungarian
+    costs 100 in one and 80 in the other, greedy 10 % more than Hungarian in both."""
+    out = []
+    for scenario, ref in (("chicago-immediate", 100.0), ("chicago-batch30s", 80.0)):
+        for alloc, factor in (("hungarian", 1.0), ("greedy", 1.1)):
+            for seed in (0, 1):
+                out.append({**_summary("hungarian", 8, seed), "scenario": scenario,
+                            "allocator": alloc, "total_cost": ref * factor * (1 + seed)})
+    return out
+
+
+def test_gap_is_paired_within_a_batch_window_variant():
+    """The reference is the Hungarian run of the same scenario (variant), planner, N and seed:
+    Hungarian is 0 % from itself and greedy +10 % in both variants (it was keyed without the
+    scenario, so one variant's Hungarian was the other's reference: -20 % / +25 %)."""
+    agg = aggregate(_variant_runs())
+    assert set(agg) == {("hungarian imm", 8), ("hungarian 30s", 8), ("greedy imm", 8),
+                        ("greedy 30s", 8)}
+    for label in ("hungarian imm", "hungarian 30s"):
+        assert agg[(label, 8)]["gap"] == pytest.approx(0.0)
+    for label in ("greedy imm", "greedy 30s"):
+        assert agg[(label, 8)]["gap"] == pytest.approx(0.1)
+    text = _render(_variant_runs())
+    assert "+10.0%" in text and "-20" not in text and "+25" not in text
+
+
+def test_tables_and_analysis_share_one_gap_and_order():
+    """The CLI's tables and analysis.metrics compute the same paired gaps and the same
+    allocator order (one definition: analysis.compare)."""
+    pd = pytest.importorskip("pandas")
+    from analysis import compare
+    from analysis import metrics as M
+    from dispatch import tables
+
+    runs = _variant_runs()
+    assert list(M.paired_gaps(pd.DataFrame(runs))) == pytest.approx(compare.paired_gaps(runs))
+    assert tables.allocator_order is compare.allocator_order is M.allocator_order
+    am = M.allocator_metrics(pd.DataFrame(runs)).set_index(["scenario", "allocator"])
+    agg = aggregate(runs)
+    for (scenario, alloc), row in am.iterrows():
+        label = f"{alloc} {M.variant_name(scenario)}"
+        assert row["gap_mean"] == pytest.approx(agg[(label, 8)]["gap"])
+
+
+def test_trip_table_shows_cancelled_and_fits_with_variant_labels():
+    """The trip table has a cancelled column (served + rejected + cancelled + failed add up
+    to the trips) and fits 80 columns uncut with the longest labels (a swept batch window)."""
+    rows = []
+    for a, n, s in itertools.product(["local_hungarian", "magnnet_match", "fcfs"],
+                                     [100, 1000], [0, 1]):
+        for scenario in ("chicago-immediate", "chicago-batch30s"):
+            rows.append({**_summary("hungarian", n, s, "road"), "allocator": a,
+                         "scenario": scenario, "n_tasks": 1000, "tasks_completed": 900,
+                         "tasks_rejected": 40, "tasks_expired": 20, "tasks_unreachable": 0,
+                         "tasks_cancelled": 38, "tasks_failed": 2})
+    text = _render(rows)
+    assert "…" not in text and max(map(len, text.splitlines())) <= 80
+    line = next(ln for ln in text.splitlines() if ln.split()[:2] == ["local_hungarian", "30s"])
+    assert line.split()[4:7] == ["90.0%", "6.0%", "3.8%"], line
+    assert "canc." in text
+
+
+def test_shared_ride_table_with_variants():
+    """Pooled road runs get the shared-ride table too, rows ordered and labelled as the trip
+    table's (allocator, then batch window)."""
+    rows = [{**_summary("hungarian", 10, s, "road"), "allocator": a, "scenario": sc,
+             "shared_rate": 0.3, "occupancy": 1.4, "delay_mean": 60.0, "detour_ratio": 1.2}
+            for a in ("fcfs", "hungarian") for sc in ("c-immediate", "c-batch30s")
+            for s in (0, 1)]
+    text = _render(rows)
+    shared = text[text.index("Shared rides"):]
+    labels = [ln.split()[:2] for ln in shared.splitlines() if ln.split()[:1] in (["fcfs"],
+                                                                              ["hungarian"])]
+    assert labels == [["hungarian", "imm"], ["hungarian", "30s"], ["fcfs", "imm"],
+                      ["fcfs", "30s"]]
