@@ -476,6 +476,10 @@ class Charging:
         self.hourly = np.zeros(1, np.int64)
         self.strandings = 0
         self.visits: dict[int, Any] = {}  # vehicle id -> its visit process
+        #: vehicle id -> (station, since) queueing now / (station, soc at plug-in, target,
+        #: since) plugged in now (closed by :meth:`finish` at the end of the run)
+        self.queueing: dict[int, tuple] = {}
+        self.plugged: dict[int, tuple] = {}
         bus.subscribe(self._released, ["release"])
         if strategy is not None and self.stations:
             env.process(self._loop())
@@ -596,7 +600,9 @@ class Charging:
             if not req.triggered:
                 station.queued += 1
                 emit(env.now, "queue", v.id, -1, station.node)
+            self.queueing[v.id] = (station, t_q)
             yield req
+            del self.queueing[v.id]
             waited = env.now - t_q
             bat.queue_seconds += waited
             station.queue_seconds += waited
@@ -607,13 +613,17 @@ class Charging:
             dur = self.seconds(a, max(a, target), station.kw)
             t_c = env.now
             emit(env.now, "charge_start", v.id, -1, station.node)
+            self.plugged[v.id] = (station, a, target, t_c)
             yield env.timeout(dur)
+            del self.plugged[v.id]
             self._charged(v, station, a, target, env.now - t_c, exact=True)
             t_c = None
             station.resource.release(req)
             req = None
             emit(env.now, "charge_end", v.id, -1, station.node)
         except simpy.Interrupt:  # a breakdown: it has put the vehicle right
+            self.queueing.pop(v.id, None)
+            self.plugged.pop(v.id, None)
             if coming:
                 station.coming -= 1
             if t_q is not None:
@@ -649,6 +659,19 @@ class Charging:
         bat.charge_seconds += seconds
         bat.plugged = False
         bat.t = self.env.now
+
+    def finish(self) -> None:
+        """The run ends: what the vehicles still plugged in have charged so far counts (and
+        their plug time), and the seconds the ones queueing have waited."""
+        now = self.env.now
+        fleet = self.fleet.by_id
+        for vid, (station, since) in sorted(self.queueing.items()):
+            fleet[vid].battery.queue_seconds += now - since
+            station.queue_seconds += now - since
+        for vid, (station, a, target, since) in sorted(self.plugged.items()):
+            self._charged(fleet[vid], station, a, target, now - since, exact=False)
+        self.queueing.clear()
+        self.plugged.clear()
 
     # ------------------------------------------------------------------ strandings
     def nearest_station(self, node: int) -> Station | None:

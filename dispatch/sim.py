@@ -378,6 +378,8 @@ class Simulation:
                     stop_leg(v, env.now)
             self.book.close_all(TaskState.CANCELLED)
             if self.energy is not None:
+                if self.charging is not None:
+                    self.charging.finish()  # the charges cut by the end count
                 self.energy.settle_all()
             if self.progress is not None:
                 self.progress(env.now, self.spec.scenario.duration, self.book.released,

@@ -23,13 +23,14 @@ GRID = 'network = "manhattan"\nblocks = [6, 2]\nblock = 200.0\nspeed = 10.0'
 TERMINAL = {"completed", "expired", "rejected", "unreachable", "cancelled", "failed"}
 
 
-def grid(d: Path, energy: str, trips, starts=(0,), extra: str = "", name="ev") -> Path:
+def grid(d: Path, energy: str, trips, starts=(0,), extra: str = "", name="ev",
+         duration: float = 1e5) -> Path:
     (d / "fleet.csv").write_text("vehicle_id,node\n" + "".join(f"{i},{n}\n"
                                                                 for i, n in enumerate(starts)))
     (d / "trips.csv").write_text("t,origin_node,dest_node\n" + "".join(
         f"{t},{o},{e}\n" for t, o, e in trips))
     p = d / f"{name}.toml"
-    p.write_text(f'name = "{name}"\nseed = 1\nduration = 1e5\n[world]\n{GRID}\n'
+    p.write_text(f'name = "{name}"\nseed = 1\nduration = {duration!r}\n[world]\n{GRID}\n'
                  f'[fleet]\nstart = "fleet.csv"\n[fleet.energy]\n{energy}\n[tasks]\n'
                  f'source = "trace"\ntrace = "trips.csv"\nmax_wait = 600.0\n[dispatch]\n'
                  f'allocator = "fcfs"\n{extra}', encoding="utf-8")
@@ -186,6 +187,21 @@ def test_same_seed_same_output(tmp_path):
         x, y = a[name], b[name]
         cols = [c for c in x.columns if c not in TIMING_COLUMNS]
         pd.testing.assert_frame_equal(x[cols], y[cols])
+
+
+def test_a_charge_cut_by_the_end_of_the_run_counts(tmp_path):
+    # as in the charge by hand, but the run ends at 280 s (its duration): plugged in at 80 s,
+    # 200 s of the 380 s charge count: 0.2 kWh at 3.6 kW
+    (tmp_path / "st.csv").write_text("station_id,node,plugs,kw\nS,1,1,3.6\n")
+    s, t = run(grid(tmp_path, "battery_kwh = 1.0\nwh_per_km = 150.0\nsoc0 = 0.15\nreserve = 0.5",
+                    [(1000.0, 10, 11)], duration=280.0,
+                    extra='[chargers]\nfile = "st.csv"\n[charging]\nstrategy = "threshold"\n'
+                          '[charging.threshold]\nlow = 0.2\nhigh = 0.5\n'))
+    assert s["sim_time"] == pytest.approx(280.0)
+    v = t["vehicles"].iloc[0]
+    assert v.kwh_charged == pytest.approx(0.2) and v.charge_seconds == pytest.approx(200.0)
+    assert v.soc_end == pytest.approx(0.12 + 0.2)
+    assert t["chargers"].iloc[0].kwh_delivered == pytest.approx(0.2)
 
 
 def test_a_queue_forms_at_a_one_plug_station(tmp_path):
