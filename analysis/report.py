@@ -423,6 +423,10 @@ def _road_part(res, summary, tasks, vehicles, events, direct, out, written, only
     TP.wait_by_group(trips.loc[trips["wait"].notna()], out / "wait_by_allocator.png", only=only,
                      title=f"{scen}: wait from release to pickup, seeds pooled")
     written += [out / f for f in ROAD_FIGURES]
+    from analysis.energy_plots import energy_section
+
+    files, energy = energy_section(res, summary, out, net, run_id, keys, scen)
+    written += files
     unit = "one hour" if bin_s == 3600 else f"{bin_s / 60:g} minutes"
     return [
         ("h2", "Taxi study: customers and fleet"),
@@ -451,6 +455,7 @@ def _road_part(res, summary, tasks, vehicles, events, direct, out, written, only
         ("img", "map.png"),
         ("p", f"Over time, in bins of {unit} (the CSV files are per hour):"),
         ("img", "hourly.png"), ("img", "fleet_state.png"), ("img", "wait_by_allocator.png"),
+        *energy,
     ]
 
 

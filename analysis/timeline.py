@@ -102,14 +102,18 @@ def positions_at(traj: dict[int, pd.DataFrame], t: float) -> dict[int, np.ndarra
 #: board), ``occupied`` (one on board, or the service at the end of a ride; for the paper's
 #: point tasks, serving the task), ``occupied_2`` and ``occupied_3+`` (shared rides: two, three
 #: or more passengers on board), ``repositioning`` (idle, driving empty where a repositioning
-#: policy sends it), ``failed`` (broken down, until repaired), ``idle``.
+#: policy sends it), ``failed`` (broken down, until repaired), ``idle``; electric fleets
+#: (``[fleet.energy]``): ``to_charger`` (driving to a station), ``queueing`` (waiting for a
+#: plug), ``charging`` (plugged in).
 FLEET_STATES = ("idle", "to_pickup", "occupied", "occupied_2", "occupied_3+", "repositioning",
-                "failed")
+                "failed", "to_charger", "queueing", "charging")
+#: the electric fleets' states: plots show them only where some vehicle had them
+CHARGING_STATES = ("to_charger", "queueing", "charging")
 #: the states of a vehicle with one or more on board (or serving)
 OCCUPIED = ("occupied", "occupied_2", "occupied_3+")
 
 _FLEET_EVENTS = ("assign", "reassign", "pickup", "arrive", "dropoff", "idle", "breakdown",
-                 "reposition")
+                 "reposition", "depart", "queue", "charge_start")
 
 
 def _occupied(onboard: int) -> str:
@@ -172,6 +176,12 @@ def fleet_states(events: pd.DataFrame, vehicles: pd.DataFrame,
                         new, onboard, pending = "failed", 0, set()
                     elif kind == "reposition" and state == "idle":
                         new = "repositioning"
+                    elif kind == "depart" and task < 0 and state == "idle":
+                        new = "to_charger"  # (a repositioning drive starts "repositioning")
+                    elif kind == "queue":
+                        new = "queueing"
+                    elif kind == "charge_start":
+                        new = "charging"
                     if new != state or onboard != shown:
                         if t > since:
                             rows.append((run, agent, state, since, min(t, stop), shown))

@@ -48,7 +48,7 @@ def _parser() -> argparse.ArgumentParser:
                        "plugin on random problems (valid answers, no mutation, determinism, rng "
                        "use)")
     c.add_argument("name", help="plugin name (see dispatch plugins)")
-    c.add_argument("--kind", choices=("allocator", "planner", "repositioner"),
+    c.add_argument("--kind", choices=("allocator", "planner", "repositioner", "charger"),
                    help="which kind NAME is (needed only when two kinds have that name)")
     c.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="a constructor parameter (VALUE read as TOML, else as a string); repeat")
@@ -200,6 +200,13 @@ def build_plugins(sc, specs, *, force: bool = False) -> None:
     for name in sorted({s.reposition for s in specs}):
         try:
             make_repositioner(sc, name)
+        except PluginError as e:
+            raise PluginError(f"{sc.path}: {e}") from e
+    if sc.charging is not None:  # [fleet.energy]: the charging strategy
+        from dispatch.sim import make_charger
+
+        try:
+            make_charger(sc, sc.charging.strategy)
         except PluginError as e:
             raise PluginError(f"{sc.path}: {e}") from e
     planners = sorted({s.planner for s in specs})
@@ -356,7 +363,7 @@ def _plugins(args, console) -> int:
 
     from dispatch.registry import describe
 
-    for kind in ("allocator", "planner", "repositioner"):
+    for kind in ("allocator", "planner", "repositioner", "charger"):
         t = Table(title=f"{kind}s (entry-point group dispatch.{kind}s)", title_justify="left")
         t.add_column("name", no_wrap=True)
         if kind != "allocator":
@@ -477,9 +484,9 @@ def _check(args, console) -> int:
 
     from dispatch.errors import PluginError
     from dispatch.registry import available, load
-    from dispatch.testing import check_allocator, check_planner, check_repositioner
+    from dispatch.testing import check_allocator, check_charger, check_planner, check_repositioner
 
-    all_kinds = ("allocator", "planner", "repositioner")
+    all_kinds = ("allocator", "planner", "repositioner", "charger")
     kinds = [k for k in all_kinds if args.name in available(k)]
     if args.kind:
         kinds = [args.kind]
@@ -504,6 +511,8 @@ def _check(args, console) -> int:
         report = check_allocator(cls, seed=args.seed, **params)
     elif kinds[0] == "planner":
         report = check_planner(cls, seed=args.seed, **params)
+    elif kinds[0] == "charger":
+        report = check_charger(cls, seed=args.seed, **params)
     else:
         report = check_repositioner(cls, seed=args.seed, **params)
     for r in report.results:

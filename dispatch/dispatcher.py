@@ -399,6 +399,9 @@ class Dispatcher:
         self.objective = OBJECTIVES[cfg.objective]
         #: the planner routes between any two locations (direct times, insertions)
         self.routes = bool(getattr(planner, "travel_times", False))
+        #: [fleet.energy]: ``(cost, drive, slots, tasks) -> cost`` with ``inf`` where a vehicle
+        #: would end below its reserve (dispatch.energy.Energy.filter); None without energy
+        self.energy_filter = None
         if self.plans and not self.routes:
             raise PluginError(f"planner {planner.name!r} computes no travel times between "
                               "locations (Planner.between): shared rides, max_delay and the "
@@ -530,6 +533,7 @@ class Dispatcher:
             if not servable.all():
                 self._close_unreachable([t for t, ok in zip(open_tasks, servable) if not ok])
         deadlines = [t.deadline for t in open_tasks]
+        drive = cost if self.energy_filter is not None else None
         inserts: dict = {}
         if self.plans:
             if servable is None:
@@ -554,6 +558,8 @@ class Dispatcher:
                 if bad and not t.offered:
                     self.book.close(t, TaskState.REJECTED)
             servable &= ~late
+        if drive is not None:  # [fleet.energy]: below the reserve after the trip: inf
+            cost = self.energy_filter(cost, drive, idle, open_tasks)
         cost_s = time.perf_counter() - t0
         self.cost_seconds += cost_s
         if servable is not None:

@@ -36,6 +36,13 @@ reposition     an idle vehicle is sent toward a node by the repositioner (agent;
                arrival, an ``idle`` there; it stays idle (dispatchable) all the way
 insert         shared rides: a decision inserted a request's stops into a busy vehicle's
                plan (agent, the request; at the vehicle), after the request's ``assign``
+queue          ``[fleet.energy]``: a vehicle reached a station whose plugs are all taken
+               (agent; at the station)
+charge_start   a vehicle is plugged in (agent; at the station); ``charge_end`` when it
+charge_end     leaves the plug (at its target, or cut by a breakdown)
+stranded       a vehicle's battery ran empty on a leg (agent; where it stopped); a
+               ``breakdown`` follows, and after ``[faults] tow`` s a ``repair`` at the
+               nearest station
 =============  ===========================================================================
 """
 
@@ -48,7 +55,8 @@ from dispatch.space import Location
 
 KINDS = ("release", "assign", "depart", "move", "pickup", "dropoff", "complete", "idle", "wait",
          "replan", "expire", "reject", "unreachable", "cancel", "failed", "skipped",
-         "breakdown", "repair", "reopen", "reassign", "reposition", "insert")
+         "breakdown", "repair", "reopen", "reassign", "reposition", "insert",
+         "queue", "charge_start", "charge_end", "stranded")
 
 
 class Event(NamedTuple):

@@ -37,6 +37,7 @@ class FaultConfig:
     repair: float = 600.0  # seconds a random breakdown lasts; inf: for good
     events: tuple[tuple[float, int, float], ...] = ()  # (t, vehicle_id, duration) from a file
     on_board: str = "transfer"  # "transfer" | "fail"
+    tow: float = 3600.0  # seconds until a stranded vehicle ([fleet.energy]) is towed
     blackout: tuple[tuple[float, float], ...] = ()
     region: tuple[float, float, float, float] | None = None
 

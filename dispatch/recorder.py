@@ -112,6 +112,19 @@ SCHEMAS: dict[str, pa.Schema] = {
         ("failures", _I), ("down_seconds", _F),
         # seats; passenger-metres (metres times passengers on board)
         ("capacity", _I), ("passenger_distance", _F),
+        # [fleet.energy] (nan without): kWh drawn (driving + auxiliary) and charged, seconds
+        # plugged in and queued at stations, lowest and final state of charge (0-1)
+        ("kwh_drawn", _F), ("kwh_charged", _F), ("charge_seconds", _F), ("queue_seconds", _F),
+        ("soc_min", _F), ("soc_end", _F),
+    ]),
+    # [fleet.energy]: every vehicle's state of charge (0-1) every [fleet.energy] sample
+    # seconds from 0 (no rows without energy)
+    "soc": pa.schema([("run_id", _S), ("t", _F), ("agent_id", _I), ("soc", _F)]),
+    # [chargers] with [fleet.energy]: one row per station (no rows without)
+    "chargers": pa.schema([
+        ("run_id", _S), ("station_id", _S), ("node", _I), ("x", _F), ("y", _F), ("plugs", _I),
+        ("kw", _F), ("kwh_delivered", _F), ("busy_plug_hours", _F), ("visits", _I),
+        ("queued_visits", _I), ("queue_seconds", _F), ("mean_queue", _F),
     ]),
     "obstacles": pa.schema([
         ("run_id", _S), ("x0", _F), ("y0", _F), ("z0", _F), ("x1", _F), ("y1", _F), ("z1", _F),

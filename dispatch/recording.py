@@ -81,6 +81,10 @@ VEHICLE_COLUMNS = {
     "tasks_completed": "v.completed", "waits": "c['waits']", "replans": "c['replans']",
     "wait_seconds": "c['wait_seconds']", "failures": "v.failures", "down_seconds": "down",
     "capacity": "v.capacity", "passenger_distance": "v.passenger_distance",
+    "kwh_drawn": "b.drawn if b else nan", "kwh_charged": "b.charged if b else nan",
+    "charge_seconds": "b.charge_seconds if b else nan",
+    "queue_seconds": "b.queue_seconds if b else nan",
+    "soc_min": "b.kwh_min / b.capacity if b else nan", "soc_end": "b.soc if b else nan",
 }
 
 
@@ -121,10 +125,11 @@ class DecisionWriter:
 def write_vehicles(recorder, space, vehicles, now: float, counts) -> None:
     """The ``vehicles`` rows at the end of a run (``counts(v)``: its waits, replans and
     wait_seconds)."""
-    build = row_builder("vehicles", VEHICLE_COLUMNS, "v, p, down, c")
+    build = row_builder("vehicles", VEHICLE_COLUMNS, "v, p, down, c, b, nan=float('nan')")
     for v in vehicles:
         down = v.down_seconds + (now - v.down_since if v.failed else 0.0)
-        recorder.append("vehicles", build(v, space.position(v.start), down, counts(v)))
+        recorder.append("vehicles", build(v, space.position(v.start), down, counts(v),
+                                          v.battery))
 
 
 def event_writer(recorder, space):

@@ -21,7 +21,7 @@ from dispatch.errors import PluginError
 log = logging.getLogger(__name__)
 
 GROUPS = {"allocator": "dispatch.allocators", "planner": "dispatch.planners",
-          "repositioner": "dispatch.repositioners"}
+          "repositioner": "dispatch.repositioners", "charger": "dispatch.chargers"}
 _FALLBACK = {
     "allocator": {
         "hungarian": "allocators.hungarian:HungarianAllocator",
@@ -43,6 +43,11 @@ _FALLBACK = {
     "repositioner": {
         "stay": "repositioners.stay:StayRepositioner",
         "demand": "repositioners.demand:DemandRepositioner",
+    },
+    "charger": {
+        "threshold": "chargers.threshold:ThresholdCharging",
+        "idle": "chargers.idle:IdleCharging",
+        "valley": "chargers.valley:ValleyCharging",
     },
 }
 

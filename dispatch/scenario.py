@@ -128,6 +128,8 @@ class FleetConfig:
     #: (row order; 0: the fleet's)
     capacity: int = 1
     capacities: tuple[int, ...] = ()
+    #: ``[fleet.energy]`` (:class:`dispatch.energy.EnergyConfig`); None: no batteries
+    energy: Any = None
 
     @property
     def pooled(self) -> bool:
@@ -265,6 +267,8 @@ class Scenario:
     faults: FaultConfig = field(default_factory=FaultConfig)
     variant_of: str | None = None  # a batch-window variant: the swept scenario's name
     reposition: RepositionConfig = field(default_factory=RepositionConfig)
+    #: ``[chargers]`` / ``[charging]`` (:class:`dispatch.energy.ChargingConfig`); None: none
+    charging: Any = None
 
     def runs(
         self,
@@ -527,6 +531,8 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
                                    f"{len(rows)}")
         fleet = replace(fleet, agents=agents, start=rows, start_file=start_path,
                         capacities=read_fleet_capacities(start_path, max_bytes)[:agents])
+    if "energy" in f.data:
+        fleet = replace(fleet, energy=_parse_energy(f.table("energy"), fleet, world))
     f.done()
 
     t = root.table("tasks")
@@ -621,13 +627,15 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     disp = _parse_allocators(d, s, disp, sweep)
     declared = "reposition" in root.data
     reposition = _parse_reposition(root.table("reposition"), sweep, s)
+    charging = _parse_charging(root, path, fleet, faults)
     s.done()
     root.done()
 
     sc = Scenario(name=name, path=path, text=text, description=description, seed=seed,
                   duration=duration, world=world, fleet=fleet, tasks=tasks, dispatch=disp,
                   sweep=sweep, comms=comms, faults=faults,
-                  reposition=replace(reposition, declared=declared or bool(sweep.reposition)))
+                  reposition=replace(reposition, declared=declared or bool(sweep.reposition)),
+                  charging=charging)
     for n in sweep.agents or (fleet.agents,):
         _check_fits(sc, n, "sweep.agents" if sweep.agents else "fleet.agents")
     return sc
@@ -850,6 +858,7 @@ def _parse_faults(f: _Table, path: Path) -> FaultConfig:
             raise f.fail("file", f"must be a CSV file of t, vehicle_id, duration; got {file!r}")
         events = read_failures((path.parent / file).resolve())
     on_board = f.string("on_board", "transfer", ("transfer", "fail"))
+    tow = f.number("tow", 3600.0, gt=0.0)
     windows = f.get("blackout", [])
     if not isinstance(windows, list) or any(
             not isinstance(w, list) or len(w) != 2
@@ -867,7 +876,7 @@ def _parse_faults(f: _Table, path: Path) -> FaultConfig:
         if not windows:
             raise f.fail("blackout_region", "needs blackout windows")
     f.done()
-    return FaultConfig(rate=rate, repair=float(repair), events=events, on_board=on_board,
+    return FaultConfig(rate=rate, repair=float(repair), events=events, on_board=on_board, tow=tow,
                        blackout=tuple((float(a), float(b)) for a, b in windows),
                        region=None if region is None else tuple(float(x) for x in region))
 
@@ -1011,3 +1020,79 @@ def check_limits(sc: Scenario, specs: list[RunSpec], limits: Limits = LIMITS) ->
     from dispatch.budget import check_work  # work bounds: runs that would not finish
 
     check_work(sc, specs, refuse)
+
+
+def _parse_energy(e: _Table, fleet: FleetConfig, world: WorldConfig):
+    """``[fleet.energy]`` (see :mod:`dispatch.energy`): batteries on a road network."""
+    from dispatch.energy import EnergyConfig, read_socs
+
+    if world.roads is None:
+        raise e.fail("battery_kwh", "energy needs a road network ([world] network)")
+    wh = e.get("wh_per_km", 140.0)
+    table: tuple = ()
+    if isinstance(wh, list):
+        if len(wh) < 2 or any(not isinstance(r, list) or len(r) != 2 or any(
+                isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x)
+                or x < 0 for x in r) for r in wh) or any(
+                b[0] <= a[0] for a, b in zip(wh, wh[1:])):
+            raise e.fail("wh_per_km", f"must be a number or a list of [km/h, Wh/km] pairs with "
+                                      f"rising speeds, got {_short(wh)}")
+        table = tuple((float(a), float(b)) for a, b in wh)
+        wh = sum(b for _, b in table) / len(table)
+    else:
+        wh = e.number("wh_per_km", 140.0, gt=0.0)
+    socs = () if fleet.start_file is None else read_socs(fleet.start_file)[:fleet.agents]
+    cfg = EnergyConfig(
+        battery_kwh=e.number("battery_kwh", 50.0, gt=0.0), wh_per_km=wh, speed_table=table,
+        idle_kwh_per_hour=e.number("idle_kwh_per_hour", 0.0, lo=0.0),
+        soc0=e.number("soc0", 1.0, lo=0.0, hi=1.0), reserve=e.number("reserve", 0.1, lo=0.0,
+                                                                     hi=1.0),
+        max_charge_kw=e.number("max_charge_kw", 1e9, gt=0.0), socs=socs,
+        sample=e.number("sample", 900.0, gt=0.0))
+    e.done()
+    return cfg
+
+
+def _parse_charging(root: _Table, path: Path, fleet: FleetConfig, faults):
+    """``[chargers]`` (stations, taper) and ``[charging]`` (strategy, interval,
+    ``[charging.<name>]``); None unless the fleet has energy."""
+    from dispatch import registry
+    from dispatch.energy import ChargingConfig, read_stations
+
+    c, g = root.table("chargers"), root.table("charging")
+    if fleet.energy is None:
+        for t, k in ((c, "file"), (g, "strategy")):
+            if t.data:
+                raise t.fail(next(iter(t.data)), "needs [fleet.energy]")
+        return None
+    stations: tuple = ()
+    file = c.get("file", None)
+    if file is not None:
+        if not isinstance(file, str) or not file:
+            raise c.fail("file", f"must be a CSV file of stations, got {_short(file)}")
+        fpath = (path.parent / file).resolve()
+        try:
+            stations = read_stations(fpath)
+        except (OSError, ValueError) as err:
+            raise c.fail("file", str(err)) from None
+    else:
+        fpath = None
+    taper_from = c.number("taper_from", 0.8, lo=0.0, hi=1.0)
+    taper_floor = c.number("taper_floor", 0.2, gt=0.0, hi=1.0)
+    c.done()
+    installed = registry.available("charger")
+    strategy = g.string("strategy", "threshold")
+    if strategy not in installed:
+        raise g.fail("strategy", f"unknown charging strategy {strategy!r}; installed: "
+                                 f"{', '.join(installed)}")
+    interval = g.number("interval", 60.0, gt=0.0)
+    params = []
+    for name in sorted(k for k in g.data if k not in ("strategy", "interval")):
+        if not isinstance(g.data[name], dict) or name not in installed:
+            raise g.fail(name, "unknown key (known keys here: interval, strategy, and one "
+                               "[charging.<name>] table per installed strategy)")
+        params.append((name, g.params(name)))
+    g.done()
+    return ChargingConfig(stations=stations, file=fpath, taper_from=taper_from,
+                          taper_floor=taper_floor, strategy=strategy, interval=interval,
+                          params=tuple(params), tow=faults.tow)

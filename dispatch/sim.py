@@ -45,7 +45,7 @@ from dispatch.world import World, build_world
 log = logging.getLogger(__name__)
 
 (STREAM_WORLD, STREAM_FLEET, STREAM_TASKS, STREAM_ALLOCATOR, STREAM_SOURCE, STREAM_FAULTS,
- STREAM_REPOSITION) = range(7)
+ STREAM_REPOSITION, STREAM_CHARGING) = range(8)
 
 __all__ = ["Simulation", "make_plugin", "place_fleet", "rng_for", "space_for", "world_for"]
 
@@ -118,6 +118,11 @@ def make_repositioner(sc: Scenario, name: str) -> Repositioner:
     """The repositioner ``name`` built from its ``[reposition.<name>]`` table."""
     return _construct("repositioner", name, sc.reposition.params_of(name), (),
                       f"reposition.{name}")
+
+
+def make_charger(sc: Scenario, name: str):
+    """The charging strategy ``name`` built from its ``[charging.<name>]`` table."""
+    return _construct("charger", name, sc.charging.params_of(name), (), f"charging.{name}")
 
 
 def check_repositioner(sc: Scenario, name: str) -> None:
@@ -290,6 +295,10 @@ class Simulation:
         self.faults = (FaultInjector(env, sc.faults, self.fleet, self.operator,
                                      rng_for(spec.seed, STREAM_FAULTS))
                        if sc.faults.vehicles else None)
+        #: [fleet.energy]: batteries (dispatch.energy.Energy) and stations, visits (Charging)
+        self.energy = self.charging = None
+        if sc.fleet.energy is not None:
+            self._electric(sc, driver)
         self.progress = progress
         if progress is not None and math.isfinite(sc.duration) and sc.duration > 0:
             env.process(self._report(sc.duration))
@@ -300,6 +309,27 @@ class Simulation:
         while True:
             yield self.env.timeout(tick)
             self.progress(self.env.now, duration, self.book.released, self.stats.n_tasks)
+
+    def _electric(self, sc: Scenario, driver) -> None:
+        """Batteries, the reserve rule, stations and the charging strategy (see
+        :mod:`dispatch.energy`)."""
+        from dispatch.energy import Charging, Energy
+
+        net = self.space
+        ref = float(net.length.sum() / net.time.sum()) if hasattr(net, "length") else 10.0
+        self.energy = Energy(sc.fleet.energy, self.fleet, self.env, ref)
+        self.dispatcher.energy_filter = self.energy.filter
+        self.env.process(self.energy.sampler(self.recorder.appender("soc")))
+        cfg = sc.charging
+        strategy = make_charger(sc, cfg.strategy) if cfg.stations else None
+        self.charging = Charging(self.env, self.bus, self.fleet, self.operator, self.energy,
+                                 cfg, net, strategy, rng_for(self.spec.seed, STREAM_CHARGING),
+                                 sc.faults.on_board == "transfer",
+                                 lambda: self.dispatcher.notify())
+        self.charging.run_id = self.spec.run_id
+        self.operator.strand = self.charging.strand
+        if self.repositioning is not None:
+            self.charging.on_assign = self.repositioning.stop
 
     def _road_driver(self, sc: Scenario) -> RoadDriver:
         """The road driver; with ``[world] congestion`` the planner's costs and the legs are
@@ -347,6 +377,10 @@ class Simulation:
                 if v.leg is not None:
                     stop_leg(v, env.now)
             self.book.close_all(TaskState.CANCELLED)
+            if self.energy is not None:
+                if self.charging is not None:
+                    self.charging.finish()  # the charges cut by the end count
+                self.energy.settle_all()
             if self.progress is not None:
                 self.progress(env.now, self.spec.scenario.duration, self.book.released,
                               self.stats.n_tasks)
@@ -373,6 +407,10 @@ class Simulation:
             rec.add("obstacles", x0=b.x0, y0=b.y0, z0=b.z0, x1=b.x1, y1=b.y1, z1=b.z1)
         if self.repositioning is not None:
             self.repositioning.finish()
+        if self.charging is not None:
+            for row in self.charging.rows():
+                x, y, _ = self.space.position(row["node"])
+                rec.add("chargers", x=x, y=y, **row)
         run = dict(scenario=spec.scenario.name, allocator=spec.allocator, planner=spec.planner,
                    reposition=spec.reposition, n_agents=len(self.vehicles), seed=spec.seed,
                    space=self.space.kind)

@@ -82,6 +82,8 @@ class Vehicle:
     down_seconds: float = 0.0
     down_since: float = 0.0
     proc: Any = field(default=None, repr=False)  # the SimPy process serving its trip
+    #: ``[fleet.energy]``: its battery (:class:`dispatch.energy.Battery`); None without energy
+    battery: Any = field(default=None, repr=False)
     _view: AgentView | None = field(default=None, repr=False)
     # ``loc`` and ``leg`` live here; their setters tell the fleet (its arrays stay current)
     _loc: Location = field(default=None, init=False, repr=False)
@@ -131,9 +133,11 @@ class Vehicle:
     def flies(self) -> bool:
         return self.kind == "uav"
 
-    def drove(self, metres: float) -> None:
-        """Count ``metres`` driven with the passengers now on board: the one place where a
-        vehicle's distances grow."""
+    def drove(self, metres: float, seconds: float = 0.0) -> None:
+        """Count ``metres`` driven (in ``seconds``) with the passengers now on board: the one
+        place where a vehicle's distances grow, and where its battery is drawn."""
+        if self.battery is not None:
+            self.battery.drive(metres, seconds)
         self.distance += metres
         if self.load:
             self.occupied_distance += metres
@@ -145,7 +149,7 @@ class Vehicle:
         """The tasks of its plan (the one in service first), each once, in plan order."""
         out = [] if self.serving is None else [self.serving]
         for s in self.stops:
-            if s.task not in out:
+            if s.task is not None and s.task not in out:
                 out.append(s.task)
         return out
 
@@ -307,7 +311,7 @@ def stop_leg(v: Vehicle, now: float) -> None:
     (with the passengers on board) and it stands where it got (a node, or a road point
     part-way along an edge)."""
     leg, t = v.leg, now - v.leg_start
-    v.drove(float(np.interp(t, np.r_[0.0, leg.times], np.r_[0.0, leg.metres])))
+    v.drove(float(np.interp(t, np.r_[0.0, leg.times], np.r_[0.0, leg.metres])), t)
     point = leg.point_at(t)
     v.loc, v.leg = (point.node if point.on_node else point), None
 
@@ -356,7 +360,7 @@ class CellDriver:
             step = step_length(v.loc, nxt) * cell_m
             yield env.timeout(step / v.speed)
             v.loc = nxt
-            v.drove(step)
+            v.drove(step, step / v.speed)
             self.bus.emit(env.now, "move", v.id, task_id, nxt)
 
 
@@ -397,7 +401,7 @@ class RoadDriver:
         else:
             yield env.timeout(leg.seconds)
         v.leg, v.loc = None, int(leg.nodes[-1])
-        v.drove(leg.length)
+        v.drove(leg.length, leg.seconds)
 
 
 # ----------------------------------------------------------------------------- operations
@@ -422,6 +426,9 @@ class Operator:
         self.on_reopen: Callable[[Task], None] = lambda task: None
         #: called with a vehicle about to be given a task (repositioning stops its drive)
         self.on_assign: Callable[[Vehicle], None] = lambda v: None
+        #: ``[fleet.energy]``: called with a vehicle whose battery ran empty on a leg (it stands
+        #: where it got; :meth:`dispatch.energy.Charging.strand`); None without energy
+        self.strand: Callable[[Vehicle], None] | None = None
         #: reservation-based execution (voxel, capacity 1; see dispatch.reservations), or None
         self.timed: TimedExecution | None = None if timed is None else timed(self)
 
@@ -622,11 +629,19 @@ class Operator:
                 v.heading = stop
                 v.plan_version += 1  # (its first stop's time is now the leg's)
                 emit(env.now, "depart", v.id, stop.task.id, v.loc)
+                if v.battery is not None and self.strand is not None:
+                    cut = v.battery.runs_out(path.length, path.seconds)
+                    if cut is not None:  # it drives until the battery is empty
+                        v.leg, v.leg_start = path, env.now
+                        yield env.timeout(cut)
+                        stop_leg(v, env.now)
+                        self.strand(v)
+                        return
                 if plain:  # RoadDriver.drive without edge events, inlined (two legs a trip)
                     v.leg, v.leg_start = path, env.now
                     yield env.timeout(path.seconds)
                     v.leg, v.loc = None, int(path.nodes[-1])
-                    v.drove(path.length)
+                    v.drove(path.length, path.seconds)
                 else:
                     yield from self.driver.drive(env, v, path, stop.task.id)
             except simpy.Interrupt as i:

@@ -6,8 +6,9 @@ columns, same rows in the same order, every value exactly equal (NaN equal to Na
 only the wall-clock columns (:data:`dispatch.recorder.TIMING_COLUMNS`, which differ between
 identical runs). Prints one line per file and exits 1 at the first difference it describes.
 
-With ``--common`` the columns only B has (a version that added columns) are listed and left
-out; every column both have must still hold the same values.
+With ``--common`` the columns only B has (a version that added columns) and the files only B
+has (a version that added tables) are listed and left out; every column both have must still
+hold the same values.
 
 Run: ``PYTHONPATH=. .venv/bin/python scripts/compare_runs.py [--common] runs/before runs/after``.
 """
@@ -68,6 +69,10 @@ def main() -> int:
     if not fa:
         print(f"no part-0.parquet under {a}")
         return 1
+    if common and fa.keys() < fb.keys():
+        for rel in sorted(fb.keys() - fa.keys()):
+            print(f"      new in B, left out: {rel}")
+        fb = {k: fb[k] for k in fa}
     if fa.keys() != fb.keys():
         print(f"different files: only in A {sorted(map(str, fa.keys() - fb.keys()))}, "
               f"only in B {sorted(map(str, fb.keys() - fa.keys()))}")
