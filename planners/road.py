@@ -67,6 +67,9 @@ FORWARD_RATIO = 4
 #: task on the same node, or a drop-off there (networks with a hierarchy), reads the kept field
 #: instead of another search. Taxi demand comes back to the same nodes all day.
 RETIRED_FIELD_BYTES = 128 * 2**20
+#: Bytes of forward fields (from a request's pickup or drop-off, for shared-ride insertions)
+#: kept, least recently used first out.
+FORWARD_FIELD_BYTES = 64 * 2**20
 #: Fields computed together by one PHAST sweep (its inner loop runs over them).
 PHAST_BLOCK = 8
 #: Threads running PHAST blocks at once (1: never in parallel).
@@ -273,6 +276,9 @@ class RoadPlanner(Planner):
         #: RETIRED_FIELD_BYTES); the same numbers a new search would give
         self._retired: OrderedDict[int, np.ndarray] = OrderedDict()
         self._retired_bytes = 0
+        #: node -> seconds from it to every node (forward fields of :meth:`between`), LRU
+        self._fwd: OrderedDict[int, np.ndarray] = OrderedDict()
+        self._fwd_bytes = 0
         t = space.time
         #: CSR triples (int64 / float64) of the time matrix and of its transpose
         self._graph = (t.indptr.astype(np.int64), t.indices.astype(np.int64),
@@ -430,12 +436,28 @@ class RoadPlanner(Planner):
         return self._retired[n]
 
     def _forward(self, nodes: np.ndarray) -> np.ndarray:
-        """Fields of seconds from each of ``nodes`` (rows; indexed like the backward fields)."""
-        h = self._hierarchy
-        self.stats.extra["forward_searches"] += int(nodes.size)
-        if h is None:
-            return np.stack(self._dijkstra(nodes, to=False))
-        return np.stack(h.fields(nodes, to=False))
+        """Fields of seconds from each of ``nodes`` (rows; indexed like the backward fields),
+        the most recently used kept within :data:`FORWARD_FIELD_BYTES` (a request's pickup and
+        drop-off are asked about at every decision it stays open)."""
+        kept = self._fwd
+        fresh = [n for n in nodes.tolist() if n not in kept]
+        if fresh:
+            h = self._hierarchy
+            arr = np.array(fresh, dtype=np.int64)
+            self.stats.extra["forward_searches"] += len(fresh)
+            new = self._dijkstra(arr, to=False) if h is None else h.fields(arr, to=False)
+            for n, f in zip(fresh, new):
+                if f.base is not None and f.base.nbytes > f.nbytes:
+                    f = f.copy()  # a row of a PHAST block: keep the row, not the block
+                kept[n] = f
+                self._fwd_bytes += f.nbytes
+        rows = []
+        for n in nodes.tolist():
+            kept.move_to_end(n)
+            rows.append(kept[n])
+        while self._fwd_bytes > FORWARD_FIELD_BYTES and len(kept) > nodes.size:
+            self._fwd_bytes -= kept.popitem(last=False)[1].nbytes
+        return np.stack(rows)
 
     def _revive(self, node: int) -> np.ndarray | None:
         """The kept field of ``node`` back among the open tasks' fields, or None."""
