@@ -189,6 +189,47 @@ def table(study: Study, best: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def figure(study: Study, path: Path) -> Path:
+    """``study.png``: served share (left) and riders' mean delay (right) against the fleet
+    size, one line per seats x method (mean over the seeds that ran that size, error bars the
+    95 % t-interval where three or more did), the target as a dashed line."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from scipy import stats
+
+    by: dict = {}
+    for (seats, method, fleet, _), r in study.done.items():
+        by.setdefault((seats, method), {}).setdefault(fleet, []).append(r)
+    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.2), layout="constrained")
+    colours = {1: "#7f7f7f", 2: "#1f77b4", 4: "#d62728"}
+    for (seats, method), sizes in sorted(by.items()):
+        xs = sorted(sizes)
+        for ax, key, scale in ((left, "served", 100.0), (right, "delay", 1.0)):
+            mean, half = [], []
+            for x in xs:
+                v = [scale * (r[key] or 0.0) for r in sizes[x]]
+                mean.append(statistics.fmean(v))
+                half.append(stats.t.ppf(0.975, len(v) - 1) * statistics.stdev(v) / len(v) ** 0.5
+                            if len(v) >= 3 else 0.0)
+            ax.errorbar(xs, mean, yerr=half, marker="o" if method == "rtv" else "s", ms=4,
+                        capsize=2, color=colours.get(seats, "k"),
+                        linestyle="-" if method == "rtv" else "--",
+                        label=f"{seats} seat{'s' if seats > 1 else ''}, {method}")
+    left.axhline(100 * study.a.target, color="k", lw=0.8, ls=":")
+    left.set(xlabel="taxis", ylabel="served (%)", title="Served share of the day's requests")
+    right.set(xlabel="taxis", ylabel="mean delay (s)",
+              title="Riders' delay (drop-off - release - direct)")
+    for ax in (left, right):
+        ax.grid(True, alpha=0.3)
+    left.legend(fontsize="small")
+    fig.suptitle("Manhattan, 2014-12-21: insertion (hungarian, batched 30 s) vs rtv")
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", default="runs/nyc_study")
@@ -215,6 +256,7 @@ def main(argv=None) -> int:
     text += f"\nStudy wall time {time.perf_counter() - t0:.0f} s (runs already done skipped).\n"
     (study.out / "study.md").write_text(text)
     print(text)
+    print(f"figure: {figure(study, study.out / 'study.png')}")
     return 0
 
 
