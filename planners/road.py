@@ -396,6 +396,15 @@ class RoadPlanner(Planner):
         field per source node is gathered at the targets; otherwise each target's field (an
         open task's, a kept one, or a new one, then kept with the retired fields: drop-offs
         and stops come back) is gathered at the sources."""
+        if pairwise and len(targets) <= 8 and len(sources) == len(targets):
+            # a few pairs (an immediate decision's new trip): no arrays to build
+            index, out = self._index, np.empty(len(targets))
+            for k, (src, t) in enumerate(zip(sources, targets)):
+                point = isinstance(src, RoadPoint)
+                n = src.node if point else int(src)
+                out[k] = self._to(int(t))[n if index is None else index[n]] + (
+                    max(src.remaining, 0.0) if point else 0.0)
+            return out
         node, rem = _loc_arrays(sources)
         tnode = _loc_arrays(targets)[0]
         if pairwise and node.size != tnode.size:

@@ -341,3 +341,32 @@ def test_hierarchy_disk_cache_round_trip(tmp_path, monkeypatch, caplog):
 
 
 road_contract = road.contract
+
+
+def test_between_equals_scipy_in_every_form():
+    """``between``: the matrix (forward fields for few sources, backward for few targets) and
+    the pairwise form (small and large) equal scipy's Dijkstra on the time matrix, road points
+    counting what is left of their edge."""
+    from scipy.sparse.csgraph import dijkstra
+
+    from dispatch.roads import RoadPoint, manhattan
+    from planners.road import RoadPlanner
+
+    net = manhattan(6, 5, 100.0, 10.0)
+    p = RoadPlanner(net)
+    full = dijkstra(net.time)
+    rng = np.random.default_rng(3)
+    src = [int(x) for x in rng.integers(net.n, size=12)]
+    src[3] = RoadPoint(int(src[3]), prev=int(net.time[int(src[3])].indices[0]), remaining=4.0)
+    tgt = [int(x) for x in rng.integers(net.n, size=12)]
+
+    def want(s, t):
+        return (full[s.node, t] + 4.0) if isinstance(s, RoadPoint) else full[s, t]
+
+    expect = np.array([[want(s, t) for t in tgt] for s in src])
+    assert np.allclose(p.between(src, tgt), expect, atol=1e-9)  # backward (as many targets)
+    assert np.allclose(p.between(src[:2], tgt), expect[:2], atol=1e-9)  # forward
+    assert np.allclose(p.between(src, tgt[:2]), expect[:, :2], atol=1e-9)
+    diag = np.diag(expect)
+    assert np.allclose(p.between(src, tgt, pairwise=True), diag, atol=1e-9)
+    assert np.allclose(p.between(src[:4], tgt[:4], pairwise=True), diag[:4], atol=1e-9)
