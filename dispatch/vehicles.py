@@ -682,25 +682,19 @@ class Operator:
             if v.stops:
                 book.close(task, COMPLETED)
             else:
-                self._complete(v, task)
+                self._go_idle(v, task)
                 return
         # emptied by a re-routing that removed every stop: nothing left to do
         self._go_idle(v)
 
-    def _complete(self, v: Vehicle, task: Task) -> None:
-        """``v`` has served ``task``, its last stop (after the service time): the task
-        completes, ``v`` is idle."""
+    def _go_idle(self, v: Vehicle, task: Task | None = None) -> None:
+        """``v``'s plan is done: it is idle where it is; ``task``, its last stop's (served,
+        after the service time), completes first."""
         v.busy_seconds += self.env.now - v.busy_since
         v.proc, v.heading = None, None
         self.fleet.set_idle(v)
-        self.book.close(task, COMPLETED)
-        self.bus.emit(self.env.now, "idle", v.id, -1, v.loc)
-        self.notify()
-
-    def _go_idle(self, v: Vehicle) -> None:
-        v.busy_seconds += self.env.now - v.busy_since
-        v.proc, v.heading = None, None
-        self.fleet.set_idle(v)
+        if task is not None:
+            self.book.close(task, COMPLETED)
         self.bus.emit(self.env.now, "idle", v.id, -1, v.loc)
         self.notify()
 
