@@ -232,6 +232,14 @@ def pooled_problem(seed: int, n: int, m: int, capacity: int = 3, *, busy: float 
     apos, tpos = net.positions(nodes) if n else np.zeros((0, 3)), \
         net.positions(picks) if m else np.zeros((0, 3))
     seats = np.full(n, capacity, np.int64)
+    # with a service time, a vehicle without a plan may still be serving its last stop: it
+    # leaves at problem.ready (the kernel's free_at), somewhere in the next service time
+    ready = None
+    if service > 0 and n:
+        ready = np.full(n, now)
+        for i in range(n):
+            if a_ids[i] not in plans and g.random() < 0.5:
+                ready[i] = now + float(g.uniform(0, service))
 
     def build(drives: bool = False) -> AllocationProblem:
         return AllocationProblem(time=now, agents=agents, tasks=tuple(tasks),
@@ -239,7 +247,8 @@ def pooled_problem(seed: int, n: int, m: int, capacity: int = 3, *, busy: float 
                                  comm=np.ones((n, n), bool), rng=np.random.default_rng(seed),
                                  max_rounds=200, agent_pos=apos.copy(), task_pos=tpos.copy(),
                                  plans=dict(plans), capacity=seats.copy(),
-                                 service_time=service, travel=travel)
+                                 service_time=service, travel=travel,
+                                 ready=None if ready is None else ready.copy())
 
     # the costs a pooled decision has: the earliest pickup (seconds from now) of the request's
     # cheapest feasible insertion into the vehicle's plan, inf where none is feasible
@@ -276,14 +285,16 @@ def route_schedule(problem: AllocationProblem, aid: int, rows: list[tuple]
     """Planned arrival times of agent ``aid`` driving the stop rows ``rows`` (of
     :func:`dispatch.dispatcher.route_stops`) from where it is, on ``problem.travel``, or
     ``(None, why)``: what :meth:`dispatch.vehicles.Operator.route_times` checks, from the
-    problem alone (the vehicle leaves now, or when its first planned stop's time says)."""
+    problem alone (the vehicle leaves now, when ``problem.ready`` says, or when its first
+    planned stop's time says)."""
     travel = problem.travel
     k = int(np.flatnonzero(problem.agent_ids == aid)[0])
     loc = problem.agents[k].loc
     cap = 1 if problem.capacity is None else int(problem.capacity[k])
     plan = problem.plans.get(aid, ())
     now = problem.time
-    ready, load = now, 0
+    ready = now if problem.ready is None else max(now, float(problem.ready[k]))
+    load = 0
     if plan:
         ready = max(now, plan[0].eta - float(travel([loc], [plan[0].loc])[0, 0]))
         load = plan[0].occupancy - plan[0].passengers
