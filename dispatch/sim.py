@@ -3,12 +3,19 @@ onto one SimPy environment. Nothing here is reached back into during the run:
 
     TaskSource ──release──▶ TaskBook ◀──assign/pickup/close── Operator (vehicles, drivers)
         │                      ▲  │                               ▲
-        └──notify──▶ Dispatcher┘  └─on_close─▶ RunStats, Recorder  └── Dispatcher.assign
-    every process ──emit──▶ EventBus ──▶ Recorder (events), PyBullet mirror, user subscribers
+        └──notify──▶ Dispatcher┘  └─on_close─▶ RunRecording      └── Dispatcher.assign
+    every process ──emit──▶ EventBus ──▶ RunRecording (events), the space's mirror, user
+                                         subscribers
+
+The jobs are the owners': the space (:mod:`dispatch.space`) loads itself and answers
+everything about location (demand, where the fleet starts, the driver, its static tables),
+:mod:`dispatch.plugins` builds the plugins, :class:`dispatch.recording.RunRecording` writes the
+tables and the summary.
 
 Randomness: every stream is a ``numpy.random.Generator`` seeded from the run's seed and a fixed
-stream number, so the world (obstacles) depends on the seed only, and the same seed gives the
-same fleet and the same tasks whichever allocator runs: instances are paired across allocators.
+stream number (:mod:`dispatch.streams`), so the world (obstacles) depends on the seed only, and
+the same seed gives the same fleet and the same tasks whichever allocator runs: instances are
+paired across allocators.
 """
 
 from __future__ import annotations
