@@ -48,6 +48,7 @@ import pyarrow.parquet as pq
 
 from dispatch import __version__
 from dispatch.recorder import SCHEMAS, Recorder, json_meta, partition_path, write_atomic
+from dispatch.runkeys import RUN_KEYS, key_names, point_settings
 from dispatch.scenario import RunSpec
 
 log = logging.getLogger(__name__)
@@ -101,13 +102,13 @@ def read_table(path: Path, partition: dict[str, Any], name: str) -> pa.Table:
 
 
 def run_metadata(spec: RunSpec) -> dict[str, str]:
-    """The schema metadata every file of a run carries (besides version and run id)."""
-    keys = {"allocator": spec.allocator, "planner": spec.planner, "n_agents": spec.agents,
-            "seed": spec.seed, "scenario": spec.scenario.name}
-    if spec.names_reposition:
-        keys["reposition"] = spec.reposition
+    """The schema metadata every file of a run carries (besides version and run id): the
+    scenario text, the seed, the run's partition (``dispatch.spec``) and the names of every
+    run key (``dispatch.run_keys``, :data:`dispatch.runkeys.RUN_KEYS`: readers learn from it
+    which columns name a run)."""
     meta = {"dispatch.scenario": spec.scenario.text, "dispatch.seed": str(spec.seed),
-            "dispatch.spec": json_meta(keys)}
+            "dispatch.spec": json_meta(spec.partition),
+            "dispatch.run_keys": json_meta(key_names())}
     trips = spec.scenario.tasks.trips
     if trips is not None and trips.dropped:  # trips of the trace left out before the run
         meta["dispatch.trips_dropped"] = json_meta({r: n for r, n in trips.dropped})
@@ -153,7 +154,7 @@ def default_out(spec: RunSpec) -> Path:
     ``..``, no absolute path): results never land outside ``runs/``."""
     from dispatch.scenario import safe_name
 
-    return Path("runs") / safe_name(spec.scenario.variant_of or spec.scenario.name)
+    return Path("runs") / safe_name(spec.scenario.name)
 
 
 def holds_results(out: Path, spec: RunSpec) -> bool:
@@ -222,8 +223,7 @@ def _digest(spec: RunSpec) -> str:
 
 
 #: Keys a sweep (or a run's point) sets: left out of a scenario's base settings
-_POINT_KEYS = {"": ("seed", "sweep"), "fleet": ("agents",),
-               "dispatch": ("allocator", "planner", "batch_window"), "reposition": ("policy",)}
+_POINT_KEYS = point_settings()
 
 
 def _base_settings(text: str) -> dict | None:
@@ -261,10 +261,9 @@ def run_digest(spec: RunSpec, text: str | None = None) -> str | None:
     doc = _base_settings(spec.scenario.text if text is None else text)
     if doc is None:
         return None
-    return _sha({"base": doc, "run_id": spec.run_id, "seed": spec.seed, "agents": spec.agents,
-                 "allocator": spec.allocator, "planner": spec.planner,
-                 "reposition": spec.reposition,
-                 "batch_window": float(spec.scenario.dispatch.batch_window)})
+    keys = spec.keys
+    return _sha({"base": doc, "run_id": spec.run_id,
+                 **{k.digest: keys[k.name] for k in RUN_KEYS if k.digest}})
 
 
 def _stored_text(out: Path, partition: Path) -> str | None:

@@ -411,9 +411,7 @@ class Simulation:
             for row in self.charging.rows():
                 x, y, _ = self.space.position(row["node"])
                 rec.add("chargers", x=x, y=y, **row)
-        run = dict(scenario=spec.scenario.name, allocator=spec.allocator, planner=spec.planner,
-                   reposition=spec.reposition, n_agents=len(self.vehicles), seed=spec.seed,
-                   space=self.space.kind)
+        run = dict(spec.keys, n_agents=len(self.vehicles), space=self.space.kind)
         summary = self.stats.summary(run=run, vehicles=self.vehicles,
                                      dispatcher=self.dispatcher, sim_time=float(self.env.now))
         summary.update(summary_of(self.repositioning))
