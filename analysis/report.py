@@ -130,6 +130,8 @@ def _taxi_view(taxi: pd.DataFrame, columns: list[str]) -> pd.DataFrame:
                                          and taxi[k].nunique() > 1]
     cols = [c for c in columns if c in taxi.columns]
     view = taxi[keys + cols].rename(columns={"n_agents": "N"})
+    if "batch_window" in keys:  # imm / 30s, as the CLI's tables and the figures' legends
+        view["batch_window"] = view["batch_window"].map(M.window_label)
     for c in cols:  # mean ± half-width of the 95 % interval over seeds, where there is one
         ci = f"{c}_ci95"
         if ci in taxi.columns and taxi[ci].notna().any():
