@@ -419,15 +419,16 @@ def _run_filter(summary, run_id: str, src: Source,
     if row.empty:
         return None
     r = row.iloc[0]
-    expr = ((ds.field("allocator") == r["allocator"]) & (ds.field("planner") == r["planner"])
-            & (ds.field("n_agents") == int(r["n_agents"])) & (ds.field("seed") == int(r["seed"])))
     part = src.dataset("summary").partitioning
-    if part is not None and "scenario" in part.schema.names:  # folders since scenario= paths
-        expr = expr & (ds.field("scenario") == (stored_name or str(r["scenario"])))
-    if part is not None and "reposition" in part.schema.names:
-        expr = expr & (ds.field("reposition") == str(r["reposition"]))
-    if part is not None and "batch_window" in part.schema.names:
-        expr = expr & (ds.field("batch_window") == float(r["batch_window"]))
+    expr = None
+    for field in part.schema if part is not None else ():  # the run keys of its path
+        if field.name not in r.index:
+            continue
+        v = stored_name if field.name == "scenario" and stored_name else r[field.name]
+        cast = (int if pa.types.is_integer(field.type)
+                else float if pa.types.is_floating(field.type) else str)
+        term = ds.field(field.name) == cast(v)
+        expr = term if expr is None else expr & term
     return expr
 
 
