@@ -235,7 +235,9 @@ class Results:
             old = {new: o for o, new in renames.items()}
             want = None
             if columns is not None:
-                want = [old.get(c, c) for c in dict.fromkeys([*columns, "run_id"])
+                # a summary's scenario and window always: an older run's are read together
+                extra = ("scenario", "batch_window") if name == "summary" else ()
+                want = [old.get(c, c) for c in dict.fromkeys([*columns, "run_id", *extra])
                         if old.get(c, c) in d.schema.names]
             df = d.to_table(columns=want, filter=flt).to_pandas()
             if self._has_duplicates() and "run_id" in df.columns:

@@ -274,8 +274,9 @@ def render_one(s: dict, console=None, *, dynamic: bool = False) -> None:
     n, done = s["n_tasks"], s["tasks_completed"]
     share = f" ({100 * done / n:.1f} %)" if n else ""
     road = s.get("space") == "road"
+    window = f", batch window {_window(s):g} s" if _window(s) else ""
     t.add_row("run", f"{s['allocator']} / {s['planner']}, N = {s['n_agents']}, seed "
-                     f"{s['seed']}, {s.get('space', 'voxel')}")
+                     f"{s['seed']}, {s.get('space', 'voxel')}{window}")
     what = "trips" if road else "tasks"
     rejected = s["tasks_rejected"] + s["tasks_expired"] + s.get("tasks_unreachable", 0)
     t.add_row(what, f"{n} released, {done} served{share}; rejected {s['tasks_rejected']} at "

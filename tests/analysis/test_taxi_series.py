@@ -53,6 +53,8 @@ def test_batch_window_is_a_partition_and_a_column(swept):
                             "n_agents", "seed"]
     tasks = res.table("tasks")
     assert set(tasks["batch_window"]) == {0.0, 30.0} and set(tasks["scenario"]) == {"tiny"}
+    few = res.table("summary", columns=["total_cost"])  # a few columns: the keys come along
+    assert sorted(few["batch_window"]) == [0.0, 0.0, 30.0, 30.0]
 
 
 def _old_layout(new: Path, old: Path) -> None:
@@ -94,6 +96,9 @@ def test_an_older_folder_of_variants_reads_as_batch_windows(swept, tmp_path):
     new_taxi = M.taxi_metrics(res.summary, *(res.table(t) for t in args))[cols]
     old_taxi = M.taxi_metrics(s, *(old.table(t) for t in args))[cols]
     pd.testing.assert_frame_equal(old_taxi, new_taxi)
+    few = old.table("summary", columns=["total_cost"])
+    assert set(few["scenario"]) == {"tiny"}
+    assert sorted(few["batch_window"]) == [0.0, 0.0, 30.0, 30.0]
     ev = old.table("events")
     assert set(ev["scenario"]) == {"tiny"} and set(ev["batch_window"]) == {0.0, 30.0}
     rid = s.loc[s["batch_window"] == 30.0, "run_id"].iloc[0]
