@@ -357,8 +357,13 @@ class Results:
         if "run_id" not in df.columns:
             return df
         summary = self.summary  # reads the stored names of older variants first
+        # a key null in some rows (a run of an older layout beside newer ones: no
+        # batch_window= level) and an older variant's scenario name: the summary's
+        stale = [k for k in self.run_keys if k in df.columns and k in summary.columns
+                 and df[k].isna().any()]
         if self._stored_names and "scenario" in df.columns:
-            df = df.drop(columns="scenario")
+            stale.append("scenario")
+        df = df.drop(columns=list(dict.fromkeys(stale)))
         missing = [k for k in self.run_keys if k not in df.columns and k in summary.columns]
         if not missing:
             return df

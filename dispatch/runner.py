@@ -5,7 +5,9 @@ Every run, whatever the number of runs, is streamed by a :class:`~dispatch.recor
 into its own Hive partition of ``out`` (``<table>/scenario=…/allocator=…/planner=…/n_agents=…/
 seed=…/part-0.parquet``, so two scenarios can share one folder; a scenario that declares
 repositioning, a ``[reposition]`` table or sweep, has a ``reposition=…`` level after
-``planner=…``, and its run ids name the repositioner after the planner; chunk files
+``planner=…``, and its run ids name the repositioner after the planner; one that sweeps its
+batch window has a ``batch_window=…`` level before ``n_agents=…`` and ``__bw<seconds>`` in its
+run ids: the levels and ids follow :data:`dispatch.runkeys.RUN_KEYS`; chunk files
 ``_inflight-NNNNN.parquet.chunk`` while it runs) and, once all of its tables are written, gets a completion marker ``out/_runs/<partition>/done.json`` (written
 atomically) that lists the files and their sizes. Rerunning a sweep (or a sweep over the output
 of ``dispatch run``) skips every run whose marker is there, names the same run of the same
@@ -15,7 +17,9 @@ is :func:`run_digest`: the scenario's settings outside ``[sweep]`` (parsed, so c
 layout do not count) and the run's own point (allocator, planner, repositioner, N, seed,
 batch window). Adding a value to a sweep list therefore runs only the new runs, and removing
 one leaves its runs in the folder (:func:`foreign_runs` does not count them as another
-scenario's). A run that raises
+scenario's). A folder written before the batch window was a run key (each window a scenario
+``<name>-batch30s``, :func:`legacy_variant`) resumes too: its complete runs count as this
+sweep's, the others are cleared and redone in the new layout. A run that raises
 is recorded in the ``errors`` table (same partition layout: run_id, scenario, error_type,
 message, traceback, seconds) and the sweep goes on; its error partition is removed once it
 succeeds. Folders starting with ``_`` are ignored by pyarrow, DuckDB's and polars' Hive readers.
@@ -39,7 +43,7 @@ import traceback
 from collections import deque
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -411,6 +415,21 @@ def foreign_runs(out: Path, specs: list[RunSpec]) -> list[str]:
     return found
 
 
+def legacy_variant(spec: RunSpec) -> RunSpec | None:
+    """The run as versions before the batch window was a run key wrote it (None for a
+    scenario that does not sweep its window): a scenario of its own, ``<name>-immediate`` (0
+    s) or ``<name>-batch<w>s``, without a ``batch_window=`` level or run-id part. A sweep
+    over such a folder takes its complete runs as this spec's (same text or same
+    :func:`run_digest`, as for any run) and clears the others, so that the folder holds each
+    run once; :mod:`analysis.io` reads them as scenario ``<name>`` with their window."""
+    if not spec.names_batch_window:
+        return None
+    sc, w = spec.scenario, spec.batch_window
+    name = f"{sc.name}-{'immediate' if w == 0 else f'batch{w:g}s'}"
+    return replace(spec, scenario=replace(sc, name=name,
+                                          sweep=replace(sc.sweep, batch_window=())))
+
+
 def read_summary(out: Path, spec: RunSpec) -> dict:
     """The summary row of a finished partition, with its partition columns put back."""
     path = Path(out) / "summary" / partition_dir(spec) / "part-0.parquet"
@@ -441,16 +460,22 @@ def sweep(
     outcomes: dict[int, Outcome] = {}
     todo: list[tuple[int, RunSpec]] = []
     for i, spec in enumerate(specs):
-        if not force and is_complete(out, spec):
-            try:
-                outcomes[i] = Outcome(spec, "skipped", summary=read_summary(out, spec))
+        old = legacy_variant(spec)
+        done = None if force else spec if is_complete(out, spec) else \
+            old if old is not None and is_complete(out, old) else None
+        if done is not None:
+            try:  # a run of an older layout reads as this one (its name, its window)
+                summary = {**read_summary(out, done), **spec.keys}
+                outcomes[i] = Outcome(spec, "skipped", summary=summary)
             except (OSError, pa.ArrowException, IndexError):
-                todo.append((i, spec))
-                continue
-            if on_done is not None:
-                on_done(outcomes[i])
-        else:
+                done = None
+        if done is None:
+            if old is not None:  # redone in its own partition: the older copy goes
+                clear_partition(out, old)
             todo.append((i, spec))
+            continue
+        if on_done is not None:
+            on_done(outcomes[i])
     if todo:
         workers = workers or os.cpu_count() or 1
         if ray:

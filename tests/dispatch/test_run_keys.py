@@ -9,6 +9,7 @@ import dataclasses
 import hashlib
 import io
 import json
+import shutil
 from pathlib import Path
 
 import pyarrow.parquet as pq
@@ -139,3 +140,58 @@ def test_sweep_takes_duration(tmp_path, capsys):
         assert "duration = 20.0  # dispatch run --duration" in text
     assert cli.main(["sweep", str(path), "--duration", "0", "--out", str(tmp_path / "x")]) == 2
     assert "--duration" in capsys.readouterr().err
+
+
+def _as_an_older_version_wrote_it(out: Path) -> None:
+    """Rewrite the files of ``out`` as versions before the batch window was a run key wrote
+    them: no ``batch_window`` column, no ``dispatch.run_keys``; markers list the new sizes."""
+    for f in out.rglob("part-0.parquet"):
+        t = pq.read_table(f)
+        if "batch_window" in t.column_names:
+            t = t.drop_columns(["batch_window"])
+        meta = {k: v for k, v in t.schema.metadata.items() if k != b"dispatch.run_keys"}
+        pq.write_table(t.replace_schema_metadata(meta), f)
+    for m in (out / "_runs").rglob("done.json"):
+        marker = json.loads(m.read_text())
+        marker["files"] = {rel: (out / rel).stat().st_size for rel in marker["files"]}
+        m.write_text(json.dumps(marker))
+
+
+def test_a_sweep_over_an_older_folder_of_variants_resumes_it(tmp_path):
+    """A folder whose windows were scenario variants (``tiny-immediate``, ``tiny-batch30s``):
+    a sweep takes its complete runs as its own (skipped, read as scenario ``tiny`` with their
+    window), runs only what the sweep added (a seed), and the folder reads once per run, every
+    table's rows with their run's window; ``force`` redoes them in the new layout and the older
+    copies go."""
+    from analysis.io import open_results
+    from dispatch.runner import execute, legacy_variant, sweep
+
+    out = run_tiny_road(tmp_path, "tiny", "[sweep]\nbatch_window = [0.0, 30.0]\n")
+    for f in list(out.iterdir()):  # keep only the older layout, written below
+        shutil.rmtree(f)
+    specs = load_scenario(tmp_path / "tiny.toml").runs()
+    old = [legacy_variant(s) for s in specs]
+    assert [o.run_id for o in old] == ["tiny-immediate__fcfs__dijkstra__n2__s0",
+                                       "tiny-batch30s__fcfs__dijkstra__n2__s0"]
+    execute(old, out)
+    _as_an_older_version_wrote_it(out)
+    outcomes = sweep(specs, out, workers=1)
+    assert [o.status for o in outcomes] == ["skipped", "skipped"]
+    assert [(o.summary["scenario"], o.summary["batch_window"]) for o in outcomes] == [
+        ("tiny", 0.0), ("tiny", 30.0)]
+    (tmp_path / "tiny.toml").write_text((tmp_path / "tiny.toml").read_text()
+                                        .replace("[sweep]\n", "[sweep]\nseed = [0, 1]\n"))
+    more = load_scenario(tmp_path / "tiny.toml").runs()
+    assert [o.status for o in sweep(more, out, workers=1)] == ["skipped", "done"] * 2
+    res = open_results(out)
+    s = res.summary
+    assert len(s) == 4 and set(s["scenario"]) == {"tiny"}
+    assert sorted(zip(s["batch_window"], s["seed"])) == [(0.0, 0), (0.0, 1), (30.0, 0),
+                                                         (30.0, 1)]
+    tasks = res.table("tasks")
+    by_run = tasks.groupby("run_id")["batch_window"].unique()
+    assert {r: list(v) for r, v in by_run.items()} == dict(zip(s["run_id"],
+                                                               ([w] for w in s["batch_window"])))
+    assert [o.status for o in sweep(more, out, workers=1, force=True)] == ["done"] * 4
+    assert not any("-batch30s" in str(p) or "-immediate" in str(p) for p in out.rglob("*.parquet"))
+    assert len(open_results(out).summary) == 4
