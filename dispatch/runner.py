@@ -162,12 +162,17 @@ def default_out(spec: RunSpec) -> Path:
 
 
 def holds_results(out: Path, spec: RunSpec) -> bool:
-    """Whether ``out`` already holds results (complete or not) of ``spec``'s partition."""
-    if marker_path(out, spec).exists():
-        return True
-    return any((Path(out) / table / partition_dir(spec)).is_dir()
-               and any((Path(out) / table / partition_dir(spec)).iterdir())
-               for table in ("summary", ERRORS))
+    """Whether ``out`` already holds results (complete or not) of ``spec``'s partition (or
+    of the partition an older version wrote the same run into, :func:`legacy_variant`)."""
+    old = legacy_variant(spec)
+    for run in (spec,) if old is None else (spec, old):
+        if marker_path(out, run).exists():
+            return True
+        if any((Path(out) / table / partition_dir(run)).is_dir()
+               and any((Path(out) / table / partition_dir(run)).iterdir())
+               for table in ("summary", ERRORS)):
+            return True
+    return False
 
 
 def execute(
@@ -348,6 +353,9 @@ def _run_and_mark(spec: RunSpec, out: Path, flush_rows: int = DEFAULT_FLUSH_ROWS
     completion marker; returns the result and the marker's files (relative path: size)."""
     started = time.perf_counter()
     clear_partition(out, spec)
+    old = legacy_variant(spec)
+    if old is not None:  # the same run as an older version wrote it: the folder holds it once
+        clear_partition(out, old)
     _cold_start()
     result = run_one(spec, out, flush_rows=flush_rows, progress=progress)
     seconds = time.perf_counter() - started
@@ -469,9 +477,7 @@ def sweep(
                 outcomes[i] = Outcome(spec, "skipped", summary=summary)
             except (OSError, pa.ArrowException, IndexError):
                 done = None
-        if done is None:
-            if old is not None:  # redone in its own partition: the older copy goes
-                clear_partition(out, old)
+        if done is None:  # (run by _run_and_mark, which clears an older copy)
             todo.append((i, spec))
             continue
         if on_done is not None:

@@ -164,7 +164,7 @@ def test_a_sweep_over_an_older_folder_of_variants_resumes_it(tmp_path):
     table's rows with their run's window; ``force`` redoes them in the new layout and the older
     copies go."""
     from analysis.io import open_results
-    from dispatch.runner import execute, legacy_variant, sweep
+    from dispatch.runner import execute, holds_results, legacy_variant, sweep
 
     out = run_tiny_road(tmp_path, "tiny", "[sweep]\nbatch_window = [0.0, 30.0]\n")
     for f in list(out.iterdir()):  # keep only the older layout, written below
@@ -175,6 +175,7 @@ def test_a_sweep_over_an_older_folder_of_variants_resumes_it(tmp_path):
                                        "tiny-batch30s__fcfs__dijkstra__n2__s0"]
     execute(old, out)
     _as_an_older_version_wrote_it(out)
+    assert all(holds_results(out, s) for s in specs)  # dispatch run refuses without --force
     outcomes = sweep(specs, out, workers=1)
     assert [o.status for o in outcomes] == ["skipped", "skipped"]
     assert [(o.summary["scenario"], o.summary["batch_window"]) for o in outcomes] == [
