@@ -152,6 +152,7 @@ def network_map(path: Path, *, pickups: np.ndarray, starts: np.ndarray,
 
 #: The columns a series label names first, in this order (then any other run key).
 LABEL_ORDER = ("allocator", "n_agents", "batch_window", "scenario", "planner", "reposition")
+SERIES_COLUMNS = LABEL_ORDER  # its older name
 
 
 def series_columns(df: pd.DataFrame) -> list[str]:
