@@ -398,6 +398,9 @@ def _add_analysis_parsers(sub) -> None:
     s.add_argument("--planner", help="planner name (overrides the file and its sweep)")
     s.add_argument("--agents", type=int, help="fleet size N (overrides the file and its sweep)")
     s.add_argument("--seed", type=int, help="seed (overrides the file and its sweep)")
+    s.add_argument("--duration", type=float, metavar="SECONDS",
+                   help="simulated seconds before each run stops (overrides the file's "
+                        "duration; the scenario text stored with the results says so)")
 
     r = sub.add_parser("report", help="tables and plots (Markdown or HTML) of run or sweep "
                        "folders")

@@ -20,6 +20,8 @@ from typing import Any
 
 from dispatch.errors import FORCE_HINT, ScenarioError
 from dispatch.faults import FaultConfig, read_failures
+from dispatch import runkeys
+from dispatch.runkeys import RUN_KEYS
 from dispatch.space import space_class
 from dispatch.traces import (
     Trips,
@@ -239,14 +241,13 @@ class SweepConfig:
     planner: tuple[str, ...] = ()
     agents: tuple[int, ...] = ()
     seed: tuple[int, ...] = ()
-    #: dispatch.batch_window values; each is its own scenario variant (see Scenario.variants)
+    #: dispatch.batch_window values: a run key (a partition and a part of the run id)
     batch_window: tuple[float, ...] = ()
     reposition: tuple[str, ...] = ()
 
     @property
     def declared(self) -> bool:
-        return bool(self.allocator or self.planner or self.agents or self.seed
-                    or self.batch_window or self.reposition)
+        return any(getattr(self, k.sweep) for k in RUN_KEYS if k.sweep)
 
 
 @dataclass(frozen=True)
@@ -266,7 +267,6 @@ class Scenario:
     sweep: SweepConfig = field(default_factory=SweepConfig)
     comms: CommsConfig = field(default_factory=CommsConfig)
     faults: FaultConfig = field(default_factory=FaultConfig)
-    variant_of: str | None = None  # a batch-window variant: the swept scenario's name
     reposition: RepositionConfig = field(default_factory=RepositionConfig)
     #: ``[chargers]`` / ``[charging]`` (:class:`dispatch.energy.ChargingConfig`); None: none
     charging: Any = None
@@ -278,26 +278,36 @@ class Scenario:
         agents: int | None = None,
         seed: int | None = None,
     ) -> list[RunSpec]:
-        """Expand the sweep into runs; a given argument replaces that sweep dimension."""
-
-        def dim(override, swept, default):
-            return (override,) if override is not None else (swept or (default,))
-
+        """Expand the sweep into runs (every combination of the run keys' values, in
+        :data:`~dispatch.runkeys.RUN_KEYS` order); a given argument replaces that sweep
+        dimension. A run's scenario carries its batch window (``dispatch.batch_window``)."""
         if seed is not None and not 0 <= seed <= MAX_SEED:
             raise ScenarioError(self.path, "--seed", f"must be in [0, 2^63), got {seed}")
         if agents is not None and agents < 1:
             raise ScenarioError(self.path, "--agents", f"must be >= 1, got {agents}")
         if agents is not None:
             _check_fits(self, agents, "--agents")
-        combos = itertools.product(
-            self.variants(),
-            dim(allocator, self.sweep.allocator, self.dispatch.allocator),
-            dim(planner, self.sweep.planner, self.dispatch.planner),
-            dim(None, self.sweep.reposition, self.reposition.policy),
-            dim(agents, self.sweep.agents, self.fleet.agents),
-            dim(seed, self.sweep.seed, self.seed),
-        )
-        return [RunSpec(v.for_allocator(a), a, p, n, s, r) for v, a, p, r, n, s in combos]
+        given = {"allocator": allocator, "planner": planner, "n_agents": agents, "seed": seed}
+        dims = [(k.name, (given[k.name],) if given.get(k.name) is not None
+                 else getattr(self.sweep, k.sweep) or (self.setting(k.setting),))
+                for k in RUN_KEYS if k.sweep]
+        specs = []
+        for values in itertools.product(*(v for _, v in dims)):
+            point = dict(zip((n for n, _ in dims), values))
+            sc = self
+            if point["batch_window"] != self.dispatch.batch_window:
+                sc = replace(sc, dispatch=replace(sc.dispatch,
+                                                  batch_window=float(point["batch_window"])))
+            specs.append(RunSpec(sc.for_allocator(point["allocator"]), point["allocator"],
+                                 point["planner"], point["n_agents"], point["seed"],
+                                 point["reposition"]))
+        return specs
+
+    def setting(self, where: tuple[str, str]) -> Any:
+        """The value of the setting ``(table, key)`` (``""``: top level) of a run key, as
+        parsed (``("fleet", "agents")``: ``self.fleet.agents``)."""
+        table, key = where
+        return getattr(self if not table else getattr(self, table), key)
 
     def for_allocator(self, allocator: str) -> Scenario:
         """The scenario as a run of ``allocator`` sees it: ``dispatch.allocator_params`` holds
@@ -307,16 +317,6 @@ class Scenario:
             return self
         return replace(self, dispatch=replace(self.dispatch,
                                               allocator_params=self.dispatch.params_for(allocator)))
-
-    def variants(self) -> list[Scenario]:
-        """The scenario once per swept ``batch_window`` (or itself when none is swept): each
-        with that window and its own name, ``<name>-immediate`` (0 s) or ``<name>-batch<w>s``,
-        so its runs get their own ``scenario=`` partition and run ids."""
-        if not self.sweep.batch_window:
-            return [self]
-        return [replace(self, name=f"{self.name}-{'immediate' if w == 0 else f'batch{w:g}s'}",
-                        dispatch=replace(self.dispatch, batch_window=w), variant_of=self.name)
-                for w in self.sweep.batch_window]
 
 
 @dataclass(frozen=True)
@@ -339,10 +339,29 @@ class RunSpec:
         return self.scenario.reposition.declared or self.reposition != "stay"
 
     @property
+    def names_batch_window(self) -> bool:
+        """Whether the run id and the partition name the batch window: when the scenario
+        sweeps it (``[sweep] batch_window``); other scenarios keep the layout they always
+        had."""
+        return bool(self.scenario.sweep.batch_window)
+
+    @property
+    def batch_window(self) -> float:
+        """Seconds the dispatcher waits after a wake-up to batch events (this run's)."""
+        return float(self.scenario.dispatch.batch_window)
+
+    @property
+    def keys(self) -> dict[str, Any]:
+        """Every run key's value (:data:`~dispatch.runkeys.RUN_KEYS` order)."""
+        values = {"scenario": self.scenario.name, "allocator": self.allocator,
+                  "planner": self.planner, "reposition": self.reposition,
+                  "batch_window": self.batch_window, "n_agents": self.agents,
+                  "seed": self.seed}
+        return {k.name: values[k.name] for k in RUN_KEYS}
+
+    @property
     def run_id(self) -> str:
-        r = f"__{self.reposition}" if self.names_reposition else ""
-        return (f"{self.scenario.name}__{self.allocator}__{self.planner}{r}__n{self.agents}"
-                f"__s{self.seed}")
+        return runkeys.run_id(self.partition)
 
     @property
     def fleet(self) -> FleetConfig:
@@ -355,13 +374,12 @@ class RunSpec:
 
     @property
     def partition(self) -> dict[str, Any]:
-        """Hive partition keys of this run inside a sweep's output folder (``reposition``
-        only where :attr:`names_reposition`)."""
-        keys = {"scenario": self.scenario.name, "allocator": self.allocator,
-                "planner": self.planner}
-        if self.names_reposition:
-            keys["reposition"] = self.reposition
-        return {**keys, "n_agents": self.agents, "seed": self.seed}
+        """Hive partition keys of this run inside a sweep's output folder: the run keys, the
+        optional ones (``reposition``, ``batch_window``) only where :attr:`names_reposition` /
+        :attr:`names_batch_window`."""
+        named = {"reposition": self.names_reposition, "batch_window": self.names_batch_window}
+        keys = self.keys
+        return {k.name: keys[k.name] for k in RUN_KEYS if not k.optional or named[k.name]}
 
 
 # ----------------------------------------------------------------------------- reading
