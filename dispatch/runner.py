@@ -53,7 +53,7 @@ import pyarrow.parquet as pq
 from dispatch import __version__
 from dispatch.recorder import SCHEMAS, Recorder, json_meta, partition_path, write_atomic
 from dispatch.runkeys import RUN_KEYS, key_names, point_settings
-from dispatch.scenario import RunSpec
+from dispatch.config import RunSpec
 
 log = logging.getLogger(__name__)
 
@@ -156,7 +156,7 @@ def run_one(spec: RunSpec, out: Path | None = None, *,
 def default_out(spec: RunSpec) -> Path:
     """``runs/<scenario name>``, the name made safe as one folder name (no separators, no
     ``..``, no absolute path): results never land outside ``runs/``."""
-    from dispatch.scenario import safe_name
+    from dispatch.config import safe_name
 
     return Path("runs") / safe_name(spec.scenario.name)
 
