@@ -10,7 +10,10 @@ places the fleet; the value's training days used seeds 100-102 by default: keep 
 * ``hungarian + demand``: the same with ``demand`` repositioning;
 * ``hungarian + value``: ``hungarian`` with ``value = --value`` (a ``dispatch train value`` file);
 * ``hungarian + value + demand``;
-* ``magnnet``: the shipped (imitation) model.
+* ``magnnet``: the shipped (imitation) model; ``magnnet + value`` (``+ value + demand``) with
+  the learned value, as ``hungarian``'s;
+* ``magnnet @2km``, ``magnnet + value @2km``: the same under a 2 km radio range (compared with
+  the same series at unlimited range when it ran).
 
 It writes ``DIR/lookahead.csv`` (``series, n_agents, seed, served_share`` (0-1), ``wait_mean``
 (s), ``rejected_share``, ``passenger_km`` (km driven with a passenger: the served trips'
@@ -46,13 +49,17 @@ sys.path.insert(0, str(ROOT))
 from dispatch.value import scenario_for
 
 SERIES = ("hungarian", "hungarian + demand", "hungarian + value", "hungarian + value + demand",
-          "magnnet")
+          "magnnet", "magnnet + value", "magnnet + value + demand", "magnnet @2km",
+          "magnnet + value @2km")
+#: series ending in ``@2km`` run under a 2 km radio range (decentralized: each agent decides
+#: on what it hears; the value adjusts each agent's own costs)
+RADIO_RANGE = 2000.0
 FIELDS = ["series", "n_agents", "seed", "served_share", "wait_mean", "rejected_share",
           "passenger_km", "empty_share", "seconds"]
 
 
 def spec_of(series: str, sc, agents: int, seed: int, value: str | None, weight: float | None):
-    allocator = "magnnet" if series == "magnnet" else "hungarian"
+    allocator = "magnnet" if series.startswith("magnnet") else "hungarian"
     params = {}
     if "value" in series:
         if value is None:
@@ -63,6 +70,8 @@ def spec_of(series: str, sc, agents: int, seed: int, value: str | None, weight: 
     sc = replace(sc, dispatch=replace(sc.dispatch, allocator_params=tuple(params.items())))
     if "demand" in series:
         sc = replace(sc, reposition=replace(sc.reposition, policy="demand", declared=True))
+    if series.endswith("@2km"):
+        sc = replace(sc, comms=replace(sc.comms, range=RADIO_RANGE))
     return sc.runs(allocator=allocator, agents=agents, seed=seed)[0]
 
 
@@ -100,6 +109,8 @@ def table(rows: list[dict]) -> str:
         for name in [s for s in SERIES if s in set(g["series"])]:
             ref = "hungarian + demand" if "demand" in name and name != "hungarian + demand" \
                 and "hungarian + demand" in set(g["series"]) else "hungarian"
+            if name.endswith("@2km") and name[:-5] in set(g["series"]):
+                ref = name[:-5]  # under the range: against its unlimited-range self
             base = g[g["series"] == ref].set_index("seed")
             h = g[g["series"] == name].set_index("seed")
             sm, sh = interval(100 * h["served_share"])
@@ -116,6 +127,8 @@ def table(rows: list[dict]) -> str:
                 line += " " * 28
             if "passenger_km" in h:
                 line += f"  {h['passenger_km'].astype(float).mean():8.0f}"
+            if name != ref:
+                line += f"  (vs {ref})"
             out.append(line)
     return "\n".join(out)
 

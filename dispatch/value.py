@@ -133,6 +133,63 @@ class ZoneValue:
                        float(f["weight"]), f["trip_fit"], json.loads(str(f["meta"])))
 
 
+# ---------------------------------------------------------------------------- an option
+class ValueOption:
+    """The ``value`` / ``value_weight`` option of an allocator (``hungarian`` and ``magnnet``
+    share it): the learned value of ``path`` and the weight to use it with (None: the file's).
+
+    Every adjustment is per agent: row ``i`` of :meth:`costs` depends only on agent ``i``'s node,
+    the tasks and the time, so a decentralized agent adjusts its own costs and gets the same
+    numbers as a central one."""
+
+    def __init__(self, path: str | Path, weight: float | None = None) -> None:
+        self.path = str(path)
+        self.value = ZoneValue.load(path)
+        self.weight = self.value.weight if weight is None else float(weight)
+
+    @classmethod
+    def of(cls, path, weight=None) -> ValueOption | None:
+        """The option of an allocator's parameters (None without a ``value`` file)."""
+        return None if path is None else cls(path, weight)
+
+    def costs(self, problem) -> np.ndarray:
+        """The problem's costs less the discounted value after each trip plus the value now
+        (:meth:`ZoneValue.adjusted`); ``inf`` where the cost is."""
+        return self.value.adjusted(problem, self.weight)
+
+    @property
+    def offset(self) -> float:
+        """A bound of how far below its travel time an adjusted cost can go (the weight times
+        the largest value of the file): :meth:`costs` plus it is never negative. A constant of
+        the file, so every agent knows it without hearing the others."""
+        return self.weight * max(float(self.value.table.max(initial=0.0)), 0.0)
+
+    def problem(self, problem, shift: bool = False):
+        """``problem`` with :meth:`costs` as its cost matrix (plus :attr:`offset` with ``shift``,
+        for allocators whose models read costs as non-negative travel times; a constant added
+        to every pair changes no comparison between pairs)."""
+        from dataclasses import replace as _replace
+
+        cost = self.costs(problem)
+        if shift:
+            cost = cost + self.offset
+        return _replace(problem, cost=np.ascontiguousarray(cost))
+
+
+def travel_costs(allocation, problem):
+    """``allocation`` (decided on an adjusted copy of ``problem``) with each request's cost
+    read back from ``problem.cost``: what the run records stays the travel time."""
+    from dataclasses import replace as _replace
+
+    if not allocation.requests:
+        return allocation
+    row = {int(a): i for i, a in enumerate(problem.agent_ids.tolist())}
+    col = {int(t): j for j, t in enumerate(problem.task_ids.tolist())}
+    reqs = tuple(_replace(r, cost=float(problem.cost[row[r.agent_id], col[r.task_id]]))
+                 for r in allocation.requests)
+    return _replace(allocation, requests=reqs)
+
+
 # ---------------------------------------------------------------------------- learning
 def transitions(tasks, vehicles, zones: Zones, end: float) -> dict[str, np.ndarray]:
     """The transitions of one simulated day (see the module doc) from its ``tasks`` and
