@@ -9,7 +9,9 @@ places the fleet; the value's training days used seeds 100-102 by default: keep 
 * ``hungarian``: the myopic optimum of each batch;
 * ``hungarian + demand``: the same with ``demand`` repositioning;
 * ``hungarian + value``: ``hungarian`` with ``value = --value`` (a ``dispatch train value`` file);
-* ``hungarian + value + demand``;
+* ``hungarian + value + demand``; ``hungarian + value(d) + demand``: with the value learned on
+  days with ``demand`` repositioning (``--value-demand``, default the shipped
+  ``chicago_n1000_demand.npz``);
 * ``magnnet``: the shipped (imitation) model; ``magnnet + value`` (``+ value + demand``) with
   the learned value, as ``hungarian``'s;
 * ``magnnet @2km``, ``magnnet + value @2km``: the same under a 2 km radio range (compared with
@@ -49,7 +51,8 @@ sys.path.insert(0, str(ROOT))
 from dispatch.value import scenario_for
 
 SERIES = ("hungarian", "hungarian + demand", "hungarian + value", "hungarian + value + demand",
-          "magnnet", "magnnet + value", "magnnet + value + demand", "magnnet @2km",
+          "hungarian + value(d) + demand", "magnnet", "magnnet + value",
+          "magnnet + value + demand", "magnnet + value(d) + demand", "magnnet @2km",
           "magnnet + value @2km")
 #: series ending in ``@2km`` run under a 2 km radio range (decentralized: each agent decides
 #: on what it hears; the value adjusts each agent's own costs)
@@ -58,12 +61,15 @@ FIELDS = ["series", "n_agents", "seed", "served_share", "wait_mean", "rejected_s
           "passenger_km", "empty_share", "seconds"]
 
 
-def spec_of(series: str, sc, agents: int, seed: int, value: str | None, weight: float | None):
+def spec_of(series: str, sc, agents: int, seed: int, value: str | None, weight: float | None,
+            value_demand: str | None = None):
     allocator = "magnnet" if series.startswith("magnnet") else "hungarian"
     params = {}
+    if "value(d)" in series:
+        value = value_demand
     if "value" in series:
         if value is None:
-            raise SystemExit(f"series {series!r} needs --value FILE")
+            raise SystemExit(f"series {series!r} needs --value FILE (value(d): --value-demand)")
         params["value"] = str(value)
         if weight is not None:
             params["value_weight"] = weight
@@ -75,11 +81,11 @@ def spec_of(series: str, sc, agents: int, seed: int, value: str | None, weight: 
     return sc.runs(allocator=allocator, agents=agents, seed=seed)[0]
 
 
-def run(series: str, sc, agents: int, seed: int, value, weight) -> dict:
+def run(series: str, sc, agents: int, seed: int, value, weight, value_demand=None) -> dict:
     from dispatch.runner import run_one
 
     t0 = time.perf_counter()
-    s = run_one(spec_of(series, sc, agents, seed, value, weight)).summary
+    s = run_one(spec_of(series, sc, agents, seed, value, weight, value_demand)).summary
     n = max(1, s["n_tasks"])
     lost = s["tasks_rejected"] + s["tasks_expired"] + s.get("tasks_unreachable", 0)
     return {"series": series, "n_agents": agents, "seed": seed,
@@ -143,6 +149,10 @@ def main(argv=None) -> int:
     p.add_argument("--value",
                    default=str(ROOT / "dispatch" / "data" / "values" / "chicago_n500.npz"),
                    help="a `dispatch train value` file (default: the shipped Chicago N = 500 one)")
+    p.add_argument("--value-demand",
+                   default=str(ROOT / "dispatch" / "data" / "values" / "chicago_n1000_demand.npz"),
+                   help="the value of the value(d) series: learned on days with demand "
+                        "repositioning (`dispatch train value --reposition demand`)")
     p.add_argument("--value-weight", type=float, default=None,
                    help="seconds per unit of value (default: the file's)")
     p.add_argument("--batch-window", type=float, default=30.0)
@@ -170,7 +180,7 @@ def main(argv=None) -> int:
                 for series in a.series:
                     if (series, n, seed) in done:
                         continue
-                    r = run(series, sc, n, seed, a.value, a.value_weight)
+                    r = run(series, sc, n, seed, a.value, a.value_weight, a.value_demand)
                     w.writerow(r)
                     f.flush()
                     rows.append(r)
