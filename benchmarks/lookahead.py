@@ -133,7 +133,7 @@ def table(rows: list[dict]) -> str:
                 line += " " * 28
             if "passenger_km" in h:
                 line += f"  {h['passenger_km'].astype(float).mean():8.0f}"
-            if name != ref:
+            if name != ref and len(common):
                 line += f"  (vs {ref})"
             out.append(line)
     return "\n".join(out)
