@@ -14,6 +14,8 @@ places the fleet; the value's training days used seeds 100-102 by default: keep 
   ``chicago_n1000_demand.npz``);
 * ``magnnet``: the shipped (imitation) model; ``magnnet + value`` (``+ value + demand``) with
   the learned value, as ``hungarian``'s;
+* ``magnnet-day + value``: MAGNNET fine-tuned by PPO on the day (``--day-checkpoint``, default
+  the shipped ``day.pt``: ``dispatch train magnnet --variant day``) with the value;
 * ``magnnet @2km``, ``magnnet + value @2km``: the same under a 2 km radio range (compared with
   the same series at unlimited range when it ran).
 
@@ -53,20 +55,25 @@ from dispatch.value import scenario_for
 SERIES = ("hungarian", "hungarian + demand", "hungarian + value", "hungarian + value + demand",
           "hungarian + value(d) + demand", "magnnet", "magnnet + value",
           "magnnet + value + demand", "magnnet + value(d) + demand", "magnnet @2km",
-          "magnnet + value @2km")
+          "magnnet + value @2km", "magnnet-day + value")
 #: series ending in ``@2km`` run under a 2 km radio range (decentralized: each agent decides
 #: on what it hears; the value adjusts each agent's own costs)
 RADIO_RANGE = 2000.0
+#: the ``magnnet-day`` series' model: MAGNNET fine-tuned by PPO on the day
+#: (``dispatch train magnnet --variant day``)
+DAY_CHECKPOINT = ROOT / "allocators" / "magnnet" / "checkpoints" / "day.pt"
 FIELDS = ["series", "n_agents", "seed", "served_share", "wait_mean", "rejected_share",
           "passenger_km", "empty_share", "seconds"]
 
 
 def spec_of(series: str, sc, agents: int, seed: int, value: str | None, weight: float | None,
-            value_demand: str | None = None):
+            value_demand: str | None = None, day_checkpoint: str | None = None):
     allocator = "magnnet" if series.startswith("magnnet") else "hungarian"
     params = {}
     if "value(d)" in series:
         value = value_demand
+    if series.startswith("magnnet-day"):  # the PPO-for-the-day model (--day-checkpoint)
+        params["checkpoint"] = str(DAY_CHECKPOINT if day_checkpoint is None else day_checkpoint)
     if "value" in series:
         if value is None:
             raise SystemExit(f"series {series!r} needs --value FILE (value(d): --value-demand)")
@@ -81,11 +88,13 @@ def spec_of(series: str, sc, agents: int, seed: int, value: str | None, weight: 
     return sc.runs(allocator=allocator, agents=agents, seed=seed)[0]
 
 
-def run(series: str, sc, agents: int, seed: int, value, weight, value_demand=None) -> dict:
+def run(series: str, sc, agents: int, seed: int, value, weight, value_demand=None,
+        day_checkpoint=None) -> dict:
     from dispatch.runner import run_one
 
     t0 = time.perf_counter()
-    s = run_one(spec_of(series, sc, agents, seed, value, weight, value_demand)).summary
+    s = run_one(spec_of(series, sc, agents, seed, value, weight, value_demand,
+                        day_checkpoint)).summary
     n = max(1, s["n_tasks"])
     lost = s["tasks_rejected"] + s["tasks_expired"] + s.get("tasks_unreachable", 0)
     return {"series": series, "n_agents": agents, "seed": seed,
@@ -153,6 +162,9 @@ def main(argv=None) -> int:
                    default=str(ROOT / "dispatch" / "data" / "values" / "chicago_n1000_demand.npz"),
                    help="the value of the value(d) series: learned on days with demand "
                         "repositioning (`dispatch train value --reposition demand`)")
+    p.add_argument("--day-checkpoint", default=None,
+                   help="the magnnet-day series' model (default: the shipped "
+                        "allocators/magnnet/checkpoints/day.pt)")
     p.add_argument("--value-weight", type=float, default=None,
                    help="seconds per unit of value (default: the file's)")
     p.add_argument("--batch-window", type=float, default=30.0)
@@ -180,7 +192,8 @@ def main(argv=None) -> int:
                 for series in a.series:
                     if (series, n, seed) in done:
                         continue
-                    r = run(series, sc, n, seed, a.value, a.value_weight, a.value_demand)
+                    r = run(series, sc, n, seed, a.value, a.value_weight, a.value_demand,
+                            a.day_checkpoint)
                     w.writerow(r)
                     f.flush()
                     rows.append(r)
