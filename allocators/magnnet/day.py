@@ -22,7 +22,9 @@ Reward of a step (as :mod:`dispatch.rl`): ``+1`` per request picked up until the
 ``-0.01`` per minute those requests waited. The team advantage (one critic value per decision)
 reaches every agent that acted. Written to ``--out``: ``model.pt`` (a ``match`` checkpoint: run
 it with ``magnnet``'s ``checkpoint`` parameter), ``curve.csv`` and ``curve.png`` (mean reward per
-decision per update, and each finished day's served share).
+decision per update with the day and simulated hour it ended at: the reward follows the hour's
+demand, so compare updates at the same hour of different days, and each finished day's served
+share).
 """
 
 from __future__ import annotations
@@ -256,6 +258,7 @@ def train(args) -> dict:
         model.eval()
         row = {"update": u + 1, "steps": (u + 1) * cfg.batch_size,
                "reward": float(np.mean(stats["reward"][-cfg.batch_size:])),
+               "day": runs["seed"], "hour": round(float(runs["run"].env.now) / 3600.0, 2),
                "seconds": round(time.perf_counter() - t0, 1), **losses}
         curve.append(row)
         print(f"update {u + 1}/{updates}: reward/decision {row['reward']:.3f}, "
@@ -290,9 +293,11 @@ def _write_curve(out: Path, curve: list[dict], days: list[dict]) -> None:
     fig, ax = plt.subplots(1, 2, figsize=(9, 3.2))
     ax[0].plot([r["steps"] for r in curve], [r["reward"] for r in curve])
     ax[0].set(xlabel="decisions", ylabel="mean reward per decision",
-              title="PPO for the day: reward")
+              title="PPO for the day: reward (follows the hour's demand)")
     if days:
         ax[1].plot(range(1, len(days) + 1), [100 * d["served"] for d in days], "o-")
+    else:
+        ax[1].text(0.5, 0.5, "no training day finished", ha="center", va="center")
     ax[1].set(xlabel="training day", ylabel="served %", title="days played while training")
     fig.tight_layout()
     fig.savefig(out / "curve.png", dpi=100)
