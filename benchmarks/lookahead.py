@@ -15,7 +15,8 @@ places the fleet; the value's training days used seeds 100-102 by default: keep 
 * ``magnnet``: the shipped (imitation) model; ``magnnet + value`` (``+ value + demand``) with
   the learned value, as ``hungarian``'s;
 * ``magnnet-day + value``: MAGNNET fine-tuned by PPO on the day (``--day-checkpoint``, default
-  the shipped ``day.pt``: ``dispatch train magnnet --variant day``) with the value;
+  ``runs/train/magnnet_day/model.pt``, what ``dispatch train magnnet --variant day`` writes)
+  with the value;
 * ``magnnet @2km``, ``magnnet + value @2km``: the same under a 2 km radio range (compared with
   the same series at unlimited range when it ran).
 
@@ -59,9 +60,10 @@ SERIES = ("hungarian", "hungarian + demand", "hungarian + value", "hungarian + v
 #: series ending in ``@2km`` run under a 2 km radio range (decentralized: each agent decides
 #: on what it hears; the value adjusts each agent's own costs)
 RADIO_RANGE = 2000.0
-#: the ``magnnet-day`` series' model: MAGNNET fine-tuned by PPO on the day
-#: (``dispatch train magnnet --variant day``)
-DAY_CHECKPOINT = ROOT / "allocators" / "magnnet" / "checkpoints" / "day.pt"
+#: the ``magnnet-day`` series' model: MAGNNET fine-tuned by PPO on the day, where
+#: ``dispatch train magnnet --variant day`` writes it by default (no such model ships: the one
+#: trained for issue 22 did not beat the imitation model, see the README)
+DAY_CHECKPOINT = ROOT / "runs" / "train" / "magnnet_day" / "model.pt"
 FIELDS = ["series", "n_agents", "seed", "served_share", "wait_mean", "rejected_share",
           "passenger_km", "empty_share", "seconds"]
 
@@ -163,8 +165,8 @@ def main(argv=None) -> int:
                    help="the value of the value(d) series: learned on days with demand "
                         "repositioning (`dispatch train value --reposition demand`)")
     p.add_argument("--day-checkpoint", default=None,
-                   help="the magnnet-day series' model (default: the shipped "
-                        "allocators/magnnet/checkpoints/day.pt)")
+                   help="the magnnet-day series' model (default: runs/train/magnnet_day/"
+                        "model.pt, where `dispatch train magnnet --variant day` writes it)")
     p.add_argument("--value-weight", type=float, default=None,
                    help="seconds per unit of value (default: the file's)")
     p.add_argument("--batch-window", type=float, default=30.0)

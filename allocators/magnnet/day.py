@@ -247,6 +247,8 @@ def train(args) -> dict:
     curve = []
     t0 = time.perf_counter()
     updates = max(1, args.steps // cfg.batch_size)
+    print(f"PPO for the day: {updates} updates of {cfg.batch_size} decisions, updates on {device}",
+          file=sys.stderr, flush=True)
     for u in range(updates):
         model.eval()
         batch = collect(model, trainer, runs, cfg.batch_size, stats)
