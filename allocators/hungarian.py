@@ -33,17 +33,16 @@ class HungarianAllocator(Allocator):
         cardinality, then the minimum of these costs; the cost recorded for a pair stays
         its travel time."""
         self.value = None
-        self.value_weight = None if value_weight is None else float(value_weight)
         if value is not None:
-            from dispatch.value import ZoneValue
+            from dispatch.value import ValueOption
 
-            self.value = ZoneValue.load(value)
+            self.value = ValueOption(value, value_weight)
             self.minimizes_total_cost = False  # of the adjusted costs, not problem.cost
 
     def allocate(self, problem: AllocationProblem) -> Allocation:
         if self.value is None:
             return Allocation.centralized(problem, optimal_pairs(problem.cost))
-        cost = self.value.adjusted(problem, self.value_weight)
+        cost = self.value.costs(problem)
         return Allocation.centralized(problem, optimal_pairs(cost))
 
 

@@ -9,8 +9,16 @@ places the fleet; the value's training days used seeds 100-102 by default: keep 
 * ``hungarian``: the myopic optimum of each batch;
 * ``hungarian + demand``: the same with ``demand`` repositioning;
 * ``hungarian + value``: ``hungarian`` with ``value = --value`` (a ``dispatch train value`` file);
-* ``hungarian + value + demand``;
-* ``magnnet``: the shipped (imitation) model.
+* ``hungarian + value + demand``; ``hungarian + value(d) + demand``: with the value learned on
+  days with ``demand`` repositioning (``--value-demand``, default the shipped
+  ``chicago_n1000_demand.npz``);
+* ``magnnet``: the shipped (imitation) model; ``magnnet + value`` (``+ value + demand``) with
+  the learned value, as ``hungarian``'s;
+* ``magnnet-day + value``: MAGNNET fine-tuned by PPO on the day (``--day-checkpoint``, default
+  ``runs/train/magnnet_day/model.pt``, what ``dispatch train magnnet --variant day`` writes)
+  with the value;
+* ``magnnet @2km``, ``magnnet + value @2km``: the same under a 2 km radio range (compared with
+  the same series at unlimited range when it ran).
 
 It writes ``DIR/lookahead.csv`` (``series, n_agents, seed, served_share`` (0-1), ``wait_mean``
 (s), ``rejected_share``, ``passenger_km`` (km driven with a passenger: the served trips'
@@ -46,31 +54,49 @@ sys.path.insert(0, str(ROOT))
 from dispatch.value import scenario_for
 
 SERIES = ("hungarian", "hungarian + demand", "hungarian + value", "hungarian + value + demand",
-          "magnnet")
+          "hungarian + value(d) + demand", "magnnet", "magnnet + value",
+          "magnnet + value + demand", "magnnet + value(d) + demand", "magnnet @2km",
+          "magnnet + value @2km", "magnnet-day + value")
+#: series ending in ``@2km`` run under a 2 km radio range (decentralized: each agent decides
+#: on what it hears; the value adjusts each agent's own costs)
+RADIO_RANGE = 2000.0
+#: the ``magnnet-day`` series' model: MAGNNET fine-tuned by PPO on the day, where
+#: ``dispatch train magnnet --variant day`` writes it by default (no such model ships: the one
+#: trained for issue 22 did not beat the imitation model, see the README)
+DAY_CHECKPOINT = ROOT / "runs" / "train" / "magnnet_day" / "model.pt"
 FIELDS = ["series", "n_agents", "seed", "served_share", "wait_mean", "rejected_share",
           "passenger_km", "empty_share", "seconds"]
 
 
-def spec_of(series: str, sc, agents: int, seed: int, value: str | None, weight: float | None):
-    allocator = "magnnet" if series == "magnnet" else "hungarian"
+def spec_of(series: str, sc, agents: int, seed: int, value: str | None, weight: float | None,
+            value_demand: str | None = None, day_checkpoint: str | None = None):
+    allocator = "magnnet" if series.startswith("magnnet") else "hungarian"
     params = {}
+    if "value(d)" in series:
+        value = value_demand
+    if series.startswith("magnnet-day"):  # the PPO-for-the-day model (--day-checkpoint)
+        params["checkpoint"] = str(DAY_CHECKPOINT if day_checkpoint is None else day_checkpoint)
     if "value" in series:
         if value is None:
-            raise SystemExit(f"series {series!r} needs --value FILE")
+            raise SystemExit(f"series {series!r} needs --value FILE (value(d): --value-demand)")
         params["value"] = str(value)
         if weight is not None:
             params["value_weight"] = weight
     sc = replace(sc, dispatch=replace(sc.dispatch, allocator_params=tuple(params.items())))
     if "demand" in series:
         sc = replace(sc, reposition=replace(sc.reposition, policy="demand", declared=True))
+    if series.endswith("@2km"):
+        sc = replace(sc, comms=replace(sc.comms, range=RADIO_RANGE))
     return sc.runs(allocator=allocator, agents=agents, seed=seed)[0]
 
 
-def run(series: str, sc, agents: int, seed: int, value, weight) -> dict:
+def run(series: str, sc, agents: int, seed: int, value, weight, value_demand=None,
+        day_checkpoint=None) -> dict:
     from dispatch.runner import run_one
 
     t0 = time.perf_counter()
-    s = run_one(spec_of(series, sc, agents, seed, value, weight)).summary
+    s = run_one(spec_of(series, sc, agents, seed, value, weight, value_demand,
+                        day_checkpoint)).summary
     n = max(1, s["n_tasks"])
     lost = s["tasks_rejected"] + s["tasks_expired"] + s.get("tasks_unreachable", 0)
     return {"series": series, "n_agents": agents, "seed": seed,
@@ -100,6 +126,8 @@ def table(rows: list[dict]) -> str:
         for name in [s for s in SERIES if s in set(g["series"])]:
             ref = "hungarian + demand" if "demand" in name and name != "hungarian + demand" \
                 and "hungarian + demand" in set(g["series"]) else "hungarian"
+            if name.endswith("@2km") and name[:-5] in set(g["series"]):
+                ref = name[:-5]  # under the range: against its unlimited-range self
             base = g[g["series"] == ref].set_index("seed")
             h = g[g["series"] == name].set_index("seed")
             sm, sh = interval(100 * h["served_share"])
@@ -116,6 +144,8 @@ def table(rows: list[dict]) -> str:
                 line += " " * 28
             if "passenger_km" in h:
                 line += f"  {h['passenger_km'].astype(float).mean():8.0f}"
+            if name != ref and len(common):
+                line += f"  (vs {ref})"
             out.append(line)
     return "\n".join(out)
 
@@ -130,6 +160,13 @@ def main(argv=None) -> int:
     p.add_argument("--value",
                    default=str(ROOT / "dispatch" / "data" / "values" / "chicago_n500.npz"),
                    help="a `dispatch train value` file (default: the shipped Chicago N = 500 one)")
+    p.add_argument("--value-demand",
+                   default=str(ROOT / "dispatch" / "data" / "values" / "chicago_n1000_demand.npz"),
+                   help="the value of the value(d) series: learned on days with demand "
+                        "repositioning (`dispatch train value --reposition demand`)")
+    p.add_argument("--day-checkpoint", default=None,
+                   help="the magnnet-day series' model (default: runs/train/magnnet_day/"
+                        "model.pt, where `dispatch train magnnet --variant day` writes it)")
     p.add_argument("--value-weight", type=float, default=None,
                    help="seconds per unit of value (default: the file's)")
     p.add_argument("--batch-window", type=float, default=30.0)
@@ -157,7 +194,8 @@ def main(argv=None) -> int:
                 for series in a.series:
                     if (series, n, seed) in done:
                         continue
-                    r = run(series, sc, n, seed, a.value, a.value_weight)
+                    r = run(series, sc, n, seed, a.value, a.value_weight, a.value_demand,
+                            a.day_checkpoint)
                     w.writerow(r)
                     f.flush()
                     rows.append(r)

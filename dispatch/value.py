@@ -27,7 +27,9 @@ by this cost. What the allocator needs is in the problem: the vehicles' nodes, t
 pickup and drop-off nodes and the costs; the file carries the node positions and the zones.
 
 Train: ``dispatch train value --out value.npz`` (see ``--help``; the Chicago day at N = 500,
-batched 30 s, by default).
+batched 30 s, by default). ``--reposition demand`` learns it from days with ``demand``
+repositioning (idle vehicles are moved, so the idle transitions end where the next trip starts):
+the value to use on top of that repositioner.
 """
 
 from __future__ import annotations
@@ -133,10 +135,73 @@ class ZoneValue:
                        float(f["weight"]), f["trip_fit"], json.loads(str(f["meta"])))
 
 
+# ---------------------------------------------------------------------------- an option
+class ValueOption:
+    """The ``value`` / ``value_weight`` option of an allocator (``hungarian`` and ``magnnet``
+    share it): the learned value of ``path`` and the weight to use it with (None: the file's).
+
+    Every adjustment is per agent: row ``i`` of :meth:`costs` depends only on agent ``i``'s node,
+    the tasks and the time, so a decentralized agent adjusts its own costs and gets the same
+    numbers as a central one."""
+
+    def __init__(self, path: str | Path, weight: float | None = None) -> None:
+        self.path = str(path)
+        self.value = ZoneValue.load(path)
+        self.weight = self.value.weight if weight is None else float(weight)
+
+    @classmethod
+    def of(cls, path, weight=None) -> ValueOption | None:
+        """The option of an allocator's parameters (None without a ``value`` file)."""
+        return None if path is None else cls(path, weight)
+
+    def costs(self, problem) -> np.ndarray:
+        """The problem's costs less the discounted value after each trip plus the value now
+        (:meth:`ZoneValue.adjusted`); ``inf`` where the cost is."""
+        return self.value.adjusted(problem, self.weight)
+
+    @property
+    def offset(self) -> float:
+        """A bound of how far below its travel time an adjusted cost can go (the weight times
+        the largest value of the file): :meth:`costs` plus it is never negative. A constant of
+        the file, so every agent knows it without hearing the others."""
+        return self.weight * max(float(self.value.table.max(initial=0.0)), 0.0)
+
+    def problem(self, problem, shift: bool = False):
+        """``problem`` with :meth:`costs` as its cost matrix (plus :attr:`offset` with ``shift``,
+        for allocators whose models read costs as non-negative travel times; a constant added
+        to every pair changes no comparison between pairs)."""
+        from dataclasses import replace as _replace
+
+        cost = self.costs(problem)
+        if shift:
+            cost = cost + self.offset
+        return _replace(problem, cost=np.ascontiguousarray(cost))
+
+
+def travel_costs(allocation, problem):
+    """``allocation`` (decided on an adjusted copy of ``problem``) with each request's cost
+    read back from ``problem.cost``: what the run records stays the travel time."""
+    from dataclasses import replace as _replace
+
+    if not allocation.requests:
+        return allocation
+    row = {int(a): i for i, a in enumerate(problem.agent_ids.tolist())}
+    col = {int(t): j for j, t in enumerate(problem.task_ids.tolist())}
+    reqs = tuple(_replace(r, cost=float(problem.cost[row[r.agent_id], col[r.task_id]]))
+                 for r in allocation.requests)
+    return _replace(allocation, requests=reqs)
+
+
 # ---------------------------------------------------------------------------- learning
-def transitions(tasks, vehicles, zones: Zones, end: float) -> dict[str, np.ndarray]:
+def transitions(tasks, vehicles, zones: Zones, end: float,
+                repositioned: bool = False) -> dict[str, np.ndarray]:
     """The transitions of one simulated day (see the module doc) from its ``tasks`` and
-    ``vehicles`` tables (pandas frames): arrays ``z, t, r, z2, t2`` (``z2 = -1``: terminal)."""
+    ``vehicles`` tables (pandas frames): arrays ``z, t, r, z2, t2`` (``z2 = -1``: terminal).
+
+    ``repositioned``: the day ran with a repositioner, so an idle vehicle did not stay where it
+    dropped off: its idle transition goes from the drop-off's zone to the zone of its next
+    pickup (where it was sent from lies within a pickup's ``max_wait`` of it; the tables do not
+    keep the vehicle's position at the assignment), and the trip starts there."""
     done = tasks[tasks["state"] == "completed"].sort_values(["agent_id", "assigned_at"])
     start = vehicles.set_index("agent_id")[["x0", "y0"]]
     z, t, r, z2, t2 = [], [], [], [], []
@@ -147,12 +212,14 @@ def transitions(tasks, vehicles, zones: Zones, end: float) -> dict[str, np.ndarr
         g = by_agent.get(aid)
         if g is not None:
             dz = zones.of_xy(g[["dropoff_x", "dropoff_y"]].to_numpy())
-            for ta, tc, zd in zip(g["assigned_at"].to_numpy(), g["completed_at"].to_numpy(),
-                                  dz.tolist()):
-                z += [prev_z, prev_z]
+            pz = zones.of_xy(g[["x", "y"]].to_numpy()) if repositioned else None
+            for k, (ta, tc, zd) in enumerate(zip(g["assigned_at"].to_numpy(),
+                                                 g["completed_at"].to_numpy(), dz.tolist())):
+                za = int(pz[k]) if repositioned else prev_z  # where the trip starts
+                z += [prev_z, za]
                 t += [prev_t, ta]
                 r += [0.0, 1.0]
-                z2 += [prev_z, zd]
+                z2 += [za, zd]
                 t2 += [ta, tc]
                 prev_z, prev_t = zd, tc
         z.append(prev_z)
@@ -211,11 +278,14 @@ def fit_trips(tasks, t_col: str = "picked_up_at") -> np.ndarray:
     return np.array([fit(hour == h) if (hour == h).sum() >= 20 else every for h in range(24)])
 
 
-def _day(sc, allocator: str, params: dict, agents: int, seed: int):
-    """Run one day; its tasks and vehicles tables (pandas) and summary."""
+def _day(sc, allocator: str, params: dict, agents: int, seed: int, reposition: str | None = None):
+    """Run one day (with the ``reposition`` policy, if one); its tasks and vehicles tables
+    (pandas) and summary."""
     from dispatch.runner import run_one
 
     sc = replace(sc, dispatch=replace(sc.dispatch, allocator_params=tuple(params.items())))
+    if reposition is not None:
+        sc = replace(sc, reposition=replace(sc.reposition, policy=reposition, declared=True))
     spec = sc.runs(allocator=allocator, agents=agents, seed=seed)[0]
     res = run_one(spec)
     tabs = res.tables
@@ -242,8 +312,10 @@ def train(scenario: str | Path, out: str | Path, *, agents: int = 500, batch_win
           seeds=(100, 101, 102), iterations: int = 1, zone: float = 3000.0, bin_s: float = 3600.0,
           half_life: float = 3600.0, weight: float = 300.0, shrink: float = 5.0,
           hours: float | None = None, cache: str | Path | None = None,
-          log=print) -> ZoneValue:
-    """Learn a :class:`ZoneValue` from simulated days and save it to ``out``."""
+          reposition: str | None = None, log=print) -> ZoneValue:
+    """Learn a :class:`ZoneValue` from simulated days and save it to ``out``. ``reposition``:
+    the days run with that repositioning policy (e.g. ``"demand"``): the value of where a
+    vehicle ends up when idle vehicles are moved, for allocators run with it."""
     from dispatch.sim import space_for
 
     sc = scenario_for(scenario, batch_window, hours)
@@ -261,7 +333,8 @@ def train(scenario: str | Path, out: str | Path, *, agents: int = 500, batch_win
             params = {} if value is None else {"value": str(out)}
             got = None
             if cache is not None and value is None:  # plain hungarian days are reusable
-                key = Path(cache) / f"n{agents}_w{batch_window:g}_h{hours}_s{seed}"
+                key = Path(cache) / (f"n{agents}_w{batch_window:g}_h{hours}_s{seed}"
+                                     + (f"_r{reposition}" if reposition else ""))
                 if (key / "summary.json").exists():
                     import pandas as pd
 
@@ -269,14 +342,15 @@ def train(scenario: str | Path, out: str | Path, *, agents: int = 500, batch_win
                            pd.read_parquet(key / "vehicles.parquet"),
                            json.loads((key / "summary.json").read_text()))
             if got is None:
-                got = _day(sc, "hungarian", params, agents, seed)
+                got = _day(sc, "hungarian", params, agents, seed, reposition)
                 if cache is not None and value is None:
                     key.mkdir(parents=True, exist_ok=True)
                     got[0].to_parquet(key / "tasks.parquet")
                     got[1].to_parquet(key / "vehicles.parquet")
                     (key / "summary.json").write_text(json.dumps(got[2], default=str))
             tasks, vehicles, summary = got
-            parts.append(transitions(tasks, vehicles, zones, sc.duration))
+            parts.append(transitions(tasks, vehicles, zones, sc.duration,
+                                     repositioned=reposition is not None))
             trips.append(tasks)
             served = summary["tasks_completed"] / max(1, summary["n_tasks"])
             history.append({"iteration": it, "seed": seed, "served": served,
@@ -292,6 +366,7 @@ def train(scenario: str | Path, out: str | Path, *, agents: int = 500, batch_win
         meta = {"scenario": str(scenario), "agents": agents, "batch_window": batch_window,
                 "seeds": list(seeds), "iterations": it + 1, "half_life": half_life,
                 "zone": zone, "shrink": shrink, "transitions": len(tr["z"]),
+                "reposition": reposition,
                 "sweeps": sweeps, "seconds": round(time.perf_counter() - t0, 1),
                 "days": history}
         value = ZoneValue(zones, node_xy, bin_s, table, gamma, weight, fit, meta)
@@ -321,10 +396,14 @@ def main(argv=None) -> int:
     p.add_argument("--hours", type=float, default=None, help="shorter days (a quick look)")
     p.add_argument("--cache", default=None,
                    help="a folder keeping the plain hungarian days (reused by later calls)")
+    p.add_argument("--reposition", default=None,
+                   help="run the training days with this repositioning policy (e.g. demand): "
+                        "the value to use with it")
     a = p.parse_args(argv)
     train(a.scenario, a.out, agents=a.agents, batch_window=a.batch_window, seeds=a.seeds,
           iterations=a.iterations, zone=a.zone, bin_s=a.bin, half_life=a.half_life,
           weight=a.weight, shrink=a.shrink, hours=a.hours, cache=a.cache,
+          reposition=a.reposition,
           log=lambda s: print(s, file=sys.stderr, flush=True))
     return 0
 

@@ -41,6 +41,11 @@ Variants (``[dispatch.allocator_params] variant = ...``):
     the actor's input (our addition); one checkpoint per size (``paper_nb_n{N}.pt``), same
     rule. Before the plugin was unified this was what ``magnnet`` ran at ``N = M``.
 
+Look-ahead (issue 22): ``value`` (a file of ``dispatch train value``) and ``value_weight``, as
+``hungarian``'s (:class:`dispatch.value.ValueOption`): each agent's costs become its travel
+times less the discounted value of where each trip leaves it plus its value now; variant
+``match`` only.
+
 Other parameters: ``checkpoint`` (a ``model.pt`` of ``dispatch train magnnet`` replacing the
 shipped one of the variant: a match model for ``match``, a paper model of one size for
 ``paper``/``paper_nb``), ``view_checkpoint`` (replaces ``view.pt``), ``confidence`` (default
@@ -201,15 +206,16 @@ class MagnnetAllocator(DecentralizedAllocator):
                  confidence: float = 0.8, view_confidence: float = 0.5,
                  patience: int = 3, view_patience: int = 12, view_hops: int = 6,
                  claims: int = 0, cost_scale: str | float = "auto",
-                 candidates: str | int = "auto", view_candidates: str | int = "auto") -> None:
+                 candidates: str | int = "auto", view_candidates: str | int = "auto",
+                 value: str | None = None, value_weight: float | None = None) -> None:
         if variant not in VARIANTS:
             raise TypeError(f"variant must be one of {', '.join(VARIANTS)}, got {variant!r}")
         if partial not in PARTIAL:
             raise TypeError(f"partial must be one of {', '.join(PARTIAL)}, got {partial!r}")
-        for name, value in (("patience", patience), ("view_patience", view_patience),
-                            ("claims", claims)):
-            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-                raise TypeError(f"{name} must be a non-negative integer, got {value!r}")
+        for name, number in (("patience", patience), ("view_patience", view_patience),
+                             ("claims", claims)):
+            if isinstance(number, bool) or not isinstance(number, int) or number < 0:
+                raise TypeError(f"{name} must be a non-negative integer, got {number!r}")
         if isinstance(view_hops, bool) or not isinstance(view_hops, int) or view_hops < 2:
             raise TypeError(f"view_hops must be an integer >= 2, got {view_hops!r}")
         self.variant, self.partial, self.patience = variant, partial, patience
@@ -235,6 +241,13 @@ class MagnnetAllocator(DecentralizedAllocator):
             raise TypeError(f"view_checkpoint and partial apply to variant 'match' only, not "
                             f"{variant!r}")
         self._record = None  # DAgger: a list that collects the views decided on
+        self.value = None
+        if value is not None:  # the look-ahead option shared with hungarian (dispatch.value)
+            if variant != "match":
+                raise TypeError(f"value applies to variant 'match' only, not {variant!r}")
+            from dispatch.value import ValueOption
+
+            self.value = ValueOption(value, value_weight)
         self.files: dict[str, str] = {}  # checkpoint file -> sha, of what this allocator loaded
         if variant == "match":
             self._init_match(checkpoint, view_checkpoint)
@@ -302,6 +315,9 @@ class MagnnetAllocator(DecentralizedAllocator):
                  "paper": "magnnet-paper", "paper_nb": "magnnet-paper+nb"}[self.variant]
         out = {"model": model, "variant": self.variant,
                "checkpoint": ",".join(f"{k}@{v}" for k, v in sorted(self.files.items()))}
+        if self.value is not None:
+            out.update(value=f"{Path(self.value.path).name}@{_sha(self.value.path)}",
+                       value_weight=f"{self.value.weight:g}")
         if self.variant == "match":
             out.update(view_hops=str(self.view_hops), claims=str(self.claims),
                        cost_scale=str(self.cost_scale), candidates=str(self.candidates),
@@ -317,6 +333,18 @@ class MagnnetAllocator(DecentralizedAllocator):
         return self.claims
 
     def allocate(self, problem):
+        """The decentralized decision (see the module doc). With ``value``, every agent decides
+        on its own row of the value-adjusted costs (:class:`dispatch.value.ValueOption`, the
+        same adjustment as ``hungarian``'s, plus the file's constant :attr:`~dispatch.value.
+        ValueOption.offset` so that the models read non-negative costs), the conflict rule
+        compares those, and the requests record the travel times."""
+        if self.value is None:
+            return self._allocate(problem)
+        from dispatch.value import travel_costs
+
+        return travel_costs(self._allocate(self.value.problem(problem, shift=True)), problem)
+
+    def _allocate(self, problem):
         from dataclasses import replace
 
         self._plans, self._known, self._complete = {}, None, None

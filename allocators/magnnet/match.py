@@ -72,13 +72,13 @@ def edge_features(cost: torch.Tensor, mask: torch.Tensor, flies: torch.Tensor) -
     colmin = c.amin(1, keepdim=True)
     if m > 1:
         two = torch.topk(c, 2, dim=2, largest=False)
-        row_other = torch.where(torch.arange(m) == two.indices[..., :1], two.values[..., 1:2],
+        row_other = torch.where(torch.arange(m, device=c.device) == two.indices[..., :1], two.values[..., 1:2],
                                 two.values[..., :1])
     else:
         row_other = far
     if n > 1:
         two = torch.topk(c, 2, dim=1, largest=False)
-        col_other = torch.where(torch.arange(n)[None, :, None] == two.indices[:, :1],
+        col_other = torch.where(torch.arange(n, device=c.device)[None, :, None] == two.indices[:, :1],
                                 two.values[:, 1:2], two.values[:, :1])
     else:
         col_other = far

@@ -31,14 +31,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
     d = PPOConfig()
     p.add_argument("--agents", type=int, default=8, help="N (= M tasks) of the paper model")
-    p.add_argument("--variant", choices=["paper", "paper_nb", "match", "view"],
+    p.add_argument("--variant", choices=["paper", "paper_nb", "match", "view", "day"],
                    default="paper",
                    help="paper: the paper's model exactly, PPO; paper_nb: plus per-task "
                         "neighbour features in the actor (ours); match: size-agnostic "
                         "agent-task graph network trained by imitation of the optimal "
                         "assignment (ours; --agents and the PPO options do not apply); view: "
                         "the match network for partial views (2-hop, limited range), DAgger "
-                        "from match.pt (ours; --iterations, --episodes, --updates)")
+                        "from match.pt (ours; --iterations, --episodes, --updates); day: "
+                        "PPO on taxi decisions of a city day from match.pt (issue 22; its own "
+                        "options: --variant day --help)")
     p.add_argument("--updates", type=int, default=None,
                    help="match: imitation updates (default 6000); view: per DAgger iteration "
                         "(default 300)")
@@ -493,6 +495,14 @@ def _figures(rows, out: Path) -> None:
 
 
 def main(argv=None) -> int:
+    import sys
+
+    argv = list(sys.argv[1:] if argv is None else argv)
+    for k, a in enumerate(argv):  # --variant day: PPO for the day, options of its own
+        if (a == "--variant" and argv[k + 1:k + 2] == ["day"]) or a == "--variant=day":
+            from allocators.magnnet import day
+
+            return day.main(argv[:k] + argv[k + (1 if "=" in a else 2):])
     p = argparse.ArgumentParser(prog="magnnet-train", description=__doc__)
     add_arguments(p)
     return run(p.parse_args(argv))

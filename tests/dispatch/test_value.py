@@ -93,3 +93,55 @@ def test_train_on_a_short_day_and_run_with_it(tmp_path):
     sc = replace(sc, dispatch=replace(sc.dispatch, allocator_params=(("value", str(out)),)))
     s = run_one(sc.runs(allocator="hungarian", seed=0)[0]).summary
     assert s["tasks_completed"] > 0
+
+
+def _road_problem(seed: int, n: int, m: int, comm=None) -> AllocationProblem:
+    """A hand-built road decision: agents and trips on the nodes of :func:`_value`'s network,
+    costs of a city's taxis (minutes), some infeasible."""
+    rng = np.random.default_rng(seed)
+    cost = rng.uniform(60.0, 900.0, (n, m))
+    cost[rng.random((n, m)) < 0.2] = np.inf
+    agents = tuple(AgentView(id=100 + i, kind="car", loc=int(rng.integers(3)), speed=10.0)
+                   for i in range(n))
+    tasks = tuple(TaskView(id=200 + j, kind="trip", loc=int(rng.integers(3)), released_at=0.0,
+                           dropoff=int(rng.integers(3))) for j in range(m))
+    return AllocationProblem(time=600.0, agents=agents, tasks=tasks, cost=cost,
+                             comm=np.ones((n, n), bool) if comm is None else comm,
+                             rng=np.random.default_rng(seed), agent_pos=rng.random((n, 3)),
+                             task_pos=rng.random((m, 3)))
+
+
+@pytest.mark.parametrize("ranged", [False, True])
+def test_magnnet_with_a_value_is_magnnet_on_the_adjusted_costs(tmp_path, ranged):
+    from allocators.magnnet.allocator import MagnnetAllocator
+    from dispatch.value import ValueOption
+
+    v = _value(weight=150.0)
+    v.save(tmp_path / "v.npz")
+    opt = ValueOption(tmp_path / "v.npz")
+    with_value = MagnnetAllocator(value=str(tmp_path / "v.npz"))
+    plain = MagnnetAllocator()
+    changed = 0
+    for seed in range(6):
+        n, m = 9, 7
+        comm = None
+        if ranged:  # a line of agents, each hearing its neighbours: partial views
+            idx = np.arange(n)
+            comm = np.abs(idx[:, None] - idx[None, :]) <= 2
+        p = _road_problem(seed, n, m, comm)
+        adj = opt.costs(p)
+        assert (adj + opt.offset >= p.cost - 1e-9).all()  # never below the travel time
+        got = with_value.allocate(p)
+        # the same decision (a fresh rng of the same seed: flooding draws from it)
+        ref = plain.allocate(replace(p, cost=adj + opt.offset, rng=np.random.default_rng(seed)))
+        assert got.pairs == ref.pairs and got.rounds == ref.rounds
+        assert got.messages == ref.messages and got.hops == ref.hops
+        # the requests record travel times, not the adjusted costs
+        row = {a: i for i, a in enumerate(p.agent_ids.tolist())}
+        col = {t: j for j, t in enumerate(p.task_ids.tolist())}
+        assert all(r.cost == p.cost[row[r.agent_id], col[r.task_id]] for r in got.requests)
+        changed += got.pairs != plain.allocate(_road_problem(seed, n, m, comm)).pairs
+    assert changed > 0  # the value changes some decisions
+    assert with_value.describe()["value"].startswith("v.npz@")
+    with pytest.raises(TypeError):
+        MagnnetAllocator(variant="paper", value=str(tmp_path / "v.npz"))
