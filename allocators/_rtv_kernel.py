@@ -1,6 +1,8 @@
 """The compiled part of :mod:`allocators.rtv`: the best stop order of a group of new requests on
 one vehicle (a depth-first search over every order of the group's stops merged into the
-vehicle's plan, the plan's own order kept), for many (vehicle, group) candidates in one call.
+vehicle's plan, the plan's own order kept: :func:`best_orders`; or over every order of the
+plan's stops and the group's together: :func:`best_orders_any`), for many (vehicle, group)
+candidates in one call.
 
 The schedule is the kernel's (:meth:`dispatch.vehicles.Operator.route_times`): arrival at a stop
 = departure from the one before + the drive between them; departure = arrival + the service time
@@ -175,6 +177,156 @@ def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, 
                             out_order[g, q] = path[q]
                         for q in range(total, L):
                             out_order[g, q] = -99
+                d -= 1
+            if nodes >= budget:
+                cut = True
+                break
+        out_cost[g] = best
+        out_cut[g] = cut
+
+
+@_jit
+def best_orders_any(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, p_svc,
+                    p_eta, p_drop, p_pred, vp, poff, ppa, vn, pn, np_, nn, r_pax, r_lp, r_ld,
+                    r_rel, r_direct, r_hasdrop, old_end, svc, objective, budget, tol, out_cost,
+                    out_order, out_cut):  # pragma: no cover - compiled
+    """:func:`best_orders` with the plan's stops reordered too (Alonso-Mora et al.'s whole-trip
+    routing): every order of the plan's stops and the group's, each pickup before its drop-off
+    (a plan's drop-off after its pickup where that is in the plan too: ``p_pred[s]``, the flat
+    index of the pickup, or ``-1``), on the same schedule, limits and costs. Any stop may come
+    first: the plan's first stop, reached first, is reached at ``first_eta[j]`` (the drive the
+    vehicle is on); any other stop at ``start[j]`` + the drive from where the vehicle is
+    (``vp[s]`` for plan stop ``s``, ``vn[j, x]`` for a new one), as the kernel re-routes a
+    vehicle whose first stop changes (it finishes the edge it is on, then drives there).
+    Drives between the plan's stops: ``ppa[poff[j] + u * n + w]`` from its ``u``-th to its
+    ``w``-th stop (``n`` stops). A vehicle's plan and group together hold at most 62 stops (the
+    caller sends longer plans to :func:`best_orders`)."""
+    G, K = groups.shape
+    L = out_order.shape[1]
+    st_time = np.empty(L + 1)
+    st_occ = np.empty(L + 1, np.int64)
+    st_cost = np.empty(L + 1)
+    st_pos = np.empty(L + 1, np.int64)  # -1 start; 0.. plan stop (flat); -2 - x new stop x
+    st_mask = np.empty(L + 1, np.int64)  # stops visited: bit u plan stop u, nplan + x new x
+    st_try = np.empty(L + 1, np.int64)
+    path = np.empty(L, np.int64)
+    for g in range(G):
+        j = gveh[g]
+        k = 0
+        while k < K and groups[g, k] >= 0:
+            k += 1
+        a, b = off[j], off[j + 1]
+        nplan = b - a
+        total = nplan + 2 * k
+        choices = nplan + 2 * k
+        full = (np.int64(1) << np.int64(nplan + 2 * k)) - 1
+        init_mask = np.int64(0)
+        for i in range(k):
+            if not r_hasdrop[groups[g, i]]:
+                init_mask |= np.int64(1) << np.int64(nplan + 2 * i + 1)
+                total -= 1
+        best = INF
+        nodes = 0
+        cut = False
+        st_time[0] = start[j]
+        st_occ[0] = load[j]
+        st_cost[0] = 0.0
+        st_pos[0] = -1
+        st_mask[0] = init_mask
+        st_try[0] = 0
+        d = 0
+        while d >= 0:
+            c = st_try[d]
+            if c >= choices or d == total:
+                d -= 1
+                continue
+            st_try[d] = c + 1
+            pos = st_pos[d]
+            t0 = st_time[d]
+            mask = st_mask[d]
+            bit = np.int64(1) << np.int64(c)
+            if mask & bit:
+                continue
+            if c < nplan:  # the plan's stop s
+                s = a + c
+                q = p_pred[s]
+                if q >= 0 and not (mask & (np.int64(1) << np.int64(q - a))):
+                    continue
+                if pos == -1:
+                    t = first_eta[j] if c == 0 else t0 + vp[s]
+                elif pos >= 0:
+                    t = t0 + ppa[poff[j] + (pos - a) * nplan + c]
+                else:
+                    t = t0 + np_[-2 - pos, s]
+                if t > p_limit[s] + tol:
+                    continue
+                occ = st_occ[d] + p_pax[s]
+                if occ > cap[j]:
+                    continue
+                add = 0.0
+                if p_drop[s] and objective == 0:
+                    add = t - p_eta[s]
+                nodes += 1
+                st_time[d + 1] = t + p_svc[s]
+                st_occ[d + 1] = occ
+                st_cost[d + 1] = st_cost[d] + add
+                st_pos[d + 1] = s
+                st_mask[d + 1] = mask | bit
+                path[d] = -c - 1
+            else:
+                x = c - nplan  # group-local stop: request x // 2, pickup if even
+                i = x // 2
+                pick = x % 2 == 0
+                if not pick and not (mask & (bit >> np.int64(1))):
+                    continue
+                r = groups[g, i]
+                gx = 2 * r + (0 if pick else 1)
+                if pos == -1:
+                    t = t0 + vn[j, gx]
+                elif pos >= 0:
+                    t = t0 + pn[pos, gx]
+                else:
+                    t = t0 + nn[-2 - pos, gx]
+                limit = r_lp[r] if pick else r_ld[r]
+                if t > limit + tol:
+                    continue
+                add = 0.0
+                serve = 0.0
+                if pick:
+                    if r_hasdrop[r]:
+                        occ = st_occ[d] + r_pax[r]
+                    else:
+                        occ = st_occ[d]
+                        serve = svc
+                        if objective == 0:
+                            add = t - r_rel[r]
+                else:
+                    occ = st_occ[d] - r_pax[r]
+                    serve = svc
+                    if objective == 0:
+                        add = t - r_rel[r] - r_direct[r]
+                if occ > cap[j]:
+                    continue
+                nodes += 1
+                st_time[d + 1] = t + serve
+                st_occ[d + 1] = occ
+                st_cost[d + 1] = st_cost[d] + add
+                st_pos[d + 1] = -2 - gx
+                st_mask[d + 1] = mask | bit
+                path[d] = x
+            d += 1
+            st_try[d] = 0
+            if d == total:
+                if st_mask[d] == full:
+                    cost = st_cost[d]
+                    if objective == 1:
+                        cost = st_time[d] - old_end[j]
+                    if cost < best - 1e-12:
+                        best = cost
+                        for q2 in range(total):
+                            out_order[g, q2] = path[q2]
+                        for q2 in range(total, L):
+                            out_order[g, q2] = -99
                 d -= 1
             if nodes >= budget:
                 cut = True

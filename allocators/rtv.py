@@ -74,7 +74,8 @@ class RtvAllocator(Allocator):
     def __init__(self, objective: str = "delay", max_group: int | None = None,
                  max_vehicles: int | None = 30, max_requests: int = 24,
                  max_groups: int = 200, max_nodes: int = 50_000,
-                 time_limit: float = 10.0, solver: str = "milp") -> None:
+                 time_limit: float = 10.0, solver: str = "milp",
+                 reorder: bool = False) -> None:
         if objective not in OBJECTIVES:
             raise TypeError(f"objective must be one of {', '.join(OBJECTIVES)}, got {objective!r}")
         if solver not in ("milp", "greedy"):
@@ -89,11 +90,16 @@ class RtvAllocator(Allocator):
         self.max_groups = _positive_int("max_groups", max_groups)
         self.max_nodes = _positive_int("max_nodes", max_nodes)
         self.time_limit = float(time_limit)
+        if not isinstance(reorder, bool):
+            raise TypeError(f"reorder must be true or false, got {reorder!r}")
         self.solver = solver
+        self.reorder = reorder
         self.stats = {k: 0 for k in (
             "batches", "groups", "groups_feasible", "largest_group", "pairs_cut", "groups_cut",
             "orders_cut", "levels_cut", "ilp", "lp_whole", "ilp_time_limit", "ilp_failed",
             "greedy", "assignment", "multi")}
+        if reorder:  # routes that change the order of the plan's own stops
+            self.stats["reordered"] = 0
         self.stats["seconds"] = self.stats["seconds_max"] = 0.0
 
     def describe(self) -> dict[str, str]:
@@ -102,6 +108,8 @@ class RtvAllocator(Allocator):
                "max_requests": str(self.max_requests), "max_groups": str(self.max_groups),
                "max_nodes": str(self.max_nodes), "time_limit": str(self.time_limit),
                "solver": self.solver}
+        if self.reorder:  # (only then: the answers and summaries of reorder = false as before)
+            out["reorder"] = "True"
         if self.stats["batches"]:
             out.update({k: (f"{v:.3f}" if isinstance(v, float) else str(v))
                         for k, v in self.stats.items()})
@@ -109,10 +117,11 @@ class RtvAllocator(Allocator):
 
     # ------------------------------------------------------------------ the decision
     def allocate(self, problem: AllocationProblem) -> Allocation:
-        _warm()  # compile first: the time limit counts the decision's work, not numba's
+        _warm(self.reorder)  # compile first: the time limit counts the decision's work, not numba's
         t_start = time.perf_counter()
         n, m = problem.n_agents, problem.n_tasks
-        if not n or not m or not np.isfinite(problem.cost).any():
+        if not n or not m or not (np.isfinite(problem.cost).any()
+                                  or (self.reorder and len(problem.plans))):
             return Allocation(pairs=())
         self.stats["batches"] += 1
         try:
@@ -176,12 +185,23 @@ class RtvAllocator(Allocator):
         return chosen
 
 
-_WARM = []
+_WARM: set = set()
 
 
-def _warm() -> None:
+def _warm(reorder: bool = False) -> None:
     """Compile the kernels (once per process; from the disk cache where there is one)."""
-    if _WARM:
+    if reorder and "any" not in _WARM:
+        from allocators._rtv_kernel import best_orders_any
+
+        z, i = np.zeros(1), np.zeros(1, np.int64)
+        best_orders_any(np.zeros((1, 1), np.int64), i, z, z, i, np.ones(1, np.int64),
+                        np.zeros(2, np.int64), i, z, z, z, np.zeros(1, bool),
+                        np.full(1, -1, np.int64), z, np.zeros(2, np.int64), z,
+                        np.zeros((1, 2)), np.zeros((1, 2)), np.zeros((2, 1)), np.zeros((2, 2)),
+                        i, z + 1, z + 1, z, z, np.ones(1, bool), z, 0.0, 0, 10, TOL,
+                        np.zeros(1), np.zeros((1, 3), np.int64), np.zeros(1, bool))
+        _WARM.add("any")
+    if "order" in _WARM:
         return
     from allocators._rtv_kernel import best_orders, pair_shareable
 
@@ -192,7 +212,7 @@ def _warm() -> None:
                 np.ones(1, bool), z, 0.0, 0, 10, TOL, np.zeros(1), np.zeros((1, 2), np.int64),
                 np.zeros(1, bool))
     pair_shareable(0.0, np.zeros((2, 2)), i, z, z, 0.0, 1, TOL)
-    _WARM.append(True)
+    _WARM.add("order")
 
 
 def _greedy(groups, gveh, gcost, sizes) -> list[int]:
@@ -275,7 +295,11 @@ class _Batch:
                 finite[:, over] &= mask
                 alloc.stats["pairs_cut"] += int((count[over] - kv).sum())
         self.finite = finite
-        vrows = np.flatnonzero(finite.any(axis=1))
+        self.extra = None
+        if alloc.reorder and len(problem.plans):
+            self.extra, self.reach = self._reorder_pairs(np.isfinite(cost))
+        vrows = np.flatnonzero(finite.any(axis=1) if self.extra is None
+                               else finite.any(axis=1) | self.extra.any(axis=1))
         self.vrows = vrows
         self.nv = nv = vrows.size
         self.empty = not nv
@@ -346,6 +370,8 @@ class _Batch:
             self.pp = np.zeros(S)
             if S > 1:
                 self.pp[:-1] = np.asarray(travel(plocs[:-1], plocs[1:], pairwise=True), float)
+            if alloc.reorder:
+                self._reorder_arrays(flat, src, rem)
             has = np.flatnonzero(self.off[1:] > self.off[:-1])
             firsts = self.off[has]
             lasts = self.off[has + 1] - 1
@@ -360,6 +386,8 @@ class _Batch:
             self.pn = np.zeros((0, 2 * m))
             self.np_ = np.zeros((2 * m, 0))
             self.pp = np.zeros(0)
+            self.p_pred, self.vp, self.ppa = np.zeros(0, np.int64), np.zeros(0), np.zeros(0)
+            self.poff = np.zeros(nv + 1, np.int64)
         bare = self.off[1:] == self.off[:-1]
         if problem.ready is not None:  # a plan-less vehicle may be in service at its last stop
             r = np.maximum(np.asarray(problem.ready, float)[vrows], now)
@@ -369,8 +397,12 @@ class _Batch:
             start[bare] = now + svc
             old_end[bare] = now + svc
         self.start, self.first_eta, self.load, self.old_end = start, first_eta, load, old_end
-        # candidate requests per vehicle: the cheapest max_requests finite pairs
+        # candidate requests per vehicle: the cheapest max_requests finite pairs (with reorder
+        # then, in the room left, the pairs feasible only by reordering, nearest first)
         sub = np.where(finite[vrows], cost[vrows], np.inf)
+        if self.extra is not None:  # ranks: the insertions' costs, then 1e12 + the drive
+            sub = np.where(self.extra[vrows], 1e12 + self.reach[vrows], sub)
+            self.rank = sub
         self.cand: list[np.ndarray] = []
         cut = 0
         k = alloc.max_requests
@@ -393,16 +425,131 @@ class _Batch:
             self.rr[:, point] = True
             np.fill_diagonal(self.rr, False)
 
+    def _reorder_pairs(self, feasible: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """With ``reorder``: the pairs whose request has no feasible insertion into the
+        vehicle's plan (``problem.cost`` is inf) but might fit once the plan is reordered: the
+        vehicle has a plan and could drive straight to the pickup by its deadline (a necessary
+        condition; the search decides), each request's ``max_vehicles`` nearest such vehicles.
+        ``(pairs (n_agents, m) bool, seconds from now to the pickup)``."""
+        problem, alloc = self.problem, self.alloc
+        n, tasks = problem.n_agents, problem.tasks
+        plans = problem.plans
+        ids = problem.agent_ids.tolist()
+        rows = np.array([k for k, a in enumerate(ids) if plans.get(int(a))], np.int64)
+        out = np.zeros((n, len(tasks)), bool)
+        reach = np.full((n, len(tasks)), np.inf)
+        if not rows.size:
+            return out, reach
+        agents, now = problem.agents, float(problem.time)
+        nodes = getattr(agents, "nodes", None)
+        if nodes is not None:
+            src = nodes[rows].tolist()
+            rem = np.asarray(agents.remaining, float)[rows]
+        else:
+            src = [agents[int(k)].loc for k in rows.tolist()]
+            rem = np.zeros(rows.size)
+        leave = np.full(rows.size, now) if problem.ready is None else \
+            np.maximum(np.asarray(problem.ready, float)[rows], now)
+        t = np.asarray(problem.travel(src, [t.loc for t in tasks]), float) + rem[:, None] \
+            + (leave - now)[:, None]
+        caps = (np.ones(n, np.int64) if problem.capacity is None
+                else np.asarray(problem.capacity, np.int64))[rows]
+        lp = np.array([t.deadline for t in tasks], float)
+        pax = np.array([t.passengers if t.dropoff is not None else 0 for t in tasks])
+        ok = (now + t <= lp + TOL) & ~feasible[rows] & (pax[None, :] <= caps[:, None])
+        kv = alloc.max_vehicles
+        if kv is not None and rows.size > kv:  # each request: its kv nearest such vehicles
+            count = ok.sum(axis=0)
+            over = np.flatnonzero(count > kv)
+            if over.size:
+                sub = np.where(ok[:, over], t[:, over], np.inf)
+                keep = np.argpartition(sub, kv - 1, axis=0)[:kv]
+                mask = np.zeros_like(sub, dtype=bool)
+                np.put_along_axis(mask, keep, True, axis=0)
+                ok[:, over] &= mask
+                alloc.stats["pairs_cut"] += int((count[over] - kv).sum())
+        out[rows] = ok
+        reach[rows] = np.where(ok, t, np.inf)
+        return out, reach
+
+    def _reorder_arrays(self, flat: list, src: list, rem: np.ndarray) -> None:
+        """What :func:`allocators._rtv_kernel.best_orders_any` needs besides: each plan stop's
+        pickup in the plan (``p_pred``), the drive from its vehicle to it (``vp``), the drives
+        between the stops of each plan (``poff``, ``ppa``)."""
+        travel = self.problem.travel
+        plocs = [s.loc for s in flat]
+        owner = np.repeat(np.arange(self.nv), np.diff(self.off))
+        self.p_pred = np.full(len(flat), -1, np.int64)
+        for j, p in enumerate(self.plans):
+            a = int(self.off[j])
+            picks = {s.task_id: a + u for u, s in enumerate(p) if s.kind == "pickup"}
+            for u, s in enumerate(p):
+                if s.kind == "dropoff" and s.task_id in picks:
+                    self.p_pred[a + u] = picks[s.task_id]
+        self.vp = np.asarray(travel([src[j] for j in owner.tolist()], plocs, pairwise=True),
+                             float) + rem[owner]
+        n = np.diff(self.off)
+        self.poff = np.zeros(self.nv + 1, np.int64)
+        np.cumsum(n * n, out=self.poff[1:])
+        us, ws = [], []
+        for j in np.flatnonzero(n > 1).tolist():
+            a, k = int(self.off[j]), int(n[j])
+            idx = np.arange(a, a + k)
+            us.append(np.repeat(idx, k))
+            ws.append(np.tile(idx, k))
+        self.ppa = np.zeros(int(self.poff[-1]))
+        if us:
+            u, w = np.concatenate(us), np.concatenate(ws)
+            got = np.asarray(travel([plocs[i] for i in u.tolist()],
+                                    [plocs[i] for i in w.tolist()], pairwise=True), float)
+            # (a plan of one stop has no drive between its stops: its block stays 0)
+            keep = np.flatnonzero(n > 1)
+            pos = np.concatenate([np.arange(self.poff[j], self.poff[j + 1]) for j in
+                                  keep.tolist()])
+            self.ppa[pos] = got
+
     def evaluate(self, groups: np.ndarray, gveh: np.ndarray):
         """Best orders of candidates ``groups`` (rows of request indices, -1 padded) on the
-        vehicles ``gveh``: ``(cost, order codes, cut)``."""
-        from allocators._rtv_kernel import best_orders
-
+        vehicles ``gveh``: ``(cost, order codes, cut)``; with ``reorder`` the plan's stops
+        are reordered too (:func:`allocators._rtv_kernel.best_orders_any`)."""
         G, K = groups.shape
         plan_len = int((self.off[1:] - self.off[:-1]).max()) if self.nv else 0
-        L = plan_len + 2 * K
+        L = max(plan_len + 2 * K, 1)
+        if not (G and self.alloc.reorder):
+            return self._evaluate_in_order(groups, gveh, L)
+        from allocators._rtv_kernel import best_orders_any
+
         cost = np.empty(G)
-        order = np.full((G, max(L, 1)), -99, np.int64)
+        order = np.full((G, L), -99, np.int64)
+        cut = np.zeros(G, bool)
+        lens = (self.off[1:] - self.off[:-1])[gveh] + 2 * (groups >= 0).sum(axis=1)
+        fits = lens <= 62  # the search's bit masks; longer plans keep their order
+        if fits.all():
+            sel = slice(None)
+        else:
+            sel = np.flatnonzero(fits)
+            rest = np.flatnonzero(~fits)
+            c2, o2, k2 = self._evaluate_in_order(groups[rest], gveh[rest], L)
+            cost[rest], order[rest], cut[rest] = c2, o2, k2
+        c1, o1, k1 = np.empty(len(groups[sel])), order[sel].copy(), cut[sel].copy()
+        best_orders_any(np.ascontiguousarray(groups[sel], np.int64),
+                        np.ascontiguousarray(gveh[sel], np.int64), self.start,
+                        self.first_eta, self.load, self.cap, self.off, self.p_pax,
+                        self.p_limit, self.p_svc, self.p_eta, self.p_drop, self.p_pred,
+                        self.vp, self.poff, self.ppa, self.vn, self.pn, self.np_, self.nn,
+                        self.pax, self.lp, self.ld, self.rel, self.direct, self.hasdrop,
+                        self.old_end, self.svc, OBJECTIVES[self.alloc.objective],
+                        self.alloc.max_nodes, TOL, c1, o1, k1)
+        cost[sel], order[sel], cut[sel] = c1, o1, k1
+        return cost, order, cut
+
+    def _evaluate_in_order(self, groups: np.ndarray, gveh: np.ndarray, L: int):
+        """:meth:`evaluate` with the plan's stops in their order (:func:`best_orders`)."""
+        from allocators._rtv_kernel import best_orders
+
+        G = len(groups)
+        cost = np.empty(G)
+        order = np.full((G, L), -99, np.int64)
         cut = np.zeros(G, bool)
         if G:
             best_orders(np.ascontiguousarray(groups, np.int64), np.ascontiguousarray(gveh,
@@ -465,7 +612,8 @@ class _Batch:
                     stats["groups_cut"] += len(got) - room
                     if room <= 0:
                         continue
-                    c1 = self.problem.cost[self.vrows[j]]
+                    c1 = self.rank[j] if self.extra is not None \
+                        else self.problem.cost[self.vrows[j]]
                     got.sort(key=lambda g: (sum(c1[r] for r in g), g))
                     got = got[:room]
                 cand_rows += got
@@ -501,7 +649,7 @@ class _Batch:
         problem = self.problem
         tids = problem.task_ids
         pairs, reqs, routes = [], [], {}
-        multi = 0
+        multi = reordered = 0
         for g in sorted(chosen, key=lambda g: int(gveh[g])):
             j = int(gveh[g])
             aid = int(self.aids[j])
@@ -519,12 +667,16 @@ class _Batch:
                     route.append(("pickup" if code % 2 == 0 else "dropoff", tid))
             routes[aid] = tuple(route)
             multi += len(rs) > 1
+            mine = [code for code in gorder[g].tolist() if -99 < code < 0]
+            reordered += mine != sorted(mine, reverse=True)
             for r in rs:
                 tid = int(tids[r])
                 pairs.append((aid, tid))
                 reqs.append(Request(round=0, agent_id=aid, task_id=tid,
                                     cost=float(problem.cost[self.vrows[j], r]), won=True))
         self.alloc.stats["multi"] += multi
+        if self.alloc.reorder:
+            self.alloc.stats["reordered"] += reordered
         return Allocation(pairs=tuple(pairs), rounds=1, requests=tuple(reqs), messages=0,
                           routes=routes)
 

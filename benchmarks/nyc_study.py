@@ -49,8 +49,9 @@ def interval(values: list[float], fmt: str = ".3g") -> str:
     return f"{format(m, fmt)} ± {h:.2g}"
 
 
-def run(a, seats: int, method: str, fleet: int, seed: int) -> dict:
-    """One run's numbers (the simulation in this process)."""
+def run(a, seats: int, method: str, fleet: int, seed: int, params: dict | None = None) -> dict:
+    """One run's numbers (the simulation in this process); ``params``: allocator parameters
+    over the scenario's (e.g. rtv's ``reorder``)."""
     from dispatch.runner import make_recorder
     from dispatch.scenario import load_scenario
     from dispatch.sim import Simulation
@@ -60,7 +61,10 @@ def run(a, seats: int, method: str, fleet: int, seed: int) -> dict:
         sc, duration=a.hours * 3600.0 + 3600.0,
         fleet=dataclasses.replace(sc.fleet, agents=fleet, capacity=seats),
         tasks=dataclasses.replace(sc.tasks, max_wait=a.max_wait, max_delay=a.max_delay),
-        dispatch=dataclasses.replace(sc.dispatch, allocator=method, batch_window=30.0),
+        dispatch=dataclasses.replace(
+            sc.dispatch, allocator=method, batch_window=30.0,
+            allocator_params=tuple(sorted({**dict(sc.dispatch.allocator_params),
+                                           **(params or {})}.items()))),
         sweep=dataclasses.replace(sc.sweep, agents=(), allocator=(), batch_window=(), seed=(),
                                   reposition=()),
         name=f"nyc_study_{method}_c{seats}_n{fleet}")

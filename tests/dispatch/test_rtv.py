@@ -37,6 +37,28 @@ def _orders(plan_keys, new_ids):
     return out
 
 
+def _all_orders(plan_keys, new_ids):
+    """Every stop order of the plan's stops and the new requests' together: each pickup before
+    its drop-off (a plan's drop-off after its pickup where that is in the plan too), any stop
+    first (the kernel re-routes a vehicle whose first stop changes: it finishes the edge it is
+    on and drives to the new first stop; the drive it is on counts only when its stop stays
+    first: :func:`dispatch.testing.route_schedule`)."""
+    stops = list(plan_keys) + [(k, t) for t in new_ids for k in ("pickup", "dropoff")]
+    out = []
+
+    def rec(seq, left):
+        if not left:
+            out.append(tuple(seq))
+            return
+        for s in left:
+            if s[0] == "dropoff" and ("pickup", s[1]) in left:
+                continue
+            rec(seq + [s], [x for x in left if x != s])
+
+    rec([], stops)
+    return out
+
+
 def _route_cost(problem, aid, route, new, objective):
     """``(cost, rows)`` of ``route`` for agent ``aid`` given the new requests ``new`` (id ->
     TaskView), or None where infeasible: every limit and the capacity checked by
@@ -68,9 +90,11 @@ def _route_cost(problem, aid, route, new, objective):
     return cost
 
 
-def brute_force(problem, objective="delay"):
+def brute_force(problem, objective="delay", reorder=False):
     """``(requests served, least total cost)`` over every assignment of groups of new requests
-    (at most a vehicle's seats each) to vehicles, each group in its best stop order."""
+    (at most a vehicle's seats each) to vehicles, each group in its best stop order (with
+    ``reorder``: the plan's stops reordered too, :func:`_all_orders`)."""
+    orders = _all_orders if reorder else _orders
     travel = problem.travel
 
     @cache
@@ -92,7 +116,7 @@ def brute_force(problem, objective="delay"):
         if len(new) > int(problem.capacity[k]):
             return None
         plan_keys = [(s.kind, s.task_id) for s in problem.plans.get(aid, ())]
-        got = [_route_cost(problem, aid, r, new, objective) for r in _orders(plan_keys, new)]
+        got = [_route_cost(problem, aid, r, new, objective) for r in orders(plan_keys, new)]
         got = [c for c in got if c is not None]
         return min(got) if got else None
 
@@ -314,3 +338,116 @@ def test_rtv_answers_single_requests_without_travel():
         p = build()
         assert RtvAllocator().allocate(p).pairs == HungarianAllocator().allocate(p).pairs \
             or not np.isfinite(p.cost).any()
+
+
+# ----------------------------------------------------------------------------- reorder
+REORDER_CASES = [(seed, 1 + seed % 3, 2 + seed % 4, 1 + (seed // 3) % 3,
+                  (0.5, 1.0)[seed % 2], 1 + (seed // 2) % 2) for seed in range(30)]
+
+
+@pytest.mark.parametrize("seed, n, m, cap, busy, max_pax", REORDER_CASES)
+def test_rtv_reorder_matches_brute_force(seed, n, m, cap, busy, max_pax):
+    """With ``reorder`` (<= 3 vehicles, <= 5 requests, plans of <= 3 stops, mostly busy
+    vehicles): as many requests served, at the same total cost, as the best of every grouping
+    with every order of the plan's stops and the new ones; and never fewer served or a higher
+    cost than without ``reorder``."""
+    _, build = pooled_problem(seed + 700, n, m, cap, busy=busy, max_pax=max_pax,
+                              service=(0.0, 20.0)[seed % 3 == 2])
+    problem = build()
+    assert all(len(p) <= 3 for p in problem.plans.values())
+    objective = "delay" if seed % 4 else "added_time"
+    alloc = RtvAllocator(objective=objective, reorder=True)
+    answer = alloc.allocate(problem)
+    validate(problem, answer, multi=True)
+    served, cost = _value(problem, answer, objective)
+    want = brute_force(problem, objective, reorder=True)
+    assert served == want[0]
+    assert cost == pytest.approx(want[1], abs=1e-6)
+    assert not any(alloc.stats[k] for k in ("pairs_cut", "groups_cut", "orders_cut",
+                                            "levels_cut", "ilp_time_limit"))
+    plain = _value(problem, RtvAllocator(objective=objective).allocate(problem), objective)
+    assert served >= plain[0]
+    assert served > plain[0] or cost <= plain[1] + 1e-6
+
+
+def test_reorder_changes_plans_and_gains():
+    """The cases above do reorder plans, and somewhere reordering serves more or costs less
+    (else the search would be a no-op)."""
+    reordered = better = 0
+    for seed, n, m, cap, busy, max_pax in REORDER_CASES:
+        problem = pooled_problem(seed + 700, n, m, cap, busy=busy, max_pax=max_pax,
+                                 service=(0.0, 20.0)[seed % 3 == 2])[1]()
+        alloc = RtvAllocator(reorder=True)
+        got = _value(problem, alloc.allocate(problem))
+        plain = _value(problem, RtvAllocator().allocate(problem))
+        reordered += alloc.stats["reordered"]
+        better += got[0] > plain[0] or got[1] < plain[1] - 1e-6
+    assert reordered >= 3 and better >= 3
+
+
+@pytest.mark.parametrize("seed", range(16))
+def test_reorder_never_worse_on_larger_decisions(seed):
+    """Larger decisions (4-6 vehicles, 8-12 requests, up to 4 seats), no bound cutting: the
+    search with ``reorder`` holds every order the one without holds, so it serves as many at
+    no more cost (or more)."""
+    problem = pooled_problem(seed + 1300, 4 + seed % 3, 8 + seed % 5, 2 + seed % 3,
+                             busy=0.8)[1]()
+    objective = "delay" if seed % 2 else "added_time"
+    big = {"objective": objective, "max_groups": 100_000, "max_nodes": 10**7}
+    a, b = RtvAllocator(reorder=True, **big), RtvAllocator(**big)
+    got = _value(problem, a.allocate(problem), objective)
+    plain = _value(problem, b.allocate(problem), objective)
+    for alloc in (a, b):
+        assert not any(alloc.stats[k] for k in ("groups_cut", "orders_cut", "levels_cut",
+                                                "ilp_time_limit"))
+    assert got[0] >= plain[0]
+    assert got[0] > plain[0] or got[1] <= plain[1] + 1e-6
+
+
+def test_reorder_false_is_the_default_and_unchanged():
+    """``reorder = false`` (the default) gives the same answers as before the option: the plan's
+    order kept in every route, and ``describe`` without the key."""
+    for seed, n, m, cap, busy, max_pax in CASES[:12]:
+        problem = pooled_problem(seed, n, m, cap, busy=busy, max_pax=max_pax)[1]()
+        a = RtvAllocator()
+        answer = a.allocate(problem)
+        for aid, route in answer.routes.items():
+            plan = [(s.kind, s.task_id) for s in problem.plans.get(aid, ())]
+            assert [s for s in route if s in plan] == plan
+        assert "reorder" not in a.describe() and "reordered" not in a.stats
+        assert a.describe() == {**a.describe()}  # (strings only)
+    assert RtvAllocator(reorder=True).describe()["reorder"] == "True"
+    with pytest.raises(TypeError):
+        RtvAllocator(reorder="yes")
+
+
+def test_check_allocator_covers_reorder():
+    report = check_allocator(RtvAllocator, reorder=True)
+    assert report.ok, str(report)
+
+
+def test_invariants_on_random_pooled_runs_with_rtv_reorder(tmp_path, monkeypatch):
+    """The 24 random runs of :func:`test_invariants_on_random_pooled_runs_with_rtv` with
+    ``reorder``: the dispatcher accepts and drives the reordered routes (vehicles on their
+    way to a stop re-routed, part-way along an edge), the stop-list invariants hold, rides are
+    shared and plans are reordered."""
+    made = []
+    original = RtvAllocator.__init__
+
+    def init(self, *args, **kwargs):
+        original(self, *args, **{**kwargs, "reorder": True})
+        made.append(self)
+
+    monkeypatch.setattr(RtvAllocator, "__init__", init)
+    shared = 0
+    for k, (cap, delay, faults, obj, seed) in enumerate(RUNS):
+        d = tmp_path / f"run{k}"
+        d.mkdir()
+        summary, tables = _run(d, allocator="rtv", capacity=cap, max_delay=delay,
+                               faults=faults, objective=obj, seed=seed + 500,
+                               service=5.0 if k % 4 == 0 else 0.0)
+        check_invariants(summary, tables)
+        shared += int(tables["tasks"].shared.sum())
+    assert made and all(a.reorder for a in made)
+    assert shared > 0
+    assert sum(a.stats["reordered"] for a in made) > 0
