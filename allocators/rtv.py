@@ -13,7 +13,16 @@ Each decision (a batch of open requests, the idle vehicles and the busy ones wit
    is closed under taking subgroups, so nothing feasible is missed), up to the vehicle's
    seats. Each candidate gets its best stop order: every order of the group's pickups and
    drop-offs merged into the vehicle's plan (the plan's own order kept), on the planner's
-   travel times (``problem.travel``), compiled (:mod:`allocators._rtv_kernel`).
+   travel times (``problem.travel``), compiled (:mod:`allocators._rtv_kernel`). With
+   ``reorder`` (Alonso-Mora et al.'s and FleetPy's whole-trip routing) every order of the
+   plan's stops and the group's together: each pickup before its drop-off (a request on board
+   has only its drop-off), every limit (a plan's stop by ``max(latest, planned arrival)``, as
+   the kernel checks) and the capacity kept; any stop may come first (the kernel re-routes a
+   vehicle whose first stop changes: it finishes the edge it is on, then drives to the new
+   one). Then a request whose insertion into a busy vehicle's plan is infeasible
+   (``problem.cost`` inf) may still fit once the plan is reordered: such pairs are candidates
+   too when the vehicle could drive straight to the pickup by its deadline (each request's
+   ``max_vehicles`` nearest; after the feasible insertions in ``max_requests``).
 3. **Assignment**: at most one group per vehicle, each request in at most one group, the most
    requests served, then the least total cost: an integer program on
    :func:`scipy.optimize.milp` (HiGHS) with a time limit; the greedy assignment (largest
@@ -34,7 +43,12 @@ program (``levels_cut``: vehicles whose larger groups were not grown; ``ilp_time
 programs stopped at the limit; ``greedy``: batches decided greedily).
 
 Exactness: with no bound cutting (small batches), the answer serves as many requests as any
-assignment of groups and, among those, has the least total cost (tested against brute force).
+assignment of groups and, among those, has the least total cost (tested against brute force,
+with ``reorder`` against every order of all the stops). ``reorder`` searches a superset of the
+orders, so on the same decision it never serves fewer nor, serving as many, costs more (unless
+a bound cuts). ``stats["reordered"]`` (with ``reorder`` only): routes handed out that change
+the order of the plan's own stops; a pair feasible only by reordering records its request's
+cost as inf (it has no insertion; the dispatcher times it from the route).
 
 A vehicle without a plan that is still serving its last stop leaves at ``problem.ready`` (the
 kernel gives it for shared rides); a problem without ``ready`` and with ``service_time > 0``
