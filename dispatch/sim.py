@@ -23,7 +23,7 @@ from functools import lru_cache
 import numpy as np
 import simpy
 
-from dispatch import registry
+from dispatch import network_file, registry
 from dispatch.contracts import Allocator, Planner
 from dispatch.demand import RoadDemand, VoxelDemand
 from dispatch.dispatcher import Dispatcher
@@ -226,6 +226,7 @@ class Simulation:
         self.vehicles = self.fleet.vehicles
         self.stats = RunStats()
         recorder.metadata.update(self.space.describe())
+        recorder.metadata.update(network_file.store(getattr(recorder, "out", None), self.space))
         self.physics = None
         roads = sc.world.roads is not None
         if roads:
