@@ -66,8 +66,8 @@ import math
 import numpy as np
 import pandas as pd
 
-from analysis import compare
-from analysis.compare import (  # noqa: F401 (re-exported: one order, one variant naming)
+from paired import compare
+from paired.compare import (  # noqa: F401 (re-exported: one order, one variant naming)
     PREFERRED_ORDER,
     allocator_order,
     variant_name,
@@ -135,7 +135,7 @@ def sort_groups(df: pd.DataFrame) -> pd.DataFrame:
 
 def paired_gaps(summary: pd.DataFrame, reference: str = "hungarian") -> pd.Series:
     """Per run: its gap to the ``reference`` allocator's run on the same instance (scenario,
-    planner, repositioner, N, seed), as :func:`analysis.compare.paired_gaps` defines it (the
+    planner, repositioner, N, seed), as :func:`paired.compare.paired_gaps` defines it (the
     CLI's tables use the same); NaN where there is no reference run or it costs 0."""
     gaps = compare.paired_gaps(summary.to_dict("records"), reference)
     return pd.Series(gaps, index=summary.index, dtype=float)

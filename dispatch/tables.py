@@ -20,8 +20,8 @@ from collections import defaultdict
 from statistics import fmean
 
 # One allocator order, one paired gap and one naming of batch-window variants for the CLI's
-# tables and the analysis package (standard library only; see its docstring).
-from analysis.compare import allocator_order, paired_gaps, variant_name, variant_rank
+# tables and the analysis package (a shared module outside both; see its docstring).
+from paired.compare import allocator_order, paired_gaps, variant_name, variant_rank
 
 
 def _mean(rows: list[dict], key: str) -> float:
@@ -49,7 +49,7 @@ def _label(s: dict, variants: bool) -> str:
 def aggregate(summaries: list[dict], reference: str = "hungarian") -> dict[tuple[str, int], dict]:
     """Per (row, n_agents), a row being the allocator (and its batch window where the runs
     hold several variants): mean over seeds of the total cost, the paired gap to
-    ``reference`` (:func:`analysis.compare.paired_gaps`: the same scenario, planner,
+    ``reference`` (:func:`paired.compare.paired_gaps`: the same scenario, planner,
     repositioner, N and seed), the conflict-free rate, the allocation seconds, and the
     per-task figures of dynamic runs (served share, wait, cost per assignment, ms per
     decision); ``runs``."""
