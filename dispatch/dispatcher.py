@@ -280,24 +280,8 @@ class Dispatcher:
         t0 = time.perf_counter()
         tasks = tuple([t.view() for t in open_tasks])
         lazy = self.lazy
-        exact = None  # lazy costs: which entries of ``cost`` are exact (the others are bounds)
-        try:
-            if lazy:
-                cost, exact = self.planner.bounds(agents, tasks)
-                exact = np.array(exact, dtype=bool) if isinstance(exact, np.ndarray) else exact
-            else:
-                cost = self.planner.costs(agents, tasks)
-        except DispatchError:
-            raise
-        except Exception as e:  # a plugin's bug: one line naming it and where
-            raise self._plugin_failed("planner", e) from e
-        want = (len(agents), len(open_tasks))
-        if not isinstance(cost, np.ndarray) or cost.shape != want or cost.dtype.kind != "f":
-            raise self._bad_costs(cost, want)
-        if lazy and not (isinstance(exact, np.ndarray) and exact.shape == want
-                         and exact.dtype == bool):
-            raise PluginError(f"{self._where('planner')}: bounds() must return a bool array "
-                              f"of shape {want} as its second item")
+        cost, exact = self._planner_costs(agents, tasks)
+        want = cost.shape
         # the usual case: a finite sum, so no inf and no nan (either would make the sum one):
         # every pair servable (a sum that overflows takes the element-wise checks below)
         if math.isfinite(np.add.reduce(cost, axis=None)):
@@ -318,11 +302,7 @@ class Dispatcher:
             cost, inserts = insertion_costs_of(cost, idle, open_tasks, now, set(holder.values()),
                                                fleet=self.fleet, operator=self.operator,
                                                planner=self.planner, objective=self.objective)
-            late = servable & ~np.isfinite(cost).any(axis=0)
-            for t, bad in zip(open_tasks, late):
-                if bad and not t.offered:
-                    self.book.close(t, TaskState.REJECTED)
-            servable &= ~late
+            servable = self._reject_late(open_tasks, cost, servable)
         elif any(d < math.inf for d in deadlines):
             if servable is None:
                 servable = np.ones(len(open_tasks), dtype=bool)
@@ -332,11 +312,7 @@ class Dispatcher:
                 exact = exact | ~np.isfinite(cost)
                 self.lazy_pairs += resolve_open(cost, exact, self._exact(agents, tasks), now,
                                                 deadlines)
-            late = servable & ~np.isfinite(cost).any(axis=0)
-            for t, bad in zip(open_tasks, late):
-                if bad and not t.offered:
-                    self.book.close(t, TaskState.REJECTED)
-            servable &= ~late
+            servable = self._reject_late(open_tasks, cost, servable)
         if drive is not None:  # [fleet.energy]: below the reserve after the trip: inf
             cost = self.energy_filter(cost, drive, idle, open_tasks)
         cost_s = time.perf_counter() - t0
@@ -389,6 +365,41 @@ class Dispatcher:
                                  n_comp, holder, index, inserts)
         if delay <= 0:
             self._hand_out()
+
+    def _planner_costs(self, agents, tasks):
+        """The planner's ``(cost, exact)`` of a decision: its exact costs (``exact`` None), or
+        with lazy costs its lower bounds and which of them are exact; a PluginError naming the
+        planner and the decision for an exception or an answer of the wrong type or shape."""
+        exact = None  # lazy costs: which entries of ``cost`` are exact (the others are bounds)
+        try:
+            if self.lazy:
+                cost, exact = self.planner.bounds(agents, tasks)
+                exact = np.array(exact, dtype=bool) if isinstance(exact, np.ndarray) else exact
+            else:
+                cost = self.planner.costs(agents, tasks)
+        except DispatchError:
+            raise
+        except Exception as e:  # a plugin's bug: one line naming it and where
+            raise self._plugin_failed("planner", e) from e
+        want = (len(agents), len(tasks))
+        if not isinstance(cost, np.ndarray) or cost.shape != want or cost.dtype.kind != "f":
+            raise self._bad_costs(cost, want)
+        if self.lazy and not (isinstance(exact, np.ndarray) and exact.shape == want
+                              and exact.dtype == bool):
+            raise PluginError(f"{self._where('planner')}: bounds() must return a bool array "
+                              f"of shape {want} as its second item")
+        return cost, exact
+
+    def _reject_late(self, open_tasks: list, cost: np.ndarray,
+                     servable: np.ndarray) -> np.ndarray:
+        """``servable`` less the tasks no vehicle can reach in time (no finite cost); of those,
+        a task offered for the first time is closed ``rejected`` at once (see the module
+        doc), one offered before waits for its deadline."""
+        late = servable & ~np.isfinite(cost).any(axis=0)
+        for t, bad in zip(open_tasks, late):
+            if bad and not t.offered:
+                self.book.close(t, TaskState.REJECTED)
+        return servable & ~late
 
     def _hearing(self, agents, now: float):
         """``(comm, positions)`` of a decision's agents: who hears whom (the ``[comms]`` range,
