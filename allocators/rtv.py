@@ -36,9 +36,9 @@ programs stopped at the limit; ``greedy``: batches decided greedily).
 Exactness: with no bound cutting (small batches), the answer serves as many requests as any
 assignment of groups and, among those, has the least total cost (tested against brute force).
 
-Limitation of the problem's contract: a vehicle in its service time at its last stop (a busy
-vehicle without a plan) cannot be told from an idle one; with ``service_time > 0`` such vehicles
-are assumed to leave after a full service time (conservative).
+A vehicle without a plan that is still serving its last stop leaves at ``problem.ready`` (the
+kernel gives it for shared rides); a problem without ``ready`` and with ``service_time > 0``
+is read conservatively (every plan-less vehicle leaves after a full service time).
 """
 
 from __future__ import annotations
@@ -360,8 +360,12 @@ class _Batch:
             self.pn = np.zeros((0, 2 * m))
             self.np_ = np.zeros((2 * m, 0))
             self.pp = np.zeros(0)
-        if svc > 0:  # a plan-less vehicle may be in service at its last stop (module doc)
-            bare = self.off[1:] == self.off[:-1]
+        bare = self.off[1:] == self.off[:-1]
+        if problem.ready is not None:  # a plan-less vehicle may be in service at its last stop
+            r = np.maximum(np.asarray(problem.ready, float)[vrows], now)
+            start[bare] = r[bare]
+            old_end[bare] = r[bare]
+        elif svc > 0:  # no ready times given: assume a full service ahead (module doc)
             start[bare] = now + svc
             old_end[bare] = now + svc
         self.start, self.first_eta, self.load, self.old_end = start, first_eta, load, old_end

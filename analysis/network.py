@@ -1,12 +1,12 @@
 """The road network of a road run, read from the results folder, for what the tables do not
 hold: the map's edges and the trips' direct free-flow times.
 
-A run writes its network once per results folder, under ``_networks/<digest>/``
+A road run writes its network once per results folder, under ``_spaces/road-<digest>/``
 (``nodes.parquet``: x, y; ``edges.parquet``: u, v, seconds, metres), and names that folder in
-its files' ``dispatch.network_file`` metadata (the writer: ``dispatch/network_file.py``). This
+its files' ``dispatch.space_files`` metadata (the writer: ``dispatch/space_files.py``). This
 module reads it with pyarrow and scipy and needs nothing of ``dispatch``. Where the folder
 cannot be found (a folder written before networks were stored, or copied without
-``_networks/``), :func:`road_network` returns None and the callers do without (a map without
+``_spaces/``), :func:`road_network` returns None and the callers do without (a map without
 streets; the detour ratio NaN). Nothing here is imported by :mod:`analysis` at import time.
 """
 
@@ -26,8 +26,8 @@ from scipy.sparse.csgraph import dijkstra
 
 log = logging.getLogger(__name__)
 
-#: the metadata key that names a run's network folder, relative to its results folder
-METADATA_KEY = "dispatch.network_file"
+#: the metadata key that names a run's space folder, relative to its results folder
+METADATA_KEY = "dispatch.space_files"
 #: origins per Dijkstra call (bounds the ``(block, n)`` distance array)
 BLOCK = 256
 

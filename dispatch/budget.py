@@ -26,8 +26,6 @@ day of 100,000 trips takes about a minute), and their size bounds are the releas
 
 from __future__ import annotations
 
-import math
-
 #: Task-decisions (decisions × open tasks) of one run on a grid of :data:`REFERENCE_CELLS`.
 TASK_DECISIONS = 600_000
 #: The grid the bound is measured on (the paper's 50 × 50 × 30 one-metre cells).
@@ -81,9 +79,11 @@ def task_decisions(spec) -> tuple[float, str]:
 def check_work(sc, specs, refuse) -> None:
     """Refuse (``refuse(key, what)``, a ScenarioError) a voxel run past :data:`TASK_DECISIONS`
     (scaled to its grid)."""
-    if sc.world.roads is not None or not specs:
+    from dispatch.space import space_class
+
+    cells = space_class(sc.world.space).work_cells(sc.world)
+    if cells is None or not specs:  # no bound in this space (road networks)
         return
-    cells = math.prod(sc.world.shape)
     bound = TASK_DECISIONS * REFERENCE_CELLS / max(cells, REFERENCE_CELLS)
     worst = max(specs, key=lambda s: task_decisions(s)[0])
     work, how = task_decisions(worst)

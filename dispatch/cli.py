@@ -358,8 +358,9 @@ def _tables(summaries, console, sc) -> None:
 
 def _validate(args, console) -> int:
     sc, specs = _specs(args)
-    world = (f"world {sc.world.shape}, {sc.world.obstacles.count} obstacles"
-             if sc.world.roads is None else f"road network {sc.world.roads.network!r}")
+    from dispatch.space import space_class
+
+    world = space_class(sc.world.space).label(sc.world)
     console.print(f"[green]ok[/]: {args.scenario} ({sc.name}): {len(specs)} run(s); "
                   f"source {sc.tasks.source}, {world}", soft_wrap=True)
     return 0

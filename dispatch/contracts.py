@@ -40,8 +40,7 @@ from typing import ClassVar, Literal, NamedTuple, Protocol
 
 import numpy as np
 
-from dispatch.space import Location, Space
-from dispatch.world import Cell
+from dispatch.space import Cell, Location, Space
 
 VehicleKind = Literal["uav", "ugv", "car"]
 TaskKind = Literal["ground", "air", "trip"]

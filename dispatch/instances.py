@@ -31,21 +31,21 @@ class FirstDecision:
 
 def first_decision(scenario: Scenario | str | Path, seed: int, n_agents: int,
                    n_tasks: int | None = None) -> FirstDecision:
-    """The first decision of the run of ``scenario`` (a voxel scenario, or its file) with
-    fleet size ``n_agents`` and ``seed``: the world of the seed, the fleet as the run places
-    it, and ``n_tasks`` tasks (default: the run's static task count) drawn from the run's task
-    stream, all released at time 0."""
-    from dispatch.demand import VoxelDemand
+    """The first decision of the run of ``scenario`` (a static scenario, or its file) with
+    fleet size ``n_agents`` and ``seed``: the space of the seed, the fleet as the run places
+    it (:meth:`Space.place`), and ``n_tasks`` tasks (default: the run's static task count)
+    drawn from the run's task stream (:meth:`Space.demand`), all released at time 0."""
     from dispatch.scenario import load_scenario
-    from dispatch.sim import STREAM_FLEET, STREAM_TASKS, place_fleet, rng_for, space_for
+    from dispatch.space import space_for
+    from dispatch.streams import STREAM_FLEET, STREAM_TASKS, rng_for
     from dispatch.tasks import Task
 
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     spec = sc.runs(agents=n_agents, seed=seed)[0]
-    world = space_for(sc.world, seed, sc.path)
-    vehicles = place_fleet(world, spec, rng_for(seed, STREAM_FLEET))
-    demand = VoxelDemand(world.grid, sc.tasks.ground_fraction, rng_for(seed, STREAM_TASKS))
+    space = space_for(sc.world, seed, sc.path)
+    vehicles = space.place(spec, rng_for(seed, STREAM_FLEET))
+    demand = space.demand(sc.tasks, rng_for(seed, STREAM_TASKS))
     m = n_tasks if n_tasks is not None else spec.n_static_tasks
     tasks = [Task(j, (r := demand.draw()).kind, r.loc, 0.0) for j in range(m)]
-    return FirstDecision(spec, world, tuple(v.view() for v in vehicles),
+    return FirstDecision(spec, space, tuple(v.view() for v in vehicles),
                          tuple(t.view() for t in tasks))

@@ -1,7 +1,9 @@
 """Where the fleet starts: at random (seeded), or where a start file puts it.
 
-Voxel world: UAVs (the first ``n_uav`` vehicles) in free cells at or below the start altitude,
-UGVs in free ground cells, no two in one cell. Road network: cars on nodes drawn uniformly
+Each space places its fleet (:meth:`dispatch.space.Space.place_vehicles`) with a function of
+this module. Voxel world (:func:`place_voxel`): UAVs (the first ``n_uav`` vehicles) in free
+cells at or below the start altitude, UGVs in free ground cells, no two in one cell. Road
+network (:func:`place_cars`): cars on nodes drawn uniformly
 (several may share one, as taxis share a rank), or with ``[fleet] placement = "demand"`` on the
 empirical sample's pickup nodes, each drawn with its share of the trips. A start file
 (``[fleet] start``) gives each vehicle's id and node or position (snapped to the nearest node
@@ -21,17 +23,13 @@ from dispatch.vehicles import Vehicle
 
 
 def place_fleet(space: Space, spec: RunSpec, rng: np.random.Generator) -> list[Vehicle]:
-    """The run's vehicles at their start locations (see the module docstring)."""
-    vehicles = (_place_cars if space.kind == "road" else _place_voxel)(space, spec, rng)
-    fleet = spec.fleet
-    if fleet.capacity != 1 or fleet.capacities:
-        seats = fleet.capacities
-        for k, v in enumerate(vehicles):  # start-file rows are in the vehicles' order
-            v.capacity = seats[k] if k < len(seats) and seats[k] else fleet.capacity
-    return vehicles
+    """The run's vehicles at their start locations, with their seats: the space's answer
+    (:meth:`dispatch.space.Space.place`)."""
+    return space.place(spec, rng)
 
 
-def _place_cars(net, spec: RunSpec, rng: np.random.Generator) -> list[Vehicle]:
+def place_cars(net, spec: RunSpec, rng: np.random.Generator) -> list[Vehicle]:
+    """Road network: cars on nodes (see the module docstring)."""
     fleet = spec.fleet
     rows = fleet.start[: fleet.agents]
     # a car's speed is informational (costs are the network's travel times): its mean speed
@@ -58,7 +56,9 @@ def _place_cars(net, spec: RunSpec, rng: np.random.Generator) -> list[Vehicle]:
     return out
 
 
-def _place_voxel(world, spec: RunSpec, rng: np.random.Generator) -> list[Vehicle]:
+def place_voxel(world, spec: RunSpec, rng: np.random.Generator) -> list[Vehicle]:
+    """Each space places its fleet (:meth:`dispatch.space.Space.place_vehicles`) with a function of
+this module. Voxel world: UAVs and UGVs in distinct free cells (see the module docstring)."""
     fleet, grid = spec.fleet, world.grid
     rows = fleet.start[: fleet.agents]
     taken: set = set()

@@ -12,7 +12,10 @@ recorder's fast path (one tuple per row, in the schema's order).
   it reaches its terminal state);
 * :class:`DecisionWriter`: the dispatcher's ``on_decision`` (``decisions`` and
   ``assignments`` rows);
-* :func:`write_vehicles`: the ``vehicles`` rows at the end of the run.
+* :func:`write_vehicles`: the ``vehicles`` rows at the end of the run;
+* :class:`RunRecording`: one run's wiring of them: the run's metadata and the space's static
+  tables, the writers, the summary statistics (:class:`dispatch.stats.RunStats`) and the
+  end-of-run tables.
 """
 
 from __future__ import annotations
@@ -23,7 +26,9 @@ from typing import Any
 
 import numpy as np
 
+from dispatch import space_files
 from dispatch.recorder import SCHEMAS
+from dispatch.stats import RunStats
 
 NAN3 = (math.nan, math.nan, math.nan)
 
@@ -166,3 +171,54 @@ def event_writer(recorder, space):
                 "x": x, "y": y, "z": z}
 
     return recorder.appender("events", columns)
+
+
+class RunRecording:
+    """What one run records into ``recorder``: made when the run is built (the space's
+    metadata and its static tables' metadata are set at once), :meth:`attach`-ed to the event
+    bus, and finished by :meth:`end_tables`, :meth:`chargers` and :meth:`summary`.
+
+    ``stats`` (:class:`dispatch.stats.RunStats`) counts the closed tasks; ``on_close`` are
+    the task book's closure subscribers (the statistics, then the ``tasks`` row);
+    ``decision`` is the dispatcher's ``on_decision``."""
+
+    def __init__(self, recorder, space) -> None:
+        self.recorder, self.space = recorder, space
+        self.stats = RunStats()
+        recorder.metadata.update(space.describe())
+        # the space's shared tables (a road network), once per results folder
+        recorder.metadata.update(space_files.store(getattr(recorder, "out", None), space))
+        self.static = space.tables()
+        for name, (meta, _rows) in self.static.items():
+            recorder.table_metadata[name] = meta
+        self.event = None
+        self.task = TaskWriter(recorder, space)
+        self.decision = DecisionWriter(recorder)
+        self.on_close = [self.stats.closed, self.task]
+
+    def attach(self, bus) -> None:
+        """Write every event of ``bus`` as a row of ``events``."""
+        self.event = event_writer(self.recorder, self.space)
+        bus.subscribe(self.event)
+
+    def end_tables(self, vehicles, now: float, counts) -> None:
+        """The ``vehicles`` rows (see :func:`write_vehicles`) and the space's static rows."""
+        write_vehicles(self.recorder, self.space, vehicles, now, counts)
+        for name, (_meta, rows) in self.static.items():
+            for row in rows:
+                self.recorder.add(name, **row)
+
+    def chargers(self, rows) -> None:
+        """The ``chargers`` rows: each station's row with its position."""
+        for row in rows:
+            x, y, _ = self.space.position(row["node"])
+            self.recorder.add("chargers", x=x, y=y, **row)
+
+    def summary(self, run: dict, vehicles, dispatcher, now: float, extra: dict) -> dict:
+        """The summary row (``run``'s keys, the statistics, then ``extra``), recorded and
+        returned."""
+        summary = self.stats.summary(run=run, vehicles=vehicles, dispatcher=dispatcher,
+                                     sim_time=now)
+        summary.update(extra)
+        self.recorder.add("summary", **summary)
+        return summary

@@ -70,7 +70,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 from dispatch.contracts import AgentView
 from dispatch.motion import step_is_legal, step_length
 from dispatch.tasks import COMPLETED as _COMPLETED
-from dispatch.world import Cell
+from dispatch.space import Cell
 
 import simpy
 
@@ -263,6 +263,15 @@ class Traffic:
         self.released = self.env.event()
         for t in self.vehicles.values():
             self._reserve(t)
+
+    def execution(self, book, fleet, service_time: float):
+        """The operator's factory of its side of this execution (``timed`` of
+        :class:`dispatch.vehicles.Operator`): a :class:`TimedExecution` over this traffic and
+        the run's hands (the operator's wake-up and breakdown)."""
+        def timed(op) -> TimedExecution:
+            return TimedExecution(self, Hands(book, fleet, service_time, op.notify,
+                                              op.breakdown))
+        return timed
 
     def of(self, v) -> Timed:
         """The record of vehicle ``v``."""

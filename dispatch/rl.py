@@ -127,7 +127,9 @@ class _Deferring(Allocator):
 def _scenario(scenario: str | Path | Scenario, agents: int | None,
               batch_window: float | None) -> Scenario:
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
-    if sc.world.roads is None:
+    from dispatch.space import space_class
+
+    if "rl" not in space_class(sc.world.space).features:
         raise ScenarioError(sc.path, "world.network", "dispatch.rl needs a road scenario")
     d = sc.dispatch
     window = d.batch_window if batch_window is None else float(batch_window)

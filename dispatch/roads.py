@@ -176,6 +176,10 @@ class RoadNetwork(Space):
     """
 
     kind: ClassVar[str] = "road"
+    default_planner: ClassVar[str] = "dijkstra"
+    features: ClassVar[frozenset[str]] = frozenset(
+        {"pooling", "reassign", "snap", "energy", "reposition", "rl"})
+    start_nodes: ClassVar[bool] = True
 
     def __init__(self, name: str, xy: np.ndarray, ids: Any, time: csr_matrix, length: csr_matrix,
                  crs: str | None = None) -> None:
@@ -533,8 +537,106 @@ class RoadNetwork(Space):
                 "dispatch.nodes": str(self.n), "dispatch.edges": str(self.n_edges),
                 "dispatch.crs": self.crs or "none"}
 
+    def shared_tables(self) -> dict[str, dict[str, np.ndarray]]:
+        """``nodes`` (``x``, ``y`` metres, in node order) and ``edges`` (``u``, ``v`` node
+        indices, ``seconds`` free-flow, ``metres``; in CSR order: by ``u``, then ``v``), kept
+        once per results folder (see :meth:`Space.shared_tables`)."""
+        t = self.time
+        u = np.repeat(np.arange(self.n, dtype=np.int64), np.diff(t.indptr))
+        return {"nodes": {"x": self.xy[:, 0], "y": self.xy[:, 1]},
+                "edges": {"u": u, "v": t.indices.astype(np.int64),
+                          "seconds": np.asarray(t.data, np.float64),
+                          "metres": np.asarray(self.length.data, np.float64)}}
+
     def __repr__(self) -> str:
         return f"RoadNetwork({self.name!r}, nodes={self.n}, edges={self.n_edges}, crs={self.crs!r})"
+
+    # ------------------------------------------------- the space contract: configuration
+    @classmethod
+    def load(cls, cfg, seed: int = 0, scenario_path=None) -> RoadNetwork:
+        """The network of ``cfg.roads`` (the seed does not matter; loading is cached)."""
+        return network_for(cfg.roads, scenario_path)
+
+    @classmethod
+    def label(cls, cfg) -> str:
+        return f"road network {cfg.roads.network!r}"
+
+    @classmethod
+    def check_size(cls, cfg, limits, refuse) -> None:
+        r = cfg.roads
+        if r.network == "manhattan" and r.blocks[0] * r.blocks[1] > limits.road_nodes:
+            raise refuse("world.blocks", f"a grid of {r.blocks[0] * r.blocks[1]:,} "
+                                         f"intersections (more than {limits.road_nodes:,})")
+
+    @classmethod
+    def check_runs(cls, sc, planners) -> None:
+        """The network loads and a trace names only nodes it has."""
+        net = network_for(sc.world.roads, sc.path)
+        if sc.tasks.trips is not None:
+            from dispatch.demand import trace_nodes_ok
+
+            trace_nodes_ok(net, sc.tasks.trips)
+
+    @classmethod
+    def small(cls, seed: int = 0) -> RoadNetwork:
+        """A 6 x 5 Manhattan grid, 100 m blocks, 10 m/s."""
+        return manhattan(6, 5, 100.0, 10.0)
+
+    # ------------------------------------------------- the space contract: a run's
+    def demand(self, tasks, rng: np.random.Generator):
+        from dispatch.demand import RoadDemand
+
+        return RoadDemand(self, rng)
+
+    def place_vehicles(self, spec, rng: np.random.Generator):
+        from dispatch.placement import place_cars
+
+        return place_cars(self, spec, rng)
+
+    def driver(self, planner, bus, cfg, clock):
+        from dispatch.drivers import road_driver
+
+        return road_driver(self, planner, bus, cfg, clock)
+
+    def sample_views(self, rng: np.random.Generator, n: int, m: int):
+        """Cars on random nodes (as road points), trips to random nodes."""
+        from dispatch.contracts import AgentView, TaskView
+
+        nodes = rng.integers(0, self.n, n + m)
+        agents = tuple(AgentView(100 + i, "car", RoadPoint(int(nodes[i])), 10.0)
+                       for i in range(n))
+        tasks = tuple(TaskView(500 + j, "trip", int(nodes[n + j]), 0.0) for j in range(m))
+        return agents, tasks
+
+    def reaches(self, path, start, goal) -> bool:
+        try:
+            return int(path[-1]) == int(goal)
+        except (TypeError, ValueError):  # not a node
+            return False
+
+    def stands(self, loc: RoadPoint | int) -> tuple[int, float, bool]:
+        """A node (any integer type, not a bool) stands on itself; a road point on its
+        ``node``, with ``remaining`` seconds (>= 0) unless it is on it."""
+        if isinstance(loc, (int, np.integer)) and not isinstance(loc, bool):
+            return loc, 0.0, False
+        on = loc.on_node
+        return loc.node, (0.0 if on else max(loc.remaining, 0.0)), not on
+
+
+def network_for(cfg, scenario_path=None) -> RoadNetwork:
+    """The road network of a ``[world]`` road configuration (loading is cached by the loader);
+    a file that cannot be loaded is a ScenarioError naming the scenario file and
+    ``world.network``."""
+    from dispatch.errors import ScenarioError
+
+    try:
+        return load_network(cfg.network, base=cfg.base, blocks=cfg.blocks, block=cfg.block,
+                            speed=cfg.speed)
+    except (ValueError, OSError) as e:
+        raise ScenarioError(scenario_path or cfg.base, "world.network", str(e)) from None
+    except Exception as e:  # noqa: BLE001 - a malformed file raises whatever its parser raises
+        raise ScenarioError(scenario_path or cfg.base, "world.network",
+                            f"{cfg.network} cannot be read ({type(e).__name__}: {e})") from None
 
 
 def _csr(u: np.ndarray, v: np.ndarray, w: np.ndarray, n: int) -> csr_matrix:

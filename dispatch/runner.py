@@ -382,7 +382,7 @@ def _cold_start() -> None:
     process, so that a run's timing columns (cost_seconds, alloc_seconds, …) do not depend on
     which runs the same worker happened to do before it: a sweep gives the same kind of
     measurement on 1 process, K processes or Ray."""
-    from dispatch.sim import world_for
+    from dispatch.world import world_for
 
     world_for.cache_clear()
 

@@ -20,6 +20,7 @@ from typing import Any
 
 from dispatch.errors import FORCE_HINT, ScenarioError
 from dispatch.faults import FaultConfig, read_failures
+from dispatch.space import space_class
 from dispatch.traces import (
     Trips,
     decode_text,
@@ -524,7 +525,8 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
         if not isinstance(start, str) or not start:
             raise f.fail("start", f"must be a CSV file of vehicle_id and node or x, y; got {start!r}")
         start_path = (path.parent / start).resolve()
-        rows = read_fleet_start(start_path, world.space, max_bytes)
+        kind = space_class(world.space)
+        rows = read_fleet_start(start_path, kind.start_nodes, kind.start_z, max_bytes)
         agents = fleet.agents if "agents" in f.data else len(rows)
         if agents > len(rows):
             raise f.fail("agents", f"{agents} vehicles but the start file {start} places "
@@ -561,7 +563,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
         if not isinstance(trace, str) or not trace:
             raise t.fail("trace", "is required when source = 'trace' (a CSV or Parquet file)")
         trace_path = shipped_trace(trace) or (path.parent / trace).resolve()
-        trips = read_trace(trace_path, world.space, world.size if world.roads is None else None,
+        trips = read_trace(trace_path, world.space, space_class(world.space).trace_bounds(world),
                            max_bytes, start=start)
         if max_snap is not None:
             trips = _within_snap(t, trips, world, max_snap)
@@ -582,7 +584,8 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     reassign = d.get("reassign", False)
     if not isinstance(reassign, bool):
         raise d.fail("reassign", f"must be true or false, got {reassign!r}")
-    if reassign and world.roads is None:
+    features = space_class(world.space).features
+    if reassign and "reassign" not in features:
         raise d.fail("reassign", "re-assignment before pickup needs a road network "
                                  "([world] network)")
     lazy = d.get("lazy_costs", False)
@@ -590,7 +593,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
         raise d.fail("lazy_costs", f"must be true or false, got {lazy!r}")
     disp = DispatchConfig(
         allocator=d.string("allocator", "hungarian"),
-        planner=d.string("planner", "astar" if world.roads is None else "dijkstra"),
+        planner=d.string("planner", space_class(world.space).default_planner),
         batch_window=d.number("batch_window", 0.0, lo=0.0),
         max_rounds=d.number("max_rounds", 1000, lo=1, integer=True),
         reassign=reassign,
@@ -646,7 +649,8 @@ def _check_pooling(path: Path, world: WorldConfig, fleet: FleetConfig, tasks: Ta
     """Shared rides (a capacity above 1) and drop-off limits are for road networks; a pooled
     fleet decides with exact costs and without re-assignment before pickup."""
     pooled = fleet.pooled
-    if world.roads is None:
+    pooling = "pooling" in space_class(world.space).features
+    if not pooling:
         if pooled:
             key = "fleet.capacity" if fleet.capacity > 1 else "fleet.start"
             raise ScenarioError(path, key, "shared rides (a capacity above 1) need a road "
@@ -661,7 +665,7 @@ def _check_pooling(path: Path, world: WorldConfig, fleet: FleetConfig, tasks: Ta
         raise ScenarioError(path, "dispatch.reassign", "re-assignment before pickup is for "
                                                        "vehicles of capacity 1")
     trips = tasks.trips
-    if trips is not None and trips.passengers is not None and len(trips) and world.roads is None \
+    if trips is not None and trips.passengers is not None and len(trips) and not pooling \
             and int(trips.passengers.max()) > 1:
         raise ScenarioError(path, "tasks.trace", "passengers above 1 need a road network")
 
@@ -685,7 +689,7 @@ def _parse_max_snap(t: _Table, source: str, world: WorldConfig) -> float | None:
     """``[tasks] max_snap``: metres (> 0) a trace's pickup or drop-off may lie from the road
     network's nearest node."""
     v = t.number("max_snap", None, gt=0.0, optional=True)
-    if v is not None and (source != "trace" or world.roads is None):
+    if v is not None and (source != "trace" or "snap" not in space_class(world.space).features):
         raise t.fail("max_snap", "is only used with a trace on a road network "
                                  "(source = 'trace', [world] network)")
     return v
@@ -960,14 +964,7 @@ def _check_fits(sc: Scenario, agents: int, key: str) -> None:
     if sc.fleet.start and agents > len(sc.fleet.start):
         raise ScenarioError(sc.path, key, f"{agents} vehicles but the start file "
                                           f"{sc.fleet.start_file} places {len(sc.fleet.start)}")
-    if sc.world.roads is not None:
-        return
-    nx, ny, _ = sc.world.shape
-    o = sc.world.obstacles
-    cover = o.count * round(o.max_size[0] / sc.world.cell) * round(o.max_size[1] / sc.world.cell)
-    if agents > max(nx * ny - cover, 0):
-        raise ScenarioError(sc.path, key,
-                            f"{agents} vehicles may not find distinct free cells in the world")
+    space_class(sc.world.space).check_fleet(sc, agents, key)
 
 
 def check_limits(sc: Scenario, specs: list[RunSpec], limits: Limits = LIMITS) -> None:
@@ -981,17 +978,7 @@ def check_limits(sc: Scenario, specs: list[RunSpec], limits: Limits = LIMITS) ->
     sweep_key = "sweep" if sc.sweep.declared else "<runs>"
     if len(specs) > limits.runs:
         raise refuse(sweep_key, f"expands to {len(specs):,} runs (more than {limits.runs:,})")
-    w = sc.world
-    if w.roads is None:
-        cells = math.prod(w.shape)
-        if cells > limits.cells:
-            raise refuse("world.cell", f"the world has {cells:,} cells {w.shape} (more than "
-                                       f"{limits.cells:,})")
-    elif w.roads.network == "manhattan":
-        nodes = w.roads.blocks[0] * w.roads.blocks[1]
-        if nodes > limits.road_nodes:
-            raise refuse("world.blocks", f"a grid of {nodes:,} intersections (more than "
-                                         f"{limits.road_nodes:,})")
+    space_class(sc.world.space).check_size(sc.world, limits, refuse)
     agents = max(s.agents for s in specs)
     if agents > limits.agents:
         raise refuse("sweep.agents" if sc.sweep.agents else "fleet.agents",
@@ -1026,7 +1013,7 @@ def _parse_energy(e: _Table, fleet: FleetConfig, world: WorldConfig):
     """``[fleet.energy]`` (see :mod:`dispatch.energy`): batteries on a road network."""
     from dispatch.energy import EnergyConfig, read_socs
 
-    if world.roads is None:
+    if "energy" not in space_class(world.space).features:
         raise e.fail("battery_kwh", "energy needs a road network ([world] network)")
     wh = e.get("wh_per_km", 140.0)
     table: tuple = ()

@@ -3,167 +3,69 @@ onto one SimPy environment. Nothing here is reached back into during the run:
 
     TaskSource ──release──▶ TaskBook ◀──assign/pickup/close── Operator (vehicles, drivers)
         │                      ▲  │                               ▲
-        └──notify──▶ Dispatcher┘  └─on_close─▶ RunStats, Recorder  └── Dispatcher.assign
-    every process ──emit──▶ EventBus ──▶ Recorder (events), PyBullet mirror, user subscribers
+        └──notify──▶ Dispatcher┘  └─on_close─▶ RunRecording      └── Dispatcher.assign
+    every process ──emit──▶ EventBus ──▶ RunRecording (events), the space's mirror, user
+                                         subscribers
+
+The jobs are the owners': the space (:mod:`dispatch.space`) loads itself and answers
+everything about location (demand, where the fleet starts, the driver, its static tables),
+:mod:`dispatch.plugins` builds the plugins, :class:`dispatch.recording.RunRecording` writes the
+tables and the summary.
 
 Randomness: every stream is a ``numpy.random.Generator`` seeded from the run's seed and a fixed
-stream number, so the world (obstacles) depends on the seed only, and the same seed gives the
-same fleet and the same tasks whichever allocator runs: instances are paired across allocators.
+stream number (:mod:`dispatch.streams`), so the world (obstacles) depends on the seed only, and
+the same seed gives the same fleet and the same tasks whichever allocator runs: instances are
+paired across allocators.
 """
 
 from __future__ import annotations
 
 import gc
-import json
 import logging
 import math
 from contextlib import contextmanager
-from functools import lru_cache
 
 import numpy as np
 import simpy
 
-from dispatch import network_file, registry
-from dispatch.contracts import Allocator, Planner
-from dispatch.demand import RoadDemand, VoxelDemand
 from dispatch.dispatcher import Dispatcher
-from dispatch.errors import PluginError, ScenarioError
+from dispatch.energy import Charging, Energy
 from dispatch.events import EventBus
 from dispatch.faults import FaultInjector, blackout_filter
-from dispatch.placement import place_fleet
-from dispatch.recorder import json_meta
-from dispatch.recording import DecisionWriter, TaskWriter, event_writer, write_vehicles
-from dispatch.reposition import Repositioner, Repositioning, summary_of
-from dispatch.reservations import Hands, TimedExecution, Traffic
-from dispatch.scenario import RoadConfig, RunSpec, Scenario, WorldConfig, _short
-from dispatch.space import Space
-from dispatch.stats import RunStats
-from dispatch.tasks import SourceConfig, Task, TaskBook, TaskSource, TaskState
-from dispatch.vehicles import CellDriver, Fleet, Operator, RoadDriver, stop_leg
-from dispatch.world import World, build_world
+from dispatch.plugins import (check_repositioner, check_runs, describe, make_charger,
+                              make_plugin, make_repositioner)
+from dispatch.recording import RunRecording
+from dispatch.reposition import Repositioning, summary_of
+from dispatch.space import space_for
+from dispatch.streams import (STREAM_ALLOCATOR, STREAM_CHARGING, STREAM_FAULTS, STREAM_FLEET,
+                              STREAM_REPOSITION, STREAM_SOURCE, STREAM_TASKS, STREAM_WORLD,
+                              rng_for)
+from dispatch.tasks import Task, TaskBook, TaskSource, TaskState
+from dispatch.vehicles import Fleet, Operator, stop_leg
 
 log = logging.getLogger(__name__)
 
-(STREAM_WORLD, STREAM_FLEET, STREAM_TASKS, STREAM_ALLOCATOR, STREAM_SOURCE, STREAM_FAULTS,
- STREAM_REPOSITION, STREAM_CHARGING) = range(8)
-
-__all__ = ["Simulation", "make_plugin", "place_fleet", "rng_for", "space_for", "world_for"]
-
-
-def rng_for(seed: int, stream: int) -> np.random.Generator:
-    """The generator of one named stream of a run's seed."""
-    return np.random.default_rng(np.random.SeedSequence(entropy=seed, spawn_key=(stream,)))
+# (the streams, the plugin builders and checks live in dispatch.streams and dispatch.plugins;
+# their names here are kept for the callers that import them from this module)
+__all__ = ["STREAM_ALLOCATOR", "STREAM_CHARGING", "STREAM_FAULTS", "STREAM_FLEET",
+           "STREAM_REPOSITION", "STREAM_SOURCE", "STREAM_TASKS", "STREAM_WORLD", "Simulation",
+           "check_repositioner", "check_runs", "describe", "make_charger", "make_plugin",
+           "make_repositioner", "place_fleet", "rng_for", "space_for", "world_for"]
 
 
-@lru_cache(maxsize=8)
-def world_for(cfg: WorldConfig, seed: int) -> World:
-    """The voxel world of a seed. Cached: runs that share it (other allocators, other fleet
-    sizes) also share everything planners cache on its immutable grid."""
-    o = cfg.obstacles
-    return build_world(cfg.size, cfg.cell, o.count, o.min_size, o.max_size,
-                       rng_for(seed, STREAM_WORLD))
+def world_for(cfg, seed: int):
+    """The voxel world of a ``[world]`` configuration and a seed: :func:`space_for` (cached
+    by :func:`dispatch.world.world_for`), kept under this name for its callers."""
+    return space_for(cfg, seed)
 
 
-def network_for(cfg: RoadConfig, scenario_path=None):
-    """The road network of a scenario (loading is cached by the loader); a file that cannot
-    be loaded is a ScenarioError naming the scenario file and ``world.network``."""
-    from dispatch.roads import load_network
-
-    try:
-        return load_network(cfg.network, base=cfg.base, blocks=cfg.blocks, block=cfg.block,
-                            speed=cfg.speed)
-    except (ValueError, OSError) as e:
-        raise ScenarioError(scenario_path or cfg.base, "world.network", str(e)) from None
-    except Exception as e:  # noqa: BLE001 - a malformed file raises whatever its parser raises
-        raise ScenarioError(scenario_path or cfg.base, "world.network",
-                            f"{cfg.network} cannot be read ({type(e).__name__}: {e})") from None
+def place_fleet(space, spec, rng: np.random.Generator) -> list:
+    """The run's vehicles at their start locations: the space's answer
+    (:meth:`dispatch.space.Space.place`), kept under this name for its callers."""
+    return space.place(spec, rng)
 
 
-def space_for(cfg: WorldConfig, seed: int, scenario_path=None) -> Space:
-    """The run's space: its voxel world (per seed) or its road network."""
-    return world_for(cfg, seed) if cfg.roads is None else network_for(cfg.roads, scenario_path)
-
-
-def make_plugin(kind: str, name: str, params, *args):
-    """Build an allocator or planner from its scenario parameters. Whatever its constructor
-    raises (TypeError, ValueError, an error of a library it calls) becomes one PluginError
-    naming the plugin, its parameters and the reason."""
-    return _construct(kind, name, params, args, f"dispatch.{kind}_params")
-
-
-def _construct(kind: str, name: str, params, args, key: str):
-    """``make_plugin`` for any kind, the parameters read from the scenario table ``key``."""
-    cls = registry.load(kind, name)
-    params = dict(params)
-    try:
-        return cls(*args, **params)
-    except Exception as e:  # a plugin's constructor may raise anything
-        shown = ", ".join(f"{k} = {_short(v)}" for k, v in params.items()) or "none"
-        reason = " ".join(str(e).split()) or type(e).__name__
-        raise PluginError(f"{kind} {name!r} rejected its parameters ({key}: {shown}): "
-                          f"{type(e).__name__}: {reason}") from e
-
-
-def describe(allocator) -> str:
-    """What an allocator says it ran, as a JSON object of strings (``"{}"`` if it says
-    nothing): the optional ``describe() -> dict[str, str]`` method of an allocator plugin
-    (e.g. a learned model's name, variant and checkpoint hash). It goes into the summary's
-    ``allocator_info`` column and the ``dispatch.allocator_info`` Parquet metadata."""
-    fn = getattr(allocator, "describe", None)
-    info = fn() if callable(fn) else {}
-    return json.dumps({str(k): str(v) for k, v in dict(info).items()}, sort_keys=True)
-
-
-def make_repositioner(sc: Scenario, name: str) -> Repositioner:
-    """The repositioner ``name`` built from its ``[reposition.<name>]`` table."""
-    return _construct("repositioner", name, sc.reposition.params_of(name), (),
-                      f"reposition.{name}")
-
-
-def make_charger(sc: Scenario, name: str):
-    """The charging strategy ``name`` built from its ``[charging.<name>]`` table."""
-    return _construct("charger", name, sc.charging.params_of(name), (), f"charging.{name}")
-
-
-def check_repositioner(sc: Scenario, name: str) -> None:
-    """ScenarioError unless repositioner ``name`` serves the scenario's space (the kernel moves
-    vehicles on road networks only: a voxel world takes passive ones, such as ``stay``)."""
-    cls = registry.load("repositioner", name)
-    space = sc.world.space
-    serves = tuple(getattr(cls, "spaces", ("road",)))
-    if space not in serves or (space != "road" and not getattr(cls, "passive", False)):
-        key = "sweep.reposition" if sc.sweep.reposition else "reposition.policy"
-        raise ScenarioError(sc.path, key, f"repositioner {name!r} moves vehicles on "
-                                          f"{' and '.join(serves)} spaces, not this scenario's "
-                                          f"{space} world (use 'stay' there)")
-
-
-def check_runs(sc: Scenario, planners, repositioners=()) -> None:
-    """Validate-time checks that need plugins or the network: every planner and repositioner
-    serves the scenario's space; a road network loads; a trace names only nodes it has."""
-    space = sc.world.space
-    for name in repositioners:
-        check_repositioner(sc, name)
-    for name in planners:
-        serves = getattr(registry.load("planner", name), "spaces", ("voxel",))
-        if space not in serves:
-            raise ScenarioError(sc.path, "dispatch.planner",
-                                f"planner {name!r} serves {' and '.join(serves)} spaces, not "
-                                f"this scenario's {space} world; {space} planners: "
-                                f"{', '.join(registry.serving(space)) or 'none installed'}")
-    if sc.world.roads is not None:
-        net = network_for(sc.world.roads, sc.path)
-        if sc.tasks.trips is not None:
-            from dispatch.demand import trace_nodes_ok
-
-            trace_nodes_ok(net, sc.tasks.trips)
-    elif sc.tasks.trips is not None and sc.tasks.trips.dest is not None \
-            and any(registry.load("planner", p).reservation_aware for p in planners):
-        raise ScenarioError(sc.path, "tasks.trace", "trips with drop-offs are not supported "
-                                                    "with reservation-based execution yet")
-
-
-def _has_max_delay(sc: Scenario) -> bool:
+def _has_max_delay(sc) -> bool:
     """Some request of the scenario has a drop-off delay limit (the file's or its trace's)."""
     trips = sc.tasks.trips
     return sc.tasks.max_delay is not None or (
@@ -206,81 +108,58 @@ class Simulation:
     end, from a SimPy process that touches nothing else (the run's results do not depend on
     it). The CLI draws its progress bar with it; library code prints nothing."""
 
-    def __init__(self, spec: RunSpec, recorder, progress=None) -> None:
+    def __init__(self, spec, recorder, progress=None) -> None:
         sc = spec.scenario
         self.spec, self.recorder = spec, recorder
         self.env = env = simpy.Environment()
-        self.space = space_for(sc.world, spec.seed, sc.path)
-        self.world = self.space  # the voxel name, for callers that know they are in one
-        allocator: Allocator = make_plugin("allocator", spec.allocator,
-                                           sc.dispatch.allocator_params)
-        self.planner: Planner = make_plugin("planner", spec.planner, sc.dispatch.planner_params,
-                                            self.space)
+        self.space = space = space_for(sc.world, spec.seed, sc.path)
+        self.world = space  # the voxel name, for callers that know they are in one
+        allocator = make_plugin("allocator", spec.allocator, sc.dispatch.allocator_params)
+        self.planner = make_plugin("planner", spec.planner, sc.dispatch.planner_params, space)
         check_repositioner(sc, spec.reposition)
-        self.repositioner: Repositioner = make_repositioner(sc, spec.reposition)
+        self.repositioner = make_repositioner(sc, spec.reposition)
         self.allocator_info = describe(allocator)
         recorder.metadata["dispatch.allocator_info"] = self.allocator_info
         self.bus = bus = EventBus()
         self.book = book = TaskBook(env, bus)
-        self.fleet = Fleet(place_fleet(self.space, spec, rng_for(spec.seed, STREAM_FLEET)))
+        self.fleet = Fleet(space.place(spec, rng_for(spec.seed, STREAM_FLEET)), space)
         self.vehicles = self.fleet.vehicles
-        self.stats = RunStats()
-        recorder.metadata.update(self.space.describe())
-        recorder.metadata.update(network_file.store(getattr(recorder, "out", None), self.space))
-        self.physics = None
-        roads = sc.world.roads is not None
-        if roads:
-            demand = RoadDemand(self.space, rng_for(spec.seed, STREAM_TASKS))
-            driver = self._road_driver(sc)
-        else:
-            recorder.table_metadata["obstacles"] = {
-                "dispatch.world_size": json_meta(list(self.space.size)),
-                "dispatch.cell": str(self.space.cell),
-            }
-            demand = VoxelDemand(self.space.grid, sc.tasks.ground_fraction,
-                                 rng_for(spec.seed, STREAM_TASKS))
-            driver = CellDriver(self.space, self.planner, bus)
-            if sc.world.physics:
-                self._mirror()
-        self._record_event = event_writer(recorder, self.space)
-        bus.subscribe(self._record_event)
-        self._record_task = TaskWriter(recorder, self.space)
-        self._record_decision = DecisionWriter(recorder)
-        book.on_close += [lambda t: self.planner.task_closed(t.id), self.stats.closed,
-                          self._record_task, self._check_finished]
+        #: the run's tables, metadata and summary statistics (dispatch.recording)
+        self.recording = RunRecording(recorder, space)
+        self.stats = self.recording.stats
+        demand = space.demand(sc.tasks, rng_for(spec.seed, STREAM_TASKS))
+        driver = space.driver(self.planner, bus, sc.world, lambda: self.env.now)
+        self.planner = driver.planner  # (a space's driver may wrap it: congestion)
+        recorder.metadata.update(driver.metadata)
+        self.physics = space.mirror(bus, self.vehicles) if sc.world.physics else None
+        self.recording.attach(bus)
+        self._record_event = self.recording.event
+        self._record_task = self.recording.task
+        self._record_decision = self.recording.decision
+        book.on_close += [lambda t: self.planner.task_closed(t.id), *self.recording.on_close,
+                          self._check_finished]
         #: reservation-based execution, with a reservation-aware planner only
-        self.traffic = (Traffic(env, self.planner, self.space.grid, self.vehicles, bus.emit)
+        self.traffic = (space.traffic(env, self.planner, self.vehicles, bus.emit)
                         if self.planner.reservation_aware else None)
         timed = None
         if self.traffic is not None:
-            def timed(op: Operator) -> TimedExecution:
-                return TimedExecution(self.traffic, Hands(
-                    book, self.fleet, sc.tasks.service_time, op.notify, op.breakdown))
+            timed = self.traffic.execution(book, self.fleet, sc.tasks.service_time)
         self.finished = env.event()
         self.dispatcher: Dispatcher
         self.operator = Operator(env, bus, book, self.fleet, driver, sc.tasks.service_time,
                                  lambda: self.dispatcher.notify(), timed)
         self.dispatcher = Dispatcher(env, book, self.fleet, self.operator, self.planner,
-                                     allocator, self.space, sc.dispatch, sc.comms,
+                                     allocator, space, sc.dispatch, sc.comms,
                                      rng_for(spec.seed, STREAM_ALLOCATOR), self._record_decision,
                                      blackout_filter(sc.faults),
                                      pooled=any(v.capacity > 1 for v in self.vehicles),
                                      max_delay=_has_max_delay(sc))
         self.dispatcher.run_id = driver.run_id = spec.run_id  # named in error messages
         t = sc.tasks
-        count = spec.n_static_tasks if t.source == "static" else t.count
-        kind, trips = t.source, t.trips
-        if kind == "empirical":  # the day is drawn now and released as a trace
-            from dispatch.empirical import draw_day, load_sample
-
-            kind = "trace"
-            trips = draw_day(load_sample(), t.trips_per_day, rng_for(spec.seed, STREAM_TASKS),
-                             t.weekday)
-        self.source = TaskSource(env, book, demand,
-                                 SourceConfig(kind, count, t.interval, t.rate, t.max_active,
-                                              t.ttl, t.max_wait, t.max_delay),
-                                 rng_for(spec.seed, STREAM_SOURCE), self.dispatcher.notify,
-                                 trips)
+        self.source = TaskSource.of(env, book, demand, t,
+                                    spec.n_static_tasks if t.source == "static" else t.count,
+                                    lambda: rng_for(spec.seed, STREAM_TASKS),
+                                    rng_for(spec.seed, STREAM_SOURCE), self.dispatcher.notify)
         self.source.on_done = self._check_finished
         self.operator.on_reopen = self.source.rearm
         #: the repositioning timer and drives (None: a passive repositioner, e.g. ``stay``)
@@ -311,11 +190,9 @@ class Simulation:
             yield self.env.timeout(tick)
             self.progress(self.env.now, duration, self.book.released, self.stats.n_tasks)
 
-    def _electric(self, sc: Scenario, driver) -> None:
+    def _electric(self, sc, driver) -> None:
         """Batteries, the reserve rule, stations and the charging strategy (see
         :mod:`dispatch.energy`)."""
-        from dispatch.energy import Charging, Energy
-
         net = self.space
         ref = float(net.length.sum() / net.time.sum()) if hasattr(net, "length") else 10.0
         self.energy = Energy(sc.fleet.energy, self.fleet, self.env, ref)
@@ -332,34 +209,14 @@ class Simulation:
         if self.repositioning is not None:
             self.charging.on_assign = self.repositioning.stop
 
-    def _road_driver(self, sc: Scenario) -> RoadDriver:
-        """The road driver; with ``[world] congestion`` the planner's costs and the legs are
-        scaled by the hour's factor (:mod:`dispatch.congestion`)."""
-        factors = sc.world.roads.congestion
-        if not factors:
-            return RoadDriver(self.space, self.planner, self.bus, sc.world.edge_events)
-        from dispatch.congestion import CongestedDriver, CongestedPlanner, HourlyFactors
-
-        hourly = HourlyFactors(factors)
-        self.planner = CongestedPlanner(self.planner, hourly, lambda: self.env.now)
-        self.recorder.metadata["dispatch.congestion"] = json_meta(list(factors))
-        return CongestedDriver(self.space, self.planner, self.bus, sc.world.edge_events, hourly)
-
     @property
-    def allocator(self) -> Allocator:
+    def allocator(self):
         return self.dispatcher.allocator
 
     @allocator.setter
-    def allocator(self, value: Allocator) -> None:
+    def allocator(self, value) -> None:
         """Swap the allocator before the run (tests script decisions this way)."""
         self.dispatcher.allocator = value
-
-    def _mirror(self) -> None:
-        """The PyBullet mirror (voxel worlds, ``[world] physics``): a subscriber."""
-        from dispatch.physics import Physics, mirror
-
-        self.physics = Physics(self.space)
-        mirror(self.physics, self.bus, self.space, self.vehicles)
 
     def _check_finished(self, _task: Task | None = None) -> None:
         if self.source.finished and not self.finished.triggered and self.book.live == 0:
@@ -396,30 +253,24 @@ class Simulation:
                 self.physics.close()
 
     def _finish(self) -> dict:
-        rec, spec = self.recorder, self.spec
+        spec = self.spec
         timed = self.operator.timed
 
         def counts(v) -> dict:  # reservation-based execution's, 0 without it
             return timed.counts(v) if timed is not None else {"waits": 0, "replans": 0,
                                                               "wait_seconds": 0.0}
 
-        write_vehicles(rec, self.space, self.vehicles, float(self.env.now), counts)
-        for b in getattr(self.space, "boxes", ()):
-            rec.add("obstacles", x0=b.x0, y0=b.y0, z0=b.z0, x1=b.x1, y1=b.y1, z1=b.z1)
+        now = float(self.env.now)
+        self.recording.end_tables(self.vehicles, now, counts)
         if self.repositioning is not None:
             self.repositioning.finish()
         if self.charging is not None:
-            for row in self.charging.rows():
-                x, y, _ = self.space.position(row["node"])
-                rec.add("chargers", x=x, y=y, **row)
+            self.recording.chargers(self.charging.rows())
         run = dict(scenario=spec.scenario.name, allocator=spec.allocator, planner=spec.planner,
                    reposition=spec.reposition, n_agents=len(self.vehicles), seed=spec.seed,
                    space=self.space.kind)
-        summary = self.stats.summary(run=run, vehicles=self.vehicles,
-                                     dispatcher=self.dispatcher, sim_time=float(self.env.now))
-        summary.update(summary_of(self.repositioning))
         # what the allocator says at the end (a learned model's name, a batch method's counts)
-        summary["allocator_info"] = describe(self.dispatcher.allocator)
-        summary["objective"] = spec.scenario.dispatch.objective
-        rec.add("summary", **summary)
-        return summary
+        extra = {**summary_of(self.repositioning),
+                 "allocator_info": describe(self.dispatcher.allocator),
+                 "objective": spec.scenario.dispatch.objective}
+        return self.recording.summary(run, self.vehicles, self.dispatcher, now, extra)

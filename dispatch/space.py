@@ -1,14 +1,29 @@
-"""Spaces: the small contract for "where things are".
+"""Spaces: everything about "where things are".
 
-A run happens in one space. The kernel never looks inside a location: it stores it, hands it to
-the planner, and asks the space for its position in metres (for the recorded tables, the
-communication range and the plots). Two spaces ship with the kernel:
+A run happens in one space. The kernel never looks inside a location and never asks which
+space it is in: it stores locations, hands them to the planner, and asks the space. A space
+answers every question about location (RidePy's ``TransportSpace`` is the model):
+
+* before it exists, of its ``[world]`` configuration (class methods): how it is loaded
+  (:meth:`Space.load`), the planner a scenario gets by default, which scenario features it
+  offers (:attr:`Space.features`), how a fleet start file and a trace are read in it, the
+  validate-time checks and size bounds, a small instance for plugin checks;
+* once built: positions in metres (for the recorded tables, the communication range and the
+  plots), the run's demand (generated draws and trace conversion), where the fleet starts,
+  the driver that follows the planner's paths, the static tables it adds to the results, and
+  random agent and task views for plugin checks.
+
+Two spaces ship with the kernel, registered in :data:`KINDS`:
 
 * ``"voxel"``: :class:`dispatch.world.World`, the paper's 3D occupancy grid; a location is a
-  cell ``(i, j, k)``;
+  cell ``(i, j, k)`` (:data:`Cell`);
 * ``"road"``: :class:`dispatch.roads.RoadNetwork`, a directed graph with travel times; a
   location is a node index (``int``) or, for a vehicle, a :class:`dispatch.roads.RoadPoint`
   (on a node, or part-way along an edge).
+
+A third space is one module with a :class:`Space` subclass (the abstract methods below, and
+the class attributes it changes), a planner that serves its kind, an entry in :data:`KINDS`
+and its branch in the ``[world]`` parsing of :mod:`dispatch.scenario`.
 
 Planners declare the spaces they serve (:attr:`dispatch.contracts.Planner.spaces`); a planner
 asked to work in another space is a scenario error found at validate time.
@@ -16,22 +31,109 @@ asked to work in another space is a scenario error found at validate time.
 
 from __future__ import annotations
 
+import importlib
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
-from typing import Any, ClassVar
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from dispatch.drivers import Driver
+    from dispatch.scenario import RunSpec, Scenario, TaskConfig, WorldConfig
+    from dispatch.tasks import Demand
+    from dispatch.vehicles import Vehicle
 
 #: A location in some space: opaque to the kernel (a voxel cell, a road node, a road point).
 Location = Any
 Position = tuple[float, float, float]
+#: A voxel cell ``(i, j, k)`` along x, y, z (see :mod:`dispatch.world`).
+Cell = tuple[int, int, int]
+
+#: The spaces, by the kind a scenario's ``[world]`` table parses to
+#: (:attr:`dispatch.scenario.WorldConfig.space`): ``"module:Class"`` of each, imported when
+#: first asked for (a voxel run never imports the road network's libraries).
+KINDS: dict[str, str] = {"voxel": "dispatch.world:World", "road": "dispatch.roads:RoadNetwork"}
+
+
+def space_class(kind: str) -> type[Space]:
+    """The :class:`Space` subclass of a kind of :data:`KINDS` (KeyError: no such kind)."""
+    module, _, name = KINDS[kind].partition(":")
+    return getattr(importlib.import_module(module), name)
+
+
+def space_for(cfg: WorldConfig, seed: int, scenario_path=None) -> Space:
+    """The run's space, built from its ``[world]`` configuration for ``seed`` (a voxel world's
+    obstacles depend on it); loading errors are ScenarioErrors naming ``scenario_path``."""
+    return space_class(cfg.space).load(cfg, seed, scenario_path)
 
 
 class Space(ABC):
-    """Where a run's vehicles and tasks are. Immutable once built, so planners may cache on it."""
+    """Where a run's vehicles and tasks are. Immutable once built, so planners may cache on it.
 
-    #: ``"voxel"`` or ``"road"``: what planners match against.
+    A subclass implements the abstract methods; the class attributes and the methods with a
+    default say what a space without more to offer answers."""
+
+    #: ``"voxel"`` or ``"road"`` (its key in :data:`KINDS`): what planners match against.
     kind: ClassVar[str] = ""
+    #: the planner a scenario gets without ``[dispatch] planner``
+    default_planner: ClassVar[str] = ""
+    #: what the space offers beyond point tasks, for the scenario checks: ``"pooling"``
+    #: (shared rides, drop-off delay limits, the added_time objective), ``"reassign"``
+    #: (re-assignment before pickup), ``"snap"`` (traces of coordinates snapped to it,
+    #: ``max_snap``), ``"energy"`` (batteries and charging stations), ``"reposition"`` (the
+    #: kernel drives idle vehicles), ``"rl"`` (:mod:`dispatch.rl`'s environment)
+    features: ClassVar[frozenset[str]] = frozenset()
+    #: a fleet start file may give a vehicle's node id (a ``node`` column) instead of metres
+    start_nodes: ClassVar[bool] = False
+    #: a fleet start file's ``z`` where it has none (nan: none)
+    start_z: ClassVar[float] = float("nan")
+
+    # ------------------------------------------------------------ of its configuration
+    @classmethod
+    @abstractmethod
+    def load(cls, cfg: WorldConfig, seed: int, scenario_path: Path | None = None) -> Space:
+        """The space of a ``[world]`` configuration and a seed (may be cached: spaces are
+        immutable); what cannot be loaded is a ScenarioError naming ``scenario_path``."""
+
+    @classmethod
+    @abstractmethod
+    def label(cls, cfg: WorldConfig) -> str:
+        """A few words saying which space a configuration is (``dispatch validate`` prints
+        them)."""
+
+    @classmethod
+    def trace_bounds(cls, cfg: WorldConfig) -> tuple[float, float, float] | None:
+        """The extent in metres a trace's positions must lie in (None: any)."""
+        return None
+
+    @classmethod
+    def check_size(cls, cfg: WorldConfig, limits, refuse) -> None:
+        """Refuse (``raise refuse(key, what)``) a space past ``limits``
+        (:class:`dispatch.scenario.Limits`). Default: nothing to bound."""
+
+    @classmethod
+    def check_fleet(cls, sc: Scenario, agents: int, key: str) -> None:
+        """ScenarioError (at ``key``) unless ``agents`` vehicles can start in the space."""
+
+    @classmethod
+    def work_cells(cls, cfg: WorldConfig) -> int | None:
+        """The number of cells the voxel work bound (:mod:`dispatch.budget`) scales with;
+        None: no such bound in this space."""
+        return None
+
+    @classmethod
+    def check_runs(cls, sc: Scenario, planners) -> None:
+        """Validate-time checks that need the space or the plugins (the planner classes of
+        ``planners`` are the registry's). Default: none."""
+
+    @classmethod
+    @abstractmethod
+    def small(cls, seed: int = 0) -> Space:
+        """A small instance for the plugin checks of :mod:`dispatch.testing`."""
+
+    # ------------------------------------------------------------ once built
 
     @abstractmethod
     def position(self, loc: Location) -> Position:
@@ -48,3 +150,70 @@ class Space(ABC):
     @abstractmethod
     def describe(self) -> dict[str, str]:
         """A few ``dispatch.*`` metadata entries describing the space (stored with results)."""
+
+    @abstractmethod
+    def demand(self, tasks: TaskConfig, rng: np.random.Generator) -> Demand:
+        """The run's demand (:class:`dispatch.tasks.Demand`): generated requests and a trace's
+        trips as requests in this space; every draw from ``rng``."""
+
+    @abstractmethod
+    def place_vehicles(self, spec: RunSpec, rng: np.random.Generator) -> list[Vehicle]:
+        """The run's vehicles at their start locations (random draws from ``rng``)."""
+
+    def place(self, spec: RunSpec, rng: np.random.Generator) -> list[Vehicle]:
+        """The run's vehicles where :meth:`place_vehicles` puts them, with their seats
+        (``[fleet] capacity``, or a start file's ``capacity`` column)."""
+        vehicles = self.place_vehicles(spec, rng)
+        fleet = spec.fleet
+        if fleet.capacity != 1 or fleet.capacities:
+            seats = fleet.capacities
+            for k, v in enumerate(vehicles):  # start-file rows are in the vehicles' order
+                v.capacity = seats[k] if k < len(seats) and seats[k] else fleet.capacity
+        return vehicles
+
+    @abstractmethod
+    def driver(self, planner, bus, cfg: WorldConfig, clock) -> Driver:
+        """The driver (:class:`dispatch.drivers.Driver`) that follows ``planner``'s paths in
+        this space; its ``planner`` is the one the run uses (it may wrap ``planner``, e.g.
+        for congestion, which reads the simulated time from ``clock()``)."""
+
+    def tables(self) -> dict[str, tuple[dict[str, str], list[dict]]]:
+        """Static tables the space adds to the results: name -> (the table's metadata, its
+        rows). Default: none."""
+        return {}
+
+    def shared_tables(self) -> dict[str, dict[str, np.ndarray]]:
+        """Tables of the space that every run on it shares, written once per results folder
+        for readers that do not rebuild the space (:mod:`dispatch.space_files`; e.g. a road
+        network's nodes and edges, which :mod:`analysis` reads): name -> {column: array}.
+        Default: none."""
+        return {}
+
+    def mirror(self, bus, vehicles):
+        """A physics mirror of the run subscribed to ``bus`` (``[world] physics``), with a
+        ``close()``; None where the space has none."""
+        return None
+
+    def traffic(self, env, planner, vehicles, emit):
+        """Reservation-based execution (:class:`dispatch.reservations.Traffic`) for a
+        reservation-aware planner; ValueError where the space has none."""
+        raise ValueError(f"reservation-based execution needs a voxel world, not a {self.kind} "
+                         "space")
+
+    @abstractmethod
+    def sample_views(self, rng: np.random.Generator, n: int, m: int):
+        """``n`` random agent views and ``m`` random task views in the space (for the planner
+        checks of :mod:`dispatch.testing`): a pair of tuples of
+        :class:`dispatch.contracts.AgentView` and :class:`dispatch.contracts.TaskView`."""
+
+    def stands(self, loc: Location) -> tuple[int, float, bool] | None:
+        """Where ``loc`` stands in the space's node arrays (kept by
+        :class:`dispatch.vehicles.Fleet` for vectorized decisions): the node it is on or drives
+        to next, the seconds left to it, and whether it is off a node; None where the space
+        has no nodes (the default)."""
+        return None
+
+    @abstractmethod
+    def reaches(self, path, start: Location, goal: Location) -> bool:
+        """Whether a planner's non-empty ``path`` goes from ``start`` (where the vehicle is)
+        to ``goal`` (what a driver and the planner checks accept)."""

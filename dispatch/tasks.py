@@ -311,6 +311,23 @@ class TaskSource:
         self.on_done: Callable[[], None] = lambda: None
         self.process = env.process(self._run())
 
+    @classmethod
+    def of(cls, env: simpy.Environment, book: TaskBook, demand: Demand, tasks, count,
+           day_rng: Callable[[], np.random.Generator], rng: np.random.Generator,
+           notify: Callable[[], None]) -> TaskSource:
+        """The source of a scenario's ``[tasks]`` (:class:`dispatch.scenario.TaskConfig`)
+        releasing ``count`` tasks where it has a count (static: the run's). An empirical day
+        is drawn now (from ``day_rng()``) and released as a trace."""
+        kind, trips = tasks.source, tasks.trips
+        if kind == "empirical":
+            from dispatch.empirical import draw_day, load_sample
+
+            kind = "trace"
+            trips = draw_day(load_sample(), tasks.trips_per_day, day_rng(), tasks.weekday)
+        cfg = SourceConfig(kind, count, tasks.interval, tasks.rate, tasks.max_active,
+                           tasks.ttl, tasks.max_wait, tasks.max_delay)
+        return cls(env, book, demand, cfg, rng, notify, trips)
+
     def _done(self) -> None:
         self.finished = True
         self.on_done()

@@ -60,7 +60,9 @@ from typing import Any
 import numpy as np
 
 from dispatch.contracts import AgentView, Allocation, AllocationProblem, TaskView
+from dispatch import registry
 from dispatch.errors import AllocationError
+from dispatch.space import KINDS, space_class
 
 __all__ = ["CheckResult", "Report", "allocation_problems", "check_allocator", "check_planner",
            "check_repositioner", "pooled_problem", "pooled_problems", "reposition_view",
@@ -183,10 +185,9 @@ def pooled_problem(seed: int, n: int, m: int, capacity: int = 3, *, busy: float 
     decision has them: seconds to the pickup of the request's earliest feasible insertion into
     the vehicle's plan (``inf`` where none is feasible)."""
     from dispatch.contracts import StopView
-    from planners.road import RoadPlanner
 
     net = small_network()
-    travel = RoadPlanner(net).between
+    travel = registry.load("planner", net.default_planner)(net).between
     g = np.random.default_rng([seed, n, m, capacity, 7])
     now = 100.0
     nodes = g.integers(0, 30, n).tolist()  # (the grid's 30 intersections)
@@ -232,6 +233,14 @@ def pooled_problem(seed: int, n: int, m: int, capacity: int = 3, *, busy: float 
     apos, tpos = net.positions(nodes) if n else np.zeros((0, 3)), \
         net.positions(picks) if m else np.zeros((0, 3))
     seats = np.full(n, capacity, np.int64)
+    # with a service time, a vehicle without a plan may still be serving its last stop: it
+    # leaves at problem.ready (the kernel's free_at), somewhere in the next service time
+    ready = None
+    if service > 0 and n:
+        ready = np.full(n, now)
+        for i in range(n):
+            if a_ids[i] not in plans and g.random() < 0.5:
+                ready[i] = now + float(g.uniform(0, service))
 
     def build(drives: bool = False) -> AllocationProblem:
         return AllocationProblem(time=now, agents=agents, tasks=tuple(tasks),
@@ -239,7 +248,8 @@ def pooled_problem(seed: int, n: int, m: int, capacity: int = 3, *, busy: float 
                                  comm=np.ones((n, n), bool), rng=np.random.default_rng(seed),
                                  max_rounds=200, agent_pos=apos.copy(), task_pos=tpos.copy(),
                                  plans=dict(plans), capacity=seats.copy(),
-                                 service_time=service, travel=travel)
+                                 service_time=service, travel=travel,
+                                 ready=None if ready is None else ready.copy())
 
     # the costs a pooled decision has: the earliest pickup (seconds from now) of the request's
     # cheapest feasible insertion into the vehicle's plan, inf where none is feasible
@@ -276,14 +286,16 @@ def route_schedule(problem: AllocationProblem, aid: int, rows: list[tuple]
     """Planned arrival times of agent ``aid`` driving the stop rows ``rows`` (of
     :func:`dispatch.dispatcher.route_stops`) from where it is, on ``problem.travel``, or
     ``(None, why)``: what :meth:`dispatch.vehicles.Operator.route_times` checks, from the
-    problem alone (the vehicle leaves now, or when its first planned stop's time says)."""
+    problem alone (the vehicle leaves now, when ``problem.ready`` says, or when its first
+    planned stop's time says)."""
     travel = problem.travel
     k = int(np.flatnonzero(problem.agent_ids == aid)[0])
     loc = problem.agents[k].loc
     cap = 1 if problem.capacity is None else int(problem.capacity[k])
     plan = problem.plans.get(aid, ())
     now = problem.time
-    ready, load = now, 0
+    ready = now if problem.ready is None else max(now, float(problem.ready[k]))
+    load = 0
     if plan:
         ready = max(now, plan[0].eta - float(travel([loc], [plan[0].loc])[0, 0]))
         load = plan[0].occupancy - plan[0].passengers
@@ -455,44 +467,15 @@ def check_allocator(cls, *, seed: int = 0, **params: Any) -> Report:
 
 
 def small_world(seed: int = 0):
-    """A 12 x 12 x 6 m voxel world of 1 m cells with 4 obstacles."""
-    from dispatch.world import build_world
-
-    return build_world((12.0, 12.0, 6.0), 1.0, 4, (1.0, 1.0, 1.0), (3.0, 3.0, 6.0),
-                       np.random.default_rng(seed))
+    """A 12 x 12 x 6 m voxel world of 1 m cells with 4 obstacles (the voxel space's
+    :meth:`~dispatch.space.Space.small`)."""
+    return space_class("voxel").small(seed)
 
 
 def small_network():
-    """A 6 x 5 Manhattan grid, 100 m blocks, 10 m/s."""
-    from dispatch.roads import manhattan
-
-    return manhattan(6, 5, 100.0, 10.0)
-
-
-def _planner_queries(space, seed: int, n: int, m: int):
-    g = np.random.default_rng(seed)
-    if space.kind == "road":
-        from dispatch.roads import RoadPoint
-
-        nodes = g.integers(0, space.n, n + m)
-        agents = tuple(AgentView(100 + i, "car", RoadPoint(int(nodes[i])), 10.0)
-                       for i in range(n))
-        tasks = tuple(TaskView(500 + j, "trip", int(nodes[n + j]), 0.0) for j in range(m))
-        return agents, tasks
-    free = space.grid.free_cells()
-    ground = free[free[:, 2] == 0]
-    def pick(pool, k):
-        return [tuple(int(v) for v in pool[i]) for i in g.integers(0, len(pool), k)]
-
-    a_cells = pick(free[free[:, 2] <= 2], n)
-    kinds = ["uav" if i % 2 else "ugv" for i in range(n)]
-    a_cells = [c if k == "uav" else pick(ground, 1)[0] for c, k in zip(a_cells, kinds)]
-    t_cells = pick(free, m)
-    agents = tuple(AgentView(100 + i, kinds[i], a_cells[i], 5.0 if kinds[i] == "uav" else 3.0)
-                   for i in range(n))
-    tasks = tuple(TaskView(500 + j, "ground" if c[2] == 0 else "air", c, 0.0)
-                  for j, c in enumerate(t_cells))
-    return agents, tasks
+    """A 6 x 5 Manhattan grid, 100 m blocks, 10 m/s (the road space's
+    :meth:`~dispatch.space.Space.small`)."""
+    return space_class("road").small()
 
 
 def check_planner(cls, space=None, *, seed: int = 0, **params: Any) -> Report:
@@ -501,8 +484,7 @@ def check_planner(cls, space=None, *, seed: int = 0, **params: Any) -> Report:
     report = Report(getattr(cls, "name", "") or getattr(cls, "__name__", str(cls)))
     if space is None:
         serves = getattr(cls, "spaces", ("voxel",))
-        spaces = ([small_world(seed)] if "voxel" in serves else []) + \
-                 ([small_network()] if "road" in serves else [])
+        spaces = [space_class(kind).small(seed) for kind in KINDS if kind in serves]
     else:
         spaces = [space]
     for sp in spaces:
@@ -529,7 +511,7 @@ def _check_planner_on(report: Report, cls, space, seed: int, params: dict, tag: 
     bad_costs, bad_plans, differs, global_rng, bad_bounds = [], [], [], [], []
     bounded = bool(getattr(cls, "lower_bounds", False))
     for k, (n, m) in enumerate(shapes):
-        agents, tasks = _planner_queries(space, seed * 100 + k, n, m)
+        agents, tasks = space.sample_views(np.random.default_rng(seed * 100 + k), n, m)
         label = f"{n} agents x {m} tasks"
         try:
             _perturb_global_rng(1)
@@ -554,8 +536,7 @@ def _check_planner_on(report: Report, cls, space, seed: int, params: dict, tag: 
                 except Exception as e:  # noqa: BLE001
                     bad_plans.append(f"{label}: plan raised {_err(e)}")
                     continue
-                start = a.loc.node if space.kind == "road" else a.loc
-                if not path or path[-1] != t.loc or (space.kind == "voxel" and path[0] != start):
+                if not path or not space.reaches(path, a.loc, t.loc):
                     bad_plans.append(f"{label}: agent {a.id} -> task {t.id}: cost {c[i, j]:.3g}"
                                      f" but plan gave {path if not path else (path[0], path[-1])}")
         if bounded:

@@ -351,21 +351,24 @@ def shipped_trace(name: str) -> Path | None:
     return Path(str(importlib.resources.files("dispatch") / SHIPPED_TRACES[name]))
 
 
-def read_fleet_start(path: Path, space: str, max_bytes: int | None = None
+def read_fleet_start(path: Path, nodes: bool, default_z: float = math.nan,
+                     max_bytes: int | None = None
                      ) -> tuple[tuple[int, float, float, float], ...]:
-    """Rows ``(vehicle_id, a, b, c)``: on roads ``a`` is a node id (``b``, ``c`` nan) or
-    ``(a, b)`` metres; in a voxel world ``(a, b, c)`` metres (``z`` defaults to 0)."""
+    """Rows ``(vehicle_id, a, b, c)``: where the space takes node ids (``nodes``, as
+    :attr:`dispatch.space.Space.start_nodes` says) and the file has a ``node`` column, ``a``
+    is a node id (``b``, ``c`` nan); else ``(a, b, c)`` metres, ``c`` from a ``z`` column or
+    ``default_z`` (:attr:`dispatch.space.Space.start_z`)."""
     if path.suffix.lower() != ".csv":
         raise ScenarioError(path, "<file>", "a fleet start file must be a .csv file")
     columns = _read_columns(path, max_bytes)
     if "vehicle_id" not in columns:
         raise ScenarioError(path, "<header>", "missing column vehicle_id")
-    if space == "road" and "node" in columns:
+    if nodes and "node" in columns:
         pos = _numbers(path, columns, ("node",))
     elif "x" in columns and "y" in columns:
         pos = _numbers(path, columns, ("x", "y") + (("z",) if "z" in columns else ()))
     else:
-        want = "node or x, y" if space == "road" else "x, y (and z)"
+        want = "node or x, y" if nodes else "x, y (and z)"
         raise ScenarioError(path, "<header>", f"missing column(s): {want}")
     ids = _numbers(path, columns, ("vehicle_id",))[:, 0]
     if len(ids) == 0:
@@ -380,8 +383,8 @@ def read_fleet_start(path: Path, space: str, max_bytes: int | None = None
             raise ScenarioError(path, f"row {i}", f"vehicle_id {int(vid)} appears twice")
         seen.add(int(vid))
         p = list(p) + [math.nan] * (3 - len(p))
-        if space == "voxel" and math.isnan(p[2]):
-            p[2] = 0.0
+        if math.isnan(p[2]):
+            p[2] = default_z
         rows.append((int(vid), *p))
     return tuple(rows)
 

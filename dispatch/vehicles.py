@@ -6,13 +6,10 @@ drives it stop by stop: to each stop, pick up or drop off (with capacity above 1
 requests ride at once), the service time where a request completes, idle when the list is
 empty. A breakdown or a re-assignment removes stops; nothing else changes the plan. What a
 vehicle drove, and with how many on board, is counted in one place (:meth:`Vehicle.drove`).
-How it drives depends on the space, through a *driver*:
-
-* :class:`CellDriver` (voxel world): cell by cell along the planner's path, a ``move`` event
-  per cell, as the paper's vehicles do;
-* :class:`RoadDriver` (road network): one timeout per leg (``depart`` ... ``pickup`` /
-  ``dropoff``), not per edge; where a vehicle is part-way through a leg is interpolated from
-  its route when someone asks (:meth:`Vehicle.location`).
+How it drives depends on the space, through the *driver* its space makes
+(:mod:`dispatch.drivers`: cell by cell in a voxel world, one timeout per leg on roads, where
+a vehicle part-way through a leg is interpolated from its route when someone asks:
+:meth:`Vehicle.location`).
 
 With a reservation-aware planner (voxel only, capacity 1) a vehicle instead follows a *timed*
 route that the run's :class:`dispatch.reservations.Traffic` keeps conflict-free and owns (with
@@ -30,18 +27,16 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import simpy
 
-from dispatch.contracts import AgentView, AgentViews, Planner
-from dispatch.errors import PluginError
+from dispatch.contracts import AgentView, AgentViews
+from dispatch.drivers import CellDriver, RoadDriver  # noqa: F401 - their old home, kept
 from dispatch.events import EventBus
-from dispatch.motion import step_length
-from dispatch.space import Location
+from dispatch.space import Location, Space
 from dispatch.stops import DROPOFF, PICKUP, Stop, occupancies, schedule
 from dispatch.tasks import COMPLETED, PICKED_UP as PICKED_UP_STATE, Task, TaskBook, TaskState
 
 if TYPE_CHECKING:
     from dispatch.reservations import TimedExecution
-    from dispatch.roads import Leg, RoadNetwork
-    from dispatch.world import World
+    from dispatch.roads import Leg
 
 
 @dataclass(eq=False)
@@ -179,9 +174,10 @@ class Fleet:
     Python loop over the fleet: ``ids``; ``idle_mask``; on roads ``node`` (the node a vehicle
     stands on, or the end of the edge it stopped on part-way), ``remaining`` (seconds left on
     that edge, 0 on a node), ``odd`` (its location is not a plain node: a road point, or a
-    voxel cell) and ``driving`` (it has a leg: its location depends on the time)."""
+    voxel cell) and ``driving`` (it has a leg: its location depends on the time). Where a
+    location stands is the space's answer (:meth:`dispatch.space.Space.stands`)."""
 
-    def __init__(self, vehicles: list[Vehicle]) -> None:
+    def __init__(self, vehicles: list[Vehicle], space: Space) -> None:
         self.vehicles = sorted(vehicles, key=lambda v: v.id)
         self.by_id = {v.id: v for v in self.vehicles}
         n = len(self.vehicles)
@@ -200,8 +196,9 @@ class Fleet:
         #: driving or odd: where it is needs a look at the vehicle (kept with the two)
         self.special = np.zeros(n, dtype=bool)
         self._odd = [False] * n  # odd, as Python bools (read by the leg setter)
-        self.road = n > 0 and all(_is_node(v.loc) or hasattr(v.loc, "node")
-                                  for v in self.vehicles)
+        self._stands = space.stands
+        #: the node arrays hold (the space has nodes)
+        self.road = n > 0 and all(space.stands(v.loc) is not None for v in self.vehicles)
         for i, v in enumerate(self.vehicles):
             v._fleet, v._slot = self, i
             self.driving[i] = v.leg is not None
@@ -212,19 +209,12 @@ class Fleet:
 
     def _moved(self, i: int, loc: Location) -> None:
         """Vehicle ``i``'s ``loc`` changed (called by its setter)."""
-        if _is_node(loc):
-            self.node[i], self.remaining[i], self.odd[i] = loc, 0.0, False
-            odd = False
+        at = self._stands(loc)
+        if at is None:  # no node (a voxel cell): the arrays are unused
+            odd = True
         else:
-            node = getattr(loc, "node", None)
-            if node is None:  # a voxel cell: the arrays are unused
-                odd = True
-            else:
-                self.node[i] = node
-                on_node = loc.on_node  # type: ignore[union-attr]
-                self.remaining[i] = 0.0 if on_node else max(loc.remaining, 0.0)  # type: ignore[union-attr]
-                odd = not on_node
-            self.odd[i] = odd
+            self.node[i], self.remaining[i], odd = at
+        self.odd[i] = odd
         self._odd[i] = odd
         self.special[i] = odd or self.vehicles[i]._leg is not None
 
@@ -266,14 +256,9 @@ class Fleet:
                 if not on:
                     points.append(k)
                 continue
-            loc = v.loc
-            if _is_node(loc):
-                node[k], rem[k] = loc, 0.0
-            else:
-                node[k] = loc.node  # type: ignore[union-attr]
-                rem[k] = 0.0 if loc.on_node else max(loc.remaining, 0.0)  # type: ignore[union-attr]
-                if not loc.on_node:  # type: ignore[union-attr]
-                    points.append(k)
+            node[k], rem[k], off = self._stands(v.loc)
+            if off:
+                points.append(k)
         return AgentViews(self.ids[idx], make, node, rem, np.array(points, dtype=np.int64),
                           ascending)
 
@@ -298,11 +283,6 @@ _NO_POINTS = np.zeros(0, dtype=np.int64)
 _NO_POINTS.setflags(write=False)
 
 
-def _is_node(loc) -> bool:
-    """A road node index (any integer type, not a bool)."""
-    return isinstance(loc, (int, np.integer)) and not isinstance(loc, bool)
-
-
 # ----------------------------------------------------------------------------- drivers
 
 
@@ -314,94 +294,6 @@ def stop_leg(v: Vehicle, now: float) -> None:
     v.drove(float(np.interp(t, np.r_[0.0, leg.times], np.r_[0.0, leg.metres])), t)
     point = leg.point_at(t)
     v.loc, v.leg = (point.node if point.on_node else point), None
-
-
-def _plan(planner: Planner, agent: AgentView, goal, now: float, run_id: str):
-    """``planner.plan``, with a planner's own exception turned into one PluginError line that
-    names the planner, the run, the vehicle and the simulated time."""
-    try:
-        return planner.plan(agent, goal)
-    except Exception as e:  # noqa: BLE001 - a plugin may raise anything
-        raise _plan_error(planner, agent, goal, now, run_id,
-                          f"raised {type(e).__name__}: {' '.join(str(e).split())[:300]}") from e
-
-
-def _plan_error(planner: Planner, agent: AgentView, goal, now: float, run_id: str,
-                why: str) -> PluginError:
-    run = f", run {run_id}" if run_id else ""
-    return PluginError(f"planner {planner.name!r}{run}, t = {now:.6g} s: plan() for vehicle "
-                       f"{agent.id} -> {goal} {why}")
-
-
-class CellDriver:
-    """Voxel world: paths are cells; a vehicle steps from cell to cell at its speed."""
-
-    def __init__(self, world: World, planner: Planner, bus: EventBus) -> None:
-        self.world, self.planner, self.bus = world, planner, bus
-        self.run_id = ""  # named in error messages
-
-    def plan(self, v: Vehicle, goal, now: float):
-        agent = v.view()
-        path = _plan(self.planner, agent, goal, now, self.run_id)
-        if path is None or len(path) == 0 or path[0] != v.loc or path[-1] != goal:
-            raise _plan_error(self.planner, agent, goal, now, self.run_id,
-                              "gave no path from the vehicle's cell to the goal although its "
-                              "cost was finite")
-        return path
-
-    @staticmethod
-    def goal(path):
-        return path[-1]
-
-    def drive(self, env: simpy.Environment, v: Vehicle, path, task_id: int):
-        """Process fragment: follow ``path`` (each cell entered counts at once)."""
-        cell_m = self.world.cell
-        for nxt in path[1:]:
-            step = step_length(v.loc, nxt) * cell_m
-            yield env.timeout(step / v.speed)
-            v.loc = nxt
-            v.drove(step, step / v.speed)
-            self.bus.emit(env.now, "move", v.id, task_id, nxt)
-
-
-class RoadDriver:
-    """Road network: a leg is the planner's node path, driven in one timeout."""
-
-    def __init__(self, network: RoadNetwork, planner: Planner, bus: EventBus,
-                 edge_events: bool = False) -> None:
-        self.network, self.planner, self.bus = network, planner, bus
-        self.edge_events = edge_events
-        self.run_id = ""  # named in error messages
-
-    def plan(self, v: Vehicle, goal, now: float) -> Leg:
-        start, agent = v.location(now), v.view(now)
-        nodes = _plan(self.planner, agent, goal, now, self.run_id)
-        if nodes is None or len(nodes) == 0 or int(nodes[-1]) != int(goal):
-            raise _plan_error(self.planner, agent, goal, now, self.run_id,
-                              "gave no path to the goal node although its cost was finite")
-        try:
-            return self.network.leg(start, nodes)
-        except ValueError as e:
-            raise _plan_error(self.planner, agent, goal, now, self.run_id,
-                              f"gave a path that is not one: {e}") from None
-
-    @staticmethod
-    def goal(leg):
-        return int(leg.nodes[-1])
-
-    def drive(self, env: simpy.Environment, v: Vehicle, leg: Leg, task_id: int):
-        """Process fragment: drive ``leg`` (its metres count on arrival; a cut leg counts
-        what was driven: :func:`stop_leg`)."""
-        v.leg, v.leg_start = leg, env.now
-        if self.edge_events:
-            start = env.now
-            for node, t in zip(leg.nodes[1:], leg.times[1:]):
-                yield env.timeout(start + float(t) - env.now)
-                self.bus.emit(env.now, "move", v.id, task_id, int(node))
-        else:
-            yield env.timeout(leg.seconds)
-        v.leg, v.loc = None, int(leg.nodes[-1])
-        v.drove(leg.length, leg.seconds)
 
 
 # ----------------------------------------------------------------------------- operations
@@ -420,8 +312,7 @@ class Operator:
         self.driver, self.service_time, self.notify = driver, service_time, notify
         #: the driver's legs are RoadDriver.drive's one timeout each (no edge events): the
         #: plan's process drives them itself, without a generator per leg
-        self._plain_legs = isinstance(driver, RoadDriver) and not driver.edge_events \
-            and type(driver).drive is RoadDriver.drive
+        self._plain_legs = driver.plain_legs
         #: called with a task re-opened by a breakdown (the task source re-arms its expiry)
         self.on_reopen: Callable[[Task], None] = lambda task: None
         #: called with a vehicle about to be given a task (repositioning stops its drive)

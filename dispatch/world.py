@@ -11,16 +11,18 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import cached_property, lru_cache
 from typing import ClassVar
 
 import numpy as np
 
-from dispatch.errors import WorldError
-from dispatch.space import Space
+from dispatch.errors import ScenarioError, WorldError
+from dispatch.space import Cell, Space
+from dispatch.streams import STREAM_WORLD, rng_for
 
-Cell = tuple[int, int, int]
+__all__ = ["Box", "Cell", "Grid", "World", "build_world", "place_obstacles", "world_for"]
 
 
 @dataclass(frozen=True)
@@ -97,6 +99,8 @@ class World(Space):
     A location is a cell; its position is the cell's centre."""
 
     kind: ClassVar[str] = "voxel"
+    default_planner: ClassVar[str] = "astar"
+    start_z: ClassVar[float] = 0.0  # a start file's vehicles without z are on the ground
 
     size: tuple[float, float, float]
     grid: Grid
@@ -115,6 +119,126 @@ class World(Space):
     def describe(self) -> dict[str, str]:
         return {"dispatch.space": "voxel", "dispatch.world_size": json.dumps(list(self.size)),
                 "dispatch.cell": str(self.cell)}
+
+    # ------------------------------------------------------------ of its configuration
+    @classmethod
+    def load(cls, cfg, seed: int, scenario_path=None) -> World:
+        return world_for(cfg, seed)
+
+    @classmethod
+    def label(cls, cfg) -> str:
+        return f"world {cfg.shape}, {cfg.obstacles.count} obstacles"
+
+    @classmethod
+    def trace_bounds(cls, cfg) -> tuple[float, float, float]:
+        return cfg.size
+
+    @classmethod
+    def check_size(cls, cfg, limits, refuse) -> None:
+        cells = math.prod(cfg.shape)
+        if cells > limits.cells:
+            raise refuse("world.cell", f"the world has {cells:,} cells {cfg.shape} (more than "
+                                       f"{limits.cells:,})")
+
+    @classmethod
+    def check_fleet(cls, sc, agents: int, key: str) -> None:
+        """Vehicles start in distinct free cells: the fleet must fit beside the largest
+        obstacles."""
+        nx, ny, _ = sc.world.shape
+        o = sc.world.obstacles
+        cover = o.count * round(o.max_size[0] / sc.world.cell) * round(o.max_size[1]
+                                                                       / sc.world.cell)
+        if agents > max(nx * ny - cover, 0):
+            raise ScenarioError(sc.path, key,
+                                f"{agents} vehicles may not find distinct free cells in the world")
+
+    @classmethod
+    def work_cells(cls, cfg) -> int:
+        return math.prod(cfg.shape)
+
+    @classmethod
+    def check_runs(cls, sc, planners) -> None:
+        from dispatch import registry
+
+        if sc.tasks.trips is not None and sc.tasks.trips.dest is not None \
+                and any(registry.load("planner", p).reservation_aware for p in planners):
+            raise ScenarioError(sc.path, "tasks.trace", "trips with drop-offs are not supported "
+                                                        "with reservation-based execution yet")
+
+    @classmethod
+    def small(cls, seed: int = 0) -> World:
+        """A 12 x 12 x 6 m world of 1 m cells with 4 obstacles."""
+        return build_world((12.0, 12.0, 6.0), 1.0, 4, (1.0, 1.0, 1.0), (3.0, 3.0, 6.0),
+                           np.random.default_rng(seed))
+
+    # ------------------------------------------------------------ once built
+    def demand(self, tasks, rng: np.random.Generator):
+        from dispatch.demand import VoxelDemand
+
+        return VoxelDemand(self.grid, tasks.ground_fraction, rng)
+
+    def place_vehicles(self, spec, rng: np.random.Generator):
+        from dispatch.placement import place_voxel
+
+        return place_voxel(self, spec, rng)
+
+    def driver(self, planner, bus, cfg, clock):
+        from dispatch.drivers import CellDriver
+
+        return CellDriver(self, planner, bus)
+
+    def tables(self) -> dict[str, tuple[dict[str, str], list[dict]]]:
+        meta = {"dispatch.world_size": json.dumps(list(self.size), sort_keys=True),
+                "dispatch.cell": str(self.cell)}
+        rows = [dict(x0=b.x0, y0=b.y0, z0=b.z0, x1=b.x1, y1=b.y1, z1=b.z1) for b in self.boxes]
+        return {"obstacles": (meta, rows)}
+
+    def mirror(self, bus, vehicles):
+        """The PyBullet mirror (``[world] physics``): a subscriber of ``bus``."""
+        from dispatch.physics import Physics, mirror
+
+        physics = Physics(self)
+        mirror(physics, bus, self, vehicles)
+        return physics
+
+    def traffic(self, env, planner, vehicles, emit):
+        from dispatch.reservations import Traffic
+
+        return Traffic(env, planner, self.grid, vehicles, emit)
+
+    def sample_views(self, rng: np.random.Generator, n: int, m: int):
+        """UAVs (odd positions) in free cells up to 2 cells high, UGVs on the ground; tasks in
+        any free cell (``ground`` on layer 0, else ``air``)."""
+        from dispatch.contracts import AgentView, TaskView
+
+        free = self.grid.free_cells()
+        ground = free[free[:, 2] == 0]
+
+        def pick(pool, k):
+            return [tuple(int(v) for v in pool[i]) for i in rng.integers(0, len(pool), k)]
+
+        a_cells = pick(free[free[:, 2] <= 2], n)
+        kinds = ["uav" if i % 2 else "ugv" for i in range(n)]
+        a_cells = [c if k == "uav" else pick(ground, 1)[0] for c, k in zip(a_cells, kinds)]
+        t_cells = pick(free, m)
+        agents = tuple(AgentView(100 + i, kinds[i], a_cells[i],
+                                 5.0 if kinds[i] == "uav" else 3.0) for i in range(n))
+        tasks = tuple(TaskView(500 + j, "ground" if c[2] == 0 else "air", c, 0.0)
+                      for j, c in enumerate(t_cells))
+        return agents, tasks
+
+    def reaches(self, path, start, goal) -> bool:
+        return path[0] == start and path[-1] == goal
+
+
+@lru_cache(maxsize=8)
+def world_for(cfg, seed: int) -> World:
+    """The voxel world of a ``[world]`` configuration and a seed. Cached: runs that share it
+    (other allocators, other fleet sizes) also share everything planners cache on its
+    immutable grid."""
+    o = cfg.obstacles
+    return build_world(cfg.size, cfg.cell, o.count, o.min_size, o.max_size,
+                       rng_for(seed, STREAM_WORLD))
 
 
 def place_obstacles(

@@ -16,7 +16,7 @@ from dispatch.vehicles import Fleet, Vehicle
 
 def _fleet():
     vs = [Vehicle(i, "car", 10.0, n) for i, n in zip((5, 2, 9, 7), (3, 0, 3, 11))]
-    return Fleet(vs)
+    return Fleet(vs, manhattan(4, 4))
 
 
 def test_agent_views_behave_as_the_tuple_of_views():

@@ -37,10 +37,7 @@ def _top(module: str) -> str:
 
 
 def test_kernel_imports_no_plugin_and_no_analysis():
-    # dispatch/testing.py's RoadPlanner import is being moved by the "spaces" change
-    known = {("dispatch/testing.py", "planners.road")}
-    bad = [(f, m) for f, m in _imports("dispatch")
-           if _top(m) in (*PLUGIN_PACKAGES, "analysis") and (f, m) not in known]
+    bad = [(f, m) for f, m in _imports("dispatch") if _top(m) in (*PLUGIN_PACKAGES, "analysis")]
     assert bad == []
 
 

@@ -177,7 +177,7 @@ def test_first_decision_and_terminal_states_match_exact_costs(tmp_path, seed):
 def test_a_walled_in_pocket_is_unreachable_with_lazy_costs(tmp_path, monkeypatch, seed):
     """Tasks in a free column walled in on every side (no obstacle at their cell: only the
     components tell) end ``unreachable``, as with exact costs; the others are served."""
-    from dispatch import sim
+    from dispatch import world as sim  # the voxel space's module builds (and caches) worlds
     from dispatch.world import Grid, World
 
     real = sim.build_world

@@ -374,8 +374,8 @@ def corridor_run(tmp_path, monkeypatch, vehicles, tasks, plan, *, service=0.0):
     world = World(size=(8.0, 4.0, 1.0), grid=Grid(occ, 1.0), boxes=())
     fleet = [Vehicle(i, kind, 5.0 if kind == "uav" else 3.0, cell)
              for i, (kind, cell) in enumerate(vehicles)]
-    monkeypatch.setattr(sim_mod, "world_for", lambda cfg, seed: world)
-    monkeypatch.setattr(sim_mod, "place_fleet", lambda w, spec, rng: fleet)
+    monkeypatch.setattr(sim_mod, "space_for", lambda cfg, seed, path=None: world)
+    monkeypatch.setattr(World, "place_vehicles", lambda w, spec, rng: fleet)
     trace = tmp_path / "trace.csv"
     trace.write_text("release_time,x,y,z\n" + "".join(
         f"{t},{c[0] + 0.5},{c[1] + 0.5},0.5\n" for t, c in tasks), encoding="utf-8")

@@ -50,7 +50,10 @@ def _route_cost(problem, aid, route, new, objective):
         svc = problem.service_time
         end = times[-1] + (svc if rows[-1][5] or rows[-1][0] == "dropoff" else 0.0)
         p = problem.plans.get(aid, ())
-        old = p[-1].eta + svc if p else problem.time
+        k = int(np.flatnonzero(problem.agent_ids == aid)[0])
+        bare_end = problem.time if problem.ready is None else max(problem.time,
+                                                                  float(problem.ready[k]))
+        old = p[-1].eta + svc if p else bare_end
         return end - old
     cost = 0.0
     for (kind, tid, *_), t in zip(rows, times):
@@ -146,6 +149,36 @@ def test_rtv_matches_brute_force(seed, n, m, cap, busy, max_pax):
     assert cost == pytest.approx(want[1], abs=1e-6)
     assert not any(alloc.stats[k] for k in ("pairs_cut", "groups_cut", "orders_cut",
                                             "levels_cut", "ilp_time_limit"))
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_rtv_matches_brute_force_with_vehicles_in_service(seed):
+    """With a service time, plan-less vehicles still serving their last stop leave at
+    ``problem.ready``: rtv schedules from it (as the brute force and the kernel do), so it
+    serves as many at the same cost, and never plans a departure before it."""
+    _, build = pooled_problem(seed + 500, 1 + seed % 3, 2 + seed % 4, 1 + seed % 3,
+                              busy=0.3, service=30.0, max_pax=1 + seed % 2)
+    problem = build()
+    assert problem.ready is not None
+    objective = "delay" if seed % 2 else "added_time"
+    answer = RtvAllocator(objective=objective).allocate(problem)
+    validate(problem, answer, multi=True)
+    served, cost = _value(problem, answer, objective)
+    want = brute_force(problem, objective)
+    assert served == want[0]
+    assert cost == pytest.approx(want[1], abs=1e-6)
+
+
+def test_rtv_reads_ready_times():
+    """A vehicle whose service ends just before a request's pickup deadline is too late for
+    it: rtv leaves it out rather than planning a departure it cannot make."""
+    for seed in range(40):
+        _, build = pooled_problem(seed + 900, 2, 3, 2, busy=0.0, service=60.0)
+        problem = build()
+        late = dataclasses.replace(problem, ready=np.full(problem.n_agents, problem.time + 1e4))
+        answer = RtvAllocator().allocate(late)
+        assert not answer.pairs  # nobody is free before every pickup deadline has passed
+        validate(late, answer, multi=True)
 
 
 def test_the_brute_force_sees_groups():

@@ -1,4 +1,4 @@
-"""A road run's network stored beside its results (dispatch/network_file.py) and read back by
+"""A road run's network stored beside its results (dispatch/space_files.py) and read back by
 analysis.network without dispatch: once per folder, the same nodes, edges and free-flow times
 as the network the run drove on; a folder without it gives no network (and says why)."""
 
@@ -23,13 +23,14 @@ def road_folder(tmp_path_factory):
 def test_stored_once_and_equal_to_the_network_driven(road_folder):
     from dispatch.roads import manhattan
 
-    stored = sorted((road_folder / "_networks").iterdir())
-    assert len(stored) == 1  # two runs, one network
+    stored = sorted((road_folder / "_spaces").iterdir())
+    assert len(stored) == 1 and stored[0].name.startswith("road-")  # two runs, one network
+    assert sorted(p.name for p in stored[0].iterdir()) == ["edges.parquet", "nodes.parquet"]
     res = open_results(road_folder)
     run_ids = list(res.summary["run_id"])
     assert len(run_ids) == 2
     metas = [res.metadata(r, t) for r in run_ids for t in ("tasks", "summary", "vehicles")]
-    assert {m[METADATA_KEY] for m in metas} == {f"_networks/{stored[0].name}"}
+    assert {m[METADATA_KEY] for m in metas} == {f"_spaces/{stored[0].name}"}
 
     net = road_network(metas[0], [road_folder])
     truth = manhattan(3, 2, 100.0, 10.0)
@@ -45,9 +46,21 @@ def test_stored_once_and_equal_to_the_network_driven(road_folder):
     assert np.isfinite(direct).all() and (direct > 0).any()
 
 
+def test_a_voxel_run_keeps_no_space_files(tmp_path):
+    from dispatch.runner import execute
+    from dispatch.scenario import load_scenario
+    from tests.conftest import write_scenario
+
+    out = tmp_path / "out"
+    execute(load_scenario(write_scenario(tmp_path)).runs(), out)
+    assert not (out / "_spaces").exists()
+    res = open_results(out)
+    assert METADATA_KEY not in res.metadata(res.summary["run_id"].iloc[0], "tasks")
+
+
 def test_a_folder_without_its_network_has_none(road_folder, tmp_path, caplog):
     copy = tmp_path / "copy"
-    shutil.copytree(road_folder, copy, ignore=shutil.ignore_patterns("_networks"))
+    shutil.copytree(road_folder, copy, ignore=shutil.ignore_patterns("_spaces"))
     res = open_results(copy)
     meta = res.metadata(res.summary["run_id"].iloc[0], "tasks")
     with caplog.at_level(logging.INFO, logger="analysis.network"):
