@@ -13,6 +13,9 @@ the network, so the fastest route is the free-flow one; only its duration change
   boundary keeps its departure hour's factor (legs last minutes, hours change slowly; a
   per-edge time-dependent model would break the exact shortest-path costs the dispatcher
   relies on).
+
+:func:`road_driver` builds a road run's driver from its ``[world]`` table: the plain
+:class:`~dispatch.drivers.RoadDriver`, or with congestion these two.
 """
 
 from __future__ import annotations
@@ -26,7 +29,7 @@ import numpy as np
 from dispatch.hourly import (  # noqa: F401
     HOURS, MIN_TRIPS, NO_CONGESTION, HourlyFactors, calibrate, free_flow_times)
 from dispatch.roads import Leg, RoadNetwork, RoadPoint
-from dispatch.vehicles import RoadDriver
+from dispatch.drivers import RoadDriver
 
 
 def scale_leg(leg: Leg, factor: float) -> Leg:
@@ -39,7 +42,7 @@ def scale_leg(leg: Leg, factor: float) -> Leg:
 
 
 class CongestedDriver(RoadDriver):
-    """A :class:`~dispatch.vehicles.RoadDriver` whose legs take ``factor(departure time)``
+    """A :class:`~dispatch.drivers.RoadDriver` whose legs take ``factor(departure time)``
     times their free-flow seconds (see the module docstring)."""
 
     def __init__(self, network: RoadNetwork, planner: Any, bus: Any, edge_events: bool,
@@ -87,3 +90,19 @@ class CongestedPlanner:
                                else 0.0 for a in agents), np.float64, len(agents))
         rem = rem[:, None]
         return rem + (cost - rem) * f
+
+
+def road_driver(network: RoadNetwork, planner: Any, bus: Any, cfg: Any, clock) -> RoadDriver:
+    """The road driver of a ``[world]`` configuration; with ``[world] congestion`` the
+    planner's costs and the legs are scaled by the hour's factor (this module's;
+    the driver's ``planner`` is then the wrapped one, and its metadata names the factors)."""
+    factors = cfg.roads.congestion
+    if not factors:
+        return RoadDriver(network, planner, bus, cfg.edge_events)
+    import json
+
+    hourly = HourlyFactors(factors)
+    driver = CongestedDriver(network, CongestedPlanner(planner, hourly, clock), bus,
+                             cfg.edge_events, hourly)
+    driver.metadata["dispatch.congestion"] = json.dumps(list(factors), sort_keys=True)
+    return driver

@@ -594,7 +594,7 @@ class RoadNetwork(Space):
         return place_cars(self, spec, rng)
 
     def driver(self, planner, bus, cfg, clock):
-        from dispatch.drivers import road_driver
+        from dispatch.congestion import road_driver
 
         return road_driver(self, planner, bus, cfg, clock)
 
