@@ -13,19 +13,30 @@ Results of older versions, where a single run wrote ``<table>.parquet`` files
 A scenario that declares repositioning (``[reposition]``) has one more level,
 ``…/planner=…/reposition=…/n_agents=…``; every other layout, older ones included, has none,
 and its runs read as ``reposition = "stay"`` (idle vehicles waited where they were, the only
-behaviour before repositioners existed).
+behaviour before repositioners existed). A scenario that sweeps its batch window (``[sweep]
+batch_window``) has a ``batch_window=…`` level before ``n_agents=…``; every summary has a
+``batch_window`` column. Folders written before the batch window was a run key named each
+window a scenario of its own (``<name>-immediate``, ``<name>-batch30s``): their runs read as
+scenario ``<name>`` with their window, found from the scenario text their files carry (as is
+the window of a run of an older version that did not sweep it).
+
+Which columns name a run is the writer's to say: every file of a run lists them in its
+``dispatch.run_keys`` metadata (:attr:`Results.run_keys`); folders written before that read
+with :data:`paired.compare.FALLBACK_RUN_KEYS`.
 
 :func:`open_results` takes any number of such folders (or folders that contain them) and gives
 one :class:`Results`, whose :meth:`Results.table` returns a pandas DataFrame in which every
-table carries the run's keys (``scenario``, ``allocator``, ``planner``, ``n_agents``, ``seed``)
-and ``reposition`` whatever the layout. Only pyarrow and pandas are needed: no torch, no PyBullet, not even the
+table carries the run's keys (``scenario``, ``allocator``, ``planner``, ``reposition``,
+``batch_window``, ``n_agents``, ``seed``) whatever the layout. Only pyarrow and pandas are needed: no torch, no PyBullet, not even the
 ``dispatch`` package.
 """
 
 from __future__ import annotations
 
 import json
+import math
 import os
+import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -33,11 +44,17 @@ import pyarrow as pa
 import pyarrow.dataset as ds
 import pyarrow.parquet as pq
 
+from paired.compare import FALLBACK_RUN_KEYS, KEY_DEFAULTS, RUN_KEYS_ATTR
+
 TABLES = ("summary", "tasks", "assignments", "decisions", "events", "vehicles", "obstacles")
-#: The columns that name a run; every table returned by :meth:`Results.table` has them.
-RUN_KEYS = ("scenario", "allocator", "planner", "n_agents", "seed", "reposition")
+#: The columns that name a run in folders that do not list theirs (the writer's list, from the
+#: files, is :attr:`Results.run_keys`); every table returned by :meth:`Results.table` has them.
+RUN_KEYS = FALLBACK_RUN_KEYS
 #: Run keys that older results lack, and the value they had.
-DEFAULT_KEYS = {"reposition": "stay"}
+DEFAULT_KEYS = KEY_DEFAULTS
+#: Partition keys read with a fixed type (not inferred from the folder names): a scenario named
+#: like a number ("2024") is a string, a batch window of 30 s the float 30.
+PARTITION_TYPES = {"scenario": pa.string(), "batch_window": pa.float64()}
 
 
 class NoResultsError(FileNotFoundError):
@@ -65,9 +82,12 @@ class Source:
         d = ds.dataset(self.path / table, format="parquet", partitioning="hive")
         part = d.partitioning
         names = part.schema.names if part is not None else []
-        if "scenario" in names and part.schema.field("scenario").type != pa.string():
-            # a scenario named like a number ("2024") must still read as a string
-            ps = part.schema.set(names.index("scenario"), pa.field("scenario", pa.string()))
+        fixed = {k: t for k, t in PARTITION_TYPES.items()
+                 if k in names and part.schema.field(k).type != t}
+        if fixed:
+            ps = part.schema
+            for k, t in fixed.items():
+                ps = ps.set(names.index(k), pa.field(k, t))
             part = ds.partitioning(ps, flavor="hive")
             d = ds.dataset(self.path / table, format="parquet", partitioning=part)
         schemas = [f.physical_schema for f in d.get_fragments()]
@@ -147,6 +167,10 @@ class Results:
         self._owner: dict[str, int] | None = None
         self._duplicates: list[Duplicate] = []
         self._dropped: set[tuple[str, str]] = set()
+        self._run_keys: list[str] | None = None
+        #: run id -> the scenario name its files were written under, where it was a
+        #: batch-window variant's (``<name>-batch30s``; read as ``<name>``)
+        self._stored_names: dict[str, str] = {}
 
     @property
     def duplicates(self) -> list[Duplicate]:
@@ -211,7 +235,9 @@ class Results:
             old = {new: o for o, new in renames.items()}
             want = None
             if columns is not None:
-                want = [old.get(c, c) for c in dict.fromkeys([*columns, "run_id"])
+                # a summary's scenario and window always: an older run's are read together
+                extra = ("scenario", "batch_window") if name == "summary" else ()
+                want = [old.get(c, c) for c in dict.fromkeys([*columns, "run_id", *extra])
                         if old.get(c, c) in d.schema.names]
             df = d.to_table(columns=want, filter=flt).to_pandas()
             if self._has_duplicates() and "run_id" in df.columns:
@@ -221,19 +247,22 @@ class Results:
                 df = df.reset_index(drop=True)
             df = _normalise(df.rename(columns=renames) if renames else df)
             if name == "summary":
+                df = self._windows(df, src)
                 for k, v in DEFAULT_KEYS.items():
                     if k not in df.columns:
                         df[k] = v
             else:
                 df = self._with_keys(df)
             if columns is not None:
-                df = df[[c for c in dict.fromkeys([*columns, *RUN_KEYS, "run_id"])
+                df = df[[c for c in dict.fromkeys([*columns, *self.run_keys, "run_id"])
                          if c in df.columns]]
             frames.append(df)
         if not frames:
             return pd.DataFrame(columns=list(columns or []))
         frames = [f for f in frames if len(f)] or frames[:1]
-        return pd.concat(frames, ignore_index=True) if len(frames) > 1 else frames[0]
+        out = pd.concat(frames, ignore_index=True) if len(frames) > 1 else frames[0]
+        out.attrs[RUN_KEYS_ATTR] = list(self.run_keys)
+        return out
 
     @property
     def summary(self):
@@ -241,6 +270,49 @@ class Results:
         if self._summary is None:
             self._summary = self.table("summary")
         return self._summary
+
+    @property
+    def run_keys(self) -> list[str]:
+        """The columns that name a run, in order: the ``dispatch.run_keys`` lists of the
+        summary files (their union, in the order the writers gave), the keys of older folders
+        (:data:`paired.compare.FALLBACK_RUN_KEYS`) where a file does not list them."""
+        if self._run_keys is None:
+            found: dict[str, None] = {}
+            for src in self.sources:
+                if not src.has("summary"):
+                    continue
+                for frag in src.dataset("summary").get_fragments():
+                    meta = frag.physical_schema.metadata or {}
+                    raw = meta.get(b"dispatch.run_keys")
+                    try:
+                        keys = json.loads(raw) if raw is not None else FALLBACK_RUN_KEYS
+                    except ValueError:
+                        keys = FALLBACK_RUN_KEYS
+                    found.update(dict.fromkeys(map(str, keys)))
+            self._run_keys = list(found) or list(FALLBACK_RUN_KEYS)
+        return self._run_keys
+
+    def _windows(self, df, src: Source):
+        """The summary rows of ``src`` with a batch window each: runs written before it was a
+        run key (no ``batch_window`` column, or null in it) take theirs from the scenario text
+        their file carries, and a batch-window variant (``<name>-batch30s``, one window of
+        the text's ``[sweep] batch_window``) reads as scenario ``<name>``."""
+        if "run_id" not in df.columns or "scenario" not in df.columns:
+            return df
+        w = df["batch_window"] if "batch_window" in df.columns else None
+        if w is not None and w.notna().all():
+            return df
+        texts = _run_identities(src)
+        names, windows = list(df["scenario"]), [math.nan] * len(df)
+        for i, (rid, scen) in enumerate(zip(df["run_id"], df["scenario"])):
+            if w is not None and w.iloc[i] == w.iloc[i]:  # not null: written as a run key
+                windows[i] = float(w.iloc[i])
+                continue
+            text = (texts.get(rid) or (None,))[0]
+            names[i], windows[i] = legacy_window(str(scen), text)
+            if names[i] != scen:
+                self._stored_names[rid] = str(scen)
+        return df.assign(scenario=names, batch_window=windows)
 
     def errors(self):
         """The ``errors`` table of sweeps (failed runs), empty when none failed."""
@@ -263,7 +335,8 @@ class Results:
             if not src.has(table):
                 continue
             d = src.dataset(table)
-            for frag in d.get_fragments(filter=_run_filter(self.summary, run_id, src)):
+            flt = _run_filter(self.summary, run_id, src, self._stored_names.get(run_id))
+            for frag in d.get_fragments(filter=flt):
                 meta = frag.physical_schema.metadata or {}
                 if meta.get(b"dispatch.run_id", run_id.encode()).decode() == run_id:
                     return {k.decode(): v.decode() for k, v in meta.items()}
@@ -279,10 +352,22 @@ class Results:
         return len(self.sources) > 1 and bool(self.duplicates)
 
     def _with_keys(self, df):
-        missing = [k for k in RUN_KEYS if k not in df.columns]
-        if not missing or "run_id" not in df.columns:
+        """``df`` with the run keys it lacks taken from the summary (and the scenario of a
+        batch-window variant of an older folder read as the summary reads it)."""
+        if "run_id" not in df.columns:
             return df
-        keys = self.summary[["run_id", *missing]].drop_duplicates("run_id")
+        summary = self.summary  # reads the stored names of older variants first
+        # a key null in some rows (a run of an older layout beside newer ones: no
+        # batch_window= level) and an older variant's scenario name: the summary's
+        stale = [k for k in self.run_keys if k in df.columns and k in summary.columns
+                 and df[k].isna().any()]
+        if self._stored_names and "scenario" in df.columns:
+            stale.append("scenario")
+        df = df.drop(columns=list(dict.fromkeys(stale)))
+        missing = [k for k in self.run_keys if k not in df.columns and k in summary.columns]
+        if not missing:
+            return df
+        keys = summary[["run_id", *missing]].drop_duplicates("run_id")
         return df.merge(keys, on="run_id", how="left")
 
 
@@ -299,16 +384,19 @@ def _legacy_renames(name: str, src: Source, names: list[str]) -> dict[str, str]:
 
 
 def _normalise(df):
-    """Partition columns come back as int32 / categorical: make them int64 / str."""
+    """Partition columns come back as int32 / categorical: make them int64 / float / str."""
     for k in ("n_agents", "seed"):
         if k in df.columns and str(df[k].dtype) != "int64":
             df[k] = df[k].astype("int64")
+    if "batch_window" in df.columns and str(df["batch_window"].dtype) != "float64":
+        df["batch_window"] = df["batch_window"].astype("float64")
     for k in ("allocator", "planner", "scenario"):
         if k in df.columns and str(df[k].dtype) == "category":
             df[k] = df[k].astype(str)
-    for k, v in DEFAULT_KEYS.items():  # a run of an older layout beside newer ones: null
-        if k in df.columns:
-            df[k] = df[k].astype(object).where(df[k].notna(), v).astype(str)
+    if "reposition" in df.columns:  # a run of an older layout beside newer ones: null
+        v = DEFAULT_KEYS["reposition"]
+        df["reposition"] = df["reposition"].astype(object).where(df["reposition"].notna(),
+                                                                 v).astype(str)
     return df
 
 
@@ -328,21 +416,48 @@ def _run_identities(src: Source) -> dict[str, tuple]:
     return out
 
 
-def _run_filter(summary, run_id: str, src: Source) -> ds.Expression | None:
+def _run_filter(summary, run_id: str, src: Source,
+                stored_name: str | None = None) -> ds.Expression | None:
+    """The partition of ``run_id`` in ``src`` (``stored_name``: the scenario name its folder
+    has, where the summary reads another one)."""
     if src.kind == "flat":
         return None
     row = summary.loc[summary["run_id"] == run_id]
     if row.empty:
         return None
     r = row.iloc[0]
-    expr = ((ds.field("allocator") == r["allocator"]) & (ds.field("planner") == r["planner"])
-            & (ds.field("n_agents") == int(r["n_agents"])) & (ds.field("seed") == int(r["seed"])))
     part = src.dataset("summary").partitioning
-    if part is not None and "scenario" in part.schema.names:  # folders since scenario= paths
-        expr = expr & (ds.field("scenario") == str(r["scenario"]))
-    if part is not None and "reposition" in part.schema.names:
-        expr = expr & (ds.field("reposition") == str(r["reposition"]))
+    expr = None
+    for field in part.schema if part is not None else ():  # the run keys of its path
+        if field.name not in r.index:
+            continue
+        v = stored_name if field.name == "scenario" and stored_name else r[field.name]
+        cast = (int if pa.types.is_integer(field.type)
+                else float if pa.types.is_floating(field.type) else str)
+        term = ds.field(field.name) == cast(v)
+        expr = term if expr is None else expr & term
     return expr
+
+
+def legacy_window(scenario: str, text: bytes | str | None) -> tuple[str, float]:
+    """The scenario name and batch window of a run written before the batch window was a run
+    key, from the scenario text its files carry: a name that is one of the text's ``[sweep]
+    batch_window`` variants as older versions named them (``<name>-immediate`` for 0 s,
+    ``<name>-batch<w>s``) reads as ``<name>`` with that window; any other run has the text's
+    ``[dispatch] batch_window`` (0 without it, or without a readable text)."""
+    try:
+        doc = tomllib.loads(text.decode() if isinstance(text, bytes) else text or "")
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError):
+        return scenario, KEY_DEFAULTS["batch_window"]
+    swept = (doc.get("sweep") or {}).get("batch_window") or []
+    for w in swept if isinstance(swept, list) else []:
+        if isinstance(w, (int, float)) and not isinstance(w, bool):
+            suffix = "-immediate" if w == 0 else f"-batch{float(w):g}s"
+            if scenario.endswith(suffix) and len(scenario) > len(suffix):
+                return scenario[: -len(suffix)], float(w)
+    w = (doc.get("dispatch") or {}).get("batch_window", KEY_DEFAULTS["batch_window"])
+    ok = isinstance(w, (int, float)) and not isinstance(w, bool)
+    return scenario, float(w) if ok else KEY_DEFAULTS["batch_window"]
 
 
 def read_parquet_metadata(path: str | os.PathLike) -> dict[str, str]:

@@ -67,66 +67,83 @@ import numpy as np
 import pandas as pd
 
 from paired import compare
-from paired.compare import (  # noqa: F401 (re-exported: one order, one variant naming)
+from paired.compare import (  # noqa: F401 (re-exported: one order, one window label)
+    KEY_DEFAULTS,
     PREFERRED_ORDER,
+    RUN_KEYS_ATTR,
     allocator_order,
-    variant_name,
-    variant_rank,
+    window_label,
 )
-from analysis.stats import mean_ci
+from paired.stats import mean_ci
 
-GROUP = ["scenario", "planner", "allocator", "n_agents"]
-
-#: FleetPy's labels of the taxi-style columns that mean the same thing (for users who compare).
-FLEETPY_LABELS = {
-    "service_rate": "served users [%]",
-    "wait_average": "waiting time",
-    "wait_median": "waiting time (median)",
-    "wait_p90": "waiting time (90% quantile)",
-    "utilization": "% fleet utilization",
-    "emptyRatio": "% empty vkm",
-}
+def run_keys(df: pd.DataFrame) -> list[str]:
+    """The run keys of ``df``'s runs that it has as columns: the writer's list
+    (``df.attrs["run_keys"]``, from the files), else :data:`paired.compare.FALLBACK_RUN_KEYS`."""
+    keys = df.attrs.get(RUN_KEYS_ATTR) or compare.FALLBACK_RUN_KEYS
+    return [k for k in keys if k in df.columns]
 
 
-#: The keys of one series of a taxi study: the allocator groups plus the repositioner (a swept
-#: batch window gives scenario variants, ``<name>-immediate`` / ``<name>-batch30s``).
-SERIES = [*GROUP, "reposition"]
+def group_keys(df: pd.DataFrame) -> list[str]:
+    """What the allocator tables group by: every run key of ``df`` but the seed (the runs of
+    a group) and the repositioner (scenario, allocator, planner, batch window, N)."""
+    return [k for k in run_keys(df) if k not in ("seed", "reposition")]
 
 
 def series_keys(df: pd.DataFrame) -> list[str]:
-    """:data:`SERIES` where ``df`` has a ``reposition`` column, else :data:`GROUP`."""
-    return SERIES if "reposition" in df.columns else GROUP
+    """The keys of one series of a taxi study: every run key of ``df`` but the seed
+    (scenario, allocator, planner, repositioner, batch window, N)."""
+    return [k for k in run_keys(df) if k != "seed"]
+
+
+#: The allocator groups of runs that do not list their run keys (see :func:`group_keys`).
+GROUP = [k for k in compare.FALLBACK_RUN_KEYS if k not in ("seed", "reposition")]
+#: Their series (see :func:`series_keys`).
+SERIES = [k for k in compare.FALLBACK_RUN_KEYS if k != "seed"]
 
 
 def with_series(df: pd.DataFrame, summary: pd.DataFrame) -> pd.DataFrame:
     """``df`` (rows with ``run_id``) with the series keys it lacks taken from ``summary``; a
-    missing repositioner reads ``stay`` (runs written before repositioning existed)."""
+    key a run lacks reads :data:`~paired.compare.KEY_DEFAULTS`' value (runs written before
+    repositioning or batch windows were run keys)."""
     keys = series_keys(summary)
     missing = [k for k in keys if k not in df.columns]
     if missing and "run_id" in df.columns:
         df = df.merge(summary[["run_id", *missing]].drop_duplicates("run_id"), on="run_id",
                       how="left")
+    return _defaults(df)
+
+
+def _defaults(df: pd.DataFrame) -> pd.DataFrame:
+    """``df`` with a null repositioner read ``stay`` and a null batch window 0."""
+    fill = {}
     if "reposition" in df.columns:
-        df = df.assign(reposition=df["reposition"].fillna("stay").astype(str))
-    return df
+        fill["reposition"] = df["reposition"].fillna(KEY_DEFAULTS["reposition"]).astype(str)
+    if "batch_window" in df.columns:
+        fill["batch_window"] = pd.to_numeric(df["batch_window"], errors="coerce").astype(
+            float).fillna(KEY_DEFAULTS["batch_window"])
+    return df.assign(**fill) if fill else df
+
+
+#: The order of a table's rows: these keys first (then any other run key).
+_ROW_ORDER = ("scenario", "planner", "allocator", "batch_window", "n_agents", "reposition")
 
 
 def sort_groups(df: pd.DataFrame) -> pd.DataFrame:
-    """Rows ordered by scenario (batch-window variants: immediate first, then by window),
-    planner, allocator (paper order), N and repositioner (``stay`` first)."""
+    """Rows ordered by scenario, planner, allocator (paper order), batch window, N and
+    repositioner (``stay`` first)."""
     if df.empty:
         return df
     rank = {a: i for i, a in enumerate(allocator_order(df["allocator"].unique()))}
-    keys = [k for k in SERIES if k in df.columns]
+    present = [k for k in (*compare.FALLBACK_RUN_KEYS, *df.attrs.get(RUN_KEYS_ATTR, ()))
+               if k in df.columns and k != "seed"]
+    keys = [k for k in _ROW_ORDER if k in present] + [k for k in present if k not in _ROW_ORDER]
     out = df.assign(_rank=df["allocator"].map(rank))
     if "reposition" in out:
         out = out.assign(_rep=out["reposition"].fillna("stay").astype(str)
                          .map(lambda r: (r != "stay", r)))
-    if "scenario" in out:
-        out = out.assign(_scen=out["scenario"].map(variant_rank))
-    sub = {"allocator": "_rank", "reposition": "_rep", "scenario": "_scen"}
-    return (out.sort_values([sub.get(k, k) for k in keys])
-               .drop(columns=[c for c in ("_rank", "_rep", "_scen") if c in out])
+    sub = {"allocator": "_rank", "reposition": "_rep"}
+    return (out.sort_values([sub.get(k, k) for k in dict.fromkeys(keys)])
+               .drop(columns=[c for c in ("_rank", "_rep") if c in out])
                .reset_index(drop=True))
 
 
@@ -137,18 +154,20 @@ def paired_gaps(summary: pd.DataFrame, reference: str = "hungarian") -> pd.Serie
     """Per run: its gap to the ``reference`` allocator's run on the same instance (scenario,
     planner, repositioner, N, seed), as :func:`paired.compare.paired_gaps` defines it (the
     CLI's tables use the same); NaN where there is no reference run or it costs 0."""
-    gaps = compare.paired_gaps(summary.to_dict("records"), reference)
+    gaps = compare.paired_gaps(summary.to_dict("records"), reference,
+                               run_keys=summary.attrs.get(RUN_KEYS_ATTR))
     return pd.Series(gaps, index=summary.index, dtype=float)
 
 
 def allocator_metrics(summary: pd.DataFrame, reference: str = "hungarian",
                       level: float = 0.95) -> pd.DataFrame:
     """Tables I and III per (scenario, planner, allocator, N); see the module docstring."""
-    s = summary.copy()
+    s = _defaults(summary.copy())
     s["gap"] = paired_gaps(s, reference)
+    keys = group_keys(s)
     rows = []
-    for key, g in s.groupby(GROUP, sort=False):
-        row = dict(zip(GROUP, key))
+    for key, g in s.groupby(keys, sort=False):
+        row = dict(zip(keys, key))
         row["runs"] = len(g)
         for col, name in (("total_cost", "total_cost"), ("gap", "gap"),
                           ("conflict_free_rate", "conflict_free_rate"),
@@ -175,7 +194,7 @@ def dynamic_metrics(summary: pd.DataFrame, level: float = 0.95) -> pd.DataFrame:
     """Tables I and III of dynamic runs, per task (see the module docstring): per (scenario,
     planner, allocator, N) the mean over seeds and 95 % half-width of ``served_share``,
     ``wait_mean``, ``cost_per_assignment``, ``conflict_free_rate`` and ``decision_ms``."""
-    s = summary.copy()
+    s = _defaults(summary.copy())
     n = pd.to_numeric(s["n_tasks"], errors="coerce").astype(float)
     s["served_share"] = s["tasks_completed"] / n.where(n > 0)
     s["wait_mean"] = s["wait_time_mean"]
@@ -184,9 +203,10 @@ def dynamic_metrics(summary: pd.DataFrame, level: float = 0.95) -> pd.DataFrame:
     s["cost_per_assignment"] = s["total_cost"] / assigned.where(assigned > 0)
     d = pd.to_numeric(s["decisions"], errors="coerce").astype(float)
     s["decision_ms"] = 1000 * s["alloc_seconds"] / d.where(d > 0)
+    keys = group_keys(s)
     rows = []
-    for key, g in s.groupby(GROUP, sort=False):
-        row = dict(zip(GROUP, key))
+    for key, g in s.groupby(keys, sort=False):
+        row = dict(zip(keys, key))
         row["runs"] = len(g)
         for col in ("served_share", "wait_mean", "cost_per_assignment", "conflict_free_rate",
                     "decision_ms"):
@@ -373,8 +393,7 @@ def _taxi(summary, tasks, vehicles, events, keys, direct=None) -> pd.DataFrame:
         missing = [k for k in keys if k not in df.columns]
         if missing:
             df = df.merge(run_keys[["run_id", *missing]], on="run_id", how="left")
-        if "reposition" in keys:
-            df = df.assign(reposition=df["reposition"].fillna("stay").astype(str))
+        df = _defaults(df)
         return {k if isinstance(k, tuple) else (k,): g
                 for k, g in df.groupby(keys, sort=False)}
 
@@ -493,7 +512,7 @@ def hourly_fleet(states: pd.DataFrame, summary: pd.DataFrame,
     time it covers) and ``utilization`` (to_pickup + occupied over the time not failed)."""
     from analysis.timeline import FLEET_STATES, hourly_states
 
-    keys = keys or GROUP
+    keys = keys or group_keys(summary)
     h = hourly_states(states, hour=bin_s)
     if h.empty:
         return pd.DataFrame(columns=[*keys, "hour", "t_h", *FLEET_STATES, "utilization"])

@@ -16,8 +16,9 @@
   ``map.png`` (streets, pickup density, fleet start; whole region and zoomed on the demand),
   ``hourly.png`` (demand, served, rejected, wait percentiles over time), ``fleet_state.png``
   (stacked fleet states over time), ``wait_by_allocator.png`` (wait distributions); each per
-  series: allocator, N and, where the runs differ in them, scenario variant (a swept batch
-  window) and repositioner (:func:`analysis.taxi_plots.series`).
+  series: allocator, N and, where the runs differ in them, batch window (a swept
+  ``[sweep] batch_window``), scenario, planner and repositioner
+  (:func:`analysis.taxi_plots.series`).
 """
 
 from __future__ import annotations
@@ -124,10 +125,13 @@ def markdown_table(df: pd.DataFrame, digits: int = 2) -> str:
 
 
 def _taxi_view(taxi: pd.DataFrame, columns: list[str]) -> pd.DataFrame:
-    keys = ["allocator", "n_agents"] + [k for k in ("scenario", "planner", "reposition")
-                                         if k in taxi and taxi[k].nunique() > 1]
+    keys = ["allocator", "n_agents"] + [k for k in M.series_keys(taxi)
+                                         if k not in ("allocator", "n_agents")
+                                         and taxi[k].nunique() > 1]
     cols = [c for c in columns if c in taxi.columns]
     view = taxi[keys + cols].rename(columns={"n_agents": "N"})
+    if "batch_window" in keys:  # imm / 30s, as the CLI's tables and the figures' legends
+        view["batch_window"] = view["batch_window"].map(M.window_label)
     for c in cols:  # mean ± half-width of the 95 % interval over seeds, where there is one
         ci = f"{c}_ci95"
         if ci in taxi.columns and taxi[ci].notna().any():
@@ -430,8 +434,8 @@ def _road_part(res, summary, tasks, vehicles, events, direct, out, written, only
     unit = "one hour" if bin_s == 3600 else f"{bin_s / 60:g} minutes"
     return [
         ("h2", "Taxi study: customers and fleet"),
-        ("p", ("Per series (allocator, fleet size N and, where they differ, scenario variant "
-               "and repositioner), requests pooled over the seeds. Names as "
+        ("p", ("Per series (allocator, fleet size N and, where they differ, batch window, "
+               "scenario and repositioner), requests pooled over the seeds. Names as "
                "MATSim DRT's customer and vehicle stats print them: rides = served trips; "
                "rejections = rejected at once + expired waiting + unreachable; cancelled = "
                "still open or aboard when the run ended; failed = aboard a vehicle that broke "

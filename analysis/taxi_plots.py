@@ -8,8 +8,9 @@
   repositioning, failed), one panel per series;
 * :func:`wait_by_group`: wait-time distributions per series (ECDF and box plots).
 
-A series (:func:`series`) is one allocator, fleet size N, scenario variant (a swept batch
-window), planner and repositioner; its label names what differs between the figure's series.
+A series (:func:`series`) is one allocator, fleet size N, batch window, scenario, planner and
+repositioner (the run keys but the seed); its label names what differs between the figure's
+series.
 
 Each takes DataFrames from :mod:`analysis.metrics` / :mod:`analysis.timeline`, writes one PNG
 and returns its path.
@@ -23,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from analysis.metrics import allocator_order, variant_name, variant_rank
+from analysis.metrics import allocator_order, series_keys, window_label
 from analysis.plots import _colours, _figure, _save
 from analysis.timeline import CHARGING_STATES, FLEET_STATES
 
@@ -149,47 +150,46 @@ def network_map(path: Path, *, pickups: np.ndarray, starts: np.ndarray,
     return _save(fig, path)
 
 
-#: The columns that tell the series of a taxi study apart, in the order their labels name them.
-SERIES_COLUMNS = ("allocator", "n_agents", "scenario", "planner", "reposition")
+#: The columns a series label names first, in this order (then any other run key).
+LABEL_ORDER = ("allocator", "n_agents", "batch_window", "scenario", "planner", "reposition")
+SERIES_COLUMNS = LABEL_ORDER  # its older name
 
 
 def series_columns(df: pd.DataFrame) -> list[str]:
-    """The columns of :data:`SERIES_COLUMNS` that ``df`` has."""
-    return [c for c in SERIES_COLUMNS if c in df.columns]
+    """The columns that tell the series of ``df`` apart (its run keys but the seed,
+    :func:`analysis.metrics.series_keys`), in :data:`LABEL_ORDER`."""
+    keys = series_keys(df)
+    return [c for c in LABEL_ORDER if c in keys] + [c for c in keys if c not in LABEL_ORDER]
 
 
 def scenario_title(names) -> str:
-    """The scenarios of a figure, for its title: one name, or the base name of batch-window
-    variants with their windows (``chicago_taxi (imm, 30s)``), or the names joined."""
-    names = sorted({str(n) for n in names}, key=variant_rank)
-    if len(names) == 1:
-        return names[0]
-    bases = {n.rpartition("-")[0] for n in names}
-    if len(bases) == 1 and all(variant_name(n) != n for n in names):
-        return f"{bases.pop()} ({', '.join(variant_name(n) for n in names)})"
-    return ", ".join(names)
+    """The scenarios of a figure, for its title: their names joined."""
+    return ", ".join(sorted({str(n) for n in names}))
 
 
 def series(df: pd.DataFrame) -> list[tuple[tuple, str, pd.DataFrame]]:
     """(key, label, rows) per series of ``df``: the key is the values of
-    :func:`series_columns` (allocator, N, scenario, planner, repositioner); the label names the
-    allocator and whatever else differs between the series of ``df``: ``N = 500``, the batch
-    window of a scenario variant (``imm``, ``30s``) or the scenario, the planner, and a
+    :func:`series_columns` (allocator, N, batch window, scenario, planner, repositioner); the
+    label names the allocator and whatever else differs between the series of ``df``:
+    ``N = 500``, the batch window (``imm``, ``30s``), the scenario, the planner, and a
     repositioner other than ``stay`` (``+ demand``), e.g. ``fcfs 30s + demand``. Ordered by
-    allocator (the paper's order), N, scenario, planner, repositioner (``stay`` first)."""
+    allocator (the paper's order), N, batch window, scenario, planner, repositioner (``stay``
+    first)."""
     if df.empty:
         return []
     cols = series_columns(df)
     d = df.assign(reposition=df["reposition"].fillna("stay").astype(str)) \
         if "reposition" in cols else df
+    if "batch_window" in cols:
+        d = d.assign(batch_window=pd.to_numeric(d["batch_window"]).astype(float).fillna(0.0))
     rank = {a: i for i, a in enumerate(allocator_order(d["allocator"].unique()))}
     varies = {c: d[c].nunique() > 1 for c in cols}
 
     def order(key):
         k = dict(zip(cols, key))
         rep = k.get("reposition", "stay")
-        return (rank[k["allocator"]], k["n_agents"], variant_rank(k.get("scenario", "")),
-                str(k.get("planner", "")), rep != "stay", rep)
+        return (rank[k["allocator"]], k["n_agents"], k.get("batch_window", 0.0),
+                str(k.get("scenario", "")), str(k.get("planner", "")), rep != "stay", rep)
 
     out = []
     for key, rows in sorted(d.groupby(cols, sort=False), key=lambda kv: order(kv[0])):
@@ -206,8 +206,10 @@ def panel_name(k: dict, varies: dict) -> str:
     parts = []
     if varies.get("n_agents"):
         parts.append(f"N={k['n_agents']}")
+    if varies.get("batch_window"):
+        parts.append(window_label(k["batch_window"]))
     if varies.get("scenario"):
-        parts.append(variant_name(k["scenario"]))
+        parts.append(str(k["scenario"]))
     if varies.get("planner"):
         parts.append(str(k["planner"]))
     name = " ".join(parts)

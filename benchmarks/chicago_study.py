@@ -5,7 +5,7 @@ The runs: ``scenarios/chicago_taxi.toml`` with its numbers overridden (``--hours
 ``--trips-per-day``, ``--agents``, ``--seeds``) and its sweep replaced by ``--allocators``
 (default ``fcfs greedy hungarian auction magnnet``; one that is not installed or fails to
 construct is skipped with a message) x ``--batch-windows`` (default 0 = immediate and 30 s:
-the scenario variants ``chicago_study-immediate`` / ``chicago_study-batch30s``) x
+a run key: ``batch_window=0`` / ``batch_window=30`` partitions of scenario ``chicago_study``) x
 ``--repositioners`` (default ``stay demand``) x ``--agents`` (default 500 1000). The derived
 scenario is written to ``<out>/chicago_study.toml`` and run through the normal resumable sweep
 (:func:`dispatch.runner.sweep`) on ``--workers`` processes (default 2): rerunning skips every
@@ -61,7 +61,6 @@ import pandas as pd
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = ROOT / "scenarios" / "chicago_taxi.toml"
-KEYS = ["scenario", "planner", "allocator", "n_agents", "reposition"]
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -203,15 +202,16 @@ def study_table(out: Path) -> pd.DataFrame:
     taxi = M.taxi_metrics(summary, res.table("tasks"), res.table("vehicles"))
     secs = wall_seconds(out)
     summary = summary.assign(wall_s=summary["run_id"].map(secs))
-    wall = summary.groupby(KEYS)["wall_s"].mean()
-    confl = summary.groupby(KEYS)[["conflicts", "conflict_free_rate"]].mean()
+    keys = M.series_keys(summary)  # the run keys but the seed (the files say which)
+    wall = summary.groupby(keys)["wall_s"].mean()
+    confl = summary.groupby(keys)[["conflicts", "conflict_free_rate"]].mean()
     rows = []
     for key, label, g in series(taxi):
         r = g.iloc[0]
         rows.append({
             "label": re.sub(r" N=\d+", "", label),  # N has its own column
             "allocator": r["allocator"], "N": int(r["n_agents"]),
-            "window": M.variant_name(r["scenario"]), "reposition": r["reposition"],
+            "window": M.window_label(r["batch_window"]), "reposition": r["reposition"],
             "runs": int(r["runs"]), "served": r["service_rate"], "rejected": r["rejectionRate"],
             "cancelled": r.get("cancelRate", math.nan), "failed_share": (
                 r.get("failed", 0) / r["requests"] if r["requests"] else math.nan),
@@ -221,10 +221,10 @@ def study_table(out: Path) -> pd.DataFrame:
             "wait_mean_ci": r.get("wait_average_ci95", math.nan),
             "wait_mean": r["wait_average"], "wait_p90": r["wait_p90"],
             "utilization": r["utilization"], "empty": r["emptyRatio"],
-            "conflicts": confl["conflicts"].get(tuple(r[k] for k in KEYS), math.nan),
-            "conflict_free": confl["conflict_free_rate"].get(tuple(r[k] for k in KEYS),
+            "conflicts": confl["conflicts"].get(tuple(r[k] for k in keys), math.nan),
+            "conflict_free": confl["conflict_free_rate"].get(tuple(r[k] for k in keys),
                                                              math.nan),
-            "wall_s": wall.get(tuple(r[k] for k in KEYS), math.nan)})
+            "wall_s": wall.get(tuple(r[k] for k in keys), math.nan)})
     return pd.DataFrame(rows)
 
 

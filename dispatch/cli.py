@@ -433,6 +433,9 @@ def _add_sweep_parser(sub) -> None:
     s.add_argument("--planner", help="planner name (overrides the file and its sweep)")
     s.add_argument("--agents", type=int, help="fleet size N (overrides the file and its sweep)")
     s.add_argument("--seed", type=int, help="seed (overrides the file and its sweep)")
+    s.add_argument("--duration", type=float, metavar="SECONDS",
+                   help="simulated seconds before each run stops (overrides the file's "
+                        "duration; the scenario text stored with the results says so)")
 
 
 def _sweep(args, console) -> int:

@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 from dispatch.errors import ScenarioError
-from dispatch.scenario import RunSpec
+from dispatch.config import RunSpec
 from dispatch.space import Space
 from dispatch.vehicles import Vehicle
 

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 
 from dispatch import registry
 from dispatch.errors import PluginError, ScenarioError
-from dispatch.scenario import Scenario, _short
+from dispatch.config import Scenario, _short
 from dispatch.space import space_class
 
 if TYPE_CHECKING:

@@ -25,6 +25,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from dispatch import __version__
+from dispatch.runkeys import format_value
 
 # pyarrow's default allocator (jemalloc or mimalloc) keeps what a chunk write or the final merge
 # freed: measured with benchmarks/memory.py, 40-65 MB more peak memory per run than the C
@@ -59,6 +60,8 @@ SCHEMAS: dict[str, pa.Schema] = {
         # [reposition]: the repositioner (stay: idle vehicles wait), the drives it started
         # toward a target and their metres (part of empty_distance)
         ("reposition", _S), ("repositions", _I), ("reposition_distance", _F),
+        # [dispatch] batch_window (a run key: swept by [sweep] batch_window)
+        ("batch_window", _F),
         # tasks that had a vehicle when they closed: total_cost / tasks_assigned is the mean
         # planned cost of an assignment (the dynamic benchmark's per-task cost)
         ("tasks_assigned", _I),
@@ -137,8 +140,9 @@ TIMING_COLUMNS = {"alloc_seconds", "cost_seconds", "decide_seconds", "first_deci
 
 
 def partition_path(partition: dict[str, Any]) -> Path:
-    """The Hive folders of a partition: ``k1=v1/k2=v2/...`` (``.`` when empty)."""
-    return Path(*(f"{k}={v}" for k, v in partition.items()))
+    """The Hive folders of a partition: ``k1=v1/k2=v2/...`` (``.`` when empty; a float
+    without a needless ``.0``: ``batch_window=30``)."""
+    return Path(*(f"{k}={format_value(v)}" for k, v in partition.items()))
 
 
 CHUNK_PREFIX = "_inflight-"

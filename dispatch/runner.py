@@ -5,7 +5,9 @@ Every run, whatever the number of runs, is streamed by a :class:`~dispatch.recor
 into its own Hive partition of ``out`` (``<table>/scenario=…/allocator=…/planner=…/n_agents=…/
 seed=…/part-0.parquet``, so two scenarios can share one folder; a scenario that declares
 repositioning, a ``[reposition]`` table or sweep, has a ``reposition=…`` level after
-``planner=…``, and its run ids name the repositioner after the planner; chunk files
+``planner=…``, and its run ids name the repositioner after the planner; one that sweeps its
+batch window has a ``batch_window=…`` level before ``n_agents=…`` and ``__bw<seconds>`` in its
+run ids: the levels and ids follow :data:`dispatch.runkeys.RUN_KEYS`; chunk files
 ``_inflight-NNNNN.parquet.chunk`` while it runs) and, once all of its tables are written, gets a completion marker ``out/_runs/<partition>/done.json`` (written
 atomically) that lists the files and their sizes. Rerunning a sweep (or a sweep over the output
 of ``dispatch run``) skips every run whose marker is there, names the same run of the same
@@ -15,7 +17,9 @@ is :func:`run_digest`: the scenario's settings outside ``[sweep]`` (parsed, so c
 layout do not count) and the run's own point (allocator, planner, repositioner, N, seed,
 batch window). Adding a value to a sweep list therefore runs only the new runs, and removing
 one leaves its runs in the folder (:func:`foreign_runs` does not count them as another
-scenario's). A run that raises
+scenario's). A folder written before the batch window was a run key (each window a scenario
+``<name>-batch30s``, :func:`legacy_variant`) resumes too: its complete runs count as this
+sweep's, the others are cleared and redone in the new layout. A run that raises
 is recorded in the ``errors`` table (same partition layout: run_id, scenario, error_type,
 message, traceback, seconds) and the sweep goes on; its error partition is removed once it
 succeeds. Folders starting with ``_`` are ignored by pyarrow, DuckDB's and polars' Hive readers.
@@ -39,7 +43,7 @@ import traceback
 from collections import deque
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -48,7 +52,8 @@ import pyarrow.parquet as pq
 
 from dispatch import __version__
 from dispatch.recorder import SCHEMAS, Recorder, json_meta, partition_path, write_atomic
-from dispatch.scenario import RunSpec
+from dispatch.runkeys import RUN_KEYS, key_names, point_settings
+from dispatch.config import RunSpec
 
 log = logging.getLogger(__name__)
 
@@ -101,13 +106,13 @@ def read_table(path: Path, partition: dict[str, Any], name: str) -> pa.Table:
 
 
 def run_metadata(spec: RunSpec) -> dict[str, str]:
-    """The schema metadata every file of a run carries (besides version and run id)."""
-    keys = {"allocator": spec.allocator, "planner": spec.planner, "n_agents": spec.agents,
-            "seed": spec.seed, "scenario": spec.scenario.name}
-    if spec.names_reposition:
-        keys["reposition"] = spec.reposition
+    """The schema metadata every file of a run carries (besides version and run id): the
+    scenario text, the seed, the run's partition (``dispatch.spec``) and the names of every
+    run key (``dispatch.run_keys``, :data:`dispatch.runkeys.RUN_KEYS`: readers learn from it
+    which columns name a run)."""
     meta = {"dispatch.scenario": spec.scenario.text, "dispatch.seed": str(spec.seed),
-            "dispatch.spec": json_meta(keys)}
+            "dispatch.spec": json_meta(spec.partition),
+            "dispatch.run_keys": json_meta(key_names())}
     trips = spec.scenario.tasks.trips
     if trips is not None and trips.dropped:  # trips of the trace left out before the run
         meta["dispatch.trips_dropped"] = json_meta({r: n for r, n in trips.dropped})
@@ -151,18 +156,23 @@ def run_one(spec: RunSpec, out: Path | None = None, *,
 def default_out(spec: RunSpec) -> Path:
     """``runs/<scenario name>``, the name made safe as one folder name (no separators, no
     ``..``, no absolute path): results never land outside ``runs/``."""
-    from dispatch.scenario import safe_name
+    from dispatch.config import safe_name
 
-    return Path("runs") / safe_name(spec.scenario.variant_of or spec.scenario.name)
+    return Path("runs") / safe_name(spec.scenario.name)
 
 
 def holds_results(out: Path, spec: RunSpec) -> bool:
-    """Whether ``out`` already holds results (complete or not) of ``spec``'s partition."""
-    if marker_path(out, spec).exists():
-        return True
-    return any((Path(out) / table / partition_dir(spec)).is_dir()
-               and any((Path(out) / table / partition_dir(spec)).iterdir())
-               for table in ("summary", ERRORS))
+    """Whether ``out`` already holds results (complete or not) of ``spec``'s partition (or
+    of the partition an older version wrote the same run into, :func:`legacy_variant`)."""
+    old = legacy_variant(spec)
+    for run in (spec,) if old is None else (spec, old):
+        if marker_path(out, run).exists():
+            return True
+        if any((Path(out) / table / partition_dir(run)).is_dir()
+               and any((Path(out) / table / partition_dir(run)).iterdir())
+               for table in ("summary", ERRORS)):
+            return True
+    return False
 
 
 def execute(
@@ -222,8 +232,7 @@ def _digest(spec: RunSpec) -> str:
 
 
 #: Keys a sweep (or a run's point) sets: left out of a scenario's base settings
-_POINT_KEYS = {"": ("seed", "sweep"), "fleet": ("agents",),
-               "dispatch": ("allocator", "planner", "batch_window"), "reposition": ("policy",)}
+_POINT_KEYS = point_settings()
 
 
 def _base_settings(text: str) -> dict | None:
@@ -261,10 +270,9 @@ def run_digest(spec: RunSpec, text: str | None = None) -> str | None:
     doc = _base_settings(spec.scenario.text if text is None else text)
     if doc is None:
         return None
-    return _sha({"base": doc, "run_id": spec.run_id, "seed": spec.seed, "agents": spec.agents,
-                 "allocator": spec.allocator, "planner": spec.planner,
-                 "reposition": spec.reposition,
-                 "batch_window": float(spec.scenario.dispatch.batch_window)})
+    keys = spec.keys
+    return _sha({"base": doc, "run_id": spec.run_id,
+                 **{k.digest: keys[k.name] for k in RUN_KEYS if k.digest}})
 
 
 def _stored_text(out: Path, partition: Path) -> str | None:
@@ -345,6 +353,9 @@ def _run_and_mark(spec: RunSpec, out: Path, flush_rows: int = DEFAULT_FLUSH_ROWS
     completion marker; returns the result and the marker's files (relative path: size)."""
     started = time.perf_counter()
     clear_partition(out, spec)
+    old = legacy_variant(spec)
+    if old is not None:  # the same run as an older version wrote it: the folder holds it once
+        clear_partition(out, old)
     _cold_start()
     result = run_one(spec, out, flush_rows=flush_rows, progress=progress)
     seconds = time.perf_counter() - started
@@ -412,6 +423,21 @@ def foreign_runs(out: Path, specs: list[RunSpec]) -> list[str]:
     return found
 
 
+def legacy_variant(spec: RunSpec) -> RunSpec | None:
+    """The run as versions before the batch window was a run key wrote it (None for a
+    scenario that does not sweep its window): a scenario of its own, ``<name>-immediate`` (0
+    s) or ``<name>-batch<w>s``, without a ``batch_window=`` level or run-id part. A sweep
+    over such a folder takes its complete runs as this spec's (same text or same
+    :func:`run_digest`, as for any run) and clears the others, so that the folder holds each
+    run once; :mod:`analysis.io` reads them as scenario ``<name>`` with their window."""
+    if not spec.names_batch_window:
+        return None
+    sc, w = spec.scenario, spec.batch_window
+    name = f"{sc.name}-{'immediate' if w == 0 else f'batch{w:g}s'}"
+    return replace(spec, scenario=replace(sc, name=name,
+                                          sweep=replace(sc.sweep, batch_window=())))
+
+
 def read_summary(out: Path, spec: RunSpec) -> dict:
     """The summary row of a finished partition, with its partition columns put back."""
     path = Path(out) / "summary" / partition_dir(spec) / "part-0.parquet"
@@ -442,16 +468,20 @@ def sweep(
     outcomes: dict[int, Outcome] = {}
     todo: list[tuple[int, RunSpec]] = []
     for i, spec in enumerate(specs):
-        if not force and is_complete(out, spec):
-            try:
-                outcomes[i] = Outcome(spec, "skipped", summary=read_summary(out, spec))
+        old = legacy_variant(spec)
+        done = None if force else spec if is_complete(out, spec) else \
+            old if old is not None and is_complete(out, old) else None
+        if done is not None:
+            try:  # a run of an older layout reads as this one (its name, its window)
+                summary = {**read_summary(out, done), **spec.keys}
+                outcomes[i] = Outcome(spec, "skipped", summary=summary)
             except (OSError, pa.ArrowException, IndexError):
-                todo.append((i, spec))
-                continue
-            if on_done is not None:
-                on_done(outcomes[i])
-        else:
+                done = None
+        if done is None:  # (run by _run_and_mark, which clears an older copy)
             todo.append((i, spec))
+            continue
+        if on_done is not None:
+            on_done(outcomes[i])
     if todo:
         workers = workers or os.cpu_count() or 1
         if ray:

@@ -266,9 +266,7 @@ class Simulation:
             self.repositioning.finish()
         if self.charging is not None:
             self.recording.chargers(self.charging.rows())
-        run = dict(scenario=spec.scenario.name, allocator=spec.allocator, planner=spec.planner,
-                   reposition=spec.reposition, n_agents=len(self.vehicles), seed=spec.seed,
-                   space=self.space.kind)
+        run = dict(spec.keys, n_agents=len(self.vehicles), space=self.space.kind)
         # what the allocator says at the end (a learned model's name, a batch method's counts)
         extra = {**summary_of(self.repositioning),
                  "allocator_info": describe(self.dispatcher.allocator),

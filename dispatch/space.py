@@ -41,7 +41,7 @@ import numpy as np
 
 if TYPE_CHECKING:
     from dispatch.drivers import Driver
-    from dispatch.scenario import RunSpec, Scenario, TaskConfig, WorldConfig
+    from dispatch.config import RunSpec, Scenario, TaskConfig, WorldConfig
     from dispatch.tasks import Demand
     from dispatch.vehicles import Vehicle
 

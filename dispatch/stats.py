@@ -63,8 +63,8 @@ class RunStats:
                     self.detours += 1
 
     def summary(self, *, run: dict, vehicles, dispatcher, sim_time: float) -> dict:
-        """The summary row: ``run`` holds the run's keys (scenario, allocator, planner,
-        n_agents, seed, space)."""
+        """The summary row: ``run`` holds the run's keys (:data:`dispatch.runkeys.RUN_KEYS`)
+        and its space."""
         c, d = self.count, dispatcher
         n_uav = sum(1 for v in vehicles if v.kind == "uav")
         n_ugv = sum(1 for v in vehicles if v.kind == "ugv")

@@ -6,11 +6,14 @@
   (served share, mean wait, mean planned cost per assignment; conflict-free rate, milliseconds
   per decision), because planned costs summed over a run are not comparable between allocators
   that drive different trajectories and serve different numbers of tasks;
-* road-network runs: the trip table (served, rejected, wait, empty and occupied km);
+* road-network runs: the trip table (served, rejected, cancelled, wait, empty km, km driven),
+  with a row of 95 % interval half-widths over the seeds under each row of several seeds;
 * a single run: its own summary, one ``key: value`` line each.
 
 Every table is one row per (allocator, N), grouped by N, with short numeric cells: it fits an
-80-column terminal without cutting a cell (a test renders them at width 80).
+80-column terminal without cutting a cell (a test renders them at width 80). Where the runs
+hold several batch windows (``[sweep] batch_window``, a run key), a row is an allocator and a
+window (``fcfs imm``, ``fcfs 30s``).
 """
 
 from __future__ import annotations
@@ -19,9 +22,12 @@ import math
 from collections import defaultdict
 from statistics import fmean
 
-# One allocator order, one paired gap and one naming of batch-window variants for the CLI's
-# tables and the analysis package (a shared module outside both; see its docstring).
-from paired.compare import allocator_order, paired_gaps, variant_name, variant_rank
+# One allocator order, one paired gap and one label of a batch window for the CLI's tables and
+# the analysis package, and one interval of a mean (a shared package outside both, standard
+# library only; see their docstrings).
+from dispatch.runkeys import key_names
+from paired.compare import allocator_order, paired_gaps, window_label
+from paired.stats import mean_ci
 
 
 def _mean(rows: list[dict], key: str) -> float:
@@ -37,34 +43,42 @@ def _f(v: float, digits: int = 1, scale: float = 1.0, unit: str = "") -> str:
     return "-" if v is None or math.isnan(v) else f"{v * scale:.{digits}f}{unit}"
 
 
-def _label(s: dict, variants: bool) -> str:
+def _label(s: dict, windows: bool) -> str:
     """A table row's name: the allocator, and its batch window when the runs hold several
-    batch-window variants (``fcfs imm``, ``fcfs 30s``; see ``Scenario.variants``)."""
-    if not variants:
-        return s["allocator"]
-    v = variant_name(s["scenario"])
-    return f"{s['allocator']} {v}" if v != s["scenario"] else s["allocator"]
+    (``fcfs imm``, ``fcfs 30s``)."""
+    return f"{s['allocator']} {window_label(_window(s))}" if windows else s["allocator"]
+
+
+def _window(s: dict) -> float:
+    """A run's batch window (0 for a summary without one)."""
+    w = s.get("batch_window")
+    return 0.0 if w is None or math.isnan(float(w)) else float(w)
+
+
+def _windows(summaries: list[dict]) -> bool:
+    """Whether the runs hold several batch windows (rows then name theirs)."""
+    return len({_window(s) for s in summaries}) > 1
 
 
 def aggregate(summaries: list[dict], reference: str = "hungarian") -> dict[tuple[str, int], dict]:
     """Per (row, n_agents), a row being the allocator (and its batch window where the runs
-    hold several variants): mean over seeds of the total cost, the paired gap to
-    ``reference`` (:func:`paired.compare.paired_gaps`: the same scenario, planner,
-    repositioner, N and seed), the conflict-free rate, the allocation seconds, and the
-    per-task figures of dynamic runs (served share, wait, cost per assignment, ms per
+    hold several): mean over seeds of the total cost, the paired gap to ``reference``
+    (:func:`paired.compare.paired_gaps`: the same value of every other run key, see
+    :data:`dispatch.runkeys.RUN_KEYS`), the conflict-free rate, the allocation seconds, and
+    the per-task figures of dynamic runs (served share, wait, cost per assignment, ms per
     decision); ``runs``."""
-    variants = len({s["scenario"] for s in summaries}) > 1
-    gaps = paired_gaps(summaries, reference)
+    windows = _windows(summaries)
+    gaps = paired_gaps(summaries, reference, run_keys=key_names())
     groups: dict[tuple[str, int], list[tuple[dict, float]]] = defaultdict(list)
     for s, g in zip(summaries, gaps, strict=True):
-        groups[(_label(s, variants), s["n_agents"])].append((s, g))
+        groups[(_label(s, windows), s["n_agents"])].append((s, g))
     out = {}
     for key, pairs in groups.items():
         rows = [s for s, _ in pairs]
         gs = [g for _, g in pairs if not math.isnan(g)]
         out[key] = {
             "allocator": rows[0]["allocator"],
-            "scenario": rows[0]["scenario"],
+            "batch_window": _window(rows[0]),
             "runs": len(rows),
             "total_cost": _mean(rows, "total_cost"),
             "gap": fmean(gs) if gs else math.nan,
@@ -100,11 +114,11 @@ def _grouped_rows(agg: dict):
     row of an N (a section ends there)."""
     sizes = sorted({n for _, n in agg})
     alloc = {a: r.get("allocator", a) for (a, _), r in agg.items()}
-    scen = {a: r.get("scenario", "") for (a, _), r in agg.items()}
+    window = {a: r.get("batch_window", 0.0) for (a, _), r in agg.items()}
     rank = {a: i for i, a in enumerate(allocator_order(alloc.values()))}
 
     def order(label):
-        return rank[alloc[label]], variant_rank(scen[label]), label
+        return rank[alloc[label]], window[label], label
 
     labels = sorted({a for a, _ in agg}, key=order)
     for n in sizes:
@@ -165,45 +179,61 @@ def render_trips(summaries: list[dict], console=None) -> None:
         _render_trips(rows, console, None if set(by_repositioner) == {"stay"} else name)
 
 
+def _ci(rows: list[dict], value) -> tuple[float, float]:
+    """Mean over ``rows`` of ``value(row)`` and the half-width of its 95 % Student-t interval
+    (NaN with fewer than two finite values)."""
+    mean, half, _ = mean_ci(value(r) for r in rows)
+    return mean, half
+
+
+#: The trip table's figures: (column, digits, scale, unit, value of one run).
+_TRIP_FIGURES = (
+    ("trips", 0, 1.0, "", lambda r: r["n_tasks"]),
+    ("served", 1, 100, "%", lambda r: _ratio(r["tasks_completed"], r["n_tasks"])),
+    ("rej.", 1, 100, "%", lambda r: _ratio(r["tasks_rejected"] + r["tasks_expired"]
+                                           + r.get("tasks_unreachable", 0), r["n_tasks"])),
+    ("canc.", 1, 100, "%", lambda r: _ratio(r["tasks_cancelled"], r["n_tasks"])),
+    ("wait", 1, 1.0, "", lambda r: r["wait_time_mean"]),
+    ("empty", 0, 100, "%", lambda r: _ratio(r["empty_distance"], r["distance"])),
+    # thousands of km: a city day fits 80 columns
+    ("k km", 1, 1e-6, "", lambda r: r["distance"]),
+    ("dec. s", 2, 1.0, "", lambda r: r["alloc_seconds"]),
+)
+
+
 def _render_trips(summaries: list[dict], console, repositioner: str | None) -> None:
     from rich.console import Console
 
     console = console or Console()
     groups: dict[tuple[str, int], list[dict]] = defaultdict(list)
-    variants = len({s["scenario"] for s in summaries}) > 1  # a swept batch_window
+    windows = _windows(summaries)
     for s in summaries:
-        groups[(_label(s, variants), s["n_agents"])].append(s)
+        groups[(_label(s, windows), s["n_agents"])].append(s)
     runs = max((len(g) for g in groups.values()), default=0)
     title = ("Trips, mean over {runs} seed(s): served, rejected (at once or expired) and "
              "cancelled (open or aboard at the end) share of the trips, wait from release to "
              "pickup (s), share of km driven empty, km driven (thousands), wall seconds "
              "deciding").format(runs=runs)
+    if runs > 1:
+        title += "; under a row of several seeds, ± the half-width of its 95 % interval"
     if repositioner is not None:
         km = fmean(s.get("reposition_distance", 0.0) for s in summaries) / 1000
         title = f"Repositioner {repositioner!r} ({km:.0f} km repositioning per run). " + title
-    t = _new_table(title, ["allocator", "N", "trips", "served", "rej.", "canc.", "wait",
-                           "empty", "k km", "dec. s"], collapse=True)
+    t = _new_table(title, ["allocator", "N", *(c for c, *_ in _TRIP_FIGURES)], collapse=True)
     agg = {}
     for key, rows in groups.items():
-        agg[key] = {
-            "allocator": rows[0]["allocator"],
-            "scenario": rows[0]["scenario"],
-            "trips": _mean(rows, "n_tasks"),
-            "served": fmean(_ratio(r["tasks_completed"], r["n_tasks"]) for r in rows),
-            "rejected": fmean(_ratio(r["tasks_rejected"] + r["tasks_expired"]
-                                     + r.get("tasks_unreachable", 0), r["n_tasks"])
-                              for r in rows),
-            "cancelled": fmean(_ratio(r["tasks_cancelled"], r["n_tasks"]) for r in rows),
-            "wait": _mean(rows, "wait_time_mean"),
-            "empty": fmean(_ratio(r["empty_distance"], r["distance"]) for r in rows),
-            "km": _mean(rows, "distance") / 1e6,  # thousands of km: a city day fits 80 columns
-            "dec": _mean(rows, "alloc_seconds"),
-        }
+        agg[key] = {"allocator": rows[0]["allocator"], "batch_window": _window(rows[0]),
+                    "runs": len(rows),
+                    "figures": [(_ci(rows, value), digits, scale, unit)
+                                for _, digits, scale, unit, value in _TRIP_FIGURES]}
     for a, n, r, last in _grouped_rows(agg):
-        t.add_row(a, str(n), _f(r["trips"], 0), _f(r["served"], 1, 100, "%"),
-                  _f(r["rejected"], 1, 100, "%"), _f(r["cancelled"], 1, 100, "%"),
-                  _f(r["wait"]), _f(r["empty"], 0, 100, "%"),
-                  _f(r["km"], 1), _f(r["dec"], 2), end_section=last)
+        several = r["runs"] > 1
+        t.add_row(a, str(n), *(_f(m, d, sc, u) for (m, _), d, sc, u in r["figures"]),
+                  end_section=last and not several)
+        if several:  # the interval under its mean, in the same columns (80 columns still)
+            t.add_row("", "", *("" if math.isnan(h) else "±" + _f(h, d, sc, u)
+                                for (_, h), d, sc, u in r["figures"]), style="dim",
+                      end_section=last)
     console.print(t)
     if any(_pooled(r) for r in summaries):
         _render_shared(groups, runs, console)
@@ -222,7 +252,7 @@ def _render_shared(groups: dict, runs: int, console) -> None:
              "share of completed rides shared, delay (drop-off - release - direct drive, s), "
              "detour (in-vehicle time / direct drive)")
     t = _new_table(title, ["allocator", "N", "occupancy", "shared", "delay", "detour"])
-    agg = {key: {"allocator": rows[0]["allocator"], "scenario": rows[0]["scenario"],
+    agg = {key: {"allocator": rows[0]["allocator"], "batch_window": _window(rows[0]),
                  "occ": _mean(rows, "occupancy"), "shared": _mean(rows, "shared_rate"),
                  "delay": _mean(rows, "delay_mean"), "detour": _mean(rows, "detour_ratio")}
            for key, rows in groups.items()}
@@ -245,8 +275,9 @@ def render_one(s: dict, console=None, *, dynamic: bool = False) -> None:
     n, done = s["n_tasks"], s["tasks_completed"]
     share = f" ({100 * done / n:.1f} %)" if n else ""
     road = s.get("space") == "road"
+    window = f", batch window {_window(s):g} s" if _window(s) else ""
     t.add_row("run", f"{s['allocator']} / {s['planner']}, N = {s['n_agents']}, seed "
-                     f"{s['seed']}, {s.get('space', 'voxel')}")
+                     f"{s['seed']}, {s.get('space', 'voxel')}{window}")
     what = "trips" if road else "tasks"
     rejected = s["tasks_rejected"] + s["tasks_expired"] + s.get("tasks_unreachable", 0)
     t.add_row(what, f"{n} released, {done} served{share}; rejected {s['tasks_rejected']} at "

@@ -1,5 +1,7 @@
-"""A taxi report over runs that differ by batch window (scenario variants) and repositioner,
-not only by allocator: every series keeps its own row and its own line.
+"""A taxi report over runs that differ by batch window (a run key) and repositioner, not only by
+allocator: every series keeps its own row and its own line; a folder written the old way (each
+window a scenario variant ``tiny-immediate`` / ``tiny-batch30s``, no ``batch_window=``
+partition) reads the same.
 
 The run is tests/analysis/test_taxi_metrics.py's tiny road (4 trips, 2 taxis), swept over
 ``batch_window = [0, 30]`` and ``reposition = ["stay", "demand"]``: four series of one fcfs
@@ -30,12 +32,78 @@ def swept(tmp_path_factory):
     return open_results(out), out
 
 
-def test_variant_names():
-    assert TP.variant_name("chicago_taxi-immediate") == "imm"
-    assert TP.variant_name("chicago_taxi-batch30s") == "30s"
-    assert TP.variant_name("manhattan") == "manhattan"
-    assert TP.scenario_title(["c-batch30s", "c-immediate"]) == "c (imm, 30s)"
-    assert TP.scenario_title(["a", "b"]) == "a, b"
+def test_window_labels_and_titles():
+    assert M.window_label(0.0) == "imm"
+    assert M.window_label(30) == "30s" and M.window_label(2.5) == "2.5s"
+    assert TP.scenario_title(["c", "c"]) == "c"
+    assert TP.scenario_title(["b", "a"]) == "a, b"
+
+
+def test_batch_window_is_a_partition_and_a_column(swept):
+    res, out = swept
+    leaves = {p.relative_to(out / "summary").parts[:5]
+              for p in (out / "summary").rglob("part-0.parquet")}
+    assert leaves == {("scenario=tiny", "allocator=fcfs", "planner=dijkstra", f"reposition={r}",
+                       f"batch_window={w}") for r in ("stay", "demand") for w in ("0", "30")}
+    s = res.summary
+    assert set(s["scenario"]) == {"tiny"}
+    assert sorted(s["batch_window"]) == [0.0, 0.0, 30.0, 30.0]
+    assert s["run_id"].nunique() == 4  # one id per window
+    assert res.run_keys == ["scenario", "allocator", "planner", "reposition", "batch_window",
+                            "n_agents", "seed"]
+    tasks = res.table("tasks")
+    assert set(tasks["batch_window"]) == {0.0, 30.0} and set(tasks["scenario"]) == {"tiny"}
+    few = res.table("summary", columns=["total_cost"])  # a few columns: the keys come along
+    assert sorted(few["batch_window"]) == [0.0, 0.0, 30.0, 30.0]
+
+
+def _old_layout(new: Path, old: Path) -> None:
+    """``new`` rewritten as versions before the batch window was a run key wrote it: each
+    window a scenario of its own (``scenario=tiny-immediate`` / ``tiny-batch30s``), no
+    ``batch_window=`` level, no ``batch_window`` column, no ``dispatch.run_keys``."""
+    import pyarrow.parquet as pq
+
+    for f in new.rglob("part-0.parquet"):
+        parts = list(f.relative_to(new).parts)
+        if parts[0] == "_runs":
+            continue
+        level = next(p for p in parts if p.startswith("batch_window="))
+        w = float(level.partition("=")[2])
+        parts.remove(level)
+        parts[1] = f"scenario=tiny-{'immediate' if w == 0 else f'batch{w:g}s'}"
+        t = pq.read_table(f)
+        assert "batch_window" not in t.column_names
+        meta = {k: v for k, v in t.schema.metadata.items() if k != b"dispatch.run_keys"}
+        dest = old.joinpath(*parts)
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        pq.write_table(t.replace_schema_metadata(meta), dest)
+
+
+def test_an_older_folder_of_variants_reads_as_batch_windows(swept, tmp_path):
+    """Runs written with ``-immediate`` / ``-batch30s`` scenario names read as scenario
+    ``tiny`` with their window: the same taxi table as the new layout's, row for row, and
+    every table's rows of a run carry the name and the window."""
+    res, out = swept
+    _old_layout(out, tmp_path / "old")
+    old = open_results(tmp_path / "old")
+    assert old.run_keys == ["scenario", "allocator", "planner", "reposition", "batch_window",
+                            "n_agents", "seed"]  # the fallback: the files do not say
+    s = old.summary
+    assert set(s["scenario"]) == {"tiny"}
+    assert sorted(s["batch_window"]) == [0.0, 0.0, 30.0, 30.0]
+    cols = ["scenario", "batch_window", "reposition", "requests", "rides", "wait_average"]
+    args = ("tasks", "vehicles", "events")
+    new_taxi = M.taxi_metrics(res.summary, *(res.table(t) for t in args))[cols]
+    old_taxi = M.taxi_metrics(s, *(old.table(t) for t in args))[cols]
+    pd.testing.assert_frame_equal(old_taxi, new_taxi)
+    few = old.table("summary", columns=["total_cost"])
+    assert set(few["scenario"]) == {"tiny"}
+    assert sorted(few["batch_window"]) == [0.0, 0.0, 30.0, 30.0]
+    ev = old.table("events")
+    assert set(ev["scenario"]) == {"tiny"} and set(ev["batch_window"]) == {0.0, 30.0}
+    rid = s.loc[s["batch_window"] == 30.0, "run_id"].iloc[0]
+    assert "batch_window" in old.metadata(rid, "summary")["dispatch.scenario"]
+    assert len(old.run(rid)["tasks"]) == 4
 
 
 def test_taxi_table_has_a_row_per_series(swept):
@@ -43,9 +111,9 @@ def test_taxi_table_has_a_row_per_series(swept):
     s = res.summary
     assert len(s) == 4
     taxi = M.taxi_metrics(s, res.table("tasks"), res.table("vehicles"), res.table("events"))
-    keys = list(zip(taxi["scenario"], taxi["reposition"]))
-    assert keys == [("tiny-immediate", "stay"), ("tiny-immediate", "demand"),
-                    ("tiny-batch30s", "stay"), ("tiny-batch30s", "demand")]
+    keys = list(zip(taxi["scenario"], taxi["batch_window"], taxi["reposition"]))
+    assert keys == [("tiny", 0.0, "stay"), ("tiny", 0.0, "demand"),
+                    ("tiny", 30.0, "stay"), ("tiny", 30.0, "demand")]
     assert list(taxi["runs"]) == [1, 1, 1, 1]
     assert list(taxi["requests"]) == [4, 4, 4, 4]  # each series its own 4 trips, not pooled
     # the immediate run without repositioning is test_taxi_metrics' hand-computed run
@@ -59,16 +127,16 @@ def test_report_series_and_legend_labels(swept, tmp_path):
     write_report(res, tmp_path)
     taxi = pd.read_csv(tmp_path / "taxi.csv")
     assert len(taxi) == 4
-    assert set(zip(taxi["scenario"], taxi["reposition"])) == {
-        (f"tiny-{v}", r) for v in ("immediate", "batch30s") for r in ("stay", "demand")}
+    assert set(zip(taxi["batch_window"], taxi["reposition"])) == {
+        (w, r) for w in (0.0, 30.0) for r in ("stay", "demand")}
     text = (tmp_path / "report.md").read_text()
     table = [ln for ln in text.splitlines() if ln.startswith("| fcfs")]
-    assert len(table) == 4 and all("tiny-" in ln for ln in table)
+    assert len(table) == 4 and {ln.split("|")[4].strip() for ln in table} == {"imm", "30s"}
     hc = pd.read_csv(tmp_path / "hourly_customers.csv")
     hf = pd.read_csv(tmp_path / "hourly_fleet.csv")
     for df in (hc, hf):  # what hourly.png and fleet_state.png draw: one line / panel each
         assert [label for _, label, _ in TP.series(df)] == LABELS
-    assert hc.groupby(["scenario", "reposition"])["requests"].sum().tolist() == [4] * 4
+    assert hc.groupby(["batch_window", "reposition"])["requests"].sum().tolist() == [4] * 4
     trips = M.with_series(M.trip_table(res.table("tasks")), res.summary)
     assert [label for _, label, _ in TP.series(trips)] == LABELS  # wait_by_allocator.png
 
@@ -166,13 +234,13 @@ def _forty():
     hc, hf, wt = [], [], []
     for a in allocs:
         for n in (500, 1000):
-            for sc in ("study-immediate", "study-batch30s"):
+            for w in (0.0, 30.0):
                 for rep in ("stay", "demand"):
-                    like = "fcfs" if a == "greedy" and sc.endswith("immediate") else a
-                    k = allocs.index(like) + (5 if n == 500 else 0) + (10 if "30" in sc else 0)
+                    like = "fcfs" if a == "greedy" and w == 0 else a
+                    k = allocs.index(like) + (5 if n == 500 else 0) + (10 if w else 0)
                     rng = np.random.default_rng(k + (20 if rep == "demand" else 0))
-                    keys = dict(allocator=a, n_agents=n, scenario=sc, planner="dijkstra",
-                                reposition=rep)
+                    keys = dict(allocator=a, n_agents=n, scenario="study", batch_window=w,
+                                planner="dijkstra", reposition=rep)
                     for h in range(6):
                         hc.append({**keys, "hour": h, "t_h": float(h), "runs": 3,
                                    "requests": 300.0, "rides": 280.0 - k,

@@ -32,8 +32,8 @@ def test_derived_scenario(study, tmp_path):
     assert sc.tasks.trips_per_day == 1000
     runs = sc.runs()
     assert len(runs) == 2 * 2 * 2 * 2 * 3  # N x allocator x window x repositioner x seed
-    assert {r.scenario.name for r in runs} == {"chicago_study-immediate",
-                                               "chicago_study-batch30s"}
+    assert {r.scenario.name for r in runs} == {"chicago_study"}
+    assert {r.batch_window for r in runs} == {0.0, 30.0}
     assert {r.seed for r in runs} == {0, 1, 2}
     assert {(r.allocator, r.agents, r.reposition) for r in runs} == {
         (al, n, rp) for al in ("fcfs", "greedy") for n in (20, 40) for rp in ("stay", "demand")}
@@ -94,8 +94,7 @@ def test_rerun_with_other_lists_resumes_the_runs_it_shares(study, tmp_path):
     shared = sorted(set(first) & set(second))
     assert len(shared) == 2 * 2 * 1 * 1 * 3  # hungarian, greedy x 2 windows x N = 1000 x stay
     # x 3 seeds
-    assert {first[r].scenario.name for r in shared} == {"chicago_study-immediate",
-                                                         "chicago_study-batch30s"}
+    assert {first[r].batch_window for r in shared} == {0.0, 30.0}
     for r in shared:
         assert run_digest(first[r]) == run_digest(second[r])
     assert len({run_digest(s) for s in second.values()}) == len(second)

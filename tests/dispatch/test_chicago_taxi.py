@@ -309,13 +309,19 @@ def test_batch_window_is_a_sweep_axis(tmp_path, capsys):
                          extra="[sweep]\nbatch_window = [0.0, 30.0]\n"
                                "allocator = ['fcfs', 'greedy']")
     specs = load_scenario(path).runs()
-    assert [(s.scenario.name, s.scenario.dispatch.batch_window, s.allocator) for s in specs] == [
-        ("road-immediate", 0.0, "fcfs"), ("road-immediate", 0.0, "greedy"),
-        ("road-batch30s", 30.0, "fcfs"), ("road-batch30s", 30.0, "greedy")]
-    assert len({s.run_id for s in specs}) == 4
-    assert default_out(specs[2]) == Path("runs") / "road"  # both variants in one folder
+    assert [(s.scenario.name, s.batch_window, s.scenario.dispatch.batch_window, s.allocator)
+            for s in specs] == [
+        ("road", 0.0, 0.0, "fcfs"), ("road", 30.0, 30.0, "fcfs"),
+        ("road", 0.0, 0.0, "greedy"), ("road", 30.0, 30.0, "greedy")]
+    # a run key: its own id part and partition level (before n_agents, as the others)
+    n, seed = specs[0].agents, specs[0].seed
+    assert [s.run_id for s in specs] == [f"road__{a}__dijkstra__bw{w}__n{n}__s{seed}"
+                                         for a in ("fcfs", "greedy") for w in ("0", "30")]
+    assert list(specs[1].partition.items())[3:] == [("batch_window", 30.0), ("n_agents", n),
+                                                    ("seed", seed)]
+    assert default_out(specs[1]) == Path("runs") / "road"  # both windows in one folder
     # the window delays the decision: assigned at release (5 s) or 30 s later
-    for spec, at in ((specs[0], 5.0), (specs[2], 35.0)):
+    for spec, at in ((specs[0], 5.0), (specs[1], 35.0)):
         task = run_one(spec).tables["tasks"].to_pandas().iloc[0]
         assert task.assigned_at == at
     assert cli.main(["run", str(path), "--out", str(tmp_path / "out")]) == 0

@@ -127,21 +127,22 @@ def test_dynamic_aggregate_by_hand():
 
 
 def _variant_runs() -> list[dict]:
-    """Two batch-window variants of one scenario (``-immediate`` and ``-batch30s``): Hungarian
-    costs 100 in one and 80 in the other, greedy 10 % more than Hungarian in both."""
+    """Two batch windows (a run key) of one scenario, 0 and 30 s: Hungarian costs 100 in one
+    and 80 in the other, greedy 10 % more than Hungarian in both."""
     out = []
-    for scenario, ref in (("chicago-immediate", 100.0), ("chicago-batch30s", 80.0)):
+    for window, ref in ((0.0, 100.0), (30.0, 80.0)):
         for alloc, factor in (("hungarian", 1.0), ("greedy", 1.1)):
             for seed in (0, 1):
-                out.append({**_summary("hungarian", 8, seed), "scenario": scenario,
-                            "allocator": alloc, "total_cost": ref * factor * (1 + seed)})
+                out.append({**_summary("hungarian", 8, seed), "scenario": "chicago",
+                            "batch_window": window, "allocator": alloc,
+                            "total_cost": ref * factor * (1 + seed)})
     return out
 
 
-def test_gap_is_paired_within_a_batch_window_variant():
-    """The reference is the Hungarian run of the same scenario (variant), planner, N and seed:
-    Hungarian is 0 % from itself and greedy +10 % in both variants (it was keyed without the
-    scenario, so one variant's Hungarian was the other's reference: -20 % / +25 %)."""
+def test_gap_is_paired_within_a_batch_window():
+    """The reference is the Hungarian run of the same scenario, batch window, planner, N and
+    seed: Hungarian is 0 % from itself and greedy +10 % at both windows (keyed without the
+    window, one window's Hungarian would be the other's reference: -20 % / +25 %)."""
     agg = aggregate(_variant_runs())
     assert set(agg) == {("hungarian imm", 8), ("hungarian 30s", 8), ("greedy imm", 8),
                         ("greedy 30s", 8)}
@@ -164,10 +165,11 @@ def test_tables_and_analysis_share_one_gap_and_order():
     runs = _variant_runs()
     assert list(M.paired_gaps(pd.DataFrame(runs))) == pytest.approx(compare.paired_gaps(runs))
     assert tables.allocator_order is compare.allocator_order is M.allocator_order
-    am = M.allocator_metrics(pd.DataFrame(runs)).set_index(["scenario", "allocator"])
+    am = M.allocator_metrics(pd.DataFrame(runs)).set_index(["batch_window", "allocator"])
+    assert len(am) == 4
     agg = aggregate(runs)
-    for (scenario, alloc), row in am.iterrows():
-        label = f"{alloc} {M.variant_name(scenario)}"
+    for (window, alloc), row in am.iterrows():
+        label = f"{alloc} {compare.window_label(window)}"
         assert row["gap_mean"] == pytest.approx(agg[(label, 8)]["gap"])
 
 
@@ -177,9 +179,9 @@ def test_trip_table_shows_cancelled_and_fits_with_variant_labels():
     rows = []
     for a, n, s in itertools.product(["local_hungarian", "magnnet_match", "fcfs"],
                                      [100, 1000], [0, 1]):
-        for scenario in ("chicago-immediate", "chicago-batch30s"):
+        for window in (0.0, 30.0):
             rows.append({**_summary("hungarian", n, s, "road"), "allocator": a,
-                         "scenario": scenario, "n_tasks": 1000, "tasks_completed": 900,
+                         "batch_window": window, "n_tasks": 1000, "tasks_completed": 900,
                          "tasks_rejected": 40, "tasks_expired": 20, "tasks_unreachable": 0,
                          "tasks_cancelled": 38, "tasks_failed": 2})
     text = _render(rows)
@@ -192,9 +194,9 @@ def test_trip_table_shows_cancelled_and_fits_with_variant_labels():
 def test_shared_ride_table_with_variants():
     """Pooled road runs get the shared-ride table too, rows ordered and labelled as the trip
     table's (allocator, then batch window)."""
-    rows = [{**_summary("hungarian", 10, s, "road"), "allocator": a, "scenario": sc,
+    rows = [{**_summary("hungarian", 10, s, "road"), "allocator": a, "batch_window": w,
              "shared_rate": 0.3, "occupancy": 1.4, "delay_mean": 60.0, "detour_ratio": 1.2}
-            for a in ("fcfs", "hungarian") for sc in ("c-immediate", "c-batch30s")
+            for a in ("fcfs", "hungarian") for w in (0.0, 30.0)
             for s in (0, 1)]
     text = _render(rows)
     shared = text[text.index("Shared rides"):]
