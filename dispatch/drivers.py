@@ -36,7 +36,7 @@ if TYPE_CHECKING:
     from dispatch.vehicles import Vehicle
     from dispatch.world import World
 
-__all__ = ["CellDriver", "Driver", "RoadDriver", "road_driver"]
+__all__ = ["CellDriver", "Driver", "RoadDriver"]
 
 
 def _plan(planner: Planner, agent: AgentView, goal, now: float, run_id: str):
@@ -170,21 +170,3 @@ class RoadDriver(Driver):
             yield env.timeout(leg.seconds)
         v.leg, v.loc = None, int(leg.nodes[-1])
         v.drove(leg.length, leg.seconds)
-
-
-def road_driver(network: RoadNetwork, planner: Planner, bus: EventBus, cfg, clock) -> RoadDriver:
-    """The road driver of a ``[world]`` configuration; with ``[world] congestion`` the
-    planner's costs and the legs are scaled by the hour's factor (:mod:`dispatch.congestion`;
-    the driver's ``planner`` is then the wrapped one, and its metadata names the factors)."""
-    factors = cfg.roads.congestion
-    if not factors:
-        return RoadDriver(network, planner, bus, cfg.edge_events)
-    import json
-
-    from dispatch.congestion import CongestedDriver, CongestedPlanner, HourlyFactors
-
-    hourly = HourlyFactors(factors)
-    driver = CongestedDriver(network, CongestedPlanner(planner, hourly, clock), bus,
-                             cfg.edge_events, hourly)
-    driver.metadata["dispatch.congestion"] = json.dumps(list(factors), sort_keys=True)
-    return driver

@@ -537,6 +537,17 @@ class RoadNetwork(Space):
                 "dispatch.nodes": str(self.n), "dispatch.edges": str(self.n_edges),
                 "dispatch.crs": self.crs or "none"}
 
+    def shared_tables(self) -> dict[str, dict[str, np.ndarray]]:
+        """``nodes`` (``x``, ``y`` metres, in node order) and ``edges`` (``u``, ``v`` node
+        indices, ``seconds`` free-flow, ``metres``; in CSR order: by ``u``, then ``v``), kept
+        once per results folder (see :meth:`Space.shared_tables`)."""
+        t = self.time
+        u = np.repeat(np.arange(self.n, dtype=np.int64), np.diff(t.indptr))
+        return {"nodes": {"x": self.xy[:, 0], "y": self.xy[:, 1]},
+                "edges": {"u": u, "v": t.indices.astype(np.int64),
+                          "seconds": np.asarray(t.data, np.float64),
+                          "metres": np.asarray(self.length.data, np.float64)}}
+
     def __repr__(self) -> str:
         return f"RoadNetwork({self.name!r}, nodes={self.n}, edges={self.n_edges}, crs={self.crs!r})"
 
@@ -583,7 +594,7 @@ class RoadNetwork(Space):
         return place_cars(self, spec, rng)
 
     def driver(self, planner, bus, cfg, clock):
-        from dispatch.drivers import road_driver
+        from dispatch.congestion import road_driver
 
         return road_driver(self, planner, bus, cfg, clock)
 

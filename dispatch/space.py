@@ -182,6 +182,13 @@ class Space(ABC):
         rows). Default: none."""
         return {}
 
+    def shared_tables(self) -> dict[str, dict[str, np.ndarray]]:
+        """Tables of the space that every run on it shares, written once per results folder
+        for readers that do not rebuild the space (:mod:`dispatch.space_files`; e.g. a road
+        network's nodes and edges, which :mod:`analysis` reads): name -> {column: array}.
+        Default: none."""
+        return {}
+
     def mirror(self, bus, vehicles):
         """A physics mirror of the run subscribed to ``bus`` (``[world] physics``), with a
         ``close()``; None where the space has none."""

@@ -83,7 +83,7 @@ def schedule(first: float, stops: list[Stop], service: float) -> list[float]:
 
 
 def _jit(fn):
-    from dispatch._compiled import _jit as jit
+    from dispatch._compiled import jit
 
     return jit(fn)
 
