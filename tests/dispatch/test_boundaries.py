@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.conftest import ROOT
+from tests.conftest import ROOT, fake_distribution
 
 PLUGIN_PACKAGES = ("allocators", "planners", "repositioners", "chargers")
 
@@ -104,15 +104,10 @@ class Run(Hello):
 def command_site(tmp_path_factory) -> Path:
     """A folder that, on PYTHONPATH, installs a distribution adding the commands ``hello``
     and ``run`` (the latter is dispatch's own: not added) and a broken one."""
-    site = tmp_path_factory.mktemp("site")
-    (site / "my_commands.py").write_text(COMMAND, encoding="utf-8")
-    info = site / "my_commands-0.1.dist-info"
-    info.mkdir()
-    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: my-commands\nVersion: 0.1\n")
-    (info / "entry_points.txt").write_text(
+    return fake_distribution(
+        tmp_path_factory.mktemp("site"), "my-commands", "my_commands", COMMAND,
         "[dispatch.commands]\nhello = my_commands:Hello\nrun = my_commands:Run\n"
         "broken = my_commands:Missing\n")
-    return site
 
 
 def _dispatch(*args, site: Path):
