@@ -15,7 +15,9 @@ the network, so the fastest route is the free-flow one; only its duration change
   relies on).
 
 :func:`road_driver` builds a road run's driver from its ``[world]`` table: the plain
-:class:`~dispatch.drivers.RoadDriver`, or with congestion these two.
+:class:`~dispatch.drivers.RoadDriver`, or with congestion these two. The road network
+(:class:`dispatch.roads.RoadNetwork`) builds its driver here, so this module knows it only as
+the :class:`~dispatch.space.Space` it is given.
 """
 
 from __future__ import annotations
@@ -28,8 +30,9 @@ import numpy as np
 # the data (hourly factors, their calibration), kept importable from here
 from dispatch.hourly import (  # noqa: F401
     HOURS, MIN_TRIPS, NO_CONGESTION, HourlyFactors, calibrate, free_flow_times)
-from dispatch.roads import Leg, RoadNetwork, RoadPoint
 from dispatch.drivers import RoadDriver
+from dispatch.legs import Leg, RoadPoint
+from dispatch.space import Space
 
 
 def scale_leg(leg: Leg, factor: float) -> Leg:
@@ -45,7 +48,7 @@ class CongestedDriver(RoadDriver):
     """A :class:`~dispatch.drivers.RoadDriver` whose legs take ``factor(departure time)``
     times their free-flow seconds (see the module docstring)."""
 
-    def __init__(self, network: RoadNetwork, planner: Any, bus: Any, edge_events: bool,
+    def __init__(self, network: Space, planner: Any, bus: Any, edge_events: bool,
                  congestion: HourlyFactors) -> None:
         super().__init__(network, planner, bus, edge_events)
         self.congestion = congestion
@@ -92,7 +95,7 @@ class CongestedPlanner:
         return rem + (cost - rem) * f
 
 
-def road_driver(network: RoadNetwork, planner: Any, bus: Any, cfg: Any, clock) -> RoadDriver:
+def road_driver(network: Space, planner: Any, bus: Any, cfg: Any, clock) -> RoadDriver:
     """The road driver of a ``[world]`` configuration; with ``[world] congestion`` the
     planner's costs and the legs are scaled by the hour's factor (this module's;
     the driver's ``planner`` is then the wrapped one, and its metadata names the factors)."""

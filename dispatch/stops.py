@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    from dispatch.space import Location
+    from dispatch.locations import Location
     from dispatch.tasks import Task
 
 PICKUP, DROPOFF = "pickup", "dropoff"
