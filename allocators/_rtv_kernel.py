@@ -22,14 +22,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from dispatch._compiled import _jit
+from dispatch._compiled import jit
 
 #: codes in a returned order: ``>= 0`` a new stop (``2 i`` the pickup, ``2 i + 1`` the drop-off
 #: of the group's ``i``-th request), ``< 0`` the plan's stop ``-code - 1``
 INF = np.inf
 
 
-@_jit
+@jit
 def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, p_svc, p_eta,
                 p_drop, pp, vn, pn, np_, nn, r_pax, r_lp, r_ld, r_rel, r_direct, r_hasdrop,
                 old_end, svc, objective, budget, tol, out_cost, out_order,
@@ -338,7 +338,7 @@ def best_orders_any(groups, gveh, start, first_eta, load, cap, off, p_pax, p_lim
 _ORDERS = np.array([[0, 1, 2], [0, 2, 1], [1, 0, 2]], np.int64)
 
 
-@_jit
+@jit
 def _pair_shareable(now, nn, r_pax, r_lp, r_ld, svc, cap_max, tol, orders,
                     out):  # pragma: no cover - compiled
     m = r_pax.size

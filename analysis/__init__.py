@@ -1,15 +1,16 @@
 """Analysis of Parquet results: reading, metrics, tables, plots, reports, animations.
 
-Reads Parquet only and imports neither torch nor PyBullet (nor the ``dispatch`` package), so a
-results folder can be analysed on any machine with pyarrow, pandas and matplotlib; only what
-needs a road network (the map's streets, the trips' direct free-flow times) uses ``dispatch``
-when it is installed, and does without it otherwise:
+Reads Parquet only and imports neither torch nor PyBullet nor the ``dispatch`` package, so a
+results folder can be analysed on any machine with pyarrow, pandas, scipy and matplotlib (a road
+run's network is read from the results folder too); ``dispatch report`` and ``dispatch render``
+reach the command line through the entry-point group ``dispatch.commands``
+(:mod:`analysis.commands`):
 
 * :mod:`analysis.io` - :func:`~analysis.io.open_results` on run / sweep folders;
 * :mod:`analysis.metrics` - Tables I and III per allocator and N (static; per task for dynamic
   runs), taxi metrics as MATSim DRT / FleetPy name them, per-hour series;
 * :mod:`analysis.timeline` - what each vehicle did when, from the events table (fleet states);
-* :mod:`analysis.network` - a road run's network rebuilt from its metadata (needs ``dispatch``);
+* :mod:`analysis.network` - a road run's network, read from its results folder;
 * :mod:`analysis.plots`, :mod:`analysis.taxi_plots` - the figures (matplotlib, Agg canvas, no
   pyplot);
 * :mod:`analysis.report` - ``dispatch report``: Markdown / HTML with tables and figures;

@@ -22,7 +22,7 @@ the window of a run of an older version that did not sweep it).
 
 Which columns name a run is the writer's to say: every file of a run lists them in its
 ``dispatch.run_keys`` metadata (:attr:`Results.run_keys`); folders written before that read
-with :data:`analysis.compare.FALLBACK_RUN_KEYS`.
+with :data:`paired.compare.FALLBACK_RUN_KEYS`.
 
 :func:`open_results` takes any number of such folders (or folders that contain them) and gives
 one :class:`Results`, whose :meth:`Results.table` returns a pandas DataFrame in which every
@@ -44,7 +44,7 @@ import pyarrow as pa
 import pyarrow.dataset as ds
 import pyarrow.parquet as pq
 
-from analysis.compare import FALLBACK_RUN_KEYS, KEY_DEFAULTS, RUN_KEYS_ATTR
+from paired.compare import FALLBACK_RUN_KEYS, KEY_DEFAULTS, RUN_KEYS_ATTR
 
 TABLES = ("summary", "tasks", "assignments", "decisions", "events", "vehicles", "obstacles")
 #: The columns that name a run in folders that do not list theirs (the writer's list, from the
@@ -275,7 +275,7 @@ class Results:
     def run_keys(self) -> list[str]:
         """The columns that name a run, in order: the ``dispatch.run_keys`` lists of the
         summary files (their union, in the order the writers gave), the keys of older folders
-        (:data:`analysis.compare.FALLBACK_RUN_KEYS`) where a file does not list them."""
+        (:data:`paired.compare.FALLBACK_RUN_KEYS`) where a file does not list them."""
         if self._run_keys is None:
             found: dict[str, None] = {}
             for src in self.sources:

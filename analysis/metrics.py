@@ -66,19 +66,19 @@ import math
 import numpy as np
 import pandas as pd
 
-from analysis import compare
-from analysis.compare import (  # noqa: F401 (re-exported: one order, one window label)
+from paired import compare
+from paired.compare import (  # noqa: F401 (re-exported: one order, one window label)
     KEY_DEFAULTS,
     PREFERRED_ORDER,
     RUN_KEYS_ATTR,
     allocator_order,
     window_label,
 )
-from analysis.stats import mean_ci
+from paired.stats import mean_ci
 
 def run_keys(df: pd.DataFrame) -> list[str]:
     """The run keys of ``df``'s runs that it has as columns: the writer's list
-    (``df.attrs["run_keys"]``, from the files), else :data:`analysis.compare.FALLBACK_RUN_KEYS`."""
+    (``df.attrs["run_keys"]``, from the files), else :data:`paired.compare.FALLBACK_RUN_KEYS`."""
     keys = df.attrs.get(RUN_KEYS_ATTR) or compare.FALLBACK_RUN_KEYS
     return [k for k in keys if k in df.columns]
 
@@ -103,7 +103,7 @@ SERIES = [k for k in compare.FALLBACK_RUN_KEYS if k != "seed"]
 
 def with_series(df: pd.DataFrame, summary: pd.DataFrame) -> pd.DataFrame:
     """``df`` (rows with ``run_id``) with the series keys it lacks taken from ``summary``; a
-    key a run lacks reads :data:`~analysis.compare.KEY_DEFAULTS`' value (runs written before
+    key a run lacks reads :data:`~paired.compare.KEY_DEFAULTS`' value (runs written before
     repositioning or batch windows were run keys)."""
     keys = series_keys(summary)
     missing = [k for k in keys if k not in df.columns]
@@ -152,7 +152,7 @@ def sort_groups(df: pd.DataFrame) -> pd.DataFrame:
 
 def paired_gaps(summary: pd.DataFrame, reference: str = "hungarian") -> pd.Series:
     """Per run: its gap to the ``reference`` allocator's run on the same instance (scenario,
-    planner, repositioner, N, seed), as :func:`analysis.compare.paired_gaps` defines it (the
+    planner, repositioner, N, seed), as :func:`paired.compare.paired_gaps` defines it (the
     CLI's tables use the same); NaN where there is no reference run or it costs 0."""
     gaps = compare.paired_gaps(summary.to_dict("records"), reference,
                                run_keys=summary.attrs.get(RUN_KEYS_ATTR))

@@ -1,12 +1,13 @@
-"""The road network of a road run, rebuilt from its Parquet metadata, for what the tables do
-not hold: the map's edges and the trips' direct free-flow times.
+"""The road network of a road run, read from the results folder, for what the tables do not
+hold: the map's edges and the trips' direct free-flow times.
 
-The run's files carry the scenario text (``dispatch.scenario``); its ``[world]`` names the
-network (``"manhattan"`` with ``blocks``, ``block``, ``speed``; ``"chicago"``; a file). Rebuilding
-it needs the ``dispatch`` package (numpy, scipy, networkx; no PyBullet, no torch). Where that
-package is missing, or a network file named relative to the scenario cannot be found from here,
-:func:`road_network` returns None and the callers do without (a map without streets; the
-detour ratio NaN). Nothing here is imported by :mod:`analysis` at import time.
+A road run writes its network once per results folder, under ``_spaces/road-<digest>/``
+(``nodes.parquet``: x, y; ``edges.parquet``: u, v, seconds, metres), and names that folder in
+its files' ``dispatch.space_files`` metadata (the writer: ``dispatch/space_files.py``). This
+module reads it with pyarrow and scipy and needs nothing of ``dispatch``. Where the folder
+cannot be found (a folder written before networks were stored, or copied without
+``_spaces/``), :func:`road_network` returns None and the callers do without (a map without
+streets; the detour ratio NaN). Nothing here is imported by :mod:`analysis` at import time.
 """
 
 from __future__ import annotations
@@ -14,28 +15,48 @@ from __future__ import annotations
 import logging
 import tomllib
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pyarrow.parquet as pq
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import dijkstra
 
 log = logging.getLogger(__name__)
+
+#: the metadata key that names a run's space folder, relative to its results folder
+METADATA_KEY = "dispatch.space_files"
+#: origins per Dijkstra call (bounds the ``(block, n)`` distance array)
+BLOCK = 256
 
 
 @dataclass(frozen=True)
 class Network:
     """What the analysis needs of a road network: node positions (metres), the directed edges
-    as index pairs, and a way to get free-flow shortest-path seconds between nodes."""
+    as index pairs, and their free-flow seconds (for shortest-path times between nodes)."""
 
     name: str
     xy: np.ndarray  # (n, 2) metres
     edges: np.ndarray  # (e, 2) node indices
-    net: object  # dispatch.roads.RoadNetwork
+    seconds: np.ndarray  # (e,) free-flow seconds of each edge
+
+    @cached_property
+    def _time(self) -> csr_matrix:
+        n = self.xy.shape[0]
+        return csr_matrix((self.seconds, (self.edges[:, 0], self.edges[:, 1])), shape=(n, n))
+
+    @cached_property
+    def _tree(self):
+        from scipy.spatial import cKDTree
+
+        return cKDTree(self.xy)
 
     def nodes_at(self, xy: np.ndarray) -> np.ndarray:
         """The index of the node at each position (the nearest node; trips' pickups and
         drop-offs lie on nodes)."""
-        idx, _ = self.net.nearest(np.asarray(xy, dtype=float).reshape(-1, 2))
+        _, idx = self._tree.query(np.asarray(xy, dtype=np.float64).reshape(-1, 2))
         return np.asarray(idx, dtype=np.int64)
 
     def free_flow_seconds(self, origins: np.ndarray, dests: np.ndarray) -> np.ndarray:
@@ -47,49 +68,49 @@ class Network:
         if origins.size == 0:
             return out
         uniq, inv = np.unique(origins, return_inverse=True)
-        block = 256
-        for s in range(0, uniq.size, block):
-            rows = self.net.distances_from(uniq[s:s + block])
-            pick = (inv >= s) & (inv < s + block)
+        for s in range(0, uniq.size, BLOCK):
+            rows = dijkstra(self._time, indices=uniq[s:s + BLOCK])
+            pick = (inv >= s) & (inv < s + BLOCK)
             out[pick] = rows[inv[pick] - s, dests[pick]]
         return out
 
 
-def _world(scenario_text: str) -> dict | None:
+def _name(scenario_text: str) -> str:
+    """The network's name as the scenario gives it (``[world] network``), else ``"road"``."""
     try:
-        return tomllib.loads(scenario_text).get("world", {})
+        return str(tomllib.loads(scenario_text).get("world", {}).get("network", "road"))
     except tomllib.TOMLDecodeError:
-        return None
+        return "road"
+
+
+def read_network(folder: Path, name: str = "road") -> Network:
+    """The network stored in ``folder`` (``nodes.parquet``, ``edges.parquet``)."""
+    nodes = pq.read_table(folder / "nodes.parquet")
+    edges = pq.read_table(folder / "edges.parquet")
+    xy = np.column_stack([nodes.column("x").to_numpy(), nodes.column("y").to_numpy()])
+    uv = np.column_stack([edges.column("u").to_numpy(), edges.column("v").to_numpy()])
+    return Network(name, xy.astype(np.float64), uv.astype(np.int64),
+                   edges.column("seconds").to_numpy().astype(np.float64))
 
 
 def road_network(metadata: dict[str, str], search: list[Path] | None = None) -> Network | None:
     """The network of the run whose schema ``metadata`` is given (see the module docstring),
-    or None where it cannot be rebuilt here. A network file is looked for relative to each
-    folder of ``search`` (e.g. the results folder, the current folder)."""
+    or None where it cannot be found. Its folder is looked for relative to each folder of
+    ``search`` (the results folders), then the current folder."""
     if metadata.get("dispatch.space") != "road":
         return None
-    world = _world(metadata.get("dispatch.scenario", ""))
-    if world is None or "network" not in world:
+    rel = metadata.get(METADATA_KEY)
+    if not rel:
+        log.info("no network stored with this run (written before networks were stored): "
+                 "no streets on the map, no detour ratio")
         return None
-    try:
-        from dispatch.roads import load_network
-    except ImportError:
-        log.info("the dispatch package is not installed: no road network for the map")
-        return None
-    kw = {k: world[k] for k in ("blocks", "block", "speed") if k in world}
-    bases = [Path.cwd(), Path.cwd() / "scenarios", *(search or [])]
+    bases = [*(search or []), Path.cwd()]
     for base in bases:
-        try:
-            net = load_network(str(world["network"]), base=base, **kw)
-            break
-        except (ValueError, OSError):
-            continue
-    else:
-        log.info("road network %r not found from %s", world["network"], bases)
-        return None
-    t = net.time.tocoo()
-    edges = np.column_stack([t.row, t.col]).astype(np.int64)
-    return Network(str(world["network"]), np.asarray(net.xy, dtype=float)[:, :2], edges, net)
+        folder = Path(base) / rel
+        if (folder / "nodes.parquet").is_file() and (folder / "edges.parquet").is_file():
+            return read_network(folder, _name(metadata.get("dispatch.scenario", "")))
+    log.info("road network %s not found under %s", rel, bases)
+    return None
 
 
 def direct_seconds(tasks: pd.DataFrame, network: Network | None) -> np.ndarray:

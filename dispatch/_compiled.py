@@ -13,7 +13,7 @@ import numba
 import numpy as np
 
 
-def _jit(fn):
+def jit(fn):
     """``numba.njit(cache=True)``, without the disk cache where none is writable."""
     try:
         return numba.njit(cache=True)(fn)
@@ -21,7 +21,7 @@ def _jit(fn):
         return numba.njit(cache=False)(fn)
 
 
-@_jit
+@jit
 def leg_sums(indptr, indices, seconds, metres, nodes, t0, m0):  # pragma: no cover - compiled
     """``(times, metres, ok)`` of the path ``nodes`` in a CSR graph whose rows hold each
     node's out-edges (``indices``: heads; ``seconds`` / ``metres``: the edges' values):

@@ -1,4 +1,6 @@
-"""The ``dispatch`` command line: run, validate, plugins, sweep, report, render."""
+"""The dispatch command line: run, validate, check, plugins, new, train, sweep; and the
+commands other packages add through the entry-point group dispatch.commands (report and render,
+from the analysis package)."""
 
 from __future__ import annotations
 
@@ -14,7 +16,13 @@ from dispatch.errors import DispatchError
 from dispatch.progress import Heartbeat
 
 
-def _parser() -> argparse.ArgumentParser:
+#: the commands of this module; a registered command of one of these names is not added
+OWN_COMMANDS = ("run", "validate", "check", "plugins", "new", "train", "sweep")
+
+
+def _parser(commands=None) -> argparse.ArgumentParser:
+    """The parser of the command line: this module's commands, then each of ``commands``
+    (name -> :class:`dispatch.commands.Command`)."""
     p = argparse.ArgumentParser(prog="dispatch", description=__doc__)
     p.add_argument("--version", action="version", version=f"dispatch {__version__}")
     p.add_argument("-v", "--verbose", action="store_true",
@@ -54,7 +62,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="a constructor parameter (VALUE read as TOML, else as a string); repeat")
     c.add_argument("--seed", type=int, default=0, help="seed of the random problems")
 
-    sub.add_parser("plugins", help="list installed allocators, planners and repositioners")
+    sub.add_parser("plugins", help="list installed allocators, planners, repositioners, "
+                   "chargers and commands")
     n = sub.add_parser("new", help="write a new plugin package (`dispatch new allocator NAME`): "
                        "installs with pip and passes `dispatch check NAME`")
     n.add_argument("kind", choices=("allocator",))
@@ -68,12 +77,34 @@ def _parser() -> argparse.ArgumentParser:
                        add_help=False)
     t.add_argument("trainer", help="trainer name (entry-point group dispatch.trainers)")
     t.add_argument("trainer_args", nargs=argparse.REMAINDER)
-    _add_analysis_parsers(sub)
+    _add_sweep_parser(sub)
+    for command in (commands or {}).values():
+        command.add_parser(sub)
     return p
 
 
+class _Output:
+    """What a registered command writes through: ``print`` a line of output, ``warn`` a
+    warning on stderr (one line each, as the CLI's own)."""
+
+    def __init__(self, console, err) -> None:
+        self.console, self.err = console, err
+
+    def print(self, text: str) -> None:
+        self.console.print(text, highlight=False, soft_wrap=True, markup=False, emoji=False)
+
+    def warn(self, text: str) -> None:
+        from rich.markup import escape
+
+        self.err.print(f"[yellow]warning[/]: {escape(text)}", highlight=False, soft_wrap=True,
+                       emoji=False)
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
+    from dispatch.commands import installed
+
+    commands = installed(reserved=OWN_COMMANDS)
+    args = _parser(commands).parse_args(argv)
     level = logging.DEBUG if args.debug else logging.INFO if args.verbose else logging.WARNING
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
     from rich.console import Console
@@ -84,9 +115,10 @@ def main(argv: list[str] | None = None) -> int:
     console = Console()
     err = Console(stderr=True, soft_wrap=True)
     try:
+        if args.command in commands:  # registered by another package (dispatch.commands)
+            return commands[args.command].run(args, _Output(console, err))
         return {"run": _run, "validate": _validate, "plugins": _plugins, "sweep": _sweep,
-                "report": _report, "render": _render, "train": _train,
-                "check": _check, "new": _new}[args.command](args, console)
+                "train": _train, "check": _check, "new": _new}[args.command](args, console)
     except DispatchError as e:
         if args.debug or args.verbose:  # the chain: where a plugin raised, then where we caught
             import traceback
@@ -356,7 +388,9 @@ def _train(args, console) -> int:
 
 
 def _plugins(args, console) -> int:
-    """One table per kind: name, spaces served (planners, repositioners) and the description
+    """One table per kind (allocators, planners, repositioners, chargers and the commands
+    other packages add to this command line): name, spaces served (planners, repositioners,
+    chargers) and the description
     (plain text, never empty) with the entry point's target on a line of its own below it, so
     that neither is cut in an 80-column terminal."""
     from rich.table import Table
@@ -364,25 +398,26 @@ def _plugins(args, console) -> int:
 
     from dispatch.registry import describe
 
-    for kind in ("allocator", "planner", "repositioner", "charger"):
+    for kind in ("allocator", "planner", "repositioner", "charger", "command"):
         t = Table(title=f"{kind}s (entry-point group dispatch.{kind}s)", title_justify="left")
         t.add_column("name", no_wrap=True)
-        if kind != "allocator":
+        spaced = kind not in ("allocator", "command")  # plugins that serve some spaces
+        if spaced:
             t.add_column("spaces")
         t.add_column("description; target (module:object)", overflow="fold")
         for name, target, spaces, doc in describe(kind):
             cell = Text(doc)
             cell.append("\n" + target, style="dim")
-            t.add_row(Text(name), *([Text(spaces)] if kind != "allocator" else []), cell)
+            t.add_row(Text(name), *([Text(spaces)] if spaced else []), cell)
         console.print(t)
     return 0
 
 
-# ----------------------------------------------------------------------------- sweep, report,
-# render (the work is in dispatch.runner and in the analysis package, imported when used)
+# ----------------------------------------------------------------------------- sweep (the work
+# is in dispatch.runner)
 
 
-def _add_analysis_parsers(sub) -> None:
+def _add_sweep_parser(sub) -> None:
     s = sub.add_parser("sweep", help="run a scenario's sweep on a process pool or Ray; "
                        "resumable (complete runs are skipped)")
     s.add_argument("scenario", type=Path)
@@ -401,28 +436,6 @@ def _add_analysis_parsers(sub) -> None:
     s.add_argument("--duration", type=float, metavar="SECONDS",
                    help="simulated seconds before each run stops (overrides the file's "
                         "duration; the scenario text stored with the results says so)")
-
-    r = sub.add_parser("report", help="tables and plots (Markdown or HTML) of run or sweep "
-                       "folders")
-    r.add_argument("runs", type=Path, nargs="+", metavar="RUNS",
-                   help="results folders (of dispatch run or sweep), or folders holding them")
-    r.add_argument("--out", type=Path, help="report folder (default: RUNS/report/)")
-    r.add_argument("--format", choices=("md", "html"), default="md")
-    r.add_argument("--run", metavar="RUN_ID", help="the run shown in detail (timeline, 3D)")
-    r.add_argument("--series", action="append", metavar="PATTERN",
-                   help="taxi figures: draw only the series whose label matches this glob "
-                        "(e.g. 'hungarian*', '* 30s*', '*+ demand'); repeat for more; the "
-                        "tables keep every series")
-
-    g = sub.add_parser("render", help="draw a run as an animated GIF from PyBullet images")
-    g.add_argument("run", type=Path, metavar="RUN",
-                   help="a results folder (of dispatch run or sweep)")
-    g.add_argument("--run-id", help="which run of a sweep folder (default: as the report)")
-    g.add_argument("--out", type=Path, help="output .gif (or .mp4; default: RUN/<run id>.gif)")
-    g.add_argument("--fps", type=int, default=10)
-    g.add_argument("--seconds", type=float, help="length of the animation (default: the "
-                   "run's simulated time, at most 12 s)")
-    g.add_argument("--size", default="480x360", help="frame size WIDTHxHEIGHT")
 
 
 def _sweep(args, console) -> int:
@@ -537,50 +550,6 @@ def _new(args, console) -> int:
     console.print(f"wrote {root}/ (pyproject.toml, dispatch_{args.name}/allocator.py, tests, "
                   f"README.md); next: pip install -e {root} && dispatch check {args.name}",
                   highlight=False, soft_wrap=True)
-    return 0
-
-
-def _analysis_call(fn, *args, **kwargs):
-    """Call into the analysis package; its input errors become one clean DispatchError."""
-    from analysis.io import NoResultsError
-
-    try:
-        return fn(*args, **kwargs)
-    except (NoResultsError, KeyError, ValueError) as e:
-        raise DispatchError(e.args[0] if e.args else str(e)) from e
-
-
-def _report(args, console) -> int:
-    from rich.console import Console
-
-    from analysis.io import open_results
-    from analysis.report import duplicates_note, write_report
-
-    out = args.out or args.runs[0] / "report"
-    res = _analysis_call(open_results, *args.runs)
-    if res.duplicates:  # the same run in two folders: counted once, and said so
-        Console(stderr=True, soft_wrap=True).print(
-            f"[yellow]warning[/]: {duplicates_note(res)}", highlight=False, soft_wrap=True)
-    files = _analysis_call(write_report, res, out, fmt=args.format, run_id=args.run,
-                           series=args.series)
-    console.print(f"report: {files[0]}", highlight=False, soft_wrap=True)
-    console.print("files: " + ", ".join(f.name for f in files[1:]), highlight=False,
-                  soft_wrap=True)
-    return 0
-
-
-def _render(args, console) -> int:
-    from analysis.render import render_run
-
-    try:
-        w, h = (int(v) for v in args.size.lower().split("x"))
-    except ValueError:
-        raise DispatchError(f"--size must be WIDTHxHEIGHT, got {args.size!r}") from None
-    if args.fps < 1 or w < 16 or h < 16:
-        raise DispatchError("--fps must be >= 1 and --size at least 16x16")
-    path = _analysis_call(render_run, args.run, args.out, run_id=args.run_id, fps=args.fps,
-                          seconds=args.seconds, size=(w, h))
-    console.print(f"animation: {path}", highlight=False, soft_wrap=True)
     return 0
 
 

@@ -1,97 +1,38 @@
-"""Congestion on roads: free-flow travel times scaled by a factor per hour of the day.
+"""Congestion on roads in a run: free-flow travel times scaled by the hour's factor.
 
-A network's edge times are free-flow times. With congestion on (``[world] congestion``), a
-drive that starts at simulated time ``t`` takes ``factor(t)`` times its free-flow time, where
-``factor(t) = factors[floor(t / 3600) mod 24]`` (the run starts at midnight). The scaling is
-uniform over the network, so the fastest route is the free-flow one; only its duration changes:
+The factors and their calibration are :mod:`dispatch.hourly`'s (re-exported here). A network's
+edge times are free-flow times. With congestion on (``[world] congestion``), a drive that starts
+at simulated time ``t`` takes ``factor(t)`` times its free-flow time. The scaling is uniform over
+the network, so the fastest route is the free-flow one; only its duration changes:
 
 * the planner's costs at a decision at time ``t`` are ``remaining + factor(t) x free-flow``
-  (``remaining``: seconds a vehicle still has on the edge it is driving, already real seconds);
+  (``remaining``: seconds a vehicle still has on the edge it is driving, already real seconds;
+  :class:`CongestedPlanner`);
 * a vehicle's leg (to a pickup, to a drop-off) is timed with the factor of the hour it
-  **departs** in, for the whole leg: a leg that crosses an hour boundary keeps its departure
-  hour's factor (legs last minutes, hours change slowly; a per-edge time-dependent model
-  would break the exact shortest-path costs the dispatcher relies on).
+  **departs** in, for the whole leg (:class:`CongestedDriver`): a leg that crosses an hour
+  boundary keeps its departure hour's factor (legs last minutes, hours change slowly; a
+  per-edge time-dependent model would break the exact shortest-path costs the dispatcher
+  relies on).
 
-:func:`calibrate` estimates the 24 factors from observed trips: the ratio of each trip's
-observed seconds to the network's free-flow shortest-path time between its snapped pickup and
-drop-off nodes, robustly (the median) per hour of day; an hour with fewer than ``min_trips``
-usable trips is pooled with its neighbours (hours h-1..h+1, then h-2..h+2, ..., circularly)
-until the pool has enough. ``dispatch/data/chicago_taxi/congestion.csv`` holds the factors
-calibrated from the Chicago taxi sample (``scripts/make_chicago_taxi.py`` writes it).
+:func:`road_driver` builds a road run's driver from its ``[world]`` table: the plain
+:class:`~dispatch.drivers.RoadDriver`, or with congestion these two. The road network
+(:class:`dispatch.roads.RoadNetwork`) builds its driver here, so this module knows it only as
+the :class:`~dispatch.space.Space` it is given.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from dispatch.roads import Leg, RoadNetwork, RoadPoint
-from dispatch.vehicles import RoadDriver
-
-HOURS = 24
-#: Fewest usable trips behind one hour's factor before neighbouring hours are pooled in.
-MIN_TRIPS = 200
-
-
-@dataclass(frozen=True)
-class HourlyFactors:
-    """24 positive factors, one per hour of day (index 0: 00:00-01:00)."""
-
-    factors: tuple[float, ...]
-
-    def __post_init__(self) -> None:
-        f = self.factors
-        if len(f) != HOURS or any(not (math.isfinite(x) and x > 0) for x in f):
-            raise ValueError(f"congestion needs {HOURS} finite factors > 0, got {list(f)!r}")
-
-    def factor(self, t: float) -> float:
-        """The factor of the hour of day that simulated time ``t`` (seconds) falls in."""
-        return self.factors[math.floor(t / 3600.0) % HOURS]
-
-
-NO_CONGESTION = HourlyFactors((1.0,) * HOURS)
-
-
-def free_flow_times(net: RoadNetwork, origin: np.ndarray, dest: np.ndarray) -> np.ndarray:
-    """Free-flow shortest-path seconds from node index ``origin[k]`` to ``dest[k]`` (one
-    Dijkstra per distinct origin)."""
-    origin, dest = np.asarray(origin, np.int64), np.asarray(dest, np.int64)
-    src, inv = np.unique(origin, return_inverse=True)
-    return net.distances_from(src)[inv, dest] if src.size else np.zeros(0)
-
-
-def calibrate(net: RoadNetwork, origin: np.ndarray, dest: np.ndarray, hour: np.ndarray,
-              seconds: np.ndarray, min_trips: int = MIN_TRIPS
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per hour of day: ``(factors, trips, widths)``: the median of observed / free-flow seconds
-    over the trips of that hour (pooled with hours within ``widths[h]`` of it when the hour
-    alone has fewer than ``min_trips``), and how many trips the median was taken over.
-
-    Trips with ``origin == dest`` (no drive on the network) or ``seconds <= 0`` (not a
-    measured ride) are left out. ``origin``, ``dest`` are node indices; ``hour`` in 0..23.
-    ValueError when fewer than ``min_trips`` usable trips exist in the whole day."""
-    origin, dest = np.asarray(origin, np.int64), np.asarray(dest, np.int64)
-    hour, seconds = np.asarray(hour, np.int64), np.asarray(seconds, np.float64)
-    use = (origin != dest) & (seconds > 0)
-    ratio = seconds[use] / free_flow_times(net, origin[use], dest[use])
-    hour = hour[use]
-    if ratio.size < max(min_trips, 1):
-        raise ValueError(f"calibrate: {ratio.size} usable trips, need at least {min_trips}")
-    factors, trips, widths = np.empty(HOURS), np.empty(HOURS, np.int64), np.empty(HOURS, np.int64)
-    for h in range(HOURS):
-        for w in range(HOURS // 2 + 1):
-            near = np.minimum((hour - h) % HOURS, (h - hour) % HOURS) <= w
-            if near.sum() >= min_trips:
-                break
-        factors[h], trips[h], widths[h] = float(np.median(ratio[near])), int(near.sum()), w
-    return factors, trips, widths
-
-
-# ----------------------------------------------------------------------------- in a run
+# the data (hourly factors, their calibration), kept importable from here
+from dispatch.hourly import (  # noqa: F401
+    HOURS, MIN_TRIPS, NO_CONGESTION, HourlyFactors, calibrate, free_flow_times)
+from dispatch.drivers import RoadDriver
+from dispatch.legs import Leg, RoadPoint
+from dispatch.space import Space
 
 
 def scale_leg(leg: Leg, factor: float) -> Leg:
@@ -104,10 +45,10 @@ def scale_leg(leg: Leg, factor: float) -> Leg:
 
 
 class CongestedDriver(RoadDriver):
-    """A :class:`~dispatch.vehicles.RoadDriver` whose legs take ``factor(departure time)``
+    """A :class:`~dispatch.drivers.RoadDriver` whose legs take ``factor(departure time)``
     times their free-flow seconds (see the module docstring)."""
 
-    def __init__(self, network: RoadNetwork, planner: Any, bus: Any, edge_events: bool,
+    def __init__(self, network: Space, planner: Any, bus: Any, edge_events: bool,
                  congestion: HourlyFactors) -> None:
         super().__init__(network, planner, bus, edge_events)
         self.congestion = congestion
@@ -152,3 +93,19 @@ class CongestedPlanner:
                                else 0.0 for a in agents), np.float64, len(agents))
         rem = rem[:, None]
         return rem + (cost - rem) * f
+
+
+def road_driver(network: Space, planner: Any, bus: Any, cfg: Any, clock) -> RoadDriver:
+    """The road driver of a ``[world]`` configuration; with ``[world] congestion`` the
+    planner's costs and the legs are scaled by the hour's factor (this module's;
+    the driver's ``planner`` is then the wrapped one, and its metadata names the factors)."""
+    factors = cfg.roads.congestion
+    if not factors:
+        return RoadDriver(network, planner, bus, cfg.edge_events)
+    import json
+
+    hourly = HourlyFactors(factors)
+    driver = CongestedDriver(network, CongestedPlanner(planner, hourly, clock), bus,
+                             cfg.edge_events, hourly)
+    driver.metadata["dispatch.congestion"] = json.dumps(list(factors), sort_keys=True)
+    return driver

@@ -19,7 +19,7 @@ import numpy as np
 from dispatch.errors import ScenarioError
 from dispatch.tasks import Demand, Request
 from dispatch.traces import Trips
-from dispatch.world import Grid
+from dispatch.voxels import Grid
 
 
 class VoxelDemand(Demand):

@@ -50,7 +50,9 @@ tasks, not with the fleet.
 
 The dispatcher is handed what it needs (the task book, the fleet, the operator that hands tasks
 to vehicles, the planner, the allocator, the space, its configuration) and reaches into nothing
-else; each decision goes to ``on_decision`` (the recorder).
+else; each decision goes to ``on_decision`` (the recorder). It decides and hands out; the plan
+machinery (insertion costs, the problem's plans) is :mod:`dispatch.plans`'s and the checking of
+an answer :mod:`dispatch.answers`'s (``validate`` and ``route_stops`` are importable from here).
 """
 
 from __future__ import annotations
@@ -58,18 +60,21 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+# answer checking; validate and route_stops stay importable from here (plugins' tests use them)
+from dispatch.answers import finders, route_stops, validate  # noqa: F401
 from dispatch.comms import comm_graph, components
-from dispatch.contracts import Allocation, AllocationProblem, Allocator, Planner, StopView
+from dispatch.contracts import Allocation, AllocationProblem, Allocator, Planner
 from dispatch.errors import AllocationError, DispatchError, PluginError
 from dispatch.lazy import certify, resolve_open
+from dispatch.plans import Inserts, Plans, insertion_costs_of, roomy
 from dispatch.space import Space
-from dispatch.stops import OBJECTIVES, PICKUP_TIME, insertion_costs
+from dispatch.stops import OBJECTIVES
 from dispatch.tasks import OPEN, TaskBook, TaskState
 
 if TYPE_CHECKING:
@@ -87,11 +92,6 @@ def _line(e: BaseException, limit: int = 400) -> str:
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
-def _ids(ids) -> str:
-    ids = sorted(ids)
-    return str(ids) if len(ids) <= 10 else f"[{', '.join(map(str, ids[:10]))}, ...] ({len(ids)})"
-
-
 def _positions(space: Space, agents) -> np.ndarray:
     """``(N, 3)`` positions of a decision's agents: from their node array where the sequence
     carries one (road points part-way along an edge one by one), else view by view."""
@@ -102,229 +102,6 @@ def _positions(space: Space, agents) -> np.ndarray:
     for k in agents.points.tolist():
         out[k] = space.positions([agents[k].loc])[0]
     return out
-
-
-def validate(problem: AllocationProblem, allocation: Allocation,
-             multi: bool = False) -> list[tuple[int, int]]:
-    """Raise AllocationError unless every pair names a known agent and task, no agent or task
-    appears twice, and no pair has infinite cost (and the counters are whole numbers >= 0).
-    With ``multi`` (an allocator that sets ``multi_request``) an agent may appear in several
-    pairs, and a pair of infinite single-request cost is allowed, when ``allocation.routes``
-    gives the agent's stop order (checked by :func:`route_stops`).
-    Returns each pair's ``(row, column)`` in the problem (its indices into ``cost``)."""
-    if not isinstance(allocation, Allocation):
-        raise AllocationError(f"allocator returned {type(allocation).__name__}, not an Allocation")
-    for k in ("rounds", "messages", "hops"):
-        v = getattr(allocation, k)
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
-            raise AllocationError(f"Allocation.{k} must be an integer >= 0, got {v!r}")
-    try:
-        pairs = tuple(allocation.pairs)
-    except TypeError:
-        raise AllocationError(f"Allocation.pairs must be a sequence of (agent_id, task_id) "
-                              f"pairs, got {type(allocation.pairs).__name__}") from None
-    agent_row, task_col = _finders(problem)
-    routes = getattr(allocation, "routes", None) or {}
-    if routes and not multi:
-        raise AllocationError("Allocation.routes is for allocators that set multi_request")
-    seen_agents: set[int] = set()
-    seen_tasks: set[int] = set()
-    hint = ("; pairs name agents and tasks by id, not by index (Allocation.centralized "
-            "turns index pairs into id pairs)")
-    n_agents, n_tasks = len(problem.agent_ids), len(problem.task_ids)
-    index = []
-    for pair in pairs:
-        try:
-            aid, tid = pair
-            hash(aid), hash(tid)
-        except (TypeError, ValueError):
-            raise AllocationError(f"pair {pair!r} is not an (agent_id, task_id) pair") from None
-        i, j = agent_row(aid), task_col(tid)
-        if i < 0:
-            by_index = isinstance(aid, (int, np.integer)) and 0 <= aid < n_agents
-            raise AllocationError(f"unknown agent id {aid!r} (idle agents: "
-                                  f"{_ids(problem.agent_ids.tolist())})"
-                                  f"{hint if by_index else ''}")
-        if j < 0:
-            by_index = isinstance(tid, (int, np.integer)) and 0 <= tid < n_tasks
-            raise AllocationError(f"unknown task id {tid!r} (open tasks: "
-                                  f"{_ids(problem.task_ids.tolist())}){hint if by_index else ''}")
-        if tid in seen_tasks:
-            raise AllocationError(f"task {tid} is given to more than one agent")
-        routed = multi and aid in routes
-        if aid in seen_agents and not routed:
-            raise AllocationError(f"agent {aid} is given more than one task"
-                                  + (" without a route (Allocation.routes)" if multi else ""))
-        if not routed and not math.isfinite(problem.cost[i, j]):
-            raise AllocationError(f"agent {aid} cannot serve task {tid} (infinite cost)")
-        seen_agents.add(aid)
-        seen_tasks.add(tid)
-        index.append((i, j))
-    for aid in routes:
-        if aid not in seen_agents:
-            raise AllocationError(f"Allocation.routes names agent {aid!r}, which is given no "
-                                  "task in pairs")
-    return index
-
-
-def route_stops(problem: AllocationProblem, aid: int, route, new: dict) -> list[tuple]:
-    """Agent ``aid``'s new stop order from ``Allocation.routes`` as ``(kind, task_id, loc,
-    passengers, latest, completes)`` rows, or AllocationError: it must hold every stop of the
-    agent's plan (``problem.plans``) and the pickup and drop-off of each request of ``new``
-    (task id -> TaskView given to it), each once, every pickup before its drop-off."""
-    plan = {(s.kind, s.task_id): s for s in problem.plans.get(aid, ())}
-    try:
-        keys = [(str(k), int(t)) for k, t in route]
-    except (TypeError, ValueError):
-        raise AllocationError(f"route of agent {aid} must be (kind, task_id) pairs, got "
-                              f"{route!r:.200}") from None
-    want = set(plan)
-    for tid, t in new.items():
-        want.add(("pickup", tid))
-        if t.dropoff is not None:
-            want.add(("dropoff", tid))
-    if len(keys) != len(set(keys)) or set(keys) != want:
-        missing, extra = sorted(want - set(keys)), sorted(set(keys) - want)
-        raise AllocationError(f"route of agent {aid} must hold its plan's stops and its new "
-                              f"requests' pickups and drop-offs once each (missing {missing}, "
-                              f"unexpected {extra}, or repeated)")
-    where = {k: n for n, k in enumerate(keys)}
-    rows = []
-    for kind, tid in keys:
-        if kind == "dropoff" and where.get(("pickup", tid), -1) > where[(kind, tid)]:
-            raise AllocationError(f"route of agent {aid}: request {tid}'s drop-off comes "
-                                  "before its pickup")
-        s = plan.get((kind, tid))
-        if s is not None:
-            rows.append((kind, tid, s.loc, s.passengers, s.latest, None))
-            continue
-        t = new[tid]
-        point = t.dropoff is None
-        if kind == "pickup":
-            rows.append((kind, tid, t.loc, 0 if point else t.passengers, t.deadline, point))
-        else:
-            rows.append((kind, tid, t.dropoff, -t.passengers, t.dropoff_deadline, True))
-    return rows
-
-
-def _finders(problem: AllocationProblem):
-    """``(agent row finder, task column finder)`` of a problem (see :func:`_rows`), made once
-    per problem (kept in its ``__dict__``: the problem is frozen, the finders derive from it)."""
-    f = problem.__dict__.get("_finders")
-    if f is None:
-        f = problem.__dict__["_finders"] = (
-            _rows(problem.agent_ids, getattr(problem.agents, "ascending", False)),
-            _rows(problem.task_ids))
-    return f
-
-
-def _rows(ids: np.ndarray, ascending: bool = False) -> Callable[[object], int]:
-    """``find(id) -> row`` of ``id`` in ``ids`` (unique int64), or -1: a binary search, so a
-    decision's answer is checked without a dict over all its agents. Ids match by value, as
-    dict keys would (``True`` is 1, ``2.0`` is 2); anything that is not a whole number is
-    unknown."""
-    if ids.size <= 64:  # a few ids (a decision's tasks): a dict is cheapest
-        index = {int(x): i for i, x in enumerate(ids.tolist())}
-
-        def small(x) -> int:
-            if isinstance(x, (float, np.floating)) and float(x).is_integer():
-                x = int(x)
-            if not isinstance(x, (int, np.integer)):
-                return -1
-            return index.get(int(x), -1)
-
-        return small
-    order = None if ascending or ids.size < 2 or bool((ids[1:] > ids[:-1]).all()) \
-        else np.argsort(ids)
-    keys = ids if order is None else ids[order]
-    size = keys.size
-
-    def find(x) -> int:
-        if isinstance(x, (float, np.floating)) and float(x).is_integer():
-            x = int(x)
-        if not isinstance(x, (int, np.integer)) or not -2**63 <= x < 2**63:
-            return -1
-        k = int(keys.searchsorted(x))
-        if k >= size or keys[k] != x:
-            return -1
-        return k if order is None else int(order[k])
-
-    return find
-
-
-class _Inserts:
-    """Where a decision's stops go, for its busy vehicles' feasible pairs, by ``(row, col)``:
-    kept as the arrays the insertion computed and looked up only for the pairs handed out (a
-    pooled batch has thousands of feasible pairs and hands out a few dozen)."""
-
-    def __init__(self, ins, rows: np.ndarray, cols: np.ndarray, m: int) -> None:
-        ok = np.isfinite(ins.cost)
-        self._ins, self._q = ins, np.flatnonzero(ok)
-        self._rows, self._cols, self._m = rows[ok], cols[ok], m
-        self._keys = None
-
-    def __bool__(self) -> bool:
-        return bool(self._q.size)
-
-    def kept(self, servable: np.ndarray) -> _Inserts:
-        """The same, for the columns of ``servable`` only (renumbered as they are kept)."""
-        col = np.cumsum(servable) - 1
-        keep = servable[self._cols]
-        out = object.__new__(_Inserts)
-        out._ins, out._q = self._ins, self._q[keep]
-        out._rows, out._cols = self._rows[keep], col[self._cols[keep]]
-        out._m, out._keys = int(servable.sum()), None
-        return out
-
-    def _find(self, key) -> int:
-        if self._keys is None:
-            keys = self._rows.astype(np.int64) * self._m + self._cols
-            order = np.argsort(keys, kind="stable")
-            self._keys, self._order = keys[order], order
-        r, c = key
-        k = int(r) * self._m + int(c)
-        i = int(np.searchsorted(self._keys, k))
-        return int(self._order[i]) if i < self._keys.size and self._keys[i] == k else -1
-
-    def get(self, key, default=None):
-        i = self._find(key)
-        return default if i < 0 else self._ins.of(int(self._q[i]))
-
-    def __contains__(self, key) -> bool:
-        return self._find(key) >= 0
-
-
-class _Plans(Mapping):
-    """:attr:`AllocationProblem.plans`: the stop lists of a decision's agents that have one,
-    read from the vehicles when asked (within the decision: nothing moves meanwhile)."""
-
-    def __init__(self, fleet: Fleet, operator: Operator, slots: np.ndarray) -> None:
-        self._fleet, self._slots, self._operator = fleet, slots, operator
-        self._by_id: dict | None = None  # agent id -> vehicle, of those with stops (on use)
-        self._cache: dict[int, tuple] = {}
-
-    @property
-    def _ids(self) -> dict:
-        if self._by_id is None:
-            vs = self._fleet.vehicles
-            self._by_id = {v.id: v for v in (vs[k] for k in self._slots.tolist()) if v.stops}
-        return self._by_id
-
-    def __getitem__(self, agent_id: int) -> tuple[StopView, ...]:
-        got = self._cache.get(agent_id)
-        if got is None:
-            v = self._ids[agent_id]
-            times = self._operator.plan_arrays(v)[0]
-            got = self._cache[agent_id] = tuple(
-                StopView(s.kind, s.task.id, s.loc, s.passengers, s.latest, s.occupancy, t)
-                for s, t in zip(v.stops, times))
-        return got
-
-    def __iter__(self):
-        return iter(self._ids)
-
-    def __len__(self) -> int:
-        return len(self._ids)
 
 
 class DecisionDeferred(BaseException):
@@ -355,7 +132,7 @@ class _Pending:
     index: list = field(default_factory=list)  # each pair's (row, column) in the problem
     #: shared rides: (row, column) of a pair whose vehicle has a plan -> where its stops go
     #: (see :class:`dispatch.stops.Insertions`)
-    inserts: _Inserts | dict = field(default_factory=dict)
+    inserts: Inserts | dict = field(default_factory=dict)
 
 
 class Dispatcher:
@@ -487,7 +264,7 @@ class Dispatcher:
             self._direct_times()
         idle = self.fleet.idle_index()
         if self.pooled:  # busy vehicles with a free seat somewhere in their plan take part
-            idle = np.union1d(idle, self._roomy())
+            idle = np.union1d(idle, roomy(self.fleet))
         holder: dict[int, int] = {}  # task id -> the vehicle driving to its pickup
         if held:  # [dispatch] reassign: vehicles driving to a pickup take part, with their tasks
             holder = {t.id: t.agent_id for t in held.values()}
@@ -503,24 +280,8 @@ class Dispatcher:
         t0 = time.perf_counter()
         tasks = tuple([t.view() for t in open_tasks])
         lazy = self.lazy
-        exact = None  # lazy costs: which entries of ``cost`` are exact (the others are bounds)
-        try:
-            if lazy:
-                cost, exact = self.planner.bounds(agents, tasks)
-                exact = np.array(exact, dtype=bool) if isinstance(exact, np.ndarray) else exact
-            else:
-                cost = self.planner.costs(agents, tasks)
-        except DispatchError:
-            raise
-        except Exception as e:  # a plugin's bug: one line naming it and where
-            raise self._plugin_failed("planner", e) from e
-        want = (len(agents), len(open_tasks))
-        if not isinstance(cost, np.ndarray) or cost.shape != want or cost.dtype.kind != "f":
-            raise self._bad_costs(cost, want)
-        if lazy and not (isinstance(exact, np.ndarray) and exact.shape == want
-                         and exact.dtype == bool):
-            raise PluginError(f"{self._where('planner')}: bounds() must return a bool array "
-                              f"of shape {want} as its second item")
+        cost, exact = self._planner_costs(agents, tasks)
+        want = cost.shape
         # the usual case: a finite sum, so no inf and no nan (either would make the sum one):
         # every pair servable (a sum that overflows takes the element-wise checks below)
         if math.isfinite(np.add.reduce(cost, axis=None)):
@@ -538,12 +299,10 @@ class Dispatcher:
         if self.plans:
             if servable is None:
                 servable = np.ones(len(open_tasks), dtype=bool)
-            cost, inserts = self._insertions(cost, idle, open_tasks, now, set(holder.values()))
-            late = servable & ~np.isfinite(cost).any(axis=0)
-            for t, bad in zip(open_tasks, late):
-                if bad and not t.offered:
-                    self.book.close(t, TaskState.REJECTED)
-            servable &= ~late
+            cost, inserts = insertion_costs_of(cost, idle, open_tasks, now, set(holder.values()),
+                                               fleet=self.fleet, operator=self.operator,
+                                               planner=self.planner, objective=self.objective)
+            servable = self._reject_late(open_tasks, cost, servable)
         elif any(d < math.inf for d in deadlines):
             if servable is None:
                 servable = np.ones(len(open_tasks), dtype=bool)
@@ -553,11 +312,7 @@ class Dispatcher:
                 exact = exact | ~np.isfinite(cost)
                 self.lazy_pairs += resolve_open(cost, exact, self._exact(agents, tasks), now,
                                                 deadlines)
-            late = servable & ~np.isfinite(cost).any(axis=0)
-            for t, bad in zip(open_tasks, late):
-                if bad and not t.offered:
-                    self.book.close(t, TaskState.REJECTED)
-            servable &= ~late
+            servable = self._reject_late(open_tasks, cost, servable)
         if drive is not None:  # [fleet.energy]: below the reserve after the trip: inf
             cost = self.energy_filter(cost, drive, idle, open_tasks)
         cost_s = time.perf_counter() - t0
@@ -574,28 +329,12 @@ class Dispatcher:
                 if lazy:
                     exact = exact[:, servable]
         comms, space = self.comms, self.space
-        unlimited = comms.range is None or math.isinf(comms.range)
-        if unlimited and self.links is None:  # everyone hears everyone: no N x N matrix
-            comm = self._everyone.get(len(agents))
-            if comm is None:
-                comm = self._everyone[len(agents)] = np.broadcast_to(np.True_, (len(agents),) * 2)
-            nodes = getattr(agents, "nodes", None)
-            if nodes is not None and not agents.points.size:
-                def apos():  # node positions (fixed now), computed if someone reads them
-                    return space.positions(nodes)
-            else:  # read if someone asks, within the decision (nothing moves meanwhile)
-                def apos():
-                    return _positions(space, agents)
-        else:
-            apos = _positions(space, agents)
-            comm = comm_graph(apos, comms.range)
-            if self.links is not None:
-                comm = self.links(comm, apos, now)
+        comm, apos = self._hearing(agents, now)
 
         def tpos():
             return space.positions([t.loc for t in tasks])
 
-        plans = _Plans(self.fleet, self.operator, idle) if self.pooled else None
+        plans = Plans(self.fleet, self.operator, idle) if self.pooled else None
         seats = self.fleet.capacity[idle] if self.pooled else None
         ready = np.maximum(self.fleet.free_at[idle], now) if self.pooled else None
         travel = self.planner.between if self.routes else None
@@ -626,6 +365,66 @@ class Dispatcher:
                                  n_comp, holder, index, inserts)
         if delay <= 0:
             self._hand_out()
+
+    def _planner_costs(self, agents, tasks):
+        """The planner's ``(cost, exact)`` of a decision: its exact costs (``exact`` None), or
+        with lazy costs its lower bounds and which of them are exact; a PluginError naming the
+        planner and the decision for an exception or an answer of the wrong type or shape."""
+        exact = None  # lazy costs: which entries of ``cost`` are exact (the others are bounds)
+        try:
+            if self.lazy:
+                cost, exact = self.planner.bounds(agents, tasks)
+                exact = np.array(exact, dtype=bool) if isinstance(exact, np.ndarray) else exact
+            else:
+                cost = self.planner.costs(agents, tasks)
+        except DispatchError:
+            raise
+        except Exception as e:  # a plugin's bug: one line naming it and where
+            raise self._plugin_failed("planner", e) from e
+        want = (len(agents), len(tasks))
+        if not isinstance(cost, np.ndarray) or cost.shape != want or cost.dtype.kind != "f":
+            raise self._bad_costs(cost, want)
+        if self.lazy and not (isinstance(exact, np.ndarray) and exact.shape == want
+                              and exact.dtype == bool):
+            raise PluginError(f"{self._where('planner')}: bounds() must return a bool array "
+                              f"of shape {want} as its second item")
+        return cost, exact
+
+    def _reject_late(self, open_tasks: list, cost: np.ndarray,
+                     servable: np.ndarray) -> np.ndarray:
+        """``servable`` less the tasks no vehicle can reach in time (no finite cost); of those,
+        a task offered for the first time is closed ``rejected`` at once (see the module
+        doc), one offered before waits for its deadline."""
+        late = servable & ~np.isfinite(cost).any(axis=0)
+        for t, bad in zip(open_tasks, late):
+            if bad and not t.offered:
+                self.book.close(t, TaskState.REJECTED)
+        return servable & ~late
+
+    def _hearing(self, agents, now: float):
+        """``(comm, positions)`` of a decision's agents: who hears whom (the ``[comms]`` range,
+        a blackout's links) and their ``(N, 3)`` positions; with an unlimited range and no
+        faults a broadcast all-True ``comm`` (no N x N matrix) and the positions as a function
+        computed only if someone reads them (nothing moves within the decision)."""
+        comms, space = self.comms, self.space
+        unlimited = comms.range is None or math.isinf(comms.range)
+        if unlimited and self.links is None:  # everyone hears everyone: no N x N matrix
+            comm = self._everyone.get(len(agents))
+            if comm is None:
+                comm = self._everyone[len(agents)] = np.broadcast_to(np.True_, (len(agents),) * 2)
+            nodes = getattr(agents, "nodes", None)
+            if nodes is not None and not agents.points.size:
+                def apos():  # node positions (fixed now), computed if someone reads them
+                    return space.positions(nodes)
+            else:  # read if someone asks, within the decision (nothing moves meanwhile)
+                def apos():
+                    return _positions(space, agents)
+            return comm, apos
+        apos = _positions(space, agents)
+        comm = comm_graph(apos, comms.range)
+        if self.links is not None:
+            comm = self.links(comm, apos, now)
+        return comm, apos
 
     def _certified(self, ask, cost, exact, agents, tasks, deadlines, now: float):
         """The certificate loop of lazy costs (:func:`dispatch.lazy.certify`) around ``ask``:
@@ -755,7 +554,7 @@ class Dispatcher:
             if routes:  # a route planned before the deliberation is stale: dropped
                 handed = tuple((a, t) for a, t in handed if a not in routes)
             if p.inserts:  # a pooled pair is stale once its vehicle has moved on: dropped
-                row, col = _finders(p.problem)
+                row, col = finders(p.problem)
                 handed = tuple((a, t) for a, t in handed
                                if (row(a), col(t)) not in p.inserts)
             if len(handed) != len(allocation.pairs):
@@ -763,7 +562,7 @@ class Dispatcher:
                           self.decisions, len(allocation.pairs) - len(handed))
                 allocation = replace(allocation, pairs=handed)
                 self.notify()
-            row, col = _finders(p.problem)
+            row, col = finders(p.problem)
             pair_cost = [float(cost[row(a), col(t)]) for a, t in allocation.pairs]
         self._recorded(p, allocation, pair_cost)
         if not holding:
@@ -844,95 +643,6 @@ class Dispatcher:
         times = free.between([t.loc for t in need], [t.dropoff for t in need], pairwise=True)
         for t, x in zip(need, np.asarray(times, dtype=float).tolist()):
             t.direct_time = x
-
-    def _roomy(self) -> np.ndarray:
-        """Positions of the busy vehicles with a free seat somewhere in their plan (shared
-        rides: they are candidates for new requests)."""
-        return np.flatnonzero(self.fleet.busy_mask & self.fleet.room)
-
-    def _insertions(self, cost: np.ndarray, slots: np.ndarray, tasks: list, now: float,
-                    holders: set) -> tuple[np.ndarray, dict]:
-        """The decision's costs with plans (see :mod:`dispatch.stops`): for a vehicle with an
-        empty plan (idle, or about to give its task up) the request's pickup and drop-off in
-        that order; for a busy one the cheapest feasible insertion into its plan; ``inf``
-        where none keeps the capacity and every limit. ``cost`` holds the drives from each
-        vehicle to each pickup. Returns ``(costs by the objective, {(row, col): where the
-        stops go})`` for the busy vehicles' finite pairs."""
-        fleet, svc = self.fleet, self.operator.service_time
-        m = len(tasks)
-        lp = np.array([t.deadline for t in tasks])
-        ld = np.array([t.dropoff_deadline for t in tasks])
-        n_req = np.array([0 if t.dropoff is None else t.passengers for t in tasks], np.int64)
-        point = np.array([t.dropoff is None for t in tasks])
-        pd = np.array([0.0 if t.dropoff is None else t.direct_time for t in tasks])
-        if getattr(self.planner, "inner", None) is not None and not point.all():
-            # a congested planner (dispatch.congestion): the drive at this hour, not free flow
-            trips = np.flatnonzero(~point)
-            pd[trips] = self.planner.between([tasks[k].loc for k in trips.tolist()],
-                                             [tasks[k].dropoff for k in trips.tolist()],
-                                             pairwise=True)
-        svc_p = np.where(point, svc, 0.0)
-        svc_d = np.where(point, 0.0, svc)
-        cap = fleet.capacity[slots]
-        planned = fleet.busy_mask[slots]  # (a busy vehicle has stops or is serving)
-        if holders:  # [dispatch] reassign: a holder decides as if its plan were empty
-            planned = planned & ~np.isin(fleet.ids[slots], list(holders))
-        out = np.full(cost.shape, np.inf)
-        empty = np.flatnonzero(~planned)
-        if empty.size:
-            c = cost[empty]
-            arr_p = now + c
-            arr_d = arr_p + svc_p + pd
-            ok = (arr_p <= lp + 1e-9) & (arr_d <= ld + 1e-9) & (n_req <= cap[empty, None])
-            value = c if self.objective == PICKUP_TIME else c + svc_p + pd + svc_d
-            out[empty] = np.where(ok, value, np.inf)
-        busy = np.flatnonzero(planned)
-        if not busy.size:
-            return out, {}
-        ready = np.maximum(fleet.free_at[slots[busy]], now)
-        rows, cols = np.nonzero((ready[:, None] + cost[busy] <= lp + 1e-9)
-                                & (n_req <= cap[busy, None]))
-        if not rows.size:
-            return out, {}
-        # the busy vehicles' plans, flat; requests by column
-        used = np.unique(rows)
-        remap = np.full(busy.size, -1, np.int64)
-        remap[used] = np.arange(used.size)
-        off, s_arr, s_svc, s_latest, s_occ, locs = [0], [], [], [], [], []
-        load = []
-        plan_of = self.operator.plan_arrays
-        vehicles = fleet.vehicles
-        for k in slots[busy[used]].tolist():
-            v = vehicles[k]
-            times, svcs, latest, occ, where = plan_of(v)
-            s_arr += times
-            s_svc += svcs
-            s_latest += latest
-            s_occ += occ
-            locs += where
-            off.append(len(locs))
-            load.append(v.load)
-        ucols = np.unique(cols)
-        cmap = np.full(m, -1, np.int64)
-        cmap[ucols] = np.arange(ucols.size)
-        picks = [tasks[c].loc for c in ucols.tolist()]
-        drops = [tasks[c].loc if tasks[c].dropoff is None else tasks[c].dropoff
-                 for c in ucols.tolist()]
-        between = self.planner.between
-        g = len(locs)
-        if g:
-            to_p, from_p = between(locs, picks), between(picks, locs)
-            to_d, from_d = between(locs, drops), between(drops, locs)
-        else:
-            to_p = to_d = np.zeros((0, ucols.size))
-            from_p = from_d = np.zeros((ucols.size, 0))
-        vrow = busy[rows]
-        ins = insertion_costs(
-            remap[rows], cmap[cols], ready[used], cost[vrow, cols], off, s_arr, s_svc,
-            s_latest, s_occ, load, cap[busy[used]], to_p, from_p, to_d, from_d, pd[ucols],
-            n_req[ucols], lp[ucols], ld[ucols], svc_p[ucols], svc_d[ucols], self.objective)
-        out[vrow, cols] = ins.cost
-        return out, _Inserts(ins, vrow, cols, m)
 
     def _close_unreachable(self, tasks) -> None:
         """Close tasks no vehicle of the fleet can reach; vehicles never leave their connected

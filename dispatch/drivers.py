@@ -17,12 +17,15 @@ goal (:meth:`Driver.reaches`) and turns it into what :meth:`Driver.drive` follow
 
 Two ship with the kernel: :class:`CellDriver` (voxel world: cell by cell, a ``move`` event per
 cell, as the paper's vehicles do) and :class:`RoadDriver` (road network: one timeout per leg;
-where a vehicle is part-way through a leg is interpolated when someone asks).
+where a vehicle is part-way through a leg is interpolated when someone asks). A driver stands
+below the space that makes it: it holds that space (the voxel :class:`dispatch.world.World`, the
+:class:`dispatch.roads.RoadNetwork`) as the :class:`dispatch.space.Space` it was given, and
+imports only the small types below both (:mod:`dispatch.legs`, :mod:`dispatch.motion`).
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import simpy
 
@@ -30,13 +33,13 @@ from dispatch.contracts import AgentView, Planner
 from dispatch.errors import PluginError
 from dispatch.events import EventBus
 from dispatch.motion import step_length
+from dispatch.space import Space
 
 if TYPE_CHECKING:
-    from dispatch.roads import Leg, RoadNetwork
+    from dispatch.legs import Leg
     from dispatch.vehicles import Vehicle
-    from dispatch.world import World
 
-__all__ = ["CellDriver", "Driver", "RoadDriver", "road_driver"]
+__all__ = ["CellDriver", "Driver", "RoadDriver"]
 
 
 def _plan(planner: Planner, agent: AgentView, goal, now: float, run_id: str):
@@ -64,7 +67,7 @@ class Driver:
     #: why a path that :meth:`reaches` refuses is no path (ends the error message)
     no_path = "gave no path to the goal although its cost was finite"
 
-    def __init__(self, space: Any, planner: Planner, bus: EventBus) -> None:
+    def __init__(self, space: Space, planner: Planner, bus: EventBus) -> None:
         self.space, self.planner, self.bus = space, planner, bus
         self.run_id = ""  # named in error messages
         #: ``dispatch.*`` metadata entries the driver adds to the results (e.g. congestion)
@@ -108,12 +111,13 @@ class Driver:
 
 
 class CellDriver(Driver):
-    """Voxel world: paths are cells; a vehicle steps from cell to cell at its speed."""
+    """Voxel world (``world``: a :class:`dispatch.world.World`): paths are cells; a vehicle
+    steps from cell to cell at its speed."""
 
     no_path = ("gave no path from the vehicle's cell to the goal although its cost was "
                "finite")
 
-    def __init__(self, world: World, planner: Planner, bus: EventBus) -> None:
+    def __init__(self, world: Space, planner: Planner, bus: EventBus) -> None:
         super().__init__(world, planner, bus)
         self.world = world
 
@@ -133,11 +137,12 @@ class CellDriver(Driver):
 
 
 class RoadDriver(Driver):
-    """Road network: a leg is the planner's node path, driven in one timeout."""
+    """Road network (``network``: a :class:`dispatch.roads.RoadNetwork`): a leg is the
+    planner's node path, driven in one timeout."""
 
     no_path = "gave no path to the goal node although its cost was finite"
 
-    def __init__(self, network: RoadNetwork, planner: Planner, bus: EventBus,
+    def __init__(self, network: Space, planner: Planner, bus: EventBus,
                  edge_events: bool = False) -> None:
         super().__init__(network, planner, bus)
         self.network, self.edge_events = network, edge_events
@@ -170,21 +175,3 @@ class RoadDriver(Driver):
             yield env.timeout(leg.seconds)
         v.leg, v.loc = None, int(leg.nodes[-1])
         v.drove(leg.length, leg.seconds)
-
-
-def road_driver(network: RoadNetwork, planner: Planner, bus: EventBus, cfg, clock) -> RoadDriver:
-    """The road driver of a ``[world]`` configuration; with ``[world] congestion`` the
-    planner's costs and the legs are scaled by the hour's factor (:mod:`dispatch.congestion`;
-    the driver's ``planner`` is then the wrapped one, and its metadata names the factors)."""
-    factors = cfg.roads.congestion
-    if not factors:
-        return RoadDriver(network, planner, bus, cfg.edge_events)
-    import json
-
-    from dispatch.congestion import CongestedDriver, CongestedPlanner, HourlyFactors
-
-    hourly = HourlyFactors(factors)
-    driver = CongestedDriver(network, CongestedPlanner(planner, hourly, clock), bus,
-                             cfg.edge_events, hourly)
-    driver.metadata["dispatch.congestion"] = json.dumps(list(factors), sort_keys=True)
-    return driver

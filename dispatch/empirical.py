@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dispatch.congestion import HOURS, HourlyFactors
+from dispatch.hourly import HOURS, HourlyFactors
 from dispatch.traces import Trips
 
 #: weekday names in the data's order (trip_start_day 1 = Sunday .. 7 = Saturday)

@@ -51,7 +51,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 from typing import NamedTuple
 
-from dispatch.space import Location
+from dispatch.locations import Location
 
 KINDS = ("release", "assign", "depart", "move", "pickup", "dropoff", "complete", "idle", "wait",
          "replan", "expire", "reject", "unreachable", "cancel", "failed", "skipped",

@@ -14,7 +14,8 @@ import math
 
 import numpy as np
 
-from dispatch.world import Cell, Grid
+from dispatch.locations import Cell
+from dispatch.voxels import Grid
 
 #: 26 neighbour offsets in 3D, ordered lexicographically.
 OFFSETS_3D: tuple[Cell, ...] = tuple(

@@ -2,7 +2,9 @@
 
 The simulation's truth is the grid and SimPy time; PyBullet mirrors it so that collisions can
 be checked, rays cast (sampling planners) and images rendered. The client runs in DIRECT mode
-(headless) unless ``gui=True``.
+(headless) unless ``gui=True``. The voxel world builds its mirror
+(:meth:`dispatch.world.World.mirror`), which reads the world's ``boxes`` and ``cell`` and so
+imports nothing of it.
 """
 
 from __future__ import annotations
@@ -10,8 +12,6 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import os
-
-from dispatch.world import World
 
 UAV_RADIUS = 0.3  # of a cell: a vehicle body fits well inside its cell
 UGV_HALF = (0.35, 0.35, 0.25)
@@ -66,9 +66,10 @@ def connect_direct(p, gui: bool = False) -> int:
 
 
 class Physics:
-    """A PyBullet client holding the world's obstacles and the vehicles' bodies."""
+    """A PyBullet client holding the world's obstacles and the vehicles' bodies (``world``: a
+    :class:`dispatch.world.World`)."""
 
-    def __init__(self, world: World, gui: bool = False) -> None:
+    def __init__(self, world, gui: bool = False) -> None:
         self.p = p = import_pybullet()
         self.world = world
         self.client = connect_direct(p, gui)

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from dispatch import space_files
 from dispatch.recorder import SCHEMAS
 from dispatch.stats import RunStats
 
@@ -185,6 +186,8 @@ class RunRecording:
         self.recorder, self.space = recorder, space
         self.stats = RunStats()
         recorder.metadata.update(space.describe())
+        # the space's shared tables (a road network), once per results folder
+        recorder.metadata.update(space_files.store(getattr(recorder, "out", None), space))
         self.static = space.tables()
         for name, (meta, _rows) in self.static.items():
             recorder.table_metadata[name] = meta

@@ -1,8 +1,11 @@
-"""Plugin registry: allocators, planners and repositioners found by name through entry points.
+"""Plugin registry: allocators, planners, repositioners, chargers and command-line commands
+found by name through entry points.
 
 Built-ins are registered in ``pyproject.toml`` under the same entry-point groups as third-party
-plugins (``dispatch.allocators``, ``dispatch.planners``, ``dispatch.repositioners``), so both
-are first-class. The table
+plugins (``dispatch.allocators``, ``dispatch.planners``, ``dispatch.repositioners``,
+``dispatch.chargers``; ``dispatch.commands`` for commands such as the :mod:`analysis`
+package's ``report`` and ``render``, see :mod:`dispatch.commands`), so both are first-class.
+The table
 below is only a fallback for a source tree that was never installed; it names modules as
 strings, so the kernel still imports no concrete plugin.
 """
@@ -21,7 +24,8 @@ from dispatch.errors import PluginError
 log = logging.getLogger(__name__)
 
 GROUPS = {"allocator": "dispatch.allocators", "planner": "dispatch.planners",
-          "repositioner": "dispatch.repositioners", "charger": "dispatch.chargers"}
+          "repositioner": "dispatch.repositioners", "charger": "dispatch.chargers",
+          "command": "dispatch.commands"}
 _FALLBACK = {
     "allocator": {
         "hungarian": "allocators.hungarian:HungarianAllocator",
@@ -48,6 +52,10 @@ _FALLBACK = {
         "threshold": "chargers.threshold:ThresholdCharging",
         "idle": "chargers.idle:IdleCharging",
         "valley": "chargers.valley:ValleyCharging",
+    },
+    "command": {
+        "report": "analysis.commands:Report",
+        "render": "analysis.commands:Render",
     },
 }
 

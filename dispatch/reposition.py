@@ -47,7 +47,8 @@ if TYPE_CHECKING:
 
     from dispatch.events import Event, EventBus
     from dispatch.roads import RoadNetwork
-    from dispatch.vehicles import Fleet, RoadDriver, Vehicle
+    from dispatch.drivers import RoadDriver
+    from dispatch.vehicles import Fleet, Vehicle
 
 log = logging.getLogger(__name__)
 

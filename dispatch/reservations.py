@@ -70,13 +70,13 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 from dispatch.contracts import AgentView
 from dispatch.motion import step_is_legal, step_length
 from dispatch.tasks import COMPLETED as _COMPLETED
-from dispatch.space import Cell
+from dispatch.locations import Cell
 
 import simpy
 
 if TYPE_CHECKING:
     from dispatch.contracts import Planner
-    from dispatch.world import Grid
+    from dispatch.voxels import Grid
 
 #: Seconds by which two reservations of one cell may overlap without conflicting (float noise).
 EPS = 1e-9

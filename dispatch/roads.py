@@ -23,6 +23,9 @@ Every loader keeps only the largest strongly connected component, so every node 
 other and travel times between nodes are finite. Shortest paths are
 :func:`scipy.sparse.csgraph.dijkstra` on the ``time`` matrix (forward) or its transpose
 (backward, one run per target).
+
+The point and leg types are :mod:`dispatch.legs`'s (kept importable from here): the road space's
+parts (drivers, congestion, vehicles) hold them from there, below this module.
 """
 
 from __future__ import annotations
@@ -30,9 +33,7 @@ from __future__ import annotations
 import functools
 import importlib.resources
 import logging
-from bisect import bisect_right
 from collections.abc import Sequence
-from dataclasses import dataclass
 from functools import cached_property
 from itertools import accumulate
 from pathlib import Path
@@ -42,6 +43,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra
 
+from dispatch.legs import Leg, RoadPoint, as_point as _as_point
 from dispatch.space import Position, Space
 
 log = logging.getLogger(__name__)
@@ -67,102 +69,6 @@ KPH = 1 / 3.6
 #: OSMnx rounds ``travel_time`` to 0.1 s: a 0 there is accepted where length / speed is below
 #: half of that (the unrounded time is used instead)
 OSMNX_TIME_PRECISION = 0.1
-
-
-@dataclass(frozen=True, slots=True)
-class RoadPoint:
-    """Where a vehicle is: at node `node` (prev == -1, remaining == 0), or on the edge prev -> node
-    with `remaining` seconds and `remaining_m` metres still to drive to `node`."""
-
-    node: int
-    prev: int = -1
-    remaining: float = 0.0
-    remaining_m: float = 0.0
-
-    @property
-    def on_node(self) -> bool:
-        """True when the vehicle stands on ``node`` (nothing left to drive)."""
-        return self.prev < 0 or self.remaining <= 0.0
-
-
-def _as_point(loc: RoadPoint | int) -> RoadPoint:
-    """A node index (any integer type) or a point, as a point."""
-    if isinstance(loc, RoadPoint):
-        return loc
-    return RoadPoint(int(loc))
-
-
-@dataclass(frozen=True)
-class Leg:
-    """A drive along a node path: nodes[0] is where it starts (the point's `node`),
-    times[i] / metres[i] are the cumulative seconds / metres from the start point to nodes[i]
-    (times[0] = point.remaining).
-
-    ``prev`` is the start point's ``prev`` (``-1`` when the leg starts on a node): needed to say
-    where a vehicle is before it reaches ``nodes[0]``.
-    """
-
-    nodes: np.ndarray  # int64
-    times: np.ndarray  # float64
-    metres: np.ndarray  # float64
-    prev: int = -1
-
-    @property
-    def seconds(self) -> float:
-        """Seconds from the start point to the last node."""
-        return float(self.times[-1])
-
-    @property
-    def length(self) -> float:
-        """Metres from the start point to the last node."""
-        return float(self.metres[-1])
-
-    def _lists(self) -> tuple[list, list, list]:
-        # Python lists (made once per leg): a vehicle's position is asked at every decision
-        # while it drives, and bisect on a list is ~10x cheaper than numpy calls on scalars;
-        # the arithmetic is the same IEEE double operations as on the arrays
-        cached = self.__dict__.get("_as_lists")
-        if cached is None:
-            cached = tuple(np.asarray(a).tolist() for a in (self.times, self.nodes, self.metres))
-            object.__setattr__(self, "_as_lists", cached)
-        return cached
-
-    def next_at(self, t: float) -> tuple[int, float, bool]:
-        """``(node, remaining, on_node)`` of :meth:`point_at` (the node it stands on or drives
-        to, the seconds left to it, whether it stands on it; remaining 0 then), without
-        building the point: a decision asks it of every driving vehicle."""
-        times, nodes, _ = self._lists()
-        if t >= times[-1]:
-            return nodes[-1], 0.0, True
-        t = max(float(t), 0.0)
-        i = bisect_right(times, t)
-        if i == 0:
-            rem = times[0] - t
-            on = self.prev < 0 or rem <= 0.0
-            return nodes[0], 0.0 if on else rem, on
-        if t == times[i - 1]:
-            return nodes[i - 1], 0.0, True
-        rem = times[i] - t
-        return nodes[i], rem if rem > 0.0 else 0.0, rem <= 0.0
-
-    def point_at(self, t: float) -> RoadPoint:
-        """Where a vehicle driving the leg is ``t`` seconds after its start: linear in time along
-        the edge it is on; the last node from ``t >= seconds`` on; a node when ``t`` is exactly
-        the arrival time there."""
-        times, nodes, metres = self._lists()
-        if t >= times[-1]:
-            return RoadPoint(nodes[-1])
-        t = max(float(t), 0.0)
-        i = bisect_right(times, t)  # times[i-1] <= t < times[i]
-        if i == 0:  # still finishing the edge the leg started on
-            rem = times[0] - t
-            rem_m = metres[0] * rem / times[0]
-            return RoadPoint(nodes[0], self.prev, rem, rem_m)
-        if t == times[i - 1]:
-            return RoadPoint(nodes[i - 1])
-        span = times[i] - times[i - 1]
-        rem = times[i] - t
-        return RoadPoint(nodes[i], nodes[i - 1], rem, (metres[i] - metres[i - 1]) * rem / span)
 
 
 class RoadNetwork(Space):
@@ -537,6 +443,17 @@ class RoadNetwork(Space):
                 "dispatch.nodes": str(self.n), "dispatch.edges": str(self.n_edges),
                 "dispatch.crs": self.crs or "none"}
 
+    def shared_tables(self) -> dict[str, dict[str, np.ndarray]]:
+        """``nodes`` (``x``, ``y`` metres, in node order) and ``edges`` (``u``, ``v`` node
+        indices, ``seconds`` free-flow, ``metres``; in CSR order: by ``u``, then ``v``), kept
+        once per results folder (see :meth:`Space.shared_tables`)."""
+        t = self.time
+        u = np.repeat(np.arange(self.n, dtype=np.int64), np.diff(t.indptr))
+        return {"nodes": {"x": self.xy[:, 0], "y": self.xy[:, 1]},
+                "edges": {"u": u, "v": t.indices.astype(np.int64),
+                          "seconds": np.asarray(t.data, np.float64),
+                          "metres": np.asarray(self.length.data, np.float64)}}
+
     def __repr__(self) -> str:
         return f"RoadNetwork({self.name!r}, nodes={self.n}, edges={self.n_edges}, crs={self.crs!r})"
 
@@ -583,7 +500,7 @@ class RoadNetwork(Space):
         return place_cars(self, spec, rng)
 
     def driver(self, planner, bus, cfg, clock):
-        from dispatch.drivers import road_driver
+        from dispatch.congestion import road_driver
 
         return road_driver(self, planner, bus, cfg, clock)
 

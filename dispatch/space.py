@@ -27,6 +27,15 @@ and its branch in the ``[world]`` parsing of :mod:`dispatch.scenario`.
 
 Planners declare the spaces they serve (:attr:`dispatch.contracts.Planner.spaces`); a planner
 asked to work in another space is a scenario error found at validate time.
+
+Where it stands: this contract is on the kernel's ground floor, under everything that holds a
+location or a space (tasks, vehicles, contracts, the configuration). So it imports none of
+them: the objects its hooks take and build (a ``[world]`` configuration,
+:class:`dispatch.config.RunSpec`, :class:`dispatch.tasks.Demand`,
+:class:`dispatch.vehicles.Vehicle`, :class:`dispatch.drivers.Driver`) are named in the
+docstrings. The two spaces stand above their parts (demand, placement, drivers), which know
+them only through the small types below both: :mod:`dispatch.locations`,
+:mod:`dispatch.voxels` and :mod:`dispatch.legs`.
 """
 
 from __future__ import annotations
@@ -35,21 +44,13 @@ import importlib
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
 
-if TYPE_CHECKING:
-    from dispatch.drivers import Driver
-    from dispatch.config import RunSpec, Scenario, TaskConfig, WorldConfig
-    from dispatch.tasks import Demand
-    from dispatch.vehicles import Vehicle
+from dispatch.locations import Cell, Location, Position
 
-#: A location in some space: opaque to the kernel (a voxel cell, a road node, a road point).
-Location = Any
-Position = tuple[float, float, float]
-#: A voxel cell ``(i, j, k)`` along x, y, z (see :mod:`dispatch.world`).
-Cell = tuple[int, int, int]
+__all__ = ["KINDS", "Cell", "Location", "Position", "Space", "space_class", "space_for"]
 
 #: The spaces, by the kind a scenario's ``[world]`` table parses to
 #: (:attr:`dispatch.scenario.WorldConfig.space`): ``"module:Class"`` of each, imported when
@@ -63,7 +64,7 @@ def space_class(kind: str) -> type[Space]:
     return getattr(importlib.import_module(module), name)
 
 
-def space_for(cfg: WorldConfig, seed: int, scenario_path=None) -> Space:
+def space_for(cfg, seed: int, scenario_path=None) -> Space:
     """The run's space, built from its ``[world]`` configuration for ``seed`` (a voxel world's
     obstacles depend on it); loading errors are ScenarioErrors naming ``scenario_path``."""
     return space_class(cfg.space).load(cfg, seed, scenario_path)
@@ -93,38 +94,38 @@ class Space(ABC):
     # ------------------------------------------------------------ of its configuration
     @classmethod
     @abstractmethod
-    def load(cls, cfg: WorldConfig, seed: int, scenario_path: Path | None = None) -> Space:
+    def load(cls, cfg, seed: int, scenario_path: Path | None = None) -> Space:
         """The space of a ``[world]`` configuration and a seed (may be cached: spaces are
         immutable); what cannot be loaded is a ScenarioError naming ``scenario_path``."""
 
     @classmethod
     @abstractmethod
-    def label(cls, cfg: WorldConfig) -> str:
+    def label(cls, cfg) -> str:
         """A few words saying which space a configuration is (``dispatch validate`` prints
         them)."""
 
     @classmethod
-    def trace_bounds(cls, cfg: WorldConfig) -> tuple[float, float, float] | None:
+    def trace_bounds(cls, cfg) -> tuple[float, float, float] | None:
         """The extent in metres a trace's positions must lie in (None: any)."""
         return None
 
     @classmethod
-    def check_size(cls, cfg: WorldConfig, limits, refuse) -> None:
+    def check_size(cls, cfg, limits, refuse) -> None:
         """Refuse (``raise refuse(key, what)``) a space past ``limits``
         (:class:`dispatch.scenario.Limits`). Default: nothing to bound."""
 
     @classmethod
-    def check_fleet(cls, sc: Scenario, agents: int, key: str) -> None:
+    def check_fleet(cls, sc, agents: int, key: str) -> None:
         """ScenarioError (at ``key``) unless ``agents`` vehicles can start in the space."""
 
     @classmethod
-    def work_cells(cls, cfg: WorldConfig) -> int | None:
+    def work_cells(cls, cfg) -> int | None:
         """The number of cells the voxel work bound (:mod:`dispatch.budget`) scales with;
         None: no such bound in this space."""
         return None
 
     @classmethod
-    def check_runs(cls, sc: Scenario, planners) -> None:
+    def check_runs(cls, sc, planners) -> None:
         """Validate-time checks that need the space or the plugins (the planner classes of
         ``planners`` are the registry's). Default: none."""
 
@@ -152,15 +153,16 @@ class Space(ABC):
         """A few ``dispatch.*`` metadata entries describing the space (stored with results)."""
 
     @abstractmethod
-    def demand(self, tasks: TaskConfig, rng: np.random.Generator) -> Demand:
+    def demand(self, tasks, rng: np.random.Generator):
         """The run's demand (:class:`dispatch.tasks.Demand`): generated requests and a trace's
         trips as requests in this space; every draw from ``rng``."""
 
     @abstractmethod
-    def place_vehicles(self, spec: RunSpec, rng: np.random.Generator) -> list[Vehicle]:
-        """The run's vehicles at their start locations (random draws from ``rng``)."""
+    def place_vehicles(self, spec, rng: np.random.Generator) -> list:
+        """The run's vehicles (:class:`dispatch.vehicles.Vehicle`) at their start locations for
+        a :class:`dispatch.config.RunSpec` (random draws from ``rng``)."""
 
-    def place(self, spec: RunSpec, rng: np.random.Generator) -> list[Vehicle]:
+    def place(self, spec, rng: np.random.Generator) -> list:
         """The run's vehicles where :meth:`place_vehicles` puts them, with their seats
         (``[fleet] capacity``, or a start file's ``capacity`` column)."""
         vehicles = self.place_vehicles(spec, rng)
@@ -172,7 +174,7 @@ class Space(ABC):
         return vehicles
 
     @abstractmethod
-    def driver(self, planner, bus, cfg: WorldConfig, clock) -> Driver:
+    def driver(self, planner, bus, cfg, clock):
         """The driver (:class:`dispatch.drivers.Driver`) that follows ``planner``'s paths in
         this space; its ``planner`` is the one the run uses (it may wrap ``planner``, e.g.
         for congestion, which reads the simulated time from ``clock()``)."""
@@ -180,6 +182,13 @@ class Space(ABC):
     def tables(self) -> dict[str, tuple[dict[str, str], list[dict]]]:
         """Static tables the space adds to the results: name -> (the table's metadata, its
         rows). Default: none."""
+        return {}
+
+    def shared_tables(self) -> dict[str, dict[str, np.ndarray]]:
+        """Tables of the space that every run on it shares, written once per results folder
+        for readers that do not rebuild the space (:mod:`dispatch.space_files`; e.g. a road
+        network's nodes and edges, which :mod:`analysis` reads): name -> {column: array}.
+        Default: none."""
         return {}
 
     def mirror(self, bus, vehicles):

@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    from dispatch.space import Location
+    from dispatch.locations import Location
     from dispatch.tasks import Task
 
 PICKUP, DROPOFF = "pickup", "dropoff"
@@ -83,7 +83,7 @@ def schedule(first: float, stops: list[Stop], service: float) -> list[float]:
 
 
 def _jit(fn):
-    from dispatch._compiled import _jit as jit
+    from dispatch._compiled import jit
 
     return jit(fn)
 

@@ -23,10 +23,11 @@ from collections import defaultdict
 from statistics import fmean
 
 # One allocator order, one paired gap and one label of a batch window for the CLI's tables and
-# the analysis package, and one interval of a mean (standard library only; see their docstrings).
-from analysis.compare import allocator_order, paired_gaps, window_label
-from analysis.stats import mean_ci
+# the analysis package, and one interval of a mean (a shared package outside both, standard
+# library only; see their docstrings).
 from dispatch.runkeys import key_names
+from paired.compare import allocator_order, paired_gaps, window_label
+from paired.stats import mean_ci
 
 
 def _mean(rows: list[dict], key: str) -> float:
@@ -62,7 +63,7 @@ def _windows(summaries: list[dict]) -> bool:
 def aggregate(summaries: list[dict], reference: str = "hungarian") -> dict[tuple[str, int], dict]:
     """Per (row, n_agents), a row being the allocator (and its batch window where the runs
     hold several): mean over seeds of the total cost, the paired gap to ``reference``
-    (:func:`analysis.compare.paired_gaps`: the same value of every other run key, see
+    (:func:`paired.compare.paired_gaps`: the same value of every other run key, see
     :data:`dispatch.runkeys.RUN_KEYS`), the conflict-free rate, the allocation seconds, and
     the per-task figures of dynamic runs (served share, wait, cost per assignment, ms per
     decision); ``runs``."""

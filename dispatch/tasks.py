@@ -34,7 +34,7 @@ import simpy
 
 from dispatch.contracts import TaskView
 from dispatch.events import EventBus
-from dispatch.space import Location
+from dispatch.locations import Location
 
 log = logging.getLogger(__name__)
 

@@ -28,7 +28,6 @@ import numpy as np
 import simpy
 
 from dispatch.contracts import AgentView, AgentViews
-from dispatch.drivers import CellDriver, RoadDriver  # noqa: F401 - their old home, kept
 from dispatch.events import EventBus
 from dispatch.space import Location, Space
 from dispatch.stops import DROPOFF, PICKUP, Stop, occupancies, schedule
@@ -36,7 +35,7 @@ from dispatch.tasks import COMPLETED, PICKED_UP as PICKED_UP_STATE, Task, TaskBo
 
 if TYPE_CHECKING:
     from dispatch.reservations import TimedExecution
-    from dispatch.roads import Leg
+    from dispatch.legs import Leg
 
 
 @dataclass(eq=False)

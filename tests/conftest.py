@@ -135,3 +135,15 @@ def run_cli(*args, cwd: Path | None = None, timeout: float = 120) -> subprocess.
 def cli():
     """``cli(*args) -> CompletedProcess`` of the ``dispatch`` command (see :func:`run_cli`)."""
     return run_cli
+
+
+def fake_distribution(site: Path, dist: str, module: str, source: str, entry_points: str) -> Path:
+    """Make ``site`` (a folder to put on PYTHONPATH) hold an installed distribution ``dist``:
+    the module ``module`` with ``source`` and the ``entry_points.txt`` text ``entry_points``
+    (what ``pip install`` of a plugin package leaves, without installing anything)."""
+    (site / f"{module}.py").write_text(source, encoding="utf-8")
+    info = site / f"{dist.replace('-', '_')}-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {dist}\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text(entry_points)
+    return site

@@ -1,10 +1,10 @@
 """Allocation instances for MAGNNET: drawn exactly as real runs draw them.
 
 An instance of seed ``s`` and fleet size ``N`` is the first decision of the static scenario
-(``scenarios/paper_static.toml`` by default) run with seed ``s``: the world of the seed
-(:func:`dispatch.sim.world_for`), the fleet of :func:`dispatch.sim.place_fleet`, ``M = N``
-tasks from :class:`dispatch.demand.VoxelDemand`, and the exact A* travel times of the ``astar``
-planner. Training uses seeds from :data:`TRAIN_SEED0` on; evaluation uses seeds from
+(``scenarios/paper_static.toml`` by default) run with seed ``s``
+(:func:`dispatch.instances.first_decision`: the world of the seed, the run's fleet and its
+``M = N`` first tasks), costed with the exact A* travel times of the ``astar`` planner (found
+through the registry: this package imports ``dispatch`` only). Training uses seeds from :data:`TRAIN_SEED0` on; evaluation uses seeds from
 :data:`EVAL_SEED0` on, so the two never overlap.
 
 Computing A* costs takes seconds per instance (one distance field per task), so pools are built
@@ -52,23 +52,12 @@ class Pool:
 def instance(seed: int, n_agents: int, scenario: str | Path = DEFAULT_SCENARIO,
              n_tasks: int | None = None):
     """``(cost, agent_pos, task_pos, flies, world_size)`` of the first decision of one run."""
-    from dispatch.scenario import load_scenario
-    from dispatch.sim import STREAM_FLEET, STREAM_TASKS, place_fleet, rng_for, world_for
-    from dispatch.demand import VoxelDemand
-    from planners.astar import AStarPlanner
+    from dispatch.instances import first_decision
+    from dispatch.registry import load
 
-    sc = load_scenario(scenario)
-    spec = sc.runs(agents=n_agents, seed=seed)[0]
-    world = world_for(sc.world, seed)
-    vehicles = place_fleet(world, spec, rng_for(seed, STREAM_FLEET))
-    demand = VoxelDemand(world.grid, sc.tasks.ground_fraction, rng_for(seed, STREAM_TASKS))
-    from dispatch.tasks import Task
-
-    m = n_tasks if n_tasks is not None else spec.n_static_tasks
-    tasks = [Task(j, (r := demand.draw()).kind, r.loc, 0.0) for j in range(m)]
-    agents = tuple(v.view() for v in vehicles)
-    views = tuple(t.view() for t in tasks)
-    cost = AStarPlanner(world).costs(agents, views)
+    first = first_decision(scenario, seed, n_agents, n_tasks)
+    world, agents, views = first.space, first.agents, first.tasks
+    cost = load("planner", "astar")(world).costs(agents, views)
     grid = world.grid
     apos = np.array([grid.centre(a.cell) for a in agents], dtype=np.float32)
     tpos = np.array([grid.centre(t.cell) for t in views], dtype=np.float32)

@@ -15,7 +15,7 @@ from scipy import stats
 
 from analysis import metrics as M
 from analysis.io import NoResultsError, open_results
-from analysis.stats import mean_ci, t_quantile
+from paired.stats import mean_ci, t_quantile
 from analysis.timeline import positions_at, trajectories, vehicle_intervals
 from tests.analysis.helpers import read_hive_rows
 from tests.conftest import ROOT
@@ -271,7 +271,7 @@ print(len(files), heavy)
 
 def test_importing_analysis_is_light():
     code = ("import sys, analysis.io, analysis.metrics, analysis.plots, analysis.report, "
-            "analysis.render, analysis.timeline, analysis.stats\n"
+            "analysis.render, analysis.timeline, analysis.commands, paired.stats\n"
             "print(sorted(m for m in ('matplotlib', 'pybullet', 'PIL', 'torch') "
             "if m in sys.modules))")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,

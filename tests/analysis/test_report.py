@@ -273,7 +273,7 @@ def test_taxi_table_adds_up_and_has_intervals_over_seeds(road_sweep, tmp_path):
 
     from analysis import metrics as M
     from analysis.io import open_results
-    from analysis.stats import mean_ci
+    from paired.stats import mean_ci
 
     res = open_results(road_sweep)
     taxi = M.taxi_metrics(res.summary, res.table("tasks"), res.table("vehicles"))

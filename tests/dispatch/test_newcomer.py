@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.conftest import ROOT, write_scenario
+from tests.conftest import ROOT, fake_distribution, write_scenario
 
 PLUGIN = '''
 from allocators.greedy import GreedyAllocator
@@ -38,15 +38,10 @@ class NoDocAllocator(GreedyAllocator):
 def plugin_site(tmp_path_factory) -> Path:
     """A folder that, on PYTHONPATH, installs the distribution ``my-plugins`` with two
     allocators: ``boom`` (raises) and ``nodoc`` (no docstring, nor has its module)."""
-    site = tmp_path_factory.mktemp("site")
-    (site / "my_plugins.py").write_text(PLUGIN, encoding="utf-8")
-    info = site / "my_plugins-0.1.dist-info"
-    info.mkdir()
-    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: my-plugins\nVersion: 0.1\n")
-    (info / "entry_points.txt").write_text(
+    return fake_distribution(
+        tmp_path_factory.mktemp("site"), "my-plugins", "my_plugins", PLUGIN,
         "[dispatch.allocators]\nboom = my_plugins:BoomAllocator\n"
         "nodoc = my_plugins:NoDocAllocator\n")
-    return site
 
 
 def dispatch(*args, site: Path | None = None, columns: int = 400):

@@ -156,9 +156,9 @@ def test_gap_is_paired_within_a_batch_window():
 
 def test_tables_and_analysis_share_one_gap_and_order():
     """The CLI's tables and analysis.metrics compute the same paired gaps and the same
-    allocator order (one definition: analysis.compare)."""
+    allocator order (one definition: paired.compare)."""
     pd = pytest.importorskip("pandas")
-    from analysis import compare
+    from paired import compare
     from analysis import metrics as M
     from dispatch import tables
 

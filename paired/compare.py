@@ -2,8 +2,9 @@
 paired on, the paired gap to a reference allocator and the label of a batch window.
 
 One definition, used by the CLI's tables (:mod:`dispatch.tables`, on summary dicts) and by
-:mod:`analysis.metrics` (on DataFrames). Standard library only: it imports neither pandas nor
-``dispatch``, so the kernel's tables can use it without the analysis extras.
+:mod:`analysis.metrics` (on DataFrames). Standard library only, and outside both packages: it
+imports neither pandas nor ``dispatch`` nor ``analysis``, so the kernel's tables and the
+analysis share it without importing each other.
 
 The **gap to Hungarian** of a run is ``(cost - reference cost) / reference cost`` where the
 reference is the ``reference`` allocator's run on the same *instance*: the same value of every

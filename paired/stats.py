@@ -1,4 +1,5 @@
-"""Small statistics without scipy: Student-t quantiles and confidence intervals of a mean."""
+"""Small statistics without scipy: Student-t quantiles and confidence intervals of a mean (shared
+by the CLI's tables and the analysis package; standard library only)."""
 
 from __future__ import annotations
 

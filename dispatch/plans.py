@@ -1,0 +1,193 @@
+"""A decision's costs when vehicles have plans (shared rides, drop-off limits, the
+added-time objective): where a new request's stops go in a vehicle's plan and what that adds.
+
+* :func:`insertion_costs_of`: the cost matrix with plans, from the drives to each pickup; an
+  empty plan takes the pickup and drop-off in that order, a busy vehicle's plan the cheapest
+  feasible insertion (:func:`dispatch.stops.insertion_costs`); :class:`Inserts` keeps where
+  the stops go for the pairs handed out;
+* :class:`Plans`: the agents' stop lists as an allocation problem shows them
+  (:attr:`AllocationProblem.plans`), read from the vehicles when asked;
+* :func:`roomy`: the busy vehicles with a free seat (candidates for new requests).
+
+The dispatcher (:mod:`dispatch.dispatcher`) decides; this is the plan machinery it asks.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from dispatch.contracts import Planner, StopView
+from dispatch.stops import PICKUP_TIME, insertion_costs
+
+if TYPE_CHECKING:
+    from dispatch.vehicles import Fleet, Operator
+
+
+class Inserts:
+    """Where a decision's stops go, for its busy vehicles' feasible pairs, by ``(row, col)``:
+    kept as the arrays the insertion computed and looked up only for the pairs handed out (a
+    pooled batch has thousands of feasible pairs and hands out a few dozen)."""
+
+    def __init__(self, ins, rows: np.ndarray, cols: np.ndarray, m: int) -> None:
+        ok = np.isfinite(ins.cost)
+        self._ins, self._q = ins, np.flatnonzero(ok)
+        self._rows, self._cols, self._m = rows[ok], cols[ok], m
+        self._keys = None
+
+    def __bool__(self) -> bool:
+        return bool(self._q.size)
+
+    def kept(self, servable: np.ndarray) -> Inserts:
+        """The same, for the columns of ``servable`` only (renumbered as they are kept)."""
+        col = np.cumsum(servable) - 1
+        keep = servable[self._cols]
+        out = object.__new__(Inserts)
+        out._ins, out._q = self._ins, self._q[keep]
+        out._rows, out._cols = self._rows[keep], col[self._cols[keep]]
+        out._m, out._keys = int(servable.sum()), None
+        return out
+
+    def _find(self, key) -> int:
+        if self._keys is None:
+            keys = self._rows.astype(np.int64) * self._m + self._cols
+            order = np.argsort(keys, kind="stable")
+            self._keys, self._order = keys[order], order
+        r, c = key
+        k = int(r) * self._m + int(c)
+        i = int(np.searchsorted(self._keys, k))
+        return int(self._order[i]) if i < self._keys.size and self._keys[i] == k else -1
+
+    def get(self, key, default=None):
+        i = self._find(key)
+        return default if i < 0 else self._ins.of(int(self._q[i]))
+
+    def __contains__(self, key) -> bool:
+        return self._find(key) >= 0
+
+
+class Plans(Mapping):
+    """:attr:`AllocationProblem.plans`: the stop lists of a decision's agents that have one,
+    read from the vehicles when asked (within the decision: nothing moves meanwhile)."""
+
+    def __init__(self, fleet: Fleet, operator: Operator, slots: np.ndarray) -> None:
+        self._fleet, self._slots, self._operator = fleet, slots, operator
+        self._by_id: dict | None = None  # agent id -> vehicle, of those with stops (on use)
+        self._cache: dict[int, tuple] = {}
+
+    @property
+    def _ids(self) -> dict:
+        if self._by_id is None:
+            vs = self._fleet.vehicles
+            self._by_id = {v.id: v for v in (vs[k] for k in self._slots.tolist()) if v.stops}
+        return self._by_id
+
+    def __getitem__(self, agent_id: int) -> tuple[StopView, ...]:
+        got = self._cache.get(agent_id)
+        if got is None:
+            v = self._ids[agent_id]
+            times = self._operator.plan_arrays(v)[0]
+            got = self._cache[agent_id] = tuple(
+                StopView(s.kind, s.task.id, s.loc, s.passengers, s.latest, s.occupancy, t)
+                for s, t in zip(v.stops, times))
+        return got
+
+    def __iter__(self):
+        return iter(self._ids)
+
+    def __len__(self) -> int:
+        return len(self._ids)
+
+
+def roomy(fleet: Fleet) -> np.ndarray:
+    """Positions of the busy vehicles with a free seat somewhere in their plan (shared
+    rides: they are candidates for new requests)."""
+    return np.flatnonzero(fleet.busy_mask & fleet.room)
+
+
+def insertion_costs_of(cost: np.ndarray, slots: np.ndarray, tasks: list, now: float,
+                       holders: set, *, fleet: Fleet, operator: Operator, planner: Planner,
+                       objective: int) -> tuple[np.ndarray, Inserts | dict]:
+    """A decision's costs with plans (see :mod:`dispatch.stops`): for a vehicle with an
+    empty plan (idle, or about to give its task up) the request's pickup and drop-off in
+    that order; for a busy one the cheapest feasible insertion into its plan; ``inf``
+    where none keeps the capacity and every limit. ``cost`` holds the drives from each
+    vehicle to each pickup. Returns ``(costs by the objective, {(row, col): where the
+    stops go})`` for the busy vehicles' finite pairs."""
+    svc = operator.service_time
+    m = len(tasks)
+    lp = np.array([t.deadline for t in tasks])
+    ld = np.array([t.dropoff_deadline for t in tasks])
+    n_req = np.array([0 if t.dropoff is None else t.passengers for t in tasks], np.int64)
+    point = np.array([t.dropoff is None for t in tasks])
+    pd = np.array([0.0 if t.dropoff is None else t.direct_time for t in tasks])
+    if getattr(planner, "inner", None) is not None and not point.all():
+        # a congested planner (dispatch.congestion): the drive at this hour, not free flow
+        trips = np.flatnonzero(~point)
+        pd[trips] = planner.between([tasks[k].loc for k in trips.tolist()],
+                                         [tasks[k].dropoff for k in trips.tolist()],
+                                         pairwise=True)
+    svc_p = np.where(point, svc, 0.0)
+    svc_d = np.where(point, 0.0, svc)
+    cap = fleet.capacity[slots]
+    planned = fleet.busy_mask[slots]  # (a busy vehicle has stops or is serving)
+    if holders:  # [dispatch] reassign: a holder decides as if its plan were empty
+        planned = planned & ~np.isin(fleet.ids[slots], list(holders))
+    out = np.full(cost.shape, np.inf)
+    empty = np.flatnonzero(~planned)
+    if empty.size:
+        c = cost[empty]
+        arr_p = now + c
+        arr_d = arr_p + svc_p + pd
+        ok = (arr_p <= lp + 1e-9) & (arr_d <= ld + 1e-9) & (n_req <= cap[empty, None])
+        value = c if objective == PICKUP_TIME else c + svc_p + pd + svc_d
+        out[empty] = np.where(ok, value, np.inf)
+    busy = np.flatnonzero(planned)
+    if not busy.size:
+        return out, {}
+    ready = np.maximum(fleet.free_at[slots[busy]], now)
+    rows, cols = np.nonzero((ready[:, None] + cost[busy] <= lp + 1e-9)
+                            & (n_req <= cap[busy, None]))
+    if not rows.size:
+        return out, {}
+    # the busy vehicles' plans, flat; requests by column
+    used = np.unique(rows)
+    remap = np.full(busy.size, -1, np.int64)
+    remap[used] = np.arange(used.size)
+    off, s_arr, s_svc, s_latest, s_occ, locs = [0], [], [], [], [], []
+    load = []
+    plan_of = operator.plan_arrays
+    vehicles = fleet.vehicles
+    for k in slots[busy[used]].tolist():
+        v = vehicles[k]
+        times, svcs, latest, occ, where = plan_of(v)
+        s_arr += times
+        s_svc += svcs
+        s_latest += latest
+        s_occ += occ
+        locs += where
+        off.append(len(locs))
+        load.append(v.load)
+    ucols = np.unique(cols)
+    cmap = np.full(m, -1, np.int64)
+    cmap[ucols] = np.arange(ucols.size)
+    picks = [tasks[c].loc for c in ucols.tolist()]
+    drops = [tasks[c].loc if tasks[c].dropoff is None else tasks[c].dropoff
+             for c in ucols.tolist()]
+    between = planner.between
+    g = len(locs)
+    if g:
+        to_p, from_p = between(locs, picks), between(picks, locs)
+        to_d, from_d = between(locs, drops), between(drops, locs)
+    else:
+        to_p = to_d = np.zeros((0, ucols.size))
+        from_p = from_d = np.zeros((ucols.size, 0))
+    vrow = busy[rows]
+    ins = insertion_costs(
+        remap[rows], cmap[cols], ready[used], cost[vrow, cols], off, s_arr, s_svc,
+        s_latest, s_occ, load, cap[busy[used]], to_p, from_p, to_d, from_d, pd[ucols],
+        n_req[ucols], lp[ucols], ld[ucols], svc_p[ucols], svc_d[ucols], objective)
+    out[vrow, cols] = ins.cost
+    return out, Inserts(ins, vrow, cols, m)
