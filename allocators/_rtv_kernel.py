@@ -185,7 +185,7 @@ def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, 
         out_cut[g] = cut
 
 
-@_jit
+@jit
 def best_orders_any(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, p_svc,
                     p_eta, p_drop, p_pred, vp, poff, ppa, vn, pn, np_, nn, r_pax, r_lp, r_ld,
                     r_rel, r_direct, r_hasdrop, old_end, svc, objective, budget, tol, out_cost,
