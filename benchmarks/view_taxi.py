@@ -126,7 +126,7 @@ def table(rows) -> str:
     df = pd.DataFrame(rows)
     for c in FIELDS[1:]:
         if c not in ("window",):
-            df[c] = pd.to_numeric(df[c])
+            df[c] = pd.to_numeric(df[c], errors="coerce")  # "nan" read back from the csv
     df["full"] = df["pairs"] == df["optimal_pairs"]
     out = ["| N | window | series | decisions | excess cost | mean gap | complete | pairs | "
            "rounds |", "|---:|---|---|---:|---:|---:|---:|---:|---:|"]
