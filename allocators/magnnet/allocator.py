@@ -48,7 +48,13 @@ times less the discounted value of where each trip leaves it plus its value now;
 
 Other parameters: ``checkpoint`` (a ``model.pt`` of ``dispatch train magnnet`` replacing the
 shipped one of the variant: a match model for ``match``, a paper model of one size for
-``paper``/``paper_nb``), ``view_checkpoint`` (replaces ``view.pt``), ``confidence`` (default
+``paper``/``paper_nb``), ``view_checkpoint`` (replaces ``view.pt``), ``view_weights`` (default
+``"auto"``: which view model scores a partial view; ``view_taxi.pt``, the view model retrained
+by DAgger on Chicago taxi decisions under a 2 km range, :mod:`allocators.magnnet.view_taxi`,
+on a view out of the training range by the test of ``cost_scale = "auto"`` below (median
+travel time above :data:`TRAIN_MAX_S`: a city's taxis), ``view.pt`` on the others, so the
+paper's instances run as before; ``"view"`` / ``"taxi"``: that model on every partial view),
+``taxi_view_checkpoint`` (replaces ``view_taxi.pt``), ``confidence`` (default
 0.8: row and column softmax a pair needs before an agent that hears everyone requests it),
 ``view_confidence`` (default 0.5: the same for the view model), ``patience`` (default 3: the
 round from which the match model on partial views, ``partial = "match"``, requests regardless),
@@ -122,6 +128,11 @@ TRAIN_MAX_S = 30.0
 #: 4.0 % / 154 % (greedy: 0.2 % / 15.9 %).
 CANDIDATES = 4
 PARTIAL = ("view", "match")
+#: ``view_weights``: which view model scores a partial view. ``"auto"``: ``view_taxi.pt`` on a
+#: view out of the training range (the test of ``cost_scale = "auto"``: median travel time above
+#: TRAIN_MAX_S, a city's taxis), ``view.pt`` on the others (the paper's instances: unchanged);
+#: ``"view"`` / ``"taxi"``: that model on every partial view.
+VIEW_WEIGHTS = ("auto", "view", "taxi")
 
 
 @lru_cache(maxsize=32)
@@ -207,7 +218,8 @@ class MagnnetAllocator(DecentralizedAllocator):
                  patience: int = 3, view_patience: int = 12, view_hops: int = 6,
                  claims: int = 0, cost_scale: str | float = "auto",
                  candidates: str | int = "auto", view_candidates: str | int = "auto",
-                 value: str | None = None, value_weight: float | None = None) -> None:
+                 value: str | None = None, value_weight: float | None = None,
+                 view_weights: str = "auto", taxi_view_checkpoint: str | None = None) -> None:
         if variant not in VARIANTS:
             raise TypeError(f"variant must be one of {', '.join(VARIANTS)}, got {variant!r}")
         if partial not in PARTIAL:
@@ -235,11 +247,16 @@ class MagnnetAllocator(DecentralizedAllocator):
             raise TypeError(f"view_candidates must be 'auto' or an integer >= 0, got "
                             f"{view_candidates!r}")
         self.view_candidates = view_candidates
+        if view_weights not in VIEW_WEIGHTS:
+            raise TypeError(f"view_weights must be one of {', '.join(VIEW_WEIGHTS)}, got "
+                            f"{view_weights!r}")
+        self.view_weights = view_weights
         self.confidence = _number(confidence, "confidence", 0.0, 1.0)
         self.view_confidence = _number(view_confidence, "view_confidence", 0.0, 1.0)
-        if variant != "match" and (view_checkpoint is not None or partial != "view"):
-            raise TypeError(f"view_checkpoint and partial apply to variant 'match' only, not "
-                            f"{variant!r}")
+        if variant != "match" and (view_checkpoint is not None or partial != "view"
+                                   or taxi_view_checkpoint is not None):
+            raise TypeError(f"view_checkpoint, taxi_view_checkpoint and partial apply to "
+                            f"variant 'match' only, not {variant!r}")
         self._record = None  # DAgger: a list that collects the views decided on
         self.value = None
         if value is not None:  # the look-ahead option shared with hungarian (dispatch.value)
@@ -250,7 +267,7 @@ class MagnnetAllocator(DecentralizedAllocator):
             self.value = ValueOption(value, value_weight)
         self.files: dict[str, str] = {}  # checkpoint file -> sha, of what this allocator loaded
         if variant == "match":
-            self._init_match(checkpoint, view_checkpoint)
+            self._init_match(checkpoint, view_checkpoint, taxi_view_checkpoint)
         else:
             self._init_paper(checkpoint)
 
@@ -260,6 +277,7 @@ class MagnnetAllocator(DecentralizedAllocator):
         it is fitting)."""
         alloc = cls(partial="match", **params)
         alloc.model, alloc.view_model, alloc.partial = match_model, view_model, "view"
+        alloc.taxi_view_model = view_model  # the one model on every partial view
         alloc.files = {"(in memory)": "-"}
         return alloc
 
@@ -269,21 +287,29 @@ class MagnnetAllocator(DecentralizedAllocator):
         self.files[Path(path).name] = sha
         return model, size
 
-    def _init_match(self, checkpoint, view_checkpoint) -> None:
+    def _init_match(self, checkpoint, view_checkpoint, taxi_view_checkpoint=None) -> None:
         from allocators.magnnet import match, views
 
         self._match_mod, self._views_mod = match, views
         self.model, _ = self._use(checkpoint or _exists(shipped("match")), ("match",))
-        self.view_model = None
+        self.view_model = self.taxi_view_model = None
         if self.partial == "view":
-            self.view_model, _ = self._use(view_checkpoint or _exists(shipped("view")),
-                                           ("view",))
+            if self.view_weights != "taxi":
+                self.view_model, _ = self._use(view_checkpoint or _exists(shipped("view")),
+                                               ("view",))
+            if self.view_weights != "view":
+                self.taxi_view_model, _ = self._use(
+                    taxi_view_checkpoint or _exists(shipped("view_taxi")), ("view",))
+            if self.view_model is None:  # "taxi": the taxi weights on every partial view
+                self.view_model = self.taxi_view_model
+            if self.taxi_view_model is None:  # "view": view.pt on every partial view
+                self.taxi_view_model = self.view_model
         # warm-up: torch's first call of each kernel is slow; pay it here, not in a decision
         warm = np.array([[1.0, 2.0], [2.0, 1.0]])
         match.scores_of(self.model, warm, np.zeros(2, bool))
-        if self.view_model is not None:
-            views.view_scores(self.view_model, warm, np.zeros(2, bool), np.array([0, 1]),
-                              np.ones(2, bool))
+        for m in {id(v): v for v in (self.view_model, self.taxi_view_model)
+                  if v is not None}.values():
+            views.view_scores(m, warm, np.zeros(2, bool), np.array([0, 1]), np.ones(2, bool))
 
     def _init_paper(self, checkpoint) -> None:
         import torch
@@ -321,7 +347,8 @@ class MagnnetAllocator(DecentralizedAllocator):
         if self.variant == "match":
             out.update(view_hops=str(self.view_hops), claims=str(self.claims),
                        cost_scale=str(self.cost_scale), candidates=str(self.candidates),
-                       view_candidates=str(self.view_candidates))
+                       view_candidates=str(self.view_candidates),
+                       view_weights=self.view_weights)
         return out
 
     # ------------------------------------------------------------------ deciding
@@ -395,7 +422,7 @@ class MagnnetAllocator(DecentralizedAllocator):
         ``cost_scale`` or the cut setting ``cut`` is ``"auto"``)."""
         finite = np.isfinite(cost)
         wide, median = False, 0.0
-        if finite.any() and "auto" in (self.cost_scale, cut):
+        if finite.any() and "auto" in (self.cost_scale, cut, self.view_weights):
             median = float(np.median(cost[finite]))
             wide = median > TRAIN_MAX_S
         if self.cost_scale == "auto":
@@ -415,6 +442,7 @@ class MagnnetAllocator(DecentralizedAllocator):
         a row without a kept edge leaves the view, and an agent that leaves its own view
         requests nothing this round (as an agent that no task keeps under ``candidates``)."""
         cost, finite, wide = self._rescaled(cost, self.view_candidates)
+        self._wide = wide  # which weights score it (view_weights = "auto")
         vc = self.view_candidates
         k = (CANDIDATES if wide else 0) if vc == "auto" else vc
         if k == 0 or cost.shape[0] <= k:
@@ -580,14 +608,21 @@ class MagnnetAllocator(DecentralizedAllocator):
                 if not rows[np.searchsorted(members, i)]:
                     continue  # not a candidate of its own view: nothing this round (-1)
                 members, hop, active = members[rows], hop[rows], active[rows]
-            if self._record is not None:
-                self._record.append((round_, members, tasks, hop, active))
-            pending.append((k, i, members, active, (cost, self._flies_of(problem, members),
-                                                    hop, active)))
-        # every view of the round in one pass (the same numbers as one call per view, up to
-        # the order of float sums: views.view_scores_many)
-        scored = views.view_scores_many(self.view_model, [v for *_, v in pending])
-        for (k, i, members, active, _), (s, rn, cn) in zip(pending, scored):
+            if self._record is not None:  # DAgger: the view as the model reads it
+                self._record.append((round_, members, tasks, hop, active, cost))
+            taxi = self._wide if self.view_weights == "auto" else self.view_weights == "taxi"
+            pending.append((k, i, members, active, taxi,
+                            (cost, self._flies_of(problem, members), hop, active)))
+        # every view of the round in one pass per model (the same numbers as one call per view,
+        # up to the order of float sums: views.view_scores_many)
+        scored: list = [None] * len(pending)
+        for taxi, model in ((False, self.view_model), (True, self.taxi_view_model)):
+            idx = [q for q, v in enumerate(pending) if v[4] == taxi]
+            if idx:
+                for q, res in zip(idx, views.view_scores_many(model, [pending[q][5]
+                                                                      for q in idx])):
+                    scored[q] = res
+        for (k, i, members, active, _, _), (s, rn, cn) in zip(pending, scored):
             req = views.view_request(s, rn, cn, int(np.searchsorted(members, i)),
                                      self.view_confidence, force=round_ >= self.view_patience,
                                      active=active, last=round_ >= 2 * self.view_patience)

@@ -65,6 +65,28 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "only, as the shipped view.pt was trained; 6: the plugin's default "
                         "rule, so DAgger visits the states after the component plans)")
     p.add_argument("--threads", type=int, default=2, help="view: torch threads")
+    p.add_argument("--taxi", action="store_true",
+                   help="view: DAgger on taxi decisions of a city day under a radio range "
+                        "instead of the voxel stages, from the shipped view.pt (or --init): "
+                        "the view_taxi.pt the plugin runs on taxi-scale views "
+                        "(allocators/magnnet/view_taxi.py; --iterations, --episodes, --updates, "
+                        "--lr apply)")
+    p.add_argument("--taxi-scenario", type=Path,
+                   default=Path(__file__).resolve().parents[2] / "scenarios" / "chicago_taxi.toml",
+                   help="view --taxi: the road scenario whose decisions are trained on")
+    p.add_argument("--taxi-agents", type=int, nargs="+", default=[500, 1000],
+                   help="view --taxi: fleet sizes of the training days")
+    p.add_argument("--taxi-seeds", type=int, nargs="+", default=[100, 101],
+                   help="view --taxi: training days (keep the evaluation's seeds 0-4 out)")
+    p.add_argument("--taxi-val-seed", type=int, default=110,
+                   help="view --taxi: the day whose decisions pick the kept weights")
+    p.add_argument("--taxi-every", type=int, default=6,
+                   help="view --taxi: keep every k-th decision of the night and day windows")
+    p.add_argument("--taxi-range", type=float, default=2000.0,
+                   help="view --taxi: radio range in metres")
+    p.add_argument("--taxi-windows", nargs="+", default=["0.5-4", "7-10"],
+                   help="view --taxi: hours of the day the decisions are drawn from, as A-B "
+                        "(default: the night and the morning)")
     p.add_argument("--init", type=Path, default=None,
                    help="view: continue from this view checkpoint instead of match.pt")
     p.add_argument("--steps", type=int, default=RECIPE["steps"],
@@ -278,6 +300,8 @@ def _run_view(args, console=None) -> int:
     from allocators.magnnet.views import (ViewConfig, ViewPolicy, config_dict, evaluate_views,
                                           train_views)
 
+    if args.taxi:
+        return _run_view_taxi(args, console)
     if args.view_hops < 2 or args.threads < 1:
         raise SystemExit("--view-hops must be >= 2 and --threads >= 1")
     if args.stage2 < 0 or args.stage2_patience < 0 or not args.stage2_lr > 0:
@@ -383,6 +407,138 @@ def _run_view(args, console=None) -> int:
                 f"conflict-free {100 * kept['val/cf50']:.1f} %)")
     (console.print if console else print)(msg)
     return 0
+
+
+def _run_view_taxi(args, console=None) -> int:
+    """DAgger of the view model on taxi decisions (:mod:`allocators.magnnet.view_taxi`), from
+    the shipped ``view.pt`` (or ``--init``): ``model.pt``, ``log.parquet`` and ``loss.png``
+    (the imitation loss and the validation gap to the optimal assignment on the decisions of
+    day ``--taxi-val-seed``)."""
+    import dataclasses
+    import resource
+
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+    import torch
+
+    from allocators.magnnet.allocator import MagnnetAllocator, shipped
+    from allocators.magnnet.ppo import load_checkpoint, save_checkpoint
+    from allocators.magnnet.view_taxi import (TaxiConfig, decision_gaps, taxi_decisions,
+                                              train_taxi)
+
+    if set(args.taxi_seeds + [args.taxi_val_seed]) & set(range(5)):
+        raise SystemExit("--taxi-seeds and --taxi-val-seed must leave the evaluation's "
+                         "seeds 0-4 out")
+    if args.threads < 1 or args.view_hops < 2:
+        raise SystemExit("--view-hops must be >= 2 and --threads >= 1")
+    try:
+        windows = tuple(tuple(float(h) for h in w.split("-")) for w in args.taxi_windows)
+        assert all(len(w) == 2 and 0 <= w[0] < w[1] for w in windows)
+    except (ValueError, AssertionError):
+        raise SystemExit(f"--taxi-windows: hours as A-B with 0 <= A < B, got "
+                         f"{args.taxi_windows}") from None
+    torch.set_num_threads(args.threads)
+    d = TaxiConfig()
+    cfg = dataclasses.replace(d, iterations=args.iterations or d.iterations,
+                              episodes=args.episodes or d.episodes,
+                              updates=args.updates or d.updates, seed=args.seed,
+                              lr=d.lr if args.lr is None else args.lr)
+    out = args.out or Path("runs") / "train" / "magnnet_view_taxi"
+    out.mkdir(parents=True, exist_ok=True)
+    say = console.print if console else print
+    started = time.perf_counter()
+
+    def cpu_s():
+        r = resource.getrusage(resource.RUSAGE_SELF)
+        return r.ru_utime + r.ru_stime
+
+    cpu0 = cpu_s()
+    problems, val = [], []
+    for n in args.taxi_agents:
+        for seed in args.taxi_seeds:
+            problems += taxi_decisions(args.taxi_scenario, n, seed, windows,
+                                       args.taxi_every, args.taxi_range)
+        # validation: a tenth as many decisions of a day of its own
+        val += taxi_decisions(args.taxi_scenario, n, args.taxi_val_seed, windows,
+                              10 * args.taxi_every, args.taxi_range)
+    say(f"{len(problems)} training and {len(val)} validation decisions "
+        f"({time.perf_counter() - started:.0f} s)")
+    match, _ = load_checkpoint(shipped("match"))
+    model, _ = load_checkpoint(args.init or shipped("view"))
+
+    def validate(m):
+        r = decision_gaps(MagnnetAllocator.with_models(match, m, view_hops=args.view_hops), val)
+        # incomplete decisions (fewer pairs than the optimum: requests left waiting) weigh most
+        return {"gap": r["gap"], "complete": r["complete"], "pairs": r["pairs"],
+                "rounds": r["rounds"], "score": r["gap"] + 5.0 * (1.0 - r["pairs"])}
+
+    def on_row(row):
+        if row["phase"] == "val":
+            say(f"iteration {row['iteration']}: validation gap {100 * row['val/gap']:.1f} %, "
+                f"pairs {100 * row['val/pairs']:.1f} % of the optimum, "
+                f"{row['val/rounds']:.1f} rounds ({row['wall_s']:.0f} s)")
+
+    if not problems:
+        raise SystemExit("no taxi decisions under the range in those windows: widen "
+                         "--taxi-windows or lower --taxi-every / --taxi-range")
+    rows = train_taxi(model, match, problems, cfg, on_row,
+                      validate=validate if val else None, view_hops=args.view_hops)
+    wall, cpu = time.perf_counter() - started, cpu_s() - cpu0
+    vals = [r for r in rows if r["phase"] == "val"]
+    kept = min(vals, key=lambda r: r["val/score"]) if vals else None
+    save_checkpoint(model, out / "model.pt", None,
+                    {"wall_s": wall, "cpu_s": cpu, "threads": args.threads,
+                     "taxi": dataclasses.asdict(cfg), "from": str(args.init or "view.pt"),
+                     "scenario": str(args.taxi_scenario), "agents": args.taxi_agents,
+                     "seeds": args.taxi_seeds, "val_seed": args.taxi_val_seed,
+                     "every": args.taxi_every, "radio_range": args.taxi_range,
+                     "windows_h": [list(w) for w in windows], "view_hops": args.view_hops,
+                     "val": {k: v for k, v in (kept or {}).items() if k.startswith("val/")},
+                     "curve": [{k: v for k, v in r.items() if k.startswith("val/")
+                                or k in ("iteration", "wall_s")} for r in vals],
+                     "decisions": len(problems)})
+    keys = sorted({k for r in rows for k in r})
+    pq.write_table(pa.table({k: [r.get(k) for r in rows] for k in keys}), out / "log.parquet")
+    _taxi_figure(rows, out)
+    msg = (f"trained in {wall:.1f} s ({cpu:.1f} CPU s on {args.threads} torch threads), "
+           f"{cfg.iterations} DAgger iterations on {len(problems)} taxi decisions; checkpoint "
+           f"{out / 'model.pt'} (run it with magnnet's taxi_view_checkpoint)")
+    if kept:
+        msg += (f"\nkept weights of iteration {kept['iteration']} (-1: the starting ones; "
+                f"validation gap {100 * kept['val/gap']:.1f} %, pairs "
+                f"{100 * kept['val/pairs']:.1f} % of the optimum)")
+    say(msg)
+    return 0
+
+
+def _taxi_figure(rows, out: Path) -> None:
+    import numpy as np
+
+    plt = _pyplot()
+    if plt is None:
+        return
+    fit = [r for r in rows if r["phase"] == "dagger"]
+    val = [r for r in rows if r["phase"] == "val"]
+    fig, ax = plt.subplots(1, 2, figsize=(9, 3.2))
+    loss = np.array([r["losses/imitation"] for r in fit])
+    k = max(1, len(loss) // 50)
+    if len(loss):
+        smooth = np.convolve(loss, np.ones(k) / k, mode="valid")
+        ax[0].plot(np.arange(len(smooth)) + k - 1, smooth)
+    ax[0].set_xlabel("update")
+    ax[0].set_ylabel(f"imitation loss (mean of {k})")
+    it = [r["iteration"] + 1 for r in val]
+    ax[1].plot(it, [100 * r["val/gap"] for r in val], marker="o", label="gap to optimal")
+    ax[1].plot(it, [100 * (1 - r["val/pairs"]) for r in val], marker="x", ls="--",
+               label="pairs short of the optimum")
+    ax[1].set_xlabel("DAgger iteration (0: the starting view.pt)")
+    ax[1].set_ylabel("% on validation taxi decisions")
+    ax[1].legend(fontsize=7)
+    for a in ax:
+        a.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(out / "loss.png", dpi=120)
+    plt.close(fig)
 
 
 def _view_figure(rows, out: Path) -> None:

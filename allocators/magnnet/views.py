@@ -279,35 +279,57 @@ def play_problem(problem, policy):
     return alloc, views
 
 
-def label(problem, alloc, views) -> list[tuple]:
-    """Teacher labels of recorded views: per view ``(cost, flies, hop, row_target,
+def label(problem, alloc, views, own_ties: bool = False) -> list[tuple]:
+    """Teacher labels of recorded views: per view ``(cost, flies, hop, active, row_target,
     col_target)``, targets the optimal assignment of the whole remaining problem of that
-    round (``m`` / ``n``: the null heads)."""
+    round (``m`` / ``n``: the null heads); ``cost`` is the view's cost as the model read it
+    when the record holds it (a taxi-scale view is rescaled and cut), else the problem's.
+
+    ``own_ties``: per view, when the view's own agent (hop 0) has no task in the optimal
+    assignment but costs exactly what the agent given some task costs for it (taxis at one
+    node), the swap (it takes that task, the other none: an optimum too), so that taxis at
+    one node do not learn that each of them is half likely to be the one."""
     from allocators.hungarian import optimal_pairs
 
     n, m = problem.cost.shape
-    won = [(q.round, q.agent_id, q.task_id) for q in alloc.requests if q.won]
-    teacher: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    ia = {int(v): k for k, v in enumerate(problem.agent_ids)}  # ids -> indices
+    it = {int(v): k for k, v in enumerate(problem.task_ids)}
+    won = [(q.round, ia[int(q.agent_id)], it[int(q.task_id)]) for q in alloc.requests if q.won]
+    free: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    teacher: dict = {}
+    flies = problem_flies(problem)
     out = []
-    for r, members, tasks, hop, active in views:
-        if r not in teacher:
+    for rec in views:
+        r, members, tasks, hop, active = rec[:5]
+        if r not in free:
             free_a, free_t = np.ones(n, bool), np.ones(m, bool)
-            for rr, a, t in won:  # ids are indices in training problems
+            for rr, a, t in won:
                 if rr < r:
                     free_a[a], free_t[t] = False, False
-            ai, ti = np.flatnonzero(free_a), np.flatnonzero(free_t)
+            free[r] = (np.flatnonzero(free_a), np.flatnonzero(free_t))
+        ai, ti = free[r]
+        if r not in teacher:
             at, ta = np.full(n, -1), np.full(m, -1)
             for i, j in optimal_pairs(problem.cost[np.ix_(ai, ti)]):
                 at[ai[i]], ta[ti[j]] = ti[j], ai[i]
             teacher[r] = (at, ta)
         at, ta = teacher[r]
+        if own_ties:
+            own = int(members[np.flatnonzero(np.asarray(hop) == 0)[0]])
+            if at[own] < 0:
+                taken = np.flatnonzero(ta >= 0)
+                tie = taken[problem.cost[own, taken] == problem.cost[ta[taken], taken]]
+                if tie.size:  # swap: an assignment of the same cost, the owner in it
+                    t = int(tie[0])
+                    at, ta = at.copy(), ta.copy()
+                    at[ta[t]], at[own], ta[t] = -1, t, own
         pos_t = {int(t): k for k, t in enumerate(tasks)}
         pos_a = {int(a): k for k, a in enumerate(members)}
         rt = np.array([pos_t.get(int(at[a]), len(tasks)) if act else len(tasks)
                        for a, act in zip(members, active)])
         ct = np.array([pos_a.get(int(ta[t]), len(members)) for t in tasks])
-        out.append((problem.cost[np.ix_(members, tasks)], problem_flies(problem)[members],
-                    hop, active, rt, ct))
+        cost = rec[5] if len(rec) > 5 else problem.cost[np.ix_(members, tasks)]
+        out.append((cost, flies[members], hop, active, rt, ct))
     return out
 
 

@@ -219,7 +219,7 @@ def test_models_load_in_the_constructor_and_describe_what_ran(monkeypatch):
     for name, sha in files.items():
         data = (mod.CHECKPOINTS / name).read_bytes()
         assert hashlib.sha256(data).hexdigest()[:16] == sha
-    assert set(files) == {"match.pt", "view.pt"}
+    assert set(files) == {"match.pt", "view.pt", "view_taxi.pt"}  # view_weights = "auto"
 
 
 @pytest.mark.parametrize("variant", ["paper", "paper_nb"])
