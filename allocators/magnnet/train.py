@@ -122,8 +122,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args, console=None) -> int:
-    import pyarrow as pa
-    import pyarrow.parquet as pq
     import torch
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
@@ -206,9 +204,7 @@ def run(args, console=None) -> int:
                      "world_size": pool.world_size.tolist(),
                      "pool": f"train seeds from 1000000, N={pool_n}, {len(pool)} training + "
                              f"{n_val} validation instances"})
-    keys = sorted({k for r in rows for k in r})
-    table = pa.table({k: [r.get(k) for r in rows] for k in keys})
-    pq.write_table(table, out / "log.parquet")
+    _write_log(rows, out)
     _figures(rows, out)
     msg = (f"trained in {wall:.1f} s, {steps} env steps ({steps / wall:.0f} steps/s); PPO "
            f"{ppo_steps} env steps in {ppo_wall:.1f} s "
@@ -224,8 +220,6 @@ def run(args, console=None) -> int:
 def _run_match(args, console=None) -> int:
     """Imitation training of :class:`~allocators.magnnet.match.MatchPolicy`: ``model.pt``,
     ``log.parquet`` (one row per update and per validation) and ``loss.png``."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
     import torch
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
@@ -266,8 +260,7 @@ def _run_match(args, console=None) -> int:
                      "pool": f"train seeds from 1000000: N=20 ({len(full) - n_val} training + "
                              f"{n_val} validation instances), random sub-problems up to "
                              f"{cfg.max_size} x {cfg.max_size}"})
-    keys = sorted({k for r in rows for k in r})
-    pq.write_table(pa.table({k: [r.get(k) for r in rows] for k in keys}), out / "log.parquet")
+    _write_log(rows, out)
     _loss_figure(rows, out)
     msg = f"trained in {wall:.1f} s, {cfg.updates} updates; checkpoint {out / 'model.pt'}"
     if best:
@@ -287,15 +280,12 @@ def _run_view(args, console=None) -> int:
     a 20 m range; the weights of the iteration closest to the targets, over both stages, are
     kept."""
     import dataclasses
-    import resource
 
-    import pyarrow as pa
-    import pyarrow.parquet as pq
     import torch
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
     from allocators.magnnet.allocator import MagnnetAllocator, shipped
-    from allocators.magnnet.ppo import load_checkpoint, save_checkpoint
+    from allocators.magnnet.ppo import load_checkpoint
     from allocators.magnnet.problems import load_pool
     from allocators.magnnet.views import (ViewConfig, ViewPolicy, config_dict, evaluate_views,
                                           train_views)
@@ -338,11 +328,7 @@ def _run_view(args, console=None) -> int:
         return {"gap20": r20["gap"], "cf20": r20["conflict_free"], "gap50": r50["gap"],
                 "cf50": r50["conflict_free"], "score": score}
 
-    def cpu_s():
-        r = resource.getrusage(resource.RUSAGE_SELF)
-        return r.ru_utime + r.ru_stime
-
-    started, cpu0 = time.perf_counter(), cpu_s()
+    started, cpu0 = time.perf_counter(), _cpu_s()
     rows: list = []
     best, best_state = None, None
     with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}"
@@ -378,26 +364,18 @@ def _run_view(args, console=None) -> int:
                 best_state = {k: v.clone() for k, v in model.state_dict().items()}
     if best_state is not None:  # the best over both stages (the last need not improve)
         model.load_state_dict(best_state)
-    wall, cpu = time.perf_counter() - started, cpu_s() - cpu0
-    vals = [r for r in rows if r["phase"] == "val"]
-    kept = min(vals, key=lambda r: r["val/score"]) if vals else None
-    save_checkpoint(model, out / "model.pt", None,
-                    {"wall_s": wall, "cpu_s": cpu, "threads": args.threads,
-                     "view": config_dict(cfg),
-                     "stages": [{"iterations": c.iterations, "patience": c.patience,
-                                 "lr": c.lr} for c in stages],
-                     "from": str(args.init) if args.init else "match.pt",
-                     "view_hops": args.view_hops,
-                     "val": {k: v for k, v in (kept or {}).items() if k.startswith("val/")},
-                     "curve": [{k: v for k, v in r.items() if k.startswith("val/")
-                                or k in ("stage", "iteration", "wall_s")} for r in vals],
-                     "world_size": p20.world_size.tolist(),
-                     "pool": "train seeds from 1000000: N=20 (500) and N=50 (170) instances "
-                             "for DAgger, 40 + 20 held out for validation at 20 m"})
-    keys = sorted({k for r in rows for k in r})
-    pq.write_table(pa.table({k: [r.get(k) for r in rows] for k in keys}), out / "log.parquet")
-    _view_figure(rows, out)
-    msg = (f"trained in {wall:.1f} s ({cpu:.1f} CPU s on {args.threads} torch threads), "
+    wall, cpu, kept = _save_dagger(
+        model, rows, out, args.threads, started, cpu0,
+        {"view": config_dict(cfg),
+         "stages": [{"iterations": c.iterations, "patience": c.patience, "lr": c.lr}
+                    for c in stages],
+         "from": str(args.init) if args.init else "match.pt",
+         "view_hops": args.view_hops},
+        {"world_size": p20.world_size.tolist(),
+         "pool": "train seeds from 1000000: N=20 (500) and N=50 (170) instances "
+                 "for DAgger, 40 + 20 held out for validation at 20 m"},
+        ("stage", "iteration", "wall_s"), _view_figure)
+    msg = (f"{_trained(wall, cpu, args.threads)}"
            f"{' + '.join(str(c.iterations) for c in stages)} DAgger iterations; checkpoint "
            f"{out / 'model.pt'}")
     if kept:
@@ -415,14 +393,11 @@ def _run_view_taxi(args, console=None) -> int:
     (the imitation loss and the validation gap to the optimal assignment on the decisions of
     day ``--taxi-val-seed``)."""
     import dataclasses
-    import resource
 
-    import pyarrow as pa
-    import pyarrow.parquet as pq
     import torch
 
     from allocators.magnnet.allocator import MagnnetAllocator, shipped
-    from allocators.magnnet.ppo import load_checkpoint, save_checkpoint
+    from allocators.magnnet.ppo import load_checkpoint
     from allocators.magnnet.view_taxi import (TaxiConfig, decision_gaps, taxi_decisions,
                                               train_taxi)
 
@@ -446,13 +421,7 @@ def _run_view_taxi(args, console=None) -> int:
     out = args.out or Path("runs") / "train" / "magnnet_view_taxi"
     out.mkdir(parents=True, exist_ok=True)
     say = console.print if console else print
-    started = time.perf_counter()
-
-    def cpu_s():
-        r = resource.getrusage(resource.RUSAGE_SELF)
-        return r.ru_utime + r.ru_stime
-
-    cpu0 = cpu_s()
+    started, cpu0 = time.perf_counter(), _cpu_s()
     problems, val = [], []
     for n in args.taxi_agents:
         for seed in args.taxi_seeds:
@@ -483,24 +452,15 @@ def _run_view_taxi(args, console=None) -> int:
                          "--taxi-windows or lower --taxi-every / --taxi-range")
     rows = train_taxi(model, match, problems, cfg, on_row,
                       validate=validate if val else None, view_hops=args.view_hops)
-    wall, cpu = time.perf_counter() - started, cpu_s() - cpu0
-    vals = [r for r in rows if r["phase"] == "val"]
-    kept = min(vals, key=lambda r: r["val/score"]) if vals else None
-    save_checkpoint(model, out / "model.pt", None,
-                    {"wall_s": wall, "cpu_s": cpu, "threads": args.threads,
-                     "taxi": dataclasses.asdict(cfg), "from": str(args.init or "view.pt"),
-                     "scenario": str(args.taxi_scenario), "agents": args.taxi_agents,
-                     "seeds": args.taxi_seeds, "val_seed": args.taxi_val_seed,
-                     "every": args.taxi_every, "radio_range": args.taxi_range,
-                     "windows_h": [list(w) for w in windows], "view_hops": args.view_hops,
-                     "val": {k: v for k, v in (kept or {}).items() if k.startswith("val/")},
-                     "curve": [{k: v for k, v in r.items() if k.startswith("val/")
-                                or k in ("iteration", "wall_s")} for r in vals],
-                     "decisions": len(problems)})
-    keys = sorted({k for r in rows for k in r})
-    pq.write_table(pa.table({k: [r.get(k) for r in rows] for k in keys}), out / "log.parquet")
-    _taxi_figure(rows, out)
-    msg = (f"trained in {wall:.1f} s ({cpu:.1f} CPU s on {args.threads} torch threads), "
+    wall, cpu, kept = _save_dagger(
+        model, rows, out, args.threads, started, cpu0,
+        {"taxi": dataclasses.asdict(cfg), "from": str(args.init or "view.pt"),
+         "scenario": str(args.taxi_scenario), "agents": args.taxi_agents,
+         "seeds": args.taxi_seeds, "val_seed": args.taxi_val_seed,
+         "every": args.taxi_every, "radio_range": args.taxi_range,
+         "windows_h": [list(w) for w in windows], "view_hops": args.view_hops},
+        {"decisions": len(problems)}, ("iteration", "wall_s"), _taxi_figure)
+    msg = (f"{_trained(wall, cpu, args.threads)}"
            f"{cfg.iterations} DAgger iterations on {len(problems)} taxi decisions; checkpoint "
            f"{out / 'model.pt'} (run it with magnnet's taxi_view_checkpoint)")
     if kept:
@@ -511,13 +471,60 @@ def _run_view_taxi(args, console=None) -> int:
     return 0
 
 
-def _taxi_figure(rows, out: Path) -> None:
+def _cpu_s() -> float:
+    """CPU seconds of this process so far (user + system, all threads)."""
+    import resource
+
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
+def _trained(wall: float, cpu: float, threads: int) -> str:
+    return f"trained in {wall:.1f} s ({cpu:.1f} CPU s on {threads} torch threads), "
+
+
+def _write_log(rows, out: Path) -> None:
+    """``log.parquet``: one column per key any row has (null where a row lacks it)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    keys = sorted({k for r in rows for k in r})
+    pq.write_table(pa.table({k: [r.get(k) for r in rows] for k in keys}), out / "log.parquet")
+
+
+def _save_dagger(model, rows, out: Path, threads: int, started: float, cpu0: float,
+                 head: dict, tail: dict, curve_keys: tuple, figure):
+    """The end of a DAgger trainer of the view model: ``model.pt`` (its ``extra``: wall and
+    CPU seconds, ``threads``, ``head``, the kept validation row's ``val/`` values, the
+    ``curve`` of validation rows (their ``val/`` values and ``curve_keys``), then ``tail``),
+    ``log.parquet`` and ``figure(rows, out)``. The kept row is the validation row of least
+    ``val/score`` (None without validation). Returns ``(wall, cpu, kept)``."""
+    from allocators.magnnet.ppo import save_checkpoint
+
+    wall, cpu = time.perf_counter() - started, _cpu_s() - cpu0
+    vals = [r for r in rows if r["phase"] == "val"]
+    kept = min(vals, key=lambda r: r["val/score"]) if vals else None
+    save_checkpoint(model, out / "model.pt", None,
+                    {"wall_s": wall, "cpu_s": cpu, "threads": threads, **head,
+                     "val": {k: v for k, v in (kept or {}).items() if k.startswith("val/")},
+                     "curve": [{k: v for k, v in r.items() if k.startswith("val/")
+                                or k in curve_keys} for r in vals],
+                     **tail})
+    _write_log(rows, out)
+    figure(rows, out)
+    return wall, cpu, kept
+
+
+def _loss_png(rows, out: Path, fit_phase: str, right) -> None:
+    """``loss.png``: on the left the imitation loss of the ``fit_phase`` rows (running mean
+    of a fiftieth of them), on the right what ``right(ax, fit, val)`` draws (``ax`` both
+    axes, ``fit`` those rows, ``val`` the validation rows); nothing without matplotlib."""
     import numpy as np
 
     plt = _pyplot()
     if plt is None:
         return
-    fit = [r for r in rows if r["phase"] == "dagger"]
+    fit = [r for r in rows if r["phase"] == fit_phase]
     val = [r for r in rows if r["phase"] == "val"]
     fig, ax = plt.subplots(1, 2, figsize=(9, 3.2))
     loss = np.array([r["losses/imitation"] for r in fit])
@@ -527,13 +534,7 @@ def _taxi_figure(rows, out: Path) -> None:
         ax[0].plot(np.arange(len(smooth)) + k - 1, smooth)
     ax[0].set_xlabel("update")
     ax[0].set_ylabel(f"imitation loss (mean of {k})")
-    it = [r["iteration"] + 1 for r in val]
-    ax[1].plot(it, [100 * r["val/gap"] for r in val], marker="o", label="gap to optimal")
-    ax[1].plot(it, [100 * (1 - r["val/pairs"]) for r in val], marker="x", ls="--",
-               label="pairs short of the optimum")
-    ax[1].set_xlabel("DAgger iteration (0: the starting view.pt)")
-    ax[1].set_ylabel("% on validation taxi decisions")
-    ax[1].legend(fontsize=7)
+    right(ax, fit, val)
     for a in ax:
         a.grid(alpha=0.3)
     fig.tight_layout()
@@ -541,22 +542,25 @@ def _taxi_figure(rows, out: Path) -> None:
     plt.close(fig)
 
 
-def _view_figure(rows, out: Path) -> None:
-    import numpy as np
+def _taxi_figure(rows, out: Path) -> None:
+    _loss_png(rows, out, "dagger", _taxi_curve)
 
-    plt = _pyplot()
-    if plt is None:
-        return
-    fit = [r for r in rows if r["phase"] == "dagger"]
-    val = [r for r in rows if r["phase"] == "val"]
-    fig, ax = plt.subplots(1, 2, figsize=(9, 3.2))
-    loss = np.array([r["losses/imitation"] for r in fit])
-    k = max(1, len(loss) // 50)
-    if len(loss):
-        smooth = np.convolve(loss, np.ones(k) / k, mode="valid")
-        ax[0].plot(np.arange(len(smooth)) + k - 1, smooth)
-    ax[0].set_xlabel("update")
-    ax[0].set_ylabel(f"imitation loss (mean of {k})")
+
+def _taxi_curve(ax, fit, val) -> None:
+    it = [r["iteration"] + 1 for r in val]
+    ax[1].plot(it, [100 * r["val/gap"] for r in val], marker="o", label="gap to optimal")
+    ax[1].plot(it, [100 * (1 - r["val/pairs"]) for r in val], marker="x", ls="--",
+               label="pairs short of the optimum")
+    ax[1].set_xlabel("DAgger iteration (0: the starting view.pt)")
+    ax[1].set_ylabel("% on validation taxi decisions")
+    ax[1].legend(fontsize=7)
+
+
+def _view_figure(rows, out: Path) -> None:
+    _loss_png(rows, out, "dagger", _view_curve)
+
+
+def _view_curve(ax, fit, val) -> None:
     it = [r["iteration"] for r in val]
     for key, lab in (("val/gap20", "gap N=20"), ("val/gap50", "gap N=50")):
         ax[1].plot(it, [100 * r[key] for r in val], marker="o", label=lab)
@@ -569,11 +573,6 @@ def _view_figure(rows, out: Path) -> None:
     ax[1].set_xlabel("DAgger iteration")
     ax[1].set_ylabel("% at 20 m range (validation)")
     ax[1].legend(fontsize=7)
-    for a in ax:
-        a.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(out / "loss.png", dpi=120)
-    plt.close(fig)
 
 
 def _pyplot():
@@ -590,28 +589,13 @@ def _pyplot():
 
 
 def _loss_figure(rows, out: Path) -> None:
-    import numpy as np
+    _loss_png(rows, out, "imitation", _match_curve)
 
-    plt = _pyplot()
-    if plt is None:
-        return
-    fit = [r for r in rows if r["phase"] == "imitation"]
-    val = [r for r in rows if r["phase"] == "val"]
-    fig, ax = plt.subplots(1, 2, figsize=(9, 3.2))
-    loss = np.array([r["losses/imitation"] for r in fit])
-    k = max(1, len(loss) // 50)
-    smooth = np.convolve(loss, np.ones(k) / k, mode="valid")
-    ax[0].plot(np.arange(len(smooth)) + k - 1, smooth)
-    ax[0].set_xlabel("update")
-    ax[0].set_ylabel(f"imitation loss (mean of {k})")
+
+def _match_curve(ax, fit, val) -> None:
     ax[1].plot([r["update"] for r in val], [100 * r["val/gap"] for r in val], marker="o")
     ax[1].set_xlabel("update")
     ax[1].set_ylabel("validation gap to optimal (%)")
-    for a in ax:
-        a.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(out / "loss.png", dpi=120)
-    plt.close(fig)
 
 
 def _figures(rows, out: Path) -> None:

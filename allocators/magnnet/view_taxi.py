@@ -149,35 +149,19 @@ def train_taxi(model, match, problems, cfg: TaxiConfig, on_row=None, validate=No
     label`, ``own_ties``) and fit on all views so far. With ``validate(model) -> dict`` (a
     ``score``, lower is better) the best weights are kept. Returns the log rows."""
     import torch
-    from torch import nn
 
     from allocators.magnnet.allocator import MagnnetAllocator
-    from allocators.magnnet.view_batch import batch_loss, prepare
-    from allocators.magnnet.views import label, play_problem
+    from allocators.magnnet.view_batch import prepare
+    from allocators.magnnet.views import DaggerLog, label, play_problem
 
     rng = np.random.default_rng(cfg.seed)
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
     data: list = []
-    rows, best, best_state = [], None, None
-    started = time.perf_counter()
-    step = 0
-
-    def check(it):
-        nonlocal best, best_state
-        res = validate(model)
-        vrow = {"phase": "val", "iteration": it, "update": step - 1,
-                "wall_s": time.perf_counter() - started,
-                **{f"val/{k}": v for k, v in res.items()}}
-        rows.append(vrow)
-        if on_row:
-            on_row(vrow)
-        if best is None or res["score"] < best:
-            best = res["score"]
-            best_state = {k: v.clone() for k, v in model.state_dict().items()}
-
+    dagger = DaggerLog(model, on_row)
     model.eval()
     if validate is not None:
-        check(-1)  # the starting weights compete too: DAgger must beat them to be kept
+        # the starting weights compete too: DAgger must beat them to be kept
+        dagger.validate(validate, -1)
     for it in range(cfg.iterations):
         model.eval()
         t0 = time.perf_counter()
@@ -195,29 +179,10 @@ def train_taxi(model, match, problems, cfg: TaxiConfig, on_row=None, validate=No
         play_s = time.perf_counter() - t0
         if not data:
             continue
-        model.train()
-        losses = []
-        for _ in range(cfg.updates):
-            idx = rng.integers(len(data), size=cfg.batch)
-            loss = batch_loss(model, [prepare(data[i]) for i in idx])
-            opt.zero_grad()
-            loss.backward()
-            nn.utils.clip_grad_norm_(model.parameters(), 1.0)
-            opt.step()
-            losses.append(loss.item())
-            row = {"phase": "dagger", "iteration": it, "update": step,
-                   "losses/imitation": losses[-1], "views": len(data),
-                   "wall_s": time.perf_counter() - started}
-            step += 1
-            rows.append(row)
-            if on_row:
-                on_row(row)
-        model.eval()
+        # the views are kept as labelled costs: features per batch (see views_per_decision)
+        losses = dagger.fit(opt, data, rng, cfg.updates, cfg.batch, it, prep=prepare)
         log.info("taxi iteration %d: %d views, play %.1f s, loss %.3f", it, len(data), play_s,
                  float(np.mean(losses[-50:])))
         if validate is not None:
-            check(it)
-    if best_state is not None:
-        model.load_state_dict(best_state)
-    model.eval()
-    return rows
+            dagger.validate(validate, it)
+    return dagger.finish()

@@ -391,20 +391,82 @@ def evaluate_views(alloc_factory, pool, comm_range, loss: float = 0.0, limit: in
             "complete": float(np.mean(complete))}
 
 
+class DaggerLog:
+    """The log rows, the update count and the kept weights of one DAgger run of ``model``
+    (what :func:`train_views` and :func:`allocators.magnnet.view_taxi.train_taxi` share): each
+    row goes to :attr:`rows` and to ``on_row``; ``wall_s`` counts from the log's creation."""
+
+    def __init__(self, model: ViewPolicy, on_row=None):
+        self.model, self.on_row = model, on_row
+        self.rows: list = []
+        self.step = 0
+        self.best, self.best_state = None, None
+        self.started = time.perf_counter()
+
+    def _add(self, row: dict) -> None:
+        self.rows.append(row)
+        if self.on_row:
+            self.on_row(row)
+
+    def fit(self, opt, data: list, rng: np.random.Generator, updates: int, batch: int,
+            it: int, prep=None) -> list[float]:
+        """``updates`` steps of ``opt`` on batches of ``batch`` views drawn from ``data`` with
+        ``rng`` (each through ``prep`` first when given), gradients clipped to norm 1, one
+        ``dagger`` row each (iteration ``it``); the model is left in eval mode. Returns the
+        losses."""
+        from allocators.magnnet.view_batch import batch_loss
+
+        model = self.model
+        model.train()
+        losses = []
+        for _ in range(updates):
+            idx = rng.integers(len(data), size=batch)
+            samples = [data[i] for i in idx] if prep is None else [prep(data[i]) for i in idx]
+            loss = batch_loss(model, samples)  # = mean of view_loss
+            opt.zero_grad()
+            loss.backward()
+            nn.utils.clip_grad_norm_(model.parameters(), 1.0)
+            opt.step()
+            losses.append(loss.item())
+            row = {"phase": "dagger", "iteration": it, "update": self.step,
+                   "losses/imitation": losses[-1], "views": len(data),
+                   "wall_s": time.perf_counter() - self.started}
+            self.step += 1
+            self._add(row)
+        model.eval()
+        return losses
+
+    def validate(self, validate, it: int) -> None:
+        """A ``val`` row of ``validate(model)`` (its keys as ``val/...``) for iteration ``it``;
+        the weights are kept when its ``score`` is the lowest so far."""
+        res = validate(self.model)
+        self._add({"phase": "val", "iteration": it, "update": self.step - 1,
+                   "wall_s": time.perf_counter() - self.started,
+                   **{f"val/{k}": v for k, v in res.items()}})
+        if self.best is None or res["score"] < self.best:
+            self.best = res["score"]
+            self.best_state = {k: v.clone() for k, v in self.model.state_dict().items()}
+
+    def finish(self) -> list:
+        """The kept weights back in the model (when any were kept), eval mode; the rows."""
+        if self.best_state is not None:
+            self.model.load_state_dict(self.best_state)
+        self.model.eval()
+        return self.rows
+
+
 def train_views(model: ViewPolicy, pools, cfg: ViewConfig, make_allocator, on_row=None,
                 validate=None):
     """DAgger: ``cfg.iterations`` times, play ``cfg.episodes`` training problems with the
     current model (``make_allocator(model)`` gives the plugin that plays them), label every
     view with the teacher, and fit the model on the views collected so far. Returns the log
     rows; with ``validate(model) -> dict`` the weights with the best ``score`` are kept."""
-    from allocators.magnnet.view_batch import batch_loss, prepare
+    from allocators.magnnet.view_batch import prepare
 
     rng = np.random.default_rng(cfg.seed)
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
     data: list = []
-    rows, best, best_state = [], None, None
-    started = time.perf_counter()
-    step = 0
+    dagger = DaggerLog(model, on_row)
     for it in range(cfg.iterations):
         model.eval()
         t0 = time.perf_counter()
@@ -419,41 +481,12 @@ def train_views(model: ViewPolicy, pools, cfg: ViewConfig, make_allocator, on_ro
             data.extend(prepare(s) for s in label(p, alloc, views))
         data = data[-cfg.max_views:]
         play_s = time.perf_counter() - t0
-        model.train()
-        losses = []
-        for _ in range(cfg.updates):
-            idx = rng.integers(len(data), size=cfg.batch)
-            loss = batch_loss(model, [data[i] for i in idx])  # = mean of view_loss
-            opt.zero_grad()
-            loss.backward()
-            nn.utils.clip_grad_norm_(model.parameters(), 1.0)
-            opt.step()
-            losses.append(loss.item())
-            row = {"phase": "dagger", "iteration": it, "update": step,
-                   "losses/imitation": losses[-1], "views": len(data),
-                   "wall_s": time.perf_counter() - started}
-            step += 1
-            rows.append(row)
-            if on_row:
-                on_row(row)
-        model.eval()
+        losses = dagger.fit(opt, data, rng, cfg.updates, cfg.batch, it)
         log.info("iteration %d: %d views, play %.1f s, loss %.3f", it, len(data), play_s,
                  float(np.mean(losses[-50:])))
         if validate is not None:
-            res = validate(model)
-            vrow = {"phase": "val", "iteration": it, "update": step - 1,
-                    "wall_s": time.perf_counter() - started, **{f"val/{k}": v
-                                                                for k, v in res.items()}}
-            rows.append(vrow)
-            if on_row:
-                on_row(vrow)
-            if best is None or res["score"] < best:
-                best = res["score"]
-                best_state = {k: v.clone() for k, v in model.state_dict().items()}
-    if best_state is not None:
-        model.load_state_dict(best_state)
-    model.eval()
-    return rows
+            dagger.validate(validate, it)
+    return dagger.finish()
 
 
 def config_dict(cfg: ViewConfig) -> dict:
