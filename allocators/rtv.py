@@ -288,6 +288,36 @@ def _milp(groups, gveh, gcost, sizes, nv: int, m: int, time_limit: float):
     return np.flatnonzero(res.x > 0.5).tolist(), (0 if res.status == 0 else 1)
 
 
+def _where(agents, rows: np.ndarray) -> tuple[list, np.ndarray]:
+    """Where the vehicles ``rows`` of ``agents`` are: ``(a node each and the seconds left to
+    it)`` where the agents are on a road network, else ``(a location each, zeros)``."""
+    nodes = getattr(agents, "nodes", None)
+    if nodes is not None:
+        return nodes[rows].tolist(), np.asarray(agents.remaining, float)[rows]
+    return [agents[int(k)].loc for k in rows.tolist()], np.zeros(rows.size)
+
+
+def _nearest(pairs: np.ndarray, value: np.ndarray, alloc: RtvAllocator) -> np.ndarray:
+    """``pairs`` (vehicles x requests, bool) with each request's pairs cut to the
+    ``alloc.max_vehicles`` of least ``value`` (a new array where any is cut; ``pairs`` itself
+    is not changed); the pairs cut counted in ``alloc.stats["pairs_cut"]``."""
+    kv = alloc.max_vehicles
+    if kv is None or pairs.shape[0] <= kv:
+        return pairs
+    count = pairs.sum(axis=0)
+    over = np.flatnonzero(count > kv)
+    if not over.size:
+        return pairs
+    sub = np.where(pairs[:, over], value[:, over], np.inf)
+    keep = np.argpartition(sub, kv - 1, axis=0)[:kv]
+    mask = np.zeros_like(sub, dtype=bool)
+    np.put_along_axis(mask, keep, True, axis=0)
+    pairs = pairs.copy()
+    pairs[:, over] &= mask
+    alloc.stats["pairs_cut"] += int((count[over] - kv).sum())
+    return pairs
+
+
 class _Batch:
     """One decision's arrays: candidate vehicles (rows with a finite pair), requests, the plans,
     the drives between everything a group's order may visit."""
@@ -295,19 +325,7 @@ class _Batch:
     def __init__(self, problem: AllocationProblem, alloc: RtvAllocator) -> None:
         self.problem, self.alloc = problem, alloc
         cost = problem.cost
-        finite = np.isfinite(cost)
-        kv = alloc.max_vehicles
-        if kv is not None and cost.shape[0] > kv:  # each request: its kv cheapest vehicles
-            count = finite.sum(axis=0)
-            over = np.flatnonzero(count > kv)
-            if over.size:
-                sub = np.where(finite[:, over], cost[:, over], np.inf)
-                keep = np.argpartition(sub, kv - 1, axis=0)[:kv]
-                mask = np.zeros_like(sub, dtype=bool)
-                np.put_along_axis(mask, keep, True, axis=0)
-                finite = finite.copy()
-                finite[:, over] &= mask
-                alloc.stats["pairs_cut"] += int((count[over] - kv).sum())
+        finite = _nearest(np.isfinite(cost), cost, alloc)  # each request: its kv cheapest vehicles
         self.finite = finite
         self.extra = None
         if alloc.reorder and len(problem.plans):
@@ -347,14 +365,7 @@ class _Batch:
         self.nn = np.ascontiguousarray(nn)
         self.direct = np.where(self.hasdrop, nn[2 * np.arange(m), 2 * np.arange(m) + 1], 0.0)
         # vehicles: where they are (a node and the seconds left to it, or a location)
-        agents = problem.agents
-        nodes = getattr(agents, "nodes", None)
-        if nodes is not None:
-            src = nodes[vrows].tolist()
-            rem = np.asarray(agents.remaining, float)[vrows]
-        else:
-            src = [agents[int(k)].loc for k in vrows.tolist()]
-            rem = np.zeros(nv)
+        src, rem = _where(problem.agents, vrows)
         self.vn = np.ascontiguousarray(np.asarray(travel(src, new_locs), float) + rem[:, None])
         # plans, flat
         off = [0]
@@ -454,14 +465,8 @@ class _Batch:
         reach = np.full((n, len(tasks)), np.inf)
         if not rows.size:
             return out, reach
-        agents, now = problem.agents, float(problem.time)
-        nodes = getattr(agents, "nodes", None)
-        if nodes is not None:
-            src = nodes[rows].tolist()
-            rem = np.asarray(agents.remaining, float)[rows]
-        else:
-            src = [agents[int(k)].loc for k in rows.tolist()]
-            rem = np.zeros(rows.size)
+        now = float(problem.time)
+        src, rem = _where(problem.agents, rows)
         leave = np.full(rows.size, now) if problem.ready is None else \
             np.maximum(np.asarray(problem.ready, float)[rows], now)
         t = np.asarray(problem.travel(src, [t.loc for t in tasks]), float) + rem[:, None] \
@@ -471,17 +476,7 @@ class _Batch:
         lp = np.array([t.deadline for t in tasks], float)
         pax = np.array([t.passengers if t.dropoff is not None else 0 for t in tasks])
         ok = (now + t <= lp + TOL) & ~feasible[rows] & (pax[None, :] <= caps[:, None])
-        kv = alloc.max_vehicles
-        if kv is not None and rows.size > kv:  # each request: its kv nearest such vehicles
-            count = ok.sum(axis=0)
-            over = np.flatnonzero(count > kv)
-            if over.size:
-                sub = np.where(ok[:, over], t[:, over], np.inf)
-                keep = np.argpartition(sub, kv - 1, axis=0)[:kv]
-                mask = np.zeros_like(sub, dtype=bool)
-                np.put_along_axis(mask, keep, True, axis=0)
-                ok[:, over] &= mask
-                alloc.stats["pairs_cut"] += int((count[over] - kv).sum())
+        ok = _nearest(ok, t, alloc)  # each request: its kv nearest such vehicles
         out[rows] = ok
         reach[rows] = np.where(ok, t, np.inf)
         return out, reach

@@ -49,6 +49,14 @@ def interval(values: list[float], fmt: str = ".3g") -> str:
     return f"{format(m, fmt)} ± {h:.2g}"
 
 
+def run_arguments(p: argparse.ArgumentParser) -> None:
+    """The options :func:`run` reads from its ``a``: ``--hours`` of the day, ``--max-wait``,
+    ``--max-delay``."""
+    p.add_argument("--hours", type=float, default=24.0)
+    p.add_argument("--max-wait", type=float, default=300.0)
+    p.add_argument("--max-delay", type=float, default=600.0)
+
+
 def run(a, seats: int, method: str, fleet: int, seed: int, params: dict | None = None) -> dict:
     """One run's numbers (the simulation in this process); ``params``: allocator parameters
     over the scenario's (e.g. rtv's ``reorder``)."""
@@ -240,9 +248,7 @@ def main(argv=None) -> int:
     p.add_argument("--seats", type=int, nargs="+", default=[1, 2, 4])
     p.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    p.add_argument("--hours", type=float, default=24.0)
-    p.add_argument("--max-wait", type=float, default=300.0)
-    p.add_argument("--max-delay", type=float, default=600.0)
+    run_arguments(p)
     p.add_argument("--target", type=float, default=0.98)
     p.add_argument("--step", type=int, default=50)
     p.add_argument("--low", type=int, default=200)

@@ -20,7 +20,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from benchmarks.nyc_study import run  # noqa: E402
+from benchmarks.nyc_study import run, run_arguments  # noqa: E402
 
 
 def main(argv=None) -> int:
@@ -29,9 +29,7 @@ def main(argv=None) -> int:
     p.add_argument("--seats", type=int, default=4)
     p.add_argument("--fleet", type=int, default=450)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--hours", type=float, default=24.0)
-    p.add_argument("--max-wait", type=float, default=300.0)
-    p.add_argument("--max-delay", type=float, default=600.0)
+    run_arguments(p)
     p.add_argument("--reorder", nargs="+", default=["false", "true"], choices=["false", "true"])
     a = p.parse_args(argv)
     out = Path(a.out)

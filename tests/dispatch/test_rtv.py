@@ -314,9 +314,9 @@ RUNS = [(cap, delay, faults, obj, seed)
              ("pickup_time", "added_time")[i // 5 % 2]) for i in range(24))]
 
 
-def test_invariants_on_random_pooled_runs_with_rtv(tmp_path):
-    """24 random runs (capacities 1-6, with and without max_delay, faults on and off, service
-    times): the stop-list invariants hold and the runs share rides."""
+def _pooled_runs(tmp_path) -> int:
+    """The runs of :data:`RUNS` with ``rtv`` (a folder each under ``tmp_path``), the stop-list
+    invariants checked on each: how many tasks shared a ride in all."""
     shared = 0
     for k, (cap, delay, faults, obj, seed) in enumerate(RUNS):
         d = tmp_path / f"run{k}"
@@ -326,7 +326,13 @@ def test_invariants_on_random_pooled_runs_with_rtv(tmp_path):
                                service=5.0 if k % 4 == 0 else 0.0)
         check_invariants(summary, tables)
         shared += int(tables["tasks"].shared.sum())
-    assert shared > 0
+    return shared
+
+
+def test_invariants_on_random_pooled_runs_with_rtv(tmp_path):
+    """24 random runs (capacities 1-6, with and without max_delay, faults on and off, service
+    times): the stop-list invariants hold and the runs share rides."""
+    assert _pooled_runs(tmp_path) > 0
 
 
 def test_rtv_answers_single_requests_without_travel():
@@ -453,15 +459,7 @@ def test_invariants_on_random_pooled_runs_with_rtv_reorder(tmp_path, monkeypatch
         return follow(self, v, rows, times, tasks, costs)
 
     monkeypatch.setattr(Operator, "follow", spy)
-    shared = 0
-    for k, (cap, delay, faults, obj, seed) in enumerate(RUNS):
-        d = tmp_path / f"run{k}"
-        d.mkdir()
-        summary, tables = _run(d, allocator="rtv", capacity=cap, max_delay=delay,
-                               faults=faults, objective=obj, seed=seed + 500,
-                               service=5.0 if k % 4 == 0 else 0.0)
-        check_invariants(summary, tables)
-        shared += int(tables["tasks"].shared.sum())
+    shared = _pooled_runs(tmp_path)
     assert made and all(a.reorder for a in made)
     assert shared > 0
     assert sum(a.stats["reordered"] for a in made) >= swapped > 0  # (a stale route is dropped)
