@@ -2,8 +2,7 @@
 one vehicle (a depth-first search over every order of the group's stops merged into the
 vehicle's plan, the plan's own order kept: :func:`best_orders`; or over every order of the
 plan's stops and the group's together: :func:`best_orders_any`), for many (vehicle, group)
-candidates in one call. Both are one search (:func:`_search`), its steps in small compiled
-helpers.
+candidates in one call.
 
 The schedule is the kernel's (:meth:`dispatch.vehicles.Operator.route_times`): arrival at a stop
 = departure from the one before + the drive between them; departure = arrival + the service time
@@ -125,109 +124,6 @@ def _keep(g, best, cost, path, total, out_order):  # pragma: no cover - compiled
 
 
 @jit
-def _search(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, p_svc, p_eta,
-            p_drop, reorder, pp, p_pred, vp, poff, ppa, vn, pn, np_, nn, r_pax, r_lp, r_ld,
-            r_rel, r_direct, r_hasdrop, old_end, svc, objective, budget, tol, out_cost,
-            out_order, out_cut):  # pragma: no cover - compiled
-    """:func:`best_orders` (``reorder`` False: ``pp`` used, ``p_pred``, ``vp``, ``poff``,
-    ``ppa`` not) or :func:`best_orders_any` (``reorder`` True: ``pp`` not used). The choices at
-    each depth, in this order: the plan's next stop (``reorder``: each plan stop not yet
-    visited, its pickup visited), then each new stop not yet visited (a drop-off: its pickup
-    visited). The mask's bits: new stop ``x`` is bit ``x`` (``reorder``: ``nplan + x``, plan
-    stop ``u`` bit ``u``)."""
-    st_time, st_occ, st_cost, st_pos, st_mask, st_try, path = _state(out_order.shape[1])
-    st_next = np.empty(out_order.shape[1] + 1, np.int64)  # next plan stop (flat), in order
-    for g in range(groups.shape[0]):
-        j = gveh[g]
-        k = _group_size(groups, g)
-        a, b = off[j], off[j + 1]
-        nplan = b - a
-        shift = nplan if reorder else 0  # the first new stop's bit
-        plan_choices = nplan if reorder else 1
-        choices = plan_choices + 2 * k
-        total = nplan + 2 * k
-        full = (np.int64(1) << np.int64(shift + 2 * k)) - 1
-        init_mask = np.int64(0)
-        for i in range(k):
-            if not r_hasdrop[groups[g, i]]:
-                init_mask |= np.int64(1) << np.int64(shift + 2 * i + 1)
-                total -= 1
-        best = INF
-        nodes = 0
-        cut = False
-        _enter(st_time, st_occ, st_cost, st_pos, st_mask, st_try, 0, start[j], load[j], 0.0, -1,
-               init_mask)
-        st_next[0] = a
-        d = 0
-        while d >= 0:
-            c = st_try[d]
-            if c >= choices or d == total:
-                d -= 1
-                continue
-            st_try[d] = c + 1
-            pos = st_pos[d]
-            t0 = st_time[d]
-            mask = st_mask[d]
-            if c < plan_choices:  # a plan stop
-                if reorder:
-                    bit = np.int64(1) << np.int64(c)
-                    if mask & bit:
-                        continue
-                    s = a + c
-                    q = p_pred[s]
-                    if q >= 0 and not (mask & (np.int64(1) << np.int64(q - a))):
-                        continue
-                else:
-                    bit = np.int64(0)
-                    s = st_next[d]
-                    if s >= b:
-                        continue
-                if pos == -1:
-                    t = first_eta[j] if s == a else t0 + vp[s]
-                elif pos >= 0:
-                    t = t0 + (ppa[poff[j] + (pos - a) * nplan + (s - a)] if reorder else pp[pos])
-                else:
-                    t = t0 + np_[-2 - pos, s]
-                ok, dep, occ, add = _plan_stop(t, s, st_occ[d], cap[j], p_pax, p_limit, p_svc,
-                                               p_eta, p_drop, objective, tol)
-                nxt = s + 1
-                at = s
-                code = -(s - a) - 1
-            else:
-                x = c - plan_choices  # group-local stop: request x // 2, pickup if even
-                bit = np.int64(1) << np.int64(shift + x)
-                if mask & bit:
-                    continue
-                pick = x % 2 == 0
-                if not pick and not (mask & (bit >> np.int64(1))):
-                    continue
-                ok, dep, occ, add, gx = _new_stop(j, pos, t0, st_occ[d], cap[j], groups[g, x // 2],
-                                                  pick, vn, pn, nn, r_pax, r_lp, r_ld, r_rel,
-                                                  r_direct, r_hasdrop, svc, objective, tol)
-                nxt = st_next[d]
-                at = -2 - gx
-                code = x
-            if not ok:
-                continue
-            nodes += 1
-            path[d] = code
-            _enter(st_time, st_occ, st_cost, st_pos, st_mask, st_try, d + 1, dep, occ,
-                   st_cost[d] + add, at, mask | bit)
-            st_next[d + 1] = nxt
-            d += 1
-            if d == total:
-                if (reorder or st_next[d] == b) and st_mask[d] == full:
-                    best = _keep(g, best, st_time[d] - old_end[j] if objective == 1
-                                 else st_cost[d], path, total, out_order)
-                d -= 1
-            if nodes >= budget:
-                cut = True
-                break
-        out_cost[g] = best
-        out_cut[g] = cut
-
-
-@jit
 def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, p_svc, p_eta,
                 p_drop, pp, vn, pn, np_, nn, r_pax, r_lp, r_ld, r_rel, r_direct, r_hasdrop,
                 old_end, svc, objective, budget, tol, out_cost, out_order,
@@ -245,10 +141,86 @@ def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, 
     ``old_end[j]`` when its plan ends now. Drives: ``vn[j, x]`` vehicle -> new stop ``x``
     (``2 r`` pickup, ``2 r + 1`` drop-off of request ``r``), ``pn[s, x]`` plan stop -> new stop,
     ``np_[x, s]`` new stop -> plan stop, ``nn[x, y]`` between new stops."""
-    _search(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, p_svc, p_eta,
-            p_drop, False, pp, off, pp, off, pp, vn, pn, np_, nn, r_pax, r_lp, r_ld, r_rel,
-            r_direct, r_hasdrop, old_end, svc, objective, budget, tol, out_cost, out_order,
-            out_cut)
+    L = out_order.shape[1]
+    # per-depth state; the mask: new stops visited (bit 2i, 2i+1)
+    st_time, st_occ, st_cost, st_pos, st_mask, st_try, path = _state(L)
+    st_next = np.empty(L + 1, np.int64)  # next plan stop (flat index)
+    for g in range(groups.shape[0]):
+        j = gveh[g]
+        k = _group_size(groups, g)
+        a, b = off[j], off[j + 1]
+        total = b - a + 2 * k
+        full = 0
+        init_mask = 0
+        for i in range(k):
+            full |= 3 << (2 * i)
+            if not r_hasdrop[groups[g, i]]:
+                init_mask |= 2 << (2 * i)
+                total -= 1
+        best = INF
+        nodes = 0
+        cut = False
+        _enter(st_time, st_occ, st_cost, st_pos, st_mask, st_try, 0, start[j], load[j], 0.0, -1,
+               init_mask)
+        st_next[0] = a
+        d = 0
+        while d >= 0:
+            c = st_try[d]
+            if c > 2 * k or d == total:
+                d -= 1
+                continue
+            st_try[d] = c + 1
+            pos = st_pos[d]
+            t0 = st_time[d]
+            mask = st_mask[d]
+            if c == 0:  # the plan's next stop
+                s = st_next[d]
+                if s >= b:
+                    continue
+                if pos == -1:
+                    t = first_eta[j]
+                elif pos >= 0:
+                    t = t0 + pp[pos]
+                else:
+                    t = t0 + np_[-2 - pos, s]
+                ok, dep, occ, add = _plan_stop(t, s, st_occ[d], cap[j], p_pax, p_limit, p_svc,
+                                               p_eta, p_drop, objective, tol)
+                nxt = s + 1
+                at = s
+                code = -(s - a) - 1
+            else:
+                x = c - 1  # group-local stop: request x // 2, pickup if even
+                bit = 1 << x
+                if mask & bit:
+                    continue
+                pick = x % 2 == 0
+                if not pick and not (mask & (1 << (x - 1))):
+                    continue
+                ok, dep, occ, add, gx = _new_stop(j, pos, t0, st_occ[d], cap[j], groups[g, x // 2],
+                                                  pick, vn, pn, nn, r_pax, r_lp, r_ld, r_rel,
+                                                  r_direct, r_hasdrop, svc, objective, tol)
+                nxt = st_next[d]
+                at = -2 - gx
+                mask |= bit
+                code = x
+            if not ok:
+                continue
+            nodes += 1
+            path[d] = code
+            _enter(st_time, st_occ, st_cost, st_pos, st_mask, st_try, d + 1, dep, occ,
+                   st_cost[d] + add, at, mask)
+            st_next[d + 1] = nxt
+            d += 1
+            if d == total:
+                if st_next[d] == b and st_mask[d] == full:
+                    best = _keep(g, best, st_time[d] - old_end[j] if objective == 1
+                                 else st_cost[d], path, total, out_order)
+                d -= 1
+            if nodes >= budget:
+                cut = True
+                break
+        out_cost[g] = best
+        out_cut[g] = cut
 
 
 @jit
@@ -267,10 +239,81 @@ def best_orders_any(groups, gveh, start, first_eta, load, cap, off, p_pax, p_lim
     Drives between the plan's stops: ``ppa[poff[j] + u * n + w]`` from its ``u``-th to its
     ``w``-th stop (``n`` stops). A vehicle's plan and group together hold at most 62 stops (the
     caller sends longer plans to :func:`best_orders`)."""
-    _search(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, p_svc, p_eta,
-            p_drop, True, ppa, p_pred, vp, poff, ppa, vn, pn, np_, nn, r_pax, r_lp, r_ld, r_rel,
-            r_direct, r_hasdrop, old_end, svc, objective, budget, tol, out_cost, out_order,
-            out_cut)
+    # the mask: stops visited, bit u plan stop u, nplan + x new stop x
+    st_time, st_occ, st_cost, st_pos, st_mask, st_try, path = _state(out_order.shape[1])
+    for g in range(groups.shape[0]):
+        j = gveh[g]
+        k = _group_size(groups, g)
+        a, b = off[j], off[j + 1]
+        nplan = b - a
+        choices = nplan + 2 * k
+        total = choices
+        full = (np.int64(1) << np.int64(choices)) - 1
+        init_mask = np.int64(0)
+        for i in range(k):
+            if not r_hasdrop[groups[g, i]]:
+                init_mask |= np.int64(1) << np.int64(nplan + 2 * i + 1)
+                total -= 1
+        best = INF
+        nodes = 0
+        cut = False
+        _enter(st_time, st_occ, st_cost, st_pos, st_mask, st_try, 0, start[j], load[j], 0.0, -1,
+               init_mask)
+        d = 0
+        while d >= 0:
+            c = st_try[d]
+            if c >= choices or d == total:
+                d -= 1
+                continue
+            st_try[d] = c + 1
+            pos = st_pos[d]
+            t0 = st_time[d]
+            mask = st_mask[d]
+            bit = np.int64(1) << np.int64(c)
+            if mask & bit:
+                continue
+            if c < nplan:  # the plan's stop s
+                s = a + c
+                q = p_pred[s]
+                if q >= 0 and not (mask & (np.int64(1) << np.int64(q - a))):
+                    continue
+                if pos == -1:
+                    t = first_eta[j] if c == 0 else t0 + vp[s]
+                elif pos >= 0:
+                    t = t0 + ppa[poff[j] + (pos - a) * nplan + c]
+                else:
+                    t = t0 + np_[-2 - pos, s]
+                ok, dep, occ, add = _plan_stop(t, s, st_occ[d], cap[j], p_pax, p_limit, p_svc,
+                                               p_eta, p_drop, objective, tol)
+                at = s
+                code = -c - 1
+            else:
+                x = c - nplan  # group-local stop: request x // 2, pickup if even
+                pick = x % 2 == 0
+                if not pick and not (mask & (bit >> np.int64(1))):
+                    continue
+                ok, dep, occ, add, gx = _new_stop(j, pos, t0, st_occ[d], cap[j], groups[g, x // 2],
+                                                  pick, vn, pn, nn, r_pax, r_lp, r_ld, r_rel,
+                                                  r_direct, r_hasdrop, svc, objective, tol)
+                at = -2 - gx
+                code = x
+            if not ok:
+                continue
+            nodes += 1
+            path[d] = code
+            _enter(st_time, st_occ, st_cost, st_pos, st_mask, st_try, d + 1, dep, occ,
+                   st_cost[d] + add, at, mask | bit)
+            d += 1
+            if d == total:
+                if st_mask[d] == full:
+                    best = _keep(g, best, st_time[d] - old_end[j] if objective == 1
+                                 else st_cost[d], path, total, out_order)
+                d -= 1
+            if nodes >= budget:
+                cut = True
+                break
+        out_cost[g] = best
+        out_cut[g] = cut
 
 
 _ORDERS = np.array([[0, 1, 2], [0, 2, 1], [1, 0, 2]], np.int64)
