@@ -30,100 +30,6 @@ INF = np.inf
 
 
 @jit
-def _group_size(groups, g):  # pragma: no cover - compiled
-    """How many requests candidate ``g`` holds (its row of ``groups`` is ``-1`` padded)."""
-    k = 0
-    while k < groups.shape[1] and groups[g, k] >= 0:
-        k += 1
-    return k
-
-
-@jit
-def _state(n):  # pragma: no cover - compiled
-    """The search's per-depth state for orders of up to ``n`` stops: departure time,
-    occupancy, cost so far, position (``-1`` start; ``>= 0`` plan stop, flat; ``-2 - x`` new
-    stop ``x``), visited stops (a bit mask), next choice to try; and the path (``n`` codes)."""
-    return (np.empty(n + 1), np.empty(n + 1, np.int64), np.empty(n + 1),
-            np.empty(n + 1, np.int64), np.empty(n + 1, np.int64), np.empty(n + 1, np.int64),
-            np.empty(n, np.int64))
-
-
-@jit
-def _plan_stop(t, s, occ, cap, p_pax, p_limit, p_svc, p_eta, p_drop, objective,
-               tol):  # pragma: no cover - compiled
-    """Plan stop ``s`` reached at ``t`` with ``occ`` on board (``cap`` seats): ``(feasible,
-    departure, occupancy after, cost added)``."""
-    if t > p_limit[s] + tol:
-        return False, t, occ, 0.0
-    occ = occ + p_pax[s]
-    if occ > cap:
-        return False, t, occ, 0.0
-    add = 0.0
-    if p_drop[s] and objective == 0:
-        add = t - p_eta[s]
-    return True, t + p_svc[s], occ, add
-
-
-@jit
-def _new_stop(j, pos, t0, occ, cap, r, pick, vn, pn, nn, r_pax, r_lp, r_ld, r_rel, r_direct,
-              r_hasdrop, svc, objective, tol):  # pragma: no cover - compiled
-    """The pickup (``pick``) or drop-off of request ``r`` next, vehicle ``j`` leaving position
-    ``pos`` (as in the state) at ``t0`` with ``occ`` on board (``cap`` seats): ``(feasible,
-    departure, occupancy after, cost added, the stop's index in the drives)``."""
-    gx = 2 * r + (0 if pick else 1)
-    if pos == -1:
-        t = t0 + vn[j, gx]
-    elif pos >= 0:
-        t = t0 + pn[pos, gx]
-    else:
-        t = t0 + nn[-2 - pos, gx]
-    limit = r_lp[r] if pick else r_ld[r]
-    if t > limit + tol:
-        return False, t, occ, 0.0, gx
-    add = 0.0
-    serve = 0.0
-    if pick:
-        if r_hasdrop[r]:
-            occ = occ + r_pax[r]
-        else:
-            serve = svc
-            if objective == 0:
-                add = t - r_rel[r]
-    else:
-        occ = occ - r_pax[r]
-        serve = svc
-        if objective == 0:
-            add = t - r_rel[r] - r_direct[r]
-    return occ <= cap, t + serve, occ, add, gx
-
-
-@jit
-def _enter(st_time, st_occ, st_cost, st_pos, st_mask, st_try, d, dep, occ, cost, pos,
-           mask):  # pragma: no cover - compiled
-    """Depth ``d``'s state: departure ``dep``, occupancy ``occ``, cost so far ``cost``, at
-    ``pos``, visited ``mask``; its first choice next."""
-    st_time[d] = dep
-    st_occ[d] = occ
-    st_cost[d] = cost
-    st_pos[d] = pos
-    st_mask[d] = mask
-    st_try[d] = 0
-
-
-@jit
-def _keep(g, best, cost, path, total, out_order):  # pragma: no cover - compiled
-    """A complete order of ``total`` stops costing ``cost``: kept as candidate ``g``'s
-    (``out_order[g]``, ``-99`` padded) when cheaper than ``best``; the best cost after."""
-    if cost < best - 1e-12:
-        for q in range(total):
-            out_order[g, q] = path[q]
-        for q in range(total, out_order.shape[1]):
-            out_order[g, q] = -99
-        return cost
-    return best
-
-
-@jit
 def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, p_svc, p_eta,
                 p_drop, pp, vn, pn, np_, nn, r_pax, r_lp, r_ld, r_rel, r_direct, r_hasdrop,
                 old_end, svc, objective, budget, tol, out_cost, out_order,
@@ -141,15 +47,25 @@ def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, 
     ``old_end[j]`` when its plan ends now. Drives: ``vn[j, x]`` vehicle -> new stop ``x``
     (``2 r`` pickup, ``2 r + 1`` drop-off of request ``r``), ``pn[s, x]`` plan stop -> new stop,
     ``np_[x, s]`` new stop -> plan stop, ``nn[x, y]`` between new stops."""
+    G, K = groups.shape
     L = out_order.shape[1]
-    # per-depth state; the mask: new stops visited (bit 2i, 2i+1)
-    st_time, st_occ, st_cost, st_pos, st_mask, st_try, path = _state(L)
+    # per-depth state
+    st_time = np.empty(L + 1)
+    st_occ = np.empty(L + 1, np.int64)
+    st_cost = np.empty(L + 1)
+    st_pos = np.empty(L + 1, np.int64)  # -1 start; 0.. plan stop (flat); -2 - x new stop x
     st_next = np.empty(L + 1, np.int64)  # next plan stop (flat index)
-    for g in range(groups.shape[0]):
+    st_mask = np.empty(L + 1, np.int64)  # new stops visited (bit 2i, 2i+1)
+    st_try = np.empty(L + 1, np.int64)  # next choice to try at this depth
+    path = np.empty(L, np.int64)
+    for g in range(G):
         j = gveh[g]
-        k = _group_size(groups, g)
+        k = 0
+        while k < K and groups[g, k] >= 0:
+            k += 1
         a, b = off[j], off[j + 1]
-        total = b - a + 2 * k
+        nplan = b - a
+        total = nplan + 2 * k
         full = 0
         init_mask = 0
         for i in range(k):
@@ -160,9 +76,13 @@ def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, 
         best = INF
         nodes = 0
         cut = False
-        _enter(st_time, st_occ, st_cost, st_pos, st_mask, st_try, 0, start[j], load[j], 0.0, -1,
-               init_mask)
+        st_time[0] = start[j]
+        st_occ[0] = load[j]
+        st_cost[0] = 0.0
+        st_pos[0] = -1
         st_next[0] = a
+        st_mask[0] = init_mask
+        st_try[0] = 0
         d = 0
         while d >= 0:
             c = st_try[d]
@@ -172,7 +92,6 @@ def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, 
             st_try[d] = c + 1
             pos = st_pos[d]
             t0 = st_time[d]
-            mask = st_mask[d]
             if c == 0:  # the plan's next stop
                 s = st_next[d]
                 if s >= b:
@@ -183,38 +102,81 @@ def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, 
                     t = t0 + pp[pos]
                 else:
                     t = t0 + np_[-2 - pos, s]
-                ok, dep, occ, add = _plan_stop(t, s, st_occ[d], cap[j], p_pax, p_limit, p_svc,
-                                               p_eta, p_drop, objective, tol)
-                nxt = s + 1
-                at = s
-                code = -(s - a) - 1
+                if t > p_limit[s] + tol:
+                    continue
+                occ = st_occ[d] + p_pax[s]
+                if occ > cap[j]:
+                    continue
+                add = 0.0
+                if p_drop[s] and objective == 0:
+                    add = t - p_eta[s]
+                nodes += 1
+                st_time[d + 1] = t + p_svc[s]
+                st_occ[d + 1] = occ
+                st_cost[d + 1] = st_cost[d] + add
+                st_pos[d + 1] = s
+                st_next[d + 1] = s + 1
+                st_mask[d + 1] = st_mask[d]
+                path[d] = -(s - a) - 1
             else:
                 x = c - 1  # group-local stop: request x // 2, pickup if even
                 bit = 1 << x
+                mask = st_mask[d]
                 if mask & bit:
                     continue
+                i = x // 2
                 pick = x % 2 == 0
                 if not pick and not (mask & (1 << (x - 1))):
                     continue
-                ok, dep, occ, add, gx = _new_stop(j, pos, t0, st_occ[d], cap[j], groups[g, x // 2],
-                                                  pick, vn, pn, nn, r_pax, r_lp, r_ld, r_rel,
-                                                  r_direct, r_hasdrop, svc, objective, tol)
-                nxt = st_next[d]
-                at = -2 - gx
-                mask |= bit
-                code = x
-            if not ok:
-                continue
-            nodes += 1
-            path[d] = code
-            _enter(st_time, st_occ, st_cost, st_pos, st_mask, st_try, d + 1, dep, occ,
-                   st_cost[d] + add, at, mask)
-            st_next[d + 1] = nxt
+                r = groups[g, i]
+                gx = 2 * r + (0 if pick else 1)
+                if pos == -1:
+                    t = t0 + vn[j, gx]
+                elif pos >= 0:
+                    t = t0 + pn[pos, gx]
+                else:
+                    t = t0 + nn[-2 - pos, gx]
+                limit = r_lp[r] if pick else r_ld[r]
+                if t > limit + tol:
+                    continue
+                add = 0.0
+                serve = 0.0
+                if pick:
+                    if r_hasdrop[r]:
+                        occ = st_occ[d] + r_pax[r]
+                    else:
+                        occ = st_occ[d]
+                        serve = svc
+                        if objective == 0:
+                            add = t - r_rel[r]
+                else:
+                    occ = st_occ[d] - r_pax[r]
+                    serve = svc
+                    if objective == 0:
+                        add = t - r_rel[r] - r_direct[r]
+                if occ > cap[j]:
+                    continue
+                nodes += 1
+                st_time[d + 1] = t + serve
+                st_occ[d + 1] = occ
+                st_cost[d + 1] = st_cost[d] + add
+                st_pos[d + 1] = -2 - gx
+                st_next[d + 1] = st_next[d]
+                st_mask[d + 1] = mask | bit
+                path[d] = x
             d += 1
+            st_try[d] = 0
             if d == total:
                 if st_next[d] == b and st_mask[d] == full:
-                    best = _keep(g, best, st_time[d] - old_end[j] if objective == 1
-                                 else st_cost[d], path, total, out_order)
+                    cost = st_cost[d]
+                    if objective == 1:
+                        cost = st_time[d] - old_end[j]
+                    if cost < best - 1e-12:
+                        best = cost
+                        for q in range(total):
+                            out_order[g, q] = path[q]
+                        for q in range(total, L):
+                            out_order[g, q] = -99
                 d -= 1
             if nodes >= budget:
                 cut = True
@@ -239,16 +201,25 @@ def best_orders_any(groups, gveh, start, first_eta, load, cap, off, p_pax, p_lim
     Drives between the plan's stops: ``ppa[poff[j] + u * n + w]`` from its ``u``-th to its
     ``w``-th stop (``n`` stops). A vehicle's plan and group together hold at most 62 stops (the
     caller sends longer plans to :func:`best_orders`)."""
-    # the mask: stops visited, bit u plan stop u, nplan + x new stop x
-    st_time, st_occ, st_cost, st_pos, st_mask, st_try, path = _state(out_order.shape[1])
-    for g in range(groups.shape[0]):
+    G, K = groups.shape
+    L = out_order.shape[1]
+    st_time = np.empty(L + 1)
+    st_occ = np.empty(L + 1, np.int64)
+    st_cost = np.empty(L + 1)
+    st_pos = np.empty(L + 1, np.int64)  # -1 start; 0.. plan stop (flat); -2 - x new stop x
+    st_mask = np.empty(L + 1, np.int64)  # stops visited: bit u plan stop u, nplan + x new x
+    st_try = np.empty(L + 1, np.int64)
+    path = np.empty(L, np.int64)
+    for g in range(G):
         j = gveh[g]
-        k = _group_size(groups, g)
+        k = 0
+        while k < K and groups[g, k] >= 0:
+            k += 1
         a, b = off[j], off[j + 1]
         nplan = b - a
+        total = nplan + 2 * k
         choices = nplan + 2 * k
-        total = choices
-        full = (np.int64(1) << np.int64(choices)) - 1
+        full = (np.int64(1) << np.int64(nplan + 2 * k)) - 1
         init_mask = np.int64(0)
         for i in range(k):
             if not r_hasdrop[groups[g, i]]:
@@ -257,8 +228,12 @@ def best_orders_any(groups, gveh, start, first_eta, load, cap, off, p_pax, p_lim
         best = INF
         nodes = 0
         cut = False
-        _enter(st_time, st_occ, st_cost, st_pos, st_mask, st_try, 0, start[j], load[j], 0.0, -1,
-               init_mask)
+        st_time[0] = start[j]
+        st_occ[0] = load[j]
+        st_cost[0] = 0.0
+        st_pos[0] = -1
+        st_mask[0] = init_mask
+        st_try[0] = 0
         d = 0
         while d >= 0:
             c = st_try[d]
@@ -283,31 +258,75 @@ def best_orders_any(groups, gveh, start, first_eta, load, cap, off, p_pax, p_lim
                     t = t0 + ppa[poff[j] + (pos - a) * nplan + c]
                 else:
                     t = t0 + np_[-2 - pos, s]
-                ok, dep, occ, add = _plan_stop(t, s, st_occ[d], cap[j], p_pax, p_limit, p_svc,
-                                               p_eta, p_drop, objective, tol)
-                at = s
-                code = -c - 1
+                if t > p_limit[s] + tol:
+                    continue
+                occ = st_occ[d] + p_pax[s]
+                if occ > cap[j]:
+                    continue
+                add = 0.0
+                if p_drop[s] and objective == 0:
+                    add = t - p_eta[s]
+                nodes += 1
+                st_time[d + 1] = t + p_svc[s]
+                st_occ[d + 1] = occ
+                st_cost[d + 1] = st_cost[d] + add
+                st_pos[d + 1] = s
+                st_mask[d + 1] = mask | bit
+                path[d] = -c - 1
             else:
                 x = c - nplan  # group-local stop: request x // 2, pickup if even
+                i = x // 2
                 pick = x % 2 == 0
                 if not pick and not (mask & (bit >> np.int64(1))):
                     continue
-                ok, dep, occ, add, gx = _new_stop(j, pos, t0, st_occ[d], cap[j], groups[g, x // 2],
-                                                  pick, vn, pn, nn, r_pax, r_lp, r_ld, r_rel,
-                                                  r_direct, r_hasdrop, svc, objective, tol)
-                at = -2 - gx
-                code = x
-            if not ok:
-                continue
-            nodes += 1
-            path[d] = code
-            _enter(st_time, st_occ, st_cost, st_pos, st_mask, st_try, d + 1, dep, occ,
-                   st_cost[d] + add, at, mask | bit)
+                r = groups[g, i]
+                gx = 2 * r + (0 if pick else 1)
+                if pos == -1:
+                    t = t0 + vn[j, gx]
+                elif pos >= 0:
+                    t = t0 + pn[pos, gx]
+                else:
+                    t = t0 + nn[-2 - pos, gx]
+                limit = r_lp[r] if pick else r_ld[r]
+                if t > limit + tol:
+                    continue
+                add = 0.0
+                serve = 0.0
+                if pick:
+                    if r_hasdrop[r]:
+                        occ = st_occ[d] + r_pax[r]
+                    else:
+                        occ = st_occ[d]
+                        serve = svc
+                        if objective == 0:
+                            add = t - r_rel[r]
+                else:
+                    occ = st_occ[d] - r_pax[r]
+                    serve = svc
+                    if objective == 0:
+                        add = t - r_rel[r] - r_direct[r]
+                if occ > cap[j]:
+                    continue
+                nodes += 1
+                st_time[d + 1] = t + serve
+                st_occ[d + 1] = occ
+                st_cost[d + 1] = st_cost[d] + add
+                st_pos[d + 1] = -2 - gx
+                st_mask[d + 1] = mask | bit
+                path[d] = x
             d += 1
+            st_try[d] = 0
             if d == total:
                 if st_mask[d] == full:
-                    best = _keep(g, best, st_time[d] - old_end[j] if objective == 1
-                                 else st_cost[d], path, total, out_order)
+                    cost = st_cost[d]
+                    if objective == 1:
+                        cost = st_time[d] - old_end[j]
+                    if cost < best - 1e-12:
+                        best = cost
+                        for q2 in range(total):
+                            out_order[g, q2] = path[q2]
+                        for q2 in range(total, L):
+                            out_order[g, q2] = -99
                 d -= 1
             if nodes >= budget:
                 cut = True
