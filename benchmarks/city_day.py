@@ -129,6 +129,12 @@ def run_child(network, allocator, args) -> dict:
     cmd = [sys.executable, __file__, "--child", "--network", network, "--allocator", allocator,
            "--requests", str(args.requests), "--vehicles", str(args.vehicles),
            "--seed", str(args.seed)]
+    return child_result(cmd)
+
+
+def child_result(cmd: list[str]) -> dict:
+    """Run a benchmark's child process (this project on its path; peak RSS is the child's) and
+    return the JSON object of its last output line; exit with its stderr if it fails."""
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     out = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
     if out.returncode:

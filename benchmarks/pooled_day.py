@@ -20,9 +20,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -30,6 +28,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from city_day import child_result  # noqa: E402  (the same child runner)
 
 DAY = 86_400.0
 METHODS = {"hungarian_30": ("hungarian", 30.0), "hungarian_0": ("hungarian", None),
@@ -97,11 +97,7 @@ def run_child(method: str, args) -> dict:
         cmd += ["--params", args.params]
     if args.profile:
         cmd += ["--profile", args.profile]
-    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    out = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
-    if out.returncode:
-        sys.exit(f"child failed ({' '.join(cmd)}):\n{out.stderr[-3000:]}")
-    return json.loads(out.stdout.strip().splitlines()[-1])
+    return child_result(cmd)
 
 
 def main() -> None:

@@ -178,18 +178,9 @@ def test_hourly_plot_draws_one_runs_counts_per_series(two_texts, tmp_path, monke
     """hourly.png of a folder holding runs of two scenario texts: the bars are one run's
     requests (4, the trace), each series' line its mean per run (3 served of 4 in every run
     here), not the sum over the runs or the series of the folder."""
-    from analysis import taxi_plots
-
     res = open_results(two_texts)
     assert len(res.summary) == 3
-    figures = {}
-    real = taxi_plots._save
-
-    def keep(fig, path):
-        figures[Path(path).name] = fig
-        return real(fig, path)
-
-    monkeypatch.setattr(taxi_plots, "_save", keep)
+    figures = _capture(monkeypatch)
     write_report(res, tmp_path)
     hc = pd.read_csv(tmp_path / "hourly_customers.csv")
     per_series = hc.set_index("allocator")
