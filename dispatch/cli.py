@@ -159,7 +159,7 @@ def _specs(args):
             except PluginError as e:  # name the file and the key that names the plugin
                 raise PluginError(f"{sc.path}: {_key_of(args, sc, kind, attr, name, default)}: "
                                   f"{e}") from e
-    from dispatch.sim import check_runs
+    from dispatch.plugins import check_runs
 
     check_runs(sc, sorted({s.planner for s in specs}), sorted({s.reposition for s in specs}))
     build_plugins(sc, specs, force=force)
@@ -215,7 +215,8 @@ def build_plugins(sc, specs, *, force: bool = False) -> None:
     rejects stops here with one line, not in the middle of a sweep; place the first run's fleet
     when a start file places it (its rows are checked against the space)."""
     from dispatch.errors import PluginError
-    from dispatch.sim import make_plugin, make_repositioner, space_for
+    from dispatch.plugins import make_plugin, make_repositioner
+    from dispatch.space import space_for
 
     def build(kind, name, params, *args):
         try:
@@ -235,7 +236,7 @@ def build_plugins(sc, specs, *, force: bool = False) -> None:
         except PluginError as e:
             raise PluginError(f"{sc.path}: {e}") from e
     if sc.charging is not None:  # [fleet.energy]: the charging strategy
-        from dispatch.sim import make_charger
+        from dispatch.plugins import make_charger
 
         try:
             make_charger(sc, sc.charging.strategy)
@@ -251,9 +252,9 @@ def build_plugins(sc, specs, *, force: bool = False) -> None:
 
                 check_planner_budget(sc, specs, planner, name)
         if sc.fleet.start:  # a start file's rows: known nodes, inside the world, one per cell
-            from dispatch.sim import STREAM_FLEET, place_fleet, rng_for
+            from dispatch.streams import STREAM_FLEET, rng_for
 
-            place_fleet(space, specs[0], rng_for(specs[0].seed, STREAM_FLEET))
+            space.place(specs[0], rng_for(specs[0].seed, STREAM_FLEET))
 
 
 def _run(args, console) -> int:

@@ -316,7 +316,7 @@ def train(scenario: str | Path, out: str | Path, *, agents: int = 500, batch_win
     """Learn a :class:`ZoneValue` from simulated days and save it to ``out``. ``reposition``:
     the days run with that repositioning policy (e.g. ``"demand"``): the value of where a
     vehicle ends up when idle vehicles are moved, for allocators run with it."""
-    from dispatch.sim import space_for
+    from dispatch.space import space_for
 
     sc = scenario_for(scenario, batch_window, hours)
     space = space_for(sc.world, 0, sc.path)
