@@ -29,6 +29,9 @@ the mean served share and mean wait with 95 % t-intervals over the seeds, and ag
 difference by seed (served points, wait in per cent) with its interval, and the mean
 passenger-km.
 
+``--demand-interval S`` and ``--demand-moves K`` change the ``demand`` repositioner of the
+``+ demand`` series (how often it runs, how many vehicles it may send per call).
+
 Run: ``PYTHONPATH=. .venv/bin/python benchmarks/lookahead.py --seeds 0 1 2 3 4 --agents 500 1000
 --series hungarian "hungarian + demand" "hungarian + value" "hungarian + value + demand" --out
 runs/lookahead`` (about 20 s per day on the shared 2-core machine; ``--value`` defaults to the
@@ -172,8 +175,21 @@ def main(argv=None) -> int:
     p.add_argument("--batch-window", type=float, default=30.0)
     p.add_argument("--hours", type=float, default=None, help="shorter days (a quick look)")
     p.add_argument("--scenario", default=str(ROOT / "scenarios" / "chicago_taxi.toml"))
+    p.add_argument("--demand-interval", type=float, default=None,
+                   help="the + demand series: seconds between two repositioner calls "
+                        "(default: the scenario's, 300 s)")
+    p.add_argument("--demand-moves", type=int, default=None,
+                   help="the + demand series: most vehicles sent per call (default 20); "
+                        "runs with other demand settings belong in an --out of their own")
     a = p.parse_args(argv)
     sc = scenario_for(a.scenario, a.batch_window, a.hours)
+    if a.demand_interval is not None:
+        sc = replace(sc, reposition=replace(sc.reposition, interval=a.demand_interval))
+    if a.demand_moves is not None:
+        params = dict(sc.reposition.params)
+        params["demand"] = tuple({**dict(params.get("demand", ())),
+                                  "max_moves": a.demand_moves}.items())
+        sc = replace(sc, reposition=replace(sc.reposition, params=tuple(params.items())))
     a.out.mkdir(parents=True, exist_ok=True)
     path = a.out / "lookahead.csv"
     rows: list[dict] = []

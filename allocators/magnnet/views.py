@@ -288,7 +288,11 @@ def label(problem, alloc, views, own_ties: bool = False) -> list[tuple]:
     ``own_ties``: per view, when the view's own agent (hop 0) has no task in the optimal
     assignment but costs exactly what the agent given some task costs for it (taxis at one
     node), the swap (it takes that task, the other none: an optimum too), so that taxis at
-    one node do not learn that each of them is half likely to be the one."""
+    one node do not learn that each of them is half likely to be the one.
+
+    A teacher pair whose edge the view's cost lacks (not finite: a taxi-scale view cut to each
+    task's cheapest candidates) is no target: its row's target is the null head, its column's
+    the "outside" head."""
     from allocators.hungarian import optimal_pairs
 
     n, m = problem.cost.shape
@@ -329,6 +333,14 @@ def label(problem, alloc, views, own_ties: bool = False) -> list[tuple]:
                        for a, act in zip(members, active)])
         ct = np.array([pos_a.get(int(ta[t]), len(members)) for t in tasks])
         cost = rec[5] if len(rec) > 5 else problem.cost[np.ix_(members, tasks)]
+        # a taxi-scale view keeps each task's cheapest candidates only: a teacher pair whose
+        # edge the cut removed is one the model cannot score (the plugin never requests it),
+        # so the row learns "none of mine" and the column "its agent is not in this view"
+        ok = np.isfinite(np.asarray(cost, float))
+        rows = np.flatnonzero(rt < len(tasks))
+        rt[rows[~ok[rows, rt[rows]]]] = len(tasks)
+        cols = np.flatnonzero(ct < len(members))
+        ct[cols[~ok[ct[cols], cols]]] = len(members)
         out.append((cost, flies[members], hop, active, rt, ct))
     return out
 

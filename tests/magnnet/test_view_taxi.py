@@ -51,6 +51,26 @@ def test_label_with_own_ties_gives_the_view_owner_its_tied_task():
     assert own[0][4].tolist() == [0, 1] and own[1][4].tolist() == [1, 0]
 
 
+def test_label_sends_a_teacher_pair_cut_from_the_view_to_the_null_heads():
+    # the teacher gives task 0 to agent 0 and task 1 to agent 1; the recorded view (as the
+    # model read it) cut the edge (0, 0): agent 0's target is "none of mine", task 0's agent
+    # "not in this view"; the uncut pair keeps its labels
+    agents = tuple(AgentView(i, "ugv", (i, 0, 0), 3.0) for i in range(2))
+    tasks = (TaskView(7, "ground", (0, 1, 0), 0.0), TaskView(8, "ground", (1, 1, 0), 0.0))
+    cost = np.array([[10.0, 50.0], [50.0, 10.0]])
+    p = AllocationProblem(0.0, agents, tasks, cost, np.ones((2, 2), bool),
+                          np.random.default_rng(0))
+    alloc = SimpleNamespace(requests=())
+    members, t = np.array([0, 1]), np.array([0, 1])
+    seen = np.array([[np.inf, 0.5], [0.5, 0.1]])
+    full = views.label(p, alloc, [(0, members, t, np.array([0, 1]), np.ones(2, bool))])
+    assert full[0][4].tolist() == [0, 1] and full[0][5].tolist() == [0, 1]
+    cut = views.label(p, alloc, [(0, members, t, np.array([0, 1]), np.ones(2, bool), seen)])
+    assert cut[0][4].tolist() == [2, 1]  # row 0: the null head (index = number of tasks)
+    assert cut[0][5].tolist() == [2, 1]  # column 0: the outside head (number of members)
+    assert np.isinf(cut[0][0][0, 0])  # the cost is the view's, as the model read it
+
+
 def test_taxi_stage_trains_on_a_tiny_day_and_the_plugin_loads_it(tmp_path):
     from allocators.magnnet.train import main
 
