@@ -82,11 +82,14 @@ def setup() -> None:
     print(f"peers environment ready: {VENV}\n  {', '.join(PINS)}")
 
 
-def command(sim: str, folder: Path, out: Path, ours: tuple[str, ...] = ()) -> list[str]:
-    """The command line of one run of ``sim`` (``ours``: the project's runner's arguments
-    after the two paths: allocator, objective; ``ridepy-grid``: RidePy on its graph space)."""
-    if sim == "ours":
-        return [sys.executable, str(HERE / "peers_ours.py"), str(folder), str(out), *ours]
+def command(sim: str, folder: Path, out: Path,
+            ours: dict[str, tuple[str, ...]] | None = None) -> list[str]:
+    """The command line of one run of ``sim``. ``ours``: the runs of the project's runner by
+    name, each with its arguments after the two paths (allocator, objective, batch window;
+    default ``{"ours": ()}``: ``fcfs`` at once); ``ridepy-grid``: RidePy on its graph space."""
+    ours = {"ours": ()} if ours is None else ours
+    if sim in ours:
+        return [sys.executable, str(HERE / "peers_ours.py"), str(folder), str(out), *ours[sim]]
     if sim == "sumo-instant":
         return [str(peer_python()), str(HERE / "peers_sumo.py"), str(folder), str(out), "instant"]
     if sim == "ridepy-grid":
@@ -94,7 +97,7 @@ def command(sim: str, folder: Path, out: Path, ours: tuple[str, ...] = ()) -> li
     return [str(peer_python()), str(HERE / f"peers_{sim}.py"), str(folder), str(out)]
 
 
-def run_once(sim: str, folder: Path, ours: tuple[str, ...] = ()) -> dict:
+def run_once(sim: str, folder: Path, ours: dict[str, tuple[str, ...]] | None = None) -> dict:
     """One run of ``sim`` on the workload in ``folder``, in a fresh process; its JSON row."""
     out = folder / f"{sim}.json"
     out.unlink(missing_ok=True)
@@ -106,16 +109,20 @@ def run_once(sim: str, folder: Path, ours: tuple[str, ...] = ()) -> dict:
     return json.loads(out.read_text())
 
 
-def run_all(sims: list[str], folder: Path, repeats: int, log, ours: tuple[str, ...] = (),
+def run_all(sims: list[str], folder: Path, repeats: int, log,
+            ours: dict[str, tuple[str, ...]] | None = None,
             label: dict[str, str] | None = None) -> dict[str, dict]:
     """``repeats`` interleaved runs of each simulator: the first run's metrics (they are
-    deterministic; a change between runs is reported) with every run's wall and CPU seconds."""
+    deterministic; a change between runs is reported) with every run's wall and CPU seconds.
+    ``ours``: as :func:`command`'s (several named runs of the project's runner may be among
+    ``sims``)."""
     label = label or LABEL
     rows: dict[str, dict] = {}
+    width = max([11, *(len(label[sim]) for sim in sims)])
     for k in range(repeats):
         for sim in sims:
             r = run_once(sim, folder, ours)
-            log(f"  {label[sim]:<11} run {k + 1}/{repeats}: {r['wall_s']:7.1f} s wall, "
+            log(f"  {label[sim]:<{width}} run {k + 1}/{repeats}: {r['wall_s']:7.1f} s wall, "
                 f"{r['cpu_s']:7.1f} s CPU")
             if sim not in rows:
                 rows[sim] = dict(r, walls=[], cpus=[], rss=[])

@@ -11,7 +11,10 @@ run ends ``--drain`` seconds after the last release (default: enough for every a
   ``max_delay``, ``[dispatch] allocator = "hungarian"``, ``objective = "added_time"`` (a pair's
   cost is how much longer the vehicle's whole plan gets), no batch window (a decision at each
   release), planner ``dijkstra``. A request no vehicle can take within its limits is rejected
-  at once.
+  at once. ``--batch-window S`` (S > 0) sets ``[dispatch] batch_window = S`` instead: a release
+  opens a window of S seconds, then one decision assigns every request released meanwhile
+  (``ours (batched S s)``); ``--batch-window 0 30`` runs both series on the same requests,
+  interleaved with RidePy's, each compared with RidePy.
 * **RidePy** (``benchmarks/peers_ridepy.py``): ``BruteForceTotalTravelTimeMinimizingDispatcher``
   (the request goes to the vehicle whose stoplist grows least in drive time), seat capacity
   ``--capacity``, ``pickup_timewindow_max`` and ``delivery_timewindow_max`` as above; it rejects
@@ -20,15 +23,25 @@ run ends ``--drain`` seconds after the last release (default: enough for every a
   block); ``ridepy-grid``: its ``Graph`` space on the same grid (a re-routed vehicle first
   reaches the next intersection, as ours does).
 
-The rules are the same: one request at a time, cheapest feasible insertion of its pickup and
-drop-off by added drive time, ties to the first vehicle and then the first positions (ours:
-``hungarian`` on a one-column matrix takes the first minimal row; between positions of one
-vehicle the earlier pickup, which is the first position on a grid). Each simulator runs in its
-own process, ``--repeats`` times, interleaved. Printed per size, side by side: requests per
-wall and per CPU second, the service metrics (served share, rejected, mean and p90 wait, mean
-detour = in-vehicle time / direct time, mean delay = drop-off - release - direct time, vehicle
-km actually driven, occupancy = passenger-km / vehicle-km, share of served rides shared) and
-the ratios ours / RidePy; then how many requests each pair of runs gave to the same vehicle.
+Without a batch window the rules are the same: one request at a time, cheapest feasible
+insertion of its pickup and drop-off by added drive time, ties to the first vehicle and then the
+first positions (ours: ``hungarian`` on a one-column matrix takes the first minimal row; between
+positions of one vehicle the earlier pickup, which is the first position on a grid). With one
+(``--batch-window S``, S > 0) they differ: ours waits up to S seconds and then assigns the whole
+batch at once (at most one new request per vehicle and decision, by the assignment that serves
+the most requests, then at the least total added time; a request no vehicle can take at its
+first decision is rejected, one left over waits for the next decision and expires at its pickup
+limit), whereas RidePy decides each request at its release. The service metrics of a batched
+series are then those of another dispatch rule, not expected to match RidePy's decision for
+decision, and its same-vehicle share below says nothing about agreement.
+
+Each simulator runs in its own process, ``--repeats`` times, interleaved. Printed per size,
+side by side: requests per wall and per CPU second, the service metrics (served share,
+rejected, expired (batched series only: left over past the pickup limit), mean and p90 wait,
+mean detour = in-vehicle time / direct time, mean delay = drop-off - release - direct time,
+vehicle km actually driven, occupancy = passenger-km / vehicle-km, share of served rides
+shared) and the ratios of each series of ours / each RidePy run; then how many requests each
+pair of runs gave to the same vehicle.
 
 Why the runs part (measured with ``--jitter 0.05``: unique shortest paths, ``ours`` against
 ``ridepy-grid``, four seeds, capacity 2 to 4, tight and loose limits): every decision is the
@@ -49,8 +62,9 @@ same decisions: a drop-off and a pickup at the same node and time count as share
 pickup first (RidePy's choice on such a tie), not in the order drop-off first.
 
 Run: ``.venv/bin/python benchmarks/pooling.py [--vehicles 200 1000] [--rate 30] [--hours 1]
-[--capacity 4] [--max-wait 300] [--max-delay 600] [--repeats 3] [--only ours ridepy
-ridepy-grid]`` (the peers' environment first: ``python benchmarks/peers.py --setup``).
+[--capacity 4] [--max-wait 300] [--max-delay 600] [--batch-window 0 [30 ...]] [--repeats 3]
+[--only ours ridepy ridepy-grid]`` (the peers' environment first: ``python benchmarks/peers.py
+--setup``).
 """
 
 from __future__ import annotations
@@ -74,22 +88,52 @@ LABEL = {"ours": "ours", "ridepy": "RidePy", "ridepy-grid": "RidePy grid"}
 OURS = ("hungarian", "added_time")
 
 
+def ours_series(windows: list[float]) -> dict[str, tuple[str, ...]]:
+    """Our runs, one per batch window, by name (``ours`` for 0: no window, ``ours-S`` for S
+    seconds), each with the runner's arguments (``peers_ours.py``: allocator, objective,
+    window)."""
+    series = {}
+    for s in dict.fromkeys(windows):  # each window once, in the order given
+        series["ours" if s == 0 else f"ours-{s:g}"] = OURS + ((f"{s!r}",) if s > 0 else ())
+    return series
+
+
+def label_of(sim: str) -> str:
+    """The printed name of a run: ``ours (batched 30 s)`` for ``ours-30``."""
+    if sim.startswith("ours-"):
+        return f"ours (batched {sim[len('ours-'):]} s)"
+    return LABEL[sim]
+
+
 def _f(x: float, nd: int = 1) -> str:
     return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:,.{nd}f}"
 
 
+def _header(sim: str) -> str:
+    return label_of(sim).replace(" (", "\n(")  # "ours\n(batched 30 s)": narrow columns
+
+
 def print_table(console, title: str, rows: dict[str, dict]) -> None:
-    """Metrics down, simulators across, then ours / each RidePy run (80 columns)."""
+    """Metrics down, simulators across, then each of our series / each RidePy run: in the same
+    table for one series of ours, in a second table for several (80 columns)."""
     from rich.table import Table
 
     sims = list(rows)
-    peers = [s for s in sims if s != "ours"] if "ours" in rows else []
-    table = Table(title=title, title_justify="left", pad_edge=False, box=None)
-    table.add_column("", no_wrap=True)
+    ours = [s for s in sims if s == "ours" or s.startswith("ours-")]
+    pairs = [(o, p) for o in ours for p in sims if p not in ours]
+
+    def new_table(title_: str | None) -> Table:
+        t = Table(title=title_, title_justify="left", pad_edge=False, box=None)
+        t.add_column("", no_wrap=True)
+        return t
+
+    table = new_table(title)
     for s in sims:
-        table.add_column(LABEL[s], justify="right", no_wrap=True)
-    for s in peers:
-        table.add_column(f"ours/{LABEL[s]}", justify="right", no_wrap=True)
+        table.add_column(_header(s), justify="right", no_wrap=True)
+    ratios = table if len(ours) == 1 else new_table(f"{title}: ratios ours / RidePy")
+    for o, p in pairs:
+        head = f"ours/{LABEL[p]}" if len(ours) == 1 else f"{_header(o)}\n/ {LABEL[p]}"
+        ratios.add_column(head, justify="right", no_wrap=True)
 
     def med(r, key):
         return statistics.median(r[key])
@@ -103,6 +147,7 @@ def print_table(console, title: str, rows: dict[str, dict]) -> None:
         ("peak RSS MB", lambda r: max(r["rss"]), 0, None),
         ("served %", lambda r: 100 * r["served_share"], 2, "value"),
         ("rejected", lambda r: r["rejected"], 0, "value"),
+        ("expired", lambda r: r.get("expired", 0), 0, "value"),
         ("wait mean s", lambda r: r["wait_mean"], 1, "value"),
         ("wait p90 s", lambda r: r["wait_p90"], 1, "value"),
         ("detour mean", lambda r: r["detour_mean"], 3, "value"),
@@ -113,16 +158,24 @@ def print_table(console, title: str, rows: dict[str, dict]) -> None:
     ]
     for name, get, nd, ratio in lines:
         cells = [_f(float(get(rows[s])), nd) for s in sims]
-        for s in peers:
-            a, b = float(get(rows["ours"])), float(get(rows[s]))
+        quotients = []
+        for o, p in pairs:
+            a, b = float(get(rows[o])), float(get(rows[p]))
             if ratio == "speed":
-                cells.append(f"{a / b:.2f}x" if b else "-")
+                quotients.append(f"{a / b:.2f}x" if b else "-")
             elif ratio == "value":
-                cells.append(f"{a / b:.3f}" if b else ("1" if a == b else "-"))
+                quotients.append(f"{a / b:.3f}" if b else ("1" if a == b else "-"))
             else:
-                cells.append("")
-        table.add_row(name, *cells)
+                quotients.append("")
+        if ratios is table:
+            table.add_row(name, *cells, *quotients)
+        else:
+            table.add_row(name, *cells)
+            if ratio is not None:
+                ratios.add_row(name, *quotients)
     console.print(table)
+    if ratios is not table and pairs:
+        console.print(ratios)
 
 
 def print_same_vehicle(console, folder: Path, sims: list[str]) -> None:
@@ -136,7 +189,7 @@ def print_same_vehicle(console, folder: Path, sims: list[str]) -> None:
             same = x["vehicle"] == y["vehicle"]
             parted = np.flatnonzero(~same)
             first = f"request {parted[0]:,}" if parted.size else "none"
-            console.print(f"same vehicle {LABEL[a]} / {LABEL[b]}: {same.mean():.1%} of the "
+            console.print(f"same vehicle {label_of(a)} / {label_of(b)}: {same.mean():.1%} of the "
                           f"requests; first parted: {first}")
 
 
@@ -158,6 +211,9 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--drain", type=float, default=None,
                     help="seconds simulated after the last release (default: the longest "
                          "direct ride + max delay + 60)")
+    ap.add_argument("--batch-window", type=float, nargs="+", default=[0.0], metavar="S",
+                    help="ours decides every S seconds ([dispatch] batch_window; 0: at each "
+                         "release, RidePy's rule); several values: one series of ours each")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--only", nargs="+", choices=SIMULATORS, default=list(SIMULATORS))
@@ -166,9 +222,11 @@ def main(argv: list[str] | None = None) -> None:
     if (min(args.vehicles) < 1 or args.repeats < 1 or args.capacity < 1 or min(args.grid) < 1
             or max(args.grid) < 2
             or not (args.rate > 0 and args.hours > 0 and args.max_wait >= 0
-                    and args.max_delay >= 0) or (args.drain is not None and args.drain < 0)):
+                    and args.max_delay >= 0 and min(args.batch_window) >= 0
+                    and math.isfinite(max(args.batch_window)))
+            or (args.drain is not None and args.drain < 0)):
         ap.error("--vehicles, --repeats, --capacity must be >= 1, --rate and --hours > 0, "
-                 "--max-wait, --max-delay and --drain >= 0")
+                 "--max-wait, --max-delay, --batch-window and --drain >= 0")
     from rich.console import Console
 
     console = Console(width=80, highlight=False)
@@ -185,6 +243,12 @@ def main(argv: list[str] | None = None) -> None:
     if args.jitter and "ridepy" in args.only:
         args.only.remove("ridepy")  # Manhattan2D has no street lengths
     work = args.work or Path(tempfile.mkdtemp(prefix="pooling-"))
+    ours = ours_series(args.batch_window)
+    # "ours" in --only: every series of ours, where "ours" stood
+    sims = [x for s in args.only for x in (ours if s == "ours" else [s])]
+    labels = {s: label_of(s) for s in sims}
+    windows = ", ".join("no batch window" if s == "ours" else f"batch window {s[5:]} s"
+                        for s in ours)
     for n in args.vehicles:
         requests = max(1, round(args.rate * n * args.hours))
         columns, rows_ = args.grid
@@ -203,14 +267,15 @@ def main(argv: list[str] | None = None) -> None:
             f"{'streets jittered by ' + format(w.jitter, 'g') + '; ' if w.jitter else ''}max wait "
             f"{w.max_wait:g} s, max delay {w.max_delay:g} s;\ndrain {drain:g} s; seed "
             f"{args.seed}; {args.repeats} run(s) of each, interleaved; ours: "
-            f"{OURS[0]}, {OURS[1]}, no batch window")
-        rows = run_all(args.only, folder, args.repeats, log, ours=OURS, label=LABEL)
+            f"{OURS[0]}, {OURS[1]}, {windows}")
+        rows = run_all(sims, folder, args.repeats, log, ours=ours, label=labels)
         print_table(console, f"{n:,} vehicles x {w.capacity} seats, {w.requests:,} requests",
                     rows)
         for sim, r in rows.items():
-            if r["served"] + r["rejected"] != r["requests"]:
-                console.print(f"note: {LABEL[sim]}: {r['requests'] - r['served'] - r['rejected']}"
-                              " request(s) neither served nor rejected by the end")
+            left = r["requests"] - r["served"] - r["rejected"] - r.get("expired", 0)
+            if left:
+                console.print(f"note: {labels[sim]}: {left} request(s) neither served, rejected "
+                              "nor expired by the end")
         if len(rows) > 1:
             print_same_vehicle(console, folder, list(rows))
         if "ridepy" in rows:

@@ -161,17 +161,53 @@ def test_ridepy_driven_seconds_is_the_union_per_vehicle():
     assert peers_ridepy.driven_seconds(vehicle, start, stop) == pytest.approx(10 + 5 + 3)
 
 
-def test_ours_runner_pools(tmp_path):
+@pytest.mark.parametrize("window", [None, 30.0])
+def test_ours_runner_pools(tmp_path, window):
     """A 4-seat workload through the project's runner with the added-time objective: every
-    request within its limits or rejected, and the shared-ride metrics consistent."""
+    request within its limits, rejected or (batched) expired, and the shared-ride metrics
+    consistent. Without a window each request is decided at its release; with a 30 s window
+    (``pooling.py --batch-window 30``) the scenario says so and decisions come up to 30 s after
+    the release."""
+    import pyarrow.parquet as pq
+
+    from dispatch.scenario import load_scenario
+
     w, t, o, d, s = pw.generate(60, 3, 0.25, seed=4, drain=2000.0, capacity=4, max_wait=300.0,
                                 max_delay=300.0)
     pw.write(tmp_path, w, t, o, d, s)
     out = tmp_path / "ours.json"
+    extra = [] if window is None else [repr(window)]
     subprocess.run([sys.executable, str(BENCH / "peers_ours.py"), str(tmp_path), str(out),
-                    "hungarian", "added_time"], check=True, cwd=BENCH.parent)
+                    "hungarian", "added_time", *extra], check=True, cwd=BENCH.parent)
     row = json.loads(out.read_text())
-    assert row["served"] + row["rejected"] == 60 and row["served"] > 0
+    name = "ours_hungarian" if window is None else "ours_hungarian_bw30"
+    [spec] = load_scenario(tmp_path / f"{name}.toml", force=True).runs()
+    assert spec.scenario.dispatch.batch_window == (window or 0.0)
+    [part] = (tmp_path / f"{name}_out" / "tasks").rglob("part-*.parquet")
+    tasks = pq.read_table(part)
+    late = tasks["assigned_at"].to_numpy() - tasks["released_at"].to_numpy()
+    late = late[np.isfinite(late)]
+    if window is None:
+        assert row["expired"] == 0 and np.all(late == 0)
+    else:
+        assert late.max() > 0 and np.all((late >= 0) & (late <= window + 1e-9))
+    assert row["served"] + row["rejected"] + row["expired"] == 60 and row["served"] > 0
     assert 0 <= row["wait_mean"] <= 300 and 0 <= row["delay_mean"] <= 300
     assert row["detour_mean"] >= 1 - 1e-9 and 0 < row["shared_rate"] <= 1
     assert row["occupancy"] == pytest.approx(row["passenger_km"] / row["vehicle_km"])
+
+
+def test_pooling_series_per_batch_window():
+    """``pooling.py --batch-window 0 30``: one series of ours per window (0 is today's run, named
+    ``ours``), labelled as batched, each run by peers_ours.py with its window."""
+    import peers
+    import pooling
+
+    series = pooling.ours_series([30.0, 0.0, 30.0])
+    assert series == {"ours-30": ("hungarian", "added_time", "30.0"),
+                      "ours": ("hungarian", "added_time")}
+    assert pooling.label_of("ours-30") == "ours (batched 30 s)"
+    assert pooling.label_of("ours") == "ours" and pooling.label_of("ridepy") == "RidePy"
+    cmd = peers.command("ours-30", Path("w"), Path("w/ours-30.json"), series)
+    assert Path(cmd[1]).name == "peers_ours.py" and cmd[-3:] == ["hungarian", "added_time", "30.0"]
+    assert peers.command("ours", Path("w"), Path("o.json"))[-2:] == ["w", "o.json"]
