@@ -123,7 +123,8 @@ def table(rows: list[dict]) -> str:
     import pandas as pd
 
     df = pd.DataFrame(rows)
-    out = [(f"{'series':<27}{'N':>5} {'seeds':>5}  {'served %':>13}  {'wait s':>12}  "
+    w = max([27] + [len(x) + 1 for x in df["series"]])
+    out = [(f"{'series':<{w}}{'N':>5} {'seeds':>5}  {'served %':>13}  {'wait s':>12}  "
             f"{'d served pts':>13}  {'d wait %':>11}  {'pass. km':>8}")]
     for n, g in df.groupby("n_agents"):
         for name in [s for s in SERIES if s in set(g["series"])]:
@@ -135,7 +136,7 @@ def table(rows: list[dict]) -> str:
             h = g[g["series"] == name].set_index("seed")
             sm, sh = interval(100 * h["served_share"])
             wm, wh = interval(h["wait_mean"])
-            line = (f"{name:<27}{n:>5} {len(h):>5}  {sm:6.2f} ±{sh:5.2f}  {wm:5.1f} ±{wh:5.1f}")
+            line = (f"{name:<{w}}{n:>5} {len(h):>5}  {sm:6.2f} ±{sh:5.2f}  {wm:5.1f} ±{wh:5.1f}")
             common = h.index.intersection(base.index)
             if name != ref and len(common):
                 ds = 100 * (h.loc[common, "served_share"] - base.loc[common, "served_share"])
