@@ -27,7 +27,7 @@ log = logging.getLogger(__name__)
 #: blocks below this many bytes come from the heap (glibc's own ceiling for it: 32 MiB)
 MMAP_THRESHOLD = 32 << 20
 #: free memory at the heap's top kept for the next decision instead of given back
-TRIM_THRESHOLD = 64 << 20
+TRIM_THRESHOLD = 128 << 20
 _M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3  # mallopt's parameter numbers (malloc.h)
 
 _state: dict[str, bool] = {}
