@@ -356,8 +356,16 @@ class RoadPlanner(Planner):
 
         hits = np.flatnonzero(cached).tolist()
         at = node if index is None else index[node]
-        for t in hits:
-            out[:, t] = self._fields[int(tnode[t])][at]
+        if len(hits) == len(tasks):  # every column from a field (a batch's usual case):
+            # the fields side by side, their rows at the agents' nodes gathered at once
+            rows = [self._fields[n] for n in tnode.tolist()]
+            side = np.empty((rows[0].size, len(rows)))
+            for t, row in enumerate(rows):
+                side[:, t] = row
+            side.take(at, axis=0, out=out)
+        else:
+            for t in hits:
+                out[:, t] = self._fields[int(tnode[t])][at]
         for t in hits:  # after reading: re-homing a task may drop a field
             self._remember(tasks[t].id, int(tnode[t]))
         if getattr(agents, "nodes", None) is not None and not agents.points.size:
