@@ -389,8 +389,8 @@ class RoadPlanner(Planner):
         else:
             self.stats.extra["field_reuses"] += 1
         nodes = agents.nodes
-        out = np.empty((nodes.size, 1))
-        out[:, 0] = field[nodes if self._index is None else self._index[nodes]]
+        # (take: the same gather as field[nodes], about twice as fast)
+        out = field.take(nodes if self._index is None else self._index.take(nodes))[:, None]
         self._remember(task.id, goal)
         if not agents.points.size:
             return out  # everyone on a node: nothing left to drive first
