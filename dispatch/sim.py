@@ -32,7 +32,6 @@ from dispatch.dispatcher import Dispatcher
 from dispatch.energy import Charging, Energy
 from dispatch.events import EventBus
 from dispatch.faults import FaultInjector, blackout_filter
-from dispatch.heap import keep_large_blocks
 from dispatch.plugins import (check_repositioner, check_runs, describe, make_charger,
                               make_plugin, make_repositioner)
 from dispatch.recording import RunRecording
@@ -228,7 +227,6 @@ class Simulation:
         """Run until every task is terminal and the source is done, or the horizon; record
         the end-of-run tables and return the summary row."""
         env = self.env
-        keep_large_blocks()  # big per-decision arrays reuse heap memory (dispatch.heap)
         try:
             horizon = env.timeout(self.spec.scenario.duration)
             with run_gc():
