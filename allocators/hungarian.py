@@ -8,6 +8,8 @@ never chosen. Works for any ``N x M`` (rectangular either way, or empty).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
@@ -59,6 +61,12 @@ def optimal_pairs(cost: np.ndarray) -> list[tuple[int, int]]:
     ``span`` the range of the finite costs.
     """
     cost = np.asarray(cost, dtype=float)
+    if cost.ndim == 2 and cost.size and math.isfinite(np.add.reduce(cost, axis=None)):
+        # every pair finite (a finite sum has no inf and no nan): no row or column to drop,
+        # the same solve on the matrix itself, without the masks and the submatrix copy
+        # (a city day's batch: half the allocator's time)
+        r, c = linear_sum_assignment(cost)
+        return list(zip(r.tolist(), c.tolist()))
     finite = np.isfinite(cost)
     if cost.ndim != 2 or not finite.any():
         return []

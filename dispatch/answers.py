@@ -42,10 +42,15 @@ def validate(problem: AllocationProblem, allocation: Allocation,
     except TypeError:
         raise AllocationError(f"Allocation.pairs must be a sequence of (agent_id, task_id) "
                               f"pairs, got {type(allocation.pairs).__name__}") from None
-    agent_row, task_col = finders(problem)
     routes = getattr(allocation, "routes", None) or {}
     if routes and not multi:
         raise AllocationError("Allocation.routes is for allocators that set multi_request")
+    hint = allocation.__dict__.get("_index")  # Allocation.centralized's (row, column) pairs
+    if hint is not None and not routes:
+        index = _hinted(problem, pairs, hint)
+        if index is not None:
+            return index
+    agent_row, task_col = finders(problem)
     seen_agents: set[int] = set()
     seen_tasks: set[int] = set()
     hint = ("; pairs name agents and tasks by id, not by index (Allocation.centralized "
@@ -83,6 +88,39 @@ def validate(problem: AllocationProblem, allocation: Allocation,
         if aid not in seen_agents:
             raise AllocationError(f"Allocation.routes names agent {aid!r}, which is given no "
                                   "task in pairs")
+    return index
+
+
+def _hinted(problem: AllocationProblem, pairs: tuple, hint) -> list[tuple[int, int]] | None:
+    """What :func:`validate` returns for ``pairs`` where ``hint`` (the ``(row, column)`` of
+    each pair, as :meth:`Allocation.centralized` was given them) holds: every hinted row and
+    column in range and naming that pair's ids, no row or column twice, every pair of finite
+    cost; None otherwise (the full check then says what is wrong). The same checks as the
+    full one, by index instead of by id lookup."""
+    if len(hint) != len(pairs):
+        return None
+    agent_ids, task_ids, cost = problem.agent_ids, problem.task_ids, problem.cost
+    n, m = len(agent_ids), len(task_ids)
+    rows: set[int] = set()
+    cols: set[int] = set()
+    index = []
+    for pair, (i, j) in zip(pairs, hint):
+        if type(i) is not int or type(j) is not int:  # (numpy integers, as the ids would)
+            if not (isinstance(i, np.integer) and isinstance(j, np.integer)):
+                return None
+            i, j = int(i), int(j)
+        if not (0 <= i < n and 0 <= j < m) or i in rows or j in cols:
+            return None
+        try:
+            aid, tid = pair
+        except (TypeError, ValueError):
+            return None
+        if type(aid) is not int or type(tid) is not int or aid != agent_ids[i] \
+                or tid != task_ids[j] or not math.isfinite(cost[i, j]):
+            return None
+        rows.add(i)
+        cols.add(j)
+        index.append((i, j))
     return index
 
 

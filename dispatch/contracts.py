@@ -406,17 +406,22 @@ class Allocation:
     @classmethod
     def centralized(cls, problem: AllocationProblem, index_pairs) -> Allocation:
         """Build the answer of a centralized method from ``(agent_index, task_index)`` pairs."""
-        pairs, reqs = [], []
+        pairs, reqs, index = [], [], []
         agent_ids, task_ids, cost = problem.agent_ids, problem.task_ids, problem.cost
         for a, t in index_pairs:
             aid, tid = int(agent_ids[a]), int(task_ids[t])
             pairs.append((aid, tid))
+            index.append((a, t))
             reqs.append(_frozen(Request, round=0, agent_id=aid, task_id=tid,
                                 cost=float(cost[a, t]), won=True))
         if cls is not Allocation:  # a subclass may add fields or checks: its own __init__
             return cls(pairs=tuple(pairs), rounds=1, requests=tuple(reqs), messages=0)
-        return _frozen(cls, pairs=tuple(pairs), rounds=1, requests=tuple(reqs), messages=0,
-                       hops=0, agent_seconds=(), routes={})
+        out = _frozen(cls, pairs=tuple(pairs), rounds=1, requests=tuple(reqs), messages=0,
+                      hops=0, agent_seconds=(), routes={})
+        # each pair's (row, column) as given: a hint the answer's check verifies against
+        # the problem instead of looking every id up (see dispatch.answers.validate)
+        out.__dict__["_index"] = index
+        return out
 
     def conflicted_tasks(self) -> set[int]:
         """Ids of tasks requested by more than one agent in some round, or requested again in a

@@ -71,6 +71,7 @@ from dispatch.answers import finders, route_stops, validate  # noqa: F401
 from dispatch.comms import comm_graph, components
 from dispatch.contracts import Allocation, AllocationProblem, Allocator, Planner
 from dispatch.errors import AllocationError, DispatchError, PluginError
+from dispatch.heap import keep_large_blocks
 from dispatch.lazy import certify, resolve_open
 from dispatch.plans import Inserts, Plans, insertion_costs_of, roomy
 from dispatch.space import Space
@@ -192,6 +193,7 @@ class Dispatcher:
         self._everyone: dict[int, np.ndarray] = {}  # n -> read-only all-True (n, n), no memory
         #: the run's id, for error messages (set by the simulation)
         self.run_id = ""
+        keep_large_blocks()  # a batch's big arrays reuse heap memory (see dispatch.heap)
         self.process = env.process(self._loop())
 
     def _where(self, kind: str) -> str:

@@ -181,6 +181,8 @@ class Fleet:
         self.by_id = {v.id: v for v in self.vehicles}
         n = len(self.vehicles)
         self.ids = np.fromiter((v.id for v in self.vehicles), np.int64, n)
+        #: the ids are the positions 0 .. n-1 (the usual fleet): a position is its id
+        self._ids_are_slots = bool((self.ids == np.arange(n)).all())
         self.idle_mask = np.ones(n, dtype=bool)
         self.busy_mask = np.zeros(n, dtype=bool)
         #: a free seat somewhere in its plan (kept by Operator.changed)
@@ -240,12 +242,17 @@ class Fleet:
 
         if ascending is None:  # ids ascend with the positions (vehicles are in id order)
             ascending = bool(idx.size < 2 or (idx[1:] > idx[:-1]).all())
+        # (take: a gather about twice as fast as fancy indexing, the same elements; a decision
+        # of an immediate city day gathers thousands of idle vehicles, so each one counts)
+        ids = idx.copy() if self._ids_are_slots else self.ids.take(idx)
         if not self.road:
-            return AgentViews(self.ids[idx], make, ascending=ascending)
-        node, rem = self.node[idx], self.remaining[idx]
-        special = self.special[idx].nonzero()[0].tolist()
-        if not special:  # every one stands on a node
-            return AgentViews(self.ids[idx], make, node, rem, _NO_POINTS, ascending)
+            return AgentViews(ids, make, ascending=ascending)
+        node = self.node.take(idx)
+        special = self.special.take(idx)
+        if not special.any():  # every one stands on a node: ``remaining`` is 0 for all
+            return AgentViews(ids, make, node, np.zeros(idx.size), _NO_POINTS, ascending)
+        rem = self.remaining.take(idx)
+        special = special.nonzero()[0].tolist()
         points = []
         for k in special:  # driving (a leg: where is it now?) or stopped part-way along an edge
             v = vs[int(idx[k])]
@@ -258,8 +265,7 @@ class Fleet:
             node[k], rem[k], off = self._stands(v.loc)
             if off:
                 points.append(k)
-        return AgentViews(self.ids[idx], make, node, rem, np.array(points, dtype=np.int64),
-                          ascending)
+        return AgentViews(ids, make, node, rem, np.array(points, dtype=np.int64), ascending)
 
     def set_busy(self, v: Vehicle) -> None:
         v.busy = True

@@ -318,9 +318,10 @@ class RoadPlanner(Planner):
         self.stats.cost_queries += 1
         if len(tasks) == 1 and getattr(agents, "nodes", None) is not None and len(agents):
             return self._column(agents, tasks[0])
-        out = np.full((len(agents), len(tasks)), np.inf)
-        if not agents or not tasks:
-            return out
+        shape = (len(agents), len(tasks))
+        if not shape[0] or not shape[1]:
+            return np.full(shape, np.inf)
+        out = None  # (made below; not filled first where every task has a field)
         node, rem = _agent_arrays(agents)
         tnode = np.fromiter((int(t.loc) for t in tasks), np.int64, len(tasks))
         cached = np.fromiter((int(n) in self._fields for n in tnode), bool, len(tasks))
@@ -341,6 +342,7 @@ class RoadPlanner(Planner):
             else:
                 at = index[tnode[cols]]
                 fwd = np.stack([f[at] for f in h.fields(agent_nodes, to=False)])
+            out = np.full(shape, np.inf)
             out[:, cols] = fwd[agent_inv]
         elif fresh.size:
             if self._retired:  # (after the choice above: forward sums may round otherwise)
@@ -356,8 +358,18 @@ class RoadPlanner(Planner):
 
         hits = np.flatnonzero(cached).tolist()
         at = node if index is None else index[node]
-        for t in hits:
-            out[:, t] = self._fields[int(tnode[t])][at]
+        if len(hits) == len(tasks):  # every column from a field (a batch's usual case):
+            # the fields side by side, their rows at the agents' nodes gathered at once
+            rows = [self._fields[n] for n in tnode.tolist()]
+            side = np.empty((rows[0].size, len(rows)))
+            for t, row in enumerate(rows):
+                side[:, t] = row
+            out = side.take(at, axis=0)  # (into a new array: several times faster than out=)
+        else:
+            if out is None:
+                out = np.full(shape, np.inf)
+            for t in hits:
+                out[:, t] = self._fields[int(tnode[t])][at]
         for t in hits:  # after reading: re-homing a task may drop a field
             self._remember(tasks[t].id, int(tnode[t]))
         if getattr(agents, "nodes", None) is not None and not agents.points.size:
@@ -381,8 +393,8 @@ class RoadPlanner(Planner):
         else:
             self.stats.extra["field_reuses"] += 1
         nodes = agents.nodes
-        out = np.empty((nodes.size, 1))
-        out[:, 0] = field[nodes if self._index is None else self._index[nodes]]
+        # (take: the same gather as field[nodes], about twice as fast)
+        out = field.take(nodes if self._index is None else self._index.take(nodes))[:, None]
         self._remember(task.id, goal)
         if not agents.points.size:
             return out  # everyone on a node: nothing left to drive first
