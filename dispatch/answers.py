@@ -45,9 +45,9 @@ def validate(problem: AllocationProblem, allocation: Allocation,
     routes = getattr(allocation, "routes", None) or {}
     if routes and not multi:
         raise AllocationError("Allocation.routes is for allocators that set multi_request")
-    hint = allocation.__dict__.get("_index")  # Allocation.centralized's (row, column) pairs
-    if hint is not None and not routes:
-        index = _hinted(problem, pairs, hint)
+    given = allocation.__dict__.get("_index")  # Allocation.centralized's (row, column) pairs
+    if given is not None and not routes:
+        index = _hinted(problem, pairs, given)
         if index is not None:
             return index
     agent_row, task_col = finders(problem)

@@ -358,13 +358,14 @@ class RoadPlanner(Planner):
 
         hits = np.flatnonzero(cached).tolist()
         at = node if index is None else index[node]
-        if len(hits) == len(tasks):  # every column from a field (a batch's usual case):
-            # the fields side by side, their rows at the agents' nodes gathered at once
-            rows = [self._fields[n] for n in tnode.tolist()]
-            side = np.empty((rows[0].size, len(rows)))
-            for t, row in enumerate(rows):
-                side[:, t] = row
-            out = side.take(at, axis=0)  # (into a new array: several times faster than out=)
+        if len(hits) == len(tasks):  # every column from a field (a batch's usual case)
+            fields = [self._fields[n] for n in tnode.tolist()]
+            if fields[0].size <= len(at):
+                # more agents than nodes (a small grid, a big fleet): the fields side by side,
+                # their rows at the agents' nodes gathered at once
+                out = np.stack(fields, axis=1).take(at, axis=0)
+            else:  # a big network: gather each field at the agents, then lay them side by side
+                out = np.stack([f.take(at) for f in fields], axis=1)
         else:
             if out is None:
                 out = np.full(shape, np.inf)
