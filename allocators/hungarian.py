@@ -29,14 +29,14 @@ class HungarianAllocator(Allocator):
 
     def __init__(self, value: str | None = None, value_weight: float | None = None) -> None:
         """``value``: a learned value of where vehicles end up (a file of ``dispatch train
-        value``, see :mod:`dispatch.value`): each pair's cost becomes its cost less the
+        value``, see :mod:`learning.value`): each pair's cost becomes its cost less the
         discounted value of the vehicle's zone and time after the trip, plus its value now
         (``value_weight`` seconds per unit of value; default: the file's). Still maximum
         cardinality, then the minimum of these costs; the cost recorded for a pair stays
         its travel time."""
         self.value = None
         if value is not None:
-            from dispatch.value import ValueOption
+            from learning.value import ValueOption
 
             self.value = ValueOption(value, value_weight)
             self.minimizes_total_cost = False  # of the adjusted costs, not problem.cost

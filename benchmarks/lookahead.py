@@ -1,5 +1,5 @@
 """Look-ahead on the Chicago day (issue 22): batched ``hungarian`` against ``hungarian`` with the
-learned value of where vehicles end up (:mod:`dispatch.value`), on seeds the training never saw.
+learned value of where vehicles end up (:mod:`learning.value`), on seeds the training never saw.
 
 Every series runs ``scenarios/chicago_taxi.toml`` batched every ``--batch-window`` seconds
 (default 30) for each ``--agents`` N and ``--seeds`` S (the seed draws the day's requests and
@@ -35,7 +35,7 @@ passenger-km.
 Run: ``PYTHONPATH=. .venv/bin/python benchmarks/lookahead.py --seeds 0 1 2 3 4 --agents 500 1000
 --series hungarian "hungarian + demand" "hungarian + value" "hungarian + value + demand" --out
 runs/lookahead`` (about 20 s per day on the shared 2-core machine; ``--value`` defaults to the
-shipped ``dispatch/data/values/chicago_n500.npz``). The table of the README and
+shipped ``learning/data/values/chicago_n500.npz``). The table of the README and
 ``docs/lookahead/lookahead.csv`` come from that command.
 """
 
@@ -54,7 +54,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from dispatch.value import scenario_for
+from learning.value import scenario_for
 
 SERIES = ("hungarian", "hungarian + demand", "hungarian + value", "hungarian + value + demand",
           "hungarian + value(d) + demand", "magnnet", "magnnet + value",
@@ -162,10 +162,10 @@ def main(argv=None) -> int:
     p.add_argument("--series", nargs="+", default=["hungarian", "hungarian + value"],
                    choices=SERIES)
     p.add_argument("--value",
-                   default=str(ROOT / "dispatch" / "data" / "values" / "chicago_n500.npz"),
+                   default=str(ROOT / "learning" / "data" / "values" / "chicago_n500.npz"),
                    help="a `dispatch train value` file (default: the shipped Chicago N = 500 one)")
     p.add_argument("--value-demand",
-                   default=str(ROOT / "dispatch" / "data" / "values" / "chicago_n1000_demand.npz"),
+                   default=str(ROOT / "learning" / "data" / "values" / "chicago_n1000_demand.npz"),
                    help="the value of the value(d) series: learned on days with demand "
                         "repositioning (`dispatch train value --reposition demand`)")
     p.add_argument("--day-checkpoint", default=None,

@@ -367,7 +367,7 @@ def _validate(args, console) -> int:
     return 0
 
 
-TRAINERS = {"magnnet": "allocators.magnnet.train", "value": "dispatch.value"}  # fallback for a never-installed tree
+TRAINERS = {"magnnet": "allocators.magnnet.train", "value": "learning.value"}  # fallback for a never-installed tree
 
 
 def _train(args, console) -> int:

@@ -42,7 +42,7 @@ Variants (``[dispatch.allocator_params] variant = ...``):
     rule. Before the plugin was unified this was what ``magnnet`` ran at ``N = M``.
 
 Look-ahead (issue 22): ``value`` (a file of ``dispatch train value``) and ``value_weight``, as
-``hungarian``'s (:class:`dispatch.value.ValueOption`): each agent's costs become its travel
+``hungarian``'s (:class:`learning.value.ValueOption`): each agent's costs become its travel
 times less the discounted value of where each trip leaves it plus its value now; variant
 ``match`` only.
 
@@ -259,10 +259,10 @@ class MagnnetAllocator(DecentralizedAllocator):
                             f"variant 'match' only, not {variant!r}")
         self._record = None  # DAgger: a list that collects the views decided on
         self.value = None
-        if value is not None:  # the look-ahead option shared with hungarian (dispatch.value)
+        if value is not None:  # the look-ahead option shared with hungarian (learning.value)
             if variant != "match":
                 raise TypeError(f"value applies to variant 'match' only, not {variant!r}")
-            from dispatch.value import ValueOption
+            from learning.value import ValueOption
 
             self.value = ValueOption(value, value_weight)
         self.files: dict[str, str] = {}  # checkpoint file -> sha, of what this allocator loaded
@@ -361,13 +361,13 @@ class MagnnetAllocator(DecentralizedAllocator):
 
     def allocate(self, problem):
         """The decentralized decision (see the module doc). With ``value``, every agent decides
-        on its own row of the value-adjusted costs (:class:`dispatch.value.ValueOption`, the
-        same adjustment as ``hungarian``'s, plus the file's constant :attr:`~dispatch.value.
+        on its own row of the value-adjusted costs (:class:`learning.value.ValueOption`, the
+        same adjustment as ``hungarian``'s, plus the file's constant :attr:`~learning.value.
         ValueOption.offset` so that the models read non-negative costs), the conflict rule
         compares those, and the requests record the travel times."""
         if self.value is None:
             return self._allocate(problem)
-        from dispatch.value import travel_costs
+        from learning.value import travel_costs
 
         return travel_costs(self._allocate(self.value.problem(problem, shift=True)), problem)
 

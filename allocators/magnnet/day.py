@@ -3,7 +3,7 @@
 ``dispatch train magnnet --variant day`` starts from the shipped imitation weights
 (``match.pt``) and fine-tunes them with the shared PPO update (:func:`allocators.magnnet.ppo.
 ppo_update`, :func:`~allocators.magnnet.ppo.gae`: the trainer of the paper's variant, not a
-copy) on the decisions of :class:`dispatch.rl.Decisions` runs of a road scenario (the Chicago
+copy) on the decisions of :class:`learning.rl.Decisions` runs of a road scenario (the Chicago
 day, batched 30 s, by default).
 
 One environment step is one dispatcher decision. The actor is the match network applied per
@@ -12,13 +12,13 @@ scores of its edges, the scores coming from the network over the decision's cand
 each task's :data:`~allocators.magnnet.allocator.CANDIDATES` cheapest agents act (at most
 :data:`N_MAX` agents and the first :data:`M_MAX` open requests, as the plugin cuts taxi-scale
 views), the others request nothing; two requests for one task go to the cheaper (the paper's
-conflict rule, :func:`dispatch.rl.pairs_from_choices`). With ``--value FILE`` (default the
-shipped Chicago value) the actor reads the value-adjusted costs of :class:`dispatch.value.
+conflict rule, :func:`learning.rl.pairs_from_choices`). With ``--value FILE`` (default the
+shipped Chicago value) the actor reads the value-adjusted costs of :class:`learning.value.
 ValueOption` (as ``magnnet`` with ``value`` runs it) and the centralized critic reads the value of
 every idle vehicle's zone and time, with the time of day, the fleet's and the requests' counts
 (the critic sees the whole decision: centralized training).
 
-Reward of a step (as :mod:`dispatch.rl`): ``+1`` per request picked up until the next decision,
+Reward of a step (as :mod:`learning.rl`): ``+1`` per request picked up until the next decision,
 ``-0.01`` per minute those requests waited. The team advantage (one critic value per decision)
 reaches every agent that acted. Written to ``--out``: ``model.pt`` (a ``match`` checkpoint: run
 it with ``magnnet``'s ``checkpoint`` parameter), ``curve.csv`` and ``curve.png`` (mean reward per
@@ -49,7 +49,7 @@ ROOT = Path(__file__).resolve().parents[2]
 N_MAX, M_MAX = 128, 32
 #: features of the critic's state (see :meth:`DayTrainer.state`)
 STATE_FEATURES = 8
-WAIT_COST = 0.01  # reward per minute waited (dispatch.rl's default)
+WAIT_COST = 0.01  # reward per minute waited (learning.rl's default)
 #: the reward the critic learns is the step's reward times this (a decision's pickups are
 #: tens at N = 500; returns of hundreds slow the critic's fit; advantages are normalized)
 REWARD_SCALE = 0.01
@@ -166,7 +166,7 @@ def collect(model, trainer: DayTrainer, runs, steps: int, stats: dict):
     one environment (``B = 1``)."""
     from torch.distributions import Categorical
 
-    from dispatch.rl import pairs_from_choices
+    from learning.rl import pairs_from_choices
 
     obs_l, act_l, logp_l, acted_l, val_l, rew_l, done_l = [], [], [], [], [], [], []
     run = runs["run"]
@@ -221,8 +221,8 @@ def train(args) -> dict:
     """PPO for the day (see the module doc); returns what was written."""
     from allocators.magnnet.allocator import shipped
     from allocators.magnnet.ppo import PPOConfig, load_checkpoint, ppo_update, save_checkpoint
-    from dispatch.rl import Decisions
-    from dispatch.value import ValueOption, scenario_for
+    from learning.rl import Decisions
+    from learning.value import ValueOption, scenario_for
 
     torch.manual_seed(args.seed)
     torch.set_num_threads(args.threads)
@@ -314,7 +314,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seeds", type=int, nargs=1, default=[100],
                    help="the first training day's seed (the next days: +1 each; keep the "
                         "evaluation's seeds 0-4 out)")
-    p.add_argument("--value", default=str(ROOT / "dispatch" / "data" / "values" /
+    p.add_argument("--value", default=str(ROOT / "learning" / "data" / "values" /
                                           "chicago_n500.npz"),
                    help="the learned value the actor's costs and the critic use ('' : none)")
     p.add_argument("--init", default=None, help="start from this match checkpoint "

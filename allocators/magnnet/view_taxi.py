@@ -58,8 +58,8 @@ def taxi_decisions(scenario, agents: int, seed: int, windows=(NIGHT, DAY), every
     the run is driven by the optimal assignment (``hungarian``) and stops after the last
     window (or ``limit`` decisions)."""
     from allocators.hungarian import HungarianAllocator
-    from dispatch.rl import Decisions
-    from dispatch.value import scenario_for
+    from learning.rl import Decisions
+    from learning.value import scenario_for
 
     end = max(w[1] for w in windows)
     sc = scenario_for(scenario, batch_window, end)

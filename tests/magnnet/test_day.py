@@ -20,8 +20,8 @@ MANHATTAN = ROOT / "scenarios" / "manhattan.toml"
 def _decision():
     from dataclasses import replace
 
-    from dispatch.rl import Decisions, pairs_from_choices
-    from dispatch.value import scenario_for
+    from learning.rl import Decisions, pairs_from_choices
+    from learning.value import scenario_for
 
     sc = scenario_for(MANHATTAN, 30.0, hours=0.3)
     sc = replace(sc, fleet=replace(sc.fleet, agents=30))

@@ -45,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dispatch.zones import Zones
+from learning.zones import Zones
 
 ROOT = Path(__file__).resolve().parents[1]
 log = logging.getLogger(__name__)

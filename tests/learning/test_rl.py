@@ -1,4 +1,4 @@
-"""dispatch.rl: the Gymnasium and PettingZoo environments over the simulator's decisions."""
+"""learning.rl: the Gymnasium and PettingZoo environments over the simulator's decisions."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ pytest.importorskip("gymnasium")
 pytest.importorskip("pettingzoo")
 
 from allocators.hungarian import HungarianAllocator
-from dispatch.rl import DispatchEnv, FleetEnv, pairs_from_choices
+from learning.rl import DispatchEnv, FleetEnv, pairs_from_choices
 from dispatch.runner import run_one
 from dispatch.scenario import load_scenario
 

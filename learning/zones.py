@@ -1,7 +1,7 @@
 """Zones of a road network: a grid of ``size``-metre squares over its nodes, numbered over the
 squares that hold at least one node (so a big region with empty corners costs no table rows).
 
-Used by :mod:`dispatch.rl` (recent demand per zone in the observations) and :mod:`dispatch.value`
+Used by :mod:`learning.rl` (recent demand per zone in the observations) and :mod:`learning.value`
 (the value of a vehicle's zone and time of day). Deterministic: the numbering depends only on
 the node positions and ``size``.
 """

@@ -1,4 +1,4 @@
-"""dispatch.value: the learned value of where a vehicle ends up, and hungarian's value option."""
+"""learning.value: the learned value of where a vehicle ends up, and hungarian's value option."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ import pytest
 
 from allocators.hungarian import HungarianAllocator
 from dispatch.contracts import AgentView, AllocationProblem, TaskView
-from dispatch.value import ZoneValue, td_learn, train
-from dispatch.zones import Zones
+from learning.value import ZoneValue, td_learn, train
+from learning.zones import Zones
 
 ROOT = Path(__file__).resolve().parents[2]
 MANHATTAN = ROOT / "scenarios" / "manhattan.toml"
@@ -84,7 +84,7 @@ def test_value_file_round_trip_and_hungarian_option(tmp_path):
 
 def test_train_on_a_short_day_and_run_with_it(tmp_path):
     from dispatch.runner import run_one
-    from dispatch.value import scenario_for
+    from learning.value import scenario_for
 
     out = tmp_path / "value.npz"
     v = train(MANHATTAN, out, agents=50, seeds=(0,), zone=1000.0, hours=0.5, log=lambda s: None)
@@ -114,7 +114,7 @@ def _road_problem(seed: int, n: int, m: int, comm=None) -> AllocationProblem:
 @pytest.mark.parametrize("ranged", [False, True])
 def test_magnnet_with_a_value_is_magnnet_on_the_adjusted_costs(tmp_path, ranged):
     from allocators.magnnet.allocator import MagnnetAllocator
-    from dispatch.value import ValueOption
+    from learning.value import ValueOption
 
     v = _value(weight=150.0)
     v.save(tmp_path / "v.npz")

@@ -21,7 +21,7 @@ the action into an :class:`Allocation`, triggers the event (at the same instant,
 other queued event) and steps SimPy again: the dispatcher builds the same problem again, gets
 the answer and hands the trips out, and the run goes on to the next decision (or its end).
 A decision the environment answers with Hungarian's pairs is therefore the decision a
-``hungarian`` run takes (``tests/dispatch/test_rl.py`` checks the whole summary).
+``hungarian`` run takes (``tests/learning/test_rl.py`` checks the whole summary).
 
 Sizes. Observations are padded to fixed sizes: ``max_agents`` vehicles (default: the fleet)
 and ``max_tasks`` requests (default 32); a decision with more idle vehicles or open requests
@@ -58,7 +58,7 @@ from dispatch.contracts import Allocation, AllocationProblem, Allocator
 from dispatch.dispatcher import DecisionDeferred
 from dispatch.errors import AllocationError, ScenarioError
 from dispatch.scenario import RunSpec, Scenario, SweepConfig, load_scenario
-from dispatch.zones import Zones
+from learning.zones import Zones
 
 __all__ = ["Decisions", "DispatchEnv", "FleetEnv", "pairs_from_choices"]
 
@@ -118,7 +118,7 @@ class _Deferring(Allocator):
         self.held = self.answer = self.resume = None
         if not (np.array_equal(held.agent_ids, problem.agent_ids)
                 and np.array_equal(held.task_ids, problem.task_ids)):
-            raise AllocationError("the decision changed while it was deferred (dispatch.rl)")
+            raise AllocationError("the decision changed while it was deferred (learning.rl)")
         if held.cost.shape == problem.cost.shape and not np.array_equal(held.cost, problem.cost):
             raise AllocationError("the decision's costs changed while it was deferred")
         return answer
@@ -130,7 +130,7 @@ def _scenario(scenario: str | Path | Scenario, agents: int | None,
     from dispatch.space import space_class
 
     if "rl" not in space_class(sc.world.space).features:
-        raise ScenarioError(sc.path, "world.network", "dispatch.rl needs a road scenario")
+        raise ScenarioError(sc.path, "world.network", "learning.rl needs a road scenario")
     d = sc.dispatch
     window = d.batch_window if batch_window is None else float(batch_window)
     if batch_window is None and sc.sweep.batch_window:
