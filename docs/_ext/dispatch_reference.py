@@ -10,7 +10,6 @@ One source of truth each, read at build time, never copied by hand:
 * the Parquet tables: ``dispatch.recorder.SCHEMAS`` (column names and Arrow types), each
   column's meaning from the table of the results page (``explanation/output.md``) where it
   has one, else from the comment above it in the recorder;
-* metric definitions: ``analysis.metrics`` (the report's columns and their FleetPy labels).
 
 The pages land in ``reference/generated/`` (git-ignored); ``reference/*.md`` include them.
 """
@@ -339,31 +338,10 @@ def parquet_tables() -> str:
     return "\n".join(out)
 
 
-# ----------------------------------------------------------------------------- metrics
-
-
-def metrics() -> str:
-    from analysis import metrics as am
-
-    out = ["# Metrics", "",
-           "How the report and the terminal tables compute each figure (`analysis.metrics`; "
-           "the paired gap to Hungarian is `paired.compare`). The report's service columns "
-           "are named as MATSim DRT's stats name them; `FLEETPY_LABELS` maps them to "
-           "FleetPy's names:", "", "| column | FleetPy's label |", "|---|---|"]
-    for k, v in getattr(am, "FLEETPY_LABELS", {}).items():
-        out.append(f"| `{k}` | {esc(str(v))} |")
-    out += ["", "```{eval-rst}",
-            ".. automodule:: analysis.metrics",
-            "   :members:",
-            "   :no-index:",
-            "```", ""]
-    return "\n".join(out)
-
-
 def generate(app=None) -> None:
     OUT.mkdir(parents=True, exist_ok=True)
     pages = {"scenario_keys.md": scenario_keys, "command_line.md": command_line,
-             "parquet_tables.md": parquet_tables, "metrics.md": metrics}
+             "parquet_tables.md": parquet_tables}
     for name, make in pages.items():
         text = make()
         path = OUT / name
