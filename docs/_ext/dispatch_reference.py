@@ -1,0 +1,377 @@
+"""Sphinx extension: writes the generated reference pages before the build reads its sources.
+
+One source of truth each, read at build time, never copied by hand:
+
+* scenario keys: the typed configuration's frozen dataclasses (``dispatch.config``, and the
+  ``[faults]``, ``[fleet.energy]`` and ``[chargers]`` dataclasses wherever they live), their
+  types and defaults from :func:`dataclasses.fields`, their meaning from the comment on or
+  above each field in the source;
+* the command line: the argument parser of ``dispatch.cli`` (the plugin commands included);
+* the Parquet tables: ``dispatch.recorder.SCHEMAS`` (column names and Arrow types), each
+  column's meaning from the table of the results page (``explanation/output.md``) where it
+  has one, else from the comment above it in the recorder;
+
+The pages land in ``reference/generated/`` (git-ignored); ``reference/*.md`` include them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import dataclasses
+import importlib
+import inspect
+import io
+import re
+import tokenize
+from pathlib import Path
+
+from sphinx.util.docutils import SphinxDirective
+from sphinx.util.nodes import nested_parse_with_titles
+
+ROOT = Path(__file__).resolve().parents[2]
+OUT = Path(__file__).resolve().parents[1] / "reference" / "generated"
+
+#: comment words that name a unit when a field's comment starts with them
+UNITS = ("metres", "m/s", "seconds", "simulated seconds", "km/h", "Wh/km", "kWh", "kW",
+         "probability", "share", "breakdowns per vehicle-hour")
+
+
+# ----------------------------------------------------------------------------- field comments
+
+
+def field_comments(cls: type) -> dict[str, str]:
+    """``{field: comment}``: the trailing ``# ...`` on a field's line, or the ``#:`` lines
+    right above it (Sphinx's convention), joined."""
+    src = inspect.getsource(cls)
+    tree = ast.parse(src)
+    body = tree.body[0].body  # type: ignore[attr-defined]
+    lines = src.splitlines()
+    trailing: dict[int, str] = {}
+    for tok in tokenize.generate_tokens(io.StringIO(src).readline):
+        if tok.type == tokenize.COMMENT:
+            trailing[tok.start[0]] = tok.string
+    out = {}
+    for node in body:
+        if not isinstance(node, ast.AnnAssign) or not isinstance(node.target, ast.Name):
+            continue
+        parts = []
+        i = node.lineno - 2  # lines above (0-based index of the line above)
+        above = []
+        while i >= 0 and lines[i].strip().startswith("#:"):
+            above.insert(0, lines[i].strip()[2:].strip())
+            i -= 1
+        parts += above
+        c = trailing.get(node.end_lineno or node.lineno)
+        code_line = lines[(node.end_lineno or node.lineno) - 1]
+        if c and not code_line.strip().startswith("#"):
+            parts.append(c.lstrip("#").strip())
+        out[node.target.id] = " ".join(parts)
+    return out
+
+
+def find_class(name: str, package: str = "dispatch"):
+    """The dataclass ``name`` from whichever module of ``package`` defines it (modules move;
+    the concept stays)."""
+    pkg = ROOT / package
+    for path in sorted(pkg.rglob("*.py")):
+        if re.search(rf"^class {name}\b", path.read_text(encoding="utf-8"), re.M):
+            mod = ".".join(path.relative_to(ROOT).with_suffix("").parts)
+            return getattr(importlib.import_module(mod), name)
+    raise LookupError(f"no module of {package} defines {name}")
+
+
+def type_text(tp) -> str:
+    s = tp if isinstance(tp, str) else getattr(tp, "__name__", str(tp))
+    return s.replace("typing.", "").replace("Vec3", "[x, y, z]")
+
+
+def default_text(f: dataclasses.Field) -> str:
+    if f.default is not dataclasses.MISSING:
+        v = f.default
+    elif f.default_factory is not dataclasses.MISSING:  # type: ignore[misc]
+        v = f.default_factory()  # type: ignore[misc]
+        if dataclasses.is_dataclass(v):
+            return "(table)"
+    else:
+        return "(required)"
+    if isinstance(v, tuple):
+        v = list(v)
+    return repr(v)
+
+
+def split_unit(doc: str) -> tuple[str, str]:
+    """``(unit, meaning)``: a leading unit word of the comment becomes the unit."""
+    for u in sorted(UNITS, key=len, reverse=True):
+        if doc.startswith(u) and (len(doc) == len(u) or not doc[len(u)].isalnum()):
+            rest = doc[len(u):].lstrip(" :;,")
+            if u in ("probability", "share"):
+                return "0-1", doc
+            return u, rest or "—"
+    return "", doc
+
+
+def esc(s: str) -> str:
+    """``s`` as one Markdown table cell (reST roles and literals as Markdown code)."""
+    s = re.sub(r":\w+:`~?([^`]+)`", r"`\1`", s)
+    s = s.replace("``", "`")
+    return s.replace("|", "\\|").replace("\n", " ")
+
+
+def guide_comments() -> dict[tuple[str, str], str]:
+    """``{(table, key): comment}`` from the first TOML block of the scenario file guide
+    (``scenarios/README.md``): the meaning of a key whose field has no comment in the code."""
+    text = (ROOT / "scenarios" / "README.md").read_text(encoding="utf-8")
+    block = text.split("```toml", 1)[1].split("```", 1)[0]
+    out, table, last = {}, "", None
+    for line in block.splitlines():
+        m = re.match(r"\[([\w.\":]+)\]\s*(?:#\s?(.*))?$", line)
+        if m:
+            table, last = m.group(1), None
+            out[(table, "")] = (m.group(2) or "").strip()
+            continue
+        m = re.match(r"(\w+)\s*=\s*(.*?)\s*#\s?(.*)$", line)
+        if m:
+            last = (table, m.group(1))
+            out[last] = m.group(3).strip()
+            out[(table, "=" + m.group(1))] = m.group(2)
+        elif last and re.match(r"\s+#", line):
+            out[last] += " " + line.strip().lstrip("#").strip()
+        else:
+            last = None
+    return out
+
+
+def file_keys() -> set[str]:
+    """Every string literal of the scenario parser: a field the parser never names is built
+    from others (a file's rows, a derived flag) and is not a key of the file."""
+    keys = set()
+    for mod in ("scenario", "config"):
+        tree = ast.parse((ROOT / "dispatch" / f"{mod}.py").read_text(encoding="utf-8"))
+        keys |= {n.value for n in ast.walk(tree)
+                 if isinstance(n, ast.Constant) and isinstance(n.value, str)}
+    return keys
+
+
+def key_table(title: str, table: str, cls: type, keys: set[str], skip=(),
+              guide=None) -> list[str]:
+    docs = field_comments(cls)
+    rows, derived = [], []
+    names = {f.name for f in dataclasses.fields(cls)}
+    for f in dataclasses.fields(cls):
+        tp = f.type
+        if f.name in skip or default_text(f) == "(table)":  # a nested table: its own section
+            continue
+        if f.name not in keys:
+            derived.append(f.name)
+            continue
+        doc = docs.get(f.name, "")
+        if not doc and (table, f.name) in (guide or {}):
+            doc = guide[(table, f.name)] + " *(scenario guide)*"
+        if not doc and cls.__name__ == "SweepConfig":
+            doc = (f"a list of `{f.name}` values (a run key): every combination of the "
+                   "lists is one run")
+        unit, meaning = split_unit(doc)
+        rows.append(f"| `{f.name}` | `{esc(type_text(tp))}` | `{esc(default_text(f))}` | "
+                    f"{esc(unit)} | {esc(meaning)} |")
+    # keys of the file that fill a field under another name (or several fields): the guide's
+    for (t, k), doc in (guide or {}).items():
+        if (t == table and k and not k.startswith("=") and k not in names
+                and cls.__name__ != "RoadConfig"):  # the road keys share [world]
+            unit, meaning = split_unit(doc)
+            example = guide.get((t, "=" + k), "")
+            rows.append(f"| `{k}` | (see meaning) | e.g. `{esc(example)}` | {esc(unit)} | "
+                        f"{esc(meaning)} *(scenario guide; read into another field)* |")
+    out = [f"## {title}", "", f"From the dataclass `{cls.__name__}`."]
+    if cls.__doc__ and not cls.__doc__.startswith(cls.__name__ + "("):
+        out += ["", esc(inspect.cleandoc(cls.__doc__))]
+    elif (guide or {}).get((table, "")):
+        out += ["", esc(guide[(table, "")]) + " *(scenario guide)*"]
+    out += ["", "| key | type | default | unit | meaning |", "|---|---|---|---|---|", *rows]
+    if derived:
+        out += ["", "Built by the parser, not keys of the file: "
+                + ", ".join(f"`{d}`" for d in derived) + "."]
+    return out + [""]
+
+
+def scenario_keys() -> str:
+    from dispatch import config
+
+    keys = file_keys() | {"blocks", "block", "speed", "network", "congestion"}
+    sections = [
+        ("top level", "", config.Scenario, ("name", "path", "text", "charging")),
+        ("[world]", "world", config.WorldConfig, ("roads",)),
+        ("[world] (road networks)", "world", config.RoadConfig, ("base",)),
+        ("[world.obstacles]", "world.obstacles", config.ObstacleConfig, ()),
+        ("[fleet]", "fleet", config.FleetConfig, ("energy",)),
+        ("[fleet.energy]", "fleet.energy", find_class("EnergyConfig"), ()),
+        ("[tasks]", "tasks", config.TaskConfig, ()),
+        ("[dispatch]", "dispatch", config.DispatchConfig, ()),
+        ("[comms]", "comms", config.CommsConfig, ()),
+        ("[faults]", "faults", find_class("FaultConfig"), ()),
+        ("[reposition]", "reposition", config.RepositionConfig, ()),
+        ("[chargers] and [charging]", "chargers", find_class("ChargingConfig"), ()),
+        ("[sweep]", "sweep", config.SweepConfig, ()),
+    ]
+    guide = guide_comments()
+    for (t, k), v in list(guide.items()):  # [charging] keys live in ChargingConfig too
+        if t == "charging":
+            guide.setdefault(("chargers", k), v)
+    out = ["# Scenario keys", "",
+           "Generated from the typed configuration the scenario parser builds (one frozen "
+           "dataclass per table). A unit is the first word of a field's comment in the code; "
+           "the [scenario file guide](../scenario_guide.md) explains the keys with examples, "
+           "and `dispatch validate FILE` checks a file against them.", ""]
+    for title, table, cls, skip in sections:
+        out += key_table(title, table, cls, keys, skip, guide)
+    return "\n".join(out)
+
+
+# ----------------------------------------------------------------------------- command line
+
+
+def _fmt_action(a: argparse.Action) -> str:
+    names = ", ".join(f"`{o}`" for o in a.option_strings) or f"`{a.dest}`"
+    if a.option_strings and a.nargs != 0:
+        names += f" `{a.metavar or a.dest.upper()}`"
+    extra = []
+    if a.choices and not isinstance(a, argparse._SubParsersAction):
+        extra.append("one of " + ", ".join(f"`{c}`" for c in a.choices))
+    if a.default not in (None, False, argparse.SUPPRESS) and a.option_strings:
+        extra.append(f"default `{a.default}`")
+    text = (a.help or "").replace("%(default)s", str(a.default)).replace("%%", "%")
+    return f"| {esc(names)} | {esc(text)}{' (' + '; '.join(extra) + ')' if extra else ''} |"
+
+
+def command_line() -> str:
+    from dispatch import cli
+    from dispatch.commands import installed
+
+    parser = cli._parser(installed(reserved=cli.OWN_COMMANDS))
+    out = ["# Command line", "", "Generated from the argument parser of `dispatch.cli`, "
+           "the commands that other packages register (`dispatch.commands` entry points) "
+           "included.", "", "```text", parser.format_usage().strip(), "```", "",
+           "| option | meaning |", "|---|---|"]
+    sub = None
+    for a in parser._actions:
+        if isinstance(a, argparse._SubParsersAction):
+            sub = a
+        elif not isinstance(a, argparse._HelpAction):
+            out.append(_fmt_action(a))
+    helps = {c.dest: c.help for c in sub._choices_actions} if sub else {}
+    for name, p in (sub.choices.items() if sub else ()):
+        out += ["", f"## dispatch {name}", "", esc(helps.get(name) or p.description or ""), "",
+                "```text", p.format_usage().strip(), "```", ""]
+        rows = [_fmt_action(a) for a in p._actions if not isinstance(a, argparse._HelpAction)]
+        if rows:
+            out += ["| argument | meaning |", "|---|---|", *rows]
+    return "\n".join(out) + "\n"
+
+
+# ----------------------------------------------------------------------------- Parquet tables
+
+
+def output_meanings() -> dict[str, dict[str, str]]:
+    """``{table: {column: meaning}}`` from the tables of the results page: a row whose first
+    cell names columns (``a, b, c``) gives each of them its meaning."""
+    text = (ROOT / "docs" / "explanation" / "output.md").read_text(encoding="utf-8")
+    table, out = "summary", {}
+    paragraphs = re.split(r"\n\s*\n", text)
+    for para in paragraphs:  # prose: "**table**: ... name (meaning), a, b (meaning) ..."
+        for m in re.finditer(r"\*\*(\w+)\*\*(.*?)(?=\*\*\w+\*\*|$)", para, re.S):
+            if m.group(2).lstrip().startswith("|"):
+                continue
+            body = " ".join(m.group(2).split())
+            for g in re.finditer(r"(\w+) \(((?:[^()]|\([^()]*\))*)\)", body):
+                out.setdefault(m.group(1), {}).setdefault(g.group(1), g.group(2))
+    for line in text.splitlines():
+        m = re.match(r"\*\*(\w+)\*\*", line)
+        if m:
+            table = m.group(1)
+        if line.startswith("| ") and not line.startswith("|---"):
+            cells = [c.strip() for c in line.strip().strip("|").split("|")]
+            if len(cells) >= 2:
+                for name in re.split(r",\s*", cells[0]):
+                    name = name.strip("` ")
+                    if re.fullmatch(r"\w+", name):
+                        out.setdefault(table, {}).setdefault(name, cells[1])
+    return out
+
+
+def recorder_comments() -> dict[str, dict[str, str]]:
+    """``{table: {column: the comment above its group}}`` in the recorder's schemas."""
+    src = (ROOT / "dispatch" / "recorder.py").read_text(encoding="utf-8")
+    out, table, comment = {}, None, []
+    for line in src.splitlines():
+        m = re.match(r'\s*"(\w+)": pa\.schema', line)
+        if m:
+            table, comment = m.group(1), []
+        s = line.strip()
+        if s.startswith("#"):
+            comment.append(s.lstrip("# "))
+            continue
+        for col in re.findall(r'\("(\w+)", _[SIFB]\)', line):
+            if table and comment:
+                out.setdefault(table, {})[col] = " ".join(comment)
+        if not s.startswith("#"):
+            comment = [] if re.search(r'\("\w+", _[SIFB]\)', line) else comment
+    return out
+
+
+def parquet_tables() -> str:
+    from dispatch.recorder import SCHEMAS
+
+    meanings, comments = output_meanings(), recorder_comments()
+    out = ["# Parquet tables", "",
+           "Generated from the recorder's schemas (`dispatch.recorder.SCHEMAS`): every table a "
+           "run writes, under `OUT/<table>/<partition>/part-0.parquet` (Hive partitions: the "
+           "run keys). The meaning (with its unit) comes from the "
+           "[results page](../../explanation/output.md), else from the recorder's comment.", ""]
+    for name, schema in SCHEMAS.items():
+        out += [f"## {name}", "", "| column | type | meaning |", "|---|---|---|"]
+        for f in schema:
+            m = meanings.get(name, {}).get(f.name) or comments.get(name, {}).get(f.name, "")
+            if f.name == "run_id":
+                m = m or "the run's id (its run keys joined by `__`)"
+            out.append(f"| `{f.name}` | {f.type} | {esc(m)} |")
+        out.append("")
+    return "\n".join(out)
+
+
+def generate(app=None) -> None:
+    OUT.mkdir(parents=True, exist_ok=True)
+    pages = {"scenario_keys.md": scenario_keys, "command_line.md": command_line,
+             "parquet_tables.md": parquet_tables}
+    for name, make in pages.items():
+        text = make()
+        path = OUT / name
+        if not path.exists() or path.read_text(encoding="utf-8") != text:
+            path.write_text(text, encoding="utf-8")  # unchanged pages keep Sphinx's cache
+
+
+class ContractDirective(SphinxDirective):
+    """``.. dispatch-contract:: Name ...``: ``autoclass`` of each class, found in whichever
+    module of ``dispatch`` defines it (modules move; the contract's name stays)."""
+
+    required_arguments = 1
+    optional_arguments = 20
+
+    def run(self):
+        from docutils.statemachine import StringList
+        from docutils import nodes
+
+        lines = []
+        for name in self.arguments:
+            cls = find_class(name)
+            lines += [f".. autoclass:: {cls.__module__}.{name}", "   :members:",
+                      "   :show-inheritance:", ""]
+        node = nodes.section()
+        node.document = self.state.document
+        nested_parse_with_titles(self.state, StringList(lines, source="dispatch-contract"), node)
+        return node.children
+
+
+def setup(app):
+    app.connect("builder-inited", generate)
+    app.add_directive("dispatch-contract", ContractDirective)
+    return {"version": "1", "parallel_read_safe": True}

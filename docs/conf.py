@@ -1,0 +1,47 @@
+"""Sphinx configuration of the dispatch site (built by ``bash scripts/docs.sh``)."""
+
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent))  # the project, for autodoc and the generated reference
+sys.path.insert(0, str(HERE / "_ext"))
+
+project = "dispatch"
+author = "the dispatch authors"
+copyright = "the dispatch authors, MIT licence"
+
+extensions = [
+    "myst_nb",  # MyST Markdown, and the tutorials executed as notebooks on every build
+    "sphinx.ext.autodoc",
+    "sphinx.ext.napoleon",
+    "dispatch_reference",  # writes reference/generated/ from the code before reading
+]
+
+html_theme = "furo"
+html_title = "dispatch"
+
+myst_enable_extensions = ["colon_fence", "dollarmath"]
+myst_heading_anchors = 3
+suppress_warnings = ["myst.header"]  # moved study pages keep their own heading depth
+
+# Every tutorial runs start to end on every build; an error in one fails the build.
+nb_execution_mode = "force"
+nb_execution_timeout = 600
+nb_execution_raise_on_error = True
+nb_execution_show_tb = True
+nb_merge_streams = True
+
+exclude_patterns = [
+    "_build",
+    "README.md",
+    # study outputs written by the benchmarks; their pages include them
+    "nyc_study/*.md",
+    "lookahead/README.md",
+]
+
+autodoc_member_order = "bysource"
+autodoc_typehints = "description"
+autodoc_default_options = {"members": True, "show-inheritance": True}
+napoleon_google_docstring = True
+napoleon_numpy_docstring = False
