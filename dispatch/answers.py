@@ -45,9 +45,8 @@ def validate(problem: AllocationProblem, allocation: Allocation,
     routes = allocation.routes or {}
     if routes and not multi:
         raise AllocationError("Allocation.routes is for allocators that set multi_request")
-    given = allocation.__dict__.get("_index")  # Allocation.centralized's (row, column) pairs
-    if given is not None and not routes:
-        index = _hinted(problem, pairs, given)
+    if allocation.index and not routes:  # Allocation.centralized's (row, column) pairs
+        index = _hinted(problem, pairs, allocation.index)
         if index is not None:
             return index
     agent_row, task_col = finders(problem)

@@ -48,6 +48,7 @@ import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import ClassVar, Literal, NamedTuple, Protocol
 
 import numpy as np
@@ -365,15 +366,6 @@ class AllocationProblem:
         return np.isfinite(self.cost)
 
 
-def _frozen(cls, **fields):
-    """An instance of the frozen dataclass ``cls`` (no ``__post_init__``, no slots) from all
-    of its fields: what ``cls(**fields)`` makes, without the field-by-field
-    ``object.__setattr__`` of a frozen ``__init__`` (an immediate decision makes two)."""
-    obj = object.__new__(cls)
-    obj.__dict__.update(fields)
-    return obj
-
-
 @dataclass(frozen=True)
 class Request:
     """One agent's request for one task in one decision round, and whether it won."""
@@ -415,6 +407,11 @@ class Allocation:
     #: The dispatcher checks it (each request's pickup before its drop-off, the capacity and
     #: every limit on the network's travel times) and the vehicle drives it.
     routes: Mapping[int, tuple[tuple[str, int], ...]] = field(default_factory=dict)
+    #: each pair's ``(row, column)`` in the problem, as :meth:`centralized` was given them (it
+    #: turns them into the ids of ``pairs``): a hint :func:`dispatch.answers.validate`
+    #: verifies against the problem instead of looking every id up (a wrong hint changes
+    #: nothing; empty: none). Not part of the answer's value.
+    index: tuple[tuple[int, int], ...] = field(default=(), compare=False, repr=False)
 
     @classmethod
     def centralized(cls, problem: AllocationProblem, index_pairs) -> Allocation:
@@ -425,37 +422,32 @@ class Allocation:
             aid, tid = int(agent_ids[a]), int(task_ids[t])
             pairs.append((aid, tid))
             index.append((a, t))
-            reqs.append(_frozen(Request, round=0, agent_id=aid, task_id=tid,
-                                cost=float(cost[a, t]), won=True))
+            reqs.append(Request(0, aid, tid, float(cost[a, t]), True))
         if cls is not Allocation:  # a subclass may add fields or checks: its own __init__
             return cls(pairs=tuple(pairs), rounds=1, requests=tuple(reqs), messages=0)
-        out = _frozen(cls, pairs=tuple(pairs), rounds=1, requests=tuple(reqs), messages=0,
-                      hops=0, agent_seconds=(), routes={})
-        # each pair's (row, column) as given: a hint the answer's check verifies against
-        # the problem instead of looking every id up (see dispatch.answers.validate)
-        out.__dict__["_index"] = index
-        return out
+        return cls(pairs=tuple(pairs), rounds=1, requests=tuple(reqs), messages=0,
+                   index=tuple(index))
 
     def conflicted_tasks(self) -> set[int]:
         """Ids of tasks requested by more than one agent in some round, or requested again in a
-        later round than the one it was won in (an agent that did not hear of the win).
-        Computed once per answer (the dispatcher and the recorder both ask; a taxi decision
-        logs hundreds of requests); a fresh set is returned each time."""
+        later round than the one it was won in (an agent that did not hear of the win); a
+        fresh set each time."""
         if len(self.requests) < 2:  # a conflict takes two requests
             return set()
-        done = self.__dict__.get("_conflicted")
-        if done is None:
-            seen: dict[tuple[int, int], int] = {}
-            won: dict[int, int] = {}
-            for r in self.requests:
-                seen[(r.round, r.task_id)] = seen.get((r.round, r.task_id), 0) + 1
-                if r.won:
-                    won[r.task_id] = min(r.round, won.get(r.task_id, r.round))
-            late = {r.task_id for r in self.requests
-                    if r.task_id in won and r.round > won[r.task_id]}
-            done = frozenset({task for (_, task), n in seen.items() if n > 1} | late)
-            object.__setattr__(self, "_conflicted", done)  # frozen: a cache, not a field
-        return set(done)
+        return set(self._conflicts)
+
+    @cached_property
+    def _conflicts(self) -> frozenset[int]:
+        """:meth:`conflicted_tasks`, computed once per answer (the dispatcher and the recorder
+        both ask; a taxi decision logs hundreds of requests)."""
+        seen: dict[tuple[int, int], int] = {}
+        won: dict[int, int] = {}
+        for r in self.requests:
+            seen[(r.round, r.task_id)] = seen.get((r.round, r.task_id), 0) + 1
+            if r.won:
+                won[r.task_id] = min(r.round, won.get(r.task_id, r.round))
+        late = {r.task_id for r in self.requests if r.task_id in won and r.round > won[r.task_id]}
+        return frozenset({task for (_, task), n in seen.items() if n > 1} | late)
 
 
 class Allocator(ABC):

@@ -253,5 +253,6 @@ def describe(kind: str) -> list[tuple[str, str, str, str]]:
             spaces = ", ".join(declaration(kind, name).spaces) if kind in BASES else ""
             rows.append((name, target, spaces, summary_line(cls, kind)))
         except PluginError as e:
-            rows.append((name, target, "", f"BROKEN: {e.__cause__}"))
+            # a load error: what the import raised; a refused declaration: the refusal
+            rows.append((name, target, "", f"BROKEN: {e.__cause__ or e}"))
     return rows
