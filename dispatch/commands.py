@@ -2,8 +2,7 @@
 
 ``dispatch report`` and ``dispatch render`` are the :mod:`analysis` package's, registered in the
 entry-point group ``dispatch.commands`` as allocators are in ``dispatch.allocators``: the kernel
-names no module of theirs (the registry's fallback table aside, which holds names as strings),
-and they import nothing of ``dispatch``.
+names no module of theirs, and they import nothing of ``dispatch``.
 
 A command is a class. Its docstring's first paragraph is what ``dispatch plugins`` shows; it
 has:

@@ -81,7 +81,8 @@ def travel_times_needed(sc: Scenario, allocators=()) -> list[tuple[str, str]]:
     empty when nothing does. ``allocators``: the names of the allocators that run."""
     t, need = sc.tasks, []
     if sc.fleet.pooled:
-        need.append(("fleet.capacity", "shared rides (a capacity above 1)"))
+        key = "fleet.capacity" if sc.fleet.capacity > 1 else "fleet.start"
+        need.append((key, "shared rides (a capacity above 1)"))
     if t.delay_limited:
         need.append(("tasks.max_delay", "drop-off delay limits"))
     if sc.dispatch.objective != "pickup_time":

@@ -293,3 +293,14 @@ def test_dispatch_validate_refuses_it_in_one_line(installed, tmp_path, capsys):
     assert main(["validate", str(path)]) == 2
     err = capsys.readouterr().err.strip()
     assert "fleet.capacity" in err and "'slow_roads'" in err and "travel_times" in err
+
+
+def test_batteries_need_a_planner_with_travel_times(installed, tmp_path):
+    """The reserve counts a request's drive to its drop-off: the planner must time it."""
+    from tests.dispatch.test_energy import grid
+
+    sc = load_scenario(grid(tmp_path, "battery_kwh = 20.0", [(0.0, 2, 8)]))
+    assert [k for k, _ in travel_times_needed(sc)] == ["fleet.energy"]
+    with pytest.raises(ScenarioError, match=r"fleet\.energy.*batteries.*'slow_roads' does not"):
+        check_runs(sc, ["slow_roads"])
+    check_runs(sc, ["dijkstra"])
