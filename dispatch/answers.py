@@ -14,7 +14,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from dispatch.contracts import Allocation, AllocationProblem
+from dispatch.contracts import AgentViews, Allocation, AllocationProblem
 from dispatch.errors import AllocationError
 
 
@@ -33,8 +33,8 @@ def validate(problem: AllocationProblem, allocation: Allocation,
     Returns each pair's ``(row, column)`` in the problem (its indices into ``cost``)."""
     if not isinstance(allocation, Allocation):
         raise AllocationError(f"allocator returned {type(allocation).__name__}, not an Allocation")
-    for k in ("rounds", "messages", "hops"):
-        v = getattr(allocation, k)
+    for k, v in (("rounds", allocation.rounds), ("messages", allocation.messages),
+                 ("hops", allocation.hops)):
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
             raise AllocationError(f"Allocation.{k} must be an integer >= 0, got {v!r}")
     try:
@@ -42,12 +42,11 @@ def validate(problem: AllocationProblem, allocation: Allocation,
     except TypeError:
         raise AllocationError(f"Allocation.pairs must be a sequence of (agent_id, task_id) "
                               f"pairs, got {type(allocation.pairs).__name__}") from None
-    routes = getattr(allocation, "routes", None) or {}
+    routes = allocation.routes or {}
     if routes and not multi:
         raise AllocationError("Allocation.routes is for allocators that set multi_request")
-    given = allocation.__dict__.get("_index")  # Allocation.centralized's (row, column) pairs
-    if given is not None and not routes:
-        index = _hinted(problem, pairs, given)
+    if allocation.index and not routes:  # Allocation.centralized's (row, column) pairs
+        index = _hinted(problem, pairs, allocation.index)
         if index is not None:
             return index
     agent_row, task_col = finders(problem)
@@ -170,7 +169,8 @@ def finders(problem: AllocationProblem):
     f = problem.__dict__.get("_finders")
     if f is None:
         f = problem.__dict__["_finders"] = (
-            _rows(problem.agent_ids, getattr(problem.agents, "ascending", False)),
+            _rows(problem.agent_ids,
+                  isinstance(problem.agents, AgentViews) and problem.agents.ascending),
             _rows(problem.task_ids))
     return f
 

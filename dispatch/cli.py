@@ -51,6 +51,8 @@ def _parser(commands=None) -> argparse.ArgumentParser:
     v.add_argument("--force", action="store_true",
                    help="accept what is past the resource limits (world cells, releases, tasks, "
                         "runs, file sizes)")
+    # (run's and sweep's overrides: validate checks the file as written)
+    v.set_defaults(allocator=None, planner=None, agents=None, seed=None, duration=None)
 
     c = sub.add_parser("check", help="check an installed allocator, planner or repositioner "
                        "plugin on random problems (valid answers, no mutation, determinism, rng "
@@ -142,26 +144,30 @@ def _specs(args):
     from dispatch.registry import load
     from dispatch.scenario import check_limits, load_scenario
 
-    force = getattr(args, "force", False)
+    force = args.force
     sc = load_scenario(args.scenario, force=force)
-    if getattr(args, "duration", None) is not None:
+    if args.duration is not None:
         sc = with_duration(sc, args.duration, force=force)
-    specs = sc.runs(allocator=getattr(args, "allocator", None), planner=getattr(args, "planner", None),
-                    agents=getattr(args, "agents", None), seed=getattr(args, "seed", None))
+    specs = sc.runs(allocator=args.allocator, planner=args.planner, agents=args.agents,
+                    seed=args.seed)
     if not force:
         check_limits(sc, specs)
-    for kind, attr, default in (("allocator", "allocator", sc.dispatch.allocator),
-                                ("planner", "planner", sc.dispatch.planner),
-                                ("repositioner", "reposition", sc.reposition.policy)):
-        for name in sorted({getattr(s, attr) for s in specs}):
+    allocators = sorted({s.allocator for s in specs})
+    planners = sorted({s.planner for s in specs})
+    repositioners = sorted({s.reposition for s in specs})
+    for kind, names, given, swept, default in (
+            ("allocator", allocators, args.allocator, sc.sweep.allocator, sc.dispatch.allocator),
+            ("planner", planners, args.planner, sc.sweep.planner, sc.dispatch.planner),
+            ("repositioner", repositioners, None, sc.sweep.reposition, sc.reposition.policy)):
+        for name in names:
             try:
                 load(kind, name)
             except PluginError as e:  # name the file and the key that names the plugin
-                raise PluginError(f"{sc.path}: {_key_of(args, sc, kind, attr, name, default)}: "
-                                  f"{e}") from e
+                key = _key_of(kind, name, given, swept, default)
+                raise PluginError(f"{sc.path}: {key}: {e}") from e
     from dispatch.plugins import check_runs
 
-    check_runs(sc, sorted({s.planner for s in specs}), sorted({s.reposition for s in specs}))
+    check_runs(sc, planners, repositioners, allocators)
     build_plugins(sc, specs, force=force)
     return sc, specs
 
@@ -198,15 +204,17 @@ def with_duration(sc, seconds: float, *, force: bool = False):
     return parse_scenario(doc, sc.path, text, limits=None if force else LIMITS)
 
 
-def _key_of(args, sc, kind: str, attr: str, name: str, default: str) -> str:
-    """Where ``name`` came from: a command-line option, the sweep's list or the file's key."""
-    if getattr(args, attr, None) == name:
-        return f"--{attr}"
-    if name in getattr(sc.sweep, attr, ()):
-        return f"sweep.{attr}"
+def _key_of(kind: str, name: str, given: str | None, swept: tuple[str, ...],
+            default: str) -> str:
+    """Where plugin ``name`` of ``kind`` came from: its command-line option (``given``), the
+    sweep's list (``swept``) or the file's key (whose value is ``default``)."""
+    if given == name:
+        return f"--{kind}"
+    if name in swept:
+        return f"sweep.{kind if kind != 'repositioner' else 'reposition'}"
     if kind == "repositioner":
         return "reposition.policy"
-    return f"dispatch.{attr}" if name == default else attr
+    return f"dispatch.{kind}" if name == default else kind
 
 
 def build_plugins(sc, specs, *, force: bool = False) -> None:
@@ -367,9 +375,6 @@ def _validate(args, console) -> int:
     return 0
 
 
-TRAINERS = {"magnnet": "allocators.magnnet.train", "value": "learning.value"}  # fallback for a never-installed tree
-
-
 def _train(args, console) -> int:
     """Hand the arguments to a trainer module (``main(argv)``) found by entry point."""
     import importlib
@@ -377,8 +382,7 @@ def _train(args, console) -> int:
 
     from dispatch.errors import PluginError
 
-    found = dict(TRAINERS)
-    found.update({ep.name: ep.value for ep in entry_points(group="dispatch.trainers")})
+    found = {ep.name: ep.value for ep in entry_points(group="dispatch.trainers")}
     if args.trainer not in found:
         raise PluginError(f"unknown trainer {args.trainer!r}; installed: {', '.join(found)}")
     try:

@@ -2,8 +2,7 @@
 
 ``dispatch report`` and ``dispatch render`` are the :mod:`analysis` package's, registered in the
 entry-point group ``dispatch.commands`` as allocators are in ``dispatch.allocators``: the kernel
-names no module of theirs (the registry's fallback table aside, which holds names as strings),
-and they import nothing of ``dispatch``.
+names no module of theirs, and they import nothing of ``dispatch``.
 
 A command is a class. Its docstring's first paragraph is what ``dispatch plugins`` shows; it
 has:
@@ -17,6 +16,9 @@ has:
   their message as one ``error:`` line, as it does for its own errors; anything else is a
   failure of the command and keeps its traceback.
 
+All four are required: they are read when the command is loaded, and a class without one of
+them is kept as a command that failed to load (running it says what it lacks).
+
 Every ``dispatch`` call loads the commands to build its parser: a command's module should
 import its work when it runs, not when it is loaded.
 """
@@ -25,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from dispatch.errors import DispatchError, PluginError
@@ -35,13 +38,27 @@ log = logging.getLogger(__name__)
 
 @dataclass(frozen=True)
 class Command:
-    """An installed command: its name, entry-point target and the loaded class (None where
-    it failed to load; ``error`` then says why)."""
+    """An installed command: its name, entry-point target, the loaded class (None where
+    it failed to load; ``error`` then says why), its help line and its ``user_errors``."""
 
     name: str
     target: str
     cls: type | None
     error: PluginError | None = None
+    help: str | None = None
+    user_errors: Callable[[], tuple] | None = None
+
+    @classmethod
+    def loaded(cls, name: str, target: str, command: type) -> Command:
+        """The command of a loaded class, its parts read once; one that lacks a part is
+        kept as failed to load, the error naming it."""
+        try:
+            parts = (command.help, command.user_errors, command.add_arguments, command.run)
+        except AttributeError as e:
+            return cls(name, target, None, PluginError(
+                f"command plugin {name!r} ({target}) lacks {e.name!r} (a command has help, "
+                f"add_arguments, run and user_errors)"))
+        return cls(name, target, command, help=parts[0], user_errors=parts[1])
 
     def add_parser(self, sub) -> None:
         """Add this command's sub-parser to ``sub`` (an argparse sub-parsers action); a
@@ -51,7 +68,7 @@ class Command:
                                add_help=False)
             p.add_argument("rest", nargs=argparse.REMAINDER)
             return
-        p = sub.add_parser(self.name, help=getattr(self.cls, "help", None))
+        p = sub.add_parser(self.name, help=self.help)
         self.cls.add_arguments(p)
 
     def run(self, args, out) -> int:
@@ -63,8 +80,7 @@ class Command:
         except DispatchError:
             raise
         except Exception as e:
-            known = getattr(self.cls, "user_errors", None)
-            if known is not None and isinstance(e, tuple(known())):
+            if isinstance(e, tuple(self.user_errors())):
                 raise DispatchError(e.args[0] if e.args else str(e)) from e
             raise
 
@@ -80,7 +96,7 @@ def installed(reserved=()) -> dict[str, Command]:
                         name, target)
             continue
         try:
-            out[name] = Command(name, target, load("command", name))
+            out[name] = Command.loaded(name, target, load("command", name))
         except PluginError as e:
             out[name] = Command(name, target, None, e)
     return out

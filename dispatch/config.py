@@ -17,6 +17,8 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from dispatch import runkeys
 from dispatch.errors import ScenarioError
 from dispatch.faults import FaultConfig
@@ -155,6 +157,14 @@ class TaskConfig:
     #: trace on roads: metres a pickup / drop-off may lie from the nearest node (farther:
     #: the trip is left out before the run, counted in trips.dropped); None: no bound
     max_snap: float | None = None
+
+    @property
+    def delay_limited(self) -> bool:
+        """Some request has a drop-off delay limit (``max_delay``, or its trace's column)."""
+        trips = self.trips
+        return self.max_delay is not None or (
+            trips is not None and trips.max_delay is not None
+            and bool(np.isfinite(trips.max_delay).any()))
 
 
 @dataclass(frozen=True)

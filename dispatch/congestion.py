@@ -30,6 +30,7 @@ import numpy as np
 # the data (hourly factors, their calibration), kept importable from here
 from dispatch.hourly import (  # noqa: F401
     HOURS, MIN_TRIPS, NO_CONGESTION, HourlyFactors, calibrate, free_flow_times)
+from dispatch.contracts import AgentViews, Planner
 from dispatch.drivers import RoadDriver
 from dispatch.legs import Leg, RoadPoint
 from dispatch.space import Space
@@ -57,16 +58,30 @@ class CongestedDriver(RoadDriver):
         return scale_leg(super().plan(v, goal, now), self.congestion.factor(now))
 
 
-class CongestedPlanner:
+class CongestedPlanner(Planner):
     """Wraps a road planner: its costs at simulated time ``clock()`` become
-    ``remaining + factor(clock()) x (free-flow cost - remaining)``; everything else (paths,
-    statistics, ``task_closed``) is the wrapped planner's."""
+    ``remaining + factor(clock()) x (free-flow cost - remaining)``; paths, statistics and
+    ``task_closed`` are the wrapped planner's, and so are its name, the spaces it serves and
+    its ``travel_times``. Lower bounds and timed routes are not passed on (the wrapped
+    planner's would be free-flow ones)."""
 
-    def __init__(self, inner: Any, congestion: HourlyFactors, clock: Callable[[], float]) -> None:
+    def __init__(self, inner: Planner, congestion: HourlyFactors,
+                 clock: Callable[[], float]) -> None:
+        self.name, self.spaces = inner.name, inner.spaces
+        super().__init__(inner.space)
+        self.stats = inner.stats  # one planner's counters: the wrapped one's
+        self.travel_times = inner.travel_times
         self.inner, self.congestion, self.clock = inner, congestion, clock
 
-    def __getattr__(self, name: str) -> Any:  # name, stats, spaces, plan, task_closed, ...
-        return getattr(self.inner, name)
+    @property
+    def free_flow(self) -> Planner:
+        return self.inner
+
+    def plan(self, agent: Any, goal: Any) -> Any:
+        return self.inner.plan(agent, goal)
+
+    def task_closed(self, task_id: int) -> None:
+        self.inner.task_closed(task_id)
 
     def between(self, sources: Sequence[Any], targets: Sequence[Any],
                 pairwise: bool = False) -> np.ndarray:
@@ -87,8 +102,8 @@ class CongestedPlanner:
         f = self.congestion.factor(self.clock())
         if f == 1.0 or not len(agents):
             return cost
-        rem = getattr(agents, "remaining", None)  # AgentViews: the array, no view built
-        if rem is None:
+        rem = agents.remaining if isinstance(agents, AgentViews) else None
+        if rem is None:  # views given by hand (the dispatcher's carry the array)
             rem = np.fromiter((max(a.loc.remaining, 0.0) if isinstance(a.loc, RoadPoint)
                                else 0.0 for a in agents), np.float64, len(agents))
         rem = rem[:, None]

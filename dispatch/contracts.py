@@ -28,6 +28,18 @@ Reservation-aware planners
     makes the kernel execute routes with reservations (:mod:`dispatch.reservations`: the time
     model, the conflict rule, waits and replans). Other planners need neither; their vehicles
     follow :meth:`Planner.plan`'s paths without reservations.
+
+Capabilities are declared
+    What a plugin can do beyond the required methods is a boolean class attribute of its base
+    class set to True (``decentralized``, ``minimizes_total_cost``, ``multi_request``;
+    ``lower_bounds``, ``travel_times``, ``reservation_aware``), and the methods a capability
+    needs are methods of the base class the plugin then defines (the base class's say what
+    they must do; the kernel calls them only on plugins that declare the capability). The
+    registry reads the declaration once when it loads a plugin
+    (:class:`dispatch.registry.Capabilities`) and refuses one that declares a capability
+    without its methods, or that a scenario needs and it does not declare
+    (:func:`dispatch.plugins.check_runs`). A constructor may withdraw a capability its
+    parameters do not allow (an instance attribute set to False).
 """
 
 from __future__ import annotations
@@ -36,6 +48,7 @@ import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import ClassVar, Literal, NamedTuple, Protocol
 
 import numpy as np
@@ -325,8 +338,9 @@ class AllocationProblem:
         """The agents' ids (int64, aligned with ``agents``; read-only)."""
         ids = self.__dict__.get("_agent_ids")
         if ids is None:
-            ids = getattr(self.agents, "ids", None)
-            if ids is None:
+            if isinstance(self.agents, AgentViews):
+                ids = self.agents.ids
+            else:
                 ids = np.fromiter((a.id for a in self.agents), np.int64, len(self.agents))
                 ids.setflags(write=False)
             self.__dict__["_agent_ids"] = ids
@@ -350,15 +364,6 @@ class AllocationProblem:
     def feasible(self) -> np.ndarray:
         """Boolean ``(N, M)`` mask of pairs with finite cost."""
         return np.isfinite(self.cost)
-
-
-def _frozen(cls, **fields):
-    """An instance of the frozen dataclass ``cls`` (no ``__post_init__``, no slots) from all
-    of its fields: what ``cls(**fields)`` makes, without the field-by-field
-    ``object.__setattr__`` of a frozen ``__init__`` (an immediate decision makes two)."""
-    obj = object.__new__(cls)
-    obj.__dict__.update(fields)
-    return obj
 
 
 @dataclass(frozen=True)
@@ -402,6 +407,11 @@ class Allocation:
     #: The dispatcher checks it (each request's pickup before its drop-off, the capacity and
     #: every limit on the network's travel times) and the vehicle drives it.
     routes: Mapping[int, tuple[tuple[str, int], ...]] = field(default_factory=dict)
+    #: each pair's ``(row, column)`` in the problem, as :meth:`centralized` was given them (it
+    #: turns them into the ids of ``pairs``): a hint :func:`dispatch.answers.validate`
+    #: verifies against the problem instead of looking every id up (a wrong hint changes
+    #: nothing; empty: none). Not part of the answer's value.
+    index: tuple[tuple[int, int], ...] = field(default=(), compare=False, repr=False)
 
     @classmethod
     def centralized(cls, problem: AllocationProblem, index_pairs) -> Allocation:
@@ -412,37 +422,32 @@ class Allocation:
             aid, tid = int(agent_ids[a]), int(task_ids[t])
             pairs.append((aid, tid))
             index.append((a, t))
-            reqs.append(_frozen(Request, round=0, agent_id=aid, task_id=tid,
-                                cost=float(cost[a, t]), won=True))
+            reqs.append(Request(0, aid, tid, float(cost[a, t]), True))
         if cls is not Allocation:  # a subclass may add fields or checks: its own __init__
             return cls(pairs=tuple(pairs), rounds=1, requests=tuple(reqs), messages=0)
-        out = _frozen(cls, pairs=tuple(pairs), rounds=1, requests=tuple(reqs), messages=0,
-                      hops=0, agent_seconds=(), routes={})
-        # each pair's (row, column) as given: a hint the answer's check verifies against
-        # the problem instead of looking every id up (see dispatch.answers.validate)
-        out.__dict__["_index"] = index
-        return out
+        return cls(pairs=tuple(pairs), rounds=1, requests=tuple(reqs), messages=0,
+                   index=tuple(index))
 
     def conflicted_tasks(self) -> set[int]:
         """Ids of tasks requested by more than one agent in some round, or requested again in a
-        later round than the one it was won in (an agent that did not hear of the win).
-        Computed once per answer (the dispatcher and the recorder both ask; a taxi decision
-        logs hundreds of requests); a fresh set is returned each time."""
+        later round than the one it was won in (an agent that did not hear of the win); a
+        fresh set each time."""
         if len(self.requests) < 2:  # a conflict takes two requests
             return set()
-        done = self.__dict__.get("_conflicted")
-        if done is None:
-            seen: dict[tuple[int, int], int] = {}
-            won: dict[int, int] = {}
-            for r in self.requests:
-                seen[(r.round, r.task_id)] = seen.get((r.round, r.task_id), 0) + 1
-                if r.won:
-                    won[r.task_id] = min(r.round, won.get(r.task_id, r.round))
-            late = {r.task_id for r in self.requests
-                    if r.task_id in won and r.round > won[r.task_id]}
-            done = frozenset({task for (_, task), n in seen.items() if n > 1} | late)
-            object.__setattr__(self, "_conflicted", done)  # frozen: a cache, not a field
-        return set(done)
+        return set(self._conflicts)
+
+    @cached_property
+    def _conflicts(self) -> frozenset[int]:
+        """:meth:`conflicted_tasks`, computed once per answer (the dispatcher and the recorder
+        both ask; a taxi decision logs hundreds of requests)."""
+        seen: dict[tuple[int, int], int] = {}
+        won: dict[int, int] = {}
+        for r in self.requests:
+            seen[(r.round, r.task_id)] = seen.get((r.round, r.task_id), 0) + 1
+            if r.won:
+                won[r.task_id] = min(r.round, won.get(r.task_id, r.round))
+        late = {r.task_id for r in self.requests if r.task_id in won and r.round > won[r.task_id]}
+        return frozenset({task for (_, task), n in seen.items() if n > 1} | late)
 
 
 class Allocator(ABC):
@@ -471,6 +476,13 @@ class Allocator(ABC):
     @abstractmethod
     def allocate(self, problem: AllocationProblem) -> Allocation:
         """Return a valid allocation for ``problem`` (see the module docstring)."""
+
+    def describe(self) -> dict[str, str]:
+        """What the allocator ran, as strings (e.g. a learned model's name, variant and
+        checkpoint hash; a batch method's counts, asked again at the end of a run): the
+        summary's ``allocator_info`` column and the ``dispatch.allocator_info`` metadata.
+        Default: nothing to say."""
+        return {}
 
 
 class Reservations(Protocol):
@@ -512,14 +524,13 @@ class Planner(ABC):
     #: True for planners that implement :meth:`bounds` and :meth:`exact` (lazy exact costs:
     #: see :mod:`dispatch.lazy`).
     lower_bounds: ClassVar[bool] = False
+    #: True for planners that implement :meth:`between` (shared rides, drop-off limits, the
+    #: added_time objective, energy and multi-request allocators need it: the kernel routes
+    #: between the stops of a plan).
+    travel_times: ClassVar[bool] = False
     #: Seconds after which a vehicle that found no timed route tries again (it also tries when
     #: other vehicles' reservations are released). Used only when ``reservation_aware``.
     retry_after: float = 1.0
-    #: Optional: ``budget(*, agents, tasks, duration) -> str | None``, a sentence saying why a
-    #: run of that many vehicles and (expected) tasks over that many simulated seconds would
-    #: not finish with this planner's parameters, None when it would; ``dispatch validate``
-    #: refuses the run with it (``--force`` runs anyway). See :mod:`dispatch.budget`.
-    budget = None
 
     def __init__(self, space: Space) -> None:
         if space.kind not in self.spaces:
@@ -528,6 +539,20 @@ class Planner(ABC):
         self.space = space
         self.world = space  # the voxel planners' name for it
         self.stats = PlanStats()
+
+    @property
+    def free_flow(self) -> Planner:
+        """The planner whose costs are free-flow travel times (limits such as a request's
+        direct time are set from them): itself, or the planner a congested one wraps
+        (:class:`dispatch.congestion.CongestedPlanner`)."""
+        return self
+
+    def budget(self, *, agents: int, tasks: float, duration: float) -> str | None:
+        """A sentence saying why a run of that many vehicles and (expected) tasks over that
+        many simulated seconds would not finish with this planner's parameters, None when it
+        would (the default); ``dispatch validate`` refuses the run with it (``--force`` runs
+        anyway). See :mod:`dispatch.budget`."""
+        return None
 
     @abstractmethod
     def costs(self, agents: tuple[AgentView, ...], tasks: tuple[TaskView, ...]) -> np.ndarray:
@@ -556,7 +581,7 @@ class Planner(ABC):
         The kernel checks this and stops the run with an error naming the planner otherwise.
         A planner should return the earliest-arriving such route (SIPP does).
         """
-        raise NotImplementedError(f"planner {self.name!r} is not reservation-aware")
+        raise NotImplementedError(f"planner {self.name!r} does not declare reservation_aware")
 
     def bounds(self, agents, tasks: tuple[TaskView, ...]) -> tuple[np.ndarray, np.ndarray]:
         """``(lower, exact)``, two ``(len(agents), len(tasks))`` arrays, for planners that set
@@ -564,17 +589,13 @@ class Planner(ABC):
         cost as :meth:`costs` would compute it), and ``exact[a, t]`` (bool) True where
         ``lower[a, t]`` *is* that cost. An ``inf`` in ``lower`` must be exact (the pair can
         never be served): the dispatcher closes tasks as unreachable from it."""
-        raise NotImplementedError(f"planner {self.name!r} computes no lower bounds")
+        raise NotImplementedError(f"planner {self.name!r} does not declare lower_bounds")
 
     def exact(self, agents, tasks: tuple[TaskView, ...], rows: np.ndarray,
               cols: np.ndarray) -> np.ndarray:
         """``costs(agents, tasks)[rows, cols]`` (a 1-D float array), computing only those
         pairs; for planners that set :attr:`lower_bounds`."""
-        raise NotImplementedError(f"planner {self.name!r} computes no lower bounds")
-
-    #: True for planners that implement :meth:`between` (shared rides and drop-off limits
-    #: need it: the kernel routes between the stops of a plan).
-    travel_times: ClassVar[bool] = False
+        raise NotImplementedError(f"planner {self.name!r} does not declare lower_bounds")
 
     def between(self, sources: Sequence[Location], targets: Sequence[Location],
                 pairwise: bool = False) -> np.ndarray:
@@ -582,8 +603,7 @@ class Planner(ABC):
         to each of ``targets`` (nodes), as :meth:`costs` counts them: a ``(len(sources),
         len(targets))`` array, or with ``pairwise`` the 1-D array of ``sources[k] ->
         targets[k]``. For planners that set :attr:`travel_times`."""
-        raise NotImplementedError(f"planner {self.name!r} computes no travel times between "
-                                  "locations")
+        raise NotImplementedError(f"planner {self.name!r} does not declare travel_times")
 
     def task_closed(self, task_id: int) -> None:
         """Forget anything cached for a task that will never be asked about again."""

@@ -69,7 +69,7 @@ import numpy as np
 # answer checking; validate and route_stops stay importable from here (plugins' tests use them)
 from dispatch.answers import finders, route_stops, validate  # noqa: F401
 from dispatch.comms import comm_graph, components
-from dispatch.contracts import Allocation, AllocationProblem, Allocator, Planner
+from dispatch.contracts import AgentViews, Allocation, AllocationProblem, Allocator, Planner
 from dispatch.errors import AllocationError, DispatchError, PluginError
 from dispatch.heap import keep_large_blocks
 from dispatch.lazy import certify, resolve_open
@@ -96,7 +96,7 @@ def _line(e: BaseException, limit: int = 400) -> str:
 def _positions(space: Space, agents) -> np.ndarray:
     """``(N, 3)`` positions of a decision's agents: from their node array where the sequence
     carries one (road points part-way along an edge one by one), else view by view."""
-    nodes = getattr(agents, "nodes", None)
+    nodes = agents.nodes if isinstance(agents, AgentViews) else None
     if nodes is None:
         return space.positions([a.loc for a in agents])
     out = space.positions(nodes)
@@ -149,7 +149,7 @@ class Dispatcher:
         self.cfg, self.comms, self.rng, self.on_decision = cfg, comms, rng, on_decision
         #: ``links(comm, positions, now) -> comm``: communication faults (a blackout), or None
         self.links = links
-        self.cell_size = float(getattr(space, "cell", 1.0))
+        self.cell_size = float(space.cell)
         self.wake = env.event()
         self.decisions = 0
         self.cost_seconds = 0.0
@@ -163,9 +163,8 @@ class Dispatcher:
         self.first_seconds = math.nan
         self._pending: _Pending | None = None
         #: [dispatch] lazy_costs, with a planner and an allocator that support it
-        self.lazy = bool(getattr(cfg, "lazy_costs", False))
-        if self.lazy and not (getattr(planner, "lower_bounds", False)
-                              and getattr(allocator, "minimizes_total_cost", False)):
+        self.lazy = cfg.lazy_costs
+        if self.lazy and not (planner.lower_bounds and allocator.minimizes_total_cost):
             log.warning("lazy_costs is on but planner %r computes no lower bounds or allocator "
                         "%r does not minimize the total cost: exact costs are used",
                         planner.name, allocator.name)
@@ -176,7 +175,7 @@ class Dispatcher:
         self.plans = self.pooled or cfg.objective != "pickup_time" or bool(max_delay)
         self.objective = OBJECTIVES[cfg.objective]
         #: the planner routes between any two locations (direct times, insertions)
-        self.routes = bool(getattr(planner, "travel_times", False))
+        self.routes = planner.travel_times
         #: [fleet.energy]: ``(cost, drive, slots, tasks) -> cost`` with ``inf`` where a vehicle
         #: would end below its reserve (dispatch.energy.Energy.filter); None without energy
         self.energy_filter = None
@@ -199,13 +198,13 @@ class Dispatcher:
     def _where(self, kind: str) -> str:
         """Where an error happened: the plugin, the run, the decision and the simulated time."""
         plugin = self.allocator if kind == "allocator" else self.planner
-        name = getattr(plugin, "name", "") or type(plugin).__name__
+        name = plugin.name or type(plugin).__name__
         run = f", run {self.run_id}" if self.run_id else ""
         return f"{kind} {name!r}{run}, decision {self.decisions}, t = {self.env.now:.6g} s"
 
     def _bad_costs(self, cost, want: tuple[int, int]) -> PluginError:
-        got = (f"{type(cost).__name__} {getattr(cost, 'shape', '')} "
-               f"{getattr(cost, 'dtype', '')}").strip()
+        got = (f"{type(cost).__name__} {cost.shape} {cost.dtype}"
+               if isinstance(cost, np.ndarray) else type(cost).__name__)
         return PluginError(f"{self._where('planner')}: costs() must return a float array of "
                            f"shape {want} without nan, got {got}")
 
@@ -414,7 +413,7 @@ class Dispatcher:
             comm = self._everyone.get(len(agents))
             if comm is None:
                 comm = self._everyone[len(agents)] = np.broadcast_to(np.True_, (len(agents),) * 2)
-            nodes = getattr(agents, "nodes", None)
+            nodes = agents.nodes if isinstance(agents, AgentViews) else None
             if nodes is not None and not agents.points.size:
                 def apos():  # node positions (fixed now), computed if someone reads them
                     return space.positions(nodes)
@@ -483,7 +482,7 @@ class Dispatcher:
             raise AllocationError(f"{self._where('allocator')}: the allocator replaced or made "
                                   "writable problem.cost (the problem is read-only; work on a "
                                   "copy)")
-        multi = bool(getattr(self.allocator, "multi_request", False))
+        multi = self.allocator.multi_request
         try:
             index = validate(problem, allocation, multi)
             routes = self._routes(problem, allocation) if multi and allocation.routes else {}
@@ -641,7 +640,7 @@ class Dispatcher:
                 if t.dropoff is not None and t.direct_time != t.direct_time]
         if not need:
             return
-        free = getattr(self.planner, "inner", self.planner)
+        free = self.planner.free_flow
         times = free.between([t.loc for t in need], [t.dropoff for t in need], pairwise=True)
         for t, x in zip(need, np.asarray(times, dtype=float).tolist()):
             t.direct_time = x

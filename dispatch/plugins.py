@@ -19,7 +19,7 @@ if TYPE_CHECKING:
     from dispatch.reposition import Repositioner
 
 __all__ = ["check_repositioner", "check_runs", "describe", "make_charger", "make_plugin",
-           "make_repositioner"]
+           "make_repositioner", "travel_times_needed"]
 
 
 def make_plugin(kind: str, name: str, params, *args):
@@ -43,12 +43,10 @@ def _construct(kind: str, name: str, params, args, key: str):
 
 
 def describe(allocator) -> str:
-    """What an allocator says it ran, as a JSON object of strings (``"{}"`` if it says
-    nothing): the optional ``describe() -> dict[str, str]`` method of an allocator plugin
-    (e.g. a learned model's name, variant and checkpoint hash). It goes into the summary's
+    """What an allocator says it ran (:meth:`dispatch.contracts.Allocator.describe`), as a
+    JSON object of strings (``"{}"`` if it says nothing). It goes into the summary's
     ``allocator_info`` column and the ``dispatch.allocator_info`` Parquet metadata."""
-    fn = getattr(allocator, "describe", None)
-    info = fn() if callable(fn) else {}
+    info = allocator.describe()
     return json.dumps({str(k): str(v) for k, v in dict(info).items()}, sort_keys=True)
 
 
@@ -67,29 +65,58 @@ def check_repositioner(sc: Scenario, name: str) -> None:
     """ScenarioError unless repositioner ``name`` serves the scenario's space (the kernel moves
     idle vehicles only in a space with the ``reposition`` feature, road networks: a voxel world
     takes passive ones, such as ``stay``)."""
-    cls = registry.load("repositioner", name)
+    caps = registry.declaration("repositioner", name)
     space = sc.world.space
-    serves = tuple(getattr(cls, "spaces", ("road",)))
     moves = "reposition" in space_class(space).features  # the kernel drives idle vehicles
-    if space not in serves or (not moves and not getattr(cls, "passive", False)):
+    if not caps.serves(space) or (not moves and not caps.passive):
         key = "sweep.reposition" if sc.sweep.reposition else "reposition.policy"
         raise ScenarioError(sc.path, key, f"repositioner {name!r} moves vehicles on "
-                                          f"{' and '.join(serves)} spaces, not this scenario's "
-                                          f"{space} world (use 'stay' there)")
+                                          f"{' and '.join(caps.spaces)} spaces, not this "
+                                          f"scenario's {space} world (use 'stay' there)")
 
 
-def check_runs(sc: Scenario, planners, repositioners=()) -> None:
+def travel_times_needed(sc: Scenario, allocators=()) -> list[tuple[str, str]]:
+    """What in the scenario needs a planner that routes between any two locations
+    (``travel_times``: the kernel times the stops of a plan with it): ``(key, what)`` pairs,
+    empty when nothing does. ``allocators``: the names of the allocators that run."""
+    t, need = sc.tasks, []
+    if sc.fleet.pooled:
+        key = "fleet.capacity" if sc.fleet.capacity > 1 else "fleet.start"
+        need.append((key, "shared rides (a capacity above 1)"))
+    if t.delay_limited:
+        need.append(("tasks.max_delay", "drop-off delay limits"))
+    if sc.dispatch.objective != "pickup_time":
+        need.append(("dispatch.objective", f"the {sc.dispatch.objective} objective"))
+    if sc.fleet.energy is not None:
+        need.append(("fleet.energy", "batteries (a request's drive counts in the reserve)"))
+    for name in allocators:
+        if registry.declaration("allocator", name).multi_request:
+            need.append(("dispatch.allocator", f"allocator {name!r} (multi_request: it routes "
+                                               f"several requests per vehicle)"))
+    return need
+
+
+def check_runs(sc: Scenario, planners, repositioners=(), allocators=()) -> None:
     """Validate-time checks that need plugins or the space: every planner and repositioner
-    serves the scenario's space, and the space's own (:meth:`dispatch.space.Space.check_runs`:
-    a road network loads, a trace names only nodes it has)."""
+    serves the scenario's space, every planner declares what the scenario needs of it
+    (:func:`travel_times_needed`), and the space's own
+    (:meth:`dispatch.space.Space.check_runs`: a road network loads, a trace names only nodes
+    it has). ``allocators``: the names of the allocators that run (their declarations may
+    need more of the planner)."""
     space = sc.world.space
     for name in repositioners:
         check_repositioner(sc, name)
+    need = travel_times_needed(sc, allocators)
     for name in planners:
-        serves = getattr(registry.load("planner", name), "spaces", ("voxel",))
-        if space not in serves:
+        caps = registry.declaration("planner", name)
+        if not caps.serves(space):
             raise ScenarioError(sc.path, "dispatch.planner",
-                                f"planner {name!r} serves {' and '.join(serves)} spaces, not "
-                                f"this scenario's {space} world; {space} planners: "
+                                f"planner {name!r} serves {' and '.join(caps.spaces)} spaces, "
+                                f"not this scenario's {space} world; {space} planners: "
                                 f"{', '.join(registry.serving(space)) or 'none installed'}")
+        if need and not caps.travel_times:
+            key, what = need[0]
+            raise ScenarioError(sc.path, key, f"{what}: the kernel routes between the stops "
+                                              f"of plans, which needs a planner that declares "
+                                              f"travel_times; planner {name!r} does not")
     space_class(space).check_runs(sc, planners)

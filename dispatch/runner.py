@@ -497,9 +497,7 @@ def sweep(
                     if on_done is not None:
                         on_done(outcome)
             finally:
-                close = getattr(stream, "close", None)
-                if close is not None:  # a pool's generator: stops its workers now, if any run
-                    close()
+                stream.close()  # (every stream is a generator: a pool's stops its workers now)
     return [outcomes[i] for i in range(len(specs))]
 
 
@@ -541,7 +539,7 @@ def _exit_with_parent(parent: int) -> None:
 def _stop_workers(pool) -> None:
     """Terminate the processes of a ProcessPoolExecutor now (SIGTERM, then SIGKILL for any
     still alive after 5 s): their runs are abandoned half-way, to be redone by a rerun."""
-    procs = list((getattr(pool, "_processes", None) or {}).values())
+    procs = list((pool._processes or {}).values())  # (None once the pool is shut down)
     for proc in procs:
         if proc.is_alive():
             proc.terminate()

@@ -253,10 +253,11 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
         tasks = replace(tasks, trace=trace_path, trips=trips, start=start, max_snap=max_snap)
     elif trace is not None:
         raise t.fail("trace", f"is only used when source = 'trace' (source is {source!r})")
-    for k, allowed in (("interval", ("periodic",)), ("rate", ("poisson",)),
-                       ("max_active", ("periodic", "poisson")),
-                       ("count", ("static", "periodic", "poisson", "trace"))):
-        if getattr(tasks, k) is not None and source not in allowed:
+    for k, value, allowed in (("interval", tasks.interval, ("periodic",)),
+                              ("rate", tasks.rate, ("poisson",)),
+                              ("max_active", tasks.max_active, ("periodic", "poisson")),
+                              ("count", tasks.count, ("static", "periodic", "poisson", "trace"))):
+        if value is not None and source not in allowed:
             raise t.fail(k, f"is only used when source is {' or '.join(allowed)} (not {source!r})")
     t.done()
 

@@ -65,14 +65,6 @@ def place_fleet(space, spec, rng: np.random.Generator) -> list:
     return space.place(spec, rng)
 
 
-def _has_max_delay(sc) -> bool:
-    """Some request of the scenario has a drop-off delay limit (the file's or its trace's)."""
-    trips = sc.tasks.trips
-    return sc.tasks.max_delay is not None or (
-        trips is not None and trips.max_delay is not None
-        and bool(np.isfinite(trips.max_delay).any()))
-
-
 #: Simulated-time ticks of a run's progress reports (see :class:`Simulation`).
 PROGRESS_TICKS = 500
 #: Allocations between two young-generation collections of the garbage collector while a run
@@ -153,7 +145,7 @@ class Simulation:
                                      rng_for(spec.seed, STREAM_ALLOCATOR), self._record_decision,
                                      blackout_filter(sc.faults),
                                      pooled=any(v.capacity > 1 for v in self.vehicles),
-                                     max_delay=_has_max_delay(sc))
+                                     max_delay=sc.tasks.delay_limited)
         self.dispatcher.run_id = driver.run_id = spec.run_id  # named in error messages
         t = sc.tasks
         self.source = TaskSource.of(env, book, demand, t,
@@ -194,7 +186,8 @@ class Simulation:
         """Batteries, the reserve rule, stations and the charging strategy (see
         :mod:`dispatch.energy`)."""
         net = self.space
-        ref = float(net.length.sum() / net.time.sum()) if hasattr(net, "length") else 10.0
+        # the network's mean edge speed (energy is a feature of road networks only)
+        ref = float(net.length.sum() / net.time.sum())
         self.energy = Energy(sc.fleet.energy, self.fleet, self.env, ref)
         self.dispatcher.energy_filter = self.energy.filter
         self.env.process(self.energy.sampler(self.recorder.appender("soc")))

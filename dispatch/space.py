@@ -61,7 +61,7 @@ KINDS: dict[str, str] = {"voxel": "dispatch.world:World", "road": "dispatch.road
 def space_class(kind: str) -> type[Space]:
     """The :class:`Space` subclass of a kind of :data:`KINDS` (KeyError: no such kind)."""
     module, _, name = KINDS[kind].partition(":")
-    return getattr(importlib.import_module(module), name)
+    return vars(importlib.import_module(module))[name]
 
 
 def space_for(cfg, seed: int, scenario_path=None) -> Space:
@@ -90,6 +90,9 @@ class Space(ABC):
     start_nodes: ClassVar[bool] = False
     #: a fleet start file's ``z`` where it has none (nan: none)
     start_z: ClassVar[float] = float("nan")
+    #: metres of a cell's side where the space is a grid of cells (the voxel world's
+    #: :attr:`dispatch.contracts.AllocationProblem.cell_size`); 1.0 in a space without cells
+    cell: float = 1.0
 
     # ------------------------------------------------------------ of its configuration
     @classmethod

@@ -91,7 +91,7 @@ class RunStats:
             occupied_distance=sum(v.occupied_distance for v in vehicles),
             failures=sum(v.failures for v in vehicles), tasks_reassigned=self.reassigned,
             tasks_transferred=self.transferred, tasks_assigned=self.assigned,
-            reassignments=getattr(d, "reassignments", 0),
+            reassignments=d.reassignments,
             passenger_distance=pax, occupancy=pax / dist if dist > 0 else math.nan,
             shared_rate=self.shared / self.rides if self.rides else math.nan,
             delay_mean=self.delay / self.rides if self.rides else math.nan,

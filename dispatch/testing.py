@@ -61,7 +61,8 @@ import numpy as np
 
 from dispatch.contracts import AgentView, Allocation, AllocationProblem, TaskView
 from dispatch import registry
-from dispatch.errors import AllocationError
+from dispatch.errors import AllocationError, PluginError
+from dispatch.legs import as_point
 from dispatch.space import KINDS, space_class
 
 __all__ = ["CheckResult", "Report", "allocation_problems", "check_allocator", "check_planner",
@@ -345,7 +346,7 @@ def _same(a: tuple, b: tuple) -> bool:
 
 def _answer(a: Allocation) -> tuple:
     return (tuple(map(tuple, a.pairs)), a.rounds, a.requests, a.messages, a.hops,
-            tuple(sorted((k, tuple(map(tuple, v))) for k, v in dict(getattr(a, "routes", None) or {}).items())))
+            tuple(sorted((k, tuple(map(tuple, v))) for k, v in dict(a.routes).items())))
 
 
 def _check_routes(problem: AllocationProblem, allocation: Allocation) -> None:
@@ -353,7 +354,7 @@ def _check_routes(problem: AllocationProblem, allocation: Allocation) -> None:
     new requests once each, pickups first, within the capacity and every limit."""
     from dispatch.dispatcher import route_stops
 
-    routes = getattr(allocation, "routes", None) or {}
+    routes = allocation.routes
     if not routes:
         return
     by_task = {t.id: t for t in problem.tasks}
@@ -378,17 +379,33 @@ def _perturb_global_rng(k: int) -> None:
         torch.manual_seed(k)
 
 
-def _constructed(cls, params: dict) -> Report:
-    """A fresh report for ``cls`` holding its "construct" check: ``cls(**params)`` must not
-    raise (``report.ok`` says whether it did not)."""
-    report = Report(getattr(cls, "name", "") or getattr(cls, "__name__", str(cls)))
+def _declared(kind: str, cls) -> tuple[Report, registry.Capabilities | None]:
+    """A fresh report for plugin class ``cls`` of ``kind`` and what it declares (the
+    registry's record); a class the registry would refuse (it does not subclass its kind's
+    base class, or declares a capability without the method it needs) fails "construct"
+    with the reason, and its declaration is None."""
+    try:
+        caps = registry.capabilities(kind, cls)
+    except PluginError as e:
+        report = Report(cls.__qualname__)
+        report.add("construct", [str(e)], "")
+        return report, None
+    return Report(caps.name or cls.__name__), caps
+
+
+def _constructed(kind: str, cls, params: dict) -> tuple[Report, registry.Capabilities | None]:
+    """:func:`_declared`, with the "construct" check: ``cls(**params)`` must not raise
+    (``report.ok`` says whether it did not)."""
+    report, caps = _declared(kind, cls)
+    if caps is None:
+        return report, caps
     try:
         cls(**params)
     except Exception as e:  # noqa: BLE001 - any exception is a failure of the plugin
         report.add("construct", [f"{cls.__name__}(**{params!r}) raised {_err(e)}"], "")
-        return report
-    report.add("construct", [], f"{getattr(cls, '__name__', cls)}(**{params!r})")
-    return report
+        return report, caps
+    report.add("construct", [], f"{cls.__name__}(**{params!r})")
+    return report, caps
 
 
 def _replay(label: str, call: Callable[[], Any], first: Any, differs: list[str],
@@ -421,11 +438,11 @@ def check_allocator(cls, *, seed: int = 0, **params: Any) -> Report:
     """Run every allocator check (see the module docstring) on ``cls(**params)``."""
     from dispatch.dispatcher import validate
 
-    report = _constructed(cls, params)
+    report, caps = _constructed("allocator", cls, params)
     if not report.ok:
         return report
     problems = allocation_problems(seed)
-    multi = bool(getattr(cls, "multi_request", False))
+    multi = caps.multi_request
     if multi:  # batch pooling: shared-ride problems, routes checked as the dispatcher does
         problems += pooled_problems(seed)
     invalid, stuck, mutated, differs, global_rng = [], [], [], [], []
@@ -481,15 +498,16 @@ def small_network():
 def check_planner(cls, space=None, *, seed: int = 0, **params: Any) -> Report:
     """Run every planner check (see the module docstring) on ``cls(space, **params)``; without
     a ``space``, on :func:`small_world` and/or :func:`small_network` (the spaces it serves)."""
-    report = Report(getattr(cls, "name", "") or getattr(cls, "__name__", str(cls)))
+    report, caps = _declared("planner", cls)
+    if caps is None:
+        return report
     if space is None:
-        serves = getattr(cls, "spaces", ("voxel",))
-        spaces = [space_class(kind).small(seed) for kind in KINDS if kind in serves]
+        spaces = [space_class(kind).small(seed) for kind in KINDS if caps.serves(kind)]
     else:
         spaces = [space]
     for sp in spaces:
         tag = f" [{sp.kind}]" if len(spaces) > 1 else ""
-        _check_planner_on(report, cls, sp, seed, params, tag)
+        _check_planner_on(report, cls, caps, sp, seed, params, tag)
     return report
 
 
@@ -497,7 +515,8 @@ def _costs(planner, agents, tasks) -> np.ndarray:
     return np.asarray(planner.costs(agents, tasks))
 
 
-def _check_planner_on(report: Report, cls, space, seed: int, params: dict, tag: str) -> None:
+def _check_planner_on(report: Report, cls, caps: registry.Capabilities, space, seed: int,
+                      params: dict, tag: str) -> None:
     try:
         cls(space, **params)
     except Exception as e:  # noqa: BLE001
@@ -505,11 +524,11 @@ def _check_planner_on(report: Report, cls, space, seed: int, params: dict, tag: 
                    "")
         return
     report.add("construct" + tag, [], f"{cls.__name__}(<{space.kind} space>, **{params!r})")
-    grid = getattr(space, "grid", None)
+    grid = getattr(space, "grid", None)  # a voxel world's: its occupancy must not change
     occupied = None if grid is None else np.array(grid.occupied, copy=True)
     shapes = [(0, 3), (3, 0), (0, 0), (1, 1), (4, 6), (6, 2)]
     bad_costs, bad_plans, differs, global_rng, bad_bounds = [], [], [], [], []
-    bounded = bool(getattr(cls, "lower_bounds", False))
+    bounded = caps.lower_bounds
     for k, (n, m) in enumerate(shapes):
         agents, tasks = space.sample_views(np.random.default_rng(seed * 100 + k), n, m)
         label = f"{n} agents x {m} tasks"
@@ -605,12 +624,12 @@ def reposition_view(space, vehicles, requests=(), *, time: float = 0.0, horizon:
     locs = [vehicles[i] for i in ids]
     targets = targets or {}
     req = list(requests)
-    nodes = [getattr(p, "node", p) for p in locs]
+    points = [as_point(p) for p in locs]
     rnodes = _readonly([int(n) for _, n in req], np.int64)
     return RepositionView(
         time=float(time), horizon=float(horizon), vehicle_ids=_readonly(ids, np.int64),
-        nodes=_readonly(nodes, np.int64),
-        remaining=_readonly([max(getattr(p, "remaining", 0.0), 0.0) for p in locs], np.float64),
+        nodes=_readonly([p.node for p in points], np.int64),
+        remaining=_readonly([max(p.remaining, 0.0) for p in points], np.float64),
         targets=_readonly([targets.get(i, -1) for i in ids], np.int64),
         vehicle_pos=_readonly(space.positions(locs) if locs else np.zeros((0, 3)), np.float64),
         request_times=_readonly([float(t) for t, _ in req], np.float64), request_nodes=rnodes,
@@ -658,11 +677,11 @@ def check_repositioner(cls, space=None, *, seed: int = 0, **params: Any) -> Repo
     of ``space`` (default :func:`small_network`)."""
     from collections.abc import Mapping
 
-    report = _constructed(cls, params)
+    report, caps = _constructed("repositioner", cls, params)
     if not report.ok:
         return report
     space = space if space is not None else small_network()
-    passive = bool(getattr(cls, "passive", False))
+    passive = caps.passive
     invalid, mutated, differs, global_rng = [], [], [], []
     answers: dict[str, dict] = {}
     cases = _reposition_views(space, seed)
@@ -751,7 +770,7 @@ def check_charger(cls, space=None, *, seed: int = 0, **params: Any) -> Report:
     use of the global random state."""
     from collections.abc import Mapping
 
-    report = _constructed(cls, params)
+    report, _ = _constructed("charger", cls, params)
     if not report.ok:
         return report
     invalid, mutated, differs, global_rng = [], [], [], []
@@ -759,9 +778,10 @@ def check_charger(cls, space=None, *, seed: int = 0, **params: Any) -> Report:
     cases = charging_views(space, seed)
 
     def snap(view):
-        return tuple(np.array(getattr(view, k)).tobytes() for k in
-                     ("vehicle_ids", "nodes", "remaining", "soc", "station_nodes", "plugs",
-                      "in_use", "waiting", "kw", "released_by_hour"))
+        return tuple(np.array(a).tobytes() for a in
+                     (view.vehicle_ids, view.nodes, view.remaining, view.soc,
+                      view.station_nodes, view.plugs, view.in_use, view.waiting, view.kw,
+                      view.released_by_hour))
 
     for label, build in cases:
         view = build()

@@ -46,11 +46,3 @@ class Zones:
     def of_xy(self, xy: np.ndarray) -> np.ndarray:
         """Zone of each position (``-1``: in no zone)."""
         return self._index(self._keys(xy))
-
-    @classmethod
-    def of_space(cls, space, size: float) -> Zones:
-        """The zones of a road space (its ``node_positions``)."""
-        nodes = getattr(space, "node_positions", None)
-        if nodes is None:
-            raise ValueError("zones need a road network (a space with node positions)")
-        return cls(np.asarray(nodes, dtype=float)[:, :2], size)

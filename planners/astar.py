@@ -49,6 +49,7 @@ class AStarPlanner(Planner):
     """
 
     name = "astar"
+    spaces = ("voxel",)
     lower_bounds = True
 
     def __init__(self, world: World, *, field_cache_mb: float | None = None) -> None:

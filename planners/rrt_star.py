@@ -224,6 +224,7 @@ class RRTStarPlanner(Planner):
     """RRT* from each goal in the continuous world (PyBullet ray tests), snapped to the grid."""
 
     name = "rrt_star"
+    spaces = ("voxel",)
 
     def __init__(self, world: World, *, max_iterations: int = 1000, step: float = 4.0,
                  rewire_radius: float = 10.0, goal_bias: float = 0.1, seed: int = 0,

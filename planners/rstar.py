@@ -365,6 +365,7 @@ class RStarPlanner(Planner):
     """R* (randomized A*, Likhachev & Stentz 2008) on the grid, bounded by ``w`` x optimal."""
 
     name = "rstar"
+    spaces = ("voxel",)
 
     def __init__(self, world: World, *, w: float = 1.5, delta: int = 8, k: int = 8,
                  local_expansions: int = 500, max_expansions: int = 100, seed: int = 0,

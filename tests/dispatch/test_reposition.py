@@ -287,6 +287,7 @@ def one_line_error(path: Path, error=ScenarioError):
         class Args:
             scenario = path
             force = False
+            allocator = planner = agents = seed = duration = None
 
         _specs(Args)
     msg = str(info.value)
@@ -381,9 +382,10 @@ def test_a_misbehaving_repositioner_stops_the_run_with_one_line(tmp_path, monkey
 
 
 def test_the_plugin_check_catches_a_bad_repositioner():
+    from dispatch.reposition import Repositioner
     from dispatch.testing import check_repositioner
 
-    class Wild:
+    class Wild(Repositioner):
         name = "wild"
 
         def reposition(self, view):

@@ -30,6 +30,7 @@ import pandas as pd
 import pyarrow.parquet as pq
 import pytest
 
+from dispatch.contracts import Allocator
 from dispatch.motion import step_is_legal, step_length
 from dispatch.physics import Physics
 from dispatch.reservations import (
@@ -342,7 +343,7 @@ def test_table_views_merge_and_filter():
     assert t.at((1, 0, 0)) == [] and len(t.owned(2)) == 1
 
 
-class Scripted:
+class Scripted(Allocator):
     """An allocator that gives each task to the vehicle named for it (``{task_id: agent_id}``),
     when that vehicle is idle."""
 

@@ -168,7 +168,7 @@ def test_congestion_wraps_the_road_planner_and_says_so():
     roads = dataclasses.replace(sc.world.roads, congestion=(2.0,) * 24)
     cfg = dataclasses.replace(sc.world, roads=roads)
     net = space_for(sc.world, 0, sc.path)
-    inner = _Fixed([0, 1])
+    inner = registry.load("planner", "dijkstra")(net)
     d = net.driver(inner, EventBus(), cfg, lambda: 0.0)
     assert d.planner is not inner and d.planner.inner is inner
     assert d.metadata == {"dispatch.congestion": "[" + ", ".join(["2.0"] * 24) + "]"}
