@@ -67,13 +67,7 @@ import numpy as np
 import pandas as pd
 
 from paired import compare
-from paired.compare import (  # noqa: F401 (re-exported: one order, one window label)
-    KEY_DEFAULTS,
-    PREFERRED_ORDER,
-    RUN_KEYS_ATTR,
-    allocator_order,
-    window_label,
-)
+from paired.compare import KEY_DEFAULTS, RUN_KEYS_ATTR, allocator_order
 from paired.stats import mean_ci
 
 def run_keys(df: pd.DataFrame) -> list[str]:

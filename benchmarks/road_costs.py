@@ -44,7 +44,8 @@ from rich.console import Console  # noqa: E402
 from rich.table import Table  # noqa: E402
 from scipy.sparse.csgraph import dijkstra  # noqa: E402
 
-from dispatch.roads import RoadNetwork, RoadPoint, load_network  # noqa: E402
+from dispatch.legs import RoadPoint  # noqa: E402
+from dispatch.roads import RoadNetwork, load_network  # noqa: E402
 
 t_import = time.perf_counter()
 from planners import _road_fast  # noqa: E402

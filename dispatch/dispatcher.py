@@ -81,7 +81,7 @@ from dispatch.tasks import OPEN, TaskBook, TaskState
 if TYPE_CHECKING:
     import simpy
 
-    from dispatch.scenario import CommsConfig, DispatchConfig
+    from dispatch.config import CommsConfig, DispatchConfig
     from dispatch.vehicles import Fleet, Operator
 
 log = logging.getLogger(__name__)

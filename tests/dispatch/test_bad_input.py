@@ -9,7 +9,8 @@ import pytest
 
 from dispatch import cli
 from dispatch.errors import ScenarioError
-from dispatch.scenario import load_scenario, safe_name
+from dispatch.config import safe_name
+from dispatch.scenario import load_scenario
 from tests.conftest import ROOT, write_scenario
 
 CHECKPOINTS = ROOT / "allocators" / "magnnet" / "checkpoints"

@@ -26,7 +26,8 @@ from dispatch.decentralized import DecentralizedAllocator, run_rounds
 from dispatch import registry
 from dispatch.errors import PluginError, ScenarioError
 from dispatch.runner import run_one
-from dispatch.scenario import CommsConfig, load_scenario
+from dispatch.config import CommsConfig
+from dispatch.scenario import load_scenario
 from tests.allocators.helpers import assert_valid, make_problem, random_problem
 from tests.dispatch.test_determinism import bitwise
 

@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dispatch.roads import Leg, RoadPoint, load_network, manhattan
+from dispatch.legs import Leg, RoadPoint
+from dispatch.roads import load_network, manhattan
 
 
 @pytest.fixture(scope="module")
@@ -173,7 +174,7 @@ def test_event_rows_placed_per_chunk_equal_per_event_positions(tmp_path, flush_r
 
     import pyarrow.parquet as pq
 
-    from dispatch.roads import RoadPoint
+    from dispatch.legs import RoadPoint
     from dispatch.runner import make_recorder
     from dispatch.scenario import load_scenario
     from dispatch.sim import Simulation
