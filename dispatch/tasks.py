@@ -252,7 +252,9 @@ class TaskBook:
 
 @dataclass(frozen=True, slots=True)
 class Request:
-    """A trip to release: where, and what the trace said about it."""
+    """A trip request to release: where, and what the trace said about it. Released, it is a
+    :class:`Task` (an agent's bid for a task in a decision round is
+    :class:`dispatch.contracts.Bid`)."""
 
     kind: str
     loc: Location
