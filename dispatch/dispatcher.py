@@ -52,7 +52,7 @@ The dispatcher is handed what it needs (the task book, the fleet, the operator t
 to vehicles, the planner, the allocator, the space, its configuration) and reaches into nothing
 else; each decision goes to ``on_decision`` (the recorder). It decides and hands out; the plan
 machinery (insertion costs, the problem's plans) is :mod:`dispatch.plans`'s and the checking of
-an answer :mod:`dispatch.answers`'s (``validate`` and ``route_stops`` are importable from here).
+an answer :mod:`dispatch.answers`'s.
 """
 
 from __future__ import annotations
@@ -66,8 +66,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-# answer checking; validate and route_stops stay importable from here (plugins' tests use them)
-from dispatch.answers import finders, route_stops, validate  # noqa: F401
+from dispatch.answers import finders, route_stops, validate
 from dispatch.comms import comm_graph, components
 from dispatch.contracts import Allocation, AllocationProblem, Allocator, Planner
 from dispatch.errors import AllocationError, DispatchError, PluginError
