@@ -80,7 +80,8 @@ ASSIGNMENT_COLUMNS = ("decision", "round", "agent_id", "task_id", "cost", "won",
 
 
 def assignment_row(i: int, r, alloc_s: float) -> tuple:
-    """The ``assignments`` row of the request ``r`` of decision ``i`` (:data:`ASSIGNMENT_COLUMNS`)."""
+    """The ``assignments`` row of the bid ``r`` (:class:`dispatch.contracts.Bid`) of decision
+    ``i`` (:data:`ASSIGNMENT_COLUMNS`)."""
     return (i, r.round, r.agent_id, r.task_id, r.cost, r.won, alloc_s)
 
 
@@ -121,7 +122,7 @@ class TaskWriter:
 
 class DecisionWriter:
     """The dispatcher's ``on_decision``: a ``decisions`` row and one ``assignments`` row per
-    request of the decision's rounds."""
+    bid of the decision's rounds."""
 
     def __init__(self, recorder) -> None:
         check_columns("decisions", DECISION_COLUMNS)

@@ -397,9 +397,7 @@ def read_tntp(net_path: str | Path, node_path: str | Path, *, name: str | None =
     return RoadGraph(name or stem, node_xy, node_no, u, v, seconds, metres, crs)
 
 
-
-
-# ==================================================================== load by name
+# ============================================================ shipped files, a scenario's file
 def chicago_files() -> tuple[Path, Path]:
     """Paths of the shipped Chicago Regional link and node files."""
     root = importlib.resources.files("dispatch") / _CHICAGO_DIR
@@ -431,7 +429,6 @@ def graph_suffix(path: Path) -> str | None:
     low = path.name.lower()
     return next((s for s in sorted(GRAPH_SUFFIXES, key=len, reverse=True) if low.endswith(s)),
                 None)
-
 
 
 def read_graph(path: Path, name: str | None = None) -> RoadGraph:
