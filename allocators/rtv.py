@@ -62,7 +62,7 @@ import time
 
 import numpy as np
 
-from dispatch.contracts import Allocation, AllocationProblem, Allocator, Request
+from dispatch.contracts import Allocation, AllocationProblem, Allocator, Bid
 
 OBJECTIVES = {"delay": 0, "added_time": 1}
 TOL = 5e-10  # (the kernel checks limits with +1e-9; half of it absorbs rounding differences)
@@ -681,7 +681,7 @@ class _Batch:
             for r in rs:
                 tid = int(tids[r])
                 pairs.append((aid, tid))
-                reqs.append(Request(round=0, agent_id=aid, task_id=tid,
+                reqs.append(Bid(round=0, agent_id=aid, task_id=tid,
                                     cost=float(problem.cost[self.vrows[j], r]), won=True))
         self.alloc.stats["multi"] += multi
         if self.alloc.reorder:

@@ -17,7 +17,8 @@ Tables are pandas DataFrames with one row per (scenario, planner, allocator, n_a
     picked up), ``cost_per_assignment`` (planned seconds from the vehicle to the pickup, mean
     over the assignments made: ``total_cost / tasks_assigned``), ``conflict_free_rate``,
     ``decision_ms`` (wall milliseconds per decision, mean), each a mean over seeds with
-    ``_ci95``. Summed planned costs are not comparable across allocators in a dynamic run: each
+    ``_ci95``; each run's figures are :func:`paired.per_task.per_task`'s, as in the CLI's
+    tables. Summed planned costs are not comparable across allocators in a dynamic run: each
     allocator drives its own trajectory through the run, and one that serves fewer tasks sums
     fewer costs.
 
@@ -67,13 +68,8 @@ import numpy as np
 import pandas as pd
 
 from paired import compare
-from paired.compare import (  # noqa: F401 (re-exported: one order, one window label)
-    KEY_DEFAULTS,
-    PREFERRED_ORDER,
-    RUN_KEYS_ATTR,
-    allocator_order,
-    window_label,
-)
+from paired.compare import KEY_DEFAULTS, RUN_KEYS_ATTR, allocator_order
+from paired.per_task import PER_TASK, per_task
 from paired.stats import mean_ci
 
 def run_keys(df: pd.DataFrame) -> list[str]:
@@ -195,21 +191,16 @@ def dynamic_metrics(summary: pd.DataFrame, level: float = 0.95) -> pd.DataFrame:
     planner, allocator, N) the mean over seeds and 95 % half-width of ``served_share``,
     ``wait_mean``, ``cost_per_assignment``, ``conflict_free_rate`` and ``decision_ms``."""
     s = _defaults(summary.copy())
-    n = pd.to_numeric(s["n_tasks"], errors="coerce").astype(float)
-    s["served_share"] = s["tasks_completed"] / n.where(n > 0)
-    s["wait_mean"] = s["wait_time_mean"]
-    assigned = (pd.to_numeric(s["tasks_assigned"], errors="coerce").astype(float)
-                if "tasks_assigned" in s else pd.Series(np.nan, index=s.index))
-    s["cost_per_assignment"] = s["total_cost"] / assigned.where(assigned > 0)
-    d = pd.to_numeric(s["decisions"], errors="coerce").astype(float)
-    s["decision_ms"] = 1000 * s["alloc_seconds"] / d.where(d > 0)
+    figures = pd.DataFrame([per_task(r) for r in s.to_dict("records")], columns=list(PER_TASK),
+                           index=s.index, dtype=float)
+    s[list(PER_TASK)] = figures
     keys = group_keys(s)
     rows = []
     for key, g in s.groupby(keys, sort=False):
         row = dict(zip(keys, key))
         row["runs"] = len(g)
         for col in ("served_share", "wait_mean", "cost_per_assignment", "conflict_free_rate",
-                    "decision_ms"):
+                    "decision_ms"):  # PER_TASK (paired.per_task) and the conflict-free rate
             m, h, _ = mean_ci(g[col], level)
             row[f"{col}_mean"], row[f"{col}_ci95"] = m, h
         row["tasks_mean"] = _mean(g["n_tasks"])

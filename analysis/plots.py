@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from analysis.metrics import allocator_order
+from paired.compare import allocator_order
 from analysis.timeline import STATES, trajectories, vehicle_intervals
 
 DPI = 120

@@ -33,6 +33,7 @@ import pandas as pd
 from analysis import metrics as M
 from analysis import plots
 from analysis.io import Results, open_results
+from paired.compare import allocator_order, window_label
 
 FIGURES = ("cost_vs_n.png", "success_vs_n.png", "alloc_time_vs_n.png", "wait_times.png",
            "timeline.png", "paths_3d.png")
@@ -65,7 +66,7 @@ VOXEL_TAXI_COLUMNS = ["runs", "requests", "rides", "rejectionRate", "wait_averag
 def default_run(summary: pd.DataFrame, reference: str = "hungarian") -> str:
     """The run a report shows in detail: the reference allocator's (else the first
     allocator's) largest fleet, smallest seed."""
-    allocs = M.allocator_order(summary["allocator"].unique())
+    allocs = allocator_order(summary["allocator"].unique())
     alloc = reference if reference in allocs else allocs[0]
     s = summary.loc[summary["allocator"] == alloc].sort_values(["n_agents", "seed"],
                                                                ascending=[False, True])
@@ -131,7 +132,7 @@ def _taxi_view(taxi: pd.DataFrame, columns: list[str]) -> pd.DataFrame:
     cols = [c for c in columns if c in taxi.columns]
     view = taxi[keys + cols].rename(columns={"n_agents": "N"})
     if "batch_window" in keys:  # imm / 30s, as the CLI's tables and the figures' legends
-        view["batch_window"] = view["batch_window"].map(M.window_label)
+        view["batch_window"] = view["batch_window"].map(window_label)
     for c in cols:  # mean ± half-width of the 95 % interval over seeds, where there is one
         ci = f"{c}_ci95"
         if ci in taxi.columns and taxi[ci].notna().any():
@@ -251,7 +252,7 @@ def _direct_times(res: Results, road: pd.DataFrame, tasks: pd.DataFrame):
 
 def _head(res, summary) -> list:
     scen = ", ".join(sorted(summary["scenario"].unique()))
-    allocs = ", ".join(M.allocator_order(summary["allocator"].unique()))
+    allocs = ", ".join(allocator_order(summary["allocator"].unique()))
     ns = ", ".join(map(str, sorted(summary["n_agents"].unique())))
     seeds = summary["seed"].nunique()
     errors = res.errors()

@@ -24,7 +24,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from analysis.metrics import allocator_order, series_keys, window_label
+from analysis.metrics import series_keys
+from paired.compare import allocator_order, window_label
 from analysis.plots import _colours, _figure, _save
 from analysis.timeline import CHARGING_STATES, FLEET_STATES
 

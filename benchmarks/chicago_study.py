@@ -196,6 +196,7 @@ def study_table(out: Path) -> pd.DataFrame:
     from analysis import metrics as M
     from analysis.io import open_results
     from analysis.taxi_plots import series
+    from paired.compare import window_label
 
     res = open_results(out)
     summary = M.with_series(res.summary, res.summary)
@@ -211,7 +212,7 @@ def study_table(out: Path) -> pd.DataFrame:
         rows.append({
             "label": re.sub(r" N=\d+", "", label),  # N has its own column
             "allocator": r["allocator"], "N": int(r["n_agents"]),
-            "window": M.window_label(r["batch_window"]), "reposition": r["reposition"],
+            "window": window_label(r["batch_window"]), "reposition": r["reposition"],
             "runs": int(r["runs"]), "served": r["service_rate"], "rejected": r["rejectionRate"],
             "cancelled": r.get("cancelRate", math.nan), "failed_share": (
                 r.get("failed", 0) / r["requests"] if r["requests"] else math.nan),

@@ -38,7 +38,7 @@ from rich.table import Table
 
 from dispatch.runner import run_one
 from dispatch.scenario import load_scenario
-from dispatch.sim import world_for
+from dispatch.world import world_for
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = ROOT / "scenarios" / "paper_static.toml"

@@ -44,7 +44,8 @@ from rich.console import Console  # noqa: E402
 from rich.table import Table  # noqa: E402
 from scipy.sparse.csgraph import dijkstra  # noqa: E402
 
-from dispatch.roads import RoadNetwork, RoadPoint, load_network  # noqa: E402
+from dispatch.legs import RoadPoint  # noqa: E402
+from dispatch.roads import RoadNetwork, load_network  # noqa: E402
 
 t_import = time.perf_counter()
 from planners import _road_fast  # noqa: E402
@@ -65,7 +66,9 @@ class Vehicle:
 
 
 @dataclass(frozen=True)
-class Request:
+class Trip:
+    """A task as the planner reads it: id, kind and pickup node."""
+
     id: int
     kind: str
     loc: int
@@ -168,8 +171,8 @@ def main() -> None:
                   f"{net.n_edges}); from / into the disk cache {t_cached:.2f} s")
     # compile / load the query kernels outside the timings
     warm_agents = vehicles(net, np.random.default_rng(99), 4)
-    RoadPlanner(net).costs(warm_agents, [Request(0, "ground", 1)])
-    stop_dijkstra(net, warm_agents, [Request(0, "ground", 1)])
+    RoadPlanner(net).costs(warm_agents, [Trip(0, "ground", 1)])
+    stop_dijkstra(net, warm_agents, [Trip(0, "ground", 1)])
 
     table = Table(title="Chicago idle vehicles x open requests: ms, min / median of "
                         f"{args.reps} runs; ratio = scipy min / ours min")
@@ -179,7 +182,7 @@ def main() -> None:
     for v, r in SIZES:
         rng = np.random.default_rng(args.seed * 1000 + v + r)
         agents = vehicles(net, rng, v)
-        tasks = [Request(i, "ground", int(n))
+        tasks = [Trip(i, "ground", int(n))
                  for i, n in enumerate(rng.choice(net.n, r, replace=False))]
         t_ref, t_cold, t_cold1, t_warm, t_stop = [], [], [], [], []
         err = 0.0

@@ -164,7 +164,7 @@ CHILD = textwrap.dedent("""
 
     # the reference: scipy's Dijkstra and ours on the same UAV graph, cold cache, one thread
     from scipy.sparse.csgraph import dijkstra
-    from dispatch.sim import world_for
+    from dispatch.world import world_for
     grid = world_for(load_scenario(Path(sys.argv[1])).world, spec.seed).grid
     g = G.graph(grid, True)
     nodes = [g.node(c) for c in cells if grid.is_free(c)]

@@ -1,6 +1,6 @@
 """Work bounds: what ``validate``, ``run`` and ``sweep`` refuse because it would not finish.
 
-The size bounds of :class:`dispatch.scenario.Limits` (cells, vehicles, releases, ...) keep a
+The size bounds of :class:`dispatch.config.Limits` (cells, vehicles, releases, ...) keep a
 run in memory; these keep it in time. Each estimates the work of a run from the scenario
 alone, before anything is built, and refuses past a bound with the estimate, the bound and
 what to change (``--force`` runs anyway), as the size bounds do:

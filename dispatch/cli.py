@@ -181,7 +181,8 @@ def with_duration(sc, seconds: float, *, force: bool = False):
     import tomllib
 
     from dispatch.errors import ScenarioError
-    from dispatch.scenario import LIMITS, parse_scenario
+    from dispatch.config import LIMITS
+    from dispatch.scenario import parse_scenario
 
     if not math.isfinite(seconds) or seconds <= 0:
         raise ScenarioError(sc.path, "--duration", f"must be a number of seconds > 0, got "

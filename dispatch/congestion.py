@@ -1,6 +1,6 @@
 """Congestion on roads in a run: free-flow travel times scaled by the hour's factor.
 
-The factors and their calibration are :mod:`dispatch.hourly`'s (re-exported here). A network's
+The factors and their calibration are :mod:`dispatch.hourly`'s. A network's
 edge times are free-flow times. With congestion on (``[world] congestion``), a drive that starts
 at simulated time ``t`` takes ``factor(t)`` times its free-flow time. The scaling is uniform over
 the network, so the fastest route is the free-flow one; only its duration changes:
@@ -27,11 +27,9 @@ from typing import Any
 
 import numpy as np
 
-# the data (hourly factors, their calibration), kept importable from here
-from dispatch.hourly import (  # noqa: F401
-    HOURS, MIN_TRIPS, NO_CONGESTION, HourlyFactors, calibrate, free_flow_times)
 from dispatch.contracts import AgentViews, Planner
 from dispatch.drivers import RoadDriver
+from dispatch.hourly import HourlyFactors
 from dispatch.legs import Leg, RoadPoint
 from dispatch.space import Space
 

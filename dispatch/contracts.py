@@ -367,8 +367,10 @@ class AllocationProblem:
 
 
 @dataclass(frozen=True)
-class Request:
-    """One agent's request for one task in one decision round, and whether it won."""
+class Bid:
+    """One agent's bid for one task in one decision round (what the MAGNNET paper calls the
+    agent's request; a request of the domain is a trip, :class:`dispatch.tasks.Request`), and
+    whether it won."""
 
     round: int
     agent_id: int
@@ -396,7 +398,7 @@ class Allocation:
 
     pairs: tuple[tuple[int, int], ...]
     rounds: int = 1
-    requests: tuple[Request, ...] = ()
+    requests: tuple[Bid, ...] = ()
     messages: int = 0
     hops: int = 0
     agent_seconds: tuple[float, ...] = field(default=(), compare=False)  # wall clock
@@ -422,7 +424,7 @@ class Allocation:
             aid, tid = int(agent_ids[a]), int(task_ids[t])
             pairs.append((aid, tid))
             index.append((a, t))
-            reqs.append(Request(0, aid, tid, float(cost[a, t]), True))
+            reqs.append(Bid(0, aid, tid, float(cost[a, t]), True))
         if cls is not Allocation:  # a subclass may add fields or checks: its own __init__
             return cls(pairs=tuple(pairs), rounds=1, requests=tuple(reqs), messages=0)
         return cls(pairs=tuple(pairs), rounds=1, requests=tuple(reqs), messages=0,

@@ -53,7 +53,7 @@ from abc import abstractmethod
 import numpy as np
 
 from dispatch.comms import Channel, relay_needed
-from dispatch.contracts import Allocation, AllocationProblem, Allocator, Request
+from dispatch.contracts import Allocation, AllocationProblem, Allocator, Bid
 from dispatch.errors import AllocationError
 
 #: What :meth:`DecentralizedAllocator.choose` returns for an agent that requests nothing this
@@ -147,7 +147,7 @@ def run_rounds(
     taken = np.zeros(m, dtype=bool)  # the arbiters' truth
     relay = np.zeros((n, m), dtype=bool)  # news each agent passes on in its next broadcast
     seconds = np.zeros(n)
-    requests: list[Request] = []
+    requests: list[Bid] = []
     rounds = messages = hops = 0
     for r in range(problem.max_rounds):
         believed_open = ~known
@@ -187,7 +187,7 @@ def run_rounds(
                                      agent_ids[req_agents].tolist(),
                                      task_ids[req_tasks].tolist(),
                                      problem.cost[req_agents, req_tasks].tolist()):
-            requests.append(Request(rnd, aid, tid, c, winners.get(t) == a))
+            requests.append(Bid(rnd, aid, tid, c, winners.get(t) == a))
         for t, a in winners.items():
             agent_task[a] = t
             taken[t] = True

@@ -52,7 +52,7 @@ The dispatcher is handed what it needs (the task book, the fleet, the operator t
 to vehicles, the planner, the allocator, the space, its configuration) and reaches into nothing
 else; each decision goes to ``on_decision`` (the recorder). It decides and hands out; the plan
 machinery (insertion costs, the problem's plans) is :mod:`dispatch.plans`'s and the checking of
-an answer :mod:`dispatch.answers`'s (``validate`` and ``route_stops`` are importable from here).
+an answer :mod:`dispatch.answers`'s.
 """
 
 from __future__ import annotations
@@ -66,8 +66,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-# answer checking; validate and route_stops stay importable from here (plugins' tests use them)
-from dispatch.answers import finders, route_stops, validate  # noqa: F401
+from dispatch.answers import finders, route_stops, validate
 from dispatch.comms import comm_graph, components
 from dispatch.contracts import AgentViews, Allocation, AllocationProblem, Allocator, Planner
 from dispatch.errors import AllocationError, DispatchError, PluginError
@@ -81,7 +80,7 @@ from dispatch.tasks import OPEN, TaskBook, TaskState
 if TYPE_CHECKING:
     import simpy
 
-    from dispatch.scenario import CommsConfig, DispatchConfig
+    from dispatch.config import CommsConfig, DispatchConfig
     from dispatch.vehicles import Fleet, Operator
 
 log = logging.getLogger(__name__)
@@ -107,7 +106,7 @@ def _positions(space: Space, agents) -> np.ndarray:
 
 class DecisionDeferred(BaseException):
     """Raised by an allocator's ``allocate`` to answer the decision later, from outside the
-    simulation (:mod:`dispatch.rl`): the dispatcher's loop waits for ``resume`` (an event
+    simulation (:mod:`learning.rl`): the dispatcher's loop waits for ``resume`` (an event
     the deferring code triggers at the same simulated instant, once it holds the answer) and
     then decides again (see :meth:`Dispatcher._decide_or_defer`). A ``BaseException`` so
     that the dispatcher's wrapping of plugin errors lets it through; raise it only before
@@ -237,11 +236,11 @@ class Dispatcher:
 
     def _decide_or_defer(self):
         """:meth:`decide`, or, when the allocator defers it (:class:`DecisionDeferred`: the
-        answer comes from outside the simulation, see :mod:`dispatch.rl`), wait for the
+        answer comes from outside the simulation, see :mod:`learning.rl`), wait for the
         deferring allocator's ``resume`` event and decide again: nothing moved meanwhile (the
         event is triggered at the same instant, ahead of the events already queued), so the
         same problem is built again and the allocator now answers it. The hook that lets
-        :mod:`dispatch.rl` drive decisions step by step without threads; a run with an
+        :mod:`learning.rl` drive decisions step by step without threads; a run with an
         ordinary allocator goes through :meth:`decide` exactly as before."""
         try:
             self.decide()

@@ -65,7 +65,7 @@ SCHEMAS: dict[str, pa.Schema] = {
         # tasks that had a vehicle when they closed: total_cost / tasks_assigned is the mean
         # planned cost of an assignment (the dynamic benchmark's per-task cost)
         ("tasks_assigned", _I),
-        # what the allocator says it ran (JSON object of strings; see dispatch.sim.describe)
+        # what the allocator says it ran (JSON object of strings; see dispatch.plugins.describe)
         ("allocator_info", _S),
         # shared rides: passenger-metres; occupancy = passenger_distance / distance (MATSim
         # DRT's); share of completed rides shared; mean delay (drop-off - release - direct

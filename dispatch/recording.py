@@ -1,10 +1,10 @@
 """The run's subscribers that write its rows: events, tasks, decisions and vehicles.
 
-Each subscriber builds its table's rows by column *name*: a row builder is made once per run
-from :data:`dispatch.recorder.SCHEMAS` and a mapping of column names to what they hold, so a
-column added to a schema without saying what it holds fails when the run starts (a
-``KeyError`` naming it), never as values shifted into the wrong columns. The builders feed the
-recorder's fast path (one tuple per row, in the schema's order).
+Each table's row is a plain function returning one tuple in the schema's order (the
+recorder's fast path), beside the tuple of the columns it fills; each writer checks that tuple
+against :data:`dispatch.recorder.SCHEMAS` when the run starts (:func:`check_columns`), so a
+column added to a schema without a value fails then (a ``KeyError`` naming it), never as values
+shifted into the wrong columns.
 
 * :func:`event_writer`: subscribes to the event bus (every event a row of ``events``; where it
   happened is looked up per chunk, for the whole chunk at once);
@@ -21,9 +21,6 @@ recorder's fast path (one tuple per row, in the schema's order).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from typing import Any
-
 import numpy as np
 
 from dispatch import space_files
@@ -33,108 +30,123 @@ from dispatch.stats import RunStats
 NAN3 = (math.nan, math.nan, math.nan)
 
 
-def row_builder(table: str, columns: dict[str, str], args: str) -> Callable[..., tuple]:
-    """``build(*args) -> row``: a function of ``args`` (its parameter list) returning the
-    tuple of ``table``'s columns (all but ``run_id``) in the schema's order, each computed by
-    the expression ``columns[name]`` (Python over ``args``). Compiled once: a row costs one
-    call, as a hand-written tuple would."""
-    names = [n for n in SCHEMAS[table].names if n != "run_id"]
-    missing = [n for n in names if n not in columns]
-    extra = sorted(set(columns) - set(names))
-    if missing or extra:
-        raise KeyError(f"{table}: no value for column(s) {missing}; unknown {extra}")
-    body = ", ".join(f"({columns[n]})" for n in names)
-    scope: dict[str, Any] = {}
-    exec(f"def build({args}):\n    return ({body},)\n", scope)  # noqa: S102 - our own text
-    return scope["build"]
+def check_columns(table: str, columns: tuple[str, ...]) -> None:
+    """KeyError naming the difference unless ``columns`` are ``table``'s columns but ``run_id``,
+    in the schema's order: what a row function says it returns (a column added to a schema
+    without a value fails when the run starts, never as values shifted into other columns)."""
+    names = tuple(n for n in SCHEMAS[table].names if n != "run_id")
+    if columns != names:
+        missing = [n for n in names if n not in columns]
+        extra = [n for n in columns if n not in names]
+        raise KeyError(f"{table}: no value for column(s) {missing}; unknown {extra}"
+                       + ("" if missing or extra else f"; schema order {list(names)}"))
 
 
-#: the ``tasks`` table: each column from the task ``t`` and the positions of its pickup ``p``
-#: and drop-off ``d``
-TASK_COLUMNS = {
-    "task_id": "t.id", "kind": "t.kind", "x": "p[0]", "y": "p[1]", "z": "p[2]",
-    "dropoff_x": "d[0]", "dropoff_y": "d[1]", "dropoff_z": "d[2]",
-    "released_at": "t.released_at", "max_wait": "t.max_wait", "snap_m": "t.snap_m",
-    "dropoff_snap_m": "t.dropoff_snap_m", "assigned_at": "t.assigned_at",
-    "agent_id": "t.agent_id", "cost": "t.cost", "picked_up_at": "t.picked_up_at",
-    "completed_at": "t.completed_at", "state": "t.state._value_", "conflicted": "t.conflicted",
-    "closed_at": "t.closed_at", "reassigned": "t.reassigned", "transfers": "t.transfers",
-    "passengers": "t.passengers", "direct_time": "t.direct_time", "max_delay": "t.max_delay",
-    "shared": "t.shared",
-}
-#: the ``decisions`` table: from the decision's number ``i``, problem ``p``, allocation ``a``
-#: and figures
-DECISION_COLUMNS = {
-    "decision": "i", "t": "float(p.time)", "n_idle": "p.n_agents", "n_tasks": "p.n_tasks",
-    "n_assigned": "len(a.pairs)", "rounds": "a.rounds", "messages": "a.messages",
-    "conflicts": "len(a.conflicted_tasks())", "total_cost": "total",
-    "cost_seconds": "cost_s", "decide_seconds": "decide_s", "hops": "hops",
-    "comm_delay": "comm_delay", "agent_seconds": "agent_seconds",
-    "comm_components": "components",
-}
-#: the ``assignments`` table: one row per request ``r`` of decision ``i``
-ASSIGNMENT_COLUMNS = {
-    "decision": "i", "round": "r.round", "agent_id": "r.agent_id", "task_id": "r.task_id",
-    "cost": "r.cost", "won": "r.won", "alloc_seconds": "alloc_s",
-}
-#: the ``vehicles`` table: from the vehicle ``v``, its start position ``p``, the seconds it
-#: was down ``down`` and the counts of reservation-based execution ``c``
-VEHICLE_COLUMNS = {
-    "agent_id": "v.id", "kind": "v.kind", "speed": "v.speed", "x0": "p[0]", "y0": "p[1]",
-    "z0": "p[2]", "distance": "v.distance", "empty_distance": "v.empty_distance",
-    "occupied_distance": "v.occupied_distance", "busy_seconds": "v.busy_seconds",
-    "tasks_completed": "v.completed", "waits": "c['waits']", "replans": "c['replans']",
-    "wait_seconds": "c['wait_seconds']", "failures": "v.failures", "down_seconds": "down",
-    "capacity": "v.capacity", "passenger_distance": "v.passenger_distance",
-    "kwh_drawn": "b.drawn if b else nan", "kwh_charged": "b.charged if b else nan",
-    "charge_seconds": "b.charge_seconds if b else nan",
-    "queue_seconds": "b.queue_seconds if b else nan",
-    "soc_min": "b.kwh_min / b.capacity if b else nan", "soc_end": "b.soc if b else nan",
-}
+#: the columns :func:`task_row` returns, in order
+TASK_COLUMNS = (
+    "task_id", "kind", "x", "y", "z", "dropoff_x", "dropoff_y", "dropoff_z", "released_at",
+    "max_wait", "snap_m", "dropoff_snap_m", "assigned_at", "agent_id", "cost", "picked_up_at",
+    "completed_at", "state", "conflicted", "closed_at", "reassigned", "transfers", "passengers",
+    "direct_time", "max_delay", "shared")
+
+
+def task_row(t, p, d) -> tuple:
+    """The ``tasks`` row of the task ``t`` with the positions of its pickup ``p`` and drop-off
+    ``d`` (:data:`TASK_COLUMNS`)."""
+    return (t.id, t.kind, p[0], p[1], p[2], d[0], d[1], d[2], t.released_at,
+            t.max_wait, t.snap_m, t.dropoff_snap_m, t.assigned_at, t.agent_id, t.cost,
+            t.picked_up_at, t.completed_at, t.state._value_, t.conflicted, t.closed_at,
+            t.reassigned, t.transfers, t.passengers, t.direct_time, t.max_delay, t.shared)
+
+
+#: the columns :func:`decision_row` returns, in order
+DECISION_COLUMNS = (
+    "decision", "t", "n_idle", "n_tasks", "n_assigned", "rounds", "messages", "conflicts",
+    "total_cost", "cost_seconds", "decide_seconds", "hops", "comm_delay", "agent_seconds",
+    "comm_components")
+
+
+def decision_row(i: int, p, a, total: float, cost_s: float, decide_s: float, hops: int,
+                 comm_delay: float, agent_seconds: float, components: int) -> tuple:
+    """The ``decisions`` row of decision ``i``: its problem ``p``, allocation ``a`` and figures
+    (:data:`DECISION_COLUMNS`)."""
+    return (i, float(p.time), p.n_agents, p.n_tasks, len(a.pairs), a.rounds, a.messages,
+            len(a.conflicted_tasks()), total, cost_s, decide_s, hops, comm_delay,
+            agent_seconds, components)
+
+
+#: the columns :func:`assignment_row` returns, in order
+ASSIGNMENT_COLUMNS = ("decision", "round", "agent_id", "task_id", "cost", "won", "alloc_seconds")
+
+
+def assignment_row(i: int, r, alloc_s: float) -> tuple:
+    """The ``assignments`` row of the bid ``r`` (:class:`dispatch.contracts.Bid`) of decision
+    ``i`` (:data:`ASSIGNMENT_COLUMNS`)."""
+    return (i, r.round, r.agent_id, r.task_id, r.cost, r.won, alloc_s)
+
+
+#: the columns :func:`vehicle_row` returns, in order
+VEHICLE_COLUMNS = (
+    "agent_id", "kind", "speed", "x0", "y0", "z0", "distance", "empty_distance",
+    "occupied_distance", "busy_seconds", "tasks_completed", "waits", "replans", "wait_seconds",
+    "failures", "down_seconds", "capacity", "passenger_distance", "kwh_drawn", "kwh_charged",
+    "charge_seconds", "queue_seconds", "soc_min", "soc_end")
+
+
+def vehicle_row(v, p, down: float, c, b) -> tuple:
+    """The ``vehicles`` row of the vehicle ``v``: its start position ``p``, the seconds it was
+    down ``down``, the counts of reservation-based execution ``c`` and its battery ``b`` (None:
+    no energy model; its columns NaN) (:data:`VEHICLE_COLUMNS`)."""
+    if b is None:
+        energy = (math.nan,) * 6
+    else:
+        energy = (b.drawn, b.charged, b.charge_seconds, b.queue_seconds,
+                  b.kwh_min / b.capacity, b.soc)
+    return (v.id, v.kind, v.speed, p[0], p[1], p[2], v.distance, v.empty_distance,
+            v.occupied_distance, v.busy_seconds, v.completed, c["waits"], c["replans"],
+            c["wait_seconds"], v.failures, down, v.capacity, v.passenger_distance, *energy)
 
 
 class TaskWriter:
     """Subscriber of the task book's closures: the task's ``tasks`` row."""
 
     def __init__(self, recorder, space) -> None:
+        check_columns("tasks", TASK_COLUMNS)
         self.append, self.position = recorder.append, space.position
-        self.build = row_builder("tasks", TASK_COLUMNS, "t, p, d")
 
     def __call__(self, t) -> None:
         p = self.position(t.loc if t.origin is None else t.origin)
         d = NAN3 if t.dropoff is None else self.position(t.dropoff)
-        self.append("tasks", self.build(t, p, d))
+        self.append("tasks", task_row(t, p, d))
 
 
 class DecisionWriter:
     """The dispatcher's ``on_decision``: a ``decisions`` row and one ``assignments`` row per
-    request of the decision's rounds."""
+    bid of the decision's rounds."""
 
     def __init__(self, recorder) -> None:
+        check_columns("decisions", DECISION_COLUMNS)
+        check_columns("assignments", ASSIGNMENT_COLUMNS)
         self.append = recorder.append
-        self.decision = row_builder("decisions", DECISION_COLUMNS,
-                                    "i, p, a, total, cost_s, decide_s, hops, comm_delay, "
-                                    "agent_seconds, components")
-        self.request = row_builder("assignments", ASSIGNMENT_COLUMNS, "i, r, alloc_s")
 
     def __call__(self, index: int, problem, allocation, total: float, cost_s: float,
                  decide_s: float, *, hops: int = 0, comm_delay: float = 0.0,
                  agent_seconds: float = math.nan, components: int = 1) -> None:
-        append, alloc_s, request = self.append, cost_s + decide_s, self.request
+        append, alloc_s = self.append, cost_s + decide_s
         for r in allocation.requests:
-            append("assignments", request(index, r, alloc_s))
-        append("decisions", self.decision(index, problem, allocation, total, cost_s, decide_s,
-                                          hops, comm_delay, agent_seconds, components))
+            append("assignments", assignment_row(index, r, alloc_s))
+        append("decisions", decision_row(index, problem, allocation, total, cost_s, decide_s,
+                                         hops, comm_delay, agent_seconds, components))
 
 
 def write_vehicles(recorder, space, vehicles, now: float, counts) -> None:
     """The ``vehicles`` rows at the end of a run (``counts(v)``: its waits, replans and
     wait_seconds)."""
-    build = row_builder("vehicles", VEHICLE_COLUMNS, "v, p, down, c, b, nan=float('nan')")
+    check_columns("vehicles", VEHICLE_COLUMNS)
     for v in vehicles:
         down = v.down_seconds + (now - v.down_since if v.failed else 0.0)
-        recorder.append("vehicles", build(v, space.position(v.start), down, counts(v),
-                                          v.battery))
+        recorder.append("vehicles", vehicle_row(v, space.position(v.start), down, counts(v),
+                                                v.battery))
 
 
 def event_writer(recorder, space):

@@ -4,8 +4,8 @@ A run of a scenario is one point of its sweep: an allocator, a planner, a reposi
 window, a fleet size N and a seed. :data:`RUN_KEYS` lists them (with the scenario, which a
 sweep does not vary), in the order of the Hive partitions and of the run id. Everything that
 walks the sweep's dimensions reads this tuple: the ``[sweep]`` lists a scenario expands
-(:meth:`dispatch.scenario.Scenario.runs`), the run's partition and run id
-(:class:`dispatch.scenario.RunSpec`), the settings a run's point replaces in a scenario's digest
+(:meth:`dispatch.config.Scenario.runs`), the run's partition and run id
+(:class:`dispatch.config.RunSpec`), the settings a run's point replaces in a scenario's digest
 (:mod:`dispatch.runner`), the ``dispatch.run_keys`` metadata every file of a run carries (so
 that readers, :mod:`analysis` among them, learn the run keys from the files) and the
 instance a run is paired on in the CLI's tables (every run key but the allocator).
@@ -31,7 +31,7 @@ class RunKey:
     """One dimension of a run.
 
     ``name``: the summary column, the Hive partition key and the name in ``dispatch.run_keys``.
-    ``sweep``: its ``[sweep]`` list (:class:`dispatch.scenario.SweepConfig` field; None: not
+    ``sweep``: its ``[sweep]`` list (:class:`dispatch.config.SweepConfig` field; None: not
     swept). ``setting``: ``(table, key)`` of the scenario setting a run's value replaces
     (``""``: top level; None: none). ``tag``: the prefix of its value in the run id.
     ``optional``: named in the partition and run id only where the scenario declares it.

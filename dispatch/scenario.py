@@ -3,8 +3,8 @@
 
 Every mistake (an unknown key, a wrong type, an impossible value) raises one
 :class:`~dispatch.errors.ScenarioError` that names the file, the dotted key and the reason.
-See ``scenarios/README.md`` for every key with its default. The configuration classes are
-re-exported here (``from dispatch.scenario import Scenario`` keeps working).
+See ``scenarios/README.md`` for every key with its default; the configuration classes are
+:mod:`dispatch.config`'s.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-from dispatch.config import (  # noqa: F401  (re-exported: the configuration's public names)
+from dispatch.config import (
     LIMITS,
     MAX_AXIS_CELLS,
     MAX_SEED,
@@ -496,7 +496,7 @@ def _parse_reposition(r: _Table, sweep: SweepConfig, s: _Table) -> RepositionCon
     """``[reposition]``: the policy (an installed repositioner), its timer and look-back, and
     one ``[reposition.<name>]`` table of constructor arguments per policy that runs. Names are
     checked against the installed repositioners here; a policy's own arguments are checked by
-    its constructor, the space it serves by :func:`dispatch.sim.check_repositioner`
+    its constructor, the space it serves by :func:`dispatch.plugins.check_repositioner`
     (``dispatch validate`` does both)."""
     from dispatch import registry
 

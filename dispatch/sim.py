@@ -32,37 +32,17 @@ from dispatch.dispatcher import Dispatcher
 from dispatch.energy import Charging, Energy
 from dispatch.events import EventBus
 from dispatch.faults import FaultInjector, blackout_filter
-from dispatch.plugins import (check_repositioner, check_runs, describe, make_charger,
-                              make_plugin, make_repositioner)
+from dispatch.plugins import (check_repositioner, describe, make_charger, make_plugin,
+                              make_repositioner)
 from dispatch.recording import RunRecording
 from dispatch.reposition import Repositioning, summary_of
 from dispatch.space import space_for
 from dispatch.streams import (STREAM_ALLOCATOR, STREAM_CHARGING, STREAM_FAULTS, STREAM_FLEET,
-                              STREAM_REPOSITION, STREAM_SOURCE, STREAM_TASKS, STREAM_WORLD,
-                              rng_for)
+                              STREAM_REPOSITION, STREAM_SOURCE, STREAM_TASKS, rng_for)
 from dispatch.tasks import Task, TaskBook, TaskSource, TaskState
 from dispatch.vehicles import Fleet, Operator, stop_leg
 
 log = logging.getLogger(__name__)
-
-# (the streams, the plugin builders and checks live in dispatch.streams and dispatch.plugins;
-# their names here are kept for the callers that import them from this module)
-__all__ = ["STREAM_ALLOCATOR", "STREAM_CHARGING", "STREAM_FAULTS", "STREAM_FLEET",
-           "STREAM_REPOSITION", "STREAM_SOURCE", "STREAM_TASKS", "STREAM_WORLD", "Simulation",
-           "check_repositioner", "check_runs", "describe", "make_charger", "make_plugin",
-           "make_repositioner", "place_fleet", "rng_for", "space_for", "world_for"]
-
-
-def world_for(cfg, seed: int):
-    """The voxel world of a ``[world]`` configuration and a seed: :func:`space_for` (cached
-    by :func:`dispatch.world.world_for`), kept under this name for its callers."""
-    return space_for(cfg, seed)
-
-
-def place_fleet(space, spec, rng: np.random.Generator) -> list:
-    """The run's vehicles at their start locations: the space's answer
-    (:meth:`dispatch.space.Space.place`), kept under this name for its callers."""
-    return space.place(spec, rng)
 
 
 #: Simulated-time ticks of a run's progress reports (see :class:`Simulation`).

@@ -18,7 +18,7 @@ Two spaces ship with the kernel, registered in :data:`KINDS`:
 * ``"voxel"``: :class:`dispatch.world.World`, the paper's 3D occupancy grid; a location is a
   cell ``(i, j, k)`` (:data:`Cell`);
 * ``"road"``: :class:`dispatch.roads.RoadNetwork`, a directed graph with travel times; a
-  location is a node index (``int``) or, for a vehicle, a :class:`dispatch.roads.RoadPoint`
+  location is a node index (``int``) or, for a vehicle, a :class:`dispatch.legs.RoadPoint`
   (on a node, or part-way along an edge).
 
 A third space is one module with a :class:`Space` subclass (the abstract methods below, and
@@ -50,10 +50,10 @@ import numpy as np
 
 from dispatch.locations import Cell, Location, Position
 
-__all__ = ["KINDS", "Cell", "Location", "Position", "Space", "space_class", "space_for"]
+__all__ = ["KINDS", "Space", "space_class", "space_for"]
 
 #: The spaces, by the kind a scenario's ``[world]`` table parses to
-#: (:attr:`dispatch.scenario.WorldConfig.space`): ``"module:Class"`` of each, imported when
+#: (:attr:`dispatch.config.WorldConfig.space`): ``"module:Class"`` of each, imported when
 #: first asked for (a voxel run never imports the road network's libraries).
 KINDS: dict[str, str] = {"voxel": "dispatch.world:World", "road": "dispatch.roads:RoadNetwork"}
 
@@ -84,7 +84,7 @@ class Space(ABC):
     #: (shared rides, drop-off delay limits, the added_time objective), ``"reassign"``
     #: (re-assignment before pickup), ``"snap"`` (traces of coordinates snapped to it,
     #: ``max_snap``), ``"energy"`` (batteries and charging stations), ``"reposition"`` (the
-    #: kernel drives idle vehicles), ``"rl"`` (:mod:`dispatch.rl`'s environment)
+    #: kernel drives idle vehicles), ``"rl"`` (:mod:`learning.rl`'s environment)
     features: ClassVar[frozenset[str]] = frozenset()
     #: a fleet start file may give a vehicle's node id (a ``node`` column) instead of metres
     start_nodes: ClassVar[bool] = False
@@ -115,7 +115,7 @@ class Space(ABC):
     @classmethod
     def check_size(cls, cfg, limits, refuse) -> None:
         """Refuse (``raise refuse(key, what)``) a space past ``limits``
-        (:class:`dispatch.scenario.Limits`). Default: nothing to bound."""
+        (:class:`dispatch.config.Limits`). Default: nothing to bound."""
 
     @classmethod
     def check_fleet(cls, sc, agents: int, key: str) -> None:

@@ -22,21 +22,18 @@ import math
 from collections import defaultdict
 from statistics import fmean
 
-# One allocator order, one paired gap and one label of a batch window for the CLI's tables and
-# the analysis package, and one interval of a mean (a shared package outside both, standard
-# library only; see their docstrings).
+# One allocator order, one paired gap, one label of a batch window, one set of per-task figures
+# for the CLI's tables and the analysis package, and one interval of a mean (a shared package
+# outside both, standard library only; see their docstrings).
 from dispatch.runkeys import key_names
 from paired.compare import allocator_order, paired_gaps, window_label
+from paired.per_task import per_task, ratio
 from paired.stats import mean_ci
 
 
 def _mean(rows: list[dict], key: str) -> float:
     vals = [float(r[key]) for r in rows if r.get(key) is not None and not math.isnan(r[key])]
     return fmean(vals) if vals else math.nan
-
-
-def _ratio(num: float, den: float) -> float:
-    return num / den if den and not math.isnan(den) and not math.isnan(num) else math.nan
 
 
 def _f(v: float, digits: int = 1, scale: float = 1.0, unit: str = "") -> str:
@@ -75,6 +72,7 @@ def aggregate(summaries: list[dict], reference: str = "hungarian") -> dict[tuple
     out = {}
     for key, pairs in groups.items():
         rows = [s for s, _ in pairs]
+        figures = [per_task(r) for r in rows]
         gs = [g for _, g in pairs if not math.isnan(g)]
         out[key] = {
             "allocator": rows[0]["allocator"],
@@ -87,12 +85,10 @@ def aggregate(summaries: list[dict], reference: str = "hungarian") -> dict[tuple
             "first_decision_seconds": _mean(rows, "first_decision_seconds"),
             "tasks_completed": _mean(rows, "tasks_completed"),
             "n_tasks": _mean(rows, "n_tasks"),
-            "served_share": fmean(_ratio(r["tasks_completed"], r["n_tasks"]) for r in rows),
-            "wait": _mean(rows, "wait_time_mean"),
-            "cost_per_assignment": fmean(
-                _ratio(r["total_cost"], r.get("tasks_assigned", math.nan)) for r in rows),
-            "decision_ms": fmean(1000 * _ratio(r["alloc_seconds"], r["decisions"])
-                                 for r in rows),
+            "served_share": fmean(f["served_share"] for f in figures),
+            "wait": _mean(figures, "wait_mean"),
+            "cost_per_assignment": fmean(f["cost_per_assignment"] for f in figures),
+            "decision_ms": fmean(f["decision_ms"] for f in figures),
         }
     return out
 
@@ -189,12 +185,12 @@ def _ci(rows: list[dict], value) -> tuple[float, float]:
 #: The trip table's figures: (column, digits, scale, unit, value of one run).
 _TRIP_FIGURES = (
     ("trips", 0, 1.0, "", lambda r: r["n_tasks"]),
-    ("served", 1, 100, "%", lambda r: _ratio(r["tasks_completed"], r["n_tasks"])),
-    ("rej.", 1, 100, "%", lambda r: _ratio(r["tasks_rejected"] + r["tasks_expired"]
+    ("served", 1, 100, "%", lambda r: per_task(r)["served_share"]),
+    ("rej.", 1, 100, "%", lambda r: ratio(r["tasks_rejected"] + r["tasks_expired"]
                                            + r.get("tasks_unreachable", 0), r["n_tasks"])),
-    ("canc.", 1, 100, "%", lambda r: _ratio(r["tasks_cancelled"], r["n_tasks"])),
+    ("canc.", 1, 100, "%", lambda r: ratio(r["tasks_cancelled"], r["n_tasks"])),
     ("wait", 1, 1.0, "", lambda r: r["wait_time_mean"]),
-    ("empty", 0, 100, "%", lambda r: _ratio(r["empty_distance"], r["distance"])),
+    ("empty", 0, 100, "%", lambda r: ratio(r["empty_distance"], r["distance"])),
     # thousands of km: a city day fits 80 columns
     ("k km", 1, 1e-6, "", lambda r: r["distance"]),
     ("dec. s", 2, 1.0, "", lambda r: r["alloc_seconds"]),
@@ -285,7 +281,7 @@ def render_one(s: dict, console=None, *, dynamic: bool = False) -> None:
                     f"{s.get('tasks_unreachable', 0)} (rejections {rejected}); cancelled "
                     f"{s['tasks_cancelled']}, failed {s.get('tasks_failed', 0)}")
     t.add_row("wait", f"{_f(s['wait_time_mean'])} s mean, release to pickup")
-    per = _ratio(s["total_cost"], s.get("tasks_assigned", math.nan))
+    per = per_task(s)["cost_per_assignment"]
     if road or dynamic:
         what = ("time added to the vehicle's plan" if s.get("objective") == "added_time"
                 else "vehicle to pickup")
@@ -296,7 +292,7 @@ def render_one(s: dict, console=None, *, dynamic: bool = False) -> None:
         t.add_row("conflict-free", f"{_f(s['conflict_free_rate'], 1, 100)} % of the tasks "
                                    "offered (Table III)")
     km = s.get("distance", math.nan) / 1000
-    empty = _ratio(s.get("empty_distance", math.nan), s.get("distance", math.nan))
+    empty = ratio(s.get("empty_distance", math.nan), s.get("distance", math.nan))
     fleet = f"{_f(km, 1)} km driven"
     if road:
         fleet += f", {_f(empty, 1, 100)} % of it empty"

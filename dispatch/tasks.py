@@ -252,7 +252,9 @@ class TaskBook:
 
 @dataclass(frozen=True, slots=True)
 class Request:
-    """A trip to release: where, and what the trace said about it."""
+    """A trip request to release: where, and what the trace said about it. Released, it is a
+    :class:`Task` (an agent's bid for a task in a decision round is
+    :class:`dispatch.contracts.Bid`)."""
 
     kind: str
     loc: Location
@@ -315,7 +317,7 @@ class TaskSource:
     def of(cls, env: simpy.Environment, book: TaskBook, demand: Demand, tasks, count,
            day_rng: Callable[[], np.random.Generator], rng: np.random.Generator,
            notify: Callable[[], None]) -> TaskSource:
-        """The source of a scenario's ``[tasks]`` (:class:`dispatch.scenario.TaskConfig`)
+        """The source of a scenario's ``[tasks]`` (:class:`dispatch.config.TaskConfig`)
         releasing ``count`` tasks where it has a count (static: the run's). An empirical day
         is drawn now (from ``day_rng()``) and released as a trace."""
         kind, trips = tasks.source, tasks.trips

@@ -254,7 +254,7 @@ def pooled_problem(seed: int, n: int, m: int, capacity: int = 3, *, busy: float 
 
     # the costs a pooled decision has: the earliest pickup (seconds from now) of the request's
     # cheapest feasible insertion into the vehicle's plan, inf where none is feasible
-    from dispatch.dispatcher import route_stops
+    from dispatch.answers import route_stops
 
     drive, cost = cost, np.full((n, m), np.inf)
     draft = build(drives=True)
@@ -352,7 +352,7 @@ def _answer(a: Allocation) -> tuple:
 def _check_routes(problem: AllocationProblem, allocation: Allocation) -> None:
     """AllocationError unless each route of a multi-request answer holds its agent's plan and
     new requests once each, pickups first, within the capacity and every limit."""
-    from dispatch.dispatcher import route_stops
+    from dispatch.answers import route_stops
 
     routes = allocation.routes
     if not routes:
@@ -436,7 +436,7 @@ def _replay(label: str, call: Callable[[], Any], first: Any, differs: list[str],
 
 def check_allocator(cls, *, seed: int = 0, **params: Any) -> Report:
     """Run every allocator check (see the module docstring) on ``cls(**params)``."""
-    from dispatch.dispatcher import validate
+    from dispatch.answers import validate
 
     report, caps = _constructed("allocator", cls, params)
     if not report.ok:
@@ -615,7 +615,7 @@ def _bound_faults(lower, known, ex, c, finite, slack, label: str) -> list[str]:
 def reposition_view(space, vehicles, requests=(), *, time: float = 0.0, horizon: float = 1800.0,
                     targets=None, seed: int = 0):
     """A :class:`~dispatch.reposition.RepositionView` built by hand: ``vehicles`` maps idle
-    vehicle ids to where they are (a node or a :class:`~dispatch.roads.RoadPoint`),
+    vehicle ids to where they are (a node or a :class:`~dispatch.legs.RoadPoint`),
     ``requests`` lists ``(release time, pickup node)`` (all inside the horizon), ``targets``
     maps vehicles already repositioning to their target node."""
     from dispatch.reposition import RepositionView, _readonly
@@ -639,7 +639,7 @@ def reposition_view(space, vehicles, requests=(), *, time: float = 0.0, horizon:
 
 def _reposition_views(space, seed: int):
     """Labelled view factories (each call builds the same view with a fresh rng)."""
-    from dispatch.roads import RoadPoint
+    from dispatch.legs import RoadPoint
 
     g = np.random.default_rng(seed)
     n = space.n

@@ -29,7 +29,8 @@ import simpy
 
 from dispatch.contracts import AgentView, AgentViews
 from dispatch.events import EventBus
-from dispatch.space import Location, Space
+from dispatch.locations import Location
+from dispatch.space import Space
 from dispatch.stops import DROPOFF, PICKUP, Stop, occupancies, schedule
 from dispatch.tasks import COMPLETED, PICKED_UP as PICKED_UP_STATE, Task, TaskBook, TaskState
 

@@ -16,7 +16,7 @@ import numpy as np
 
 from dispatch.locations import Cell
 
-__all__ = ["Box", "Cell", "Grid"]
+__all__ = ["Box", "Grid"]
 
 
 @dataclass(frozen=True)

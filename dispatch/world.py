@@ -6,8 +6,9 @@ the ground layer, where UGVs drive. Obstacles are axis-aligned boxes standing on
 aligned to cell boundaries, separated by at least one free cell so that the free space stays
 passable between them.
 
-The grid and box types are :mod:`dispatch.voxels`'s (kept importable from here): the voxel
-space's parts (demand, motion, drivers, reservations) read them from there, below this module.
+The grid and box types (:class:`~dispatch.voxels.Grid`, :class:`~dispatch.voxels.Box`) are
+:mod:`dispatch.voxels`'s, below this module, where the voxel space's parts (demand, motion,
+drivers, reservations) read them.
 """
 
 from __future__ import annotations
@@ -25,8 +26,6 @@ from dispatch.locations import Cell
 from dispatch.space import Space
 from dispatch.voxels import Box, Grid
 from dispatch.streams import STREAM_WORLD, rng_for
-
-__all__ = ["Box", "Cell", "Grid", "World", "build_world", "place_obstacles", "world_for"]
 
 
 @dataclass(frozen=True, eq=False)

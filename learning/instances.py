@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from dispatch.contracts import AgentView, TaskView
-from dispatch.scenario import RunSpec, Scenario
+from dispatch.config import RunSpec, Scenario
 from dispatch.space import Space
 
 

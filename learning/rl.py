@@ -57,7 +57,8 @@ from simpy.events import URGENT
 from dispatch.contracts import Allocation, AllocationProblem, Allocator
 from dispatch.dispatcher import DecisionDeferred
 from dispatch.errors import AllocationError, ScenarioError
-from dispatch.scenario import RunSpec, Scenario, SweepConfig, load_scenario
+from dispatch.config import RunSpec, Scenario, SweepConfig
+from dispatch.scenario import load_scenario
 from learning.zones import Zones
 
 __all__ = ["Decisions", "DispatchEnv", "FleetEnv", "pairs_from_choices"]

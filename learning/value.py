@@ -296,7 +296,8 @@ def scenario_for(path: str | Path, batch_window: float, hours: float | None = No
                  trips_per_day: float | None = None):
     """The scenario of a study: its sweep dropped, the batch window fixed, optionally a
     shorter run (``hours``) or another demand (``trips_per_day``)."""
-    from dispatch.scenario import SweepConfig, load_scenario
+    from dispatch.config import SweepConfig
+    from dispatch.scenario import load_scenario
 
     sc = load_scenario(path)
     sc = replace(sc, sweep=SweepConfig(),

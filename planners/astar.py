@@ -36,7 +36,8 @@ from __future__ import annotations
 import numpy as np
 
 from dispatch.contracts import AgentView, Planner, TaskView
-from dispatch.world import Cell, World
+from dispatch.locations import Cell
+from dispatch.world import World
 from planners.graph import astar, components, field_cache, field_values, lattice_bound
 
 

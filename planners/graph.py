@@ -18,7 +18,7 @@ length (several fields at once on threads), single pairs by A* with a radix heap
 ``scipy.sparse`` adjacency (``GridGraph.csr``) is built only on request, for references and
 other tools.
 
-Everything here depends only on the immutable :class:`~dispatch.world.Grid`, so it is cached
+Everything here depends only on the immutable :class:`~dispatch.voxels.Grid`, so it is cached
 on ``grid.cache``: the graphs (built once per grid and model) and a :class:`FieldCache` of
 distance fields that owns them, bounded in bytes (the cost path reads fields in place and
 never keeps one, see :func:`field_values`).
@@ -38,7 +38,8 @@ import numpy as np
 from scipy.sparse import csr_matrix
 
 from dispatch.motion import offsets
-from dispatch.world import Cell, Grid
+from dispatch.locations import Cell
+from dispatch.voxels import Grid
 from planners import _fast
 
 #: Most distance fields kept per grid (both movement models together).

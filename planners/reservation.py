@@ -39,7 +39,9 @@ from collections.abc import Callable, Sequence
 from dispatch.contracts import AgentView, Reservations
 from dispatch.motion import offsets
 from dispatch.reservations import EPS, step_box, step_seconds
-from dispatch.world import Cell, Grid, World
+from dispatch.locations import Cell
+from dispatch.voxels import Grid
+from dispatch.world import World
 from planners.astar import AStarPlanner
 from planners.graph import distance_field, graph
 

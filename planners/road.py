@@ -53,7 +53,8 @@ from typing import Any
 import numpy as np
 
 from dispatch.contracts import Planner
-from dispatch.roads import RoadNetwork, RoadPoint
+from dispatch.legs import RoadPoint
+from dispatch.roads import RoadNetwork
 from planners import _road_fast
 
 log = logging.getLogger(__name__)

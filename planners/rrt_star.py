@@ -53,7 +53,8 @@ import numpy as np
 
 from dispatch.contracts import AgentView, Planner, TaskView
 from dispatch.motion import path_length
-from dispatch.world import Cell, World
+from dispatch.locations import Cell
+from dispatch.world import World
 from planners.sampling import (
     GoalCache,
     RayWorld,

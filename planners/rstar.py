@@ -57,7 +57,9 @@ import numpy as np
 
 from dispatch.contracts import AgentView, Planner, TaskView
 from dispatch.motion import octile, offsets
-from dispatch.world import Cell, Grid, World
+from dispatch.locations import Cell
+from dispatch.voxels import Grid
+from dispatch.world import World
 from planners.sampling import (
     GoalCache,
     components,

@@ -28,7 +28,9 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
 from dispatch.motion import offsets
-from dispatch.world import Box, Cell, Grid, World
+from dispatch.locations import Cell
+from dispatch.voxels import Box, Grid
+from dispatch.world import World
 
 _MOVES_KEY = "planners.sampling.moves"
 _COMPONENTS_KEY = "planners.sampling.components"

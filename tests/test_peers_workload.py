@@ -126,7 +126,8 @@ def test_limits_and_jittered_streets(tmp_path):
     """The windows are release + max_wait and release + direct + max_delay; direct times are
     Manhattan distances on the plain grid and Dijkstra's on jittered streets, and the GraphML
     the project reads gives the same fastest times."""
-    from dispatch.roads import read_graphml
+    from dispatch.road_files import read_graphml
+    from dispatch.roads import RoadNetwork
 
     w, t, o, d, s = pw.generate(50, 3, 1.0, seed=2, columns=5, rows=4, max_wait=120.0,
                                 max_delay=300.0)
@@ -142,7 +143,7 @@ def test_limits_and_jittered_streets(tmp_path):
     direct = jw.direct(jo, jd)
     assert not np.allclose(direct, l1) and np.all(np.abs(direct / l1 - 1) <= 0.1 + 1e-12)
     pw.write(tmp_path, jw, jt, jo, jd, js)
-    net = read_graphml(tmp_path / "grid.graphml")
+    net = RoadNetwork.from_graph(read_graphml(tmp_path / "grid.graphml"))
     from scipy.sparse.csgraph import dijkstra
 
     times = dijkstra(net.time)

@@ -15,7 +15,7 @@ from dispatch import registry
 from dispatch.comms import comm_graph, components, diameter
 from dispatch.contracts import AgentView, AllocationProblem, TaskView
 from dispatch.errors import PluginError
-from dispatch.sim import make_plugin
+from dispatch.plugins import make_plugin
 
 from .helpers import assert_valid, index_pairs, make_problem, random_problem, total_cost
 

@@ -10,7 +10,7 @@ import pytest
 
 from allocators.fcfs import FcfsAllocator
 from dispatch.contracts import AgentView, AllocationProblem, TaskView
-from dispatch.dispatcher import validate
+from dispatch.answers import validate
 
 
 def problem(cost, released, agent_ids=None) -> AllocationProblem:

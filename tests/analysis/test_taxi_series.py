@@ -18,6 +18,7 @@ import pytest
 from analysis import metrics as M
 from analysis import taxi_plots as TP
 from analysis.io import open_results
+from paired.compare import window_label
 from analysis.report import write_report
 from dispatch.scenario import load_scenario
 from tests.analysis.helpers import run_tiny_road
@@ -33,8 +34,8 @@ def swept(tmp_path_factory):
 
 
 def test_window_labels_and_titles():
-    assert M.window_label(0.0) == "imm"
-    assert M.window_label(30) == "30s" and M.window_label(2.5) == "2.5s"
+    assert window_label(0.0) == "imm"
+    assert window_label(30) == "30s" and window_label(2.5) == "2.5s"
     assert TP.scenario_title(["c", "c"]) == "c"
     assert TP.scenario_title(["b", "a"]) == "a, b"
 

@@ -7,10 +7,11 @@ import numpy as np
 import pytest
 
 from dispatch.contracts import AgentView, AgentViews, AllocationProblem
-from dispatch.dispatcher import validate
+from dispatch.answers import validate
 from dispatch.contracts import Allocation
 from dispatch.errors import AllocationError
-from dispatch.roads import RoadPoint, manhattan
+from dispatch.legs import RoadPoint
+from dispatch.roads import manhattan
 from dispatch.vehicles import Fleet, Vehicle
 
 
@@ -68,7 +69,8 @@ def test_one_task_cost_column_equals_scipy_and_the_general_path():
     scipy's Dijkstra plus the seconds left on an edge, and those of its general path."""
     from scipy.sparse.csgraph import dijkstra
 
-    from dispatch.congestion import CongestedPlanner, HourlyFactors
+    from dispatch.congestion import CongestedPlanner
+    from dispatch.hourly import HourlyFactors
     from dispatch.contracts import TaskView
     from planners.road import RoadPlanner
 

@@ -9,7 +9,8 @@ import pytest
 
 from dispatch import cli
 from dispatch.errors import ScenarioError
-from dispatch.scenario import load_scenario, safe_name
+from dispatch.config import Limits, safe_name
+from dispatch.scenario import load_scenario
 from tests.conftest import ROOT, write_scenario
 
 CHECKPOINTS = ROOT / "allocators" / "magnnet" / "checkpoints"
@@ -119,9 +120,9 @@ def test_file_size_limits_and_force(tmp_path, capsys, monkeypatch):
     path = write_scenario(tmp_path, tasks={"source": "trace", "trace": "t.csv",
                                            "ground_fraction": None})
     (tmp_path / "t.csv").write_text("t,x,y,z\n0,1.5,1.5,0.5\n", encoding="utf-8")
-    monkeypatch.setattr(scenario, "LIMITS", scenario.Limits(file_bytes=50, input_bytes=10))
+    monkeypatch.setattr(scenario, "LIMITS", Limits(file_bytes=50, input_bytes=10))
     assert "MiB is refused" in one_line_error(path, capsys)
-    monkeypatch.setattr(scenario, "LIMITS", scenario.Limits(input_bytes=10))
+    monkeypatch.setattr(scenario, "LIMITS", Limits(input_bytes=10))
     err = one_line_error(path, capsys)
     assert "t.csv" in err and "--force" in err
     code, text, _ = validate(path, "--force", capsys=capsys)

@@ -14,7 +14,8 @@ import pytest
 from scipy.stats import chisquare
 
 from dispatch import cli
-from dispatch.congestion import NO_CONGESTION, CongestedPlanner, HourlyFactors, calibrate, scale_leg
+from dispatch.congestion import CongestedPlanner, scale_leg
+from dispatch.hourly import NO_CONGESTION, HourlyFactors, calibrate
 from dispatch.empirical import (
     MIN_POOL,
     WEEKDAYS,
@@ -24,7 +25,8 @@ from dispatch.empirical import (
     load_sample,
     pickup_weights,
 )
-from dispatch.roads import RoadPoint, load_network, manhattan
+from dispatch.legs import RoadPoint
+from dispatch.roads import load_network, manhattan
 from dispatch.runner import default_out, run_one
 from dispatch.scenario import load_scenario
 from tests.dispatch.test_trips import road_scenario, write_csv

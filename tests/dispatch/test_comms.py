@@ -21,12 +21,13 @@ from dispatch.comms import (
     neighbours,
     relay_needed,
 )
-from dispatch.contracts import Allocation, Request
+from dispatch.contracts import Allocation, Bid
 from dispatch.decentralized import DecentralizedAllocator, run_rounds
 from dispatch import registry
 from dispatch.errors import PluginError, ScenarioError
 from dispatch.runner import run_one
-from dispatch.scenario import CommsConfig, load_scenario
+from dispatch.config import CommsConfig
+from dispatch.scenario import load_scenario
 from tests.allocators.helpers import assert_valid, make_problem, random_problem
 from tests.dispatch.test_determinism import bitwise
 
@@ -208,8 +209,8 @@ def test_stale_request_loses_and_is_a_conflict():
     assert sorted(a.pairs) == [(100, 500), (101, 501)]
     assert a.conflicted_tasks() == {500}
     # A request in a later round for a task won earlier is a conflict too.
-    late = Allocation(pairs=((100, 500),), requests=(Request(0, 100, 500, 1.0, True),
-                                                     Request(2, 101, 500, 2.0, False)))
+    late = Allocation(pairs=((100, 500),), requests=(Bid(0, 100, 500, 1.0, True),
+                                                     Bid(2, 101, 500, 2.0, False)))
     assert late.conflicted_tasks() == {500}
 
 

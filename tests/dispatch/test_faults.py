@@ -260,7 +260,7 @@ def test_breakdowns_with_reservations_keep_vehicles_apart(tmp_path, seed, on_boa
     shares a cell; every task still ends once."""
     from tests.dispatch.test_reservations import Recorded, check_run
 
-    from dispatch.sim import world_for
+    from dispatch.world import world_for
 
     path = write_scenario(tmp_path, world={"size": [10, 10, 3]},
                           obstacles={"count": 8, "min_size": [1, 1, 3], "max_size": [3, 3, 3]},

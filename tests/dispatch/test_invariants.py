@@ -26,8 +26,9 @@ import pytest
 
 from dispatch.motion import step_is_legal, step_length
 from dispatch.runner import RunResult, run_one
-from dispatch.scenario import RunSpec, load_scenario
-from dispatch.sim import world_for
+from dispatch.config import RunSpec
+from dispatch.scenario import load_scenario
+from dispatch.world import world_for
 from tests.conftest import write_scenario
 
 SOURCES = ("static", "periodic", "poisson", "trace_csv", "trace_parquet")

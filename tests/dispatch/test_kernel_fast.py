@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dispatch.roads import Leg, RoadPoint, load_network, manhattan
+from dispatch.legs import Leg, RoadPoint
+from dispatch.roads import load_network, manhattan
 
 
 @pytest.fixture(scope="module")
@@ -115,7 +116,7 @@ def test_recorder_constant_column(value, n):
 
 
 def test_centralized_allocation_equals_the_constructed_one():
-    from dispatch.contracts import Allocation, AllocationProblem, Request
+    from dispatch.contracts import Allocation, AllocationProblem, Bid
 
     rng = np.random.default_rng(5)
     cost = rng.uniform(1, 9, (4, 3))
@@ -125,8 +126,8 @@ def test_centralized_allocation_equals_the_constructed_one():
     problem.__dict__["_task_ids"] = np.array([7, 8, 9])
     got = Allocation.centralized(problem, [(2, 0), (0, 2)])
     want = Allocation(pairs=((12, 7), (10, 9)), rounds=1, messages=0,
-                      requests=(Request(0, 12, 7, float(cost[2, 0]), True),
-                                Request(0, 10, 9, float(cost[0, 2]), True)))
+                      requests=(Bid(0, 12, 7, float(cost[2, 0]), True),
+                                Bid(0, 10, 9, float(cost[0, 2]), True)))
     # besides the fields, the answer made by index carries its (row, column) pairs: a hint
     # that dispatch.answers.validate verifies against the problem
     assert got.index == ((2, 0), (0, 2))
@@ -173,7 +174,7 @@ def test_event_rows_placed_per_chunk_equal_per_event_positions(tmp_path, flush_r
 
     import pyarrow.parquet as pq
 
-    from dispatch.roads import RoadPoint
+    from dispatch.legs import RoadPoint
     from dispatch.runner import make_recorder
     from dispatch.scenario import load_scenario
     from dispatch.sim import Simulation

@@ -18,7 +18,7 @@ from scipy.optimize import linear_sum_assignment
 import tests.dispatch.test_invariants as inv
 from allocators.hungarian import HungarianAllocator
 from dispatch.contracts import AgentView, AllocationProblem, TaskView
-from dispatch.dispatcher import validate
+from dispatch.answers import validate
 from dispatch.errors import ScenarioError
 from dispatch.lazy import certify, in_time, resolve_open
 from dispatch.scenario import load_scenario
@@ -110,7 +110,8 @@ def test_lazy_decision_is_optimal_for_the_exact_matrix(seed):
 
 def _copy(world):
     """The same world on a new grid (its own, empty cache)."""
-    from dispatch.world import Grid, World
+    from dispatch.voxels import Grid
+    from dispatch.world import World
 
     return World(size=world.size, grid=Grid(np.array(world.grid.occupied), world.grid.cell),
                  boxes=())
@@ -178,7 +179,8 @@ def test_a_walled_in_pocket_is_unreachable_with_lazy_costs(tmp_path, monkeypatch
     """Tasks in a free column walled in on every side (no obstacle at their cell: only the
     components tell) end ``unreachable``, as with exact costs; the others are served."""
     from dispatch import world as sim  # the voxel space's module builds (and caches) worlds
-    from dispatch.world import Grid, World
+    from dispatch.voxels import Grid
+    from dispatch.world import World
 
     real = sim.build_world
 

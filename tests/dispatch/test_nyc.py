@@ -22,7 +22,8 @@ import pytest
 from pyproj import Transformer
 
 from dispatch.errors import ScenarioError
-from dispatch.roads import load_network, manhattan_osm_file, read_graphml, read_node_link
+from dispatch.road_files import manhattan_osm_file, read_graphml, read_node_link
+from dispatch.roads import RoadNetwork, load_network
 from dispatch.runner import run_metadata, run_one
 from dispatch.scenario import load_scenario
 from dispatch.traces import shipped_trace
@@ -147,15 +148,16 @@ def _osmnx_graphml(doc: dict, path: Path, *, drop: tuple[str, ...] = (), crs=Non
 
 
 def test_osmnx_graphml_unprojected_and_projected_load_alike(tmp_path, net, doc):
-    a = read_graphml(_osmnx_graphml(doc, tmp_path / "city.graphml"))
+    a = RoadNetwork.from_graph(read_graphml(_osmnx_graphml(doc, tmp_path / "city.graphml")))
     assert (a.n, a.n_edges, a.crs) == (net.n, net.n_edges, "EPSG:32618")
     assert list(a.ids) == [str(i) for i in net.ids]
     np.testing.assert_array_equal(a.xy, net.xy)
     np.testing.assert_array_equal(a.time.data, net.time.data)
     np.testing.assert_array_equal(a.length.data, net.length.data)
     # projected by the user (x, y metres in EPSG:32618): the same network, its CRS kept
-    b = read_graphml(_osmnx_graphml(doc, tmp_path / "utm.graphml", crs="EPSG:32618",
-                                    xy=net.xy[[net.index_of(n["id"]) for n in doc["nodes"]]]))
+    b = RoadNetwork.from_graph(read_graphml(_osmnx_graphml(
+        doc, tmp_path / "utm.graphml", crs="EPSG:32618",
+        xy=net.xy[[net.index_of(n["id"]) for n in doc["nodes"]]])))
     assert b.crs == "EPSG:32618"
     np.testing.assert_allclose(b.xy, net.xy, atol=1e-6)
     np.testing.assert_array_equal(b.time.data, net.time.data)
@@ -179,7 +181,7 @@ def test_speed_kph_without_travel_time(tmp_path, doc):
                        {"source": 3, "target": 2, "key": 0, "length": 0.4, "speed_kph": 40.0,
                         "travel_time": 0.0}]}  # OSMnx rounded 0.036 s to 0.0
     (tmp_path / "small.json").write_text(json.dumps(small))
-    net = read_node_link(tmp_path / "small.json")
+    net = RoadNetwork.from_graph(read_node_link(tmp_path / "small.json"))
     i = {k: net.index_of(k) for k in (1, 2, 3)}
     assert net.edge(i[1], i[2]) == pytest.approx((50.0, 1000.0))
     assert net.edge(i[2], i[3]) == pytest.approx((20.0, 100.0))
@@ -187,7 +189,7 @@ def test_speed_kph_without_travel_time(tmp_path, doc):
     assert net.edge(i[3], i[2]) == pytest.approx((0.4 / (40 / 3.6), 0.4))
     assert net.crs.startswith("EPSG:326")
     _osmnx_graphml(small, tmp_path / "small.graphml")
-    g = read_graphml(tmp_path / "small.graphml")
+    g = RoadNetwork.from_graph(read_graphml(tmp_path / "small.graphml"))
     np.testing.assert_allclose(g.time.data, net.time.data)
     np.testing.assert_allclose(g.xy, net.xy)
 
@@ -221,8 +223,8 @@ def test_degrees_without_a_crs_are_read_as_metres_with_a_warning(tmp_path, caplo
                                                      {"id": "b", "x": -73.98, "y": 40.75}],
            "links": [{"source": "a", "target": "b", "length": 800.0, "travel_time": 60.0}]}
     (tmp_path / "nocrs.json").write_text(json.dumps(doc))
-    with caplog.at_level(logging.WARNING, logger="dispatch.roads"):
-        net = read_node_link(tmp_path / "nocrs.json")
+    with caplog.at_level(logging.WARNING, logger="dispatch.road_files"):
+        net = RoadNetwork.from_graph(read_node_link(tmp_path / "nocrs.json"))
     assert "crs = 'epsg:4326'" in caplog.text and net.crs is None
     assert net.edge(0, 1) == net.edge(1, 0) == (60.0, 800.0)  # undirected: both ways
 

@@ -12,7 +12,8 @@ from dispatch.physics import Physics
 from dispatch.runner import make_recorder
 from dispatch.scenario import load_scenario
 from dispatch.tasks import TaskState
-from dispatch.sim import Simulation, world_for
+from dispatch.sim import Simulation
+from dispatch.world import world_for
 from dispatch.world import build_world
 from tests.conftest import write_scenario
 

@@ -282,15 +282,47 @@ def test_dispatch_run_writes_the_one_layout_and_readme_reads_it(tiny_scenario, c
 
 
 def test_rows_are_tied_to_columns_by_name():
-    """Every column of the tables written during a run says what it holds (a schema column
-    without a source, or a source without a column, fails at once, naming it)."""
+    """Every table written during a run declares the columns its row function fills, checked
+    against the schema when the run starts (a schema column without a value, or a value
+    without a column, fails at once, naming it); each value lands in its named column."""
     from dispatch import recording
 
     for table, cols in (("tasks", recording.TASK_COLUMNS),
                         ("decisions", recording.DECISION_COLUMNS),
                         ("assignments", recording.ASSIGNMENT_COLUMNS),
                         ("vehicles", recording.VEHICLE_COLUMNS)):
-        assert set(cols) == set(SCHEMAS[table].names) - {"run_id"}, table
+        recording.check_columns(table, cols)
     with pytest.raises(KeyError, match="shared"):
-        recording.row_builder("tasks", {k: v for k, v in recording.TASK_COLUMNS.items()
-                                        if k != "shared"}, "t, p, d")
+        recording.check_columns("tasks", recording.TASK_COLUMNS[:-1])
+    with pytest.raises(KeyError, match="schema order"):
+        recording.check_columns("assignments", ("round", "decision", "agent_id", "task_id",
+                                                "cost", "won", "alloc_seconds"))
+
+    class Tag(str):
+        """A value that says which attribute it was read from."""
+
+        def __getattr__(self, name):
+            return Tag(f"{self}.{name}" if self else name)
+
+    row = dict(zip(recording.TASK_COLUMNS, recording.task_row(Tag(), "xyz", "XYZ"), strict=True))
+    assert row["task_id"] == "id" and row["state"] == "state._value_"
+    assert (row["x"], row["z"], row["dropoff_y"]) == ("x", "z", "Y")
+    assert all(row[c] == c for c in ("released_at", "max_wait", "snap_m", "dropoff_snap_m",
+                                     "assigned_at", "agent_id", "cost", "picked_up_at",
+                                     "completed_at", "conflicted", "closed_at", "reassigned",
+                                     "transfers", "passengers", "direct_time", "max_delay",
+                                     "shared"))
+    counts = {"waits": "W", "replans": "R", "wait_seconds": "S"}
+    row = dict(zip(recording.VEHICLE_COLUMNS,
+                   recording.vehicle_row(Tag(), "xyz", "down", counts, None), strict=True))
+    assert (row["agent_id"], row["tasks_completed"], row["x0"], row["down_seconds"]) == \
+        ("id", "completed", "x", "down")
+    assert (row["waits"], row["replans"], row["wait_seconds"]) == ("W", "R", "S")
+    assert all(row[c] == c for c in ("kind", "speed", "distance", "empty_distance",
+                                     "occupied_distance", "busy_seconds", "failures",
+                                     "capacity", "passenger_distance"))
+    assert all(math.isnan(row[c]) for c in ("kwh_drawn", "soc_min", "soc_end"))
+    row = dict(zip(recording.ASSIGNMENT_COLUMNS,
+                   recording.assignment_row("i", Tag(), "s"), strict=True))
+    assert row == {"decision": "i", "round": "round", "agent_id": "agent_id",
+                   "task_id": "task_id", "cost": "cost", "won": "won", "alloc_seconds": "s"}

@@ -42,7 +42,8 @@ from dispatch.reservations import (
 )
 from dispatch.runner import RunResult, make_recorder
 from dispatch.scenario import load_scenario
-from dispatch.sim import Simulation, world_for
+from dispatch.sim import Simulation
+from dispatch.world import world_for
 from tests.conftest import write_scenario
 from tests.dispatch.test_determinism import bitwise
 from tests.dispatch.test_invariants import TERMINAL_EVENT, run_scenario
@@ -367,7 +368,8 @@ def corridor_run(tmp_path, monkeypatch, vehicles, tasks, plan, *, service=0.0):
     (release time, cell); ``plan``: which vehicle gets each task (by task id = index)."""
     from dispatch import sim as sim_mod
     from dispatch.vehicles import Vehicle
-    from dispatch.world import Grid, World
+    from dispatch.voxels import Grid
+    from dispatch.world import World
 
     occ = np.ones((8, 4, 1), dtype=bool)
     occ[:, 1, 0] = False

@@ -11,19 +11,9 @@ import numpy as np
 import pytest
 from scipy.sparse.csgraph import connected_components, dijkstra
 
-from dispatch.roads import (
-    MILE,
-    MPH,
-    US_SURVEY_FOOT,
-    Leg,
-    RoadNetwork,
-    RoadPoint,
-    chicago_files,
-    load_network,
-    manhattan,
-    read_graphml,
-    read_tntp,
-)
+from dispatch.legs import Leg, RoadPoint
+from dispatch.road_files import MILE, MPH, US_SURVEY_FOOT, chicago_files, read_graphml, read_tntp
+from dispatch.roads import RoadNetwork, load_network, manhattan
 
 SHARED = Path("/work/shared/data/roads/chicago_regional")
 
@@ -209,7 +199,7 @@ def test_graphml_round_trip(tmp_path):
     g.add_edge("c", "a", length=120.0, speed=4.0)  # 30 s
     path = tmp_path / "tiny.graphml"
     nx.write_graphml(g, path)
-    net = read_graphml(path)
+    net = RoadNetwork.from_graph(read_graphml(path))
     a, b, c = (net.index_of(k) for k in "abc")
     assert net.crs == "EPSG:32616" and net.name == "tiny" and net.n == 3
     assert net.edge(a, b) == (9.0, 130.0)
@@ -226,7 +216,7 @@ def test_graphml_undirected_gets_both_directions(tmp_path):
     g.add_edge(1, 2, length=50.0, speed=10.0)
     path = tmp_path / "u.graphml"
     nx.write_graphml(g, path)
-    net = read_graphml(path)
+    net = RoadNetwork.from_graph(read_graphml(path))
     assert net.crs is None and net.ids == ["1", "2"]
     assert net.edge(0, 1) == (5.0, 50.0) == net.edge(1, 0)
     assert net.index_of(2) == 1
@@ -294,7 +284,7 @@ def _tiny_tntp(tmp_path: Path) -> Path:
 def test_tntp_drops_zones_and_derives_zero_times(tmp_path, caplog):
     net_file = _tiny_tntp(tmp_path)
     with caplog.at_level("INFO", logger="dispatch.roads"):
-        net = read_tntp(net_file, tmp_path / "Tiny_node.tntp")
+        net = RoadNetwork.from_graph(read_tntp(net_file, tmp_path / "Tiny_node.tntp"))
     # zones 1, 2 dropped; node 6 (reached only by 5 -> 6, never left) is outside the largest SCC
     assert list(net.ids) == [3, 4, 5] and net.crs == "EPSG:26771" and net.name == "Tiny"
     assert "dropped 1" in caplog.text

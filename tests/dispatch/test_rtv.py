@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from allocators.rtv import RtvAllocator
-from dispatch.dispatcher import route_stops, validate
+from dispatch.answers import route_stops, validate
 from dispatch.testing import check_allocator, pooled_problem, route_schedule
 from tests.dispatch.test_pooling import _run, check_invariants
 

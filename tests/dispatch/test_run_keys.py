@@ -17,7 +17,8 @@ import pyarrow.parquet as pq
 from dispatch import cli, runkeys
 from dispatch.recorder import SCHEMAS
 from dispatch.runner import _base_settings, run_digest
-from dispatch.scenario import SweepConfig, load_scenario
+from dispatch.config import SweepConfig
+from dispatch.scenario import load_scenario
 from dispatch.tables import print_tables
 from tests.analysis.helpers import run_tiny_road
 

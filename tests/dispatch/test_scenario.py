@@ -359,7 +359,7 @@ def test_obstacle_wider_than_world_is_a_scenario_error(tmp_path):
 
 def test_validated_obstacles_build_for_every_seed(tmp_path):
     from dispatch.errors import WorldError
-    from dispatch.sim import world_for
+    from dispatch.world import world_for
 
     path = write_scenario(tmp_path, obstacles={"count": 2, "min_size": [5, 5, 1],
                                                "max_size": [5, 5, 1]})

@@ -20,9 +20,11 @@ from dispatch import registry
 from dispatch.drivers import CellDriver, Driver, RoadDriver
 from dispatch.errors import PluginError, ScenarioError
 from dispatch.events import EventBus
-from dispatch.roads import RoadNetwork, RoadPoint
+from dispatch.legs import RoadPoint
+from dispatch.roads import RoadNetwork
 from dispatch.scenario import load_scenario
-from dispatch.space import KINDS, Cell, Space, space_class, space_for
+from dispatch.locations import Cell
+from dispatch.space import KINDS, Space, space_class, space_for
 from dispatch.streams import STREAM_FLEET, rng_for
 from dispatch.traces import read_fleet_start
 from dispatch.vehicles import Fleet, Vehicle
@@ -51,7 +53,7 @@ def test_kinds_are_registered_once_and_answer_their_class_questions():
                                     "rl"} <= RoadNetwork.features
 
 
-def test_cell_lives_in_space_and_world_reexports_it():
+def test_cell_is_one_type_from_dispatch_locations():
     from dispatch import contracts, world
 
     assert world.Cell is Cell and contracts.Cell is Cell

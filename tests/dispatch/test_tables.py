@@ -204,3 +204,39 @@ def test_shared_ride_table_with_variants():
                                                                               ["hungarian"])]
     assert labels == [["hungarian", "imm"], ["hungarian", "30s"], ["fcfs", "imm"],
                       ["fcfs", "30s"]]
+
+
+def test_tables_and_analysis_share_one_set_of_per_task_figures():
+    """The CLI's tables and analysis.metrics read each run's per-task figures from one
+    definition (paired.per_task): the same means, a zero or missing denominator giving NaN
+    in both (not a division error, not 0)."""
+    import math
+
+    pd = pytest.importorskip("pandas")
+    from analysis import metrics as M
+    from paired.per_task import PER_TASK, per_task
+
+    runs = []
+    for seed, (done, assigned, decisions) in enumerate(((12000, 400, 9876), (11000, 0, 0),
+                                                        (0, None, 5))):
+        s = {**_summary("greedy", 8, seed), "tasks_completed": done, "wait_time_mean": 30.0 + seed,
+             "tasks_assigned": assigned, "decisions": decisions}
+        runs.append(s)
+    got = [per_task(s) for s in runs]
+    assert got[0] == {"served_share": 12000 / 12345, "wait_mean": 30.0,
+                      "cost_per_assignment": runs[0]["total_cost"] / 400,
+                      "decision_ms": 1000 * 123.456 / 9876}
+    assert math.isnan(got[1]["cost_per_assignment"]) and math.isnan(got[1]["decision_ms"])
+    assert got[2]["served_share"] == 0.0 and math.isnan(got[2]["cost_per_assignment"])
+    dm = M.dynamic_metrics(pd.DataFrame(runs)).iloc[0]
+    agg = aggregate(runs)[("greedy", 8)]
+    for name, key in zip(PER_TASK, ("served_share", "wait", "cost_per_assignment",
+                                    "decision_ms")):
+        values = [g[name] for g in got]
+        mean = sum(values) / len(values)  # NaN where a run's figure is NaN
+        assert dm[f"{name}_mean"] == pytest.approx(
+            sum(v for v in values if not math.isnan(v)) / sum(not math.isnan(v) for v in values))
+        if name == "wait_mean":
+            assert agg[key] == pytest.approx(mean)
+        else:  # the CLI's mean over seeds keeps a NaN (a run without the figure)
+            assert (math.isnan(agg[key]) and math.isnan(mean)) or agg[key] == pytest.approx(mean)

@@ -15,10 +15,11 @@ import pytest
 from scipy.sparse.csgraph import dijkstra
 
 from dispatch.errors import ScenarioError
-from dispatch.roads import RoadPoint, load_network, manhattan
+from dispatch.legs import RoadPoint
+from dispatch.roads import load_network, manhattan
 from dispatch.runner import run_one
 from dispatch.scenario import load_scenario
-from dispatch.sim import check_runs
+from dispatch.plugins import check_runs
 
 ROOT = Path(__file__).resolve().parents[2]
 TAXI = ROOT.parent / "shared" / "data" / "taxi" / "chicago_taxi_trips_sample.csv"

@@ -130,11 +130,11 @@ def test_paper_reading_hand_computed():
     1: agent 1 requests task 2 (wins). The paper's reading: 3 of 4 requests won; ours: task 0
     was in conflict, so 2 of 3 tasks are conflict-free."""
     from benchmarks.paper_ppo import ours, paper_reading
-    from dispatch.contracts import Allocation, Request
+    from dispatch.contracts import Allocation, Bid
 
     a = Allocation(pairs=((0, 0), (2, 1), (1, 2)), rounds=2, requests=(
-        Request(0, 0, 0, 1.0, True), Request(0, 1, 0, 2.0, False),
-        Request(0, 2, 1, 1.0, True), Request(1, 1, 2, 3.0, True)))
+        Bid(0, 0, 0, 1.0, True), Bid(0, 1, 0, 2.0, False),
+        Bid(0, 2, 1, 1.0, True), Bid(1, 1, 2, 3.0, True)))
     assert paper_reading(a) == pytest.approx(3 / 4)
     assert ours(a, 3) == pytest.approx(2 / 3)
 

@@ -17,7 +17,8 @@ from scipy.sparse.csgraph import dijkstra
 
 from dispatch.contracts import AgentView, TaskView
 from dispatch.motion import check_path, offsets, path_length, step_is_legal, step_length
-from dispatch.world import Grid, World
+from dispatch.voxels import Grid
+from dispatch.world import World
 from planners import graph as G
 from planners.astar import AStarPlanner
 
@@ -632,7 +633,8 @@ def test_costs_on_paper_world_equal_scipy_after_moves():
     matrix equals scipy shortest paths on the explicit adjacency, cold and after every vehicle
     moved (fields reused: no new Dijkstra)."""
     from dispatch.scenario import load_scenario
-    from dispatch.sim import STREAM_FLEET, STREAM_TASKS, place_fleet, rng_for, world_for
+    from dispatch.world import world_for
+    from dispatch.streams import STREAM_FLEET, STREAM_TASKS, rng_for
     from dispatch.demand import VoxelDemand
 
     root = Path(__file__).resolve().parents[2]
@@ -640,7 +642,7 @@ def test_costs_on_paper_world_equal_scipy_after_moves():
     spec = scenario.runs(allocator="hungarian", agents=20, seed=3)[0]
     world = world_for(scenario.world, 3)
     grid = world.grid
-    agents = tuple(v.view() for v in place_fleet(world, spec, rng_for(3, STREAM_FLEET)))
+    agents = tuple(v.view() for v in world.place(spec, rng_for(3, STREAM_FLEET)))
     demand = VoxelDemand(grid, 0.5, rng_for(3, STREAM_TASKS))  # ground and air tasks
     tasks = tuple(TaskView(i, (r := demand.draw()).kind, r.loc, 0.0) for i in range(20))
 

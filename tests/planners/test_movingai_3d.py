@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from dispatch.motion import check_path, path_length
-from dispatch.world import Grid
+from dispatch.voxels import Grid
 from planners import graph as G
 
 DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "movingai_3d"

@@ -20,7 +20,8 @@ from dispatch import registry
 from dispatch.contracts import AgentView, TaskView
 from dispatch.motion import check_path, path_length
 from dispatch.reservations import occupancy, overlaps
-from dispatch.world import Grid, World
+from dispatch.voxels import Grid
+from dispatch.world import World
 from planners.astar import AStarPlanner
 from planners.graph import distance_field
 from planners.reservation import ReservationPlanner, safe_intervals, sipp

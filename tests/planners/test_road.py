@@ -12,7 +12,8 @@ from scipy.sparse.csgraph import dijkstra
 
 from dispatch.contracts import Planner
 from dispatch.registry import load
-from dispatch.roads import RoadNetwork, RoadPoint, load_network, manhattan
+from dispatch.legs import RoadPoint
+from dispatch.roads import RoadNetwork, load_network, manhattan
 from planners import road
 from planners.road import RoadPlanner
 
@@ -349,7 +350,8 @@ def test_between_equals_scipy_in_every_form():
     counting what is left of their edge."""
     from scipy.sparse.csgraph import dijkstra
 
-    from dispatch.roads import RoadPoint, manhattan
+    from dispatch.legs import RoadPoint
+    from dispatch.roads import manhattan
     from planners.road import RoadPlanner
 
     net = manhattan(6, 5, 100.0, 10.0)

@@ -9,7 +9,8 @@ import pytest
 from scipy.sparse.csgraph import dijkstra
 
 from dispatch.contracts import AgentView, TaskView
-from dispatch.roads import RoadPoint, load_network, manhattan
+from dispatch.legs import RoadPoint
+from dispatch.roads import load_network, manhattan
 from planners.road import RoadPlanner
 
 

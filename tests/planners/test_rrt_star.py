@@ -16,7 +16,8 @@ from dispatch.contracts import AgentView, TaskView
 from dispatch.motion import check_path, path_length
 from dispatch.runner import run_one
 from dispatch.scenario import load_scenario
-from dispatch.world import Grid, World, build_world
+from dispatch.voxels import Grid
+from dispatch.world import World, build_world
 from planners.graph import distance_field
 from planners.rrt_star import RRTStarPlanner
 from planners.sampling import RayWorld, collision_boxes, segment_cells, snap_polyline

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 from scipy.sparse.csgraph import dijkstra
 
-from dispatch.roads import RoadPoint, manhattan
+from dispatch.legs import RoadPoint
+from dispatch.roads import manhattan
 from dispatch.testing import check_repositioner, reposition_view
 from repositioners.demand import DemandRepositioner, shares
 from repositioners.stay import StayRepositioner
