@@ -7,7 +7,7 @@ Scenario section ``[comms]`` (all optional)::
     loss = 0.1       # probability that one reception of a message is lost (default 0)
 
 Graph
-    At each decision the dispatcher builds the graph over the *idle* agents of that decision
+    At each decision :class:`Hearing` builds the graph over the *idle* agents of that decision
     (the agents of the :class:`~dispatch.contracts.AllocationProblem`) from the centres of their
     cells: two agents are linked when their straight-line distance is at most ``range``.
     Obstacles do not block radio, and busy vehicles do not relay (they are not part of the

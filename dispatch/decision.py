@@ -14,11 +14,12 @@ in the order they run:
    which of them are exact), checked: a :class:`PluginError` naming the planner otherwise.
 4. :func:`reachable`: the requests some vehicle of the decision can reach; those no vehicle of
    the fleet can ever reach are closed ``unreachable`` (:func:`close_unreachable`).
-5. Limits, by the objective: with plans, :func:`insertion_costs` (each request's cheapest
-   feasible insertion into each vehicle's plan); without, :func:`deadlines` (``inf`` where
-   a vehicle would reach the pickup after the deadline; with lazy costs each request's
-   feasibility made exact). A request no vehicle reaches in time is rejected the first time
-   it is offered (:func:`reject_late`).
+5. :meth:`Pipeline.limits`: with plans, the insertion costs by the objective
+   (:func:`dispatch.plans.insertion_costs_of`: each request's cheapest feasible insertion
+   into each vehicle's plan); without, :func:`deadlines` (``inf`` where a vehicle would
+   reach the pickup after the deadline; with lazy costs each request's feasibility made
+   exact, :func:`dispatch.lazy.resolve_open`). A request no vehicle reaches in time is
+   rejected the first time it is offered (:func:`reject_late`).
 6. The energy filter (``[fleet.energy]``, :meth:`dispatch.energy.Energy.filter`): ``inf``
    where a vehicle would end below its reserve.
 7. :func:`keep_servable`: the columns of the requests left out are dropped.
@@ -428,8 +429,32 @@ class Pipeline:
         if servable is not None and not servable.all():
             close_unreachable(self.book, self.fleet, self.costs,
                               [t for t, ok in zip(open_tasks, servable) if not ok], now)
-        limits = [t.deadline for t in open_tasks]
         drive = cost if self.energy_filter is not None else None
+        cost, exact, servable, inserts = self.limits(now, agents, tasks, idle, open_tasks, holder,
+                                                     cost, exact, servable)
+        if drive is not None:  # [fleet.energy]: below the reserve after the trip: inf
+            cost = self.energy_filter(cost, drive, idle, open_tasks)
+        cost_s = time.perf_counter() - t0
+        self.tally.cost_seconds += cost_s
+        if servable is not None:
+            if not servable.any():
+                return None
+            if not servable.all():
+                open_tasks, tasks, cost, exact, inserts = keep_servable(
+                    servable, open_tasks, cost, exact, inserts)
+        comm, apos = self.hearing(agents, now)
+        return Decision(now, idle, agents, open_tasks, tasks, cost, exact, inserts, holder, comm,
+                        cost_s, self.problems.of(now, agents, tasks, idle, comm, apos))
+
+    def limits(self, now: float, agents, tasks, idle: np.ndarray, open_tasks: list,
+               holder: dict, cost: np.ndarray, exact, servable):
+        """``(cost, exact, servable, inserts)`` within every limit: with plans the insertion
+        costs by the objective (and where a busy vehicle's stops would go); without, ``inf``
+        where a vehicle would reach the pickup after the deadline (with lazy costs each
+        request's feasibility made exact). The requests no vehicle reaches in time are left
+        out of ``servable`` (rejected at their first offer); ``servable`` stays None where no
+        limit applies and every request is reachable."""
+        limits = [t.deadline for t in open_tasks]
         inserts: dict = {}
         if self.plans:
             if servable is None:
@@ -448,19 +473,7 @@ class Pipeline:
                 self.tally.lazy_pairs += resolve_open(cost, exact, self.costs.exact(agents, tasks),
                                                       now, limits)
             servable = reject_late(self.book, open_tasks, cost, servable)
-        if drive is not None:  # [fleet.energy]: below the reserve after the trip: inf
-            cost = self.energy_filter(cost, drive, idle, open_tasks)
-        cost_s = time.perf_counter() - t0
-        self.tally.cost_seconds += cost_s
-        if servable is not None:
-            if not servable.any():
-                return None
-            if not servable.all():
-                open_tasks, tasks, cost, exact, inserts = keep_servable(
-                    servable, open_tasks, cost, exact, inserts)
-        comm, apos = self.hearing(agents, now)
-        return Decision(now, idle, agents, open_tasks, tasks, cost, exact, inserts, holder, comm,
-                        cost_s, self.problems.of(now, agents, tasks, idle, comm, apos))
+        return cost, exact, servable, inserts
 
     def answer(self, d: Decision, ask: Ask) -> tuple:
         """``(problem, allocation, allocator seconds, pair indices)`` of decision ``d``:

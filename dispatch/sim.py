@@ -2,10 +2,20 @@
 onto one SimPy environment. Nothing here is reached back into during the run:
 
     TaskSource ──release──▶ TaskBook ◀──assign/pickup/close── Operator (vehicles, drivers)
-        │                      ▲  │                               ▲
-        └──notify──▶ Dispatcher┘  └─on_close─▶ RunRecording      └── Dispatcher.assign
+        │                      ▲  │                               ▲     │
+        │                      │  └─on_close─▶ RunRecording       │     │
+        │         Dispatcher ──┴──────────────assign──────────────┘     │
+        │             ▲   (its Pipeline builds each problem)            │
+        └──call──▶ Wakeup ◀───────────────────call──────────────────────┘
+                   (repositioning and charging call it too)
     every process ──emit──▶ EventBus ──▶ RunRecording (events), the space's mirror, user
                                          subscribers
+
+Everything is built once, in :class:`Simulation`'s constructor, each object from those made
+before it. The one cycle (the operator wakes the dispatcher, the dispatcher drives the
+operator) is broken by the :class:`~dispatch.dispatcher.Wakeup`, made first and handed to
+both; the decision's pipeline (:class:`~dispatch.decision.Pipeline`) gets the energy filter
+and the comms faults when it is built.
 
 The jobs are the owners': the space (:mod:`dispatch.space`) loads itself and answers
 everything about location (demand, where the fleet starts, the driver, its static tables),
