@@ -65,7 +65,7 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 
-def _line(e: BaseException, limit: int = 400) -> str:
+def one_line(e: BaseException, limit: int = 400) -> str:
     """An exception's message on one line, at most ``limit`` characters."""
     text = " ".join(str(e).split())
     return text if len(text) <= limit else text[: limit - 3] + "..."
@@ -108,7 +108,7 @@ class Blame:
 
     def failed(self, kind: str, plugin, e: Exception) -> PluginError:
         """The error to raise for a plugin's exception: one line naming it and where."""
-        reason = _line(e) or "(no message)"
+        reason = one_line(e) or "(no message)"
         return PluginError(f"{self.where(kind, plugin)}: {kind} raised {type(e).__name__}: "
                            f"{reason}")
 

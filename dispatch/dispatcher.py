@@ -70,7 +70,7 @@ from typing import TYPE_CHECKING
 from dispatch.answers import finders, route_stops, validate  # noqa: F401
 from dispatch.comms import components
 from dispatch.contracts import Allocation, AllocationProblem, Allocator
-from dispatch.decision import Blame, Pipeline, Tally, _line
+from dispatch.decision import Blame, Pipeline, Tally, one_line
 from dispatch.errors import AllocationError, DispatchError, PluginError
 from dispatch.heap import keep_large_blocks
 from dispatch.plans import Inserts
@@ -222,9 +222,9 @@ class Dispatcher:
         try:
             allocation = self.allocator.allocate(problem)
         except AllocationError as e:
-            raise AllocationError(f"{self._where()}: {_line(e)}") from e
+            raise AllocationError(f"{self._where()}: {one_line(e)}") from e
         except DispatchError as e:
-            raise PluginError(f"{self._where()}: {_line(e)}") from e
+            raise PluginError(f"{self._where()}: {one_line(e)}") from e
         except Exception as e:  # a plugin's bug: one line naming it and where
             raise self.blame.failed("allocator", self.allocator, e) from e
         decide_s = time.perf_counter() - t1
