@@ -113,7 +113,7 @@ def child(args) -> None:
         summary = sim.run()
         recorder.finish()
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
-    d = sim.dispatcher
+    d = sim.tally
     print(json.dumps({
         "wall": wall, "cpu": cpu, "setup": setup, "calib": calib,
         "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,

@@ -84,7 +84,7 @@ def run(a, seats: int, method: str, fleet: int, seed: int, params: dict | None =
         r = sim.run()
         rec.finish()
         wall = time.perf_counter() - t0
-    d = sim.dispatcher
+    d = sim.tally
     released = r["n_tasks"]
     if a.hours < 24:  # requests released before the cut (the rest never were)
         released = max(1, r["n_tasks"] - r.get("tasks_cancelled", 0))

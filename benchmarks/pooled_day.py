@@ -76,7 +76,7 @@ def child(args) -> None:
             summary = sim.run()
         recorder.finish()
         wall = time.perf_counter() - t0
-    d = sim.dispatcher
+    d = sim.tally
     stats = dict(getattr(sim.allocator, "stats", {}) or {})
     print(json.dumps({
         "wall": wall, "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,

@@ -93,6 +93,7 @@ CHILD = textwrap.dedent("""
     real = A.AStarPlanner.costs
     # the counters: the dispatcher (certificate rounds, exact pairs) and UAV fields computed
     import dispatch.dispatcher as D
+    from dispatch.answers import finders
     kept, uav_fields, check = {}, [0], {"decisions": 0, "differ": 0, "worst": 0.0}
     real_values = A.field_values
 
@@ -110,7 +111,7 @@ CHILD = textwrap.dedent("""
         if verify:  # each decision against hungarian on the exact matrix (fields, own grid)
             from allocators.hungarian import optimal_pairs
             from dispatch.world import Grid, World
-            w = self.space
+            w = self.pipeline.problems.space
             ref = A.AStarPlanner(World(size=w.size, grid=Grid(np.array(w.grid.occupied),
                                                                 w.grid.cell), boxes=()))
             record = self.on_decision
@@ -120,7 +121,7 @@ CHILD = textwrap.dedent("""
                 dl = np.array([t.deadline for t in problem.tasks])
                 c = np.where(problem.time + c <= dl + 1e-9, c, np.inf)
                 want = optimal_pairs(c)
-                rows, cols = D._finders(problem)
+                rows, cols = finders(problem)
                 got = [(rows(a), cols(t)) for a, t in allocation.pairs]
                 lazy_total = float(sum(c[i, j] for i, j in got))
                 best = float(sum(c[i, j] for i, j in want))
@@ -180,14 +181,14 @@ CHILD = textwrap.dedent("""
         t_ours += t1 - t0
         equal = equal and np.array_equal(ours, ref)
     d = kept["d"]
-    extra = d.planner.stats.extra
+    extra = d.pipeline.planner.stats.extra
     print(json.dumps({"tasks": int(s["n_tasks"]), "completed": int(s["tasks_completed"]),
                       "expired": int(s["tasks_expired"]), "decisions": int(s["decisions"]),
-                      "wait": float(s["wait_time_mean"]), "lazy": d.lazy,
+                      "wait": float(s["wait_time_mean"]), "lazy": d.pipeline.lazy,
                       "uav_fields": uav_fields[0], "fields": int(extra["fields_computed"]),
-                      "astar": int(extra.get("astar_pairs", 0)), "rounds": d.lazy_rounds,
-                      "lazy_decisions": d.decisions if d.lazy else 0, "check": check,
-                      "wall": wall, "cpu": cpu, "cost_s": d.cost_seconds, "rss_mb": rss,
+                      "astar": int(extra.get("astar_pairs", 0)), "rounds": d.tally.lazy_rounds,
+                      "lazy_decisions": d.tally.decisions if d.pipeline.lazy else 0, "check": check,
+                      "wall": wall, "cpu": cpu, "cost_s": d.tally.cost_seconds, "rss_mb": rss,
                       "ref_fields": len(nodes), "ours_ms": 1000 * t_ours / max(1, len(nodes)),
                       "scipy_ms": 1000 * t_ref / max(1, len(nodes)), "equal": equal}))
 """)

@@ -7,7 +7,7 @@ Scenario section ``[comms]`` (all optional)::
     loss = 0.1       # probability that one reception of a message is lost (default 0)
 
 Graph
-    At each decision the dispatcher builds the graph over the *idle* agents of that decision
+    At each decision :class:`Hearing` builds the graph over the *idle* agents of that decision
     (the agents of the :class:`~dispatch.contracts.AllocationProblem`) from the centres of their
     cells: two agents are linked when their straight-line distance is at most ``range``.
     Obstacles do not block radio, and busy vehicles do not relay (they are not part of the
@@ -38,6 +38,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.spatial import cKDTree
 from scipy.sparse.csgraph import connected_components, shortest_path
+from dispatch.contracts import AgentViews
 
 
 def comm_graph(positions, comm_range: float | None) -> np.ndarray:
@@ -114,6 +115,54 @@ def relay_needed(comm: np.ndarray) -> np.ndarray:
     # need[a, b] = b hears a, and any_c nb[b, c] & ~reach[a, c]. float32 counts are exact
     # below 2^24 agents and go through BLAS (an int64 product does not: 25 ms at N = 500)
     return ((nb.astype(np.float32) @ (~reach).T.astype(np.float32)).T > 0) & nb
+
+
+
+def _positions(space, agents) -> np.ndarray:
+    """``(N, 3)`` positions of a decision's agents: from their node array where the sequence
+    carries one (road points part-way along an edge one by one), else view by view."""
+    nodes = agents.nodes if isinstance(agents, AgentViews) else None
+    if nodes is None:
+        return space.positions([a.loc for a in agents])
+    out = space.positions(nodes)
+    for k in agents.points.tolist():
+        out[k] = space.positions([agents[k].loc])[0]
+    return out
+
+
+class Hearing:
+    """Who hears whom at a decision: the graph over its agents from their positions in
+    ``space``, the ``[comms]`` range and ``links`` (``links(comm, positions, now) -> comm``:
+    communication faults, a blackout; or None)."""
+
+    def __init__(self, space, comms, links=None) -> None:
+        self.space, self.comms, self.links = space, comms, links
+        self._everyone: dict[int, np.ndarray] = {}  # n -> read-only all-True (n, n), no memory
+
+    def __call__(self, agents, now: float):
+        """``(comm, positions)`` of a decision's agents: who hears whom (the ``[comms]`` range,
+        a blackout's links) and their ``(N, 3)`` positions; with an unlimited range and no
+        faults a broadcast all-True ``comm`` (no N x N matrix) and the positions as a function
+        computed only if someone reads them (nothing moves within the decision)."""
+        comms, space = self.comms, self.space
+        unlimited = comms.range is None or math.isinf(comms.range)
+        if unlimited and self.links is None:  # everyone hears everyone: no N x N matrix
+            comm = self._everyone.get(len(agents))
+            if comm is None:
+                comm = self._everyone[len(agents)] = np.broadcast_to(np.True_, (len(agents),) * 2)
+            nodes = agents.nodes if isinstance(agents, AgentViews) else None
+            if nodes is not None and not agents.points.size:
+                def apos():  # node positions (fixed now), computed if someone reads them
+                    return space.positions(nodes)
+            else:  # read if someone asks, within the decision (nothing moves meanwhile)
+                def apos():
+                    return _positions(space, agents)
+            return comm, apos
+        apos = _positions(space, agents)
+        comm = comm_graph(apos, comms.range)
+        if self.links is not None:
+            comm = self.links(comm, apos, now)
+        return comm, apos
 
 
 @dataclass

@@ -48,65 +48,43 @@ pair by pair (no dict over all agents), and with an unlimited communication rang
 problem's ``comm`` is a broadcast all-True array: a decision's Python work grows with its
 tasks, not with the fleet.
 
-The dispatcher is handed what it needs (the task book, the fleet, the operator that hands tasks
-to vehicles, the planner, the allocator, the space, its configuration) and reaches into nothing
-else; each decision goes to ``on_decision`` (the recorder). It decides and hands out; the plan
-machinery (insertion costs, the problem's plans) is :mod:`dispatch.plans`'s and the checking of
-an answer :mod:`dispatch.answers`'s.
+The dispatcher is handed what it needs (the wake-up call, the pipeline that builds each
+decision's problem, the fleet, the operator that hands tasks to vehicles, the allocator, the
+run's tally, its configuration) and reaches into nothing else; each decision goes to
+``on_decision`` (the recorder). It asks and hands out: the problem is built in the named steps
+of :mod:`dispatch.decision` (costs, deadlines, insertions, the energy filter, lazy
+certification, the comm graph), the plan machinery is :mod:`dispatch.plans`'s and the checking
+of an answer :mod:`dispatch.answers`'s.
 """
 
 from __future__ import annotations
 
 import logging
-import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
-import numpy as np
-
 from dispatch.answers import finders, route_stops, validate
-from dispatch.comms import comm_graph, components
-from dispatch.contracts import AgentViews, Allocation, AllocationProblem, Allocator, Planner
+from dispatch.comms import components
+from dispatch.contracts import Allocation, AllocationProblem, Allocator
+from dispatch.decision import Blame, Pipeline, Tally, one_line
 from dispatch.errors import AllocationError, DispatchError, PluginError
 from dispatch.heap import keep_large_blocks
-from dispatch.lazy import certify, resolve_open
-from dispatch.plans import Inserts, Plans, insertion_costs_of, roomy
-from dispatch.space import Space
-from dispatch.stops import OBJECTIVES
+from dispatch.plans import Inserts
 from dispatch.tasks import OPEN, TaskBook, TaskState
 
 if TYPE_CHECKING:
     import simpy
 
-    from dispatch.config import CommsConfig, DispatchConfig
     from dispatch.vehicles import Fleet, Operator
 
 log = logging.getLogger(__name__)
 
 
-def _line(e: BaseException, limit: int = 400) -> str:
-    """An exception's message on one line, at most ``limit`` characters."""
-    text = " ".join(str(e).split())
-    return text if len(text) <= limit else text[: limit - 3] + "..."
-
-
-def _positions(space: Space, agents) -> np.ndarray:
-    """``(N, 3)`` positions of a decision's agents: from their node array where the sequence
-    carries one (road points part-way along an edge one by one), else view by view."""
-    nodes = agents.nodes if isinstance(agents, AgentViews) else None
-    if nodes is None:
-        return space.positions([a.loc for a in agents])
-    out = space.positions(nodes)
-    for k in agents.points.tolist():
-        out[k] = space.positions([agents[k].loc])[0]
-    return out
-
-
 class DecisionDeferred(BaseException):
     """Raised by an allocator's ``allocate`` to answer the decision later, from outside the
-    simulation (:mod:`learning.rl`): the dispatcher's loop waits for ``resume`` (an event
+    simulation (:mod:`dispatch.rl`): the dispatcher's loop waits for ``resume`` (an event
     the deferring code triggers at the same simulated instant, once it holds the answer) and
     then decides again (see :meth:`Dispatcher._decide_or_defer`). A ``BaseException`` so
     that the dispatcher's wrapping of plugin errors lets it through; raise it only before
@@ -135,100 +113,55 @@ class _Pending:
     inserts: Inserts | dict = field(default_factory=dict)
 
 
+class Wakeup:
+    """The dispatcher's wake-up call: made before the objects that call it (the operator, the
+    task source, repositioning, charging) and the dispatcher that waits on it, so that none
+    of them needs the others to exist first.
+
+    Calling it asks for a decision (idempotent until the dispatcher wakes). Deciding at once
+    (``always`` False: no batching window, no re-assignment), a call while no task is open is
+    dropped: the decision would find nothing to do (a vehicle that becomes idle then costs no
+    wake-up; the next release asks again). Only the order of decisions among events of one
+    same simulated instant could differ, and only when a task is released at exactly the
+    instant an idle vehicle's call would have been answered."""
+
+    def __init__(self, env: simpy.Environment, book: TaskBook, always: bool) -> None:
+        self.env, self.book, self.always = env, book, bool(always)
+        #: triggered by a call; the dispatcher waits on it and then :meth:`rearm`\ s it
+        self.event = env.event()
+
+    def __call__(self) -> None:
+        if not self.event.triggered and (self.book.open or self.always):
+            self.event.succeed()
+
+    def rearm(self) -> None:
+        """A fresh event: calls from now on ask for the next decision."""
+        self.event = self.env.event()
+
+
 class Dispatcher:
-    """Owns the wake-up event and the decision step of one simulation."""
+    """The loop of one simulation's decisions: wait for the wake-up, ask the pipeline for the
+    problem, ask the allocator, check the answer and hand it out (after the comms delay)."""
 
-    def __init__(self, env: simpy.Environment, book: TaskBook, fleet: Fleet, operator: Operator,
-                 planner: Planner, allocator: Allocator, space: Space, cfg: DispatchConfig,
-                 comms: CommsConfig, rng: np.random.Generator,
-                 on_decision: Callable[..., None], links=None, *, pooled: bool = False,
-                 max_delay: bool = False) -> None:
-        self.env, self.book, self.fleet, self.operator = env, book, fleet, operator
-        self.planner, self.allocator, self.space = planner, allocator, space
-        self.cfg, self.comms, self.rng, self.on_decision = cfg, comms, rng, on_decision
-        #: ``links(comm, positions, now) -> comm``: communication faults (a blackout), or None
-        self.links = links
-        self.cell_size = float(space.cell)
-        self.wake = env.event()
-        self.decisions = 0
-        self.cost_seconds = 0.0
-        self.decide_seconds = 0.0
-        self.rounds = 0
-        self.messages = 0
-        self.comm_delay = 0.0  # simulated seconds spent deliberating (hops * latency)
-        self.reassignments = 0  # [dispatch] reassign: tasks a vehicle gave up for another
-        self.agent_seconds = 0.0  # sum over decisions of the per-agent critical path
-        self.first_cost = math.nan  # the first decision's total cost and wall seconds
-        self.first_seconds = math.nan
+    def __init__(self, env: simpy.Environment, wakeup: Wakeup, pipeline: Pipeline,
+                 fleet: Fleet, operator: Operator, allocator: Allocator, tally: Tally,
+                 blame: Blame, on_decision: Callable[..., None], *, window: float = 0.0,
+                 latency: float = 0.0) -> None:
+        self.env, self.wakeup, self.pipeline = env, wakeup, pipeline
+        self.fleet, self.operator, self.allocator = fleet, operator, allocator
+        self.tally, self.blame, self.on_decision = tally, blame, on_decision
+        #: seconds waited after a wake-up (batching); simulated seconds per message hop
+        self.window, self.latency = window, latency
         self._pending: _Pending | None = None
-        #: [dispatch] lazy_costs, with a planner and an allocator that support it
-        self.lazy = cfg.lazy_costs
-        if self.lazy and not (planner.lower_bounds and allocator.minimizes_total_cost):
-            log.warning("lazy_costs is on but planner %r computes no lower bounds or allocator "
-                        "%r does not minimize the total cost: exact costs are used",
-                        planner.name, allocator.name)
-            self.lazy = False
-        #: the vehicles have plans to insert into (a capacity above 1), requests have drop-off
-        #: limits or the objective is the added time: costs are insertion costs (dispatch.stops)
-        self.pooled = bool(pooled)
-        self.plans = self.pooled or cfg.objective != "pickup_time" or bool(max_delay)
-        self.objective = OBJECTIVES[cfg.objective]
-        #: the planner routes between any two locations (direct times, insertions)
-        self.routes = planner.travel_times
-        #: [fleet.energy]: ``(cost, drive, slots, tasks) -> cost`` with ``inf`` where a vehicle
-        #: would end below its reserve (dispatch.energy.Energy.filter); None without energy
-        self.energy_filter = None
-        if self.plans and not self.routes:
-            raise PluginError(f"planner {planner.name!r} computes no travel times between "
-                              "locations (Planner.between): shared rides, max_delay and the "
-                              "added_time objective need them")
-        if self.lazy and self.plans:
-            log.warning("lazy_costs is off: shared rides, max_delay and the added_time "
-                        "objective cost insertions exactly")
-            self.lazy = False
-        self.lazy_rounds = 0  # lazy costs: allocator calls (one per certificate round)
-        self.lazy_pairs = 0  # lazy costs: pairs whose exact cost was computed
-        self._everyone: dict[int, np.ndarray] = {}  # n -> read-only all-True (n, n), no memory
-        #: the run's id, for error messages (set by the simulation)
-        self.run_id = ""
         keep_large_blocks()  # a batch's big arrays reuse heap memory (see dispatch.heap)
-        self.process = env.process(self._loop())
-
-    def _where(self, kind: str) -> str:
-        """Where an error happened: the plugin, the run, the decision and the simulated time."""
-        plugin = self.allocator if kind == "allocator" else self.planner
-        name = plugin.name or type(plugin).__name__
-        run = f", run {self.run_id}" if self.run_id else ""
-        return f"{kind} {name!r}{run}, decision {self.decisions}, t = {self.env.now:.6g} s"
-
-    def _bad_costs(self, cost, want: tuple[int, int]) -> PluginError:
-        got = (f"{type(cost).__name__} {cost.shape} {cost.dtype}"
-               if isinstance(cost, np.ndarray) else type(cost).__name__)
-        return PluginError(f"{self._where('planner')}: costs() must return a float array of "
-                           f"shape {want} without nan, got {got}")
-
-    def _plugin_failed(self, kind: str, e: Exception) -> PluginError:
-        reason = _line(e) or "(no message)"
-        return PluginError(f"{self._where(kind)}: {kind} raised {type(e).__name__}: {reason}")
-
-    def notify(self) -> None:
-        """Ask for a decision (idempotent until the dispatcher wakes).
-
-        Deciding at once (no batching window, no re-assignment), a call while no task is
-        open is dropped: the decision would find nothing to do (a vehicle that becomes idle
-        then costs no wake-up; the next release asks again). Only the order of decisions
-        among events of one same simulated instant could differ, and only when a task is
-        released at exactly the instant an idle vehicle's call would have been answered."""
-        if not self.wake.triggered and (self.book.open or self.cfg.batch_window > 0
-                                        or self.cfg.reassign):
-            self.wake.succeed()
+        env.process(self._loop())
 
     def _loop(self):
-        env, window = self.env, self.cfg.batch_window
+        env, window, wakeup = self.env, self.window, self.wakeup
         while True:
-            yield self.wake
+            yield wakeup.event
             yield env.timeout(window)
-            self.wake = env.event()
+            wakeup.rearm()
             yield from self._decide_or_defer()
             if self._pending is not None:
                 yield env.timeout(self._pending.delay)
@@ -236,11 +169,11 @@ class Dispatcher:
 
     def _decide_or_defer(self):
         """:meth:`decide`, or, when the allocator defers it (:class:`DecisionDeferred`: the
-        answer comes from outside the simulation, see :mod:`learning.rl`), wait for the
+        answer comes from outside the simulation, see :mod:`dispatch.rl`), wait for the
         deferring allocator's ``resume`` event and decide again: nothing moved meanwhile (the
         event is triggered at the same instant, ahead of the events already queued), so the
         same problem is built again and the allocator now answers it. The hook that lets
-        :mod:`learning.rl` drive decisions step by step without threads; a run with an
+        :mod:`dispatch.rl` drive decisions step by step without threads; a run with an
         ordinary allocator goes through :meth:`decide` exactly as before."""
         try:
             self.decide()
@@ -249,7 +182,8 @@ class Dispatcher:
             self.decide()
 
     def decide(self) -> None:
-        """One decision over the idle vehicles and the open tasks (nothing if either is empty).
+        """One decision over the candidate vehicles and the open tasks (nothing if the pipeline
+        finds nothing to decide).
 
         Without latency the tasks are handed out at once; with it the hand-out waits in
         ``self._pending`` for the loop to let the simulated deliberation time pass.
@@ -257,211 +191,26 @@ class Dispatcher:
         Its Python work grows with the open tasks, not the fleet: the idle vehicles come as
         an :class:`AgentViews` (arrays, views built on access), and a planner that reads the
         arrays (the road planner does) costs them with numpy."""
-        held = self.book.assigned if self.cfg.reassign else {}
-        if not self.book.open and not held:
+        d = self.pipeline.build(self.env.now)
+        if d is None:
             return
-        if self.routes:
-            self._direct_times()
-        idle = self.fleet.idle_index()
-        if self.pooled:  # busy vehicles with a free seat somewhere in their plan take part
-            idle = np.union1d(idle, roomy(self.fleet))
-        holder: dict[int, int] = {}  # task id -> the vehicle driving to its pickup
-        if held:  # [dispatch] reassign: vehicles driving to a pickup take part, with their tasks
-            holder = {t.id: t.agent_id for t in held.values()}
-            slots = np.array([self.fleet.by_id[a]._slot for a in holder.values()], np.int64)
-            idle = np.union1d(idle, slots)
-            open_tasks = sorted([*self.book.open.values(), *held.values()], key=lambda t: t.id)
-        else:
-            open_tasks = list(self.book.open.values())
-        if not idle.size:
-            return
-        now = self.env.now
-        agents = self.fleet.views(idle, now, ascending=True)  # flatnonzero, union1d: sorted
-        t0 = time.perf_counter()
-        tasks = tuple([t.view() for t in open_tasks])
-        lazy = self.lazy
-        cost, exact = self._planner_costs(agents, tasks)
-        want = cost.shape
-        # the usual case: a finite sum, so no inf and no nan (either would make the sum one):
-        # every pair servable (a sum that overflows takes the element-wise checks below)
-        if math.isfinite(np.add.reduce(cost, axis=None)):
-            servable = None
-        else:
-            finite = np.isfinite(cost)
-            if np.isnan(cost).any():
-                raise self._bad_costs(cost, want)
-            servable = finite.any(axis=0)
-            if not servable.all():
-                self._close_unreachable([t for t, ok in zip(open_tasks, servable) if not ok])
-        deadlines = [t.deadline for t in open_tasks]
-        drive = cost if self.energy_filter is not None else None
-        inserts: dict = {}
-        if self.plans:
-            if servable is None:
-                servable = np.ones(len(open_tasks), dtype=bool)
-            cost, inserts = insertion_costs_of(cost, idle, open_tasks, now, set(holder.values()),
-                                               fleet=self.fleet, operator=self.operator,
-                                               planner=self.planner, objective=self.objective)
-            servable = self._reject_late(open_tasks, cost, servable)
-        elif any(d < math.inf for d in deadlines):
-            if servable is None:
-                servable = np.ones(len(open_tasks), dtype=bool)
-            deadlines = np.array(deadlines)
-            cost = np.where(now + cost <= deadlines + 1e-9, cost, np.inf)
-            if lazy:  # late by its bound is late exactly; feasibility of each task made exact
-                exact = exact | ~np.isfinite(cost)
-                self.lazy_pairs += resolve_open(cost, exact, self._exact(agents, tasks), now,
-                                                deadlines)
-            servable = self._reject_late(open_tasks, cost, servable)
-        if drive is not None:  # [fleet.energy]: below the reserve after the trip: inf
-            cost = self.energy_filter(cost, drive, idle, open_tasks)
-        cost_s = time.perf_counter() - t0
-        self.cost_seconds += cost_s
-        if servable is not None:
-            if not servable.any():
-                return
-            if not servable.all():
-                if inserts:  # their columns move left
-                    inserts = inserts.kept(servable)
-                open_tasks = [t for t, ok in zip(open_tasks, servable) if ok]
-                tasks = tuple([t.view() for t in open_tasks])
-                cost = cost[:, servable]
-                if lazy:
-                    exact = exact[:, servable]
-        comms, space = self.comms, self.space
-        comm, apos = self._hearing(agents, now)
-
-        def tpos():
-            return space.positions([t.loc for t in tasks])
-
-        plans = Plans(self.fleet, self.operator, idle) if self.pooled else None
-        seats = self.fleet.capacity[idle] if self.pooled else None
-        ready = np.maximum(self.fleet.free_at[idle], now) if self.pooled else None
-        travel = self.planner.between if self.routes else None
-
-        def ask(cost: np.ndarray):
-            problem = AllocationProblem.made(now, agents, tasks, np.array(cost, order="C"),
-                                             comm, self.rng, self.cfg.max_rounds, comms.loss,
-                                             comms.latency, self.cell_size, apos, tpos, plans,
-                                             seats, self.operator.service_time, travel,
-                                             ready)
-            allocation, decide_s, index = self._ask(problem)
-            return problem, allocation, decide_s, index
-
-        if lazy:
-            problem, allocation, decide_s, index, extra = self._certified(
-                ask, cost, exact, agents, tasks, np.array([t.deadline for t in open_tasks]), now)
-            cost_s += extra  # computing exact pairs is cost time
-        else:
-            problem, allocation, decide_s, index = ask(cost)
-        self.decide_seconds += decide_s
-        delay = allocation.hops * comms.latency
+        problem, allocation, decide_s, index = self.pipeline.answer(d, self._ask)
+        self.tally.decide_seconds += decide_s
+        delay = allocation.hops * self.latency
         conflicted = allocation.conflicted_tasks() if allocation.requests else set()
-        for t in open_tasks:
+        for t in d.requests:
             t.offered = True
             t.conflicted = t.conflicted or t.id in conflicted
+        comm = d.comm
         n_comp = 1 if comm.strides == (0, 0) else components(comm)[0]
-        self._pending = _Pending(problem, allocation, open_tasks, cost_s, decide_s, delay,
-                                 n_comp, holder, index, inserts)
+        self._pending = _Pending(problem, allocation, d.requests, d.cost_s, decide_s, delay,
+                                 n_comp, d.holder, index, d.inserts)
         if delay <= 0:
             self._hand_out()
 
-    def _planner_costs(self, agents, tasks):
-        """The planner's ``(cost, exact)`` of a decision: its exact costs (``exact`` None), or
-        with lazy costs its lower bounds and which of them are exact; a PluginError naming the
-        planner and the decision for an exception or an answer of the wrong type or shape."""
-        exact = None  # lazy costs: which entries of ``cost`` are exact (the others are bounds)
-        try:
-            if self.lazy:
-                cost, exact = self.planner.bounds(agents, tasks)
-                exact = np.array(exact, dtype=bool) if isinstance(exact, np.ndarray) else exact
-            else:
-                cost = self.planner.costs(agents, tasks)
-        except DispatchError:
-            raise
-        except Exception as e:  # a plugin's bug: one line naming it and where
-            raise self._plugin_failed("planner", e) from e
-        want = (len(agents), len(tasks))
-        if not isinstance(cost, np.ndarray) or cost.shape != want or cost.dtype.kind != "f":
-            raise self._bad_costs(cost, want)
-        if self.lazy and not (isinstance(exact, np.ndarray) and exact.shape == want
-                              and exact.dtype == bool):
-            raise PluginError(f"{self._where('planner')}: bounds() must return a bool array "
-                              f"of shape {want} as its second item")
-        return cost, exact
-
-    def _reject_late(self, open_tasks: list, cost: np.ndarray,
-                     servable: np.ndarray) -> np.ndarray:
-        """``servable`` less the tasks no vehicle can reach in time (no finite cost); of those,
-        a task offered for the first time is closed ``rejected`` at once (see the module
-        doc), one offered before waits for its deadline."""
-        late = servable & ~np.isfinite(cost).any(axis=0)
-        for t, bad in zip(open_tasks, late):
-            if bad and not t.offered:
-                self.book.close(t, TaskState.REJECTED)
-        return servable & ~late
-
-    def _hearing(self, agents, now: float):
-        """``(comm, positions)`` of a decision's agents: who hears whom (the ``[comms]`` range,
-        a blackout's links) and their ``(N, 3)`` positions; with an unlimited range and no
-        faults a broadcast all-True ``comm`` (no N x N matrix) and the positions as a function
-        computed only if someone reads them (nothing moves within the decision)."""
-        comms, space = self.comms, self.space
-        unlimited = comms.range is None or math.isinf(comms.range)
-        if unlimited and self.links is None:  # everyone hears everyone: no N x N matrix
-            comm = self._everyone.get(len(agents))
-            if comm is None:
-                comm = self._everyone[len(agents)] = np.broadcast_to(np.True_, (len(agents),) * 2)
-            nodes = agents.nodes if isinstance(agents, AgentViews) else None
-            if nodes is not None and not agents.points.size:
-                def apos():  # node positions (fixed now), computed if someone reads them
-                    return space.positions(nodes)
-            else:  # read if someone asks, within the decision (nothing moves meanwhile)
-                def apos():
-                    return _positions(space, agents)
-            return comm, apos
-        apos = _positions(space, agents)
-        comm = comm_graph(apos, comms.range)
-        if self.links is not None:
-            comm = self.links(comm, apos, now)
-        return comm, apos
-
-    def _certified(self, ask, cost, exact, agents, tasks, deadlines, now: float):
-        """The certificate loop of lazy costs (:func:`dispatch.lazy.certify`) around ``ask``:
-        ``(problem, allocation, allocator seconds, pair indices, seconds spent computing exact
-        pairs)``; the latter are added to :attr:`cost_seconds`."""
-        spent = [0.0]
-
-        def timed(c):
-            t = time.perf_counter()
-            answer = ask(c)
-            spent[0] += time.perf_counter() - t
-            return answer
-
-        t0 = time.perf_counter()
-        (problem, allocation, _, index), rounds, pairs = certify(
-            timed, cost, exact, self._exact(agents, tasks), now, deadlines)
-        extra = time.perf_counter() - t0 - spent[0]
-        self.cost_seconds += extra
-        self.lazy_rounds += rounds
-        self.lazy_pairs += pairs
-        return problem, allocation, spent[0], index, extra
-
-    def _exact(self, agents, tasks):
-        """``compute(rows, cols)``: the planner's exact costs of those pairs (lazy costs)."""
-        def compute(rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-            try:
-                values = self.planner.exact(agents, tasks, rows, cols)
-            except DispatchError:
-                raise
-            except Exception as e:  # a plugin's bug: one line naming it and where
-                raise self._plugin_failed("planner", e) from e
-            values = np.asarray(values, dtype=float).reshape(-1)
-            if values.shape != rows.shape or np.isnan(values).any():
-                raise PluginError(f"{self._where('planner')}: exact() must return "
-                                  f"{rows.size} costs without nan, got {values.shape}")
-            return values
-        return compute
+    def _where(self) -> str:
+        """Where an allocator's error happened (see :class:`dispatch.decision.Blame`)."""
+        return self.blame.where("allocator", self.allocator)
 
     def _ask(self, problem: AllocationProblem):
         """The allocator's answer to ``problem``, checked: ``(allocation, seconds it took,
@@ -471,14 +220,14 @@ class Dispatcher:
         try:
             allocation = self.allocator.allocate(problem)
         except AllocationError as e:
-            raise AllocationError(f"{self._where('allocator')}: {_line(e)}") from e
+            raise AllocationError(f"{self._where()}: {one_line(e)}") from e
         except DispatchError as e:
-            raise PluginError(f"{self._where('allocator')}: {_line(e)}") from e
+            raise PluginError(f"{self._where()}: {one_line(e)}") from e
         except Exception as e:  # a plugin's bug: one line naming it and where
-            raise self._plugin_failed("allocator", e) from e
+            raise self.blame.failed("allocator", self.allocator, e) from e
         decide_s = time.perf_counter() - t1
         if problem.cost is not cost_given or problem.cost.flags.writeable:
-            raise AllocationError(f"{self._where('allocator')}: the allocator replaced or made "
+            raise AllocationError(f"{self._where()}: the allocator replaced or made "
                                   "writable problem.cost (the problem is read-only; work on a "
                                   "copy)")
         multi = self.allocator.multi_request
@@ -486,7 +235,7 @@ class Dispatcher:
             index = validate(problem, allocation, multi)
             routes = self._routes(problem, allocation) if multi and allocation.routes else {}
         except AllocationError as e:
-            raise AllocationError(f"{self._where('allocator')}: {e}") from None
+            raise AllocationError(f"{self._where()}: {e}") from None
         if routes:
             object.__setattr__(allocation, "_checked_routes", routes)  # (a cache, frozen)
         return allocation, decide_s, index
@@ -559,9 +308,9 @@ class Dispatcher:
                                if (row(a), col(t)) not in p.inserts)
             if len(handed) != len(allocation.pairs):
                 log.debug("decision %d: %d pair(s) not handed out (task closed while deciding)",
-                          self.decisions, len(allocation.pairs) - len(handed))
+                          self.tally.decisions, len(allocation.pairs) - len(handed))
                 allocation = replace(allocation, pairs=handed)
-                self.notify()
+                self.wakeup()
             row, col = finders(p.problem)
             pair_cost = [float(cost[row(a), col(t)]) for a, t in allocation.pairs]
         self._recorded(p, allocation, pair_cost)
@@ -599,17 +348,18 @@ class Dispatcher:
     def _recorded(self, p: _Pending, allocation: Allocation, pair_cost: list[float]) -> None:
         """Count and record a decision's hand-out (``allocation`` as handed out)."""
         critical = max(allocation.agent_seconds, default=p.decide_s)
-        self.rounds += allocation.rounds
-        self.messages += allocation.messages
-        self.comm_delay += p.delay
-        self.agent_seconds += critical
+        tally = self.tally
+        tally.rounds += allocation.rounds
+        tally.messages += allocation.messages
+        tally.comm_delay += p.delay
+        tally.agent_seconds += critical
         total = float(sum(pair_cost))
-        if self.decisions == 0:
-            self.first_cost, self.first_seconds = total, p.cost_s + p.decide_s
-        self.on_decision(self.decisions, p.problem, allocation, total, p.cost_s, p.decide_s,
+        if tally.decisions == 0:
+            tally.first_cost, tally.first_seconds = total, p.cost_s + p.decide_s
+        self.on_decision(tally.decisions, p.problem, allocation, total, p.cost_s, p.decide_s,
                          hops=allocation.hops, comm_delay=p.delay, agent_seconds=critical,
                          components=p.components)
-        self.decisions += 1
+        tally.decisions += 1
 
     def _reassign(self, p: _Pending, holding: dict, handed: tuple, pair_cost: list[float],
                   still) -> None:
@@ -624,35 +374,10 @@ class Dispatcher:
             new_task.get(a, t) != t or (a not in new_task and t in taken)))
         for a in give:
             self.operator.give_up(by_id[a])
-        self.reassignments += len(give)
+        self.tally.reassignments += len(give)
         for (aid, tid), c in zip(handed, pair_cost):
             if holding.get(aid) != tid:
                 self.operator.assign(by_task[tid], by_id[aid], c)
         for a in give:
             if a not in new_task:
                 self.operator.stand_idle(by_id[a])
-
-    def _direct_times(self) -> None:
-        """Set the free-flow direct drive time of open requests that have none yet (the first
-        decision that considers a request; a congested planner's inner, free-flow one)."""
-        need = [t for t in self.book.open.values()
-                if t.dropoff is not None and t.direct_time != t.direct_time]
-        if not need:
-            return
-        free = self.planner.free_flow
-        times = free.between([t.loc for t in need], [t.dropoff for t in need], pairwise=True)
-        for t, x in zip(need, np.asarray(times, dtype=float).tolist()):
-            t.direct_time = x
-
-    def _close_unreachable(self, tasks) -> None:
-        """Close tasks no vehicle of the fleet can reach; vehicles never leave their connected
-        component of free space, so a task unreachable from every vehicle's cell stays so."""
-        now = self.env.now
-        busy = self.fleet.views(np.flatnonzero([v.busy for v in self.fleet.vehicles]), now)
-        if busy:
-            views = tuple(t.view() for t in tasks)  # lazy: an inf bound is an inf cost
-            c = self.planner.bounds(busy, views)[0] if self.lazy else \
-                self.planner.costs(busy, views)
-            tasks = [t for t, ok in zip(tasks, np.isfinite(c).any(axis=0)) if not ok]
-        for t in tasks:
-            self.book.close(t, TaskState.UNREACHABLE)

@@ -2,10 +2,20 @@
 onto one SimPy environment. Nothing here is reached back into during the run:
 
     TaskSource ──release──▶ TaskBook ◀──assign/pickup/close── Operator (vehicles, drivers)
-        │                      ▲  │                               ▲
-        └──notify──▶ Dispatcher┘  └─on_close─▶ RunRecording      └── Dispatcher.assign
+        │                      ▲  │                               ▲     │
+        │                      │  └─on_close─▶ RunRecording       │     │
+        │         Dispatcher ──┴──────────────assign──────────────┘     │
+        │             ▲   (its Pipeline builds each problem)            │
+        └──call──▶ Wakeup ◀───────────────────call──────────────────────┘
+                   (repositioning and charging call it too)
     every process ──emit──▶ EventBus ──▶ RunRecording (events), the space's mirror, user
                                          subscribers
+
+Everything is built once, in :class:`Simulation`'s constructor, each object from those made
+before it. The one cycle (the operator wakes the dispatcher, the dispatcher drives the
+operator) is broken by the :class:`~dispatch.dispatcher.Wakeup`, made first and handed to
+both; the decision's pipeline (:class:`~dispatch.decision.Pipeline`) gets the energy filter
+and the comms faults when it is built.
 
 The jobs are the owners': the space (:mod:`dispatch.space`) loads itself and answers
 everything about location (demand, where the fleet starts, the driver, its static tables),
@@ -28,7 +38,8 @@ from contextlib import contextmanager
 import numpy as np
 import simpy
 
-from dispatch.dispatcher import Dispatcher
+from dispatch.decision import Blame, Pipeline, Tally
+from dispatch.dispatcher import Dispatcher, Wakeup
 from dispatch.energy import Charging, Energy
 from dispatch.events import EventBus
 from dispatch.faults import FaultInjector, blackout_filter
@@ -117,21 +128,32 @@ class Simulation:
         if self.traffic is not None:
             timed = self.traffic.execution(book, self.fleet, sc.tasks.service_time)
         self.finished = env.event()
-        self.dispatcher: Dispatcher
+        # the dispatcher's wake-up call first: the operator, the task source, repositioning
+        # and charging call it, the dispatcher (made after the operator it drives) waits on it
+        d = sc.dispatch
+        wakeup = Wakeup(env, book, always=d.batch_window > 0 or d.reassign)
         self.operator = Operator(env, bus, book, self.fleet, driver, sc.tasks.service_time,
-                                 lambda: self.dispatcher.notify(), timed)
-        self.dispatcher = Dispatcher(env, book, self.fleet, self.operator, self.planner,
-                                     allocator, space, sc.dispatch, sc.comms,
-                                     rng_for(spec.seed, STREAM_ALLOCATOR), self._record_decision,
-                                     blackout_filter(sc.faults),
-                                     pooled=any(v.capacity > 1 for v in self.vehicles),
-                                     max_delay=sc.tasks.delay_limited)
-        self.dispatcher.run_id = driver.run_id = spec.run_id  # named in error messages
+                                 wakeup, timed)
+        #: [fleet.energy]: batteries and the reserve rule (dispatch.energy.Energy), or None
+        self.energy = self._energy(sc)
+        #: what the decisions add up to (the summary's columns); the errors' context
+        self.tally = Tally()
+        blame = Blame(env, spec.run_id, self.tally)
+        pipeline = Pipeline(book, self.fleet, self.operator, self.planner, allocator, space, d,
+                            sc.comms, rng_for(spec.seed, STREAM_ALLOCATOR), self.tally, blame,
+                            blackout_filter(sc.faults),
+                            None if self.energy is None else self.energy.filter,
+                            pooled=any(v.capacity > 1 for v in self.vehicles),
+                            max_delay=sc.tasks.delay_limited)
+        self.dispatcher = Dispatcher(env, wakeup, pipeline, self.fleet, self.operator,
+                                     allocator, self.tally, blame, self._record_decision,
+                                     window=d.batch_window, latency=sc.comms.latency)
+        driver.run_id = spec.run_id  # named in error messages
         t = sc.tasks
         self.source = TaskSource.of(env, book, demand, t,
                                     spec.n_static_tasks if t.source == "static" else t.count,
                                     lambda: rng_for(spec.seed, STREAM_TASKS),
-                                    rng_for(spec.seed, STREAM_SOURCE), self.dispatcher.notify)
+                                    rng_for(spec.seed, STREAM_SOURCE), wakeup)
         self.source.on_done = self._check_finished
         self.operator.on_reopen = self.source.rearm
         #: the repositioning timer and drives (None: a passive repositioner, e.g. ``stay``)
@@ -140,17 +162,16 @@ class Simulation:
             r = sc.reposition
             self.repositioning = Repositioning(env, bus, self.fleet, driver, self.space,
                                                self.repositioner, r.interval, r.horizon,
-                                               rng_for(spec.seed, STREAM_REPOSITION),
-                                               lambda: self.dispatcher.notify())
+                                               rng_for(spec.seed, STREAM_REPOSITION), wakeup)
             self.repositioning.run_id = spec.run_id
             self.operator.on_assign = self.repositioning.stop
         self.faults = (FaultInjector(env, sc.faults, self.fleet, self.operator,
                                      rng_for(spec.seed, STREAM_FAULTS))
                        if sc.faults.vehicles else None)
-        #: [fleet.energy]: batteries (dispatch.energy.Energy) and stations, visits (Charging)
-        self.energy = self.charging = None
-        if sc.fleet.energy is not None:
-            self._electric(sc, driver)
+        #: [fleet.energy]: stations and visits (dispatch.energy.Charging), or None
+        self.charging = None
+        if self.energy is not None:
+            self._electric(sc, wakeup)
         self.progress = progress
         if progress is not None and math.isfinite(sc.duration) and sc.duration > 0:
             env.process(self._report(sc.duration))
@@ -162,21 +183,26 @@ class Simulation:
             yield self.env.timeout(tick)
             self.progress(self.env.now, duration, self.book.released, self.stats.n_tasks)
 
-    def _electric(self, sc, driver) -> None:
-        """Batteries, the reserve rule, stations and the charging strategy (see
-        :mod:`dispatch.energy`)."""
+    def _energy(self, sc) -> Energy | None:
+        """``[fleet.energy]``: the run's batteries and the dispatcher's reserve rule (see
+        :mod:`dispatch.energy`); None without it."""
+        if sc.fleet.energy is None:
+            return None
         net = self.space
         # the network's mean edge speed (energy is a feature of road networks only)
         ref = float(net.length.sum() / net.time.sum())
-        self.energy = Energy(sc.fleet.energy, self.fleet, self.env, ref)
-        self.dispatcher.energy_filter = self.energy.filter
+        return Energy(sc.fleet.energy, self.fleet, self.env, ref)
+
+    def _electric(self, sc, wakeup: Wakeup) -> None:
+        """The batteries' ``soc`` samples, stations and the charging strategy (see
+        :mod:`dispatch.energy`)."""
+        net = self.space
         self.env.process(self.energy.sampler(self.recorder.appender("soc")))
         cfg = sc.charging
         strategy = make_charger(sc, cfg.strategy) if cfg.stations else None
         self.charging = Charging(self.env, self.bus, self.fleet, self.operator, self.energy,
                                  cfg, net, strategy, rng_for(self.spec.seed, STREAM_CHARGING),
-                                 sc.faults.on_board == "transfer",
-                                 lambda: self.dispatcher.notify())
+                                 sc.faults.on_board == "transfer", wakeup)
         self.charging.run_id = self.spec.run_id
         self.operator.strand = self.charging.strand
         if self.repositioning is not None:
@@ -244,4 +270,4 @@ class Simulation:
         extra = {**summary_of(self.repositioning),
                  "allocator_info": describe(self.dispatcher.allocator),
                  "objective": spec.scenario.dispatch.objective}
-        return self.recording.summary(run, self.vehicles, self.dispatcher, now, extra)
+        return self.recording.summary(run, self.vehicles, self.tally, now, extra)

@@ -1,0 +1,492 @@
+"""A decision's problem, built in named steps: what the dispatcher asks the allocator about.
+
+The dispatcher (:mod:`dispatch.dispatcher`) wakes, asks :meth:`Pipeline.build` for the
+decision's problem, asks the allocator (once, or in the certificate loop of lazy costs:
+:meth:`Pipeline.answer`) and hands the answer out. What a problem is made of is here, each step
+a function or a small class that says what it promises, composed in :meth:`Pipeline.build`
+in the order they run:
+
+1. :func:`direct_times`: each open request's free-flow direct drive time, set once.
+2. :func:`candidates`: the vehicles and requests that take part (the idle vehicles; with
+   shared rides the busy ones with a free seat; with re-assignment those driving to a pickup,
+   with their requests).
+3. :class:`PlannerCosts`: the planner's cost matrix (or, with lazy costs, its lower bounds and
+   which of them are exact), checked: a :class:`PluginError` naming the planner otherwise.
+4. :func:`reachable`: the requests some vehicle of the decision can reach; those no vehicle of
+   the fleet can ever reach are closed ``unreachable`` (:func:`close_unreachable`).
+5. :meth:`Pipeline.limits`: with plans, the insertion costs by the objective
+   (:func:`dispatch.plans.insertion_costs_of`: each request's cheapest feasible insertion
+   into each vehicle's plan); without, :func:`deadlines` (``inf`` where a vehicle would
+   reach the pickup after the deadline; with lazy costs each request's feasibility made
+   exact, :func:`dispatch.lazy.resolve_open`). A request no vehicle reaches in time is
+   rejected the first time it is offered (:func:`reject_late`).
+6. The energy filter (``[fleet.energy]``, :meth:`dispatch.energy.Energy.filter`): ``inf``
+   where a vehicle would end below its reserve.
+7. :func:`keep_servable`: the columns of the requests left out are dropped.
+8. :class:`dispatch.comms.Hearing`: who hears whom (the ``[comms]`` range, a blackout's
+   links) and where the agents are.
+9. :class:`Problems`: the :class:`AllocationProblem` of a cost matrix, everything else fixed.
+10. :func:`certified`: with lazy costs the certificate loop (:mod:`dispatch.lazy`) around the
+    allocator; without them one question.
+
+A step reads the run's objects it is given when the pipeline is built (the task book, the
+fleet, the operator, the planner, the space, the configuration) and the decision's values it
+is passed; the steps that close requests (4, 5) close them in the task book, as the dispatcher
+always has. The seconds spent building problems are added to :attr:`Tally.cost_seconds`.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from dispatch.comms import Hearing
+from dispatch.contracts import AgentViews, AllocationProblem, Allocator, Planner
+from dispatch.errors import DispatchError, PluginError
+from dispatch.lazy import certify, resolve_open
+from dispatch.plans import Inserts, Plans, insertion_costs_of, roomy
+from dispatch.space import Space
+from dispatch.stops import OBJECTIVES
+from dispatch.tasks import TaskBook, TaskState
+
+if TYPE_CHECKING:
+    import simpy
+
+    from dispatch.scenario import CommsConfig, DispatchConfig
+    from dispatch.tasks import Task
+    from dispatch.vehicles import Fleet, Operator
+
+log = logging.getLogger(__name__)
+
+
+def one_line(e: BaseException, limit: int = 400) -> str:
+    """An exception's message on one line, at most ``limit`` characters."""
+    text = " ".join(str(e).split())
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+@dataclass
+class Tally:
+    """What the run's decisions add up to (the summary's columns of the same names): decisions
+    handed out, wall seconds building problems (``cost_seconds``) and in the allocator
+    (``decide_seconds``), the allocators' rounds and messages, the simulated seconds spent
+    deliberating, re-assignments, the per-agent critical path, the first decision's total
+    cost and wall seconds, and with lazy costs the allocator calls and exact pairs."""
+
+    decisions: int = 0
+    cost_seconds: float = 0.0
+    decide_seconds: float = 0.0
+    rounds: int = 0
+    messages: int = 0
+    comm_delay: float = 0.0  # simulated seconds spent deliberating (hops * latency)
+    reassignments: int = 0  # [dispatch] reassign: tasks a vehicle gave up for another
+    agent_seconds: float = 0.0  # sum over decisions of the per-agent critical path
+    first_cost: float = math.nan  # the first decision's total cost and wall seconds
+    first_seconds: float = math.nan
+    lazy_rounds: int = 0  # lazy costs: allocator calls (one per certificate round)
+    lazy_pairs: int = 0  # lazy costs: pairs whose exact cost was computed
+
+
+class Blame:
+    """Where an error happened, for the messages of the errors a plugin causes: the plugin,
+    the run, the decision and the simulated time."""
+
+    def __init__(self, env: simpy.Environment, run_id: str, tally: Tally) -> None:
+        self.env, self.run_id, self.tally = env, run_id, tally
+
+    def where(self, kind: str, plugin) -> str:
+        """``"<kind> '<name>', run <id>, decision <k>, t = <now> s"``."""
+        name = plugin.name or type(plugin).__name__
+        run = f", run {self.run_id}" if self.run_id else ""
+        return f"{kind} {name!r}{run}, decision {self.tally.decisions}, t = {self.env.now:.6g} s"
+
+    def failed(self, kind: str, plugin, e: Exception) -> PluginError:
+        """The error to raise for a plugin's exception: one line naming it and where."""
+        reason = one_line(e) or "(no message)"
+        return PluginError(f"{self.where(kind, plugin)}: {kind} raised {type(e).__name__}: "
+                           f"{reason}")
+
+
+def lazy_costs(cfg: DispatchConfig, planner: Planner, allocator: Allocator, plans: bool) -> bool:
+    """Whether decisions use lazy exact costs: ``[dispatch] lazy_costs`` asked for, a planner
+    that computes lower bounds, an allocator that minimizes the total cost, and no plans
+    (insertions are costed exactly); a warning says why where it was asked for and is off."""
+    lazy = cfg.lazy_costs
+    if lazy and not (planner.lower_bounds and allocator.minimizes_total_cost):
+        log.warning("lazy_costs is on but planner %r computes no lower bounds or allocator "
+                    "%r does not minimize the total cost: exact costs are used",
+                    planner.name, allocator.name)
+        lazy = False
+    if lazy and plans:
+        log.warning("lazy_costs is off: shared rides, max_delay and the added_time "
+                    "objective cost insertions exactly")
+        lazy = False
+    return lazy
+
+
+# ----------------------------------------------------------------------------- the steps
+
+
+def direct_times(book: TaskBook, free: Planner) -> None:
+    """Set the free-flow direct drive time of open requests that have none yet (the first
+    decision that considers a request), from ``free`` (a congested planner's inner,
+    free-flow one)."""
+    need = [t for t in book.open.values()
+            if t.dropoff is not None and t.direct_time != t.direct_time]
+    if not need:
+        return
+    times = free.between([t.loc for t in need], [t.dropoff for t in need], pairwise=True)
+    for t, x in zip(need, np.asarray(times, dtype=float).tolist()):
+        t.direct_time = x
+
+
+def candidates(fleet: Fleet, book: TaskBook, held: dict, pooled: bool
+               ) -> tuple[np.ndarray, list[Task], dict[int, int]]:
+    """``(slots, requests, holder)`` of a decision: the fleet positions of its vehicles,
+    ascending (the idle ones; ``pooled``: and the busy ones with a free seat in their plan;
+    with re-assignment those driving to the pickup of a ``held`` task), its requests (the
+    open ones in release order, or with ``held`` tasks all by id) and, for each held task,
+    the vehicle driving to it (task id -> vehicle id)."""
+    idle = fleet.idle_index()
+    if pooled:  # busy vehicles with a free seat somewhere in their plan take part
+        idle = np.union1d(idle, roomy(fleet))
+    holder: dict[int, int] = {}  # task id -> the vehicle driving to its pickup
+    if held:  # [dispatch] reassign: vehicles driving to a pickup take part, with their tasks
+        holder = {t.id: t.agent_id for t in held.values()}
+        slots = np.array([fleet.by_id[a]._slot for a in holder.values()], np.int64)
+        idle = np.union1d(idle, slots)
+        open_tasks = sorted([*book.open.values(), *held.values()], key=lambda t: t.id)
+    else:
+        open_tasks = list(book.open.values())
+    return idle, open_tasks, holder
+
+
+class PlannerCosts:
+    """The planner's side of a decision, checked: its costs (or lower bounds), the exact costs
+    of chosen pairs (lazy costs), and the costs of the busy vehicles (unreachable tasks)."""
+
+    def __init__(self, planner: Planner, lazy: bool, blame: Blame) -> None:
+        self.planner, self.lazy, self.blame = planner, lazy, blame
+
+    def _bad_costs(self, cost, want: tuple[int, int]) -> PluginError:
+        got = (f"{type(cost).__name__} {cost.shape} {cost.dtype}"
+               if isinstance(cost, np.ndarray) else type(cost).__name__)
+        return PluginError(f"{self.blame.where('planner', self.planner)}: costs() must return "
+                           f"a float array of shape {want} without nan, got {got}")
+
+    def __call__(self, agents, tasks):
+        """The planner's ``(cost, exact)`` of a decision: its exact costs (``exact`` None), or
+        with lazy costs its lower bounds and which of them are exact; a PluginError naming the
+        planner and the decision for an exception or an answer of the wrong type or shape."""
+        exact = None  # lazy costs: which entries of ``cost`` are exact (the others are bounds)
+        try:
+            if self.lazy:
+                cost, exact = self.planner.bounds(agents, tasks)
+                exact = np.array(exact, dtype=bool) if isinstance(exact, np.ndarray) else exact
+            else:
+                cost = self.planner.costs(agents, tasks)
+        except DispatchError:
+            raise
+        except Exception as e:  # a plugin's bug: one line naming it and where
+            raise self.blame.failed("planner", self.planner, e) from e
+        want = (len(agents), len(tasks))
+        if not isinstance(cost, np.ndarray) or cost.shape != want or cost.dtype.kind != "f":
+            raise self._bad_costs(cost, want)
+        if self.lazy and not (isinstance(exact, np.ndarray) and exact.shape == want
+                              and exact.dtype == bool):
+            raise PluginError(f"{self.blame.where('planner', self.planner)}: bounds() must "
+                              f"return a bool array of shape {want} as its second item")
+        return cost, exact
+
+    def exact(self, agents, tasks):
+        """``compute(rows, cols)``: the planner's exact costs of those pairs (lazy costs)."""
+        def compute(rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+            try:
+                values = self.planner.exact(agents, tasks, rows, cols)
+            except DispatchError:
+                raise
+            except Exception as e:  # a plugin's bug: one line naming it and where
+                raise self.blame.failed("planner", self.planner, e) from e
+            values = np.asarray(values, dtype=float).reshape(-1)
+            if values.shape != rows.shape or np.isnan(values).any():
+                raise PluginError(f"{self.blame.where('planner', self.planner)}: exact() must "
+                                  f"return {rows.size} costs without nan, got {values.shape}")
+            return values
+        return compute
+
+    def reachable(self, cost: np.ndarray) -> np.ndarray | None:
+        """Which columns of ``cost`` have a finite entry, or None when all of them have (the
+        usual case, found by one finite sum); a PluginError for a ``nan``."""
+        # a finite sum has no inf and no nan (either would make the sum one): every pair
+        # servable (a sum that overflows takes the element-wise checks below)
+        if math.isfinite(np.add.reduce(cost, axis=None)):
+            return None
+        finite = np.isfinite(cost)
+        if np.isnan(cost).any():
+            raise self._bad_costs(cost, cost.shape)
+        return finite.any(axis=0)
+
+    def busy(self, agents, tasks) -> np.ndarray:
+        """The cost matrix of ``agents`` (busy vehicles) to ``tasks``: the planner's costs, or
+        with lazy costs its bounds (an ``inf`` bound is an ``inf`` cost)."""
+        return self.planner.bounds(agents, tasks)[0] if self.lazy else \
+            self.planner.costs(agents, tasks)
+
+
+def close_unreachable(book: TaskBook, fleet: Fleet, costs: PlannerCosts, tasks, now: float
+                      ) -> None:
+    """Close ``tasks`` (none of the decision's vehicles can reach them) that no vehicle of the
+    fleet can reach either; vehicles never leave their connected component of free space, so
+    a task unreachable from every vehicle's cell stays so."""
+    busy = fleet.views(np.flatnonzero([v.busy for v in fleet.vehicles]), now)
+    if busy:
+        views = tuple(t.view() for t in tasks)  # lazy: an inf bound is an inf cost
+        c = costs.busy(busy, views)
+        tasks = [t for t, ok in zip(tasks, np.isfinite(c).any(axis=0)) if not ok]
+    for t in tasks:
+        book.close(t, TaskState.UNREACHABLE)
+
+
+def reject_late(book: TaskBook, open_tasks: list, cost: np.ndarray, servable: np.ndarray
+                ) -> np.ndarray:
+    """``servable`` less the tasks no vehicle can reach in time (no finite cost); of those,
+    a task offered for the first time is closed ``rejected`` at once (see
+    :mod:`dispatch.dispatcher`), one offered before waits for its deadline."""
+    late = servable & ~np.isfinite(cost).any(axis=0)
+    for t, bad in zip(open_tasks, late):
+        if bad and not t.offered:
+            book.close(t, TaskState.REJECTED)
+    return servable & ~late
+
+
+def deadlines(cost: np.ndarray, deadline: np.ndarray, now: float) -> np.ndarray:
+    """``cost`` with ``inf`` where a vehicle would reach the pickup after the request's
+    deadline (``now + cost <= deadline``, to 1e-9 s)."""
+    return np.where(now + cost <= deadline + 1e-9, cost, np.inf)
+
+
+def keep_servable(servable: np.ndarray, requests: list, cost: np.ndarray, exact, inserts):
+    """``(requests, tasks, cost, exact, inserts)`` for the ``servable`` columns only: the
+    requests and their fresh views, the columns of the costs (and of ``exact``, lazy costs)
+    and the insertions (renumbered)."""
+    if inserts:  # their columns move left
+        inserts = inserts.kept(servable)
+    requests = [t for t, ok in zip(requests, servable) if ok]
+    tasks = tuple([t.view() for t in requests])
+    cost = cost[:, servable]
+    if exact is not None:
+        exact = exact[:, servable]
+    return requests, tasks, cost, exact, inserts
+
+
+class Problems:
+    """The :class:`AllocationProblem` of a decision's cost matrix: the run's fixed fields (the
+    allocator's generator, rounds, the comms' loss and latency, the cell size, the service
+    time, travel times between locations when the planner routes) and the decision's."""
+
+    def __init__(self, fleet: Fleet, operator: Operator, planner: Planner, space: Space,
+                 cfg: DispatchConfig, comms: CommsConfig, rng: np.random.Generator,
+                 pooled: bool, routes: bool) -> None:
+        self.fleet, self.operator, self.planner, self.space = fleet, operator, planner, space
+        self.rng, self.max_rounds = rng, cfg.max_rounds
+        self.loss, self.latency = comms.loss, comms.latency
+        self.pooled, self.routes = pooled, routes
+        self.cell_size = float(space.cell)
+
+    def of(self, now: float, agents, tasks, slots: np.ndarray, comm: np.ndarray, apos
+           ) -> Callable[[np.ndarray], AllocationProblem]:
+        """``make(cost)``: the problem of these agents (at fleet positions ``slots``), tasks
+        and comm graph with a C-ordered copy of ``cost`` (the certificate loop changes its
+        matrix between questions); the task positions, the plans, seats and ready times
+        (shared rides) as the problem reads them."""
+        space = self.space
+
+        def tpos():
+            return space.positions([t.loc for t in tasks])
+
+        plans = Plans(self.fleet, self.operator, slots) if self.pooled else None
+        seats = self.fleet.capacity[slots] if self.pooled else None
+        ready = np.maximum(self.fleet.free_at[slots], now) if self.pooled else None
+        travel = self.planner.between if self.routes else None
+
+        def make(cost: np.ndarray) -> AllocationProblem:
+            return AllocationProblem.made(now, agents, tasks, np.array(cost, order="C"), comm,
+                                          self.rng, self.max_rounds, self.loss, self.latency,
+                                          self.cell_size, apos, tpos, plans, seats,
+                                          self.operator.service_time, travel, ready)
+        return make
+
+
+#: ``ask(problem) -> (allocation, seconds it took, each pair's (row, column))``: the
+#: dispatcher's question to the allocator, its answer checked.
+Ask = Callable[[AllocationProblem], tuple]
+
+
+def certified(ask, cost, exact, compute, now: float, deadline: np.ndarray, tally: Tally):
+    """The certificate loop of lazy costs (:func:`dispatch.lazy.certify`) around ``ask``
+    (``cost -> (problem, allocation, allocator seconds, pair indices)``): ``(problem,
+    allocation, allocator seconds, pair indices, seconds spent computing exact pairs)``; the
+    latter, the rounds and the pairs computed are added to ``tally``."""
+    spent = [0.0]
+
+    def timed(c):
+        t = time.perf_counter()
+        answer = ask(c)
+        spent[0] += time.perf_counter() - t
+        return answer
+
+    t0 = time.perf_counter()
+    (problem, allocation, _, index), rounds, pairs = certify(
+        timed, cost, exact, compute, now, deadline)
+    extra = time.perf_counter() - t0 - spent[0]
+    tally.cost_seconds += extra
+    tally.lazy_rounds += rounds
+    tally.lazy_pairs += pairs
+    return problem, allocation, spent[0], index, extra
+
+
+# ----------------------------------------------------------------------------- composed
+
+
+@dataclass
+class Decision:
+    """A decision's problem, built (what :meth:`Pipeline.answer` asks the allocator about):
+    its time, agents (at fleet positions ``slots``), requests and their views, the cost
+    matrix (with lazy costs bounds and ``exact``), where a busy vehicle's stops would go
+    (``inserts``), re-assignment's holders (task id -> vehicle id), the comm graph, the
+    seconds spent building it and ``make(cost)`` (:meth:`Problems.of`)."""
+
+    now: float
+    slots: np.ndarray
+    agents: AgentViews
+    requests: list
+    tasks: tuple
+    cost: np.ndarray
+    exact: np.ndarray | None
+    inserts: Inserts | dict
+    holder: dict
+    comm: np.ndarray
+    cost_s: float
+    make: Callable[[np.ndarray], AllocationProblem]
+
+
+class Pipeline:
+    """The steps of a decision's problem (see the module), composed in :meth:`build`."""
+
+    def __init__(self, book: TaskBook, fleet: Fleet, operator: Operator, planner: Planner,
+                 allocator: Allocator, space: Space, cfg: DispatchConfig, comms: CommsConfig,
+                 rng: np.random.Generator, tally: Tally, blame: Blame, links=None,
+                 energy_filter=None, *, pooled: bool = False, max_delay: bool = False) -> None:
+        self.book, self.fleet, self.operator, self.tally = book, fleet, operator, tally
+        #: the vehicles have plans to insert into (a capacity above 1), requests have drop-off
+        #: limits or the objective is the added time: costs are insertion costs (dispatch.stops)
+        self.pooled = bool(pooled)
+        self.plans = self.pooled or cfg.objective != "pickup_time" or bool(max_delay)
+        self.objective = OBJECTIVES[cfg.objective]
+        self.reassign = cfg.reassign
+        #: the planner routes between any two locations (direct times, insertions)
+        self.routes = planner.travel_times
+        if self.plans and not self.routes:
+            raise PluginError(f"planner {planner.name!r} computes no travel times between "
+                              "locations (Planner.between): shared rides, max_delay and the "
+                              "added_time objective need them")
+        #: [dispatch] lazy_costs, with a planner and an allocator that support it
+        self.lazy = lazy_costs(cfg, planner, allocator, self.plans)
+        self.planner = planner
+        self.costs = PlannerCosts(planner, self.lazy, blame)
+        #: [fleet.energy]: ``(cost, drive, slots, tasks) -> cost`` with ``inf`` where a vehicle
+        #: would end below its reserve (dispatch.energy.Energy.filter); None without energy
+        self.energy_filter = energy_filter
+        self.hearing = Hearing(space, comms, links)
+        self.problems = Problems(fleet, operator, planner, space, cfg, comms, rng, self.pooled,
+                                 self.routes)
+
+    def build(self, now: float) -> Decision | None:
+        """The problem of a decision at ``now`` over the candidate vehicles and the open
+        requests; None when there is nothing to decide (no open request, no vehicle, or no
+        request any vehicle can serve). Closes the requests it finds unreachable or (offered
+        the first time) too late."""
+        held = self.book.assigned if self.reassign else {}
+        if not self.book.open and not held:
+            return None
+        if self.routes:
+            direct_times(self.book, self.planner.free_flow)
+        idle, open_tasks, holder = candidates(self.fleet, self.book, held, self.pooled)
+        if not idle.size:
+            return None
+        agents = self.fleet.views(idle, now, ascending=True)  # flatnonzero, union1d: sorted
+        t0 = time.perf_counter()
+        tasks = tuple([t.view() for t in open_tasks])
+        cost, exact = self.costs(agents, tasks)
+        servable = self.costs.reachable(cost)
+        if servable is not None and not servable.all():
+            close_unreachable(self.book, self.fleet, self.costs,
+                              [t for t, ok in zip(open_tasks, servable) if not ok], now)
+        drive = cost if self.energy_filter is not None else None
+        cost, exact, servable, inserts = self.limits(now, agents, tasks, idle, open_tasks, holder,
+                                                     cost, exact, servable)
+        if drive is not None:  # [fleet.energy]: below the reserve after the trip: inf
+            cost = self.energy_filter(cost, drive, idle, open_tasks)
+        cost_s = time.perf_counter() - t0
+        self.tally.cost_seconds += cost_s
+        if servable is not None:
+            if not servable.any():
+                return None
+            if not servable.all():
+                open_tasks, tasks, cost, exact, inserts = keep_servable(
+                    servable, open_tasks, cost, exact, inserts)
+        comm, apos = self.hearing(agents, now)
+        return Decision(now, idle, agents, open_tasks, tasks, cost, exact, inserts, holder, comm,
+                        cost_s, self.problems.of(now, agents, tasks, idle, comm, apos))
+
+    def limits(self, now: float, agents, tasks, idle: np.ndarray, open_tasks: list,
+               holder: dict, cost: np.ndarray, exact, servable):
+        """``(cost, exact, servable, inserts)`` within every limit: with plans the insertion
+        costs by the objective (and where a busy vehicle's stops would go); without, ``inf``
+        where a vehicle would reach the pickup after the deadline (with lazy costs each
+        request's feasibility made exact). The requests no vehicle reaches in time are left
+        out of ``servable`` (rejected at their first offer); ``servable`` stays None where no
+        limit applies and every request is reachable."""
+        limits = [t.deadline for t in open_tasks]
+        inserts: dict = {}
+        if self.plans:
+            if servable is None:
+                servable = np.ones(len(open_tasks), dtype=bool)
+            cost, inserts = insertion_costs_of(cost, idle, open_tasks, now, set(holder.values()),
+                                               fleet=self.fleet, operator=self.operator,
+                                               planner=self.planner, objective=self.objective)
+            servable = reject_late(self.book, open_tasks, cost, servable)
+        elif any(d < math.inf for d in limits):
+            if servable is None:
+                servable = np.ones(len(open_tasks), dtype=bool)
+            limits = np.array(limits)
+            cost = deadlines(cost, limits, now)
+            if self.lazy:  # late by its bound is late exactly; feasibility of each task exact
+                exact = exact | ~np.isfinite(cost)
+                self.tally.lazy_pairs += resolve_open(cost, exact, self.costs.exact(agents, tasks),
+                                                      now, limits)
+            servable = reject_late(self.book, open_tasks, cost, servable)
+        return cost, exact, servable, inserts
+
+    def answer(self, d: Decision, ask: Ask) -> tuple:
+        """``(problem, allocation, allocator seconds, pair indices)`` of decision ``d``:
+        ``ask``'s answer to its problem, or with lazy costs the certified one (the seconds
+        spent computing exact pairs are added to ``d.cost_s``)."""
+        def solve(cost: np.ndarray):
+            problem = d.make(cost)
+            allocation, decide_s, index = ask(problem)
+            return problem, allocation, decide_s, index
+
+        if not self.lazy:
+            return solve(d.cost)
+        problem, allocation, decide_s, index, extra = certified(
+            solve, d.cost, d.exact, self.costs.exact(d.agents, d.tasks), d.now,
+            np.array([t.deadline for t in d.requests]), self.tally)
+        d.cost_s += extra  # computing exact pairs is cost time
+        return problem, allocation, decide_s, index
