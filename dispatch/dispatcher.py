@@ -68,6 +68,7 @@ import numpy as np
 
 # answer checking; validate and route_stops stay importable from here (plugins' tests use them)
 from dispatch.answers import finders, route_stops, validate  # noqa: F401
+from dispatch.candidates import cut as candidate_cut
 from dispatch.comms import comm_graph, components
 from dispatch.contracts import Allocation, AllocationProblem, Allocator, Planner
 from dispatch.errors import AllocationError, DispatchError, PluginError
@@ -134,6 +135,7 @@ class _Pending:
     #: shared rides: (row, column) of a pair whose vehicle has a plan -> where its stops go
     #: (see :class:`dispatch.stops.Insertions`)
     inserts: Inserts | dict = field(default_factory=dict)
+    cut: int = 0  # open tasks the candidate cut left out (dispatch.candidates)
 
 
 class Dispatcher:
@@ -280,6 +282,7 @@ class Dispatcher:
         now = self.env.now
         agents = self.fleet.views(idle, now, ascending=True)  # flatnonzero, union1d: sorted
         t0 = time.perf_counter()
+        open_tasks, n_cut = candidate_cut(open_tasks, agents, self.space, holder)
         tasks = tuple([t.view() for t in open_tasks])
         lazy = self.lazy
         cost, exact = self._planner_costs(agents, tasks)
@@ -364,7 +367,7 @@ class Dispatcher:
             t.conflicted = t.conflicted or t.id in conflicted
         n_comp = 1 if comm.strides == (0, 0) else components(comm)[0]
         self._pending = _Pending(problem, allocation, open_tasks, cost_s, decide_s, delay,
-                                 n_comp, holder, index, inserts)
+                                 n_comp, holder, index, inserts, n_cut)
         if delay <= 0:
             self._hand_out()
 
@@ -610,7 +613,7 @@ class Dispatcher:
             self.first_cost, self.first_seconds = total, p.cost_s + p.decide_s
         self.on_decision(self.decisions, p.problem, allocation, total, p.cost_s, p.decide_s,
                          hops=allocation.hops, comm_delay=p.delay, agent_seconds=critical,
-                         components=p.components)
+                         components=p.components, cut=p.cut)
         self.decisions += 1
 
     def _reassign(self, p: _Pending, holding: dict, handed: tuple, pair_cost: list[float],

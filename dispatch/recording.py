@@ -70,7 +70,7 @@ DECISION_COLUMNS = {
     "conflicts": "len(a.conflicted_tasks())", "total_cost": "total",
     "cost_seconds": "cost_s", "decide_seconds": "decide_s", "hops": "hops",
     "comm_delay": "comm_delay", "agent_seconds": "agent_seconds",
-    "comm_components": "components",
+    "comm_components": "components", "n_cut": "cut",
 }
 #: the ``assignments`` table: one row per request ``r`` of decision ``i``
 ASSIGNMENT_COLUMNS = {
@@ -114,17 +114,17 @@ class DecisionWriter:
         self.append = recorder.append
         self.decision = row_builder("decisions", DECISION_COLUMNS,
                                     "i, p, a, total, cost_s, decide_s, hops, comm_delay, "
-                                    "agent_seconds, components")
+                                    "agent_seconds, components, cut")
         self.request = row_builder("assignments", ASSIGNMENT_COLUMNS, "i, r, alloc_s")
 
     def __call__(self, index: int, problem, allocation, total: float, cost_s: float,
                  decide_s: float, *, hops: int = 0, comm_delay: float = 0.0,
-                 agent_seconds: float = math.nan, components: int = 1) -> None:
+                 agent_seconds: float = math.nan, components: int = 1, cut: int = 0) -> None:
         append, alloc_s, request = self.append, cost_s + decide_s, self.request
         for r in allocation.requests:
             append("assignments", request(index, r, alloc_s))
         append("decisions", self.decision(index, problem, allocation, total, cost_s, decide_s,
-                                          hops, comm_delay, agent_seconds, components))
+                                          hops, comm_delay, agent_seconds, components, cut))
 
 
 def write_vehicles(recorder, space, vehicles, now: float, counts) -> None:
