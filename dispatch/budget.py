@@ -20,9 +20,10 @@ what to change (``--force`` runs anyway), as the size bounds do:
   proportion for larger grids (the fields grow with the grid).
 * **a planner's own work**: a planner plugin may define ``budget(agents, tasks, duration)``,
   returning a sentence when a run of that many vehicles and tasks over that many simulated
-  seconds is past its own bound (``rrt_star``: tree iterations; ``reservation``: the retries
-  of blocked vehicles, ``agents × duration / retry_after``); :func:`check_planner_budget`
-  calls it.
+  seconds is past its own bound (``rrt_star``: tree iterations, and the ray tests its
+  parameters cost: a tiny ``step`` keeps a tree within a rewiring radius of its goal, so each
+  iteration tests every node; ``reservation``: the retries of blocked vehicles,
+  ``agents × duration / retry_after``); :func:`check_planner_budget` calls it.
 
 Road networks have no task-decision bound: a decision reads cached Dijkstra trees (a city
 day of 100,000 trips takes about a minute), and their size bounds are the releases'.
@@ -173,7 +174,8 @@ def check_work(sc, specs, refuse) -> None:
         key = "tasks.max_active" if t.max_active is None else "tasks.rate"
         fix = "set tasks.max_active or tasks.ttl, or a lower rate or shorter duration"
     if t.source != "static" and not window > 0:
-        fix += ", or a batch window (dispatch.batch_window: a decision per window, not per release)"
+        fix += (", or a batch window (dispatch.batch_window: a decision per window, not per "
+                "release)")
     grid = f" on a grid of {cells:,} cells" if cells > REFERENCE_CELLS else ""
     raise refuse(key, f"about {work:.3g} task-decisions ({how}){grid}: more than "
                       f"{bound:,.0f}, which take about 20 s; {fix}")
