@@ -46,6 +46,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from dispatch.candidates import cut as candidate_cut
 from dispatch.comms import Hearing
 from dispatch.contracts import AgentViews, AllocationProblem, Allocator, Planner
 from dispatch.errors import DispatchError, PluginError
@@ -374,6 +375,7 @@ class Decision:
     comm: np.ndarray
     cost_s: float
     make: Callable[[np.ndarray], AllocationProblem]
+    cut: int = 0  # open tasks the candidate cut left out (dispatch.candidates)
 
 
 class Pipeline:
@@ -384,6 +386,7 @@ class Pipeline:
                  rng: np.random.Generator, tally: Tally, blame: Blame, links=None,
                  energy_filter=None, *, pooled: bool = False, max_delay: bool = False) -> None:
         self.book, self.fleet, self.operator, self.tally = book, fleet, operator, tally
+        self.space = space
         #: the vehicles have plans to insert into (a capacity above 1), requests have drop-off
         #: limits or the objective is the added time: costs are insertion costs (dispatch.stops)
         self.pooled = bool(pooled)
@@ -422,6 +425,7 @@ class Pipeline:
             return None
         agents = self.fleet.views(idle, now, ascending=True)  # flatnonzero, union1d: sorted
         t0 = time.perf_counter()
+        open_tasks, n_cut = candidate_cut(open_tasks, agents, self.space, holder)
         tasks = tuple([t.view() for t in open_tasks])
         cost, exact = self.costs(agents, tasks)
         servable = self.costs.reachable(cost)
@@ -443,7 +447,7 @@ class Pipeline:
                     servable, open_tasks, cost, exact, inserts)
         comm, apos = self.hearing(agents, now)
         return Decision(now, idle, agents, open_tasks, tasks, cost, exact, inserts, holder, comm,
-                        cost_s, self.problems.of(now, agents, tasks, idle, comm, apos))
+                        cost_s, self.problems.of(now, agents, tasks, idle, comm, apos), n_cut)
 
     def limits(self, now: float, agents, tasks, idle: np.ndarray, open_tasks: list,
                holder: dict, cost: np.ndarray, exact, servable):

@@ -111,6 +111,7 @@ class _Pending:
     #: shared rides: (row, column) of a pair whose vehicle has a plan -> where its stops go
     #: (see :class:`dispatch.stops.Insertions`)
     inserts: Inserts | dict = field(default_factory=dict)
+    cut: int = 0  # open tasks the candidate cut left out (dispatch.candidates)
 
 
 class Wakeup:
@@ -204,7 +205,7 @@ class Dispatcher:
         comm = d.comm
         n_comp = 1 if comm.strides == (0, 0) else components(comm)[0]
         self._pending = _Pending(problem, allocation, d.requests, d.cost_s, decide_s, delay,
-                                 n_comp, d.holder, index, d.inserts)
+                                 n_comp, d.holder, index, d.inserts, d.cut)
         if delay <= 0:
             self._hand_out()
 
@@ -358,7 +359,7 @@ class Dispatcher:
             tally.first_cost, tally.first_seconds = total, p.cost_s + p.decide_s
         self.on_decision(tally.decisions, p.problem, allocation, total, p.cost_s, p.decide_s,
                          hops=allocation.hops, comm_delay=p.delay, agent_seconds=critical,
-                         components=p.components)
+                         components=p.components, cut=p.cut)
         tally.decisions += 1
 
     def _reassign(self, p: _Pending, holding: dict, handed: tuple, pair_cost: list[float],

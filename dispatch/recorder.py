@@ -97,6 +97,8 @@ SCHEMAS: dict[str, pa.Schema] = {
         ("n_assigned", _I), ("rounds", _I), ("messages", _I), ("conflicts", _I),
         ("total_cost", _F), ("cost_seconds", _F), ("decide_seconds", _F),
         ("hops", _I), ("comm_delay", _F), ("agent_seconds", _F), ("comm_components", _I),
+        # open tasks the candidate cut left out of the decision (dispatch.candidates)
+        ("n_cut", _I),
     ]),
     "events": pa.schema([
         ("run_id", _S), ("t", _F), ("event", _S), ("agent_id", _I), ("task_id", _I),

@@ -63,16 +63,16 @@ def task_row(t, p, d) -> tuple:
 DECISION_COLUMNS = (
     "decision", "t", "n_idle", "n_tasks", "n_assigned", "rounds", "messages", "conflicts",
     "total_cost", "cost_seconds", "decide_seconds", "hops", "comm_delay", "agent_seconds",
-    "comm_components")
+    "comm_components", "n_cut")
 
 
 def decision_row(i: int, p, a, total: float, cost_s: float, decide_s: float, hops: int,
-                 comm_delay: float, agent_seconds: float, components: int) -> tuple:
+                 comm_delay: float, agent_seconds: float, components: int, cut: int) -> tuple:
     """The ``decisions`` row of decision ``i``: its problem ``p``, allocation ``a`` and figures
     (:data:`DECISION_COLUMNS`)."""
     return (i, float(p.time), p.n_agents, p.n_tasks, len(a.pairs), a.rounds, a.messages,
             len(a.conflicted_tasks()), total, cost_s, decide_s, hops, comm_delay,
-            agent_seconds, components)
+            agent_seconds, components, cut)
 
 
 #: the columns :func:`assignment_row` returns, in order
@@ -131,12 +131,12 @@ class DecisionWriter:
 
     def __call__(self, index: int, problem, allocation, total: float, cost_s: float,
                  decide_s: float, *, hops: int = 0, comm_delay: float = 0.0,
-                 agent_seconds: float = math.nan, components: int = 1) -> None:
+                 agent_seconds: float = math.nan, components: int = 1, cut: int = 0) -> None:
         append, alloc_s = self.append, cost_s + decide_s
         for r in allocation.requests:
             append("assignments", assignment_row(index, r, alloc_s))
         append("decisions", decision_row(index, problem, allocation, total, cost_s, decide_s,
-                                         hops, comm_delay, agent_seconds, components))
+                                         hops, comm_delay, agent_seconds, components, cut))
 
 
 def write_vehicles(recorder, space, vehicles, now: float, counts) -> None:

@@ -69,6 +69,21 @@ MAX_LOOSE_TREES = 64
 _JOIN_BATCH = 64
 
 
+def sampled_region(world: World, clearance: float, flies: bool):
+    """``(lo, hi, dim, measure, gamma)`` of a movement model's sampled region: its corners
+    (metres), dimension (3 for UAVs, 2 on the ground plane for UGVs), measure (volume or area)
+    and the RRT* rewiring constant ``gamma`` of that measure."""
+    cell = world.cell
+    clear = clearance * cell
+    size = np.asarray(world.size, dtype=float)
+    lo = np.array([clear, clear, clear if flies else 0.5 * cell])
+    hi = np.array([size[0] - clear, size[1] - clear, size[2] - clear if flies else 0.5 * cell])
+    d = 3 if flies else 2
+    measure = float(np.prod((hi - lo)[:d]))
+    gamma = 2.0 * (1 + 1 / d) ** (1 / d) * (measure / unit_ball_volume(d)) ** (1 / d)
+    return lo, hi, d, measure, gamma
+
+
 class _Tree:
     """One RRT* tree rooted at a goal point; node 0 is the root."""
 
@@ -78,15 +93,8 @@ class _Tree:
         self.goal = goal
         world = planner.world
         cell = world.cell
-        self.dim = 3 if flies else 2
-        clear = planner.clearance * cell
-        size = np.asarray(world.size, dtype=float)
-        self.lo = np.array([clear, clear, clear if flies else 0.5 * cell])
-        self.hi = np.array([size[0] - clear, size[1] - clear,
-                            size[2] - clear if flies else 0.5 * cell])
-        measure = float(np.prod((self.hi - self.lo)[: self.dim]))
-        d = self.dim
-        self.gamma = 2.0 * (1 + 1 / d) ** (1 / d) * (measure / unit_ball_volume(d)) ** (1 / d)
+        self.lo, self.hi, self.dim, _, self.gamma = sampled_region(world, planner.clearance,
+                                                                   flies)
         gi, gj, gk = goal
         seq = np.random.SeedSequence(entropy=planner.seed,
                                      spawn_key=(int(flies), int(gi), int(gj), int(gk)))
@@ -259,18 +267,60 @@ class RRTStarPlanner(Planner):
     #: Tree iterations of one run past which ``dispatch validate`` refuses it (see
     #: :meth:`budget`): about 20 s on one core (an iteration scans every node of its tree).
     MAX_RUN_ITERATIONS = 60_000
+    #: Ray tests of one run past which ``dispatch validate`` refuses it (see :meth:`budget`):
+    #: about 20 s on one core (1.4 µs a ray, batched, measured on the paper's world).
+    MAX_RUN_RAYS = 15_000_000
 
     def budget(self, *, agents: int, tasks: float, duration: float) -> str | None:
         """Why a run of ``tasks`` tasks would not finish (None: it would): each task's goal
         grows a tree of ``max_iterations`` iterations per movement model that serves it
         (two for a ground task), so a run costs about ``2 × tasks × max_iterations``
-        iterations (see :mod:`dispatch.budget`)."""
+        iterations; and each iteration tests its new node against its rewiring neighbours
+        (:meth:`tree_rays`), which a tiny ``step`` makes every node of the tree (see
+        :mod:`dispatch.budget`)."""
         work = 2 * tasks * self.max_iterations
-        if work <= self.MAX_RUN_ITERATIONS:
+        if work > self.MAX_RUN_ITERATIONS:
+            return (f"about {work:.3g} tree iterations (2 trees x {tasks:,.0f} tasks x "
+                    f"max_iterations = {self.max_iterations:,}; more than "
+                    f"{self.MAX_RUN_ITERATIONS:,}, about 20 s): lower max_iterations or use "
+                    "astar")
+        (uav, iters, reach), (ugv, _, _) = self.tree_rays(True), self.tree_rays(False)
+        rays = tasks * (uav + ugv)
+        if rays <= self.MAX_RUN_RAYS:
             return None
-        return (f"about {work:.3g} tree iterations (2 trees x {tasks:,.0f} tasks x "
-                f"max_iterations = {self.max_iterations:,}; more than "
-                f"{self.MAX_RUN_ITERATIONS:,}, about 20 s): lower max_iterations or use astar")
+        why = (f"step = {self.step:g} m keeps a tree of {iters:,} iterations within "
+               f"{reach:.3g} m of its goal, so every node is a rewiring neighbour of every new "
+               f"one" if reach < self.rewire_radius else
+               f"{iters:,} iterations a tree, each testing its new node against its rewiring "
+               f"neighbours (rewire_radius = {self.rewire_radius:g} m)")
+        return (f"about {rays:.3g} ray tests ({tasks:,.0f} tasks x a UAV and a UGV tree of "
+                f"{uav:.3g} and {ugv:.3g}: {why}; more than {self.MAX_RUN_RAYS:,}, about 20 s): "
+                "raise step (default 4 m), lower max_iterations or use astar")
+
+    def tree_rays(self, flies: bool) -> tuple[float, int, float]:
+        """``(rays, iterations, reach)``: the ray tests one tree of a movement model is
+        expected to make while it grows, its iterations and how far (metres) they can take it
+        from its goal (``iterations × step``).
+
+        Iteration ``n`` tests its new node against the nodes within the rewiring radius
+        ``r_n = min(rewire_radius, gamma (log n / n)^(1/d))``: about ``n`` times the share of
+        the tree's region that ball covers, the region being the sampled one or, when the
+        tree cannot reach that far, the ball of radius ``n × step`` (a lower bound of the
+        share: nodes crowd nearer the goal). A tree whose every iteration together cannot
+        leave its goal's cell (``iterations × step`` below a cell) cannot go around an
+        obstacle: a start its goal does not see spends all ``max_rounds`` rounds of
+        ``max_iterations // 2``, which are then counted (in a world with obstacles)."""
+        _, _, d, measure, gamma = sampled_region(self.world, self.clearance, flies)
+        rounds = self.max_rounds * max(1, self.max_iterations // 2)
+        iters = self.max_iterations
+        if (iters + rounds) * self.step < self.world.cell and self.world.boxes:
+            iters += rounds
+        n = np.arange(1, iters + 1, dtype=float)
+        radius = np.minimum(self.rewire_radius, gamma * (np.log(n + 1) / (n + 1)) ** (1 / d))
+        ball = unit_ball_volume(d)
+        share = radius**d / np.minimum(measure / ball, (n * self.step) ** d)
+        near = n * np.minimum(1.0, share)
+        return float(near.sum()), iters, iters * self.step
 
     # ------------------------------------------------------------------ plumbing
     @property
