@@ -248,18 +248,23 @@ def test_run_duration_overrides_the_file(tmp_path):
     assert open_results(tmp_path / "out2").summary.iloc[0]["sim_time"] <= 10.0
 
 
-def test_readme_run_counts_match_validate():
-    """Every `dispatch run scenarios/X.toml  # ... (N runs)` line of the README says as many
-    runs as the file expands to (paper_static is 200, not 240)."""
+def test_documented_run_counts_match_validate():
+    """Every `dispatch run scenarios/X.toml  # ... (N runs)` line of the README, scenarios/README.md
+    and the docs pages (the command-line page holds them now) says as many runs as the file
+    expands to (paper_static is 200, not 240)."""
     import re
 
     from dispatch.scenario import load_scenario
 
+    pages = [ROOT / "README.md", ROOT / "scenarios" / "README.md",
+             *sorted((ROOT / "docs").rglob("*.md"))]
     found = 0
-    for line in (ROOT / "README.md").read_text(encoding="utf-8").splitlines():
-        m = re.match(r"dispatch (?:run|sweep|validate) (scenarios/\S+\.toml)\s+#.*\((\d+) runs?\)",
-                     line)
-        if m:
-            found += 1
-            assert len(load_scenario(ROOT / m.group(1)).runs()) == int(m.group(2)), line
+    for page in pages:
+        for line in page.read_text(encoding="utf-8").splitlines():
+            m = re.match(r"\s*dispatch (?:run|sweep|validate) (scenarios/\S+\.toml)\s+#.*"
+                         r"\((\d+) runs?\)", line)
+            if m:
+                found += 1
+                runs = len(load_scenario(ROOT / m.group(1)).runs())
+                assert runs == int(m.group(2)), (page, line)
     assert found

@@ -1,5 +1,5 @@
 """dispatch.testing: every built-in plugin passes the checks; deliberately broken plugins are
-caught by the check that names their bug; the README's allocator passes; ``dispatch check``;
+caught by the check that names their bug; the documented allocator passes; ``dispatch check``;
 a misbehaving plugin inside a run stops it with one line naming the plugin, run and decision."""
 
 from __future__ import annotations
@@ -241,21 +241,25 @@ def test_broken_planners_are_caught():
         assert check in failed, (cls.__name__, failed)
 
 
-# ----------------------------------------------------------------------------- the README example
+# ------------------------------------------------------------------------- the documented example
+
+#: The pages that show the whole ``CheapestFirst`` allocator: the plugin explanation (the old
+#: README section) and the tutorial (a MyST-NB code cell).
+PLUGIN_PAGES = ("docs/explanation/plugins.md", "docs/tutorials/plugin.md")
 
 
-def readme_allocator():
-    readme = (ROOT / "README.md").read_text(encoding="utf-8")
-    section = readme.split("## Writing a plugin", 1)[1].split("\n## ", 1)[0]
-    (code,) = [b for b in re.findall(r"```python\n(.*?)```", section, re.DOTALL)
-               if "class CheapestFirst" in b]
+def documented_allocator(page):
+    text = (ROOT / page).read_text(encoding="utf-8")
+    (code,) = [b for b in re.findall(r"```(?:python|\{code-cell\} python)\n(.*?)```", text,
+                                     re.DOTALL) if "class CheapestFirst" in b]
     scope: dict = {}
-    exec(compile(code, "README.md", "exec"), scope)  # noqa: S102 - the README's own code
+    exec(compile(code, page, "exec"), scope)  # noqa: S102 - the page's own code
     return code, scope["CheapestFirst"]
 
 
-def test_readme_allocator_passes_the_checker():
-    code, cls = readme_allocator()
+@pytest.mark.parametrize("page", PLUGIN_PAGES)
+def test_documented_allocator_passes_the_checker(page):
+    code, cls = documented_allocator(page)
     assert len(code.strip().splitlines()) <= 30
     report = check_allocator(cls)
     assert report.ok, str(report)

@@ -256,9 +256,9 @@ def spec_id(path: Path) -> str:
     return load_scenario(path).runs()[0].run_id
 
 
-def test_dispatch_run_writes_the_one_layout_and_readme_reads_it(tiny_scenario, cli, tmp_path):
-    """A single ``dispatch run`` writes the Hive layout of a sweep; the README's pyarrow
-    snippet reads it as it is written there."""
+def test_dispatch_run_writes_the_one_layout_and_the_results_page_reads_it(tiny_scenario, cli, tmp_path):
+    """A single ``dispatch run`` writes the Hive layout of a sweep; the pyarrow snippet of the
+    results page (docs/explanation/output.md) reads it as it is written there."""
     out = tmp_path / "out"
     proc = cli("run", tiny_scenario, "--out", out)
     assert proc.returncode == 0, proc.stderr
@@ -267,12 +267,12 @@ def test_dispatch_run_writes_the_one_layout_and_readme_reads_it(tiny_scenario, c
     assert (out / "summary" / leaf / "part-0.parquet").is_file()
     assert not (out / "summary.parquet").exists()
     assert (out / "_runs" / leaf / "done.json").is_file()
-    readme = (ROOT / "README.md").read_text(encoding="utf-8")
-    snippet = next(block for block in re.findall(r"```python\n(.*?)```", readme, re.S)
+    page = (ROOT / "docs" / "explanation" / "output.md").read_text(encoding="utf-8")
+    snippet = next(block for block in re.findall(r"```python\n(.*?)```", page, re.S)
                    if "pyarrow.dataset" in block)
     folder = re.search(r'ds\.dataset\("([^"]+)/summary"', snippet).group(1)
     scope: dict = {}
-    exec(snippet.replace(folder, str(out)), scope)  # noqa: S102 - the README's own code
+    exec(snippet.replace(folder, str(out)), scope)  # noqa: S102 - the page's own code
     summary = scope["summary"]
     assert len(summary) == 1
     row = summary.iloc[0]

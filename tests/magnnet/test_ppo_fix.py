@@ -145,7 +145,7 @@ def test_pure_ppo_learns_to_assign_without_stalling():
     instances, with the trainer's validation picking the kept weights: those assign every task on most
     held-out instances and are conflict-free more often than the initial weights. (Without
     the validation the last weights may leave instances incomplete: the argmax policy can
-    reject all round, the weakness the README describes.)"""
+    reject all round, the weakness docs/explanation/magnnet.md describes.)"""
     from allocators.magnnet.ppo import train, validation_set
 
     torch.set_num_threads(1)
