@@ -1,5 +1,5 @@
 """Benchmark: the cheapest feasible insertion (``dispatch.stops.insertion_costs``) against the
-exhaustive search that re-simulates every plan (``dispatch.stops.brute_force_insertion``, the
+exhaustive search that re-simulates every plan (``tests.dispatch.reference.brute_force_insertion``, the
 reference the tests hold it to), on the same random pairs, in the same run.
 
 Pairs: a vehicle whose plan holds ``--stops`` stops (requests picked up or waiting, capacity 4,
@@ -24,7 +24,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from dispatch.stops import ADDED_TIME, brute_force_insertion, insertion_costs  # noqa: E402
+from dispatch.stops import ADDED_TIME, insertion_costs  # noqa: E402
+from tests.dispatch.reference import brute_force_insertion  # noqa: E402
 
 
 #: pairs per simulated decision

@@ -75,7 +75,7 @@ from dispatch.heap import keep_large_blocks
 from dispatch.lazy import certify, resolve_open
 from dispatch.plans import Inserts, Plans, insertion_costs_of, roomy
 from dispatch.space import Space
-from dispatch.stops import OBJECTIVES
+from dispatch.stops import OBJECTIVES, PICKUP
 from dispatch.tasks import OPEN, TaskBook, TaskState
 
 if TYPE_CHECKING:
@@ -585,8 +585,8 @@ class Dispatcher:
         for k, (aid, tid) in enumerate(allocation.pairs):
             if aid in routes:
                 rows, times = routes[aid]
-                at = next(t for (kind, task, *_), t in zip(rows, times)
-                          if kind == "pickup" and task == tid)
+                at = next(t for r, t in zip(rows, times)
+                          if r.kind == PICKUP and r.task_id == tid)
                 pair_cost[k] = at - now
                 mine.setdefault(aid, {})[tid] = pair_cost[k]
         self._recorded(p, allocation, pair_cost)
