@@ -1,6 +1,7 @@
 """Benchmark: the cheapest feasible insertion (``dispatch.stops.insertion_costs``) against the
-exhaustive search that re-simulates every plan (``tests.dispatch.reference.brute_force_insertion``, the
-reference the tests hold it to), on the same random pairs, in the same run.
+exhaustive search that re-simulates every plan
+(``tests.dispatch.reference.brute_force_insertion``, the reference the tests hold it to), on
+the same random pairs, in the same run.
 
 Pairs: a vehicle whose plan holds ``--stops`` stops (requests picked up or waiting, capacity 4,
 limits with random slack, travel times of points in the plane) and a new request. Both sides

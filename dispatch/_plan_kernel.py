@@ -7,16 +7,29 @@ Imported on first use only (it compiles with numba, cached on disk where possibl
 
 from __future__ import annotations
 
+import types
+
 import numpy as np
 
 from dispatch import stops
 from dispatch._compiled import jit
 from dispatch.stops import TOL
 
+
+
+def _twin(fn, **compiled):
+    """``fn`` compiled, calling the ``compiled`` functions where it calls their Python twins
+    (numba reads a function's globals: the same code, given the compiled helpers)."""
+    names = dict(fn.__globals__)
+    names.update(compiled)
+    return jit(types.FunctionType(fn.__code__, names, fn.__name__, fn.__defaults__,
+                                  fn.__closure__))
+
+
 leave = jit(stops.leave)
 leave_late = jit(stops.leave_late)
 later = jit(stops.later)
-timetable = jit(stops.timetable)
+timetable = _twin(stops.timetable, leave=leave)
 
 
 @jit

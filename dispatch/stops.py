@@ -122,9 +122,10 @@ def timetable(first: float, legs, earliest, service, latest, passengers, load: i
               tol: float, out) -> tuple[int, bool]:
     """The rule over a whole stop sequence: the first stop is reached at ``first``, stop
     ``k > 0`` ``legs[k - 1]`` seconds after leaving stop ``k - 1``; ``out[k]`` gets each
-    arrival (up to the first stop that breaks a limit). Returns ``(-1, False)`` when every stop keeps its limits, else the first stop that
-    does not and whether it is the capacity (``load`` on board before the first stop, ``cap``
-    seats) that it breaks rather than its ``latest``."""
+    arrival (up to the first stop that breaks a limit). Returns ``(-1, False)`` when every
+    stop keeps its limits, else the first stop that does not and whether it is the capacity
+    (``load`` on board before the first stop, ``cap`` seats) that it breaks rather than its
+    ``latest``."""
     t, occ = first, load
     for k in range(len(out)):
         if k:

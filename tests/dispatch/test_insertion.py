@@ -1,6 +1,7 @@
 """The compiled cheapest insertion (dispatch.stops.insertion_costs) against an exhaustive search
-that re-simulates every plan (tests.dispatch.reference.brute_force_insertion), on random stop lists of up
-to 6 stops, random capacities, limits and travel times (a metric: points in the plane)."""
+that re-simulates every plan (tests.dispatch.reference.brute_force_insertion), on random stop
+lists of up to 6 stops, random capacities, limits and travel times (a metric: points in the
+plane)."""
 
 from __future__ import annotations
 
