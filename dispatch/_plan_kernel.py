@@ -2,13 +2,17 @@
 there (:func:`leave`, :func:`leave_late`, :func:`later`, :func:`timetable`; compiled kernels of
 plugins call these too, e.g. :mod:`allocators._rtv_kernel`), and the cheapest insertion of each
 candidate pair of a decision (:func:`insert_pairs`, behind :func:`dispatch.stops.insertion_costs`).
-Imported on first use only (it compiles with numba, cached on disk where possible).
+Imported on first use only (it compiles with numba, cached on disk where possible; numba's
+cache does not notice a change of a called function in another file: after editing the rule
+in :mod:`dispatch.stops`, delete the ``__pycache__/*.nbi`` / ``*.nbc`` files of ``dispatch``
+and ``allocators``).
 """
 
 from __future__ import annotations
 
 import types
 
+import numba
 import numpy as np
 
 from dispatch import stops
@@ -26,8 +30,17 @@ def _twin(fn, **compiled):
                                   fn.__closure__))
 
 
-leave = jit(stops.leave)
-leave_late = jit(stops.leave_late)
+def _inline(fn):
+    """``fn`` compiled into each compiled caller (so a constant ``earliest`` of ``-inf``, a
+    stop that never waits, compiles to a plain sum)."""
+    try:
+        return numba.njit(inline="always", cache=True)(fn)
+    except RuntimeError:  # (no writable cache directory: see dispatch._compiled.jit)
+        return numba.njit(inline="always")(fn)
+
+
+leave = _inline(stops.leave)
+leave_late = _inline(stops.leave_late)
 later = jit(stops.later)
 timetable = _twin(stops.timetable, leave=leave)
 
@@ -115,17 +128,19 @@ def insert_pairs(rows, cols, ready, first_tt, off, s_arr, s_svc, s_latest, s_occ
     re-simulates."""
     inf = np.inf
     tol = TOL
+    last, opens = -1, -inf  # (the pairs come by vehicle: its plan's latest opening, once)
     for q in range(rows.size):
         v, r = rows[q], cols[q]
         a, b = off[v], off[v + 1]
         k = b - a
         n = req_n[r]
         t0 = ready[v]
-        waits = req_e[r] > t0
-        for m in range(a, b):
-            if s_e[m] > t0:
-                waits = True
-        if waits:
+        if v != last:
+            last, opens = v, -inf
+            for m in range(a, b):
+                if s_e[m] > opens:
+                    opens = s_e[m]
+        if opens > t0 or req_e[r] > t0:
             got = _insert_one(a, k, t0, first_tt[q], s_arr, s_svc, s_e, s_latest, s_occ,
                               load[v], cap[v], to_p, from_p, to_d, from_d, r, pd_tt, n,
                               req_lp[r], req_ld[r], req_e[r], req_svc_p[r], req_svc_d[r],
@@ -133,6 +148,8 @@ def insert_pairs(rows, cols, ready, first_tt, off, s_arr, s_svc, s_latest, s_occ
             out_cost[q], out_i[q], out_j[q], out_pick[q] = got[0], got[1], got[2], got[3]
             out_drop[q], out_s1[q], out_s2[q] = got[4], got[5], got[6]
             continue
+        # no stop opens after t0, and every arrival is at t0 or later: no earliest binds
+        # (the rule's departures with ``-inf``, which compile to plain sums)
         best, bi, bj, bpick, bdrop, bs1, bs2 = inf, -1, -1, inf, inf, 0.0, 0.0
         # slack[m]: how much later stops m.. of the plan may be reached (m = k: none follow)
         slack = np.empty(k + 1)
@@ -140,7 +157,7 @@ def insert_pairs(rows, cols, ready, first_tt, off, s_arr, s_svc, s_latest, s_occ
         for m in range(k - 1, -1, -1):
             sl = s_latest[a + m] - s_arr[a + m]
             slack[m] = sl if sl < slack[m + 1] else slack[m + 1]
-        end_old = t0 if k == 0 else leave(s_arr[b - 1], s_e[b - 1], s_svc[b - 1])
+        end_old = t0 if k == 0 else leave(s_arr[b - 1], -inf, s_svc[b - 1])
         for i in range(k + 1):  # the pickup after the plan's i-th stop (0: first)
             occ_i = load[v] if i == 0 else s_occ[a + i - 1]
             if occ_i + n > cap[v]:
@@ -149,11 +166,11 @@ def insert_pairs(rows, cols, ready, first_tt, off, s_arr, s_svc, s_latest, s_occ
                 dep = t0
                 arr_p = t0 + first_tt[q]
             else:
-                dep = leave(s_arr[a + i - 1], s_e[a + i - 1], s_svc[a + i - 1])
+                dep = leave(s_arr[a + i - 1], -inf, s_svc[a + i - 1])
                 arr_p = dep + to_p[a + i - 1, r]
             if arr_p > req_lp[r] + tol:
                 continue
-            leave_p = leave(arr_p, req_e[r], req_svc_p[r])
+            leave_p = leave(arr_p, -inf, req_svc_p[r])
             old = 0.0  # the drive it replaces: to the next stop (from ``dep``)
             if i < k:
                 old = s_arr[a + i] - dep
@@ -182,7 +199,7 @@ def insert_pairs(rows, cols, ready, first_tt, off, s_arr, s_svc, s_latest, s_occ
             for j in range(i + 1, k + 1):  # the drop-off after the plan's j-th stop
                 if s_occ[a + j - 1] + n > cap[v]:
                     break  # on board through stop j: no later drop-off fits either
-                dep_j = leave_late(s_arr[a + j - 1], delta1, s_e[a + j - 1], s_svc[a + j - 1])
+                dep_j = leave_late(s_arr[a + j - 1], delta1, -inf, s_svc[a + j - 1])
                 arr_d = dep_j + to_d[a + j - 1, r]
                 if arr_d > req_ld[r] + tol:
                     continue

@@ -95,16 +95,16 @@ class PlannedStop(NamedTuple):
 def leave(arrive: float, earliest: float, service: float) -> float:
     """Departure from a stop reached at ``arrive``: service starts at ``max(arrive,
     earliest)`` and lasts ``service`` seconds."""
-    return (arrive if arrive >= earliest else earliest) + service
+    return (earliest if earliest > arrive else arrive) + service
 
 
 def leave_late(arrive: float, push: float, earliest: float, service: float) -> float:
     """Departure from a stop planned to be reached at ``arrive`` and reached ``push`` seconds
     later (:func:`leave` of ``arrive + push``, summed as ``arrive + service + push`` where the
     stop does not wait, so a push adds to the planned departure as it did)."""
-    if arrive + push >= earliest:
-        return arrive + service + push
-    return earliest + service
+    if earliest > arrive + push:
+        return earliest + service
+    return arrive + service + push
 
 
 def later(push: float, arrive: float, earliest: float) -> float:
