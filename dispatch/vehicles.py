@@ -397,8 +397,9 @@ class Operator:
         is already planned late (traffic ran slower than planned) may stay as late as it is."""
         env, planner = self.env, self.driver.planner
         now = env.now
-        old = {(s.kind, _task_id(s)): s for s in v.stops}
-        planned = dict(zip(old, self._times(v)))
+        keys = [(s.kind, _task_id(s)) for s in v.stops]
+        old = dict(zip(keys, v.stops))
+        planned = dict(zip(keys, self._times(v)))
         first = old.get((rows[0].kind, rows[0].task_id))
         if first is not None and v.heading is first and v.leg is not None:
             t = v.leg_start + v.leg.seconds
