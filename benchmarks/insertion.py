@@ -1,4 +1,4 @@
-"""Benchmark: the cheapest feasible insertion (``dispatch.stops.insertion_costs``) against the
+"""Benchmark: the cheapest feasible insertion (``dispatch.insertion.insertion_costs``) against the
 exhaustive search that re-simulates every plan
 (``tests.dispatch.reference.brute_force_insertion``, the reference the tests hold it to), on
 the same random pairs, in the same run.
@@ -25,7 +25,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from dispatch.stops import ADDED_TIME, insertion_costs  # noqa: E402
+from dispatch.insertion import insertion_costs  # noqa: E402
+from dispatch.stops import ADDED_TIME  # noqa: E402
 from tests.dispatch.reference import brute_force_insertion  # noqa: E402
 
 

@@ -1,7 +1,8 @@
 """The compiled part of :mod:`dispatch.stops`: the rule's functions compiled as they are written
 there (:func:`leave`, :func:`leave_late`, :func:`later`, :func:`timetable`; compiled kernels of
 plugins call these too, e.g. :mod:`allocators._rtv_kernel`), and the cheapest insertion of each
-candidate pair of a decision (:func:`insert_pairs`, behind :func:`dispatch.stops.insertion_costs`).
+candidate pair of a decision (:func:`insert_pairs`, behind
+:func:`dispatch.insertion.insertion_costs`).
 Imported on first use only (it compiles with numba, cached on disk where possible; numba's
 cache does not notice a change of a called function in another file: after editing the rule
 in :mod:`dispatch.stops`, delete the ``__pycache__/*.nbi`` / ``*.nbc`` files of ``dispatch``
@@ -120,7 +121,7 @@ def insert_pairs(rows, cols, ready, first_tt, off, s_arr, s_svc, s_latest, s_occ
                  to_p, from_p, to_d, from_d, pd_tt, req_n, req_lp, req_ld, req_svc_p,
                  req_svc_d, objective, s_e, req_e, out_cost, out_i, out_j, out_pick, out_drop,
                  out_s1, out_s2):  # pragma: no cover - compiled
-    """The kernel of :func:`dispatch.stops.insertion_costs` (one loop over the candidate pairs).
+    """The kernel of :func:`dispatch.insertion.insertion_costs` (one loop over the candidate pairs).
     Where no stop can wait (every ``earliest`` at or before the vehicle's ready time, as for
     requests' stops) the rule is a running sum, and an insertion that reaches stop ``m``
     ``delta`` seconds later is feasible when ``delta`` is within the plan's slack there (how

@@ -132,7 +132,7 @@ class _Pending:
     holder: dict = field(default_factory=dict)  # reassign: task id -> vehicle id at decision
     index: list = field(default_factory=list)  # each pair's (row, column) in the problem
     #: shared rides: (row, column) of a pair whose vehicle has a plan -> where its stops go
-    #: (see :class:`dispatch.stops.Insertions`)
+    #: (see :class:`dispatch.insertion.Insertion`)
     inserts: Inserts | dict = field(default_factory=dict)
 
 

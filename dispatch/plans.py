@@ -3,7 +3,7 @@ added-time objective): where a new request's stops go in a vehicle's plan and wh
 
 * :func:`insertion_costs_of`: the cost matrix with plans, from the drives to each pickup; an
   empty plan takes the pickup and drop-off in that order, a busy vehicle's plan the cheapest
-  feasible insertion (:func:`dispatch.stops.insertion_costs`); :class:`Inserts` keeps where
+  feasible insertion (:func:`dispatch.insertion.insertion_costs`); :class:`Inserts` keeps where
   the stops go for the pairs handed out;
 * :class:`Plans`: the agents' stop lists as an allocation problem shows them
   (:attr:`AllocationProblem.plans`), read from the vehicles when asked;
@@ -20,14 +20,15 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from dispatch.contracts import Planner, StopView
-from dispatch.stops import PICKUP_TIME, Insertion, insertion_costs
+from dispatch.insertion import Insertion, insertion_costs
+from dispatch.stops import PICKUP_TIME
 
 if TYPE_CHECKING:
     from dispatch.vehicles import Fleet, Operator
 
 
 class Inserts:
-    """Where a decision's stops go (:class:`dispatch.stops.Insertion`), for its busy
+    """Where a decision's stops go (:class:`dispatch.insertion.Insertion`), for its busy
     vehicles' feasible pairs, by ``(row, col)``: kept as the arrays the insertion computed and
     looked up only for the pairs handed out (a pooled batch has thousands of feasible pairs
     and hands out a few dozen)."""

@@ -30,11 +30,12 @@ import simpy
 from dispatch.contracts import AgentView, AgentViews
 from dispatch.events import EventBus
 from dispatch.space import Location, Space
-from dispatch.stops import (DROPOFF, PICKUP, TOL, Insertion, PlannedStop, Stop, insert, leave,
-                            occupancies, pushed, schedule, timetable)
+from dispatch.stops import (DROPOFF, PICKUP, TOL, PlannedStop, Stop, insert, leave, occupancies,
+                            pushed, schedule, timetable)
 from dispatch.tasks import COMPLETED, PICKED_UP as PICKED_UP_STATE, Task, TaskBook, TaskState
 
 if TYPE_CHECKING:
+    from dispatch.insertion import Insertion
     from dispatch.reservations import TimedExecution
     from dispatch.legs import Leg
 

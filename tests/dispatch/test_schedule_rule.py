@@ -19,6 +19,7 @@ import pytest
 
 from dispatch import stops as S
 from dispatch._plan_kernel import timetable as compiled_timetable
+from dispatch.insertion import insertion_costs
 from tests.dispatch.reference import brute_force_insertion, simulate
 
 #: every kind a plan may hold, with what a stop of it changes on board
@@ -160,7 +161,7 @@ def _insertions(c, objective):
     for s in rows:
         occ += s[1]
         s_occ.append(occ)
-    return S.insertion_costs(
+    return insertion_costs(
         np.zeros(m, np.int64), np.arange(m), [c["ready"]], [tt(0, r[0]) for r in reqs], [0, k],
         c["arr"], [s[3] for s in rows], [s[2] for s in rows], s_occ, [c["load"]], [c["cap"]],
         np.array([[tt(x, r[0]) for r in reqs] for x in g]).reshape(k, m),
@@ -232,9 +233,8 @@ def _rtv_case(rng, nplan_max=4):
     return c
 
 
-def _rtv_arrays(c, objective):
-    from allocators._rtv_kernel import best_orders, best_orders_any  # noqa: F401
-
+def _rtv_arrays(c):
+    """rtv's kernel arrays of case ``c``: the vehicle and plan, the group, the drives."""
     tt, rows, reqs = c["tt"], c["stops"], c["reqs"]
     k, m = len(rows), len(reqs)
     locs_new = [x for r in reqs for x in (r[0], r[1])]
@@ -260,7 +260,7 @@ def _rtv_arrays(c, objective):
         vn=vn, pn=pn, np_=np_, nn=nn, r_pax=f([r[2] for r in reqs], np.int64),
         r_lp=f([r[3] for r in reqs]), r_ld=f([r[4] for r in reqs]), r_rel=np.zeros(m),
         r_direct=np.zeros(m), r_hasdrop=np.ones(m, bool), old_end=f([end_old]))
-    return args, reqs_args, pp, ppa, first_eta, end_old
+    return args, reqs_args, pp, ppa
 
 
 def _rtv_reference(c, keep_plan_order: bool):
@@ -318,7 +318,7 @@ def test_rtv_orders_with_every_stop_kind_equal_the_reference(reorder):
         svc = float(rng.choice([0.0, 15.0]))
         c["reqs"] = [r[:6] + (svc, -math.inf) for r in c["reqs"]]
         cases += 1
-        args, rargs, pp, ppa, _, _ = _rtv_arrays(c, 1)
+        args, rargs, pp, ppa = _rtv_arrays(c)
         k, m = len(c["stops"]), len(c["reqs"])
         L = k + 2 * m
         out = np.full(1, np.inf), np.full((1, L), -99, np.int64), np.zeros(1, bool)
