@@ -1,6 +1,6 @@
 """The compiled part of :mod:`dispatch.stops`: the rule's functions compiled as they are written
-there (:func:`leave`, :func:`leave_late`, :func:`later`, :func:`timetable`; compiled kernels of
-plugins call these too, e.g. :mod:`allocators._rtv_kernel`), and the cheapest insertion of each
+there (:func:`leave`, :func:`leave_late`, :func:`timetable`; compiled kernels of plugins
+call these too, e.g. :mod:`allocators._rtv_kernel`), and the cheapest insertion of each
 candidate pair of a decision (:func:`insert_pairs`, behind
 :func:`dispatch.insertion.insertion_costs`).
 Imported on first use only (it compiles with numba, cached on disk where possible; numba's
@@ -42,7 +42,6 @@ def _inline(fn):
 
 leave = _inline(stops.leave)
 leave_late = _inline(stops.leave_late)
-later = jit(stops.later)
 timetable = _twin(stops.timetable, leave=leave)
 
 

@@ -106,10 +106,9 @@ def later(push: float, arrive: float, earliest: float) -> float:
     is reached ``push`` seconds later: ``push`` unless a wait for ``earliest`` takes some up
     (or, reached earlier, makes some)."""
     reached = arrive + push
-    if arrive >= earliest and reached >= earliest:
+    if earliest <= arrive and earliest <= reached:
         return push
-    return (reached if reached >= earliest else earliest) - \
-        (arrive if arrive >= earliest else earliest)
+    return leave(reached, earliest, 0.0) - leave(arrive, earliest, 0.0)
 
 
 def timetable(first: float, legs, earliest, service, latest, passengers, load: int, cap: int,
