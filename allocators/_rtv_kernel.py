@@ -4,11 +4,13 @@ vehicle's plan, the plan's own order kept: :func:`best_orders`; or over every or
 plan's stops and the group's together: :func:`best_orders_any`), for many (vehicle, group)
 candidates in one call.
 
-The schedule is the kernel's (:meth:`dispatch.vehicles.Operator.route_times`): arrival at a stop
-= departure from the one before + the drive between them; departure = arrival + the service time
+The schedule is the kernel's one rule (:mod:`dispatch.stops`, compiled in
+:mod:`dispatch._plan_kernel`: departures by its ``leave``): arrival at a stop = departure from the
+one before + the drive between them; service starts at ``max(arrival, earliest)`` (``p_e``: a
+plan stop's earliest time; a request's stops are open); departure = that start + the service time
 of a stop that completes a request (a drop-off; the pickup of a point task); a stop of the plan
 must be reached by ``max(latest, planned arrival)``, a new stop by its limit; the occupancy never
-exceeds the capacity. Vehicles never wait.
+exceeds the capacity.
 
 Costs (``objective``): 0 ``delay``: the new requests' delays (drop-off time - release - direct
 drive; a point task: pickup time - release) plus how much later the plan's own drop-offs come
@@ -23,6 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 from dispatch._compiled import jit
+from dispatch._plan_kernel import leave
 
 #: codes in a returned order: ``>= 0`` a new stop (``2 i`` the pickup, ``2 i + 1`` the drop-off
 #: of the group's ``i``-th request), ``< 0`` the plan's stop ``-code - 1``
@@ -31,7 +34,7 @@ INF = np.inf
 
 @jit
 def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, p_svc, p_eta,
-                p_drop, pp, vn, pn, np_, nn, r_pax, r_lp, r_ld, r_rel, r_direct, r_hasdrop,
+                p_drop, p_e, pp, vn, pn, np_, nn, r_pax, r_lp, r_ld, r_rel, r_direct, r_hasdrop,
                 old_end, svc, objective, budget, tol, out_cost, out_order,
                 out_cut):  # pragma: no cover - compiled
     """For each candidate ``g``: vehicle ``gveh[g]`` (row of the per-vehicle arrays) and the
@@ -42,8 +45,8 @@ def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, 
 
     Vehicle ``j``: it can leave at ``start[j]``; reaching its plan's first stop first it arrives
     at ``first_eta[j]`` (the kernel's planned time); ``load[j]`` on board, ``cap[j]`` seats;
-    plan stops ``off[j]:off[j + 1]`` of the flat arrays (passengers, limit, service after,
-    planned arrival, is a drop-off); ``pp[s]`` drive from plan stop ``s`` to ``s + 1``;
+    plan stops ``off[j]:off[j + 1]`` of the flat arrays (passengers, limit, service,
+    planned arrival, is a drop-off, earliest); ``pp[s]`` drive from plan stop ``s`` to ``s + 1``;
     ``old_end[j]`` when its plan ends now. Drives: ``vn[j, x]`` vehicle -> new stop ``x``
     (``2 r`` pickup, ``2 r + 1`` drop-off of request ``r``), ``pn[s, x]`` plan stop -> new stop,
     ``np_[x, s]`` new stop -> plan stop, ``nn[x, y]`` between new stops."""
@@ -111,7 +114,7 @@ def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, 
                 if p_drop[s] and objective == 0:
                     add = t - p_eta[s]
                 nodes += 1
-                st_time[d + 1] = t + p_svc[s]
+                st_time[d + 1] = leave(t, p_e[s], p_svc[s])
                 st_occ[d + 1] = occ
                 st_cost[d + 1] = st_cost[d] + add
                 st_pos[d + 1] = s
@@ -157,7 +160,7 @@ def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, 
                 if occ > cap[j]:
                     continue
                 nodes += 1
-                st_time[d + 1] = t + serve
+                st_time[d + 1] = leave(t, -INF, serve)
                 st_occ[d + 1] = occ
                 st_cost[d + 1] = st_cost[d] + add
                 st_pos[d + 1] = -2 - gx
@@ -187,7 +190,7 @@ def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, 
 
 @jit
 def best_orders_any(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, p_svc,
-                    p_eta, p_drop, p_pred, vp, poff, ppa, vn, pn, np_, nn, r_pax, r_lp, r_ld,
+                    p_eta, p_drop, p_e, p_pred, vp, poff, ppa, vn, pn, np_, nn, r_pax, r_lp, r_ld,
                     r_rel, r_direct, r_hasdrop, old_end, svc, objective, budget, tol, out_cost,
                     out_order, out_cut):  # pragma: no cover - compiled
     """:func:`best_orders` with the plan's stops reordered too (Alonso-Mora et al.'s whole-trip
@@ -267,7 +270,7 @@ def best_orders_any(groups, gveh, start, first_eta, load, cap, off, p_pax, p_lim
                 if p_drop[s] and objective == 0:
                     add = t - p_eta[s]
                 nodes += 1
-                st_time[d + 1] = t + p_svc[s]
+                st_time[d + 1] = leave(t, p_e[s], p_svc[s])
                 st_occ[d + 1] = occ
                 st_cost[d + 1] = st_cost[d] + add
                 st_pos[d + 1] = s
@@ -308,7 +311,7 @@ def best_orders_any(groups, gveh, start, first_eta, load, cap, off, p_pax, p_lim
                 if occ > cap[j]:
                     continue
                 nodes += 1
-                st_time[d + 1] = t + serve
+                st_time[d + 1] = leave(t, -INF, serve)
                 st_occ[d + 1] = occ
                 st_cost[d + 1] = st_cost[d] + add
                 st_pos[d + 1] = -2 - gx
@@ -379,7 +382,7 @@ def _pair_shareable(now, nn, r_pax, r_lp, r_ld, svc, cap_max, tol, orders,
                                 break
                         else:
                             occ -= r_pax[u] if code == 1 else r_pax[v]
-                            t += svc
+                            t = leave(t, -INF, svc)
                         prev = x
                     if feasible:
                         ok = True

@@ -209,7 +209,7 @@ def _warm(reorder: bool = False) -> None:
 
         z, i = np.zeros(1), np.zeros(1, np.int64)
         best_orders_any(np.zeros((1, 1), np.int64), i, z, z, i, np.ones(1, np.int64),
-                        np.zeros(2, np.int64), i, z, z, z, np.zeros(1, bool),
+                        np.zeros(2, np.int64), i, z, z, z, np.zeros(1, bool), z,
                         np.full(1, -1, np.int64), z, np.zeros(2, np.int64), z,
                         np.zeros((1, 2)), np.zeros((1, 2)), np.zeros((2, 1)), np.zeros((2, 2)),
                         i, z + 1, z + 1, z, z, np.ones(1, bool), z, 0.0, 0, 10, TOL,
@@ -221,7 +221,7 @@ def _warm(reorder: bool = False) -> None:
 
     z, i = np.zeros(1), np.zeros(1, np.int64)
     best_orders(np.zeros((1, 1), np.int64), i, z, z, i, np.ones(1, np.int64),
-                np.zeros(2, np.int64), i, z, z, z, np.zeros(1, bool), z, np.zeros((1, 2)),
+                np.zeros(2, np.int64), i, z, z, z, np.zeros(1, bool), z, z, np.zeros((1, 2)),
                 np.zeros((1, 2)), np.zeros((2, 1)), np.zeros((2, 2)), i, z + 1, z + 1, z, z,
                 np.ones(1, bool), z, 0.0, 0, 10, TOL, np.zeros(1), np.zeros((1, 2), np.int64),
                 np.zeros(1, bool))
@@ -379,6 +379,8 @@ class _Batch:
         self.p_eta = np.array([s.eta for s in flat], float)
         self.p_limit = np.maximum(np.array([s.latest for s in flat], float), self.p_eta)
         self.p_drop = np.array([s.kind == "dropoff" for s in flat], bool)
+        # (a problem's plans carry no earliest times: their stops never wait)
+        self.p_e = np.full(S, -np.inf)
         completes = []
         for p in self.plans:
             drops = {s.task_id for s in p if s.kind == "dropoff"}
@@ -544,7 +546,8 @@ class _Batch:
         best_orders_any(np.ascontiguousarray(groups[sel], np.int64),
                         np.ascontiguousarray(gveh[sel], np.int64), self.start,
                         self.first_eta, self.load, self.cap, self.off, self.p_pax,
-                        self.p_limit, self.p_svc, self.p_eta, self.p_drop, self.p_pred,
+                        self.p_limit, self.p_svc, self.p_eta, self.p_drop, self.p_e,
+                        self.p_pred,
                         self.vp, self.poff, self.ppa, self.vn, self.pn, self.np_, self.nn,
                         self.pax, self.lp, self.ld, self.rel, self.direct, self.hasdrop,
                         self.old_end, self.svc, OBJECTIVES[self.alloc.objective],
@@ -564,7 +567,8 @@ class _Batch:
             best_orders(np.ascontiguousarray(groups, np.int64), np.ascontiguousarray(gveh,
                                                                                      np.int64),
                         self.start, self.first_eta, self.load, self.cap, self.off, self.p_pax,
-                        self.p_limit, self.p_svc, self.p_eta, self.p_drop, self.pp, self.vn,
+                        self.p_limit, self.p_svc, self.p_eta, self.p_drop, self.p_e, self.pp,
+                        self.vn,
                         self.pn, self.np_, self.nn, self.pax, self.lp, self.ld, self.rel,
                         self.direct, self.hasdrop, self.old_end, self.svc,
                         OBJECTIVES[self.alloc.objective], self.alloc.max_nodes, TOL, cost,

@@ -1,6 +1,7 @@
-"""Benchmark: the cheapest feasible insertion (``dispatch.stops.insertion_costs``) against the
-exhaustive search that re-simulates every plan (``dispatch.stops.brute_force_insertion``, the
-reference the tests hold it to), on the same random pairs, in the same run.
+"""Benchmark: the cheapest feasible insertion (``dispatch.insertion.insertion_costs``) against the
+exhaustive search that re-simulates every plan
+(``tests.dispatch.reference.brute_force_insertion``, the reference the tests hold it to), on
+the same random pairs, in the same run.
 
 Pairs: a vehicle whose plan holds ``--stops`` stops (requests picked up or waiting, capacity 4,
 limits with random slack, travel times of points in the plane) and a new request. Both sides
@@ -24,7 +25,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from dispatch.stops import ADDED_TIME, brute_force_insertion, insertion_costs  # noqa: E402
+from dispatch.insertion import insertion_costs  # noqa: E402
+from dispatch.stops import ADDED_TIME  # noqa: E402
+from tests.dispatch.reference import brute_force_insertion  # noqa: E402
 
 
 #: pairs per simulated decision

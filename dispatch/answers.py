@@ -16,6 +16,7 @@ import numpy as np
 
 from dispatch.contracts import AgentViews, Allocation, AllocationProblem
 from dispatch.errors import AllocationError
+from dispatch.stops import DROPOFF, PICKUP, PlannedStop
 
 
 def _ids(ids) -> str:
@@ -123,11 +124,11 @@ def _hinted(problem: AllocationProblem, pairs: tuple, hint) -> list[tuple[int, i
     return index
 
 
-def route_stops(problem: AllocationProblem, aid: int, route, new: dict) -> list[tuple]:
-    """Agent ``aid``'s new stop order from ``Allocation.routes`` as ``(kind, task_id, loc,
-    passengers, latest, completes)`` rows, or AllocationError: it must hold every stop of the
-    agent's plan (``problem.plans``) and the pickup and drop-off of each request of ``new``
-    (task id -> TaskView given to it), each once, every pickup before its drop-off."""
+def route_stops(problem: AllocationProblem, aid: int, route, new: dict) -> list[PlannedStop]:
+    """Agent ``aid``'s new stop order from ``Allocation.routes`` as
+    :class:`dispatch.stops.PlannedStop` rows, or AllocationError: it must hold every stop of
+    the agent's plan (``problem.plans``) and the pickup and drop-off of each request of
+    ``new`` (task id -> TaskView given to it), each once, every pickup before its drop-off."""
     plan = {(s.kind, s.task_id): s for s in problem.plans.get(aid, ())}
     try:
         keys = [(str(k), int(t)) for k, t in route]
@@ -136,9 +137,9 @@ def route_stops(problem: AllocationProblem, aid: int, route, new: dict) -> list[
                               f"{route!r:.200}") from None
     want = set(plan)
     for tid, t in new.items():
-        want.add(("pickup", tid))
+        want.add((PICKUP, tid))
         if t.dropoff is not None:
-            want.add(("dropoff", tid))
+            want.add((DROPOFF, tid))
     if len(keys) != len(set(keys)) or set(keys) != want:
         missing, extra = sorted(want - set(keys)), sorted(set(keys) - want)
         raise AllocationError(f"route of agent {aid} must hold its plan's stops and its new "
@@ -147,19 +148,21 @@ def route_stops(problem: AllocationProblem, aid: int, route, new: dict) -> list[
     where = {k: n for n, k in enumerate(keys)}
     rows = []
     for kind, tid in keys:
-        if kind == "dropoff" and where.get(("pickup", tid), -1) > where[(kind, tid)]:
+        if kind == DROPOFF and where.get((PICKUP, tid), -1) > where[(kind, tid)]:
             raise AllocationError(f"route of agent {aid}: request {tid}'s drop-off comes "
                                   "before its pickup")
         s = plan.get((kind, tid))
         if s is not None:
-            rows.append((kind, tid, s.loc, s.passengers, s.latest, None))
+            rows.append(PlannedStop(s.kind, tid, s.loc, s.passengers, s.latest, None))
             continue
         t = new[tid]
         point = t.dropoff is None
-        if kind == "pickup":
-            rows.append((kind, tid, t.loc, 0 if point else t.passengers, t.deadline, point))
+        if kind == PICKUP:
+            rows.append(PlannedStop(PICKUP, tid, t.loc, 0 if point else t.passengers,
+                                    t.deadline, point))
         else:
-            rows.append((kind, tid, t.dropoff, -t.passengers, t.dropoff_deadline, True))
+            rows.append(PlannedStop(DROPOFF, tid, t.dropoff, -t.passengers,
+                                    t.dropoff_deadline, True))
     return rows
 
 

@@ -72,6 +72,7 @@ from dispatch.decision import Blame, Pipeline, Tally, one_line
 from dispatch.errors import AllocationError, DispatchError, PluginError
 from dispatch.heap import keep_large_blocks
 from dispatch.plans import Inserts
+from dispatch.stops import PICKUP
 from dispatch.tasks import OPEN, TaskBook, TaskState
 
 if TYPE_CHECKING:
@@ -109,7 +110,7 @@ class _Pending:
     holder: dict = field(default_factory=dict)  # reassign: task id -> vehicle id at decision
     index: list = field(default_factory=list)  # each pair's (row, column) in the problem
     #: shared rides: (row, column) of a pair whose vehicle has a plan -> where its stops go
-    #: (see :class:`dispatch.stops.Insertions`)
+    #: (see :class:`dispatch.insertion.Insertion`)
     inserts: Inserts | dict = field(default_factory=dict)
     cut: int = 0  # open tasks the candidate cut left out (dispatch.candidates)
 
@@ -333,8 +334,8 @@ class Dispatcher:
         for k, (aid, tid) in enumerate(allocation.pairs):
             if aid in routes:
                 rows, times = routes[aid]
-                at = next(t for (kind, task, *_), t in zip(rows, times)
-                          if kind == "pickup" and task == tid)
+                at = next(t for r, t in zip(rows, times)
+                          if r.kind == PICKUP and r.task_id == tid)
                 pair_cost[k] = at - now
                 mine.setdefault(aid, {})[tid] = pair_cost[k]
         self._recorded(p, allocation, pair_cost)

@@ -3,7 +3,7 @@ added-time objective): where a new request's stops go in a vehicle's plan and wh
 
 * :func:`insertion_costs_of`: the cost matrix with plans, from the drives to each pickup; an
   empty plan takes the pickup and drop-off in that order, a busy vehicle's plan the cheapest
-  feasible insertion (:func:`dispatch.stops.insertion_costs`); :class:`Inserts` keeps where
+  feasible insertion (:func:`dispatch.insertion.insertion_costs`); :class:`Inserts` keeps where
   the stops go for the pairs handed out;
 * :class:`Plans`: the agents' stop lists as an allocation problem shows them
   (:attr:`AllocationProblem.plans`), read from the vehicles when asked;
@@ -20,16 +20,18 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from dispatch.contracts import Planner, StopView
-from dispatch.stops import PICKUP_TIME, insertion_costs
+from dispatch.insertion import Insertion, insertion_costs
+from dispatch.stops import PICKUP_TIME
 
 if TYPE_CHECKING:
     from dispatch.vehicles import Fleet, Operator
 
 
 class Inserts:
-    """Where a decision's stops go, for its busy vehicles' feasible pairs, by ``(row, col)``:
-    kept as the arrays the insertion computed and looked up only for the pairs handed out (a
-    pooled batch has thousands of feasible pairs and hands out a few dozen)."""
+    """Where a decision's stops go (:class:`dispatch.insertion.Insertion`), for its busy
+    vehicles' feasible pairs, by ``(row, col)``: kept as the arrays the insertion computed and
+    looked up only for the pairs handed out (a pooled batch has thousands of feasible pairs
+    and hands out a few dozen)."""
 
     def __init__(self, ins, rows: np.ndarray, cols: np.ndarray, m: int) -> None:
         ok = np.isfinite(ins.cost)
@@ -60,7 +62,7 @@ class Inserts:
         i = int(np.searchsorted(self._keys, k))
         return int(self._order[i]) if i < self._keys.size and self._keys[i] == k else -1
 
-    def get(self, key, default=None):
+    def get(self, key, default=None) -> Insertion | None:
         i = self._find(key)
         return default if i < 0 else self._ins.of(int(self._q[i]))
 
@@ -90,7 +92,8 @@ class Plans(Mapping):
             v = self._ids[agent_id]
             times = self._operator.plan_arrays(v)[0]
             got = self._cache[agent_id] = tuple(
-                StopView(s.kind, s.task.id, s.loc, s.passengers, s.latest, s.occupancy, t)
+                StopView(s.kind, -1 if s.task is None else s.task.id, s.loc, s.passengers,
+                         s.latest, s.occupancy, t)
                 for s, t in zip(v.stops, times))
         return got
 
@@ -156,18 +159,19 @@ def insertion_costs_of(cost: np.ndarray, slots: np.ndarray, tasks: list, now: fl
     used = np.unique(rows)
     remap = np.full(busy.size, -1, np.int64)
     remap[used] = np.arange(used.size)
-    off, s_arr, s_svc, s_latest, s_occ, locs = [0], [], [], [], [], []
+    off, s_arr, s_svc, s_latest, s_occ, locs, s_e = [0], [], [], [], [], [], []
     load = []
     plan_of = operator.plan_arrays
     vehicles = fleet.vehicles
     for k in slots[busy[used]].tolist():
         v = vehicles[k]
-        times, svcs, latest, occ, where = plan_of(v)
+        times, svcs, latest, occ, where, earliest = plan_of(v)
         s_arr += times
         s_svc += svcs
         s_latest += latest
         s_occ += occ
         locs += where
+        s_e += earliest
         off.append(len(locs))
         load.append(v.load)
     ucols = np.unique(cols)
@@ -188,6 +192,6 @@ def insertion_costs_of(cost: np.ndarray, slots: np.ndarray, tasks: list, now: fl
     ins = insertion_costs(
         remap[rows], cmap[cols], ready[used], cost[vrow, cols], off, s_arr, s_svc,
         s_latest, s_occ, load, cap[busy[used]], to_p, from_p, to_d, from_d, pd[ucols],
-        n_req[ucols], lp[ucols], ld[ucols], svc_p[ucols], svc_d[ucols], objective)
+        n_req[ucols], lp[ucols], ld[ucols], svc_p[ucols], svc_d[ucols], objective, s_e)
     out[vrow, cols] = ins.cost
     return out, Inserts(ins, vrow, cols, m)

@@ -64,6 +64,7 @@ from dispatch import registry
 from dispatch.errors import AllocationError, PluginError
 from dispatch.legs import as_point
 from dispatch.space import KINDS, space_class
+from dispatch.stops import DROPOFF, TOL, PlannedStop, timetable
 
 __all__ = ["CheckResult", "Report", "allocation_problems", "check_allocator", "check_planner",
            "check_repositioner", "pooled_problem", "pooled_problems", "reposition_view",
@@ -282,13 +283,13 @@ def pooled_problems(seed: int = 0) -> list[tuple[str, Callable[[], AllocationPro
             pooled_problem(s + 6, 5, 0, 2), pooled_problem(s + 7, 0, 4, 2)]
 
 
-def route_schedule(problem: AllocationProblem, aid: int, rows: list[tuple]
+def route_schedule(problem: AllocationProblem, aid: int, rows: list[PlannedStop]
                    ) -> tuple[list[float] | None, str]:
     """Planned arrival times of agent ``aid`` driving the stop rows ``rows`` (of
-    :func:`dispatch.dispatcher.route_stops`) from where it is, on ``problem.travel``, or
-    ``(None, why)``: what :meth:`dispatch.vehicles.Operator.route_times` checks, from the
-    problem alone (the vehicle leaves now, when ``problem.ready`` says, or when its first
-    planned stop's time says)."""
+    :func:`dispatch.answers.route_stops`) from where it is, on ``problem.travel``, by the
+    schedule rule (:func:`dispatch.stops.timetable`), or ``(None, why)``: what
+    :meth:`dispatch.vehicles.Operator.route_times` checks, from the problem alone (the vehicle
+    leaves now, when ``problem.ready`` says, or when its first planned stop's time says)."""
     travel = problem.travel
     k = int(np.flatnonzero(problem.agent_ids == aid)[0])
     loc = problem.agents[k].loc
@@ -301,30 +302,34 @@ def route_schedule(problem: AllocationProblem, aid: int, rows: list[tuple]
         ready = max(now, plan[0].eta - float(travel([loc], [plan[0].loc])[0, 0]))
         load = plan[0].occupancy - plan[0].passengers
     mine = {(s.kind, s.task_id): s for s in plan}
-    drops = {s.task_id for s in plan if s.kind == "dropoff"}
-    if plan and (rows[0][0], rows[0][1]) == (plan[0].kind, plan[0].task_id):
+    drops = {s.task_id for s in plan if s.kind == DROPOFF}
+    if plan and (rows[0].kind, rows[0].task_id) == (plan[0].kind, plan[0].task_id):
         t = plan[0].eta
     else:
-        t = ready + float(travel([loc], [rows[0][2]])[0, 0])
-    legs = travel([r[2] for r in rows[:-1]], [r[2] for r in rows[1:]], pairwise=True) \
-        if len(rows) > 1 else []
-    times, occ = [], load
-    for i, (kind, tid, where, pax, latest, completes) in enumerate(rows):
-        if i:
-            t += float(legs[i - 1])
-        old = mine.get((kind, tid))
+        t = ready + float(travel([loc], [rows[0].loc])[0, 0])
+    legs = travel([r.loc for r in rows[:-1]], [r.loc for r in rows[1:]],
+                  pairwise=True).tolist() if len(rows) > 1 else []
+    service, latest = [], []
+    for r in rows:
+        old = mine.get((r.kind, r.task_id))
+        completes = r.completes
         if completes is None:
-            completes = kind == "dropoff" or tid not in drops
-        occ += pax
-        if occ > cap:
-            return None, f"{occ} on board after {kind} of request {tid} (capacity {cap})"
-        limit = latest if old is None else max(latest, old.eta)
-        if t > limit + 1e-9:
-            return None, f"{kind} of request {tid} at {t:.6g} s, after its latest {latest:.6g} s"
-        times.append(t)
-        if completes:
-            t += problem.service_time
-    return times, ""
+            completes = r.kind == DROPOFF or r.task_id not in drops
+        service.append(problem.service_time if completes else 0.0)
+        latest.append(r.latest if old is None else max(r.latest, old.eta))
+    pax = [r.passengers for r in rows]
+    times = [0.0] * len(rows)
+    # (a problem's plans carry no earliest times: a request's stops never wait)
+    bad, over = timetable(t, legs, [-math.inf] * len(rows), service, latest, pax, load, cap,
+                          TOL, times)
+    if bad < 0:
+        return times, ""
+    r = rows[bad]
+    if over:
+        return None, (f"{load + sum(pax[:bad + 1])} on board after {r.kind} of request "
+                      f"{r.task_id} (capacity {cap})")
+    return None, (f"{r.kind} of request {r.task_id} at {times[bad]:.6g} s, after its latest "
+                  f"{r.latest:.6g} s")
 
 
 def _snapshot(p: AllocationProblem) -> tuple:

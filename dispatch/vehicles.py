@@ -31,10 +31,12 @@ from dispatch.contracts import AgentView, AgentViews
 from dispatch.events import EventBus
 from dispatch.locations import Location
 from dispatch.space import Space
-from dispatch.stops import DROPOFF, PICKUP, Stop, occupancies, schedule
+from dispatch.stops import (DROPOFF, PICKUP, TOL, PlannedStop, Stop, insert, leave, occupancies,
+                            pushed, schedule, timetable)
 from dispatch.tasks import COMPLETED, PICKED_UP as PICKED_UP_STATE, Task, TaskBook, TaskState
 
 if TYPE_CHECKING:
+    from dispatch.insertion import Insertion
     from dispatch.reservations import TimedExecution
     from dispatch.legs import Leg
 
@@ -285,6 +287,11 @@ class Fleet:
         self.busy_mask[v._slot] = False
 
 
+def _task_id(s: Stop) -> int:
+    """The id of the request a stop serves; -1 for a stop that serves none."""
+    return -1 if s.task is None else s.task.id
+
+
 _NO_POINTS = np.zeros(0, dtype=np.int64)
 _NO_POINTS.setflags(write=False)
 
@@ -332,18 +339,17 @@ class Operator:
     # ------------------------------------------------------------------ the plan
     def _stops(self, task: Task) -> list[Stop]:
         """The stops of ``task``: its pickup (which completes a point task) and drop-off."""
-        n = task.passengers
+        n, svc = task.passengers, self.service_time
         if task.dropoff is None:
-            return [Stop(PICKUP, task, task.loc, 0, task.deadline, True)]
+            return [Stop(PICKUP, task, task.loc, 0, task.deadline, True, service=svc)]
         return [Stop(PICKUP, task, task.loc, n, task.deadline, False),
-                Stop(DROPOFF, task, task.dropoff, -n, task.dropoff_deadline, True)]
+                Stop(DROPOFF, task, task.dropoff, -n, task.dropoff_deadline, True, service=svc)]
 
-    def assign(self, task: Task, v: Vehicle, cost: float, at: tuple | None = None) -> None:
+    def assign(self, task: Task, v: Vehicle, cost: float, at: Insertion | None = None) -> None:
         """Give ``task`` to ``v`` at the decision's ``cost``: an idle vehicle (or one that has
         just given its task up, :meth:`give_up`) starts a plan of the task's stops; a busy one
-        (pooling) gets them inserted where ``at`` says, ``(i, j, pickup_at, dropoff_at,
-        shift1, shift2)`` of :class:`dispatch.stops.Insertions`, and re-routes if its next
-        stop changed."""
+        (pooling) gets them inserted where ``at`` says (:func:`dispatch.stops.insert`), and
+        re-routes if its next stop changed."""
         env = self.env
         if self.timed is not None:  # its drive process follows the route; cost = priority
             self.on_assign(v)
@@ -358,7 +364,7 @@ class Operator:
             self.book.assign(task, v.id, cost)
             self.fleet.set_busy(v)
             if at is not None:  # the planned times of the decision
-                self._set_legs(v, new, [at[2], at[3]][:len(new)])
+                self._set_legs(v, new, [at.pickup_at, at.dropoff_at][:len(new)])
             else:  # (legs only matter to later insertions: pooled runs always pass ``at``)
                 new[0].leg = float(getattr(path, "seconds", 0.0))
                 if len(new) > 1:
@@ -368,19 +374,14 @@ class Operator:
             self.changed(v)
             v.proc = env.process(self._run(v, path, new[0]))
             return
-        i, j, pick, drop, shift1, shift2 = at  # type: ignore[misc]
+        assert at is not None
+        i, j = at.i, at.j
         self.book.assign(task, v.id, cost)
         old = v.stops
-        times = self._times(v)  # the stops after the new ones are reached later
-        for k in range(len(old)):
-            times[k] += 0.0 if k < i else (shift1 if k < j else shift2)
-        if len(new) == 1:  # a point task: its one stop
-            plan = old[:i] + new + old[i:]
-            times = times[:i] + [pick] + times[i:]
-        else:
-            p, d = new
-            plan = old[:i] + [p] + old[i:j] + [d] + old[j:]
-            times = times[:i] + [pick] + times[i:j] + [drop] + times[j:]
+        # the stops after the new ones are reached later
+        times = pushed(self._times(v), old, i, j, at.shift1, at.shift2)
+        plan = insert(old, new, i, j)
+        times = insert(times, [at.pickup_at, at.dropoff_at][:len(new)], i, j)
         self._set_legs(v, plan, times)
         v.stops = plan
         occupancies(v.load, v.stops)
@@ -389,57 +390,65 @@ class Operator:
         if i == 0 and v.heading is not None and v.proc is not None and v.proc.is_alive:
             v.proc.interrupt("reroute")  # its next stop is the new pickup
 
-    def route_times(self, v: Vehicle, rows: list[tuple]) -> tuple[list[float] | None, str]:
-        """Planned arrival times if ``v`` drove the stops ``rows`` (:func:`dispatch.dispatcher.
-        route_stops`: kind, task id, location, passengers, latest time, completes) from where
-        it is now, on the planner's travel times, or ``(None, why)`` where a stop would be
-        late or the vehicle over its capacity. A stop of its plan that is already planned
-        late (traffic ran slower than planned) may stay as late as it is."""
+    def route_times(self, v: Vehicle, rows: list[PlannedStop]
+                    ) -> tuple[list[float] | None, str]:
+        """Planned arrival times if ``v`` drove the stops ``rows`` (of
+        :func:`dispatch.answers.route_stops`) from where it is now, on the planner's travel
+        times, by the schedule rule (:func:`dispatch.stops.timetable`), or ``(None, why)``
+        where a stop would be late or the vehicle over its capacity. A stop of its plan that
+        is already planned late (traffic ran slower than planned) may stay as late as it is."""
         env, planner = self.env, self.driver.planner
         now = env.now
-        old = {(s.kind, s.task.id): s for s in v.stops}
-        planned = dict(zip([(s.kind, s.task.id) for s in v.stops], self._times(v)))
-        first = old.get((rows[0][0], rows[0][1]))
+        keys = [(s.kind, _task_id(s)) for s in v.stops]
+        old = dict(zip(keys, v.stops))
+        planned = dict(zip(keys, self._times(v)))
+        first = old.get((rows[0].kind, rows[0].task_id))
         if first is not None and v.heading is first and v.leg is not None:
             t = v.leg_start + v.leg.seconds
         else:
-            t = max(now, v.free_at) + float(planner.between([v.location(now)], [rows[0][2]])[0, 0])
-        legs = (planner.between([r[2] for r in rows[:-1]], [r[2] for r in rows[1:]],
-                                pairwise=True) if len(rows) > 1 else [])
-        times, occ = [], v.load
-        for k, (kind, tid, loc, pax, latest, completes) in enumerate(rows):
-            if k:
-                t += float(legs[k - 1])
-            mine = old.get((kind, tid))
-            if completes is None:
-                completes = mine.completes
-            occ += pax
-            if occ > v.capacity:
-                return None, f"{occ} on board after {kind} of request {tid} (capacity " \
-                             f"{v.capacity})"
-            limit = latest if mine is None else max(latest, planned[(kind, tid)])
-            if t > limit + 1e-9:
-                return None, f"{kind} of request {tid} at {t:.6g} s, after its latest " \
-                             f"{latest:.6g} s"
-            times.append(t)
-            if completes:
-                t += self.service_time
-        return times, ""
+            t = max(now, v.free_at) + float(planner.between([v.location(now)], [rows[0].loc])[0, 0])
+        legs = (planner.between([r.loc for r in rows[:-1]], [r.loc for r in rows[1:]],
+                                pairwise=True).tolist() if len(rows) > 1 else [])
+        svc = self.service_time
+        earliest, service, latest = [], [], []
+        for r in rows:
+            mine = old.get((r.kind, r.task_id))
+            if mine is None:
+                earliest.append(-math.inf)
+                service.append(svc if r.completes else 0.0)
+                latest.append(r.latest)
+            else:
+                earliest.append(mine.earliest)
+                service.append(mine.service)
+                latest.append(max(r.latest, planned[(r.kind, r.task_id)]))
+        pax = [r.passengers for r in rows]
+        times = [0.0] * len(rows)
+        bad, over = timetable(t, legs, earliest, service, latest, pax, v.load, v.capacity, TOL,
+                              times)
+        if bad < 0:
+            return times, ""
+        r = rows[bad]
+        if over:
+            return None, f"{v.load + sum(pax[:bad + 1])} on board after {r.kind} of request " \
+                         f"{r.task_id} (capacity {v.capacity})"
+        return None, f"{r.kind} of request {r.task_id} at {times[bad]:.6g} s, after its latest " \
+                     f"{r.latest:.6g} s"
 
-    def follow(self, v: Vehicle, rows: list[tuple], times: list[float], tasks: dict,
+    def follow(self, v: Vehicle, rows: list[PlannedStop], times: list[float], tasks: dict,
                costs: dict) -> None:
         """A multi-request decision (``Allocation.routes``): ``v`` gets the requests ``tasks``
         (task id -> Task, each handed at ``costs[task id]``) and drives the stops ``rows`` in
         that order (planned arrival ``times``, checked by :meth:`route_times`)."""
         env = self.env
-        old = {(s.kind, s.task.id): s for s in v.stops}
+        old = {(s.kind, _task_id(s)): s for s in v.stops}
         empty = not v.stops and v.serving is None
         head = v.stops[0] if v.stops else None
-        stops = []
-        for kind, tid, loc, pax, latest, completes in rows:
-            s = old.get((kind, tid))
+        stops, svc = [], self.service_time
+        for r in rows:
+            s = old.get((r.kind, r.task_id))
             if s is None:
-                s = Stop(kind, tasks[tid], loc, pax, latest, bool(completes))
+                s = Stop(r.kind, tasks[r.task_id], r.loc, r.passengers, r.latest,
+                         bool(r.completes), service=svc if r.completes else 0.0)
             stops.append(s)
         if empty:
             self.on_assign(v)
@@ -470,29 +479,29 @@ class Operator:
             first = v.leg_start + v.leg.seconds
         else:
             first = max(self.env.now, v.free_at) + stops[0].leg
-        return schedule(first, stops, self.service_time)
+        return schedule(first, stops)
 
     def _set_legs(self, v: Vehicle, plan: list[Stop], times: list[float]) -> None:
-        """Each stop's ``leg`` from planned arrival ``times`` (what is not driving or service
-        between two arrivals is the drive)."""
+        """Each stop's ``leg`` from planned arrival ``times`` (what is not driving, waiting or
+        service between two arrivals is the drive)."""
         t = max(self.env.now, v.free_at)
         for s, arrive in zip(plan, times):
             s.leg = arrive - t
-            t = arrive + (self.service_time if s.completes else 0.0)
+            t = leave(arrive, s.earliest, s.service)
 
-    def plan_arrays(self, v: Vehicle) -> tuple[list, list, list, list, list]:
-        """``v``'s plan as a decision reads it: planned arrival times, service seconds after
-        each stop, latest times, occupancies after each stop, locations (lists; kept until
-        the plan or the vehicle's state changes: :meth:`changed`)."""
+    def plan_arrays(self, v: Vehicle) -> tuple[list, list, list, list, list, list]:
+        """``v``'s plan as a decision reads it: planned arrival times, service seconds of
+        each stop, latest times, occupancies after each stop, locations, earliest times
+        (lists; kept until the plan or the vehicle's state changes: :meth:`changed`)."""
         now = self.env.now
         key = (v.plan_version, now if v.heading is None and v.free_at <= now else None)
         cached = v.plan_cache
         if cached is not None and cached[0] == key:
             return cached[1]
-        svc, stops = self.service_time, v.stops
-        arrays = (self._times(v), [svc if s.completes else 0.0 for s in stops],
+        stops = v.stops
+        arrays = (self._times(v), [s.service for s in stops],
                   [s.latest for s in stops], [s.occupancy for s in stops],
-                  [s.loc for s in stops])
+                  [s.loc for s in stops], [s.earliest for s in stops])
         v.plan_cache = (key, arrays)
         return arrays
 

@@ -1,6 +1,7 @@
-"""The compiled cheapest insertion (dispatch.stops.insertion_costs) against an exhaustive search
-that re-simulates every plan (dispatch.stops.brute_force_insertion), on random stop lists of up
-to 6 stops, random capacities, limits and travel times (a metric: points in the plane)."""
+"""The compiled cheapest insertion (dispatch.insertion.insertion_costs) against an exhaustive search
+that re-simulates every plan (tests.dispatch.reference.brute_force_insertion), on random stop
+lists of up to 6 stops, random capacities, limits and travel times (a metric: points in the
+plane)."""
 
 from __future__ import annotations
 
@@ -9,7 +10,9 @@ import math
 import numpy as np
 import pytest
 
-from dispatch.stops import ADDED_TIME, PICKUP_TIME, brute_force_insertion, insertion_costs
+from dispatch.insertion import insertion_costs
+from dispatch.stops import ADDED_TIME, PICKUP_TIME
+from tests.dispatch.reference import brute_force_insertion
 
 
 def _case(rng: np.random.Generator):

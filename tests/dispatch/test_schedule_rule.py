@@ -1,0 +1,341 @@
+"""The one schedule rule (dispatch.stops) against an independent brute force
+(tests/dispatch/reference.py) over every order of small plans holding every stop kind: pickups
+and drop-offs among charge, reposition, wait and depot stops, with earliest and latest times,
+capacities and service times (random small instances, seeded).
+
+Held to the reference: the rule over a stop sequence (``timetable``, in Python and compiled,
+and ``schedule`` over Stop objects), the compiled insertion (its slack path and its
+re-simulating path for plans whose stops wait), the plan change (``insert`` and ``pushed``:
+the times the operator keeps after an insertion) and rtv's search over every order
+(``best_orders_any``) and over the orders keeping the plan's own (``best_orders``)."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+
+from dispatch import stops as S
+from dispatch._plan_kernel import timetable as compiled_timetable
+from dispatch.insertion import insertion_costs
+from tests.dispatch.reference import brute_force_insertion, simulate
+
+#: every kind a plan may hold, with what a stop of it changes on board
+KINDS = (S.PICKUP, S.DROPOFF, S.CHARGE, S.REPOSITION, S.WAIT, S.DEPOT)
+
+
+def _metric(rng):
+    pts = rng.uniform(0, 1000, size=(60, 2))
+
+    def tt(a: int, b: int) -> float:
+        return float(np.hypot(*(pts[a] - pts[b]))) / 10.0
+
+    return tt
+
+
+def _stop(rng, kind: str, loc: int, pax: int, ready: float):
+    """A ``(loc, passengers, latest, service, earliest)`` row of ``kind``: a charger visit
+    takes long and may open later (a booked slot), a wait stop holds until its time, a depot
+    closes at some time; requests' stops never wait."""
+    earliest, service, latest = -math.inf, 0.0, math.inf
+    if kind == S.CHARGE:
+        service = float(rng.uniform(60, 600))
+        if rng.random() < 0.5:
+            earliest = ready + float(rng.uniform(0, 400))
+    elif kind == S.WAIT:
+        earliest = ready + float(rng.uniform(0, 500))
+    elif kind == S.REPOSITION:
+        if rng.random() < 0.3:
+            earliest = ready + float(rng.uniform(0, 200))
+    elif kind == S.DEPOT:
+        service = float(rng.uniform(0, 120))
+        latest = ready + float(rng.uniform(300, 3000))
+    elif kind == S.DROPOFF:
+        service = float(rng.choice([0.0, 15.0]))
+    if kind in (S.PICKUP, S.DROPOFF) and rng.random() < 0.6:
+        latest = ready + float(rng.uniform(100, 1500))
+    return (loc, pax, latest, service, earliest)
+
+
+def _sequence(rng, ready: float):
+    """A random small stop set of every kind (no order implied): ``(rows, load, cap)``."""
+    cap = int(rng.integers(1, 4))
+    rows, load = [], 0
+    for k in range(int(rng.integers(1, 6))):
+        kind = KINDS[int(rng.integers(0, len(KINDS)))]
+        pax = {S.PICKUP: 1, S.DROPOFF: -1}.get(kind, 0)
+        if kind == S.DROPOFF:
+            load += 1  # someone on board to drop
+        rows.append(_stop(rng, kind, k + 1, pax, ready))
+    return rows, min(load, cap), cap
+
+
+def _rule(first, tt, rows, load, cap, compiled: bool):
+    """Arrival times by :func:`dispatch.stops.timetable` (or its compiled twin), None where a
+    stop breaks a limit."""
+    legs = [tt(a[0], b[0]) for a, b in zip(rows, rows[1:])]
+    cols = [legs, [r[4] for r in rows], [r[3] for r in rows], [r[2] for r in rows],
+            [r[1] for r in rows]]
+    out = [0.0] * len(rows)
+    if compiled:
+        cols = [np.array(x, float) for x in cols[:4]] + [np.array(cols[4], np.int64)]
+        out = np.zeros(len(rows))
+    bad, _ = (compiled_timetable if compiled else S.timetable)(first, *cols, load, cap, S.TOL,
+                                                               out)
+    return None if bad >= 0 else [float(x) for x in out]
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_timetable_equals_the_reference_over_every_order(seed):
+    rng = np.random.default_rng([seed, 28])
+    orders = feasible = 0
+    for _ in range(60):
+        tt = _metric(rng)
+        ready = float(rng.uniform(0, 100))
+        rows, load, cap = _sequence(rng, ready)
+        for order in itertools.permutations(rows):
+            order = list(order)
+            want = simulate(ready, lambda loc: tt(0, loc), tt, order, load, cap)
+            first = ready + tt(0, order[0][0])
+            got = _rule(first, tt, order, load, cap, False)
+            jit = _rule(first, tt, order, load, cap, True)
+            assert got == jit  # the compiled rule is the same rule, to the bit
+            orders += 1
+            if want is None:
+                assert got is None, (order, got)
+                continue
+            feasible += 1
+            assert got == pytest.approx(want[0], abs=1e-9)
+            # the same schedule from Stop objects and their legs
+            plan = [S.Stop(S.WAIT, None, r[0], r[1], r[2], False, leg=tt(a[0], r[0]) if k else 0.0,
+                           earliest=r[4], service=r[3])
+                    for k, (a, r) in enumerate(zip([order[0]] + order, order))]
+            assert S.schedule(first, plan) == got
+    assert feasible > 200 and orders - feasible > 200  # both outcomes exercised
+
+
+def _plan_case(rng):
+    """A plan of requests' stops with charge, reposition, wait and depot stops among them
+    (some waiting), planned by the rule, limits with random slack; 5 new requests (some
+    prebooked: a pickup that opens later)."""
+    tt = _metric(rng)
+    ready = float(rng.uniform(0, 50))
+    cap = int(rng.integers(1, 5))
+    load = int(rng.integers(0, cap + 1))
+    kinds = [S.DROPOFF] * min(load, 2) + [
+        KINDS[int(rng.integers(0, len(KINDS)))] for _ in range(int(rng.integers(0, 4)))]
+    rng.shuffle(kinds)
+    rows, occ = [], load
+    for k, kind in enumerate(kinds):
+        if kind == S.PICKUP and occ >= cap:
+            kind = S.REPOSITION
+        if kind == S.DROPOFF and occ <= 0:
+            kind = S.CHARGE
+        pax = {S.PICKUP: 1, S.DROPOFF: -1}.get(kind, 0)
+        occ += pax
+        rows.append(_stop(rng, kind, k + 1, pax, ready))
+    got = simulate(ready, lambda loc: tt(0, loc), tt,
+                   [(r[0], r[1], math.inf, r[3], r[4]) for r in rows], load, cap)
+    arr = got[0] if got else []
+    rows = [(r[0], r[1], a + float(rng.choice([0.0, rng.uniform(0, 300), math.inf])), r[3], r[4])
+            for r, a in zip(rows, arr)]
+    reqs = []
+    for _ in range(5):
+        p, d = int(rng.integers(20, 60)), int(rng.integers(20, 60))
+        n = int(rng.integers(1, cap + 2))
+        svc = float(rng.choice([0.0, 15.0]))
+        lp = ready + float(rng.uniform(0, 500))
+        ep = ready + float(rng.uniform(0, 200)) if rng.random() < 0.2 else -math.inf
+        ld = lp + tt(p, d) + float(rng.choice([rng.uniform(0, 400), math.inf]))
+        reqs.append((p, d, n, lp, ld, 0.0, svc, ep))
+    return dict(tt=tt, ready=ready, cap=cap, load=load, stops=rows, arr=arr, reqs=reqs)
+
+
+def _insertions(c, objective):
+    rows, reqs, tt = c["stops"], c["reqs"], c["tt"]
+    k, m = len(rows), len(reqs)
+    g = [s[0] for s in rows]
+    occ, s_occ = c["load"], []
+    for s in rows:
+        occ += s[1]
+        s_occ.append(occ)
+    return insertion_costs(
+        np.zeros(m, np.int64), np.arange(m), [c["ready"]], [tt(0, r[0]) for r in reqs], [0, k],
+        c["arr"], [s[3] for s in rows], [s[2] for s in rows], s_occ, [c["load"]], [c["cap"]],
+        np.array([[tt(x, r[0]) for r in reqs] for x in g]).reshape(k, m),
+        np.array([[tt(r[0], x) for x in g] for r in reqs]).reshape(m, k),
+        np.array([[tt(x, r[1]) for r in reqs] for x in g]).reshape(k, m),
+        np.array([[tt(r[1], x) for x in g] for r in reqs]).reshape(m, k),
+        [tt(r[0], r[1]) for r in reqs], [r[2] for r in reqs], [r[3] for r in reqs],
+        [r[4] for r in reqs], [r[5] for r in reqs], [r[6] for r in reqs], objective,
+        [s[4] for s in rows], [r[7] for r in reqs])
+
+
+@pytest.mark.parametrize("objective", [S.PICKUP_TIME, S.ADDED_TIME])
+def test_insertion_with_every_stop_kind_equals_the_reference(objective):
+    rng = np.random.default_rng(28 + objective)
+    cases = feasible = waited = 0
+    while cases < 300:
+        c = _plan_case(rng)
+        cases += 1
+        got = _insertions(c, objective)
+        tt, ready = c["tt"], c["ready"]
+        waited += any(s[4] > ready for s in c["stops"]) or any(r[7] > ready for r in c["reqs"])
+        for q, req in enumerate(c["reqs"]):
+            want = brute_force_insertion(ready, lambda loc: tt(0, loc), c["stops"], c["load"],
+                                         c["cap"], req, tt, objective)
+            if math.isinf(want[0]):
+                assert math.isinf(got.cost[q]), (q, want, got.of(q))
+                continue
+            feasible += 1
+            assert got.cost[q] == pytest.approx(want[0], abs=1e-6), (want, got.of(q))
+            assert got.pickup_at[q] == pytest.approx(want[3], abs=1e-6)
+    assert feasible > 300 and waited > 100
+
+
+def test_the_plan_change_keeps_the_rule():
+    """After :func:`insert` of a request where the compiled insertion says, the times the
+    operator keeps (:func:`pushed`, then the pickup's and drop-off's) are the rule's for the
+    new plan, waits for charge slots and wait stops included."""
+    rng = np.random.default_rng(5)
+    checked = 0
+    while checked < 300:
+        c = _plan_case(rng)
+        if not c["stops"]:
+            continue
+        got = _insertions(c, S.ADDED_TIME)
+        tt, ready = c["tt"], c["ready"]
+        plan = [S.Stop(S.REPOSITION, None, s[0], s[1], s[2], False, earliest=s[4], service=s[3])
+                for s in c["stops"]]
+        for q, (p, d, n, lp, ld, sp, sd, ep) in enumerate(c["reqs"]):
+            if math.isinf(got.cost[q]):
+                continue
+            at = got.of(q)
+            new = [(p, n, lp, sp, ep), (d, -n, ld, sd, -math.inf)]
+            want = simulate(ready, lambda loc: tt(0, loc), tt,
+                            S.insert(list(c["stops"]), new, at.i, at.j), c["load"], c["cap"])
+            assert want is not None
+            times = S.pushed(list(c["arr"]), plan, at.i, at.j, at.shift1, at.shift2)
+            times = S.insert(times, [at.pickup_at, at.dropoff_at], at.i, at.j)
+            assert times == pytest.approx(want[0], abs=1e-6)
+            checked += 1
+
+
+def _rtv_case(rng, nplan_max=4):
+    """One vehicle with a plan of every kind and a group of 1-2 new requests, as rtv's kernel
+    takes them, and the same as reference rows."""
+    c = _plan_case(rng)
+    c["stops"] = c["stops"][:nplan_max]
+    c["arr"] = c["arr"][:nplan_max]
+    c["reqs"] = [r[:7] + (-math.inf,) for r in c["reqs"][:int(rng.integers(1, 3))]]
+    return c
+
+
+def _rtv_arrays(c):
+    """rtv's kernel arrays of case ``c``: the vehicle and plan, the group, the drives."""
+    tt, rows, reqs = c["tt"], c["stops"], c["reqs"]
+    k, m = len(rows), len(reqs)
+    locs_new = [x for r in reqs for x in (r[0], r[1])]
+    ready = c["ready"]
+    first_eta = c["arr"][0] if k else ready
+    end_old = ready if not k else S.leave(c["arr"][-1], rows[-1][4], rows[-1][3])
+    pp = np.array([tt(a[0], b[0]) for a, b in zip(rows, rows[1:])] + [0.0])
+    ppa = np.array([tt(a[0], b[0]) for a in rows for b in rows] or [0.0])
+    f = np.array
+    args = dict(
+        groups=f([list(range(m))], np.int64), gveh=f([0], np.int64), start=f([ready]),
+        first_eta=f([first_eta]), load=f([c["load"]], np.int64), cap=f([c["cap"]], np.int64),
+        off=f([0, k], np.int64), p_pax=f([r[1] for r in rows], np.int64).reshape(k),
+        p_limit=f([r[2] for r in rows], float).reshape(k),
+        p_svc=f([r[3] for r in rows], float).reshape(k),
+        p_eta=f(c["arr"], float).reshape(k), p_drop=np.zeros(k, bool),
+        p_e=f([r[4] for r in rows], float).reshape(k))
+    vn = f([[tt(0, x) for x in locs_new]])
+    pn = f([[tt(r[0], x) for x in locs_new] for r in rows]).reshape(k, 2 * m)
+    np_ = f([[tt(x, r[0]) for r in rows] for x in locs_new]).reshape(2 * m, k)
+    nn = f([[tt(x, y) for y in locs_new] for x in locs_new])
+    reqs_args = dict(
+        vn=vn, pn=pn, np_=np_, nn=nn, r_pax=f([r[2] for r in reqs], np.int64),
+        r_lp=f([r[3] for r in reqs]), r_ld=f([r[4] for r in reqs]), r_rel=np.zeros(m),
+        r_direct=np.zeros(m), r_hasdrop=np.ones(m, bool), old_end=f([end_old]))
+    return args, reqs_args, pp, ppa
+
+
+def _rtv_reference(c, keep_plan_order: bool):
+    """The least added time over every order of the plan's stops and the group's (each
+    pickup before its drop-off; with ``keep_plan_order`` the plan's order kept), simulated by
+    the reference: the plan's first stop, reached first, at its planned time (the drive the
+    vehicle is on); any other first stop by the drive from where the vehicle is."""
+    tt, rows, reqs, ready = c["tt"], c["stops"], c["reqs"], c["ready"]
+    svc = reqs[0][6]
+    items = [("plan", u) for u in range(len(rows))] + \
+        [(x, i) for i in range(len(reqs)) for x in ("p", "d")]
+    end_old = ready if not rows else S.leave(c["arr"][-1], rows[-1][4], rows[-1][3])
+    best = math.inf
+    for order in itertools.permutations(items):
+        seen, ok, last_plan = set(), True, -1
+        for it in order:
+            if it[0] == "d" and ("p", it[1]) not in seen:
+                ok = False
+            if it[0] == "plan":
+                if keep_plan_order and it[1] != last_plan + 1:
+                    ok = False
+                last_plan = it[1]
+            seen.add(it)
+        if not ok:
+            continue
+        plan = []
+        for kind, u in order:
+            if kind == "plan":
+                plan.append(rows[u])
+            else:
+                p, d, n, lp, ld = reqs[u][:5]
+                plan.append((p, n, lp, 0.0, -math.inf) if kind == "p" else
+                            (d, -n, ld, svc, -math.inf))
+        head = order[0] == ("plan", 0)
+
+        def first_tt(loc, head=head):
+            return c["arr"][0] - ready if head else tt(0, loc)
+
+        got = simulate(ready, first_tt, tt, plan, c["load"], c["cap"])
+        if got is not None:
+            best = min(best, got[1] - end_old)
+    return best
+
+
+@pytest.mark.parametrize("reorder", [False, True])
+def test_rtv_orders_with_every_stop_kind_equal_the_reference(reorder):
+    from allocators._rtv_kernel import best_orders, best_orders_any
+
+    rng = np.random.default_rng(280 + reorder)
+    feasible = cases = 0
+    while cases < 200:
+        c = _rtv_case(rng, 3 if reorder else 4)  # (every order of up to 7 stops)
+        # (rtv's plans: a stop's limit is at least its planned time; drop-offs serve)
+        c["stops"] = [(r[0], r[1], max(r[2], a), r[3], r[4]) for r, a in zip(c["stops"], c["arr"])]
+        svc = float(rng.choice([0.0, 15.0]))
+        c["reqs"] = [r[:6] + (svc, -math.inf) for r in c["reqs"]]
+        cases += 1
+        args, rargs, pp, ppa = _rtv_arrays(c)
+        k, m = len(c["stops"]), len(c["reqs"])
+        L = k + 2 * m
+        out = np.full(1, np.inf), np.full((1, L), -99, np.int64), np.zeros(1, bool)
+        common = [args[x] for x in ("groups", "gveh", "start", "first_eta", "load", "cap", "off",
+                                    "p_pax", "p_limit", "p_svc", "p_eta", "p_drop", "p_e")]
+        tail = [rargs[x] for x in ("vn", "pn", "np_", "nn", "r_pax", "r_lp", "r_ld", "r_rel",
+                                   "r_direct", "r_hasdrop", "old_end")]
+        if reorder:
+            vp = np.array([c["tt"](0, r[0]) for r in c["stops"]]).reshape(k)
+            best_orders_any(*common, np.full(k, -1, np.int64), vp, np.zeros(1, np.int64), ppa,
+                            *tail, svc, 1, 10**7, S.TOL, *out)
+        else:
+            best_orders(*common, pp, *tail, svc, 1, 10**7, S.TOL, *out)
+        want = _rtv_reference(c, keep_plan_order=not reorder)
+        if math.isinf(want):
+            assert math.isinf(out[0][0]), (want, out)
+            continue
+        feasible += 1
+        assert out[0][0] == pytest.approx(want, abs=1e-6)
+    assert 50 < feasible < cases  # both outcomes exercised
