@@ -3,9 +3,10 @@
 Compares every ``part-0.parquet`` under folder A with the file at the same relative path under
 folder B (``dispatch run --out A`` before a change, ``--out B`` after it): same files, same
 columns, same rows in the same order, every value exactly equal (NaN equal to NaN), leaving out
-only the wall-clock columns (:data:`dispatch.recorder.TIMING_COLUMNS` and the solver seconds an allocator writes into
-``allocator_info``, :data:`TIMING_KEYS`, which differ between
-identical runs). Prints one line per file and exits 1 at the first difference it describes.
+only the wall-clock figures, which differ between identical runs: the timing columns
+(:data:`dispatch.recorder.TIMING_COLUMNS`) and the solver seconds an allocator writes into
+``allocator_info`` (:data:`TIMING_KEYS`). Prints one line per file and exits 1 at the first
+difference it describes.
 
 With ``--common`` the columns only B has (a version that added columns) and the files only B
 has (a version that added tables) are listed and left out; every column both have must still
