@@ -178,7 +178,7 @@ class Dispatcher:
         #: the planner routes between any two locations (direct times, insertions)
         self.routes = bool(getattr(planner, "travel_times", False))
         #: [fleet.energy]: ``(cost, drive, slots, tasks) -> cost`` with ``inf`` where a vehicle
-        #: would end below its reserve (dispatch.energy.Energy.filter); None without energy
+        #: would end below its reserve (dispatch.battery.Energy.filter); None without energy
         self.energy_filter = None
         if self.plans and not self.routes:
             raise PluginError(f"planner {planner.name!r} computes no travel times between "

@@ -29,7 +29,8 @@ import numpy as np
 import simpy
 
 from dispatch.dispatcher import Dispatcher
-from dispatch.energy import Charging, Energy
+from dispatch.battery import Energy
+from dispatch.charging import Charging
 from dispatch.events import EventBus
 from dispatch.faults import FaultInjector, blackout_filter
 from dispatch.plugins import (check_repositioner, check_runs, describe, make_charger,
@@ -175,7 +176,7 @@ class Simulation:
         self.faults = (FaultInjector(env, sc.faults, self.fleet, self.operator,
                                      rng_for(spec.seed, STREAM_FAULTS))
                        if sc.faults.vehicles else None)
-        #: [fleet.energy]: batteries (dispatch.energy.Energy) and stations, visits (Charging)
+        #: [fleet.energy]: batteries (dispatch.battery.Energy) and stations, visits (Charging)
         self.energy = self.charging = None
         if sc.fleet.energy is not None:
             self._electric(sc, driver)
@@ -192,7 +193,7 @@ class Simulation:
 
     def _electric(self, sc, driver) -> None:
         """Batteries, the reserve rule, stations and the charging strategy (see
-        :mod:`dispatch.energy`)."""
+        :mod:`dispatch.battery`, :mod:`dispatch.charging`)."""
         net = self.space
         ref = float(net.length.sum() / net.time.sum()) if hasattr(net, "length") else 10.0
         self.energy = Energy(sc.fleet.energy, self.fleet, self.env, ref)

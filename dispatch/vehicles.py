@@ -76,7 +76,7 @@ class Vehicle:
     down_seconds: float = 0.0
     down_since: float = 0.0
     proc: Any = field(default=None, repr=False)  # the SimPy process serving its trip
-    #: ``[fleet.energy]``: its battery (:class:`dispatch.energy.Battery`); None without energy
+    #: ``[fleet.energy]``: its battery (:class:`dispatch.battery.Battery`); None without energy
     battery: Any = field(default=None, repr=False)
     _view: AgentView | None = field(default=None, repr=False)
     # ``loc`` and ``leg`` live here; their setters tell the fleet (its arrays stay current)
@@ -323,7 +323,7 @@ class Operator:
         #: called with a vehicle about to be given a task (repositioning stops its drive)
         self.on_assign: Callable[[Vehicle], None] = lambda v: None
         #: ``[fleet.energy]``: called with a vehicle whose battery ran empty on a leg (it stands
-        #: where it got; :meth:`dispatch.energy.Charging.strand`); None without energy
+        #: where it got; :meth:`dispatch.charging.Charging.strand`); None without energy
         self.strand: Callable[[Vehicle], None] | None = None
         #: reservation-based execution (voxel, capacity 1; see dispatch.reservations), or None
         self.timed: TimedExecution | None = None if timed is None else timed(self)

@@ -1,24 +1,4 @@
-"""Electric fleets: batteries, chargers as shared resources, charging strategies as plugins.
-
-Everything here is off unless the scenario has ``[fleet.energy]``; a run without it builds none
-of it and its tables are today's.
-
-Energy (``[fleet.energy]``)
-    Each vehicle carries a :class:`Battery`. A leg draws ``wh_per_km`` at the leg's mean speed
-    (a constant, or a table of ``[km/h, Wh/km]`` points interpolated linearly, like HIVE's
-    tabular powertrain) times its length, when it is counted (:meth:`dispatch.vehicles.Vehicle.
-    drove`: a leg cut part-way by a decision, a breakdown or the horizon draws what was driven,
-    at the cut part's mean speed). ``idle_kwh_per_hour`` is drawn over every second the
-    vehicle is not plugged in (auxiliary load). The battery never goes below 0 kWh: a vehicle
-    whose next leg would empty it drives until it is empty and is *stranded*
-    (:meth:`Charging.strand`). Energy is conserved: ``kwh0 + kwh_charged - kwh_drawn = kwh``
-    at every instant.
-
-Reserve
-    A vehicle whose plan, with a new request, would leave it below ``reserve`` of its battery
-    is not a candidate for the request (``inf`` cost): the dispatcher estimates the energy of
-    the plan's remaining drive seconds plus the drive to the pickup and the trip's direct time
-    at the fleet's reference consumption (:attr:`Energy.kwh_per_second`).
+"""Chargers as shared resources and charging visits (``[chargers]``, ``[charging]``).
 
 Chargers (``[chargers]``)
     Stations from a CSV file (``station_id``, ``node`` or ``lon``/``lat``, ``plugs``, ``kw``);
@@ -30,21 +10,25 @@ A charging visit is a ``charge`` stop of the vehicle's stop list (:data:`CHARGE`
 the vehicle drives to the station, queues (``queue`` event), charges (``charge_start``,
 ``charge_end``) to the strategy's target and is idle again. While on a visit it is neither
 idle nor busy: no decision considers it. A breakdown ends the visit (the energy charged so far
-counts). Strategies (``dispatch.chargers`` plugins, :class:`ChargingStrategy`) decide which
-idle vehicles go where, every ``[charging] interval`` seconds.
+counts). Strategies (``dispatch.chargers`` plugins,
+:class:`dispatch.charging_strategy.ChargingStrategy`) decide which idle vehicles go where, every
+``[charging] interval`` seconds. A vehicle whose battery runs empty is *stranded*
+(:meth:`Charging.strand`).
 """
 
 from __future__ import annotations
 
 import math
-from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import simpy
 
+from dispatch.battery import Energy
+from dispatch.charging_strategy import ChargingStrategy, ChargingView
+from dispatch.energy_config import ChargingConfig
 from dispatch.errors import PluginError
 from dispatch.stops import Stop
 
@@ -53,114 +37,6 @@ if TYPE_CHECKING:
     from dispatch.vehicles import Fleet, Operator, Vehicle
 
 CHARGE = "charge"
-_EPS = 1e-12
-
-
-# ----------------------------------------------------------------------------- configuration
-
-
-@dataclass(frozen=True)
-class EnergyConfig:
-    """``[fleet.energy]`` (see the module docstring). ``speed_table``: ``((km/h, Wh/km), ...)``
-    sorted by speed (empty: the constant ``wh_per_km``); ``socs``: a start file's ``soc``
-    column per vehicle (row order; nan: ``soc0``)."""
-
-    battery_kwh: float = 50.0
-    wh_per_km: float = 140.0
-    speed_table: tuple[tuple[float, float], ...] = ()
-    idle_kwh_per_hour: float = 0.0
-    soc0: float = 1.0
-    reserve: float = 0.1
-    max_charge_kw: float = math.inf
-    socs: tuple[float, ...] = ()
-    #: seconds between two rows per vehicle of the ``soc`` table
-    sample: float = 900.0
-
-    def wh_per_metre(self, speed: float) -> float:
-        """Wh per metre at ``speed`` (m/s; 0 or nan: the constant, or the table's mean)."""
-        if not self.speed_table:
-            return self.wh_per_km / 1000.0
-        s, w = zip(*self.speed_table)
-        if not speed > 0:
-            return float(np.mean(w)) / 1000.0
-        return float(np.interp(speed * 3.6, s, w)) / 1000.0
-
-
-@dataclass(frozen=True)
-class StationRow:
-    station_id: str
-    node: Any  # a node id of the network file (or None: lon/lat given)
-    lon: float
-    lat: float
-    plugs: int
-    kw: float
-
-
-@dataclass(frozen=True)
-class ChargingConfig:
-    """``[chargers]`` and ``[charging]``: the stations, the taper, the strategy and its
-    parameters (``[charging.<name>]``), the timer."""
-
-    stations: tuple[StationRow, ...] = ()
-    file: Any = None
-    taper_from: float = 0.8
-    taper_floor: float = 0.2
-    strategy: str = "threshold"
-    interval: float = 60.0
-    params: tuple[tuple[str, tuple[tuple[str, Any], ...]], ...] = ()
-    sweep: tuple[str, ...] = ()
-    #: [faults] tow: seconds until a stranded vehicle stands charged-able at the nearest station
-    tow: float = 3600.0
-
-    def params_of(self, name: str) -> tuple[tuple[str, Any], ...]:
-        return dict(self.params).get(name, ())
-
-
-def read_stations(path, tab=None) -> tuple[StationRow, ...]:
-    """Rows of a stations CSV: ``station_id``, ``node`` or ``lon``/``lat``, ``plugs``, ``kw``
-    (HIVE's ``charger_count`` / ``charger_id`` are read as plugs / kW of LEVEL_1 3.3,
-    LEVEL_2 7.2, DCFC 50 where ``plugs`` / ``kw`` are missing)."""
-    import csv
-
-    hive_kw = {"LEVEL_1": 3.3, "LEVEL_2": 7.2, "DCFC": 50.0}
-    out = []
-    with open(path, newline="", encoding="utf-8") as f:
-        for i, r in enumerate(csv.DictReader(f), 1):
-            try:
-                sid = str(r["station_id"])
-                plugs = int(r.get("plugs") or r["charger_count"])
-                kw = float(r["kw"]) if r.get("kw") else hive_kw[r["charger_id"]]
-                node = r.get("node") or None
-                lon = float(r["lon"]) if r.get("lon") else math.nan
-                lat = float(r["lat"]) if r.get("lat") else math.nan
-            except (KeyError, ValueError) as e:
-                raise ValueError(f"{path}: row {i}: {type(e).__name__}: {e} (want station_id, "
-                                 f"node or lon/lat, plugs, kw)") from None
-            if plugs < 1 or not kw > 0 or (node is None and math.isnan(lon + lat)):
-                raise ValueError(f"{path}: row {i}: plugs must be >= 1, kw > 0, and a node or "
-                                 f"lon/lat given")
-            out.append(StationRow(sid, node, lon, lat, plugs, kw))
-    if not out:
-        raise ValueError(f"{path}: no station")
-    return tuple(out)
-
-
-def read_socs(path) -> tuple[float, ...]:
-    """The optional ``soc`` column (0-1) of a fleet start file, in row order (blank: nan, the
-    scenario's ``soc0``); empty if there is none."""
-    import csv
-
-    with open(path, newline="", encoding="utf-8") as f:
-        rows = list(csv.DictReader(f))
-    if not rows or "soc" not in rows[0]:
-        return ()
-    out = []
-    for i, r in enumerate(rows, 1):
-        x = float(r["soc"]) if r["soc"] not in ("", None) else math.nan
-        if x == x and not 0.0 <= x <= 1.0:
-            raise ValueError(f"{path}: row {i}: soc {x} not in [0, 1]")
-        out.append(x)
-    return tuple(out)
 
 
 # ----------------------------------------------------------------------------- charging curve
@@ -208,115 +84,6 @@ def soc_after(a: float, seconds: float, kwh: float, kw: float, taper_from: float
     return min(1.0, taper_from + (1.0 - x) / k)
 
 
-# ----------------------------------------------------------------------------- batteries
-
-
-class Battery:
-    """One vehicle's battery (kWh). ``now`` gives the simulated time (auxiliary draw is
-    settled lazily: :meth:`settle`)."""
-
-    __slots__ = ("cfg", "capacity", "kwh", "kwh0", "drawn", "charged", "charge_seconds",
-                 "queue_seconds", "kwh_min", "t", "plugged", "now", "arr", "slot")
-
-    def __init__(self, cfg: EnergyConfig, soc: float, now: Callable[[], float],
-                 arr: np.ndarray, slot: int) -> None:
-        self.cfg, self.capacity = cfg, cfg.battery_kwh
-        self.kwh = self.kwh0 = self.kwh_min = soc * cfg.battery_kwh
-        self.drawn = self.charged = self.charge_seconds = self.queue_seconds = 0.0
-        self.t, self.plugged, self.now = 0.0, False, now
-        self.arr, self.slot = arr, slot
-        arr[slot] = self.kwh
-
-    @property
-    def soc(self) -> float:
-        return self.kwh / self.capacity
-
-    def _take(self, e: float) -> None:
-        take = min(max(e, 0.0), self.kwh)
-        self.kwh -= take
-        self.drawn += take
-        if self.kwh < self.kwh_min:
-            self.kwh_min = self.kwh
-        self.arr[self.slot] = self.kwh
-
-    def settle(self) -> None:
-        """Draw the auxiliary load up to now (nothing while plugged in)."""
-        now = self.now()
-        if now > self.t:
-            if not self.plugged and self.cfg.idle_kwh_per_hour:
-                self._take(self.cfg.idle_kwh_per_hour * (now - self.t) / 3600.0)
-            self.t = now
-
-    def leg_kwh(self, metres: float, seconds: float) -> float:
-        """kWh a drive of ``metres`` in ``seconds`` draws (without the auxiliary load)."""
-        speed = metres / seconds if seconds > 0 else 0.0
-        return metres * self.cfg.wh_per_metre(speed) / 1000.0
-
-    def drive(self, metres: float, seconds: float) -> None:
-        self.settle()
-        self._take(self.leg_kwh(metres, seconds))
-
-    def runs_out(self, metres: float, seconds: float) -> float | None:
-        """Seconds into a leg of ``metres`` in ``seconds`` at which the battery is empty, or
-        None if it lasts the leg."""
-        self.settle()
-        aux = self.cfg.idle_kwh_per_hour * seconds / 3600.0
-        need = self.leg_kwh(metres, seconds) + aux
-        if need <= self.kwh + 1e-12:
-            return None
-        return seconds * self.kwh / need if need > 0 else 0.0
-
-    def add(self, e: float) -> None:
-        e = min(max(e, 0.0), self.capacity - self.kwh)
-        self.kwh += e
-        self.charged += e
-        self.arr[self.slot] = self.kwh
-
-
-class Energy:
-    """The run's batteries and the dispatcher's reserve rule."""
-
-    def __init__(self, cfg: EnergyConfig, fleet: Fleet, env: simpy.Environment,
-                 ref_speed: float) -> None:
-        self.cfg, self.fleet, self.env = cfg, fleet, env
-        n = len(fleet)
-        self.kwh = np.zeros(n)
-        now = lambda: env.now  # noqa: E731
-        for i, v in enumerate(fleet.vehicles):
-            soc = cfg.socs[i] if i < len(cfg.socs) and cfg.socs[i] == cfg.socs[i] else cfg.soc0
-            v.battery = Battery(cfg, soc, now, self.kwh, v._slot)
-        #: kWh per second of driving at the reference speed (the network's mean free speed)
-        self.kwh_per_second = cfg.wh_per_metre(ref_speed) * ref_speed / 1000.0
-        self.reserve_kwh = cfg.reserve * cfg.battery_kwh
-
-    def filter(self, cost: np.ndarray, drive: np.ndarray, slots: np.ndarray, tasks) -> np.ndarray:
-        """``cost`` with ``inf`` where vehicle ``slots[i]`` would end below the reserve after
-        the plan and request ``j`` (``drive``: seconds from each vehicle to each pickup)."""
-        vs = self.fleet.vehicles
-        plan_s = np.array([sum(s.leg for s in vs[k].stops) for k in slots.tolist()]) \
-            if slots.size else np.zeros(0)
-        direct = np.array([0.0 if t.dropoff is None or t.direct_time != t.direct_time
-                           else t.direct_time for t in tasks])
-        need = (plan_s[:, None] + drive + direct[None, :]) * self.kwh_per_second
-        ok = self.kwh[slots][:, None] - need >= self.reserve_kwh
-        return np.where(ok, cost, np.inf)
-
-    def sampler(self, append: Callable[[tuple], None]):
-        """Process: every ``sample`` seconds from 0, one ``soc`` row per vehicle."""
-        ids = [v.id for v in self.fleet.vehicles]
-        while True:
-            self.settle_all()
-            t = float(self.env.now)
-            cap = self.cfg.battery_kwh
-            for vid, k in zip(ids, (self.kwh / cap).tolist()):
-                append((t, vid, k))
-            yield self.env.timeout(self.cfg.sample)
-
-    def settle_all(self) -> None:
-        for v in self.fleet.vehicles:
-            v.battery.settle()
-
-
 # ----------------------------------------------------------------------------- stations
 
 
@@ -342,105 +109,6 @@ class Station:
     @property
     def in_use(self) -> int:
         return self.resource.count
-
-
-# ----------------------------------------------------------------------------- strategies
-
-
-@dataclass(frozen=True, eq=False)
-class ChargingView:
-    """What a strategy sees (read-only arrays). Idle vehicles (row ``i``): ``vehicle_ids``,
-    ``nodes`` (the node it stands on or reaches next), ``remaining`` (seconds to it),
-    ``soc`` (0-1). Stations (row ``s``): ``station_ids``, ``station_nodes``, ``plugs``,
-    ``in_use``, ``waiting`` (queued now), ``kw``. ``released_by_hour``: requests released in
-    each hour of the run so far (index = hour since 0 s); ``time``; ``space`` (travel times:
-    :meth:`travel_times`); ``battery_kwh``, ``reserve``; ``rng``."""
-
-    time: float
-    vehicle_ids: np.ndarray
-    nodes: np.ndarray
-    remaining: np.ndarray
-    soc: np.ndarray
-    station_ids: tuple[str, ...]
-    station_nodes: np.ndarray
-    plugs: np.ndarray
-    in_use: np.ndarray
-    waiting: np.ndarray
-    kw: np.ndarray
-    released_by_hour: np.ndarray
-    battery_kwh: float
-    reserve: float
-    space: Any
-    rng: np.random.Generator
-    charge_seconds: Callable[[float, float, float], float] = field(repr=False)
-    #: (stations, nodes) shortest drive seconds from every node to each station (None:
-    #: computed on demand from ``space``)
-    to_stations: np.ndarray | None = field(default=None, repr=False)
-    #: vehicles driving to each station on a visit (None: none)
-    coming: np.ndarray | None = None
-
-    @property
-    def n_vehicles(self) -> int:
-        return int(self.vehicle_ids.size)
-
-    def travel_times(self, rows=None) -> np.ndarray:
-        """``(vehicles, stations)`` drive seconds from the idle vehicles ``rows`` (all if
-        None) to every station."""
-        rows = np.arange(self.n_vehicles) if rows is None else np.asarray(rows, np.int64)
-        if rows.size == 0:
-            return np.zeros((0, self.station_nodes.size))
-        t = self.to_stations
-        if t is None:
-            t = self.space.distances_to(self.station_nodes)  # (stations, nodes)
-        return t[:, self.nodes[rows]].T + self.remaining[rows][:, None]
-
-    def queue_seconds(self, target: float = 0.8, extra=None) -> np.ndarray:
-        """A rough wait at each station for a vehicle sent now: the vehicles ahead of it
-        (charging, queueing, on their way, and ``extra`` more) beyond the plugs, times a mean
-        charge (from 20 % to ``target``) divided by the plugs."""
-        mean = np.array([self.charge_seconds(0.2, target, kw) for kw in self.kw.tolist()])
-        ahead = self.in_use + self.waiting
-        if self.coming is not None:
-            ahead = ahead + self.coming
-        if extra is not None:
-            ahead = ahead + extra
-        return np.maximum(ahead - self.plugs + 1, 0) * mean / self.plugs
-
-    def best_station(self, rows, target: float = 0.8) -> np.ndarray:
-        """For each vehicle of ``rows``, in that order, the station row of least drive + queue
-        seconds, counting the vehicles sent before it in the queues (so that one call does not
-        send every vehicle to the same station)."""
-        rows = np.asarray(rows, np.int64)
-        if rows.size == 0:
-            return np.zeros(0, np.int64)
-        t = self.travel_times(rows)
-        extra = np.zeros(self.station_nodes.size, np.int64)
-        mean = np.array([self.charge_seconds(0.2, target, kw) for kw in self.kw.tolist()])
-        base = self.in_use + self.waiting + (0 if self.coming is None else self.coming)
-        out = np.empty(rows.size, np.int64)
-        for k in range(rows.size):
-            q = np.maximum(base + extra - self.plugs + 1, 0) * mean / self.plugs
-            s = int(np.argmin(t[k] + q))
-            out[k] = s
-            extra[s] += 1
-        return out
-
-
-class ChargingStrategy(ABC):
-    """Base class of ``dispatch.chargers`` plugins.
-
-    Every ``[charging] interval`` seconds the kernel hands :meth:`decide` a
-    :class:`ChargingView` and it returns ``{vehicle id: (station id, target soc)}`` for idle
-    vehicles to send charging now (target in (0, 1]). It must name only vehicles and stations
-    of the view, must not mutate it, and draws randomness only from ``view.rng``. Constructor
-    keyword arguments come from ``[charging.<name>]``; reject bad ones with ``TypeError`` /
-    ``ValueError``."""
-
-    name: ClassVar[str] = ""
-
-    @abstractmethod
-    def decide(self, view: ChargingView) -> Mapping[int, tuple[str, float]]:
-        """The visits to start now."""
 
 
 # ----------------------------------------------------------------------------- the kernel side
