@@ -6,22 +6,23 @@ Chargers (``[chargers]``)
     Power is ``min(station kw, [fleet.energy] max_charge_kw)`` up to ``taper_from`` (state of
     charge), then falls linearly to ``taper_floor`` of it at full (:func:`charge_seconds`).
 
-A charging visit is a ``charge`` stop of the vehicle's stop list (:data:`CHARGE`, no task):
-the vehicle drives to the station, queues (``queue`` event), charges (``charge_start``,
-``charge_end``) to the strategy's target and is idle again. While on a visit it is neither
-idle nor busy: no decision considers it. A breakdown ends the visit (the energy charged so far
-counts). Strategies (``dispatch.chargers`` plugins,
+A charging visit is a charge stop of the vehicle's plan (:data:`dispatch.stops.CHARGE`, no
+task; its :class:`Visit`), driven by the operator like any stop
+(:meth:`dispatch.vehicles.Operator.charge`): the vehicle drives to the station, queues
+(``queue`` event), charges (``charge_start``, ``charge_end``) to the strategy's target and is
+idle again. While on a visit it is neither idle nor busy: no decision considers it. A breakdown
+ends the visit (the energy charged so far counts). Strategies (``dispatch.chargers`` plugins,
 :class:`dispatch.charging_strategy.ChargingStrategy`) decide which idle vehicles go where, every
-``[charging] interval`` seconds. A vehicle whose battery runs empty is *stranded*
-(:meth:`Charging.strand`).
+``[charging] interval`` seconds. A vehicle whose battery runs empty is *stranded* and towed to
+the nearest station (:meth:`dispatch.vehicles.Operator.strand`, :meth:`Stations.nearest_node`).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import simpy
@@ -30,13 +31,11 @@ from dispatch.battery import Energy
 from dispatch.charging_strategy import ChargingStrategy, ChargingView
 from dispatch.energy_config import ChargingConfig
 from dispatch.errors import PluginError
-from dispatch.stops import Stop
+from dispatch.legs import as_point
 
 if TYPE_CHECKING:
     from dispatch.events import EventBus
     from dispatch.vehicles import Fleet, Operator, Vehicle
-
-CHARGE = "charge"
 
 
 # ----------------------------------------------------------------------------- charging curve
@@ -111,21 +110,13 @@ class Station:
         return self.resource.count
 
 
-# ----------------------------------------------------------------------------- the kernel side
+class Stations:
+    """The run's stations (``[chargers]``) on the road network ``space``, each power capped at
+    ``max_kw`` (``[fleet.energy] max_charge_kw``), and the drive seconds to each."""
 
-
-class Charging:
-    """Stations, the strategy's timer, charging visits and strandings of one run."""
-
-    def __init__(self, env: simpy.Environment, bus: EventBus, fleet: Fleet, operator: Operator,
-                 energy: Energy, cfg: ChargingConfig, space, strategy: ChargingStrategy | None,
-                 rng: np.random.Generator, transfer: bool, notify: Callable[[], None]) -> None:
-        self.env, self.bus, self.fleet, self.op = env, bus, fleet, operator
-        self.energy, self.cfg, self.space, self.strategy = energy, cfg, space, strategy
-        self.rng, self.transfer, self.notify = rng, transfer, notify
-        self.run_id = ""
-        self.on_assign: Callable[[Vehicle], None] = lambda v: None
-        ecfg = energy.cfg
+    def __init__(self, env: simpy.Environment, cfg: ChargingConfig, space,
+                 max_kw: float) -> None:
+        self.env = env
         self.stations: list[Station] = []
         for k, row in enumerate(cfg.stations):
             if row.node is not None:
@@ -133,7 +124,7 @@ class Charging:
             else:
                 xy = space.lonlat_to_xy([row.lon], [row.lat])
                 node = int(space.nearest(xy)[0][0])
-            kw = min(row.kw, ecfg.max_charge_kw)
+            kw = min(row.kw, max_kw)
             self.stations.append(Station(row.station_id, k, int(node), row.plugs, kw,
                                          simpy.Resource(env, capacity=row.plugs)))
         self.by_id = {s.id: s for s in self.stations}
@@ -141,9 +132,122 @@ class Charging:
         self.to_stations = (space.distances_to([s.node for s in self.stations])
                             if self.stations else np.zeros((0, space.n)))
         self.to_stations.setflags(write=False)
+
+    def nearest(self, node: int) -> Station | None:
+        """The station of least drive seconds from ``node`` (None: there is none)."""
+        if not self.stations:
+            return None
+        t = self.to_stations[:, node]
+        return self.stations[int(np.argmin(t))]
+
+    def nearest_node(self, node: int) -> int | None:
+        """Where a vehicle stranded at ``node`` is towed: the nearest station's node (None:
+        there is no station; it stays)."""
+        s = self.nearest(int(node))
+        return None if s is None else s.node
+
+    def rows(self):
+        """The ``chargers`` table's rows (dicts)."""
+        dur = max(float(self.env.now), 1e-9)
+        for s in self.stations:
+            yield dict(station_id=s.id, node=s.node, plugs=s.plugs, kw=s.kw, kwh_delivered=s.kwh,
+                       busy_plug_hours=s.busy_seconds / 3600.0, visits=s.visits,
+                       queued_visits=s.queued, queue_seconds=s.queue_seconds,
+                       mean_queue=s.queue_seconds / dur)
+
+
+# ----------------------------------------------------------------------------- visits
+
+
+@dataclass(eq=False)
+class Visit:
+    """One charging visit (a charge stop's ``visit``): to ``station``, up to ``target`` state
+    of charge. The station counts it as *coming* from when it is made until the vehicle
+    reaches the station or its drive there ends otherwise (:meth:`reached`)."""
+
+    charging: Charging
+    station: Station
+    target: float
+
+    def __post_init__(self) -> None:
+        self.station.coming += 1
+
+    def reached(self) -> None:
+        """The drive to the station is over (arrived, or cut by a breakdown or an empty
+        battery)."""
+        self.station.coming -= 1
+
+    def serve(self, v: Vehicle):
+        """Process fragment: ``v`` at the station queues for a plug, charges to the target and
+        leaves. A breakdown (an interrupt) closes the visit (the seconds queued, the energy
+        charged so far and the plug count) and goes on to the caller."""
+        c, station = self.charging, self.station
+        env, emit, bat, target = c.env, c.bus.emit, v.battery, self.target
+        t_c = None
+        a = 0.0
+        bat.settle()
+        req = station.resource.request()
+        station.visits += 1
+        t_q = env.now
+        try:
+            if not req.triggered:
+                station.queued += 1
+                emit(env.now, "queue", v.id, -1, station.node)
+            c.queueing[v.id] = (station, t_q)
+            yield req
+            del c.queueing[v.id]
+            waited = env.now - t_q
+            bat.queue_seconds += waited
+            station.queue_seconds += waited
+            t_q = None
+            bat.settle()
+            bat.plugged = True
+            a = bat.soc
+            dur = c.seconds(a, max(a, target), station.kw)
+            t_c = env.now
+            emit(env.now, "charge_start", v.id, -1, station.node)
+            c.plugged[v.id] = (station, a, target, t_c)
+            yield env.timeout(dur)
+            del c.plugged[v.id]
+            c.charged(v, station, a, target, env.now - t_c, exact=True)
+            t_c = None
+            station.resource.release(req)
+            req = None
+            emit(env.now, "charge_end", v.id, -1, station.node)
+        except simpy.Interrupt:  # a breakdown: the operator has put the vehicle right
+            c.queueing.pop(v.id, None)
+            c.plugged.pop(v.id, None)
+            if t_q is not None:
+                waited = env.now - t_q
+                bat.queue_seconds += waited
+                station.queue_seconds += waited
+            if t_c is not None:
+                c.charged(v, station, a, target, env.now - t_c, exact=False)
+                emit(env.now, "charge_end", v.id, -1, station.node)
+            if req is not None:
+                if req.triggered:
+                    station.resource.release(req)
+                else:
+                    req.cancel()
+            raise
+
+
+# ----------------------------------------------------------------------------- the strategy's side
+
+
+class Charging:
+    """The charging strategy's timer and the visits it starts, on the run's ``stations``."""
+
+    def __init__(self, env: simpy.Environment, bus: EventBus, fleet: Fleet, operator: Operator,
+                 energy: Energy, cfg: ChargingConfig, stations: Stations, space,
+                 strategy: ChargingStrategy | None, rng: np.random.Generator,
+                 run_id: str = "") -> None:
+        self.env, self.bus, self.fleet, self.op = env, bus, fleet, operator
+        self.energy, self.cfg, self.space, self.strategy = energy, cfg, space, strategy
+        self.rng, self.run_id = rng, run_id
+        self.stations, self.by_id = stations.stations, stations.by_id
+        self.to_stations = stations.to_stations
         self.hourly = np.zeros(1, np.int64)
-        self.strandings = 0
-        self.visits: dict[int, Any] = {}  # vehicle id -> its visit process
         #: vehicle id -> (station, since) queueing now / (station, soc at plug-in, target,
         #: since) plugged in now (closed by :meth:`finish` at the end of the run)
         self.queueing: dict[int, tuple] = {}
@@ -171,14 +275,14 @@ class Charging:
 
     def view(self) -> ChargingView:
         now = self.env.now
-        idle = [v for v in self.fleet.idle() if v.id not in self.visits]
-        locs = [v.location(now) for v in idle]
+        idle = self.fleet.idle()
+        locs = [as_point(v.location(now)) for v in idle]
         ro = _readonly
         st = self.stations
         return ChargingView(
             time=float(now), vehicle_ids=ro([v.id for v in idle], np.int64),
-            nodes=ro([getattr(p, "node", p) for p in locs], np.int64),
-            remaining=ro([max(getattr(p, "remaining", 0.0), 0.0) for p in locs], float),
+            nodes=ro([p.node for p in locs], np.int64),
+            remaining=ro([max(p.remaining, 0.0) for p in locs], float),
             soc=ro([v.battery.soc for v in idle], float),
             station_ids=tuple(s.id for s in st), station_nodes=ro([s.node for s in st], np.int64),
             plugs=ro([s.plugs for s in st], np.int64), in_use=ro([s.in_use for s in st], np.int64),
@@ -190,7 +294,7 @@ class Charging:
             to_stations=self.to_stations)
 
     def _fail(self, why: str) -> PluginError:
-        name = getattr(self.strategy, "name", "") or type(self.strategy).__name__
+        name = self.strategy.name or type(self.strategy).__name__
         run = f", run {self.run_id}" if self.run_id else ""
         return PluginError(f"charging strategy {name!r}{run}, t = {self.env.now:.6g} s: {why}")
 
@@ -227,96 +331,14 @@ class Charging:
 
     # ------------------------------------------------------------------ visits
     def send(self, v: Vehicle, station: Station, target: float) -> None:
-        """Send the idle vehicle ``v`` charging at ``station`` up to ``target``."""
-        self.on_assign(v)  # (a repositioning drive stops where it is)
-        self.fleet.set_failed(v)  # neither idle nor busy: no decision sees it
-        v.stops = [Stop(CHARGE, None, station.node, 0, math.inf, False)]
-        self.op.changed(v)
-        v.proc = self.env.process(self._visit(v, station, target))
-        self.visits[v.id] = v.proc
+        """Send the idle vehicle ``v`` charging at ``station`` up to ``target``: the operator
+        drives the visit as its plan's charge stop."""
+        self.op.charge(v, Visit(self, station, target))
 
-    def _visit(self, v: Vehicle, station: Station, target: float):
-        env, emit, bat = self.env, self.bus.emit, v.battery
-        req = None
-        t_q = t_c = None
-        a = 0.0
-        station.coming += 1
-        coming = True
-        try:
-            if v.location(env.now) != station.node:
-                leg = self.op.driver.plan(v, station.node, env.now)
-                emit(env.now, "depart", v.id, -1, v.loc)
-                cut = bat.runs_out(leg.length, leg.seconds)
-                if cut is not None:
-                    v.leg, v.leg_start = leg, env.now
-                    yield env.timeout(cut)
-                    from dispatch.vehicles import stop_leg
-
-                    stop_leg(v, env.now)
-                    self.visits.pop(v.id, None)
-                    v.stops = []
-                    station.coming -= 1
-                    self.strand(v)
-                    return
-                yield from self.op.driver.drive(env, v, leg, -1)
-            station.coming -= 1
-            coming = False
-            bat.settle()
-            req = station.resource.request()
-            station.visits += 1
-            t_q = env.now
-            if not req.triggered:
-                station.queued += 1
-                emit(env.now, "queue", v.id, -1, station.node)
-            self.queueing[v.id] = (station, t_q)
-            yield req
-            del self.queueing[v.id]
-            waited = env.now - t_q
-            bat.queue_seconds += waited
-            station.queue_seconds += waited
-            t_q = None
-            bat.settle()
-            bat.plugged = True
-            a = bat.soc
-            dur = self.seconds(a, max(a, target), station.kw)
-            t_c = env.now
-            emit(env.now, "charge_start", v.id, -1, station.node)
-            self.plugged[v.id] = (station, a, target, t_c)
-            yield env.timeout(dur)
-            del self.plugged[v.id]
-            self._charged(v, station, a, target, env.now - t_c, exact=True)
-            t_c = None
-            station.resource.release(req)
-            req = None
-            emit(env.now, "charge_end", v.id, -1, station.node)
-        except simpy.Interrupt:  # a breakdown: it has put the vehicle right
-            self.queueing.pop(v.id, None)
-            self.plugged.pop(v.id, None)
-            if coming:
-                station.coming -= 1
-            if t_q is not None:
-                waited = env.now - t_q
-                bat.queue_seconds += waited
-                station.queue_seconds += waited
-            if t_c is not None:
-                self._charged(v, station, a, target, env.now - t_c, exact=False)
-                emit(env.now, "charge_end", v.id, -1, station.node)
-            if req is not None:
-                if req.triggered:
-                    station.resource.release(req)
-                else:
-                    req.cancel()
-            self.visits.pop(v.id, None)
-            return
-        self.visits.pop(v.id, None)
-        v.stops, v.proc = [], None
-        self.op.changed(v)
-        self.fleet.set_idle(v)
-        emit(env.now, "idle", v.id, -1, v.loc)
-        self.notify()
-
-    def _charged(self, v: Vehicle, station: Station, a: float, target: float, seconds: float,
-                 exact: bool) -> None:
+    def charged(self, v: Vehicle, station: Station, a: float, target: float, seconds: float,
+                exact: bool) -> None:
+        """``v`` charged ``seconds`` at ``station`` from state of charge ``a``: to ``target``
+        (``exact``), or as far as the curve got in that time; it is unplugged now."""
         bat, c = v.battery, self.cfg
         b = max(a, target) if exact else soc_after(a, seconds, bat.capacity, station.kw,
                                                    c.taper_from, c.taper_floor)
@@ -337,49 +359,9 @@ class Charging:
             fleet[vid].battery.queue_seconds += now - since
             station.queue_seconds += now - since
         for vid, (station, a, target, since) in sorted(self.plugged.items()):
-            self._charged(fleet[vid], station, a, target, now - since, exact=False)
+            self.charged(fleet[vid], station, a, target, now - since, exact=False)
         self.queueing.clear()
         self.plugged.clear()
-
-    # ------------------------------------------------------------------ strandings
-    def nearest_station(self, node: int) -> Station | None:
-        if not self.stations:
-            return None
-        t = self.to_stations[:, node]
-        return self.stations[int(np.argmin(t))]
-
-    def strand(self, v: Vehicle) -> None:
-        """``v``'s battery is empty where it stands: a ``stranded`` event, a breakdown (its
-        trips transferred or failed as ``[faults] on_board`` says) that lasts ``[faults] tow``
-        seconds, after which it stands at the nearest station (idle; a strategy charges it)."""
-        env = self.env
-        self.strandings += 1
-        self.bus.emit(env.now, "stranded", v.id, -1, v.loc)
-        self.op.breakdown(v, math.inf, self.transfer)
-        env.process(self._tow(v))
-
-    def _tow(self, v: Vehicle):
-        yield self.env.timeout(self.cfg.tow)
-        node = getattr(v.loc, "node", v.loc)
-        s = self.nearest_station(int(node))
-        if s is not None:
-            v.loc = s.node
-        v.battery.settle()
-        v.failed = False
-        v.down_seconds += self.env.now - v.down_since
-        self.fleet.set_idle(v)
-        self.bus.emit(self.env.now, "repair", v.id, -1, v.loc)
-        self.bus.emit(self.env.now, "idle", v.id, -1, v.loc)
-        self.notify()
-
-    def rows(self):
-        """The ``chargers`` table's rows (dicts)."""
-        dur = max(float(self.env.now), 1e-9)
-        for s in self.stations:
-            yield dict(station_id=s.id, node=s.node, plugs=s.plugs, kw=s.kw, kwh_delivered=s.kwh,
-                       busy_plug_hours=s.busy_seconds / 3600.0, visits=s.visits,
-                       queued_visits=s.queued, queue_seconds=s.queue_seconds,
-                       mean_queue=s.queue_seconds / dur)
 
 
 def _node_id(x):

@@ -508,7 +508,8 @@ def _finish(traffic: Traffic, hands: Hands, t: Timed):
     v.busy_seconds += env.now - v.busy_since
     t.task = None
     v.completed += 1
-    hands.fleet.set_idle(v)
+    v.stops = []
+    hands.fleet.refresh(v)
     hands.book.close(task, _COMPLETED)
     traffic.emit(env.now, "idle", v.id, -1, v.loc)
     hands.notify()

@@ -30,7 +30,7 @@ import simpy
 
 from dispatch.dispatcher import Dispatcher
 from dispatch.battery import Energy
-from dispatch.charging import Charging
+from dispatch.charging import Charging, Stations
 from dispatch.events import EventBus
 from dispatch.faults import FaultInjector, blackout_filter
 from dispatch.plugins import (check_repositioner, check_runs, describe, make_charger,
@@ -42,7 +42,7 @@ from dispatch.streams import (STREAM_ALLOCATOR, STREAM_CHARGING, STREAM_FAULTS, 
                               STREAM_REPOSITION, STREAM_SOURCE, STREAM_TASKS, STREAM_WORLD,
                               rng_for)
 from dispatch.tasks import Task, TaskBook, TaskSource, TaskState
-from dispatch.vehicles import Fleet, Operator, stop_leg
+from dispatch.vehicles import Fleet, Hooks, Operator, Towing, stop_leg
 
 log = logging.getLogger(__name__)
 
@@ -147,8 +147,14 @@ class Simulation:
             timed = self.traffic.execution(book, self.fleet, sc.tasks.service_time)
         self.finished = env.event()
         self.dispatcher: Dispatcher
+        #: [fleet.energy]: the stations (a stranded vehicle is towed to the nearest one)
+        self.stations = (Stations(env, sc.charging, space, sc.fleet.energy.max_charge_kw)
+                         if sc.fleet.energy is not None else None)
+        towing = None if self.stations is None else Towing(
+            sc.charging.tow, self.stations.nearest_node, sc.faults.on_board == "transfer")
         self.operator = Operator(env, bus, book, self.fleet, driver, sc.tasks.service_time,
-                                 lambda: self.dispatcher.notify(), timed)
+                                 Hooks(lambda: self.dispatcher.notify(),
+                                       lambda task: self.source.rearm(task)), timed, towing)
         self.dispatcher = Dispatcher(env, book, self.fleet, self.operator, self.planner,
                                      allocator, space, sc.dispatch, sc.comms,
                                      rng_for(spec.seed, STREAM_ALLOCATOR), self._record_decision,
@@ -162,17 +168,13 @@ class Simulation:
                                     lambda: rng_for(spec.seed, STREAM_TASKS),
                                     rng_for(spec.seed, STREAM_SOURCE), self.dispatcher.notify)
         self.source.on_done = self._check_finished
-        self.operator.on_reopen = self.source.rearm
         #: the repositioning timer and drives (None: a passive repositioner, e.g. ``stay``)
         self.repositioning = None
         if not self.repositioner.passive:
             r = sc.reposition
-            self.repositioning = Repositioning(env, bus, self.fleet, driver, self.space,
+            self.repositioning = Repositioning(env, bus, self.fleet, self.operator, self.space,
                                                self.repositioner, r.interval, r.horizon,
-                                               rng_for(spec.seed, STREAM_REPOSITION),
-                                               lambda: self.dispatcher.notify())
-            self.repositioning.run_id = spec.run_id
-            self.operator.on_assign = self.repositioning.stop
+                                               rng_for(spec.seed, STREAM_REPOSITION), spec.run_id)
         self.faults = (FaultInjector(env, sc.faults, self.fleet, self.operator,
                                      rng_for(spec.seed, STREAM_FAULTS))
                        if sc.faults.vehicles else None)
@@ -202,13 +204,8 @@ class Simulation:
         cfg = sc.charging
         strategy = make_charger(sc, cfg.strategy) if cfg.stations else None
         self.charging = Charging(self.env, self.bus, self.fleet, self.operator, self.energy,
-                                 cfg, net, strategy, rng_for(self.spec.seed, STREAM_CHARGING),
-                                 sc.faults.on_board == "transfer",
-                                 lambda: self.dispatcher.notify())
-        self.charging.run_id = self.spec.run_id
-        self.operator.strand = self.charging.strand
-        if self.repositioning is not None:
-            self.charging.on_assign = self.repositioning.stop
+                                 cfg, self.stations, net, strategy,
+                                 rng_for(self.spec.seed, STREAM_CHARGING), self.spec.run_id)
 
     @property
     def allocator(self):
@@ -263,10 +260,9 @@ class Simulation:
 
         now = float(self.env.now)
         self.recording.end_tables(self.vehicles, now, counts)
-        if self.repositioning is not None:
-            self.repositioning.finish()
+        self.operator.finish()
         if self.charging is not None:
-            self.recording.chargers(self.charging.rows())
+            self.recording.chargers(self.stations.rows())
         run = dict(spec.keys, n_agents=len(self.vehicles), space=self.space.kind)
         # what the allocator says at the end (a learned model's name, a batch method's counts)
         extra = {**summary_of(self.repositioning),

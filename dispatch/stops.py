@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -33,6 +33,9 @@ if TYPE_CHECKING:
     from dispatch.tasks import Task
 
 PICKUP, DROPOFF = "pickup", "dropoff"
+#: a charging visit (no request; :mod:`dispatch.charging`) and a repositioning move (no request;
+#: :mod:`dispatch.reposition`), driven by the operator like any stop
+CHARGE, REPOSITION = "charge", "reposition"
 #: ``objective`` codes of :func:`insertion_costs`
 PICKUP_TIME, ADDED_TIME = 0, 1
 OBJECTIVES = {"pickup_time": PICKUP_TIME, "added_time": ADDED_TIME}
@@ -57,6 +60,9 @@ class Stop:
     completes: bool
     occupancy: int = 0
     leg: float = 0.0
+    #: a charge stop's visit (:class:`dispatch.charging.Visit`: the station, the target, what
+    #: the vehicle does there); None for every other stop
+    visit: Any = None
 
     @property
     def earliest(self) -> float:
