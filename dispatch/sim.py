@@ -142,9 +142,6 @@ class Simulation:
         #: reservation-based execution, with a reservation-aware planner only
         self.traffic = (space.traffic(env, self.planner, self.vehicles, bus.emit)
                         if self.planner.reservation_aware else None)
-        timed = None
-        if self.traffic is not None:
-            timed = self.traffic.execution(book, self.fleet, sc.tasks.service_time)
         self.finished = env.event()
         self.dispatcher: Dispatcher
         #: [fleet.energy]: the stations (a stranded vehicle is towed to the nearest one)
@@ -154,7 +151,9 @@ class Simulation:
             sc.charging.tow, self.stations.nearest_node, sc.faults.on_board == "transfer")
         self.operator = Operator(env, bus, book, self.fleet, driver, sc.tasks.service_time,
                                  Hooks(lambda: self.dispatcher.notify(),
-                                       lambda task: self.source.rearm(task)), timed, towing)
+                                       lambda task: self.source.rearm(task)),
+                                 None if self.traffic is None else self.traffic.execution,
+                                 towing)
         self.dispatcher = Dispatcher(env, book, self.fleet, self.operator, self.planner,
                                      allocator, space, sc.dispatch, sc.comms,
                                      rng_for(spec.seed, STREAM_ALLOCATOR), self._record_decision,
@@ -243,8 +242,7 @@ class Simulation:
             for v in self.vehicles:
                 if v.busy:
                     v.busy_seconds += env.now - v.busy_since
-            if self.operator.timed is not None:
-                self.operator.timed.end(env.now)
+            self.operator.execution.end(env.now)
             return self._finish()
         finally:
             if self.physics is not None:
@@ -252,14 +250,9 @@ class Simulation:
 
     def _finish(self) -> dict:
         spec = self.spec
-        timed = self.operator.timed
-
-        def counts(v) -> dict:  # reservation-based execution's, 0 without it
-            return timed.counts(v) if timed is not None else {"waits": 0, "replans": 0,
-                                                              "wait_seconds": 0.0}
-
         now = float(self.env.now)
-        self.recording.end_tables(self.vehicles, now, counts)
+        # (waits, replans, wait seconds: reservation-based execution's, 0 without it)
+        self.recording.end_tables(self.vehicles, now, self.operator.execution.counts)
         self.operator.finish()
         if self.charging is not None:
             self.recording.chargers(self.stations.rows())

@@ -11,10 +11,11 @@ How it drives depends on the space, through the *driver* its space makes
 a vehicle part-way through a leg is interpolated from its route when someone asks:
 :meth:`Vehicle.location`).
 
-With a reservation-aware planner (voxel only, capacity 1) a vehicle instead follows a *timed*
-route that the run's :class:`dispatch.reservations.Traffic` keeps conflict-free and owns (with
-the rest of that execution's state: :class:`dispatch.reservations.Timed`); the operator reaches
-it through :class:`dispatch.reservations.TimedExecution`.
+How a vehicle sets out on a plan, is halted by a breakdown and is repaired is the operator's
+*execution* (:class:`Execution`): its own plan process (:class:`PlanExecution`), or, with a
+reservation-aware planner (voxel only, capacity 1), the timed drives of
+:class:`dispatch.reservations.TimedExecution`, which follow routes that the run's
+:class:`dispatch.reservations.Traffic` keeps conflict-free and owns.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 import simpy
@@ -34,7 +35,6 @@ from dispatch.stops import CHARGE, DROPOFF, PICKUP, REPOSITION, Stop, occupancie
 from dispatch.tasks import COMPLETED, PICKED_UP as PICKED_UP_STATE, Task, TaskBook, TaskState
 
 if TYPE_CHECKING:
-    from dispatch.reservations import TimedExecution
     from dispatch.legs import Leg
 
 
@@ -329,6 +329,35 @@ class Towing:
     transfer: bool
 
 
+class Execution(Protocol):
+    """How the operator's vehicles execute their plans (a driver the operator uses, made at
+    its construction from the operator): :class:`PlanExecution` (the operator's plan process)
+    or :class:`dispatch.reservations.TimedExecution` (timed routes on reservations)."""
+
+    def set_out(self, v: Vehicle, task: Task, cost: float, at: tuple | None) -> None:
+        """``v``, with an empty plan, is given ``task`` at ``cost`` (``at``: the decision's
+        planned times, see :meth:`Operator.assign`) and sets out now."""
+
+    def halt(self, v: Vehicle, again: Callable[[], Any]) -> list[Task] | None:
+        """``v`` breaks down now: stop what drives it and return the tasks of its plan; or
+        None where it can only stop later (``again`` then breaks it down)."""
+
+    def breaking(self, v: Vehicle) -> bool:
+        """``v`` breaks down as soon as it can (a breakdown waits for it)."""
+
+    def holds(self, v: Vehicle) -> Task | None:
+        """The task ``v`` drives to pick up (capacity 1, ``[dispatch] reassign``), or None."""
+
+    def repaired(self, v: Vehicle) -> None:
+        """``v`` is back in service."""
+
+    def end(self, now: float) -> None:
+        """The run is over at ``now``."""
+
+    def counts(self, v: Vehicle) -> dict:
+        """The ``vehicles`` table's ``waits``, ``replans`` and ``wait_seconds`` of ``v``."""
+
+
 class Operator:
     """Hands requests to vehicles (inserting their stops into the vehicle's plan) and drives
     every plan with one SimPy process per vehicle on the move: the process is the loop, the
@@ -336,13 +365,14 @@ class Operator:
     visit (:data:`dispatch.stops.CHARGE`: drive, queue for a plug, charge, leave; see
     :mod:`dispatch.charging`) and a repositioning move (:data:`dispatch.stops.REPOSITION`:
     drive, idle all the way; a decision that gives the vehicle a request cuts it). Breakdowns,
-    strandings (``towing``), repairs and tows are its own. With reservations (voxel, capacity
-    1) one ``drive`` process per vehicle follows a timed route instead (see
-    :mod:`dispatch.reservations`)."""
+    strandings (``towing``), repairs and tows are its own. How a vehicle sets out and is
+    halted is its ``execution`` (:class:`Execution`, made by ``execution(operator)``):
+    :class:`PlanExecution`, or with reservations (voxel, capacity 1) one ``drive`` process per
+    vehicle following a timed route (see :mod:`dispatch.reservations`)."""
 
     def __init__(self, env: simpy.Environment, bus: EventBus, book: TaskBook, fleet: Fleet,
                  driver, service_time: float, hooks: Hooks,
-                 timed: Callable[[Operator], TimedExecution] | None = None,
+                 execution: Callable[[Operator], Execution] | None = None,
                  towing: Towing | None = None) -> None:
         self.env, self.bus, self.book, self.fleet = env, bus, book, fleet
         self.driver, self.service_time, self.hooks = driver, service_time, hooks
@@ -356,8 +386,8 @@ class Operator:
         #: when the move began)), and the metres of the moves ended so far
         self._moves: dict[int, tuple[Stop, float]] = {}
         self.reposition_distance = 0.0
-        #: reservation-based execution (voxel, capacity 1; see dispatch.reservations), or None
-        self.timed: TimedExecution | None = None if timed is None else timed(self)
+        #: how its vehicles set out, are halted and repaired
+        self.execution: Execution = (execution or PlanExecution)(self)
 
     # ------------------------------------------------------------------ the plan
     def _stops(self, task: Task) -> list[Stop]:
@@ -375,30 +405,11 @@ class Operator:
         shift1, shift2)`` of :class:`dispatch.stops.Insertions`, and re-routes if its next
         stop changed."""
         env = self.env
-        if self.timed is not None:  # its drive process follows the route; cost = priority
-            self.book.assign(task, v.id, cost)
-            v.stops = self._stops(task)
-            self.changed(v)
-            self.fleet.refresh(v)
-            self.timed.assign(v, task)
-            return
         self._cut(v)  # a repositioning move ends here: the vehicle sets out from where it is
-        new = self._stops(task)
         if not v.stops and v.serving is None:  # an empty plan: the vehicle sets out now
-            path = self.driver.plan(v, task.loc, env.now)
-            self.book.assign(task, v.id, cost)
-            if at is not None:  # the planned times of the decision
-                self._set_legs(v, new, [at[2], at[3]][:len(new)])
-            else:  # (legs only matter to later insertions: pooled runs always pass ``at``)
-                new[0].leg = self.driver.leg_seconds(path)
-                if len(new) > 1:
-                    new[1].leg = task.direct_time
-            v.stops = new
-            occupancies(v.load, v.stops)
-            self.changed(v)
-            self.fleet.refresh(v)
-            v.proc = env.process(self._run(v, path, new[0]))
+            self.execution.set_out(v, task, cost, at)
             return
+        new = self._stops(task)
         i, j, pick, drop, shift1, shift2 = at  # type: ignore[misc]
         self.book.assign(task, v.id, cost)
         old = v.stops
@@ -738,19 +749,12 @@ class Operator:
         service for ``duration`` seconds (``inf``: for good), then repaired where it stands
         or, ``towed``, at the place :attr:`towing` names. False if it had already failed (or,
         with reservations, never: faults are refused there at validate time)."""
-        timed = self.timed
-        if v.failed or (timed is not None and timed.breaking(v)):
+        if v.failed or self.execution.breaking(v):
             return False
         env = self.env
-        if timed is not None:  # its drive process lives on: stop serving, hold the cell
-            tasks = timed.stop(v, lambda: self.breakdown(v, duration, transfer))
-            if tasks is None:  # it breaks down at the end of the step it is executing
-                return True
-        else:
-            tasks = v.tasks()
-            if v.proc is not None and v.proc.is_alive and v.proc is not env.active_process:
-                v.proc.interrupt("breakdown")
-                v.proc = None
+        tasks = self.execution.halt(v, lambda: self.breakdown(v, duration, transfer, towed))
+        if tasks is None:  # it breaks down when it can (the end of a step it is executing)
+            return True
         if v.leg is not None:  # stop part-way: count what was driven, stand where it got
             stop_leg(v, env.now)
         if v.busy:
@@ -789,7 +793,7 @@ class Operator:
         :meth:`stand_idle`. Returns the task given up."""
         env = self.env
         task = v.stops[0].task if v.stops else None
-        assert task is not None and task.state is TaskState.ASSIGNED and self.timed is None
+        assert task is not None and task.state is TaskState.ASSIGNED
         proc = v.proc
         if proc is not None and proc.is_alive and proc is not env.active_process \
                 and not isinstance(proc.target, simpy.events.Initialize):
@@ -807,10 +811,7 @@ class Operator:
 
     def holds(self, v: Vehicle) -> Task | None:
         """The task ``v`` drives to pick up (capacity 1, ``[dispatch] reassign``), or None."""
-        if self.timed is not None:
-            return self.timed.task_of(v)
-        s = v.stops[0] if v.stops else None
-        return s.task if s is not None and s.kind is PICKUP else None
+        return self.execution.holds(v)
 
     def stand_idle(self, v: Vehicle) -> None:
         """``v`` (after :meth:`give_up`, with no new task) is idle where it stopped."""
@@ -828,10 +829,59 @@ class Operator:
                 v.loc = place
             v.battery.settle()
         v.failed = False
-        if self.timed is not None:
-            self.timed.repaired(v)
+        self.execution.repaired(v)
         v.down_seconds += self.env.now - v.down_since
         self.fleet.refresh(v)
         self.bus.emit(self.env.now, "repair", v.id, -1, v.loc)
         self.bus.emit(self.env.now, "idle", v.id, -1, v.loc)
         self.notify()
+
+
+class PlanExecution:
+    """The operator's own execution (every run without reservations): a vehicle that sets out
+    gets its task's stops as its plan and one process drives them (:meth:`Operator._run`); a
+    breakdown interrupts that process at once."""
+
+    def __init__(self, op: Operator) -> None:
+        self.op = op
+
+    def set_out(self, v: Vehicle, task: Task, cost: float, at: tuple | None) -> None:
+        op = self.op
+        new = op._stops(task)
+        path = op.driver.plan(v, task.loc, op.env.now)
+        op.book.assign(task, v.id, cost)
+        if at is not None:  # the planned times of the decision
+            op._set_legs(v, new, [at[2], at[3]][:len(new)])
+        else:  # (legs only matter to later insertions: pooled runs always pass ``at``)
+            new[0].leg = op.driver.leg_seconds(path)
+            if len(new) > 1:
+                new[1].leg = task.direct_time
+        v.stops = new
+        occupancies(v.load, v.stops)
+        op.changed(v)
+        op.fleet.refresh(v)
+        v.proc = op.env.process(op._run(v, path, new[0]))
+
+    def halt(self, v: Vehicle, again: Callable[[], Any]) -> list[Task]:
+        tasks = v.tasks()
+        proc = v.proc
+        if proc is not None and proc.is_alive and proc is not self.op.env.active_process:
+            proc.interrupt("breakdown")
+            v.proc = None
+        return tasks
+
+    def breaking(self, v: Vehicle) -> bool:
+        return False
+
+    def holds(self, v: Vehicle) -> Task | None:
+        s = v.stops[0] if v.stops else None
+        return s.task if s is not None and s.kind is PICKUP else None
+
+    def repaired(self, v: Vehicle) -> None:
+        """Nothing to do: its next plan starts a process."""
+
+    def end(self, now: float) -> None:
+        """Nothing open: the run's end cut the legs being driven."""
+
+    def counts(self, v: Vehicle) -> dict:
+        return {"waits": 0, "replans": 0, "wait_seconds": 0.0}
