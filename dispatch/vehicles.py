@@ -303,10 +303,6 @@ def stop_leg(v: Vehicle, now: float) -> None:
 # ----------------------------------------------------------------------------- operations
 
 
-def _no_reopen(task: Task) -> None:
-    """The default :attr:`Hooks.reopen`: nothing re-arms a re-opened task's expiry."""
-
-
 @dataclass(frozen=True)
 class Hooks:
     """What the operator calls in the rest of the run (given at construction)."""
@@ -314,7 +310,7 @@ class Hooks:
     #: asks the dispatcher for a decision (a vehicle became idle, tasks re-opened)
     notify: Callable[[], None]
     #: a task re-opened by a breakdown (the task source re-arms its expiry)
-    reopen: Callable[[Task], None] = _no_reopen
+    reopen: Callable[[Task], None]
 
 
 @dataclass(frozen=True)
@@ -439,8 +435,9 @@ class Operator:
         late (traffic ran slower than planned) may stay as late as it is."""
         env, planner = self.env, self.driver.planner
         now = env.now
-        old = {(s.kind, s.task.id): s for s in v.stops}
-        planned = dict(zip([(s.kind, s.task.id) for s in v.stops], self._times(v)))
+        kept = self.kept(v)
+        old = {(s.kind, s.task.id): s for s in kept}
+        planned = dict(zip([(s.kind, s.task.id) for s in kept], self._times(v)))
         first = old.get((rows[0][0], rows[0][1]))
         if first is not None and v.heading is first and v.leg is not None:
             t = v.leg_start + v.leg.seconds
@@ -575,6 +572,11 @@ class Operator:
         self.bus.emit(env.now, "reposition", v.id, -1, node)
         self.bus.emit(env.now, "depart", v.id, -1, v.loc)
         v.proc = env.process(self._run(v, leg, stop, departed=True))
+
+    def kept(self, v: Vehicle) -> list[Stop]:
+        """The stops of ``v``'s plan that a decision keeps: all of them, but none of a
+        repositioning move (which giving the vehicle a request cuts)."""
+        return [] if v.stops and v.stops[0].kind is REPOSITION else v.stops
 
     def repositioning(self, v: Vehicle):
         """The node ``v`` is repositioning to, or None."""

@@ -111,3 +111,40 @@ def test_charge_reposition_cut_strand_and_tow_by_one_operator(tmp_path):
     terminal = ev[ev.event.isin(TERMINAL)]
     assert terminal.task_id.is_unique and set(terminal.task_id) == released
     assert set(tasks.task_id) == released
+
+
+@pytest.mark.parametrize("allocator", ["rtv", "hungarian"])
+def test_pooled_decisions_cut_repositioning_moves(tmp_path, allocator):
+    # a repositioning move is a stop of the plan that a decision does not keep: pooled
+    # decisions (rtv's routes, insertions) see the vehicle's plan as empty and cut the move
+    p = tmp_path / "pool.toml"
+    p.write_text(
+        'name = "pool"\nseed = 1\nduration = 20000.0\n[world]\nnetwork = "manhattan"\n'
+        'blocks = [8, 8]\nblock = 200.0\nspeed = 10.0\n[fleet]\nagents = 6\ncapacity = 2\n'
+        '[tasks]\nsource = "poisson"\nrate = 0.03\ncount = 120\nmax_wait = 300.0\n'
+        f'max_delay = 600.0\n[dispatch]\nallocator = "{allocator}"\nbatch_window = 20.0\n'
+        'objective = "added_time"\n[reposition]\npolicy = "demand"\ninterval = 60.0\n'
+        'horizon = 1000.0\n[reposition.demand]\nzone = 600.0\n', encoding="utf-8")
+    [spec] = load_scenario(p).runs()
+    recorder = make_recorder(spec, tmp_path / "out")
+    summary = Simulation(spec, recorder).run()
+    recorder.finish()
+    ev = pd.read_parquet(tmp_path / "out" / "events")
+    cuts = 0
+    for _, g in ev[ev.agent_id >= 0].groupby("agent_id"):
+        moving, load = False, 0
+        for k in g.event:
+            if k == "reposition":
+                assert load == 0  # only an idle vehicle repositions
+                moving = True
+            elif k == "idle":
+                moving = False
+            elif k == "assign":
+                cuts += moving
+                moving = False
+            load = {"pickup": load + 1, "dropoff": load - 1}.get(k, load)
+            assert 0 <= load <= 2
+    assert summary["repositions"] > 0 and cuts > 0
+    terminal = ev[ev.event.isin(TERMINAL)]
+    assert terminal.task_id.is_unique
+    assert set(terminal.task_id) == set(ev[ev.event == "release"].task_id)
