@@ -655,7 +655,11 @@ class Operator:
                     if not (departed and stop is first):
                         emit(env.now, "depart", v.id, tid, v.loc)
                     first = None
-                    if v.battery is not None and self.towing is not None:
+                    # (a repositioning move is not checked, as before it was a stop: it
+                    # drives on with its battery held at 0 kWh; checking it strands such
+                    # vehicles, which changes the results of runs that pair the two)
+                    if v.battery is not None and self.towing is not None \
+                            and stop.kind is not REPOSITION:
                         cut = v.battery.runs_out(path.length, path.seconds)
                         if cut is not None:  # it drives until the battery is empty
                             v.leg, v.leg_start = path, env.now
