@@ -274,10 +274,14 @@ class Fleet:
         repositioning move, which a decision may cut)."""
         busy = idle = False
         if not v.failed:
-            if v.serving is not None or any(s.task is not None for s in v.stops):
-                busy = True
-            else:
-                idle = not any(s.kind is CHARGE for s in v.stops)
+            busy = v.serving is not None
+            idle = not busy
+            for s in v.stops:  # (a loop, not any(): it runs at every assignment and idle)
+                if s.task is not None:
+                    busy, idle = True, False
+                    break
+                if s.kind is CHARGE:
+                    idle = False
         v.busy = busy
         self.idle_mask[v._slot] = idle
         self.busy_mask[v._slot] = busy
