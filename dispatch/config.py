@@ -122,7 +122,7 @@ class FleetConfig:
     #: (row order; 0: the fleet's)
     capacity: int = 1
     capacities: tuple[int, ...] = ()
-    #: ``[fleet.energy]`` (:class:`dispatch.energy.EnergyConfig`); None: no batteries
+    #: ``[fleet.energy]`` (:class:`dispatch.energy_config.EnergyConfig`); None: no batteries
     energy: Any = None
 
     @property
@@ -267,7 +267,7 @@ class Scenario:
     comms: CommsConfig = field(default_factory=CommsConfig)
     faults: FaultConfig = field(default_factory=FaultConfig)
     reposition: RepositionConfig = field(default_factory=RepositionConfig)
-    #: ``[chargers]`` / ``[charging]`` (:class:`dispatch.energy.ChargingConfig`); None: none
+    #: ``[chargers]`` / ``[charging]`` (:class:`dispatch.energy_config.ChargingConfig`); None: none
     charging: Any = None
 
     def runs(

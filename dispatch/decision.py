@@ -20,7 +20,7 @@ in the order they run:
    reach the pickup after the deadline; with lazy costs each request's feasibility made
    exact, :func:`dispatch.lazy.resolve_open`). A request no vehicle reaches in time is
    rejected the first time it is offered (:func:`reject_late`).
-6. The energy filter (``[fleet.energy]``, :meth:`dispatch.energy.Energy.filter`): ``inf``
+6. The energy filter (``[fleet.energy]``, :meth:`dispatch.battery.Energy.filter`): ``inf``
    where a vehicle would end below its reserve.
 7. :func:`keep_servable`: the columns of the requests left out are dropped.
 8. :class:`dispatch.comms.Hearing`: who hears whom (the ``[comms]`` range, a blackout's
@@ -404,7 +404,7 @@ class Pipeline:
         self.planner = planner
         self.costs = PlannerCosts(planner, self.lazy, blame)
         #: [fleet.energy]: ``(cost, drive, slots, tasks) -> cost`` with ``inf`` where a vehicle
-        #: would end below its reserve (dispatch.energy.Energy.filter); None without energy
+        #: would end below its reserve (dispatch.battery.Energy.filter); None without energy
         self.energy_filter = energy_filter
         self.hearing = Hearing(space, comms, links)
         self.problems = Problems(fleet, operator, planner, space, cfg, comms, rng, self.pooled,

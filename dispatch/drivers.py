@@ -13,7 +13,9 @@ goal (:meth:`Driver.reaches`) and turns it into what :meth:`Driver.drive` follow
 * :meth:`goal` (required): where a route ends;
 * :meth:`drive` (required): the SimPy process fragment that follows a route;
 * :attr:`plain_legs` (optional): True where :meth:`drive` is one timeout of ``route.seconds``
-  ending with the vehicle on the route's last node, so the operator may drive it inline.
+  ending with the vehicle on the route's last node, so the operator may drive it inline;
+* :meth:`node_of` (optional): the place of the space a location stands at (default: itself);
+* :meth:`leg_seconds` (optional): a route's planned seconds (default: 0, untimed).
 
 Two ship with the kernel: :class:`CellDriver` (voxel world: cell by cell, a ``move`` event per
 cell, as the paper's vehicles do) and :class:`RoadDriver` (road network: one timeout per leg;
@@ -32,6 +34,7 @@ import simpy
 from dispatch.contracts import AgentView, Planner
 from dispatch.errors import PluginError
 from dispatch.events import EventBus
+from dispatch.legs import as_point
 from dispatch.motion import step_length
 from dispatch.space import Space
 
@@ -80,6 +83,16 @@ class Driver:
     def start(self, v: Vehicle, now: float):
         """Where ``v`` is when a path is planned for it at ``now``, and its view then."""
         return v.loc, v.view()
+
+    def node_of(self, loc):
+        """The place where someone at ``loc`` waits (a rider put down by a breakdown) or is
+        towed from: ``loc`` itself (a cell)."""
+        return loc
+
+    def leg_seconds(self, route) -> float:
+        """The seconds a route's drive is planned to take, where the driver times its routes;
+        0 where it does not (cells: a decision's insertion gives the planned times)."""
+        return 0.0
 
     def reaches(self, path, start, goal) -> bool:
         """Whether ``path`` (a planner's answer) goes from ``start`` to ``goal``: the
@@ -154,6 +167,14 @@ class RoadDriver(Driver):
 
     def start(self, v: Vehicle, now: float):
         return v.location(now), v.view(now)
+
+    def node_of(self, loc) -> int:
+        """The node of ``loc``: itself, or the node a road point part-way along an edge
+        drives to."""
+        return as_point(loc).node
+
+    def leg_seconds(self, leg: Leg) -> float:
+        return leg.seconds
 
     def route(self, start, path) -> Leg:
         return self.network.leg(start, path)

@@ -83,7 +83,8 @@ class Plans(Mapping):
     def _ids(self) -> dict:
         if self._by_id is None:
             vs = self._fleet.vehicles
-            self._by_id = {v.id: v for v in (vs[k] for k in self._slots.tolist()) if v.stops}
+            self._by_id = {v.id: v for v in (vs[k] for k in self._slots.tolist())
+                           if self._operator.kept(v)}
         return self._by_id
 
     def __getitem__(self, agent_id: int) -> tuple[StopView, ...]:

@@ -40,7 +40,7 @@ GROUPS = {"allocator": "dispatch.allocators", "planner": "dispatch.planners",
 #: import nothing of ``dispatch`` (:mod:`dispatch.commands` reads them).
 BASES = {"allocator": "dispatch.contracts:Allocator", "planner": "dispatch.contracts:Planner",
          "repositioner": "dispatch.reposition:Repositioner",
-         "charger": "dispatch.energy:ChargingStrategy"}
+         "charger": "dispatch.charging_strategy:ChargingStrategy"}
 
 #: The methods of its contract a plugin declaring a capability must define itself (the base
 #: class's are there to document them; the kernel calls them only on plugins that declare it).

@@ -15,14 +15,16 @@ Repositioners
     it (``stay``, the default, is one: idle vehicles wait where they are).
 
 What the kernel does with a move
-    The vehicle drives the fastest path to the target node (empty: its metres count in
+    The move is a reposition stop of the vehicle's plan (:data:`dispatch.stops.REPOSITION`),
+    driven by the operator like any stop (:meth:`dispatch.vehicles.Operator.reposition`): the
+    vehicle drives the fastest path to the target node (empty: its metres count in
     ``empty_distance`` and in the summary's ``reposition_distance``). It stays *idle* all the
-    way: the dispatcher may give it a trip at any moment, and it then drives to the pickup from
-    where it is (part-way along an edge included); a later move may re-target it. Its arrival
-    wakes the dispatcher (a request it could not reach in time before may be within reach).
-    Events: a ``reposition`` (vehicle; at the target node), then a ``depart`` with task -1 (at
-    where it starts); on arrival an ``idle`` at the target. A breakdown stops it like any
-    drive.
+    way: the dispatcher may give it a trip at any moment, which cuts the move, and it then
+    drives to the pickup from where it is (part-way along an edge included); a later move may
+    re-target it. Its arrival wakes the dispatcher (a request it could not reach in time before
+    may be within reach). Events: a ``reposition`` (vehicle; at the target node), then a
+    ``depart`` with task -1 (at where it starts); on arrival an ``idle`` at the target. A
+    breakdown stops it like any drive.
 
 Repositioning moves vehicles on road networks only: a scenario that pairs a non-passive
 repositioner with a voxel world fails validation (:attr:`Repositioner.spaces`).
@@ -33,22 +35,21 @@ from __future__ import annotations
 import logging
 from abc import ABC, abstractmethod
 from collections import deque
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
 from dispatch.errors import PluginError
-from dispatch.vehicles import stop_leg
+from dispatch.legs import as_point
 
 if TYPE_CHECKING:
     import simpy
 
     from dispatch.events import Event, EventBus
     from dispatch.roads import RoadNetwork
-    from dispatch.drivers import RoadDriver
-    from dispatch.vehicles import Fleet, Vehicle
+    from dispatch.vehicles import Fleet, Operator, Vehicle
 
 log = logging.getLogger(__name__)
 
@@ -133,36 +134,20 @@ class Repositioner(ABC):
 # ----------------------------------------------------------------------------- the kernel side
 
 
-@dataclass(eq=False)
-class _Trip:
-    """One repositioning drive of one vehicle."""
-
-    target: int
-    empty0: float  # the vehicle's empty metres when it set off
-    proc: simpy.Process | None = field(default=None, repr=False)
-    open: bool = True
-
-
 class Repositioning:
-    """Calls a non-passive repositioner every ``interval`` seconds and drives its moves.
+    """Calls a non-passive repositioner every ``interval`` seconds and hands its moves to the
+    operator (:meth:`dispatch.vehicles.Operator.reposition`), which drives them as reposition
+    stops. ``moves`` counts the moves started; their metres are the operator's
+    (:attr:`dispatch.vehicles.Operator.reposition_distance`)."""
 
-    Hooks (set up by :class:`dispatch.sim.Simulation`): :meth:`stop` runs before a vehicle is
-    given a trip (``Operator.on_assign``); :meth:`finish` closes the accounting at the end of
-    the run. ``moves`` counts the drives started, ``distance`` their metres."""
-
-    def __init__(self, env: simpy.Environment, bus: EventBus, fleet: Fleet, driver: RoadDriver,
+    def __init__(self, env: simpy.Environment, bus: EventBus, fleet: Fleet, operator: Operator,
                  space: RoadNetwork, repositioner: Repositioner, interval: float, horizon: float,
-                 rng: np.random.Generator, notify: Callable[[], None] = lambda: None) -> None:
-        self.env, self.bus, self.fleet, self.driver = env, bus, fleet, driver
-        #: asks the dispatcher for a decision: a vehicle that arrived may now reach a request
-        #: it could not reach in time from where it was
-        self.notify = notify
+                 rng: np.random.Generator, run_id: str = "") -> None:
+        self.env, self.bus, self.fleet, self.operator = env, bus, fleet, operator
         self.space, self.repositioner, self.rng = space, repositioner, rng
         self.interval, self.horizon = interval, horizon
-        self.run_id = ""  # named in error messages
+        self.run_id = run_id  # named in error messages
         self.moves = 0
-        self.distance = 0.0
-        self._trips: dict[int, _Trip] = {}
         self._recent: deque[tuple[float, int]] = deque()
         bus.subscribe(self._released, ["release"])
         self.process = env.process(self._loop())
@@ -183,9 +168,11 @@ class Repositioning:
             recent.popleft()
         idle = self.fleet.idle()
         locs = [v.location(now) for v in idle]
-        nodes = [getattr(p, "node", p) for p in locs]
-        rem = [max(getattr(p, "remaining", 0.0), 0.0) for p in locs]
-        targets = [self._trips[v.id].target if v.id in self._trips else -1 for v in idle]
+        points = [as_point(p) for p in locs]
+        nodes = [p.node for p in points]
+        rem = [max(p.remaining, 0.0) for p in points]
+        going = [self.operator.repositioning(v) for v in idle]
+        targets = [-1 if node is None else node for node in going]
         rnodes = _readonly([n for _, n in recent], np.int64)
         return RepositionView(
             time=float(now), horizon=self.horizon,
@@ -235,69 +222,16 @@ class Repositioning:
                 continue
             self.start(self.fleet.by_id[vid], node)
 
-    # ------------------------------------------------------------------ drives
     def start(self, v: Vehicle, node: int) -> None:
-        """Send the idle vehicle ``v`` to ``node`` now (stopping a drive it is on)."""
-        env = self.env
-        self.stop(v)
-        leg = self.driver.plan(v, node, env.now)
-        trip = _Trip(node, v.empty_distance)
-        self._trips[v.id] = trip
+        """Send the idle vehicle ``v`` to ``node`` now (a move it is on ends where it is)."""
         self.moves += 1
-        self.bus.emit(env.now, "reposition", v.id, -1, node)
-        self.bus.emit(env.now, "depart", v.id, -1, v.loc)
-        trip.proc = v.proc = env.process(self._drive(v, leg, trip))
-
-    def _drive(self, v: Vehicle, leg, trip: _Trip):
-        import simpy
-
-        try:
-            yield from self.driver.drive(self.env, v, leg, -1)  # counts its metres
-        except simpy.Interrupt:  # stop() or a breakdown has already counted what was driven
-            self._close(v, trip)
-            return
-        self._close(v, trip)
-        self.bus.emit(self.env.now, "idle", v.id, -1, v.loc)
-        self.notify()
-
-    def _close(self, v: Vehicle, trip: _Trip) -> None:
-        if trip.open:
-            trip.open = False
-            self.distance += v.empty_distance - trip.empty0
-        if self._trips.get(v.id) is trip:
-            del self._trips[v.id]
-
-    def stop(self, v: Vehicle) -> None:
-        """If ``v`` is repositioning, stop it where it is now (part-way along an edge
-        possibly): the part driven counts, and the vehicle stands at that point. Called before
-        the vehicle is given a trip, which it then drives from there."""
-        trip = self._trips.get(v.id)
-        if trip is None:
-            return
-        env = self.env
-        if v.leg is not None:
-            stop_leg(v, env.now)
-        self._close(v, trip)
-        if trip.proc is not None and trip.proc.is_alive and trip.proc is not env.active_process:
-            trip.proc.interrupt("stopped")
-        if v.proc is trip.proc:
-            v.proc = None
-
-    def finish(self) -> None:
-        """Close the drives still going when the run ends (the simulation has already counted
-        the part of each leg driven before the horizon)."""
-        for vid, trip in sorted(self._trips.items()):
-            self._close(self.fleet.by_id[vid], trip)
+        self.operator.reposition(v, node)
 
 
 def summary_of(r: Repositioning | None) -> dict:
-    """The summary columns of repositioning: drives started and their metres."""
+    """The summary columns of repositioning: moves started and their metres."""
     return {"repositions": 0 if r is None else r.moves,
-            "reposition_distance": 0.0 if r is None else r.distance}
+            "reposition_distance": 0.0 if r is None else r.operator.reposition_distance}
 
 
-def no_op(_v) -> None:
-    """The ``Operator.on_assign`` hook when nothing repositions."""
-
-
-__all__ = ["RepositionView", "Repositioner", "Repositioning", "no_op", "summary_of"]
+__all__ = ["RepositionView", "Repositioner", "Repositioning", "summary_of"]

@@ -264,14 +264,10 @@ class Traffic:
         for t in self.vehicles.values():
             self._reserve(t)
 
-    def execution(self, book, fleet, service_time: float):
-        """The operator's factory of its side of this execution (``timed`` of
-        :class:`dispatch.vehicles.Operator`): a :class:`TimedExecution` over this traffic and
-        the run's hands (the operator's wake-up and breakdown)."""
-        def timed(op) -> TimedExecution:
-            return TimedExecution(self, Hands(book, fleet, service_time, op.notify,
-                                              op.breakdown))
-        return timed
+    def execution(self, op) -> TimedExecution:
+        """The operator's execution on this traffic (``execution`` of
+        :class:`dispatch.vehicles.Operator`, which calls it with itself)."""
+        return TimedExecution(self, op)
 
     def of(self, v) -> Timed:
         """The record of vehicle ``v``."""
@@ -508,7 +504,8 @@ def _finish(traffic: Traffic, hands: Hands, t: Timed):
     v.busy_seconds += env.now - v.busy_since
     t.task = None
     v.completed += 1
-    hands.fleet.set_idle(v)
+    v.stops = []
+    hands.fleet.refresh(v)
     hands.book.close(task, _COMPLETED)
     traffic.emit(env.now, "idle", v.id, -1, v.loc)
     hands.notify()
@@ -572,32 +569,40 @@ def _after_step(traffic: Traffic, t: Timed, again: Callable[[], Any]):
 
 
 class TimedExecution:
-    """The operator's side of reservation-based execution (voxel world, capacity 1): hands a
-    task to a vehicle's timed drive, breaks one down and repairs it."""
+    """Reservation-based execution (voxel world, capacity 1), the operator's
+    :class:`dispatch.vehicles.Execution`: one drive process per vehicle for the whole run
+    follows the timed route the traffic keeps for it; the operator hands it a task, breaks it
+    down and repairs it through here."""
 
-    def __init__(self, traffic: Traffic, hands: Hands) -> None:
-        self.traffic, self.hands = traffic, hands
-        _start(traffic, hands)
+    def __init__(self, traffic: Traffic, op) -> None:
+        self.traffic, self.op = traffic, op
+        self.hands = Hands(op.book, op.fleet, op.service_time, op.notify, op.breakdown)
+        _start(traffic, self.hands)
 
     @property
     def env(self):
         return self.traffic.env
 
-    def assign(self, v, task) -> None:
-        """``v`` (marked busy by the operator) now drives to ``task``; its cost is its
-        priority."""
+    def set_out(self, v, task, cost: float, at: tuple | None) -> None:
+        """``v`` now drives to ``task`` (its plan: the task's one stop); the task's ``cost`` is
+        its priority."""
+        op = self.op
+        op.book.assign(task, v.id, cost)
+        v.stops = op._stops(task)
+        op.changed(v)
+        op.fleet.refresh(v)
         t = self.traffic.of(v)
         t.task, v.busy_since = task, self.env.now
         self.traffic.emit(self.env.now, "depart", v.id, task.id, v.loc)
         self.traffic.request(t)
 
-    def task_of(self, v):
+    def holds(self, v):
         return self.traffic.of(v).task
 
     def breaking(self, v) -> bool:
         return self.traffic.of(v).breaking
 
-    def stop(self, v, again: Callable[[], Any]) -> list | None:
+    def halt(self, v, again: Callable[[], Any]) -> list | None:
         """``v`` breaks down: None if it is executing a step (a step is never interrupted:
         ``again`` runs on arrival in the step's cell, so it never moves while failed); else
         it stops serving, holds its cell hard, and the task it had is returned (in a list)."""

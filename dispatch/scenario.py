@@ -682,8 +682,8 @@ def check_limits(sc: Scenario, specs: list[RunSpec], limits: Limits = LIMITS) ->
 
 
 def _parse_energy(e: _Table, fleet: FleetConfig, world: WorldConfig):
-    """``[fleet.energy]`` (see :mod:`dispatch.energy`): batteries on a road network."""
-    from dispatch.energy import EnergyConfig, read_socs
+    """``[fleet.energy]`` (see :mod:`dispatch.battery`): batteries on a road network."""
+    from dispatch.energy_config import EnergyConfig, read_socs
 
     if "energy" not in space_class(world.space).features:
         raise e.fail("battery_kwh", "energy needs a road network ([world] network)")
@@ -716,7 +716,7 @@ def _parse_charging(root: _Table, path: Path, fleet: FleetConfig, faults):
     """``[chargers]`` (stations, taper) and ``[charging]`` (strategy, interval,
     ``[charging.<name>]``); None unless the fleet has energy."""
     from dispatch import registry
-    from dispatch.energy import ChargingConfig, read_stations
+    from dispatch.energy_config import ChargingConfig, read_stations
 
     c, g = root.table("chargers"), root.table("charging")
     if fleet.energy is None:

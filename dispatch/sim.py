@@ -38,9 +38,10 @@ from contextlib import contextmanager
 import numpy as np
 import simpy
 
+from dispatch.battery import Energy
+from dispatch.charging import Charging, Stations
 from dispatch.decision import Blame, Pipeline, Tally
 from dispatch.dispatcher import Dispatcher, Wakeup
-from dispatch.energy import Charging, Energy
 from dispatch.events import EventBus
 from dispatch.faults import FaultInjector, blackout_filter
 from dispatch.plugins import (check_repositioner, describe, make_charger, make_plugin,
@@ -51,7 +52,7 @@ from dispatch.space import space_for
 from dispatch.streams import (STREAM_ALLOCATOR, STREAM_CHARGING, STREAM_FAULTS, STREAM_FLEET,
                               STREAM_REPOSITION, STREAM_SOURCE, STREAM_TASKS, rng_for)
 from dispatch.tasks import Task, TaskBook, TaskSource, TaskState
-from dispatch.vehicles import Fleet, Operator, stop_leg
+from dispatch.vehicles import Fleet, Hooks, Operator, Towing, stop_leg
 
 log = logging.getLogger(__name__)
 
@@ -124,17 +125,21 @@ class Simulation:
         #: reservation-based execution, with a reservation-aware planner only
         self.traffic = (space.traffic(env, self.planner, self.vehicles, bus.emit)
                         if self.planner.reservation_aware else None)
-        timed = None
-        if self.traffic is not None:
-            timed = self.traffic.execution(book, self.fleet, sc.tasks.service_time)
         self.finished = env.event()
         # the dispatcher's wake-up call first: the operator, the task source, repositioning
         # and charging call it, the dispatcher (made after the operator it drives) waits on it
         d = sc.dispatch
         wakeup = Wakeup(env, book, always=d.batch_window > 0 or d.reassign)
+        #: [fleet.energy]: the stations (a stranded vehicle is towed to the nearest one)
+        self.stations = (Stations(env, sc.charging, space, sc.fleet.energy.max_charge_kw)
+                         if sc.fleet.energy is not None else None)
+        towing = None if self.stations is None else Towing(
+            sc.charging.tow, self.stations.nearest_node, sc.faults.on_board == "transfer")
         self.operator = Operator(env, bus, book, self.fleet, driver, sc.tasks.service_time,
-                                 wakeup, timed)
-        #: [fleet.energy]: batteries and the reserve rule (dispatch.energy.Energy), or None
+                                 Hooks(wakeup, lambda task: self.source.rearm(task)),
+                                 None if self.traffic is None else self.traffic.execution,
+                                 towing)
+        #: [fleet.energy]: batteries and the reserve rule (dispatch.battery.Energy), or None
         self.energy = self._energy(sc)
         #: what the decisions add up to (the summary's columns); the errors' context
         self.tally = Tally()
@@ -155,23 +160,20 @@ class Simulation:
                                     lambda: rng_for(spec.seed, STREAM_TASKS),
                                     rng_for(spec.seed, STREAM_SOURCE), wakeup)
         self.source.on_done = self._check_finished
-        self.operator.on_reopen = self.source.rearm
         #: the repositioning timer and drives (None: a passive repositioner, e.g. ``stay``)
         self.repositioning = None
         if not self.repositioner.passive:
             r = sc.reposition
-            self.repositioning = Repositioning(env, bus, self.fleet, driver, self.space,
+            self.repositioning = Repositioning(env, bus, self.fleet, self.operator, self.space,
                                                self.repositioner, r.interval, r.horizon,
-                                               rng_for(spec.seed, STREAM_REPOSITION), wakeup)
-            self.repositioning.run_id = spec.run_id
-            self.operator.on_assign = self.repositioning.stop
+                                               rng_for(spec.seed, STREAM_REPOSITION), spec.run_id)
         self.faults = (FaultInjector(env, sc.faults, self.fleet, self.operator,
                                      rng_for(spec.seed, STREAM_FAULTS))
                        if sc.faults.vehicles else None)
-        #: [fleet.energy]: stations and visits (dispatch.energy.Charging), or None
+        #: [fleet.energy]: stations and visits (dispatch.charging.Charging), or None
         self.charging = None
         if self.energy is not None:
-            self._electric(sc, wakeup)
+            self._electric(sc)
         self.progress = progress
         if progress is not None and math.isfinite(sc.duration) and sc.duration > 0:
             env.process(self._report(sc.duration))
@@ -185,7 +187,7 @@ class Simulation:
 
     def _energy(self, sc) -> Energy | None:
         """``[fleet.energy]``: the run's batteries and the dispatcher's reserve rule (see
-        :mod:`dispatch.energy`); None without it."""
+        :mod:`dispatch.battery`); None without it."""
         if sc.fleet.energy is None:
             return None
         net = self.space
@@ -193,20 +195,16 @@ class Simulation:
         ref = float(net.length.sum() / net.time.sum())
         return Energy(sc.fleet.energy, self.fleet, self.env, ref)
 
-    def _electric(self, sc, wakeup: Wakeup) -> None:
+    def _electric(self, sc) -> None:
         """The batteries' ``soc`` samples, stations and the charging strategy (see
-        :mod:`dispatch.energy`)."""
+        :mod:`dispatch.battery`, :mod:`dispatch.charging`)."""
         net = self.space
         self.env.process(self.energy.sampler(self.recorder.appender("soc")))
         cfg = sc.charging
         strategy = make_charger(sc, cfg.strategy) if cfg.stations else None
         self.charging = Charging(self.env, self.bus, self.fleet, self.operator, self.energy,
-                                 cfg, net, strategy, rng_for(self.spec.seed, STREAM_CHARGING),
-                                 sc.faults.on_board == "transfer", wakeup)
-        self.charging.run_id = self.spec.run_id
-        self.operator.strand = self.charging.strand
-        if self.repositioning is not None:
-            self.charging.on_assign = self.repositioning.stop
+                                 cfg, self.stations, net, strategy,
+                                 rng_for(self.spec.seed, STREAM_CHARGING), self.spec.run_id)
 
     @property
     def allocator(self):
@@ -244,8 +242,7 @@ class Simulation:
             for v in self.vehicles:
                 if v.busy:
                     v.busy_seconds += env.now - v.busy_since
-            if self.operator.timed is not None:
-                self.operator.timed.end(env.now)
+            self.operator.execution.end(env.now)
             return self._finish()
         finally:
             if self.physics is not None:
@@ -253,18 +250,12 @@ class Simulation:
 
     def _finish(self) -> dict:
         spec = self.spec
-        timed = self.operator.timed
-
-        def counts(v) -> dict:  # reservation-based execution's, 0 without it
-            return timed.counts(v) if timed is not None else {"waits": 0, "replans": 0,
-                                                              "wait_seconds": 0.0}
-
         now = float(self.env.now)
-        self.recording.end_tables(self.vehicles, now, counts)
-        if self.repositioning is not None:
-            self.repositioning.finish()
+        # (waits, replans, wait seconds: reservation-based execution's, 0 without it)
+        self.recording.end_tables(self.vehicles, now, self.operator.execution.counts)
+        self.operator.finish()
         if self.charging is not None:
-            self.recording.chargers(self.charging.rows())
+            self.recording.chargers(self.stations.rows())
         run = dict(spec.keys, n_agents=len(self.vehicles), space=self.space.kind)
         # what the allocator says at the end (a learned model's name, a batch method's counts)
         extra = {**summary_of(self.repositioning),

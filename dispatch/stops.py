@@ -28,13 +28,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 if TYPE_CHECKING:
     from dispatch.locations import Location
     from dispatch.tasks import Task
 
-#: stop kinds (the values may be written to Parquet)
+#: stop kinds (the values may be written to Parquet): a charging visit (no request;
+#: :mod:`dispatch.charging`) and a repositioning move (no request; :mod:`dispatch.reposition`)
+#: are driven by the operator like any stop
 PICKUP, DROPOFF, CHARGE, REPOSITION, WAIT, DEPOT = (
     "pickup", "dropoff", "charge", "reposition", "wait", "depot")
 KINDS = (PICKUP, DROPOFF, CHARGE, REPOSITION, WAIT, DEPOT)
@@ -69,6 +71,9 @@ class Stop:
     leg: float = 0.0
     earliest: float = -math.inf
     service: float = 0.0
+    #: a charge stop's visit (:class:`dispatch.charging.Visit`: the station, the target, what
+    #: the vehicle does there); None for every other stop
+    visit: Any = None
 
 
 class PlannedStop(NamedTuple):

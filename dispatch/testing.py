@@ -733,9 +733,10 @@ def check_repositioner(cls, space=None, *, seed: int = 0, **params: Any) -> Repo
 
 
 def charging_views(space=None, seed: int = 0) -> list[tuple[str, Callable[[], Any]]]:
-    """:class:`dispatch.energy.ChargingView` factories on ``space`` (default
+    """:class:`dispatch.charging_strategy.ChargingView` factories on ``space`` (default
     :func:`small_network`): empty, low batteries, full batteries, busy stations."""
-    from dispatch.energy import ChargingView, charge_seconds
+    from dispatch.charging import charge_seconds
+    from dispatch.charging_strategy import ChargingView
 
     space = space if space is not None else small_network()
 
@@ -769,10 +770,10 @@ def charging_views(space=None, seed: int = 0) -> list[tuple[str, Callable[[], An
 
 
 def check_charger(cls, space=None, *, seed: int = 0, **params: Any) -> Report:
-    """Run every charging-strategy check on ``cls(**params)`` (a :class:`dispatch.energy.
-    ChargingStrategy`): each answer a mapping of idle vehicle ids of the view to (station id
-    of the view, target in (0, 1]); the view not mutated; same view and seed, same answer; no
-    use of the global random state."""
+    """Run every charging-strategy check on ``cls(**params)`` (a
+    :class:`dispatch.charging_strategy.ChargingStrategy`): each answer a mapping of idle vehicle
+    ids of the view to (station id of the view, target in (0, 1]); the view not mutated; same
+    view and seed, same answer; no use of the global random state."""
     from collections.abc import Mapping
 
     report, _ = _constructed("charger", cls, params)

@@ -11,10 +11,11 @@ How it drives depends on the space, through the *driver* its space makes
 a vehicle part-way through a leg is interpolated from its route when someone asks:
 :meth:`Vehicle.location`).
 
-With a reservation-aware planner (voxel only, capacity 1) a vehicle instead follows a *timed*
-route that the run's :class:`dispatch.reservations.Traffic` keeps conflict-free and owns (with
-the rest of that execution's state: :class:`dispatch.reservations.Timed`); the operator reaches
-it through :class:`dispatch.reservations.TimedExecution`.
+How a vehicle sets out on a plan, is halted by a breakdown and is repaired is the operator's
+*execution* (:class:`Execution`): its own plan process (:class:`PlanExecution`), or, with a
+reservation-aware planner (voxel only, capacity 1), the timed drives of
+:class:`dispatch.reservations.TimedExecution`, which follow routes that the run's
+:class:`dispatch.reservations.Traffic` keeps conflict-free and owns.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 import simpy
@@ -31,13 +32,12 @@ from dispatch.contracts import AgentView, AgentViews
 from dispatch.events import EventBus
 from dispatch.locations import Location
 from dispatch.space import Space
-from dispatch.stops import (DROPOFF, PICKUP, TOL, PlannedStop, Stop, insert, leave, occupancies,
-                            pushed, schedule, timetable)
+from dispatch.stops import (CHARGE, DROPOFF, PICKUP, REPOSITION, TOL, PlannedStop, Stop, insert,
+                            leave, occupancies, pushed, schedule, timetable)
 from dispatch.tasks import COMPLETED, PICKED_UP as PICKED_UP_STATE, Task, TaskBook, TaskState
 
 if TYPE_CHECKING:
     from dispatch.insertion import Insertion
-    from dispatch.reservations import TimedExecution
     from dispatch.legs import Leg
 
 
@@ -79,7 +79,7 @@ class Vehicle:
     down_seconds: float = 0.0
     down_since: float = 0.0
     proc: Any = field(default=None, repr=False)  # the SimPy process serving its trip
-    #: ``[fleet.energy]``: its battery (:class:`dispatch.energy.Battery`); None without energy
+    #: ``[fleet.energy]``: its battery (:class:`dispatch.battery.Battery`); None without energy
     battery: Any = field(default=None, repr=False)
     _view: AgentView | None = field(default=None, repr=False)
     # ``loc`` and ``leg`` live here; their setters tell the fleet (its arrays stay current)
@@ -171,8 +171,8 @@ class Fleet:
     """The run's vehicles by id, and the index of the idle ones.
 
     Besides the vehicles it keeps array state, aligned with :attr:`vehicles` (id order) and
-    updated as vehicles change (their ``loc`` / ``leg`` setters and :meth:`set_busy` and
-    friends call in), so that a decision over the idle vehicles costs numpy operations, not a
+    updated as vehicles change (their ``loc`` / ``leg`` setters and :meth:`refresh` call
+    in), so that a decision over the idle vehicles costs numpy operations, not a
     Python loop over the fleet: ``ids``; ``idle_mask``; on roads ``node`` (the node a vehicle
     stands on, or the end of the edge it stopped on part-way), ``remaining`` (seconds left on
     that edge, 0 on a node), ``odd`` (its location is not a plain node: a road point, or a
@@ -270,21 +270,24 @@ class Fleet:
                 points.append(k)
         return AgentViews(ids, make, node, rem, np.array(points, dtype=np.int64), ascending)
 
-    def set_busy(self, v: Vehicle) -> None:
-        v.busy = True
-        self.idle_mask[v._slot] = False
-        self.busy_mask[v._slot] = True
-
-    def set_idle(self, v: Vehicle) -> None:
-        v.busy = False
-        self.idle_mask[v._slot] = True
-        self.busy_mask[v._slot] = False
-
-    def set_failed(self, v: Vehicle) -> None:
-        """Out of service: neither idle nor busy until :meth:`set_idle`."""
-        v.busy = False
-        self.idle_mask[v._slot] = False
-        self.busy_mask[v._slot] = False
+    def refresh(self, v: Vehicle) -> None:
+        """Set ``v``'s state from its plan and its failure: failed, or on a charging visit (a
+        charge stop in its plan), it is neither idle nor busy (no decision considers it);
+        serving a request or with one in its plan, busy; else idle (standing, or on a
+        repositioning move, which a decision may cut)."""
+        busy = idle = False
+        if not v.failed:
+            busy = v.serving is not None
+            idle = not busy
+            for s in v.stops:  # (a loop, not any(): it runs at every assignment and idle)
+                if s.task is not None:
+                    busy, idle = True, False
+                    break
+                if s.kind is CHARGE:
+                    idle = False
+        v.busy = busy
+        self.idle_mask[v._slot] = idle
+        self.busy_mask[v._slot] = busy
 
 
 def _task_id(s: Stop) -> int:
@@ -312,29 +315,87 @@ def stop_leg(v: Vehicle, now: float) -> None:
 # ----------------------------------------------------------------------------- operations
 
 
+@dataclass(frozen=True)
+class Hooks:
+    """What the operator calls in the rest of the run (given at construction)."""
+
+    #: asks the dispatcher for a decision (a vehicle became idle, tasks re-opened)
+    notify: Callable[[], None]
+    #: a task re-opened by a breakdown (the task source re-arms its expiry)
+    reopen: Callable[[Task], None]
+
+
+@dataclass(frozen=True)
+class Towing:
+    """``[fleet.energy]``: a vehicle whose battery runs empty is *stranded*: a breakdown (its
+    riders transferred when ``transfer``, else their trips fail) that lasts ``seconds``, after
+    which it stands at ``to(node)`` (the nearest station to the node where it stranded; None:
+    where it is)."""
+
+    seconds: float
+    to: Callable[[Any], Any]
+    transfer: bool
+
+
+class Execution(Protocol):
+    """How the operator's vehicles execute their plans (a driver the operator uses, made at
+    its construction from the operator): :class:`PlanExecution` (the operator's plan process)
+    or :class:`dispatch.reservations.TimedExecution` (timed routes on reservations)."""
+
+    def set_out(self, v: Vehicle, task: Task, cost: float, at: tuple | None) -> None:
+        """``v``, with an empty plan, is given ``task`` at ``cost`` (``at``: the decision's
+        planned times, see :meth:`Operator.assign`) and sets out now."""
+
+    def halt(self, v: Vehicle, again: Callable[[], Any]) -> list[Task] | None:
+        """``v`` breaks down now: stop what drives it and return the tasks of its plan; or
+        None where it can only stop later (``again`` then breaks it down)."""
+
+    def breaking(self, v: Vehicle) -> bool:
+        """``v`` breaks down as soon as it can (a breakdown waits for it)."""
+
+    def holds(self, v: Vehicle) -> Task | None:
+        """The task ``v`` drives to pick up (capacity 1, ``[dispatch] reassign``), or None."""
+
+    def repaired(self, v: Vehicle) -> None:
+        """``v`` is back in service."""
+
+    def end(self, now: float) -> None:
+        """The run is over at ``now``."""
+
+    def counts(self, v: Vehicle) -> dict:
+        """The ``vehicles`` table's ``waits``, ``replans`` and ``wait_seconds`` of ``v``."""
+
+
 class Operator:
     """Hands requests to vehicles (inserting their stops into the vehicle's plan) and drives
-    each busy vehicle's plan with one SimPy process: the process is the loop, the stop list
-    is the state. With reservations (voxel, capacity 1) one ``drive`` process per vehicle
-    follows a timed route instead (see :mod:`dispatch.reservations`)."""
+    every plan with one SimPy process per vehicle on the move: the process is the loop, the
+    stop list is the state. It drives every kind of stop: pickups and drop-offs, a charging
+    visit (:data:`dispatch.stops.CHARGE`: drive, queue for a plug, charge, leave; see
+    :mod:`dispatch.charging`) and a repositioning move (:data:`dispatch.stops.REPOSITION`:
+    drive, idle all the way; a decision that gives the vehicle a request cuts it). Breakdowns,
+    strandings (``towing``), repairs and tows are its own. How a vehicle sets out and is
+    halted is its ``execution`` (:class:`Execution`, made by ``execution(operator)``):
+    :class:`PlanExecution`, or with reservations (voxel, capacity 1) one ``drive`` process per
+    vehicle following a timed route (see :mod:`dispatch.reservations`)."""
 
     def __init__(self, env: simpy.Environment, bus: EventBus, book: TaskBook, fleet: Fleet,
-                 driver, service_time: float, notify: Callable[[], None],
-                 timed: Callable[[Operator], TimedExecution] | None = None) -> None:
+                 driver, service_time: float, hooks: Hooks,
+                 execution: Callable[[Operator], Execution] | None = None,
+                 towing: Towing | None = None) -> None:
         self.env, self.bus, self.book, self.fleet = env, bus, book, fleet
-        self.driver, self.service_time, self.notify = driver, service_time, notify
+        self.driver, self.service_time, self.hooks = driver, service_time, hooks
+        self.notify = hooks.notify
+        #: what becomes of a stranded vehicle (``[fleet.energy]``; None without energy)
+        self.towing = towing
         #: the driver's legs are RoadDriver.drive's one timeout each (no edge events): the
         #: plan's process drives them itself, without a generator per leg
         self._plain_legs = driver.plain_legs
-        #: called with a task re-opened by a breakdown (the task source re-arms its expiry)
-        self.on_reopen: Callable[[Task], None] = lambda task: None
-        #: called with a vehicle about to be given a task (repositioning stops its drive)
-        self.on_assign: Callable[[Vehicle], None] = lambda v: None
-        #: ``[fleet.energy]``: called with a vehicle whose battery ran empty on a leg (it stands
-        #: where it got; :meth:`dispatch.energy.Charging.strand`); None without energy
-        self.strand: Callable[[Vehicle], None] | None = None
-        #: reservation-based execution (voxel, capacity 1; see dispatch.reservations), or None
-        self.timed: TimedExecution | None = None if timed is None else timed(self)
+        #: repositioning: moves under way (vehicle id -> (its reposition stop, its empty metres
+        #: when the move began)), and the metres of the moves ended so far
+        self._moves: dict[int, tuple[Stop, float]] = {}
+        self.reposition_distance = 0.0
+        #: how its vehicles set out, are halted and repaired
+        self.execution: Execution = (execution or PlanExecution)(self)
 
     # ------------------------------------------------------------------ the plan
     def _stops(self, task: Task) -> list[Stop]:
@@ -351,29 +412,11 @@ class Operator:
         (pooling) gets them inserted where ``at`` says (:func:`dispatch.stops.insert`), and
         re-routes if its next stop changed."""
         env = self.env
-        if self.timed is not None:  # its drive process follows the route; cost = priority
-            self.on_assign(v)
-            self.book.assign(task, v.id, cost)
-            self.fleet.set_busy(v)
-            self.timed.assign(v, task)
+        self._cut(v)  # a repositioning move ends here: the vehicle sets out from where it is
+        if not v.stops and v.serving is None:  # an empty plan: the vehicle sets out now
+            self.execution.set_out(v, task, cost, at)
             return
         new = self._stops(task)
-        if not v.stops and v.serving is None:  # an empty plan: the vehicle sets out now
-            self.on_assign(v)
-            path = self.driver.plan(v, task.loc, env.now)
-            self.book.assign(task, v.id, cost)
-            self.fleet.set_busy(v)
-            if at is not None:  # the planned times of the decision
-                self._set_legs(v, new, [at.pickup_at, at.dropoff_at][:len(new)])
-            else:  # (legs only matter to later insertions: pooled runs always pass ``at``)
-                new[0].leg = float(getattr(path, "seconds", 0.0))
-                if len(new) > 1:
-                    new[1].leg = task.direct_time
-            v.stops = new
-            occupancies(v.load, v.stops)
-            self.changed(v)
-            v.proc = env.process(self._run(v, path, new[0]))
-            return
         assert at is not None
         i, j = at.i, at.j
         self.book.assign(task, v.id, cost)
@@ -399,8 +442,9 @@ class Operator:
         is already planned late (traffic ran slower than planned) may stay as late as it is."""
         env, planner = self.env, self.driver.planner
         now = env.now
-        keys = [(s.kind, _task_id(s)) for s in v.stops]
-        old = dict(zip(keys, v.stops))
+        kept = self.kept(v)
+        keys = [(s.kind, _task_id(s)) for s in kept]
+        old = dict(zip(keys, kept))
         planned = dict(zip(keys, self._times(v)))
         first = old.get((rows[0].kind, rows[0].task_id))
         if first is not None and v.heading is first and v.leg is not None:
@@ -440,6 +484,7 @@ class Operator:
         (task id -> Task, each handed at ``costs[task id]``) and drives the stops ``rows`` in
         that order (planned arrival ``times``, checked by :meth:`route_times`)."""
         env = self.env
+        self._cut(v)  # a repositioning move ends here: the vehicle sets out from where it is
         old = {(s.kind, _task_id(s)): s for s in v.stops}
         empty = not v.stops and v.serving is None
         head = v.stops[0] if v.stops else None
@@ -451,7 +496,6 @@ class Operator:
                          bool(r.completes), service=svc if r.completes else 0.0)
             stops.append(s)
         if empty:
-            self.on_assign(v)
             path = self.driver.plan(v, stops[0].loc, env.now)
         for tid, task in tasks.items():
             self.book.assign(task, v.id, costs[tid])
@@ -460,7 +504,7 @@ class Operator:
         occupancies(v.load, v.stops)
         self.changed(v)
         if empty:
-            self.fleet.set_busy(v)
+            self.fleet.refresh(v)
             v.proc = env.process(self._run(v, path, stops[0]))
             return
         for tid in tasks:
@@ -515,43 +559,139 @@ class Operator:
                 low = s.occupancy
         self.fleet.room[v._slot] = low < v.capacity
 
-    def _run(self, v: Vehicle, path, first: Stop):
+    # ------------------------------------------------------------------ charging, repositioning
+    def charge(self, v: Vehicle, visit) -> None:
+        """Send the idle vehicle ``v`` on a charging ``visit`` (:class:`dispatch.charging.
+        Visit`): its plan becomes the visit's charge stop (drive to the station, queue for a
+        plug, charge, leave), during which it is neither idle nor busy; a repositioning move
+        ends where it is."""
+        self._cut(v)
+        v.stops = [Stop(CHARGE, None, visit.station.node, 0, math.inf, False, visit=visit)]
+        self.changed(v)
+        self.fleet.refresh(v)
+        v.proc = self.env.process(self._run(v, None, v.stops[0]))
+
+    def reposition(self, v: Vehicle, node) -> None:
+        """Send the idle vehicle ``v`` to ``node`` now (a move it is on ends where it is): its
+        plan becomes one reposition stop, which it drives idle (a decision that gives it a
+        request cuts the move: :meth:`_cut`). A ``reposition`` event (at the target), then a
+        ``depart`` (where it starts); on arrival an ``idle``."""
+        env = self.env
+        self._cut(v)
+        leg = self.driver.plan(v, node, env.now)
+        stop = Stop(REPOSITION, None, node, 0, math.inf, False)
+        v.stops = [stop]
+        self.changed(v)
+        self._moves[v.id] = (stop, v.empty_distance)
+        self.bus.emit(env.now, "reposition", v.id, -1, node)
+        self.bus.emit(env.now, "depart", v.id, -1, v.loc)
+        v.proc = env.process(self._run(v, leg, stop, departed=True))
+
+    def kept(self, v: Vehicle) -> list[Stop]:
+        """The stops of ``v``'s plan that a decision keeps: all of them, but none of a
+        repositioning move (which giving the vehicle a request cuts)."""
+        return [] if v.stops and v.stops[0].kind is REPOSITION else v.stops
+
+    def repositioning(self, v: Vehicle):
+        """The node ``v`` is repositioning to, or None."""
+        s = v.stops[0] if v.stops else None
+        return s.loc if s is not None and s.kind is REPOSITION else None
+
+    def _cut(self, v: Vehicle) -> None:
+        """If ``v`` is on a repositioning move, the move ends now where it is (part-way along
+        an edge possibly: the part driven counts) and its plan is empty."""
+        if not v.stops or v.stops[0].kind is not REPOSITION:
+            return
+        env = self.env
+        if v.leg is not None:
+            stop_leg(v, env.now)
+        self._moved(v, v.stops[0])
+        proc = v.proc
+        if proc is not None and proc.is_alive and proc is not env.active_process:
+            proc.interrupt("cut")
+        v.proc, v.stops, v.heading = None, [], None
+        self.changed(v)
+
+    def _moved(self, v: Vehicle, stop: Stop) -> None:
+        """The repositioning move to ``stop`` ended (arrived, cut, broken down, or the run's
+        end): its metres count once."""
+        move = self._moves.get(v.id)
+        if move is not None and move[0] is stop:
+            del self._moves[v.id]
+            self.reposition_distance += v.empty_distance - move[1]
+
+    def finish(self) -> None:
+        """The run ends: the moves still under way count what they drove (the simulation has
+        already counted the part of each leg driven before the horizon)."""
+        vs = self.fleet.by_id
+        for vid, (stop, _) in sorted(self._moves.items()):
+            self._moved(vs[vid], stop)
+
+    def _dropped(self, v: Vehicle, stop: Stop) -> None:
+        """The drive to ``stop`` ended without reaching it (a breakdown, an empty battery):
+        a repositioning move's metres count, a charging visit is no longer coming."""
+        if stop.kind is REPOSITION:
+            self._moved(v, stop)
+        elif stop.visit is not None:
+            stop.visit.reached()
+
+    # ------------------------------------------------------------------ the process
+    def _run(self, v: Vehicle, path, first: Stop, departed: bool = False):
         """Process: drive ``v``'s plan stop by stop until it is empty, then idle. ``path``
-        was planned to ``first`` at the assignment. A decision that puts a new stop first
+        was planned to ``first`` when the plan was set (None: planned now); ``departed``: its
+        ``depart`` event was already emitted. A decision that puts a new stop first
         interrupts a drive (``reroute``: it stops where it is and drives to the new first
-        stop); a breakdown or a re-assignment interrupts it for good (they have already put
-        the vehicle and its tasks right)."""
+        stop); a breakdown, a re-assignment or the cut of a repositioning move interrupts it
+        for good (they have already put the vehicle and its tasks right). At a request's stop
+        it picks up or drops off (and serves, where the stop completes the request); at a
+        charge stop it makes the visit (:meth:`dispatch.charging.Visit.serve`); at a
+        reposition stop it is idle where it arrived. Only a plan of requests counts as busy
+        time."""
         env = self.env
         if v.proc is not env.active_process:  # given up before it started ([dispatch] reassign)
             return
-        v.busy_since = env.now
+        busy = first.task is not None
+        if busy:
+            v.busy_since = env.now
         emit, plain, book = self.bus.emit, self._plain_legs, self.book
         while v.stops:
             stop = v.stops[0]
+            task = stop.task
+            tid = -1 if task is None else task.id
             try:
-                if path is None or stop is not first:
-                    path = self.driver.plan(v, stop.loc, env.now)
-                first = None
-                v.heading = stop
-                v.plan_version += 1  # (its first stop's time is now the leg's)
-                emit(env.now, "depart", v.id, stop.task.id, v.loc)
-                if v.battery is not None and self.strand is not None:
-                    cut = v.battery.runs_out(path.length, path.seconds)
-                    if cut is not None:  # it drives until the battery is empty
-                        v.leg, v.leg_start = path, env.now
-                        yield env.timeout(cut)
-                        stop_leg(v, env.now)
-                        self.strand(v)
-                        return
-                if plain:  # RoadDriver.drive without edge events, inlined (two legs a trip)
-                    v.leg, v.leg_start = path, env.now
-                    yield env.timeout(path.seconds)
-                    v.leg, v.loc = None, int(path.nodes[-1])
-                    v.drove(path.length, path.seconds)
+                if stop.visit is not None and v.location(env.now) == stop.loc:
+                    pass  # at the station already: no drive
                 else:
-                    yield from self.driver.drive(env, v, path, stop.task.id)
+                    if path is None or stop is not first:
+                        path = self.driver.plan(v, stop.loc, env.now)
+                    v.heading = stop
+                    v.plan_version += 1  # (its first stop's time is now the leg's)
+                    if not (departed and stop is first):
+                        emit(env.now, "depart", v.id, tid, v.loc)
+                    first = None
+                    # (a repositioning move is not checked, as before it was a stop: it
+                    # drives on with its battery held at 0 kWh; checking it strands such
+                    # vehicles, which changes the results of runs that pair the two)
+                    if v.battery is not None and self.towing is not None \
+                            and stop.kind is not REPOSITION:
+                        cut = v.battery.runs_out(path.length, path.seconds)
+                        if cut is not None:  # it drives until the battery is empty
+                            v.leg, v.leg_start = path, env.now
+                            yield env.timeout(cut)
+                            stop_leg(v, env.now)
+                            self._dropped(v, stop)
+                            self.strand(v)
+                            return
+                    if plain:  # RoadDriver.drive without edge events, inlined
+                        v.leg, v.leg_start = path, env.now
+                        yield env.timeout(path.seconds)
+                        v.leg, v.loc = None, int(path.nodes[-1])
+                        v.drove(path.length, path.seconds)
+                    else:
+                        yield from self.driver.drive(env, v, path, tid)
             except simpy.Interrupt as i:
                 if i.cause != "reroute":
+                    self._dropped(v, stop)
                     return
                 if v.leg is not None:
                     stop_leg(v, env.now)
@@ -559,8 +699,20 @@ class Operator:
                 v.plan_version += 1
                 continue
             v.heading, path = None, None
+            if stop.visit is not None:  # a charging visit: queue, charge, leave
+                stop.visit.reached()
+                try:
+                    yield from stop.visit.serve(v)
+                except simpy.Interrupt:  # a breakdown at the station: the visit is closed
+                    return
+                v.stops.pop(0)
+                self.changed(v)
+                continue
             v.stops.pop(0)
-            task = stop.task
+            if stop.kind is REPOSITION:
+                self._moved(v, stop)
+                self.changed(v)
+                continue
             if stop.kind is PICKUP:
                 if v.load and stop.passengers:  # a shared ride: it and those on board
                     task.shared = True
@@ -590,41 +742,39 @@ class Operator:
             else:
                 self._go_idle(v, task)
                 return
-        # emptied by a re-routing that removed every stop: nothing left to do
-        self._go_idle(v)
+        # done: the last stop was a visit or a move, or a re-routing removed every stop
+        self._go_idle(v, busy=busy)
 
-    def _go_idle(self, v: Vehicle, task: Task | None = None) -> None:
+    def _go_idle(self, v: Vehicle, task: Task | None = None, busy: bool = True) -> None:
         """``v``'s plan is done: it is idle where it is; ``task``, its last stop's (served,
-        after the service time), completes first."""
-        v.busy_seconds += self.env.now - v.busy_since
+        after the service time), completes first. ``busy``: it was a plan of requests (its
+        busy time counts)."""
+        if busy:
+            v.busy_seconds += self.env.now - v.busy_since
         v.proc, v.heading = None, None
-        self.fleet.set_idle(v)
+        self.fleet.refresh(v)
         if task is not None:
             self.book.close(task, COMPLETED)
         self.bus.emit(self.env.now, "idle", v.id, -1, v.loc)
         self.notify()
 
     # ------------------------------------------------------------------ faults, re-assignment
-    def breakdown(self, v: Vehicle, duration: float, transfer: bool) -> bool:
+    def breakdown(self, v: Vehicle, duration: float, transfer: bool,
+                  towed: bool = False) -> bool:
         """``v`` fails now, where it is (on roads possibly part-way along an edge: the part of
-        the leg driven counts). Its plan is dropped: each request not yet picked up goes back
-        to open; each one on board is re-opened for a transfer at the vehicle's position (on
-        roads: the node it was driving to) when ``transfer``, else it ends ``failed``. It is
-        out of service for ``duration`` seconds (``inf``: for good). False if it had already
-        failed (or, with reservations, never: faults are refused there at validate time)."""
-        timed = self.timed
-        if v.failed or (timed is not None and timed.breaking(v)):
+        the leg driven counts). Its plan is dropped (a charging visit ends: what was charged
+        counts; a repositioning move ends): each request not yet picked up goes back to open;
+        each one on board is re-opened for a transfer at the vehicle's position (on roads: the
+        node it was driving to) when ``transfer``, else it ends ``failed``. It is out of
+        service for ``duration`` seconds (``inf``: for good), then repaired where it stands
+        or, ``towed``, at the place :attr:`towing` names. False if it had already failed (or,
+        with reservations, never: faults are refused there at validate time)."""
+        if v.failed or self.execution.breaking(v):
             return False
         env = self.env
-        if timed is not None:  # its drive process lives on: stop serving, hold the cell
-            tasks = timed.stop(v, lambda: self.breakdown(v, duration, transfer))
-            if tasks is None:  # it breaks down at the end of the step it is executing
-                return True
-        else:
-            tasks = v.tasks()
-            if v.proc is not None and v.proc.is_alive and v.proc is not env.active_process:
-                v.proc.interrupt("breakdown")
-                v.proc = None
+        tasks = self.execution.halt(v, lambda: self.breakdown(v, duration, transfer, towed))
+        if tasks is None:  # it breaks down when it can (the end of a step it is executing)
+            return True
         if v.leg is not None:  # stop part-way: count what was driven, stand where it got
             stop_leg(v, env.now)
         if v.busy:
@@ -632,20 +782,27 @@ class Operator:
         v.failed, v.failures, v.down_since = True, v.failures + 1, env.now
         v.stops, v.load, v.serving, v.heading = [], 0, None, None
         self.changed(v)
-        self.fleet.set_failed(v)
+        self.fleet.refresh(v)
         self.bus.emit(env.now, "breakdown", v.id, tasks[0].id if tasks else -1, v.loc)
         for task in tasks:
             if task.state is TaskState.PICKED_UP and not transfer:
                 self.book.close(task, TaskState.FAILED)
-            else:
-                where = getattr(v.loc, "node", v.loc)  # a passenger waits at a node
-                self.book.reopen(task, where)
-                self.on_reopen(task)
+            else:  # a passenger waits at a node
+                self.book.reopen(task, self.driver.node_of(v.loc))
+                self.hooks.reopen(task)
         if tasks:
             self.notify()
         if duration < math.inf:
-            env.process(self._repair(v, duration))
+            env.process(self._repair(v, duration, towed))
         return True
+
+    def strand(self, v: Vehicle) -> None:
+        """``v``'s battery is empty where it stands: a ``stranded`` event, then a breakdown
+        (its trips transferred or failed as :attr:`towing` says) that lasts the tow's seconds,
+        after which it stands idle at the tow's place (a charging strategy charges it)."""
+        tow = self.towing
+        self.bus.emit(self.env.now, "stranded", v.id, -1, v.loc)
+        self.breakdown(v, tow.seconds, tow.transfer, towed=True)
 
     def give_up(self, v: Vehicle) -> Task:
         """``[dispatch] reassign`` (capacity 1): ``v``, driving to its task's pickup, gives
@@ -656,7 +813,7 @@ class Operator:
         :meth:`stand_idle`. Returns the task given up."""
         env = self.env
         task = v.stops[0].task if v.stops else None
-        assert task is not None and task.state is TaskState.ASSIGNED and self.timed is None
+        assert task is not None and task.state is TaskState.ASSIGNED
         proc = v.proc
         if proc is not None and proc.is_alive and proc is not env.active_process \
                 and not isinstance(proc.target, simpy.events.Initialize):
@@ -674,24 +831,77 @@ class Operator:
 
     def holds(self, v: Vehicle) -> Task | None:
         """The task ``v`` drives to pick up (capacity 1, ``[dispatch] reassign``), or None."""
-        if self.timed is not None:
-            return self.timed.task_of(v)
-        s = v.stops[0] if v.stops else None
-        return s.task if s is not None and s.kind is PICKUP else None
+        return self.execution.holds(v)
 
     def stand_idle(self, v: Vehicle) -> None:
         """``v`` (after :meth:`give_up`, with no new task) is idle where it stopped."""
-        self.fleet.set_idle(v)
+        self.fleet.refresh(v)
         self.bus.emit(self.env.now, "idle", v.id, -1, v.loc)
         self.notify()
 
-    def _repair(self, v: Vehicle, duration: float):
+    def _repair(self, v: Vehicle, duration: float, towed: bool):
+        """Process: ``v`` is out of service ``duration`` seconds, then idle where it stands
+        or, ``towed``, where :attr:`towing` takes it (its battery settled there)."""
         yield self.env.timeout(duration)
+        if towed:
+            place = self.towing.to(self.driver.node_of(v.loc))
+            if place is not None:
+                v.loc = place
+            v.battery.settle()
         v.failed = False
-        if self.timed is not None:
-            self.timed.repaired(v)
+        self.execution.repaired(v)
         v.down_seconds += self.env.now - v.down_since
-        self.fleet.set_idle(v)
+        self.fleet.refresh(v)
         self.bus.emit(self.env.now, "repair", v.id, -1, v.loc)
         self.bus.emit(self.env.now, "idle", v.id, -1, v.loc)
         self.notify()
+
+
+class PlanExecution:
+    """The operator's own execution (every run without reservations): a vehicle that sets out
+    gets its task's stops as its plan and one process drives them (:meth:`Operator._run`); a
+    breakdown interrupts that process at once."""
+
+    def __init__(self, op: Operator) -> None:
+        self.op = op
+
+    def set_out(self, v: Vehicle, task: Task, cost: float, at: tuple | None) -> None:
+        op = self.op
+        new = op._stops(task)
+        path = op.driver.plan(v, task.loc, op.env.now)
+        op.book.assign(task, v.id, cost)
+        if at is not None:  # the planned times of the decision
+            op._set_legs(v, new, [at[2], at[3]][:len(new)])
+        else:  # (legs only matter to later insertions: pooled runs always pass ``at``)
+            new[0].leg = op.driver.leg_seconds(path)
+            if len(new) > 1:
+                new[1].leg = task.direct_time
+        v.stops = new
+        occupancies(v.load, v.stops)
+        op.changed(v)
+        op.fleet.refresh(v)
+        v.proc = op.env.process(op._run(v, path, new[0]))
+
+    def halt(self, v: Vehicle, again: Callable[[], Any]) -> list[Task]:
+        tasks = v.tasks()
+        proc = v.proc
+        if proc is not None and proc.is_alive and proc is not self.op.env.active_process:
+            proc.interrupt("breakdown")
+            v.proc = None
+        return tasks
+
+    def breaking(self, v: Vehicle) -> bool:
+        return False
+
+    def holds(self, v: Vehicle) -> Task | None:
+        s = v.stops[0] if v.stops else None
+        return s.task if s is not None and s.kind is PICKUP else None
+
+    def repaired(self, v: Vehicle) -> None:
+        """Nothing to do: its next plan starts a process."""
+
+    def end(self, now: float) -> None:
+        """Nothing open: the run's end cut the legs being driven."""
+
+    def counts(self, v: Vehicle) -> dict:
+        return {"waits": 0, "replans": 0, "wait_seconds": 0.0}

@@ -35,10 +35,12 @@ def test_agent_views_behave_as_the_tuple_of_views():
 def test_fleet_arrays_follow_the_vehicles():
     fleet = _fleet()
     v = fleet.by_id[7]
-    fleet.set_busy(v)
+    v.failed = True  # out of service: not idle
+    fleet.refresh(v)
     assert fleet.idle_index().tolist() == [0, 1, 3]
     v.loc = RoadPoint(node=12, prev=11, remaining=2.5, remaining_m=25.0)
-    fleet.set_idle(v)
+    v.failed = False
+    fleet.refresh(v)
     views = fleet.views(fleet.idle_index(), 10.0)
     k = views.ids.tolist().index(7)
     assert views.nodes[k] == 12 and views.remaining[k] == 2.5

@@ -12,7 +12,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from dispatch.energy import charge_seconds, power_kw, soc_after
+from dispatch.charging import charge_seconds, power_kw, soc_after
 from dispatch.errors import ScenarioError
 from dispatch.recorder import TIMING_COLUMNS
 from dispatch.runner import run_one
@@ -230,7 +230,7 @@ def tiny_view(socs, in_use=(0, 0), waiting=(0, 0)):
     """Vehicles at node 0 of a 6 x 5 grid (100 m blocks, 10 m/s); station a (1 plug) at node
     0, b (1 plug) at node 10, 5 edges = 50 s away; 50 kW, 50 kWh: a mean charge (20 % -> 80 %)
     takes 2,160 s."""
-    from dispatch.energy import ChargingView
+    from dispatch.charging_strategy import ChargingView
     from dispatch.testing import small_network
 
     n = len(socs)

@@ -241,4 +241,6 @@ def test_no_location_switch_outside_the_spaces():
 
 def test_sim_imports_few_kernel_modules():
     text = (ROOT / "dispatch" / "sim.py").read_text(encoding="utf-8")
-    assert len(set(re.findall(r"from dispatch[a-z_.]*", text))) <= 11
+    # (13: energy.py split into battery and charging, and the decision's pipeline, all wired
+    # here: sim.py is the one place the simulation is put together)
+    assert len(set(re.findall(r"from dispatch[a-z_.]*", text))) <= 13
