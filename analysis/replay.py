@@ -111,8 +111,82 @@ def _scenario_name(run: RunFiles, summary: pd.DataFrame) -> str:
         return ""
 
 
+#: at most this many keyframes from routing legs along the streets (else straight lines)
+ROUTE_BUDGET = 2_000_000
+#: a recorded position this close (metres) to a node is at that node
+AT_NODE = 1.0
+
+
+def route_keyframes(kf: pd.DataFrame, x: np.ndarray, y: np.ndarray, u: np.ndarray,
+                    v: np.ndarray, seconds: np.ndarray,
+                    budget: int = ROUTE_BUDGET) -> pd.DataFrame:
+    """``kf`` (see :func:`keyframes`) with each drive between two nodes that are not
+    neighbours replaced by the fastest path's nodes, timed in proportion to their free-flow
+    seconds over the drive's recorded duration (a run records where a vehicle departs and
+    arrives, not the streets between unless ``[output] edge_events``). Unchanged where the
+    paths would add more than ``budget`` keyframes (then the page draws straight lines)."""
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import dijkstra
+    from scipy.spatial import cKDTree
+
+    n = len(x)
+    if n == 0 or len(kf) < 2:
+        return kf
+    a = kf["agent_id"].to_numpy()
+    t = kf["t"].to_numpy(dtype=float)
+    pts = kf[["x", "y"]].to_numpy(dtype=float)
+    dist, node = cKDTree(np.column_stack([x, y])).query(pts)
+    at = dist <= AT_NODE
+    legs = np.flatnonzero((a[1:] == a[:-1]) & at[1:] & at[:-1] & (node[1:] != node[:-1])
+                          & (t[1:] > t[:-1]))
+    graph = csr_matrix((seconds, (u, v)), shape=(n, n))
+    adjacent = np.asarray(graph[node[legs], node[legs + 1]]).ravel() > 0
+    legs = legs[~adjacent]
+    if legs.size == 0:
+        return kf
+    if legs.size * max(2.0, np.sqrt(n)) > budget:  # a grid's mean path: ~sqrt(n) nodes
+        log.info("%d drives: straight lines (routing them would exceed %d keyframes)",
+                 legs.size, budget)
+        return kf
+    src = node[legs]
+    uniq, inv = np.unique(src, return_inverse=True)
+    add_t, add_x, add_y, add_a, added = [], [], [], [], 0
+    for s in range(0, uniq.size, 256):
+        dist_b, pred = dijkstra(graph, indices=uniq[s:s + 256], return_predecessors=True)
+        for j in np.flatnonzero((inv >= s) & (inv < s + 256)):
+            k, row = legs[j], inv[j] - s
+            b = node[k + 1]
+            if not np.isfinite(dist_b[row, b]):
+                continue
+            path = [b]
+            while path[-1] != node[k] and len(path) <= n:
+                path.append(pred[row, path[-1]])
+            path = path[::-1]
+            cum = dist_b[row, path]
+            total = cum[-1]
+            if total <= 0 or len(path) < 3:
+                continue
+            frac = cum[1:-1] / total
+            add_t.append(t[k] + frac * (t[k + 1] - t[k]))
+            add_x.append(x[path[1:-1]])
+            add_y.append(y[path[1:-1]])
+            add_a.append(np.full(len(path) - 2, a[k]))
+            added += len(path) - 2
+            if added > budget:
+                log.info("routing past %d keyframes: straight lines", budget)
+                return kf
+    if not added:
+        return kf
+    extra = pd.DataFrame({"agent_id": np.concatenate(add_a), "t": np.concatenate(add_t),
+                          "x": np.concatenate(add_x), "y": np.concatenate(add_y), "z": 0.0})
+    out = pd.concat([kf.assign(o=0), extra.assign(o=1)], ignore_index=True)
+    return (out.sort_values(["agent_id", "t", "o"], kind="stable")
+            .drop(columns="o").reset_index(drop=True))
+
+
 def _network(run: RunFiles):
-    """(node x, y arrays, undirected edge index pairs) of a road run, or None."""
+    """(node x, y arrays, undirected edge index pairs, directed edges u, v, seconds) of a
+    road run, or None."""
     rel = run.metadata.get("dispatch.space_files")
     if not rel:
         return None
@@ -126,7 +200,7 @@ def _network(run: RunFiles):
 
     try:
         n = pq.read_table(nodes)
-        e = pq.read_table(edges, columns=["u", "v"])
+        e = pq.read_table(edges, columns=["u", "v", "seconds"])
     except (pa.ArrowInvalid, OSError) as err:
         raise ReplayInputError(f"{folder}: network files not readable "
                                f"({' '.join(str(err).split())})") from None
@@ -135,7 +209,7 @@ def _network(run: RunFiles):
     a, b = np.minimum(u, v), np.maximum(u, v)
     pairs = np.unique(np.column_stack([a, b]), axis=0) if len(a) else np.zeros((0, 2), np.int64)
     return (n.column("x").to_numpy().astype(float), n.column("y").to_numpy().astype(float),
-            pairs)
+            pairs, u, v, e.column("seconds").to_numpy().astype(float))
 
 
 def keyframes(events: pd.DataFrame, vehicles: pd.DataFrame) -> pd.DataFrame:
@@ -176,8 +250,9 @@ def _offsets(ids: np.ndarray, order: np.ndarray) -> np.ndarray:
     return np.concatenate([[0], ends]).astype(np.int32) if len(order) else np.zeros(1, np.int32)
 
 
-def build_run(run: RunFiles) -> dict:
-    """The page's data of one run (a JSON-able dict; see the module docstring)."""
+def build_run(run: RunFiles, route: bool = True) -> dict:
+    """The page's data of one run (a JSON-able dict; see the module docstring); ``route``:
+    drives between recorded positions follow the fastest streets (:func:`route_keyframes`)."""
     summary = read_table(run, "summary")
     tasks = read_table(run, "tasks")
     vehicles = read_table(run, "vehicles")
@@ -204,6 +279,8 @@ def build_run(run: RunFiles) -> dict:
         xs += [tasks["x"].to_numpy(dtype=float), tasks["dropoff_x"].to_numpy(dtype=float)]
         ys += [tasks["y"].to_numpy(dtype=float), tasks["dropoff_y"].to_numpy(dtype=float)]
     net = _network(run) if space == "road" else None
+    if net is not None and route:
+        kf = route_keyframes(kf, net[0], net[1], *net[3:])
     if net is not None:
         xs.append(net[0])
         ys.append(net[1])
