@@ -224,21 +224,21 @@ def keyframes(events: pd.DataFrame, vehicles: pd.DataFrame) -> pd.DataFrame:
                           "z": vehicles["z0"].astype(float)})
     k = pd.concat([start.assign(o=0), e.assign(o=1)], ignore_index=True)
     k = k.sort_values(["agent_id", "t", "o"], kind="stable").reset_index(drop=True)
-    a = k["agent_id"].to_numpy()
-    t = k["t"].to_numpy(dtype=float)
-    xyz = k[["x", "y", "z"]].to_numpy(dtype=float)
-    same_prev = np.zeros(len(k), bool)
-    same_next = np.zeros(len(k), bool)
-    if len(k) > 1:
-        eq = (a[1:] == a[:-1]) & np.all(xyz[1:] == xyz[:-1], axis=1)
-        same_prev[1:] = eq
-        same_next[:-1] = eq
-        dup = np.zeros(len(k), bool)
-        dup[1:] = eq & (t[1:] == t[:-1])
-        keep = ~((same_prev & same_next) | dup)
-    else:
-        keep = np.ones(len(k), bool)
-    return k.loc[keep, ["agent_id", "t", "x", "y", "z"]].reset_index(drop=True)
+
+    def same(k):
+        a = k["agent_id"].to_numpy()
+        xyz = k[["x", "y", "z"]].to_numpy(dtype=float)
+        return (a[1:] == a[:-1]) & np.all(xyz[1:] == xyz[:-1], axis=1)
+
+    if len(k) > 1:  # first repeated rows (same time and place), then standing still
+        t = k["t"].to_numpy(dtype=float)
+        dup = np.concatenate([[False], same(k) & (t[1:] == t[:-1])])
+        k = k.loc[~dup].reset_index(drop=True)
+    if len(k) > 2:
+        eq = same(k)
+        middle = np.concatenate([[False], eq[1:] & eq[:-1], [False]])
+        k = k.loc[~middle]
+    return k[["agent_id", "t", "x", "y", "z"]].reset_index(drop=True)
 
 
 def _offsets(ids: np.ndarray, order: np.ndarray) -> np.ndarray:
