@@ -259,11 +259,11 @@
   }
 
   View.prototype.fit = function () {
-    var b = this.run.d.bounds, w = this.cw, h = this.ch, pad = 16;
-    var sx = (w - 2 * pad) / Math.max(b[2] - b[0], 1e-9), sy = (h - 2 * pad) / Math.max(b[3] - b[1], 1e-9);
+    var b = this.run.d.bounds, w = this.cw, h = this.ch, pad = 16, top = 34; // below the title
+    var sx = (w - 2 * pad) / Math.max(b[2] - b[0], 1e-9), sy = (h - pad - top) / Math.max(b[3] - b[1], 1e-9);
     this.scale = Math.max(1e-6, Math.min(sx, sy));
     this.ox = (w - (b[2] - b[0]) * this.scale) / 2 - b[0] * this.scale;
-    this.oy = h - (h - (b[3] - b[1]) * this.scale) / 2 + b[1] * this.scale;
+    this.oy = top + (h - pad - top + (b[3] - b[1]) * this.scale) / 2 + b[1] * this.scale;
     this.fitted = true;
   };
   View.prototype.sx = function (x) { return this.ox + x * this.scale; };
@@ -676,6 +676,13 @@
     frames: function () { return APP.frames; },
     follow: function (id, i) { var v = views[i || 0], k = v.run.byId[id]; v.setFollow(k === undefined ? -1 : k); render(); return k !== undefined; },
     screen: function (id, i) { var v = views[i || 0], k = v.run.byId[id]; return k === undefined ? null : [v.sx(v.run.px[k]), v.sy(v.run.py[k])]; },
+    vehicles: function (i) { // on-screen position (CSS pixels of the map) and state of each
+      var v = views[i || 0], r = v.run, out = [];
+      for (var k = 0; k < r.n; k++) out.push({ id: r.d.vehicles.id[k], x: v.sx(r.px[k]), y: v.sy(r.py[k]),
+        state: r.d.fleetStates[r.state[k]], onboard: r.onb[k] });
+      return out;
+    },
+    colors: COLORS,
     span: [T0, T1], version: DATA.version, runs: runs.map(function (r) { return r.d.runId; })
   };
   if (!fromHash()) seek(T0);

@@ -1,0 +1,323 @@
+"""``dispatch replay`` in a real browser: Debian's ``chromium`` driven by Playwright (no
+browser download). The page's counts equal counts computed here from the Parquet tables;
+it draws vehicles, follows a clicked one, shows two runs side by side and the state of
+charge, loads nothing from the network, and shows text from the input files as text. The
+errors on a bad folder are checked without a browser."""
+
+from __future__ import annotations
+
+import shutil
+from io import BytesIO
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyarrow.dataset as ds
+import pytest
+
+from dispatch.runner import execute
+from dispatch.scenario import load_scenario
+from tests.conftest import run_cli
+
+CHROMIUM = Path("/usr/bin/chromium")
+EVIL = "</script><script>document.title='x'</script>"
+KPIS = ("waiting", "onboard", "delivered", "rejected")
+
+ROAD = """\
+name = "<b>ev</b>{evil}"
+seed = 1
+duration = 3000.0
+[world]
+network = "manhattan"
+blocks = [6, 6]
+block = 200.0
+speed = 10.0
+[fleet]
+agents = 6
+capacity = 2
+[fleet.energy]
+battery_kwh = 2.0
+wh_per_km = 150.0
+soc0 = 0.8
+sample = 300.0
+[chargers]
+file = "st.csv"
+[charging.threshold]
+low = 0.3
+high = 0.9
+[tasks]
+source = "poisson"
+rate = 0.03
+count = 60
+max_wait = 300.0
+max_delay = 600.0
+[dispatch]
+allocator = "{allocator}"
+"""
+
+
+def _road_run(root: Path, allocator: str) -> Path:
+    root.mkdir(parents=True, exist_ok=True)
+    (root / "st.csv").write_text(
+        f'station_id,node,plugs,kw\n"{EVIL}",0,1,20\nB,30,2,20\n', encoding="utf-8")
+    p = root / "ev.toml"
+    p.write_text(ROAD.format(evil=EVIL, allocator=allocator), encoding="utf-8")
+    out = root / "run"
+    execute(load_scenario(p).runs(), out)
+    return out
+
+
+@pytest.fixture(scope="module")
+def road_run(tmp_path_factory) -> Path:
+    """A small pooled road run with an electric fleet, a station named like markup."""
+    return _road_run(tmp_path_factory.mktemp("replay_road"), "hungarian")
+
+
+@pytest.fixture(scope="module")
+def road_run_b(tmp_path_factory) -> Path:
+    return _road_run(tmp_path_factory.mktemp("replay_road_b"), "greedy")
+
+
+@pytest.fixture(scope="module")
+def browser():
+    if not CHROMIUM.exists():
+        pytest.skip("needs Debian's chromium package (apt-get install chromium)")
+    sync_api = pytest.importorskip("playwright.sync_api",
+                                   reason="needs the playwright package (pip install playwright)")
+    with sync_api.sync_playwright() as p:
+        b = p.chromium.launch(executable_path=str(CHROMIUM), args=["--no-sandbox"])
+        yield b
+        b.close()
+
+
+class Page:
+    """A page of the browser whose every request that is not a file is blocked and
+    recorded, with its console messages and script errors."""
+
+    def __init__(self, browser, path: Path, t: float | None = None) -> None:
+        self.ctx = browser.new_context(viewport={"width": 1280, "height": 760})
+        self.blocked: list[str] = []
+        self.requests: list[str] = []
+        self.console: list[str] = []
+
+        def route(r):
+            if r.request.url.startswith("file://"):
+                r.continue_()
+            else:
+                self.blocked.append(r.request.url)
+                r.abort()
+
+        self.ctx.route("**/*", route)
+        self.page = self.ctx.new_page()
+        self.page.on("request", lambda q: self.requests.append(q.url))
+        self.page.on("console", lambda m: self.console.append(f"{m.type}: {m.text}"))
+        self.page.on("pageerror", lambda e: self.console.append(f"pageerror: {e}"))
+        url = path.resolve().as_uri() + (f"#t={t}" if t is not None else "")
+        self.page.goto(url)
+        self.page.wait_for_selector("body[data-ready='1']", timeout=30000)
+
+    def kpis(self, view: int = 0) -> dict[str, int]:
+        sec = f"section.view[data-run='{view}'] "
+        return {k: int(self.page.text_content(sec + f"[data-kpi='{k}']")) for k in KPIS}
+
+    def close(self) -> None:
+        assert not self.blocked, self.blocked
+        assert all(u.startswith("file://") for u in self.requests), self.requests
+        assert not [m for m in self.console if "error" in m.split(":")[0]
+                    or "Content Security Policy" in m], self.console
+        self.ctx.close()
+
+
+def _table(folder: Path, name: str) -> pd.DataFrame:
+    return ds.dataset(folder / name, format="parquet", partitioning="hive").to_table().to_pandas()
+
+
+def expected_counts(tasks: pd.DataFrame, t: float) -> dict[str, int]:
+    """The issue's definitions, from the tasks table."""
+    def at_or_before(col):
+        return tasks[col].notna() & (tasks[col] <= t)
+
+    picked, closed = at_or_before("picked_up_at"), at_or_before("closed_at")
+    return {"waiting": int((at_or_before("released_at") & ~picked & ~closed).sum()),
+            "onboard": int((picked & ~closed).sum()),
+            "delivered": int(at_or_before("completed_at").sum()),
+            "rejected": int((closed & tasks["state"].isin(["rejected", "expired"])).sum())}
+
+
+def _times(tasks: pd.DataFrame) -> list[float]:
+    """Three times: one a quarter in, one exactly at a pickup, one late in the run."""
+    end = float(tasks["closed_at"].max())
+    picks = tasks["picked_up_at"].dropna().sort_values()
+    return [round(end / 4, 3), float(picks.iloc[len(picks) // 2]), round(end * 0.8, 3)]
+
+
+def _write(folder: Path, out: Path, *more: str) -> Path:
+    r = run_cli("replay", folder, "--out", out, *more)
+    assert r.returncode == 0, r.stderr + r.stdout
+    return out
+
+
+def _vehicles_drawn(p: Page, png: bytes) -> tuple[int, int]:
+    """(vehicles on the map, those whose pixel in the screenshot has their state's colour)."""
+    from PIL import Image
+
+    im = np.asarray(Image.open(BytesIO(png)).convert("RGB")).astype(int)
+    colors = p.page.evaluate("window.replay.colors")
+    seen = shown = 0
+    for v in p.page.evaluate("window.replay.vehicles()"):
+        x, y = int(round(v["x"])), int(round(v["y"]))
+        if not (0 <= y < im.shape[0] and 0 <= x < im.shape[1]):
+            continue
+        seen += 1
+        c = colors[v["state"]].lstrip("#")
+        rgb = np.array([int(c[i:i + 2], 16) for i in (0, 2, 4)])
+        shown += int(np.abs(im[y, x] - rgb).sum() < 40)
+    return seen, shown
+
+
+@pytest.mark.parametrize("world", ["road", "voxel"])
+def test_counts_match_the_tables(world, road_run, single_run, browser, tmp_path):
+    folder = road_run if world == "road" else single_run
+    tasks = _table(folder, "tasks")
+    page = _write(folder, tmp_path / "replay.html")
+    times = _times(tasks)
+    p = Page(browser, page, times[0])
+    try:
+        for i, t in enumerate(times):
+            if i:
+                p.page.evaluate("t => window.replay.seek(t)", t)
+            want = expected_counts(tasks, t)
+            assert p.kpis() == want, (t, want)
+            assert p.page.evaluate("window.replay.counts()") == want
+        # the hash opens the page paused at that time
+        assert p.page.evaluate("window.replay.time()") == pytest.approx(times[-1])
+        canvas = p.page.query_selector("section.view canvas.map")
+        shot = canvas.screenshot()
+        from PIL import Image
+
+        im = np.asarray(Image.open(BytesIO(shot)).convert("L"))
+        assert im.std() > 5, "blank map"
+        seen, shown = _vehicles_drawn(p, shot)
+        assert seen >= 3 and shown >= seen - 1, (seen, shown)  # one may hide under another
+    finally:
+        p.close()
+
+
+def test_hash_opens_paused_at_that_time(road_run, browser, tmp_path):
+    page = _write(road_run, tmp_path / "replay.html")
+    p = Page(browser, page, 1234.5)
+    try:
+        p.page.wait_for_timeout(300)
+        assert p.page.evaluate("window.replay.time()") == 1234.5
+        assert p.page.text_content("#clock") == "0:20:34"
+    finally:
+        p.close()
+
+
+def test_clicking_a_vehicle_shows_its_stop_list(road_run, browser, tmp_path):
+    tasks = _table(road_run, "tasks")
+    t = _times(tasks)[0]
+    riding = tasks[(tasks["picked_up_at"] <= t) & (tasks["closed_at"] > t)]
+    assert len(riding), "no ride at the chosen time"
+    page = _write(road_run, tmp_path / "replay.html")
+    p = Page(browser, page, t)
+    try:
+        box = p.page.query_selector("section.view canvas.map").bounding_box()
+        ids = sorted(_table(road_run, "vehicles")["agent_id"].astype(int))
+        pos = {i: p.page.evaluate("i => window.replay.screen(i)", i) for i in ids}
+
+        def isolated(i):
+            return min((np.hypot(*(np.subtract(pos[i], pos[j]))) for j in ids if j != i),
+                       default=99) > 16
+
+        candidates = [int(a) for a in riding["agent_id"] if isolated(int(a))]
+        assert candidates, "every riding vehicle is next to another one"
+        v = candidates[0]
+        p.page.mouse.click(box["x"] + pos[v][0], box["y"] + pos[v][1])
+        p.page.wait_for_selector(f"[data-panel='follow'] [data-vehicle='{v}']")
+        stops = p.page.text_content("[data-panel='follow'] [data-panel='stops']")
+        for task in riding.loc[riding["agent_id"] == v, "task_id"]:
+            assert f"drop-off of request {int(task)}" in stops
+        riders = p.page.text_content("[data-panel='follow']")
+        assert "riders: request" in riders and "state of charge" in riders
+    finally:
+        p.close()
+
+
+def test_compare_shows_both_runs(road_run, road_run_b, browser, tmp_path):
+    page = _write(road_run, tmp_path / "replay.html", "--compare", str(road_run_b))
+    tasks = [_table(road_run, "tasks"), _table(road_run_b, "tasks")]
+    t = _times(tasks[0])[0]
+    p = Page(browser, page, t)
+    try:
+        assert len(p.page.query_selector_all("section.view")) == 2
+        titles = [p.page.text_content(f"section.view[data-run='{i}'] .title") for i in (0, 1)]
+        assert "hungarian" in titles[0] and "greedy" in titles[1]
+        for i in (0, 1):
+            assert p.kpis(i) == expected_counts(tasks[i], t)
+            assert p.page.evaluate(f"window.replay.counts({i})") == expected_counts(tasks[i], t)
+    finally:
+        p.close()
+
+
+def test_energy_run_shows_the_state_of_charge(road_run, browser, tmp_path):
+    page = _write(road_run, tmp_path / "replay.html")
+    soc = _table(road_run, "soc")
+    t = float(soc["t"].iloc[len(soc) // 2])
+    p = Page(browser, page, t)
+    try:
+        panel = p.page.query_selector("[data-panel='soc']")
+        assert panel is not None and panel.is_visible()
+        q = soc.loc[soc["t"] == t, "soc"].median()
+        assert f"median {100 * q:.0f} %" in panel.text_content()
+    finally:
+        p.close()
+
+
+def test_text_from_the_inputs_is_shown_as_text(road_run, browser, tmp_path):
+    page = _write(road_run, tmp_path / "replay.html")
+    assert EVIL not in page.read_text(encoding="utf-8")  # escaped in the data block
+    p = Page(browser, page, 100.0)
+    try:
+        assert p.page.title() != "x" and "<b>ev</b>" in p.page.title()
+        assert EVIL in p.page.text_content("[data-panel='stations']")
+        assert "<b>ev</b>" in p.page.text_content("section.view .title")
+        assert p.page.query_selector("section.view .title b") is None
+        assert p.page.evaluate("document.scripts.length") == 2
+    finally:
+        p.close()
+
+
+# ----------------------------------------------------------------------------- no browser
+def _error(*args) -> str:
+    r = run_cli("replay", *args)
+    assert r.returncode != 0
+    lines = [x for x in (r.stderr + r.stdout).strip().splitlines() if x.strip()]
+    assert len(lines) == 1, lines
+    return lines[0]
+
+
+def test_a_folder_of_several_runs_needs_run(small_sweep, tmp_path):
+    line = _error(small_sweep, "--out", tmp_path / "r.html")
+    assert str(small_sweep) in line and "--run" in line and "18 runs" in line
+
+
+def test_a_folder_without_runs(tmp_path):
+    (tmp_path / "empty").mkdir()
+    line = _error(tmp_path / "empty")
+    assert str(tmp_path / "empty") in line
+
+
+def test_a_truncated_parquet_file_is_named(single_run, tmp_path):
+    copy = tmp_path / "copy"
+    shutil.copytree(single_run, copy)
+    [part] = list((copy / "tasks").rglob("part-0.parquet"))
+    data = part.read_bytes()
+    part.write_bytes(data[: len(data) // 2])
+    line = _error(copy, "--out", tmp_path / "r.html")
+    assert str(part) in line
+
+
+def test_kepler_needs_a_network_with_a_crs(road_run, tmp_path):
+    line = _error(road_run, "--kepler", "--out", tmp_path / "t.geojson")
+    assert "no CRS" in line and str(road_run) in line
