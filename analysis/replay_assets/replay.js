@@ -686,6 +686,8 @@
     span: [T0, T1], version: DATA.version, runs: runs.map(function (r) { return r.d.runId; })
   };
   if (!fromHash()) seek(T0);
+  APP.readyAt = performance.now();
+  window.replay.readyAt = APP.readyAt; // milliseconds from navigation start to the first frame
   document.body.setAttribute("data-ready", "1");
   requestAnimationFrame(frame);
 })();
