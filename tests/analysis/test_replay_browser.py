@@ -289,6 +289,35 @@ def test_text_from_the_inputs_is_shown_as_text(road_run, browser, tmp_path):
 
 
 # ----------------------------------------------------------------------------- no browser
+def test_the_replay_needs_no_dispatch_pybullet_or_torch(road_run, single_run, tmp_path):
+    """Written with the heavy modules and the dispatch package itself blocked."""
+    import subprocess
+    import sys
+
+    code = f"""
+import sys
+for m in ("pybullet", "torch", "dispatch", "simpy", "ray"):
+    sys.modules[m] = None
+from analysis.replay import write_replay
+for src, name in (({str(road_run)!r}, "road"), ({str(single_run)!r}, "voxel")):
+    print(write_replay(src, {str(tmp_path)!r} + "/" + name + ".html").stat().st_size > 0)
+print([m for m in ("pybullet", "torch", "dispatch") if sys.modules.get(m) is not None])
+"""
+    root = Path(__file__).resolve().parents[2]
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          cwd=root, timeout=120, check=False)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.split() == ["True", "True", "[]"]
+
+
+def test_counts_at_agrees_with_the_definitions(road_run):
+    from analysis.replay import counts_at
+
+    tasks = _table(road_run, "tasks")
+    for t in [0.0, *_times(tasks), float(tasks["closed_at"].max()) + 1]:
+        assert counts_at(tasks, t) == expected_counts(tasks, t)
+
+
 def _error(*args) -> str:
     r = run_cli("replay", *args)
     assert r.returncode != 0
