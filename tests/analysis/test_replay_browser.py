@@ -347,6 +347,63 @@ def test_a_truncated_parquet_file_is_named(single_run, tmp_path):
     assert str(part) in line
 
 
+def _lonlat_city(root: Path) -> Path:
+    """A 5 x 5 street grid in longitude / latitude (node-link JSON, crs epsg:4326) near
+    Times Square, and a scenario of 3 taxis on it."""
+    import json
+
+    nodes, links = [], []
+    for i in range(5):
+        for j in range(5):
+            nodes.append({"id": i * 5 + j, "x": -73.99 + 0.002 * i, "y": 40.75 + 0.002 * j})
+    for i in range(5):
+        for j in range(5):
+            for di, dj, m in ((1, 0, 168.6), (0, 1, 222.4)):
+                if i + di < 5 and j + dj < 5:
+                    a, b = i * 5 + j, (i + di) * 5 + j + dj
+                    links += [{"source": a, "target": b, "length": m, "speed": 10.0},
+                              {"source": b, "target": a, "length": m, "speed": 10.0}]
+    (root / "grid.json").write_text(json.dumps({"directed": True, "graph": {"crs": "epsg:4326"},
+                                                "nodes": nodes, "links": links}))
+    p = root / "ll.toml"
+    p.write_text('name = "ll"\nseed = 0\nduration = 1500.0\n[world]\nnetwork = "grid.json"\n'
+                 '[fleet]\nagents = 3\n[tasks]\nsource = "poisson"\nrate = 0.02\n'
+                 'count = 15\nmax_wait = 600.0\n[dispatch]\nallocator = "hungarian"\n',
+                 encoding="utf-8")
+    execute(load_scenario(p).runs(), root / "run")
+    return root / "run"
+
+
+def test_kepler_trips_in_lon_lat(tmp_path):
+    import json
+
+    pytest.importorskip("pyproj")
+    run = _lonlat_city(tmp_path)
+    r = run_cli("replay", run, "--kepler", "--out", tmp_path / "t.geojson", "--epoch", "1e9")
+    assert r.returncode == 0, r.stderr
+    fc = json.loads((tmp_path / "t.geojson").read_text())
+    assert fc["type"] == "FeatureCollection" and fc["features"]
+    vehicles = _table(run, "vehicles")
+    by_vehicle: dict[int, list] = {}
+    for f in fc["features"]:
+        assert f["geometry"]["type"] == "LineString"
+        props = f["properties"]
+        assert set(props) == {"vehicle_id", "state", "passengers"}
+        coords = f["geometry"]["coordinates"]
+        assert len(coords) >= 2 and all(len(c) == 4 and c[2] == 0 for c in coords)
+        for lon, lat, _, _ in coords:  # on the grid, in degrees
+            assert -73.9901 <= lon <= -73.9819 and 40.7499 <= lat <= 40.7581
+        ts = [c[3] for c in coords]
+        assert ts == sorted(ts) and ts[0] >= 1e9
+        by_vehicle.setdefault(props["vehicle_id"], []).append((ts[0], ts[-1], props["state"]))
+    assert set(by_vehicle) == set(vehicles["agent_id"].astype(int))
+    for spells in by_vehicle.values():  # each vehicle's spells follow each other
+        spells.sort()
+        assert all(a[1] == pytest.approx(b[0]) for a, b in zip(spells, spells[1:]))
+    states = {s for spells in by_vehicle.values() for _, _, s in spells}
+    assert {"idle", "to_pickup", "occupied"} <= states
+
+
 def test_kepler_needs_a_network_with_a_crs(road_run, tmp_path):
     line = _error(road_run, "--kepler", "--out", tmp_path / "t.geojson")
     assert "no CRS" in line and str(road_run) in line
