@@ -22,7 +22,7 @@ from analysis.replay_data import ReplayInputError, choose_run, read_table
 from analysis.timeline import fleet_states
 
 
-def _to_lonlat(crs: str, where: str):
+def _to_lonlat(crs: str):
     try:
         from pyproj import CRS, Transformer
     except ImportError:
@@ -49,7 +49,7 @@ def trips(folder: str | Path, run_id: str | None = None, epoch: float = 0.0) -> 
         raise ReplayInputError(f"{run.root}: the network of run {run.run_id} has no CRS "
                                "(plain metres, e.g. a generated grid): no longitude / latitude "
                                "for kepler.gl")
-    convert = _to_lonlat(crs, str(run.root))
+    convert = _to_lonlat(crs)
     tasks = read_table(run, "tasks")
     vehicles = read_table(run, "vehicles").sort_values("agent_id").reset_index(drop=True)
     events = read_table(run, "events")

@@ -397,14 +397,21 @@
     if (T && (LAYERS.requests || LAYERS.arcs || LAYERS.flashes)) {
       var flash = Math.max(20, 1.5 * Math.abs(APP.speed));
       var first = ub(T.rel, t - run.span - flash), last = ub(T.rel, t);
-      var refused = {};
+      var refused = {}, airKind = T.kind.indexOf("air");
       d.refused.forEach(function (s) { refused[d.taskStates.indexOf(s)] = true; });
       var drawTask = function (i) {
         var p = fin(T.pick[i]), cl = fin(T.close[i]);
         if (T.rel[i] > t) return;
         var x = self.sx(T.x[i]), y = self.sy(T.y[i]);
         if (t < p && t < cl) {
-          if (LAYERS.requests) { c.fillStyle = "#ff7043"; c.fillRect(x - 2.5, y - 2.5, 5, 5); }
+          if (LAYERS.requests) {
+            // filled: nobody is coming yet; hollow: a vehicle is on its way; circles: air tasks
+            var taken = T.asg[i] <= t, air = airKind >= 0 && T.kindCode[i] === airKind;
+            c.fillStyle = c.strokeStyle = "#ff7043"; c.lineWidth = 1.5;
+            if (air) { c.beginPath(); c.arc(x, y, 3, 0, 2 * Math.PI); if (taken) c.stroke(); else c.fill(); }
+            else if (taken) c.strokeRect(x - 2.5, y - 2.5, 5, 5);
+            else c.fillRect(x - 2.5, y - 2.5, 5, 5);
+          }
         } else if (p <= t && t < cl) {
           if (LAYERS.arcs && T.dx[i] === T.dx[i]) {
             var X = self.sx(T.dx[i]), Y = self.sy(T.dy[i]), mx = (x + X) / 2, my = (y + Y) / 2;
@@ -517,6 +524,8 @@
     box.appendChild(el("div", { "data-vehicle": String(id) },
       "vehicle " + id + " (" + kind + ", " + d.vehicles.cap[v] + " seat" + (d.vehicles.cap[v] > 1 ? "s" : "") + "): " +
       (run.labels[d.fleetStates[run.state[v]]] || "")));
+    if (run.voxel) box.appendChild(el("div", null, "position " + run.px[v].toFixed(1) + ", " +
+      run.py[v].toFixed(1) + ", altitude " + run.pz[v].toFixed(1) + " m"));
     var stops = [], riders = [];
     (run.tasksOf[id] || []).forEach(function (i) {
       var asg = T.asg ? fin(T.asg[i]) : T.rel[i], p = fin(T.pick[i]), cl = fin(T.close[i]);
@@ -625,7 +634,7 @@
     span.appendChild(sw); span.appendChild(document.createTextNode(runs[0].labels[s]));
     legend.appendChild(span);
   });
-  [["#ff7043", "request waiting for its pickup"], ["rgba(46,134,222,.6)", "ride: arc from pickup to drop-off while on board"],
+  [["#ff7043", "request waiting for its pickup (hollow: a vehicle is on its way; circle: a task in the air)"], ["rgba(46,134,222,.6)", "ride: arc from pickup to drop-off while on board"],
    ["#d32f2f", "request rejected or expired (flash)"]].forEach(function (x) {
     var span = el("span"), sw = el("span", { "class": "sw" }); sw.style.background = x[0];
     span.appendChild(sw); span.appendChild(document.createTextNode(x[1])); legend.appendChild(span);
