@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import base64
 import hashlib
+import html
 import json
 import logging
 import math
@@ -439,7 +440,9 @@ def page(runs: list[dict]) -> str:
     csp = (f"default-src 'none'; script-src {sha(js)}; style-src {sha(css)}; "
            "img-src data: blob:; connect-src 'none'; font-src 'none'; base-uri 'none'; "
            "form-action 'none'")
-    parts = {"CSP": csp, "TITLE": "dispatch replay", "CSS": css, "DATA": data, "JS": js}
+    parts = {"CSP": csp, "TITLE": "dispatch replay", "CSS": css, "DATA": data, "JS": js,
+             "GENERATOR": html.escape(f"dispatch {project_version()} (dispatch replay)"),
+             "RUNIDS": html.escape(" ".join(r["runId"] for r in runs))}
     # one pass: text put in is never searched again (a scenario named "{{JS}}" stays text)
     return re.sub(r"\{\{([A-Z]+)\}\}", lambda m: parts[m.group(1)], _asset("replay.html"))
 
