@@ -326,6 +326,59 @@ def _error(*args) -> str:
     return lines[0]
 
 
+def _interpolate(kf: pd.DataFrame, agent: int, t: float) -> tuple[float, float]:
+    """Where the page draws ``agent`` at ``t``: the last keyframe at or before ``t``, moving in
+    a straight line toward the next one."""
+    k = kf[kf["agent_id"] == agent]
+    ts, xs, ys = (k[c].to_numpy(dtype=float) for c in ("t", "x", "y"))
+    i = int(np.searchsorted(ts, t, side="right")) - 1
+    if i >= len(ts) - 1 or ts[i + 1] == ts[i]:
+        return xs[i], ys[i]
+    a = (t - ts[i]) / (ts[i + 1] - ts[i])
+    return xs[i] + a * (xs[i + 1] - xs[i]), ys[i] + a * (ys[i + 1] - ys[i])
+
+
+@pytest.mark.parametrize("world", ["road", "voxel"])
+def test_keyframes_keep_every_recorded_position(world, road_run, single_run):
+    """Leaving out standing rows changes nothing drawn: at every time a vehicle's position was
+    recorded (the last one recorded at that time), the page puts it there."""
+    from analysis.replay import POSITION_EVENTS, keyframes
+
+    folder = road_run if world == "road" else single_run
+    ev, veh = _table(folder, "events"), _table(folder, "vehicles")
+    kf = keyframes(ev, veh)
+    assert len(kf) < len(ev[ev["event"].isin(POSITION_EVENTS)]) + len(veh)
+    pos = ev[(ev["agent_id"] >= 0) & ev["event"].isin(POSITION_EVENTS)]
+    last = pos.groupby(["agent_id", "t"], sort=False).tail(1)
+    for r in last.itertuples(index=False):
+        assert _interpolate(kf, r.agent_id, r.t) == pytest.approx((r.x, r.y)), r
+
+
+def test_routed_keyframes_follow_the_streets(road_run):
+    """Routing adds only nodes, each drive's added nodes form a path of the network's edges
+    from where it departed to where it arrived, and the recorded positions stay."""
+    from analysis.replay import _network, keyframes, route_keyframes
+    from analysis.replay_data import choose_run
+
+    ev, veh = _table(road_run, "events"), _table(road_run, "vehicles")
+    kf = keyframes(ev, veh)
+    x, y, _pairs, u, v, sec = _network(choose_run(road_run, None))
+    routed = route_keyframes(kf, x, y, u, v, sec)
+    assert len(routed) > len(kf)
+    node = {(round(a, 6), round(b, 6)): i for i, (a, b) in enumerate(zip(x, y))}
+    edges = set(zip(u.tolist(), v.tolist()))
+    merged = routed.merge(kf.assign(kept=True), how="left", on=["agent_id", "t", "x", "y", "z"])
+    added = merged["kept"].isna().to_numpy()
+    assert (~added).sum() == len(kf)  # every recorded position stays
+    assert added.any()
+    for agent, g in routed.groupby("agent_id"):
+        assert g["t"].is_monotonic_increasing
+        ids = [node.get((round(a, 6), round(b, 6))) for a, b in zip(g["x"], g["y"])]
+        for i in range(1, len(ids)):
+            if added[g.index[i]] or added[g.index[i - 1]]:  # a step of a routed drive
+                assert (ids[i - 1], ids[i]) in edges, (agent, i)
+
+
 def test_a_folder_of_several_runs_needs_run(small_sweep, tmp_path):
     line = _error(small_sweep, "--out", tmp_path / "r.html")
     assert str(small_sweep) in line and "--run" in line and "18 runs" in line
