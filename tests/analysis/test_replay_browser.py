@@ -210,6 +210,27 @@ def test_hash_opens_paused_at_that_time(road_run, browser, tmp_path):
         p.page.wait_for_timeout(300)
         assert p.page.evaluate("window.replay.time()") == 1234.5
         assert p.page.text_content("#clock") == "0:20:34"
+        p.page.select_option("#speed", "-10")  # reverse
+        p.page.click("#play")
+        p.page.wait_for_timeout(600)
+        p.page.click("#play")
+        assert 1234.5 - 60 < p.page.evaluate("window.replay.time()") < 1234.5 - 1
+    finally:
+        p.close()
+
+
+def test_jump_to_the_next_event_of_a_kind(road_run, browser, tmp_path):
+    ev = _table(road_run, "events")
+    page = _write(road_run, tmp_path / "replay.html")
+    p = Page(browser, page, 1000.0)
+    try:
+        for kind in ("pickup", "insert", "charge_start"):
+            p.page.evaluate("window.replay.seek(1000)")
+            times = ev.loc[(ev["event"] == kind) & (ev["t"] > 1000.0), "t"]
+            assert len(times), kind
+            p.page.select_option("#jumpkind", kind)
+            p.page.click("#jump")
+            assert p.page.evaluate("window.replay.time()") == float(times.min())
     finally:
         p.close()
 
