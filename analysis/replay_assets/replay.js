@@ -93,6 +93,7 @@
   Run.prototype.prepareTasks = function () {
     var T = this.d.tasks;
     this.m = T ? T.rel.length : 0;
+    this.tasksOf = {};
     if (!T) { this.kpi = null; return; }
     var m = this.m, refused = {};
     this.d.refused.forEach(function (s) { refused[this.d.taskStates.indexOf(s)] = true; }, this);
@@ -109,7 +110,6 @@
                  rS: sorted(rS) };
     this.span = span; this.openTasks = open;
     // each vehicle's tasks (their final vehicle)
-    this.tasksOf = {};
     for (var j = 0; j < m; j++) {
       var a = T.agent[j];
       if (a >= 0) (this.tasksOf[a] = this.tasksOf[a] || []).push(j);
