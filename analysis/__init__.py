@@ -2,7 +2,7 @@
 
 Reads Parquet only and imports neither torch nor PyBullet nor the ``dispatch`` package, so a
 results folder can be analysed on any machine with pyarrow, pandas, scipy and matplotlib (a road
-run's network is read from the results folder too); ``dispatch report`` and ``dispatch render``
+run's network is read from the results folder too); ``dispatch report``, ``dispatch render`` and ``dispatch replay``
 reach the command line through the entry-point group ``dispatch.commands``
 (:mod:`analysis.commands`):
 
@@ -15,7 +15,10 @@ reach the command line through the entry-point group ``dispatch.commands``
   pyplot);
 * :mod:`analysis.report` - ``dispatch report``: Markdown / HTML with tables and figures;
 * :mod:`analysis.render` - ``dispatch render``: an animated GIF from PyBullet camera images
-  (imports PyBullet when called), or for a road run on its map (:mod:`analysis.road_render`).
+  (imports PyBullet when called), or for a road run on its map (:mod:`analysis.road_render`);
+* :mod:`analysis.replay` - ``dispatch replay``: one offline HTML page that plays a run (or
+  two) in the browser (:mod:`analysis.replay_data` reads the run, ``replay_assets/`` holds the
+  page's script); :mod:`analysis.replay_kepler` - its kepler.gl trips export.
 
 Importing any of these modules imports nothing heavy (matplotlib, PyBullet and Pillow are
 imported inside the functions that use them).

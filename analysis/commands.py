@@ -82,3 +82,49 @@ class Render:
                           seconds=args.seconds, size=(w, h))
         out.print(f"animation: {path}")
         return 0
+
+
+class Replay:
+    """One self-contained HTML page that plays a run (or two side by side) in the browser,
+    offline; ``--kepler``: the vehicles' trips as kepler.gl GeoJSON."""
+
+    help = "an interactive replay of a run in one offline HTML page"
+
+    @staticmethod
+    def user_errors() -> tuple[type[Exception], ...]:
+        from analysis.replay_data import ReplayInputError
+
+        return (ReplayInputError, *user_errors())
+
+    @staticmethod
+    def add_arguments(r) -> None:
+        r.add_argument("run_dir", type=Path, metavar="RUN_DIR",
+                       help="a results folder (of dispatch run or sweep)")
+        r.add_argument("--run", metavar="RUN_ID",
+                       help="which run of the folder (needed where it holds several)")
+        r.add_argument("--out", type=Path,
+                       help="output page (default: RUN_DIR/replay.html; with --kepler "
+                            "RUN_DIR/<run id>.trips.geojson)")
+        r.add_argument("--compare", type=Path, metavar="OTHER_RUN_DIR",
+                       help="a second results folder, shown beside the first on one clock")
+        r.add_argument("--compare-run", metavar="RUN_ID",
+                       help="which run of the --compare folder (needed where it holds several)")
+        r.add_argument("--kepler", action="store_true",
+                       help="write kepler.gl trips (GeoJSON, [lon, lat, 0, epoch]) of a road "
+                            "run instead of the page")
+        r.add_argument("--epoch", type=float, default=0.0,
+                       help="--kepler: the Unix time of simulated second 0 (default 0)")
+
+    def run(self, args, out) -> int:
+        if args.kepler:
+            from analysis.replay_kepler import write_trips
+
+            path = write_trips(args.run_dir, args.out, run_id=args.run, epoch=args.epoch)
+            out.print(f"kepler.gl trips: {path}")
+            return 0
+        from analysis.replay import write_replay
+
+        path = write_replay(args.run_dir, args.out, run_id=args.run, compare=args.compare,
+                            compare_run=args.compare_run)
+        out.print(f"replay: {path}")
+        return 0

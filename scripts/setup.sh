@@ -20,3 +20,15 @@ if [ ! -f "$stamp" ]; then
     rm -f .venv/.installed-*
     touch "$stamp"
 fi
+# The replay's browser tests (tests/analysis/test_replay_browser.py) drive Debian's chromium
+# through Playwright (no browser download); where it cannot be installed they skip, naming it.
+if [ ! -x /usr/bin/chromium ]; then
+    if command -v apt-get >/dev/null && [ "$(id -u)" = 0 ]; then
+        { apt-get install -y -q chromium || { apt-get update -q && apt-get install -y -q chromium; }; } \
+            >/dev/null 2>&1 \
+            || echo "setup: apt-get install chromium failed: the replay's browser tests will skip"
+    else
+        echo "setup: no /usr/bin/chromium (Debian package 'chromium'; run: sudo apt-get install" \
+             "chromium): the replay's browser tests will skip"
+    fi
+fi

@@ -1,0 +1,483 @@
+"""``dispatch replay`` in a real browser: Debian's ``chromium`` driven by Playwright (no
+browser download). The page's counts equal counts computed here from the Parquet tables;
+it draws vehicles, follows a clicked one, shows two runs side by side and the state of
+charge, loads nothing from the network, and shows text from the input files as text. The
+errors on a bad folder are checked without a browser."""
+
+from __future__ import annotations
+
+import shutil
+from io import BytesIO
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyarrow.dataset as ds
+import pytest
+
+from dispatch.runner import execute
+from dispatch.scenario import load_scenario
+from tests.conftest import run_cli
+
+CHROMIUM = Path("/usr/bin/chromium")
+EVIL = "</script><script>document.title='x'</script>"
+KPIS = ("waiting", "onboard", "delivered", "rejected")
+
+ROAD = """\
+name = "<b>ev</b>{evil}"
+seed = 1
+duration = 3000.0
+[world]
+network = "manhattan"
+blocks = [6, 6]
+block = 200.0
+speed = 10.0
+[fleet]
+agents = 6
+capacity = 2
+[fleet.energy]
+battery_kwh = 2.0
+wh_per_km = 150.0
+soc0 = 0.8
+sample = 300.0
+[chargers]
+file = "st.csv"
+[charging.threshold]
+low = 0.3
+high = 0.9
+[tasks]
+source = "poisson"
+rate = 0.03
+count = 60
+max_wait = 300.0
+max_delay = 600.0
+[dispatch]
+allocator = "{allocator}"
+"""
+
+
+def _road_run(root: Path, allocator: str) -> Path:
+    root.mkdir(parents=True, exist_ok=True)
+    (root / "st.csv").write_text(
+        f'station_id,node,plugs,kw\n"{EVIL}",0,1,20\nB,30,2,20\n', encoding="utf-8")
+    p = root / "ev.toml"
+    p.write_text(ROAD.format(evil=EVIL, allocator=allocator), encoding="utf-8")
+    out = root / "run"
+    execute(load_scenario(p).runs(), out)
+    return out
+
+
+@pytest.fixture(scope="module")
+def road_run(tmp_path_factory) -> Path:
+    """A small pooled road run with an electric fleet, a station named like markup."""
+    return _road_run(tmp_path_factory.mktemp("replay_road"), "hungarian")
+
+
+@pytest.fixture(scope="module")
+def road_run_b(tmp_path_factory) -> Path:
+    return _road_run(tmp_path_factory.mktemp("replay_road_b"), "greedy")
+
+
+@pytest.fixture(scope="module")
+def browser():
+    if not CHROMIUM.exists():
+        pytest.skip("needs Debian's chromium package (apt-get install chromium)")
+    sync_api = pytest.importorskip("playwright.sync_api",
+                                   reason="needs the playwright package (pip install playwright)")
+    with sync_api.sync_playwright() as p:
+        b = p.chromium.launch(executable_path=str(CHROMIUM), args=["--no-sandbox"])
+        yield b
+        b.close()
+
+
+class Page:
+    """A page of the browser whose every request that is not a file is blocked and
+    recorded, with its console messages and script errors."""
+
+    def __init__(self, browser, path: Path, t: float | None = None) -> None:
+        self.ctx = browser.new_context(viewport={"width": 1280, "height": 760})
+        self.blocked: list[str] = []
+        self.requests: list[str] = []
+        self.console: list[str] = []
+
+        def route(r):
+            if r.request.url.startswith("file://"):
+                r.continue_()
+            else:
+                self.blocked.append(r.request.url)
+                r.abort()
+
+        self.ctx.route("**/*", route)
+        self.page = self.ctx.new_page()
+        self.page.on("request", lambda q: self.requests.append(q.url))
+        self.page.on("console", lambda m: self.console.append(f"{m.type}: {m.text}"))
+        self.page.on("pageerror", lambda e: self.console.append(f"pageerror: {e}"))
+        url = path.resolve().as_uri() + (f"#t={t}" if t is not None else "")
+        self.page.goto(url)
+        self.page.wait_for_selector("body[data-ready='1']", timeout=30000)
+
+    def kpis(self, view: int = 0) -> dict[str, int]:
+        sec = f"section.view[data-run='{view}'] "
+        return {k: int(self.page.text_content(sec + f"[data-kpi='{k}']")) for k in KPIS}
+
+    def close(self) -> None:
+        assert not self.blocked, self.blocked
+        assert all(u.startswith("file://") for u in self.requests), self.requests
+        assert not [m for m in self.console if "error" in m.split(":")[0]
+                    or "Content Security Policy" in m], self.console
+        self.ctx.close()
+
+
+def _table(folder: Path, name: str) -> pd.DataFrame:
+    return ds.dataset(folder / name, format="parquet", partitioning="hive").to_table().to_pandas()
+
+
+def expected_counts(tasks: pd.DataFrame, t: float) -> dict[str, int]:
+    """The issue's definitions, from the tasks table."""
+    def at_or_before(col):
+        return tasks[col].notna() & (tasks[col] <= t)
+
+    picked, closed = at_or_before("picked_up_at"), at_or_before("closed_at")
+    return {"waiting": int((at_or_before("released_at") & ~picked & ~closed).sum()),
+            "onboard": int((picked & ~closed).sum()),
+            "delivered": int(at_or_before("completed_at").sum()),
+            "rejected": int((closed & tasks["state"].isin(["rejected", "expired"])).sum())}
+
+
+def _times(tasks: pd.DataFrame) -> list[float]:
+    """Three times: one a quarter in, one exactly at a pickup, one late in the run."""
+    end = float(tasks["closed_at"].max())
+    picks = tasks["picked_up_at"].dropna().sort_values()
+    return [round(end / 4, 3), float(picks.iloc[len(picks) // 2]), round(end * 0.8, 3)]
+
+
+def _write(folder: Path, out: Path, *more: str) -> Path:
+    r = run_cli("replay", folder, "--out", out, *more)
+    assert r.returncode == 0, r.stderr + r.stdout
+    return out
+
+
+def _vehicles_drawn(p: Page, png: bytes) -> tuple[int, int]:
+    """(vehicles on the map, those whose pixel in the screenshot has their state's colour)."""
+    from PIL import Image
+
+    im = np.asarray(Image.open(BytesIO(png)).convert("RGB")).astype(int)
+    colors = p.page.evaluate("window.replay.colors")
+    seen = shown = 0
+    for v in p.page.evaluate("window.replay.vehicles()"):
+        x, y = int(round(v["x"])), int(round(v["y"]))
+        if not (0 <= y < im.shape[0] and 0 <= x < im.shape[1]):
+            continue
+        seen += 1
+        c = colors[v["state"]].lstrip("#")
+        rgb = np.array([int(c[i:i + 2], 16) for i in (0, 2, 4)])
+        shown += int(np.abs(im[y, x] - rgb).sum() < 40)
+    return seen, shown
+
+
+@pytest.mark.parametrize("world", ["road", "voxel"])
+def test_counts_match_the_tables(world, road_run, single_run, browser, tmp_path):
+    folder = road_run if world == "road" else single_run
+    tasks = _table(folder, "tasks")
+    page = _write(folder, tmp_path / "replay.html")
+    times = _times(tasks)
+    p = Page(browser, page, times[0])
+    try:
+        for i, t in enumerate(times):
+            if i:
+                p.page.evaluate("t => window.replay.seek(t)", t)
+            want = expected_counts(tasks, t)
+            assert p.kpis() == want, (t, want)
+            assert p.page.evaluate("window.replay.counts()") == want
+        # the hash opens the page paused at that time
+        assert p.page.evaluate("window.replay.time()") == pytest.approx(times[-1])
+        canvas = p.page.query_selector("section.view canvas.map")
+        shot = canvas.screenshot()
+        from PIL import Image
+
+        im = np.asarray(Image.open(BytesIO(shot)).convert("L"))
+        assert im.std() > 5, "blank map"
+        seen, shown = _vehicles_drawn(p, shot)
+        assert seen >= 3 and shown >= seen - 1, (seen, shown)  # one may hide under another
+    finally:
+        p.close()
+
+
+def test_hash_opens_paused_at_that_time(road_run, browser, tmp_path):
+    page = _write(road_run, tmp_path / "replay.html")
+    p = Page(browser, page, 1234.5)
+    try:
+        p.page.wait_for_timeout(300)
+        assert p.page.evaluate("window.replay.time()") == 1234.5
+        assert p.page.text_content("#clock") == "0:20:34"
+        p.page.select_option("#speed", "-10")  # reverse
+        p.page.click("#play")
+        p.page.wait_for_timeout(600)
+        p.page.click("#play")
+        assert 1234.5 - 60 < p.page.evaluate("window.replay.time()") < 1234.5 - 1
+    finally:
+        p.close()
+
+
+def test_jump_to_the_next_event_of_a_kind(road_run, browser, tmp_path):
+    ev = _table(road_run, "events")
+    page = _write(road_run, tmp_path / "replay.html")
+    p = Page(browser, page, 1000.0)
+    try:
+        for kind in ("pickup", "insert", "charge_start"):
+            p.page.evaluate("window.replay.seek(1000)")
+            times = ev.loc[(ev["event"] == kind) & (ev["t"] > 1000.0), "t"]
+            assert len(times), kind
+            p.page.select_option("#jumpkind", kind)
+            p.page.click("#jump")
+            assert p.page.evaluate("window.replay.time()") == float(times.min())
+    finally:
+        p.close()
+
+
+def test_clicking_a_vehicle_shows_its_stop_list(road_run, browser, tmp_path):
+    tasks = _table(road_run, "tasks")
+    t = _times(tasks)[0]
+    riding = tasks[(tasks["picked_up_at"] <= t) & (tasks["closed_at"] > t)]
+    assert len(riding), "no ride at the chosen time"
+    page = _write(road_run, tmp_path / "replay.html")
+    p = Page(browser, page, t)
+    try:
+        box = p.page.query_selector("section.view canvas.map").bounding_box()
+        ids = sorted(_table(road_run, "vehicles")["agent_id"].astype(int))
+        pos = {i: p.page.evaluate("i => window.replay.screen(i)", i) for i in ids}
+
+        def isolated(i):
+            return min((np.hypot(*(np.subtract(pos[i], pos[j]))) for j in ids if j != i),
+                       default=99) > 16
+
+        candidates = [int(a) for a in riding["agent_id"] if isolated(int(a))]
+        assert candidates, "every riding vehicle is next to another one"
+        v = candidates[0]
+        p.page.mouse.click(box["x"] + pos[v][0], box["y"] + pos[v][1])
+        p.page.wait_for_selector(f"[data-panel='follow'] [data-vehicle='{v}']")
+        stops = p.page.text_content("[data-panel='follow'] [data-panel='stops']")
+        for task in riding.loc[riding["agent_id"] == v, "task_id"]:
+            assert f"drop-off of request {int(task)}" in stops
+        riders = p.page.text_content("[data-panel='follow']")
+        assert "riders: request" in riders and "state of charge" in riders
+    finally:
+        p.close()
+
+
+def test_compare_shows_both_runs(road_run, road_run_b, browser, tmp_path):
+    page = _write(road_run, tmp_path / "replay.html", "--compare", str(road_run_b))
+    tasks = [_table(road_run, "tasks"), _table(road_run_b, "tasks")]
+    t = _times(tasks[0])[0]
+    p = Page(browser, page, t)
+    try:
+        assert len(p.page.query_selector_all("section.view")) == 2
+        titles = [p.page.text_content(f"section.view[data-run='{i}'] .title") for i in (0, 1)]
+        assert "hungarian" in titles[0] and "greedy" in titles[1]
+        for i in (0, 1):
+            assert p.kpis(i) == expected_counts(tasks[i], t)
+            assert p.page.evaluate(f"window.replay.counts({i})") == expected_counts(tasks[i], t)
+    finally:
+        p.close()
+
+
+def test_energy_run_shows_the_state_of_charge(road_run, browser, tmp_path):
+    page = _write(road_run, tmp_path / "replay.html")
+    soc = _table(road_run, "soc")
+    t = float(soc["t"].iloc[len(soc) // 2])
+    p = Page(browser, page, t)
+    try:
+        panel = p.page.query_selector("[data-panel='soc']")
+        assert panel is not None and panel.is_visible()
+        q = soc.loc[soc["t"] == t, "soc"].median()
+        assert f"median {100 * q:.0f} %" in panel.text_content()
+    finally:
+        p.close()
+
+
+def test_text_from_the_inputs_is_shown_as_text(road_run, browser, tmp_path):
+    page = _write(road_run, tmp_path / "replay.html")
+    assert EVIL not in page.read_text(encoding="utf-8")  # escaped in the data block
+    p = Page(browser, page, 100.0)
+    try:
+        assert p.page.title() != "x" and "<b>ev</b>" in p.page.title()
+        assert EVIL in p.page.text_content("[data-panel='stations']")
+        assert "<b>ev</b>" in p.page.text_content("section.view .title")
+        assert p.page.query_selector("section.view .title b") is None
+        assert p.page.evaluate("document.scripts.length") == 2
+    finally:
+        p.close()
+
+
+# ----------------------------------------------------------------------------- no browser
+def test_the_replay_needs_no_dispatch_pybullet_or_torch(road_run, single_run, tmp_path):
+    """Written with the heavy modules and the dispatch package itself blocked."""
+    import subprocess
+    import sys
+
+    code = f"""
+import sys
+for m in ("pybullet", "torch", "dispatch", "simpy", "ray"):
+    sys.modules[m] = None
+from analysis.replay import write_replay
+for src, name in (({str(road_run)!r}, "road"), ({str(single_run)!r}, "voxel")):
+    print(write_replay(src, {str(tmp_path)!r} + "/" + name + ".html").stat().st_size > 0)
+print([m for m in ("pybullet", "torch", "dispatch") if sys.modules.get(m) is not None])
+"""
+    root = Path(__file__).resolve().parents[2]
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          cwd=root, timeout=120, check=False)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.split() == ["True", "True", "[]"]
+
+
+def test_counts_at_agrees_with_the_definitions(road_run):
+    from analysis.replay import counts_at
+
+    tasks = _table(road_run, "tasks")
+    for t in [0.0, *_times(tasks), float(tasks["closed_at"].max()) + 1]:
+        assert counts_at(tasks, t) == expected_counts(tasks, t)
+
+
+def _error(*args) -> str:
+    r = run_cli("replay", *args)
+    assert r.returncode != 0
+    lines = [x for x in (r.stderr + r.stdout).strip().splitlines() if x.strip()]
+    assert len(lines) == 1, lines
+    return lines[0]
+
+
+def _interpolate(kf: pd.DataFrame, agent: int, t: float) -> tuple[float, float]:
+    """Where the page draws ``agent`` at ``t``: the last keyframe at or before ``t``, moving in
+    a straight line toward the next one."""
+    k = kf[kf["agent_id"] == agent]
+    ts, xs, ys = (k[c].to_numpy(dtype=float) for c in ("t", "x", "y"))
+    i = int(np.searchsorted(ts, t, side="right")) - 1
+    if i >= len(ts) - 1 or ts[i + 1] == ts[i]:
+        return xs[i], ys[i]
+    a = (t - ts[i]) / (ts[i + 1] - ts[i])
+    return xs[i] + a * (xs[i + 1] - xs[i]), ys[i] + a * (ys[i + 1] - ys[i])
+
+
+@pytest.mark.parametrize("world", ["road", "voxel"])
+def test_keyframes_keep_every_recorded_position(world, road_run, single_run):
+    """Leaving out standing rows changes nothing drawn: at every time a vehicle's position was
+    recorded (the last one recorded at that time), the page puts it there."""
+    from analysis.replay import POSITION_EVENTS, keyframes
+
+    folder = road_run if world == "road" else single_run
+    ev, veh = _table(folder, "events"), _table(folder, "vehicles")
+    kf = keyframes(ev, veh)
+    assert len(kf) < len(ev[ev["event"].isin(POSITION_EVENTS)]) + len(veh)
+    pos = ev[(ev["agent_id"] >= 0) & ev["event"].isin(POSITION_EVENTS)]
+    last = pos.groupby(["agent_id", "t"], sort=False).tail(1)
+    for r in last.itertuples(index=False):
+        assert _interpolate(kf, r.agent_id, r.t) == pytest.approx((r.x, r.y)), r
+
+
+def test_routed_keyframes_follow_the_streets(road_run):
+    """Routing adds only nodes, each drive's added nodes form a path of the network's edges
+    from where it departed to where it arrived, and the recorded positions stay."""
+    from analysis.replay import _network, keyframes, route_keyframes
+    from analysis.replay_data import choose_run
+
+    ev, veh = _table(road_run, "events"), _table(road_run, "vehicles")
+    kf = keyframes(ev, veh)
+    x, y, _pairs, u, v, sec = _network(choose_run(road_run, None))
+    routed = route_keyframes(kf, x, y, u, v, sec)
+    assert len(routed) > len(kf)
+    node = {(round(a, 6), round(b, 6)): i for i, (a, b) in enumerate(zip(x, y))}
+    edges = set(zip(u.tolist(), v.tolist()))
+    merged = routed.merge(kf.assign(kept=True), how="left", on=["agent_id", "t", "x", "y", "z"])
+    added = merged["kept"].isna().to_numpy()
+    assert (~added).sum() == len(kf)  # every recorded position stays
+    assert added.any()
+    for agent, g in routed.groupby("agent_id"):
+        assert g["t"].is_monotonic_increasing
+        ids = [node.get((round(a, 6), round(b, 6))) for a, b in zip(g["x"], g["y"])]
+        for i in range(1, len(ids)):
+            if added[g.index[i]] or added[g.index[i - 1]]:  # a step of a routed drive
+                assert (ids[i - 1], ids[i]) in edges, (agent, i)
+
+
+def test_a_folder_of_several_runs_needs_run(small_sweep, tmp_path):
+    line = _error(small_sweep, "--out", tmp_path / "r.html")
+    assert str(small_sweep) in line and "--run" in line and "18 runs" in line
+
+
+def test_a_folder_without_runs(tmp_path):
+    (tmp_path / "empty").mkdir()
+    line = _error(tmp_path / "empty")
+    assert str(tmp_path / "empty") in line
+
+
+def test_a_truncated_parquet_file_is_named(single_run, tmp_path):
+    copy = tmp_path / "copy"
+    shutil.copytree(single_run, copy)
+    [part] = list((copy / "tasks").rglob("part-0.parquet"))
+    data = part.read_bytes()
+    part.write_bytes(data[: len(data) // 2])
+    line = _error(copy, "--out", tmp_path / "r.html")
+    assert str(part) in line
+
+
+def _lonlat_city(root: Path) -> Path:
+    """A 5 x 5 street grid in longitude / latitude (node-link JSON, crs epsg:4326) near
+    Times Square, and a scenario of 3 taxis on it."""
+    import json
+
+    nodes, links = [], []
+    for i in range(5):
+        for j in range(5):
+            nodes.append({"id": i * 5 + j, "x": -73.99 + 0.002 * i, "y": 40.75 + 0.002 * j})
+    for i in range(5):
+        for j in range(5):
+            for di, dj, m in ((1, 0, 168.6), (0, 1, 222.4)):
+                if i + di < 5 and j + dj < 5:
+                    a, b = i * 5 + j, (i + di) * 5 + j + dj
+                    links += [{"source": a, "target": b, "length": m, "speed": 10.0},
+                              {"source": b, "target": a, "length": m, "speed": 10.0}]
+    (root / "grid.json").write_text(json.dumps({"directed": True, "graph": {"crs": "epsg:4326"},
+                                                "nodes": nodes, "links": links}))
+    p = root / "ll.toml"
+    p.write_text('name = "ll"\nseed = 0\nduration = 1500.0\n[world]\nnetwork = "grid.json"\n'
+                 '[fleet]\nagents = 3\n[tasks]\nsource = "poisson"\nrate = 0.02\n'
+                 'count = 15\nmax_wait = 600.0\n[dispatch]\nallocator = "hungarian"\n',
+                 encoding="utf-8")
+    execute(load_scenario(p).runs(), root / "run")
+    return root / "run"
+
+
+def test_kepler_trips_in_lon_lat(tmp_path):
+    import json
+
+    pytest.importorskip("pyproj")
+    run = _lonlat_city(tmp_path)
+    r = run_cli("replay", run, "--kepler", "--out", tmp_path / "t.geojson", "--epoch", "1e9")
+    assert r.returncode == 0, r.stderr
+    fc = json.loads((tmp_path / "t.geojson").read_text())
+    assert fc["type"] == "FeatureCollection" and fc["features"]
+    vehicles = _table(run, "vehicles")
+    by_vehicle: dict[int, list] = {}
+    for f in fc["features"]:
+        assert f["geometry"]["type"] == "LineString"
+        props = f["properties"]
+        assert set(props) == {"vehicle_id", "state", "passengers"}
+        coords = f["geometry"]["coordinates"]
+        assert len(coords) >= 2 and all(len(c) == 4 and c[2] == 0 for c in coords)
+        for lon, lat, _, _ in coords:  # on the grid, in degrees
+            assert -73.9901 <= lon <= -73.9819 and 40.7499 <= lat <= 40.7581
+        ts = [c[3] for c in coords]
+        assert ts == sorted(ts) and ts[0] >= 1e9
+        by_vehicle.setdefault(props["vehicle_id"], []).append((ts[0], ts[-1], props["state"]))
+    assert set(by_vehicle) == set(vehicles["agent_id"].astype(int))
+    for spells in by_vehicle.values():  # each vehicle's spells follow each other
+        spells.sort()
+        assert all(a[1] == pytest.approx(b[0]) for a, b in zip(spells, spells[1:]))
+    states = {s for spells in by_vehicle.values() for _, _, s in spells}
+    assert {"idle", "to_pickup", "occupied"} <= states
+
+
+def test_kepler_needs_a_network_with_a_crs(road_run, tmp_path):
+    line = _error(road_run, "--kepler", "--out", tmp_path / "t.geojson")
+    assert "no CRS" in line and str(road_run) in line
