@@ -1,5 +1,5 @@
 """One run: wiring the space, the fleet, the task source, the dispatcher and the subscribers
-onto one SimPy environment. Nothing here is reached back into during the run:
+onto one SimPy environment. Nothing here is reached back into during the run::
 
     TaskSource ──release──▶ TaskBook ◀──assign/pickup/close── Operator (vehicles, drivers)
         │                      ▲  │                               ▲     │
