@@ -135,7 +135,7 @@ class Space(ABC):
     @classmethod
     @abstractmethod
     def small(cls, seed: int = 0) -> Space:
-        """A small instance for the plugin checks of :mod:`dispatch.testing`."""
+        """A small instance for the plugin checks (:mod:`dispatch.check_common`)."""
 
     # ------------------------------------------------------------ once built
 
@@ -208,7 +208,7 @@ class Space(ABC):
     @abstractmethod
     def sample_views(self, rng: np.random.Generator, n: int, m: int):
         """``n`` random agent views and ``m`` random task views in the space (for the planner
-        checks of :mod:`dispatch.testing`): a pair of tuples of
+        checks of :mod:`dispatch.check_planners`): a pair of tuples of
         :class:`dispatch.contracts.AgentView` and :class:`dispatch.contracts.TaskView`."""
 
     def stands(self, loc: Location) -> tuple[int, float, bool] | None:
