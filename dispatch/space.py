@@ -23,7 +23,7 @@ Two spaces ship with the kernel, registered in :data:`KINDS`:
 
 A third space is one module with a :class:`Space` subclass (the abstract methods below, and
 the class attributes it changes), a planner that serves its kind, an entry in :data:`KINDS`
-and its branch in the ``[world]`` parsing of :mod:`dispatch.scenario`.
+and its branch in the ``[world]`` parsing of :mod:`dispatch.scenario_sections`.
 
 Planners declare the spaces they serve (:attr:`dispatch.contracts.Planner.spaces`); a planner
 asked to work in another space is a scenario error found at validate time.
