@@ -1,5 +1,5 @@
-"""The plugin checks (dispatch.check_*): every built-in plugin passes the checks; deliberately broken plugins are
-caught by the check that names their bug; the documented allocator passes; ``dispatch check``;
+"""The plugin checks (dispatch.check_*): every built-in plugin passes the checks; deliberately
+broken plugins are caught by the check that names their bug; the documented allocator passes; ``dispatch check``;
 a misbehaving plugin inside a run stops it with one line naming the plugin, run and decision."""
 
 from __future__ import annotations
