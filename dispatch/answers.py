@@ -3,8 +3,8 @@ task once, at a finite cost (:func:`validate`); a multi-request answer's routes 
 stops in a feasible order (:func:`route_stops`). Ids are looked up by binary search
 (:func:`finders`), so a decision's answer is checked without a dict over all its agents.
 
-The dispatcher checks every answer with these before the hand-out; :mod:`dispatch.testing` and
-plugin tests use them too.
+The dispatcher checks every answer with these before the hand-out;
+:mod:`dispatch.check_allocators` and plugin tests use them too.
 """
 
 from __future__ import annotations

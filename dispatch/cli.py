@@ -501,13 +501,17 @@ def _sweep(args, console) -> int:
 
 
 def _check(args, console) -> int:
-    """``dispatch check NAME``: run :mod:`dispatch.testing`'s checks on an installed plugin;
+    """``dispatch check NAME``: run the plugin checks (:mod:`dispatch.check_allocators`, ...) on
+    an installed plugin;
     one line per check; exit 0 when all pass, 1 otherwise."""
     import tomllib
 
     from dispatch.errors import PluginError
     from dispatch.registry import available, load
-    from dispatch.testing import check_allocator, check_charger, check_planner, check_repositioner
+    from dispatch.check_allocators import check_allocator
+    from dispatch.check_chargers import check_charger
+    from dispatch.check_planners import check_planner
+    from dispatch.check_repositioners import check_repositioner
 
     all_kinds = ("allocator", "planner", "repositioner", "charger")
     kinds = [k for k in all_kinds if args.name in available(k)]

@@ -59,7 +59,7 @@ from dispatch.tasks import TaskBook, TaskState
 if TYPE_CHECKING:
     import simpy
 
-    from dispatch.scenario import CommsConfig, DispatchConfig
+    from dispatch.config import CommsConfig, DispatchConfig
     from dispatch.tasks import Task
     from dispatch.vehicles import Fleet, Operator
 

@@ -287,7 +287,7 @@ class Dispatcher:
                 self._recorded(p, allocation, pair_cost)
                 return
         else:
-            def still(a: int) -> bool:  # a vehicle of the decision, as it was then
+            def vehicle_unchanged(a: int) -> bool:  # a vehicle of the decision, as it was then
                 v = by_id[a]
                 if a not in holding:
                     return not v.busy
@@ -300,7 +300,8 @@ class Dispatcher:
                 return task.state is TaskState.OPEN if t not in p.holder else (
                     task.state is TaskState.ASSIGNED and task.agent_id == p.holder[t])
 
-            handed = tuple((a, t) for a, t in allocation.pairs if available(t) and still(a))
+            handed = tuple((a, t) for a, t in allocation.pairs
+                           if available(t) and vehicle_unchanged(a))
             routes = allocation.__dict__.get("_checked_routes") or {}
             if routes:  # a route planned before the deliberation is stale: dropped
                 handed = tuple((a, t) for a, t in handed if a not in routes)
@@ -320,7 +321,7 @@ class Dispatcher:
             for (aid, tid), c in zip(handed, pair_cost):  # allocation.pairs is handed
                 self.operator.assign(by_task[tid], by_id[aid], c)
             return
-        self._reassign(p, holding, handed, pair_cost, still)
+        self._reassign(p, holding, handed, pair_cost, vehicle_unchanged)
 
     def _follow(self, p: _Pending, allocation: Allocation, routes: dict,
                 pair_cost: list[float]) -> None:
@@ -364,7 +365,7 @@ class Dispatcher:
         tally.decisions += 1
 
     def _reassign(self, p: _Pending, holding: dict, handed: tuple, pair_cost: list[float],
-                  still) -> None:
+                  vehicle_unchanged) -> None:
         """The hand-out of a decision with re-assignment before pickup."""
         by_task = {t.id: t for t in p.tasks}
         by_id = self.fleet.by_id
@@ -372,7 +373,7 @@ class Dispatcher:
         # or none while its task goes to another vehicle; otherwise it keeps it
         new_task = dict(handed)
         taken = set(new_task.values())
-        give = sorted(a for a, t in holding.items() if still(a) and (
+        give = sorted(a for a, t in holding.items() if vehicle_unchanged(a) and (
             new_task.get(a, t) != t or (a not in new_task and t in taken)))
         for a in give:
             self.operator.give_up(by_id[a])

@@ -278,7 +278,7 @@ class Recorder:
                              f" values, expected {len(names)} ({', '.join(names)})")
         else:
             cols = dict(zip(names, zip(*rows))) if rows else {k: () for k in names}
-        cols["run_id"] = _Same(self.run_id, len(rows))
+        cols["run_id"] = ConstantColumn(self.run_id, len(rows))
         for k, v in self.partition.items():
             if k in cols and any(x != v for x in cols[k]):
                 bad = next(x for x in cols[k] if x != v)
@@ -358,7 +358,7 @@ class Recorder:
                 self._rows[name] = []
 
 
-class _Same(tuple):
+class ConstantColumn(tuple):
     """A column of ``n`` times the same value (``run_id``): a tuple, that also says so."""
 
     def __new__(cls, value, n: int):
@@ -378,7 +378,7 @@ def arrow_column(values, typ: pa.DataType) -> pa.Array:
     if isinstance(values, np.ndarray) and values.ndim == 1 and (
             (typ == _F and values.dtype == np.float64) or (typ == _I and values.dtype == np.int64)):
         return pa.Array.from_buffers(typ, n, [None, pa.py_buffer(np.ascontiguousarray(values))])
-    if isinstance(values, _Same) and typ == _S and type(values.value) is str:
+    if isinstance(values, ConstantColumn) and typ == _S and type(values.value) is str:
         one = values.value.encode()
         offsets = np.arange(n + 1, dtype=np.int64) * len(one)
         if offsets[-1] < 2**31:

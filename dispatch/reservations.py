@@ -465,7 +465,7 @@ class Traffic:
 # ----------------------------------------------------------------------------- timed drives
 
 
-class Hands:
+class DriveContext:
     """What the timed drives need of the run (the operator's): the task book, the fleet's
     index, the service time, the dispatcher's wake-up and a breakdown to finish later."""
 
@@ -475,9 +475,9 @@ class Hands:
         self.notify, self.breakdown = notify, breakdown
 
 
-def _start(traffic: Traffic, hands: Hands) -> None:
+def _start(traffic: Traffic, ctx: DriveContext) -> None:
     for t in traffic.vehicles.values():
-        t.vehicle.proc = traffic.env.process(_drive(traffic, hands, t))
+        t.vehicle.proc = traffic.env.process(_drive(traffic, ctx, t))
 
 
 def begin_wait(traffic: Traffic, t: Timed) -> None:
@@ -496,22 +496,22 @@ def end_wait(t: Timed, now: float) -> None:
         t.waiting_since = None
 
 
-def _finish(traffic: Traffic, hands: Hands, t: Timed):
+def _finish(traffic: Traffic, ctx: DriveContext, t: Timed):
     """Serve the task at its cell (the service time), then idle."""
     env, v, task = traffic.env, t.vehicle, t.task
-    if hands.service_time > 0:
-        yield env.timeout(hands.service_time)
+    if ctx.service_time > 0:
+        yield env.timeout(ctx.service_time)
     v.busy_seconds += env.now - v.busy_since
     t.task = None
     v.completed += 1
     v.stops = []
-    hands.fleet.refresh(v)
-    hands.book.close(task, _COMPLETED)
+    ctx.fleet.refresh(v)
+    ctx.book.close(task, _COMPLETED)
     traffic.emit(env.now, "idle", v.id, -1, v.loc)
-    hands.notify()
+    ctx.notify()
 
 
-def _drive(traffic: Traffic, hands: Hands, t: Timed):
+def _drive(traffic: Traffic, ctx: DriveContext, t: Timed):
     """Process (one per vehicle for the whole run): follow the timed route that the traffic
     keeps for this vehicle, whatever it is for: its task (then serve it), parking out of
     someone's way while idle, or holding its cell (a one-cell route). Without a route to its
@@ -532,9 +532,9 @@ def _drive(traffic: Traffic, hands: Hands, t: Timed):
                 yield t.changed
             elif v.loc == task.loc:
                 t.arrived = True
-                hands.book.picked_up(task)
+                ctx.book.picked_up(task)
                 try:
-                    yield from _finish(traffic, hands, t)
+                    yield from _finish(traffic, ctx, t)
                 except simpy.Interrupt:  # broke down while serving: breakdown() did the rest
                     continue
                 t.arrived = False
@@ -576,8 +576,8 @@ class TimedExecution:
 
     def __init__(self, traffic: Traffic, op) -> None:
         self.traffic, self.op = traffic, op
-        self.hands = Hands(op.book, op.fleet, op.service_time, op.notify, op.breakdown)
-        _start(traffic, self.hands)
+        self.context = DriveContext(op.book, op.fleet, op.service_time, op.notify, op.breakdown)
+        _start(traffic, self.context)
 
     @property
     def env(self):

@@ -7,7 +7,7 @@ It writes ``dispatch-NAME/`` holding
   ``dispatch.allocators`` as ``NAME``;
 * ``dispatch_NAME/allocator.py``: a working allocator (the cheapest feasible pair first, a
   parameter checked in the constructor) to edit, its docstring saying what the contract asks;
-* ``tests/test_allocator.py``: :func:`dispatch.testing.check_allocator` on it (pytest);
+* ``tests/test_allocator.py``: :func:`dispatch.check_allocators.check_allocator` on it (pytest);
 * ``README.md``: install (``pip install -e .``), check (``dispatch check NAME``), use it in a
   scenario.
 
@@ -32,7 +32,7 @@ name = "dispatch-{dist}"
 version = "0.1.0"
 description = "The {name} allocator for the dispatch simulator"
 requires-python = ">=3.11"
-# dispatch-sim: the simulator (its contracts and dispatch.testing); numpy for the cost matrix
+# dispatch-sim: the simulator (its contracts and plugin checks); numpy for the cost matrix
 dependencies = ["dispatch-sim", "numpy>=1.26"]
 
 [project.optional-dependencies]
@@ -92,7 +92,7 @@ class {cls}(Allocator):
 TEST = '''"""The simulator's own plugin checks (valid answers, no mutation, determinism, rng
 use)."""
 
-from dispatch.testing import check_allocator
+from dispatch.check_allocators import check_allocator
 
 from {pkg}.allocator import {cls}
 

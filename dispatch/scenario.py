@@ -1,5 +1,7 @@
 """Scenario files: TOML parsed once into the frozen, typed configuration of
-:mod:`dispatch.config`.
+:mod:`dispatch.config`; the tables that depend on one another (fleet, tasks, dispatch, comms,
+sweep) here, the self-contained ones in :mod:`dispatch.scenario_sections`; and the limits a
+scenario's runs must keep (:func:`check_limits`).
 
 Every mistake (an unknown key, a wrong type, an impossible value) raises one
 :class:`~dispatch.errors.ScenarioError` that names the file, the dotted key and the reason.
@@ -15,34 +17,34 @@ import tomllib
 from dataclasses import replace
 from datetime import datetime
 from pathlib import Path
-from typing import Any
 
 from dispatch.config import (
     LIMITS,
-    MAX_AXIS_CELLS,
     MAX_SEED,
-    ROAD_KEYS,
     SOURCES,
-    VOXEL_KEYS,
     CommsConfig,
     DispatchConfig,
     FleetConfig,
     Limits,
-    ObstacleConfig,
-    RepositionConfig,
-    RoadConfig,
     RunSpec,
     Scenario,
     SweepConfig,
     TaskConfig,
-    Vec3,
     WorldConfig,
     _check_fits,
     _short,
     safe_name,
 )
 from dispatch.errors import FORCE_HINT, ScenarioError
-from dispatch.faults import FaultConfig, read_failures
+from dispatch.scenario_sections import (
+    parse_allocators,
+    parse_charging,
+    parse_energy,
+    parse_faults,
+    parse_reposition,
+    parse_world,
+)
+from dispatch.scenario_table import Table
 from dispatch.space import space_class
 from dispatch.traces import (
     Trips,
@@ -57,98 +59,6 @@ from dispatch.traces import (
 )
 
 log = logging.getLogger(__name__)
-
-class _Table:
-    """A TOML table being read: typed getters that raise ScenarioError, unknown-key check."""
-
-    def __init__(self, file: Path, prefix: str, data: Any) -> None:
-        self.file, self.prefix = file, prefix
-        if not isinstance(data, dict):
-            raise ScenarioError(file, prefix.rstrip(".") or "<root>", "must be a table")
-        self.data, self.used = data, set()
-
-    def key(self, k: str) -> str:
-        return f"{self.prefix}{k}"
-
-    def fail(self, k: str, reason: str) -> ScenarioError:
-        return ScenarioError(self.file, self.key(k), reason)
-
-    def get(self, k: str, default: Any) -> Any:
-        self.used.add(k)
-        return self.data.get(k, default)
-
-    def table(self, k: str) -> _Table:
-        return _Table(self.file, self.key(k) + ".", self.get(k, {}))
-
-    def number(self, k, default, *, lo=None, gt=None, hi=None, integer=False, optional=False):
-        v = self.get(k, default)
-        if v is None and optional:
-            return None
-        kind = "an integer" if integer else "a number"
-        if isinstance(v, bool) or not isinstance(v, (int, float) if not integer else int):
-            raise self.fail(k, f"must be {kind}, got {_short(v)}")
-        if not integer and not math.isfinite(v):
-            raise self.fail(k, f"must be finite, got {_short(v)}")
-        if lo is not None and v < lo:
-            raise self.fail(k, f"must be >= {lo}, got {_short(v)}")
-        if gt is not None and v <= gt:
-            raise self.fail(k, f"must be > {gt}, got {_short(v)}")
-        if hi is not None and v > hi:
-            raise self.fail(k, f"must be <= {hi}, got {_short(v)}")
-        return int(v) if integer else float(v)
-
-    def string(self, k, default, choices=None) -> str:
-        v = self.get(k, default)
-        if not isinstance(v, str) or not v:
-            raise self.fail(k, f"must be a non-empty string, got {_short(v)}")
-        if choices and v not in choices:
-            raise self.fail(k, f"must be one of {', '.join(choices)}; got {_short(v)}")
-        return v
-
-    def vec3(self, k, default, *, gt=0.0) -> Vec3:
-        v = self.get(k, default)
-        if (
-            not isinstance(v, (list, tuple))
-            or len(v) != 3
-            or any(isinstance(x, bool) or not isinstance(x, (int, float)) for x in v)
-        ):
-            raise self.fail(k, f"must be a list of 3 numbers, got {_short(v)}")
-        if any(not math.isfinite(x) or x <= gt for x in v):
-            raise self.fail(k, f"every entry must be finite and > {gt}, got {_short(v)}")
-        return tuple(float(x) for x in v)  # type: ignore[return-value]
-
-    def str_list(self, k) -> tuple[str, ...]:
-        v = self.get(k, [])
-        if not isinstance(v, list) or any(not isinstance(x, str) or not x for x in v):
-            raise self.fail(k, f"must be a list of names, got {_short(v)}")
-        return tuple(v)
-
-    def int_list(self, k, lo=None, hi=None) -> tuple[int, ...]:
-        v = self.get(k, [])
-        if not isinstance(v, list) or any(isinstance(x, bool) or not isinstance(x, int) for x in v):
-            raise self.fail(k, f"must be a list of integers, got {_short(v)}")
-        if lo is not None and any(x < lo for x in v):
-            raise self.fail(k, f"every entry must be >= {lo}, got {_short(v)}")
-        if hi is not None and any(x > hi for x in v):
-            raise self.fail(k, f"every entry must be <= {hi}, got {_short(v)}")
-        return tuple(v)
-
-    def params(self, k) -> tuple[tuple[str, Any], ...]:
-        v = self.get(k, {})
-        if not isinstance(v, dict):
-            raise self.fail(k, "must be a table of parameters")
-        return tuple(sorted(v.items()))
-
-    def params_all(self) -> tuple[tuple[str, Any], ...]:
-        """This whole table as sorted parameters."""
-        self.used.update(self.data)
-        return tuple(sorted(self.data.items()))
-
-    def done(self) -> None:
-        unknown = sorted(set(self.data) - self.used)
-        if unknown:
-            known = ", ".join(sorted(self.used))
-            raise self.fail(unknown[0], f"unknown key (known keys here: {known})")
 
 
 def load_scenario(path: str | Path, *, force: bool = False) -> Scenario:
@@ -178,7 +88,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     """Validate an already-decoded TOML document (see :func:`load_scenario`); ``limits`` bound
     the size of the files it names (None: no bound)."""
     max_bytes = None if limits is None else limits.input_bytes
-    root = _Table(path, "", data)
+    root = Table(path, "", data)
     name = safe_name(root.string("name", path.stem), safe_name(path.stem))
     description = root.get("description", "")
     if not isinstance(description, str):
@@ -187,7 +97,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     duration = root.number("duration", 3600.0, gt=0.0)
 
     w = root.table("world")
-    world = _parse_world(w, path)
+    world = parse_world(w, path)
     w.done()
 
     f = root.table("fleet")
@@ -214,7 +124,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
         fleet = replace(fleet, agents=agents, start=rows, start_file=start_path,
                         capacities=read_fleet_capacities(start_path, max_bytes)[:agents])
     if "energy" in f.data:
-        fleet = replace(fleet, energy=_parse_energy(f.table("energy"), fleet, world))
+        fleet = replace(fleet, energy=parse_energy(f.table("energy"), fleet, world))
     f.done()
 
     t = root.table("tasks")
@@ -297,7 +207,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
                              f"a small range for agents that cannot talk), got {comms.loss!r}")
     c.done()
 
-    faults = _parse_faults(root.table("faults"), path)
+    faults = parse_faults(root.table("faults"), path)
 
     s = root.table("sweep")
     sweep = SweepConfig(
@@ -308,10 +218,10 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
         batch_window=_windows(s),
         reposition=s.str_list("reposition"),
     )
-    disp = _parse_allocators(d, s, disp, sweep)
+    disp = parse_allocators(d, s, disp, sweep)
     declared = "reposition" in root.data
-    reposition = _parse_reposition(root.table("reposition"), sweep, s)
-    charging = _parse_charging(root, path, fleet, faults)
+    reposition = parse_reposition(root.table("reposition"), sweep, s)
+    charging = parse_charging(root, path, fleet, faults)
     s.done()
     root.done()
 
@@ -351,7 +261,7 @@ def _check_pooling(path: Path, world: WorldConfig, fleet: FleetConfig, tasks: Ta
         raise ScenarioError(path, "tasks.trace", "passengers above 1 need a road network")
 
 
-def _parse_start(t: _Table, source: str) -> datetime | None:
+def _parse_start(t: Table, source: str) -> datetime | None:
     """``[tasks] start``: the date-time of second 0 of a trace of ``departure_time`` date-times
     (an ISO 8601 string such as "2014-12-21T00:00", or a TOML date-time)."""
     v = t.get("start", None)
@@ -366,7 +276,7 @@ def _parse_start(t: _Table, source: str) -> datetime | None:
                               f"{_short(v)}") from None
 
 
-def _parse_max_snap(t: _Table, source: str, world: WorldConfig) -> float | None:
+def _parse_max_snap(t: Table, source: str, world: WorldConfig) -> float | None:
     """``[tasks] max_snap``: metres (> 0) a trace's pickup or drop-off may lie from the road
     network's nearest node."""
     v = t.number("max_snap", None, gt=0.0, optional=True)
@@ -376,7 +286,7 @@ def _parse_max_snap(t: _Table, source: str, world: WorldConfig) -> float | None:
     return v
 
 
-def _within_snap(t: _Table, trips: Trips, world: WorldConfig, max_snap: float) -> Trips:
+def _within_snap(t: Table, trips: Trips, world: WorldConfig, max_snap: float) -> Trips:
     """The trace's trips within ``max_snap`` metres of the network (loaded here: it is cached
     for the run); ScenarioError when none is left or the network cannot be loaded."""
     from dispatch.roads import load_network
@@ -401,7 +311,7 @@ def _within_snap(t: _Table, trips: Trips, world: WorldConfig, max_snap: float) -
     return kept
 
 
-def _windows(s: _Table) -> tuple[float, ...]:
+def _windows(s: Table) -> tuple[float, ...]:
     """``[sweep] batch_window``: distinct finite seconds >= 0."""
     v = s.get("batch_window", [])
     if not isinstance(v, list) or any(isinstance(x, bool) or not isinstance(x, (int, float))
@@ -411,7 +321,7 @@ def _windows(s: _Table) -> tuple[float, ...]:
     return tuple(float(x) for x in v)
 
 
-def _parse_empirical(t: _Table, tasks: TaskConfig, world: WorldConfig,
+def _parse_empirical(t: Table, tasks: TaskConfig, world: WorldConfig,
                      fleet: FleetConfig) -> TaskConfig:
     """``[tasks] source = "empirical"``: ``trips_per_day`` and ``weekday`` (see
     :mod:`dispatch.empirical`); the sample is snapped to the Chicago network only."""
@@ -433,210 +343,6 @@ def _parse_empirical(t: _Table, tasks: TaskConfig, world: WorldConfig,
                                       "number of trips over the 24 h day)")
     return replace(tasks, trips_per_day=t.number("trips_per_day", None, gt=0.0),
                    weekday=t.string("weekday", "all", ("all", *WEEKDAYS)))
-
-
-def _parse_congestion(w: _Table, network: str) -> tuple[float, ...]:
-    """``[world] congestion``: "chicago_taxi" (the factors calibrated from the taxi sample), a
-    list of 24 factors > 0 (hour 0 first), or false / absent (free-flow times)."""
-    v = w.get("congestion", False)
-    if v is False:
-        return ()
-    if v == "chicago_taxi":
-        from dispatch.empirical import load_factors
-
-        return load_factors().factors
-    ok = isinstance(v, list) and len(v) == 24 and all(
-        not isinstance(x, bool) and isinstance(x, (int, float)) and math.isfinite(x) and x > 0
-        for x in v)
-    if not ok:
-        raise w.fail("congestion", f"must be 'chicago_taxi', false or a list of 24 factors > 0 "
-                                   f"(one per hour of day), got {_short(v)}")
-    return tuple(float(x) for x in v)
-def _parse_allocators(d: _Table, s: _Table, disp: DispatchConfig,
-                      sweep: SweepConfig) -> DispatchConfig:
-    """The allocators a file names (``dispatch.allocator``, ``sweep.allocator``), checked
-    against the installed ones (an unknown name suggests the closest), and
-    ``[dispatch.allocator_params]`` split into the flat keys (every allocator gets them) and
-    one table per allocator or named variant (``[dispatch.allocator_params.magnnet]``,
-    ``[dispatch.allocator_params."magnnet:paper"]``); a variant ``name:v`` in a list needs its
-    table."""
-    from dispatch import registry
-
-    installed = registry.available("allocator")
-    p = _Table(d.file, d.key("allocator_params") + ".", dict(disp.allocator_params))
-    named = {disp.allocator, *sweep.allocator}
-
-    def known(tab: _Table, key: str, name: str) -> None:
-        base, colon, variant = name.partition(":")
-        if base not in installed:
-            raise tab.fail(key, registry.unknown("allocator", name))
-        if colon and not variant:
-            raise tab.fail(key, f"{name!r}: a named variant is 'allocator:variant'")
-
-    flat, tables = [], []
-    for k, v in disp.allocator_params:
-        if isinstance(v, dict) and (k.partition(":")[0] in installed or ":" in k or k in named):
-            quoted = f'"{k}"' if ":" in k else k  # as the file writes the table's name
-            known(p, quoted, k)
-            tables.append((k, _Table(d.file, p.key(quoted) + ".", v).params_all()))
-        else:
-            flat.append((k, v))
-    for tab, names in ((d, (disp.allocator,)), (s, sweep.allocator)):
-        for name in names:
-            known(tab, "allocator", name)
-            if ":" in name and name not in dict(tables):
-                raise tab.fail("allocator", f"{name!r} names a variant of "
-                                            f"{name.partition(':')[0]!r} without parameters: "
-                                            f"add a [dispatch.allocator_params.\"{name}\"] "
-                                            "table")
-    return replace(disp, allocator_params=tuple(flat), allocator_tables=tuple(tables))
-
-
-def _parse_reposition(r: _Table, sweep: SweepConfig, s: _Table) -> RepositionConfig:
-    """``[reposition]``: the policy (an installed repositioner), its timer and look-back, and
-    one ``[reposition.<name>]`` table of constructor arguments per policy that runs. Names are
-    checked against the installed repositioners here; a policy's own arguments are checked by
-    its constructor, the space it serves by :func:`dispatch.plugins.check_repositioner`
-    (``dispatch validate`` does both)."""
-    from dispatch import registry
-
-    installed = registry.available("repositioner")
-    policy = r.string("policy", "stay")
-    interval = r.number("interval", 300.0, gt=0.0)
-    horizon = r.number("horizon", 1800.0, gt=0.0)
-
-    def known(tab: _Table, key: str, name: str) -> None:
-        if name not in installed:
-            raise tab.fail(key, f"unknown repositioner {name!r}; installed repositioners: "
-                                f"{', '.join(installed) or 'none'}")
-
-    known(r, "policy", policy)
-    for name in sweep.reposition:
-        known(s, "reposition", name)
-    running = set(sweep.reposition or (policy,))
-    params = []
-    for name in sorted(k for k in r.data if k not in ("policy", "interval", "horizon")):
-        if not isinstance(r.data[name], dict):
-            raise r.fail(name, "unknown key (known keys here: horizon, interval, policy, and "
-                               "one [reposition.<name>] table of parameters per repositioner)")
-        known(r, name, name)
-        if name not in running:
-            raise r.fail(name, f"parameters of repositioner {name!r}, which does not run "
-                               f"(running: {', '.join(sorted(running))})")
-        params.append((name, r.params(name)))
-    r.done()
-    return RepositionConfig(policy=policy, interval=interval, horizon=horizon,
-                            params=tuple(params))
-
-
-def _parse_faults(f: _Table, path: Path) -> FaultConfig:
-    """``[faults]``: vehicle breakdowns (a rate, a file) and communication blackouts."""
-    rate = f.number("rate", 0.0, lo=0.0)
-    repair = f.get("repair", 600.0)
-    if isinstance(repair, bool) or not isinstance(repair, (int, float)) or math.isnan(repair) \
-            or repair <= 0:
-        raise f.fail("repair", f"must be a number of seconds > 0 (inf: for good), got {repair!r}")
-    events: tuple = ()
-    file = f.get("file", None)
-    if file is not None:
-        if not isinstance(file, str) or not file:
-            raise f.fail("file", f"must be a CSV file of t, vehicle_id, duration; got {file!r}")
-        events = read_failures((path.parent / file).resolve())
-    on_board = f.string("on_board", "transfer", ("transfer", "fail"))
-    tow = f.number("tow", 3600.0, gt=0.0)
-    windows = f.get("blackout", [])
-    if not isinstance(windows, list) or any(
-            not isinstance(w, list) or len(w) != 2
-            or any(isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x)
-                   or x < 0 for x in w) or w[0] >= w[1] for w in windows):
-        raise f.fail("blackout", f"must be a list of [t0, t1] windows with 0 <= t0 < t1, "
-                                 f"got {windows!r}")
-    region = f.get("blackout_region", None)
-    if region is not None:
-        if not isinstance(region, list) or len(region) != 4 or any(
-                isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x)
-                for x in region) or region[0] > region[2] or region[1] > region[3]:
-            raise f.fail("blackout_region", f"must be [x0, y0, x1, y1] in metres with x0 <= x1 "
-                                            f"and y0 <= y1, got {region!r}")
-        if not windows:
-            raise f.fail("blackout_region", "needs blackout windows")
-    f.done()
-    return FaultConfig(rate=rate, repair=float(repair), events=events, on_board=on_board, tow=tow,
-                       blackout=tuple((float(a), float(b)) for a, b in windows),
-                       region=None if region is None else tuple(float(x) for x in region))
-
-
-def _parse_world(w: _Table, path: Path) -> WorldConfig:
-    """``[world]``: a voxel world (size, cell, obstacles) or a road network (network, ...)."""
-    physics = w.get("physics", None)
-    if physics is not None and not isinstance(physics, bool):
-        raise w.fail("physics", f"must be true or false, got {physics!r}")
-    if "network" in w.data:
-        for k in VOXEL_KEYS:
-            if k in w.data:
-                raise w.fail(k, "is a voxel-world key; a road network (world.network) has none")
-        network = w.string("network", "manhattan")
-        blocks = w.int_list("blocks", lo=2) if "blocks" in w.data else (20, 20)
-        if len(blocks) != 2:
-            raise w.fail("blocks", f"must be [columns, rows] (intersections), got {list(blocks)}")
-        block = w.number("block", 200.0, gt=0.0)
-        speed = w.number("speed", 10.0, gt=0.0)
-        if network != "manhattan":
-            for k in ("blocks", "block", "speed"):
-                if k in w.data:
-                    raise w.fail(k, f"only describes network = 'manhattan' (not {network!r})")
-        if physics:
-            raise w.fail("physics", "the PyBullet mirror shows voxel worlds; a road network "
-                                    "runs without it")
-        edge_events = w.get("edge_events", False)
-        if not isinstance(edge_events, bool):
-            raise w.fail("edge_events", f"must be true or false, got {edge_events!r}")
-        roads = RoadConfig(network=network, base=path.parent.resolve(), blocks=tuple(blocks),
-                           block=block, speed=speed, congestion=_parse_congestion(w, network))
-        return WorldConfig(roads=roads, physics=bool(physics), edge_events=edge_events)
-    for k in (*ROAD_KEYS, "edge_events", "congestion"):
-        if k in w.data:
-            raise w.fail(k, "describes a road network; set world.network to use one")
-    size = w.vec3("size", [50, 50, 30])
-    cell = w.number("cell", 1.0, gt=0.0)
-    for axis, s in zip("xyz", size):
-        if not s / cell <= MAX_AXIS_CELLS:
-            raise w.fail("cell", f"{cell} m cells make the world {s / cell:.3g} cells along "
-                                 f"{axis} ({s} m); at most {MAX_AXIS_CELLS:,} per axis")
-    for axis, s in zip("xyz", size):
-        if abs(s / cell - round(s / cell)) > 1e-9 or round(s / cell) < 1:
-            raise w.fail("size", f"{axis} size {s} is not a whole number of {cell} m cells")
-    o = w.table("obstacles")
-    obstacles = ObstacleConfig(
-        count=o.number("count", 10, lo=0, integer=True),
-        min_size=o.vec3("min_size", [3, 3, 5]),
-        max_size=o.vec3("max_size", [10, 10, 30]),
-    )
-    for a, (lo_, hi_, s) in enumerate(zip(obstacles.min_size, obstacles.max_size, size)):
-        if lo_ > hi_:
-            raise o.fail("min_size", f"entry {a} ({lo_}) is larger than max_size's ({hi_})")
-        if a < 2 and hi_ > s:
-            raise o.fail("max_size", f"entry {a} ({hi_} m) does not fit in the world ({s} m)")
-    o.done()
-    world = WorldConfig(size=size, cell=cell, obstacles=obstacles,
-                        physics=True if physics is None else physics)
-    _check_obstacles_fit(o, world)
-    return world
-
-
-def _check_obstacles_fit(o: _Table, world: WorldConfig) -> None:
-    """Obstacles stand one free cell apart: their smallest footprints must fit the ground."""
-    nx, ny, _ = world.shape
-    w = max(1, round(world.obstacles.min_size[0] / world.cell))
-    d = max(1, round(world.obstacles.min_size[1] / world.cell))
-    need = world.obstacles.count * (w + 1) * (d + 1)
-    have = (nx + 1) * (ny + 1)
-    if need > have // 2:
-        raise o.fail(
-            "count",
-            f"{world.obstacles.count} obstacles of at least {w}x{d} cells (plus a free margin) "
-            f"do not fit in a {nx}x{ny} ground with room left to move; use fewer or smaller ones",
-        )
 
 
 def check_limits(sc: Scenario, specs: list[RunSpec], limits: Limits = LIMITS) -> None:
@@ -681,77 +387,3 @@ def check_limits(sc: Scenario, specs: list[RunSpec], limits: Limits = LIMITS) ->
     check_work(sc, specs, refuse)
 
 
-def _parse_energy(e: _Table, fleet: FleetConfig, world: WorldConfig):
-    """``[fleet.energy]`` (see :mod:`dispatch.battery`): batteries on a road network."""
-    from dispatch.energy_config import EnergyConfig, read_socs
-
-    if "energy" not in space_class(world.space).features:
-        raise e.fail("battery_kwh", "energy needs a road network ([world] network)")
-    wh = e.get("wh_per_km", 140.0)
-    table: tuple = ()
-    if isinstance(wh, list):
-        if len(wh) < 2 or any(not isinstance(r, list) or len(r) != 2 or any(
-                isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x)
-                or x < 0 for x in r) for r in wh) or any(
-                b[0] <= a[0] for a, b in zip(wh, wh[1:])):
-            raise e.fail("wh_per_km", f"must be a number or a list of [km/h, Wh/km] pairs with "
-                                      f"rising speeds, got {_short(wh)}")
-        table = tuple((float(a), float(b)) for a, b in wh)
-        wh = sum(b for _, b in table) / len(table)
-    else:
-        wh = e.number("wh_per_km", 140.0, gt=0.0)
-    socs = () if fleet.start_file is None else read_socs(fleet.start_file)[:fleet.agents]
-    cfg = EnergyConfig(
-        battery_kwh=e.number("battery_kwh", 50.0, gt=0.0), wh_per_km=wh, speed_table=table,
-        idle_kwh_per_hour=e.number("idle_kwh_per_hour", 0.0, lo=0.0),
-        soc0=e.number("soc0", 1.0, lo=0.0, hi=1.0), reserve=e.number("reserve", 0.1, lo=0.0,
-                                                                     hi=1.0),
-        max_charge_kw=e.number("max_charge_kw", 1e9, gt=0.0), socs=socs,
-        sample=e.number("sample", 900.0, gt=0.0))
-    e.done()
-    return cfg
-
-
-def _parse_charging(root: _Table, path: Path, fleet: FleetConfig, faults):
-    """``[chargers]`` (stations, taper) and ``[charging]`` (strategy, interval,
-    ``[charging.<name>]``); None unless the fleet has energy."""
-    from dispatch import registry
-    from dispatch.energy_config import ChargingConfig, read_stations
-
-    c, g = root.table("chargers"), root.table("charging")
-    if fleet.energy is None:
-        for t, k in ((c, "file"), (g, "strategy")):
-            if t.data:
-                raise t.fail(next(iter(t.data)), "needs [fleet.energy]")
-        return None
-    stations: tuple = ()
-    file = c.get("file", None)
-    if file is not None:
-        if not isinstance(file, str) or not file:
-            raise c.fail("file", f"must be a CSV file of stations, got {_short(file)}")
-        fpath = (path.parent / file).resolve()
-        try:
-            stations = read_stations(fpath)
-        except (OSError, ValueError) as err:
-            raise c.fail("file", str(err)) from None
-    else:
-        fpath = None
-    taper_from = c.number("taper_from", 0.8, lo=0.0, hi=1.0)
-    taper_floor = c.number("taper_floor", 0.2, gt=0.0, hi=1.0)
-    c.done()
-    installed = registry.available("charger")
-    strategy = g.string("strategy", "threshold")
-    if strategy not in installed:
-        raise g.fail("strategy", f"unknown charging strategy {strategy!r}; installed: "
-                                 f"{', '.join(installed)}")
-    interval = g.number("interval", 60.0, gt=0.0)
-    params = []
-    for name in sorted(k for k in g.data if k not in ("strategy", "interval")):
-        if not isinstance(g.data[name], dict) or name not in installed:
-            raise g.fail(name, "unknown key (known keys here: interval, strategy, and one "
-                               "[charging.<name>] table per installed strategy)")
-        params.append((name, g.params(name)))
-    g.done()
-    return ChargingConfig(stations=stations, file=fpath, taper_from=taper_from,
-                          taper_floor=taper_floor, strategy=strategy, interval=interval,
-                          params=tuple(params), tow=faults.tow)

@@ -23,7 +23,7 @@ Two spaces ship with the kernel, registered in :data:`KINDS`:
 
 A third space is one module with a :class:`Space` subclass (the abstract methods below, and
 the class attributes it changes), a planner that serves its kind, an entry in :data:`KINDS`
-and its branch in the ``[world]`` parsing of :mod:`dispatch.scenario`.
+and its branch in the ``[world]`` parsing of :mod:`dispatch.scenario_sections`.
 
 Planners declare the spaces they serve (:attr:`dispatch.contracts.Planner.spaces`); a planner
 asked to work in another space is a scenario error found at validate time.
@@ -135,7 +135,7 @@ class Space(ABC):
     @classmethod
     @abstractmethod
     def small(cls, seed: int = 0) -> Space:
-        """A small instance for the plugin checks of :mod:`dispatch.testing`."""
+        """A small instance for the plugin checks (:mod:`dispatch.check_common`)."""
 
     # ------------------------------------------------------------ once built
 
@@ -208,7 +208,7 @@ class Space(ABC):
     @abstractmethod
     def sample_views(self, rng: np.random.Generator, n: int, m: int):
         """``n`` random agent views and ``m`` random task views in the space (for the planner
-        checks of :mod:`dispatch.testing`): a pair of tuples of
+        checks of :mod:`dispatch.check_planners`): a pair of tuples of
         :class:`dispatch.contracts.AgentView` and :class:`dispatch.contracts.TaskView`."""
 
     def stands(self, loc: Location) -> tuple[int, float, bool] | None:

@@ -146,7 +146,7 @@ def file_keys() -> set[str]:
     """Every string literal of the scenario parser: a field the parser never names is built
     from others (a file's rows, a derived flag) and is not a key of the file."""
     keys = set()
-    for mod in ("scenario", "config"):
+    for mod in ("scenario", "scenario_sections", "config"):
         tree = ast.parse((ROOT / "dispatch" / f"{mod}.py").read_text(encoding="utf-8"))
         keys |= {n.value for n in ast.walk(tree)
                  if isinstance(n, ast.Constant) and isinstance(n.value, str)}

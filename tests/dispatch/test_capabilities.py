@@ -18,7 +18,9 @@ from dispatch.contracts import Allocation, Allocator, Planner
 from dispatch.errors import PluginError, ScenarioError
 from dispatch.plugins import check_runs, travel_times_needed
 from dispatch.scenario import load_scenario
-from dispatch.testing import check_allocator, check_planner, small_network
+from dispatch.check_allocators import check_allocator
+from dispatch.check_common import small_network
+from dispatch.check_planners import check_planner
 from planners.astar import AStarPlanner
 from planners.road import RoadPlanner
 from tests.dispatch.test_trips import SOURCES, road_scenario, write_csv

@@ -17,7 +17,7 @@ from dispatch.errors import ScenarioError
 from dispatch.recorder import TIMING_COLUMNS
 from dispatch.runner import run_one
 from dispatch.scenario import load_scenario
-from dispatch.testing import charging_views, check_charger
+from dispatch.check_chargers import charging_views, check_charger
 
 GRID = 'network = "manhattan"\nblocks = [6, 2]\nblock = 200.0\nspeed = 10.0'
 TERMINAL = {"completed", "expired", "rejected", "unreachable", "cancelled", "failed"}
@@ -231,7 +231,7 @@ def tiny_view(socs, in_use=(0, 0), waiting=(0, 0)):
     0, b (1 plug) at node 10, 5 edges = 50 s away; 50 kW, 50 kWh: a mean charge (20 % -> 80 %)
     takes 2,160 s."""
     from dispatch.charging_strategy import ChargingView
-    from dispatch.testing import small_network
+    from dispatch.check_common import small_network
 
     n = len(socs)
     ro = np.asarray

@@ -108,9 +108,9 @@ def test_recorder_columns_equal_pa_array():
 def test_recorder_constant_column(value, n):
     import pyarrow as pa
 
-    from dispatch.recorder import _Same, arrow_column
+    from dispatch.recorder import ConstantColumn, arrow_column
 
-    got = arrow_column(_Same(value, n), pa.string())
+    got = arrow_column(ConstantColumn(value, n), pa.string())
     got.validate(full=True)
     assert got.equals(pa.array([value] * n, pa.string()))
 

@@ -270,7 +270,7 @@ def test_lazy_costs_without_support_fall_back_with_a_warning(tmp_path, caplog):
 def test_check_planner_checks_the_bounds():
     """``check_planner`` passes ``astar``'s bounds and catches bounds above the costs and
     exact marks on entries that are not exact."""
-    from dispatch.testing import check_planner
+    from dispatch.check_planners import check_planner
 
     assert check_planner(AStarPlanner).ok
 

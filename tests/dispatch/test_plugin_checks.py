@@ -1,5 +1,5 @@
-"""dispatch.testing: every built-in plugin passes the checks; deliberately broken plugins are
-caught by the check that names their bug; the documented allocator passes; ``dispatch check``;
+"""The plugin checks (dispatch.check_*): every built-in plugin passes the checks; deliberately
+broken plugins are caught by the check that names their bug; the documented allocator passes; ``dispatch check``;
 a misbehaving plugin inside a run stops it with one line naming the plugin, run and decision."""
 
 from __future__ import annotations
@@ -14,7 +14,8 @@ from dispatch import cli
 from dispatch.contracts import Allocation, AllocationProblem, Allocator
 from dispatch.errors import AllocationError, PluginError
 from dispatch.registry import load
-from dispatch.testing import check_allocator, check_planner
+from dispatch.check_allocators import check_allocator
+from dispatch.check_planners import check_planner
 from tests.conftest import ROOT
 
 BUILTIN_ALLOCATORS = ["hungarian", "fcfs", "greedy", "random", "auction", "magnnet",

@@ -383,7 +383,7 @@ def test_a_misbehaving_repositioner_stops_the_run_with_one_line(tmp_path, monkey
 
 def test_the_plugin_check_catches_a_bad_repositioner():
     from dispatch.reposition import Repositioner
-    from dispatch.testing import check_repositioner
+    from dispatch.check_repositioners import check_repositioner
 
     class Wild(Repositioner):
         name = "wild"

@@ -13,7 +13,8 @@ import pytest
 
 from allocators.rtv import RtvAllocator
 from dispatch.answers import route_stops, validate
-from dispatch.testing import check_allocator, pooled_problem, route_schedule
+from dispatch.allocation_problems import pooled_problem, route_schedule
+from dispatch.check_allocators import check_allocator
 from tests.dispatch.test_pooling import _run, check_invariants
 
 
@@ -42,7 +43,7 @@ def _all_orders(plan_keys, new_ids):
     its drop-off (a plan's drop-off after its pickup where that is in the plan too), any stop
     first (the kernel re-routes a vehicle whose first stop changes: it finishes the edge it is
     on and drives to the new first stop; the drive it is on counts only when its stop stays
-    first: :func:`dispatch.testing.route_schedule`)."""
+    first: :func:`dispatch.allocation_problems.route_schedule`)."""
     stops = list(plan_keys) + [(k, t) for t in new_ids for k in ("pickup", "dropoff")]
     out = []
 
@@ -338,7 +339,7 @@ def test_invariants_on_random_pooled_runs_with_rtv(tmp_path):
 def test_rtv_answers_single_requests_without_travel():
     """Without ``problem.travel`` (a voxel world) it is the linear assignment."""
     from allocators.hungarian import HungarianAllocator
-    from dispatch.testing import allocation_problems
+    from dispatch.allocation_problems import allocation_problems
 
     for _, build in allocation_problems(0):
         p = build()

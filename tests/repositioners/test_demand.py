@@ -11,7 +11,7 @@ from scipy.sparse.csgraph import dijkstra
 
 from dispatch.legs import RoadPoint
 from dispatch.roads import manhattan
-from dispatch.testing import check_repositioner, reposition_view
+from dispatch.check_repositioners import check_repositioner, reposition_view
 from repositioners.demand import DemandRepositioner, shares
 from repositioners.stay import StayRepositioner
 from repositioners.zones import Zones
