@@ -59,7 +59,7 @@ from typing import Any
 
 import numpy as np
 
-from dispatch.contracts import AgentView, Allocation, AllocationProblem, TaskView
+from dispatch.problem import AgentView, Allocation, AllocationProblem, TaskView
 from dispatch import registry
 from dispatch.errors import AllocationError, PluginError
 from dispatch.legs import as_point
@@ -186,7 +186,7 @@ def pooled_problem(seed: int, n: int, m: int, capacity: int = 3, *, busy: float 
     30-300 s of the direct drive), ``problem.travel`` the road planner's, costs as a pooled
     decision has them: seconds to the pickup of the request's earliest feasible insertion into
     the vehicle's plan (``inf`` where none is feasible)."""
-    from dispatch.contracts import StopView
+    from dispatch.problem import StopView
 
     net = small_network()
     travel = registry.load("planner", net.default_planner)(net).between

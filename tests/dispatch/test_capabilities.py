@@ -14,9 +14,10 @@ import pytest
 from dispatch import registry
 from dispatch.commands import Command
 from dispatch.congestion import CongestedPlanner, HourlyFactors
-from dispatch.contracts import Allocation, Allocator, Planner
+from dispatch.contracts import Allocator, Planner
 from dispatch.errors import PluginError, ScenarioError
 from dispatch.plugins import check_runs, travel_times_needed
+from dispatch.problem import Allocation
 from dispatch.scenario import load_scenario
 from dispatch.testing import check_allocator, check_planner, small_network
 from planners.astar import AStarPlanner
