@@ -64,8 +64,9 @@ import numpy as np
 
 from allocators import _cbba_fast
 from dispatch.comms import Channel, components
-from dispatch.contracts import Allocation, AllocationProblem, Allocator
+from dispatch.contracts import Allocator
 from dispatch.decentralized import run_rounds
+from dispatch.problem import Allocation, AllocationProblem
 
 NONE = -1
 _BIG = np.iinfo(np.int64).max

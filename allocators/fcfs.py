@@ -13,7 +13,8 @@ import math
 
 import numpy as np
 
-from dispatch.contracts import Allocation, AllocationProblem, Allocator
+from dispatch.contracts import Allocator
+from dispatch.problem import Allocation, AllocationProblem
 
 
 class FcfsAllocator(Allocator):

@@ -20,8 +20,8 @@ import numpy as np
 
 from allocators.hungarian import optimal_pairs
 from dispatch.comms import components
-from dispatch.contracts import AllocationProblem
 from dispatch.decentralized import WAIT, DecentralizedAllocator
+from dispatch.problem import AllocationProblem
 
 VIEWS = ("two_hop", "component")
 

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from dispatch.contracts import AllocationProblem
 from dispatch.decentralized import DecentralizedAllocator
+from dispatch.problem import AllocationProblem
 
 
 class RandomAllocator(DecentralizedAllocator):

@@ -62,7 +62,8 @@ import time
 
 import numpy as np
 
-from dispatch.contracts import Allocation, AllocationProblem, Allocator, Bid
+from dispatch.contracts import Allocator
+from dispatch.problem import Allocation, AllocationProblem, Bid
 
 OBJECTIVES = {"delay": 0, "added_time": 1}
 TOL = 5e-10  # (the kernel checks limits with +1e-9; half of it absorbs rounding differences)

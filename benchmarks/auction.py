@@ -35,7 +35,7 @@ from rich.table import Table
 
 from dispatch import registry
 from dispatch.comms import comm_graph, components, diameter
-from dispatch.contracts import AllocationProblem, TaskView
+from dispatch.problem import AllocationProblem, TaskView
 from dispatch.scenario import load_scenario
 from dispatch.world import world_for
 from dispatch.streams import STREAM_ALLOCATOR, STREAM_FLEET, STREAM_TASKS, rng_for

@@ -38,7 +38,7 @@ sys.path.insert(0, str(ROOT))
 
 from scipy.sparse.csgraph import dijkstra  # noqa: E402
 
-from dispatch.contracts import AgentView, TaskView  # noqa: E402
+from dispatch.problem import AgentView, TaskView  # noqa: E402
 from dispatch.scenario import load_scenario  # noqa: E402
 from dispatch.world import world_for  # noqa: E402
 from dispatch.streams import STREAM_FLEET, STREAM_TASKS, rng_for  # noqa: E402

@@ -3,7 +3,7 @@
 Instances: the first decision of ``scenarios/paper_static.toml`` (exact A* costs, UAV/UGV mix,
 M = N tasks) for evaluation seeds 2 000 000 + k (training used seeds from 1 000 000; see
 :mod:`allocators.magnnet.problems`), cached under ``.cache/magnnet``. Every allocator answers
-the same :class:`~dispatch.contracts.AllocationProblem`: the paper's complete communication
+the same :class:`~dispatch.problem.AllocationProblem`: the paper's complete communication
 graph by default, or the graph of ``--comm-range`` metres between the agents' positions, with
 ``--loss`` (probability that one reception of a broadcast is lost).
 
@@ -35,7 +35,7 @@ import time
 
 import numpy as np
 
-from dispatch.contracts import AgentView, AllocationProblem, TaskView
+from dispatch.problem import AgentView, AllocationProblem, TaskView
 from dispatch.registry import load
 
 PAPER = {  # Table I and III of the paper: (MAGNNET cost, gap %, success %)

@@ -17,7 +17,7 @@ import numpy as np
 
 from dispatch import registry
 from dispatch.check_common import small_network
-from dispatch.contracts import AgentView, AllocationProblem, TaskView
+from dispatch.problem import AgentView, AllocationProblem, TaskView
 from dispatch.stops import DROPOFF, TOL, PlannedStop, timetable
 
 
@@ -96,7 +96,7 @@ def pooled_problem(seed: int, n: int, m: int, capacity: int = 3, *, busy: float 
     30-300 s of the direct drive), ``problem.travel`` the road planner's, costs as a pooled
     decision has them: seconds to the pickup of the request's earliest feasible insertion into
     the vehicle's plan (``inf`` where none is feasible)."""
-    from dispatch.contracts import StopView
+    from dispatch.problem import StopView
 
     net = small_network()
     travel = registry.load("planner", net.default_planner)(net).between
@@ -199,7 +199,7 @@ def route_schedule(problem: AllocationProblem, aid: int, rows: list[PlannedStop]
     """Planned arrival times of agent ``aid`` driving the stop rows ``rows`` (of
     :func:`dispatch.answers.route_stops`) from where it is, on ``problem.travel``, by the
     schedule rule (:func:`dispatch.stops.timetable`), or ``(None, why)``: what
-    :meth:`dispatch.vehicles.Operator.route_times` checks, from the problem alone (the vehicle
+    :meth:`dispatch.operator.Operator.route_times` checks, from the problem alone (the vehicle
     leaves now, when ``problem.ready`` says, or when its first planned stop's time says)."""
     travel = problem.travel
     k = int(np.flatnonzero(problem.agent_ids == aid)[0])

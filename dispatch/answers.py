@@ -14,8 +14,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from dispatch.contracts import AgentViews, Allocation, AllocationProblem
 from dispatch.errors import AllocationError
+from dispatch.problem import AgentViews, Allocation, AllocationProblem
 from dispatch.stops import DROPOFF, PICKUP, PlannedStop
 
 

@@ -8,13 +8,13 @@ Chargers (``[chargers]``)
 
 A charging visit is a charge stop of the vehicle's plan (:data:`dispatch.stops.CHARGE`, no
 task; its :class:`Visit`), driven by the operator like any stop
-(:meth:`dispatch.vehicles.Operator.charge`): the vehicle drives to the station, queues
+(:meth:`dispatch.operator.Operator.charge`): the vehicle drives to the station, queues
 (``queue`` event), charges (``charge_start``, ``charge_end``) to the strategy's target and is
 idle again. While on a visit it is neither idle nor busy: no decision considers it. A breakdown
 ends the visit (the energy charged so far counts). Strategies (``dispatch.chargers`` plugins,
 :class:`dispatch.charging_strategy.ChargingStrategy`) decide which idle vehicles go where, every
 ``[charging] interval`` seconds. A vehicle whose battery runs empty is *stranded* and towed to
-the nearest station (:meth:`dispatch.vehicles.Operator.strand`, :meth:`Stations.nearest_node`).
+the nearest station (:meth:`dispatch.operator.Operator.strand`, :meth:`Stations.nearest_node`).
 """
 
 from __future__ import annotations
@@ -35,7 +35,8 @@ from dispatch.legs import as_point
 
 if TYPE_CHECKING:
     from dispatch.events import EventBus
-    from dispatch.vehicles import Fleet, Operator, Vehicle
+    from dispatch.operator import Operator
+    from dispatch.vehicles import Fleet, Vehicle
 
 
 # ----------------------------------------------------------------------------- charging curve

@@ -9,7 +9,7 @@ Each check runs on every problem of :func:`dispatch.allocation_problems.allocati
 indices, several communication components, message loss):
 
 ``construct``   the class builds with the given parameters;
-``valid``       every answer is an :class:`~dispatch.contracts.Allocation` the dispatcher accepts
+``valid``       every answer is an :class:`~dispatch.problem.Allocation` the dispatcher accepts
                 (known ids, no agent or task twice, no ``inf`` pair, whole counters);
 ``progress``    when some pair is finite, the answer assigns at least one;
 ``no-mutation`` the problem (its arrays, views and scalars) is the same after the call, even
@@ -35,7 +35,7 @@ import numpy as np
 from dispatch.allocation_problems import allocation_problems, pooled_problems, route_schedule
 from dispatch.check_common import (Report, constructed, describe_error, perturb_global_rng,
                                    replay, same_snapshot)
-from dispatch.contracts import Allocation, AllocationProblem
+from dispatch.problem import Allocation, AllocationProblem
 from dispatch.errors import AllocationError
 
 

@@ -8,7 +8,7 @@ Scenario section ``[comms]`` (all optional)::
 
 Graph
     At each decision :class:`Hearing` builds the graph over the *idle* agents of that decision
-    (the agents of the :class:`~dispatch.contracts.AllocationProblem`) from the centres of their
+    (the agents of the :class:`~dispatch.problem.AllocationProblem`) from the centres of their
     cells: two agents are linked when their straight-line distance is at most ``range``.
     Obstacles do not block radio, and busy vehicles do not relay (they are not part of the
     decision). The adjacency is symmetric and its diagonal is True (an agent always "hears"
@@ -24,7 +24,7 @@ Messages
 Latency
     Decentralized allocators run in synchronous rounds; a round is as slow as its slowest hop.
     An allocator reports the number of sequential hops of its decision
-    (:attr:`~dispatch.contracts.Allocation.hops`); the dispatcher holds the hand-out back by
+    (:attr:`~dispatch.problem.Allocation.hops`); the dispatcher holds the hand-out back by
     ``hops * latency`` simulated seconds (see :mod:`dispatch.dispatcher`). Centralized methods
     report 0 hops.
 """
@@ -38,7 +38,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.spatial import cKDTree
 from scipy.sparse.csgraph import connected_components, shortest_path
-from dispatch.contracts import AgentViews
+from dispatch.problem import AgentViews
 
 
 def comm_graph(positions, comm_range: float | None) -> np.ndarray:

@@ -27,10 +27,11 @@ from typing import Any
 
 import numpy as np
 
-from dispatch.contracts import AgentViews, Planner
+from dispatch.contracts import Planner
 from dispatch.drivers import RoadDriver
 from dispatch.hourly import HourlyFactors
 from dispatch.legs import Leg, RoadPoint
+from dispatch.problem import AgentViews
 from dispatch.space import Space
 
 

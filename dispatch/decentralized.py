@@ -53,8 +53,9 @@ from abc import abstractmethod
 import numpy as np
 
 from dispatch.comms import Channel, relay_needed
-from dispatch.contracts import Allocation, AllocationProblem, Allocator, Bid
+from dispatch.contracts import Allocator
 from dispatch.errors import AllocationError
+from dispatch.problem import Allocation, AllocationProblem, Bid
 
 #: What :meth:`DecentralizedAllocator.choose` returns for an agent that requests nothing this
 #: round but is not done: unlike ``-1`` it keeps the rounds going when nobody requests.

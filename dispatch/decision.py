@@ -48,10 +48,11 @@ import numpy as np
 
 from dispatch.candidates import cut as candidate_cut
 from dispatch.comms import Hearing
-from dispatch.contracts import AgentViews, AllocationProblem, Allocator, Planner
+from dispatch.contracts import Allocator, Planner
 from dispatch.errors import DispatchError, PluginError
 from dispatch.lazy import certify, resolve_open
-from dispatch.plans import Inserts, Plans, insertion_costs_of, roomy
+from dispatch.plans import Inserts, Plans, busy_with_free_seat, insertion_costs_of
+from dispatch.problem import AgentViews, AllocationProblem
 from dispatch.space import Space
 from dispatch.stops import OBJECTIVES
 from dispatch.tasks import TaskBook, TaskState
@@ -60,8 +61,9 @@ if TYPE_CHECKING:
     import simpy
 
     from dispatch.config import CommsConfig, DispatchConfig
+    from dispatch.operator import Operator
     from dispatch.tasks import Task
-    from dispatch.vehicles import Fleet, Operator
+    from dispatch.vehicles import Fleet
 
 log = logging.getLogger(__name__)
 
@@ -156,7 +158,7 @@ def candidates(fleet: Fleet, book: TaskBook, held: dict, pooled: bool
     the vehicle driving to it (task id -> vehicle id)."""
     idle = fleet.idle_index()
     if pooled:  # busy vehicles with a free seat somewhere in their plan take part
-        idle = np.union1d(idle, roomy(fleet))
+        idle = np.union1d(idle, busy_with_free_seat(fleet))
     holder: dict[int, int] = {}  # task id -> the vehicle driving to its pickup
     if held:  # [dispatch] reassign: vehicles driving to a pickup take part, with their tasks
         holder = {t.id: t.agent_id for t in held.values()}

@@ -43,7 +43,7 @@ exact costs. The recorded problem's cost matrix then holds bounds beside the exa
 the pairs handed out.
 
 Cost per decision. The idle vehicles come from the fleet's arrays as an
-:class:`~dispatch.contracts.AgentViews` (views built only when read), the answer is checked
+:class:`~dispatch.problem.AgentViews` (views built only when read), the answer is checked
 pair by pair (no dict over all agents), and with an unlimited communication range the
 problem's ``comm`` is a broadcast all-True array: a decision's Python work grows with its
 tasks, not with the fleet.
@@ -67,18 +67,20 @@ from typing import TYPE_CHECKING
 
 from dispatch.answers import finders, route_stops, validate
 from dispatch.comms import components
-from dispatch.contracts import Allocation, AllocationProblem, Allocator
+from dispatch.contracts import Allocator
 from dispatch.decision import Blame, Pipeline, Tally, one_line
 from dispatch.errors import AllocationError, DispatchError, PluginError
 from dispatch.heap import keep_large_blocks
 from dispatch.plans import Inserts
+from dispatch.problem import Allocation, AllocationProblem
 from dispatch.stops import PICKUP
 from dispatch.tasks import OPEN, TaskBook, TaskState
 
 if TYPE_CHECKING:
     import simpy
 
-    from dispatch.vehicles import Fleet, Operator
+    from dispatch.operator import Operator
+    from dispatch.vehicles import Fleet
 
 log = logging.getLogger(__name__)
 

@@ -1,7 +1,7 @@
 """Drivers: how a vehicle follows a planner's path in its space.
 
 A driver is made by its space (:meth:`dispatch.space.Space.driver`) and used by the
-:class:`dispatch.vehicles.Operator` and the repositioning drives. :class:`Driver` is the one
+:class:`dispatch.operator.Operator` and the repositioning drives. :class:`Driver` is the one
 base: :meth:`Driver.plan` asks the planner (a planner's own exception becomes one PluginError
 line naming the planner, the run, the vehicle and the time), checks that the answer reaches the
 goal (:meth:`Driver.reaches`) and turns it into what :meth:`Driver.drive` follows
@@ -31,11 +31,12 @@ from typing import TYPE_CHECKING
 
 import simpy
 
-from dispatch.contracts import AgentView, Planner
+from dispatch.contracts import Planner
 from dispatch.errors import PluginError
 from dispatch.events import EventBus
 from dispatch.legs import as_point
 from dispatch.motion import step_length
+from dispatch.problem import AgentView
 from dispatch.space import Space
 
 if TYPE_CHECKING:

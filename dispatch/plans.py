@@ -7,7 +7,7 @@ added-time objective): where a new request's stops go in a vehicle's plan and wh
   the stops go for the pairs handed out;
 * :class:`Plans`: the agents' stop lists as an allocation problem shows them
   (:attr:`AllocationProblem.plans`), read from the vehicles when asked;
-* :func:`roomy`: the busy vehicles with a free seat (candidates for new requests).
+* :func:`busy_with_free_seat`: the busy vehicles with a free seat (candidates for new requests).
 
 The dispatcher (:mod:`dispatch.dispatcher`) decides; this is the plan machinery it asks.
 """
@@ -19,12 +19,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from dispatch.contracts import Planner, StopView
+from dispatch.contracts import Planner
 from dispatch.insertion import Insertion, insertion_costs
+from dispatch.problem import StopView
 from dispatch.stops import PICKUP_TIME
 
 if TYPE_CHECKING:
-    from dispatch.vehicles import Fleet, Operator
+    from dispatch.operator import Operator
+    from dispatch.vehicles import Fleet
 
 
 class Inserts:
@@ -105,7 +107,7 @@ class Plans(Mapping):
         return len(self._ids)
 
 
-def roomy(fleet: Fleet) -> np.ndarray:
+def busy_with_free_seat(fleet: Fleet) -> np.ndarray:
     """Positions of the busy vehicles with a free seat somewhere in their plan (shared
     rides: they are candidates for new requests)."""
     return np.flatnonzero(fleet.busy_mask & fleet.room)

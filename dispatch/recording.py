@@ -80,7 +80,7 @@ ASSIGNMENT_COLUMNS = ("decision", "round", "agent_id", "task_id", "cost", "won",
 
 
 def assignment_row(i: int, r, alloc_s: float) -> tuple:
-    """The ``assignments`` row of the bid ``r`` (:class:`dispatch.contracts.Bid`) of decision
+    """The ``assignments`` row of the bid ``r`` (:class:`dispatch.problem.Bid`) of decision
     ``i`` (:data:`ASSIGNMENT_COLUMNS`)."""
     return (i, r.round, r.agent_id, r.task_id, r.cost, r.won, alloc_s)
 

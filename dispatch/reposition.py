@@ -16,7 +16,7 @@ Repositioners
 
 What the kernel does with a move
     The move is a reposition stop of the vehicle's plan (:data:`dispatch.stops.REPOSITION`),
-    driven by the operator like any stop (:meth:`dispatch.vehicles.Operator.reposition`): the
+    driven by the operator like any stop (:meth:`dispatch.operator.Operator.reposition`): the
     vehicle drives the fastest path to the target node (empty: its metres count in
     ``empty_distance`` and in the summary's ``reposition_distance``). It stays *idle* all the
     way: the dispatcher may give it a trip at any moment, which cuts the move, and it then
@@ -48,8 +48,9 @@ if TYPE_CHECKING:
     import simpy
 
     from dispatch.events import Event, EventBus
+    from dispatch.operator import Operator
     from dispatch.roads import RoadNetwork
-    from dispatch.vehicles import Fleet, Operator, Vehicle
+    from dispatch.vehicles import Fleet, Vehicle
 
 log = logging.getLogger(__name__)
 
@@ -136,9 +137,9 @@ class Repositioner(ABC):
 
 class Repositioning:
     """Calls a non-passive repositioner every ``interval`` seconds and hands its moves to the
-    operator (:meth:`dispatch.vehicles.Operator.reposition`), which drives them as reposition
+    operator (:meth:`dispatch.operator.Operator.reposition`), which drives them as reposition
     stops. ``moves`` counts the moves started; their metres are the operator's
-    (:attr:`dispatch.vehicles.Operator.reposition_distance`)."""
+    (:attr:`dispatch.operator.Operator.reposition_distance`)."""
 
     def __init__(self, env: simpy.Environment, bus: EventBus, fleet: Fleet, operator: Operator,
                  space: RoadNetwork, repositioner: Repositioner, interval: float, horizon: float,

@@ -67,8 +67,8 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, NamedTuple
 
-from dispatch.contracts import AgentView
 from dispatch.motion import step_is_legal, step_length
+from dispatch.problem import AgentView
 from dispatch.tasks import COMPLETED as _COMPLETED
 from dispatch.locations import Cell
 
@@ -210,7 +210,7 @@ class TableView:
 
 
 @dataclass(eq=False)
-class Timed:
+class TimedVehicle:
     """What reservation-based execution keeps of one vehicle (owned by :class:`Traffic`, not
     by the vehicle): its timed ``route`` (``route[0]`` is the cell it stands in, or is stepping
     into with the step's arrival time; a one-cell route holds that cell indefinitely), the
@@ -246,7 +246,7 @@ class Traffic:
     vehicles' timed drives.
 
     Each vehicle's drive process (:meth:`start`, one per vehicle for the whole run) follows
-    its :class:`Timed` record's ``route`` and calls :meth:`start_step` when it commits to a
+    its :class:`TimedVehicle` record's ``route`` and calls :meth:`start_step` when it commits to a
     step; :meth:`request` is called when a vehicle is given a task and when a waiting vehicle
     tries again. A record's ``changed`` fires when a request changed that vehicle's route, and
     :attr:`released` whenever a request changed the table or a vehicle became idle
@@ -258,7 +258,7 @@ class Traffic:
         self.env, self.planner, self.grid, self.emit = env, planner, grid, emit
         self.table = ReservationTable()
         #: vehicle id -> its record
-        self.vehicles = {v.id: Timed(v, [(0.0, v.loc)], env.event()) for v in vehicles}
+        self.vehicles = {v.id: TimedVehicle(v, [(0.0, v.loc)], env.event()) for v in vehicles}
         self.retry_after = float(self.planner.retry_after)
         self.released = self.env.event()
         for t in self.vehicles.values():
@@ -266,20 +266,20 @@ class Traffic:
 
     def execution(self, op) -> TimedExecution:
         """The operator's execution on this traffic (``execution`` of
-        :class:`dispatch.vehicles.Operator`, which calls it with itself)."""
+        :class:`dispatch.operator.Operator`, which calls it with itself)."""
         return TimedExecution(self, op)
 
-    def of(self, v) -> Timed:
+    def of(self, v) -> TimedVehicle:
         """The record of vehicle ``v``."""
         return self.vehicles[v.id]
 
     # --------------------------------------------------------------- classification
     @staticmethod
-    def priority(v: Timed) -> tuple[float, int]:
+    def priority(v: TimedVehicle) -> tuple[float, int]:
         """Lower goes first: the task's cost, then the id; idle vehicles last."""
         return (INF if v.task is None else v.task.cost, v.id)
 
-    def _keeps(self, w: Timed, steps: float) -> tuple[Callable[[Entry], bool], dict]:
+    def _keeps(self, w: TimedVehicle, steps: float) -> tuple[Callable[[Entry], bool], dict]:
         """What ``w`` plans around: hard reservations (executing steps, serving vehicles) and
         those of higher-priority vehicles; plus every lower-priority vehicle's *inertia*: its
         commit cell for the time of ``steps`` straight steps (it cannot leave faster than one;
@@ -300,21 +300,21 @@ class Traffic:
                 inertia.setdefault(c, []).append((t, t + steps * self.grid.cell / o.speed))
         return keep, inertia
 
-    def commit_point(self, v: Timed) -> tuple[float, Cell]:
+    def commit_point(self, v: TimedVehicle) -> tuple[float, Cell]:
         """Where and when ``v`` can next change its mind: the end of the step it is executing,
         or its cell now."""
         t, c = v.route[0]
         return max(t, self.env.now), c
 
     # --------------------------------------------------------------- table
-    def _reserve(self, v: Timed) -> None:
+    def _reserve(self, v: TimedVehicle) -> None:
         self.table.clear(v.id)
         if v.step is not None and v.step[3] > self.env.now:
             a, b, dep, arr = v.step
             self.table.add(v.id, ((c, dep, arr) for c in step_box(a, b)), committed=True)
         self.table.add(v.id, occupancy(v.route, v.speed, self.grid.cell))
 
-    def start_step(self, v: Timed) -> tuple[Cell, float]:
+    def start_step(self, v: TimedVehicle) -> tuple[Cell, float]:
         """``v`` leaves ``route[0]`` for ``route[1]`` now; returns (next cell, arrival time)."""
         (_, a), (arr, b) = v.route[0], v.route[1]
         v.step = (a, b, self.env.now, arr)
@@ -322,7 +322,7 @@ class Traffic:
         self._reserve(v)
         return b, arr
 
-    def _plan(self, v: Timed, t0: float, cell: Cell, view: TableView) -> Route | None:
+    def _plan(self, v: TimedVehicle, t0: float, cell: Cell, view: TableView) -> Route | None:
         """The planner's timed route for ``v`` from ``cell`` at ``t0`` (to its task, or to
         any cell it may keep if idle), checked; or None."""
         goal = None if v.task is None else v.task.cell
@@ -345,7 +345,7 @@ class Traffic:
         return route
 
     # --------------------------------------------------------------- the conflict rule
-    def request(self, v: Timed) -> None:
+    def request(self, v: TimedVehicle) -> None:
         """Give ``v`` a route to its task, displacing lower-priority and idle vehicles; else
         a route around everyone; else it keeps the route it has (a one-cell route: it waits)."""
         v.last_try = self.env.now
@@ -362,7 +362,7 @@ class Traffic:
         if route is not None or moved:
             self.notify()
 
-    def _make_way(self, v: Timed, t: float, c: Cell) -> bool:
+    def _make_way(self, v: TimedVehicle, t: float, c: Cell) -> bool:
         """Park the idle vehicles standing on ``v``'s untimed shortest path (or a step's box of
         it) somewhere off that path, each around every reservation (so nothing else changes);
         True if any moved. The last resort of :meth:`request`: an idle vehicle in a passage
@@ -391,7 +391,7 @@ class Traffic:
                 moved = True
         return moved
 
-    def _settle(self, v: Timed, steps: float) -> bool:
+    def _settle(self, v: TimedVehicle, steps: float) -> bool:
         """Plan ``v`` and, in priority order, everything it displaces; False (and nothing
         changed) if some displaced vehicle can neither move nor stay."""
         saved: dict[int, Route] = {}
@@ -440,7 +440,7 @@ class Traffic:
             w.route = route
             self._reserve(w)
 
-    def hold(self, v: Timed) -> None:
+    def hold(self, v: TimedVehicle) -> None:
         """``v`` broke down: it stops at its commit point (the end of the step it is executing,
         or its cell), its later reservations are released and its cell is held hard (nobody
         plans through it, nobody asks it to make way) until it is repaired."""
@@ -451,7 +451,7 @@ class Traffic:
         self._wake(v)
         self.notify()
 
-    def _wake(self, v: Timed) -> None:
+    def _wake(self, v: TimedVehicle) -> None:
         if not v.changed.triggered:
             v.changed.succeed()
 
@@ -480,7 +480,7 @@ def _start(traffic: Traffic, ctx: DriveContext) -> None:
         t.vehicle.proc = traffic.env.process(_drive(traffic, ctx, t))
 
 
-def begin_wait(traffic: Traffic, t: Timed) -> None:
+def begin_wait(traffic: Traffic, t: TimedVehicle) -> None:
     """It stands in its cell on the way to its task (until its next step starts)."""
     if t.waiting_since is None:
         now = traffic.env.now
@@ -489,14 +489,14 @@ def begin_wait(traffic: Traffic, t: Timed) -> None:
         traffic.emit(now, "wait", t.id, t.task.id, t.cell)
 
 
-def end_wait(t: Timed, now: float) -> None:
+def end_wait(t: TimedVehicle, now: float) -> None:
     """Its wait (if any) ends now."""
     if t.waiting_since is not None:
         t.wait_seconds += now - t.waiting_since
         t.waiting_since = None
 
 
-def _finish(traffic: Traffic, ctx: DriveContext, t: Timed):
+def _finish(traffic: Traffic, ctx: DriveContext, t: TimedVehicle):
     """Serve the task at its cell (the service time), then idle."""
     env, v, task = traffic.env, t.vehicle, t.task
     if ctx.service_time > 0:
@@ -511,7 +511,7 @@ def _finish(traffic: Traffic, ctx: DriveContext, t: Timed):
     ctx.notify()
 
 
-def _drive(traffic: Traffic, ctx: DriveContext, t: Timed):
+def _drive(traffic: Traffic, ctx: DriveContext, t: TimedVehicle):
     """Process (one per vehicle for the whole run): follow the timed route that the traffic
     keeps for this vehicle, whatever it is for: its task (then serve it), parking out of
     someone's way while idle, or holding its cell (a one-cell route). Without a route to its
@@ -562,7 +562,7 @@ def _drive(traffic: Traffic, ctx: DriveContext, t: Timed):
         traffic.emit(env.now, "move", v.id, -1 if t.task is None else t.task.id, nxt)
 
 
-def _after_step(traffic: Traffic, t: Timed, again: Callable[[], Any]):
+def _after_step(traffic: Traffic, t: TimedVehicle, again: Callable[[], Any]):
     yield traffic.env.timeout(t.step[3] - traffic.env.now)
     t.breaking = False
     again()
@@ -570,7 +570,7 @@ def _after_step(traffic: Traffic, t: Timed, again: Callable[[], Any]):
 
 class TimedExecution:
     """Reservation-based execution (voxel world, capacity 1), the operator's
-    :class:`dispatch.vehicles.Execution`: one drive process per vehicle for the whole run
+    :class:`dispatch.execution.Execution`: one drive process per vehicle for the whole run
     follows the timed route the traffic keeps for it; the operator hands it a task, breaks it
     down and repairs it through here."""
 

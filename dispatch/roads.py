@@ -488,7 +488,7 @@ class RoadNetwork(Space):
 
     def sample_views(self, rng: np.random.Generator, n: int, m: int):
         """Cars on random nodes (as road points), trips to random nodes."""
-        from dispatch.contracts import AgentView, TaskView
+        from dispatch.problem import AgentView, TaskView
 
         nodes = rng.integers(0, self.n, n + m)
         agents = tuple(AgentView(100 + i, "car", RoadPoint(int(nodes[i])), 10.0)

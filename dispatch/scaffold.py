@@ -50,10 +50,10 @@ ALLOCATOR = '''"""The {name} allocator: the globally cheapest feasible (vehicle,
 first, until no vehicle or task is left (a greedy matching). Edit :meth:`{cls}.allocate`.
 
 The contract (:class:`dispatch.contracts.Allocator`): ``allocate(problem)`` gets a read-only
-:class:`~dispatch.contracts.AllocationProblem` (``problem.cost``: the N x M travel seconds of
+:class:`~dispatch.problem.AllocationProblem` (``problem.cost``: the N x M travel seconds of
 the idle vehicles to the open tasks, ``inf`` where a vehicle cannot serve a task;
 ``problem.agent_ids``, ``problem.task_ids``, positions, release times; ``problem.rng``, the
-only randomness it may use) and returns an :class:`~dispatch.contracts.Allocation` of
+only randomness it may use) and returns an :class:`~dispatch.problem.Allocation` of
 feasible pairs, each vehicle and task at most once. It must not write to the problem.
 ``dispatch check {name}`` checks all of this on random problems.
 """

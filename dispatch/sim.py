@@ -44,6 +44,7 @@ from dispatch.decision import Blame, Pipeline, Tally
 from dispatch.dispatcher import Dispatcher, Wakeup
 from dispatch.events import EventBus
 from dispatch.faults import FaultInjector, blackout_filter
+from dispatch.operator import Hooks, Operator, Towing
 from dispatch.plugins import (check_repositioner, describe, make_charger, make_plugin,
                               make_repositioner)
 from dispatch.recording import RunRecording
@@ -52,7 +53,7 @@ from dispatch.space import space_for
 from dispatch.streams import (STREAM_ALLOCATOR, STREAM_CHARGING, STREAM_FAULTS, STREAM_FLEET,
                               STREAM_REPOSITION, STREAM_SOURCE, STREAM_TASKS, rng_for)
 from dispatch.tasks import Task, TaskBook, TaskSource, TaskState
-from dispatch.vehicles import Fleet, Hooks, Operator, Towing, stop_leg
+from dispatch.vehicles import Fleet, stop_leg
 
 log = logging.getLogger(__name__)
 

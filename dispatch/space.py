@@ -91,7 +91,7 @@ class Space(ABC):
     #: a fleet start file's ``z`` where it has none (nan: none)
     start_z: ClassVar[float] = float("nan")
     #: metres of a cell's side where the space is a grid of cells (the voxel world's
-    #: :attr:`dispatch.contracts.AllocationProblem.cell_size`); 1.0 in a space without cells
+    #: :attr:`dispatch.problem.AllocationProblem.cell_size`); 1.0 in a space without cells
     cell: float = 1.0
 
     # ------------------------------------------------------------ of its configuration
@@ -209,7 +209,7 @@ class Space(ABC):
     def sample_views(self, rng: np.random.Generator, n: int, m: int):
         """``n`` random agent views and ``m`` random task views in the space (for the planner
         checks of :mod:`dispatch.check_planners`): a pair of tuples of
-        :class:`dispatch.contracts.AgentView` and :class:`dispatch.contracts.TaskView`."""
+        :class:`dispatch.problem.AgentView` and :class:`dispatch.problem.TaskView`."""
 
     def stands(self, loc: Location) -> tuple[int, float, bool] | None:
         """Where ``loc`` stands in the space's node arrays (kept by

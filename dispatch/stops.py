@@ -6,11 +6,11 @@ completes the task), drop them off (:data:`DROPOFF`), charge (:data:`CHARGE`), r
 (:data:`REPOSITION`), wait or park (:data:`WAIT`), return to a depot (:data:`DEPOT`). A stop
 serving no request has ``task=None``. A vehicle owns an ordered list of them
 (:attr:`dispatch.vehicles.Vehicle.stops`); its SimPy process drives the list stop by stop
-(:class:`dispatch.vehicles.Operator`), a decision inserts stops (:func:`insert`), a breakdown
+(:class:`dispatch.operator.Operator`), a decision inserts stops (:func:`insert`), a breakdown
 or a re-assignment removes them.
 
 **The schedule rule** (the only one: the compiled insertion, ``rtv``'s orders, the answer
-checks, :meth:`dispatch.vehicles.Operator.route_times` and the test references all use
+checks, :meth:`dispatch.operator.Operator.route_times` and the test references all use
 :func:`leave` and :func:`timetable`): arrival at a stop = departure from the stop before + the
 drive between them; service starts at ``max(arrival, earliest)`` (a vehicle early for a stop
 waits); departure = that start + the stop's ``service`` seconds. A plan is feasible when no
@@ -77,7 +77,7 @@ class Stop:
 
 
 class PlannedStop(NamedTuple):
-    """A stop of a route an allocator hands out (:attr:`dispatch.contracts.Allocation.routes`,
+    """A stop of a route an allocator hands out (:attr:`dispatch.problem.Allocation.routes`,
     checked by :func:`dispatch.answers.route_stops`): its kind, the request's id, where, the
     passengers it changes, the latest time, and whether the request completes there (None: a
     stop of the vehicle's plan, as the plan has it)."""

@@ -32,9 +32,9 @@ from enum import Enum
 import numpy as np
 import simpy
 
-from dispatch.contracts import TaskView
 from dispatch.events import EventBus
 from dispatch.locations import Location
+from dispatch.problem import TaskView
 
 log = logging.getLogger(__name__)
 
@@ -254,7 +254,7 @@ class TaskBook:
 class Request:
     """A trip request to release: where, and what the trace said about it. Released, it is a
     :class:`Task` (an agent's bid for a task in a decision round is
-    :class:`dispatch.contracts.Bid`)."""
+    :class:`dispatch.problem.Bid`)."""
 
     kind: str
     loc: Location

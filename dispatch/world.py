@@ -144,7 +144,7 @@ class World(Space):
     def sample_views(self, rng: np.random.Generator, n: int, m: int):
         """UAVs (odd positions) in free cells up to 2 cells high, UGVs on the ground; tasks in
         any free cell (``ground`` on layer 0, else ``air``)."""
-        from dispatch.contracts import AgentView, TaskView
+        from dispatch.problem import AgentView, TaskView
 
         free = self.grid.free_cells()
         ground = free[free[:, 2] == 0]

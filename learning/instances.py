@@ -13,8 +13,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from dispatch.contracts import AgentView, TaskView
 from dispatch.config import RunSpec, Scenario
+from dispatch.problem import AgentView, TaskView
 from dispatch.space import Space
 
 

@@ -54,10 +54,11 @@ import numpy as np
 import simpy
 from simpy.events import URGENT
 
-from dispatch.contracts import Allocation, AllocationProblem, Allocator
+from dispatch.contracts import Allocator
 from dispatch.dispatcher import DecisionDeferred
 from dispatch.errors import AllocationError, ScenarioError
 from dispatch.config import RunSpec, Scenario, SweepConfig
+from dispatch.problem import Allocation, AllocationProblem
 from dispatch.scenario import load_scenario
 from learning.zones import Zones
 

@@ -35,8 +35,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from dispatch.contracts import AgentView, Planner, TaskView
+from dispatch.contracts import Planner
 from dispatch.locations import Cell
+from dispatch.problem import AgentView, TaskView
 from dispatch.world import World
 from planners.graph import astar, components, field_cache, field_values, lattice_bound
 

@@ -36,8 +36,9 @@ import itertools
 import math
 from collections.abc import Callable, Sequence
 
-from dispatch.contracts import AgentView, Reservations
+from dispatch.contracts import Reservations
 from dispatch.motion import offsets
+from dispatch.problem import AgentView
 from dispatch.reservations import EPS, step_box, step_seconds
 from dispatch.locations import Cell
 from dispatch.voxels import Grid

@@ -587,7 +587,7 @@ def _loc_arrays(locs: Sequence[Any]) -> tuple[np.ndarray, np.ndarray]:
 
 def _agent_arrays(agents: Sequence[Any]) -> tuple[np.ndarray, np.ndarray]:
     """``(node, remaining seconds)`` of the agents' locations (points or node ints): read from
-    the arrays of a :class:`dispatch.contracts.AgentViews` where it has them (no view built)."""
+    the arrays of a :class:`dispatch.problem.AgentViews` where it has them (no view built)."""
     nodes = getattr(agents, "nodes", None)
     if nodes is not None:
         return nodes, agents.remaining

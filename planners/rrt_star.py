@@ -51,9 +51,10 @@ import math
 
 import numpy as np
 
-from dispatch.contracts import AgentView, Planner, TaskView
+from dispatch.contracts import Planner
 from dispatch.motion import path_length
 from dispatch.locations import Cell
+from dispatch.problem import AgentView, TaskView
 from dispatch.world import World
 from planners.sampling import (
     GoalCache,

@@ -55,9 +55,10 @@ import math
 
 import numpy as np
 
-from dispatch.contracts import AgentView, Planner, TaskView
+from dispatch.contracts import Planner
 from dispatch.motion import octile, offsets
 from dispatch.locations import Cell
+from dispatch.problem import AgentView, TaskView
 from dispatch.voxels import Grid
 from dispatch.world import World
 from planners.sampling import (

@@ -108,9 +108,9 @@ from pathlib import Path
 
 import numpy as np
 
-from dispatch.contracts import AgentViews, AllocationProblem
 from dispatch.decentralized import DecentralizedAllocator
 from dispatch.errors import AllocationError
+from dispatch.problem import AgentViews, AllocationProblem
 
 CHECKPOINTS = Path(__file__).resolve().parent / "checkpoints"
 #: Positions are divided by the size of the world the shipped models were trained in.
@@ -684,7 +684,7 @@ def _exists(path: Path) -> Path:
 
 
 def _dummy(n: int) -> AllocationProblem:
-    from dispatch.contracts import AgentView, TaskView
+    from dispatch.problem import AgentView, TaskView
 
     agents = tuple(AgentView(i, "uav" if i % 2 else "ugv", (i, 0, 0), 3.0) for i in range(n))
     tasks = tuple(TaskView(j, "ground", (j, 1, 0), 0.0) for j in range(n))

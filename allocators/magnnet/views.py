@@ -365,7 +365,7 @@ def sub_problem(pool, k: int, n: int, comm_range: float | None, loss: float,
     """A random ``n x n`` sub-problem (agents and tasks drawn without replacement) of
     instance ``k`` of ``pool``, as an AllocationProblem whose ids are indices."""
     from dispatch.comms import comm_graph
-    from dispatch.contracts import AgentView, AllocationProblem, TaskView
+    from dispatch.problem import AgentView, AllocationProblem, TaskView
 
     big_n, big_m = pool.cost.shape[1:]
     ai = np.sort(rng.choice(big_n, min(n, big_n), replace=False))

@@ -13,9 +13,9 @@ import pytest
 from allocators.auction import AuctionAllocator, better
 from dispatch import registry
 from dispatch.comms import comm_graph, components, diameter
-from dispatch.contracts import AgentView, AllocationProblem, TaskView
 from dispatch.errors import PluginError
 from dispatch.plugins import make_plugin
+from dispatch.problem import AgentView, AllocationProblem, TaskView
 
 from .helpers import assert_valid, index_pairs, make_problem, random_problem, total_cost
 

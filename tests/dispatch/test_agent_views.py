@@ -6,11 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dispatch.contracts import AgentView, AgentViews, AllocationProblem
 from dispatch.answers import validate
-from dispatch.contracts import Allocation
 from dispatch.errors import AllocationError
 from dispatch.legs import RoadPoint
+from dispatch.problem import AgentView, AgentViews, Allocation, AllocationProblem
 from dispatch.roads import manhattan
 from dispatch.vehicles import Fleet, Vehicle
 
@@ -73,7 +72,7 @@ def test_one_task_cost_column_equals_scipy_and_the_general_path():
 
     from dispatch.congestion import CongestedPlanner
     from dispatch.hourly import HourlyFactors
-    from dispatch.contracts import TaskView
+    from dispatch.problem import TaskView
     from planners.road import RoadPlanner
 
     net = manhattan(5, 5, 100.0, 10.0)

@@ -13,10 +13,12 @@ import pytest
 
 from dispatch import registry
 from dispatch.commands import Command
-from dispatch.congestion import CongestedPlanner, HourlyFactors
-from dispatch.contracts import Allocation, Allocator, Planner
+from dispatch.congestion import CongestedPlanner
+from dispatch.hourly import HourlyFactors
+from dispatch.contracts import Allocator, Planner
 from dispatch.errors import PluginError, ScenarioError
 from dispatch.plugins import check_runs, travel_times_needed
+from dispatch.problem import Allocation
 from dispatch.scenario import load_scenario
 from dispatch.check_allocators import check_allocator
 from dispatch.check_common import small_network

@@ -185,7 +185,7 @@ def test_factor_of_time_and_scaled_costs_by_hand():
     leg = net.leg(RoadPoint(1, 0, 7.0, 70.0), [1, 2])  # 7 s left on 0 -> 1, then 10 s
     scaled = scale_leg(leg, 2.0)
     assert scaled.times.tolist() == [7.0, 27.0] and scaled.metres.tolist() == leg.metres.tolist()
-    from dispatch.contracts import AgentView, TaskView
+    from dispatch.problem import AgentView, TaskView
     from planners.road import RoadPlanner
 
     clock = [10.0]

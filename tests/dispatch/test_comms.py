@@ -21,8 +21,8 @@ from dispatch.comms import (
     neighbours,
     relay_needed,
 )
-from dispatch.contracts import Allocation, Bid
 from dispatch.decentralized import DecentralizedAllocator, run_rounds
+from dispatch.problem import Allocation, Bid
 from dispatch import registry
 from dispatch.errors import PluginError, ScenarioError
 from dispatch.runner import run_one

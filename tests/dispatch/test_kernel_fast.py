@@ -116,7 +116,7 @@ def test_recorder_constant_column(value, n):
 
 
 def test_centralized_allocation_equals_the_constructed_one():
-    from dispatch.contracts import Allocation, AllocationProblem, Bid
+    from dispatch.problem import Allocation, AllocationProblem, Bid
 
     rng = np.random.default_rng(5)
     cost = rng.uniform(1, 9, (4, 3))
@@ -138,8 +138,8 @@ def test_centralized_allocation_equals_the_constructed_one():
 
 @pytest.mark.parametrize("reassign", [False, True])
 def test_fleet_arrays_follow_the_vehicles(tmp_path, reassign):
-    """``special`` stays ``driving | odd`` through trips, breakdowns (vehicles stopped
-    part-way along an edge) and re-assignments, checked after every event."""
+    """``driving_or_off_node`` stays ``driving | off_node`` through trips, breakdowns
+    (vehicles stopped part-way along an edge) and re-assignments, checked after every event."""
     from dispatch.runner import make_recorder
     from dispatch.scenario import load_scenario
     from dispatch.sim import Simulation
@@ -157,8 +157,8 @@ def test_fleet_arrays_follow_the_vehicles(tmp_path, reassign):
 
     def check(e):
         seen.add(e.kind)
-        assert np.array_equal(fleet.special, fleet.driving | fleet.odd)
-        assert fleet._odd == fleet.odd.tolist()
+        assert np.array_equal(fleet.driving_or_off_node, fleet.driving | fleet.off_node)
+        assert fleet._off_node == fleet.off_node.tolist()
 
     sim.bus.subscribe(check)
     sim.run()
@@ -218,7 +218,7 @@ def test_appender_columns_must_name_every_column(tmp_path):
 def test_problem_made_equals_the_constructed_one():
     import dataclasses
 
-    from dispatch.contracts import AgentView, AllocationProblem, TaskView
+    from dispatch.problem import AgentView, AllocationProblem, TaskView
 
     agents = (AgentView(3, "ugv", (0, 0, 0), 1.0), AgentView(5, "uav", (1, 0, 2), 2.0))
     tasks = (TaskView(9, "ground", (2, 1, 0), 0.0),)
@@ -240,7 +240,7 @@ def test_problem_made_equals_the_constructed_one():
 def test_problem_with_lazy_positions_pickles():
     import pickle
 
-    from dispatch.contracts import AgentView, AllocationProblem, TaskView
+    from dispatch.problem import AgentView, AllocationProblem, TaskView
 
     agents = (AgentView(3, "ugv", (0, 0, 0), 1.0),)
     tasks = (TaskView(9, "ground", (2, 1, 0), 0.0),)

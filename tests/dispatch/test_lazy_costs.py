@@ -17,10 +17,10 @@ from scipy.optimize import linear_sum_assignment
 
 import tests.dispatch.test_invariants as inv
 from allocators.hungarian import HungarianAllocator
-from dispatch.contracts import AgentView, AllocationProblem, TaskView
 from dispatch.answers import validate
 from dispatch.errors import ScenarioError
 from dispatch.lazy import certify, in_time, resolve_open
+from dispatch.problem import AgentView, AllocationProblem, TaskView
 from dispatch.scenario import load_scenario
 from planners.astar import AStarPlanner
 from tests.conftest import write_scenario

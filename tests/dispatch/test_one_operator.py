@@ -1,6 +1,6 @@
 """One operator drives every stop: a vehicle that charges, is dispatched part-way through a
 repositioning move, runs its battery empty with a rider on board (stranded: a breakdown) and is
-towed, all through :class:`dispatch.vehicles.Operator`'s process; the invariants checked from
+towed, all through :class:`dispatch.operator.Operator`'s process; the invariants checked from
 the events (occupancy within capacity, energy balance, one terminal state per request)."""
 
 from __future__ import annotations

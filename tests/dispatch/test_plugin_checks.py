@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from dispatch import cli
-from dispatch.contracts import Allocation, AllocationProblem, Allocator
+from dispatch.contracts import Allocator
 from dispatch.errors import AllocationError, PluginError
+from dispatch.problem import Allocation, AllocationProblem
 from dispatch.registry import load
 from dispatch.check_allocators import check_allocator
 from dispatch.check_planners import check_planner

@@ -267,7 +267,8 @@ def test_allocators_read_the_plans_read_only(tmp_path):
 def _two_requests_one_taxi(tmp_path, route, capacity=2):
     """Two requests released together, one taxi, an allocator that gives it both along
     ``route`` (``Allocation.routes``); returns the run's tables or raises its error."""
-    from dispatch.contracts import Allocation, Allocator
+    from dispatch.contracts import Allocator
+    from dispatch.problem import Allocation
     from dispatch.runner import make_recorder
     from dispatch.sim import Simulation
 

@@ -354,7 +354,7 @@ class Scripted(Allocator):
         self.plan = plan
 
     def allocate(self, problem):
-        from dispatch.contracts import Allocation
+        from dispatch.problem import Allocation
 
         agents = {a.id: i for i, a in enumerate(problem.agents)}
         pairs = [(agents[self.plan[t.id]], j) for j, t in enumerate(problem.tasks)

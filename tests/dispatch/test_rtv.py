@@ -445,7 +445,7 @@ def test_invariants_on_random_pooled_runs_with_rtv_reorder(tmp_path, monkeypatch
         made.append(self)
 
     monkeypatch.setattr(RtvAllocator, "__init__", init)
-    from dispatch.vehicles import Operator
+    from dispatch.operator import Operator
 
     swapped = moved = 0
     follow = Operator.follow

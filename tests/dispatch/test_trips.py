@@ -232,7 +232,7 @@ def test_chicago_trace_by_latitude_longitude(tmp_path):
 def test_a_vehicle_mid_leg_is_costed_from_where_it_is():
     """Where a decision finds a vehicle part-way along a leg: the rest of its edge plus the
     fastest path from the edge's end (scipy), as the planner prices it."""
-    from dispatch.contracts import AgentView, TaskView
+    from dispatch.problem import AgentView, TaskView
     from dispatch.registry import load
 
     net = manhattan(6, 5, 100.0, 10.0)

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from dispatch.answers import validate
-from dispatch.contracts import Allocation
 from dispatch.errors import AllocationError
+from dispatch.problem import Allocation
 from tests.allocators.helpers import make_problem, random_problem
 
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from allocators.hungarian import HungarianAllocator
-from dispatch.contracts import AgentView, AllocationProblem, TaskView
+from dispatch.problem import AgentView, AllocationProblem, TaskView
 from learning.value import ZoneValue, td_learn, train
 from learning.zones import Zones
 

@@ -130,7 +130,7 @@ def test_paper_reading_hand_computed():
     1: agent 1 requests task 2 (wins). The paper's reading: 3 of 4 requests won; ours: task 0
     was in conflict, so 2 of 3 tasks are conflict-free."""
     from benchmarks.paper_ppo import ours, paper_reading
-    from dispatch.contracts import Allocation, Bid
+    from dispatch.problem import Allocation, Bid
 
     a = Allocation(pairs=((0, 0), (2, 1), (1, 2)), rounds=2, requests=(
         Bid(0, 0, 0, 1.0, True), Bid(0, 1, 0, 2.0, False),

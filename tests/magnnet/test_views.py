@@ -74,7 +74,7 @@ def test_view_request_hand_computed():
 def test_teacher_labels_are_the_optimal_assignment_of_what_remains():
     """Round 1 after agent 0 won task 0: the teacher solves agents {1, 2} x tasks {1, 2};
     inactive rows and taken tasks point at the null heads."""
-    from dispatch.contracts import Allocation, Bid
+    from dispatch.problem import Allocation, Bid
 
     cost = np.array([[1.0, 9.0, 9.0], [9.0, 5.0, 1.0], [9.0, 1.0, 5.0]])
     p = make_problem(cost)

@@ -15,8 +15,8 @@ import pytest
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from dispatch.contracts import AgentView, TaskView
 from dispatch.motion import check_path, offsets, path_length, step_is_legal, step_length
+from dispatch.problem import AgentView, TaskView
 from dispatch.voxels import Grid
 from dispatch.world import World
 from planners import graph as G

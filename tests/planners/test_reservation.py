@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 from dispatch import registry
-from dispatch.contracts import AgentView, TaskView
 from dispatch.motion import check_path, path_length
+from dispatch.problem import AgentView, TaskView
 from dispatch.reservations import occupancy, overlaps
 from dispatch.voxels import Grid
 from dispatch.world import World

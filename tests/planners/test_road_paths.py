@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from scipy.sparse.csgraph import dijkstra
 
-from dispatch.contracts import AgentView, TaskView
 from dispatch.legs import RoadPoint
+from dispatch.problem import AgentView, TaskView
 from dispatch.roads import load_network, manhattan
 from planners.road import RoadPlanner
 

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from dispatch import registry
-from dispatch.contracts import AgentView, TaskView
 from dispatch.motion import check_path, path_length
+from dispatch.problem import AgentView, TaskView
 from dispatch.runner import run_one
 from dispatch.scenario import load_scenario
 from dispatch.voxels import Grid
