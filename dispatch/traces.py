@@ -29,6 +29,7 @@ import codecs
 import csv
 import io
 import math
+import operator
 import os
 import stat
 from dataclasses import dataclass, fields, replace
@@ -148,44 +149,176 @@ def decode_text(path: Path, data: bytes) -> str:
                                                 "as UTF-8") from None
 
 
-def _read_columns(path: Path, max_bytes: int | None = None) -> dict[str, list]:
-    check_file(path, max_bytes, "table file")
-    suffix = path.suffix.lower()
+#: rows converted at a time while a CSV file is read (the cells of one chunk are held as
+#: strings; the file's columns only as numbers)
+CHUNK_ROWS = 32_768
+#: what :meth:`Table.read` makes of a column: numbers (a blank cell is an error), numbers where
+#: a blank cell is nan, or the cells as read (date-times: parsed by the caller)
+NUMBER, NUMBER_OR_BLANK, CELLS = "number", "number_or_blank", "cells"
+
+
+def _cell_number(path: Path, name: str, i: int, v, blank_ok: bool) -> float:
+    """One cell as a float (nan for a blank one where ``blank_ok``); a bad one names its
+    1-based data row (``i`` is 0-based)."""
+    if blank_ok and (v is None or (isinstance(v, str) and not v.strip())):
+        return math.nan
     try:
-        if suffix == ".parquet":
-            import pyarrow.parquet as pq
-
-            return pq.read_table(path).to_pydict()
-        if suffix == ".csv":
-            text = decode_text(path, read_bytes(path, max_bytes, "table file"))
-            reader = csv.DictReader(io.StringIO(text, newline=""))
-            data = list(reader)
-            names = reader.fieldnames or []
-            return {n: [r.get(n) for r in data] for n in names}
-    except ScenarioError:
-        raise
-    except Exception as e:  # pyarrow and csv raise several kinds for a malformed file
-        raise ScenarioError(path, "<file>", f"cannot be read as a table: {e}") from None
-    raise ScenarioError(path, "<file>", "must be a .csv or .parquet file")
+        f = float(v)
+    except (TypeError, ValueError):
+        raise ScenarioError(path, f"row {i + 1}", f"{name} is not a number ({v!r})") from None
+    if not math.isfinite(f):
+        raise ScenarioError(path, f"row {i + 1}", f"{name} is not finite ({v!r})")
+    return f
 
 
-def _numbers(path: Path, columns: dict[str, list], names, *, blank_ok: bool = False) -> np.ndarray:
-    """The named columns as a float array ``(rows, len(names))``; bad values name their row."""
-    n = len(columns[names[0]]) if names else 0
-    out = np.empty((n, len(names)))
-    for j, name in enumerate(names):
-        for i, v in enumerate(columns[name]):
-            if blank_ok and (v is None or (isinstance(v, str) and not v.strip())):
-                out[i, j] = math.nan
+class Columns:
+    """The columns :meth:`Table.read` converted: numbers as float arrays, cells as lists. A
+    column's first bad cell is kept (not raised) until the column is asked for, so that the
+    error a reader sees is the one of the first column it checks, whatever the rows' order."""
+
+    def __init__(self, path: Path, n: int, numbers: dict[str, np.ndarray],
+                 cells: dict[str, list], errors: dict[str, ScenarioError]) -> None:
+        self.path, self.n = path, n
+        self._numbers, self._cells, self._errors = numbers, cells, errors
+
+    def numbers(self, names) -> np.ndarray:
+        """The named columns as a float array ``(rows, len(names))``; the first bad cell of the
+        first column (in ``names``' order) that has one raises its ScenarioError."""
+        for name in names:
+            if name in self._errors:
+                raise self._errors[name]
+        if not names:
+            return np.empty((self.n, 0))
+        return np.column_stack([self._numbers[name] for name in names])
+
+    def cells(self, name: str) -> list:
+        """The cells of a column read as :data:`CELLS`."""
+        return self._cells[name]
+
+
+class Table:
+    """A CSV or Parquet table file, its header read: :attr:`names` are its columns, and
+    :meth:`read` converts the columns asked for. A CSV file is read in chunks of rows, so a
+    large trace is held as arrays of numbers, never as a string per cell (the parsing rules
+    are the ``csv`` module's: blank lines skipped, a short row's missing cells blank, a
+    repeated column name meaning its last column)."""
+
+    def __init__(self, path: Path, max_bytes: int | None = None) -> None:
+        check_file(path, max_bytes, "table file")
+        self.path = path
+        suffix = path.suffix.lower()
+        if suffix not in (".csv", ".parquet"):
+            raise ScenarioError(path, "<file>", "must be a .csv or .parquet file")
+        self._arrow = None
+        self._rows = None
+        try:
+            if suffix == ".parquet":
+                import pyarrow.parquet as pq
+
+                self._arrow = pq.read_table(path)
+                self.names = list(self._arrow.column_names)
+            else:
+                data = read_bytes(path, max_bytes, "table file")
+                decode_text(path, data)  # the encoding checks; the text is read again in rows
+                self._rows = csv.reader(io.TextIOWrapper(io.BytesIO(data), encoding="utf-8-sig",
+                                                         newline=""))
+                self.names = next(self._rows, None) or []
+        except ScenarioError:
+            raise
+        except Exception as e:  # pyarrow and csv raise several kinds for a malformed file
+            raise ScenarioError(path, "<file>", f"cannot be read as a table: {e}") from None
+
+    def read(self, want: dict[str, str]) -> Columns:
+        """Read the rows, converting each column of ``want`` (a column of the header, by
+        name) as its kind says (:data:`NUMBER`, :data:`NUMBER_OR_BLANK`, :data:`CELLS`). A
+        CSV file's rows are read once: ``read({})`` only checks that the rest of the file
+        parses."""
+        try:
+            if self._arrow is not None:
+                return self._read_arrow(want)
+            return self._read_csv(want)
+        except ScenarioError:
+            raise
+        except Exception as e:  # pyarrow and csv raise several kinds for a malformed file
+            raise ScenarioError(self.path, "<file>", f"cannot be read as a table: {e}") from None
+
+    def _read_arrow(self, want: dict[str, str]) -> Columns:
+        import pyarrow as pa
+
+        numbers, cells, errors = {}, {}, {}
+        n = self._arrow.num_rows
+        for name, kind in want.items():
+            col = self._arrow.column(name)
+            if kind == CELLS:
+                cells[name] = col.to_pylist()
                 continue
+            if (pa.types.is_integer(col.type) or pa.types.is_floating(col.type)) \
+                    and col.null_count == 0:
+                values = col.to_numpy().astype(np.float64)
+                if np.isfinite(values).all():
+                    numbers[name] = values
+                    continue
+            numbers[name] = self._slow(name, col.to_pylist(), 0, kind == NUMBER_OR_BLANK,
+                                       errors)
+        return Columns(self.path, n, numbers, cells, errors)
+
+    def _slow(self, name: str, values, first: int, blank_ok: bool,
+              errors: dict[str, ScenarioError]) -> np.ndarray:
+        """Cell by cell (rows ``first``, ``first + 1``, ...); a bad cell is nan, the column's
+        first one kept in ``errors``."""
+        out = np.empty(len(values))
+        for i, v in enumerate(values, first):
             try:
-                f = float(v)
+                out[i - first] = _cell_number(self.path, name, i, v, blank_ok)
+            except ScenarioError as e:
+                errors.setdefault(name, e)
+                out[i - first] = math.nan
+        return out
+
+    def _read_csv(self, want: dict[str, str]) -> Columns:
+        # DictReader's rules: the last column of a repeated name; None past a short row's end
+        where = {name: max(j for j, h in enumerate(self.names) if h == name) for name in want}
+        parts: dict[str, list] = {name: [] for name in want}
+        errors: dict[str, ScenarioError] = {}
+        dedup: dict = {}
+        n = 0
+        chunk: list[list[str]] = []
+        for row in self._rows:
+            if not row:
+                continue  # a blank line (csv.DictReader skips them too)
+            chunk.append(row)
+            if len(chunk) == CHUNK_ROWS:
+                self._convert(chunk, n, want, where, parts, errors, dedup)
+                n += len(chunk)
+                chunk = []
+        if chunk:
+            self._convert(chunk, n, want, where, parts, errors, dedup)
+            n += len(chunk)
+        numbers = {name: np.concatenate(p) if p else np.empty(0) for name, p in parts.items()
+                   if want[name] != CELLS}
+        cells = {name: [v for p in parts[name] for v in p] for name in want
+                 if want[name] == CELLS}
+        return Columns(self.path, n, numbers, cells, errors)
+
+    def _convert(self, chunk: list[list[str]], first: int, want: dict[str, str],
+                 where: dict[str, int], parts: dict[str, list],
+                 errors: dict[str, ScenarioError], dedup: dict) -> None:
+        width = min(map(len, chunk))
+        for name, kind in want.items():
+            j = where[name]
+            values = list(map(operator.itemgetter(j), chunk)) if j < width else \
+                [r[j] if j < len(r) else None for r in chunk]
+            if kind == CELLS:
+                parts[name].append([dedup.setdefault(v, v) for v in values])
+                continue
+            try:  # the usual case: every cell a finite number
+                got = np.fromiter(map(float, values), np.float64, len(values))
+                fine = bool(np.isfinite(got).all())
             except (TypeError, ValueError):
-                raise ScenarioError(path, f"row {i + 1}", f"{name} is not a number ({v!r})") from None
-            if not math.isfinite(f):
-                raise ScenarioError(path, f"row {i + 1}", f"{name} is not finite ({v!r})")
-            out[i, j] = f
-    return out
+                fine = False
+            if not fine:
+                got = self._slow(name, values, first, kind == NUMBER_OR_BLANK, errors)
+            parts[name].append(got)
 
 
 def parse_datetime(v) -> datetime:
@@ -235,7 +368,8 @@ def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
     a file of more than ``max_bytes`` is refused before it is read. A ``departure_time``
     column (date-times) needs ``start``: times are seconds from it, and trips departing before
     it are left out (counted in :attr:`Trips.dropped`)."""
-    columns = _read_columns(path, max_bytes)
+    table = Table(path, max_bytes)
+    columns = set(table.names)
     tcol = next((c for c in TIME_COLUMNS if c in columns), None)
     layout = next((lay for lay in LAYOUTS[space] if all(c in columns for c in lay[1])), None)
     if tcol is None or layout is None:
@@ -245,40 +379,46 @@ def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
             wanted = [" or ".join("(" + ", ".join(lay[1]) + ")" for lay in LAYOUTS[space])]
         missing = ([] if layout else wanted) + (
             [] if tcol else ["release_time (or t, or departure_time)"])
-        raise ScenarioError(path, "<header>", f"missing column(s): {', '.join(missing)}")
+        raise _after_rows(table, ScenarioError(path, "<header>",
+                                               f"missing column(s): {', '.join(missing)}"))
     name, pick, drop = layout
     has_dest = all(c in columns for c in drop)
     if not has_dest and any(c in columns for c in drop):
-        raise ScenarioError(path, "<header>", f"drop-off needs all of {', '.join(drop)}")
+        raise _after_rows(table, ScenarioError(path, "<header>",
+                                               f"drop-off needs all of {', '.join(drop)}"))
+    if tcol == DATETIME_COLUMN and start is None:
+        raise _after_rows(table, ScenarioError(
+            path, DATETIME_COLUMN, "holds date-times: set [tasks] start (e.g. start = "
+            "\"2014-12-21T00:00\") in the scenario, the time the run's second 0 stands for"))
+    if tcol != DATETIME_COLUMN and start is not None:
+        raise _after_rows(table, ScenarioError(
+            path, tcol, "gives times in seconds; [tasks] start is only used with a "
+            f"{DATETIME_COLUMN} column of date-times"))
+    optional = [c for c in ("max_wait", "max_delay", "passengers") if c in columns]
+    cols = table.read({tcol: CELLS if tcol == DATETIME_COLUMN else NUMBER,
+                       **{c: NUMBER for c in pick + (drop if has_dest else ())},
+                       **{c: NUMBER_OR_BLANK for c in optional}})
     if tcol == DATETIME_COLUMN:
-        if start is None:
-            raise ScenarioError(path, DATETIME_COLUMN, "holds date-times: set [tasks] start "
-                                "(e.g. start = \"2014-12-21T00:00\") in the scenario, the "
-                                "time the run's second 0 stands for")
-        t = _seconds_since(path, columns[tcol], start)
+        t = _seconds_since(path, cols.cells(tcol), start)
     else:
-        if start is not None:
-            raise ScenarioError(path, tcol, "gives times in seconds; [tasks] start is only used "
-                                            f"with a {DATETIME_COLUMN} column of date-times")
-        t = _numbers(path, columns, (tcol,))[:, 0]
-    origin = _numbers(path, columns, pick)
-    dest = _numbers(path, columns, drop) if has_dest else None
-    max_wait = (_numbers(path, columns, ("max_wait",), blank_ok=True)[:, 0]
+        t = cols.numbers((tcol,))[:, 0]
+    origin = cols.numbers(pick)
+    dest = cols.numbers(drop) if has_dest else None
+    max_wait = (cols.numbers(("max_wait",))[:, 0]
                 if "max_wait" in columns else np.full(len(t), math.nan))
-    max_delay = (_numbers(path, columns, ("max_delay",), blank_ok=True)[:, 0]
+    max_delay = (cols.numbers(("max_delay",))[:, 0]
                  if "max_delay" in columns else np.full(len(t), math.nan))
-    passengers = (_numbers(path, columns, ("passengers",), blank_ok=True)[:, 0]
+    passengers = (cols.numbers(("passengers",))[:, 0]
                   if "passengers" in columns else np.ones(len(t)))
+    del cols
     early = t < 0 if tcol == DATETIME_COLUMN else np.zeros(len(t), dtype=bool)
-    for i in range(len(t)):
-        if early[i]:
-            continue  # before start: left out below, not checked
+
+    def check_row(i: int) -> None:
+        """Raise the first error of row ``i`` (0-based), if it has one."""
         if max_delay[i] < 0:
             raise ScenarioError(path, f"row {i + 1}", f"max_delay {max_delay[i]} is negative")
         p = passengers[i]
-        if p != p:
-            passengers[i] = 1.0
-        elif p < 1 or p != int(p) or p > 2**31:
+        if p == p and (p < 1 or p != int(p) or p > 2**31):
             raise ScenarioError(path, f"row {i + 1}", f"passengers = {p} is not a whole "
                                                       f"number >= 1")
         if t[i] < 0:
@@ -286,8 +426,8 @@ def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
         if max_wait[i] <= 0:
             raise ScenarioError(path, f"row {i + 1}", f"max_wait {max_wait[i]} is not > 0")
         if size is not None:
-            for cols, values in ((pick, origin[i]), (drop, dest[i] if has_dest else ())):
-                for c, v, s in zip(cols, values, size):
+            for cs, values in ((pick, origin[i]), (drop, dest[i] if has_dest else ())):
+                for c, v, s in zip(cs, values, size):
                     if not 0 <= v < s:
                         raise ScenarioError(path, f"row {i + 1}",
                                             f"{c} = {v} is outside the world [0, {s})")
@@ -302,6 +442,27 @@ def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
                 if not -180 <= v <= 180 or (c.endswith(("latitude", "lat"))
                                             and not -90 <= v <= 90):
                     raise ScenarioError(path, f"row {i + 1}", f"{c} = {v} is not a coordinate")
+
+    # the checks of every row at once; the first row failing one is checked alone, for its
+    # message (rows departing before ``start`` are left out below, not checked)
+    with np.errstate(invalid="ignore"):
+        bad = (max_delay < 0) | (t < 0) | (max_wait <= 0) | (
+            (passengers == passengers)
+            & ((passengers < 1) | (passengers != np.trunc(passengers)) | (passengers > 2**31)))
+        points = [(pick, origin)] + ([(drop, dest)] if has_dest else [])
+        for cs, values in points:
+            if size is not None:
+                for j, s in enumerate(size[:len(cs)]):
+                    bad |= ~((values[:, j] >= 0) & (values[:, j] < s))
+            if name == "node":
+                bad |= (values != np.trunc(values)).any(axis=1)
+            if name == "latlon":
+                lat = np.array([c.endswith(("latitude", "lat")) for c in cs])
+                bad |= (~((values >= -180) & (values <= 180))
+                        | (lat & ~((values >= -90) & (values <= 90)))).any(axis=1)
+    for i in np.flatnonzero(bad & ~early):
+        check_row(int(i))
+    passengers[(passengers != passengers) & ~early] = 1.0
     order = np.argsort(t, kind="stable")
     trips = Trips(path, name, t[order], origin[order],
                   None if dest is None else dest[order], max_wait[order], order + 1,
@@ -312,6 +473,13 @@ def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
         raise ScenarioError(path, DATETIME_COLUMN, f"no trip departs at or after tasks.start "
                                                    f"({start.isoformat()})")
     return trips
+
+
+def _after_rows(table: Table, error: ScenarioError) -> ScenarioError:
+    """``error``, once the rest of ``table`` is read (a file that does not parse says so
+    before a header's error does)."""
+    table.read({})
+    return error
 
 
 def snap_distances(trips: Trips, network) -> np.ndarray:
@@ -360,17 +528,20 @@ def read_fleet_start(path: Path, nodes: bool, default_z: float = math.nan,
     ``default_z`` (:attr:`dispatch.space.Space.start_z`)."""
     if path.suffix.lower() != ".csv":
         raise ScenarioError(path, "<file>", "a fleet start file must be a .csv file")
-    columns = _read_columns(path, max_bytes)
+    table = Table(path, max_bytes)
+    columns = set(table.names)
     if "vehicle_id" not in columns:
-        raise ScenarioError(path, "<header>", "missing column vehicle_id")
+        raise _after_rows(table, ScenarioError(path, "<header>", "missing column vehicle_id"))
     if nodes and "node" in columns:
-        pos = _numbers(path, columns, ("node",))
+        where = ("node",)
     elif "x" in columns and "y" in columns:
-        pos = _numbers(path, columns, ("x", "y") + (("z",) if "z" in columns else ()))
+        where = ("x", "y") + (("z",) if "z" in columns else ())
     else:
         want = "node or x, y" if nodes else "x, y (and z)"
-        raise ScenarioError(path, "<header>", f"missing column(s): {want}")
-    ids = _numbers(path, columns, ("vehicle_id",))[:, 0]
+        raise _after_rows(table, ScenarioError(path, "<header>", f"missing column(s): {want}"))
+    cols = table.read(dict.fromkeys(where + ("vehicle_id",), NUMBER))
+    pos = cols.numbers(where)
+    ids = cols.numbers(("vehicle_id",))[:, 0]
     if len(ids) == 0:
         raise ScenarioError(path, "<file>", "places no vehicle")
     seen: set[int] = set()
@@ -392,10 +563,11 @@ def read_fleet_start(path: Path, nodes: bool, default_z: float = math.nan,
 def read_fleet_capacities(path: Path, max_bytes: int | None = None) -> tuple[int, ...]:
     """The optional ``capacity`` column of a fleet start file (seats per vehicle, in row
     order; blank: the scenario's ``[fleet] capacity``, given as 0); empty if there is none."""
-    columns = _read_columns(path, max_bytes)
-    if "capacity" not in columns:
+    table = Table(path, max_bytes)
+    if "capacity" not in table.names:
+        table.read({})
         return ()
-    seats = _numbers(path, columns, ("capacity",), blank_ok=True)[:, 0]
+    seats = table.read({"capacity": NUMBER_OR_BLANK}).numbers(("capacity",))[:, 0]
     out = []
     for i, c in enumerate(seats, 1):
         if c != c:
