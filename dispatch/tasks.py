@@ -386,11 +386,10 @@ class TaskSource:
             return
         if cfg.kind == "trace":
             requests = self.demand.from_trace(self.trips)
-            # the times first: zip stops at the count before a request past it is made
-            for t, req in zip(self.trips.t[: cfg.count], requests):
+            for t in self.trips.t[: cfg.count]:
                 if t > self.env.now:
                     yield self.env.timeout(t - self.env.now)
-                self.release(req)
+                self.release(next(requests))  # made now, not before its time
             self._done()
             return
         if cfg.kind == "periodic":
