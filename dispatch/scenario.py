@@ -46,12 +46,10 @@ from dispatch.config import (
 from dispatch.errors import FORCE_HINT, ScenarioError
 from dispatch.faults import FaultConfig, read_failures
 from dispatch.space import space_class
+from dispatch.table_files import check_file, decode_text, read_bytes
 from dispatch.traces import (
     Trips,
-    check_file,
-    decode_text,
     parse_datetime,
-    read_bytes,
     read_fleet_capacities,
     read_fleet_start,
     read_trace,

@@ -1,7 +1,8 @@
-"""Trace demand streams: a CSV trace is read in chunks of rows into number arrays (the same
-trips and the same first error as a read of the whole file at once, against an independent
-``csv.DictReader`` reference), its requests are made as the clock reaches them, and a
-scenario parsed again reuses the trips read for the same bytes."""
+"""Trace demand streams: a CSV trace is read into number arrays, by pyarrow where every cell
+is a number and else in chunks of rows (either way the trips of an independent
+``csv.DictReader`` reference, and the same first error as a read of the whole file column by
+column), its requests are made as the clock reaches them, and a scenario parsed again reuses
+the trips read for the same bytes."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ import numpy as np
 import pytest
 import simpy
 
-from dispatch import traces
+from dispatch import table_files
 from dispatch.demand import RoadDemand
 from dispatch.errors import ScenarioError
 from dispatch.events import EventBus
@@ -63,7 +64,7 @@ def reference(path: Path) -> dict[str, list]:
 @pytest.mark.parametrize("chunk", [1, 3, 64, 10**6])
 def test_a_trace_read_in_chunks_is_the_whole_file(tmp_path, monkeypatch, chunk):
     path = write_trace(tmp_path / "trips.csv", random_rows(np.random.default_rng(7), 200))
-    monkeypatch.setattr(traces, "CHUNK_ROWS", chunk)
+    monkeypatch.setattr(table_files, "CHUNK_ROWS", chunk)
     trips = read_trace(path, "road", None)
     want = reference(path)
     assert trips.layout == "metres" and len(trips) == 200
@@ -83,7 +84,7 @@ def test_the_first_column_checked_names_its_error_whatever_the_row(tmp_path, mon
     rows[1][2] = "north"
     rows[4][1] = "soon"
     path = write_trace(tmp_path / "trips.csv", rows)
-    monkeypatch.setattr(traces, "CHUNK_ROWS", chunk)
+    monkeypatch.setattr(table_files, "CHUNK_ROWS", chunk)
     with pytest.raises(ScenarioError, match=r"row 5.*t is not a number \('soon'\)"):
         read_trace(path, "road", None)
     rows[4][1] = "12.0"
@@ -101,9 +102,52 @@ def test_a_row_check_names_the_first_failing_row_not_the_first_in_time(tmp_path)
         read_trace(path, "road", None)
 
 
-def test_reading_a_large_trace_holds_numbers_not_a_string_per_cell(tmp_path):
-    """100,000 rows (about 4 MB): the read peaks at a few times the file, not at the ~70 MB
-    of a string per cell and a dict per row."""
+def all_numbers(tmp_path: Path) -> Path:
+    rows = random_rows(np.random.default_rng(8), 300)
+    for r in rows:
+        r[6], r[7] = r[6] or "600", r[7] or "1"
+    return write_trace(tmp_path / "trips.csv", rows)
+
+
+def test_a_trace_of_numbers_is_read_at_once_as_row_by_row(tmp_path, monkeypatch):
+    path = all_numbers(tmp_path)
+    used = []
+    at_once = table_files.Table._read_csv_at_once
+    monkeypatch.setattr(table_files.Table, "_read_csv_at_once",
+                        lambda self, want: used.append(at_once(self, want)) or used[-1])
+    fast = read_trace(path, "road", None)
+    assert used and used[0] is not None  # pyarrow read it
+    monkeypatch.setattr(table_files.Table, "_read_csv_at_once", lambda self, want: None)
+    slow = read_trace(path, "road", None)
+    want = reference(path)
+    for trips in (fast, slow):
+        assert trips.t.tolist() == want["t"] and trips.row.tolist() == want["row"]
+        assert trips.origin.tolist() == want["origin"] and trips.dest.tolist() == want["dest"]
+        assert trips.max_wait.tolist() == want["max_wait"]
+        assert trips.passengers.tolist() == want["passengers"]
+
+
+@pytest.mark.parametrize("cell, what", [("", "t is not a number"), ("1_0", None),
+                                        ("inf", "t is not finite"), (" 7 ", None)])
+def test_a_cell_pyarrow_reads_otherwise_is_read_row_by_row(tmp_path, cell, what):
+    """A blank, an underscore, an infinity, spaces: Python's float() decides, as row by row."""
+    rows = [list(r) for r in random_rows(np.random.default_rng(9), 4)]
+    for r in rows:
+        r[6], r[7] = r[6] or "600", r[7] or "1"
+    rows[2][1] = cell
+    path = write_trace(tmp_path / "trips.csv", rows)
+    if what is None:
+        assert float(cell) in read_trace(path, "road", None).t.tolist()
+    else:
+        with pytest.raises(ScenarioError, match=f"row 3: {what}"):
+            read_trace(path, "road", None)
+
+
+def test_reading_a_large_trace_holds_numbers_not_a_string_per_cell(tmp_path, monkeypatch):
+    """100,000 rows (about 4 MB) read row by row (the way a trace with a blank cell is read;
+    pyarrow's memory is not traced): the read peaks at a few times the file, not at the
+    ~70 MB of a string per cell and a dict per row."""
+    monkeypatch.setattr(table_files.Table, "_read_csv_at_once", lambda self, want: None)
     rng = np.random.default_rng(3)
     n = 100_000
     path = tmp_path / "big.csv"
