@@ -13,6 +13,7 @@ Every draw comes from the generator the demand is given.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -37,16 +38,15 @@ class VoxelDemand(Demand):
         c = pool[self.rng.integers(len(pool))]
         return Request("ground" if on_ground else "air", (int(c[0]), int(c[1]), int(c[2])))
 
-    def from_trace(self, trips: Trips) -> list[Request]:
-        out = []
+    def from_trace(self, trips: Trips) -> Iterator[Request]:
+        grid, dest = self.grid, trips.dest
         for i in range(len(trips)):
-            cell = self.grid.cell_of(trips.origin[i])
-            drop = None if trips.dest is None else self.grid.cell_of(trips.dest[i])
+            cell = grid.cell_of(trips.origin[i])
+            drop = None if dest is None else grid.cell_of(dest[i])
             kind = "ground" if cell[2] == 0 and (drop is None or drop[2] == 0) else "air"
-            out.append(Request(kind, cell, drop, float(trips.max_wait[i]),
-                               passengers=_int(trips.passengers, i),
-                               max_delay=_float(trips.max_delay, i)))
-        return out
+            yield Request(kind, cell, drop, float(trips.max_wait[i]),
+                          passengers=_int(trips.passengers, i),
+                          max_delay=_float(trips.max_delay, i))
 
     def valid(self, loc) -> bool:
         return self.grid.is_free(loc)
@@ -62,16 +62,23 @@ class RoadDemand(Demand):
         d = int(self.rng.integers(n - 1))
         return Request("trip", o, d + (d >= o))  # uniform over the other nodes
 
-    def from_trace(self, trips: Trips) -> list[Request]:
+    def from_trace(self, trips: Trips) -> Iterator[Request]:
         net = self.network
+        # every trip's nodes at once (a node the network lacks is an error now, not when the
+        # clock reaches its row); the requests are made one by one as they are asked for
         origin, snap_o = _nodes(net, trips, trips.origin)
         dest, snap_d = (None, None) if trips.dest is None else _nodes(net, trips, trips.dest)
-        nan = math.nan
-        return [Request("trip", int(origin[i]), None if dest is None else int(dest[i]),
-                        float(trips.max_wait[i]), float(snap_o[i]),
-                        nan if snap_d is None else float(snap_d[i]),
-                        _int(trips.passengers, i), _float(trips.max_delay, i))
-                for i in range(len(trips))]
+        return _road_requests(trips, origin, snap_o, dest, snap_d)
+
+
+def _road_requests(trips: Trips, origin: np.ndarray, snap_o: np.ndarray,
+                   dest: np.ndarray | None, snap_d: np.ndarray | None) -> Iterator[Request]:
+    nan = math.nan
+    for i in range(len(trips)):
+        yield Request("trip", int(origin[i]), None if dest is None else int(dest[i]),
+                      float(trips.max_wait[i]), float(snap_o[i]),
+                      nan if snap_d is None else float(snap_d[i]),
+                      _int(trips.passengers, i), _float(trips.max_delay, i))
 
 
 def _int(column, i: int) -> int:
@@ -85,13 +92,20 @@ def _float(column, i: int) -> float:
 def _nodes(net, trips: Trips, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Node indices and snapping distances (metres; 0 for node ids) of a trace's columns."""
     if trips.layout == "node":
-        idx = np.empty(len(cols), dtype=np.int64)
-        for i, v in enumerate(cols[:, 0]):
+        ids, inverse = np.unique(cols[:, 0], return_inverse=True)
+        known = np.empty(len(ids), dtype=np.int64)
+        for k, v in enumerate(ids):  # each distinct id looked up once
             try:
-                idx[i] = net.index_of(int(v))
+                known[k] = net.index_of(int(v))
+            except ValueError:
+                known[k] = -1
+        if (known < 0).any():
+            i = int(np.flatnonzero(known[inverse] < 0)[0])  # the first trip naming one
+            try:
+                net.index_of(int(cols[i, 0]))
             except ValueError as e:
                 raise ScenarioError(trips.path, f"row {trips.row[i]}", str(e)) from None
-        return idx, np.zeros(len(cols))
+        return known[inverse.reshape(-1)], np.zeros(len(cols))
     if trips.layout == "metres":
         xy = cols[:, :2]
     else:  # latitude, longitude columns

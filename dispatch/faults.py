@@ -51,7 +51,7 @@ def read_failures(path) -> tuple[tuple[float, int, float], ...]:
     import csv
     import io
 
-    from dispatch.traces import decode_text, read_bytes
+    from dispatch.table_files import decode_text, read_bytes
 
     text = decode_text(path, read_bytes(path, MAX_FILE_BYTES, "breakdown file"))
     try:

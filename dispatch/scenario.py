@@ -11,6 +11,8 @@ See ``scenarios/README.md`` for every key with its default; the configuration cl
 
 from __future__ import annotations
 
+import functools
+import hashlib
 import logging
 import math
 import tomllib
@@ -46,11 +48,10 @@ from dispatch.scenario_sections import (
 )
 from dispatch.scenario_table import Table
 from dispatch.space import space_class
+from dispatch.table_files import check_file, decode_text, read_bytes
 from dispatch.traces import (
     Trips,
-    decode_text,
     parse_datetime,
-    read_bytes,
     read_fleet_capacities,
     read_fleet_start,
     read_trace,
@@ -153,8 +154,8 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
         if not isinstance(trace, str) or not trace:
             raise t.fail("trace", "is required when source = 'trace' (a CSV or Parquet file)")
         trace_path = shipped_trace(trace) or (path.parent / trace).resolve()
-        trips = read_trace(trace_path, world.space, space_class(world.space).trace_bounds(world),
-                           max_bytes, start=start)
+        trips = _read_trace(trace_path, world.space,
+                            space_class(world.space).trace_bounds(world), max_bytes, start)
         if max_snap is not None:
             trips = _within_snap(t, trips, world, max_snap)
         for reason, n in trips.dropped:
@@ -284,6 +285,26 @@ def _parse_max_snap(t: Table, source: str, world: WorldConfig) -> float | None:
         raise t.fail("max_snap", "is only used with a trace on a road network "
                                  "(source = 'trace', [world] network)")
     return v
+
+
+def _read_trace(path: Path, space: str, bounds, max_bytes: int | None,
+                start: datetime | None) -> Trips:
+    """:func:`dispatch.traces.read_trace`, the trips kept for the file's bytes as they are: a
+    scenario parsed again (``dispatch run --duration`` parses its text again) does not read a
+    large trace again."""
+    check_file(path, max_bytes, "table file")  # before opening it: not a FIFO, not too large
+    try:
+        with open(path, "rb") as fh:
+            digest = hashlib.file_digest(fh, "blake2b").digest()
+    except OSError:
+        return read_trace(path, space, bounds, max_bytes, start=start)  # it says why
+    return _read_trace_of(path, digest, space, bounds, max_bytes, start)
+
+
+@functools.lru_cache(maxsize=1)
+def _read_trace_of(path: Path, digest: bytes, space: str, bounds, max_bytes: int | None,
+                   start: datetime | None) -> Trips:
+    return read_trace(path, space, bounds, max_bytes, start=start)
 
 
 def _within_snap(t: Table, trips: Trips, world: WorldConfig, max_snap: float) -> Trips:

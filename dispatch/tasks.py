@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from enum import Enum
 
@@ -268,14 +268,16 @@ class Request:
 
 class Demand:
     """Turns a scenario's task description into requests in its space: ``draw`` makes a
-    generated one (static, periodic, poisson); ``from_trace`` converts a trace's trips.
-    ``valid(loc)`` says whether a task there can be served at all (a cell inside an
-    obstacle cannot)."""
+    generated one (static, periodic, poisson); ``from_trace`` converts a trace's trips: it
+    checks them all when called and returns an iterator that makes each trip's request when
+    it is asked for, in the trips' (release) order (a day of a million trips is never a
+    million requests at once). ``valid(loc)`` says whether a task there can be served at all
+    (a cell inside an obstacle cannot)."""
 
     def draw(self) -> Request:
         raise NotImplementedError
 
-    def from_trace(self, trips) -> list[Request]:
+    def from_trace(self, trips) -> Iterator[Request]:
         raise NotImplementedError
 
     def valid(self, loc: Location) -> bool:
@@ -383,11 +385,11 @@ class TaskSource:
             yield self.env.timeout(0)
             return
         if cfg.kind == "trace":
-            requests = self.demand.from_trace(self.trips)[: cfg.count]
-            for t, req in zip(self.trips.t, requests):
+            requests = self.demand.from_trace(self.trips)
+            for t in self.trips.t[: cfg.count]:
                 if t > self.env.now:
                     yield self.env.timeout(t - self.env.now)
-                self.release(req)
+                self.release(next(requests))  # made now, not before its time
             self._done()
             return
         if cfg.kind == "periodic":

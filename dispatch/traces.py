@@ -25,12 +25,7 @@ raises a ScenarioError naming the file and its 1-based data row.
 
 from __future__ import annotations
 
-import codecs
-import csv
-import io
 import math
-import os
-import stat
 from dataclasses import dataclass, fields, replace
 from datetime import date, datetime
 from pathlib import Path
@@ -38,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from dispatch.errors import ScenarioError
+from dispatch.table_files import CELLS, NUMBER, NUMBER_OR_BLANK, Table
 
 TIME_COLUMNS = ("t", "release_time", "departure_time")
 #: the time column given as date-times (seconds from ``[tasks] start``)
@@ -93,101 +89,6 @@ class Trips:
         return replace(self, **cut, dropped=self.dropped + ((reason, n_out),))
 
 
-#: byte order marks of encodings other than UTF-8 (longest first: UTF-32 LE starts as UTF-16 LE)
-BOMS = ((codecs.BOM_UTF32_LE, "UTF-32 LE"), (codecs.BOM_UTF32_BE, "UTF-32 BE"),
-        (codecs.BOM_UTF16_LE, "UTF-16 LE"), (codecs.BOM_UTF16_BE, "UTF-16 BE"))
-
-
-def check_file(path: Path, max_bytes: int | None, what: str = "file") -> int:
-    """Stat ``path`` before reading it: it must exist, be a regular file (not a device, a
-    FIFO or a folder) and hold at most ``max_bytes`` (None: no bound). Returns its size."""
-    try:
-        st = os.stat(path)
-    except OSError as e:
-        reason = "cannot be read: file not found" if isinstance(e, FileNotFoundError) else \
-            f"cannot be read ({e.strerror or e})"
-        raise ScenarioError(path, "<file>", reason) from None
-    if not stat.S_ISREG(st.st_mode):
-        kind = "a folder" if stat.S_ISDIR(st.st_mode) else "a device, pipe or socket"
-        raise ScenarioError(path, "<file>", f"is {kind}, not a regular {what}")
-    if max_bytes is not None and st.st_size > max_bytes:
-        raise ScenarioError(path, "<file>", f"is {st.st_size / 2**20:.1f} MiB; a {what} of "
-                                            f"more than {max_bytes / 2**20:.0f} MiB is refused "
-                                            "(use --force to read it anyway)")
-    return st.st_size
-
-
-def read_bytes(path: Path, max_bytes: int | None, what: str = "file") -> bytes:
-    """The bytes of a regular file checked by :func:`check_file` (read at most the size it
-    had, plus one byte: a file that grows meanwhile is refused, not read without end)."""
-    size = check_file(path, max_bytes, what)
-    try:
-        with open(path, "rb") as fh:
-            data = fh.read(size + 1 if max_bytes is None else max(size, max_bytes) + 1)
-    except OSError as e:
-        raise ScenarioError(path, "<file>", f"cannot be read ({e.strerror or e})") from None
-    if max_bytes is not None and len(data) > max_bytes:
-        raise ScenarioError(path, "<file>", f"grew past {max_bytes / 2**20:.0f} MiB while read")
-    return data
-
-
-def decode_text(path: Path, data: bytes) -> str:
-    """UTF-8 text (a UTF-8 byte order mark is dropped); one-line errors for a UTF-16/32 file
-    (named by its byte order mark) and for bytes that are not UTF-8."""
-    for bom, name in BOMS:
-        if data.startswith(bom):
-            raise ScenarioError(path, "<encoding>", f"is {name} text (it starts with the byte "
-                                                    f"order mark {bom.hex(' ').upper()}); save "
-                                                    "it as UTF-8")
-    try:
-        return data.decode("utf-8-sig")
-    except UnicodeDecodeError as e:
-        line = data[: e.start].count(b"\n") + 1
-        raise ScenarioError(path, "<encoding>", f"is not UTF-8 text (byte 0x{data[e.start]:02X} "
-                                                f"on line {line}, offset {e.start}); save it "
-                                                "as UTF-8") from None
-
-
-def _read_columns(path: Path, max_bytes: int | None = None) -> dict[str, list]:
-    check_file(path, max_bytes, "table file")
-    suffix = path.suffix.lower()
-    try:
-        if suffix == ".parquet":
-            import pyarrow.parquet as pq
-
-            return pq.read_table(path).to_pydict()
-        if suffix == ".csv":
-            text = decode_text(path, read_bytes(path, max_bytes, "table file"))
-            reader = csv.DictReader(io.StringIO(text, newline=""))
-            data = list(reader)
-            names = reader.fieldnames or []
-            return {n: [r.get(n) for r in data] for n in names}
-    except ScenarioError:
-        raise
-    except Exception as e:  # pyarrow and csv raise several kinds for a malformed file
-        raise ScenarioError(path, "<file>", f"cannot be read as a table: {e}") from None
-    raise ScenarioError(path, "<file>", "must be a .csv or .parquet file")
-
-
-def _numbers(path: Path, columns: dict[str, list], names, *, blank_ok: bool = False) -> np.ndarray:
-    """The named columns as a float array ``(rows, len(names))``; bad values name their row."""
-    n = len(columns[names[0]]) if names else 0
-    out = np.empty((n, len(names)))
-    for j, name in enumerate(names):
-        for i, v in enumerate(columns[name]):
-            if blank_ok and (v is None or (isinstance(v, str) and not v.strip())):
-                out[i, j] = math.nan
-                continue
-            try:
-                f = float(v)
-            except (TypeError, ValueError):
-                raise ScenarioError(path, f"row {i + 1}", f"{name} is not a number ({v!r})") from None
-            if not math.isfinite(f):
-                raise ScenarioError(path, f"row {i + 1}", f"{name} is not finite ({v!r})")
-            out[i, j] = f
-    return out
-
-
 def parse_datetime(v) -> datetime:
     """A date-time of a trace cell or a scenario key: a ``datetime`` (a ``date`` is its
     midnight) or an ISO 8601 string (``2014-12-21 08:30:00``, ``2014-12-21T08:30``, with or
@@ -235,7 +136,8 @@ def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
     a file of more than ``max_bytes`` is refused before it is read. A ``departure_time``
     column (date-times) needs ``start``: times are seconds from it, and trips departing before
     it are left out (counted in :attr:`Trips.dropped`)."""
-    columns = _read_columns(path, max_bytes)
+    table = Table(path, max_bytes)
+    columns = set(table.names)
     tcol = next((c for c in TIME_COLUMNS if c in columns), None)
     layout = next((lay for lay in LAYOUTS[space] if all(c in columns for c in lay[1])), None)
     if tcol is None or layout is None:
@@ -245,40 +147,46 @@ def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
             wanted = [" or ".join("(" + ", ".join(lay[1]) + ")" for lay in LAYOUTS[space])]
         missing = ([] if layout else wanted) + (
             [] if tcol else ["release_time (or t, or departure_time)"])
-        raise ScenarioError(path, "<header>", f"missing column(s): {', '.join(missing)}")
+        raise table.after_rows(ScenarioError(path, "<header>",
+                                               f"missing column(s): {', '.join(missing)}"))
     name, pick, drop = layout
     has_dest = all(c in columns for c in drop)
     if not has_dest and any(c in columns for c in drop):
-        raise ScenarioError(path, "<header>", f"drop-off needs all of {', '.join(drop)}")
+        raise table.after_rows(ScenarioError(path, "<header>",
+                                               f"drop-off needs all of {', '.join(drop)}"))
+    if tcol == DATETIME_COLUMN and start is None:
+        raise table.after_rows(ScenarioError(
+            path, DATETIME_COLUMN, "holds date-times: set [tasks] start (e.g. start = "
+            "\"2014-12-21T00:00\") in the scenario, the time the run's second 0 stands for"))
+    if tcol != DATETIME_COLUMN and start is not None:
+        raise table.after_rows(ScenarioError(
+            path, tcol, "gives times in seconds; [tasks] start is only used with a "
+            f"{DATETIME_COLUMN} column of date-times"))
+    optional = [c for c in ("max_wait", "max_delay", "passengers") if c in columns]
+    cols = table.read({tcol: CELLS if tcol == DATETIME_COLUMN else NUMBER,
+                       **{c: NUMBER for c in pick + (drop if has_dest else ())},
+                       **{c: NUMBER_OR_BLANK for c in optional}})
     if tcol == DATETIME_COLUMN:
-        if start is None:
-            raise ScenarioError(path, DATETIME_COLUMN, "holds date-times: set [tasks] start "
-                                "(e.g. start = \"2014-12-21T00:00\") in the scenario, the "
-                                "time the run's second 0 stands for")
-        t = _seconds_since(path, columns[tcol], start)
+        t = _seconds_since(path, cols.cells(tcol), start)
     else:
-        if start is not None:
-            raise ScenarioError(path, tcol, "gives times in seconds; [tasks] start is only used "
-                                            f"with a {DATETIME_COLUMN} column of date-times")
-        t = _numbers(path, columns, (tcol,))[:, 0]
-    origin = _numbers(path, columns, pick)
-    dest = _numbers(path, columns, drop) if has_dest else None
-    max_wait = (_numbers(path, columns, ("max_wait",), blank_ok=True)[:, 0]
+        t = cols.numbers((tcol,))[:, 0]
+    origin = cols.numbers(pick)
+    dest = cols.numbers(drop) if has_dest else None
+    max_wait = (cols.numbers(("max_wait",))[:, 0]
                 if "max_wait" in columns else np.full(len(t), math.nan))
-    max_delay = (_numbers(path, columns, ("max_delay",), blank_ok=True)[:, 0]
+    max_delay = (cols.numbers(("max_delay",))[:, 0]
                  if "max_delay" in columns else np.full(len(t), math.nan))
-    passengers = (_numbers(path, columns, ("passengers",), blank_ok=True)[:, 0]
+    passengers = (cols.numbers(("passengers",))[:, 0]
                   if "passengers" in columns else np.ones(len(t)))
+    del cols
     early = t < 0 if tcol == DATETIME_COLUMN else np.zeros(len(t), dtype=bool)
-    for i in range(len(t)):
-        if early[i]:
-            continue  # before start: left out below, not checked
+
+    def check_row(i: int) -> None:
+        """Raise the first error of row ``i`` (0-based), if it has one."""
         if max_delay[i] < 0:
             raise ScenarioError(path, f"row {i + 1}", f"max_delay {max_delay[i]} is negative")
         p = passengers[i]
-        if p != p:
-            passengers[i] = 1.0
-        elif p < 1 or p != int(p) or p > 2**31:
+        if p == p and (p < 1 or p != int(p) or p > 2**31):
             raise ScenarioError(path, f"row {i + 1}", f"passengers = {p} is not a whole "
                                                       f"number >= 1")
         if t[i] < 0:
@@ -286,8 +194,8 @@ def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
         if max_wait[i] <= 0:
             raise ScenarioError(path, f"row {i + 1}", f"max_wait {max_wait[i]} is not > 0")
         if size is not None:
-            for cols, values in ((pick, origin[i]), (drop, dest[i] if has_dest else ())):
-                for c, v, s in zip(cols, values, size):
+            for cs, values in ((pick, origin[i]), (drop, dest[i] if has_dest else ())):
+                for c, v, s in zip(cs, values, size):
                     if not 0 <= v < s:
                         raise ScenarioError(path, f"row {i + 1}",
                                             f"{c} = {v} is outside the world [0, {s})")
@@ -302,6 +210,27 @@ def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
                 if not -180 <= v <= 180 or (c.endswith(("latitude", "lat"))
                                             and not -90 <= v <= 90):
                     raise ScenarioError(path, f"row {i + 1}", f"{c} = {v} is not a coordinate")
+
+    # the checks of every row at once; the first row failing one is checked alone, for its
+    # message (rows departing before ``start`` are left out below, not checked)
+    with np.errstate(invalid="ignore"):
+        bad = (max_delay < 0) | (t < 0) | (max_wait <= 0) | (
+            (passengers == passengers)
+            & ((passengers < 1) | (passengers != np.trunc(passengers)) | (passengers > 2**31)))
+        points = [(pick, origin)] + ([(drop, dest)] if has_dest else [])
+        for cs, values in points:
+            if size is not None:
+                for j, s in enumerate(size[:len(cs)]):
+                    bad |= ~((values[:, j] >= 0) & (values[:, j] < s))
+            if name == "node":
+                bad |= (values != np.trunc(values)).any(axis=1)
+            if name == "latlon":
+                lat = np.array([c.endswith(("latitude", "lat")) for c in cs])
+                bad |= (~((values >= -180) & (values <= 180))
+                        | (lat & ~((values >= -90) & (values <= 90)))).any(axis=1)
+    for i in np.flatnonzero(bad & ~early):
+        check_row(int(i))
+    passengers[(passengers != passengers) & ~early] = 1.0
     order = np.argsort(t, kind="stable")
     trips = Trips(path, name, t[order], origin[order],
                   None if dest is None else dest[order], max_wait[order], order + 1,
@@ -360,17 +289,20 @@ def read_fleet_start(path: Path, nodes: bool, default_z: float = math.nan,
     ``default_z`` (:attr:`dispatch.space.Space.start_z`)."""
     if path.suffix.lower() != ".csv":
         raise ScenarioError(path, "<file>", "a fleet start file must be a .csv file")
-    columns = _read_columns(path, max_bytes)
+    table = Table(path, max_bytes)
+    columns = set(table.names)
     if "vehicle_id" not in columns:
-        raise ScenarioError(path, "<header>", "missing column vehicle_id")
+        raise table.after_rows(ScenarioError(path, "<header>", "missing column vehicle_id"))
     if nodes and "node" in columns:
-        pos = _numbers(path, columns, ("node",))
+        where = ("node",)
     elif "x" in columns and "y" in columns:
-        pos = _numbers(path, columns, ("x", "y") + (("z",) if "z" in columns else ()))
+        where = ("x", "y") + (("z",) if "z" in columns else ())
     else:
         want = "node or x, y" if nodes else "x, y (and z)"
-        raise ScenarioError(path, "<header>", f"missing column(s): {want}")
-    ids = _numbers(path, columns, ("vehicle_id",))[:, 0]
+        raise table.after_rows(ScenarioError(path, "<header>", f"missing column(s): {want}"))
+    cols = table.read(dict.fromkeys(where + ("vehicle_id",), NUMBER))
+    pos = cols.numbers(where)
+    ids = cols.numbers(("vehicle_id",))[:, 0]
     if len(ids) == 0:
         raise ScenarioError(path, "<file>", "places no vehicle")
     seen: set[int] = set()
@@ -392,10 +324,11 @@ def read_fleet_start(path: Path, nodes: bool, default_z: float = math.nan,
 def read_fleet_capacities(path: Path, max_bytes: int | None = None) -> tuple[int, ...]:
     """The optional ``capacity`` column of a fleet start file (seats per vehicle, in row
     order; blank: the scenario's ``[fleet] capacity``, given as 0); empty if there is none."""
-    columns = _read_columns(path, max_bytes)
-    if "capacity" not in columns:
+    table = Table(path, max_bytes)
+    if "capacity" not in table.names:
+        table.read({})
         return ()
-    seats = _numbers(path, columns, ("capacity",), blank_ok=True)[:, 0]
+    seats = table.read({"capacity": NUMBER_OR_BLANK}).numbers(("capacity",))[:, 0]
     out = []
     for i, c in enumerate(seats, 1):
         if c != c:
