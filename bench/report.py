@@ -29,11 +29,18 @@ def _cell(iv: Interval) -> str:
     return _fmt(iv.mean) + ("" if math.isnan(iv.half) else f" ± {_fmt(iv.half)}")
 
 
-def _columns(instance: str, rows: list[dict]) -> list[str]:
+def _group(instance: str, rows: list[dict]) -> str:
+    """The instance's group in the suite; an instance outside it: robots in a voxel world."""
     inst = _BY_NAME.get(instance)
-    group = inst.group if inst else "fleets"
+    if inst is not None:
+        return inst.group
     world = next((r["world"] for r in rows if r["instance"] == instance), "voxel")
-    cols = list(BOARD[group])
+    return "robots" if world == "voxel" else "fleets"
+
+
+def _columns(instance: str, rows: list[dict]) -> list[str]:
+    world = next((r["world"] for r in rows if r["instance"] == instance), "voxel")
+    cols = list(BOARD[_group(instance, rows)])
     if world == "road":
         cols += [c for c in BOARD["fleets"] if c not in cols]
     return cols
@@ -139,7 +146,7 @@ def write_figure(rows: list[dict], path: Path) -> bool:
     fig, axes = plt.subplots(2, 2, figsize=(13, 8), squeeze=False)
     colors = plt.get_cmap("tab10")
     for ax, (group, metric, label, scale, log) in zip(axes.T.flat, panels):
-        names = [i for i, _ in order if _BY_NAME.get(i) and _BY_NAME[i].group == group]
+        names = [i for i, _ in order if _group(i, rows) == group]
         if not names:
             ax.set_visible(False)
             continue
@@ -167,9 +174,10 @@ def write_figure(rows: list[dict], path: Path) -> bool:
             if lab not in labels:
                 handles.append(h)
                 labels.append(lab)
-    fig.legend(handles, labels, loc="upper center", ncol=len(labels), frameon=False)
-    fig.suptitle(f"{VERSION}: mean over seeds, 95 % intervals", y=0.995, fontsize=11)
-    fig.tight_layout(rect=(0, 0, 1, 0.95))
+    fig.suptitle(f"{VERSION}: mean over seeds, 95 % intervals", y=0.99, fontsize=11)
+    fig.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, 0.955),
+               ncol=len(labels), frameon=False)
+    fig.tight_layout(rect=(0, 0, 1, 0.91))
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return True

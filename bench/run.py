@@ -88,12 +88,15 @@ def plan(chosen: list[Instance], named: list[str], *, quick: bool, seeds: int | 
     from dispatch.scenario import parse_scenario
 
     out = Plan()
+    parsed: dict[str, Any] = {}  # text -> scenario: the allocators without params share one
     for inst in chosen:
         world = inst.world()
         for alloc in allocators_for(inst, named):
             own = params if (params and alloc in named) else None
             text = inst.text(quick, alloc, own)
-            sc = parse_scenario(tomllib.loads(text), inst.path, text, limits=None)
+            if text not in parsed:
+                parsed[text] = parse_scenario(tomllib.loads(text), inst.path, text, limits=None)
+            sc = parsed[text]
             why = None
             caps = declaration("allocator", base_name(alloc))
             if not caps.serves(sc.world.space):
@@ -102,9 +105,13 @@ def plan(chosen: list[Instance], named: list[str], *, quick: bool, seeds: int | 
             else:
                 try:
                     check_runs(sc, sorted({sc.dispatch.planner}), (), [alloc])
-                    make_plugin("allocator", alloc, sc.dispatch.params_for(alloc))
-                except DispatchError as e:
+                except DispatchError as e:  # a capability the instance needs
                     why = str(e).replace(f"{inst.path}: ", "")
+            if why is None:
+                try:
+                    make_plugin("allocator", alloc, sc.dispatch.params_for(alloc))
+                except DispatchError as e:  # its parameters (--param): the caller's mistake
+                    raise BenchError(f"{alloc}: {e}") from None
             for seed in seeds_of(inst, quick, seeds):
                 if why is not None:
                     out.unsupported.append(_row(inst, world, alloc, seed,

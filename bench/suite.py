@@ -59,6 +59,8 @@ class Instance:
         if quick:
             _merge(doc, self.quick)
         doc["name"] = f"bench_{self.name}"
+        if self.note:  # (the scenario's own description would name its settings, not ours)
+            doc["description"] = f"{VERSION} {self.name}: {self.note}"
         return doc
 
     @property
