@@ -84,8 +84,8 @@ def write_markdown(rows: list[dict], path: Path, machine: dict, seconds: float) 
         seeds = sorted({r["seed"] for r in mine})
         lines += [f"## {instance}", "",
                   f"{inst.note if inst else ''} ({mine[0]['world']}; seeds "
-                  f"{', '.join(map(str, seeds))}; {_fmt(ivs[(instance, allocs[0], 'requests')].mean)}"
-                  " requests).", ""]
+                  f"{', '.join(map(str, seeds))}; "
+                  f"{_fmt(ivs[(instance, allocs[0], 'requests')].mean)} requests).", ""]
         best = {}
         for c in cols:
             if c in NOT_RANKED:

@@ -211,6 +211,9 @@ def test_against_flags_a_planted_regression_and_passes_an_equal_board():
 def test_against_from_files_round_trip(tmp_path):
     write_csv(_board(), tmp_path / "bench.csv")
     assert against.compare(read_csv(tmp_path / "bench.csv"), _board()) == []
+    (tmp_path / "bad.csv").write_bytes(b"\xff\xfe\x00garbage")
+    with pytest.raises(BenchFileError, match="bad.csv"):
+        read_csv(tmp_path / "bad.csv")
 
 
 # ------------------------------------------------------------------------- one-line errors
