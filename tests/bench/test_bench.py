@@ -25,7 +25,7 @@ SUITE_SEEDS = {
     "static_n50": (0, 1, 2), "static_n100": (0, 1, 2),
     "dynamic_n8": (0, 1, 2), "radio_20m": (0, 1, 2), "radio_10m": (0, 1, 2), "faults": (0, 1, 2),
     "chicago_n500_30s": (0, 1), "chicago_n1000_30s": (0, 1), "nyc_1seat": (0, 1),
-    "nyc_4seats": (0, 1), "nyc_ev": (0, 1), "grid_10k": (0,),
+    "nyc_4seats": (0, 1), "nyc_ev": (0,), "grid_10k": (0,),
 }
 QUICK = ["static_n4", "static_n8", "static_n20", "dynamic_n8", "radio_20m", "radio_10m",
          "faults", "chicago_n500_30s", "nyc_1seat", "nyc_4seats", "nyc_ev"]
@@ -49,6 +49,8 @@ def test_the_suite_is_fixed():
     assert {i.world() for i in suite.SUITE if i.group == "fleets"} == {"road"}
     assert suite.seeds_of(by["static_n4"], k=3) == (0, 1, 2)
     assert suite.seeds_of(by["grid_10k"], k=2) == (0, 1)
+    assert suite.seeds_of(by["static_n4"], quick=True) == (0, 1)
+    assert suite.seeds_of(by["nyc_ev"], quick=True) == (0,)
 
 
 def test_instance_texts_read_back_and_params_stay_with_their_allocator():
