@@ -252,3 +252,23 @@ def test_a_run_that_fails_gets_a_row(tiny, tmp_path, monkeypatch):
     monkeypatch.setattr(dispatch.runner, "run_one", boom)
     res = run_bench([], tmp_path, workers=1, only=["tiny_voxel"], seeds=1)
     assert [r["status"] for r in res.rows] == ["failed: RuntimeError: planted failure"] * 2
+
+
+# ------------------------------------------------------------------------- above the kernel
+
+def test_the_kernel_imports_nothing_of_bench_and_bench_no_plugin():
+    import ast
+
+    from tests.conftest import ROOT
+
+    def imports(package):
+        for path in sorted((ROOT / package).rglob("*.py")):
+            for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+                if isinstance(node, ast.Import):
+                    yield from ((path.name, a.name.partition(".")[0]) for a in node.names)
+                elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+                    yield path.name, node.module.partition(".")[0]
+
+    assert [i for i in imports("dispatch") if i[1] == "bench"] == []
+    plugins = {"allocators", "planners", "repositioners", "chargers", "analysis", "learning"}
+    assert [i for i in imports("bench") if i[1] in plugins] == []
