@@ -1,0 +1,219 @@
+"""Running the bench: the runs of the chosen instances and allocators on the sweep runner (a
+process pool or Ray, resumable through its completion markers in ``DIR/runs/``), then one row
+per run (:mod:`bench.metrics`) and the files of :mod:`bench.report`.
+
+An allocator that cannot run an instance (it serves other spaces, lacks a capability the
+instance needs, rejects the instance's parameters) gets rows with status ``unsupported: …``; a
+run that raises gets ``failed: …`` (its traceback in ``DIR/runs/errors/``); neither stops the
+bench.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+import platform
+import time
+import tomllib
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from bench.metrics import COLUMNS, run_metrics
+from bench.stats import fill_gaps
+from bench.suite import REFERENCE, VERSION, Instance, instances, seeds_of
+
+log = logging.getLogger(__name__)
+
+RUNS = "runs"
+
+
+class BenchError(ValueError):
+    """A wrong input to the bench (an unknown allocator, a bad --param): one line."""
+
+
+@dataclass
+class Plan:
+    """What a bench call runs: per instance the allocators, their specs and the rows of the
+    allocators that cannot run there."""
+
+    specs: list = field(default_factory=list)  # (instance, allocator, spec)
+    unsupported: list[dict] = field(default_factory=list)
+
+
+def allocators_for(instance: Instance, named: list[str]) -> list[str]:
+    """The reference first, then the named allocators, then the other baselines (each once)."""
+    out: list[str] = []
+    for a in (REFERENCE, *named, *instance.baselines()):
+        if a not in out:
+            out.append(a)
+    return out
+
+
+def check_allocators(named: list[str]) -> None:
+    """BenchError naming the first allocator that is not installed."""
+    from dispatch.registry import available, base_name
+
+    have = available("allocator")
+    for name in named:
+        if base_name(name) not in have:
+            raise BenchError(f"unknown allocator {name!r}; installed: {', '.join(sorted(have))}")
+
+
+def parse_params(items: list[str]) -> dict[str, Any]:
+    """``KEY=VALUE`` strings as ``dispatch check --param`` reads them (VALUE as TOML, else a
+    string)."""
+    params = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise BenchError(f"--param must be KEY=VALUE, got {item!r}")
+        try:
+            params[key.strip()] = tomllib.loads(f"v = {value}")["v"]
+        except tomllib.TOMLDecodeError:
+            params[key.strip()] = value
+    return params
+
+
+def plan(chosen: list[Instance], named: list[str], *, quick: bool, seeds: int | None,
+         params: dict[str, Any]) -> Plan:
+    """The specs of every (instance, allocator, seed), each allocator checked against the
+    instance first."""
+    from dispatch.errors import DispatchError
+    from dispatch.plugins import check_runs, make_plugin
+    from dispatch.registry import base_name, declaration
+    from dispatch.scenario import parse_scenario
+
+    out = Plan()
+    parsed: dict[str, Any] = {}  # text -> scenario: the allocators without params share one
+    for inst in chosen:
+        world = inst.world()
+        for alloc in allocators_for(inst, named):
+            own = params if (params and alloc in named) else None
+            text = inst.text(quick, alloc, own)
+            if text not in parsed:
+                parsed[text] = parse_scenario(tomllib.loads(text), inst.path, text, limits=None)
+            sc = parsed[text]
+            why = None
+            caps = declaration("allocator", base_name(alloc))
+            if not caps.serves(sc.world.space):
+                why = (f"{alloc} serves {' and '.join(caps.spaces)} spaces, not "
+                       f"{sc.world.space}")
+            else:
+                try:
+                    check_runs(sc, sorted({sc.dispatch.planner}), (), [alloc])
+                except DispatchError as e:  # a capability the instance needs
+                    why = str(e).replace(f"{inst.path}: ", "")
+            if why is None:
+                try:
+                    make_plugin("allocator", alloc, sc.dispatch.params_for(alloc))
+                except DispatchError as e:  # its parameters (--param): the caller's mistake
+                    raise BenchError(f"{alloc}: {e}") from None
+            for seed in seeds_of(inst, quick, seeds):
+                if why is not None:
+                    out.unsupported.append(_row(inst, world, alloc, seed,
+                                                f"unsupported: {why}"))
+                else:
+                    spec, = sc.runs(allocator=alloc, seed=seed)
+                    out.specs.append((inst, alloc, spec))
+    return out
+
+
+def _row(inst: Instance, world: str, alloc: str, seed: int, status: str) -> dict:
+    row = dict.fromkeys(COLUMNS, math.nan)
+    row.update(world=world, instance=inst.name, allocator=alloc, seed=seed, status=status)
+    return row
+
+
+def machine() -> dict[str, Any]:
+    """The machine and software the board was measured on."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    versions = {}
+    for pkg in ("dispatch-sim", "numpy", "scipy", "simpy", "numba", "networkx", "pyarrow",
+                "torch", "ray"):
+        try:
+            versions[pkg] = version(pkg)
+        except PackageNotFoundError:
+            continue
+    try:
+        load = os.getloadavg()[0]
+    except OSError:
+        load = math.nan
+    return {"cores": os.cpu_count(), "python": platform.python_version(),
+            "platform": platform.platform(), "processor": platform.processor() or
+            platform.machine(), "load_1min_at_start": load, "versions": versions}
+
+
+def _read(out: Path, spec, table: str):
+    from dispatch.runner import partition_dir, read_table
+
+    path = out / table / partition_dir(spec) / "part-0.parquet"
+    return read_table(path, spec.partition, table) if path.exists() else None
+
+
+def _wall(out: Path, spec) -> float:
+    from dispatch.runner import marker_path
+
+    try:
+        return float(json.loads(marker_path(out, spec).read_text(encoding="utf-8"))["seconds"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return math.nan
+
+
+@dataclass
+class BenchResult:
+    rows: list[dict]
+    counts: dict[str, int]
+    seconds: float
+    machine: dict
+
+
+def run_bench(named: list[str], out: Path, *, suite: str = "all", quick: bool = False,
+              seeds: int | None = None, params: dict[str, Any] | None = None,
+              workers: int | None = None, ray: bool = False,
+              only: list[str] | None = None,
+              on_done: Callable[[Any], None] | None = None) -> BenchResult:
+    """Run the bench into ``out`` (runs in ``out/runs``; finished ones are reused) and return
+    its rows (``bench.csv``'s, in suite order). ``only``: instance names to keep (tests)."""
+    from dispatch.runner import sweep
+
+    check_allocators(named)
+    chosen = instances(suite, quick)
+    if only is not None:
+        unknown = sorted(set(only) - {i.name for i in chosen})
+        if unknown:
+            raise BenchError(f"no instance {', '.join(unknown)} in the {suite} suite")
+        chosen = [i for i in chosen if i.name in only]
+    started = time.perf_counter()
+    info = machine()
+    p = plan(chosen, list(named), quick=quick, seeds=seeds, params=params or {})
+    runs = (Path(out) / RUNS).resolve()
+    outcomes = sweep([s for _, _, s in p.specs], runs, workers=workers, ray=ray,
+                     on_done=on_done) if p.specs else []
+    rows = list(p.unsupported)
+    counts = {"done": 0, "skipped": 0, "failed": 0, "unsupported": len(p.unsupported)}
+    for (inst, alloc, spec), o in zip(p.specs, outcomes):
+        counts[o.status] += 1
+        world = inst.world()
+        if o.status == "failed":
+            rows.append(_row(inst, world, alloc, spec.seed, f"failed: {o.error}"))
+            continue
+        row = _row(inst, world, alloc, spec.seed, "ok")
+        summary = _read(runs, spec, "summary").to_pylist()[0]
+        row.update(run_metrics(summary, _read(runs, spec, "tasks"),
+                               _read(runs, spec, "vehicles"), road=world == "road"))
+        row["wall_s"] = _wall(runs, spec)
+        rows.append(row)
+    order = {i.name: k for k, i in enumerate(chosen)}
+    alloc_order = {(i.name, a): k for i in chosen
+                   for k, a in enumerate(allocators_for(i, list(named)))}
+    rows.sort(key=lambda r: (order[r["instance"]], alloc_order[(r["instance"], r["allocator"])],
+                             r["seed"]))
+    fill_gaps(rows)
+    info.update(suite=VERSION, which=suite, quick=quick, allocators=list(named),
+                params=params or {}, workers=workers or os.cpu_count(), ray=ray)
+    return BenchResult(rows, counts, time.perf_counter() - started, info)
