@@ -572,10 +572,12 @@ def _check(args, console) -> int:
     else:
         report = check_repositioner(cls, seed=args.seed, **params)
     for r in report.results:
-        mark = "[green]pass[/]" if r.ok else "[red]FAIL[/]"
+        mark = {"pass": "[green]pass[/]", "skip": "[yellow]skip[/]"}.get(r.mark, "[red]FAIL[/]")
         console.print(f"{mark} {r.name}: {r.detail}", highlight=False, soft_wrap=True)
+    skipped = sum(r.skipped for r in report.results)
     verdict = "passes every check" if report.ok else \
-        f"fails {sum(not r.ok for r in report.results)} of {len(report.results)} checks"
+        f"fails {sum(not r.ok and not r.skipped for r in report.results)} of " \
+        f"{len(report.results)} checks" + (f" ({skipped} could not run)" if skipped else "")
     console.print(f"{kinds[0]} {args.name!r} ({cls.__module__}.{cls.__qualname__}) {verdict}",
                   highlight=False, soft_wrap=True)
     return 0 if report.ok else 1
