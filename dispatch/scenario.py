@@ -229,7 +229,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     disp = parse_allocators(d, s, disp, sweep)
     declared = "reposition" in root.data
     reposition = parse_reposition(root.table("reposition"), sweep, s)
-    charging = parse_charging(root, path, fleet, faults)
+    charging = parse_charging(root, path, fleet, faults, world)
     s.done()
     root.done()
 

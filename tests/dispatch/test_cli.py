@@ -249,3 +249,18 @@ def test_every_argument_has_help():
     walk(_parser(ours), "dispatch")
     assert {"report", "render"} <= set(ours)
     assert missing == []
+
+
+def test_snap_warning_printed_once_with_duration(tmp_path, caplog):
+    """The scenario is parsed once, ``--duration`` and overrides included: the trips left out
+    beyond ``max_snap`` are reported once."""
+    import logging
+
+    from dispatch.cli import main
+    from tests.conftest import ROOT
+
+    caplog.set_level(logging.WARNING, logger="dispatch.scenario")
+    assert main(["run", str(ROOT / "scenarios" / "nyc_manhattan.toml"), "--duration", "30",
+                 "--out", str(tmp_path / "out")]) == 0
+    left_out = [r for r in caplog.records if "trips left out" in r.getMessage()]
+    assert len(left_out) == 1, [r.getMessage() for r in left_out]
