@@ -297,8 +297,8 @@ def _parse_max_snap(t: Table, source: str, world: WorldConfig) -> float | None:
 def _read_trace(path: Path, space: str, bounds, max_bytes: int | None,
                 start: datetime | None) -> Trips:
     """:func:`dispatch.traces.read_trace`, the trips kept for the file's bytes as they are: a
-    scenario parsed again (``dispatch run --duration`` parses its text again) does not read a
-    large trace again."""
+    scenario parsed again (the same file in one process: tests, notebooks, a second command)
+    does not read a large trace again."""
     check_file(path, max_bytes, "table file")  # before opening it: not a FIFO, not too large
     try:
         with open(path, "rb") as fh:
