@@ -29,7 +29,8 @@ class Report:
         r.add_argument("runs", type=Path, nargs="+", metavar="RUNS",
                        help="results folders (of dispatch run or sweep), or folders holding them")
         r.add_argument("--out", type=Path, help="report folder (default: RUNS/report/)")
-        r.add_argument("--format", choices=("md", "html"), default="md")
+        r.add_argument("--format", choices=("md", "html"), default="md",
+                       help="report.md (default) or report.html")
         r.add_argument("--run", metavar="RUN_ID", help="the run shown in detail (timeline, 3D)")
         r.add_argument("--series", action="append", metavar="PATTERN",
                        help="taxi figures: draw only the series whose label matches this glob "
@@ -54,7 +55,8 @@ class Render:
     """Draws a run as an animated GIF (or MP4): PyBullet camera images of a voxel run, the map
     of a road run."""
 
-    help = "draw a run as an animated GIF from PyBullet images"
+    help = ("draw a run as an animated GIF or MP4: PyBullet images of a voxel run, the map of "
+            "a road run")
     user_errors = staticmethod(user_errors)
 
     @staticmethod
@@ -64,7 +66,7 @@ class Render:
         g.add_argument("--run-id", help="which run of a sweep folder (default: as the report)")
         g.add_argument("--out", type=Path,
                        help="output .gif (or .mp4; default: RUN/<run id>.gif)")
-        g.add_argument("--fps", type=int, default=10)
+        g.add_argument("--fps", type=int, default=10, help="frames per second (default: 10)")
         g.add_argument("--seconds", type=float, help="length of the animation (default: the "
                        "run's simulated time, at most 12 s)")
         g.add_argument("--size", default="480x360", help="frame size WIDTHxHEIGHT")

@@ -83,6 +83,7 @@ def check_allocator(cls, *, seed: int = 0, **params: Any) -> Report:
         problems += pooled_problems(seed)
     invalid, stuck, mutated, differs, global_rng = [], [], [], [], []
     answers: dict[str, tuple] = {}
+    called = 0  # problems whose allocate returned (the no-mutation check's)
     for label, build in problems:
         problem = build()
         before = _snapshot(problem)
@@ -92,6 +93,7 @@ def check_allocator(cls, *, seed: int = 0, **params: Any) -> Report:
         except Exception as e:  # noqa: BLE001 - any exception is a failure of the plugin
             invalid.append(f"{label}: allocate raised {describe_error(e)}")
             continue
+        called += 1
         if not same_snapshot(before, _snapshot(problem)):
             mutated.append(f"{label}: the problem changed during allocate")
         try:
@@ -109,8 +111,13 @@ def check_allocator(cls, *, seed: int = 0, **params: Any) -> Report:
                     differs, global_rng, show=lambda a: str(a[0]), given="problem and seed")
     n = len(problems)
     report.add("valid", invalid, f"{n} problems, every answer accepted")
-    report.add("progress", stuck, "assigns a pair whenever one is finite")
-    report.add("no-mutation", mutated, "no problem changed")
-    report.add("deterministic", differs, "same problem and seed, same answer")
-    report.add("rng", global_rng, "answers do not depend on the global random state")
+    valid = len(answers)
+    report.add("progress", stuck, "assigns a pair whenever one is finite", ran=valid, of=n,
+               after="valid")
+    report.add("no-mutation", mutated, "no problem changed", ran=called, of=n,
+               after="allocate (it raised)")
+    report.add("deterministic", differs, "same problem and seed, same answer", ran=valid, of=n,
+               after="valid")
+    report.add("rng", global_rng, "answers do not depend on the global random state", ran=valid,
+               of=n, after="valid")
     return report

@@ -74,6 +74,7 @@ def check_charger(cls, space=None, *, seed: int = 0, **params: Any) -> Report:
                       view.station_nodes, view.plugs, view.in_use, view.waiting, view.kw,
                       view.released_by_hour))
 
+    called = 0  # views whose call returned (the no-mutation check's)
     for label, build in cases:
         view = build()
         before = snap(view)
@@ -83,6 +84,7 @@ def check_charger(cls, space=None, *, seed: int = 0, **params: Any) -> Report:
         except Exception as e:  # noqa: BLE001
             invalid.append(f"{label}: decide raised {describe_error(e)}")
             continue
+        called += 1
         if before != snap(view):
             mutated.append(f"{label}: the view changed during decide")
         if not isinstance(moves, Mapping):
@@ -108,7 +110,10 @@ def check_charger(cls, space=None, *, seed: int = 0, **params: Any) -> Report:
                     answers[label], differs, global_rng, given="view and seed")
     report.add("valid", invalid, f"{len(cases)} views, every answer a mapping of idle vehicle "
                                  f"ids to (station id, target)")
-    report.add("no-mutation", mutated, "no view changed")
-    report.add("deterministic", differs, "same view and seed, same visits")
-    report.add("rng", global_rng, "visits do not depend on the global random state")
+    report.add("no-mutation", mutated, "no view changed",
+               ran=called, of=len(cases), after="decide (it raised)")
+    report.add("deterministic", differs, "same view and seed, same visits",
+               ran=len(answers), of=len(cases), after="valid")
+    report.add("rng", global_rng, "visits do not depend on the global random state",
+               ran=len(answers), of=len(cases), after="valid")
     return report

@@ -35,9 +35,17 @@ from dispatch.space import space_class
 
 @dataclass(frozen=True)
 class CheckResult:
+    """One check's verdict: passed (``ok``), failed, or ``skipped`` (it had nothing to run on:
+    every case stopped at an earlier check; never ``ok``)."""
+
     name: str
     ok: bool
     detail: str
+    skipped: bool = False
+
+    @property
+    def mark(self) -> str:
+        return "pass" if self.ok else "skip" if self.skipped else "FAIL"
 
 
 @dataclass
@@ -54,16 +62,27 @@ class Report:
     def failed(self) -> list[CheckResult]:
         return [r for r in self.results if not r.ok]
 
-    def add(self, name: str, failures: list[str], passed: str) -> None:
+    def add(self, name: str, failures: list[str], passed: str, *, ran: int | None = None,
+            of: int | None = None, after: str = "") -> None:
+        """Record check ``name``: failed on the first of ``failures``, else passed with
+        ``passed``. A check that depends on an earlier one says on how many cases it ``ran``
+        (``of`` the cases; None: all): on none it is skipped (never passed), naming the check it
+        waited for (``after``); on some, its pass says on how many."""
         if failures:
             more = f" (and {len(failures) - 1} more)" if len(failures) > 1 else ""
             self.results.append(CheckResult(name, False, failures[0] + more))
+        elif ran == 0:
+            self.results.append(CheckResult(
+                name, False, f"not run: no case got past {after or 'the earlier checks'}",
+                skipped=True))
+        elif ran is not None and of is not None and ran < of:
+            self.results.append(CheckResult(name, True, f"{passed} (on the {ran} of {of} cases "
+                                                        f"that got past {after})"))
         else:
             self.results.append(CheckResult(name, True, passed))
 
     def __str__(self) -> str:
-        return "\n".join(f"{'pass' if r.ok else 'FAIL'} {r.name}: {r.detail}"
-                         for r in self.results)
+        return "\n".join(f"{r.mark} {r.name}: {r.detail}" for r in self.results)
 
 
 def describe_error(e: BaseException) -> str:

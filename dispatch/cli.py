@@ -20,20 +20,39 @@ from dispatch.progress import Heartbeat
 OWN_COMMANDS = ("run", "validate", "check", "plugins", "new", "train", "sweep")
 
 
+def _logging_options(p: argparse.ArgumentParser, default) -> None:
+    """``-v`` and ``--debug``, on the top parser (``default`` False) and again on each
+    subcommand (``default`` SUPPRESS, so that a flag given before the subcommand is kept)."""
+    p.add_argument("-v", "--verbose", action="store_true", default=default,
+                   help="log progress of every run; an error prints its traceback too")
+    p.add_argument("--debug", action="store_true", default=default,
+                   help="debug logging; an error (a plugin's included) prints its whole "
+                        "traceback, the plugin's own frames among them")
+
+
+def _override_options(p: argparse.ArgumentParser) -> None:
+    """The scenario-key overrides of run, sweep and validate (:mod:`dispatch.overrides`)."""
+    p.add_argument("--capacity", type=int, metavar="N",
+                   help="seats per vehicle (sets fleet.capacity)")
+    p.add_argument("--batch-window", type=float, metavar="SECONDS",
+                   help="seconds between batched decisions, 0: each request at once (sets "
+                        "dispatch.batch_window, and replaces the sweep's batch_window list)")
+    p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                   dest="overrides",
+                   help="set any scenario key (VALUE read as TOML, else as a string; e.g. "
+                        "--set tasks.max_delay=600); checked like the file; repeat")
+
+
 def _parser(commands=None) -> argparse.ArgumentParser:
     """The parser of the command line: this module's commands, then each of ``commands``
     (name -> :class:`dispatch.commands.Command`)."""
     p = argparse.ArgumentParser(prog="dispatch", description=__doc__)
     p.add_argument("--version", action="version", version=f"dispatch {__version__}")
-    p.add_argument("-v", "--verbose", action="store_true",
-                   help="log progress of every run; an error prints its traceback too")
-    p.add_argument("--debug", action="store_true",
-                   help="debug logging; an error (a plugin's included) prints its whole "
-                        "traceback, the plugin's own frames among them")
+    _logging_options(p, False)
     sub = p.add_subparsers(dest="command", required=True)
 
     r = sub.add_parser("run", help="run a scenario (every combination of its sweep)")
-    r.add_argument("scenario", type=Path)
+    r.add_argument("scenario", type=Path, help="the scenario file (TOML)")
     r.add_argument("--out", type=Path, help="output folder (default: runs/<scenario name>/)")
     r.add_argument("--allocator", help="allocator name (overrides the file and its sweep)")
     r.add_argument("--planner", help="planner name (overrides the file and its sweep)")
@@ -45,13 +64,15 @@ def _parser(commands=None) -> argparse.ArgumentParser:
     r.add_argument("--force", action="store_true",
                    help="overwrite earlier results of these runs in the output folder, and run "
                         "past the resource limits (world cells, releases, tasks, runs, sizes)")
+    _override_options(r)
 
     v = sub.add_parser("validate", help="check a scenario file and list the runs it expands to")
-    v.add_argument("scenario", type=Path)
+    v.add_argument("scenario", type=Path, help="the scenario file (TOML)")
     v.add_argument("--force", action="store_true",
                    help="accept what is past the resource limits (world cells, releases, tasks, "
                         "runs, file sizes)")
-    # (run's and sweep's overrides: validate checks the file as written)
+    _override_options(v)
+    # (run's and sweep's plugin, size and seed options: validate lists the file's runs)
     v.set_defaults(allocator=None, planner=None, agents=None, seed=None, duration=None)
 
     c = sub.add_parser("check", help="check an installed allocator, planner or repositioner "
@@ -68,21 +89,34 @@ def _parser(commands=None) -> argparse.ArgumentParser:
                    "chargers and commands")
     n = sub.add_parser("new", help="write a new plugin package (`dispatch new allocator NAME`): "
                        "installs with pip and passes `dispatch check NAME`")
-    n.add_argument("kind", choices=("allocator",))
+    n.add_argument("kind", choices=("allocator",), help="the kind of plugin to write")
     n.add_argument("name", help="the plugin's name (lower-case letters, digits, _)")
     n.add_argument("--out", type=Path, default=Path("."),
                    help="folder to write dispatch-NAME/ into (default: here)")
     n.add_argument("--force", action="store_true", help="overwrite the files of an existing "
                    "dispatch-NAME/")
+    trainers = _trainers()
     t = sub.add_parser("train", help="train a learned allocator (e.g. `dispatch train magnnet "
-                       "--agents 8`); options after the name go to its trainer (--help)",
-                       add_help=False)
-    t.add_argument("trainer", help="trainer name (entry-point group dispatch.trainers)")
-    t.add_argument("trainer_args", nargs=argparse.REMAINDER)
+                       "--agents 8`); options after the name go to its trainer (`dispatch "
+                       "train NAME --help`)",
+                       epilog="installed trainers (entry-point group dispatch.trainers): "
+                              + (", ".join(trainers) or "none"))
+    t.add_argument("trainer", help="trainer name: " + (", ".join(trainers) or "none installed"))
+    t.add_argument("trainer_args", nargs=argparse.REMAINDER,
+                   help="the trainer's own options (its --help lists them)")
     _add_sweep_parser(sub)
     for command in (commands or {}).values():
         command.add_parser(sub)
+    for name, action in sub.choices.items():
+        _logging_options(action, argparse.SUPPRESS)
     return p
+
+
+def _trainers() -> list[str]:
+    """The installed trainers' names (entry-point group dispatch.trainers), sorted."""
+    from importlib.metadata import entry_points
+
+    return sorted(ep.name for ep in entry_points(group="dispatch.trainers"))
 
 
 class _Output:
@@ -145,11 +179,9 @@ def _specs(args):
     from dispatch.scenario import check_limits, load_scenario
 
     force = args.force
-    sc = load_scenario(args.scenario, force=force)
-    if args.duration is not None:
-        sc = with_duration(sc, args.duration, force=force)
+    sc = load_scenario(args.scenario, force=force, overrides=overrides(args))
     specs = sc.runs(allocator=args.allocator, planner=args.planner, agents=args.agents,
-                    seed=args.seed)
+                    seed=args.seed, batch_window=getattr(args, "batch_window", None))
     if not force:
         check_limits(sc, specs)
     allocators = sorted({s.allocator for s in specs})
@@ -172,37 +204,33 @@ def _specs(args):
     return sc, specs
 
 
-def with_duration(sc, seconds: float, *, force: bool = False):
-    """``sc`` with ``duration = seconds``, parsed again from its text with that line
-    replaced (or added), so that the text stored with the results, the digests that tell runs
-    apart and every bound that depends on the duration agree with what runs."""
+def overrides(args) -> list[tuple[str, str, str]]:
+    """The scenario keys the command line sets, as :func:`dispatch.scenario.load_scenario`
+    takes them: ``--duration``, ``--capacity``, ``--batch-window``, then each ``--set`` in
+    order (a later one wins)."""
     import math
-    import re
-    import tomllib
 
     from dispatch.errors import ScenarioError
-    from dispatch.config import LIMITS
-    from dispatch.scenario import parse_scenario
+    from dispatch.overrides import parse_set
 
-    if not math.isfinite(seconds) or seconds <= 0:
-        raise ScenarioError(sc.path, "--duration", f"must be a number of seconds > 0, got "
-                                                   f"{seconds!r}")
-    line = f"duration = {seconds!r}  # dispatch run --duration"
-    first_table = re.search(r"(?m)^[ \t]*\[", sc.text)
-    cut = first_table.start() if first_table else len(sc.text)
-    head, rest = sc.text[:cut], sc.text[cut:]
-    if re.search(r"(?m)^[ \t]*duration[ \t]*=", head):
-        text = re.sub(r"(?m)^[ \t]*duration[ \t]*=.*$", lambda m: line, head, count=1) + rest
-    else:
-        text = line + "\n" + sc.text
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError:
-        doc = {}
-    if doc.get("duration") != seconds:  # a duration written in a way the above cannot replace
-        raise ScenarioError(sc.path, "--duration", "cannot override the file's duration; "
-                                                   "edit the file")
-    return parse_scenario(doc, sc.path, text, limits=None if force else LIMITS)
+    out = []
+    duration = getattr(args, "duration", None)
+    if duration is not None:
+        if not math.isfinite(duration) or duration <= 0:
+            raise ScenarioError(args.scenario, "--duration", f"must be a number of seconds > 0, "
+                                                             f"got {duration!r}")
+        out.append(("duration", repr(float(duration)), "run --duration"))
+    if getattr(args, "capacity", None) is not None:
+        out.append(("fleet.capacity", str(args.capacity), "--capacity"))
+    window = getattr(args, "batch_window", None)
+    if window is not None:
+        if not math.isfinite(window):  # TOML has inf; the file's own check says >= 0
+            raise ScenarioError(args.scenario, "--batch-window", f"must be a number of seconds "
+                                                                 f">= 0, got {window!r}")
+        out.append(("dispatch.batch_window", repr(float(window)), "--batch-window"))
+    for item in getattr(args, "overrides", None) or ():
+        out.append((*parse_set(item, args.scenario), "--set"))
+    return out
 
 
 def _key_of(kind: str, name: str, given: str | None, swept: tuple[str, ...],
@@ -426,7 +454,7 @@ def _plugins(args, console) -> int:
 def _add_sweep_parser(sub) -> None:
     s = sub.add_parser("sweep", help="run a scenario's sweep on a process pool or Ray; "
                        "resumable (complete runs are skipped)")
-    s.add_argument("scenario", type=Path)
+    s.add_argument("scenario", type=Path, help="the scenario file (TOML)")
     s.add_argument("--out", type=Path, help="output folder (default: runs/<scenario name>/)")
     s.add_argument("--workers", type=int, metavar="K",
                    help="worker processes (or local Ray CPUs); default: the CPU count")
@@ -442,6 +470,7 @@ def _add_sweep_parser(sub) -> None:
     s.add_argument("--duration", type=float, metavar="SECONDS",
                    help="simulated seconds before each run stops (overrides the file's "
                         "duration; the scenario text stored with the results says so)")
+    _override_options(s)
 
 
 def _sweep(args, console) -> int:
@@ -543,10 +572,12 @@ def _check(args, console) -> int:
     else:
         report = check_repositioner(cls, seed=args.seed, **params)
     for r in report.results:
-        mark = "[green]pass[/]" if r.ok else "[red]FAIL[/]"
+        mark = {"pass": "[green]pass[/]", "skip": "[yellow]skip[/]"}.get(r.mark, "[red]FAIL[/]")
         console.print(f"{mark} {r.name}: {r.detail}", highlight=False, soft_wrap=True)
+    skipped = sum(r.skipped for r in report.results)
     verdict = "passes every check" if report.ok else \
-        f"fails {sum(not r.ok for r in report.results)} of {len(report.results)} checks"
+        f"fails {sum(not r.ok and not r.skipped for r in report.results)} of " \
+        f"{len(report.results)} checks" + (f" ({skipped} could not run)" if skipped else "")
     console.print(f"{kinds[0]} {args.name!r} ({cls.__module__}.{cls.__qualname__}) {verdict}",
                   highlight=False, soft_wrap=True)
     return 0 if report.ok else 1

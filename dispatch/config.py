@@ -276,6 +276,7 @@ class Scenario:
         planner: str | None = None,
         agents: int | None = None,
         seed: int | None = None,
+        batch_window: float | None = None,
     ) -> list[RunSpec]:
         """Expand the sweep into runs (every combination of the run keys' values, in
         :data:`~dispatch.runkeys.RUN_KEYS` order); a given argument replaces that sweep
@@ -286,7 +287,8 @@ class Scenario:
             raise ScenarioError(self.path, "--agents", f"must be >= 1, got {agents}")
         if agents is not None:
             _check_fits(self, agents, "--agents")
-        given = {"allocator": allocator, "planner": planner, "n_agents": agents, "seed": seed}
+        given = {"allocator": allocator, "planner": planner, "n_agents": agents, "seed": seed,
+                 "batch_window": batch_window}
         dims = [(k.name, (given[k.name],) if given.get(k.name) is not None
                  else getattr(self.sweep, k.sweep) or (self.setting(k.setting),))
                 for k in RUN_KEYS if k.sweep]

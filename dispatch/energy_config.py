@@ -51,6 +51,12 @@ class StationRow:
     kw: float
 
 
+#: metres a station given by lon/lat may lie from the network's nearest node (``[chargers]
+#: max_snap``): the shipped Manhattan stations lie up to 491 m from an intersection (so the
+#: trips' 250 m would refuse one); a station a kilometre from every node is in another place
+STATION_MAX_SNAP = 1000.0
+
+
 @dataclass(frozen=True)
 class ChargingConfig:
     """``[chargers]`` and ``[charging]``: the stations, the taper, the strategy and its
@@ -60,6 +66,8 @@ class ChargingConfig:
     file: Any = None
     taper_from: float = 0.8
     taper_floor: float = 0.2
+    #: metres a station given by lon/lat may lie from the nearest node (farther: refused)
+    max_snap: float = STATION_MAX_SNAP
     strategy: str = "threshold"
     interval: float = 60.0
     params: tuple[tuple[str, tuple[tuple[str, Any], ...]], ...] = ()

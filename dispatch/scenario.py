@@ -62,8 +62,11 @@ from dispatch.traces import (
 log = logging.getLogger(__name__)
 
 
-def load_scenario(path: str | Path, *, force: bool = False) -> Scenario:
+def load_scenario(path: str | Path, *, force: bool = False,
+                  overrides: list[tuple[str, str, str]] = ()) -> Scenario:
     """Read and validate a scenario file; raise ScenarioError naming file, key and reason.
+    ``overrides`` (``(dotted key, TOML value, option)``, see :mod:`dispatch.overrides`) are
+    written into its text before it is parsed, once.
 
     The file must be a regular file of at most ``Limits.file_bytes`` (``force``: any size) in
     UTF-8; the traces and start files it names are size-checked before they are read too."""
@@ -81,6 +84,10 @@ def load_scenario(path: str | Path, *, force: bool = False) -> Scenario:
     except (ValueError, MemoryError) as e:  # e.g. an integer of more than 4300 digits
         reason = str(e).splitlines()[0] if str(e) else type(e).__name__
         raise ScenarioError(path, "<syntax>", f"invalid TOML: {reason}") from None
+    if overrides:
+        from dispatch.overrides import apply_overrides
+
+        text, doc = apply_overrides(text, doc, list(overrides), path)
     return parse_scenario(doc, path, text, limits=limits)
 
 
@@ -222,7 +229,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     disp = parse_allocators(d, s, disp, sweep)
     declared = "reposition" in root.data
     reposition = parse_reposition(root.table("reposition"), sweep, s)
-    charging = parse_charging(root, path, fleet, faults)
+    charging = parse_charging(root, path, fleet, faults, world)
     s.done()
     root.done()
 
@@ -290,8 +297,8 @@ def _parse_max_snap(t: Table, source: str, world: WorldConfig) -> float | None:
 def _read_trace(path: Path, space: str, bounds, max_bytes: int | None,
                 start: datetime | None) -> Trips:
     """:func:`dispatch.traces.read_trace`, the trips kept for the file's bytes as they are: a
-    scenario parsed again (``dispatch run --duration`` parses its text again) does not read a
-    large trace again."""
+    scenario parsed again (the same file in one process: tests, notebooks, a second command)
+    does not read a large trace again."""
     check_file(path, max_bytes, "table file")  # before opening it: not a FIFO, not too large
     try:
         with open(path, "rb") as fh:

@@ -189,11 +189,12 @@ def parse_energy(e: Table, fleet: FleetConfig, world: WorldConfig):
     return cfg
 
 
-def parse_charging(root: Table, path: Path, fleet: FleetConfig, faults):
-    """``[chargers]`` (stations, taper) and ``[charging]`` (strategy, interval,
-    ``[charging.<name>]``); None unless the fleet has energy."""
+def parse_charging(root: Table, path: Path, fleet: FleetConfig, faults, world):
+    """``[chargers]`` (stations, taper, the snap limit of stations given by lon/lat) and
+    ``[charging]`` (strategy, interval, ``[charging.<name>]``); None unless the fleet has
+    energy."""
     from dispatch import registry
-    from dispatch.energy_config import ChargingConfig, read_stations
+    from dispatch.energy_config import STATION_MAX_SNAP, ChargingConfig, read_stations
 
     c, g = root.table("chargers"), root.table("charging")
     if fleet.energy is None:
@@ -215,6 +216,8 @@ def parse_charging(root: Table, path: Path, fleet: FleetConfig, faults):
         fpath = None
     taper_from = c.number("taper_from", 0.8, lo=0.0, hi=1.0)
     taper_floor = c.number("taper_floor", 0.2, gt=0.0, hi=1.0)
+    max_snap = c.number("max_snap", STATION_MAX_SNAP, gt=0.0)
+    _check_station_snap(c, stations, world, max_snap)
     c.done()
     installed = registry.available("charger")
     strategy = g.string("strategy", "threshold")
@@ -230,8 +233,37 @@ def parse_charging(root: Table, path: Path, fleet: FleetConfig, faults):
         params.append((name, g.params(name)))
     g.done()
     return ChargingConfig(stations=stations, file=fpath, taper_from=taper_from,
-                          taper_floor=taper_floor, strategy=strategy, interval=interval,
+                          taper_floor=taper_floor, max_snap=max_snap, strategy=strategy, interval=interval,
                           params=tuple(params), tow=faults.tow)
+
+
+def _check_station_snap(c: Table, stations, world, max_snap: float) -> None:
+    """Refuse, naming it, the first station given by lon/lat that lies farther than
+    ``max_snap`` metres from every node of the road network (it would be snapped to a node far
+    from where it is); the network is loaded here (cached for the run)."""
+    import numpy as np
+
+    from dispatch.roads import load_network
+
+    placed = [s for s in stations if s.node is None]
+    if not placed or world.roads is None:
+        return
+    r = world.roads
+    try:
+        net = load_network(r.network, base=r.base, blocks=r.blocks, block=r.block,
+                           speed=r.speed)
+        far = net.nearest(net.lonlat_to_xy([s.lon for s in placed],
+                                           [s.lat for s in placed]))[1]
+    except (ValueError, OSError) as e:
+        raise c.fail("file", f"its stations cannot be placed on {r.network}: {e}") from None
+    beyond = np.flatnonzero(np.asarray(far) > max_snap)
+    if len(beyond):
+        s = placed[int(beyond[0])]
+        more = f" (and {len(beyond) - 1} more)" if len(beyond) > 1 else ""
+        raise c.fail("file", f"station {s.station_id!r} at lon {s.lon:g}, lat {s.lat:g} lies "
+                             f"{float(far[beyond[0]]):,.0f} m from the nearest node of "
+                             f"{net.name}, farther than chargers.max_snap = {max_snap:g} m"
+                             f"{more}")
 
 
 def parse_allocators(d: Table, s: Table, disp: DispatchConfig,

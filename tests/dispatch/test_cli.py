@@ -187,3 +187,80 @@ def test_negative_seed_override_is_a_clean_error(tiny_scenario, tmp_path, capsys
     assert cli_module.main(["run", str(tiny_scenario), "--seed", "-1", "--out", str(out)]) == 2
     assert "--seed" in capsys.readouterr().err
     assert not out.exists()
+
+
+# ----------------------------------------------------------------------------- the first hour
+
+
+@pytest.mark.parametrize("flags", [["--debug"], ["-v"]])
+def test_logging_flag_before_or_after_the_command(tiny_scenario, flags):
+    from dispatch.cli import _parser
+
+    before = _parser().parse_args([*flags, "validate", str(tiny_scenario)])
+    after = _parser().parse_args(["validate", str(tiny_scenario), *flags])
+    neither = _parser().parse_args(["validate", str(tiny_scenario)])
+    key = "debug" if flags == ["--debug"] else "verbose"
+    assert getattr(before, key) and getattr(after, key)
+    assert not neither.debug and not neither.verbose
+
+
+def test_debug_after_the_command_prints_the_traceback(make_scenario, cli):
+    path = make_scenario(dispatch={"allocator": "nosuch"})
+    proc = cli("validate", path, "--debug")
+    assert proc.returncode == 2 and "nosuch" in proc.stderr
+    assert "Traceback" in proc.stderr
+
+
+def test_train_help_lists_the_trainers(cli):
+    from importlib.metadata import entry_points
+
+    proc = cli("train", "--help")
+    assert proc.returncode == 0, proc.stderr
+    names = [ep.name for ep in entry_points(group="dispatch.trainers")]
+    assert names
+    for name in names:
+        assert name in proc.stdout
+
+
+def test_every_argument_has_help():
+    """Every option and positional of every subcommand (this package's and the analysis
+    package's) says what it is in --help."""
+    import argparse
+
+    from dispatch.cli import OWN_COMMANDS, _parser
+    from dispatch.commands import installed
+
+    ours = {n: c for n, c in installed(reserved=OWN_COMMANDS).items()
+            if c.target.startswith(("dispatch.", "analysis."))}
+    missing = []
+
+    def walk(parser, name):
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                shown = {a.dest for a in action._choices_actions}
+                for sub, subparser in action.choices.items():
+                    if sub in OWN_COMMANDS or sub in ours:
+                        if sub not in shown:
+                            missing.append(f"{name} {sub}")
+                        walk(subparser, f"{name} {sub}")
+            elif not action.help or action.help == argparse.SUPPRESS:
+                missing.append(f"{name} {'/'.join(action.option_strings) or action.dest}")
+
+    walk(_parser(ours), "dispatch")
+    assert {"report", "render"} <= set(ours)
+    assert missing == []
+
+
+def test_snap_warning_printed_once_with_duration(tmp_path, caplog):
+    """The scenario is parsed once, ``--duration`` and overrides included: the trips left out
+    beyond ``max_snap`` are reported once."""
+    import logging
+
+    from dispatch.cli import main
+    from tests.conftest import ROOT
+
+    caplog.set_level(logging.WARNING, logger="dispatch.scenario")
+    assert main(["run", str(ROOT / "scenarios" / "nyc_manhattan.toml"), "--duration", "30",
+                 "--out", str(tmp_path / "out")]) == 0
+    left_out = [r for r in caplog.records if "trips left out" in r.getMessage()]
+    assert len(left_out) == 1, [r.getMessage() for r in left_out]

@@ -295,3 +295,36 @@ def test_a_strategy_rejecting_its_parameters_stops_validation(tmp_path):
     sc = load_scenario(p)
     with pytest.raises(PluginError, match="charging.threshold: high = 0.5, low = 0.9"):
         build_plugins(sc, sc.runs())
+
+
+def _ev_with_stations(tmp_path, rows: str, extra: str = "") -> Path:
+    """The shipped Manhattan EV scenario with the station file ``rows`` (station_id, lon, lat,
+    plugs, kw lines) and ``extra`` lines under [chargers]."""
+    root = Path(__file__).resolve().parents[2] / "scenarios"
+    (tmp_path / "st.csv").write_text("station_id,lon,lat,plugs,kw\n" + rows)
+    text = (root / "nyc_manhattan_ev.toml").read_text().replace(
+        'file = "data/nyc_manhattan_ev_stations.csv"', 'file = "st.csv"' + extra)
+    text = text.replace('"data/', f'"{root}/data/')
+    path = tmp_path / "ev.toml"
+    path.write_text(text)
+    return path
+
+
+def test_station_beyond_max_snap_is_refused_naming_it(tmp_path):
+    near = "s20,-73.92271,40.86694,20,50.0\n"
+    chicago = "loop,-87.63,41.88,4,50.0\n"
+    with pytest.raises(ScenarioError, match=r"chargers.file: station 'loop' at lon -87.63, lat "
+                                            r"41.88 lies [\d,]+ m from the nearest node of "
+                                            r"manhattan_osm, farther than chargers.max_snap = "
+                                            r"1000 m"):
+        load_scenario(_ev_with_stations(tmp_path, near + chicago))
+    sc = load_scenario(_ev_with_stations(tmp_path, near))
+    assert sc.charging.max_snap == 1000.0 and len(sc.charging.stations) == 1
+    # s20 lies 35 m from its intersection: a tighter limit refuses it too
+    with pytest.raises(ScenarioError, match="station 's20'.*chargers.max_snap = 1 m"):
+        load_scenario(_ev_with_stations(tmp_path, near, "\nmax_snap = 1.0"))
+
+
+def test_shipped_ev_stations_lie_within_the_default_snap():
+    sc = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "nyc_manhattan_ev.toml")
+    assert len(sc.charging.stations) == 15 and sc.charging.max_snap == 1000.0

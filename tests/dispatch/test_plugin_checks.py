@@ -410,3 +410,41 @@ def test_misbehaving_plan_in_a_run_is_one_line_naming_it(make_scenario, monkeypa
     msg = str(info.value)
     assert "\n" not in msg and words in msg, msg
     assert msg.startswith(f"planner 'bad', run {spec.run_id}, t = 0 s: plan() for vehicle 0")
+
+
+class AlwaysRaises(Allocator):
+    name = "always_raises"
+
+    def allocate(self, problem):
+        raise RuntimeError("not written yet")
+
+
+def test_checks_that_could_not_run_are_skipped_not_passed():
+    """An allocator whose allocate always raises fails ``valid``; the checks that need an
+    answer (progress, no-mutation, deterministic, rng) had none to look at: skipped, not
+    passed, and the report is not ok."""
+    report = check_allocator(AlwaysRaises)
+    marks = {r.name: r.mark for r in report.results}
+    assert marks == {"construct": "pass", "valid": "FAIL", "progress": "skip",
+                     "no-mutation": "skip", "deterministic": "skip", "rng": "skip"}
+    assert not report.ok
+    assert "skip rng: not run: no case got past valid" in str(report)
+    # raising on some problems only: the dependent checks pass, saying on how many they ran
+    partial = {r.name: r for r in check_allocator(Raises).results}
+    assert partial["valid"].mark == "FAIL" and partial["rng"].ok
+    assert re.search(r"on the \d+ of \d+ cases that got past valid", partial["rng"].detail)
+
+
+def test_repositioner_that_always_raises_is_not_passed():
+    from dispatch.check_repositioners import check_repositioner
+    from dispatch.reposition import Repositioner
+
+    class Broken(Repositioner):
+        name = "broken"
+
+        def reposition(self, view):
+            raise RuntimeError("no")
+
+    marks = {r.name: r.mark for r in check_repositioner(Broken).results}
+    assert marks["valid"] == "FAIL"
+    assert {marks[k] for k in ("no-mutation", "deterministic", "rng")} == {"skip"}
