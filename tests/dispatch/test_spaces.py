@@ -223,7 +223,9 @@ SWITCH = re.compile(r'roads is (not )?None|kind [!=]= "(road|voxel)"|_is_node|'
 #: (scenario.py); the road planner checking
 #: its own space; tables and analysis reading the recorded ``space`` column of results
 ALLOWED = {"dispatch/space.py": 99, "dispatch/world.py": 99, "dispatch/roads.py": 99,
-           "dispatch/config.py": 1, "dispatch/scenario.py": 1, "planners/road.py": 1, "dispatch/tables.py": 1,
+           "dispatch/config.py": 1, "dispatch/scenario.py": 1,
+           # [chargers] max_snap: stations given in lon/lat are snapped to the road network
+           "dispatch/scenario_sections.py": 1, "planners/road.py": 1, "dispatch/tables.py": 1,
            "analysis/report.py": 2,
            # the replay draws a stored run (analysis reads Parquet, it cannot ask the kernel's
            # space): streets for a road run, obstacles and cells for a voxel run
