@@ -88,11 +88,11 @@ def test_charge_reposition_cut_strand_and_tow_by_one_operator(tmp_path):
     stranded = mine[mine.event == "stranded"].iloc[0]
     repair = mine[mine.event == "repair"].iloc[0]
     assert repair.t == pytest.approx(stranded.t + 100.0) and repair.x == 200.0  # at node 1
-    # one operator: every stop's events come from its processes, no charging or
-    # repositioning process of their own
+    # one operator: every stop's events come from its processes (its repair is its
+    # Breakdowns base's), no charging or repositioning process of their own
     owners = {q for k, q in by if k in DRIVEN}
-    assert owners <= {"Operator._run", "Operator._repair"}, owners
-    assert all(q.startswith("Operator.") for k, q in by if k == "idle")
+    assert owners <= {"Operator._run", "Breakdowns._repair"}, owners
+    assert all(q.startswith(("Operator.", "Breakdowns.")) for k, q in by if k == "idle")
 
     # occupancy never above the capacity (a breakdown empties the vehicle)
     load, cap = 0, 2
