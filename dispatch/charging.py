@@ -14,7 +14,7 @@ idle again. While on a visit it is neither idle nor busy: no decision considers 
 ends the visit (the energy charged so far counts). Strategies (``dispatch.chargers`` plugins,
 :class:`dispatch.charging_strategy.ChargingStrategy`) decide which idle vehicles go where, every
 ``[charging] interval`` seconds. A vehicle whose battery runs empty is *stranded* and towed to
-the nearest station (:meth:`dispatch.operator.Operator.strand`, :meth:`Stations.nearest_node`).
+the nearest station (:meth:`dispatch.breakdowns.Breakdowns.strand`, :meth:`Stations.nearest_node`).
 """
 
 from __future__ import annotations
