@@ -7,7 +7,8 @@ Vehicle breakdowns (``[faults]``) come from two sources, both SimPy processes:
   ``repair`` seconds (``inf``: for good);
 * a **file** of breakdowns: rows ``t, vehicle_id, duration`` (``inf``: for good).
 
-What a breakdown does to the vehicle and its trip is :meth:`dispatch.breakdowns.Breakdowns.breakdown`:
+What a breakdown does to the vehicle and its trip is
+:meth:`dispatch.breakdowns.Breakdowns.breakdown`:
 it stops where it is; a trip not yet picked up goes back to open and is re-assigned; a
 passenger on board is either transferred (``on_board = "transfer"``: another vehicle picks them
 up where the failed one stopped) or the trip ends ``failed`` (``on_board = "fail"``).
