@@ -32,8 +32,8 @@ their tasks join its tasks. A vehicle whose answer is its own task drives on. On
 task, or none while its task goes to another vehicle, gives its task up (a ``reassign`` event
 naming the vehicle and the task; :meth:`dispatch.breakdowns.Breakdowns.give_up`): it stops
 where it is, the task is open again (release time and deadline kept) and the hand-out's
-``assign`` events follow; a vehicle left without a task is idle where it stopped. A vehicle that gets nothing while its
-task gets no one keeps its task. The summary counts ``reassignments``.
+``assign`` events follow; a vehicle left without a task is idle where it stopped. A vehicle
+that gets nothing while its task gets no one keeps its task. The summary counts ``reassignments``.
 
 Lazy exact costs (``[dispatch] lazy_costs = true``, with a planner that computes lower bounds
 and an allocator that minimizes the total cost): the decision starts from the planner's lower
