@@ -25,6 +25,8 @@ from typing import Any
 from bench.metrics import COLUMNS, run_metrics
 from bench.stats import fill_gaps
 from bench.suite import REFERENCE, VERSION, Instance, instances, seeds_of
+from dispatch.errors import DispatchError
+from dispatch.overrides import key_values
 
 log = logging.getLogger(__name__)
 
@@ -64,18 +66,13 @@ def check_allocators(named: list[str]) -> None:
 
 
 def parse_params(items: list[str]) -> dict[str, Any]:
-    """``KEY=VALUE`` strings as ``dispatch check --param`` reads them (VALUE as TOML, else a
-    string)."""
-    params = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        if not sep or not key.strip():
-            raise BenchError(f"--param must be KEY=VALUE, got {item!r}")
-        try:
-            params[key.strip()] = tomllib.loads(f"v = {value}")["v"]
-        except tomllib.TOMLDecodeError:
-            params[key.strip()] = value
-    return params
+    """``KEY=VALUE`` strings as ``dispatch check --param`` reads them
+    (:func:`dispatch.overrides.key_values`: VALUE as TOML, else a string); BenchError for an
+    item without a key or an ``=``."""
+    try:
+        return key_values(items)
+    except DispatchError as e:
+        raise BenchError(str(e)) from None
 
 
 def plan(chosen: list[Instance], named: list[str], *, quick: bool, seeds: int | None,

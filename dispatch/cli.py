@@ -181,7 +181,7 @@ def _specs(args):
     force = args.force
     sc = load_scenario(args.scenario, force=force, overrides=overrides(args))
     specs = sc.runs(allocator=args.allocator, planner=args.planner, agents=args.agents,
-                    seed=args.seed, batch_window=getattr(args, "batch_window", None))
+                    seed=args.seed, batch_window=args.batch_window)
     if not force:
         check_limits(sc, specs)
     allocators = sorted({s.allocator for s in specs})
@@ -214,21 +214,21 @@ def overrides(args) -> list[tuple[str, str, str]]:
     from dispatch.overrides import parse_set
 
     out = []
-    duration = getattr(args, "duration", None)
+    duration = args.duration
     if duration is not None:
         if not math.isfinite(duration) or duration <= 0:
             raise ScenarioError(args.scenario, "--duration", f"must be a number of seconds > 0, "
                                                              f"got {duration!r}")
         out.append(("duration", repr(float(duration)), "run --duration"))
-    if getattr(args, "capacity", None) is not None:
+    if args.capacity is not None:
         out.append(("fleet.capacity", str(args.capacity), "--capacity"))
-    window = getattr(args, "batch_window", None)
+    window = args.batch_window
     if window is not None:
         if not math.isfinite(window):  # TOML has inf; the file's own check says >= 0
             raise ScenarioError(args.scenario, "--batch-window", f"must be a number of seconds "
                                                                  f">= 0, got {window!r}")
         out.append(("dispatch.batch_window", repr(float(window)), "--batch-window"))
-    for item in getattr(args, "overrides", None) or ():
+    for item in args.overrides:
         out.append((*parse_set(item, args.scenario), "--set"))
     return out
 
@@ -533,8 +533,6 @@ def _check(args, console) -> int:
     """``dispatch check NAME``: run the plugin checks (:mod:`dispatch.check_allocators`, ...) on
     an installed plugin;
     one line per check; exit 0 when all pass, 1 otherwise."""
-    import tomllib
-
     from dispatch.errors import PluginError
     from dispatch.registry import available, load
     from dispatch.check_allocators import check_allocator
@@ -553,15 +551,9 @@ def _check(args, console) -> int:
                           f"{', '.join(available('repositioner'))} (repositioners)")
     if len(kinds) > 1:
         raise DispatchError(f"{args.name!r} is both {' and '.join(kinds)}; say --kind")
-    params = {}
-    for item in args.param:
-        key, sep, value = item.partition("=")
-        if not sep or not key.strip():
-            raise DispatchError(f"--param must be KEY=VALUE, got {item!r}")
-        try:
-            params[key.strip()] = tomllib.loads(f"v = {value}")["v"]
-        except tomllib.TOMLDecodeError:
-            params[key.strip()] = value
+    from dispatch.overrides import key_values
+
+    params = key_values(args.param)
     cls = load(kinds[0], args.name)
     if kinds[0] == "allocator":
         report = check_allocator(cls, seed=args.seed, **params)

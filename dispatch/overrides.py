@@ -13,7 +13,7 @@ import re
 import tomllib
 from pathlib import Path
 
-from dispatch.errors import ScenarioError
+from dispatch.errors import DispatchError, ScenarioError
 
 def parse_set(item: str, path: Path) -> tuple[str, str]:
     """``"section.key=value"`` -> ``("section.key", value as TOML)``: the value as written when
@@ -91,3 +91,19 @@ def _set_line(text: str, tables: list[str], name: str, line: str) -> str:
                     last += 1
             return "\n".join(lines[:i] + [line] + lines[min(last, end - 1) + 1:]) + "\n"
     return "\n".join(lines[:start] + [line] + lines[start:]) + "\n"
+
+
+def key_values(items) -> dict:
+    """``KEY=VALUE`` strings as ``--param`` takes them (``dispatch check``, ``dispatch bench``):
+    each VALUE read as TOML, else kept as a string; DispatchError naming an item without a key
+    or an ``=``."""
+    params = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise DispatchError(f"--param must be KEY=VALUE, got {item!r}")
+        try:
+            params[key.strip()] = tomllib.loads(f"v = {value}")["v"]
+        except tomllib.TOMLDecodeError:
+            params[key.strip()] = value
+    return params
