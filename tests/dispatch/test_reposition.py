@@ -288,6 +288,8 @@ def one_line_error(path: Path, error=ScenarioError):
             scenario = path
             force = False
             allocator = planner = agents = seed = duration = None
+            capacity = batch_window = None  # the override options run, sweep and validate have
+            overrides: list[str] = []
 
         _specs(Args)
     msg = str(info.value)
