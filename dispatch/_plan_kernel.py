@@ -45,6 +45,30 @@ leave_late = _inline(stops.leave_late)
 timetable = _twin(stops.timetable, leave=leave)
 
 
+@_inline
+def _through(t, a, lo, hi, first_leg, s_arr, s_e, s_svc, s_latest, s_occ, extra, cap, tol):
+    """The plan's stops ``lo .. hi - 1`` (flat from ``a``) driven after leaving a new stop at
+    ``t``: the first ``first_leg`` seconds later, each later one as long after the stop before
+    it as planned, every departure by the rule (:func:`dispatch.stops.leave`), with ``extra``
+    more on board (0: no seat to check). Returns ``(t, shift, ok)``: the departure from stop
+    ``hi - 1`` (``t`` where there is none), how much later than planned stop ``lo`` is reached,
+    and False at the first stop over ``cap`` or past its latest (``tol`` seconds allowed)."""
+    shift = 0.0
+    for m in range(lo, hi):
+        if extra and s_occ[a + m] + extra > cap:
+            return t, shift, False
+        if m == lo:
+            t = t + first_leg
+        else:
+            t = t + (s_arr[a + m] - leave(s_arr[a + m - 1], s_e[a + m - 1], s_svc[a + m - 1]))
+        if t > s_latest[a + m] + tol:
+            return t, shift, False
+        if m == lo:
+            shift = t - s_arr[a + m]
+        t = leave(t, s_e[a + m], s_svc[a + m])
+    return t, shift, True
+
+
 @jit
 def _insert_one(a, k, t0, ftt, s_arr, s_svc, s_e, s_latest, s_occ, load, cap, to_p, from_p,
                 to_d, from_d, r, pd, n, lp, ld, ep, svc_p, svc_d, objective,
@@ -70,43 +94,16 @@ def _insert_one(a, k, t0, ftt, s_arr, s_svc, s_e, s_latest, s_occ, load, cap, to
         leave_p = leave(arr_p, ep, svc_p)
         for j in range(i, k + 1):
             # the plan's stops i .. j - 1 after the pickup, then the drop-off, then the rest
-            t = leave_p
-            ok = True
-            s1 = 0.0
-            for m in range(i, j):
-                if s_occ[a + m] + n > cap:
-                    ok = False
-                    break
-                if m == i:
-                    t = t + from_p[r, a + m]
-                else:
-                    t = t + (s_arr[a + m] - leave(s_arr[a + m - 1], s_e[a + m - 1],
-                                                  s_svc[a + m - 1]))
-                if t > s_latest[a + m] + tol:
-                    ok = False
-                    break
-                if m == i:
-                    s1 = t - s_arr[a + m]
-                t = leave(t, s_e[a + m], s_svc[a + m])
+            t, s1, ok = _through(leave_p, a, i, j, from_p[r, a + i] if j > i else 0.0, s_arr,
+                                 s_e, s_svc, s_latest, s_occ, n, cap, tol)
             if not ok:
                 break  # (a later drop-off keeps the same stops after the pickup)
             arr_d = t + (pd[r] if j == i else to_d[a + j - 1, r])
             if arr_d > ld + tol:
                 continue
-            t = leave(arr_d, -inf, svc_d)
-            s2 = 0.0
-            for m in range(j, k):
-                if m == j:
-                    t = t + from_d[r, a + m]
-                else:
-                    t = t + (s_arr[a + m] - leave(s_arr[a + m - 1], s_e[a + m - 1],
-                                                  s_svc[a + m - 1]))
-                if t > s_latest[a + m] + tol:
-                    ok = False
-                    break
-                if m == j:
-                    s2 = t - s_arr[a + m]
-                t = leave(t, s_e[a + m], s_svc[a + m])
+            t, s2, ok = _through(leave(arr_d, -inf, svc_d), a, j, k,
+                                 from_d[r, a + j] if j < k else 0.0, s_arr, s_e, s_svc,
+                                 s_latest, s_occ, 0, cap, tol)
             if not ok:
                 continue
             c = arr_p - t0 if objective == 0 else t - end_old
