@@ -157,6 +157,16 @@ class TaskConfig:
     #: trace on roads: metres a pickup / drop-off may lie from the nearest node (farther:
     #: the trip is left out before the run, counted in trips.dropped); None: no bound
     max_snap: float | None = None
+    #: share of generated requests booked ahead, and how many seconds ahead (dispatch.prebook)
+    prebook_share: float = 0.0
+    prebook_lead: float = 3600.0
+
+    @property
+    def prebooked(self) -> bool:
+        """Some request is booked ahead (``prebook_share``, or its trace's ``booked_at``)."""
+        from dispatch.prebook import prebooked
+
+        return self.prebook_share > 0 or prebooked(self.trips)
 
     @property
     def delay_limited(self) -> bool:
@@ -186,6 +196,10 @@ class DispatchConfig:
     #: ``[dispatch.allocator_params.<name>]`` tables: parameters of one allocator (``magnnet``)
     #: or of a named variant (``"magnnet:paper"``), over the flat ones (see :meth:`params_for`)
     allocator_tables: tuple[tuple[str, tuple[tuple[str, Any], ...]], ...] = ()
+    #: when a booked request enters dispatch: "at_booking" or "lead" (``prebook_lead`` seconds
+    #: before its departure; None: the [tasks] prebook_lead); see dispatch.prebook
+    prebook: str = "at_booking"
+    prebook_lead: float | None = None
 
     def params_for(self, allocator: str) -> tuple[tuple[str, Any], ...]:
         """The constructor arguments of ``allocator`` (a name, or ``name:variant``): the flat
