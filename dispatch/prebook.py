@@ -201,7 +201,7 @@ class PrebookSource(TaskSource):
             trips = self.trips
             if cfg.count is not None:
                 trips = trips.subset(np.arange(len(trips)) < cfg.count, "tasks.count")
-            if trips.booked_at is None and self.share > 0:
+            if self.share > 0 and not prebooked(trips):
                 trips = synthesize(trips, self.share, self.lead, self.booking_rng)
             trips, entry = in_entry_order(trips,
                                           entry_times(trips, self.mode, self.dispatch_lead))

@@ -68,7 +68,8 @@ CLOSE_EVENT = {TaskState.COMPLETED: "complete", TaskState.EXPIRED: "expire",
 #: the states a task may move to from each live state
 MOVES = {
     TaskState.OPEN: {TaskState.ASSIGNED, TaskState.EXPIRED, TaskState.REJECTED,
-                     TaskState.UNREACHABLE, TaskState.CANCELLED},
+                     TaskState.UNREACHABLE, TaskState.CANCELLED,
+                     TaskState.FAILED},  # (a promise a breakdown broke: dispatch.prebook)
     TaskState.ASSIGNED: {TaskState.PICKED_UP, TaskState.OPEN, TaskState.CANCELLED,
                          TaskState.FAILED},
     TaskState.PICKED_UP: {TaskState.COMPLETED, TaskState.OPEN, TaskState.CANCELLED,
