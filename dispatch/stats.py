@@ -35,7 +35,7 @@ class RunStats:
         self.detour = 0.0  # ... their in-vehicle time over the direct drive
         self.detours = 0  # ... those with a direct time > 0
         self.promises = 0  # booked requests accepted (dispatch.prebook)
-        self.promises_broken = 0  # ... of those, not completed
+        self.promises_broken = 0  # ... of those, ended failed or expired
 
     def closed(self, t: Task) -> None:
         self.n_tasks += 1
@@ -51,7 +51,9 @@ class RunStats:
         self.conflicts += t.conflicted
         if t.promised:
             self.promises += 1
-            self.promises_broken += t.state is not COMPLETED
+            # (cancelled: cut by the run's end, not broken)
+            self.promises_broken += t.state is not COMPLETED \
+                and t.state is not TaskState.CANCELLED
         if not math.isnan(t.picked_up_at):
             self.picked += 1
             self.waits += t.picked_up_at - t.released_at
