@@ -157,8 +157,10 @@ class TaskConfig:
     #: trace on roads: metres a pickup / drop-off may lie from the nearest node (farther:
     #: the trip is left out before the run, counted in trips.dropped); None: no bound
     max_snap: float | None = None
-    #: share of generated requests booked ahead, and how many seconds ahead (dispatch.prebook)
+    #: share of the requests booked ahead (each drawn from the run's prebooking stream; a
+    #: trace's booked_at column instead: see dispatch.prebook)
     prebook_share: float = 0.0
+    #: seconds before its departure a request of prebook_share is booked
     prebook_lead: float = 3600.0
 
     @property
@@ -196,9 +198,11 @@ class DispatchConfig:
     #: ``[dispatch.allocator_params.<name>]`` tables: parameters of one allocator (``magnnet``)
     #: or of a named variant (``"magnnet:paper"``), over the flat ones (see :meth:`params_for`)
     allocator_tables: tuple[tuple[str, tuple[tuple[str, Any], ...]], ...] = ()
-    #: when a booked request enters dispatch: "at_booking" or "lead" (``prebook_lead`` seconds
-    #: before its departure; None: the [tasks] prebook_lead); see dispatch.prebook
+    #: when a booked request enters dispatch: "at_booking" (when it is booked) or "lead"
+    #: (prebook_lead seconds before its departure, not before its booking); dispatch.prebook
     prebook: str = "at_booking"
+    #: seconds before its departure a booked request enters dispatch with prebook = "lead"
+    #: (unset: the [tasks] prebook_lead)
     prebook_lead: float | None = None
 
     def params_for(self, allocator: str) -> tuple[tuple[str, Any], ...]:
