@@ -42,18 +42,19 @@ from dispatch.battery import Energy
 from dispatch.charging import Charging, Stations
 from dispatch.decision import Blame, Pipeline, Tally
 from dispatch.dispatcher import Dispatcher, Wakeup
+from dispatch.errors import ScenarioError
 from dispatch.events import EventBus
 from dispatch.faults import FaultInjector, blackout_filter
 from dispatch.operator import Hooks, Operator, Towing
 from dispatch.plugins import (check_repositioner, describe, make_charger, make_plugin,
                               make_repositioner)
+from dispatch.prebook import PrebookSource
 from dispatch.recording import RunRecording
 from dispatch.reposition import Repositioning, summary_of
 from dispatch.space import space_for
 from dispatch.streams import (STREAM_ALLOCATOR, STREAM_CHARGING, STREAM_FAULTS, STREAM_FLEET,
                               STREAM_REPOSITION, STREAM_SOURCE, STREAM_TASKS, rng_for)
 from dispatch.streams import STREAM_PREBOOK
-from dispatch.prebook import PrebookSource
 from dispatch.tasks import Task, TaskBook, TaskSource, TaskState
 from dispatch.vehicles import Fleet, stop_leg
 
@@ -161,6 +162,10 @@ class Simulation:
         t = sc.tasks
         source, extra = TaskSource, {}
         if t.prebooked:  # requests booked ahead (dispatch.prebook)
+            if allocator.multi_request:  # its routes do not read a booked pickup's earliest
+                raise ScenarioError(sc.path, "dispatch.allocator", f"{spec.allocator!r} "
+                                    "builds its own routes (multi_request): prebooking needs "
+                                    "an allocator that takes the insertion costs")
             source, extra = PrebookSource, dict(
                 share=t.prebook_share, lead=t.prebook_lead, mode=d.prebook,
                 dispatch_lead=t.prebook_lead if d.prebook_lead is None else d.prebook_lead,

@@ -6,8 +6,8 @@ scenario's ``[tasks] start``), its pickup and, optionally, its drop-off, and an 
 ``max_wait`` and ``max_delay`` (seconds; blank: the scenario's) and ``passengers`` (a whole
 number >= 1; blank: 1) and ``booked_at`` (when the trip was booked: seconds, or a date-time
 where the trace's time column is ``departure_time``; blank: not booked; never after the
-requested departure; see :mod:`dispatch.prebook`). Other columns (``request_id``, ...) are ignored. Where things are, by
-space:
+requested departure; see :mod:`dispatch.prebook`). Other columns (``request_id``, ...) are
+ignored. Where things are, by space:
 
 * voxel world: ``x, y, z`` (metres; the pickup), optionally ``dest_x, dest_y, dest_z``;
 * road network, one of: ``origin_node, dest_node`` (node ids of the network);

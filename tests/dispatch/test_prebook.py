@@ -243,3 +243,13 @@ def test_prebooking_needs_a_road_network_and_no_reassign(tmp_path):
     path = road_scenario(tmp_path, tasks='source = "poisson"\nrate = 0.1\nprebook_share = 1.5')
     with pytest.raises(ScenarioError, match="prebook_share"):
         load_scenario(path)
+
+
+def test_an_allocator_of_its_own_routes_is_refused(tmp_path):
+    """``rtv`` routes its groups itself and reads no booked pickup's earliest time: a clear
+    error, not a booked rider picked up early."""
+    _trace(tmp_path, 4)
+    path = _scenario(tmp_path, allocator="rtv", capacity=2)
+    [spec] = load_scenario(path).runs()
+    with pytest.raises(ScenarioError, match="dispatch.allocator: 'rtv' builds its own routes"):
+        run_one(spec)
