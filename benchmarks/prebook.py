@@ -8,7 +8,10 @@ itself: today's dispatch), 30 % and 60 % the shipped traces
 ``scenarios/data/make_nyc_manhattan_prebook.py`` from a fixed seed). ``--agents`` (700: the
 fleet that serves 98 % without prebooking, nyc_manhattan's) taxis; each share over ``--seeds``
 run seeds (the fleet's start positions and the allocator's stream; the bookings are the file's).
-``--start HH:MM`` and ``--hours`` cut the day to a window (requests departing before the
+``--shares -1`` runs the day without bookings but dispatched as prebooking dispatches
+(every request booked at its departure: insertion into the taxis' plans, one seat or not),
+which separates what the bookings do from what the insertion does. ``--start HH:MM`` and
+``--hours`` cut the day to a window (requests departing before the
 start are left out; a booking before it enters at the start), with an hour more to finish.
 
 Prints per run and, per share, the mean with a 95 % t interval over the seeds: the served
@@ -47,7 +50,7 @@ def scenario_text(share: int, agents: int, seed: int, start: str, hours: float, 
     for line in SCENARIO.read_text().splitlines():
         key = line.split("=")[0].strip()
         if key == "trace":
-            line = ('trace = "nyc_taxi_2014-12-21"' if share == 0
+            line = ('trace = "nyc_taxi_2014-12-21"' if share <= 0
                     else f'trace = "{DATA / f"nyc_manhattan_prebook{share}.csv"}"')
         elif key == "agents":
             line = f"agents = {agents}"
@@ -58,8 +61,10 @@ def scenario_text(share: int, agents: int, seed: int, start: str, hours: float, 
         elif key == "duration":
             line = f"duration = {hours * 3600.0 + 3600.0}"
         elif key == "prebook":
-            line = "" if share == 0 else f'prebook = "{mode}"' + (
+            line = "" if share <= 0 else f'prebook = "{mode}"' + (
                 f"\nprebook_lead = {lead}" if lead is not None else "")
+        elif key == "max_wait" and share < 0:  # every request booked at its departure
+            line += "\nprebook_share = 1.0\nprebook_lead = 0.0"
         out.append(line)
     return "\n".join(out) + "\n"
 
@@ -85,7 +90,7 @@ def one(share: int, agents: int, seed: int, start: str, hours: float, mode: str,
         wall = time.perf_counter() - t0
     t = r.tables["tasks"].to_pandas()
     s = r.summary
-    booked = t.booked_at.notna()
+    booked = t.booked_at.notna() & (t.released_at > t.booked_at)  # (share -1: none ahead)
     done = t.state == "completed"
     picked = t.picked_up_at.notna()
     return dict(share=share, seed=seed, requests=len(t), booked=int(booked.sum()),
@@ -114,7 +119,9 @@ def interval(values: list[float], scale: float = 1.0, fmt: str = ".2f") -> str:
 def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    p.add_argument("--shares", type=int, nargs="+", default=[0, 30, 60], choices=(0, 30, 60))
+    p.add_argument("--shares", type=int, nargs="+", default=[0, 30, 60], choices=(-1, 0, 30, 60),
+                   help="-1: no booking, every request dispatched as one booked at its "
+                        "departure (the insertion into plans that prebooking turns on)")
     p.add_argument("--agents", type=int, default=700)
     p.add_argument("--start", default="00:00", help="HH:MM: the window's start")
     p.add_argument("--hours", type=float, default=24.0, help="the window's hours")

@@ -160,7 +160,8 @@ class TaskConfig:
     #: share of the requests booked ahead (each drawn from the run's prebooking stream; a
     #: trace's booked_at column instead: see dispatch.prebook)
     prebook_share: float = 0.0
-    #: seconds before its departure a request of prebook_share is booked
+    #: seconds before its departure a request of prebook_share is booked (0: at its
+    #: departure, an immediate request dispatched as a booked one)
     prebook_lead: float = 3600.0
 
     @property

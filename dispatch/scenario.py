@@ -153,7 +153,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
                     max_delay=t.number("max_delay", None, lo=0.0, optional=True))
     tasks = _parse_empirical(t, tasks, world, fleet)
     tasks = replace(tasks, prebook_share=t.number("prebook_share", 0.0, lo=0.0, hi=1.0),
-                    prebook_lead=t.number("prebook_lead", 3600.0, gt=0.0))
+                    prebook_lead=t.number("prebook_lead", 3600.0, lo=0.0))
     trace = t.get("trace", None)
     if source == "periodic" and tasks.interval is None:
         raise t.fail("interval", "is required when source = 'periodic'")
