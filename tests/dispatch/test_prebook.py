@@ -253,3 +253,17 @@ def test_an_allocator_of_its_own_routes_is_refused(tmp_path):
     [spec] = load_scenario(path).runs()
     with pytest.raises(ScenarioError, match="dispatch.allocator: 'rtv' builds its own routes"):
         run_one(spec)
+
+
+def test_lead_mode_enters_a_booking_its_lead_before_departure(tmp_path):
+    """prebook = "lead", prebook_lead = 120 s: a ride booked at 0 for 1000 s is first offered
+    (and accepted) at 880 s, and still picked up at 1000 s, not sooner."""
+    write_csv(tmp_path / "trips.csv", ["t", "origin_node", "dest_node", "booked_at"],
+              [(1000.0, 0, 5, 0.0)])
+    summary, tables = _run(_scenario(tmp_path, agents=1, mode="lead"))
+    t = tables["tasks"].iloc[0]
+    assert t.state == "completed" and t.promised
+    assert t.assigned_at == pytest.approx(880.0)
+    assert t.picked_up_at == pytest.approx(1000.0)
+    ev = tables["events"]
+    assert ev[ev.event == "release"].t.iloc[0] == pytest.approx(880.0)
