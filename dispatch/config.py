@@ -167,9 +167,7 @@ class TaskConfig:
     @property
     def prebooked(self) -> bool:
         """Some request is booked ahead (``prebook_share``, or its trace's ``booked_at``)."""
-        from dispatch.prebook import prebooked
-
-        return self.prebook_share > 0 or prebooked(self.trips)
+        return self.prebook_share > 0 or (self.trips is not None and self.trips.prebooked)
 
     @property
     def delay_limited(self) -> bool:

@@ -33,50 +33,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import fields, replace
-from datetime import datetime
-from pathlib import Path
 
 import numpy as np
 
-from dispatch.errors import ScenarioError
 from dispatch.tasks import TaskSource, TaskState
-from dispatch.traces import BOOKED_COLUMN, Trips, _seconds_since
+from dispatch.traces import Trips
 
 #: ``[dispatch] prebook`` values
 MODES = ("at_booking", "lead")
-
-
-def booking_times(path: Path, cols, datetimes: bool, start: datetime | None,
-                  t: np.ndarray) -> np.ndarray:
-    """The ``booked_at`` column of a trace as seconds of the run (nan where blank): date-times
-    (read from ``start``, as ``departure_time``) where ``datetimes``, else seconds. A booking
-    after the row's requested departure ``t`` (seconds) raises a ScenarioError naming the file,
-    the row and the column; rows departing before ``start`` (left out) are not checked."""
-    if datetimes:
-        cells = cols.cells(BOOKED_COLUMN)
-        blank = np.array([c is None or (isinstance(c, str) and not c.strip())
-                          or (isinstance(c, float) and c != c) for c in cells], dtype=bool)
-        booked = np.full(len(cells), math.nan)
-        if (~blank).any():
-            keep = np.flatnonzero(~blank)
-            try:
-                got = _seconds_since(path, [cells[i] for i in keep.tolist()], start)
-            except ScenarioError as e:  # its row is the k-th non-blank one: name the file's
-                k = int(e.key.split()[-1]) - 1
-                raise ScenarioError(path, f"row {int(keep[k]) + 1}",
-                                    f"{BOOKED_COLUMN} {cells[int(keep[k])]!r} is not a "
-                                    "date-time (ISO 8601, e.g. 2014-12-21 07:30:00)") from None
-            booked[keep] = got
-    else:
-        booked = cols.numbers((BOOKED_COLUMN,))[:, 0]
-    with np.errstate(invalid="ignore"):
-        late = (booked > t) & (t >= 0)
-    if late.any():
-        i = int(np.flatnonzero(late)[0])
-        raise ScenarioError(path, f"row {i + 1}",
-                            f"{BOOKED_COLUMN} = {booked[i]:.6g} s is after the requested "
-                            f"departure ({t[i]:.6g} s): a trip is booked at or before it departs")
-    return booked
 
 
 def synthesize(trips: Trips, share: float, lead: float, rng: np.random.Generator) -> Trips:
@@ -85,12 +49,6 @@ def synthesize(trips: Trips, share: float, lead: float, rng: np.random.Generator
     pick = rng.random(len(trips)) < share
     booked = np.where(pick, np.maximum(trips.t - lead, 0.0), math.nan)
     return replace(trips, booked_at=booked)
-
-
-def prebooked(trips: Trips | None) -> bool:
-    """Whether some trip of ``trips`` is booked."""
-    return trips is not None and trips.booked_at is not None \
-        and bool(np.isfinite(trips.booked_at).any())
 
 
 def entry_times(trips: Trips, mode: str, lead: float) -> np.ndarray:
@@ -202,7 +160,7 @@ class PrebookSource(TaskSource):
             trips = self.trips
             if cfg.count is not None:
                 trips = trips.subset(np.arange(len(trips)) < cfg.count, "tasks.count")
-            if self.share > 0 and not prebooked(trips):
+            if self.share > 0 and not trips.prebooked:
                 trips = synthesize(trips, self.share, self.lead, self.booking_rng)
             trips, entry = in_entry_order(trips,
                                           entry_times(trips, self.mode, self.dispatch_lead))

@@ -38,7 +38,7 @@ from dispatch.config import (
     safe_name,
 )
 from dispatch.errors import FORCE_HINT, ScenarioError
-from dispatch.prebook import MODES as PREBOOK_MODES, prebooked
+from dispatch.prebook import MODES as PREBOOK_MODES
 from dispatch.scenario_sections import (
     parse_allocators,
     parse_charging,
@@ -261,7 +261,7 @@ def _check_prebooking(path: Path, world: WorldConfig, tasks: TaskConfig,
     if disp.reassign:
         raise ScenarioError(path, "dispatch.reassign", "re-assignment before pickup and "
                                                        "prebooking do not go together")
-    if tasks.prebook_share > 0 and prebooked(tasks.trips):
+    if tasks.prebook_share > 0 and tasks.trips is not None and tasks.trips.prebooked:
         raise ScenarioError(path, "tasks.prebook_share", "the trace has a booked_at column: "
                                                          "its bookings are used, not a share")
 

@@ -83,6 +83,11 @@ class Trips:
     def __len__(self) -> int:
         return len(self.t)
 
+    @property
+    def prebooked(self) -> bool:
+        """Some trip is booked (a finite ``booked_at``)."""
+        return self.booked_at is not None and bool(np.isfinite(self.booked_at).any())
+
     def subset(self, keep: np.ndarray, reason: str) -> Trips:
         """The trips where ``keep`` (a boolean mask) holds, the others counted under
         ``reason`` in :attr:`dropped` (every per-trip array is cut alike)."""
@@ -190,8 +195,6 @@ def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
                   if "passengers" in columns else np.ones(len(t)))
     booked_at = None
     if booked:
-        from dispatch.prebook import booking_times
-
         booked_at = booking_times(path, cols, tcol == DATETIME_COLUMN, start, t)
     del cols
     early = t < 0 if tcol == DATETIME_COLUMN else np.zeros(len(t), dtype=bool)
@@ -257,6 +260,39 @@ def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
         raise ScenarioError(path, DATETIME_COLUMN, f"no trip departs at or after tasks.start "
                                                    f"({start.isoformat()})")
     return trips
+
+
+def booking_times(path: Path, cols, datetimes: bool, start: datetime | None,
+                  t: np.ndarray) -> np.ndarray:
+    """The ``booked_at`` column of a trace as seconds of the run (nan where blank): date-times
+    (read from ``start``, as ``departure_time``) where ``datetimes``, else seconds. A booking
+    after the row's requested departure ``t`` (seconds) raises a ScenarioError naming the file,
+    the row and the column; rows departing before ``start`` (left out) are not checked."""
+    if datetimes:
+        cells = cols.cells(BOOKED_COLUMN)
+        blank = np.array([c is None or (isinstance(c, str) and not c.strip())
+                          or (isinstance(c, float) and c != c) for c in cells], dtype=bool)
+        booked = np.full(len(cells), math.nan)
+        if (~blank).any():
+            keep = np.flatnonzero(~blank)
+            try:
+                got = _seconds_since(path, [cells[i] for i in keep.tolist()], start)
+            except ScenarioError as e:  # its row is the k-th non-blank one: name the file's
+                k = int(e.key.split()[-1]) - 1
+                raise ScenarioError(path, f"row {int(keep[k]) + 1}",
+                                    f"{BOOKED_COLUMN} {cells[int(keep[k])]!r} is not a "
+                                    "date-time (ISO 8601, e.g. 2014-12-21 07:30:00)") from None
+            booked[keep] = got
+    else:
+        booked = cols.numbers((BOOKED_COLUMN,))[:, 0]
+    with np.errstate(invalid="ignore"):
+        late = (booked > t) & (t >= 0)
+    if late.any():
+        i = int(np.flatnonzero(late)[0])
+        raise ScenarioError(path, f"row {i + 1}",
+                            f"{BOOKED_COLUMN} = {booked[i]:.6g} s is after the requested "
+                            f"departure ({t[i]:.6g} s): a trip is booked at or before it departs")
+    return booked
 
 
 def snap_distances(trips: Trips, network) -> np.ndarray:
