@@ -5,14 +5,14 @@ batched 30 s, ``max_wait`` 300 s from the requested departure) with 0 / 30 / 60 
 requests booked one hour ahead: 0 % is the shipped trace without bookings (``nyc_manhattan``
 itself: today's dispatch), 30 % and 60 % the shipped traces
 ``scenarios/data/nyc_manhattan_prebook{30,60}.csv`` (booking times synthesised by
-``scenarios/data/make_nyc_manhattan_prebook.py`` from a fixed seed). ``--agents`` (700: the
-fleet that serves 98 % without prebooking, nyc_manhattan's) taxis; each share over ``--seeds``
-run seeds (the fleet's start positions and the allocator's stream; the bookings are the file's).
-``--shares -1`` runs the day without bookings but dispatched as prebooking dispatches
-(every request booked at its departure: insertion into the taxis' plans, one seat or not),
-which separates what the bookings do from what the insertion does. ``--start HH:MM`` and
-``--hours`` cut the day to a window (requests departing before the
-start are left out; a booking before it enters at the start), with an hour more to finish.
+``scenarios/data/make_nyc_manhattan_prebook.py`` from a fixed seed). ``--agents`` (650: the
+smallest of 600 / 650 / 700 that serves 98 % without prebooking) taxis; each share over
+``--seeds`` run seeds (the fleet's start positions and the allocator's stream; the bookings are
+the file's). ``--shares -1`` runs the day without bookings but dispatched as prebooking
+dispatches (every request booked at its departure: insertion into the taxis' plans, one seat or
+not), which separates what the bookings do from what the insertion does. ``--start HH:MM`` and
+``--hours`` cut the day to a window (requests departing before the start are left out; a
+booking before it enters at the start), with an hour more to finish.
 
 Prints per run and, per share, the mean with a 95 % t interval over the seeds: the served
 share of all requests, of the booked ones, and of the immediate ones; promises made and
@@ -20,7 +20,7 @@ broken; the mean wait (pickup - requested departure); wall seconds. The target: 
 served >= 99.5 % at this fleet, and the whole served share not lower than at 0 %.
 
 Run: ``PYTHONPATH=. .venv/bin/python benchmarks/prebook.py [--seeds 0 1 2] [--shares 0 30 60]
-[--agents 700] [--start 00:00] [--hours 24] [--mode at_booking|lead] [--lead 900]
+[--agents 650] [--start 00:00] [--hours 24] [--mode at_booking|lead] [--lead 900]
 [--json out.json]``.
 """
 
@@ -122,7 +122,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--shares", type=int, nargs="+", default=[0, 30, 60], choices=(-1, 0, 30, 60),
                    help="-1: no booking, every request dispatched as one booked at its "
                         "departure (the insertion into plans that prebooking turns on)")
-    p.add_argument("--agents", type=int, default=700)
+    p.add_argument("--agents", type=int, default=650)
     p.add_argument("--start", default="00:00", help="HH:MM: the window's start")
     p.add_argument("--hours", type=float, default=24.0, help="the window's hours")
     p.add_argument("--mode", default="at_booking", choices=("at_booking", "lead"))
