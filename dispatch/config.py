@@ -157,6 +157,17 @@ class TaskConfig:
     #: trace on roads: metres a pickup / drop-off may lie from the nearest node (farther:
     #: the trip is left out before the run, counted in trips.dropped); None: no bound
     max_snap: float | None = None
+    #: share of the requests booked ahead (each drawn from the run's prebooking stream; a
+    #: trace's booked_at column instead: see dispatch.prebook)
+    prebook_share: float = 0.0
+    #: seconds before its departure a request of prebook_share is booked (0: at its
+    #: departure, an immediate request dispatched as a booked one)
+    prebook_lead: float = 3600.0
+
+    @property
+    def prebooked(self) -> bool:
+        """Some request is booked ahead (``prebook_share``, or its trace's ``booked_at``)."""
+        return self.prebook_share > 0 or (self.trips is not None and self.trips.prebooked)
 
     @property
     def delay_limited(self) -> bool:
@@ -186,6 +197,12 @@ class DispatchConfig:
     #: ``[dispatch.allocator_params.<name>]`` tables: parameters of one allocator (``magnnet``)
     #: or of a named variant (``"magnnet:paper"``), over the flat ones (see :meth:`params_for`)
     allocator_tables: tuple[tuple[str, tuple[tuple[str, Any], ...]], ...] = ()
+    #: when a booked request enters dispatch: "at_booking" (when it is booked) or "lead"
+    #: (prebook_lead seconds before its departure, not before its booking); dispatch.prebook
+    prebook: str = "at_booking"
+    #: seconds before its departure a booked request enters dispatch with prebook = "lead"
+    #: (unset: the [tasks] prebook_lead)
+    prebook_lead: float | None = None
 
     def params_for(self, allocator: str) -> tuple[tuple[str, Any], ...]:
         """The constructor arguments of ``allocator`` (a name, or ``name:variant``): the flat

@@ -99,9 +99,12 @@ class Operator(Breakdowns):
     def _stops(self, task: Task) -> list[Stop]:
         """The stops of ``task``: its pickup (which completes a point task) and drop-off."""
         n, svc = task.passengers, self.service_time
+        # a booked request is picked up no sooner than its requested departure (prebook)
+        e = task.released_at if task.booked_at == task.booked_at else -math.inf
         if task.dropoff is None:
-            return [Stop(PICKUP, task, task.loc, 0, task.deadline, True, service=svc)]
-        return [Stop(PICKUP, task, task.loc, n, task.deadline, False),
+            return [Stop(PICKUP, task, task.loc, 0, task.deadline, True, service=svc,
+                         earliest=e)]
+        return [Stop(PICKUP, task, task.loc, n, task.deadline, False, earliest=e),
                 Stop(DROPOFF, task, task.dropoff, -n, task.dropoff_deadline, True, service=svc)]
 
     def assign(self, task: Task, v: Vehicle, cost: float, at: Insertion | None = None) -> None:
@@ -397,6 +400,19 @@ class Operator(Breakdowns):
                 v.plan_version += 1
                 continue
             v.heading, path = None, None
+            if stop.earliest > env.now:  # early for a stop that opens later: wait there
+                stop.leg = 0.0
+                v.heading = stop  # (held for it: a new first stop interrupts the wait)
+                self.changed(v)
+                try:
+                    yield env.timeout(stop.earliest - env.now)
+                except simpy.Interrupt as i:
+                    if i.cause != "reroute":
+                        return
+                    v.heading = None
+                    v.plan_version += 1
+                    continue  # a new stop first: the vehicle leaves for it
+                v.heading = None
             if stop.visit is not None:  # a charging visit: queue, charge, leave
                 stop.visit.reached()
                 try:

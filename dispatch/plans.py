@@ -127,6 +127,8 @@ def insertion_costs_of(cost: np.ndarray, slots: np.ndarray, tasks: list, now: fl
     lp = np.array([t.deadline for t in tasks])
     ld = np.array([t.dropoff_deadline for t in tasks])
     n_req = np.array([0 if t.dropoff is None else t.passengers for t in tasks], np.int64)
+    # a booked request's pickup opens at its requested departure (dispatch.prebook)
+    ep = np.array([t.released_at if t.booked_at == t.booked_at else -np.inf for t in tasks])
     point = np.array([t.dropoff is None for t in tasks])
     pd = np.array([0.0 if t.dropoff is None else t.direct_time for t in tasks])
     if getattr(planner, "inner", None) is not None and not point.all():
@@ -146,7 +148,7 @@ def insertion_costs_of(cost: np.ndarray, slots: np.ndarray, tasks: list, now: fl
     if empty.size:
         c = cost[empty]
         arr_p = now + c
-        arr_d = arr_p + svc_p + pd
+        arr_d = np.maximum(arr_p, ep) + svc_p + pd
         ok = (arr_p <= lp + 1e-9) & (arr_d <= ld + 1e-9) & (n_req <= cap[empty, None])
         value = c if objective == PICKUP_TIME else c + svc_p + pd + svc_d
         out[empty] = np.where(ok, value, np.inf)
@@ -195,6 +197,7 @@ def insertion_costs_of(cost: np.ndarray, slots: np.ndarray, tasks: list, now: fl
     ins = insertion_costs(
         remap[rows], cmap[cols], ready[used], cost[vrow, cols], off, s_arr, s_svc,
         s_latest, s_occ, load, cap[busy[used]], to_p, from_p, to_d, from_d, pd[ucols],
-        n_req[ucols], lp[ucols], ld[ucols], svc_p[ucols], svc_d[ucols], objective, s_e)
+        n_req[ucols], lp[ucols], ld[ucols], svc_p[ucols], svc_d[ucols], objective, s_e,
+        ep[ucols])
     out[vrow, cols] = ins.cost
     return out, Inserts(ins, vrow, cols, m)

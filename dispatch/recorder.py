@@ -74,6 +74,8 @@ SCHEMAS: dict[str, pa.Schema] = {
         ("delay_mean", _F), ("detour_ratio", _F),
         # [dispatch] objective: what a pair's cost (total_cost's terms) measures
         ("objective", _S),
+        # prebooking: booked requests accepted (promises), and of those not completed
+        ("promises", _I), ("promises_broken", _I),
     ]),
     "tasks": pa.schema([
         ("run_id", _S), ("task_id", _I), ("kind", _S), ("x", _F), ("y", _F), ("z", _F),
@@ -87,6 +89,8 @@ SCHEMAS: dict[str, pa.Schema] = {
         # shared rides: riders; free-flow seconds pickup -> drop-off; the request's delay
         # limit; whether another request was on board during its ride
         ("passengers", _I), ("direct_time", _F), ("max_delay", _F), ("shared", _B),
+        # prebooking: when it was booked (nan: not booked); accepted when booked (a promise)
+        ("booked_at", _F), ("promised", _B),
     ]),
     "assignments": pa.schema([
         ("run_id", _S), ("decision", _I), ("round", _I), ("agent_id", _I), ("task_id", _I),

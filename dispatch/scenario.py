@@ -38,6 +38,7 @@ from dispatch.config import (
     safe_name,
 )
 from dispatch.errors import FORCE_HINT, ScenarioError
+from dispatch.prebook import MODES as PREBOOK_MODES
 from dispatch.scenario_sections import (
     parse_allocators,
     parse_charging,
@@ -151,6 +152,8 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
                                              else None, gt=0.0, optional=True),
                     max_delay=t.number("max_delay", None, lo=0.0, optional=True))
     tasks = _parse_empirical(t, tasks, world, fleet)
+    tasks = replace(tasks, prebook_share=t.number("prebook_share", 0.0, lo=0.0, hi=1.0),
+                    prebook_lead=t.number("prebook_lead", 3600.0, lo=0.0))
     trace = t.get("trace", None)
     if source == "periodic" and tasks.interval is None:
         raise t.fail("interval", "is required when source = 'periodic'")
@@ -201,7 +204,10 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
         allocator_params=d.params("allocator_params"),
         planner_params=d.params("planner_params"),
     )
+    disp = replace(disp, prebook=d.string("prebook", "at_booking", PREBOOK_MODES),
+                   prebook_lead=d.number("prebook_lead", None, gt=0.0, optional=True))
     d.done()
+    _check_prebooking(path, world, tasks, disp)
     _check_pooling(path, world, fleet, tasks, disp)
 
     c = root.table("comms")
@@ -241,6 +247,23 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     for n in sweep.agents or (fleet.agents,):
         _check_fits(sc, n, "sweep.agents" if sweep.agents else "fleet.agents")
     return sc
+
+
+def _check_prebooking(path: Path, world: WorldConfig, tasks: TaskConfig,
+                      disp: DispatchConfig) -> None:
+    """Prebooking (dispatch.prebook) inserts into plans: a road network, no re-assignment
+    before pickup, and one source of bookings (a trace's ``booked_at`` or ``prebook_share``)."""
+    if not tasks.prebooked:
+        return
+    key = "tasks.prebook_share" if tasks.prebook_share > 0 else "tasks.trace"
+    if "pooling" not in space_class(world.space).features:
+        raise ScenarioError(path, key, "prebooking needs a road network ([world] network)")
+    if disp.reassign:
+        raise ScenarioError(path, "dispatch.reassign", "re-assignment before pickup and "
+                                                       "prebooking do not go together")
+    if tasks.prebook_share > 0 and tasks.trips is not None and tasks.trips.prebooked:
+        raise ScenarioError(path, "tasks.prebook_share", "the trace has a booked_at column: "
+                                                         "its bookings are used, not a share")
 
 
 def _check_pooling(path: Path, world: WorldConfig, fleet: FleetConfig, tasks: TaskConfig,

@@ -42,16 +42,19 @@ from dispatch.battery import Energy
 from dispatch.charging import Charging, Stations
 from dispatch.decision import Blame, Pipeline, Tally
 from dispatch.dispatcher import Dispatcher, Wakeup
+from dispatch.errors import ScenarioError
 from dispatch.events import EventBus
 from dispatch.faults import FaultInjector, blackout_filter
 from dispatch.operator import Hooks, Operator, Towing
 from dispatch.plugins import (check_repositioner, describe, make_charger, make_plugin,
                               make_repositioner)
+from dispatch.prebook import PrebookSource
 from dispatch.recording import RunRecording
 from dispatch.reposition import Repositioning, summary_of
 from dispatch.space import space_for
 from dispatch.streams import (STREAM_ALLOCATOR, STREAM_CHARGING, STREAM_FAULTS, STREAM_FLEET,
                               STREAM_REPOSITION, STREAM_SOURCE, STREAM_TASKS, rng_for)
+from dispatch.streams import STREAM_PREBOOK
 from dispatch.tasks import Task, TaskBook, TaskSource, TaskState
 from dispatch.vehicles import Fleet, stop_leg
 
@@ -149,17 +152,28 @@ class Simulation:
                             sc.comms, rng_for(spec.seed, STREAM_ALLOCATOR), self.tally, blame,
                             blackout_filter(sc.faults),
                             None if self.energy is None else self.energy.filter,
-                            pooled=any(v.capacity > 1 for v in self.vehicles),
+                            pooled=any(v.capacity > 1 for v in self.vehicles)
+                            or sc.tasks.prebooked,  # (a promise waits in a plan)
                             max_delay=sc.tasks.delay_limited)
         self.dispatcher = Dispatcher(env, wakeup, pipeline, self.fleet, self.operator,
                                      allocator, self.tally, blame, self._record_decision,
                                      window=d.batch_window, latency=sc.comms.latency)
         driver.run_id = spec.run_id  # named in error messages
         t = sc.tasks
-        self.source = TaskSource.of(env, book, demand, t,
-                                    spec.n_static_tasks if t.source == "static" else t.count,
-                                    lambda: rng_for(spec.seed, STREAM_TASKS),
-                                    rng_for(spec.seed, STREAM_SOURCE), wakeup)
+        source, extra = TaskSource, {}
+        if t.prebooked:  # requests booked ahead (dispatch.prebook)
+            if allocator.multi_request:  # its routes do not read a booked pickup's earliest
+                raise ScenarioError(sc.path, "dispatch.allocator", f"{spec.allocator!r} "
+                                    "builds its own routes (multi_request): prebooking needs "
+                                    "an allocator that takes the insertion costs")
+            source, extra = PrebookSource, dict(
+                share=t.prebook_share, lead=t.prebook_lead, mode=d.prebook,
+                dispatch_lead=t.prebook_lead if d.prebook_lead is None else d.prebook_lead,
+                booking_rng=rng_for(spec.seed, STREAM_PREBOOK))
+        self.source = source.of(env, book, demand, t,
+                                spec.n_static_tasks if t.source == "static" else t.count,
+                                lambda: rng_for(spec.seed, STREAM_TASKS),
+                                rng_for(spec.seed, STREAM_SOURCE), wakeup, **extra)
         self.source.on_done = self._check_finished
         #: the repositioning timer and drives (None: a passive repositioner, e.g. ``stay``)
         self.repositioning = None

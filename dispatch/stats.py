@@ -34,6 +34,8 @@ class RunStats:
         self.delay = 0.0  # ... their delay over the direct drive (s)
         self.detour = 0.0  # ... their in-vehicle time over the direct drive
         self.detours = 0  # ... those with a direct time > 0
+        self.promises = 0  # booked requests accepted (dispatch.prebook)
+        self.promises_broken = 0  # ... of those, ended failed or expired
 
     def closed(self, t: Task) -> None:
         self.n_tasks += 1
@@ -47,6 +49,11 @@ class RunStats:
             self.offered += 1
             self.clean += t.agent_id >= 0 and not t.conflicted
         self.conflicts += t.conflicted
+        if t.promised:
+            self.promises += 1
+            # (cancelled: cut by the run's end, not broken)
+            self.promises_broken += t.state is not COMPLETED \
+                and t.state is not TaskState.CANCELLED
         if not math.isnan(t.picked_up_at):
             self.picked += 1
             self.waits += t.picked_up_at - t.released_at
@@ -96,4 +103,5 @@ class RunStats:
             shared_rate=self.shared / self.rides if self.rides else math.nan,
             delay_mean=self.delay / self.rides if self.rides else math.nan,
             detour_ratio=self.detour / self.detours if self.detours else math.nan,
+            promises=self.promises, promises_broken=self.promises_broken,
         )

@@ -68,7 +68,8 @@ CLOSE_EVENT = {TaskState.COMPLETED: "complete", TaskState.EXPIRED: "expire",
 #: the states a task may move to from each live state
 MOVES = {
     TaskState.OPEN: {TaskState.ASSIGNED, TaskState.EXPIRED, TaskState.REJECTED,
-                     TaskState.UNREACHABLE, TaskState.CANCELLED},
+                     TaskState.UNREACHABLE, TaskState.CANCELLED,
+                     TaskState.FAILED},  # (a promise a breakdown broke: dispatch.prebook)
     TaskState.ASSIGNED: {TaskState.PICKED_UP, TaskState.OPEN, TaskState.CANCELLED,
                          TaskState.FAILED},
     TaskState.PICKED_UP: {TaskState.COMPLETED, TaskState.OPEN, TaskState.CANCELLED,
@@ -105,6 +106,10 @@ class Task:
     direct_time: float = math.nan  # free-flow fastest seconds from pickup to drop-off
     shared: bool = False  # another request was on board during its ride
     dropped_at: float = math.nan  # when its passengers got off (before any service time)
+    #: when it was booked (nan: not booked; its ``released_at`` is then the requested
+    #: departure, see dispatch.prebook) and whether it was accepted so (a promise)
+    booked_at: float = math.nan
+    promised: bool = False
 
     @property
     def cell(self):
@@ -185,6 +190,8 @@ class TaskBook:
     def assign(self, task: Task, agent_id: int, cost: float) -> None:
         self._move(task, ASSIGNED)
         self._active[task.id] = task
+        if task.booked_at == task.booked_at:  # a booked request accepted: a promise
+            task.promised = True
         task.assigned_at, task.agent_id, task.cost = float(self.env.now), agent_id, cost
         self.bus.emit(self.env.now, "assign", agent_id, task.id, task.loc)
 
@@ -318,10 +325,11 @@ class TaskSource:
     @classmethod
     def of(cls, env: simpy.Environment, book: TaskBook, demand: Demand, tasks, count,
            day_rng: Callable[[], np.random.Generator], rng: np.random.Generator,
-           notify: Callable[[], None]) -> TaskSource:
+           notify: Callable[[], None], **extra) -> TaskSource:
         """The source of a scenario's ``[tasks]`` (:class:`dispatch.config.TaskConfig`)
         releasing ``count`` tasks where it has a count (static: the run's). An empirical day
-        is drawn now (from ``day_rng()``) and released as a trace."""
+        is drawn now (from ``day_rng()``) and released as a trace. ``extra``: a subclass's
+        own arguments (:class:`dispatch.prebook.PrebookSource`)."""
         kind, trips = tasks.source, tasks.trips
         if kind == "empirical":
             from dispatch.empirical import draw_day, load_sample
@@ -330,7 +338,7 @@ class TaskSource:
             trips = draw_day(load_sample(), tasks.trips_per_day, day_rng(), tasks.weekday)
         cfg = SourceConfig(kind, count, tasks.interval, tasks.rate, tasks.max_active,
                            tasks.ttl, tasks.max_wait, tasks.max_delay)
-        return cls(env, book, demand, cfg, rng, notify, trips)
+        return cls(env, book, demand, cfg, rng, notify, trips, **extra)
 
     def _done(self) -> None:
         self.finished = True

@@ -4,8 +4,10 @@ A **trace** (CSV or Parquet) holds one trip per row: its release time ``t`` (or
 ``release_time``, seconds; or ``departure_time``, a date-time read as seconds from the
 scenario's ``[tasks] start``), its pickup and, optionally, its drop-off, and an optional
 ``max_wait`` and ``max_delay`` (seconds; blank: the scenario's) and ``passengers`` (a whole
-number >= 1; blank: 1). Other columns (``request_id``, ...) are ignored. Where things are, by
-space:
+number >= 1; blank: 1) and ``booked_at`` (when the trip was booked: seconds, or a date-time
+where the trace's time column is ``departure_time``; blank: not booked; never after the
+requested departure; see :mod:`dispatch.prebook`). Other columns (``request_id``, ...) are
+ignored. Where things are, by space:
 
 * voxel world: ``x, y, z`` (metres; the pickup), optionally ``dest_x, dest_y, dest_z``;
 * road network, one of: ``origin_node, dest_node`` (node ids of the network);
@@ -38,6 +40,8 @@ from dispatch.table_files import CELLS, NUMBER, NUMBER_OR_BLANK, Table
 TIME_COLUMNS = ("t", "release_time", "departure_time")
 #: the time column given as date-times (seconds from ``[tasks] start``)
 DATETIME_COLUMN = "departure_time"
+#: when a trip was booked (optional; :mod:`dispatch.prebook`)
+BOOKED_COLUMN = "booked_at"
 #: the column sets a trace may use, by space: (name, pickup columns, drop-off columns)
 LAYOUTS = {
     "voxel": (("xyz", ("x", "y", "z"), ("dest_x", "dest_y", "dest_z")),),
@@ -72,9 +76,17 @@ class Trips:
     #: trips of the file left out, as ``(reason, count)`` pairs (before ``[tasks] start``;
     #: farther than ``[tasks] max_snap`` from the network): stored with the results
     dropped: tuple[tuple[str, int], ...] = ()
+    #: when each trip was booked (seconds of the run, ``booked_at`` column; nan: not booked,
+    #: it is requested at its release time): see :mod:`dispatch.prebook`
+    booked_at: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.t)
+
+    @property
+    def prebooked(self) -> bool:
+        """Some trip is booked (a finite ``booked_at``)."""
+        return self.booked_at is not None and bool(np.isfinite(self.booked_at).any())
 
     def subset(self, keep: np.ndarray, reason: str) -> Trips:
         """The trips where ``keep`` (a boolean mask) holds, the others counted under
@@ -163,9 +175,12 @@ def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
             path, tcol, "gives times in seconds; [tasks] start is only used with a "
             f"{DATETIME_COLUMN} column of date-times"))
     optional = [c for c in ("max_wait", "max_delay", "passengers") if c in columns]
+    booked = BOOKED_COLUMN in columns
     cols = table.read({tcol: CELLS if tcol == DATETIME_COLUMN else NUMBER,
                        **{c: NUMBER for c in pick + (drop if has_dest else ())},
-                       **{c: NUMBER_OR_BLANK for c in optional}})
+                       **{c: NUMBER_OR_BLANK for c in optional},
+                       **({BOOKED_COLUMN: CELLS if tcol == DATETIME_COLUMN else NUMBER_OR_BLANK}
+                          if booked else {})})
     if tcol == DATETIME_COLUMN:
         t = _seconds_since(path, cols.cells(tcol), start)
     else:
@@ -178,6 +193,9 @@ def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
                  if "max_delay" in columns else np.full(len(t), math.nan))
     passengers = (cols.numbers(("passengers",))[:, 0]
                   if "passengers" in columns else np.ones(len(t)))
+    booked_at = None
+    if booked:
+        booked_at = booking_times(path, cols, tcol == DATETIME_COLUMN, start, t)
     del cols
     early = t < 0 if tcol == DATETIME_COLUMN else np.zeros(len(t), dtype=bool)
 
@@ -234,13 +252,47 @@ def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
     order = np.argsort(t, kind="stable")
     trips = Trips(path, name, t[order], origin[order],
                   None if dest is None else dest[order], max_wait[order], order + 1,
-                  passengers[order].astype(np.int64), max_delay[order])
+                  passengers[order].astype(np.int64), max_delay[order],
+                  booked_at=None if booked_at is None else booked_at[order])
     if early.any():
         trips = trips.subset(~early[order], f"departed before tasks.start ({start.isoformat()})")
     if early.any() and not len(trips):
         raise ScenarioError(path, DATETIME_COLUMN, f"no trip departs at or after tasks.start "
                                                    f"({start.isoformat()})")
     return trips
+
+
+def booking_times(path: Path, cols, datetimes: bool, start: datetime | None,
+                  t: np.ndarray) -> np.ndarray:
+    """The ``booked_at`` column of a trace as seconds of the run (nan where blank): date-times
+    (read from ``start``, as ``departure_time``) where ``datetimes``, else seconds. A booking
+    after the row's requested departure ``t`` (seconds) raises a ScenarioError naming the file,
+    the row and the column; rows departing before ``start`` (left out) are not checked."""
+    if datetimes:
+        cells = cols.cells(BOOKED_COLUMN)
+        blank = np.array([c is None or (isinstance(c, str) and not c.strip())
+                          or (isinstance(c, float) and c != c) for c in cells], dtype=bool)
+        booked = np.full(len(cells), math.nan)
+        if (~blank).any():
+            keep = np.flatnonzero(~blank)
+            try:
+                got = _seconds_since(path, [cells[i] for i in keep.tolist()], start)
+            except ScenarioError as e:  # its row is the k-th non-blank one: name the file's
+                k = int(e.key.split()[-1]) - 1
+                raise ScenarioError(path, f"row {int(keep[k]) + 1}",
+                                    f"{BOOKED_COLUMN} {cells[int(keep[k])]!r} is not a "
+                                    "date-time (ISO 8601, e.g. 2014-12-21 07:30:00)") from None
+            booked[keep] = got
+    else:
+        booked = cols.numbers((BOOKED_COLUMN,))[:, 0]
+    with np.errstate(invalid="ignore"):
+        late = (booked > t) & (t >= 0)
+    if late.any():
+        i = int(np.flatnonzero(late)[0])
+        raise ScenarioError(path, f"row {i + 1}",
+                            f"{BOOKED_COLUMN} = {booked[i]:.6g} s is after the requested "
+                            f"departure ({t[i]:.6g} s): a trip is booked at or before it departs")
+    return booked
 
 
 def snap_distances(trips: Trips, network) -> np.ndarray:
