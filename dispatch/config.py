@@ -269,6 +269,10 @@ class Scenario:
     reposition: RepositionConfig = field(default_factory=RepositionConfig)
     #: ``[chargers]`` / ``[charging]`` (:class:`dispatch.energy_config.ChargingConfig`); None: none
     charging: Any = None
+    #: ``[acceptor]`` (:class:`dispatch.offers.AcceptorConfig`): offers riders may decline
+    acceptor: Any = None
+    #: ``[pricing]`` (:class:`dispatch.offers.Pricing`); None: no fares
+    pricing: Any = None
 
     def runs(
         self,

@@ -74,6 +74,9 @@ SCHEMAS: dict[str, pa.Schema] = {
         ("delay_mean", _F), ("detour_ratio", _F),
         # [dispatch] objective: what a pair's cost (total_cost's terms) measures
         ("objective", _S),
+        # offers riders may decline (dispatch.offers): requests closed `declined`, offers made,
+        # fares of the completed rides (0 without [pricing])
+        ("tasks_declined", _I), ("offers", _I), ("revenue", _F),
     ]),
     "tasks": pa.schema([
         ("run_id", _S), ("task_id", _I), ("kind", _S), ("x", _F), ("y", _F), ("z", _F),
@@ -87,6 +90,9 @@ SCHEMAS: dict[str, pa.Schema] = {
         # shared rides: riders; free-flow seconds pickup -> drop-off; the request's delay
         # limit; whether another request was on board during its ride
         ("passengers", _I), ("direct_time", _F), ("max_delay", _F), ("shared", _B),
+        # offers riders may decline (dispatch.offers): offers made to the rider (0 without an
+        # acceptor that declines or [pricing]) and the last offer's fare (nan without [pricing])
+        ("offers", _I), ("fare", _F),
     ]),
     "assignments": pa.schema([
         ("run_id", _S), ("decision", _I), ("round", _I), ("agent_id", _I), ("task_id", _I),

@@ -34,6 +34,8 @@ class RunStats:
         self.delay = 0.0  # ... their delay over the direct drive (s)
         self.detour = 0.0  # ... their in-vehicle time over the direct drive
         self.detours = 0  # ... those with a direct time > 0
+        self.offers = 0  # offers made to riders (dispatch.offers)
+        self.revenue = 0.0  # fares of the completed rides ([pricing])
 
     def closed(self, t: Task) -> None:
         self.n_tasks += 1
@@ -47,6 +49,9 @@ class RunStats:
             self.offered += 1
             self.clean += t.agent_id >= 0 and not t.conflicted
         self.conflicts += t.conflicted
+        self.offers += t.offers
+        if t.state is COMPLETED and t.fare == t.fare:
+            self.revenue += t.fare
         if not math.isnan(t.picked_up_at):
             self.picked += 1
             self.waits += t.picked_up_at - t.released_at
@@ -96,4 +101,5 @@ class RunStats:
             shared_rate=self.shared / self.rides if self.rides else math.nan,
             delay_mean=self.delay / self.rides if self.rides else math.nan,
             detour_ratio=self.detour / self.detours if self.detours else math.nan,
+            tasks_declined=c[TaskState.DECLINED], offers=self.offers, revenue=self.revenue,
         )

@@ -12,6 +12,8 @@ import numpy as np
 
 (STREAM_WORLD, STREAM_FLEET, STREAM_TASKS, STREAM_ALLOCATOR, STREAM_SOURCE, STREAM_FAULTS,
  STREAM_REPOSITION, STREAM_CHARGING) = range(8)
+#: the riders' answers to offers (dispatch.offers); a number of its own, clear of the others
+STREAM_OFFERS = 31
 
 
 def rng_for(seed: int, stream: int) -> np.random.Generator:

@@ -5,6 +5,7 @@ without one). Life cycle::
 
     open -> assigned -> picked_up -> completed
       \\-> expired | rejected | unreachable | cancelled | failed   (terminal, from any live state)
+      \\-> declined   (terminal, from open: its rider declined the offer, see dispatch.offers)
 
 ``expired``: its ``ttl`` or ``max_wait`` ran out while it was open; ``rejected``: when the
 dispatcher first considered it, no vehicle could reach its pickup within its ``max_wait``;
@@ -49,6 +50,7 @@ class TaskState(str, Enum):
     UNREACHABLE = "unreachable"
     CANCELLED = "cancelled"
     FAILED = "failed"
+    DECLINED = "declined"
 
     @property
     def terminal(self) -> bool:
@@ -60,15 +62,17 @@ class TaskState(str, Enum):
 OPEN, ASSIGNED, PICKED_UP, COMPLETED = (TaskState.OPEN, TaskState.ASSIGNED, TaskState.PICKED_UP,
                                         TaskState.COMPLETED)
 TERMINAL = frozenset({TaskState.COMPLETED, TaskState.EXPIRED, TaskState.REJECTED,
-                      TaskState.UNREACHABLE, TaskState.CANCELLED, TaskState.FAILED})
+                      TaskState.UNREACHABLE, TaskState.CANCELLED, TaskState.FAILED,
+                      TaskState.DECLINED})
 #: the event emitted when a task enters a terminal state
 CLOSE_EVENT = {TaskState.COMPLETED: "complete", TaskState.EXPIRED: "expire",
                TaskState.REJECTED: "reject", TaskState.UNREACHABLE: "unreachable",
-               TaskState.CANCELLED: "cancel", TaskState.FAILED: "failed"}
+               TaskState.CANCELLED: "cancel", TaskState.FAILED: "failed",
+               TaskState.DECLINED: "decline"}
 #: the states a task may move to from each live state
 MOVES = {
     TaskState.OPEN: {TaskState.ASSIGNED, TaskState.EXPIRED, TaskState.REJECTED,
-                     TaskState.UNREACHABLE, TaskState.CANCELLED},
+                     TaskState.UNREACHABLE, TaskState.CANCELLED, TaskState.DECLINED},
     TaskState.ASSIGNED: {TaskState.PICKED_UP, TaskState.OPEN, TaskState.CANCELLED,
                          TaskState.FAILED},
     TaskState.PICKED_UP: {TaskState.COMPLETED, TaskState.OPEN, TaskState.CANCELLED,
@@ -105,6 +109,8 @@ class Task:
     direct_time: float = math.nan  # free-flow fastest seconds from pickup to drop-off
     shared: bool = False  # another request was on board during its ride
     dropped_at: float = math.nan  # when its passengers got off (before any service time)
+    offers: int = 0  # offers made to its rider (dispatch.offers; 0 without an acceptor)
+    fare: float = math.nan  # the fare of its last offer ([pricing]; nan without)
 
     @property
     def cell(self):
