@@ -198,7 +198,7 @@ class Simulation:
         from dispatch.plugins import make_acceptor
 
         acc = sc.acceptor
-        if sc.pricing is None and (acc is None or acc == AcceptorConfig()):
+        if sc.pricing is None and acc == AcceptorConfig():
             return None
         acceptor = make_acceptor(sc)
         if sc.pricing is None and not registry.capabilities("acceptor", acceptor).declines:
