@@ -115,7 +115,7 @@ class Offering:
         task.offers += 1
         fare = self.fare(task, pooled)
         task.fare = fare
-        offer = Offer(task.id, vehicle_id, now, task.released_at, pickup_at, dropoff_at,
+        offer = Offer(task.view(), vehicle_id, now, task.released_at, pickup_at, dropoff_at,
                       task.direct_time, fare, pooled, task.offers)
         try:
             yes = bool(self.acceptor.accept(offer, self.rng))

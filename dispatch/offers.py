@@ -39,11 +39,14 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from dispatch.problem import TaskView
+
 
 @dataclass(frozen=True, slots=True)
 class Offer:
-    """What a rider is offered: the request, the vehicle, and the estimates of the plan the
-    decision chose (simulated seconds).
+    """What a rider is offered: the request (its read-only view: pickup, drop-off, release,
+    riders, limits), the vehicle's id, and the estimates of the plan the decision chose
+    (simulated seconds).
 
     ``wait``: pickup estimate minus the request's release; ``ivt``: in-vehicle seconds
     (drop-off estimate minus pickup estimate; 0 for a request without a drop-off);
@@ -52,7 +55,7 @@ class Offer:
     ``pooled``: another rider is on board at some point of this ride in the plan; ``attempt``:
     1 for the first offer, 2 for the first re-offer, ..."""
 
-    task_id: int
+    request: TaskView
     vehicle_id: int
     now: float
     released_at: float

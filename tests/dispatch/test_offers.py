@@ -15,6 +15,7 @@ from acceptors.logit import LogitAcceptor
 from acceptors.threshold import ThresholdAcceptor
 from dispatch.errors import ScenarioError
 from dispatch.offers import Offer, Pricing, logistic
+from dispatch.problem import TaskView
 from dispatch.runner import run_one
 from dispatch.scenario import load_scenario
 from tests.dispatch.test_trips import road_scenario, write_csv
@@ -216,7 +217,8 @@ def test_threshold_declines_exactly_past_its_wait_limit(tmp_path, max_wait):
 
 
 def _offer(**kw) -> Offer:
-    base = dict(task_id=0, vehicle_id=0, now=0.0, released_at=0.0, pickup_at=60.0,
+    base = dict(request=TaskView(0, "trip", 3, 0.0, 7), vehicle_id=0, now=0.0,
+                released_at=0.0, pickup_at=60.0,
                 dropoff_at=360.0, direct=240.0, fare=10.0, pooled=False, attempt=1)
     base.update(kw)
     return Offer(**base)
