@@ -74,12 +74,12 @@ from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 from dispatch.answers import finders, route_stops, validate
-from dispatch.offering import Offering, insertion_estimates, plain_estimates, route_estimates
 from dispatch.comms import components
 from dispatch.contracts import Allocator
 from dispatch.decision import Blame, Pipeline, Tally, one_line
 from dispatch.errors import AllocationError, DispatchError, PluginError
 from dispatch.heap import keep_large_blocks
+from dispatch.offering import Offering, insertion_estimates, plain_estimates, route_estimates
 from dispatch.plans import Inserts
 from dispatch.problem import Allocation, AllocationProblem
 from dispatch.stops import DROPOFF, PICKUP, PlannedStop
