@@ -86,7 +86,7 @@ def _parser(commands=None) -> argparse.ArgumentParser:
     c.add_argument("--seed", type=int, default=0, help="seed of the random problems")
 
     sub.add_parser("plugins", help="list installed allocators, planners, repositioners, "
-                   "chargers and commands")
+                   "chargers, acceptors and commands")
     n = sub.add_parser("new", help="write a new plugin package (`dispatch new allocator NAME`): "
                        "installs with pip and passes `dispatch check NAME`")
     n.add_argument("kind", choices=("allocator",), help="the kind of plugin to write")
@@ -432,10 +432,10 @@ def _plugins(args, console) -> int:
 
     from dispatch.registry import describe
 
-    for kind in ("allocator", "planner", "repositioner", "charger", "command"):
+    for kind in ("allocator", "planner", "repositioner", "charger", "acceptor", "command"):
         t = Table(title=f"{kind}s (entry-point group dispatch.{kind}s)", title_justify="left")
         t.add_column("name", no_wrap=True)
-        spaced = kind not in ("allocator", "command")  # plugins that serve some spaces
+        spaced = kind not in ("allocator", "acceptor", "command")  # plugins that serve spaces
         if spaced:
             t.add_column("spaces")
         t.add_column("description; target (module:object)", overflow="fold")

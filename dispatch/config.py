@@ -22,6 +22,7 @@ import numpy as np
 from dispatch import runkeys
 from dispatch.errors import ScenarioError
 from dispatch.faults import FaultConfig
+from dispatch.offers import AcceptorConfig
 from dispatch.runkeys import RUN_KEYS
 from dispatch.space import space_class
 from dispatch.traces import Trips
@@ -286,6 +287,10 @@ class Scenario:
     reposition: RepositionConfig = field(default_factory=RepositionConfig)
     #: ``[chargers]`` / ``[charging]`` (:class:`dispatch.energy_config.ChargingConfig`); None: none
     charging: Any = None
+    #: ``[acceptor]`` (:class:`dispatch.offers.AcceptorConfig`): offers riders may decline
+    acceptor: AcceptorConfig = field(default_factory=AcceptorConfig)
+    #: ``[pricing]`` (:class:`dispatch.offers.Pricing`); None: no fares
+    pricing: Any = None
 
     def runs(
         self,

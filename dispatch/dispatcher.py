@@ -55,11 +55,19 @@ run's tally, its configuration) and reaches into nothing else; each decision goe
 of :mod:`dispatch.decision` (costs, deadlines, insertions, the energy filter, lazy
 certification, the comm graph), the plan machinery is :mod:`dispatch.plans`'s and the checking
 of an answer :mod:`dispatch.answers`'s.
+
+Offers riders may decline (``[acceptor]``, ``[pricing]``; see :mod:`dispatch.offers`). With an
+``offering`` (:class:`dispatch.offering.Offering`), each pair about to be handed out is first
+offered to its rider with the estimates of the plan the decision chose; a declined pair is
+left out of the hand-out as a pair closed while deciding is (its stops never enter the plan;
+a routed vehicle drives its route without them, re-timed), and the ``decisions`` row counts
+the pairs handed out. Without one (the default) the hand-out is what it always was.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -71,9 +79,10 @@ from dispatch.contracts import Allocator
 from dispatch.decision import Blame, Pipeline, Tally, one_line
 from dispatch.errors import AllocationError, DispatchError, PluginError
 from dispatch.heap import keep_large_blocks
+from dispatch.offering import Offering, insertion_estimates, plain_estimates, route_estimates
 from dispatch.plans import Inserts
 from dispatch.problem import Allocation, AllocationProblem
-from dispatch.stops import PICKUP
+from dispatch.stops import DROPOFF, PICKUP, PlannedStop
 from dispatch.tasks import OPEN, TaskBook, TaskState
 
 if TYPE_CHECKING:
@@ -150,12 +159,14 @@ class Dispatcher:
     def __init__(self, env: simpy.Environment, wakeup: Wakeup, pipeline: Pipeline,
                  fleet: Fleet, operator: Operator, allocator: Allocator, tally: Tally,
                  blame: Blame, on_decision: Callable[..., None], *, window: float = 0.0,
-                 latency: float = 0.0) -> None:
+                 latency: float = 0.0, offering: Offering | None = None) -> None:
         self.env, self.wakeup, self.pipeline = env, wakeup, pipeline
         self.fleet, self.operator, self.allocator = fleet, operator, allocator
         self.tally, self.blame, self.on_decision = tally, blame, on_decision
         #: seconds waited after a wake-up (batching); simulated seconds per message hop
         self.window, self.latency = window, latency
+        #: offers riders may decline (dispatch.offers); None: every pair is handed out
+        self.offering = offering
         self._pending: _Pending | None = None
         keep_large_blocks()  # a batch's big arrays reuse heap memory (see dispatch.heap)
         env.process(self._loop())
@@ -276,6 +287,8 @@ class Dispatcher:
                                                 for a, t in allocation.pairs)):
             # (without latency nothing changed since the decision; with it, a pooled pair
             # whose vehicle moved on is stale: the slow path below drops it)
+            if self.offering is not None:
+                allocation = self._offered(p, allocation)
             handed = tuple(allocation.pairs)
             pair_cost = [float(cost[i, j]) for i, j in p.index]
             routes = allocation.__dict__.get("_checked_routes")
@@ -311,6 +324,10 @@ class Dispatcher:
                 row, col = finders(p.problem)
                 handed = tuple((a, t) for a, t in handed
                                if (row(a), col(t)) not in p.inserts)
+            if self.offering is not None:  # (plain pairs only: routes, insertions dropped)
+                row, col = finders(p.problem)
+                index = [(row(a), col(t)) for a, t in handed]
+                handed, _ = self._offer(p, handed, index, {})
             if len(handed) != len(allocation.pairs):
                 log.debug("decision %d: %d pair(s) not handed out (task closed while deciding)",
                           self.tally.decisions, len(allocation.pairs) - len(handed))
@@ -324,6 +341,83 @@ class Dispatcher:
                 self.operator.assign(by_task[tid], by_id[aid], c)
             return
         self._reassign(p, holding, handed, pair_cost, vehicle_unchanged)
+
+    def _offered(self, p: _Pending, allocation: Allocation) -> Allocation:
+        """``allocation`` less the pairs whose riders decline their offers (``p.index`` cut
+        to match; a routed vehicle's route re-timed without the declined requests' stops)."""
+        routes = allocation.__dict__.get("_checked_routes") or {}
+        kept, routes = self._offer(p, allocation.pairs, p.index, routes)
+        if len(kept) == len(allocation.pairs):
+            return allocation
+        keep = set(kept)
+        p.index = [ij for pair, ij in zip(allocation.pairs, p.index) if pair in keep]
+        allocation = replace(allocation, pairs=tuple(kept))
+        if routes:
+            object.__setattr__(allocation, "_checked_routes", routes)  # (a cache, frozen)
+        return allocation
+
+    def _offer(self, p: _Pending, pairs, index, routes: dict) -> tuple[tuple, dict]:
+        """``(pairs accepted, routes)``: each of ``pairs`` (at ``index``, its (row, column)
+        in the problem) whose rider has not accepted before is offered with the estimates of
+        the plan the decision chose (a route's planned times, an insertion's, or the vehicle
+        setting out now); ``routes`` re-timed without the declined requests' stops. A
+        declined request left open for a re-offer asks for the next decision."""
+        off, by_id, op = self.offering, self.fleet.by_id, self.operator
+        by_task = {t.id: t for t in p.tasks}
+        now, decided, cost = self.env.now, float(p.problem.time), p.problem.cost
+        plans = self.pipeline.plans
+        kept, gone = [], {}
+        for (aid, tid), ij in zip(pairs, index):
+            task = by_task[tid]
+            if tid in p.holder or not off.asks(task):  # accepted before
+                kept.append((aid, tid))
+                continue
+            v = by_id[aid]
+            at = p.inserts.get(ij) if p.inserts else None
+            if aid in routes:
+                rows, times = routes[aid]
+                est = route_estimates(task, rows, times, v.load)
+            elif at is not None:
+                est = insertion_estimates(task, op.kept(v), v.load, at)
+            elif plans:  # a vehicle setting out on the request's stops, by the schedule rule
+                est = self._set_out_estimates(v, task, decided, float(cost[ij]))
+            else:
+                est = plain_estimates(task, decided, float(cost[ij]))
+            if off.offer(task, aid, now, est):
+                kept.append((aid, tid))
+            else:
+                gone.setdefault(aid, set()).add(tid)
+        if off.reoffer:
+            off.reoffer = False
+            self.wakeup()
+        if routes and gone.keys() & routes.keys():
+            routes = dict(routes)
+            mine = {a for a, _ in kept}
+            for aid in gone.keys() & routes.keys():
+                if aid not in mine:  # no new request left: it keeps its plan as it is
+                    del routes[aid]
+                    continue
+                rows = [r for r in routes[aid][0] if r.task_id not in gone[aid]]
+                times, why = op.route_times(by_id[aid], rows)
+                if times is None:  # (fewer stops of a feasible route stay feasible)
+                    raise DispatchError(f"{self._where()}: the route of vehicle {aid} without "
+                                        f"the declined requests is infeasible: {why}")
+                routes[aid] = (rows, times)
+        return tuple(kept), routes
+
+    def _set_out_estimates(self, v, task, decided: float, cost: float
+                           ) -> tuple[float, float, bool]:
+        """Estimates of ``v`` driving ``task``'s stops from where it is now (the operator's
+        route times, no limit), or from the decision's cost where those cannot be had."""
+        n = task.passengers
+        rows = [PlannedStop(PICKUP, task.id, task.loc, n if task.dropoff is not None else 0,
+                            math.inf, task.dropoff is None)]
+        if task.dropoff is not None:
+            rows.append(PlannedStop(DROPOFF, task.id, task.dropoff, -n, math.inf, True))
+        times, _ = self.operator.route_times(v, rows)
+        if times is None:
+            return plain_estimates(task, decided, cost)
+        return times[0], times[-1], False
 
     def _follow(self, p: _Pending, allocation: Allocation, routes: dict,
                 pair_cost: list[float]) -> None:

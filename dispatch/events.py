@@ -56,7 +56,7 @@ from dispatch.locations import Location
 KINDS = ("release", "assign", "depart", "move", "pickup", "dropoff", "complete", "idle", "wait",
          "replan", "expire", "reject", "unreachable", "cancel", "failed", "skipped",
          "breakdown", "repair", "reopen", "reassign", "reposition", "insert",
-         "queue", "charge_start", "charge_end", "stranded")
+         "queue", "charge_start", "charge_end", "stranded", "decline")
 
 
 class Event(NamedTuple):

@@ -18,8 +18,8 @@ from dispatch.space import space_class
 if TYPE_CHECKING:
     from dispatch.reposition import Repositioner
 
-__all__ = ["check_repositioner", "check_runs", "describe", "make_charger", "make_plugin",
-           "make_repositioner", "travel_times_needed"]
+__all__ = ["check_repositioner", "check_runs", "describe", "make_acceptor", "make_charger",
+           "make_plugin", "make_repositioner", "travel_times_needed"]
 
 
 def make_plugin(kind: str, name: str, params, *args):
@@ -59,6 +59,12 @@ def make_repositioner(sc: Scenario, name: str) -> Repositioner:
 def make_charger(sc: Scenario, name: str):
     """The charging strategy ``name`` built from its ``[charging.<name>]`` table."""
     return _construct("charger", name, sc.charging.params_of(name), (), f"charging.{name}")
+
+
+def make_acceptor(sc: Scenario):
+    """The acceptor of ``[acceptor]`` built from its ``[acceptor.<name>]`` table."""
+    a = sc.acceptor
+    return _construct("acceptor", a.name, a.params, (), f"acceptor.{a.name}")
 
 
 def check_repositioner(sc: Scenario, name: str) -> None:

@@ -76,6 +76,9 @@ SCHEMAS: dict[str, pa.Schema] = {
         ("objective", _S),
         # prebooking: booked requests accepted (promises), and of those not completed
         ("promises", _I), ("promises_broken", _I),
+        # offers riders may decline (dispatch.offers): requests closed `declined`, offers made,
+        # fares of the completed rides (0 without [pricing])
+        ("tasks_declined", _I), ("offers", _I), ("revenue", _F),
     ]),
     "tasks": pa.schema([
         ("run_id", _S), ("task_id", _I), ("kind", _S), ("x", _F), ("y", _F), ("z", _F),
@@ -91,6 +94,9 @@ SCHEMAS: dict[str, pa.Schema] = {
         ("passengers", _I), ("direct_time", _F), ("max_delay", _F), ("shared", _B),
         # prebooking: when it was booked (nan: not booked); accepted when booked (a promise)
         ("booked_at", _F), ("promised", _B),
+        # offers riders may decline (dispatch.offers): offers made to the rider (0 without an
+        # acceptor that declines or [pricing]) and the last offer's fare (nan without [pricing])
+        ("offers", _I), ("fare", _F),
     ]),
     "assignments": pa.schema([
         ("run_id", _S), ("decision", _I), ("round", _I), ("agent_id", _I), ("task_id", _I),

@@ -47,7 +47,7 @@ TASK_COLUMNS = (
     "task_id", "kind", "x", "y", "z", "dropoff_x", "dropoff_y", "dropoff_z", "released_at",
     "max_wait", "snap_m", "dropoff_snap_m", "assigned_at", "agent_id", "cost", "picked_up_at",
     "completed_at", "state", "conflicted", "closed_at", "reassigned", "transfers", "passengers",
-    "direct_time", "max_delay", "shared", "booked_at", "promised")
+    "direct_time", "max_delay", "shared", "booked_at", "promised", "offers", "fare")
 
 
 def task_row(t, p, d) -> tuple:
@@ -57,7 +57,7 @@ def task_row(t, p, d) -> tuple:
             t.max_wait, t.snap_m, t.dropoff_snap_m, t.assigned_at, t.agent_id, t.cost,
             t.picked_up_at, t.completed_at, t.state._value_, t.conflicted, t.closed_at,
             t.reassigned, t.transfers, t.passengers, t.direct_time, t.max_delay, t.shared,
-            t.booked_at, t.promised)
+            t.booked_at, t.promised, t.offers, t.fare)
 
 
 #: the columns :func:`decision_row` returns, in order

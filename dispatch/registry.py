@@ -3,7 +3,8 @@ found by name through entry points, and what each plugin declares it can do.
 
 The entry points are the only list of plugins: built-ins are registered in ``pyproject.toml``
 under the same groups as third-party plugins (``dispatch.allocators``, ``dispatch.planners``,
-``dispatch.repositioners``, ``dispatch.chargers``; ``dispatch.commands`` for commands such as
+``dispatch.repositioners``, ``dispatch.chargers``, ``dispatch.acceptors``;
+``dispatch.commands`` for commands such as
 the :mod:`analysis` package's ``report`` and ``render``, see :mod:`dispatch.commands`), so both
 are first-class and the kernel names no module of theirs.
 
@@ -33,14 +34,15 @@ log = logging.getLogger(__name__)
 
 GROUPS = {"allocator": "dispatch.allocators", "planner": "dispatch.planners",
           "repositioner": "dispatch.repositioners", "charger": "dispatch.chargers",
-          "command": "dispatch.commands"}
+          "command": "dispatch.commands", "acceptor": "dispatch.acceptors"}
 
 #: The base class a plugin of each kind subclasses (``"module:Class"``, imported when a plugin
 #: of the kind is first loaded). Commands have none: they are plain classes of packages that
 #: import nothing of ``dispatch`` (:mod:`dispatch.commands` reads them).
 BASES = {"allocator": "dispatch.contracts:Allocator", "planner": "dispatch.contracts:Planner",
          "repositioner": "dispatch.reposition:Repositioner",
-         "charger": "dispatch.charging_strategy:ChargingStrategy"}
+         "charger": "dispatch.charging_strategy:ChargingStrategy",
+         "acceptor": "dispatch.offers:Acceptor"}
 
 #: The methods of its contract a plugin declaring a capability must define itself (the base
 #: class's are there to document them; the kernel calls them only on plugins that declare it).
@@ -63,7 +65,8 @@ class Capabilities:
     (``between``: shared rides, drop-off limits, the added_time objective, energy and
     multi-request allocators need it), ``reservation_aware`` (``plan_timed``: execution with
     reservations). Repositioners: ``passive`` (never moves a vehicle; the kernel never calls
-    it). The flags of other kinds are False."""
+    it). Acceptors: ``declines`` (may decline an offer; ``always`` does not, and the kernel
+    then skips the offer step). The flags of other kinds are False."""
 
     kind: str
     name: str
@@ -75,6 +78,7 @@ class Capabilities:
     travel_times: bool = False
     reservation_aware: bool = False
     passive: bool = False
+    declines: bool = False
 
     def declared(self) -> frozenset[str]:
         """The names of the capabilities it declares."""
@@ -82,7 +86,7 @@ class Capabilities:
                  "minimizes_total_cost": self.minimizes_total_cost,
                  "multi_request": self.multi_request, "lower_bounds": self.lower_bounds,
                  "travel_times": self.travel_times, "reservation_aware": self.reservation_aware,
-                 "passive": self.passive}
+                 "passive": self.passive, "declines": self.declines}
         return frozenset(k for k, on in flags.items() if on)
 
     def serves(self, space: str) -> bool:
@@ -161,6 +165,8 @@ def capabilities(kind: str, plugin) -> Capabilities:
                             reservation_aware=bool(p.reservation_aware))
     elif kind == "repositioner":
         caps = Capabilities(kind, p.name, tuple(p.spaces), passive=bool(p.passive))
+    elif kind == "acceptor":
+        caps = Capabilities(kind, p.name, declines=bool(p.declines))
     else:
         caps = Capabilities(kind, p.name)
     mro = cls.__mro__

@@ -40,10 +40,12 @@ from dispatch.config import (
 from dispatch.errors import FORCE_HINT, ScenarioError
 from dispatch.prebook import MODES as PREBOOK_MODES
 from dispatch.scenario_sections import (
+    parse_acceptor,
     parse_allocators,
     parse_charging,
     parse_energy,
     parse_faults,
+    parse_pricing,
     parse_reposition,
     parse_world,
 )
@@ -236,6 +238,8 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     declared = "reposition" in root.data
     reposition = parse_reposition(root.table("reposition"), sweep, s)
     charging = parse_charging(root, path, fleet, faults, world)
+    pricing = parse_pricing(root.table("pricing"), world)
+    acceptor = parse_acceptor(root.table("acceptor"), pricing)
     s.done()
     root.done()
 
@@ -243,7 +247,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
                   duration=duration, world=world, fleet=fleet, tasks=tasks, dispatch=disp,
                   sweep=sweep, comms=comms, faults=faults,
                   reposition=replace(reposition, declared=declared or bool(sweep.reposition)),
-                  charging=charging)
+                  charging=charging, acceptor=acceptor, pricing=pricing)
     for n in sweep.agents or (fleet.agents,):
         _check_fits(sc, n, "sweep.agents" if sweep.agents else "fleet.agents")
     return sc

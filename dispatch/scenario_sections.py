@@ -341,3 +341,59 @@ def parse_reposition(r: Table, sweep: SweepConfig, s: Table) -> RepositionConfig
     r.done()
     return RepositionConfig(policy=policy, interval=interval, horizon=horizon,
                             params=tuple(params))
+
+
+def parse_pricing(p: Table, world: WorldConfig):
+    """``[pricing]``: a ride's fare, ``base + per_km * km + per_minute * minutes`` of the
+    direct ride, less ``sharing_discount`` (a share, 0-1) for a pooled one
+    (:class:`dispatch.offers.Pricing`); None without the section. Fares are of rides on a
+    road network (the direct route's metres)."""
+    from dispatch.offers import Pricing
+
+    if not p.data:
+        return None
+    if world.roads is None:
+        raise p.fail(next(iter(p.data)), "fares need a road network ([world] network)")
+    pricing = Pricing(base=p.number("base", 0.0, lo=0.0), per_km=p.number("per_km", 0.0, lo=0.0),
+                      per_minute=p.number("per_minute", 0.0, lo=0.0),
+                      sharing_discount=p.number("sharing_discount", 0.0, lo=0.0, hi=1.0))
+    p.done()
+    return pricing
+
+
+def parse_acceptor(a: Table, pricing):
+    """``[acceptor]``: the acceptor that answers offers (an installed one, default
+    ``always``), ``retries`` (times a declined request is offered again, default 0) and its
+    parameters, ``[acceptor.<name>]`` (checked here by building it: its constructor's refusal
+    becomes one line naming the file and the table) (:class:`dispatch.offers.AcceptorConfig`)."""
+    from dispatch import registry
+    from dispatch.errors import PluginError
+    from dispatch.offers import AcceptorConfig
+
+    if not a.data:  # every rider accepts: nothing to load
+        return AcceptorConfig()
+    installed = registry.available("acceptor")
+    name = a.string("name", "always")
+    if name not in installed:
+        raise a.fail("name", registry.unknown("acceptor", name))
+    retries = a.number("retries", 0, lo=0, integer=True)
+    for k in sorted(k for k in a.data if k not in ("name", "retries")):
+        if not isinstance(a.data[k], dict):
+            raise a.fail(k, "unknown key (known keys here: name, retries, and the "
+                            "[acceptor.<name>] table of the acceptor's parameters)")
+        if k != name:
+            raise a.fail(k, f"parameters of acceptor {k!r}, which does not run (name is "
+                            f"{name!r})")
+    params = a.params(name) if name in a.data else ()
+    a.done()
+    try:
+        cls = registry.load("acceptor", name)
+    except PluginError as e:
+        raise a.fail("name", str(e)) from None
+    try:
+        made = cls(**dict(params))
+    except (TypeError, ValueError) as e:
+        raise a.fail(name, " ".join(str(e).split()) or type(e).__name__) from None
+    if made.uses_fare and pricing is None:
+        raise a.fail("name", f"acceptor {name!r} weighs the fare: add a [pricing] section")
+    return AcceptorConfig(name=name, retries=retries, params=tuple(params))

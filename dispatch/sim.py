@@ -53,8 +53,8 @@ from dispatch.recording import RunRecording
 from dispatch.reposition import Repositioning, summary_of
 from dispatch.space import space_for
 from dispatch.streams import (STREAM_ALLOCATOR, STREAM_CHARGING, STREAM_FAULTS, STREAM_FLEET,
-                              STREAM_REPOSITION, STREAM_SOURCE, STREAM_TASKS, rng_for)
-from dispatch.streams import STREAM_PREBOOK
+                              STREAM_OFFERS, STREAM_PREBOOK, STREAM_REPOSITION, STREAM_SOURCE,
+                              STREAM_TASKS, rng_for)
 from dispatch.tasks import Task, TaskBook, TaskSource, TaskState
 from dispatch.vehicles import Fleet, stop_leg
 
@@ -157,7 +157,8 @@ class Simulation:
                             max_delay=sc.tasks.delay_limited)
         self.dispatcher = Dispatcher(env, wakeup, pipeline, self.fleet, self.operator,
                                      allocator, self.tally, blame, self._record_decision,
-                                     window=d.batch_window, latency=sc.comms.latency)
+                                     window=d.batch_window, latency=sc.comms.latency,
+                                     offering=self._offering(sc, blame))
         driver.run_id = spec.run_id  # named in error messages
         t = sc.tasks
         source, extra = TaskSource, {}
@@ -199,6 +200,26 @@ class Simulation:
         while True:
             yield self.env.timeout(tick)
             self.progress(self.env.now, duration, self.book.released, self.stats.n_tasks)
+
+    def _offering(self, sc, blame: Blame):
+        """``[acceptor]`` / ``[pricing]``: the offer step (:mod:`dispatch.offering`), or None
+        where there is nothing to offer: the default configuration (no section), or an
+        acceptor that declares it never declines without fares to record."""
+        from dispatch import registry
+        from dispatch.offering import Offering
+        from dispatch.offers import AcceptorConfig
+        from dispatch.plugins import make_acceptor
+
+        acc = sc.acceptor
+        if sc.pricing is None and acc == AcceptorConfig():
+            return None
+        acceptor = make_acceptor(sc)
+        if sc.pricing is None and not registry.capabilities("acceptor", acceptor).declines:
+            return None
+        # fares are of rides on a road network (the parser refuses [pricing] elsewhere)
+        metres = self.space.path_metres if sc.pricing is not None else None
+        return Offering(self.book, acceptor, rng_for(self.spec.seed, STREAM_OFFERS),
+                        acc.retries, sc.pricing, metres, blame)
 
     def _energy(self, sc) -> Energy | None:
         """``[fleet.energy]``: the run's batteries and the dispatcher's reserve rule (see

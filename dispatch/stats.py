@@ -36,6 +36,8 @@ class RunStats:
         self.detours = 0  # ... those with a direct time > 0
         self.promises = 0  # booked requests accepted (dispatch.prebook)
         self.promises_broken = 0  # ... of those, ended failed or expired
+        self.offers = 0  # offers made to riders (dispatch.offers)
+        self.revenue = 0.0  # fares of the completed rides ([pricing])
 
     def closed(self, t: Task) -> None:
         self.n_tasks += 1
@@ -54,6 +56,9 @@ class RunStats:
             # (cancelled: cut by the run's end, not broken)
             self.promises_broken += t.state is not COMPLETED \
                 and t.state is not TaskState.CANCELLED
+        self.offers += t.offers
+        if t.state is COMPLETED and t.fare == t.fare:
+            self.revenue += t.fare
         if not math.isnan(t.picked_up_at):
             self.picked += 1
             self.waits += t.picked_up_at - t.released_at
@@ -104,4 +109,5 @@ class RunStats:
             delay_mean=self.delay / self.rides if self.rides else math.nan,
             detour_ratio=self.detour / self.detours if self.detours else math.nan,
             promises=self.promises, promises_broken=self.promises_broken,
+            tasks_declined=c[TaskState.DECLINED], offers=self.offers, revenue=self.revenue,
         )

@@ -14,6 +14,8 @@ import numpy as np
  STREAM_REPOSITION, STREAM_CHARGING) = range(8)
 #: which requests are booked ahead ([tasks] prebook_share; dispatch.prebook)
 STREAM_PREBOOK = 8
+#: the riders' answers to offers (dispatch.offers); a number of its own, clear of the others
+STREAM_OFFERS = 31
 
 
 def rng_for(seed: int, stream: int) -> np.random.Generator:

@@ -280,6 +280,9 @@ def render_one(s: dict, console=None, *, dynamic: bool = False) -> None:
                     f"once, expired {s['tasks_expired']}, unreachable "
                     f"{s.get('tasks_unreachable', 0)} (rejections {rejected}); cancelled "
                     f"{s['tasks_cancelled']}, failed {s.get('tasks_failed', 0)}")
+    if s.get("offers", 0):  # offers riders may decline (dispatch.offers)
+        t.add_row("offers", f"{s['offers']} made, {s['tasks_declined']} riders declined; "
+                            f"revenue {_f(s['revenue'])}")
     t.add_row("wait", f"{_f(s['wait_time_mean'])} s mean, release to pickup")
     per = per_task(s)["cost_per_assignment"]
     if road or dynamic:

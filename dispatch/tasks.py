@@ -5,6 +5,7 @@ without one). Life cycle::
 
     open -> assigned -> picked_up -> completed
       \\-> expired | rejected | unreachable | cancelled | failed   (terminal, from any live state)
+      \\-> declined   (terminal, from open: its rider declined the offer, see dispatch.offers)
 
 ``expired``: its ``ttl`` or ``max_wait`` ran out while it was open; ``rejected``: when the
 dispatcher first considered it, no vehicle could reach its pickup within its ``max_wait``;
@@ -49,6 +50,7 @@ class TaskState(str, Enum):
     UNREACHABLE = "unreachable"
     CANCELLED = "cancelled"
     FAILED = "failed"
+    DECLINED = "declined"
 
     @property
     def terminal(self) -> bool:
@@ -60,16 +62,18 @@ class TaskState(str, Enum):
 OPEN, ASSIGNED, PICKED_UP, COMPLETED = (TaskState.OPEN, TaskState.ASSIGNED, TaskState.PICKED_UP,
                                         TaskState.COMPLETED)
 TERMINAL = frozenset({TaskState.COMPLETED, TaskState.EXPIRED, TaskState.REJECTED,
-                      TaskState.UNREACHABLE, TaskState.CANCELLED, TaskState.FAILED})
+                      TaskState.UNREACHABLE, TaskState.CANCELLED, TaskState.FAILED,
+                      TaskState.DECLINED})
 #: the event emitted when a task enters a terminal state
 CLOSE_EVENT = {TaskState.COMPLETED: "complete", TaskState.EXPIRED: "expire",
                TaskState.REJECTED: "reject", TaskState.UNREACHABLE: "unreachable",
-               TaskState.CANCELLED: "cancel", TaskState.FAILED: "failed"}
+               TaskState.CANCELLED: "cancel", TaskState.FAILED: "failed",
+               TaskState.DECLINED: "decline"}
 #: the states a task may move to from each live state
 MOVES = {
     TaskState.OPEN: {TaskState.ASSIGNED, TaskState.EXPIRED, TaskState.REJECTED,
-                     TaskState.UNREACHABLE, TaskState.CANCELLED,
-                     TaskState.FAILED},  # (a promise a breakdown broke: dispatch.prebook)
+                     TaskState.UNREACHABLE, TaskState.CANCELLED, TaskState.DECLINED,
+                     TaskState.FAILED},  # (failed: a promise a breakdown broke: dispatch.prebook)
     TaskState.ASSIGNED: {TaskState.PICKED_UP, TaskState.OPEN, TaskState.CANCELLED,
                          TaskState.FAILED},
     TaskState.PICKED_UP: {TaskState.COMPLETED, TaskState.OPEN, TaskState.CANCELLED,
@@ -110,6 +114,8 @@ class Task:
     #: departure, see dispatch.prebook) and whether it was accepted so (a promise)
     booked_at: float = math.nan
     promised: bool = False
+    offers: int = 0  # offers made to its rider (dispatch.offers; 0 without an acceptor)
+    fare: float = math.nan  # the fare of its last offer ([pricing]; nan without)
 
     @property
     def cell(self):

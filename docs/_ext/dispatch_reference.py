@@ -199,7 +199,8 @@ def scenario_keys() -> str:
 
     keys = file_keys() | {"blocks", "block", "speed", "network", "congestion"}
     sections = [
-        ("top level", "", config.Scenario, ("name", "path", "text", "charging")),
+        ("top level", "", config.Scenario, ("name", "path", "text", "charging", "acceptor",
+                                            "pricing")),
         ("[world]", "world", config.WorldConfig, ("roads",)),
         ("[world] (road networks)", "world", config.RoadConfig, ("base",)),
         ("[world.obstacles]", "world.obstacles", config.ObstacleConfig, ()),
@@ -212,6 +213,8 @@ def scenario_keys() -> str:
         ("[reposition]", "reposition", config.RepositionConfig, ()),
         ("[chargers] and [charging]", "chargers", find_class("ChargingConfig"), ()),
         ("[sweep]", "sweep", config.SweepConfig, ()),
+        ("[acceptor]", "acceptor", find_class("AcceptorConfig"), ()),
+        ("[pricing]", "pricing", find_class("Pricing"), ()),
     ]
     guide = guide_comments()
     for (t, k), v in list(guide.items()):  # [charging] keys live in ChargingConfig too

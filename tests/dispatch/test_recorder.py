@@ -311,7 +311,7 @@ def test_rows_are_tied_to_columns_by_name():
                                      "assigned_at", "agent_id", "cost", "picked_up_at",
                                      "completed_at", "conflicted", "closed_at", "reassigned",
                                      "transfers", "passengers", "direct_time", "max_delay",
-                                     "shared"))
+                                     "shared", "offers", "fare"))
     counts = {"waits": "W", "replans": "R", "wait_seconds": "S"}
     row = dict(zip(recording.VEHICLE_COLUMNS,
                    recording.vehicle_row(Tag(), "xyz", "down", counts, None), strict=True))
