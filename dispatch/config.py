@@ -124,6 +124,14 @@ class FleetConfig:
     capacities: tuple[int, ...] = ()
     #: ``[fleet.energy]`` (:class:`dispatch.energy_config.EnergyConfig`); None: no batteries
     energy: Any = None
+    #: the start file's shift columns (:class:`dispatch.shifts.ShiftTable`); None: none
+    shifts: Any = None
+    #: seconds after its shift's end a vehicle may still complete its plan's last stop
+    shift_grace: float = 0.0
+    #: ``[fleet] sizing``: the fleet-sizing strategy (``dispatch.sizers``) and its
+    #: ``[fleet.sizing_params]``
+    sizing: str = "fixed"
+    sizing_params: tuple[tuple[str, Any], ...] = ()
 
     @property
     def pooled(self) -> bool:

@@ -25,6 +25,7 @@ import numpy as np
 
 from dispatch import space_files
 from dispatch.recorder import SCHEMAS
+from dispatch.shifts import duty_columns
 from dispatch.stats import RunStats
 
 NAN3 = (math.nan, math.nan, math.nan)
@@ -90,7 +91,8 @@ VEHICLE_COLUMNS = (
     "agent_id", "kind", "speed", "x0", "y0", "z0", "distance", "empty_distance",
     "occupied_distance", "busy_seconds", "tasks_completed", "waits", "replans", "wait_seconds",
     "failures", "down_seconds", "capacity", "passenger_distance", "kwh_drawn", "kwh_charged",
-    "charge_seconds", "queue_seconds", "soc_min", "soc_end")
+    "charge_seconds", "queue_seconds", "soc_min", "soc_end", "shift_start", "shift_end",
+    "vehicle_hours", "overrun_seconds")
 
 
 def vehicle_row(v, p, down: float, c, b) -> tuple:
@@ -146,7 +148,7 @@ def write_vehicles(recorder, space, vehicles, now: float, counts) -> None:
     for v in vehicles:
         down = v.down_seconds + (now - v.down_since if v.failed else 0.0)
         recorder.append("vehicles", vehicle_row(v, space.position(v.start), down, counts(v),
-                                                v.battery))
+                                                v.battery) + duty_columns(v, now))
 
 
 def event_writer(recorder, space):

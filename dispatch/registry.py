@@ -1,9 +1,10 @@
-"""Plugin registry: allocators, planners, repositioners, chargers and command-line commands
-found by name through entry points, and what each plugin declares it can do.
+"""Plugin registry: allocators, planners, repositioners, chargers, fleet sizers and
+command-line commands found by name through entry points, and what each plugin declares it
+can do.
 
 The entry points are the only list of plugins: built-ins are registered in ``pyproject.toml``
 under the same groups as third-party plugins (``dispatch.allocators``, ``dispatch.planners``,
-``dispatch.repositioners``, ``dispatch.chargers``; ``dispatch.commands`` for commands such as
+``dispatch.repositioners``, ``dispatch.chargers``, ``dispatch.sizers``; ``dispatch.commands`` for commands such as
 the :mod:`analysis` package's ``report`` and ``render``, see :mod:`dispatch.commands`), so both
 are first-class and the kernel names no module of theirs.
 
@@ -33,14 +34,15 @@ log = logging.getLogger(__name__)
 
 GROUPS = {"allocator": "dispatch.allocators", "planner": "dispatch.planners",
           "repositioner": "dispatch.repositioners", "charger": "dispatch.chargers",
-          "command": "dispatch.commands"}
+          "command": "dispatch.commands", "sizer": "dispatch.sizers"}
 
 #: The base class a plugin of each kind subclasses (``"module:Class"``, imported when a plugin
 #: of the kind is first loaded). Commands have none: they are plain classes of packages that
 #: import nothing of ``dispatch`` (:mod:`dispatch.commands` reads them).
 BASES = {"allocator": "dispatch.contracts:Allocator", "planner": "dispatch.contracts:Planner",
          "repositioner": "dispatch.reposition:Repositioner",
-         "charger": "dispatch.charging_strategy:ChargingStrategy"}
+         "charger": "dispatch.charging_strategy:ChargingStrategy",
+         "sizer": "dispatch.sizing:Sizer"}
 
 #: The methods of its contract a plugin declaring a capability must define itself (the base
 #: class's are there to document them; the kernel calls them only on plugins that declare it).
@@ -63,7 +65,8 @@ class Capabilities:
     (``between``: shared rides, drop-off limits, the added_time objective, energy and
     multi-request allocators need it), ``reservation_aware`` (``plan_timed``: execution with
     reservations). Repositioners: ``passive`` (never moves a vehicle; the kernel never calls
-    it). The flags of other kinds are False."""
+    it); fleet sizers (``dispatch.sizers``, :mod:`dispatch.sizing`) too (never changes the
+    fleet). The flags of other kinds are False."""
 
     kind: str
     name: str
@@ -161,6 +164,8 @@ def capabilities(kind: str, plugin) -> Capabilities:
                             reservation_aware=bool(p.reservation_aware))
     elif kind == "repositioner":
         caps = Capabilities(kind, p.name, tuple(p.spaces), passive=bool(p.passive))
+    elif kind == "sizer":
+        caps = Capabilities(kind, p.name, passive=bool(p.passive))
     else:
         caps = Capabilities(kind, p.name)
     mro = cls.__mro__

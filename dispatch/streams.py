@@ -12,6 +12,8 @@ import numpy as np
 
 (STREAM_WORLD, STREAM_FLEET, STREAM_TASKS, STREAM_ALLOCATOR, STREAM_SOURCE, STREAM_FAULTS,
  STREAM_REPOSITION, STREAM_CHARGING) = range(8)
+#: fleet sizing (dispatch.shifts); numbered apart from the streams above
+STREAM_SIZING = 12
 
 
 def rng_for(seed: int, stream: int) -> np.random.Generator:
