@@ -63,7 +63,8 @@ def make_charger(sc: Scenario, name: str):
 
 
 def make_sizer(sc: Scenario):
-    """The fleet-sizing strategy of ``[fleet] sizing`` built from ``[fleet.sizing_params]``."""
+    """The fleet-sizing strategy of ``[fleet] sizing`` (given) built from
+    ``[fleet.sizing_params]``."""
     return _construct("sizer", sc.fleet.sizing, sc.fleet.sizing_params, (),
                       "fleet.sizing_params")
 

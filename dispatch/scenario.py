@@ -279,9 +279,11 @@ def _parse_sizing(f: Table, fleet: FleetConfig) -> FleetConfig:
     ``[fleet.sizing_params]`` (see :mod:`dispatch.shifts`)."""
     from dispatch import registry
 
-    sizing = f.string("sizing", "fixed")
-    if sizing not in registry.available("sizer"):
+    sizing = f.string("sizing", "fixed") if "sizing" in f.data else None
+    if sizing is not None and sizing not in registry.available("sizer"):
         raise f.fail("sizing", registry.unknown("sizer", sizing))
+    if sizing is None and "sizing_params" in f.data:
+        raise f.fail("sizing_params", "is only used with [fleet] sizing")
     return replace(fleet, shift_grace=f.number("shift_grace", 0.0, lo=0.0), sizing=sizing,
                    sizing_params=f.params("sizing_params"))
 

@@ -246,7 +246,7 @@ class Shifts:
             if depot is None:
                 depot = v.loc
             elif v.loc != depot:
-                v.loc = depot  # it enters at its depot
+                v.start = v.loc = depot  # it enters at its depot (and starts there)
             v.duty = Duty(start, end, grace, depot)
             self.until[k] = v.duty.until
             self.limited = self.limited or end < math.inf

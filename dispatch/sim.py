@@ -147,8 +147,8 @@ class Simulation:
         #: driver shifts and fleet sizing (dispatch.shifts); None without shift columns and
         #: with ``fixed`` sizing (every vehicle on duty all run)
         self.shifts = None
-        sizer = make_sizer(sc)
-        if sc.fleet.shifts is not None or not sizer.passive:
+        sizer = None if sc.fleet.sizing is None else make_sizer(sc)
+        if sc.fleet.shifts is not None or (sizer is not None and not sizer.passive):
             self.shifts = Shifts(env, bus, self.fleet, self.operator, space, sc.fleet, wakeup,
                                  sizer, rng_for(spec.seed, STREAM_SIZING))
         #: what the decisions add up to (the summary's columns); the errors' context
