@@ -266,6 +266,8 @@ class Shifts:
         env.process(self._calendar(passive))
         if not passive:
             self._busy_mark, self._duty_mark = self._totals()
+            self._released = self._unserved = 0
+            bus.subscribe(self._count, ("release", "reject", "expire"))
             env.process(self._sizing())
 
     # ------------------------------------------------------------------ the decision's limit
@@ -407,11 +409,19 @@ class Shifts:
         return [v for v in self.fleet.vehicles if not v.duty.on and not v.duty.ended
                 and v.duty.start <= now < v.duty.end and not v.failed]
 
-    def _view(self, on: int, pool: int, utilization: float = math.nan):
+    def _view(self, on: int, pool: int, utilization: float = math.nan,
+              unserved: float = math.nan):
         from dispatch.sizing import SizingView
 
         busy = int(self.fleet.busy_mask.sum()) if on else 0
-        return SizingView(float(self.env.now), on, busy, pool, utilization, self.rng)
+        return SizingView(float(self.env.now), on, busy, pool, utilization, self.rng, unserved)
+
+    def _count(self, ev) -> None:
+        """Bus subscriber: requests released and left unserved since the last look."""
+        if ev.kind == "release":
+            self._released += 1
+        else:
+            self._unserved += 1
 
     def _sizing(self):
         """Process: every ``interval`` s, the strategy's fleet size, by joins and leaves."""
@@ -422,9 +432,11 @@ class Shifts:
             du = duty - self._duty_mark
             u = (busy - self._busy_mark) / du if du > 0 else math.nan
             self._busy_mark, self._duty_mark = busy, duty
+            unserved = self._unserved / self._released if self._released else math.nan
+            self._released = self._unserved = 0
             on = [v for v in self.fleet.vehicles if v.duty.on and not v.duty.home]
             pool = self._pool()
-            want = int(sizer.size(self._view(len(on), len(pool), u)))
+            want = int(sizer.size(self._view(len(on), len(pool), u, unserved)))
             if want > len(on):
                 for v in pool[:want - len(on)]:
                     self._enter(v)

@@ -233,3 +233,30 @@ def test_unknown_sizer(tmp_path):
                          fleet='agents = 2\nsizing = "utilisation"')
     with pytest.raises(ScenarioError, match="fleet.sizing.*did you mean 'utilization'"):
         load_scenario(path)
+
+
+def test_utilization_rule():
+    """The strategy's answer from its view, by its rule: in the band it keeps the fleet; above
+    it, the size at the target utilisation; below it, smaller; a share unserved above
+    max_unserved grows it; always within the bounds and what the pool allows."""
+    from dispatch.sizing import SizingView
+    from sizers.utilization import UtilizationSizer
+
+    s = UtilizationSizer(min_vehicles=5, max_vehicles=40, low=0.4, high=0.8, target=0.6)
+    rng = np.random.default_rng(0)
+
+    def view(on, u, pool=100, unserved=0.0):
+        return SizingView(0.0, on, 0, pool, u, rng, unserved)
+
+    assert s.size(view(20, 0.5)) == 20
+    assert s.size(view(20, 0.9)) == math.ceil(20 * 0.9 / 0.6)
+    assert s.size(view(20, 0.2)) == math.ceil(20 * 0.2 / 0.6)
+    assert s.size(view(20, 0.1)) == 5  # not below min_vehicles
+    assert s.size(view(30, 1.0)) == 40  # not above max_vehicles
+    assert s.size(view(20, 0.95, pool=3)) == 23  # not beyond the pool
+    assert s.size(view(20, 0.5, unserved=0.2)) == 25  # 20 / (1 - 0.2)
+    assert s.size(view(20, 0.2, unserved=0.2)) == 25  # unserved: no shrinking
+    assert s.size(view(20, float("nan"))) == 20
+    assert s.initial(view(0, float("nan"), pool=50)) == 5
+    with pytest.raises(ValueError, match="max_vehicles"):
+        UtilizationSizer(min_vehicles=5, max_vehicles=3)
