@@ -26,8 +26,8 @@ import simpy
 from dispatch.breakdowns import Breakdowns
 from dispatch.events import EventBus
 from dispatch.execution import Execution, PlanExecution
-from dispatch.stops import (CHARGE, DEPOT, DROPOFF, PICKUP, REPOSITION, TOL, PlannedStop, Stop, insert,
-                            leave, occupancies, pushed, schedule, timetable)
+from dispatch.stops import (CHARGE, DEPOT, DROPOFF, PICKUP, REPOSITION, TOL, PlannedStop, Stop,
+                            insert, leave, occupancies, pushed, schedule, timetable)
 from dispatch.tasks import COMPLETED, PICKED_UP as PICKED_UP_STATE, Task, TaskBook
 from dispatch.vehicles import Fleet, Vehicle, stop_leg
 

@@ -59,7 +59,8 @@ class Inserts:
         """``(rows, cols, insertions)``: every feasible pair kept and its insertion's arrays
         (:class:`dispatch.insertion.Insertions`, aligned with the pairs)."""
         ins, q = self._ins, self._q
-        return self._rows, self._cols, replace(ins, **{f.name: getattr(ins, f.name)[q] for f in fields(ins)})
+        cut = {f.name: getattr(ins, f.name)[q] for f in fields(ins)}
+        return self._rows, self._cols, replace(ins, **cut)
 
     def _find(self, key) -> int:
         if self._keys is None:

@@ -4,9 +4,9 @@ can do.
 
 The entry points are the only list of plugins: built-ins are registered in ``pyproject.toml``
 under the same groups as third-party plugins (``dispatch.allocators``, ``dispatch.planners``,
-``dispatch.repositioners``, ``dispatch.chargers``, ``dispatch.sizers``; ``dispatch.commands`` for commands such as
-the :mod:`analysis` package's ``report`` and ``render``, see :mod:`dispatch.commands`), so both
-are first-class and the kernel names no module of theirs.
+``dispatch.repositioners``, ``dispatch.chargers``, ``dispatch.sizers``; ``dispatch.commands``
+for commands such as the :mod:`analysis` package's ``report`` and ``render``, see
+:mod:`dispatch.commands`), so both are first-class and the kernel names no module of theirs.
 
 Capabilities are declared, never probed. A plugin of the four kinds subclasses its contract's
 base class (:data:`BASES`) and says what it can do with the boolean class attributes that base

@@ -262,7 +262,8 @@ class Fleet:
 
     def refresh(self, v: Vehicle) -> None:
         """Set ``v``'s state from its plan and its failure: failed, off duty (dispatch.shifts)
-        or on a charging visit (a charge stop in its plan), it is neither idle nor busy (no decision considers it);
+        or on a charging visit (a charge stop in its plan), it is neither idle nor busy (no
+        decision considers it);
         serving a request or with one in its plan, busy; else idle (standing, or on a
         repositioning move, which a decision may cut)."""
         busy = idle = False
