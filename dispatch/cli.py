@@ -432,10 +432,12 @@ def _plugins(args, console) -> int:
 
     from dispatch.registry import describe
 
-    for kind in ("allocator", "planner", "repositioner", "charger", "acceptor", "command"):
+    for kind in ("allocator", "planner", "repositioner", "charger", "acceptor", "sizer",
+                 "command"):
         t = Table(title=f"{kind}s (entry-point group dispatch.{kind}s)", title_justify="left")
         t.add_column("name", no_wrap=True)
-        spaced = kind not in ("allocator", "acceptor", "command")  # plugins that serve spaces
+        # plugins that serve some spaces
+        spaced = kind not in ("allocator", "acceptor", "sizer", "command")
         if spaced:
             t.add_column("spaces")
         t.add_column("description; target (module:object)", overflow="fold")

@@ -125,6 +125,14 @@ class FleetConfig:
     capacities: tuple[int, ...] = ()
     #: ``[fleet.energy]`` (:class:`dispatch.energy_config.EnergyConfig`); None: no batteries
     energy: Any = None
+    #: the start file's shift columns (:class:`dispatch.shifts.ShiftTable`); None: none
+    shifts: Any = None
+    #: seconds after its shift's end a vehicle may still complete its plan's last stop
+    shift_grace: float = 0.0
+    #: ``[fleet] sizing``: the fleet-sizing strategy (``dispatch.sizers``; None: not given,
+    #: as ``fixed``: every vehicle on duty over its shift) and its ``[fleet.sizing_params]``
+    sizing: str | None = None
+    sizing_params: tuple[tuple[str, Any], ...] = ()
 
     @property
     def pooled(self) -> bool:

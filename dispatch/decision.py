@@ -21,7 +21,8 @@ in the order they run:
    exact, :func:`dispatch.lazy.resolve_open`). A request no vehicle reaches in time is
    rejected the first time it is offered (:func:`reject_late`).
 6. The energy filter (``[fleet.energy]``, :meth:`dispatch.battery.Energy.filter`): ``inf``
-   where a vehicle would end below its reserve.
+   where a vehicle would end below its reserve; the shift limit (:meth:`dispatch.shifts.
+   Shifts.limit`): ``inf`` where a plan would end after the vehicle's shift and its grace.
 7. :func:`keep_servable`: the columns of the requests left out are dropped.
 8. :class:`dispatch.comms.Hearing`: who hears whom (the ``[comms]`` range, a blackout's
    links) and where the agents are.
@@ -386,7 +387,8 @@ class Pipeline:
     def __init__(self, book: TaskBook, fleet: Fleet, operator: Operator, planner: Planner,
                  allocator: Allocator, space: Space, cfg: DispatchConfig, comms: CommsConfig,
                  rng: np.random.Generator, tally: Tally, blame: Blame, links=None,
-                 energy_filter=None, *, pooled: bool = False, max_delay: bool = False) -> None:
+                 energy_filter=None, *, pooled: bool = False, max_delay: bool = False,
+                 shifts=None) -> None:
         self.book, self.fleet, self.operator, self.tally = book, fleet, operator, tally
         self.space = space
         #: the vehicles have plans to insert into (a capacity above 1), requests have drop-off
@@ -408,6 +410,9 @@ class Pipeline:
         #: [fleet.energy]: ``(cost, drive, slots, tasks) -> cost`` with ``inf`` where a vehicle
         #: would end below its reserve (dispatch.battery.Energy.filter); None without energy
         self.energy_filter = energy_filter
+        #: driver shifts (dispatch.shifts.Shifts.limit: ``inf`` where a plan would end after
+        #: the vehicle's shift and grace); None without shift ends
+        self.shifts = shifts
         self.hearing = Hearing(space, comms, links)
         self.problems = Problems(fleet, operator, planner, space, cfg, comms, rng, self.pooled,
                                  self.routes)
@@ -434,11 +439,13 @@ class Pipeline:
         if servable is not None and not servable.all():
             close_unreachable(self.book, self.fleet, self.costs,
                               [t for t, ok in zip(open_tasks, servable) if not ok], now)
-        drive = cost if self.energy_filter is not None else None
+        drive = cost if self.energy_filter is not None or self.shifts is not None else None
         cost, exact, servable, inserts = self.limits(now, agents, tasks, idle, open_tasks, holder,
                                                      cost, exact, servable)
-        if drive is not None:  # [fleet.energy]: below the reserve after the trip: inf
+        if self.energy_filter is not None:  # [fleet.energy]: below the reserve after the trip: inf
             cost = self.energy_filter(cost, drive, idle, open_tasks)
+        if self.shifts is not None:  # shifts: a plan ending after the shift and grace: inf
+            cost = self.shifts.limit(cost, drive, now, idle, open_tasks, inserts, self.plans)
         cost_s = time.perf_counter() - t0
         self.tally.cost_seconds += cost_s
         if servable is not None:

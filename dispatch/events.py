@@ -43,6 +43,10 @@ charge_end     leaves the plug (at its target, or cut by a breakdown)
 stranded       a vehicle's battery ran empty on a leg (agent; where it stopped); a
                ``breakdown`` follows, and after ``[faults] tow`` s a ``repair`` at the
                nearest station
+shift_start    a vehicle enters the fleet at its depot (its shift starts, or the sizing
+               brings it in; :mod:`dispatch.shifts`)
+shift_end      a vehicle leaves the fleet on reaching its depot (its shift is over, or the
+               sizing sent it home)
 =============  ===========================================================================
 """
 
@@ -57,6 +61,7 @@ KINDS = ("release", "assign", "depart", "move", "pickup", "dropoff", "complete",
          "replan", "expire", "reject", "unreachable", "cancel", "failed", "skipped",
          "breakdown", "repair", "reopen", "reassign", "reposition", "insert",
          "queue", "charge_start", "charge_end", "stranded", "decline")
+         "queue", "charge_start", "charge_end", "stranded", "shift_start", "shift_end")
 
 
 class Event(NamedTuple):

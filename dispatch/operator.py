@@ -26,8 +26,8 @@ import simpy
 from dispatch.breakdowns import Breakdowns
 from dispatch.events import EventBus
 from dispatch.execution import Execution, PlanExecution
-from dispatch.stops import (CHARGE, DROPOFF, PICKUP, REPOSITION, TOL, PlannedStop, Stop, insert,
-                            leave, occupancies, pushed, schedule, timetable)
+from dispatch.stops import (CHARGE, DEPOT, DROPOFF, PICKUP, REPOSITION, TOL, PlannedStop, Stop,
+                            insert, leave, occupancies, pushed, schedule, timetable)
 from dispatch.tasks import COMPLETED, PICKED_UP as PICKED_UP_STATE, Task, TaskBook
 from dispatch.vehicles import Fleet, Vehicle, stop_leg
 
@@ -288,6 +288,15 @@ class Operator(Breakdowns):
         self.bus.emit(env.now, "depart", v.id, -1, v.loc)
         v.proc = env.process(self._run(v, leg, stop, departed=True))
 
+    def to_depot(self, v: Vehicle, node) -> None:
+        """Send ``v`` (its plan empty, or a repositioning move, which ends where it is) to its
+        depot ``node`` (dispatch.shifts): its plan becomes one depot stop; on arrival an
+        ``idle``."""
+        self._cut(v)
+        v.stops = [Stop(DEPOT, None, node, 0, math.inf, False)]
+        self.changed(v)
+        v.proc = self.env.process(self._run(v, None, v.stops[0]))
+
     def kept(self, v: Vehicle) -> list[Stop]:
         """The stops of ``v``'s plan that a decision keeps: all of them, but none of a
         repositioning move (which giving the vehicle a request cuts)."""
@@ -423,7 +432,7 @@ class Operator(Breakdowns):
                 self.changed(v)
                 continue
             v.stops.pop(0)
-            if stop.kind is REPOSITION:
+            if stop.kind is REPOSITION or stop.kind is DEPOT:
                 self._moved(v, stop)
                 self.changed(v)
                 continue

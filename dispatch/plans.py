@@ -15,6 +15,7 @@ The dispatcher (:mod:`dispatch.dispatcher`) decides; this is the plan machinery 
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import fields, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -53,6 +54,13 @@ class Inserts:
         out._rows, out._cols = self._rows[keep], col[self._cols[keep]]
         out._m, out._keys = int(servable.sum()), None
         return out
+
+    def pairs(self):
+        """``(rows, cols, insertions)``: every feasible pair kept and its insertion's arrays
+        (:class:`dispatch.insertion.Insertions`, aligned with the pairs)."""
+        ins, q = self._ins, self._q
+        cut = {f.name: getattr(ins, f.name)[q] for f in fields(ins)}
+        return self._rows, self._cols, replace(ins, **cut)
 
     def _find(self, key) -> int:
         if self._keys is None:

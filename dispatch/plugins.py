@@ -13,13 +13,14 @@ from typing import TYPE_CHECKING
 from dispatch import registry
 from dispatch.errors import PluginError, ScenarioError
 from dispatch.config import Scenario, _short
+from dispatch.shifts import check_allocator
 from dispatch.space import space_class
 
 if TYPE_CHECKING:
     from dispatch.reposition import Repositioner
 
 __all__ = ["check_repositioner", "check_runs", "describe", "make_acceptor", "make_charger",
-           "make_plugin", "make_repositioner", "travel_times_needed"]
+           "make_plugin", "make_repositioner", "make_sizer", "travel_times_needed"]
 
 
 def make_plugin(kind: str, name: str, params, *args):
@@ -67,6 +68,13 @@ def make_acceptor(sc: Scenario):
     return _construct("acceptor", a.name, a.params, (), f"acceptor.{a.name}")
 
 
+def make_sizer(sc: Scenario):
+    """The fleet-sizing strategy of ``[fleet] sizing`` (given) built from
+    ``[fleet.sizing_params]``."""
+    return _construct("sizer", sc.fleet.sizing, sc.fleet.sizing_params, (),
+                      "fleet.sizing_params")
+
+
 def check_repositioner(sc: Scenario, name: str) -> None:
     """ScenarioError unless repositioner ``name`` serves the scenario's space (the kernel moves
     idle vehicles only in a space with the ``reposition`` feature, road networks: a voxel world
@@ -112,6 +120,7 @@ def check_runs(sc: Scenario, planners, repositioners=(), allocators=()) -> None:
     space = sc.world.space
     for name in repositioners:
         check_repositioner(sc, name)
+    check_allocator(sc, allocators)
     need = travel_times_needed(sc, allocators)
     for name in planners:
         caps = registry.declaration("planner", name)

@@ -79,6 +79,9 @@ SCHEMAS: dict[str, pa.Schema] = {
         # offers riders may decline (dispatch.offers): requests closed `declined`, offers made,
         # fares of the completed rides (0 without [pricing])
         ("tasks_declined", _I), ("offers", _I), ("revenue", _F),
+        # shifts and sizing (dispatch.shifts): on-duty vehicle-hours, completed requests per
+        # vehicle-hour, vehicles that reached their depot after their shift's end and grace
+        ("vehicle_hours", _F), ("riders_per_vehicle_hour", _F), ("shift_overruns", _I),
     ]),
     "tasks": pa.schema([
         ("run_id", _S), ("task_id", _I), ("kind", _S), ("x", _F), ("y", _F), ("z", _F),
@@ -131,6 +134,9 @@ SCHEMAS: dict[str, pa.Schema] = {
         # plugged in and queued at stations, lowest and final state of charge (0-1)
         ("kwh_drawn", _F), ("kwh_charged", _F), ("charge_seconds", _F), ("queue_seconds", _F),
         ("soc_min", _F), ("soc_end", _F),
+        # shifts (dispatch.shifts): its shift (0, inf: none), its on-duty hours, and how late
+        # it reached its depot after its shift's end and grace (0: in time)
+        ("shift_start", _F), ("shift_end", _F), ("vehicle_hours", _F), ("overrun_seconds", _F),
     ]),
     # [fleet.energy]: every vehicle's state of charge (0-1) every [fleet.energy] sample
     # seconds from 0 (no rows without energy)

@@ -25,6 +25,7 @@ import numpy as np
 
 from dispatch import space_files
 from dispatch.recorder import SCHEMAS
+from dispatch.shifts import duty_columns
 from dispatch.stats import RunStats
 
 NAN3 = (math.nan, math.nan, math.nan)
@@ -91,13 +92,16 @@ VEHICLE_COLUMNS = (
     "agent_id", "kind", "speed", "x0", "y0", "z0", "distance", "empty_distance",
     "occupied_distance", "busy_seconds", "tasks_completed", "waits", "replans", "wait_seconds",
     "failures", "down_seconds", "capacity", "passenger_distance", "kwh_drawn", "kwh_charged",
-    "charge_seconds", "queue_seconds", "soc_min", "soc_end")
+    "charge_seconds", "queue_seconds", "soc_min", "soc_end", "shift_start", "shift_end",
+    "vehicle_hours", "overrun_seconds")
 
 
-def vehicle_row(v, p, down: float, c, b) -> tuple:
+def vehicle_row(v, p, down: float, c, b,
+                duty: tuple = (0.0, math.inf, math.nan, 0.0)) -> tuple:
     """The ``vehicles`` row of the vehicle ``v``: its start position ``p``, the seconds it was
-    down ``down``, the counts of reservation-based execution ``c`` and its battery ``b`` (None:
-    no energy model; its columns NaN) (:data:`VEHICLE_COLUMNS`)."""
+    down ``down``, the counts of reservation-based execution ``c``, its battery ``b`` (None:
+    no energy model; its columns NaN) and its shift's columns ``duty``
+    (:func:`dispatch.shifts.duty_columns`) (:data:`VEHICLE_COLUMNS`)."""
     if b is None:
         energy = (math.nan,) * 6
     else:
@@ -105,7 +109,8 @@ def vehicle_row(v, p, down: float, c, b) -> tuple:
                   b.kwh_min / b.capacity, b.soc)
     return (v.id, v.kind, v.speed, p[0], p[1], p[2], v.distance, v.empty_distance,
             v.occupied_distance, v.busy_seconds, v.completed, c["waits"], c["replans"],
-            c["wait_seconds"], v.failures, down, v.capacity, v.passenger_distance, *energy)
+            c["wait_seconds"], v.failures, down, v.capacity, v.passenger_distance, *energy,
+            *duty)
 
 
 class TaskWriter:
@@ -147,7 +152,7 @@ def write_vehicles(recorder, space, vehicles, now: float, counts) -> None:
     for v in vehicles:
         down = v.down_seconds + (now - v.down_since if v.failed else 0.0)
         recorder.append("vehicles", vehicle_row(v, space.position(v.start), down, counts(v),
-                                                v.battery))
+                                                v.battery, duty_columns(v, now)))
 
 
 def event_writer(recorder, space):

@@ -1,10 +1,11 @@
-"""Plugin registry: allocators, planners, repositioners, chargers and command-line commands
-found by name through entry points, and what each plugin declares it can do.
+"""Plugin registry: allocators, planners, repositioners, chargers, fleet sizers and
+command-line commands found by name through entry points, and what each plugin declares it
+can do.
 
 The entry points are the only list of plugins: built-ins are registered in ``pyproject.toml``
 under the same groups as third-party plugins (``dispatch.allocators``, ``dispatch.planners``,
-``dispatch.repositioners``, ``dispatch.chargers``, ``dispatch.acceptors``;
-``dispatch.commands`` for commands such as
+``dispatch.repositioners``, ``dispatch.chargers``, ``dispatch.acceptors``,
+``dispatch.sizers``; ``dispatch.commands`` for commands such as
 the :mod:`analysis` package's ``report`` and ``render``, see :mod:`dispatch.commands`), so both
 are first-class and the kernel names no module of theirs.
 
@@ -34,7 +35,8 @@ log = logging.getLogger(__name__)
 
 GROUPS = {"allocator": "dispatch.allocators", "planner": "dispatch.planners",
           "repositioner": "dispatch.repositioners", "charger": "dispatch.chargers",
-          "command": "dispatch.commands", "acceptor": "dispatch.acceptors"}
+          "command": "dispatch.commands", "acceptor": "dispatch.acceptors",
+          "sizer": "dispatch.sizers"}
 
 #: The base class a plugin of each kind subclasses (``"module:Class"``, imported when a plugin
 #: of the kind is first loaded). Commands have none: they are plain classes of packages that
@@ -42,7 +44,8 @@ GROUPS = {"allocator": "dispatch.allocators", "planner": "dispatch.planners",
 BASES = {"allocator": "dispatch.contracts:Allocator", "planner": "dispatch.contracts:Planner",
          "repositioner": "dispatch.reposition:Repositioner",
          "charger": "dispatch.charging_strategy:ChargingStrategy",
-         "acceptor": "dispatch.offers:Acceptor"}
+         "acceptor": "dispatch.offers:Acceptor",
+         "sizer": "dispatch.sizing:Sizer"}
 
 #: The methods of its contract a plugin declaring a capability must define itself (the base
 #: class's are there to document them; the kernel calls them only on plugins that declare it).
@@ -66,7 +69,8 @@ class Capabilities:
     multi-request allocators need it), ``reservation_aware`` (``plan_timed``: execution with
     reservations). Repositioners: ``passive`` (never moves a vehicle; the kernel never calls
     it). Acceptors: ``declines`` (may decline an offer; ``always`` does not, and the kernel
-    then skips the offer step). The flags of other kinds are False."""
+    then skips the offer step). Fleet sizers (``dispatch.sizers``, :mod:`dispatch.sizing`):
+    ``passive`` (never changes the fleet). The flags of other kinds are False."""
 
     kind: str
     name: str
@@ -167,6 +171,8 @@ def capabilities(kind: str, plugin) -> Capabilities:
         caps = Capabilities(kind, p.name, tuple(p.spaces), passive=bool(p.passive))
     elif kind == "acceptor":
         caps = Capabilities(kind, p.name, declines=bool(p.declines))
+    elif kind == "sizer":
+        caps = Capabilities(kind, p.name, passive=bool(p.passive))
     else:
         caps = Capabilities(kind, p.name)
     mro = cls.__mro__

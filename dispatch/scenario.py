@@ -50,6 +50,7 @@ from dispatch.scenario_sections import (
     parse_world,
 )
 from dispatch.scenario_table import Table
+from dispatch.shifts import read_shifts
 from dispatch.space import space_class
 from dispatch.table_files import check_file, decode_text, read_bytes
 from dispatch.traces import (
@@ -136,6 +137,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
                         capacities=read_fleet_capacities(start_path, max_bytes)[:agents])
     if "energy" in f.data:
         fleet = replace(fleet, energy=parse_energy(f.table("energy"), fleet, world))
+    fleet = _parse_sizing(f, fleet)
     f.done()
 
     t = root.table("tasks")
@@ -183,6 +185,9 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
         if value is not None and source not in allowed:
             raise t.fail(k, f"is only used when source is {' or '.join(allowed)} (not {source!r})")
     t.done()
+    if fleet.start_file is not None:  # (date-times in the shift columns need [tasks] start)
+        fleet = replace(fleet, shifts=read_shifts(fleet.start_file, fleet.agents, start,
+                                                  max_bytes))
 
     d = root.table("dispatch")
     reassign = d.get("reassign", False)
@@ -294,6 +299,20 @@ def _check_pooling(path: Path, world: WorldConfig, fleet: FleetConfig, tasks: Ta
     if trips is not None and trips.passengers is not None and len(trips) and not pooling \
             and int(trips.passengers.max()) > 1:
         raise ScenarioError(path, "tasks.trace", "passengers above 1 need a road network")
+
+
+def _parse_sizing(f: Table, fleet: FleetConfig) -> FleetConfig:
+    """``[fleet] shift_grace`` (seconds), ``sizing`` (a ``dispatch.sizers`` plugin) and its
+    ``[fleet.sizing_params]`` (see :mod:`dispatch.shifts`)."""
+    from dispatch import registry
+
+    sizing = f.string("sizing", "fixed") if "sizing" in f.data else None
+    if sizing is not None and sizing not in registry.available("sizer"):
+        raise f.fail("sizing", registry.unknown("sizer", sizing))
+    if sizing is None and "sizing_params" in f.data:
+        raise f.fail("sizing_params", "is only used with [fleet] sizing")
+    return replace(fleet, shift_grace=f.number("shift_grace", 0.0, lo=0.0), sizing=sizing,
+                   sizing_params=f.params("sizing_params"))
 
 
 def _parse_start(t: Table, source: str) -> datetime | None:

@@ -47,14 +47,15 @@ from dispatch.events import EventBus
 from dispatch.faults import FaultInjector, blackout_filter
 from dispatch.operator import Hooks, Operator, Towing
 from dispatch.plugins import (check_repositioner, describe, make_charger, make_plugin,
-                              make_repositioner)
+                              make_repositioner, make_sizer)
 from dispatch.prebook import PrebookSource
 from dispatch.recording import RunRecording
 from dispatch.reposition import Repositioning, summary_of
+from dispatch.shifts import Shifts, fleet_summary
 from dispatch.space import space_for
 from dispatch.streams import (STREAM_ALLOCATOR, STREAM_CHARGING, STREAM_FAULTS, STREAM_FLEET,
-                              STREAM_OFFERS, STREAM_PREBOOK, STREAM_REPOSITION, STREAM_SOURCE,
-                              STREAM_TASKS, rng_for)
+                              STREAM_OFFERS, STREAM_PREBOOK, STREAM_REPOSITION,
+                              STREAM_SIZING, STREAM_SOURCE, STREAM_TASKS, rng_for)
 from dispatch.tasks import Task, TaskBook, TaskSource, TaskState
 from dispatch.vehicles import Fleet, stop_leg
 
@@ -145,6 +146,13 @@ class Simulation:
                                  towing)
         #: [fleet.energy]: batteries and the reserve rule (dispatch.battery.Energy), or None
         self.energy = self._energy(sc)
+        #: driver shifts and fleet sizing (dispatch.shifts); None without shift columns and
+        #: with ``fixed`` sizing (every vehicle on duty all run)
+        self.shifts = None
+        sizer = None if sc.fleet.sizing is None else make_sizer(sc)
+        if sc.fleet.shifts is not None or (sizer is not None and not sizer.passive):
+            self.shifts = Shifts(env, bus, self.fleet, self.operator, space, sc.fleet, wakeup,
+                                 sizer, rng_for(spec.seed, STREAM_SIZING))
         #: what the decisions add up to (the summary's columns); the errors' context
         self.tally = Tally()
         blame = Blame(env, spec.run_id, self.tally)
@@ -154,7 +162,9 @@ class Simulation:
                             None if self.energy is None else self.energy.filter,
                             pooled=any(v.capacity > 1 for v in self.vehicles)
                             or sc.tasks.prebooked,  # (a promise waits in a plan)
-                            max_delay=sc.tasks.delay_limited)
+                            max_delay=sc.tasks.delay_limited,
+                            shifts=self.shifts if self.shifts is not None
+                            and self.shifts.limited else None)
         self.dispatcher = Dispatcher(env, wakeup, pipeline, self.fleet, self.operator,
                                      allocator, self.tally, blame, self._record_decision,
                                      window=d.batch_window, latency=sc.comms.latency,
@@ -296,5 +306,6 @@ class Simulation:
         # what the allocator says at the end (a learned model's name, a batch method's counts)
         extra = {**summary_of(self.repositioning),
                  "allocator_info": describe(self.dispatcher.allocator),
-                 "objective": spec.scenario.dispatch.objective}
+                 "objective": spec.scenario.dispatch.objective,
+                 **fleet_summary(self.vehicles, now, self.stats.count[TaskState.COMPLETED])}
         return self.recording.summary(run, self.vehicles, self.tally, now, extra)

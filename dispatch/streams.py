@@ -16,6 +16,8 @@ import numpy as np
 STREAM_PREBOOK = 8
 #: the riders' answers to offers (dispatch.offers); a number of its own, clear of the others
 STREAM_OFFERS = 31
+#: fleet sizing (dispatch.shifts); numbered apart from the streams above
+STREAM_SIZING = 12
 
 
 def rng_for(seed: int, stream: int) -> np.random.Generator:

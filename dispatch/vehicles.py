@@ -68,6 +68,10 @@ class Vehicle:
     #: ``[fleet.energy]``: its battery (:class:`dispatch.battery.Battery`); None without energy
     battery: Any = field(default=None, repr=False)
     _view: AgentView | None = field(default=None, repr=False)
+    #: not in the fleet now (before its shift, on its way home, after it: dispatch.shifts);
+    #: neither idle nor busy, as a failed vehicle
+    off_duty: bool = False
+    duty: Any = field(default=None, repr=False)  # its shift (dispatch.shifts.Duty); None: none
     # ``loc`` and ``leg`` live here; their setters tell the fleet (its arrays stay current)
     _loc: Location = field(default=None, init=False, repr=False)
     _leg: Leg | None = field(default=None, init=False, repr=False)
@@ -257,12 +261,13 @@ class Fleet:
         return AgentViews(ids, make, node, rem, np.array(points, dtype=np.int64), ascending)
 
     def refresh(self, v: Vehicle) -> None:
-        """Set ``v``'s state from its plan and its failure: failed, or on a charging visit (a
-        charge stop in its plan), it is neither idle nor busy (no decision considers it);
+        """Set ``v``'s state from its plan and its failure: failed, off duty (dispatch.shifts)
+        or on a charging visit (a charge stop in its plan), it is neither idle nor busy (no
+        decision considers it);
         serving a request or with one in its plan, busy; else idle (standing, or on a
         repositioning move, which a decision may cut)."""
         busy = idle = False
-        if not v.failed:
+        if not v.failed and not v.off_duty:
             busy = v.serving is not None
             idle = not busy
             for s in v.stops:  # (a loop, not any(): it runs at every assignment and idle)

@@ -1,0 +1,2 @@
+"""Fleet-sizing strategies (``dispatch.sizers`` plugins; the contract is
+:mod:`dispatch.sizing`)."""
