@@ -60,8 +60,8 @@ from dispatch.locations import Location
 KINDS = ("release", "assign", "depart", "move", "pickup", "dropoff", "complete", "idle", "wait",
          "replan", "expire", "reject", "unreachable", "cancel", "failed", "skipped",
          "breakdown", "repair", "reopen", "reassign", "reposition", "insert",
-         "queue", "charge_start", "charge_end", "stranded", "decline")
-         "queue", "charge_start", "charge_end", "stranded", "shift_start", "shift_end")
+         "queue", "charge_start", "charge_end", "stranded", "decline", "shift_start",
+         "shift_end")
 
 
 class Event(NamedTuple):
