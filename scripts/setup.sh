@@ -38,7 +38,7 @@ if [ ! -f "$stamp" ]; then
     done_step
     # torch first, pinned: the magnnet extra pins the same version, so nothing below resolves
     # torch again (another version would pull gigabytes of CUDA libraries).
-    step 2 "torch 2.13.0 (MAGNNET's network; about 200 MB)"
+    step 2 "torch 2.13.0 (MAGNNET's network; the largest download)"
     pip_install "torch==2.13.0"
     done_step
     step 3 "this project (editable), its test and magnnet extras: about 100 packages" \
