@@ -74,6 +74,12 @@ SCHEMAS: dict[str, pa.Schema] = {
         ("delay_mean", _F), ("detour_ratio", _F),
         # [dispatch] objective: what a pair's cost (total_cost's terms) measures
         ("objective", _S),
+        # [fleet.energy] (nan, and 0 charges and strandings, without): the fleet's kWh drawn
+        # and charged, charges started (plug-ins), vehicles stranded (battery empty), the
+        # lowest state of charge a vehicle reached and the fleet's mean at the end (0-1),
+        # seconds the fleet queued at stations (dispatch.energy_summary)
+        ("kwh_drawn", _F), ("kwh_charged", _F), ("charges", _I), ("strandings", _I),
+        ("soc_min", _F), ("soc_end_mean", _F), ("queue_seconds", _F),
     ]),
     "tasks": pa.schema([
         ("run_id", _S), ("task_id", _I), ("kind", _S), ("x", _F), ("y", _F), ("z", _F),

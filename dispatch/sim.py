@@ -42,6 +42,7 @@ from dispatch.battery import Energy
 from dispatch.charging import Charging, Stations
 from dispatch.decision import Blame, Pipeline, Tally
 from dispatch.dispatcher import Dispatcher, Wakeup
+from dispatch.energy_summary import EnergyTally, energy_columns
 from dispatch.events import EventBus
 from dispatch.faults import FaultInjector, blackout_filter
 from dispatch.operator import Hooks, Operator, Towing
@@ -142,6 +143,8 @@ class Simulation:
                                  towing)
         #: [fleet.energy]: batteries and the reserve rule (dispatch.battery.Energy), or None
         self.energy = self._energy(sc)
+        #: [fleet.energy]: charges and strandings, for the summary (None without energy)
+        self.energy_tally = None if self.energy is None else EnergyTally(bus)
         #: what the decisions add up to (the summary's columns); the errors' context
         self.tally = Tally()
         blame = Blame(env, spec.run_id, self.tally)
@@ -260,6 +263,7 @@ class Simulation:
         run = dict(spec.keys, n_agents=len(self.vehicles), space=self.space.kind)
         # what the allocator says at the end (a learned model's name, a batch method's counts)
         extra = {**summary_of(self.repositioning),
+                 **energy_columns(self.energy_tally, self.vehicles),
                  "allocator_info": describe(self.dispatcher.allocator),
                  "objective": spec.scenario.dispatch.objective}
         return self.recording.summary(run, self.vehicles, self.tally, now, extra)
