@@ -64,14 +64,14 @@ def soc_over_day(q: pd.DataFrame, path: Path, title: str = "") -> Path:
             else:
                 for p in ("p10", "p90"):
                     ax.plot(h, 100 * g[p], color=c, linewidth=0.8, linestyle=":")
-            ax.plot(h, 100 * g["median"], color=c, linewidth=1.8, label=label)
+            ax.plot(h, 100 * g["median"], color=c, linewidth=1.8, label=_short(label, scen))
         ax.set_ylabel("state of charge (%)")
         ax.set_ylim(0, 100)
         ax.grid(True, alpha=0.3)
         if len(scenarios) > 1:
             ax.set_title(scen, fontsize="medium")
-        handles = [Line2D([], [], color=colours[label], linewidth=1.8, label=label)
-                   for label, _ in mine]
+        handles = [Line2D([], [], color=colours[label], linewidth=1.8,
+                          label=_short(label, scen)) for label, _ in mine]
         handles.append(Line2D([], [], color="0.3", linewidth=1.8, label="median vehicle"))
         handles.append(
             Line2D([], [], color="0.3", linewidth=6, alpha=0.25,
@@ -83,6 +83,11 @@ def soc_over_day(q: pd.DataFrame, path: Path, title: str = "") -> Path:
     axes[-1].set_xlabel("time (h)")
     fig.suptitle(title or "State of charge of the fleet", wrap=True)
     return _save(fig, path)
+
+
+def _short(label: str, scenario: str) -> str:
+    """A series label without the scenario its panel already names."""
+    return " ".join(w for w in label.split(" ") if w != scenario) if scenario else label
 
 
 @dataclass(frozen=True)
