@@ -34,9 +34,9 @@ FleetPy's evaluation label in :data:`FLEETPY_LABELS`), tasks pooled over the gro
         state ``cancelled``, cut off by the run's ``duration``, not a rider's choice) and
         ``failed`` (a breakdown with the passenger aboard), so that rides + rejections +
         cut_off + failed = requests; ``rejectionRate`` = rejections / requests;
-        ``service_rate`` = rides / requests; ``cutOffRate`` = cut_off / requests; ``wait_average``, ``wait_median``,
-        ``wait_p90``, ``wait_p95``, ``wait_max``: release -> pickup, seconds, over every request picked up
-        (quantiles by linear interpolation); ``inVehicleTravelTime_mean``: pickup -> drop-off
+        ``service_rate`` = rides / requests; ``cutOffRate`` = cut_off / requests;
+        ``wait_average``, ``wait_median``, ``wait_p90``, ``wait_p95``, ``wait_max``: release ->
+        pickup, seconds, over every request picked up (quantiles by linear interpolation); ``inVehicleTravelTime_mean``: pickup -> drop-off
         (s, rides with a drop-off); ``directTravelTime_mean``: the trip's free-flow fastest
         path (s; from the tasks' ``direct_seconds`` when the kernel records it, else from the
         network rebuilt by :mod:`analysis.network`); ``detour_ratio_mean`` / ``_median``:
