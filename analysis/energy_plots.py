@@ -174,9 +174,10 @@ def station_map(panels: list[StationPanel], path: Path, *, title: str = "") -> P
         handles = [Line2D([], [], marker="o", linestyle="", markerfacecolor="white",
                           markeredgecolor="black", markersize=np.sqrt(15 + 700 * k / kmax),
                           label=f"{k:,.0f} kWh") for k in sizes]
-        axes[0].legend(handles=handles, title="energy delivered", loc="lower left",
-                       fontsize="small", title_fontsize="small", labelspacing=1.6,
-                       handletextpad=1.6, borderpad=1.0, framealpha=0.9)
+        if handles:  # nothing delivered (a short run): no size to key
+            axes[0].legend(handles=handles, title="energy delivered", loc="lower left",
+                           fontsize="small", title_fontsize="small", labelspacing=1.6,
+                           handletextpad=1.6, borderpad=1.0, framealpha=0.9)
     fig.suptitle(title or "Charging stations: energy delivered and queueing", wrap=True)
     return _save(fig, path)
 
