@@ -30,12 +30,13 @@ FleetPy's evaluation label in :data:`FLEETPY_LABELS`), tasks pooled over the gro
         ``requests`` (tasks released); ``rides`` (served: completed); ``rejections`` (requests
         the fleet did not serve in time: ``rejected`` at once (no vehicle could reach the pickup
         within ``max_wait``), ``expired`` while open (``max_wait`` / ``ttl`` ran out) or
-        ``unreachable``); ``cancelled`` (open or aboard when the run ended) and ``failed`` (a
-        breakdown with the passenger aboard), so that rides + rejections + cancelled + failed
-        = requests; ``rejectionRate`` = rejections / requests; ``service_rate`` = rides /
-        requests; ``cancelRate`` = cancelled / requests; ``wait_average``, ``wait_median``,
-        ``wait_p90``, ``wait_p95``, ``wait_max``: release -> pickup, seconds, over every request picked up
-        (quantiles by linear interpolation); ``inVehicleTravelTime_mean``: pickup -> drop-off
+        ``unreachable``); ``cut_off`` (still waiting or aboard when the run ended: tasks of
+        state ``cancelled``, cut off by the run's ``duration``, not a rider's choice) and
+        ``failed`` (a breakdown with the passenger aboard), so that rides + rejections +
+        cut_off + failed = requests; ``rejectionRate`` = rejections / requests;
+        ``service_rate`` = rides / requests; ``cutOffRate`` = cut_off / requests;
+        ``wait_average``, ``wait_median``, ``wait_p90``, ``wait_p95``, ``wait_max``: release ->
+        pickup, seconds, over every request picked up (quantiles by linear interpolation); ``inVehicleTravelTime_mean``: pickup -> drop-off
         (s, rides with a drop-off); ``directTravelTime_mean``: the trip's free-flow fastest
         path (s; from the tasks' ``direct_seconds`` when the kernel records it, else from the
         network rebuilt by :mod:`analysis.network`); ``detour_ratio_mean`` / ``_median``:
@@ -54,6 +55,10 @@ FleetPy's evaluation label in :data:`FLEETPY_LABELS`), tasks pooled over the gro
     voxel paths
         ``path_stretch_mean``: per leg, metres driven / straight line from departure to
         arrival (from ``move`` events: voxel runs; obstacles make it > 1).
+    energy (electric runs; NaN without energy)
+        ``kwh_drawn_per_vehicle``, ``kwh_charged_per_vehicle``, ``charges``, ``strandings``,
+        ``soc_min``, ``soc_end_mean``, ``queue_seconds_per_vehicle``: see
+        :mod:`analysis.energy_metrics`.
 
 :func:`hourly_customers` and :func:`hourly_fleet` give the per-hour series (customers by the
 hour of their release, the fleet by clock hour); :func:`run_metrics` gives the taxi columns per
@@ -67,6 +72,7 @@ import math
 import numpy as np
 import pandas as pd
 
+from analysis.energy_metrics import energy_events, energy_stats
 from paired import compare
 from paired.compare import KEY_DEFAULTS, RUN_KEYS_ATTR, allocator_order
 from paired.per_task import PER_TASK, per_task
@@ -252,14 +258,15 @@ def customer_stats(trips: pd.DataFrame) -> dict:
     requests = len(trips)
     rides = int((trips["state"] == "completed").sum())
     rejections = int(trips["state"].isin(REJECTED_STATES).sum())
-    cancelled = int((trips["state"] == "cancelled").sum())
+    # the tasks table's state "cancelled": the run's end cut the trip off
+    cut_off = int((trips["state"] == "cancelled").sum())
     wait = trips["wait"].to_numpy(dtype=float)
     return {
         "requests": requests, "rides": rides, "rejections": rejections,
-        "cancelled": cancelled, "failed": int((trips["state"] == "failed").sum()),
+        "cut_off": cut_off, "failed": int((trips["state"] == "failed").sum()),
         "rejectionRate": rejections / requests if requests else math.nan,
         "service_rate": rides / requests if requests else math.nan,
-        "cancelRate": cancelled / requests if requests else math.nan,
+        "cutOffRate": cut_off / requests if requests else math.nan,
         "wait_average": _stat(wait, np.mean), "wait_median": _stat(wait, np.median),
         "wait_p90": _stat(wait, lambda v: np.quantile(v, 0.9)),
         "wait_p95": _stat(wait, lambda v: np.quantile(v, 0.95)),
@@ -390,6 +397,7 @@ def _taxi(summary, tasks, vehicles, events, keys, direct=None) -> pd.DataFrame:
 
     t_groups, tr_groups, v_groups = groups(tasks), groups(trips), groups(vehicles)
     s_groups, st_groups = groups(states), groups(stretch)
+    e_groups = groups(energy_events(events))
     rows = []
     for key, s in summary.groupby(keys, sort=False):
         key = key if isinstance(key, tuple) else (key,)
@@ -407,6 +415,8 @@ def _taxi(summary, tasks, vehicles, events, keys, direct=None) -> pd.DataFrame:
         ok = st.loc[st["direct"] > 0] if st is not None else None
         row["path_stretch_mean"] = (float((ok["driven"] / ok["direct"]).mean())
                                     if ok is not None and len(ok) else math.nan)
+        row.update(energy_stats(v_groups.get(key, vehicles.iloc[:0]),
+                                None if events is None else e_groups.get(key)))
         rows.append(row)
     return sort_groups(pd.DataFrame(rows))
 
@@ -432,7 +442,7 @@ RUN_VALUES = {
     "service_rate": lambda s: s["tasks_completed"] / s["n_tasks"],
     "rejectionRate": lambda s: (s["tasks_rejected"] + s["tasks_expired"]
                                 + s.get("tasks_unreachable", 0)) / s["n_tasks"],
-    "cancelRate": lambda s: s["tasks_cancelled"] / s["n_tasks"],
+    "cutOffRate": lambda s: s["tasks_cancelled"] / s["n_tasks"],
     "wait_average": lambda s: s["wait_time_mean"],
     "emptyRatio": lambda s: s["empty_distance"] / s["distance"],
 }

@@ -22,6 +22,8 @@ STATE_COLOURS = {"travel": "#1f77b4", "service": "#2ca02c", "waiting": "#ff7f0e"
 MARKERS = ("o", "s", "^", "D", "v", "P", "X")
 TASK_COLOURS = {"completed": "#2ca02c", "expired": "#d62728", "unreachable": "#7f7f7f",
                 "cancelled": "#9467bd", "rejected": "#ff7f0e", "failed": "#8c564b"}
+#: How a legend names a task state: the state ``cancelled`` is a task the run's end cut off.
+TASK_LABELS = {"cancelled": "cut off by the end"}
 
 
 def _figure(w: float = 6.4, h: float = 4.2):
@@ -241,7 +243,8 @@ def paths_3d(events: pd.DataFrame, vehicles: pd.DataFrame, obstacles: pd.DataFra
     for state, g in tasks.groupby("state"):
         ax.scatter(g["x"], g["y"], g["z"], marker="x", s=36 if len(tasks) <= 60 else 12,
                    depthshade=False,
-                   color=TASK_COLOURS.get(state, "black"), label=f"task {state}")
+                   color=TASK_COLOURS.get(state, "black"),
+                   label=f"task {TASK_LABELS.get(state, state)}")
     from matplotlib.lines import Line2D
 
     handles = [Line2D([], [], color="0.2", linestyle="-", marker="o", label="UAV path / start"),

@@ -44,12 +44,17 @@ DYNAMIC_FIGURES = ("served_vs_n.png", "wait_vs_n.png", "cost_per_task_vs_n.png",
 ROAD_FIGURES = ("map.png", "hourly.png", "fleet_state.png", "wait_by_allocator.png")
 
 #: The taxi columns the report shows (taxi.csv has them all).
-TAXI_COLUMNS = ["runs", "requests", "rides", "rejections", "cancelled", "failed", "service_rate",
-                "rejectionRate", "cancelRate", "wait_average", "wait_median", "wait_p90",
+TAXI_COLUMNS = ["runs", "requests", "rides", "rejections", "cut_off", "failed", "service_rate",
+                "rejectionRate", "cutOffRate", "wait_average", "wait_median", "wait_p90",
                 "wait_p95", "wait_max", "inVehicleTravelTime_mean", "detour_ratio_mean",
                 "utilization", "emptyRatio", "vkm_per_ride"]
 #: ... and of shared rides, where some ride was shared (occupancy: passenger-km / vehicle-km)
 SHARED_COLUMNS = ["occupancy", "shared_rate", "delay_mean"]
+
+
+#: The shares the report prints as percentages with one decimal (taxi.csv keeps 0-1).
+PERCENT_COLUMNS = {"service_rate", "rejectionRate", "cutOffRate", "utilization", "emptyRatio",
+                   "shared_rate", "soc_min", "soc_end_mean"}
 
 
 def _pooled(taxi: pd.DataFrame) -> bool:
@@ -135,10 +140,21 @@ def _taxi_view(taxi: pd.DataFrame, columns: list[str]) -> pd.DataFrame:
         view["batch_window"] = view["batch_window"].map(window_label)
     for c in cols:  # mean ± half-width of the 95 % interval over seeds, where there is one
         ci = f"{c}_ci95"
-        if ci in taxi.columns and taxi[ci].notna().any():
+        h = (taxi[ci] if ci in taxi.columns and taxi[ci].notna().any()
+             else pd.Series(math.nan, index=taxi.index))
+        if c in PERCENT_COLUMNS:  # 99.3 % and 99.5 % told apart, not both 0.99
+            view[c] = [_percent(float(m), float(w)) for m, w in zip(taxi[c], h)]
+        elif h.notna().any():
             digits = 1 if c == "wait_average" else 3
-            view[c] = [_pm(float(m), float(h), digits) for m, h in zip(taxi[c], taxi[ci])]
+            view[c] = [_pm(float(m), float(w), digits) for m, w in zip(taxi[c], h)]
     return view
+
+
+def _percent(m: float, h: float = math.nan) -> str:
+    """A share (0-1) as a percentage with one decimal, ``± half-width`` where there is one:
+    ``99.3 %``, ``97.2 ± 0.4 %``; ``–`` for a missing value."""
+    s = _pm(m, h, 1, 100)
+    return s if s == "–" else s + " %"
 
 
 def table_dynamic(dm: pd.DataFrame) -> pd.DataFrame:
@@ -405,19 +421,26 @@ def _road_part(res, summary, tasks, vehicles, events, direct, out, written, only
     hf.to_csv(out / "hourly_fleet.csv", index=False)
     written += [out / "hourly_customers.csv", out / "hourly_fleet.csv"]
 
-    run_id = run_id or default_run(summary)
-    r = summary.loc[summary["run_id"] == run_id].iloc[0]
-    rt, rv = t.loc[t["run_id"] == run_id], v.loc[v["run_id"] == run_id]
-    try:
-        net = road_network(res.metadata(run_id, "tasks"), [s.path for s in res.sources])
-    except KeyError:
-        net = None
+    # the map and the stations: one run of each scenario (the chosen run for its own)
+    run_ids, nets, panels = {}, {}, []
+    for scen_name, g in summary.groupby("scenario", sort=True):
+        rid = run_id if run_id in set(g["run_id"]) else default_run(g)
+        r = g.loc[g["run_id"] == rid].iloc[0]
+        rt, rv = t.loc[t["run_id"] == rid], v.loc[v["run_id"] == rid]
+        try:
+            net = road_network(res.metadata(rid, "tasks"), [s.path for s in res.sources])
+        except KeyError:
+            net = None
+        run_ids[str(scen_name)], nets[str(scen_name)] = rid, net
+        panels.append(TP.MapPanel(
+            f"{scen_name}\nseed {r['seed']}: {len(rt)} requests, N = {r['n_agents']}",
+            rt[["x", "y"]].to_numpy(dtype=float),
+            rv[["x0", "y0"]].to_numpy(dtype=float),
+            None if net is None else net.xy, None if net is None else net.edges))
     scen = TP.scenario_title(summary["scenario"].unique())
-    TP.network_map(out / "map.png", pickups=rt[["x", "y"]].to_numpy(dtype=float),
-                   starts=rv[["x0", "y0"]].to_numpy(dtype=float),
-                   xy=None if net is None else net.xy, edges=None if net is None else net.edges,
-                   title=f"{r['scenario']}: streets, pickups of seed {r['seed']} "
-                         f"({len(rt)} requests), fleet start (N = {r['n_agents']})")
+    TP.network_map(out / "map.png", panels,
+                   title="Streets, demand and where the fleet starts" + (
+                       ", one scenario a row" if len(panels) > 1 else ""))
     cols = TP.series_columns(summary)
     runs = {k if isinstance(k, tuple) else (k,): n
             for k, n in summary.groupby(cols)["run_id"].nunique().items()}
@@ -428,20 +451,27 @@ def _road_part(res, summary, tasks, vehicles, events, direct, out, written, only
     TP.wait_by_group(trips.loc[trips["wait"].notna()], out / "wait_by_allocator.png", only=only,
                      title=f"{scen}: wait from release to pickup, seeds pooled")
     written += [out / f for f in ROAD_FIGURES]
+    from analysis.energy_metrics import ENERGY_COLUMNS
     from analysis.energy_plots import energy_section
 
-    files, energy = energy_section(res, summary, out, net, run_id, keys, scen)
+    files, energy = energy_section(res, summary, out, nets, run_ids, keys)
     written += files
+    if energy:  # the energy columns of taxi.csv, after the section's heading and text
+        energy[2:2] = [("p", ENERGY_NOTE),
+                       ("table", _taxi_view(taxi.loc[taxi["kwh_drawn_per_vehicle"].notna()],
+                                            ["runs", *ENERGY_COLUMNS]))]
     unit = "one hour" if bin_s == 3600 else f"{bin_s / 60:g} minutes"
     return [
         ("h2", "Taxi study: customers and fleet"),
         ("p", ("Per series (allocator, fleet size N and, where they differ, batch window, "
                "scenario and repositioner), requests pooled over the seeds. Names as "
                "MATSim DRT's customer and vehicle stats print them: rides = served trips; "
-               "rejections = rejected at once + expired waiting + unreachable; cancelled = "
-               "still open or aboard when the run ended; failed = aboard a vehicle that broke "
-               "down (rides + rejections + cancelled + failed = requests); service_rate, "
-               "rejectionRate, cancelRate = rides, rejections, cancelled / requests; "
+               "rejections = rejected at once + expired waiting + unreachable; cut_off = "
+               "still waiting or aboard when the run ended (the run's end cut them off; a "
+               "count of their own, not a rejection); failed = aboard a vehicle that broke "
+               "down (rides + rejections + cut_off + failed = requests); service_rate, "
+               "rejectionRate, cutOffRate = rides, rejections, cut_off / requests (%, one "
+               "decimal, as utilization, emptyRatio and shared_rate; taxi.csv holds 0-1); "
                "wait = release → pickup (s; median, p90 by linear interpolation); "
                "a ± gives the half-width of the 95 % Student-t interval of the mean over "
                "seeds (the runs' own values; none with one seed); "
@@ -462,6 +492,14 @@ def _road_part(res, summary, tasks, vehicles, events, direct, out, written, only
         ("img", "hourly.png"), ("img", "fleet_state.png"), ("img", "wait_by_allocator.png"),
         *energy,
     ]
+
+
+#: What the energy table says (taxi.csv's energy columns, :mod:`analysis.energy_metrics`).
+ENERGY_NOTE = ("Per series: kWh drawn (driving and auxiliary load) and charged, mean per "
+               "vehicle; charges started (plug-ins) and strandings (a battery run empty) "
+               "summed over the seeds; soc_min = the lowest state of charge any vehicle "
+               "reached, soc_end_mean = the vehicles' mean at the end (%); seconds queued "
+               "for a plug, mean per vehicle. Columns of taxi.csv (runs.csv per run).")
 
 
 def _markdown(sections) -> str:

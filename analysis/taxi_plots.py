@@ -1,7 +1,8 @@
 """The figures of a taxi (road network) study, drawn with matplotlib's object API (Agg).
 
 * :func:`network_map`: the streets (thin grey), the density of pickups (hexagon bins, log
-  colour scale) and where the fleet starts, the whole region and zoomed on the demand;
+  colour scale) and where the fleet starts, the whole region and zoomed on the demand, one
+  row per scenario (:class:`MapPanel`);
 * :func:`hourly`: per time bin, demand and served trips, rejection rate, wait percentiles, per
   series;
 * :func:`fleet_state`: the fleet's state over time, stacked (idle, to pickup, occupied,
@@ -19,6 +20,7 @@ and returns its path.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -102,51 +104,86 @@ def _map_panel(ax, lo, hi, *, pickups, starts, xy, edges, zoomed: bool):
     return hb
 
 
-def network_map(path: Path, *, pickups: np.ndarray, starts: np.ndarray,
-                xy: np.ndarray | None = None, edges: np.ndarray | None = None,
-                title: str = "") -> Path:
-    """The map: streets (``xy`` node positions in metres, ``edges`` index pairs; left out when
-    None), pickups as hexagon-binned density (log scale) and the fleet's start positions.
-    Left: the whole region; right (when there are pickups and their :func:`demand_box` is
-    smaller than the region): zoomed on the demand, the box drawn on the left panel."""
-    from matplotlib.lines import Line2D
-    from matplotlib.patches import Rectangle
-    from matplotlib.ticker import FuncFormatter
+@dataclass(frozen=True)
+class MapPanel:
+    """One scenario's row of :func:`network_map`: its title, pickups and fleet start (x, y
+    metres) and its streets (``xy`` node positions, ``edges`` index pairs; None: none)."""
 
-    pts = [p for p in (pickups, starts, xy) if p is not None and len(p)]
+    title: str
+    pickups: np.ndarray
+    starts: np.ndarray
+    xy: np.ndarray | None = None
+    edges: np.ndarray | None = None
+
+
+def _extent(m: MapPanel):
+    pts = [p for p in (m.pickups, m.starts, m.xy) if p is not None and len(p)]
     allxy = np.vstack([p[:, :2] for p in pts]) if pts else np.zeros((1, 2))
     lo, hi = allxy.min(axis=0), allxy.max(axis=0)
     span = float(max(hi - lo)) or 1.0
     lo, hi = lo - 0.03 * span, hi + 0.03 * span
-    box = demand_box(pickups) if len(pickups) >= 10 else None
+    box = demand_box(m.pickups) if len(m.pickups) >= 10 else None
     zoom = box is not None and float(np.prod(box[1] - box[0])) < 0.6 * float(np.prod(hi - lo))
     if zoom:
         box = (np.maximum(box[0], lo), np.minimum(box[1], hi))
-    fig = _figure(13.5 if zoom else 7.5, 7.0)
-    axes = fig.subplots(1, 2, width_ratios=[1, 1.15]) if zoom else [fig.add_subplot()]
-    kw = {"pickups": pickups, "starts": starts, "xy": xy, "edges": edges}
-    hb = _map_panel(axes[0], lo, hi, zoomed=False, **kw)
-    axes[0].set_title("whole region", fontsize="medium")
-    if zoom:
-        hb = _map_panel(axes[1], box[0], box[1], zoomed=True, **kw)
-        axes[0].add_patch(Rectangle(box[0], *(box[1] - box[0]), fill=False, edgecolor="black",
-                                    linewidth=1.0, linestyle="--", zorder=4))
-        axes[1].set_title("zoomed on the demand (1st–99th percentile of pickups, + 10 %)",
-                          fontsize="medium")
-    if hb is not None:
-        cb = fig.colorbar(hb, ax=axes[-1], shrink=0.8)
-        cb.set_label("pickups per hexagon (log scale)")
-        cb.ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
-        cb.ax.yaxis.set_minor_formatter(FuncFormatter(
-            lambda v, _: f"{v:g}" if f"{v:.1e}"[0] in "25" else ""))
-    handles = []
-    if len(starts):
-        handles.append(Line2D([], [], marker="^", linestyle="", color="#1f77b4",
-                              label=f"fleet start ({len(starts)} vehicles)"))
-    if xy is not None:
-        handles.append(Line2D([], [], color="0.6", label="streets"))
-    if handles:
-        axes[0].legend(handles=handles, loc="upper left", fontsize="small", framealpha=0.9)
+    return lo, hi, box if zoom else None
+
+
+def network_map(path: Path, panels: list[MapPanel], title: str = "") -> Path:
+    """The map, one row per panel (a scenario): streets, pickups as hexagon-binned density
+    (log scale) and the fleet's start positions. Left: the whole region; right (when there
+    are pickups and their :func:`demand_box` is smaller than the region): zoomed on the
+    demand, the box drawn on the left panel. Panels are as wide as their region is, so a
+    tall city leaves no empty band between them."""
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Rectangle
+    from matplotlib.ticker import FuncFormatter
+
+    rows = [(m, *_extent(m)) for m in panels]
+    row_h = 6.2
+    aspects = []
+    for _m, lo, hi, box in rows:
+        a = [float((hi - lo)[0] / max((hi - lo)[1], 1e-9))]
+        if box is not None:
+            a.append(float((box[1] - box[0])[0] / max((box[1] - box[0])[1], 1e-9)))
+        aspects.append(a)
+    ncols = max(len(a) for a in aspects)
+    # each panel about as wide as its map at the row's height (+ axis labels, colour bar)
+    widths = [max(a[k] if k < len(a) else 0.0 for a in aspects) for k in range(ncols)]
+    widths = [min(max(w, 0.45), 2.2) for w in widths]
+    fig = _figure(min(row_h * sum(widths) + 1.2 + 1.0 * ncols, 16.0),
+                  row_h * len(rows) + 0.6)
+    axes = fig.subplots(len(rows), ncols, squeeze=False, width_ratios=widths)
+    for r, (m, lo, hi, box) in enumerate(rows):
+        kw = {"pickups": m.pickups, "starts": m.starts, "xy": m.xy, "edges": m.edges}
+        ax = axes[r]
+        hb = _map_panel(ax[0], lo, hi, zoomed=False, **kw)
+        ax[0].set_title(f"{m.title}; whole region" if m.title else "whole region",
+                        fontsize="medium")
+        if box is not None:
+            hb = _map_panel(ax[1], box[0], box[1], zoomed=True, **kw)
+            ax[0].add_patch(Rectangle(box[0], *(box[1] - box[0]), fill=False,
+                                      edgecolor="black", linewidth=1.0, linestyle="--",
+                                      zorder=4))
+            ax[1].set_title("zoomed on the demand\n(1st–99th percentile of pickups, + 10 %)",
+                            fontsize="medium")
+        for extra in ax[(2 if box is not None else 1):]:
+            extra.set_visible(False)
+        last = ax[1] if box is not None else ax[0]
+        if hb is not None:
+            cb = fig.colorbar(hb, ax=last, shrink=0.8)
+            cb.set_label("pickups per hexagon (log scale)")
+            cb.ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+            cb.ax.yaxis.set_minor_formatter(FuncFormatter(
+                lambda v, _: f"{v:g}" if f"{v:.1e}"[0] in "25" else ""))
+        handles = []
+        if len(m.starts):
+            handles.append(Line2D([], [], marker="^", linestyle="", color="#1f77b4",
+                                  label=f"fleet start ({len(m.starts)} vehicles)"))
+        if m.xy is not None:
+            handles.append(Line2D([], [], color="0.6", label="streets"))
+        if handles:
+            ax[0].legend(handles=handles, loc="upper left", fontsize="small", framealpha=0.9)
     fig.suptitle(title or "Network, demand and fleet", wrap=True)
     return _save(fig, path)
 

@@ -214,11 +214,11 @@ def study_table(out: Path) -> pd.DataFrame:
             "allocator": r["allocator"], "N": int(r["n_agents"]),
             "window": window_label(r["batch_window"]), "reposition": r["reposition"],
             "runs": int(r["runs"]), "served": r["service_rate"], "rejected": r["rejectionRate"],
-            "cancelled": r.get("cancelRate", math.nan), "failed_share": (
+            "cancelled": r.get("cutOffRate", math.nan), "failed_share": (
                 r.get("failed", 0) / r["requests"] if r["requests"] else math.nan),
             "served_ci": r.get("service_rate_ci95", math.nan),
             "rejected_ci": r.get("rejectionRate_ci95", math.nan),
-            "cancelled_ci": r.get("cancelRate_ci95", math.nan),
+            "cancelled_ci": r.get("cutOffRate_ci95", math.nan),
             "wait_mean_ci": r.get("wait_average_ci95", math.nan),
             "wait_mean": r["wait_average"], "wait_p90": r["wait_p90"],
             "utilization": r["utilization"], "empty": r["emptyRatio"],

@@ -82,6 +82,12 @@ SCHEMAS: dict[str, pa.Schema] = {
         # shifts and sizing (dispatch.shifts): on-duty vehicle-hours, completed requests per
         # vehicle-hour, vehicles that reached their depot after their shift's end and grace
         ("vehicle_hours", _F), ("riders_per_vehicle_hour", _F), ("shift_overruns", _I),
+        # [fleet.energy] (nan, and 0 charges and strandings, without): the fleet's kWh drawn
+        # and charged, charges started (plug-ins), vehicles stranded (battery empty), the
+        # lowest state of charge a vehicle reached and the fleet's mean at the end (0-1),
+        # seconds the fleet queued at stations (dispatch.energy_summary)
+        ("kwh_drawn", _F), ("kwh_charged", _F), ("charges", _I), ("strandings", _I),
+        ("soc_min", _F), ("soc_end_mean", _F), ("queue_seconds", _F),
     ]),
     "tasks": pa.schema([
         ("run_id", _S), ("task_id", _I), ("kind", _S), ("x", _F), ("y", _F), ("z", _F),

@@ -42,6 +42,7 @@ from dispatch.battery import Energy
 from dispatch.charging import Charging, Stations
 from dispatch.decision import Blame, Pipeline, Tally
 from dispatch.dispatcher import Dispatcher, Wakeup
+from dispatch.energy_summary import EnergyTally, energy_columns
 from dispatch.errors import ScenarioError
 from dispatch.events import EventBus
 from dispatch.faults import FaultInjector, blackout_filter
@@ -153,6 +154,8 @@ class Simulation:
         if sc.fleet.shifts is not None or (sizer is not None and not sizer.passive):
             self.shifts = Shifts(env, bus, self.fleet, self.operator, space, sc.fleet, wakeup,
                                  sizer, rng_for(spec.seed, STREAM_SIZING))
+        #: [fleet.energy]: charges and strandings, for the summary (None without energy)
+        self.energy_tally = None if self.energy is None else EnergyTally(bus)
         #: what the decisions add up to (the summary's columns); the errors' context
         self.tally = Tally()
         blame = Blame(env, spec.run_id, self.tally)
@@ -305,6 +308,7 @@ class Simulation:
         run = dict(spec.keys, n_agents=len(self.vehicles), space=self.space.kind)
         # what the allocator says at the end (a learned model's name, a batch method's counts)
         extra = {**summary_of(self.repositioning),
+                 **energy_columns(self.energy_tally, self.vehicles),
                  "allocator_info": describe(self.dispatcher.allocator),
                  "objective": spec.scenario.dispatch.objective,
                  **fleet_summary(self.vehicles, now, self.stats.count[TaskState.COMPLETED])}

@@ -6,8 +6,9 @@
   (served share, mean wait, mean planned cost per assignment; conflict-free rate, milliseconds
   per decision), because planned costs summed over a run are not comparable between allocators
   that drive different trajectories and serve different numbers of tasks;
-* road-network runs: the trip table (served, rejected, cancelled, wait, empty km, km driven),
-  with a row of 95 % interval half-widths over the seeds under each row of several seeds;
+* road-network runs: the trip table (served, rejected, cut off by the run's end, wait, empty
+  km, km driven), with a row of 95 % interval half-widths over the seeds under each row of
+  several seeds; electric runs add the energy table (:mod:`dispatch.energy_summary`);
 * a single run: its own summary, one ``key: value`` line each.
 
 Every table is one row per (allocator, N), grouped by N, with short numeric cells: it fits an
@@ -25,6 +26,7 @@ from statistics import fmean
 # One allocator order, one paired gap, one label of a batch window, one set of per-task figures
 # for the CLI's tables and the analysis package, and one interval of a mean (a shared package
 # outside both, standard library only; see their docstrings).
+from dispatch.energy_summary import ENERGY_FIGURES, electric, energy_line
 from dispatch.runkeys import key_names
 from paired.compare import allocator_order, paired_gaps, window_label
 from paired.per_task import per_task, ratio
@@ -188,7 +190,8 @@ _TRIP_FIGURES = (
     ("served", 1, 100, "%", lambda r: per_task(r)["served_share"]),
     ("rej.", 1, 100, "%", lambda r: ratio(r["tasks_rejected"] + r["tasks_expired"]
                                            + r.get("tasks_unreachable", 0), r["n_tasks"])),
-    ("canc.", 1, 100, "%", lambda r: ratio(r["tasks_cancelled"], r["n_tasks"])),
+    # the summary's tasks_cancelled: trips the run's end cut off (still waiting or aboard)
+    ("cut", 1, 100, "%", lambda r: ratio(r["tasks_cancelled"], r["n_tasks"])),
     ("wait", 1, 1.0, "", lambda r: r["wait_time_mean"]),
     ("empty", 0, 100, "%", lambda r: ratio(r["empty_distance"], r["distance"])),
     # thousands of km: a city day fits 80 columns
@@ -206,10 +209,10 @@ def _render_trips(summaries: list[dict], console, repositioner: str | None) -> N
     for s in summaries:
         groups[(_label(s, windows), s["n_agents"])].append(s)
     runs = max((len(g) for g in groups.values()), default=0)
-    title = ("Trips, mean over {runs} seed(s): served, rejected (at once or expired) and "
-             "cancelled (open or aboard at the end) share of the trips, wait from release to "
-             "pickup (s), share of km driven empty, km driven (thousands), wall seconds "
-             "deciding").format(runs=runs)
+    title = ("Trips, mean over {runs} seed(s): served, rejected (at once or expired) and cut "
+             "off (still waiting or aboard when the run ended) share of the trips, wait from "
+             "release to pickup (s), share of km driven empty, km driven (thousands), wall "
+             "seconds deciding").format(runs=runs)
     if runs > 1:
         title += "; under a row of several seeds, ± the half-width of its 95 % interval"
     if repositioner is not None:
@@ -233,6 +236,8 @@ def _render_trips(summaries: list[dict], console, repositioner: str | None) -> N
     console.print(t)
     if any(_pooled(r) for r in summaries):
         _render_shared(groups, runs, console)
+    if any(electric(r) for r in summaries):
+        _render_energy(groups, runs, console)
 
 
 def _pooled(s: dict) -> bool:
@@ -258,6 +263,21 @@ def _render_shared(groups: dict, runs: int, console) -> None:
     console.print(t)
 
 
+def _render_energy(groups: dict, runs: int, console) -> None:
+    """The energy table of electric runs (:data:`dispatch.energy_summary.ENERGY_FIGURES`)."""
+    title = (f"Energy, mean over {runs} seed(s): kWh drawn and charged per vehicle, charges "
+             "(plug-ins), hours queued at stations, lowest state of charge of any vehicle "
+             "and the fleet's mean at the end (%), vehicles stranded (battery empty)")
+    t = _new_table(title, ["allocator", "N", *(c for c, *_ in ENERGY_FIGURES)], collapse=True)
+    agg = {key: {"allocator": rows[0]["allocator"], "batch_window": _window(rows[0]),
+                 "figures": [(_mean([{"v": value(r)} for r in rows if electric(r)], "v"), d, sc)
+                             for _, d, sc, value in ENERGY_FIGURES]}
+           for key, rows in groups.items()}
+    for a, n, r, last in _grouped_rows(agg):
+        t.add_row(a, str(n), *(_f(m, d, sc) for m, d, sc in r["figures"]), end_section=last)
+    console.print(t)
+
+
 def render_one(s: dict, console=None, *, dynamic: bool = False) -> None:
     """Print one run's summary, one ``key: value`` line each (wrapped, never cut)."""
     from rich.console import Console
@@ -276,10 +296,12 @@ def render_one(s: dict, console=None, *, dynamic: bool = False) -> None:
                      f"{s['seed']}, {s.get('space', 'voxel')}{window}")
     what = "trips" if road else "tasks"
     rejected = s["tasks_rejected"] + s["tasks_expired"] + s.get("tasks_unreachable", 0)
-    t.add_row(what, f"{n} released, {done} served{share}; rejected {s['tasks_rejected']} at "
-                    f"once, expired {s['tasks_expired']}, unreachable "
-                    f"{s.get('tasks_unreachable', 0)} (rejections {rejected}); cancelled "
-                    f"{s['tasks_cancelled']}, failed {s.get('tasks_failed', 0)}")
+    # tasks_cancelled: the tasks the run's end cut off (a count of its own, not a rejection)
+    t.add_row(what, f"{n} released, {done} served{share}, {s['tasks_cancelled']} cut off by "
+                    f"the end of the run (still waiting or {'aboard' if road else 'under way'}"
+                    f"); rejected {s['tasks_rejected']} at once, expired "
+                    f"{s['tasks_expired']}, unreachable {s.get('tasks_unreachable', 0)} "
+                    f"(rejections {rejected}); failed {s.get('tasks_failed', 0)}")
     if s.get("offers", 0):  # offers riders may decline (dispatch.offers)
         t.add_row("offers", f"{s['offers']} made, {s['tasks_declined']} riders declined; "
                             f"revenue {_f(s['revenue'])}")
@@ -308,6 +330,8 @@ def render_one(s: dict, console=None, *, dynamic: bool = False) -> None:
     if road and s.get("reposition", "stay") != "stay":
         t.add_row("repositioning", f"{s['reposition']}: {s.get('repositions', 0)} drives, "
                                    f"{_f(s.get('reposition_distance', 0.0) / 1000, 1)} km")
+    if electric(s):
+        t.add_row("energy", energy_line(s))
     if s.get("reassignments"):
         t.add_row("reassigned", f"{s['reassignments']} times a vehicle on its way to a pickup "
                                 "was given another task")

@@ -147,3 +147,16 @@ def fake_distribution(site: Path, dist: str, module: str, source: str, entry_poi
     (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {dist}\nVersion: 0.1\n")
     (info / "entry_points.txt").write_text(entry_points)
     return site
+
+
+#: Raw data the shipped files and some checks were made from: kept beside a checkout of the
+#: workspace (``../shared/data``), never shipped. Tests that read it skip without it.
+SHARED_DATA = ROOT.parent / "shared" / "data"
+
+
+def missing_data(path: Path, what: str) -> str:
+    """The reason a test that reads ``path`` (under :data:`SHARED_DATA`) skips: what it needs,
+    where, and that a clone lacks it by design (nothing to install)."""
+    return (f"needs {what} at {path}: raw data kept beside the workspace's checkout in "
+            "../shared/data, not shipped with the repository (nothing to install; the "
+            "shipped files hold what the other tests need)")

@@ -13,6 +13,7 @@ import pytest
 from allocators.hungarian import HungarianAllocator
 
 from .helpers import assert_valid, make_problem, random_cost, total_cost
+from tests.conftest import missing_data
 
 ORLIB = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "orlib_assign"
 
@@ -159,7 +160,7 @@ ORLIB_NAMES = ["assign100", "assign200", "assign300", "assign400", "assignp800"]
 @pytest.mark.parametrize("name", ORLIB_NAMES)
 def test_reproduces_orlib_optimum(name):
     if not (ORLIB / "assignopt.txt").exists():
-        pytest.skip(f"OR-Library assignment data not found under {ORLIB}")
+        pytest.skip(missing_data(ORLIB, "the OR-Library assignment problems"))
     optimum = _optimal_values()
     assert set(ORLIB_NAMES) <= set(optimum), f"assignopt.txt lists {sorted(optimum)}"
     path = ORLIB / f"{name}.txt"

@@ -266,9 +266,10 @@ def test_a_run_in_two_folders_counts_once(small_sweep, tmp_path, cli):
 
 
 def test_taxi_table_adds_up_and_has_intervals_over_seeds(road_sweep, tmp_path):
-    """rides + rejections + cancelled + failed = requests per series; the 95 % interval over
+    """rides + rejections + cut_off + failed = requests per series; the 95 % interval over
     the two seeds of each share and of the mean wait is the Student-t one of the runs' own
-    values; the report shows them as mean ± half-width."""
+    values; the report shows them as mean ± half-width, the shares as percentages with one
+    decimal; the trips the run's end cut off are called so, never cancelled."""
     import math as m
 
     from analysis import metrics as M
@@ -278,18 +279,26 @@ def test_taxi_table_adds_up_and_has_intervals_over_seeds(road_sweep, tmp_path):
     res = open_results(road_sweep)
     taxi = M.taxi_metrics(res.summary, res.table("tasks"), res.table("vehicles"))
     for _, r in taxi.iterrows():
-        assert r["rides"] + r["rejections"] + r["cancelled"] + r["failed"] == r["requests"]
-        assert r["service_rate"] + r["rejectionRate"] + r["cancelRate"] == pytest.approx(
+        assert r["rides"] + r["rejections"] + r["cut_off"] + r["failed"] == r["requests"]
+        assert r["service_rate"] + r["rejectionRate"] + r["cutOffRate"] == pytest.approx(
             1 - r["failed"] / r["requests"])
         runs = res.summary.loc[res.summary["allocator"] == r["allocator"]]
         assert len(runs) == 2
         served = runs["tasks_completed"] / runs["n_tasks"]
         assert r["service_rate_ci95"] == pytest.approx(mean_ci(served)[1])
         assert r["wait_average_ci95"] == pytest.approx(mean_ci(runs["wait_time_mean"])[1])
-        assert m.isfinite(r["cancelRate_ci95"])
+        assert m.isfinite(r["cutOffRate_ci95"])
     write_report(road_sweep, tmp_path)
     text = (tmp_path / "report.md").read_text()
-    assert "cancelled" in text and "cancelRate" in text and " ± " in text
+    assert "cut_off" in text and "cutOffRate" in text and " ± " in text
+    assert "cancel" not in text
+    row = next(ln for ln in text.splitlines() if ln.startswith("| hungarian |"))
+    header = next(ln for ln in text.splitlines() if ln.startswith("| allocator |"))
+    cell = dict(zip([c.strip() for c in header.split("|")], [c.strip() for c in row.split("|")]))
+    r = taxi.loc[taxi["allocator"] == "hungarian"].iloc[0]
+    assert cell["service_rate"] == (f"{100 * r['service_rate']:.1f} ± "
+                                    f"{100 * r['service_rate_ci95']:.1f} %")
+    assert cell["utilization"] == f"{100 * r['utilization']:.1f} %"
 
 
 def test_cli_report_series_filter(road_sweep, tmp_path, cli):

@@ -30,6 +30,7 @@ from dispatch.roads import load_network, manhattan
 from dispatch.runner import default_out, run_one
 from dispatch.scenario import load_scenario
 from tests.dispatch.test_trips import road_scenario, write_csv
+from tests.conftest import missing_data
 
 ROOT = Path(__file__).resolve().parents[2]
 RAW = ROOT.parent / "shared" / "data" / "taxi" / "chicago_taxi_trips_sample.csv"
@@ -291,7 +292,7 @@ def test_bad_keys_one_line(tmp_path, capsys, world, fleet, tasks, words):
 # ----------------------------------------------------------------------------- derivation
 
 
-@pytest.mark.skipif(not RAW.is_file(), reason=f"raw taxi sample not at {RAW}")
+@pytest.mark.skipif(not RAW.is_file(), reason=missing_data(RAW, "the raw Chicago taxi sample"))
 def test_derivation_script_reproduces_the_shipped_files(tmp_path):
     spec = importlib.util.spec_from_file_location("make_chicago_taxi",
                                                   ROOT / "scripts" / "make_chicago_taxi.py")

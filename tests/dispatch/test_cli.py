@@ -264,3 +264,24 @@ def test_snap_warning_printed_once_with_duration(tmp_path, caplog):
                  "--out", str(tmp_path / "out")]) == 0
     left_out = [r for r in caplog.records if "trips left out" in r.getMessage()]
     assert len(left_out) == 1, [r.getMessage() for r in left_out]
+
+
+def test_an_electric_run_prints_its_energy_and_cut_off_trips(tmp_path, cli):
+    """``dispatch run`` of an electric scenario cut off by its duration: the summary counts
+    the trips still waiting or aboard as cut off (not cancelled) and prints the energy line
+    with the summary's figures as written to the Parquet file."""
+    from tests.dispatch.test_energy import grid
+
+    p = grid(tmp_path, "battery_kwh = 1.0\nwh_per_km = 150.0\nidle_kwh_per_hour = 0.36\n"
+                       "soc0 = 0.5\nreserve = 0.1", [(0.0, 2, 8), (1.0, 3, 9), (2.0, 4, 10)],
+             duration=50.0)
+    proc = cli("run", p, "--out", tmp_path / "out")
+    assert proc.returncode == 0, proc.stderr
+    s = ds.dataset(tmp_path / "out" / "summary", partitioning="hive").to_table().to_pylist()[0]
+    assert s["tasks_cancelled"] > 0
+    text = " ".join(proc.stdout.split())
+    assert f"{s['tasks_cancelled']} cut off by the end of the run" in text
+    assert "cancel" not in text
+    assert (f"energy {s['kwh_drawn']:,.1f} kWh drawn ({s['kwh_drawn']:.2f} per vehicle), "
+            f"0.0 kWh charged in 0 charges, 0.0 h queued; state of charge lowest "
+            f"{100 * s['soc_min']:.1f}%") in text

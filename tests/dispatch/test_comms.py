@@ -44,6 +44,7 @@ def _installed(name: str):
 
 
 MagnnetAllocator = _installed("magnnet")
+NO_MAGNNET = "needs the magnnet allocator (its entry point: pip install -e .)"
 
 
 def line(n: int) -> np.ndarray:
@@ -273,7 +274,7 @@ def test_range_so_small_nobody_talks_still_gives_valid_allocations(cls):
                 assert not np.isfinite(p.cost[x, t])
 
 
-@pytest.mark.skipif(MagnnetAllocator is None, reason="MAGNNET is issue 4; not implemented yet")
+@pytest.mark.skipif(MagnnetAllocator is None, reason=NO_MAGNNET)
 def test_magnnet_with_no_links_gives_a_valid_allocation():  # pragma: no cover - until issue 4
     for seed in range(20):
         p = with_comm(random_problem(seed, 6, 6), np.eye(6, dtype=bool))
@@ -282,7 +283,6 @@ def test_magnnet_with_no_links_gives_a_valid_allocation():  # pragma: no cover -
 
 # ----------------------------------------------------------------------------- simulation
 
-NO_MAGNNET = "MAGNNET is issue 4; not implemented yet"
 COMMS_ALLOCATORS = ["hungarian", "greedy", "random", "auction",
                     pytest.param("magnnet", marks=pytest.mark.skipif(MagnnetAllocator is None,
                                                                      reason=NO_MAGNNET))]

@@ -93,7 +93,7 @@ def test_process_pool_gives_identical_results(small, tmp_path):
 
 
 def test_local_ray_gives_identical_results(small, tmp_path):
-    ray = pytest.importorskip("ray")
+    ray = pytest.importorskip("ray", reason="needs ray (the test extra: bash scripts/setup.sh)")
     _, specs, serial = small
     assert not ray.is_initialized()
     outcomes = sweep(specs, tmp_path / "ray", workers=2, ray=True)
@@ -291,7 +291,7 @@ def test_cli_sweep_bad_arguments(tiny_scenario, cli, tmp_path):
 def _pool_sweep_with_workers(tmp_path):
     """A ``dispatch sweep`` on 2 worker processes, returned once both workers are up (the
     parent and its spawned children, as psutil processes)."""
-    psutil = pytest.importorskip("psutil")
+    psutil = pytest.importorskip("psutil", reason="needs psutil (comes with ray: the test extra)")
     scenario = write_scenario(
         tmp_path, world={"size": [40, 40, 8]}, obstacles={"count": 6, "max_size": [6, 6, 8]},
         fleet={"agents": 10}, tasks={"ground_fraction": 1.0},

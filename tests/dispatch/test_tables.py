@@ -173,9 +173,10 @@ def test_tables_and_analysis_share_one_gap_and_order():
         assert row["gap_mean"] == pytest.approx(agg[(label, 8)]["gap"])
 
 
-def test_trip_table_shows_cancelled_and_fits_with_variant_labels():
-    """The trip table has a cancelled column (served + rejected + cancelled + failed add up
-    to the trips) and fits 80 columns uncut with the longest labels (a swept batch window)."""
+def test_trip_table_shows_cut_off_trips_and_fits_with_variant_labels():
+    """The trip table has a column of the trips the run's end cut off (summary
+    ``tasks_cancelled``; served + rejected + cut off + failed add up to the trips), named so,
+    and fits 80 columns uncut with the longest labels (a swept batch window)."""
     rows = []
     for a, n, s in itertools.product(["local_hungarian", "magnnet_match", "fcfs"],
                                      [100, 1000], [0, 1]):
@@ -188,7 +189,8 @@ def test_trip_table_shows_cancelled_and_fits_with_variant_labels():
     assert "…" not in text and max(map(len, text.splitlines())) <= 80
     line = next(ln for ln in text.splitlines() if ln.split()[:2] == ["local_hungarian", "30s"])
     assert line.split()[4:7] == ["90.0%", "6.0%", "3.8%"], line
-    assert "canc." in text
+    assert " cut " in text and "cut off (still waiting or aboard when the run ended)" in " ".join(
+        text.split()) and "canc" not in text
 
 
 def test_shared_ride_table_with_variants():
@@ -240,3 +242,38 @@ def test_tables_and_analysis_share_one_set_of_per_task_figures():
             assert agg[key] == pytest.approx(mean)
         else:  # the CLI's mean over seeds keeps a NaN (a run without the figure)
             assert (math.isnan(agg[key]) and math.isnan(mean)) or agg[key] == pytest.approx(mean)
+
+
+ENERGY = {"kwh_drawn": 2400.0, "kwh_charged": 900.0, "charges": 37, "strandings": 1,
+          "soc_min": 0.123, "soc_end_mean": 0.456, "queue_seconds": 7200.0}
+
+
+def test_one_road_run_says_cut_off_trips_and_its_energy():
+    """One run's summary counts the trips the run's end cut off on their own (not as
+    cancelled) and, with energy, prints its energy line: kWh drawn and charged, charges,
+    queueing, lowest and end state of charge, strandings."""
+    s = {**_summary("hungarian", 1200, 0, "road"), **ENERGY}
+    text = " ".join(_render([s]).split())
+    assert "12000 served (97.2 %), 45 cut off by the end of the run (still waiting or aboard)" \
+        in text and "cancel" not in text
+    assert ("energy 2,400.0 kWh drawn (2.00 per vehicle), 900.0 kWh charged in 37 charges, "
+            "2.0 h queued; state of charge lowest 12.3%, mean at the end 45.6%; 1 vehicle "
+            "stranded") in text
+    plain = _render([_summary("hungarian", 1200, 0, "road")])
+    assert "energy" not in plain and "kWh" not in plain
+
+
+def test_electric_runs_get_an_energy_table_that_fits_80_columns():
+    """Several electric runs: the energy table, per vehicle and means over the seeds (by
+    hand), rows as the trip table's, within 80 columns."""
+    rows = [{**_summary("hungarian", n, seed, "road"), **ENERGY, "allocator": a,
+             "charges": 30 + 10 * seed, "kwh_drawn": 2400.0 + 600.0 * seed}
+            for a in ("local_hungarian", "fcfs") for n in (800, 1200) for seed in (0, 1)]
+    text = _render(rows)
+    assert "…" not in text and max(map(len, text.splitlines())) <= 80
+    energy = text[text.index("Energy, mean over 2 seed(s)"):]
+    line = next(ln for ln in energy.splitlines() if ln.split()[:2] == ["local_hungarian", "800"])
+    # (2400 + 3000) / 2 / 800 kWh per vehicle, 900 / 800 charged, (30 + 40) / 2 charges,
+    # 2 h queued, 12.3 % lowest, 45.6 % at the end, 1 stranded
+    assert line.split()[2:] == ["3.38", "1.12", "35", "2.0", "12.3", "45.6", "1"], line
+    assert "Energy" not in _render([_summary("fcfs", 8, s, "road") for s in (0, 1)])

@@ -20,6 +20,7 @@ from dispatch.roads import load_network, manhattan
 from dispatch.runner import run_one
 from dispatch.scenario import load_scenario
 from dispatch.plugins import check_runs
+from tests.conftest import missing_data
 
 ROOT = Path(__file__).resolve().parents[2]
 TAXI = ROOT.parent / "shared" / "data" / "taxi" / "chicago_taxi_trips_sample.csv"
@@ -197,7 +198,7 @@ def test_positions_in_metres_are_snapped_and_the_distance_recorded(tmp_path):
     assert tasks.dropoff_snap_m.tolist() == pytest.approx([math.hypot(20, 10), 0.0])
 
 
-@pytest.mark.skipif(not TAXI.is_file(), reason=f"Chicago taxi sample not found at {TAXI}")
+@pytest.mark.skipif(not TAXI.is_file(), reason=missing_data(TAXI, "the raw Chicago taxi sample"))
 def test_chicago_trace_by_latitude_longitude(tmp_path):
     """Real taxi trips (the shared Chicago sample) on the shipped Chicago network: snapped to
     through nodes a few hundred metres away, served, costs equal to scipy's Dijkstra."""

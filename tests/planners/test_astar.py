@@ -21,6 +21,7 @@ from dispatch.voxels import Grid
 from dispatch.world import World
 from planners import graph as G
 from planners.astar import AStarPlanner
+from tests.conftest import missing_data
 
 SHAPE = (12, 10, 6)
 SEEDS = (0, 1, 2, 3)
@@ -540,7 +541,8 @@ def load_scen(path: Path) -> list[tuple[int, int, int, int, int, int, int, float
 
 
 MAPS = sorted(p.name for p in (DATA / "maps").glob("*.map")) if DATA.is_dir() else []
-needs_data = pytest.mark.skipif(not MAPS, reason=f"MovingAI data not found under {DATA}")
+needs_data = pytest.mark.skipif(not MAPS,
+                                reason=missing_data(DATA, "the MovingAI 2D benchmark maps"))
 
 
 def sample_scenarios(rows, per_map: int):

@@ -18,13 +18,14 @@ import pytest
 from dispatch.motion import check_path, path_length
 from dispatch.voxels import Grid
 from planners import graph as G
+from tests.conftest import missing_data
 
 DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "movingai_3d"
 MAP = DATA / "A1.3dmap"
 SCEN = DATA / "A1.3dmap.3dscen"
 
 needs_data = pytest.mark.skipif(not (MAP.is_file() and SCEN.is_file()),
-                                reason=f"MovingAI 3D data not found under {DATA}")
+                                reason=missing_data(DATA, "the MovingAI 3D map A1"))
 
 
 def load_voxels(path: Path) -> Grid:
