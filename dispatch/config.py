@@ -157,6 +157,20 @@ class TaskConfig:
     #: trace on roads: metres a pickup / drop-off may lie from the nearest node (farther:
     #: the trip is left out before the run, counted in trips.dropped); None: no bound
     max_snap: float | None = None
+    #: meeting points (dispatch.meeting): metres a rider may walk to board and from alighting
+    #: (0: door to door), walking speed (m/s), and at most how many boarding (and as many
+    #: alighting) points per request, the nearest
+    max_walk: float = 0.0
+    walk_speed: float = 1.4
+    meeting_points: int = 8
+
+    @property
+    def walking(self) -> bool:
+        """Some rider may walk to a meeting point (``max_walk`` > 0, or its trace's column)."""
+        trips = self.trips
+        return self.max_walk > 0 or (
+            trips is not None and trips.max_walk is not None
+            and bool((np.nan_to_num(trips.max_walk) > 0).any()))
 
     @property
     def delay_limited(self) -> bool:

@@ -16,7 +16,8 @@ in the order they run:
    the fleet can ever reach are closed ``unreachable`` (:func:`close_unreachable`).
 5. :meth:`Pipeline.limits`: with plans, the insertion costs by the objective
    (:func:`dispatch.plans.insertion_costs_of`: each request's cheapest feasible insertion
-   into each vehicle's plan); without, :func:`deadlines` (``inf`` where a vehicle would
+   into each vehicle's plan; with meeting points :func:`dispatch.meeting.meeting_costs`, the
+   cheapest over its candidate boarding and alighting points too); without, :func:`deadlines` (``inf`` where a vehicle would
    reach the pickup after the deadline; with lazy costs each request's feasibility made
    exact, :func:`dispatch.lazy.resolve_open`). A request no vehicle reaches in time is
    rejected the first time it is offered (:func:`reject_late`).
@@ -51,6 +52,7 @@ from dispatch.comms import Hearing
 from dispatch.contracts import Allocator, Planner
 from dispatch.errors import DispatchError, PluginError
 from dispatch.lazy import certify, resolve_open
+from dispatch.meeting import meeting_costs
 from dispatch.plans import Inserts, Plans, busy_with_free_seat, insertion_costs_of
 from dispatch.problem import AgentViews, AllocationProblem
 from dispatch.space import Space
@@ -386,13 +388,17 @@ class Pipeline:
     def __init__(self, book: TaskBook, fleet: Fleet, operator: Operator, planner: Planner,
                  allocator: Allocator, space: Space, cfg: DispatchConfig, comms: CommsConfig,
                  rng: np.random.Generator, tally: Tally, blame: Blame, links=None,
-                 energy_filter=None, *, pooled: bool = False, max_delay: bool = False) -> None:
+                 energy_filter=None, *, pooled: bool = False, max_delay: bool = False,
+                 walks=None) -> None:
         self.book, self.fleet, self.operator, self.tally = book, fleet, operator, tally
         self.space = space
         #: the vehicles have plans to insert into (a capacity above 1), requests have drop-off
         #: limits or the objective is the added time: costs are insertion costs (dispatch.stops)
         self.pooled = bool(pooled)
-        self.plans = self.pooled or cfg.objective != "pickup_time" or bool(max_delay)
+        #: meeting points (:class:`dispatch.meeting.Walks`; None: door to door)
+        self.walks = walks
+        self.plans = self.pooled or cfg.objective != "pickup_time" or bool(max_delay) \
+            or walks is not None
         self.objective = OBJECTIVES[cfg.objective]
         self.reassign = cfg.reassign
         #: the planner routes between any two locations (direct times, insertions)
@@ -464,9 +470,16 @@ class Pipeline:
         if self.plans:
             if servable is None:
                 servable = np.ones(len(open_tasks), dtype=bool)
-            cost, inserts = insertion_costs_of(cost, idle, open_tasks, now, set(holder.values()),
-                                               fleet=self.fleet, operator=self.operator,
-                                               planner=self.planner, objective=self.objective)
+            if self.walks is not None:  # meeting points: the cheapest candidate pair's
+                cost, inserts = meeting_costs(self.walks, cost, idle, agents, open_tasks, now,
+                                              set(holder.values()), fleet=self.fleet,
+                                              operator=self.operator, planner=self.planner,
+                                              objective=self.objective)
+            else:
+                cost, inserts = insertion_costs_of(cost, idle, open_tasks, now,
+                                                   set(holder.values()), fleet=self.fleet,
+                                                   operator=self.operator, planner=self.planner,
+                                                   objective=self.objective)
             servable = reject_late(self.book, open_tasks, cost, servable)
         elif any(d < math.inf for d in limits):
             if servable is None:

@@ -99,6 +99,10 @@ class Operator(Breakdowns):
     def _stops(self, task: Task) -> list[Stop]:
         """The stops of ``task``: its pickup (which completes a point task) and drop-off."""
         n, svc = task.passengers, self.service_time
+        m = task.meeting
+        if m is not None and not task.transfers:  # meeting points (dispatch.meeting)
+            return [Stop(PICKUP, task, m.board, n, task.deadline, False, earliest=m.earliest),
+                    Stop(DROPOFF, task, m.alight, -n, m.latest_drop, True, service=svc)]
         if task.dropoff is None:
             return [Stop(PICKUP, task, task.loc, 0, task.deadline, True, service=svc)]
         return [Stop(PICKUP, task, task.loc, n, task.deadline, False),
@@ -111,6 +115,8 @@ class Operator(Breakdowns):
         re-routes if its next stop changed."""
         env = self.env
         self._cut(v)  # a repositioning move ends here: the vehicle sets out from where it is
+        if at is not None and at.meeting is not None:  # where the rider boards and alights
+            task.meeting = at.meeting
         if not v.stops and v.serving is None:  # an empty plan: the vehicle sets out now
             self.execution.set_out(v, task, cost, at)
             return
@@ -387,6 +393,10 @@ class Operator(Breakdowns):
                         v.drove(path.length, path.seconds)
                     else:
                         yield from self.driver.drive(env, v, path, tid)
+                    if stop.earliest > env.now:  # (the rule) e.g. a rider still walking to it
+                        stop.leg = 0.0  # it waits where the stop is
+                        v.plan_version += 1
+                        yield env.timeout(stop.earliest - env.now)
             except simpy.Interrupt as i:
                 if i.cause != "reroute":
                     self._dropped(v, stop)

@@ -74,6 +74,10 @@ SCHEMAS: dict[str, pa.Schema] = {
         ("delay_mean", _F), ("detour_ratio", _F),
         # [dispatch] objective: what a pair's cost (total_cost's terms) measures
         ("objective", _S),
+        # meeting points (dispatch.meeting): mean metres walked per completed ride (to board
+        # plus from alighting; 0 door to door), candidate points found, and points within a
+        # radius left out by [tasks] meeting_points
+        ("walk_mean", _F), ("meeting_points", _I), ("meeting_cut", _I),
     ]),
     "tasks": pa.schema([
         ("run_id", _S), ("task_id", _I), ("kind", _S), ("x", _F), ("y", _F), ("z", _F),
@@ -87,6 +91,10 @@ SCHEMAS: dict[str, pa.Schema] = {
         # shared rides: riders; free-flow seconds pickup -> drop-off; the request's delay
         # limit; whether another request was on board during its ride
         ("passengers", _I), ("direct_time", _F), ("max_delay", _F), ("shared", _B),
+        # meeting points (dispatch.meeting): where the rider boarded and alighted (the pickup
+        # and drop-off door to door; nan: never handed out) and the metres walked
+        ("board_x", _F), ("board_y", _F), ("alight_x", _F), ("alight_y", _F),
+        ("walk_to_board_m", _F), ("walk_from_alight_m", _F),
     ]),
     "assignments": pa.schema([
         ("run_id", _S), ("decision", _I), ("round", _I), ("agent_id", _I), ("task_id", _I),

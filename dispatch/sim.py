@@ -43,6 +43,7 @@ from dispatch.charging import Charging, Stations
 from dispatch.decision import Blame, Pipeline, Tally
 from dispatch.dispatcher import Dispatcher, Wakeup
 from dispatch.events import EventBus
+from dispatch.meeting import Walks
 from dispatch.faults import FaultInjector, blackout_filter
 from dispatch.operator import Hooks, Operator, Towing
 from dispatch.plugins import (check_repositioner, describe, make_charger, make_plugin,
@@ -145,12 +146,16 @@ class Simulation:
         #: what the decisions add up to (the summary's columns); the errors' context
         self.tally = Tally()
         blame = Blame(env, spec.run_id, self.tally)
+        #: meeting points (dispatch.meeting.Walks): None when every rider goes door to door
+        self.walks = (Walks(space, sc.tasks.meeting_points) if sc.tasks.walking else None)
+        if self.walks is not None:
+            book.on_close.append(lambda t: self.walks.forget((t.id,)))
         pipeline = Pipeline(book, self.fleet, self.operator, self.planner, allocator, space, d,
                             sc.comms, rng_for(spec.seed, STREAM_ALLOCATOR), self.tally, blame,
                             blackout_filter(sc.faults),
                             None if self.energy is None else self.energy.filter,
                             pooled=any(v.capacity > 1 for v in self.vehicles),
-                            max_delay=sc.tasks.delay_limited)
+                            max_delay=sc.tasks.delay_limited, walks=self.walks)
         self.dispatcher = Dispatcher(env, wakeup, pipeline, self.fleet, self.operator,
                                      allocator, self.tally, blame, self._record_decision,
                                      window=d.batch_window, latency=sc.comms.latency)
@@ -261,5 +266,7 @@ class Simulation:
         # what the allocator says at the end (a learned model's name, a batch method's counts)
         extra = {**summary_of(self.repositioning),
                  "allocator_info": describe(self.dispatcher.allocator),
-                 "objective": spec.scenario.dispatch.objective}
+                 "objective": spec.scenario.dispatch.objective,
+                 "meeting_points": 0 if self.walks is None else self.walks.points,
+                 "meeting_cut": 0 if self.walks is None else self.walks.cut}
         return self.recording.summary(run, self.vehicles, self.tally, now, extra)

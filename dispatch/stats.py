@@ -34,6 +34,7 @@ class RunStats:
         self.delay = 0.0  # ... their delay over the direct drive (s)
         self.detour = 0.0  # ... their in-vehicle time over the direct drive
         self.detours = 0  # ... those with a direct time > 0
+        self.walked = 0.0  # ... metres their riders walked (meeting points: dispatch.meeting)
 
     def closed(self, t: Task) -> None:
         self.n_tasks += 1
@@ -58,6 +59,8 @@ class RunStats:
                 self.rides += 1
                 self.shared += t.shared
                 self.delay += t.dropped_at - t.released_at - direct
+                if t.meeting is not None:
+                    self.walked += t.meeting.walk_to_board + t.meeting.walk_from_alight
                 if direct > 0:
                     self.detour += (t.dropped_at - t.picked_up_at) / direct
                     self.detours += 1
@@ -96,4 +99,5 @@ class RunStats:
             shared_rate=self.shared / self.rides if self.rides else math.nan,
             delay_mean=self.delay / self.rides if self.rides else math.nan,
             detour_ratio=self.detour / self.detours if self.detours else math.nan,
+            walk_mean=self.walked / self.rides if self.rides else math.nan,
         )
