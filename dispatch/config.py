@@ -157,11 +157,13 @@ class TaskConfig:
     #: trace on roads: metres a pickup / drop-off may lie from the nearest node (farther:
     #: the trip is left out before the run, counted in trips.dropped); None: no bound
     max_snap: float | None = None
-    #: meeting points (dispatch.meeting): metres a rider may walk to board and from alighting
-    #: (0: door to door), walking speed (m/s), and at most how many boarding (and as many
-    #: alighting) points per request, the nearest
+    #: metres a rider may walk to a boarding point and from an alighting point (meeting
+    #: points, dispatch.meeting; 0: door to door; a trace's ``max_walk`` column per row)
     max_walk: float = 0.0
+    #: m/s riders walk at (a trace's ``walk_speed`` column per row)
     walk_speed: float = 1.4
+    #: boarding points (and as many alighting points) per request at most, the nearest
+    #: within ``max_walk``
     meeting_points: int = 8
 
     @property
