@@ -44,6 +44,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from dispatch.insertion import insertion_costs
+from dispatch.problem import TaskView
 
 if TYPE_CHECKING:
     from dispatch.contracts import Planner
@@ -193,17 +194,24 @@ def _pairs(walks: Walks, tasks: list, svc: float, planner: Planner):
 
 def meeting_costs(walks: Walks, cost: np.ndarray, slots: np.ndarray, agents, tasks: list,
                   now: float, holders: set, *, fleet: Fleet, operator: Operator,
-                  planner: Planner, objective: int) -> tuple[np.ndarray, MeetingInserts]:
+                  planner: Planner, objective: int, one_point: bool = False):
     """A decision's costs with meeting points (what :func:`dispatch.plans.insertion_costs_of`
     is door to door): for each vehicle (``slots``, views ``agents``) and request of ``tasks``
     the minimum over its candidate pairs of the cheapest feasible insertion (an empty plan: the
     pickup and drop-off in that order), ``inf`` where none keeps every limit. ``cost`` (the
     drives to the origins) gives the shape. Returns ``(costs by the objective, where the stops
-    go)`` for every finite pair."""
+    go, {}))`` for every finite pair.
+
+    ``one_point`` (allocators that route several requests, ``rtv``): one candidate pair per
+    request for every vehicle, the one of its cheapest insertion among the pairs whose
+    boarding point the rider reaches before any vehicle of the decision can (release + walk
+    time <= now + the shortest drive there: no route of these vehicles ever boards the rider
+    early, whatever its order); the third item maps each such request's index to its
+    :class:`Meeting`."""
     n_v, m = cost.shape
     out = np.full((n_v, m), np.inf)
     if not n_v or not m:
-        return out, MeetingInserts(None, {}, [])
+        return out, MeetingInserts(None, {}, []), {}
     col, b, a, wb, wa, e, lp, ld, n_req, svc_p, svc_d, pd = _pairs(
         walks, tasks, operator.service_time, planner)
     ub, b_at = np.unique(b, return_inverse=True)
@@ -214,10 +222,12 @@ def meeting_costs(walks: Walks, cost: np.ndarray, slots: np.ndarray, agents, tas
     ready = np.where(planned, np.maximum(fleet.free_at[slots], now), now)
     drive = np.asarray(planner.between([ag.loc for ag in agents], ub.tolist()), float)
     first = drive[:, b_at]  # (vehicles, candidate pairs)
-    rows, vcols = np.nonzero((ready[:, None] + first <= lp + 1e-9)
-                             & (n_req <= cap[:, None]))
+    ok = (ready[:, None] + first <= lp + 1e-9) & (n_req <= cap[:, None])
+    if one_point:  # boarding points the rider reaches first
+        ok &= (e <= now + first.min(axis=0) + 1e-9)[None, :]
+    rows, vcols = np.nonzero(ok)
     if not rows.size:
-        return out, MeetingInserts(None, {}, [])
+        return out, MeetingInserts(None, {}, []), {}
     used = np.unique(rows)
     remap = np.full(n_v, -1, np.int64)
     remap[used] = np.arange(used.size)
@@ -251,29 +261,48 @@ def meeting_costs(walks: Walks, cost: np.ndarray, slots: np.ndarray, agents, tas
         remap[rows], cmap[vcols], ready[used], first[rows, vcols], off, s_arr, s_svc,
         s_latest, s_occ, load, cap[used], to_p, from_p, to_d, from_d, pd[uc], n_req[uc],
         lp[uc], ld[uc], svc_p[uc], svc_d[uc], objective, s_e, e[uc])
-    # each (vehicle, request)'s cheapest candidate pair: by cost, then the pair listed first
     task_of = col[vcols]
-    key = rows * m + task_of
-    order = np.lexsort((vcols, ins.cost, key))
-    head = np.ones(order.size, bool)
-    head[1:] = key[order][1:] != key[order][:-1]
-    best = order[head]
-    best = best[np.isfinite(ins.cost[best])]
+    chosen: dict[int, Meeting] = {}
+    if one_point:  # each request's pair: its cheapest insertion's (then the pair first listed)
+        order = np.lexsort((vcols, ins.cost, task_of))
+        head = np.ones(order.size, bool)
+        head[1:] = task_of[order][1:] != task_of[order][:-1]
+        pick = np.full(m, -1, np.int64)
+        pick[task_of[order[head]]] = vcols[order[head]]
+        best = np.flatnonzero((vcols == pick[task_of]) & np.isfinite(ins.cost))
+        for k in np.unique(vcols[best]).tolist():
+            chosen[int(col[k])] = _meeting(k, b, a, wb, wa, e, ld)
+    else:  # each (vehicle, request)'s cheapest candidate pair (then the pair first listed)
+        key = rows * m + task_of
+        order = np.lexsort((vcols, ins.cost, key))
+        head = np.ones(order.size, bool)
+        head[1:] = key[order][1:] != key[order][:-1]
+        best = order[head]
+        best = best[np.isfinite(ins.cost[best])]
     out[rows[best], task_of[best]] = ins.cost[best]
     meet: list = [None] * rows.size
     q_of = {}
     for q in best.tolist():
-        k = int(vcols[q])
-        meet[q] = Meeting(int(b[k]), int(a[k]), float(wb[k]), float(wa[k]), float(e[k]),
-                          float(ld[k]))
+        meet[q] = _meeting(int(vcols[q]), b, a, wb, wa, e, ld)
         q_of[(int(rows[q]), int(task_of[q]))] = q
-    return out, MeetingInserts(ins, q_of, meet)
+    return out, MeetingInserts(ins, q_of, meet), chosen
+
+
+def _meeting(k: int, b, a, wb, wa, e, ld) -> Meeting:
+    return Meeting(int(b[k]), int(a[k]), float(wb[k]), float(wa[k]), float(e[k]), float(ld[k]))
+
+
+def view_at(t: Task, m: Meeting) -> TaskView:
+    """``t``'s view with its pickup and drop-off at the meeting points ``m`` and the drop-off
+    limit less the walk from it (what an allocator routing several requests plans with)."""
+    return TaskView(t.id, t.kind, m.board, t.released_at, m.alight,  # type: ignore[arg-type]
+                    t.deadline, t.passengers, m.latest_drop)
 
 
 def walk_m(t: Task) -> tuple[float, float]:
     """Metres ``t``'s rider walked to board and from alighting (0, 0 door to door; nan for a
     request never handed out)."""
+    if t.agent_id < 0:
+        return math.nan, math.nan
     m = t.meeting
-    if m is not None:
-        return m.walk_to_board, m.walk_from_alight
-    return (0.0, 0.0) if t.agent_id >= 0 else (math.nan, math.nan)
+    return (0.0, 0.0) if m is None else (m.walk_to_board, m.walk_from_alight)

@@ -122,7 +122,7 @@ class TaskWriter:
         p = self.position(t.loc if t.origin is None else t.origin)
         d = NAN3 if t.dropoff is None else self.position(t.dropoff)
         m = t.meeting
-        if m is not None:  # meeting points (dispatch.meeting)
+        if m is not None and t.agent_id >= 0:  # meeting points (dispatch.meeting)
             b, a = self.position(m.board), self.position(m.alight)
         elif t.agent_id >= 0:  # door to door
             b, a = p, d

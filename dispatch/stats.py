@@ -59,7 +59,7 @@ class RunStats:
                 self.rides += 1
                 self.shared += t.shared
                 self.delay += t.dropped_at - t.released_at - direct
-                if t.meeting is not None:
+                if t.meeting is not None and t.agent_id >= 0:
                     self.walked += t.meeting.walk_to_board + t.meeting.walk_from_alight
                 if direct > 0:
                     self.detour += (t.dropped_at - t.picked_up_at) / direct

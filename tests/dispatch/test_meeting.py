@@ -60,12 +60,13 @@ def _tables(path: Path):
 
 def _brute(walks, cost, slots, agents, tasks, now, holders, fleet, operator, planner,
            objective):
-    """Every (vehicle, request): the least cost over every candidate pair of points and every
-    pair of positions, by re-simulating each plan (tests/dispatch/reference.py). A plan's
+    """Every (vehicle, request, candidate pair of points): the least cost over every pair of
+    positions, by re-simulating each plan (tests/dispatch/reference.py), as an array
+    ``(vehicles, requests, pairs)`` (inf past a request's pairs). A plan's
     stops keep their planned drives between them (as a decision reads a plan: the drive
     between two consecutive stops of a plan is the one planned), every other drive is the
     planner's."""
-    out = np.full(cost.shape, math.inf)
+    out = np.full((*cost.shape, 64), math.inf)
     svc = operator.service_time
 
     def node(x):
@@ -98,16 +99,20 @@ def _brute(walks, cost, slots, agents, tasks, now, holders, fleet, operator, pla
             return float(planner.between([loc], [node(x)])[0, 0])
 
         for c, t in enumerate(tasks):
-            cand = walks.of(t)
-            for b, wb in zip(cand.board.tolist(), cand.board_m.tolist()):
-                for a, wa in zip(cand.alight.tolist(), cand.alight_m.tolist()):
-                    e = t.released_at + wb / t.walk_speed if wb > 0 else -math.inf
-                    req = (b, a, t.passengers, t.deadline,
-                           t.dropoff_deadline - wa / t.walk_speed, 0.0, svc, e)
-                    got = brute_force_insertion(ready, first_tt, stops, load, v.capacity, req,
-                                                tt, objective)[0]
-                    out[r, c] = min(out[r, c], got)
+            for q, (b, a, e, ld) in enumerate(_points(walks, t)):
+                req = (b, a, t.passengers, t.deadline, ld, 0.0, svc, e)
+                out[r, c, q] = brute_force_insertion(ready, first_tt, stops, load, v.capacity,
+                                                     req, tt, objective)[0]
     return out
+
+
+def _points(walks, t):
+    """``t``'s candidate pairs in order: (board, alight, earliest pickup, latest drop-off)."""
+    cand = walks.of(t)
+    return [(b, a, t.released_at + wb / t.walk_speed if wb > 0 else -math.inf,
+             t.dropoff_deadline - wa / t.walk_speed)
+            for b, wb in zip(cand.board.tolist(), cand.board_m.tolist())
+            for a, wa in zip(cand.alight.tolist(), cand.alight_m.tolist())]
 
 
 @pytest.mark.parametrize("seed,objective,service", [(0, "added_time", 0.0),
@@ -119,17 +124,25 @@ def test_costs_equal_a_brute_force_over_points_and_positions(tmp_path, monkeypat
     checked = []
 
     def spy(walks, cost, slots, agents, tasks, now, holders, *, fleet, operator, planner,
-            objective):
-        got, inserts = meeting_costs(walks, cost, slots, agents, tasks, now, holders,
-                                     fleet=fleet, operator=operator, planner=planner,
-                                     objective=objective)
-        want = _brute(walks, cost, slots, agents, tasks, now, holders, fleet, operator,
+            objective, one_point):
+        assert not one_point
+        got, inserts, _ = meeting_costs(walks, cost, slots, agents, tasks, now, holders,
+                                        fleet=fleet, operator=operator, planner=planner,
+                                        objective=objective)
+        each = _brute(walks, cost, slots, agents, tasks, now, holders, fleet, operator,
                       planner, objective)
+        want = each.min(axis=2)
         assert (np.isfinite(got) == np.isfinite(want)).all(), (now, got, want)
         fin = np.isfinite(want)
         np.testing.assert_allclose(got[fin], want[fin], rtol=0, atol=1e-6)
+        for r, c in zip(*np.nonzero(fin)):  # the points handed out are a cheapest pair's
+            m = inserts.get((r, c)).meeting
+            pts = _points(walks, tasks[c])
+            q = [(p[0], p[1]) for p in pts].index((m.board, m.alight))
+            assert each[r, c, q] == pytest.approx(want[r, c], abs=1e-6)
+            assert (m.earliest, m.latest_drop) == pts[q][2:]
         checked.append(int(fin.sum()))
-        return got, inserts
+        return got, inserts, {}
 
     monkeypatch.setattr(decision, "meeting_costs", spy)
     _trace(tmp_path, seed)
@@ -137,6 +150,47 @@ def test_costs_equal_a_brute_force_over_points_and_positions(tmp_path, monkeypat
                                    service=service))
     assert summary["tasks_completed"] > 0
     assert sum(checked) > 20  # decisions with feasible pairs, busy plans among them
+
+
+@pytest.mark.parametrize("seed", [0, 4])
+def test_one_point_per_request_equals_a_brute_force(tmp_path, monkeypatch, seed):
+    """``rtv``'s meeting points: one pair per request, the cheapest insertion's among the pairs
+    whose boarding point the rider reaches before any vehicle of the decision can; every
+    vehicle's cost is that pair's exhaustive minimum over positions."""
+    checked = []
+
+    def spy(walks, cost, slots, agents, tasks, now, holders, *, fleet, operator, planner,
+            objective, one_point):
+        assert one_point
+        got, inserts, chosen = meeting_costs(walks, cost, slots, agents, tasks, now, holders,
+                                             fleet=fleet, operator=operator, planner=planner,
+                                             objective=objective, one_point=True)
+        each = _brute(walks, cost, slots, agents, tasks, now, holders, fleet, operator,
+                      planner, objective)
+        for c, t in enumerate(tasks):
+            pts = _points(walks, t)
+            soon = [min(float(planner.between([ag.loc], [p[0]])[0, 0]) for ag in agents)
+                    for p in pts]
+            allowed = [q for q, p in enumerate(pts) if p[2] <= now + soon[q] + 1e-9]
+            best = min((each[:, c, q].min() for q in allowed), default=math.inf)
+            if not math.isfinite(best):
+                assert c not in chosen and not np.isfinite(got[:, c]).any()
+                continue
+            m = chosen[c]
+            q = [(p[0], p[1]) for p in pts].index((m.board, m.alight))
+            assert q in allowed and each[:, c, q].min() == pytest.approx(best, abs=1e-6)
+            col = each[:, c, q]
+            assert (np.isfinite(got[:, c]) == np.isfinite(col)).all()
+            np.testing.assert_allclose(got[np.isfinite(col), c], col[np.isfinite(col)],
+                                       rtol=0, atol=1e-6)
+            checked.append(c)
+        return got, inserts, chosen
+
+    monkeypatch.setattr(decision, "meeting_costs", spy)
+    _trace(tmp_path, seed)
+    summary, tables = _tables(_scenario(tmp_path, walk=200.0, allocator="rtv"))
+    assert len(checked) > 10 and summary["walk_mean"] > 0
+    _walk_invariants(tables, 200.0)
 
 
 def _walk_invariants(tables: dict, walk: dict | float) -> None:
@@ -166,8 +220,7 @@ def test_rides_keep_the_walking_limits(tmp_path, allocator):
     summary, tables = _tables(_scenario(tmp_path, walk=250.0, allocator=allocator))
     check_invariants(summary, tables)
     _walk_invariants(tables, 250.0)
-    if allocator != "rtv":  # (rtv routes its groups door to door)
-        assert summary["walk_mean"] > 0
+    assert summary["walk_mean"] > 0
     assert summary["meeting_points"] > 0
 
 
