@@ -52,10 +52,10 @@ TASK_COLUMNS = (
     "walk_to_board_m", "walk_from_alight_m")
 
 
-def task_row(t, p, d, b=NAN3, a=NAN3) -> tuple:
+def task_row(t, p, d, b=NAN3, a=NAN3, walk=NAN3[:2]) -> tuple:
     """The ``tasks`` row of the task ``t`` with the positions of its pickup ``p`` and drop-off
-    ``d`` and of where its rider boarded ``b`` and alighted ``a`` (:data:`TASK_COLUMNS`)."""
-    walk = walk_m(t)
+    ``d``, of where its rider boarded ``b`` and alighted ``a`` and the metres ``walk`` to the
+    one and from the other (:data:`TASK_COLUMNS`)."""
     return (t.id, t.kind, p[0], p[1], p[2], d[0], d[1], d[2], t.released_at,
             t.max_wait, t.snap_m, t.dropoff_snap_m, t.assigned_at, t.agent_id, t.cost,
             t.picked_up_at, t.completed_at, t.state._value_, t.conflicted, t.closed_at,
@@ -128,7 +128,7 @@ class TaskWriter:
             b, a = p, d
         else:
             b = a = NAN3
-        self.append("tasks", task_row(t, p, d, b, a))
+        self.append("tasks", task_row(t, p, d, b, a, walk_m(t)))
 
 
 class DecisionWriter:
