@@ -17,10 +17,11 @@ in the order they run:
 5. :meth:`Pipeline.limits`: with plans, the insertion costs by the objective
    (:func:`dispatch.plans.insertion_costs_of`: each request's cheapest feasible insertion
    into each vehicle's plan; with meeting points :func:`dispatch.meeting.meeting_costs`, the
-   cheapest over its candidate boarding and alighting points too); without, :func:`deadlines` (``inf`` where a vehicle would
-   reach the pickup after the deadline; with lazy costs each request's feasibility made
-   exact, :func:`dispatch.lazy.resolve_open`). A request no vehicle reaches in time is
-   rejected the first time it is offered (:func:`reject_late`).
+   cheapest over its candidate boarding and alighting points too); without,
+   :func:`deadlines` (``inf`` where a vehicle would reach the pickup after the deadline;
+   with lazy costs each request's feasibility made exact, :func:`dispatch.lazy.resolve_open`).
+   A request no vehicle reaches in time is rejected the first time it is offered
+   (:func:`reject_late`).
 6. The energy filter (``[fleet.energy]``, :meth:`dispatch.battery.Energy.filter`): ``inf``
    where a vehicle would end below its reserve.
 7. :func:`keep_servable`: the columns of the requests left out are dropped.

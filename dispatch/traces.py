@@ -5,8 +5,8 @@ A **trace** (CSV or Parquet) holds one trip per row: its release time ``t`` (or
 scenario's ``[tasks] start``), its pickup and, optionally, its drop-off, and an optional
 ``max_wait`` and ``max_delay`` (seconds; blank: the scenario's), ``passengers`` (a whole
 number >= 1; blank: 1) and ``max_walk`` (metres) and ``walk_speed`` (m/s) of meeting points
-(:mod:`dispatch.meeting`; blank: the scenario's). Other columns (``request_id``, ...) are ignored. Where things are, by
-space:
+(:mod:`dispatch.meeting`; blank: the scenario's). Other columns (``request_id``, ...) are
+ignored. Where things are, by space:
 
 * voxel world: ``x, y, z`` (metres; the pickup), optionally ``dest_x, dest_y, dest_z``;
 * road network, one of: ``origin_node, dest_node`` (node ids of the network);

@@ -7,6 +7,7 @@ the walk from it); ``max_walk = 0`` is door to door; bad input is one line namin
 
 from __future__ import annotations
 
+import csv
 import math
 from pathlib import Path
 
@@ -228,7 +229,6 @@ def test_per_row_max_walk(tmp_path):
     """The trace's ``max_walk`` column: each rider walks within their own limit."""
     _trace(tmp_path, 7, n=20, walk_column=True)
     summary, tables = _tables(_scenario(tmp_path, walk=None))
-    import csv
     with (tmp_path / "trips.csv").open() as fh:
         rows = list(csv.DictReader(fh))
     # task ids follow release order (the trace is sorted by t already)
