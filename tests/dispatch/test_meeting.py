@@ -44,13 +44,16 @@ def _trace(directory: Path, seed: int, n: int = 16, walk_column: bool = False) -
 
 def _scenario(directory: Path, *, walk: float | None, allocator: str = "hungarian",
               objective: str = "added_time", capacity: int = 3, agents: int = 3,
-              service: float = 0.0) -> Path:
+              service: float = 0.0, faults: bool = False) -> Path:
     tasks = ('source = "trace"\ntrace = "trips.csv"\nmax_wait = 240.0\nmax_delay = 300.0'
              f"\nservice_time = {service}")
     if walk is not None:
         tasks += f"\nmax_walk = {walk}\nwalk_speed = {SPEED}\nmeeting_points = 4"
+    extra = f'objective = "{objective}"'
+    if faults:
+        extra += '\n\n[faults]\nrate = 30.0\nrepair = 60.0\non_board = "transfer"'
     return road_scenario(directory, tasks=tasks, fleet=f"agents = {agents}\ncapacity = "
-                         f"{capacity}", allocator=allocator, extra=f'objective = "{objective}"')
+                         f"{capacity}", allocator=allocator, extra=extra)
 
 
 def _tables(path: Path):
@@ -196,7 +199,7 @@ def test_one_point_per_request_equals_a_brute_force(tmp_path, monkeypatch, seed)
 
 def _walk_invariants(tables: dict, walk: dict | float) -> None:
     tasks = tables["tasks"].set_index("task_id")
-    done = tasks[tasks.state == "completed"]
+    done = tasks[(tasks.state == "completed") & (tasks.transfers == 0)]
     assert len(done)
     limit = done.index.map(lambda k: walk[k]) if isinstance(walk, dict) else walk
     # boarding never before the rider gets there; walks within the limit
@@ -223,6 +226,16 @@ def test_rides_keep_the_walking_limits(tmp_path, allocator):
     _walk_invariants(tables, 250.0)
     assert summary["walk_mean"] > 0
     assert summary["meeting_points"] > 0
+
+
+def test_breakdowns_with_riders_walking(tmp_path):
+    """Breakdowns (riders transferred): the invariants hold, the rides not transferred keep
+    the walking limits."""
+    _trace(tmp_path, 8, n=24)
+    summary, tables = _tables(_scenario(tmp_path, walk=250.0, faults=True))
+    assert summary["failures"] > 0
+    check_invariants(summary, tables)
+    _walk_invariants(tables, 250.0)
 
 
 def test_per_row_max_walk(tmp_path):
