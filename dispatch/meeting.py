@@ -25,10 +25,13 @@ choice rides with the insertion handed out (:attr:`dispatch.insertion.Insertion.
 the operator puts the request's stops there (:class:`Meeting`; the vehicle waits at a boarding
 point for a rider still walking).
 
-Allocators that hand out pairs (every allocator costing insertions) get the meeting point of
-the pair's cheapest insertion. ``rtv`` (routes of several requests) plans its groups door to
-door: the requests it routes are driven to and from their origin and destination, those it
-hands out as single pairs take their meeting points (see the how-to).
+Allocators that hand out pairs (every allocator costing insertions) get the meeting points of
+the pair's cheapest insertion. An allocator routing several requests (``rtv``; its decision's
+``one_point``) plans with one pair of points per request: of the pairs whose boarding point the
+rider reaches before any vehicle of the decision could drive there (so no route, in whatever
+order, boards a rider early, and no stop of it waits), the pair of the request's cheapest
+insertion; the allocator sees the request's view at those points (:func:`view_at`) and every
+vehicle's cost of that pair (see the how-to).
 
 With ``max_walk`` = 0 everywhere nothing here runs (the decision has no candidate step).
 """
@@ -200,7 +203,7 @@ def meeting_costs(walks: Walks, cost: np.ndarray, slots: np.ndarray, agents, tas
     the minimum over its candidate pairs of the cheapest feasible insertion (an empty plan: the
     pickup and drop-off in that order), ``inf`` where none keeps every limit. ``cost`` (the
     drives to the origins) gives the shape. Returns ``(costs by the objective, where the stops
-    go, {}))`` for every finite pair.
+    go, {})`` for every finite pair.
 
     ``one_point`` (allocators that route several requests, ``rtv``): one candidate pair per
     request for every vehicle, the one of its cheapest insertion among the pairs whose
