@@ -400,7 +400,7 @@ class Pipeline:
         #: that routes several requests (rtv) plans with one pair of points per request
         self.walks = walks
         self.one_point = walks is not None and allocator.multi_request
-        self._points: dict = {}  # (one_point) task index -> its Meeting, of the last limits
+        self._points: dict = {}  # (one_point) task id -> its Meeting, of the last limits
         self.plans = self.pooled or cfg.objective != "pickup_time" or bool(max_delay) \
             or walks is not None
         self.objective = OBJECTIVES[cfg.objective]
