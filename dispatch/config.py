@@ -177,6 +177,22 @@ class TaskConfig:
     def prebooked(self) -> bool:
         """Some request is booked ahead (``prebook_share``, or its trace's ``booked_at``)."""
         return self.prebook_share > 0 or (self.trips is not None and self.trips.prebooked)
+    #: metres a rider may walk to a boarding point and from an alighting point (meeting
+    #: points, dispatch.meeting; 0: door to door; a trace's ``max_walk`` column per row)
+    max_walk: float = 0.0
+    #: m/s riders walk at (a trace's ``walk_speed`` column per row)
+    walk_speed: float = 1.4
+    #: boarding points (and as many alighting points) per request at most, the nearest
+    #: within ``max_walk``
+    meeting_points: int = 8
+
+    @property
+    def walking(self) -> bool:
+        """Some rider may walk to a meeting point (``max_walk`` > 0, or its trace's column)."""
+        trips = self.trips
+        return self.max_walk > 0 or (
+            trips is not None and trips.max_walk is not None
+            and bool((np.nan_to_num(trips.max_walk) > 0).any()))
 
     @property
     def delay_limited(self) -> bool:

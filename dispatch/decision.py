@@ -16,10 +16,12 @@ in the order they run:
    the fleet can ever reach are closed ``unreachable`` (:func:`close_unreachable`).
 5. :meth:`Pipeline.limits`: with plans, the insertion costs by the objective
    (:func:`dispatch.plans.insertion_costs_of`: each request's cheapest feasible insertion
-   into each vehicle's plan); without, :func:`deadlines` (``inf`` where a vehicle would
-   reach the pickup after the deadline; with lazy costs each request's feasibility made
-   exact, :func:`dispatch.lazy.resolve_open`). A request no vehicle reaches in time is
-   rejected the first time it is offered (:func:`reject_late`).
+   into each vehicle's plan; with meeting points :func:`dispatch.meeting.meeting_costs`, the
+   cheapest over its candidate boarding and alighting points too); without,
+   :func:`deadlines` (``inf`` where a vehicle would reach the pickup after the deadline;
+   with lazy costs each request's feasibility made exact, :func:`dispatch.lazy.resolve_open`).
+   A request no vehicle reaches in time is rejected the first time it is offered
+   (:func:`reject_late`).
 6. The energy filter (``[fleet.energy]``, :meth:`dispatch.battery.Energy.filter`): ``inf``
    where a vehicle would end below its reserve; the shift limit (:meth:`dispatch.shifts.
    Shifts.limit`): ``inf`` where a plan would end after the vehicle's shift and its grace.
@@ -52,6 +54,7 @@ from dispatch.comms import Hearing
 from dispatch.contracts import Allocator, Planner
 from dispatch.errors import DispatchError, PluginError
 from dispatch.lazy import certify, resolve_open
+from dispatch.meeting import meeting_costs, view_at
 from dispatch.plans import Inserts, Plans, busy_with_free_seat, insertion_costs_of
 from dispatch.problem import AgentViews, AllocationProblem
 from dispatch.space import Space
@@ -388,13 +391,19 @@ class Pipeline:
                  allocator: Allocator, space: Space, cfg: DispatchConfig, comms: CommsConfig,
                  rng: np.random.Generator, tally: Tally, blame: Blame, links=None,
                  energy_filter=None, *, pooled: bool = False, max_delay: bool = False,
-                 shifts=None) -> None:
+                 shifts=None, walks=None) -> None:
         self.book, self.fleet, self.operator, self.tally = book, fleet, operator, tally
         self.space = space
         #: the vehicles have plans to insert into (a capacity above 1), requests have drop-off
         #: limits or the objective is the added time: costs are insertion costs (dispatch.stops)
         self.pooled = bool(pooled)
-        self.plans = self.pooled or cfg.objective != "pickup_time" or bool(max_delay)
+        #: meeting points (:class:`dispatch.meeting.Walks`; None: door to door); an allocator
+        #: that routes several requests (rtv) plans with one pair of points per request
+        self.walks = walks
+        self.one_point = walks is not None and allocator.multi_request
+        self._points: dict = {}  # (one_point) task id -> its Meeting, of the last limits
+        self.plans = self.pooled or cfg.objective != "pickup_time" or bool(max_delay) \
+            or walks is not None
         self.objective = OBJECTIVES[cfg.objective]
         self.reassign = cfg.reassign
         #: the planner routes between any two locations (direct times, insertions)
@@ -454,6 +463,8 @@ class Pipeline:
             if not servable.all():
                 open_tasks, tasks, cost, exact, inserts = keep_servable(
                     servable, open_tasks, cost, exact, inserts)
+        if self.one_point:  # the requests planned at their meeting points (dispatch.meeting)
+            tasks = self._at_points(open_tasks, tasks)
         comm, apos = self.hearing(agents, now)
         return Decision(now, idle, agents, open_tasks, tasks, cost, exact, inserts, holder, comm,
                         cost_s, self.problems.of(now, agents, tasks, idle, comm, apos), n_cut)
@@ -471,9 +482,17 @@ class Pipeline:
         if self.plans:
             if servable is None:
                 servable = np.ones(len(open_tasks), dtype=bool)
-            cost, inserts = insertion_costs_of(cost, idle, open_tasks, now, set(holder.values()),
-                                               fleet=self.fleet, operator=self.operator,
-                                               planner=self.planner, objective=self.objective)
+            if self.walks is not None:  # meeting points: the cheapest candidate pair's
+                cost, inserts, points = meeting_costs(
+                    self.walks, cost, idle, agents, open_tasks, now, set(holder.values()),
+                    fleet=self.fleet, operator=self.operator, planner=self.planner,
+                    objective=self.objective, one_point=self.one_point)
+                self._points = {open_tasks[c].id: p for c, p in points.items()}
+            else:
+                cost, inserts = insertion_costs_of(cost, idle, open_tasks, now,
+                                                   set(holder.values()), fleet=self.fleet,
+                                                   operator=self.operator, planner=self.planner,
+                                                   objective=self.objective)
             servable = reject_late(self.book, open_tasks, cost, servable)
         elif any(d < math.inf for d in limits):
             if servable is None:
@@ -486,6 +505,16 @@ class Pipeline:
                                                       now, limits)
             servable = reject_late(self.book, open_tasks, cost, servable)
         return cost, exact, servable, inserts
+
+    def _at_points(self, requests: list, views: tuple) -> tuple:
+        """The views of ``requests`` at the meeting points chosen for them (each request's
+        :attr:`dispatch.tasks.Task.meeting` set to it: handed out, it is where it rides)."""
+        out = []
+        for t, view in zip(requests, views):
+            p = self._points.get(t.id)
+            t.meeting = p
+            out.append(view if p is None else view_at(t, p))
+        return tuple(out)
 
     def answer(self, d: Decision, ask: Ask) -> tuple:
         """``(problem, allocation, allocator seconds, pair indices)`` of decision ``d``:

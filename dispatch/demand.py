@@ -78,7 +78,8 @@ def _road_requests(trips: Trips, origin: np.ndarray, snap_o: np.ndarray,
         yield Request("trip", int(origin[i]), None if dest is None else int(dest[i]),
                       float(trips.max_wait[i]), float(snap_o[i]),
                       nan if snap_d is None else float(snap_d[i]),
-                      _int(trips.passengers, i), _float(trips.max_delay, i))
+                      _int(trips.passengers, i), _float(trips.max_delay, i),
+                      _float(trips.max_walk, i), _float(trips.walk_speed, i))
 
 
 def _int(column, i: int) -> int:

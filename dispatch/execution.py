@@ -58,7 +58,7 @@ class PlanExecution:
     def set_out(self, v: Vehicle, task: Task, cost: float, at: tuple | None) -> None:
         op = self.op
         new = op._stops(task)
-        path = op.driver.plan(v, task.loc, op.env.now)
+        path = op.driver.plan(v, new[0].loc, op.env.now)
         op.book.assign(task, v.id, cost)
         if at is not None:  # the planned times of the decision
             op._set_legs(v, new, [at[2], at[3]][:len(new)])

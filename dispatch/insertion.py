@@ -21,7 +21,8 @@ class Insertion(NamedTuple):
     plan's ``i``-th stop (0: first), the drop-off after its ``j``-th (``j == i``: right after
     the pickup); planned arrival at the pickup and the drop-off; how much later the plan's
     stop ``i`` is reached (``shift1``) and its stop ``j`` (``shift2``; see
-    :func:`dispatch.stops.pushed`)."""
+    :func:`dispatch.stops.pushed`); with meeting points where the rider boards and alights
+    (:class:`dispatch.meeting.Meeting`; None: door to door)."""
 
     i: int
     j: int
@@ -29,6 +30,7 @@ class Insertion(NamedTuple):
     dropoff_at: float
     shift1: float
     shift2: float
+    meeting: object = None
 
 
 @dataclass(frozen=True)

@@ -99,6 +99,10 @@ class Operator(Breakdowns):
     def _stops(self, task: Task) -> list[Stop]:
         """The stops of ``task``: its pickup (which completes a point task) and drop-off."""
         n, svc = task.passengers, self.service_time
+        m = task.meeting
+        if m is not None and not task.transfers:  # meeting points (dispatch.meeting)
+            return [Stop(PICKUP, task, m.board, n, task.deadline, False, earliest=m.earliest),
+                    Stop(DROPOFF, task, m.alight, -n, m.latest_drop, True, service=svc)]
         # a booked request is picked up no sooner than its requested departure (prebook)
         e = task.released_at if task.booked_at == task.booked_at else -math.inf
         if task.dropoff is None:
@@ -114,6 +118,8 @@ class Operator(Breakdowns):
         re-routes if its next stop changed."""
         env = self.env
         self._cut(v)  # a repositioning move ends here: the vehicle sets out from where it is
+        if at is not None and at.meeting is not None:  # where the rider boards and alights
+            task.meeting = at.meeting
         if not v.stops and v.serving is None:  # an empty plan: the vehicle sets out now
             self.execution.set_out(v, task, cost, at)
             return
@@ -399,6 +405,10 @@ class Operator(Breakdowns):
                         v.drove(path.length, path.seconds)
                     else:
                         yield from self.driver.drive(env, v, path, tid)
+                    if stop.earliest > env.now:  # (the rule) a rider still walking to it, a
+                        stop.leg = 0.0  # booked ride's departure: it waits where the stop is
+                        v.plan_version += 1  # (a new first stop interrupts the wait: reroute)
+                        yield env.timeout(stop.earliest - env.now)
             except simpy.Interrupt as i:
                 if i.cause != "reroute":
                     self._dropped(v, stop)
@@ -409,19 +419,6 @@ class Operator(Breakdowns):
                 v.plan_version += 1
                 continue
             v.heading, path = None, None
-            if stop.earliest > env.now:  # early for a stop that opens later: wait there
-                stop.leg = 0.0
-                v.heading = stop  # (held for it: a new first stop interrupts the wait)
-                self.changed(v)
-                try:
-                    yield env.timeout(stop.earliest - env.now)
-                except simpy.Interrupt as i:
-                    if i.cause != "reroute":
-                        return
-                    v.heading = None
-                    v.plan_version += 1
-                    continue  # a new stop first: the vehicle leaves for it
-                v.heading = None
             if stop.visit is not None:  # a charging visit: queue, charge, leave
                 stop.visit.reached()
                 try:

@@ -88,6 +88,10 @@ SCHEMAS: dict[str, pa.Schema] = {
         # seconds the fleet queued at stations (dispatch.energy_summary)
         ("kwh_drawn", _F), ("kwh_charged", _F), ("charges", _I), ("strandings", _I),
         ("soc_min", _F), ("soc_end_mean", _F), ("queue_seconds", _F),
+        # meeting points (dispatch.meeting): mean metres walked per completed ride (to board
+        # plus from alighting; 0 door to door), candidate points found, and points within a
+        # radius left out by [tasks] meeting_points
+        ("walk_mean", _F), ("meeting_points", _I), ("meeting_cut", _I),
     ]),
     "tasks": pa.schema([
         ("run_id", _S), ("task_id", _I), ("kind", _S), ("x", _F), ("y", _F), ("z", _F),
@@ -106,6 +110,10 @@ SCHEMAS: dict[str, pa.Schema] = {
         # offers riders may decline (dispatch.offers): offers made to the rider (0 without an
         # acceptor that declines or [pricing]) and the last offer's fare (nan without [pricing])
         ("offers", _I), ("fare", _F),
+        # meeting points (dispatch.meeting): where the rider boarded and alighted (the pickup
+        # and drop-off door to door; nan: never handed out) and the metres walked
+        ("board_x", _F), ("board_y", _F), ("alight_x", _F), ("alight_y", _F),
+        ("walk_to_board_m", _F), ("walk_from_alight_m", _F),
     ]),
     "assignments": pa.schema([
         ("run_id", _S), ("decision", _I), ("round", _I), ("agent_id", _I), ("task_id", _I),

@@ -24,6 +24,7 @@ import math
 import numpy as np
 
 from dispatch import space_files
+from dispatch.meeting import walk_m
 from dispatch.recorder import SCHEMAS
 from dispatch.shifts import duty_columns
 from dispatch.stats import RunStats
@@ -48,17 +49,19 @@ TASK_COLUMNS = (
     "task_id", "kind", "x", "y", "z", "dropoff_x", "dropoff_y", "dropoff_z", "released_at",
     "max_wait", "snap_m", "dropoff_snap_m", "assigned_at", "agent_id", "cost", "picked_up_at",
     "completed_at", "state", "conflicted", "closed_at", "reassigned", "transfers", "passengers",
-    "direct_time", "max_delay", "shared", "booked_at", "promised", "offers", "fare")
+    "direct_time", "max_delay", "shared", "booked_at", "promised", "offers", "fare",
+    "board_x", "board_y", "alight_x", "alight_y", "walk_to_board_m", "walk_from_alight_m")
 
 
-def task_row(t, p, d) -> tuple:
+def task_row(t, p, d, b=NAN3, a=NAN3, walk=NAN3[:2]) -> tuple:
     """The ``tasks`` row of the task ``t`` with the positions of its pickup ``p`` and drop-off
-    ``d`` (:data:`TASK_COLUMNS`)."""
+    ``d``, of where its rider boarded ``b`` and alighted ``a`` and the metres ``walk`` to the
+    one and from the other (:data:`TASK_COLUMNS`)."""
     return (t.id, t.kind, p[0], p[1], p[2], d[0], d[1], d[2], t.released_at,
             t.max_wait, t.snap_m, t.dropoff_snap_m, t.assigned_at, t.agent_id, t.cost,
             t.picked_up_at, t.completed_at, t.state._value_, t.conflicted, t.closed_at,
             t.reassigned, t.transfers, t.passengers, t.direct_time, t.max_delay, t.shared,
-            t.booked_at, t.promised, t.offers, t.fare)
+            t.booked_at, t.promised, t.offers, t.fare, b[0], b[1], a[0], a[1], *walk)
 
 
 #: the columns :func:`decision_row` returns, in order
@@ -123,7 +126,14 @@ class TaskWriter:
     def __call__(self, t) -> None:
         p = self.position(t.loc if t.origin is None else t.origin)
         d = NAN3 if t.dropoff is None else self.position(t.dropoff)
-        self.append("tasks", task_row(t, p, d))
+        m = t.meeting
+        if m is not None and t.agent_id >= 0:  # meeting points (dispatch.meeting)
+            b, a = self.position(m.board), self.position(m.alight)
+        elif t.agent_id >= 0:  # door to door
+            b, a = p, d
+        else:
+            b = a = NAN3
+        self.append("tasks", task_row(t, p, d, b, a, walk_m(t)))
 
 
 class DecisionWriter:

@@ -154,7 +154,10 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     )
     tasks = replace(tasks, max_wait=t.number("max_wait", 600.0 if source == "empirical"
                                              else None, gt=0.0, optional=True),
-                    max_delay=t.number("max_delay", None, lo=0.0, optional=True))
+                    max_delay=t.number("max_delay", None, lo=0.0, optional=True),
+                    max_walk=t.number("max_walk", 0.0, lo=0.0),
+                    walk_speed=t.number("walk_speed", 1.4, gt=0.0),
+                    meeting_points=t.number("meeting_points", 8, lo=1, integer=True))
     tasks = _parse_empirical(t, tasks, world, fleet)
     tasks = replace(tasks, prebook_share=t.number("prebook_share", 0.0, lo=0.0, hi=1.0),
                     prebook_lead=t.number("prebook_lead", 3600.0, lo=0.0))
@@ -289,6 +292,9 @@ def _check_pooling(path: Path, world: WorldConfig, fleet: FleetConfig, tasks: Ta
         if tasks.max_delay is not None:
             raise ScenarioError(path, "tasks.max_delay", "a drop-off delay limit needs a road "
                                                          "network ([world] network)")
+        if tasks.walking:
+            raise ScenarioError(path, "tasks.max_walk", "meeting points need a road network "
+                                                        "([world] network)")
         if disp.objective != "pickup_time":
             raise ScenarioError(path, "dispatch.objective", "added_time needs a road network "
                                                             "([world] network)")

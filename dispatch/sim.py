@@ -45,6 +45,7 @@ from dispatch.dispatcher import Dispatcher, Wakeup
 from dispatch.energy_summary import EnergyTally, energy_columns
 from dispatch.errors import ScenarioError
 from dispatch.events import EventBus
+from dispatch.meeting import Walks
 from dispatch.faults import FaultInjector, blackout_filter
 from dispatch.operator import Hooks, Operator, Towing
 from dispatch.plugins import (check_repositioner, describe, make_charger, make_plugin,
@@ -159,6 +160,10 @@ class Simulation:
         #: what the decisions add up to (the summary's columns); the errors' context
         self.tally = Tally()
         blame = Blame(env, spec.run_id, self.tally)
+        #: meeting points (dispatch.meeting.Walks): None when every rider goes door to door
+        self.walks = (Walks(space, sc.tasks.meeting_points) if sc.tasks.walking else None)
+        if self.walks is not None:
+            book.on_close.append(lambda t: self.walks.forget((t.id,)))
         pipeline = Pipeline(book, self.fleet, self.operator, self.planner, allocator, space, d,
                             sc.comms, rng_for(spec.seed, STREAM_ALLOCATOR), self.tally, blame,
                             blackout_filter(sc.faults),
@@ -167,7 +172,7 @@ class Simulation:
                             or sc.tasks.prebooked,  # (a promise waits in a plan)
                             max_delay=sc.tasks.delay_limited,
                             shifts=self.shifts if self.shifts is not None
-                            and self.shifts.limited else None)
+                            and self.shifts.limited else None, walks=self.walks)
         self.dispatcher = Dispatcher(env, wakeup, pipeline, self.fleet, self.operator,
                                      allocator, self.tally, blame, self._record_decision,
                                      window=d.batch_window, latency=sc.comms.latency,
@@ -311,5 +316,7 @@ class Simulation:
                  **energy_columns(self.energy_tally, self.vehicles),
                  "allocator_info": describe(self.dispatcher.allocator),
                  "objective": spec.scenario.dispatch.objective,
-                 **fleet_summary(self.vehicles, now, self.stats.count[TaskState.COMPLETED])}
+                 **fleet_summary(self.vehicles, now, self.stats.count[TaskState.COMPLETED]),
+                 "meeting_points": 0 if self.walks is None else self.walks.points,
+                 "meeting_cut": 0 if self.walks is None else self.walks.cut}
         return self.recording.summary(run, self.vehicles, self.tally, now, extra)

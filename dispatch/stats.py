@@ -38,6 +38,7 @@ class RunStats:
         self.promises_broken = 0  # ... of those, ended failed or expired
         self.offers = 0  # offers made to riders (dispatch.offers)
         self.revenue = 0.0  # fares of the completed rides ([pricing])
+        self.walked = 0.0  # ... metres their riders walked (meeting points: dispatch.meeting)
 
     def closed(self, t: Task) -> None:
         self.n_tasks += 1
@@ -70,6 +71,8 @@ class RunStats:
                 self.rides += 1
                 self.shared += t.shared
                 self.delay += t.dropped_at - t.released_at - direct
+                if t.meeting is not None and t.agent_id >= 0:
+                    self.walked += t.meeting.walk_to_board + t.meeting.walk_from_alight
                 if direct > 0:
                     self.detour += (t.dropped_at - t.picked_up_at) / direct
                     self.detours += 1
@@ -110,4 +113,5 @@ class RunStats:
             detour_ratio=self.detour / self.detours if self.detours else math.nan,
             promises=self.promises, promises_broken=self.promises_broken,
             tasks_declined=c[TaskState.DECLINED], offers=self.offers, revenue=self.revenue,
+            walk_mean=self.walked / self.rides if self.rides else math.nan,
         )

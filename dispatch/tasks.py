@@ -116,6 +116,12 @@ class Task:
     promised: bool = False
     offers: int = 0  # offers made to its rider (dispatch.offers; 0 without an acceptor)
     fare: float = math.nan  # the fare of its last offer ([pricing]; nan without)
+    #: meeting points (dispatch.meeting): metres the rider may walk to a boarding point and
+    #: from an alighting point (0: door to door), and their walking speed (m/s)
+    max_walk: float = 0.0
+    walk_speed: float = 1.4
+    #: the meeting points of its ride as handed out (None: door to door) and the metres walked
+    meeting: object = None
 
     @property
     def cell(self):
@@ -277,6 +283,8 @@ class Request:
     dropoff_snap_m: float = math.nan
     passengers: int = 1
     max_delay: float = math.nan
+    max_walk: float = math.nan  # nan: the scenario's
+    walk_speed: float = math.nan
 
 
 class Demand:
@@ -312,6 +320,8 @@ class SourceConfig:
     ttl: float | None
     max_wait: float | None
     max_delay: float | None = None
+    max_walk: float = 0.0
+    walk_speed: float = 1.4
 
 
 class TaskSource:
@@ -343,7 +353,8 @@ class TaskSource:
             kind = "trace"
             trips = draw_day(load_sample(), tasks.trips_per_day, day_rng(), tasks.weekday)
         cfg = SourceConfig(kind, count, tasks.interval, tasks.rate, tasks.max_active,
-                           tasks.ttl, tasks.max_wait, tasks.max_delay)
+                           tasks.ttl, tasks.max_wait, tasks.max_delay, tasks.max_walk,
+                           tasks.walk_speed)
         return cls(env, book, demand, cfg, rng, notify, trips, **extra)
 
     def _done(self) -> None:
@@ -358,6 +369,11 @@ class TaskSource:
         task = self.book.release(req.kind, req.loc, req.dropoff, max_wait=wait,
                                  snap_m=req.snap_m, dropoff_snap_m=req.dropoff_snap_m,
                                  passengers=req.passengers, max_delay=delay)
+        walk = req.max_walk if req.max_walk == req.max_walk else self.cfg.max_walk
+        if walk > 0:  # (door to door otherwise: the task's defaults)
+            task.max_walk = walk
+            task.walk_speed = (req.walk_speed if req.walk_speed == req.walk_speed
+                               else self.cfg.walk_speed)
         if not self.demand.valid(req.loc) or (req.dropoff is not None
                                               and not self.demand.valid(req.dropoff)):
             log.warning("task %d lies in an obstacle; closed as unreachable", task.id)

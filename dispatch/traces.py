@@ -3,11 +3,13 @@
 A **trace** (CSV or Parquet) holds one trip per row: its release time ``t`` (or
 ``release_time``, seconds; or ``departure_time``, a date-time read as seconds from the
 scenario's ``[tasks] start``), its pickup and, optionally, its drop-off, and an optional
-``max_wait`` and ``max_delay`` (seconds; blank: the scenario's) and ``passengers`` (a whole
-number >= 1; blank: 1) and ``booked_at`` (when the trip was booked: seconds, or a date-time
-where the trace's time column is ``departure_time``; blank: not booked; never after the
-requested departure; see :mod:`dispatch.prebook`). Other columns (``request_id``, ...) are
-ignored. Where things are, by space:
+``max_wait`` and ``max_delay`` (seconds; blank: the scenario's), ``passengers`` (a whole
+number >= 1; blank: 1), ``max_walk`` (metres) and ``walk_speed`` (m/s) of meeting points
+(:mod:`dispatch.meeting`; blank: the scenario's) and ``booked_at`` (when the trip was booked:
+seconds, or a date-time where the trace's time column is ``departure_time``; blank: not
+booked; never after the requested departure; see :mod:`dispatch.prebook`). Other columns
+(``request_id``, ...) are ignored.
+Where things are, by space:
 
 * voxel world: ``x, y, z`` (metres; the pickup), optionally ``dest_x, dest_y, dest_z``;
 * road network, one of: ``origin_node, dest_node`` (node ids of the network);
@@ -73,6 +75,11 @@ class Trips:
     #: seconds of delay over the direct drive each trip accepts (``max_delay``; nan: the
     #: scenario's)
     max_delay: np.ndarray | None = None
+    #: metres each rider may walk to a boarding point and from an alighting point
+    #: (``max_walk``; nan: the scenario's) and the rider's walking speed (``walk_speed``, m/s;
+    #: nan: the scenario's); None where the trace has no such column
+    max_walk: np.ndarray | None = None
+    walk_speed: np.ndarray | None = None
     #: trips of the file left out, as ``(reason, count)`` pairs (before ``[tasks] start``;
     #: farther than ``[tasks] max_snap`` from the network): stored with the results
     dropped: tuple[tuple[str, int], ...] = ()
@@ -174,7 +181,8 @@ def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
         raise table.after_rows(ScenarioError(
             path, tcol, "gives times in seconds; [tasks] start is only used with a "
             f"{DATETIME_COLUMN} column of date-times"))
-    optional = [c for c in ("max_wait", "max_delay", "passengers") if c in columns]
+    optional = [c for c in ("max_wait", "max_delay", "passengers", "max_walk", "walk_speed")
+                if c in columns]
     booked = BOOKED_COLUMN in columns
     cols = table.read({tcol: CELLS if tcol == DATETIME_COLUMN else NUMBER,
                        **{c: NUMBER for c in pick + (drop if has_dest else ())},
@@ -196,6 +204,8 @@ def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
     booked_at = None
     if booked:
         booked_at = booking_times(path, cols, tcol == DATETIME_COLUMN, start, t)
+    max_walk = cols.numbers(("max_walk",))[:, 0] if "max_walk" in columns else None
+    walk_speed = cols.numbers(("walk_speed",))[:, 0] if "walk_speed" in columns else None
     del cols
     early = t < 0 if tcol == DATETIME_COLUMN else np.zeros(len(t), dtype=bool)
 
@@ -203,6 +213,12 @@ def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
         """Raise the first error of row ``i`` (0-based), if it has one."""
         if max_delay[i] < 0:
             raise ScenarioError(path, f"row {i + 1}", f"max_delay {max_delay[i]} is negative")
+        if max_walk is not None and max_walk[i] < 0:
+            raise ScenarioError(path, f"row {i + 1}, column max_walk",
+                                f"max_walk {max_walk[i]} is negative")
+        if walk_speed is not None and walk_speed[i] <= 0:
+            raise ScenarioError(path, f"row {i + 1}, column walk_speed",
+                                f"walk_speed {walk_speed[i]} is not > 0")
         p = passengers[i]
         if p == p and (p < 1 or p != int(p) or p > 2**31):
             raise ScenarioError(path, f"row {i + 1}", f"passengers = {p} is not a whole "
@@ -235,6 +251,10 @@ def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
         bad = (max_delay < 0) | (t < 0) | (max_wait <= 0) | (
             (passengers == passengers)
             & ((passengers < 1) | (passengers != np.trunc(passengers)) | (passengers > 2**31)))
+        if max_walk is not None:
+            bad |= max_walk < 0
+        if walk_speed is not None:
+            bad |= walk_speed <= 0
         points = [(pick, origin)] + ([(drop, dest)] if has_dest else [])
         for cs, values in points:
             if size is not None:
@@ -253,6 +273,8 @@ def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
     trips = Trips(path, name, t[order], origin[order],
                   None if dest is None else dest[order], max_wait[order], order + 1,
                   passengers[order].astype(np.int64), max_delay[order],
+                  None if max_walk is None else max_walk[order],
+                  None if walk_speed is None else walk_speed[order],
                   booked_at=None if booked_at is None else booked_at[order])
     if early.any():
         trips = trips.subset(~early[order], f"departed before tasks.start ({start.isoformat()})")

@@ -142,7 +142,7 @@ def test_shifts_match_the_new_schedule():
         for q, (p, d, n, lp, ld, sp, sd) in enumerate(c["reqs"]):
             if math.isinf(got.cost[q]):
                 continue
-            i, j, pick, drop, s1, s2 = got.of(q)
+            i, j, pick, drop, s1, s2, _ = got.of(q)  # (no meeting points here)
             plan = list(c["stops"])
             plan.insert(j, (d, -n, ld, sd))
             plan.insert(i, (p, n, lp, sp))

@@ -304,8 +304,13 @@ def test_rows_are_tied_to_columns_by_name():
         def __getattr__(self, name):
             return Tag(f"{self}.{name}" if self else name)
 
-    row = dict(zip(recording.TASK_COLUMNS, recording.task_row(Tag(), "xyz", "XYZ"), strict=True))
+    row = dict(zip(recording.TASK_COLUMNS,
+                   recording.task_row(Tag(), "xyz", "XYZ", "bcd", "efg", ("w", "W")),
+                   strict=True))
     assert row["task_id"] == "id" and row["state"] == "state._value_"
+    assert (row["board_x"], row["board_y"], row["alight_x"], row["alight_y"]) == \
+        ("b", "c", "e", "f")
+    assert (row["walk_to_board_m"], row["walk_from_alight_m"]) == ("w", "W")
     assert (row["x"], row["z"], row["dropoff_y"]) == ("x", "z", "Y")
     assert all(row[c] == c for c in ("released_at", "max_wait", "snap_m", "dropoff_snap_m",
                                      "assigned_at", "agent_id", "cost", "picked_up_at",
