@@ -176,9 +176,9 @@ class PlanTable:
         lens = self.length[idx]
         off = np.zeros(idx.size + 1, dtype=np.int64)
         np.cumsum(lens, out=off[1:])
-        w = int(lens.max()) if lens.size else 0
-        keep = np.arange(w) < lens[:, None]
-        arr, svc, lat, oc, ear, node = (f[idx, :w][keep] for f in self._fields)
+        # each stop's place in the (row-major) tables: one ``take`` per field
+        at = np.repeat(idx * self.width - off[:-1], lens) + np.arange(off[-1])
+        arr, svc, lat, oc, ear, node = (f.take(at) for f in self._fields)
         if self.on_nodes:
             locs = node
         else:
