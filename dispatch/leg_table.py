@@ -52,21 +52,23 @@ class LegTable:
         ``rem[k]`` (a driving one: :meth:`dispatch.legs.Leg.next_at` of its leg at ``now`` less
         its start; a stopped one: ``stands(loc)``, the space's answer) and return the ``k``
         of those part-way along an edge, ascending."""
-        src, write = self._src, self._write
-        driving, slots, starts = [], [], []
+        src = self._src
+        slots = idx[looked].tolist() if looked else []
+        vs = [vehicles[s] for s in slots]
+        legs = [v._leg for v in vs]
         off = np.zeros(len(looked), dtype=bool)
-        for i, k in enumerate(looked):
-            s = int(idx[k])
-            v = vehicles[s]
-            leg = v._leg
-            if leg is None:  # stopped part-way along an edge (or off the nodes)
-                node[k], rem[k], off[i] = stands(v.loc)
-                continue
+        driving = list(range(len(looked)))
+        stopped = [i for i, leg in enumerate(legs) if leg is None]
+        if stopped:  # stopped part-way along an edge (or off the nodes)
+            for i in stopped:
+                k = looked[i]
+                node[k], rem[k], off[i] = stands(vs[i].loc)
+            driving = [i for i in driving if legs[i] is not None]
+            vs, slots, legs = ([x[i] for i in driving] for x in (vs, slots, legs))
+        for s, leg in zip(slots, legs):
             if leg is not src[s]:
-                write(s, leg)
-            driving.append(i)
-            slots.append(s)
-            starts.append(v.leg_start)
+                self._write(s, leg)
+        starts = [v.leg_start for v in vs]
         if driving:
             at = np.array(slots, dtype=np.int64)
             t = now - np.array(starts)

@@ -165,13 +165,11 @@ class PlanTable:
         ``off[i]:off[i + 1]``; the locations an int64 array of nodes where every stop is on a
         node, else a list; ``load`` on board now, per vehicle."""
         src, write = self._src, self._write
-        load = []
-        for k in slots:
-            v = vehicles[k]
-            got = plan_of(v)
+        vs = [vehicles[k] for k in slots]
+        for k, got in zip(slots, [plan_of(v) for v in vs]):
             if got is not src[k]:
                 write(k, got)
-            load.append(v.load)
+        load = [v.load for v in vs]
         idx = np.array(slots, dtype=np.int64)
         lens = self.length[idx]
         off = np.zeros(idx.size + 1, dtype=np.int64)
