@@ -6,8 +6,9 @@ leg that is a Python call per driving vehicle per decision, the largest part of 
 pooled decision's views (a thousand-vehicle fleet keeps a hundred or more driving with a free
 seat). :class:`LegTable` keeps each vehicle's current leg as a row of arrays (rewritten when the
 vehicle's leg is another object than the one its row was written from) and answers
-:meth:`LegTable.where` for all the looked-at vehicles with numpy: the same comparisons and
-subtractions on the same doubles as :meth:`Leg.next_at`, so the same answers.
+:meth:`LegTable.where` for all the looked-at vehicles in one compiled loop
+(:func:`dispatch._compiled.legs_at`): the same comparisons and subtractions on the same
+doubles as :meth:`Leg.next_at`, so the same answers.
 """
 
 from __future__ import annotations
@@ -69,26 +70,14 @@ class LegTable:
             if leg is not src[s]:
                 self._write(s, leg)
         starts = [v.leg_start for v in vs]
+        looked_at = np.array(looked, dtype=np.int64)
         if driving:
-            at = np.array(slots, dtype=np.int64)
-            t = now - np.array(starts)
-            times, nodes = self.times[at], self.nodes[at]
-            rows = np.arange(at.size)
-            last = self.length[at] - 1
-            end = t >= times[rows, last]  # the leg is over: its last node
-            t = np.where(t > 0.0, t, 0.0)
-            i = (times <= t[:, None]).sum(axis=1)  # bisect_right (inf pads never count)
-            first = i == 0  # still on the edge the leg started on
-            j = np.where(first, 1, i) - 1
-            exact = ~first & (t == times[rows, j])  # on node ``j`` at this instant
-            nxt = np.minimum(i, last)
-            left = times[rows, nxt] - t
-            on = np.where(first, (self.prev[at] < 0) | (left <= 0.0), exact | (left <= 0.0))
-            on |= end
-            where = np.where(exact, nodes[rows, j], nodes[rows, nxt])
-            where = np.where(end, nodes[rows, last], where)
-            left = np.where(on, 0.0, left)
-            k = np.array(looked, dtype=np.int64)[driving]
-            node[k], rem[k] = where, left
-            off[driving] = ~on
-        return np.array(looked, dtype=np.int64)[off]
+            from dispatch._compiled import legs_at
+
+            on = np.ones(len(looked), dtype=bool)
+            d = np.array(driving, dtype=np.int64)
+            legs_at(self.times, self.nodes, self.length, self.prev,
+                    np.array(slots, dtype=np.int64), float(now), np.array(starts, dtype=float),
+                    looked_at[d], node, rem, d, on)
+            off[d] = ~on[d]
+        return looked_at[off]
