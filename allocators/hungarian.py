@@ -62,6 +62,13 @@ def optimal_pairs(cost: np.ndarray) -> list[tuple[int, int]]:
     ``span`` the range of the finite costs.
     """
     cost = np.asarray(cost, dtype=float)
+    if cost.ndim == 2 and cost.shape[1] == 1 and cost.shape[0]:
+        # one task (an immediate decision's problem): the cheapest finite row, the first of
+        # equal ones, as scipy's solve picks it (its first augmenting path from zero duals
+        # takes the first unassigned minimum); a nan or no finite row takes the general path
+        a = int(np.argmin(cost[:, 0]))
+        if math.isfinite(cost[a, 0]):
+            return [(a, 0)]
     if cost.ndim == 2 and cost.size and math.isfinite(np.add.reduce(cost, axis=None)):
         # every pair finite (a finite sum has no inf and no nan): no row or column to drop,
         # the same solve on the matrix itself, without the masks and the submatrix copy

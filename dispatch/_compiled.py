@@ -49,3 +49,42 @@ def leg_sums(indptr, indices, seconds, metres, nodes, t0, m0):  # pragma: no cov
         times[i] = times[i - 1] + seconds[e]
         out_m[i] = out_m[i - 1] + metres[e]
     return times, out_m, True
+
+
+@jit
+def legs_at(times, nodes, length, prev, rows, now, starts, out_k, node, rem, out_i,
+            on):  # pragma: no cover - compiled
+    """Where vehicles driving legs are at ``now`` (:class:`dispatch.leg_table.LegTable`): for
+    each ``q``, the leg in row ``rows[q]`` of ``times`` / ``nodes`` (its first ``length``
+    entries; ``prev``: its start point's), started at ``starts[q]``: writes
+    :meth:`dispatch.legs.Leg.next_at`'s ``(node, remaining)`` of ``now - starts[q]`` into
+    ``node[out_k[q]]``, ``rem[out_k[q]]`` and whether it stands on the node into
+    ``on[out_i[q]]``, by the same comparisons and subtractions (``max``, ``bisect_right``)."""
+    for q in range(rows.size):
+        r = rows[q]
+        n = length[r]
+        t = now - starts[q]
+        k = out_k[q]
+        if t >= times[r, n - 1]:
+            node[k], rem[k], on[out_i[q]] = nodes[r, n - 1], 0.0, True
+            continue
+        if 0.0 > t:  # max(t, 0.0)
+            t = 0.0
+        lo, hi = 0, n  # bisect_right
+        while lo < hi:
+            mid = (lo + hi) // 2
+            if t < times[r, mid]:
+                hi = mid
+            else:
+                lo = mid + 1
+        if lo == 0:
+            left = times[r, 0] - t
+            here = prev[r] < 0 or left <= 0.0
+            node[k], rem[k], on[out_i[q]] = nodes[r, 0], 0.0 if here else left, here
+        elif t == times[r, lo - 1]:
+            node[k], rem[k], on[out_i[q]] = nodes[r, lo - 1], 0.0, True
+        else:
+            left = times[r, lo] - t
+            node[k], rem[k], on[out_i[q]] = nodes[r, lo], left if left > 0.0 else 0.0, \
+                left <= 0.0
+    return 0

@@ -55,7 +55,7 @@ from dispatch.contracts import Allocator, Planner
 from dispatch.errors import DispatchError, PluginError
 from dispatch.lazy import certify, resolve_open
 from dispatch.meeting import meeting_costs, view_at
-from dispatch.plans import Inserts, Plans, busy_with_free_seat, insertion_costs_of
+from dispatch.plans import Inserts, Plans, PlanTable, insertion_costs_of
 from dispatch.problem import AgentViews, AllocationProblem
 from dispatch.space import Space
 from dispatch.stops import OBJECTIVES
@@ -160,9 +160,10 @@ def candidates(fleet: Fleet, book: TaskBook, held: dict, pooled: bool
     with re-assignment those driving to the pickup of a ``held`` task), its requests (the
     open ones in release order, or with ``held`` tasks all by id) and, for each held task,
     the vehicle driving to it (task id -> vehicle id)."""
-    idle = fleet.idle_index()
     if pooled:  # busy vehicles with a free seat somewhere in their plan take part
-        idle = np.union1d(idle, busy_with_free_seat(fleet))
+        idle = np.flatnonzero(fleet.idle_mask | (fleet.busy_mask & fleet.room))
+    else:
+        idle = fleet.idle_index()
     holder: dict[int, int] = {}  # task id -> the vehicle driving to its pickup
     if held:  # [dispatch] reassign: vehicles driving to a pickup take part, with their tasks
         holder = {t.id: t.agent_id for t in held.values()}
@@ -425,6 +426,9 @@ class Pipeline:
         self.hearing = Hearing(space, comms, links)
         self.problems = Problems(fleet, operator, planner, space, cfg, comms, rng, self.pooled,
                                  self.routes)
+        #: with plans, the fleet's plans as the compiled insertion reads them, kept between
+        #: decisions (a row rewritten when its vehicle's plan changed)
+        self.table = PlanTable(len(fleet)) if self.plans else None
 
     def build(self, now: float) -> Decision | None:
         """The problem of a decision at ``now`` over the candidate vehicles and the open
@@ -492,7 +496,7 @@ class Pipeline:
                 cost, inserts = insertion_costs_of(cost, idle, open_tasks, now,
                                                    set(holder.values()), fleet=self.fleet,
                                                    operator=self.operator, planner=self.planner,
-                                                   objective=self.objective)
+                                                   objective=self.objective, table=self.table)
             servable = reject_late(self.book, open_tasks, cost, servable)
         elif any(d < math.inf for d in limits):
             if servable is None:

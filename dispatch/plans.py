@@ -7,7 +7,8 @@ added-time objective): where a new request's stops go in a vehicle's plan and wh
   the stops go for the pairs handed out;
 * :class:`Plans`: the agents' stop lists as an allocation problem shows them
   (:attr:`AllocationProblem.plans`), read from the vehicles when asked;
-* :func:`busy_with_free_seat`: the busy vehicles with a free seat (candidates for new requests).
+* :class:`PlanTable`: the fleet's plans kept as arrays between decisions, gathered for the
+  busy vehicles of a decision without a Python loop over their stops.
 
 The dispatcher (:mod:`dispatch.dispatcher`) decides; this is the plan machinery it asks.
 """
@@ -115,21 +116,92 @@ class Plans(Mapping):
         return len(self._ids)
 
 
-def busy_with_free_seat(fleet: Fleet) -> np.ndarray:
-    """Positions of the busy vehicles with a free seat somewhere in their plan (shared
-    rides: they are candidates for new requests)."""
-    return np.flatnonzero(fleet.busy_mask & fleet.room)
+class PlanTable:
+    """The fleet's plans as the compiled insertion reads them: for each vehicle (by fleet
+    position) a row of each field of :meth:`dispatch.operator.Operator.plan_arrays` (planned
+    arrival, service, latest, occupancy, earliest; the locations as node ids where every stop
+    lies on a node, else kept as the lists), so that a decision gathers the plans of its busy
+    vehicles with a few numpy operations (:meth:`gather`) instead of concatenating lists
+    vehicle by vehicle.
+
+    A row is written when the vehicle's plan arrays are not the ones it was written from
+    (``plan_arrays`` answers the same tuple until the plan, the drive along it or, for a
+    standing vehicle, the clock changes): a decision rewrites the few plans that changed
+    since the last one. The values are those lists' (the same doubles, in the same order)."""
+
+    def __init__(self, n: int, width: int = 8) -> None:
+        self._src: list = [None] * n  # the plan_arrays tuple each row was written from
+        self.length = np.zeros(n, dtype=np.int64)
+        #: every stop written so far lies on a node (an integer): ``nodes`` holds them
+        self.on_nodes = True
+        self._fields = self._alloc(n, width, ())
+
+    def _alloc(self, n: int, width: int, old: tuple) -> tuple:
+        """The fields (arrival, service, latest, occupancy, earliest, node), ``width`` stops
+        wide, holding the ``old`` fields' values."""
+        self.width = width
+        fields = (np.zeros((n, width)), np.zeros((n, width)), np.zeros((n, width)),
+                  np.zeros((n, width), dtype=np.int64), np.zeros((n, width)),
+                  np.zeros((n, width), dtype=np.int64))
+        for new, was in zip(fields, old):
+            new[:, :was.shape[1]] = was
+        return fields
+
+    def _write(self, k: int, arrays) -> None:
+        times, svcs, latest, occ, where, earliest = arrays
+        n = len(times)
+        if n > self.width:
+            self._fields = self._alloc(len(self._src), max(n, 2 * self.width), self._fields)
+        arr, svc, lat, oc, ear, node = self._fields
+        arr[k, :n] = times
+        svc[k, :n] = svcs
+        lat[k, :n] = latest
+        oc[k, :n] = occ
+        ear[k, :n] = earliest
+        if self.on_nodes:
+            if all(isinstance(x, (int, np.integer)) and not isinstance(x, bool) for x in where):
+                node[k, :n] = where
+            else:
+                self.on_nodes = False
+        self.length[k] = n
+        self._src[k] = arrays
+
+    def gather(self, vehicles: list, slots: list[int], plan_of):
+        """``(off, arrival, service, latest, occupancy, locations, earliest, load)`` of the
+        vehicles at fleet positions ``slots`` (``plan_of``: ``Operator.plan_arrays``), flat as
+        :func:`dispatch.insertion.insertion_costs` takes them: vehicle ``i``'s stops are
+        ``off[i]:off[i + 1]``; the locations an int64 array of nodes where every stop is on a
+        node, else a list; ``load`` on board now, per vehicle."""
+        src, write = self._src, self._write
+        vs = [vehicles[k] for k in slots]
+        for k, got in zip(slots, [plan_of(v) for v in vs]):
+            if got is not src[k]:
+                write(k, got)
+        load = [v.load for v in vs]
+        idx = np.array(slots, dtype=np.int64)
+        lens = self.length[idx]
+        off = np.zeros(idx.size + 1, dtype=np.int64)
+        np.cumsum(lens, out=off[1:])
+        # each stop's place in the (row-major) tables: one ``take`` per field
+        at = np.repeat(idx * self.width - off[:-1], lens) + np.arange(off[-1])
+        arr, svc, lat, oc, ear, node = (f.take(at) for f in self._fields)
+        if self.on_nodes:
+            locs = node
+        else:
+            locs = [x for k in slots for x in src[k][4]]
+        return off, arr, svc, lat, oc, locs, ear, np.array(load, dtype=np.int64)
 
 
 def insertion_costs_of(cost: np.ndarray, slots: np.ndarray, tasks: list, now: float,
                        holders: set, *, fleet: Fleet, operator: Operator, planner: Planner,
-                       objective: int) -> tuple[np.ndarray, Inserts | dict]:
+                       objective: int, table: PlanTable) -> tuple[np.ndarray, Inserts | dict]:
     """A decision's costs with plans (see :mod:`dispatch.stops`): for a vehicle with an
     empty plan (idle, or about to give its task up) the request's pickup and drop-off in
     that order; for a busy one the cheapest feasible insertion into its plan; ``inf``
     where none keeps the capacity and every limit. ``cost`` holds the drives from each
     vehicle to each pickup. Returns ``(costs by the objective, {(row, col): where the
-    stops go})`` for the busy vehicles' finite pairs."""
+    stops go})`` for the busy vehicles' finite pairs. ``table``: the run's
+    :class:`PlanTable` (the busy vehicles' plans are read through it)."""
     svc = operator.service_time
     m = len(tasks)
     lp = np.array([t.deadline for t in tasks])
@@ -168,33 +240,25 @@ def insertion_costs_of(cost: np.ndarray, slots: np.ndarray, tasks: list, now: fl
                             & (n_req <= cap[busy, None]))
     if not rows.size:
         return out, {}
-    # the busy vehicles' plans, flat; requests by column
-    used = np.unique(rows)
-    remap = np.full(busy.size, -1, np.int64)
-    remap[used] = np.arange(used.size)
-    off, s_arr, s_svc, s_latest, s_occ, locs, s_e = [0], [], [], [], [], [], []
-    load = []
-    plan_of = operator.plan_arrays
-    vehicles = fleet.vehicles
-    for k in slots[busy[used]].tolist():
-        v = vehicles[k]
-        times, svcs, latest, occ, where, earliest = plan_of(v)
-        s_arr += times
-        s_svc += svcs
-        s_latest += latest
-        s_occ += occ
-        locs += where
-        s_e += earliest
-        off.append(len(locs))
-        load.append(v.load)
-    ucols = np.unique(cols)
+    # the busy vehicles' plans, flat (rows come sorted: np.nonzero is row-major); requests
+    # by column
+    first = np.empty(rows.size, dtype=bool)
+    first[0] = True
+    np.not_equal(rows[1:], rows[:-1], out=first[1:])
+    used = rows[first]
+    row_of = np.cumsum(first) - 1  # each pair's vehicle among ``used``
+    off, s_arr, s_svc, s_latest, s_occ, locs, s_e, load = table.gather(
+        fleet.vehicles, slots[busy[used]].tolist(), operator.plan_arrays)
+    seen = np.zeros(m, dtype=bool)
+    seen[cols] = True
+    ucols = np.flatnonzero(seen)
     cmap = np.full(m, -1, np.int64)
     cmap[ucols] = np.arange(ucols.size)
     picks = [tasks[c].loc for c in ucols.tolist()]
     drops = [tasks[c].loc if tasks[c].dropoff is None else tasks[c].dropoff
              for c in ucols.tolist()]
     between = planner.between
-    g = len(locs)
+    g = off[-1]
     if g:
         to_p, from_p = between(locs, picks), between(picks, locs)
         to_d, from_d = between(locs, drops), between(drops, locs)
@@ -203,7 +267,7 @@ def insertion_costs_of(cost: np.ndarray, slots: np.ndarray, tasks: list, now: fl
         from_p = from_d = np.zeros((ucols.size, 0))
     vrow = busy[rows]
     ins = insertion_costs(
-        remap[rows], cmap[cols], ready[used], cost[vrow, cols], off, s_arr, s_svc,
+        row_of, cmap[cols], ready[used], cost[vrow, cols], off, s_arr, s_svc,
         s_latest, s_occ, load, cap[busy[used]], to_p, from_p, to_d, from_d, pd[ucols],
         n_req[ucols], lp[ucols], ld[ucols], svc_p[ucols], svc_d[ucols], objective, s_e,
         ep[ucols])

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from dispatch.leg_table import LegTable
 from dispatch.locations import Location
 from dispatch.problem import AgentView, AgentViews
 from dispatch.space import Space
@@ -191,6 +192,7 @@ class Fleet:
         self.driving_or_off_node = np.zeros(n, dtype=bool)
         self._off_node = [False] * n  # off_node, as Python bools (read by the leg setter)
         self._stands = space.stands
+        self.legs = LegTable(n)  # the driving vehicles' legs as arrays (dispatch.leg_table)
         #: the node arrays hold (the space has nodes)
         self.road = n > 0 and all(space.stands(v.loc) is not None for v in self.vehicles)
         for i, v in enumerate(self.vehicles):
@@ -245,20 +247,10 @@ class Fleet:
         if not looked.any():  # every one stands on a node: ``remaining`` is 0 for all
             return AgentViews(ids, make, node, np.zeros(idx.size), _NO_POINTS, ascending)
         rem = self.remaining.take(idx)
-        looked = looked.nonzero()[0].tolist()
-        points = []
-        for k in looked:  # driving (a leg: where is it now?) or stopped part-way along an edge
-            v = vs[int(idx[k])]
-            leg = v._leg
-            if leg is not None:  # (Leg.point_at's numbers, without building the point)
-                node[k], rem[k], on = leg.next_at(now - v.leg_start)
-                if not on:
-                    points.append(k)
-                continue
-            node[k], rem[k], off = self._stands(v.loc)
-            if off:
-                points.append(k)
-        return AgentViews(ids, make, node, rem, np.array(points, dtype=np.int64), ascending)
+        # driving (a leg: where is it now?) or stopped part-way along an edge
+        points = self.legs.where(vs, idx, looked.nonzero()[0].tolist(), node, rem, now,
+                                 self._stands)
+        return AgentViews(ids, make, node, rem, points, ascending)
 
     def refresh(self, v: Vehicle) -> None:
         """Set ``v``'s state from its plan and its failure: failed, off duty (dispatch.shifts)

@@ -170,3 +170,28 @@ def test_reproduces_orlib_optimum(name):
     pairs = assert_valid(problem, allocation)
     assert len(pairs) == cost.shape[0]
     assert total_cost(problem, allocation) == optimum[name]
+
+
+def test_one_task_takes_the_row_scipys_solve_takes():
+    """A one-column problem (an immediate decision's) takes the first cheapest finite row,
+    the pair scipy's solve of the same column gives, ties, ``inf`` and ``nan`` included."""
+    from scipy.optimize import linear_sum_assignment
+
+    from allocators.hungarian import optimal_pairs
+
+    rng = np.random.default_rng(7)
+    for _ in range(3000):
+        n = int(rng.integers(1, 10))
+        cost = rng.integers(0, 3, (n, 1)).astype(float)  # many ties
+        cost[rng.random(n) < 0.3] = np.inf
+        if rng.random() < 0.1:
+            cost[:] = np.inf
+        if rng.random() < 0.1:
+            cost[int(rng.integers(n))] = np.nan
+        ok = np.isfinite(cost[:, 0])
+        want = []
+        if ok.any():  # scipy on the finite rows, as the general path solves it
+            rows = np.flatnonzero(ok)
+            r, c = linear_sum_assignment(cost[rows])
+            want = [(int(rows[r[0]]), int(c[0]))]
+        assert optimal_pairs(cost) == want, cost.ravel()
