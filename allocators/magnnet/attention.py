@@ -210,7 +210,7 @@ def decide(model, cost, deciding, open_tasks, comm, flies, round_: int) -> np.nd
     one), the argmax of :func:`act`, :func:`requests`. Entries of agents not deciding are
     meaningless (the caller keeps the deciding ones)."""
     obs = observe(np.array(cost, np.float64)[None], np.asarray(deciding)[None],
-                  np.asarray(open_tasks)[None], np.ascontiguousarray(comm, dtype=bool)[None],
+                  np.asarray(open_tasks)[None], np.array(comm, dtype=bool)[None],
                   np.asarray(flies)[None])
     with torch.no_grad():
         a, _, _, _ = act(model, obs)
