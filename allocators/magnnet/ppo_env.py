@@ -15,12 +15,13 @@ global); the plugin under limited range relays the news hop by hop.
 
 Rewards come from the cost matrix only (no optimal assignment, no teacher), per agent:
 
-* ``R_WIN - c_ij / c_mean`` when it wins task ``j`` (``c_mean``: the instance's mean finite
+* ``w (R_WIN - c_ij / c_mean)`` when it wins task ``j`` (``w``: ``cost_weight``, default 1;
+  it weighs the win and stall rewards against the conflict penalty) (``c_mean``: the instance's mean finite
   cost): a win is worth more the cheaper it is, and requesting is worth more than waiting
   (without ``R_WIN`` a win is an immediate loss and waiting is paid only at the end: the
   first training run waited);
 * :data:`R_CONFLICT` for each request of a task that two or more agents requested that round;
-* :data:`R_STALL` when the decision ends while it is still deciding (unassigned while an open
+* ``w`` :data:`R_STALL` when the decision ends while it is still deciding (unassigned while an open
   task it can serve is left).
 
 The *team* reward of a round is the sum over agents; each agent trains on
@@ -43,8 +44,9 @@ R_STALL = -3.0
 class RoundsEnv:
     """``B`` decisions of one size ``N x M`` played round by round (numpy state)."""
 
-    def __init__(self, batch: int, n: int, m: int) -> None:
+    def __init__(self, batch: int, n: int, m: int, cost_weight: float = 1.0) -> None:
         self.B, self.n, self.m = batch, n, m
+        self.cost_weight = cost_weight
         self.cost = np.zeros((batch, n, m))
         self.flies = np.zeros((batch, n), bool)
         self.comm = np.ones((batch, n, n), bool)
@@ -108,8 +110,8 @@ class RoundsEnv:
             for t, a in winners.items():
                 self.agent_task[b, a] = t
                 self.taken[b, t] = True
-                own[b, a] += R_WIN - self.cost[b, a, t] / self.c_mean[b]
+                own[b, a] += self.cost_weight * (R_WIN - self.cost[b, a, t] / self.c_mean[b])
         still = self.deciding()
         done |= ~still.any(1)
-        own += np.where(done[:, None] & still, R_STALL, 0.0)
+        own += np.where(done[:, None] & still, self.cost_weight * R_STALL, 0.0)
         return own, dec, done

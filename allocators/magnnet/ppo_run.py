@@ -33,6 +33,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--lr", type=float, default=3e-4)
     p.add_argument("--ent", type=float, default=0.01)
     p.add_argument("--team-weight", type=float, default=0.5)
+    p.add_argument("--cost-weight", type=float, default=1.0,
+                   help="weight w of the win and stall rewards against the conflict "
+                        "penalty: w (R_WIN - c / c_mean), w R_STALL")
+    p.add_argument("--gap-weight", type=float, default=1.0,
+                   help="weight of the gap in the validation score that keeps the weights")
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--out", type=Path, default=Path("runs/train/magnnet_ppo"))
 
@@ -52,9 +57,11 @@ def validation(pool, count: int, seed: int = 4321):
     return out
 
 
-def measure(model, val) -> dict:
+def measure(model, val, gap_weight: float = 1.0) -> dict:
     """Gap (fully assigned decisions), conflict-free share of tasks, share fully assigned,
-    per N and their means; ``score`` (lower is better) picks the kept weights."""
+    per N; ``score`` (lower is better: ``gap_weight`` times the gap, plus the share of tasks
+    not conflict-free, plus three times the share left incomplete, averaged over N) picks the
+    kept weights."""
     from allocators.magnnet.ppo_train import play
 
     res, score = {}, 0.0
@@ -66,7 +73,7 @@ def measure(model, val) -> dict:
         cf = float((env.taken & ~env.conflicted).mean())
         comp = float(full.mean())
         res.update({f"gap{n}": g, f"cf{n}": cf, f"complete{n}": comp})
-        score += g + (1 - cf) + 3 * (1 - comp)
+        score += gap_weight * g + (1 - cf) + 3 * (1 - comp)
     res["score"] = score / len(val)
     return res
 
@@ -90,6 +97,7 @@ def run(args, console=None) -> int:
     pool = full.take(slice(0, len(full) - n_val))
     val = validation(full.take(slice(len(full) - n_val, len(full))), args.val_count)
     cfg = Config(lr=args.lr, ent_coef=args.ent, team_weight=args.team_weight,
+                 cost_weight=args.cost_weight,
                  updates=args.updates, seed=args.seed, wall_s=60 * args.minutes)
     with torch.random.fork_rng():
         torch.manual_seed(cfg.seed)
@@ -98,11 +106,11 @@ def run(args, console=None) -> int:
 
     def on_update(row):
         if row["phase"] == "val":
-            say(f"update {row['update']}: val gap " + " / ".join(
-                f"{100 * row[f'val/gap{n}']:.1f}" for n in VAL_SIZES) + " %, cf " + " / ".join(
-                f"{100 * row[f'val/cf{n}']:.0f}" for n in VAL_SIZES) + f" % ({row['wall_s']:.0f} s)")
+            gaps = " / ".join(f"{100 * row[f'val/gap{n}']:.1f}" for n in VAL_SIZES)
+            cfs = " / ".join(f"{100 * row[f'val/cf{n}']:.0f}" for n in VAL_SIZES)
+            say(f"update {row['update']}: val gap {gaps} %, cf {cfs} % ({row['wall_s']:.0f} s)")
 
-    rows = train(model, pool, cfg, on_update, validate=lambda m: measure(m, val))
+    rows = train(model, pool, cfg, on_update, validate=lambda m: measure(m, val, args.gap_weight))
     wall = time.perf_counter() - started
     vals = [r for r in rows if r["phase"] == "val"]
     kept = min(vals, key=lambda r: r["val/score"]) if vals else None

@@ -47,6 +47,9 @@ class Config:
     max_grad_norm: float = 0.5
     team_weight: float = 0.5
     """share of the team reward (mean over agents) in each agent's reward."""
+    cost_weight: float = 1.0
+    """weight of the win and stall rewards against the conflict penalty
+    (:class:`~allocators.magnnet.ppo_env.RoundsEnv`)."""
     sizes: tuple = (4, 6, 8, 10, 12)
     comm_ranges: tuple | None = (15.0, 40.0)
     """radio ranges (metres) drawn for ``p_range`` of the games; None: complete graphs only."""
@@ -214,7 +217,7 @@ def train(model, pool, cfg: Config, on_update=None, validate=None) -> list[dict]
     sampler = Sampler(pool, rng, cfg.comm_ranges, cfg.p_range)
     envs = []
     for n in cfg.sizes:
-        env = RoundsEnv(cfg.n_envs, n, n)
+        env = RoundsEnv(cfg.n_envs, n, n, cfg.cost_weight)
         sampler.fill(env, np.arange(cfg.n_envs))
         envs.append(env)
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr, eps=1e-5)
