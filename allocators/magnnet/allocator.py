@@ -41,6 +41,14 @@ Variants (``[dispatch.allocator_params] variant = ...``):
     the actor's input (our addition); one checkpoint per size (``paper_nb_n{N}.pt``), same
     rule. Before the plugin was unified this was what ``magnnet`` ran at ``N = M``.
 
+``"ppo"``
+    The attention policy trained by PPO alone (issue 33, :mod:`allocators.magnnet.attention`:
+    agent-task pairs attend over their agent's tasks and over the agents in radio range; no
+    imitation, no teacher), one checkpoint ``ppo.pt`` for every size. Each round the deciding
+    agents of a belief score their observation (:func:`~allocators.magnnet.attention.observe`)
+    and act by :func:`~allocators.magnnet.attention.decide`, the function the training
+    environment (:mod:`allocators.magnnet.ppo_env`) plays: wait, or request one task.
+
 Look-ahead (issue 22): ``value`` (a file of ``dispatch train value``) and ``value_weight``, as
 ``hungarian``'s (:class:`learning.value.ValueOption`): each agent's costs become its travel
 times less the discounted value of where each trip leaves it plus its value now; variant
@@ -115,7 +123,7 @@ from dispatch.problem import AgentViews, AllocationProblem
 CHECKPOINTS = Path(__file__).resolve().parent / "checkpoints"
 #: Positions are divided by the size of the world the shipped models were trained in.
 TRAIN_WORLD = np.array([50.0, 50.0, 30.0], np.float32)
-VARIANTS = ("match", "paper", "paper_nb")
+VARIANTS = ("match", "paper", "paper_nb", "ppo")
 #: The training instances' travel times (paper_static, N = 20 pool): median 7.3 s, largest
 #: 25.2 s. A view whose median cost exceeds TRAIN_MAX_S (a city's taxis: minutes) is out of
 #: that range; ``cost_scale = "auto"`` rescales it so its median is TRAIN_MEDIAN_S.
@@ -268,6 +276,8 @@ class MagnnetAllocator(DecentralizedAllocator):
         self.files: dict[str, str] = {}  # checkpoint file -> sha, of what this allocator loaded
         if variant == "match":
             self._init_match(checkpoint, view_checkpoint, taxi_view_checkpoint)
+        elif variant == "ppo":
+            self._init_ppo(checkpoint)
         else:
             self._init_paper(checkpoint)
 
@@ -311,6 +321,15 @@ class MagnnetAllocator(DecentralizedAllocator):
                   if v is not None}.values():
             views.view_scores(m, warm, np.zeros(2, bool), np.array([0, 1]), np.ones(2, bool))
 
+    def _init_ppo(self, checkpoint) -> None:
+        from allocators.magnnet import attention
+
+        self._attention = attention
+        self.ppo_model, _ = self._use(checkpoint or _exists(shipped("ppo")), ("ppo",))
+        p = _dummy(2)  # warm-up
+        attention.decide(self.ppo_model, p.cost, np.ones(2, bool), np.ones(2, bool), p.comm,
+                         np.array([False, True]), 0)
+
     def _init_paper(self, checkpoint) -> None:
         import torch
 
@@ -338,7 +357,8 @@ class MagnnetAllocator(DecentralizedAllocator):
         under limited range (``view_hops``, ``claims``) and how taxi-scale views are brought
         to the training range (``cost_scale``, ``candidates``)."""
         model = {"match": "magnnet-match" + ("+view" if self.partial == "view" else ""),
-                 "paper": "magnnet-paper", "paper_nb": "magnnet-paper+nb"}[self.variant]
+                 "paper": "magnnet-paper", "paper_nb": "magnnet-paper+nb",
+                 "ppo": "magnnet-attention-ppo"}[self.variant]
         out = {"model": model, "variant": self.variant,
                "checkpoint": ",".join(f"{k}@{v}" for k, v in sorted(self.files.items()))}
         if self.value is not None:
@@ -398,6 +418,14 @@ class MagnnetAllocator(DecentralizedAllocator):
                round_: int) -> np.ndarray:
         if self.variant == "match":
             return self._choose_match(problem, agents, open_tasks, round_)
+        if self.variant == "ppo":
+            n = problem.cost.shape[0]
+            deciding = np.zeros(n, bool)
+            deciding[agents] = True
+            req = self._attention.decide(self.ppo_model, problem.cost, deciding, open_tasks,
+                                         problem.comm, self._flies_of(problem, np.arange(n)),
+                                         round_)
+            return req[agents]
         return self._choose_paper(problem, agents, open_tasks)
 
     def _costs(self, cost: np.ndarray, candidates: bool = True):

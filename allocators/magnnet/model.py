@@ -228,4 +228,8 @@ def build(config: dict) -> nn.Module:
         from allocators.magnnet.views import ViewPolicy
 
         return ViewPolicy(**cfg)
+    if variant == "ppo":
+        from allocators.magnnet.attention import AttentionPolicy
+
+        return AttentionPolicy(**cfg)
     raise ValueError(f"unknown MAGNNET variant {variant!r}")

@@ -31,7 +31,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
     d = PPOConfig()
     p.add_argument("--agents", type=int, default=8, help="N (= M tasks) of the paper model")
-    p.add_argument("--variant", choices=["paper", "paper_nb", "match", "view", "day"],
+    p.add_argument("--variant", choices=["paper", "paper_nb", "match", "view", "day", "ppo"],
                    default="paper",
                    help="paper: the paper's model exactly, PPO; paper_nb: plus per-task "
                         "neighbour features in the actor (ours); match: size-agnostic "
@@ -40,7 +40,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "the match network for partial views (2-hop, limited range), DAgger "
                         "from match.pt (ours; --iterations, --episodes, --updates); day: "
                         "PPO on taxi decisions of a city day from match.pt (issue 22; its own "
-                        "options: --variant day --help)")
+                        "options: --variant day --help); ppo: the attention policy trained by "
+                        "PPO alone, one model for every N (issue 33; its own options: "
+                        "--variant ppo --help)")
     p.add_argument("--updates", type=int, default=None,
                    help="match: imitation updates (default 6000); view: per DAgger iteration "
                         "(default 300)")
@@ -643,6 +645,11 @@ def main(argv=None) -> int:
             from allocators.magnnet import day
 
             return day.main(argv[:k] + argv[k + (1 if "=" in a else 2):])
+        # --variant ppo: attention + PPO alone (issue 33), options of its own
+        if (a == "--variant" and argv[k + 1:k + 2] == ["ppo"]) or a == "--variant=ppo":
+            from allocators.magnnet import ppo_run
+
+            return ppo_run.main(argv[:k] + argv[k + (1 if "=" in a else 2):])
     p = argparse.ArgumentParser(prog="magnnet-train", description=__doc__)
     add_arguments(p)
     return run(p.parse_args(argv))
