@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import statistics
 import sys
 import time
 from dataclasses import replace
@@ -35,21 +34,11 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 from rich.console import Console  # noqa: E402
 from rich.table import Table  # noqa: E402
 
+from benchmarks.nyc_study import interval  # noqa: E402
 from dispatch.runner import run_one  # noqa: E402
 from dispatch.scenario import load_scenario  # noqa: E402
 
 SCENARIO = ROOT / "scenarios" / "nyc_manhattan_offers.toml"
-
-
-def interval(values: list[float], fmt: str = ".3g") -> str:
-    """``mean ± half-width`` of a 95 % t-interval (the mean alone below 3 values)."""
-    m = statistics.fmean(values)
-    if len(values) < 3:
-        return format(m, fmt)
-    from scipy import stats
-
-    h = stats.t.ppf(0.975, len(values) - 1) * statistics.stdev(values) / len(values) ** 0.5
-    return f"{format(m, fmt)} ± {h:.2g}"
 
 
 def one(sc, per_km: float, agents: int, seed: int) -> dict:

@@ -146,7 +146,7 @@ class PrebookSource(TaskSource):
         if self._drawn and not self._pending:
             self._done()
 
-    def _generated(self, req) -> None:
+    def _released(self, req) -> None:
         booking = self._booking() if self.share > 0 else None
         if booking is not None and self.mode == "lead":
             self._pending += 1
@@ -173,20 +173,7 @@ class PrebookSource(TaskSource):
                 self.release(next(requests), None if b != b else (b, float(trips.t[k])))
             self._done()
             return
-        if cfg.kind == "static":
-            for _ in range(cfg.count or 0):
-                self._generated(self.demand.draw())
-        else:
-            gap = (lambda: cfg.interval) if cfg.kind == "periodic" else \
-                (lambda: float(self.rng.exponential(1.0 / cfg.rate)))
-            released = 0
-            while cfg.count is None or released < cfg.count:
-                yield self.env.timeout(gap())
-                if cfg.max_active is not None and self.book.live >= cfg.max_active:
-                    self.book.bus.emit(self.env.now, "skipped")
-                    continue
-                self._generated(self.demand.draw())
-                released += 1
+        yield from self._generate()
         self._drawn = True
         if not self._pending:
             self._done()

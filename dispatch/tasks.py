@@ -406,21 +406,17 @@ class TaskSource:
         if task.state is OPEN and not task.transfers:
             self.book.close(task, TaskState.EXPIRED)
 
-    def _run(self):
+    def _released(self, request) -> None:
+        """Hand a generated request out now (a subclass may hold it back: prebooking)."""
+        self.release(request)
+
+    def _generate(self):
+        """Process steps: the generated requests (static, periodic, poisson), each handed to
+        :meth:`_released` when drawn; ends when the count is reached (never without one)."""
         cfg = self.cfg
         if cfg.kind == "static":
             for _ in range(cfg.count or 0):
-                self.release(self.demand.draw())
-            self._done()
-            yield self.env.timeout(0)
-            return
-        if cfg.kind == "trace":
-            requests = self.demand.from_trace(self.trips)
-            for t in self.trips.t[: cfg.count]:
-                if t > self.env.now:
-                    yield self.env.timeout(t - self.env.now)
-                self.release(next(requests))  # made now, not before its time
-            self._done()
+                self._released(self.demand.draw())
             return
         if cfg.kind == "periodic":
             def gap():
@@ -434,6 +430,20 @@ class TaskSource:
             if cfg.max_active is not None and self.book.live >= cfg.max_active:
                 self.book.bus.emit(self.env.now, "skipped")
                 continue
-            self.release(self.demand.draw())
+            self._released(self.demand.draw())
             released += 1
+
+    def _run(self):
+        cfg = self.cfg
+        if cfg.kind == "trace":
+            requests = self.demand.from_trace(self.trips)
+            for t in self.trips.t[: cfg.count]:
+                if t > self.env.now:
+                    yield self.env.timeout(t - self.env.now)
+                self.release(next(requests))  # made now, not before its time
+            self._done()
+            return
+        yield from self._generate()
         self._done()
+        if cfg.kind == "static":
+            yield self.env.timeout(0)
