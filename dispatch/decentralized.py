@@ -181,7 +181,7 @@ def run_rounds(
                 f"{req_tasks[k]}, which is not an open task it can serve"
             )
         fresh = ~taken[req_tasks]
-        winners = _resolve(problem.cost, req_agents[fresh], req_tasks[fresh])
+        winners = resolve_conflicts(problem.cost, req_agents[fresh], req_tasks[fresh])
         # the log, built from whole arrays (a taxi decision logs hundreds of requests)
         rnd = start_round + r
         for a, t, aid, tid, c in zip(req_agents.tolist(), req_tasks.tolist(),
@@ -320,7 +320,8 @@ def _cheaper(c1, a1, c2, a2):
     return np.where(take, c2, c1), np.where(take, a2, a1)
 
 
-def _resolve(cost: np.ndarray, agents: np.ndarray, tasks: np.ndarray) -> dict[int, int]:
+def resolve_conflicts(cost: np.ndarray, agents: np.ndarray, tasks: np.ndarray
+                      ) -> dict[int, int]:
     """The conflict rule: for each requested task, the requester with the smallest cost."""
     best: dict[int, tuple[float, int]] = {}  # task -> (cost, agent) of its best requester
     for a, t, c in zip(agents.tolist(), tasks.tolist(), cost[agents, tasks].tolist()):

@@ -76,7 +76,8 @@ from typing import TYPE_CHECKING
 from dispatch.answers import finders, route_stops, validate
 from dispatch.comms import components
 from dispatch.contracts import Allocator
-from dispatch.decision import Blame, Pipeline, Tally, one_line
+from dispatch.decision import Pipeline
+from dispatch.tally import Blame, Tally, one_line
 from dispatch.errors import AllocationError, DispatchError, PluginError
 from dispatch.heap import keep_large_blocks
 from dispatch.offering import Offering, insertion_estimates, plain_estimates, route_estimates

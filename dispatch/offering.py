@@ -26,7 +26,7 @@ from dispatch.stops import DROPOFF, PICKUP
 from dispatch.tasks import TaskBook, TaskState
 
 if TYPE_CHECKING:
-    from dispatch.decision import Blame
+    from dispatch.tally import Blame
     from dispatch.tasks import Task
 
 log = logging.getLogger(__name__)

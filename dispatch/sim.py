@@ -35,18 +35,17 @@ import logging
 import math
 from contextlib import contextmanager
 
-import numpy as np
 import simpy
 
 from dispatch.battery import Energy
 from dispatch.charging import Charging, Stations
-from dispatch.decision import Blame, Pipeline, Tally
+from dispatch.decision import Pipeline
 from dispatch.dispatcher import Dispatcher, Wakeup
 from dispatch.energy_summary import EnergyTally, energy_columns
 from dispatch.errors import ScenarioError
 from dispatch.events import EventBus
-from dispatch.meeting import Walks
 from dispatch.faults import FaultInjector, blackout_filter
+from dispatch.meeting import Walks
 from dispatch.operator import Hooks, Operator, Towing
 from dispatch.plugins import (check_repositioner, describe, make_charger, make_plugin,
                               make_repositioner, make_sizer)
@@ -58,6 +57,7 @@ from dispatch.space import space_for
 from dispatch.streams import (STREAM_ALLOCATOR, STREAM_CHARGING, STREAM_FAULTS, STREAM_FLEET,
                               STREAM_OFFERS, STREAM_PREBOOK, STREAM_REPOSITION,
                               STREAM_SIZING, STREAM_SOURCE, STREAM_TASKS, rng_for)
+from dispatch.tally import Blame, Tally
 from dispatch.tasks import Task, TaskBook, TaskSource, TaskState
 from dispatch.vehicles import Fleet, stop_leg
 

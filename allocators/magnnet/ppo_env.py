@@ -8,8 +8,8 @@ those unassigned with an open feasible task; each is given its observation
 (:func:`allocators.magnnet.attention.observe`), acts, and its action becomes a request by
 :func:`allocators.magnnet.attention.requests` (the plugin's rule); a round in which nobody
 requests or waits ends the decision; the requests are settled by the kernel's conflict rule
-(:func:`dispatch.decentralized._resolve`: the cheapest requester wins, ties to the lowest
-index). No SimPy: a static decision needs only its cost matrix. Games of a radio graph
+(:func:`dispatch.decentralized.resolve_conflicts`: the cheapest requester wins, ties to the
+lowest index). No SimPy: a static decision needs only its cost matrix. Games of a radio graph
 (training under limited range) still learn of every won task at once (the game's beliefs are
 global); the plugin under limited range relays the news hop by hop.
 
@@ -34,7 +34,7 @@ import numpy as np
 import torch
 
 from allocators.magnnet.attention import observe, requests
-from dispatch.decentralized import WAIT, _resolve
+from dispatch.decentralized import WAIT, resolve_conflicts
 
 R_WIN = 2.0
 R_CONFLICT = -1.0
@@ -102,7 +102,7 @@ class RoundsEnv:
                 done[b] = True  # the shared loop stops: nobody requests or waits
                 continue
             ra, rt = agents[asked], choice[asked]
-            winners = _resolve(self.cost[b], ra, rt)
+            winners = resolve_conflicts(self.cost[b], ra, rt)
             count = np.bincount(rt, minlength=self.m)
             contested = count[rt] > 1
             own[b, ra[contested]] += R_CONFLICT

@@ -85,7 +85,7 @@ def run(args, console=None) -> int:
     from allocators.magnnet.ppo import save_checkpoint
     from allocators.magnnet.ppo_train import Config, train
     from allocators.magnnet.problems import load_pool
-    from allocators.magnnet.train import _write_log
+    from allocators.magnnet.train_files import write_log
 
     torch.set_num_threads(args.threads)
     say = console.print if console else print
@@ -125,7 +125,7 @@ def run(args, console=None) -> int:
                      "world_size": full.world_size.tolist(),
                      "pool": f"train seeds from 1000000, N=20, {len(pool)} training + "
                              f"{n_val} validation instances"})
-    _write_log(rows, out)
+    write_log(rows, out)
     figures(rows, out)
     say(f"trained in {wall:.0f} s, {steps} environment steps, {len(rows) - len(vals)} "
         f"updates; checkpoint {out / 'model.pt'}; kept update {kept and kept['update']}")
@@ -134,9 +134,9 @@ def run(args, console=None) -> int:
 
 def figures(rows, out: Path) -> None:
     """reward.png, entropy.png (running means over the updates) and validation.png."""
-    from allocators.magnnet.train import _pyplot
+    from allocators.magnnet.train_files import pyplot
 
-    plt = _pyplot()
+    plt = pyplot()
     if plt is None:
         return
     ppo = [r for r in rows if r["phase"] == "ppo"]

@@ -13,6 +13,8 @@ import logging
 import time
 from pathlib import Path
 
+from allocators.magnnet.train_files import pyplot, write_log
+
 log = logging.getLogger(__name__)
 
 #: The view model's second DAgger stage (``dispatch train magnnet --variant view`` runs both):
@@ -206,7 +208,7 @@ def run(args, console=None) -> int:
                      "world_size": pool.world_size.tolist(),
                      "pool": f"train seeds from 1000000, N={pool_n}, {len(pool)} training + "
                              f"{n_val} validation instances"})
-    _write_log(rows, out)
+    write_log(rows, out)
     _figures(rows, out)
     msg = (f"trained in {wall:.1f} s, {steps} env steps ({steps / wall:.0f} steps/s); PPO "
            f"{ppo_steps} env steps in {ppo_wall:.1f} s "
@@ -262,7 +264,7 @@ def _run_match(args, console=None) -> int:
                      "pool": f"train seeds from 1000000: N=20 ({len(full) - n_val} training + "
                              f"{n_val} validation instances), random sub-problems up to "
                              f"{cfg.max_size} x {cfg.max_size}"})
-    _write_log(rows, out)
+    write_log(rows, out)
     _loss_figure(rows, out)
     msg = f"trained in {wall:.1f} s, {cfg.updates} updates; checkpoint {out / 'model.pt'}"
     if best:
@@ -485,15 +487,6 @@ def _trained(wall: float, cpu: float, threads: int) -> str:
     return f"trained in {wall:.1f} s ({cpu:.1f} CPU s on {threads} torch threads), "
 
 
-def _write_log(rows, out: Path) -> None:
-    """``log.parquet``: one column per key any row has (null where a row lacks it)."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    keys = sorted({k for r in rows for k in r})
-    pq.write_table(pa.table({k: [r.get(k) for r in rows] for k in keys}), out / "log.parquet")
-
-
 def _save_dagger(model, rows, out: Path, threads: int, started: float, cpu0: float,
                  head: dict, tail: dict, curve_keys: tuple, figure):
     """The end of a DAgger trainer of the view model: ``model.pt`` (its ``extra``: wall and
@@ -512,7 +505,7 @@ def _save_dagger(model, rows, out: Path, threads: int, started: float, cpu0: flo
                      "curve": [{k: v for k, v in r.items() if k.startswith("val/")
                                 or k in curve_keys} for r in vals],
                      **tail})
-    _write_log(rows, out)
+    write_log(rows, out)
     figure(rows, out)
     return wall, cpu, kept
 
@@ -523,7 +516,7 @@ def _loss_png(rows, out: Path, fit_phase: str, right) -> None:
     axes, ``fit`` those rows, ``val`` the validation rows); nothing without matplotlib."""
     import numpy as np
 
-    plt = _pyplot()
+    plt = pyplot()
     if plt is None:
         return
     fit = [r for r in rows if r["phase"] == fit_phase]
@@ -577,19 +570,6 @@ def _view_curve(ax, fit, val) -> None:
     ax[1].legend(fontsize=7)
 
 
-def _pyplot():
-    """matplotlib's pyplot on the headless Agg backend, or None (logged) when it is missing."""
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        log.warning("matplotlib missing: no figures")
-        return None
-    return plt
-
-
 def _loss_figure(rows, out: Path) -> None:
     _loss_png(rows, out, "imitation", _match_curve)
 
@@ -601,7 +581,7 @@ def _match_curve(ax, fit, val) -> None:
 
 
 def _figures(rows, out: Path) -> None:
-    plt = _pyplot()
+    plt = pyplot()
     if plt is None:
         return
     ppo = [r for r in rows if r["phase"] == "ppo"]

@@ -14,8 +14,9 @@ import pytest
 import simpy
 
 from dispatch.comms import Hearing, comm_graph
-from dispatch.decision import (Blame, PlannerCosts, Tally, deadlines, keep_servable,
-                               lazy_costs, reject_late)
+from dispatch.decision import deadlines, keep_servable, reject_late
+from dispatch.planner_costs import PlannerCosts, lazy_costs
+from dispatch.tally import Blame, Tally
 from dispatch.dispatcher import Wakeup
 from dispatch.errors import PluginError
 from dispatch.scenario import load_scenario
@@ -141,7 +142,7 @@ def test_lazy_costs_need_bounds_a_total_cost_minimizer_and_no_plans(caplog):
     total = SimpleNamespace(name="a", minimizes_total_cost=True)
     assert lazy_costs(cfg, bounds, total, plans=False)
     assert not lazy_costs(SimpleNamespace(lazy_costs=False), bounds, total, plans=False)
-    with caplog.at_level("WARNING", logger="dispatch.decision"):
+    with caplog.at_level("WARNING", logger="dispatch.planner_costs"):
         assert not lazy_costs(cfg, SimpleNamespace(name="p", lower_bounds=False), total, plans=False)
         assert not lazy_costs(cfg, bounds, total, plans=True)
     assert "computes no lower bounds" in caplog.text and "insertions exactly" in caplog.text

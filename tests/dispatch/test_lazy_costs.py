@@ -261,7 +261,7 @@ def test_lazy_costs_without_support_fall_back_with_a_warning(tmp_path, caplog):
         d = tmp_path / str(on)
         d.mkdir()
         path = write_scenario(d, dispatch={"allocator": "greedy", "lazy_costs": on})
-        with caplog.at_level(logging.WARNING, logger="dispatch.decision"):
+        with caplog.at_level(logging.WARNING, logger="dispatch.planner_costs"):
             results.append(inv.run_scenario(path))
     assert "lazy_costs is on but" in caplog.text
     assert results[0].summary["total_cost"] == results[1].summary["total_cost"]
