@@ -132,3 +132,23 @@ class Offering:
             self.book.bus.emit(now, "decline", vehicle_id, task.id, task.loc)
             self.reoffer = True
         return False
+
+
+def offering_for(sc, book: TaskBook, space, rng: np.random.Generator, blame: Blame
+                 ) -> Offering | None:
+    """``[acceptor]`` / ``[pricing]``: the run's offer step, or None where there is nothing
+    to offer: the default configuration (no section), or an acceptor that declares it never
+    declines without fares to record. ``rng``: the riders' answers' stream."""
+    from dispatch import registry
+    from dispatch.offers import AcceptorConfig
+    from dispatch.plugins import make_acceptor
+
+    acc = sc.acceptor
+    if sc.pricing is None and acc == AcceptorConfig():
+        return None
+    acceptor = make_acceptor(sc)
+    if sc.pricing is None and not registry.capabilities("acceptor", acceptor).declines:
+        return None
+    # fares are of rides on a road network (the parser refuses [pricing] elsewhere)
+    metres = space.path_metres if sc.pricing is not None else None
+    return Offering(book, acceptor, rng, acc.retries, sc.pricing, metres, blame)

@@ -36,6 +36,7 @@ from dataclasses import fields, replace
 
 import numpy as np
 
+from dispatch.errors import ScenarioError
 from dispatch.tasks import TaskSource, TaskState
 from dispatch.traces import Trips
 
@@ -178,3 +179,21 @@ class PrebookSource(TaskSource):
         if not self._pending:
             self._done()
         yield self.env.timeout(0)
+
+
+def task_source(sc, allocator, booking_rng) -> tuple[type[TaskSource], dict]:
+    """The run's task source class and its own arguments: :class:`PrebookSource` where some
+    request is booked ahead (``booking_rng``: its stream), else :class:`TaskSource`; a
+    ScenarioError for an allocator that builds its own routes (they do not read a booked
+    pickup's earliest time)."""
+    t, d = sc.tasks, sc.dispatch
+    if not t.prebooked:
+        return TaskSource, {}
+    if allocator.multi_request:
+        raise ScenarioError(sc.path, "dispatch.allocator", f"{allocator.name!r} builds its own "
+                            "routes (multi_request): prebooking needs an allocator that takes "
+                            "the insertion costs")
+    return PrebookSource, dict(
+        share=t.prebook_share, lead=t.prebook_lead, mode=d.prebook,
+        dispatch_lead=t.prebook_lead if d.prebook_lead is None else d.prebook_lead,
+        booking_rng=booking_rng)

@@ -60,7 +60,7 @@ class RoadNetwork(Space):
     kind: ClassVar[str] = "road"
     default_planner: ClassVar[str] = "dijkstra"
     features: ClassVar[frozenset[str]] = frozenset(
-        {"pooling", "reassign", "snap", "energy", "reposition", "rl"})
+        {"pooling", "reassign", "snap", "energy", "reposition", "rl", "pricing", "depots"})
     start_nodes: ClassVar[bool] = True
 
     def __init__(self, name: str, xy: np.ndarray, ids: Any, time: csr_matrix, length: csr_matrix,

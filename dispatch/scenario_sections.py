@@ -352,7 +352,7 @@ def parse_pricing(p: Table, world: WorldConfig):
 
     if not p.data:
         return None
-    if world.roads is None:
+    if "pricing" not in space_class(world.space).features:
         raise p.fail(next(iter(p.data)), "fares need a road network ([world] network)")
     pricing = Pricing(base=p.number("base", 0.0, lo=0.0), per_km=p.number("per_km", 0.0, lo=0.0),
                       per_minute=p.number("per_minute", 0.0, lo=0.0),

@@ -141,7 +141,7 @@ def depot_location(space, path: Path, row: int, cell):
     metres within :data:`DEPOT_SNAP` of a node; ScenarioError naming the file, row and
     column otherwise."""
     net = space
-    if space.kind != "road":  # (the voxel world has no nodes to name)
+    if "depots" not in space.features:  # (the voxel world has no nodes to name)
         raise ScenarioError(path, f"row {row}", "depot is only read on a road network "
                                                 "([world] network)")
     text = str(cell).strip()

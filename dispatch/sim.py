@@ -42,14 +42,14 @@ from dispatch.charging import Charging, Stations
 from dispatch.decision import Pipeline
 from dispatch.dispatcher import Dispatcher, Wakeup
 from dispatch.energy_summary import EnergyTally, energy_columns
-from dispatch.errors import ScenarioError
 from dispatch.events import EventBus
 from dispatch.faults import FaultInjector, blackout_filter
 from dispatch.meeting import Walks
 from dispatch.operator import Hooks, Operator, Towing
 from dispatch.plugins import (check_repositioner, describe, make_charger, make_plugin,
                               make_repositioner, make_sizer)
-from dispatch.prebook import PrebookSource
+from dispatch.offering import offering_for
+from dispatch.prebook import task_source
 from dispatch.recording import RunRecording
 from dispatch.reposition import Repositioning, summary_of
 from dispatch.shifts import Shifts, fleet_summary
@@ -58,7 +58,7 @@ from dispatch.streams import (STREAM_ALLOCATOR, STREAM_CHARGING, STREAM_FAULTS, 
                               STREAM_OFFERS, STREAM_PREBOOK, STREAM_REPOSITION,
                               STREAM_SIZING, STREAM_SOURCE, STREAM_TASKS, rng_for)
 from dispatch.tally import Blame, Tally
-from dispatch.tasks import Task, TaskBook, TaskSource, TaskState
+from dispatch.tasks import Task, TaskBook, TaskState
 from dispatch.vehicles import Fleet, stop_leg
 
 log = logging.getLogger(__name__)
@@ -176,19 +176,12 @@ class Simulation:
         self.dispatcher = Dispatcher(env, wakeup, pipeline, self.fleet, self.operator,
                                      allocator, self.tally, blame, self._record_decision,
                                      window=d.batch_window, latency=sc.comms.latency,
-                                     offering=self._offering(sc, blame))
+                                     offering=offering_for(sc, book, self.space,
+                                                           rng_for(spec.seed, STREAM_OFFERS),
+                                                           blame))
         driver.run_id = spec.run_id  # named in error messages
         t = sc.tasks
-        source, extra = TaskSource, {}
-        if t.prebooked:  # requests booked ahead (dispatch.prebook)
-            if allocator.multi_request:  # its routes do not read a booked pickup's earliest
-                raise ScenarioError(sc.path, "dispatch.allocator", f"{spec.allocator!r} "
-                                    "builds its own routes (multi_request): prebooking needs "
-                                    "an allocator that takes the insertion costs")
-            source, extra = PrebookSource, dict(
-                share=t.prebook_share, lead=t.prebook_lead, mode=d.prebook,
-                dispatch_lead=t.prebook_lead if d.prebook_lead is None else d.prebook_lead,
-                booking_rng=rng_for(spec.seed, STREAM_PREBOOK))
+        source, extra = task_source(sc, allocator, rng_for(spec.seed, STREAM_PREBOOK))
         self.source = source.of(env, book, demand, t,
                                 spec.n_static_tasks if t.source == "static" else t.count,
                                 lambda: rng_for(spec.seed, STREAM_TASKS),
@@ -218,26 +211,6 @@ class Simulation:
         while True:
             yield self.env.timeout(tick)
             self.progress(self.env.now, duration, self.book.released, self.stats.n_tasks)
-
-    def _offering(self, sc, blame: Blame):
-        """``[acceptor]`` / ``[pricing]``: the offer step (:mod:`dispatch.offering`), or None
-        where there is nothing to offer: the default configuration (no section), or an
-        acceptor that declares it never declines without fares to record."""
-        from dispatch import registry
-        from dispatch.offering import Offering
-        from dispatch.offers import AcceptorConfig
-        from dispatch.plugins import make_acceptor
-
-        acc = sc.acceptor
-        if sc.pricing is None and acc == AcceptorConfig():
-            return None
-        acceptor = make_acceptor(sc)
-        if sc.pricing is None and not registry.capabilities("acceptor", acceptor).declines:
-            return None
-        # fares are of rides on a road network (the parser refuses [pricing] elsewhere)
-        metres = self.space.path_metres if sc.pricing is not None else None
-        return Offering(self.book, acceptor, rng_for(self.spec.seed, STREAM_OFFERS),
-                        acc.retries, sc.pricing, metres, blame)
 
     def _energy(self, sc) -> Energy | None:
         """``[fleet.energy]``: the run's batteries and the dispatcher's reserve rule (see

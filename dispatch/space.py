@@ -84,7 +84,9 @@ class Space(ABC):
     #: (shared rides, drop-off delay limits, the added_time objective), ``"reassign"``
     #: (re-assignment before pickup), ``"snap"`` (traces of coordinates snapped to it,
     #: ``max_snap``), ``"energy"`` (batteries and charging stations), ``"reposition"`` (the
-    #: kernel drives idle vehicles), ``"rl"`` (:mod:`learning.rl`'s environment)
+    #: kernel drives idle vehicles), ``"rl"`` (:mod:`learning.rl`'s environment), ``"pricing"``
+    #: (fares by the direct route's kilometres: ``[pricing]``), ``"depots"`` (shift depots
+    #: named by node or snapped from ``x,y``: :mod:`dispatch.shifts`)
     features: ClassVar[frozenset[str]] = frozenset()
     #: a fleet start file may give a vehicle's node id (a ``node`` column) instead of metres
     start_nodes: ClassVar[bool] = False
