@@ -39,7 +39,7 @@ With ``max_walk`` = 0 everywhere nothing here runs (the decision has no candidat
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
 from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
@@ -163,6 +163,15 @@ class MeetingInserts:
     def __contains__(self, key) -> bool:
         return (int(key[0]), int(key[1])) in self._q
 
+    def pairs(self):
+        """``(rows, cols, insertions)`` as :meth:`dispatch.plans.Inserts.pairs`: every feasible
+        pair kept and the insertion arrays of its cheapest candidate pair of points."""
+        rows = np.fromiter((k[0] for k in self._q), np.int64, len(self._q))
+        cols = np.fromiter((k[1] for k in self._q), np.int64, len(self._q))
+        q = np.fromiter(self._q.values(), np.int64, len(self._q))
+        ins = self._ins
+        return rows, cols, replace(ins, **{f.name: getattr(ins, f.name)[q] for f in fields(ins)})
+
 
 def _pairs(walks: Walks, tasks: list, svc: float, planner: Planner):
     """The candidate pairs of ``tasks`` as columns: each one's task index, boarding and
@@ -184,7 +193,10 @@ def _pairs(walks: Walks, tasks: list, svc: float, planner: Planner):
     point = np.array([t.dropoff is None for t in tasks])[col]
     lp = np.array([t.deadline for t in tasks])[col]
     ld = np.array([t.dropoff_deadline for t in tasks])[col] - wa / spd
-    e = np.where(wb > 0, release + wb / spd, -np.inf)
+    # boarding no earlier than the rider gets there: a booked ride's requested departure
+    # (its released_at, dispatch.prebook) plus the walk; door to door no limit unless booked
+    booked = np.array([t.booked_at == t.booked_at for t in tasks])[col]
+    e = np.where(wb > 0, release + wb / spd, np.where(booked, release, -np.inf))
     n = np.array([0 if t.dropoff is None else t.passengers for t in tasks], np.int64)[col]
     trips = np.flatnonzero(~point)
     pd = np.zeros(col.size)

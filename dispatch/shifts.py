@@ -298,7 +298,8 @@ class Shifts:
             rows_busy = np.flatnonzero(planned)
             if rows_busy.size:
                 end[rows_busy] = math.inf  # busy: only its feasible insertions
-            if inserts and rows_busy.size:
+            if inserts:  # busy vehicles' pairs (with meeting points idle ones' too: the
+                # rider's walk may hold the pickup back)
                 rows, cols, ins = inserts.pairs()
                 last = np.zeros(len(slots))
                 n_stops = np.zeros(len(slots), np.int64)
@@ -311,7 +312,7 @@ class Shifts:
                 at_end = ins.j == n_stops[rows]
                 done = np.where(at_end, ins.dropoff_at + svc_d[cols],
                                 last[rows] + ins.shift2)
-                end[rows, cols] = np.where(planned[rows], done, end[rows, cols])
+                end[rows, cols] = done
         ok = end <= lim[:, None] + TOL
         return np.where(ok, cost, np.inf)
 

@@ -307,3 +307,20 @@ def test_meeting_points_need_a_road_network(tmp_path):
                     '[tasks]\nsource = "static"\ncount = 2\nmax_walk = 100.0\n', "utf-8")
     with pytest.raises(ScenarioError, match="max_walk"):
         load_scenario(path)
+
+
+def test_a_booked_rider_who_walks_boards_after_departure_and_walk(tmp_path):
+    # prebooking: a booked ride's released_at is its requested departure; with meeting points
+    # its boarding is no earlier than that plus the walk (door to door: the departure)
+    _trace(tmp_path, 5, n=30)
+    path = _scenario(tmp_path, walk=200.0)
+    text = path.read_text().replace("[tasks]\n", "[tasks]\nprebook_share = 0.5\n"
+                                    "prebook_lead = 300.0\n", 1)
+    path.write_text(text)
+    summary, tables = _tables(path)
+    t = tables["tasks"]
+    booked = t[t.booked_at.notna() & t.picked_up_at.notna()]
+    assert len(booked) >= 5 and summary["promises"] >= 5
+    walk_s = booked.walk_to_board_m / SPEED
+    assert (booked.picked_up_at >= booked.released_at + walk_s - EPS).all()
+

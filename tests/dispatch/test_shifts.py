@@ -41,7 +41,7 @@ FLEET = [  # vehicle_id, node, shift_start, shift_end, depot
 
 def _run(directory: Path, *, allocator: str = "hungarian", capacity: int = 1,
          grace: float = 0.0, rows=FLEET, fleet_extra: str = "", extra: str = "",
-         seed: int = 0, max_delay: float | None = None, columns=True):
+         seed: int = 0, max_delay: float | None = None, columns=True, tasks_extra: str = ""):
     _trace(directory, seed, max_pax=min(capacity, 2))
     header = ["vehicle_id", "node", "shift_start", "shift_end", "depot"]
     if columns:
@@ -51,6 +51,7 @@ def _run(directory: Path, *, allocator: str = "hungarian", capacity: int = 1,
     tasks = 'source = "trace"\ntrace = "trips.csv"\nmax_wait = 240.0'
     if max_delay is not None:
         tasks += f"\nmax_delay = {max_delay}"
+    tasks += tasks_extra
     fleet = f'start = "fleet.csv"\ncapacity = {capacity}\nshift_grace = {grace}\n{fleet_extra}'
     path = road_scenario(directory, tasks=tasks, fleet=fleet, allocator=allocator,
                          extra=extra, duration=1e5)
@@ -260,3 +261,16 @@ def test_utilization_rule():
     assert s.initial(view(0, float("nan"), pool=50)) == 5
     with pytest.raises(ValueError, match="max_vehicles"):
         UtilizationSizer(min_vehicles=5, max_vehicles=3)
+
+
+def test_shifts_with_meeting_points_keep_the_shift(tmp_path):
+    # meeting points cost insertions for idle and busy vehicles alike; the shift limit reads
+    # the busy ones' insertion times from them as it does door to door
+    summary, tables = _run(tmp_path, capacity=3, max_delay=300.0,
+                           tasks_extra="\nmax_walk = 200.0\nmeeting_points = 4")
+    ev, veh, tasks = tables["events"], tables["vehicles"].set_index("agent_id"), tables["tasks"]
+    assert summary["tasks_completed"] > 10 and (tasks.walk_to_board_m > 0).any()
+    for a, row in veh.iterrows():
+        picks = ev[(ev.agent_id == a) & (ev.event == "pickup")].t
+        assert (picks >= row.shift_start - EPS).all() and (picks <= row.shift_end + EPS).all()
+
