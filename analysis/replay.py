@@ -72,7 +72,7 @@ POSITION_EVENTS = ("depart", "move", "wait", "pickup", "dropoff", "arrive", "com
 #: event kinds the page can jump to (those the run has)
 JUMP_EVENTS = ("release", "assign", "pickup", "dropoff", "reject", "expire", "reassign",
                "insert", "reposition", "queue", "charge_start", "breakdown", "repair",
-               "stranded")
+               "stranded", "decline", "shift_start", "shift_end")
 ASSETS = "replay_assets"
 
 

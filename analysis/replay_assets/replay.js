@@ -613,15 +613,24 @@
     if (run.voxel) box.appendChild(el("div", null, "position " + run.px[v].toFixed(1) + ", " +
       run.py[v].toFixed(1) + ", altitude " + run.pz[v].toFixed(1) + " m"));
     var stops = [], riders = [];
+    var F = (T && T.features) || {};
+    var note = function (i, end) { // a booked ride; a rider who walks to or from the stop
+      var s = "";
+      if (end === "pickup" && F.booked && T.bk[i] === T.bk[i]) s += ", booked at " + clock(T.bk[i]);
+      var m = !F.walks ? 0 : end === "pickup" ? T.wTo[i] : T.wFrom[i];
+      if (m > 0) s += ", rider walks " + m.toFixed(0) + " m " + (end === "pickup" ? "to it" : "from it");
+      return s ? " (" + s.slice(2) + ")" : "";
+    };
     (run.tasksOf[id] || []).forEach(function (i) {
       var asg = T.asg ? fin(T.asg[i]) : T.rel[i], p = fin(T.pick[i]), cl = fin(T.close[i]);
       if (t >= cl) return;
+      var drop = "drop-off of request " + T.id[i] + note(i, "dropoff");
       if (p <= t) {
         riders.push(i);
-        if (T.dx[i] === T.dx[i]) stops.push([fin(T.done[i]), "drop-off of request " + T.id[i]]);
+        if (T.dx[i] === T.dx[i]) stops.push([fin(T.done[i]), drop]);
       } else if (asg <= t) {
-        stops.push([p, "pickup of request " + T.id[i]]);
-        if (T.dx[i] === T.dx[i]) stops.push([fin(T.done[i]), "drop-off of request " + T.id[i]]);
+        stops.push([p, "pickup of request " + T.id[i] + note(i, "pickup")]);
+        if (T.dx[i] === T.dx[i]) stops.push([fin(T.done[i]), drop]);
       }
     });
     stops.sort(function (a, b) { return a[0] - b[0]; });

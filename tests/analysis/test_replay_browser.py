@@ -692,6 +692,14 @@ def test_browser_booked_rides(walk_run, browser, tmp_path):
             want = expected_counts(tasks, t, WALK_SPEED)["booked"]
             assert p.kpis()["booked"] == want, t
         assert "booked ahead" in p.page.text_content("[data-legend='booked']")
+        # a followed vehicle's stop list says which of its pickups are booked rides
+        held = tasks[tasks["booked_at"].notna() & (tasks["assigned_at"] < tasks["picked_up_at"])]
+        r = held.iloc[0]
+        t = float(r["assigned_at"] + r["picked_up_at"]) / 2
+        p.page.evaluate("t => window.replay.seek(t)", t)
+        assert p.page.evaluate("i => window.replay.follow(i)", int(r["agent_id"]))
+        stops = p.page.text_content("[data-panel='follow'] [data-panel='stops']")
+        assert f"pickup of request {int(r['task_id'])} (booked at" in stops
     finally:
         p.close()
 
@@ -748,6 +756,12 @@ def test_browser_driver_shifts(shift_run, browser, tmp_path):
             assert sum(s == "off_shift" for s in states.values()) == want["off_shift"]
         assert states[0] == "off_shift"  # its shift ended at 1200, home by 2000
         assert p.page.query_selector("[data-legend='off_shift']") is not None
+        p.page.evaluate("window.replay.seek(0)")
+        p.page.select_option("#jumpkind", "shift_end")
+        p.page.click("#jump")
+        assert p.page.evaluate("window.replay.time()") == float(
+            ev.loc[ev["event"] == "shift_end", "t"].min())
+        p.page.evaluate("t => window.replay.seek(t)", times[-1])
         # off shift: not drawn; the layer draws a ring where the vehicle waits
         from PIL import Image
 
