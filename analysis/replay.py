@@ -17,8 +17,19 @@ Counts the panel shows (``data-kpi``), from the tasks table, at time ``t``: ``wa
 released at or before ``t``, not picked up and not closed by ``t``; ``onboard``: picked up
 at or before ``t`` and not closed by ``t``; ``delivered``: completed at or before ``t``;
 ``rejected``: closed at or before ``t`` in state ``rejected`` or ``expired``
-(:data:`REFUSED_STATES`). :func:`counts_at` computes them in Python (the tests compare the
-page with it).
+(:data:`REFUSED_STATES`); ``declined``: closed at or before ``t`` in state ``declined`` (the
+rider declined the offer, ``dispatch.offers``); ``cutoff``: closed at or before ``t`` in state
+``cancelled`` (:data:`CUT_OFF_STATE`: the run's end cut it off, labelled "cut off" as in the
+report); ``booked``: booked ahead (``booked_at``) at or before ``t``, not picked up and not
+closed by ``t`` (``dispatch.prebook``); ``walking``: riders on foot at ``t`` (meeting points,
+``dispatch.meeting``): from release to the boarding point (``walk_to_board_m`` at the walking
+speed, until the pickup or the close if sooner) and from the alighting point after the
+drop-off (``walk_from_alight_m``). The walking speed is the scenario's ``[tasks] walk_speed``
+(default 1.4 m/s; a trace's per-row speeds are not in the results). :func:`counts_at`
+computes them in Python (the tests compare the page with it).
+
+Vehicles with driver shifts (``dispatch.shifts``) are also ``off_shift`` (not drawn) and
+``to_depot`` (driving home): :mod:`analysis.replay_duty`.
 """
 
 from __future__ import annotations
@@ -38,14 +49,22 @@ import numpy as np
 import pandas as pd
 
 from analysis.replay_data import ReplayInputError, RunFiles, choose_run, read_table
+from analysis.replay_duty import DUTY_STATES, duty_spells, overlay
 from analysis.timeline import FLEET_STATES, fleet_states
 
 log = logging.getLogger(__name__)
 
 #: task states that count as refused in the panel's ``rejected`` count
 REFUSED_STATES = ("rejected", "expired")
+#: the task state of a request the run's end cut off (the page and the report say "cut off")
+CUT_OFF_STATE = "cancelled"
 #: task states in the page's order (code = index; anything else: "open")
-TASK_STATES = ("completed", "rejected", "expired", "unreachable", "cancelled", "failed", "open")
+TASK_STATES = ("completed", "rejected", "expired", "unreachable", "cancelled", "failed",
+               "declined", "open")
+#: the riders' walking speed (m/s) where the scenario does not set ``[tasks] walk_speed``
+WALK_SPEED = 1.4
+#: the panel's counts (``data-kpi``), in its order
+KPIS = ("waiting", "onboard", "delivered", "rejected", "declined", "cutoff", "booked", "walking")
 #: vehicle events whose x, y, z are the vehicle's own position
 POSITION_EVENTS = ("depart", "move", "wait", "pickup", "dropoff", "arrive", "complete", "idle",
                    "breakdown", "repair", "queue", "charge_start", "charge_end", "stranded",
@@ -53,27 +72,69 @@ POSITION_EVENTS = ("depart", "move", "wait", "pickup", "dropoff", "arrive", "com
 #: event kinds the page can jump to (those the run has)
 JUMP_EVENTS = ("release", "assign", "pickup", "dropoff", "reject", "expire", "reassign",
                "insert", "reposition", "queue", "charge_start", "breakdown", "repair",
-               "stranded")
+               "stranded", "decline", "shift_start", "shift_end")
 ASSETS = "replay_assets"
 
 
 # ----------------------------------------------------------------------------- counts
-def counts_at(tasks: pd.DataFrame, t: float) -> dict[str, int]:
-    """The panel's four counts at time ``t`` from a run's tasks table (see the module
-    docstring for their definitions)."""
+def _col(tasks: pd.DataFrame, name: str) -> np.ndarray:
+    """A float column of the tasks table, all NaN where the run has none (older results)."""
+    if name in tasks.columns:
+        return tasks[name].to_numpy(dtype=float)
+    return np.full(len(tasks), np.nan)
+
+
+def walk_spells(tasks: pd.DataFrame, speed: float) -> tuple[np.ndarray, ...]:
+    """(start, end) of each rider's walk to the boarding point and (start, end) of the walk
+    from the alighting point, NaN where there is none (see the module docstring)."""
+    rel, pick = _col(tasks, "released_at"), _col(tasks, "picked_up_at")
+    close, done = _col(tasks, "closed_at"), _col(tasks, "completed_at")
+    to, frm = _col(tasks, "walk_to_board_m"), _col(tasks, "walk_from_alight_m")
+    with np.errstate(invalid="ignore"):
+        stop = np.fmin(np.fmin(rel + to / speed, pick), close)
+        s1 = np.where(to > 0, rel, np.nan)
+        e1 = np.where(to > 0, stop, np.nan)
+        s2 = np.where((frm > 0) & np.isfinite(done), done, np.nan)
+        e2 = s2 + frm / speed
+    return s1, e1, s2, e2
+
+
+def counts_at(tasks: pd.DataFrame, t: float, walk_speed: float = WALK_SPEED) -> dict[str, int]:
+    """The panel's counts (:data:`KPIS`) at time ``t`` from a run's tasks table (see the
+    module docstring for their definitions)."""
     rel = tasks["released_at"].to_numpy(dtype=float)
     pick = tasks["picked_up_at"].to_numpy(dtype=float)
     done = tasks["completed_at"].to_numpy(dtype=float)
     close = tasks["closed_at"].to_numpy(dtype=float)
+    booked = _col(tasks, "booked_at")
+    s1, e1, s2, e2 = walk_spells(tasks, walk_speed)
+    state = tasks["state"]
     with np.errstate(invalid="ignore"):
         picked = pick <= t
         closed = close <= t
         waiting = (rel <= t) & ~picked & ~closed
         onboard = picked & ~closed
         delivered = done <= t
-        refused = tasks["state"].isin(REFUSED_STATES).to_numpy() & closed
-    return {"waiting": int(waiting.sum()), "onboard": int(onboard.sum()),
-            "delivered": int(delivered.sum()), "rejected": int(refused.sum())}
+        refused = state.isin(REFUSED_STATES).to_numpy() & closed
+        walking = ((s1 <= t) & (t < e1)) | ((s2 <= t) & (t < e2))
+        return {"waiting": int(waiting.sum()), "onboard": int(onboard.sum()),
+                "delivered": int(delivered.sum()), "rejected": int(refused.sum()),
+                "declined": int(((state == "declined").to_numpy() & closed).sum()),
+                "cutoff": int(((state == CUT_OFF_STATE).to_numpy() & closed).sum()),
+                "booked": int(((booked <= t) & ~picked & ~closed).sum()),
+                "walking": int(walking.sum())}
+
+
+def walk_speed_of(run: RunFiles) -> float:
+    """The scenario's ``[tasks] walk_speed`` (m/s), else :data:`WALK_SPEED`."""
+    try:
+        import tomllib
+
+        scen = tomllib.loads(run.metadata.get("dispatch.scenario", ""))
+    except ValueError:
+        return WALK_SPEED
+    v = scen.get("tasks", {}).get("walk_speed", WALK_SPEED)
+    return float(v) if isinstance(v, (int, float)) and v > 0 else WALK_SPEED
 
 
 # ----------------------------------------------------------------------------- encoding
@@ -300,7 +361,9 @@ def build_run(run: RunFiles, route: bool = True) -> dict:
     st = fleet_states(events.assign(run_id=run.run_id), vehicles.assign(run_id=run.run_id),
                       end=end, passengers=riders)
     st = st.sort_values(["agent_id", "start"], kind="stable")
-    code = {s: i for i, s in enumerate(FLEET_STATES)}
+    st = overlay(st, duty_spells(events, vehicles, end))
+    states = (*FLEET_STATES, *DUTY_STATES)
+    code = {s: i for i, s in enumerate(states)}
 
     kinds = sorted(vehicles["kind"].astype(str).unique()) if "kind" in vehicles else ["vehicle"]
     veh = {
@@ -343,6 +406,26 @@ def build_run(run: RunFiles, route: bool = True) -> dict:
         }
         tk["kindCode"] = _arr(tasks["kind"].astype(str).map(
             {k: i for i, k in enumerate(tk["kind"])}), np.uint8)
+        # prebooking, offers, meeting points (absent columns: none of them)
+        booked = _col(tasks, "booked_at")
+        walk_to, walk_from = _col(tasks, "walk_to_board_m"), _col(tasks, "walk_from_alight_m")
+        walks = bool(np.nansum(walk_to) + np.nansum(walk_from) > 0)
+        tk["features"] = {
+            "booked": bool(np.isfinite(booked).any()),
+            "offers": bool(np.nansum(_col(tasks, "offers")) > 0
+                           or (tasks["state"] == "declined").any()),
+            "walks": walks}
+        if tk["features"]["booked"]:
+            tk["bk"] = _arr(booked, np.float64)
+            tk["promised"] = _arr(tasks["promised"].fillna(False).astype(bool)
+                                  if "promised" in tasks else np.zeros(len(tasks)), np.uint8)
+        if walks:
+            tk["walkSpeed"] = walk_speed_of(run)
+            tk["wTo"] = _arr(np.nan_to_num(walk_to), np.float32)
+            tk["wFrom"] = _arr(np.nan_to_num(walk_from), np.float32)
+            for key, col, o in (("bx", "board_x", ox), ("by", "board_y", oy),
+                                ("ax", "alight_x", ox), ("ay", "alight_y", oy)):
+                tk[key] = _arr(_col(tasks, col) - o, np.float32)
     else:
         tk = None
 
@@ -409,8 +492,8 @@ def build_run(run: RunFiles, route: bool = True) -> dict:
                                          "e": _arr(net[2].ravel(), np.int32)},
         "obstacles": obstacles, "vehicles": veh, "tasks": tk, "jumps": jumps,
         "decisions": dec, "soc": socd, "stations": stations,
-        "fleetStates": list(FLEET_STATES), "taskStates": list(TASK_STATES),
-        "refused": list(REFUSED_STATES),
+        "fleetStates": list(states), "taskStates": list(TASK_STATES),
+        "refused": list(REFUSED_STATES), "cutOff": CUT_OFF_STATE,
     }
 
 

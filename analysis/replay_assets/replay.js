@@ -48,18 +48,23 @@
   var COLORS = {
     idle: "#9aa0a6", to_pickup: "#f5a623", occupied: "#2e86de", occupied_2: "#1b4f9c",
     "occupied_3+": "#7b1fa2", repositioning: "#26a69a", failed: "#d32f2f",
-    to_charger: "#9ccc65", queueing: "#c0ca33", charging: "#2e7d32"
+    to_charger: "#9ccc65", queueing: "#c0ca33", charging: "#2e7d32",
+    to_depot: "#546e7a", off_shift: "#b0b7bf"
   };
+  // marks of the demand-responsive features (prebooking, offers, meeting points)
+  var MARKS = { booked: "#d81b60", declined: "#ffb300", walk: "#5d4037", refused: "#d32f2f" };
   var ROAD_LABELS = {
     idle: "idle", to_pickup: "to pickup", occupied: "carrying 1 rider (or dropping off)",
     occupied_2: "carrying 2 riders", "occupied_3+": "carrying 3+ riders",
     repositioning: "repositioning", failed: "broken down", to_charger: "to a charger",
-    queueing: "at a charger, queueing", charging: "at a charger, charging"
+    queueing: "at a charger, queueing", charging: "at a charger, charging",
+    to_depot: "driving to its depot (shift over)", off_shift: "off shift (not in the fleet)"
   };
   var VOXEL_LABELS = {
     idle: "idle", to_pickup: "to its task", occupied: "at its task (serving)",
     occupied_2: "2 tasks", "occupied_3+": "3+ tasks", repositioning: "repositioning",
-    failed: "broken down", to_charger: "to a charger", queueing: "queueing", charging: "charging"
+    failed: "broken down", to_charger: "to a charger", queueing: "queueing", charging: "charging",
+    to_depot: "to its depot (shift over)", off_shift: "off shift"
   };
 
   // ---------------------------------------------------------------- one run
@@ -86,6 +91,7 @@
     for (var i = 0; i < n; i++) this.byId[V.id[i]] = i;
     this.stateIndex = {};
     d.fleetStates.forEach(function (s, i) { this.stateIndex[s] = i; }, this);
+    this.offShift = d.fleetStates.indexOf("off_shift");
     this.prepareTasks();
     this.prepareSeries();
   }
@@ -95,20 +101,36 @@
     this.m = T ? T.rel.length : 0;
     this.tasksOf = {};
     if (!T) { this.kpi = null; return; }
-    var m = this.m, refused = {};
+    var m = this.m, refused = {}, F = T.features || {};
     this.d.refused.forEach(function (s) { refused[this.d.taskStates.indexOf(s)] = true; }, this);
-    var wS = [], wE = [], oS = [], oE = [], dS = [], rS = [], span = 0, open = [];
+    var declined = this.d.taskStates.indexOf("declined"), cut = this.d.taskStates.indexOf(this.d.cutOff);
+    var wS = [], wE = [], oS = [], oE = [], dS = [], rS = [], xS = [], cS = [], bS = [], bE = [],
+        kS = [], kE = [], span = 0, open = [], booked = [], walkMax = 0;
     for (var i = 0; i < m; i++) {
       var r = T.rel[i], p = fin(T.pick[i]), c = fin(T.close[i]);
       wS.push(r); wE.push(Math.max(r, Math.min(p, c)));
       if (p !== Infinity) { oS.push(p); oE.push(Math.max(p, c)); }
       if (T.done[i] === T.done[i]) dS.push(T.done[i]);
       if (refused[T.state[i]] && c !== Infinity) rS.push(c);
+      if (T.state[i] === declined && c !== Infinity) xS.push(c);
+      if (T.state[i] === cut && c !== Infinity) cS.push(c);
+      if (F.booked && T.bk[i] === T.bk[i]) {
+        bS.push(T.bk[i]); bE.push(Math.max(T.bk[i], Math.min(p, c)));
+        if (T.bk[i] < r) booked.push(i);
+      }
+      if (F.walks) {
+        var w = this.walk(i);
+        if (w[1] > w[0]) { kS.push(w[0]); kE.push(w[1]); }
+        if (w[3] > w[2]) { kS.push(w[2]); kE.push(w[3]); walkMax = Math.max(walkMax, w[3] - w[2]); }
+      }
       if (c === Infinity) open.push(i); else span = Math.max(span, c - r);
     }
     this.kpi = { wS: sorted(wS), wE: sorted(wE), oS: sorted(oS), oE: sorted(oE), dS: sorted(dS),
-                 rS: sorted(rS) };
-    this.span = span; this.openTasks = open;
+                 rS: sorted(rS), xS: sorted(xS), cS: sorted(cS), bS: sorted(bS), bE: sorted(bE),
+                 kS: sorted(kS), kE: sorted(kE) };
+    booked.sort(function (a, b) { return T.bk[a] - T.bk[b]; });
+    this.bookedTasks = booked; this.bookedBk = Float64Array.from(booked.map(function (i) { return T.bk[i]; }));
+    this.span = span; this.openTasks = open; this.walkMax = walkMax;
     // each vehicle's tasks (their final vehicle)
     for (var j = 0; j < m; j++) {
       var a = T.agent[j];
@@ -116,11 +138,22 @@
     }
   };
 
+  // a rider's walks: [to the boarding point from, until, from the alighting point from, until]
+  // (walk_to_board_m / walk_from_alight_m at the scenario's walking speed; see analysis/replay.py)
+  Run.prototype.walk = function (i) {
+    var T = this.d.tasks, v = T.walkSpeed, r = T.rel[i], out = [0, 0, 0, 0];
+    if (T.wTo[i] > 0) { out[0] = r; out[1] = Math.min(r + T.wTo[i] / v, fin(T.pick[i]), fin(T.close[i])); }
+    if (T.wFrom[i] > 0 && T.done[i] === T.done[i]) { out[2] = T.done[i]; out[3] = T.done[i] + T.wFrom[i] / v; }
+    return out;
+  };
+
   Run.prototype.counts = function (t) {
     var K = this.kpi;
-    if (!K) return { waiting: 0, onboard: 0, delivered: 0, rejected: 0 };
+    if (!K) return { waiting: 0, onboard: 0, delivered: 0, rejected: 0, declined: 0, cutoff: 0, booked: 0, walking: 0 };
     return { waiting: ub(K.wS, t) - ub(K.wE, t), onboard: ub(K.oS, t) - ub(K.oE, t),
-             delivered: ub(K.dS, t), rejected: ub(K.rS, t) };
+             delivered: ub(K.dS, t), rejected: ub(K.rS, t), declined: ub(K.xS, t),
+             cutoff: ub(K.cS, t), booked: ub(K.bS, t) - ub(K.bE, t),
+             walking: ub(K.kS, t) - ub(K.kE, t) };
   };
 
   Run.prototype.stateAt = function (v, t) {
@@ -163,20 +196,20 @@
     var N = 200, t0 = this.d.t0, t1 = this.d.t1, V = this.d.vehicles;
     var ts = new Float64Array(N), wait = new Float32Array(N), onb = new Float32Array(N),
         busy = new Float32Array(N);
-    var idle = this.stateIndex.idle;
+    var idle = this.stateIndex.idle, off = this.offShift;
     for (var i = 0; i < N; i++) {
       var t = t0 + (t1 - t0) * i / (N - 1), c = this.counts(t), b = 0;
       ts[i] = t; wait[i] = c.waiting; onb[i] = c.onboard;
       for (var v = 0; v < this.n; v++) {
         var s = this.stateAt(v, t);
-        if (s >= 0 && V.stCode[s] !== idle) b++;
+        if (s >= 0 && V.stCode[s] !== idle && V.stCode[s] !== off) b++;
       }
       busy[i] = b;
     }
     this.series = { t: ts, lines: [
       { name: "waiting", color: "#ff7043", y: wait },
       { name: "on board", color: "#2e86de", y: onb },
-      { name: "vehicles not idle", color: "#777", y: busy }] };
+      { name: "vehicles busy (not idle, not off shift)", color: "#777", y: busy }] };
   };
 
   // ---------------------------------------------------------------- one view (map + panel)
@@ -195,8 +228,12 @@
     p.appendChild(el("h3", null, "requests"));
     var k = el("div", { "class": "kpis" });
     this.kpiEls = {};
+    var F = (d.tasks && d.tasks.features) || {};
     [["waiting", "waiting"], ["onboard", "on board"], ["delivered", "delivered"],
-     ["rejected", "rejected / expired"]].forEach(function (x) {
+     ["rejected", "rejected / expired"], ["declined", "declined the offer", F.offers],
+     ["cutoff", "cut off by the run's end"], ["booked", "booked ahead, not yet picked up", F.booked],
+     ["walking", "walking", F.walks]].forEach(function (x) {
+      if (x.length > 2 && !x[2]) return;
       var box = el("div", { "class": "kpi" }, x[1]);
       var b = el("b", { "data-kpi": x[0] }, "0");
       box.insertBefore(b, box.firstChild);
@@ -314,6 +351,7 @@
     var r = this.canvas.getBoundingClientRect(), mx = e.clientX - r.left, my = e.clientY - r.top;
     var best = -1, bd = 14 * 14, run = this.run;
     for (var v = 0; v < run.n; v++) {
+      if (run.state[v] === run.offShift && !LAYERS.offshift) continue;
       var dx = this.sx(run.px[v]) - mx, dy = this.sy(run.py[v]) - my, dd = dx * dx + dy * dy;
       if (dd < bd) { bd = dd; best = v; }
     }
@@ -394,46 +432,93 @@
       }
     }
     // requests
-    if (T && (LAYERS.requests || LAYERS.arcs || LAYERS.flashes)) {
+    if (T && (LAYERS.requests || LAYERS.arcs || LAYERS.flashes || LAYERS.walks)) {
       var flash = Math.max(20, 1.5 * Math.abs(APP.speed));
-      var first = ub(T.rel, t - run.span - flash), last = ub(T.rel, t);
-      var refused = {}, airKind = T.kind.indexOf("air");
+      var first = ub(T.rel, t - run.span - flash - run.walkMax), last = ub(T.rel, t);
+      var refused = {}, airKind = T.kind.indexOf("air"), F = T.features || {};
+      var declined = d.taskStates.indexOf("declined");
       d.refused.forEach(function (s) { refused[d.taskStates.indexOf(s)] = true; });
+      var dotted = function (x0, y0, x1, y1) {
+        c.strokeStyle = MARKS.walk; c.lineWidth = 1.5; c.setLineDash([2, 3]);
+        c.beginPath(); c.moveTo(x0, y0); c.lineTo(x1, y1); c.stroke(); c.setLineDash([]);
+      };
       var drawTask = function (i) {
         var p = fin(T.pick[i]), cl = fin(T.close[i]);
-        if (T.rel[i] > t) return;
+        var bk = F.booked ? T.bk[i] : NaN, isBooked = bk === bk && bk <= t;
+        if (T.rel[i] > t && !isBooked) return;
         var x = self.sx(T.x[i]), y = self.sy(T.y[i]);
+        var walks = F.walks && T.bx[i] === T.bx[i], w = F.walks ? run.walk(i) : null;
         if (t < p && t < cl) {
+          // a rider walking to the boarding point is drawn on the way, then waits there
+          if (walks && T.wTo[i] > 0 && T.rel[i] <= t) {
+            var bx = self.sx(T.bx[i]), by = self.sy(T.by[i]);
+            if (LAYERS.walks) dotted(x, y, bx, by);
+            var f = Math.min(1, (t - T.rel[i]) / (T.wTo[i] / T.walkSpeed));
+            x += f * (bx - x); y += f * (by - y);
+          }
           if (LAYERS.requests) {
-            // filled: nobody is coming yet; hollow: a vehicle is on its way; circles: air tasks
             var taken = T.asg[i] <= t, air = airKind >= 0 && T.kindCode[i] === airKind;
-            c.fillStyle = c.strokeStyle = "#ff7043"; c.lineWidth = 1.5;
-            if (air) { c.beginPath(); c.arc(x, y, 3, 0, 2 * Math.PI); if (taken) c.stroke(); else c.fill(); }
-            else if (taken) c.strokeRect(x - 2.5, y - 2.5, 5, 5);
-            else c.fillRect(x - 2.5, y - 2.5, 5, 5);
+            c.lineWidth = 1.5;
+            if (isBooked) {
+              // booked ahead: a diamond from booking to pickup (hollow: a vehicle's plan holds it)
+              c.fillStyle = c.strokeStyle = MARKS.booked;
+              c.beginPath(); c.moveTo(x, y - 4); c.lineTo(x + 4, y); c.lineTo(x, y + 4); c.lineTo(x - 4, y); c.closePath();
+              if (taken) c.stroke(); else c.fill();
+            } else {
+              // filled: nobody is coming yet; hollow: a vehicle is on its way; circles: air tasks
+              c.fillStyle = c.strokeStyle = "#ff7043";
+              if (air) { c.beginPath(); c.arc(x, y, 3, 0, 2 * Math.PI); if (taken) c.stroke(); else c.fill(); }
+              else if (taken) c.strokeRect(x - 2.5, y - 2.5, 5, 5);
+              else c.fillRect(x - 2.5, y - 2.5, 5, 5);
+            }
           }
         } else if (p <= t && t < cl) {
           if (LAYERS.arcs && T.dx[i] === T.dx[i]) {
-            var X = self.sx(T.dx[i]), Y = self.sy(T.dy[i]), mx = (x + X) / 2, my = (y + Y) / 2;
+            if (walks && T.ax[i] === T.ax[i]) { x = self.sx(T.bx[i]); y = self.sy(T.by[i]); }
+            var X = self.sx(walks && T.ax[i] === T.ax[i] ? T.ax[i] : T.dx[i]),
+                Y = self.sy(walks && T.ay[i] === T.ay[i] ? T.ay[i] : T.dy[i]), mx = (x + X) / 2, my = (y + Y) / 2;
             var nx = -(Y - y) * 0.2, ny = (X - x) * 0.2;
             c.strokeStyle = "rgba(46,134,222,.35)"; c.lineWidth = 1;
             c.beginPath(); c.moveTo(x, y); c.quadraticCurveTo(mx + nx, my + ny, X, Y); c.stroke();
           } else if (LAYERS.requests && run.voxel) {
             c.strokeStyle = "#2e86de"; c.strokeRect(x - 3, y - 3, 6, 6);
           }
-        } else if (refused[T.state[i]] && cl <= t && t - cl < flash && LAYERS.flashes) {
-          var a = 1 - (t - cl) / flash;
-          c.strokeStyle = "rgba(211,47,47," + a.toFixed(3) + ")"; c.lineWidth = 2;
+        } else if (cl <= t && t - cl < flash && LAYERS.flashes &&
+                   (refused[T.state[i]] || T.state[i] === declined)) {
+          var a = 1 - (t - cl) / flash, rgb = T.state[i] === declined ? "255,179,0" : "211,47,47";
+          c.strokeStyle = "rgba(" + rgb + "," + a.toFixed(3) + ")"; c.lineWidth = 2;
           c.beginPath(); c.arc(x, y, 4 + 10 * (1 - a), 0, 2 * Math.PI); c.stroke();
+        }
+        // a rider walking from the alighting point to the destination after the drop-off
+        if (walks && LAYERS.walks && w[3] > w[2] && w[2] <= t && t < w[3] && T.ax[i] === T.ax[i]) {
+          var ax = self.sx(T.ax[i]), ay = self.sy(T.ay[i]), ex = self.sx(T.dx[i]), ey = self.sy(T.dy[i]);
+          dotted(ax, ay, ex, ey);
+          var g2 = (t - w[2]) / (w[3] - w[2]);
+          c.fillStyle = MARKS.walk; c.beginPath();
+          c.arc(ax + g2 * (ex - ax), ay + g2 * (ey - ay), 2.5, 0, 2 * Math.PI); c.fill();
         }
       };
       for (var i = first; i < last; i++) drawTask(i);
       for (var o = 0; o < run.openTasks.length; o++) if (run.openTasks[o] < first) drawTask(run.openTasks[o]);
+      // booked ahead, not yet at their requested departure
+      for (var q = 0, nb = ub(run.bookedBk, t); q < nb; q++)
+        if (T.rel[run.bookedTasks[q]] > t) drawTask(run.bookedTasks[q]);
     }
     // vehicles: one path per state, a triangle along the heading (drones: a diamond)
     var kinds = V.kindNames, uav = kinds.indexOf("uav");
     var nStates = d.fleetStates.length;
+    // off shift: not in the fleet, not drawn (a layer shows them as rings where they wait)
+    if (run.offShift >= 0 && LAYERS.offshift) {
+      c.strokeStyle = COLORS.off_shift; c.lineWidth = 1.5; c.beginPath();
+      for (var u = 0; u < run.n; u++) {
+        if (run.state[u] !== run.offShift) continue;
+        var ux = this.sx(run.px[u]), uy = this.sy(run.py[u]);
+        c.moveTo(ux + 4, uy); c.arc(ux, uy, 4, 0, 2 * Math.PI);
+      }
+      c.stroke();
+    }
     for (var s = 0; s < nStates; s++) {
+      if (s === run.offShift) continue;
       c.fillStyle = COLORS[d.fleetStates[s]] || "#000";
       c.beginPath();
       for (var w = 0; w < run.n; w++) {
@@ -466,12 +551,13 @@
       var s = String(cts[k]);
       if (this.kpiEls[k].textContent !== s) this.kpiEls[k].textContent = s;
     }
-    var closed = cts.delivered + cts.rejected;
+    var closed = cts.delivered + cts.rejected + cts.declined;
     this.served.textContent = "served so far: " + (closed ? (100 * cts.delivered / closed).toFixed(1) + " %" : "\u2013") +
       " of " + closed + " closed requests";
     var byState = new Array(d.fleetStates.length).fill(0), riders = 0, seats = 0, inUse = 0;
     for (var v = 0; v < run.n; v++) {
-      byState[run.state[v]]++; riders += run.onb[v]; seats += d.vehicles.cap[v];
+      byState[run.state[v]]++; riders += run.onb[v];
+      if (run.state[v] !== run.offShift) seats += d.vehicles.cap[v];
       if (run.onb[v] > 0) inUse++;
     }
     this.stateCells.forEach(function (x, i) {
@@ -527,15 +613,24 @@
     if (run.voxel) box.appendChild(el("div", null, "position " + run.px[v].toFixed(1) + ", " +
       run.py[v].toFixed(1) + ", altitude " + run.pz[v].toFixed(1) + " m"));
     var stops = [], riders = [];
+    var F = (T && T.features) || {};
+    var note = function (i, end) { // a booked ride; a rider who walks to or from the stop
+      var s = "";
+      if (end === "pickup" && F.booked && T.bk[i] === T.bk[i]) s += ", booked at " + clock(T.bk[i]);
+      var m = !F.walks ? 0 : end === "pickup" ? T.wTo[i] : T.wFrom[i];
+      if (m > 0) s += ", rider walks " + m.toFixed(0) + " m " + (end === "pickup" ? "to it" : "from it");
+      return s ? " (" + s.slice(2) + ")" : "";
+    };
     (run.tasksOf[id] || []).forEach(function (i) {
       var asg = T.asg ? fin(T.asg[i]) : T.rel[i], p = fin(T.pick[i]), cl = fin(T.close[i]);
       if (t >= cl) return;
+      var drop = "drop-off of request " + T.id[i] + note(i, "dropoff");
       if (p <= t) {
         riders.push(i);
-        if (T.dx[i] === T.dx[i]) stops.push([fin(T.done[i]), "drop-off of request " + T.id[i]]);
+        if (T.dx[i] === T.dx[i]) stops.push([fin(T.done[i]), drop]);
       } else if (asg <= t) {
-        stops.push([p, "pickup of request " + T.id[i]]);
-        if (T.dx[i] === T.dx[i]) stops.push([fin(T.done[i]), "drop-off of request " + T.id[i]]);
+        stops.push([p, "pickup of request " + T.id[i] + note(i, "pickup")]);
+        if (T.dx[i] === T.dx[i]) stops.push([fin(T.done[i]), drop]);
       }
     });
     stops.sort(function (a, b) { return a[0] - b[0]; });
@@ -564,7 +659,8 @@
   };
 
   // ---------------------------------------------------------------- the application
-  var LAYERS = { network: true, requests: true, arcs: true, flashes: true, trails: false, stations: true };
+  var LAYERS = { network: true, requests: true, arcs: true, flashes: true, trails: false, stations: true,
+                 walks: true, offshift: false };
   var runs = DATA.runs.map(function (d, i) { return new Run(d, i); });
   if (runs.some(function (r) { return r.voxel; })) LAYERS.trails = true;
   var root = document.getElementById("views");
@@ -609,10 +705,17 @@
 
   var layerBox = document.getElementById("layers");
   var layerNames = { network: runs.some(function (r) { return r.voxel; }) ? "map / obstacles" : "streets",
-                     requests: "waiting requests", arcs: "rides (arcs)", flashes: "rejected / expired",
-                     trails: "trails", stations: "stations" };
+                     requests: "waiting requests", arcs: "rides (arcs)", flashes: "rejected / expired / declined",
+                     trails: "trails", stations: "stations", walks: "walks", offshift: "off-shift vehicles" };
+  function feature(f) { return runs.some(function (r) { return r.d.tasks && r.d.tasks.features && r.d.tasks.features[f]; }); }
+  var hasShifts = runs.some(function (r) {
+    var V = r.d.vehicles;
+    for (var i = 0; i < V.stCode.length; i++) if (V.stCode[i] === r.offShift) return true;
+    return false;
+  });
   Object.keys(LAYERS).forEach(function (k) {
     if (k === "stations" && !runs.some(function (r) { return r.d.stations; })) return;
+    if ((k === "walks" && !feature("walks")) || (k === "offshift" && !hasShifts)) return;
     var lab = el("label"), cb = el("input", { type: "checkbox", "data-layer": k });
     cb.checked = LAYERS[k];
     cb.addEventListener("change", function () { LAYERS[k] = cb.checked; views.forEach(function (v) { v.bgKey = ""; }); APP.dirty = true; });
@@ -630,14 +733,20 @@
   });
   runs[0].d.fleetStates.forEach(function (s, i) {
     if (!used[i] && i > 4) return;
-    var span = el("span"), sw = el("span", { "class": "sw" }); sw.style.background = COLORS[s];
-    span.appendChild(sw); span.appendChild(document.createTextNode(runs[0].labels[s]));
+    var span = el("span", { "data-legend": s }), sw = el("span", { "class": "sw" }); sw.style.background = COLORS[s];
+    span.appendChild(sw);
+    span.appendChild(document.createTextNode(runs[0].labels[s] + (s === "off_shift" ? " – hidden; the layer shows rings at their depots" : "")));
     legend.appendChild(span);
   });
-  [["#ff7043", "request waiting for its pickup (hollow: a vehicle is on its way; circle: a task in the air)"], ["rgba(46,134,222,.6)", "ride: arc from pickup to drop-off while on board"],
-   ["#d32f2f", "request rejected or expired (flash)"]].forEach(function (x) {
-    var span = el("span"), sw = el("span", { "class": "sw" }); sw.style.background = x[0];
-    span.appendChild(sw); span.appendChild(document.createTextNode(x[1])); legend.appendChild(span);
+  [["request", "#ff7043", "request waiting for its pickup (hollow: a vehicle is on its way; circle: a task in the air)", true],
+   ["booked", MARKS.booked, "booked ahead: diamond from booking to pickup (hollow: a promise a vehicle's plan holds)", feature("booked")],
+   ["walk", MARKS.walk, "rider walking (dotted): origin to boarding point, alighting point to destination", feature("walks")],
+   ["ride", "rgba(46,134,222,.6)", "ride: arc from pickup to drop-off while on board", true],
+   ["refused", MARKS.refused, "request rejected or expired (flash)", true],
+   ["declined", MARKS.declined, "offer declined by the rider (flash)", feature("offers")]].forEach(function (x) {
+    if (!x[3]) return;
+    var span = el("span", { "data-legend": x[0] }), sw = el("span", { "class": "sw" }); sw.style.background = x[1];
+    span.appendChild(sw); span.appendChild(document.createTextNode(x[2])); legend.appendChild(span);
   });
   legend.appendChild(el("span", { "class": "muted" }, runs.some(function (r) { return r.voxel; }) ?
     "triangle: ground robot (points where it drives); diamond: drone; grey boxes: obstacles, darker is taller" :

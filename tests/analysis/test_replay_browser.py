@@ -21,7 +21,7 @@ from tests.conftest import run_cli
 
 CHROMIUM = Path("/usr/bin/chromium")
 EVIL = "</script><script>document.title='x'</script>"
-KPIS = ("waiting", "onboard", "delivered", "rejected")
+KPIS = ("waiting", "onboard", "delivered", "rejected", "declined", "cutoff", "booked", "walking")
 
 ROAD = """\
 name = "<b>ev</b>{evil}"
@@ -117,8 +117,10 @@ class Page:
         self.page.wait_for_selector("body[data-ready='1']", timeout=30000)
 
     def kpis(self, view: int = 0) -> dict[str, int]:
+        """The counts the panel shows (those of features the run lacks are not shown)."""
         sec = f"section.view[data-run='{view}'] "
-        return {k: int(self.page.text_content(sec + f"[data-kpi='{k}']")) for k in KPIS}
+        return {k: int(self.page.text_content(sec + f"[data-kpi='{k}']")) for k in KPIS
+                if self.page.query_selector(sec + f"[data-kpi='{k}']") is not None}
 
     def close(self) -> None:
         assert not self.blocked, self.blocked
@@ -132,16 +134,29 @@ def _table(folder: Path, name: str) -> pd.DataFrame:
     return ds.dataset(folder / name, format="parquet", partitioning="hive").to_table().to_pandas()
 
 
-def expected_counts(tasks: pd.DataFrame, t: float) -> dict[str, int]:
-    """The issue's definitions, from the tasks table."""
+def expected_counts(tasks: pd.DataFrame, t: float, walk_speed: float = 1.4) -> dict[str, int]:
+    """The issue's definitions, from the tasks table; and those of the demand-responsive
+    features (analysis/replay.py's docstring), row by row."""
     def at_or_before(col):
         return tasks[col].notna() & (tasks[col] <= t)
 
     picked, closed = at_or_before("picked_up_at"), at_or_before("closed_at")
+    walking = 0
+    for r in tasks.itertuples(index=False):
+        if r.walk_to_board_m > 0:  # from release to the boarding point, until pickup / close
+            until = min(r.released_at + r.walk_to_board_m / walk_speed,
+                        *(x for x in (r.picked_up_at, r.closed_at) if x == x))
+            walking += r.released_at <= t < until
+        if r.walk_from_alight_m > 0 and r.completed_at == r.completed_at:
+            walking += r.completed_at <= t < r.completed_at + r.walk_from_alight_m / walk_speed
     return {"waiting": int((at_or_before("released_at") & ~picked & ~closed).sum()),
             "onboard": int((picked & ~closed).sum()),
             "delivered": int(at_or_before("completed_at").sum()),
-            "rejected": int((closed & tasks["state"].isin(["rejected", "expired"])).sum())}
+            "rejected": int((closed & tasks["state"].isin(["rejected", "expired"])).sum()),
+            "declined": int((closed & (tasks["state"] == "declined")).sum()),
+            "cutoff": int((closed & (tasks["state"] == "cancelled")).sum()),
+            "booked": int((at_or_before("booked_at") & ~picked & ~closed).sum()),
+            "walking": int(walking)}
 
 
 def _times(tasks: pd.DataFrame) -> list[float]:
@@ -187,7 +202,7 @@ def test_counts_match_the_tables(world, road_run, single_run, browser, tmp_path)
             if i:
                 p.page.evaluate("t => window.replay.seek(t)", t)
             want = expected_counts(tasks, t)
-            assert p.kpis() == want, (t, want)
+            assert p.kpis() == {k: want[k] for k in KPIS[:4] + ("cutoff",)}, (t, want)
             assert p.page.evaluate("window.replay.counts()") == want
         # the hash opens the page paused at that time
         assert p.page.evaluate("window.replay.time()") == pytest.approx(times[-1])
@@ -275,7 +290,8 @@ def test_compare_shows_both_runs(road_run, road_run_b, browser, tmp_path):
         titles = [p.page.text_content(f"section.view[data-run='{i}'] .title") for i in (0, 1)]
         assert "hungarian" in titles[0] and "greedy" in titles[1]
         for i in (0, 1):
-            assert p.kpis(i) == expected_counts(tasks[i], t)
+            want = expected_counts(tasks[i], t)
+            assert p.kpis(i) == {k: want[k] for k in KPIS[:4] + ("cutoff",)}
             assert p.page.evaluate(f"window.replay.counts({i})") == expected_counts(tasks[i], t)
     finally:
         p.close()
@@ -481,3 +497,289 @@ def test_kepler_trips_in_lon_lat(tmp_path):
 def test_kepler_needs_a_network_with_a_crs(road_run, tmp_path):
     line = _error(road_run, "--kepler", "--out", tmp_path / "t.geojson")
     assert "no CRS" in line and str(road_run) in line
+
+
+# ----------------------------------------------------------------------------- demand-responsive
+# Two small runs of the features of issue 31 on the 6 x 6 grid: (a) riders who walk to meeting
+# points, 30 % of the rides booked 10 min ahead, the run cut short so that some requests are
+# cut off; (b) offers a rider declines past 150 s of wait, and driver shifts (vehicles 3 and 4
+# enter late, 0, 3 and 5 end their shifts and drive to their depots). (Meeting points and
+# shifts are two runs: the kernel does not combine them.)
+DRT = """\
+name = "drt"
+seed = 1
+duration = {duration}
+[world]
+network = "manhattan"
+blocks = [6, 6]
+block = 200.0
+speed = 10.0
+[fleet]
+{fleet}
+capacity = 2
+[tasks]
+source = "poisson"
+rate = 0.03
+count = 60
+max_wait = 300.0
+max_delay = 600.0
+{tasks}
+[dispatch]
+allocator = "hungarian"
+batch_window = 30.0
+{dispatch}
+[acceptor]
+name = "threshold"
+retries = 0
+[acceptor.threshold]
+max_wait = 150.0
+"""
+SHIFTS = """\
+vehicle_id,node,shift_start,shift_end,depot
+0,0,0,1200,0
+1,10,0,,
+2,14,0,,
+3,20,600,1800,20
+4,35,900,,35
+5,6,0,1500,6
+"""
+WALK_SPEED = 1.2
+
+
+@pytest.fixture(scope="module")
+def walk_run(tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("replay_walk")
+    p = root / "walk.toml"
+    p.write_text(DRT.format(duration=1700.0, fleet="agents = 6",
+                            tasks=f"max_walk = 250.0\nwalk_speed = {WALK_SPEED}\n"
+                                  "prebook_share = 0.3\nprebook_lead = 600.0",
+                            dispatch='prebook = "at_booking"'), encoding="utf-8")
+    execute(load_scenario(p).runs(), root / "run")
+    return root / "run"
+
+
+@pytest.fixture(scope="module")
+def shift_run(tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("replay_shifts")
+    (root / "fleet.csv").write_text(SHIFTS, encoding="utf-8")
+    p = root / "shifts.toml"
+    p.write_text(DRT.format(duration=3000.0, fleet='start = "fleet.csv"\nshift_grace = 300.0',
+                            tasks="", dispatch=""), encoding="utf-8")
+    execute(load_scenario(p).runs(), root / "run")
+    return root / "run"
+
+
+def _spread(tasks: pd.DataFrame, col: str) -> list[float]:
+    """Three times at which something of ``col`` happens (a quarter, half, three quarters
+    through its times), a little after."""
+    ts = tasks[col].dropna().sort_values().to_numpy()
+    return [float(ts[int(len(ts) * q)]) + 5.0 for q in (0.25, 0.5, 0.75)]
+
+
+def test_counts_at_the_new_states_and_marks(walk_run, shift_run):
+    """counts_at agrees with the row-by-row definitions, and each feature's count is seen."""
+    from analysis.replay import counts_at
+
+    seen = dict.fromkeys(("declined", "cutoff", "booked", "walking"), 0)
+    for folder, speed in ((walk_run, WALK_SPEED), (shift_run, 1.4)):
+        tasks = _table(folder, "tasks")
+        end = float(tasks["closed_at"].max())
+        for t in np.linspace(0.0, end, 41):
+            got = counts_at(tasks, t, walk_speed=speed)
+            assert got == expected_counts(tasks, t, speed), t
+            for k in seen:
+                seen[k] = max(seen[k], got[k])
+    assert all(seen.values()), seen
+
+
+def test_the_page_data_carry_walks_bookings_and_offers(walk_run, shift_run, road_run):
+    import base64
+
+    from analysis.replay import build_run
+    from analysis.replay_data import choose_run
+
+    def arr(o):
+        return np.frombuffer(base64.b64decode(o["b"]), dtype=np.dtype(o["t"]).newbyteorder("<"))
+
+    d = build_run(choose_run(walk_run, None), route=False)
+    tasks = _table(walk_run, "tasks").sort_values("released_at", kind="stable")
+    tk = d["tasks"]
+    assert tk["features"] == {"booked": True, "offers": True, "walks": True}
+    assert tk["walkSpeed"] == WALK_SPEED  # the scenario's
+    np.testing.assert_array_equal(arr(tk["bk"]), tasks["booked_at"].to_numpy())
+    np.testing.assert_array_equal(arr(tk["promised"]), tasks["promised"].astype(np.uint8))
+    np.testing.assert_allclose(arr(tk["wTo"]), tasks["walk_to_board_m"].fillna(0), rtol=1e-6)
+    np.testing.assert_allclose(arr(tk["bx"]) + d["origin"][0], tasks["board_x"], atol=0.01)
+    np.testing.assert_allclose(arr(tk["ay"]) + d["origin"][1], tasks["alight_y"], atol=0.01)
+    codes = arr(tk["state"])
+    states = np.array(d["taskStates"])[codes]
+    np.testing.assert_array_equal(states, tasks["state"].to_numpy())  # cancelled: its own code
+    s = build_run(choose_run(shift_run, None), route=False)
+    assert "declined" in set(np.array(s["taskStates"])[arr(s["tasks"]["state"])])
+    plain = build_run(choose_run(road_run, None), route=False)["tasks"]
+    assert plain["features"] == {"booked": False, "offers": False, "walks": False}
+    assert "bk" not in plain and "wTo" not in plain
+
+
+def test_duty_spells_of_driver_shifts(shift_run, road_run):
+    """Off shift before entering and after leaving, driving home in between; the time on duty
+    is the vehicles table's vehicle_hours; no pickup while off shift; the fleet states laid
+    over still cover each vehicle's time without gaps."""
+    from analysis.replay_duty import duty_spells, overlay
+    from analysis.timeline import fleet_states
+
+    ev, veh = _table(shift_run, "events"), _table(shift_run, "vehicles")
+    end = float(ev["t"].max())
+    sp = duty_spells(ev, veh, end)
+    off = sp[sp["state"] == "off_shift"]
+    for r in veh.itertuples(index=False):
+        mine = off[off["agent_id"] == r.agent_id]
+        assert end - (mine["end"] - mine["start"]).sum() == pytest.approx(
+            r.vehicle_hours * 3600, abs=1e-6), r.agent_id
+    first = off.groupby("agent_id")["start"].min()
+    assert first.get(3) == 0.0 and first.get(4) == 0.0  # before their shifts
+    assert off.loc[(off["agent_id"] == 3) & (off["start"] == 0.0), "end"].item() == 600.0
+    home = sp[sp["state"] == "to_depot"]
+    assert set(home["agent_id"]) <= {0, 3, 5} and len(home)
+    ends = ev[ev["event"] == "shift_end"].set_index("agent_id")["t"]
+    for r in home.itertuples(index=False):
+        assert r.end == ends[r.agent_id]
+        assert r.start >= veh.set_index("agent_id").loc[r.agent_id, "shift_end"]
+    picks = ev[ev["event"] == "pickup"]
+    for r in off.itertuples(index=False):
+        mine = picks[picks["agent_id"] == r.agent_id]
+        assert not ((mine["t"] > r.start) & (mine["t"] < r.end)).any(), r
+    st = overlay(fleet_states(ev.assign(run_id="r"), veh.assign(run_id="r"), end=end), sp)
+    for _, g in st.groupby("agent_id"):
+        assert g["start"].iloc[0] == 0.0 and g["end"].iloc[-1] == end
+        np.testing.assert_array_equal(g["start"].to_numpy()[1:], g["end"].to_numpy()[:-1])
+    # a run without shifts: no spell
+    assert duty_spells(_table(road_run, "events"), _table(road_run, "vehicles"), 3000.0).empty
+
+
+def test_browser_walking_riders(walk_run, browser, tmp_path):
+    tasks = _table(walk_run, "tasks")
+    page = _write(walk_run, tmp_path / "replay.html")
+    times = _spread(tasks[tasks["walk_to_board_m"] > 0], "released_at")
+    p = Page(browser, page, times[0])
+    try:
+        drawn = 0
+        for t in times:
+            p.page.evaluate("t => window.replay.seek(t)", t)
+            want = expected_counts(tasks, t, WALK_SPEED)
+            assert want["walking"] > 0
+            assert p.kpis()["walking"] == want["walking"], t
+            from PIL import Image
+
+            im = np.asarray(Image.open(BytesIO(
+                p.page.query_selector("section.view canvas.map").screenshot())).convert("RGB"))
+            drawn += int((np.abs(im.astype(int) - [0x5d, 0x40, 0x37]).sum(axis=2) < 30).sum())
+        assert drawn > 0, "no walk drawn"
+        assert "walking" in p.page.text_content("[data-legend='walk']")
+        assert p.page.query_selector("[data-layer='walks']") is not None
+    finally:
+        p.close()
+
+
+def test_browser_booked_rides(walk_run, browser, tmp_path):
+    tasks = _table(walk_run, "tasks")
+    page = _write(walk_run, tmp_path / "replay.html")
+    times = _spread(tasks, "booked_at")
+    p = Page(browser, page, times[0])
+    try:
+        for t in times:
+            p.page.evaluate("t => window.replay.seek(t)", t)
+            want = expected_counts(tasks, t, WALK_SPEED)["booked"]
+            assert p.kpis()["booked"] == want, t
+        assert "booked ahead" in p.page.text_content("[data-legend='booked']")
+        # a followed vehicle's stop list says which of its pickups are booked rides
+        held = tasks[tasks["booked_at"].notna() & (tasks["assigned_at"] < tasks["picked_up_at"])]
+        r = held.iloc[0]
+        t = float(r["assigned_at"] + r["picked_up_at"]) / 2
+        p.page.evaluate("t => window.replay.seek(t)", t)
+        assert p.page.evaluate("i => window.replay.follow(i)", int(r["agent_id"]))
+        stops = p.page.text_content("[data-panel='follow'] [data-panel='stops']")
+        assert f"pickup of request {int(r['task_id'])} (booked at" in stops
+    finally:
+        p.close()
+
+
+def test_browser_declined_offers(shift_run, browser, tmp_path):
+    tasks = _table(shift_run, "tasks")
+    assert (tasks["state"] == "declined").sum() >= 2
+    page = _write(shift_run, tmp_path / "replay.html")
+    end = float(tasks["closed_at"].max())
+    p = Page(browser, page, end / 2)
+    try:
+        for t in (end / 2, end):
+            p.page.evaluate("t => window.replay.seek(t)", t)
+            want = expected_counts(tasks, t)
+            got = p.kpis()
+            assert (got["declined"], got["rejected"]) == (want["declined"], want["rejected"]), t
+        assert got["declined"] == int((tasks["state"] == "declined").sum())
+        assert "declined" in p.page.text_content("[data-legend='declined']")
+    finally:
+        p.close()
+
+
+def test_browser_cut_off_requests(walk_run, browser, tmp_path):
+    tasks = _table(walk_run, "tasks")
+    n = int((tasks["state"] == "cancelled").sum())
+    assert n > 0, "the run's end cut nothing off"
+    page = _write(walk_run, tmp_path / "replay.html")
+    p = Page(browser, page, float(tasks["closed_at"].max()))
+    try:
+        box = p.page.query_selector("[data-kpi='cutoff']")
+        assert int(box.text_content()) == n
+        label = p.page.evaluate("e => e.parentElement.textContent", box)
+        assert "cut off" in label and "cancel" not in label
+    finally:
+        p.close()
+
+
+def test_browser_driver_shifts(shift_run, browser, tmp_path):
+    from analysis.replay_duty import duty_at, duty_spells
+
+    ev, veh = _table(shift_run, "events"), _table(shift_run, "vehicles")
+    sp = duty_spells(ev, veh, float(ev["t"].max()))
+    home = sp[sp["state"] == "to_depot"].iloc[0]
+    times = [300.0, float(home["start"] + home["end"]) / 2, 2000.0]
+    page = _write(shift_run, tmp_path / "replay.html")
+    p = Page(browser, page, times[0])
+    try:
+        for t in times:
+            p.page.evaluate("t => window.replay.seek(t)", t)
+            want = duty_at(sp, veh["agent_id"], t)
+            got = {s: int(p.page.text_content(f"[data-state='{s}']")) for s in want}
+            assert got == want, t
+            states = {v["id"]: v["state"] for v in p.page.evaluate("window.replay.vehicles()")}
+            assert sum(s == "off_shift" for s in states.values()) == want["off_shift"]
+        assert states[0] == "off_shift"  # its shift ended at 1200, home by 2000
+        assert p.page.query_selector("[data-legend='off_shift']") is not None
+        p.page.evaluate("window.replay.seek(0)")
+        p.page.select_option("#jumpkind", "shift_end")
+        p.page.click("#jump")
+        assert p.page.evaluate("window.replay.time()") == float(
+            ev.loc[ev["event"] == "shift_end", "t"].min())
+        p.page.evaluate("t => window.replay.seek(t)", times[-1])
+        # off shift: not drawn; the layer draws a ring where the vehicle waits
+        from PIL import Image
+
+        def pixel(v):
+            x, y = p.page.evaluate("i => window.replay.screen(i)", v)
+            im = np.asarray(Image.open(BytesIO(p.page.query_selector(
+                "section.view canvas.map").screenshot())).convert("RGB")).astype(int)
+            return im[int(round(y)), int(round(x))]
+
+        colors = p.page.evaluate("window.replay.colors")
+        drawn = [np.array([int(c.lstrip("#")[i:i + 2], 16) for i in (0, 2, 4)])
+                 for s, c in colors.items() if s != "off_shift"]
+        assert min(np.abs(pixel(0) - c).sum() for c in drawn) > 40  # no vehicle drawn there
+        p.page.click("[data-layer='offshift']")
+        x, y = p.page.evaluate("i => window.replay.screen(i)", 0)
+        im = np.asarray(Image.open(BytesIO(p.page.query_selector(
+            "section.view canvas.map").screenshot())).convert("RGB")).astype(int)
+        ring = im[int(round(y)) - 6:int(round(y)) + 7, int(round(x)) - 6:int(round(x)) + 7]
+        assert (np.abs(ring - [0xb0, 0xb7, 0xbf]).sum(axis=2) < 40).any()
+    finally:
+        p.close()
