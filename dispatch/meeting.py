@@ -296,10 +296,11 @@ def _meeting(k: int, b, a, wb, wa, e, ld) -> Meeting:
 
 
 def view_at(t: Task, m: Meeting) -> TaskView:
-    """``t``'s view with its pickup and drop-off at the meeting points ``m`` and the drop-off
-    limit less the walk from it (what an allocator routing several requests plans with)."""
+    """``t``'s view with its pickup and drop-off at the meeting points ``m``, the drop-off
+    limit less the walk from it and the boarding no earlier than the rider gets there (what an
+    allocator routing several requests plans with)."""
     return TaskView(t.id, t.kind, m.board, t.released_at, m.alight,  # type: ignore[arg-type]
-                    t.deadline, t.passengers, m.latest_drop)
+                    t.deadline, t.passengers, m.latest_drop, m.earliest)
 
 
 def walk_m(t: Task) -> tuple[float, float]:

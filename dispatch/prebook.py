@@ -24,9 +24,12 @@ broken).
 
 Prebooking needs plans (a road network): with it on, every decision inserts into the vehicles'
 plans as a pooled fleet's do (:class:`dispatch.decision.Pipeline` with ``pooled``), so a
-vehicle holding a promise later in its plan still takes requests before it. ``rtv`` builds its
-own routes and ignores a stop's ``earliest``: prebooking is for the allocators that take the
-insertion costs.
+vehicle holding a promise later in its plan still takes requests before it. An allocator that
+builds its own routes (``multi_request``: ``rtv``) reads a booked pickup's earliest time from
+its view (:attr:`dispatch.problem.TaskView.earliest`, :func:`earliest_views`) and the plans'
+(:attr:`dispatch.problem.StopView.earliest`), and its routes wait for them by the one schedule
+rule (:mod:`dispatch.stops`); the dispatcher times every route by that rule, so no route picks a
+booked rider up before the requested departure.
 """
 
 from __future__ import annotations
@@ -70,6 +73,16 @@ def in_entry_order(trips: Trips, entry: np.ndarray) -> tuple[Trips, np.ndarray]:
            if isinstance(getattr(trips, f.name), np.ndarray)
            and getattr(trips, f.name).shape[:1] == (n,)}
     return replace(trips, **cut), entry[order]
+
+
+def earliest_views(requests: list, views: tuple) -> tuple:
+    """``views`` of ``requests`` (aligned) with each booked request's pickup no earlier than
+    its requested departure (:attr:`dispatch.problem.TaskView.earliest`; a view's own, e.g. a
+    meeting point's, kept where later); ``views`` itself where none is booked."""
+    if not any(t.booked_at == t.booked_at for t in requests):  # (nan: not booked)
+        return views
+    return tuple(v if t.booked_at != t.booked_at or v.earliest >= t.released_at
+                 else replace(v, earliest=t.released_at) for t, v in zip(requests, views))
 
 
 class PrebookSource(TaskSource):

@@ -43,7 +43,6 @@ from dispatch.charging import Charging, Stations
 from dispatch.decision import Blame, Pipeline, Tally
 from dispatch.dispatcher import Dispatcher, Wakeup
 from dispatch.energy_summary import EnergyTally, energy_columns
-from dispatch.errors import ScenarioError
 from dispatch.events import EventBus
 from dispatch.meeting import Walks
 from dispatch.faults import FaultInjector, blackout_filter
@@ -181,10 +180,6 @@ class Simulation:
         t = sc.tasks
         source, extra = TaskSource, {}
         if t.prebooked:  # requests booked ahead (dispatch.prebook)
-            if allocator.multi_request:  # its routes do not read a booked pickup's earliest
-                raise ScenarioError(sc.path, "dispatch.allocator", f"{spec.allocator!r} "
-                                    "builds its own routes (multi_request): prebooking needs "
-                                    "an allocator that takes the insertion costs")
             source, extra = PrebookSource, dict(
                 share=t.prebook_share, lead=t.prebook_lead, mode=d.prebook,
                 dispatch_lead=t.prebook_lead if d.prebook_lead is None else d.prebook_lead,
