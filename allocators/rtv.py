@@ -30,6 +30,13 @@ Each decision (a batch of open requests, the idle vehicles and the busy ones wit
    taken). A batch whose groups are all single requests is a linear assignment
    (:func:`allocators.hungarian.optimal_pairs`, exact).
 
+Times: every order is timed by the kernel's one schedule rule (:mod:`dispatch.stops`): a stop
+reached before its earliest time waits (a booked request's pickup, ``TaskView.earliest``: its
+requested departure; a plan's stop, ``StopView.earliest``), and with driver shifts a route ends
+(leaves its last stop) by its vehicle's ``problem.until`` (shift end plus grace). Waits only
+delay, so feasibility stays closed under taking subgroups and the pair test stays a necessary
+condition (it waits too).
+
 Costs (``objective``): ``delay`` (default): the new requests' delays (drop-off time - release -
 direct drive) plus how much later the plan's own drop-offs come; ``added_time``: how much later
 the vehicle's plan ends.
