@@ -13,7 +13,8 @@ its candidates, found once per request; the points left out by that bound are co
 (:attr:`Walks.cut`).
 
 A candidate pair (boarding point ``b``, alighting point ``a``) is the request with its pickup
-at ``b``, no earlier than the rider gets there (release + walk / ``walk_speed``), by the same
+at ``b``, no earlier than the rider gets there (release + walk / ``walk_speed``; a booked
+ride's release is its requested departure, so it boards no sooner even at its origin), by the same
 latest pickup (release + ``max_wait``: the wait at the point counts), and its drop-off at
 ``a`` by the door-to-door latest arrival less the walk from ``a`` (release + direct drive +
 ``max_delay`` - walk / ``walk_speed``: the walk counts in the rider's total trip time and in
@@ -184,7 +185,9 @@ def _pairs(walks: Walks, tasks: list, svc: float, planner: Planner):
     point = np.array([t.dropoff is None for t in tasks])[col]
     lp = np.array([t.deadline for t in tasks])[col]
     ld = np.array([t.dropoff_deadline for t in tasks])[col] - wa / spd
-    e = np.where(wb > 0, release + wb / spd, -np.inf)
+    # boarding no sooner than the rider gets there, nor than a booked ride's requested departure
+    booked = np.array([t.booked_at == t.booked_at for t in tasks])[col]
+    e = np.where((wb > 0) | booked, release + wb / spd, -np.inf)
     n = np.array([0 if t.dropoff is None else t.passengers for t in tasks], np.int64)[col]
     trips = np.flatnonzero(~point)
     pd = np.zeros(col.size)

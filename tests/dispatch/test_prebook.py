@@ -282,3 +282,16 @@ def test_lead_mode_enters_a_booking_its_lead_before_departure(tmp_path):
     assert t.picked_up_at == pytest.approx(1000.0)
     ev = tables["events"]
     assert ev[ev.event == "release"].t.iloc[0] == pytest.approx(880.0)
+
+
+@pytest.mark.parametrize("allocator,capacity", [("hungarian", 1), ("hungarian", 3), ("rtv", 3)])
+def test_walking_riders_booked_ahead_board_no_sooner(tmp_path, allocator, capacity):
+    """Meeting points and bookings together: a booked rider boarding at the origin itself (no
+    walk) still boards no sooner than the requested departure, as at any other point."""
+    _trace(tmp_path, 3, n=40, share=0.6)
+    tasks = 'source = "trace"\ntrace = "trips.csv"\nmax_wait = 240.0\nmax_walk = 150.0'
+    summary, tables = _run(_scenario(tmp_path, allocator=allocator, capacity=capacity,
+                                     tasks=tasks, agents=2))
+    check_promises(summary, tables)
+    t = tables["tasks"]
+    assert t[t.booked_at.notna()].picked_up_at.notna().sum() > 0
