@@ -16,9 +16,9 @@ shift's end plus the grace; ``inf``: none). Departures only grow along a route, 
 route leaving a stop after ``until`` is cut at once.
 
 Costs (``objective``): 0 ``delay``: the new requests' delays (drop-off time - release - direct
-drive; a point task: the start of its service - release) plus how much later the plan's own drop-offs come
-than planned (Alonso-Mora et al.'s sum of delays); 1 ``added_time``: how much later the plan
-ends (departure from its last stop) than it did.
+drive; a point task: the start of its service - release) plus how much later the plan's own
+drop-offs come than planned (Alonso-Mora et al.'s sum of delays); 1 ``added_time``: how much
+later the plan ends (departure from its last stop) than it did.
 
 Compiled with numba on first use (cached on disk where possible).
 """
@@ -51,9 +51,10 @@ def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, 
     plan stops ``off[j]:off[j + 1]`` of the flat arrays (passengers, limit, service,
     planned arrival, is a drop-off, earliest); ``pp[s]`` drive from plan stop ``s`` to ``s + 1``;
     ``old_end[j]`` when its plan ends now, ``until[j]`` when it must end at the latest.
-    ``r_e[r]``: the earliest start of request ``r``'s pickup (``-inf``: open). Drives: ``vn[j, x]`` vehicle -> new stop ``x``
-    (``2 r`` pickup, ``2 r + 1`` drop-off of request ``r``), ``pn[s, x]`` plan stop -> new stop,
-    ``np_[x, s]`` new stop -> plan stop, ``nn[x, y]`` between new stops."""
+    ``r_e[r]``: the earliest start of request ``r``'s pickup (``-inf``: open). Drives:
+    ``vn[j, x]`` vehicle -> new stop ``x`` (``2 r`` pickup, ``2 r + 1`` drop-off of request
+    ``r``), ``pn[s, x]`` plan stop -> new stop, ``np_[x, s]`` new stop -> plan stop,
+    ``nn[x, y]`` between new stops."""
     G, K = groups.shape
     L = out_order.shape[1]
     # per-depth state

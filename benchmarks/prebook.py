@@ -151,8 +151,8 @@ def main(argv: list[str] | None = None) -> None:
                   f"{r['cancelled']}; {r['wall']:.0f} s wall", flush=True)
             if a.json:
                 a.json.write_text(json.dumps(rows, indent=1))
-    print(f"\n{a.agents} taxis of {a.capacity} seat(s), {a.allocator}, window {a.start} + {a.hours:g} h, mode {a.mode}, seeds "
-          f"{a.seeds} (mean ± 95 % t interval)")
+    print(f"\n{a.agents} taxis of {a.capacity} seat(s), {a.allocator}, window {a.start} + "
+          f"{a.hours:g} h, mode {a.mode}, seeds {a.seeds} (mean ± 95 % t interval)")
     print("| booked | served % | booked served % | immediate served % | promises broken "
           "| wait s |")
     print("|---|---|---|---|---|---|")
