@@ -28,11 +28,10 @@ point for a rider still walking).
 
 Allocators that hand out pairs (every allocator costing insertions) get the meeting points of
 the pair's cheapest insertion. An allocator routing several requests (``rtv``; its decision's
-``one_point``) plans with one pair of points per request: of the pairs whose boarding point the
-rider reaches before any vehicle of the decision could drive there (so no route, in whatever
-order, boards a rider early, and no stop of it waits), the pair of the request's cheapest
-insertion; the allocator sees the request's view at those points (:func:`view_at`) and every
-vehicle's cost of that pair (see the how-to).
+``one_point``) plans with one pair of points per request, the pair of the request's cheapest
+insertion; the allocator sees the request's view at those points (:func:`view_at`: its pickup
+no earlier than the rider gets there, ``TaskView.earliest``, which its route search waits for
+by the schedule rule) and every vehicle's cost of that pair (see the how-to).
 
 With ``max_walk`` = 0 everywhere nothing here runs (the decision has no candidate step).
 """
@@ -209,11 +208,9 @@ def meeting_costs(walks: Walks, cost: np.ndarray, slots: np.ndarray, agents, tas
     go, {})`` for every finite pair.
 
     ``one_point`` (allocators that route several requests, ``rtv``): one candidate pair per
-    request for every vehicle, the one of its cheapest insertion among the pairs whose
-    boarding point the rider reaches before any vehicle of the decision can (release + walk
-    time <= now + the shortest drive there: no route of these vehicles ever boards the rider
-    early, whatever its order); the third item maps each such request's index to its
-    :class:`Meeting`."""
+    request for every vehicle, the one of its cheapest insertion (the allocator's routes wait
+    for the rider's arrival there: :attr:`dispatch.problem.TaskView.earliest`); the third
+    item maps each such request's index to its :class:`Meeting`."""
     n_v, m = cost.shape
     out = np.full((n_v, m), np.inf)
     if not n_v or not m:
@@ -229,8 +226,6 @@ def meeting_costs(walks: Walks, cost: np.ndarray, slots: np.ndarray, agents, tas
     drive = np.asarray(planner.between([ag.loc for ag in agents], ub.tolist()), float)
     first = drive[:, b_at]  # (vehicles, candidate pairs)
     ok = (ready[:, None] + first <= lp + 1e-9) & (n_req <= cap[:, None])
-    if one_point:  # boarding points the rider reaches first
-        ok &= (e <= now + first.min(axis=0) + 1e-9)[None, :]
     rows, vcols = np.nonzero(ok)
     if not rows.size:
         return out, MeetingInserts(None, {}, []), {}
