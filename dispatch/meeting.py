@@ -28,10 +28,12 @@ point for a rider still walking).
 
 Allocators that hand out pairs (every allocator costing insertions) get the meeting points of
 the pair's cheapest insertion. An allocator routing several requests (``rtv``; its decision's
-``one_point``) plans with one pair of points per request, the pair of the request's cheapest
+``one_point``) plans with one pair of points per request: of the pairs whose boarding point the
+rider reaches before any vehicle of the decision could drive there, counted from when the ride
+may start (now; a booked ride's requested departure), the pair of the request's cheapest
 insertion; the allocator sees the request's view at those points (:func:`view_at`: its pickup
-no earlier than the rider gets there, ``TaskView.earliest``, which its route search waits for
-by the schedule rule) and every vehicle's cost of that pair (see the how-to).
+no earlier than the rider gets there, :attr:`dispatch.problem.TaskView.earliest`, which its
+routes wait for) and every vehicle's cost of that pair (see the how-to).
 
 With ``max_walk`` = 0 everywhere nothing here runs (the decision has no candidate step).
 """
@@ -208,9 +210,13 @@ def meeting_costs(walks: Walks, cost: np.ndarray, slots: np.ndarray, agents, tas
     go, {})`` for every finite pair.
 
     ``one_point`` (allocators that route several requests, ``rtv``): one candidate pair per
-    request for every vehicle, the one of its cheapest insertion (the allocator's routes wait
-    for the rider's arrival there: :attr:`dispatch.problem.TaskView.earliest`); the third
-    item maps each such request's index to its :class:`Meeting`."""
+    request for every vehicle, the one of its cheapest insertion among the pairs whose
+    boarding point the rider reaches before any vehicle of the decision can, counted from when
+    the ride may start (release + walk time <= max(now, release) + the shortest drive there;
+    for a request released by now: no route of these vehicles waits for the walk, whatever
+    its order; a booked ride's pickup waits for its requested departure anyway, and the
+    allocator's routes wait for its ``earliest``); the third item maps each such request's
+    index to its :class:`Meeting`."""
     n_v, m = cost.shape
     out = np.full((n_v, m), np.inf)
     if not n_v or not m:
@@ -226,6 +232,9 @@ def meeting_costs(walks: Walks, cost: np.ndarray, slots: np.ndarray, agents, tas
     drive = np.asarray(planner.between([ag.loc for ag in agents], ub.tolist()), float)
     first = drive[:, b_at]  # (vehicles, candidate pairs)
     ok = (ready[:, None] + first <= lp + 1e-9) & (n_req <= cap[:, None])
+    if one_point:  # boarding points the rider reaches first, from when the ride may start
+        start = np.maximum(np.array([t.released_at for t in tasks])[col], now)
+        ok &= (e <= start + first.min(axis=0) + 1e-9)[None, :]
     rows, vcols = np.nonzero(ok)
     if not rows.size:
         return out, MeetingInserts(None, {}, []), {}

@@ -158,9 +158,9 @@ def test_costs_equal_a_brute_force_over_points_and_positions(tmp_path, monkeypat
 
 @pytest.mark.parametrize("seed", [0, 4])
 def test_one_point_per_request_equals_a_brute_force(tmp_path, monkeypatch, seed):
-    """``rtv``'s meeting points: one pair per request, the cheapest insertion's among all its
-    pairs (rtv's routes wait for the rider at the boarding point); every vehicle's cost is
-    that pair's exhaustive minimum over positions."""
+    """``rtv``'s meeting points: one pair per request, the cheapest insertion's among the pairs
+    whose boarding point the rider reaches before any vehicle of the decision can; every
+    vehicle's cost is that pair's exhaustive minimum over positions."""
     checked = []
 
     def spy(walks, cost, slots, agents, tasks, now, holders, *, fleet, operator, planner,
@@ -173,7 +173,10 @@ def test_one_point_per_request_equals_a_brute_force(tmp_path, monkeypatch, seed)
                       planner, objective)
         for c, t in enumerate(tasks):
             pts = _points(walks, t)
-            allowed = range(len(pts))
+            soon = [min(float(planner.between([ag.loc], [p[0]])[0, 0]) for ag in agents)
+                    for p in pts]
+            allowed = [q for q, p in enumerate(pts)
+                       if p[2] <= max(now, t.released_at) + soon[q] + 1e-9]
             best = min((each[:, c, q].min() for q in allowed), default=math.inf)
             if not math.isfinite(best):
                 assert c not in chosen and not np.isfinite(got[:, c]).any()
