@@ -7,15 +7,18 @@ candidates in one call.
 The schedule is the kernel's one rule (:mod:`dispatch.stops`, compiled in
 :mod:`dispatch._plan_kernel`: departures by its ``leave``): arrival at a stop = departure from the
 one before + the drive between them; service starts at ``max(arrival, earliest)`` (``p_e``: a
-plan stop's earliest time; a request's stops are open); departure = that start + the service time
-of a stop that completes a request (a drop-off; the pickup of a point task); a stop of the plan
-must be reached by ``max(latest, planned arrival)``, a new stop by its limit; the occupancy never
-exceeds the capacity.
+plan stop's earliest time, ``r_e``: a new request's pickup's, e.g. a booked request's requested
+departure; a drop-off is open); departure = that start + the service time of a stop that
+completes a request (a drop-off; the pickup of a point task); a stop of the plan must be reached
+by ``max(latest, planned arrival)``, a new stop by its limit; the occupancy never exceeds the
+capacity; the departure from the route's last stop is no later than the vehicle's ``until`` (its
+shift's end plus the grace; ``inf``: none). Departures only grow along a route, so a partial
+route leaving a stop after ``until`` is cut at once.
 
 Costs (``objective``): 0 ``delay``: the new requests' delays (drop-off time - release - direct
-drive; a point task: pickup time - release) plus how much later the plan's own drop-offs come
-than planned (Alonso-Mora et al.'s sum of delays); 1 ``added_time``: how much later the plan
-ends (departure from its last stop) than it did.
+drive; a point task: the start of its service - release) plus how much later the plan's own
+drop-offs come than planned (Alonso-Mora et al.'s sum of delays); 1 ``added_time``: how much
+later the plan ends (departure from its last stop) than it did.
 
 Compiled with numba on first use (cached on disk where possible).
 """
@@ -35,7 +38,7 @@ INF = np.inf
 @jit
 def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, p_svc, p_eta,
                 p_drop, p_e, pp, vn, pn, np_, nn, r_pax, r_lp, r_ld, r_rel, r_direct, r_hasdrop,
-                old_end, svc, objective, budget, tol, out_cost, out_order,
+                r_e, until, old_end, svc, objective, budget, tol, out_cost, out_order,
                 out_cut):  # pragma: no cover - compiled
     """For each candidate ``g``: vehicle ``gveh[g]`` (row of the per-vehicle arrays) and the
     requests ``groups[g, :]`` (indices of the batch's requests, ``-1`` padded): the cheapest
@@ -47,9 +50,11 @@ def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, 
     at ``first_eta[j]`` (the kernel's planned time); ``load[j]`` on board, ``cap[j]`` seats;
     plan stops ``off[j]:off[j + 1]`` of the flat arrays (passengers, limit, service,
     planned arrival, is a drop-off, earliest); ``pp[s]`` drive from plan stop ``s`` to ``s + 1``;
-    ``old_end[j]`` when its plan ends now. Drives: ``vn[j, x]`` vehicle -> new stop ``x``
-    (``2 r`` pickup, ``2 r + 1`` drop-off of request ``r``), ``pn[s, x]`` plan stop -> new stop,
-    ``np_[x, s]`` new stop -> plan stop, ``nn[x, y]`` between new stops."""
+    ``old_end[j]`` when its plan ends now, ``until[j]`` when it must end at the latest.
+    ``r_e[r]``: the earliest start of request ``r``'s pickup (``-inf``: open). Drives:
+    ``vn[j, x]`` vehicle -> new stop ``x`` (``2 r`` pickup, ``2 r + 1`` drop-off of request
+    ``r``), ``pn[s, x]`` plan stop -> new stop, ``np_[x, s]`` new stop -> plan stop,
+    ``nn[x, y]`` between new stops."""
     G, K = groups.shape
     L = out_order.shape[1]
     # per-depth state
@@ -113,8 +118,11 @@ def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, 
                 add = 0.0
                 if p_drop[s] and objective == 0:
                     add = t - p_eta[s]
+                dep = leave(t, p_e[s], p_svc[s])
+                if dep > until[j] + tol:  # departures only grow: the plan would end too late
+                    continue
                 nodes += 1
-                st_time[d + 1] = leave(t, p_e[s], p_svc[s])
+                st_time[d + 1] = dep
                 st_occ[d + 1] = occ
                 st_cost[d + 1] = st_cost[d] + add
                 st_pos[d + 1] = s
@@ -144,14 +152,15 @@ def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, 
                     continue
                 add = 0.0
                 serve = 0.0
+                e = r_e[r] if pick else -INF  # (a pickup waits for its earliest time)
                 if pick:
                     if r_hasdrop[r]:
                         occ = st_occ[d] + r_pax[r]
                     else:
                         occ = st_occ[d]
                         serve = svc
-                        if objective == 0:
-                            add = t - r_rel[r]
+                        if objective == 0:  # (served from the start of its service)
+                            add = leave(t, e, 0.0) - r_rel[r]
                 else:
                     occ = st_occ[d] - r_pax[r]
                     serve = svc
@@ -159,8 +168,11 @@ def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, 
                         add = t - r_rel[r] - r_direct[r]
                 if occ > cap[j]:
                     continue
+                dep = leave(t, e, serve)
+                if dep > until[j] + tol:
+                    continue
                 nodes += 1
-                st_time[d + 1] = leave(t, -INF, serve)
+                st_time[d + 1] = dep
                 st_occ[d + 1] = occ
                 st_cost[d + 1] = st_cost[d] + add
                 st_pos[d + 1] = -2 - gx
@@ -191,8 +203,8 @@ def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, 
 @jit
 def best_orders_any(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, p_svc,
                     p_eta, p_drop, p_e, p_pred, vp, poff, ppa, vn, pn, np_, nn, r_pax, r_lp, r_ld,
-                    r_rel, r_direct, r_hasdrop, old_end, svc, objective, budget, tol, out_cost,
-                    out_order, out_cut):  # pragma: no cover - compiled
+                    r_rel, r_direct, r_hasdrop, r_e, until, old_end, svc, objective, budget, tol,
+                    out_cost, out_order, out_cut):  # pragma: no cover - compiled
     """:func:`best_orders` with the plan's stops reordered too (Alonso-Mora et al.'s whole-trip
     routing): every order of the plan's stops and the group's, each pickup before its drop-off
     (a plan's drop-off after its pickup where that is in the plan too: ``p_pred[s]``, the flat
@@ -269,8 +281,11 @@ def best_orders_any(groups, gveh, start, first_eta, load, cap, off, p_pax, p_lim
                 add = 0.0
                 if p_drop[s] and objective == 0:
                     add = t - p_eta[s]
+                dep = leave(t, p_e[s], p_svc[s])
+                if dep > until[j] + tol:  # departures only grow: the plan would end too late
+                    continue
                 nodes += 1
-                st_time[d + 1] = leave(t, p_e[s], p_svc[s])
+                st_time[d + 1] = dep
                 st_occ[d + 1] = occ
                 st_cost[d + 1] = st_cost[d] + add
                 st_pos[d + 1] = s
@@ -295,14 +310,15 @@ def best_orders_any(groups, gveh, start, first_eta, load, cap, off, p_pax, p_lim
                     continue
                 add = 0.0
                 serve = 0.0
+                e = r_e[r] if pick else -INF  # (a pickup waits for its earliest time)
                 if pick:
                     if r_hasdrop[r]:
                         occ = st_occ[d] + r_pax[r]
                     else:
                         occ = st_occ[d]
                         serve = svc
-                        if objective == 0:
-                            add = t - r_rel[r]
+                        if objective == 0:  # (served from the start of its service)
+                            add = leave(t, e, 0.0) - r_rel[r]
                 else:
                     occ = st_occ[d] - r_pax[r]
                     serve = svc
@@ -310,8 +326,11 @@ def best_orders_any(groups, gveh, start, first_eta, load, cap, off, p_pax, p_lim
                         add = t - r_rel[r] - r_direct[r]
                 if occ > cap[j]:
                     continue
+                dep = leave(t, e, serve)
+                if dep > until[j] + tol:
+                    continue
                 nodes += 1
-                st_time[d + 1] = leave(t, -INF, serve)
+                st_time[d + 1] = dep
                 st_occ[d + 1] = occ
                 st_cost[d + 1] = st_cost[d] + add
                 st_pos[d + 1] = -2 - gx
@@ -342,7 +361,7 @@ _ORDERS = np.array([[0, 1, 2], [0, 2, 1], [1, 0, 2]], np.int64)
 
 
 @jit
-def _pair_shareable(now, nn, r_pax, r_lp, r_ld, svc, cap_max, tol, orders,
+def _pair_shareable(now, nn, r_pax, r_lp, r_ld, r_e, svc, cap_max, tol, orders,
                     out):  # pragma: no cover - compiled
     m = r_pax.size
     for r in range(m):
@@ -356,7 +375,7 @@ def _pair_shareable(now, nn, r_pax, r_lp, r_ld, svc, cap_max, tol, orders,
                     continue
                 # after u's pickup: 0 v's pickup, 1 u's drop-off, 2 v's drop-off
                 for o in range(3):
-                    t = now
+                    t = leave(now, r_e[u], 0.0)
                     occ = r_pax[u]
                     prev = 2 * u
                     feasible = True
@@ -380,6 +399,7 @@ def _pair_shareable(now, nn, r_pax, r_lp, r_ld, svc, cap_max, tol, orders,
                             if occ > cap_max:
                                 feasible = False
                                 break
+                            t = leave(t, r_e[v], 0.0)
                         else:
                             occ -= r_pax[u] if code == 1 else r_pax[v]
                             t = leave(t, -INF, svc)
@@ -393,13 +413,14 @@ def _pair_shareable(now, nn, r_pax, r_lp, r_ld, svc, cap_max, tol, orders,
             out[q, r] = ok
 
 
-def pair_shareable(now, nn, r_pax, r_lp, r_ld, svc, cap_max, tol):
+def pair_shareable(now, nn, r_pax, r_lp, r_ld, r_e, svc, cap_max, tol):
     """``(m, m)`` bool: ``[r, q]`` True when one vehicle standing at the pickup of ``r`` or of
     ``q`` at ``now`` could serve both (some order of their four stops, each within its limit,
-    at most ``cap_max`` seats): a necessary condition for any vehicle to serve them together
-    (a real vehicle reaches its first pickup at ``now`` or later; drives obey the triangle
-    inequality)."""
+    each pickup starting no sooner than its earliest time ``r_e``, at most ``cap_max`` seats):
+    a necessary condition for any vehicle to serve them together (a real vehicle reaches its
+    first pickup at ``now`` or later, drives obey the triangle inequality, and a later arrival
+    never leaves a stop sooner)."""
     out = np.zeros((r_pax.size, r_pax.size), dtype=bool)
-    _pair_shareable(float(now), nn, r_pax, r_lp, r_ld, float(svc), int(cap_max), float(tol),
-                    _ORDERS, out)
+    _pair_shareable(float(now), nn, r_pax, r_lp, r_ld, r_e, float(svc), int(cap_max),
+                    float(tol), _ORDERS, out)
     return out

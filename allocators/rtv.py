@@ -30,6 +30,13 @@ Each decision (a batch of open requests, the idle vehicles and the busy ones wit
    taken). A batch whose groups are all single requests is a linear assignment
    (:func:`allocators.hungarian.optimal_pairs`, exact).
 
+Times: every order is timed by the kernel's one schedule rule (:mod:`dispatch.stops`): a stop
+reached before its earliest time waits (a booked request's pickup, ``TaskView.earliest``: its
+requested departure; a plan's stop, ``StopView.earliest``), and with driver shifts a route ends
+(leaves its last stop) by its vehicle's ``problem.until`` (shift end plus grace). Waits only
+delay, so feasibility stays closed under taking subgroups and the pair test stays a necessary
+condition (it waits too).
+
 Costs (``objective``): ``delay`` (default): the new requests' delays (drop-off time - release -
 direct drive) plus how much later the plan's own drop-offs come; ``added_time``: how much later
 the vehicle's plan ends.
@@ -213,8 +220,8 @@ def _warm(reorder: bool = False) -> None:
                         np.zeros(2, np.int64), i, z, z, z, np.zeros(1, bool), z,
                         np.full(1, -1, np.int64), z, np.zeros(2, np.int64), z,
                         np.zeros((1, 2)), np.zeros((1, 2)), np.zeros((2, 1)), np.zeros((2, 2)),
-                        i, z + 1, z + 1, z, z, np.ones(1, bool), z, 0.0, 0, 10, TOL,
-                        np.zeros(1), np.zeros((1, 3), np.int64), np.zeros(1, bool))
+                        i, z + 1, z + 1, z, z, np.ones(1, bool), z - np.inf, z + np.inf, z, 0.0,
+                        0, 10, TOL, np.zeros(1), np.zeros((1, 3), np.int64), np.zeros(1, bool))
         _WARM.add("any")
     if "order" in _WARM:
         return
@@ -224,9 +231,9 @@ def _warm(reorder: bool = False) -> None:
     best_orders(np.zeros((1, 1), np.int64), i, z, z, i, np.ones(1, np.int64),
                 np.zeros(2, np.int64), i, z, z, z, np.zeros(1, bool), z, z, np.zeros((1, 2)),
                 np.zeros((1, 2)), np.zeros((2, 1)), np.zeros((2, 2)), i, z + 1, z + 1, z, z,
-                np.ones(1, bool), z, 0.0, 0, 10, TOL, np.zeros(1), np.zeros((1, 2), np.int64),
-                np.zeros(1, bool))
-    pair_shareable(0.0, np.zeros((2, 2)), i, z, z, 0.0, 1, TOL)
+                np.ones(1, bool), z - np.inf, z + np.inf, z, 0.0, 0, 10, TOL, np.zeros(1),
+                np.zeros((1, 2), np.int64), np.zeros(1, bool))
+    pair_shareable(0.0, np.zeros((2, 2)), i, z, z, z - np.inf, 0.0, 1, TOL)
     _WARM.add("order")
 
 
@@ -359,6 +366,8 @@ class _Batch:
         self.ld = np.array([t.dropoff_deadline if t.dropoff is not None else math.inf
                             for t in tasks], float)
         self.rel = np.array([t.released_at for t in tasks], float)
+        # a pickup waits for its earliest time (a booked request's requested departure)
+        self.r_e = np.array([t.earliest for t in tasks], float)
         new_locs = []
         for t in tasks:
             new_locs += [t.loc, t.loc if t.dropoff is None else t.dropoff]
@@ -380,8 +389,7 @@ class _Batch:
         self.p_eta = np.array([s.eta for s in flat], float)
         self.p_limit = np.maximum(np.array([s.latest for s in flat], float), self.p_eta)
         self.p_drop = np.array([s.kind == "dropoff" for s in flat], bool)
-        # (a problem's plans carry no earliest times: their stops never wait)
-        self.p_e = np.full(S, -np.inf)
+        self.p_e = np.array([s.earliest for s in flat], float)
         completes = []
         for p in self.plans:
             drops = {s.task_id for s in p if s.kind == "dropoff"}
@@ -409,7 +417,7 @@ class _Batch:
             first_eta[has] = self.p_eta[firsts]
             start[has] = np.maximum(now, self.p_eta[firsts] - to_first)
             load[has] = [flat[k].occupancy - flat[k].passengers for k in firsts.tolist()]
-            old_end[has] = self.p_eta[lasts] + self.p_svc[lasts]
+            old_end[has] = np.maximum(self.p_eta[lasts], self.p_e[lasts]) + self.p_svc[lasts]
         else:
             self.pn = np.zeros((0, 2 * m))
             self.np_ = np.zeros((2 * m, 0))
@@ -425,6 +433,9 @@ class _Batch:
             start[bare] = now + svc
             old_end[bare] = now + svc
         self.start, self.first_eta, self.load, self.old_end = start, first_eta, load, old_end
+        # when each vehicle's route must end (its shift's end plus the grace; inf: never)
+        self.until = (np.full(nv, np.inf) if problem.until is None
+                      else np.asarray(problem.until, float)[vrows])
         # candidate requests per vehicle: the cheapest max_requests finite pairs (with reorder
         # then, in the room left, the pairs feasible only by reordering, nearest first)
         sub = np.where(finite[vrows], cost[vrows], np.inf)
@@ -445,7 +456,7 @@ class _Batch:
         alloc.stats["pairs_cut"] += cut
         from allocators._rtv_kernel import pair_shareable
 
-        self.rr = pair_shareable(now, self.nn, self.pax, self.lp, self.ld, svc,
+        self.rr = pair_shareable(now, self.nn, self.pax, self.lp, self.ld, self.r_e, svc,
                                  int(self.cap.max()), TOL)
         point = ~self.hasdrop
         if point.any():  # point tasks: no pair test
@@ -551,7 +562,8 @@ class _Batch:
                         self.p_pred,
                         self.vp, self.poff, self.ppa, self.vn, self.pn, self.np_, self.nn,
                         self.pax, self.lp, self.ld, self.rel, self.direct, self.hasdrop,
-                        self.old_end, self.svc, OBJECTIVES[self.alloc.objective],
+                        self.r_e, self.until, self.old_end, self.svc,
+                        OBJECTIVES[self.alloc.objective],
                         self.alloc.max_nodes, TOL, c1, o1, k1)
         cost[sel], order[sel], cut[sel] = c1, o1, k1
         return cost, order, cut
@@ -571,7 +583,7 @@ class _Batch:
                         self.p_limit, self.p_svc, self.p_eta, self.p_drop, self.p_e, self.pp,
                         self.vn,
                         self.pn, self.np_, self.nn, self.pax, self.lp, self.ld, self.rel,
-                        self.direct, self.hasdrop, self.old_end, self.svc,
+                        self.direct, self.hasdrop, self.r_e, self.until, self.old_end, self.svc,
                         OBJECTIVES[self.alloc.objective], self.alloc.max_nodes, TOL, cost,
                         order, cut)
         return cost, order, cut

@@ -19,9 +19,12 @@ share of all requests, of the booked ones, and of the immediate ones; promises m
 broken; the mean wait (pickup - requested departure); wall seconds. The target: booked riders
 served >= 99.5 % at this fleet, and the whole served share not lower than at 0 %.
 
+``--allocator`` / ``--capacity`` run another allocator and seat count (e.g. ``rtv`` with 4
+seats: its own routes, each booked pickup waiting for its requested departure).
+
 Run: ``PYTHONPATH=. .venv/bin/python benchmarks/prebook.py [--seeds 0 1 2] [--shares 0 30 60]
 [--agents 650] [--start 00:00] [--hours 24] [--mode at_booking|lead] [--lead 900]
-[--json out.json]``.
+[--allocator hungarian] [--capacity 1] [--json out.json]``.
 """
 
 from __future__ import annotations
@@ -43,9 +46,9 @@ DATA = ROOT / "scenarios" / "data"
 
 
 def scenario_text(share: int, agents: int, seed: int, start: str, hours: float, mode: str,
-                  lead: float | None) -> str:
+                  lead: float | None, allocator: str = "hungarian", capacity: int = 1) -> str:
     """The prebooking scenario's text for one run: its trace (0 %: the shipped one without
-    bookings), fleet, seed, window and entry mode."""
+    bookings), fleet, seed, window, entry mode, allocator and seats."""
     out = []
     for line in SCENARIO.read_text().splitlines():
         key = line.split("=")[0].strip()
@@ -53,7 +56,9 @@ def scenario_text(share: int, agents: int, seed: int, start: str, hours: float, 
             line = ('trace = "nyc_taxi_2014-12-21"' if share <= 0
                     else f'trace = "{DATA / f"nyc_manhattan_prebook{share}.csv"}"')
         elif key == "agents":
-            line = f"agents = {agents}"
+            line = f"agents = {agents}" + (f"\ncapacity = {capacity}" if capacity != 1 else "")
+        elif key == "allocator":
+            line = f'allocator = "{allocator}"'
         elif key == "seed":
             line = f"seed = {seed}"
         elif key == "start":
@@ -70,14 +75,14 @@ def scenario_text(share: int, agents: int, seed: int, start: str, hours: float, 
 
 
 def one(share: int, agents: int, seed: int, start: str, hours: float, mode: str,
-        lead: float | None) -> dict:
+        lead: float | None, allocator: str = "hungarian", capacity: int = 1) -> dict:
     """One run's figures."""
     from dispatch.runner import run_one
     from dispatch.scenario import load_scenario
 
     with tempfile.TemporaryDirectory(prefix="prebook-") as tmp:
         path = Path(tmp) / "nyc_manhattan_prebook.toml"
-        text = scenario_text(share, agents, seed, start, hours, mode, lead)
+        text = scenario_text(share, agents, seed, start, hours, mode, lead, allocator, capacity)
         path.write_text(text)
         trips = load_scenario(path, force=True).tasks.trips
         # the window's requests only: those departing before its end (the hour after it
@@ -128,12 +133,15 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--mode", default="at_booking", choices=("at_booking", "lead"))
     p.add_argument("--lead", type=float, default=None,
                    help="[dispatch] prebook_lead (seconds; --mode lead)")
+    p.add_argument("--allocator", default="hungarian")
+    p.add_argument("--capacity", type=int, default=1, help="seats per vehicle")
     p.add_argument("--json", type=Path, help="write every run's figures here")
     a = p.parse_args(argv)
     rows = []
     for share in a.shares:
         for seed in a.seeds:
-            r = one(share, a.agents, seed, a.start, a.hours, a.mode, a.lead)
+            r = one(share, a.agents, seed, a.start, a.hours, a.mode, a.lead, a.allocator,
+                    a.capacity)
             rows.append(r)
             print(f"share {share:2d} % seed {seed}: {r['requests']} requests, {r['booked']} "
                   f"booked; served {100 * r['served']:.2f} % (booked "
@@ -143,8 +151,8 @@ def main(argv: list[str] | None = None) -> None:
                   f"{r['cancelled']}; {r['wall']:.0f} s wall", flush=True)
             if a.json:
                 a.json.write_text(json.dumps(rows, indent=1))
-    print(f"\n{a.agents} taxis, window {a.start} + {a.hours:g} h, mode {a.mode}, seeds "
-          f"{a.seeds} (mean ± 95 % t interval)")
+    print(f"\n{a.agents} taxis of {a.capacity} seat(s), {a.allocator}, window {a.start} + "
+          f"{a.hours:g} h, mode {a.mode}, seeds {a.seeds} (mean ± 95 % t interval)")
     print("| booked | served % | booked served % | immediate served % | promises broken "
           "| wait s |")
     print("|---|---|---|---|---|---|")

@@ -18,7 +18,7 @@ import numpy as np
 from dispatch import registry
 from dispatch.check_common import small_network
 from dispatch.problem import AgentView, AllocationProblem, TaskView
-from dispatch.stops import DROPOFF, TOL, PlannedStop, timetable
+from dispatch.stops import DROPOFF, TOL, PlannedStop, leave, timetable
 
 
 def _problem(label: str, seed: int, n: int, m: int, *, p_inf: float = 0.0, inf_rows=(),
@@ -198,9 +198,10 @@ def route_schedule(problem: AllocationProblem, aid: int, rows: list[PlannedStop]
                    ) -> tuple[list[float] | None, str]:
     """Planned arrival times of agent ``aid`` driving the stop rows ``rows`` (of
     :func:`dispatch.answers.route_stops`) from where it is, on ``problem.travel``, by the
-    schedule rule (:func:`dispatch.stops.timetable`), or ``(None, why)``: what
-    :meth:`dispatch.operator.Operator.route_times` checks, from the problem alone (the vehicle
-    leaves now, when ``problem.ready`` says, or when its first planned stop's time says)."""
+    schedule rule (:func:`dispatch.stops.timetable`; a stop waits for its row's
+    ``earliest``), or ``(None, why)``: what :meth:`dispatch.operator.Operator.route_times`
+    checks, from the problem alone (the vehicle leaves now, when ``problem.ready`` says, or
+    when its first planned stop's time says; its route ends by ``problem.until``)."""
     travel = problem.travel
     k = int(np.flatnonzero(problem.agent_ids == aid)[0])
     loc = problem.agents[k].loc
@@ -220,7 +221,7 @@ def route_schedule(problem: AllocationProblem, aid: int, rows: list[PlannedStop]
         t = ready + float(travel([loc], [rows[0].loc])[0, 0])
     legs = travel([r.loc for r in rows[:-1]], [r.loc for r in rows[1:]],
                   pairwise=True).tolist() if len(rows) > 1 else []
-    service, latest = [], []
+    service, latest, earliest = [], [], []
     for r in rows:
         old = mine.get((r.kind, r.task_id))
         completes = r.completes
@@ -228,12 +229,15 @@ def route_schedule(problem: AllocationProblem, aid: int, rows: list[PlannedStop]
             completes = r.kind == DROPOFF or r.task_id not in drops
         service.append(problem.service_time if completes else 0.0)
         latest.append(r.latest if old is None else max(r.latest, old.eta))
+        earliest.append(r.earliest)
     pax = [r.passengers for r in rows]
     times = [0.0] * len(rows)
-    # (a problem's plans carry no earliest times: a request's stops never wait)
-    bad, over = timetable(t, legs, [-math.inf] * len(rows), service, latest, pax, load, cap,
-                          TOL, times)
+    bad, over = timetable(t, legs, earliest, service, latest, pax, load, cap, TOL, times)
     if bad < 0:
+        end = leave(times[-1], earliest[-1], service[-1])
+        until = math.inf if problem.until is None else float(problem.until[k])
+        if end > until + TOL:
+            return None, f"the route ends at {end:.6g} s, after its shift end {until:.6g} s"
         return times, ""
     r = rows[bad]
     if over:

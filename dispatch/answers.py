@@ -153,13 +153,14 @@ def route_stops(problem: AllocationProblem, aid: int, route, new: dict) -> list[
                                   "before its pickup")
         s = plan.get((kind, tid))
         if s is not None:
-            rows.append(PlannedStop(s.kind, tid, s.loc, s.passengers, s.latest, None))
+            rows.append(PlannedStop(s.kind, tid, s.loc, s.passengers, s.latest, None,
+                                    s.earliest))
             continue
         t = new[tid]
         point = t.dropoff is None
         if kind == PICKUP:
             rows.append(PlannedStop(PICKUP, tid, t.loc, 0 if point else t.passengers,
-                                    t.deadline, point))
+                                    t.deadline, point, t.earliest))
         else:
             rows.append(PlannedStop(DROPOFF, tid, t.dropoff, -t.passengers,
                                     t.dropoff_deadline, True))

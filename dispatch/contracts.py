@@ -77,8 +77,11 @@ class Allocator(ABC):
     minimizes_total_cost: ClassVar[bool] = False
     #: True for batch-pooling methods that may give one agent several requests in one
     #: decision (``Allocation.routes`` then says in which order it serves them); the
-    #: dispatcher gives them ``problem.travel`` to route between any locations. Others give
-    #: an agent at most one request, inserted where the decision's cost says.
+    #: dispatcher gives them ``problem.travel`` to route between any locations, and checks
+    #: each route by the schedule rule: a stop waits for its ``earliest`` time (the views'
+    #: ``TaskView.earliest``, ``StopView.earliest``), every stop by its latest, the route's end
+    #: by ``problem.until``. Others give an agent at most one request, inserted where the
+    #: decision's cost says.
     multi_request: ClassVar[bool] = False
 
     @abstractmethod

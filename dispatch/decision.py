@@ -57,6 +57,7 @@ from dispatch.lazy import certify, resolve_open
 from dispatch.meeting import meeting_costs, view_at
 from dispatch.planner_costs import PlannerCosts, close_unreachable, lazy_costs
 from dispatch.plans import Inserts, Plans, PlanTable, insertion_costs_of
+from dispatch.prebook import earliest_views
 from dispatch.problem import AgentViews, AllocationProblem
 from dispatch.space import Space
 from dispatch.stops import OBJECTIVES
@@ -149,8 +150,11 @@ class Problems:
 
     def __init__(self, fleet: Fleet, operator: Operator, planner: Planner, space: Space,
                  cfg: DispatchConfig, comms: CommsConfig, rng: np.random.Generator,
-                 pooled: bool, routes: bool) -> None:
+                 pooled: bool, routes: bool, until: np.ndarray | None = None) -> None:
         self.fleet, self.operator, self.planner, self.space = fleet, operator, planner, space
+        #: driver shifts: each fleet position's latest plan end (dispatch.shifts.Shifts.until,
+        #: kept up to date there); None without shift ends
+        self.until = until
         self.rng, self.max_rounds = rng, cfg.max_rounds
         self.loss, self.latency = comms.loss, comms.latency
         self.pooled, self.routes = pooled, routes
@@ -171,12 +175,13 @@ class Problems:
         seats = self.fleet.capacity[slots] if self.pooled else None
         ready = np.maximum(self.fleet.free_at[slots], now) if self.pooled else None
         travel = self.planner.between if self.routes else None
+        until = None if self.until is None else self.until[slots]
 
         def make(cost: np.ndarray) -> AllocationProblem:
             return AllocationProblem.made(now, agents, tasks, np.array(cost, order="C"), comm,
                                           self.rng, self.max_rounds, self.loss, self.latency,
                                           self.cell_size, apos, tpos, plans, seats,
-                                          self.operator.service_time, travel, ready)
+                                          self.operator.service_time, travel, ready, until)
         return make
 
 
@@ -251,6 +256,9 @@ class Pipeline:
         #: that routes several requests (rtv) plans with one pair of points per request
         self.walks = walks
         self.one_point = walks is not None and allocator.multi_request
+        #: an allocator routing several requests itself reads each pickup's earliest time
+        #: from the views (dispatch.prebook.earliest_views); the others insert by the costs
+        self.routed = allocator.multi_request
         self._points: dict = {}  # (one_point) task id -> its Meeting, of the last limits
         self.plans = self.pooled or cfg.objective != "pickup_time" or bool(max_delay) \
             or walks is not None
@@ -274,7 +282,7 @@ class Pipeline:
         self.shifts = shifts
         self.hearing = Hearing(space, comms, links)
         self.problems = Problems(fleet, operator, planner, space, cfg, comms, rng, self.pooled,
-                                 self.routes)
+                                 self.routes, None if shifts is None else shifts.until)
         #: with plans, the fleet's plans as the compiled insertion reads them, kept between
         #: decisions (a row rewritten when its vehicle's plan changed)
         self.table = PlanTable(len(fleet)) if self.plans else None
@@ -318,6 +326,8 @@ class Pipeline:
                     servable, open_tasks, cost, exact, inserts)
         if self.one_point:  # the requests planned at their meeting points (dispatch.meeting)
             tasks = self._at_points(open_tasks, tasks)
+        if self.routed:  # booked pickups' earliest times, for the allocator's own routes
+            tasks = earliest_views(open_tasks, tasks)
         comm, apos = self.hearing(agents, now)
         return Decision(now, idle, agents, open_tasks, tasks, cost, exact, inserts, holder, comm,
                         cost_s, self.problems.of(now, agents, tasks, idle, comm, apos), n_cut)

@@ -259,8 +259,9 @@ class Dispatcher:
     def _routes(self, problem: AllocationProblem, allocation: Allocation) -> dict:
         """The routes of a multi-request answer, checked: agent id -> (stop rows of
         :func:`route_stops`, planned arrival times); AllocationError where a route breaks the
-        capacity or a limit."""
+        capacity, a limit or the vehicle's shift end (``problem.until``)."""
         by_task = {t.id: t for t in problem.tasks}
+        row = finders(problem)[0] if problem.until is not None else None
         new: dict[int, dict] = {}
         for aid, tid in allocation.pairs:
             new.setdefault(aid, {})[tid] = by_task[tid]
@@ -268,7 +269,8 @@ class Dispatcher:
         for aid, route in allocation.routes.items():
             rows = route_stops(problem, aid, route, new.get(aid, {}))
             v = self.fleet.by_id[int(aid)]
-            times, why = self.operator.route_times(v, rows)
+            until = math.inf if row is None else float(problem.until[row(aid)])
+            times, why = self.operator.route_times(v, rows, until)
             if why:
                 raise AllocationError(f"route of agent {aid} is infeasible: {why}")
             out[int(aid)] = (rows, times)

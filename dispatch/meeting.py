@@ -13,7 +13,8 @@ its candidates, found once per request; the points left out by that bound are co
 (:attr:`Walks.cut`).
 
 A candidate pair (boarding point ``b``, alighting point ``a``) is the request with its pickup
-at ``b``, no earlier than the rider gets there (release + walk / ``walk_speed``), by the same
+at ``b``, no earlier than the rider gets there (release + walk / ``walk_speed``; a booked
+ride's release is its requested departure, so it boards no sooner even at its origin), by the same
 latest pickup (release + ``max_wait``: the wait at the point counts), and its drop-off at
 ``a`` by the door-to-door latest arrival less the walk from ``a`` (release + direct drive +
 ``max_delay`` - walk / ``walk_speed``: the walk counts in the rider's total trip time and in
@@ -28,10 +29,11 @@ point for a rider still walking).
 Allocators that hand out pairs (every allocator costing insertions) get the meeting points of
 the pair's cheapest insertion. An allocator routing several requests (``rtv``; its decision's
 ``one_point``) plans with one pair of points per request: of the pairs whose boarding point the
-rider reaches before any vehicle of the decision could drive there (so no route, in whatever
-order, boards a rider early, and no stop of it waits), the pair of the request's cheapest
-insertion; the allocator sees the request's view at those points (:func:`view_at`) and every
-vehicle's cost of that pair (see the how-to).
+rider reaches before any vehicle of the decision could drive there, counted from when the ride
+may start (now; a booked ride's requested departure), the pair of the request's cheapest
+insertion; the allocator sees the request's view at those points (:func:`view_at`: its pickup
+no earlier than the rider gets there, :attr:`dispatch.problem.TaskView.earliest`, which its
+routes wait for) and every vehicle's cost of that pair (see the how-to).
 
 With ``max_walk`` = 0 everywhere nothing here runs (the decision has no candidate step).
 """
@@ -193,10 +195,9 @@ def _pairs(walks: Walks, tasks: list, svc: float, planner: Planner):
     point = np.array([t.dropoff is None for t in tasks])[col]
     lp = np.array([t.deadline for t in tasks])[col]
     ld = np.array([t.dropoff_deadline for t in tasks])[col] - wa / spd
-    # boarding no earlier than the rider gets there: a booked ride's requested departure
-    # (its released_at, dispatch.prebook) plus the walk; door to door no limit unless booked
+    # boarding no sooner than the rider gets there, nor than a booked ride's requested departure
     booked = np.array([t.booked_at == t.booked_at for t in tasks])[col]
-    e = np.where(wb > 0, release + wb / spd, np.where(booked, release, -np.inf))
+    e = np.where((wb > 0) | booked, release + wb / spd, -np.inf)
     n = np.array([0 if t.dropoff is None else t.passengers for t in tasks], np.int64)[col]
     trips = np.flatnonzero(~point)
     pd = np.zeros(col.size)
@@ -219,10 +220,12 @@ def meeting_costs(walks: Walks, cost: np.ndarray, slots: np.ndarray, agents, tas
 
     ``one_point`` (allocators that route several requests, ``rtv``): one candidate pair per
     request for every vehicle, the one of its cheapest insertion among the pairs whose
-    boarding point the rider reaches before any vehicle of the decision can (release + walk
-    time <= now + the shortest drive there: no route of these vehicles ever boards the rider
-    early, whatever its order); the third item maps each such request's index to its
-    :class:`Meeting`."""
+    boarding point the rider reaches before any vehicle of the decision can, counted from when
+    the ride may start (release + walk time <= max(now, release) + the shortest drive there;
+    for a request released by now: no route of these vehicles waits for the walk, whatever
+    its order; a booked ride's pickup waits for its requested departure anyway, and the
+    allocator's routes wait for its ``earliest``); the third item maps each such request's
+    index to its :class:`Meeting`."""
     n_v, m = cost.shape
     out = np.full((n_v, m), np.inf)
     if not n_v or not m:
@@ -238,8 +241,9 @@ def meeting_costs(walks: Walks, cost: np.ndarray, slots: np.ndarray, agents, tas
     drive = np.asarray(planner.between([ag.loc for ag in agents], ub.tolist()), float)
     first = drive[:, b_at]  # (vehicles, candidate pairs)
     ok = (ready[:, None] + first <= lp + 1e-9) & (n_req <= cap[:, None])
-    if one_point:  # boarding points the rider reaches first
-        ok &= (e <= now + first.min(axis=0) + 1e-9)[None, :]
+    if one_point:  # boarding points the rider reaches first, from when the ride may start
+        start = np.maximum(np.array([t.released_at for t in tasks])[col], now)
+        ok &= (e <= start + first.min(axis=0) + 1e-9)[None, :]
     rows, vcols = np.nonzero(ok)
     if not rows.size:
         return out, MeetingInserts(None, {}, []), {}
@@ -308,10 +312,11 @@ def _meeting(k: int, b, a, wb, wa, e, ld) -> Meeting:
 
 
 def view_at(t: Task, m: Meeting) -> TaskView:
-    """``t``'s view with its pickup and drop-off at the meeting points ``m`` and the drop-off
-    limit less the walk from it (what an allocator routing several requests plans with)."""
+    """``t``'s view with its pickup and drop-off at the meeting points ``m``, the drop-off
+    limit less the walk from it and the boarding no earlier than the rider gets there (what an
+    allocator routing several requests plans with)."""
     return TaskView(t.id, t.kind, m.board, t.released_at, m.alight,  # type: ignore[arg-type]
-                    t.deadline, t.passengers, m.latest_drop)
+                    t.deadline, t.passengers, m.latest_drop, m.earliest)
 
 
 def walk_m(t: Task) -> tuple[float, float]:

@@ -140,13 +140,15 @@ class Operator(Breakdowns):
         if i == 0 and v.heading is not None and v.proc is not None and v.proc.is_alive:
             v.proc.interrupt("reroute")  # its next stop is the new pickup
 
-    def route_times(self, v: Vehicle, rows: list[PlannedStop]
+    def route_times(self, v: Vehicle, rows: list[PlannedStop], until: float = math.inf
                     ) -> tuple[list[float] | None, str]:
         """Planned arrival times if ``v`` drove the stops ``rows`` (of
         :func:`dispatch.answers.route_stops`) from where it is now, on the planner's travel
-        times, by the schedule rule (:func:`dispatch.stops.timetable`), or ``(None, why)``
-        where a stop would be late or the vehicle over its capacity. A stop of its plan that
-        is already planned late (traffic ran slower than planned) may stay as late as it is."""
+        times, by the schedule rule (:func:`dispatch.stops.timetable`; a new stop waits for
+        its row's ``earliest``), or ``(None, why)`` where a stop would be late, the vehicle
+        over its capacity or the route would end (leave its last stop) after ``until`` (a
+        driver's shift end plus the grace). A stop of its plan that is already planned late
+        (traffic ran slower than planned) may stay as late as it is."""
         env, planner = self.env, self.driver.planner
         now = env.now
         kept = self.kept(v)
@@ -165,7 +167,7 @@ class Operator(Breakdowns):
         for r in rows:
             mine = old.get((r.kind, r.task_id))
             if mine is None:
-                earliest.append(-math.inf)
+                earliest.append(r.earliest)
                 service.append(svc if r.completes else 0.0)
                 latest.append(r.latest)
             else:
@@ -177,6 +179,10 @@ class Operator(Breakdowns):
         bad, over = timetable(t, legs, earliest, service, latest, pax, v.load, v.capacity, TOL,
                               times)
         if bad < 0:
+            end = leave(times[-1], earliest[-1], service[-1])
+            if end > until + TOL:
+                return None, f"the route ends at {end:.6g} s, after the vehicle's shift end " \
+                             f"and grace {until:.6g} s"
             return times, ""
         r = rows[bad]
         if over:
@@ -200,7 +206,8 @@ class Operator(Breakdowns):
             s = old.get((r.kind, r.task_id))
             if s is None:
                 s = Stop(r.kind, tasks[r.task_id], r.loc, r.passengers, r.latest,
-                         bool(r.completes), service=svc if r.completes else 0.0)
+                         bool(r.completes), service=svc if r.completes else 0.0,
+                         earliest=r.earliest)
             stops.append(s)
         if empty:
             path = self.driver.plan(v, stops[0].loc, env.now)

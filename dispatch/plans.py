@@ -105,7 +105,7 @@ class Plans(Mapping):
             times = self._operator.plan_arrays(v)[0]
             got = self._cache[agent_id] = tuple(
                 StopView(s.kind, -1 if s.task is None else s.task.id, s.loc, s.passengers,
-                         s.latest, s.occupancy, t)
+                         s.latest, s.occupancy, t, s.earliest)
                 for s, t in zip(v.stops, times))
         return got
 

@@ -13,7 +13,6 @@ from typing import TYPE_CHECKING
 from dispatch import registry
 from dispatch.errors import PluginError, ScenarioError
 from dispatch.config import Scenario, _short
-from dispatch.shifts import check_allocator
 from dispatch.space import space_class
 
 if TYPE_CHECKING:
@@ -120,7 +119,6 @@ def check_runs(sc: Scenario, planners, repositioners=(), allocators=()) -> None:
     space = sc.world.space
     for name in repositioners:
         check_repositioner(sc, name)
-    check_allocator(sc, allocators)
     need = travel_times_needed(sc, allocators)
     for name in planners:
         caps = registry.declaration("planner", name)

@@ -24,9 +24,12 @@ broken).
 
 Prebooking needs plans (a road network): with it on, every decision inserts into the vehicles'
 plans as a pooled fleet's do (:class:`dispatch.decision.Pipeline` with ``pooled``), so a
-vehicle holding a promise later in its plan still takes requests before it. ``rtv`` builds its
-own routes and ignores a stop's ``earliest``: prebooking is for the allocators that take the
-insertion costs.
+vehicle holding a promise later in its plan still takes requests before it. An allocator that
+builds its own routes (``multi_request``: ``rtv``) reads a booked pickup's earliest time from
+its view (:attr:`dispatch.problem.TaskView.earliest`, :func:`earliest_views`) and the plans'
+(:attr:`dispatch.problem.StopView.earliest`), and its routes wait for them by the one schedule
+rule (:mod:`dispatch.stops`); the dispatcher times every route by that rule, so no route picks a
+booked rider up before the requested departure.
 """
 
 from __future__ import annotations
@@ -36,7 +39,6 @@ from dataclasses import fields, replace
 
 import numpy as np
 
-from dispatch.errors import ScenarioError
 from dispatch.tasks import TaskSource, TaskState
 from dispatch.traces import Trips
 
@@ -71,6 +73,16 @@ def in_entry_order(trips: Trips, entry: np.ndarray) -> tuple[Trips, np.ndarray]:
            if isinstance(getattr(trips, f.name), np.ndarray)
            and getattr(trips, f.name).shape[:1] == (n,)}
     return replace(trips, **cut), entry[order]
+
+
+def earliest_views(requests: list, views: tuple) -> tuple:
+    """``views`` of ``requests`` (aligned) with each booked request's pickup no earlier than
+    its requested departure (:attr:`dispatch.problem.TaskView.earliest`; a view's own, e.g. a
+    meeting point's, kept where later); ``views`` itself where none is booked."""
+    if not any(t.booked_at == t.booked_at for t in requests):  # (nan: not booked)
+        return views
+    return tuple(v if t.booked_at != t.booked_at or v.earliest >= t.released_at
+                 else replace(v, earliest=t.released_at) for t, v in zip(requests, views))
 
 
 class PrebookSource(TaskSource):
@@ -181,18 +193,12 @@ class PrebookSource(TaskSource):
         yield self.env.timeout(0)
 
 
-def task_source(sc, allocator, booking_rng) -> tuple[type[TaskSource], dict]:
+def task_source(sc, booking_rng) -> tuple[type[TaskSource], dict]:
     """The run's task source class and its own arguments: :class:`PrebookSource` where some
-    request is booked ahead (``booking_rng``: its stream), else :class:`TaskSource`; a
-    ScenarioError for an allocator that builds its own routes (they do not read a booked
-    pickup's earliest time)."""
+    request is booked ahead (``booking_rng``: its stream), else :class:`TaskSource`."""
     t, d = sc.tasks, sc.dispatch
     if not t.prebooked:
         return TaskSource, {}
-    if allocator.multi_request:
-        raise ScenarioError(sc.path, "dispatch.allocator", f"{allocator.name!r} builds its own "
-                            "routes (multi_request): prebooking needs an allocator that takes "
-                            "the insertion costs")
     return PrebookSource, dict(
         share=t.prebook_share, lead=t.prebook_lead, mode=d.prebook,
         dispatch_lead=t.prebook_lead if d.prebook_lead is None else d.prebook_lead,

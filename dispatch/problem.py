@@ -149,6 +149,11 @@ class TaskView:
     #: direct free-flow time + ``max_delay``; ``inf`` without a ``max_delay``)
     passengers: int = 1
     dropoff_deadline: float = math.inf
+    #: the earliest time its pickup may start (a vehicle there sooner waits): a booked
+    #: request's requested departure (:mod:`dispatch.prebook`), a rider's arrival at a meeting
+    #: point (:mod:`dispatch.meeting`); ``-inf``: open since its release. Set in the views of
+    #: decisions whose allocator routes several requests itself (``multi_request``)
+    earliest: float = -math.inf
 
     @property
     def cell(self) -> Cell:
@@ -180,7 +185,9 @@ class _Positions:
 class StopView(NamedTuple):
     """One stop of an agent's plan as a decision sees it (shared rides): ``kind`` (``pickup``
     or ``dropoff``), the request's id, where, the passengers it adds (negative: removes),
-    the latest time it may be reached, the occupancy after it and its planned arrival time."""
+    the latest time it may be reached, the occupancy after it, its planned arrival time and
+    the earliest time its service may start (``-inf``: none; the planned arrival already
+    counts the wait)."""
 
     kind: str
     task_id: int
@@ -189,6 +196,7 @@ class StopView(NamedTuple):
     latest: float
     occupancy: int
     eta: float
+    earliest: float = -math.inf
 
 
 @dataclass(frozen=True, eq=False)
@@ -240,12 +248,17 @@ class AllocationProblem:
     #: shared rides: when each agent can leave where it is (the decision's time, or the end
     #: of the service it is in); None: the decision's time for all
     ready: np.ndarray | None = None
+    #: driver shifts: the latest time each agent's plan may end (departure from its last stop:
+    #: its shift's end plus the grace, ``-inf`` once it ended; aligned with ``agents``); None:
+    #: no limit. A multi-request allocator's routes keep it (the dispatcher checks them)
+    until: np.ndarray | None = None
 
     @classmethod
     def made(cls, time: float, agents, tasks, cost: np.ndarray, comm: np.ndarray,
              rng: np.random.Generator, max_rounds: int, loss: float, latency: float,
              cell_size: float, agent_pos, task_pos, plans=None, capacity=None,
-             service_time: float = 0.0, travel=None, ready=None) -> AllocationProblem:
+             service_time: float = 0.0, travel=None, ready=None,
+             until=None) -> AllocationProblem:
         """The problem ``cls(...)`` of these fields (all of them, positionally) makes, checked
         the same way, without the field-by-field ``object.__setattr__`` of a frozen
         ``__init__`` (the dispatcher makes one per decision)."""
@@ -254,7 +267,8 @@ class AllocationProblem:
                             max_rounds=max_rounds, loss=loss, latency=latency,
                             cell_size=cell_size, _agent_pos=agent_pos, _task_pos=task_pos,
                             plans={} if plans is None else plans, capacity=capacity,
-                            service_time=service_time, travel=travel, ready=ready)
+                            service_time=service_time, travel=travel, ready=ready,
+                            until=until)
         obj.__post_init__()
         return obj
 

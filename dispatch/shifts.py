@@ -32,9 +32,11 @@ and ``overrun_seconds``; the summary's ``vehicle_hours``, ``riders_per_vehicle_h
 (completed requests per vehicle-hour) and ``shift_overruns``. Without shift columns and with
 ``fixed`` nothing of this runs: every vehicle is on duty from 0 to the run's end.
 
-The shift limit is kept in the cost matrix; an allocator that routes several requests per
-vehicle itself (``multi_request``, e.g. ``rtv``) would not keep it, and a scenario with shift
-ends and such an allocator is refused at validate time (:func:`check_allocator`).
+The shift limit is kept in the cost matrix, and for an allocator that routes several requests
+per vehicle itself (``multi_request``, e.g. ``rtv``) in the problem too
+(:attr:`dispatch.problem.AllocationProblem.until`, from :attr:`Shifts.until`): its routes end
+by it, and the dispatcher refuses a route that does not
+(:meth:`dispatch.operator.Operator.route_times`).
 """
 
 from __future__ import annotations
@@ -162,24 +164,6 @@ def depot_location(space, path: Path, row: int, cell):
     except ValueError as e:
         raise ScenarioError(path, f"row {row}", f"depot {text!r} is off the network: {e}") \
             from None
-
-
-def check_allocator(sc, allocators) -> None:
-    """ScenarioError when the scenario's shifts end before the run and an allocator routes
-    several requests per vehicle itself (the shift limit is kept in the cost matrix, which
-    such an allocator's routes go beyond)."""
-    from dispatch import registry
-
-    shifts = sc.fleet.shifts
-    if shifts is None or not shifts.limited:
-        return
-    for name in allocators:
-        if registry.declaration("allocator", name).multi_request:
-            raise ScenarioError(shifts.path, "shift_end",
-                                f"allocator {name!r} routes several requests per vehicle "
-                                "itself (multi_request), beyond the shift limit the kernel "
-                                "keeps in the cost matrix: use a single-request allocator "
-                                "(hungarian, greedy, ...) with shifts")
 
 
 class Duty:

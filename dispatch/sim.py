@@ -181,7 +181,7 @@ class Simulation:
                                                            blame))
         driver.run_id = spec.run_id  # named in error messages
         t = sc.tasks
-        source, extra = task_source(sc, allocator, rng_for(spec.seed, STREAM_PREBOOK))
+        source, extra = task_source(sc, rng_for(spec.seed, STREAM_PREBOOK))
         self.source = source.of(env, book, demand, t,
                                 spec.n_static_tasks if t.source == "static" else t.count,
                                 lambda: rng_for(spec.seed, STREAM_TASKS),

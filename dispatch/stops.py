@@ -79,8 +79,9 @@ class Stop:
 class PlannedStop(NamedTuple):
     """A stop of a route an allocator hands out (:attr:`dispatch.problem.Allocation.routes`,
     checked by :func:`dispatch.answers.route_stops`): its kind, the request's id, where, the
-    passengers it changes, the latest time, and whether the request completes there (None: a
-    stop of the vehicle's plan, as the plan has it)."""
+    passengers it changes, the latest time, whether the request completes there (None: a
+    stop of the vehicle's plan, as the plan has it) and the earliest start of its service
+    (``-inf``: none; a booked pickup's requested departure)."""
 
     kind: str
     task_id: int
@@ -88,6 +89,7 @@ class PlannedStop(NamedTuple):
     passengers: int
     latest: float
     completes: bool | None
+    earliest: float = -math.inf
 
 
 # ----------------------------------------------------------------------------- the rule

@@ -175,7 +175,8 @@ def test_one_point_per_request_equals_a_brute_force(tmp_path, monkeypatch, seed)
             pts = _points(walks, t)
             soon = [min(float(planner.between([ag.loc], [p[0]])[0, 0]) for ag in agents)
                     for p in pts]
-            allowed = [q for q, p in enumerate(pts) if p[2] <= now + soon[q] + 1e-9]
+            allowed = [q for q, p in enumerate(pts)
+                       if p[2] <= max(now, t.released_at) + soon[q] + 1e-9]
             best = min((each[:, c, q].min() for q in allowed), default=math.inf)
             if not math.isfinite(best):
                 assert c not in chosen and not np.isfinite(got[:, c]).any()

@@ -245,14 +245,29 @@ def test_prebooking_needs_a_road_network_and_no_reassign(tmp_path):
         load_scenario(path)
 
 
-def test_an_allocator_of_its_own_routes_is_refused(tmp_path):
-    """``rtv`` routes its groups itself and reads no booked pickup's earliest time: a clear
-    error, not a booked rider picked up early."""
-    _trace(tmp_path, 4)
-    path = _scenario(tmp_path, allocator="rtv", capacity=2)
-    [spec] = load_scenario(path).runs()
-    with pytest.raises(ScenarioError, match="dispatch.allocator: 'rtv' builds its own routes"):
-        run_one(spec)
+@pytest.mark.parametrize("mode,faults,capacity,reorder", [
+    ("at_booking", "", 2, False), ("lead", "", 3, True), ("at_booking", "transfer", 3, False),
+    ("lead", "fail", 2, True)])
+def test_rtv_keeps_every_promise(tmp_path, mode, faults, capacity, reorder):
+    """``rtv`` routes its groups itself, each booked pickup waiting for its requested
+    departure: no booked rider picked up early, every promise kept or its fault named, and
+    its groups pool booked and immediate requests."""
+    _trace(tmp_path, 4 + capacity + len(faults), n=40, share=0.6)
+    f = "" if not faults else \
+        f'\n\n[faults]\nrate = 3.0\nrepair = 200.0\non_board = "{faults}"'
+    if reorder:
+        f += '\n\n[dispatch.allocator_params.rtv]\nreorder = true'
+    summary, tables = _run(_scenario(tmp_path, allocator="rtv", mode=mode, faults=f,
+                                     capacity=capacity, agents=2))
+    check_promises(summary, tables)
+    assert summary["promises"] > 0
+    tasks = tables["tasks"]
+    if not faults:
+        assert summary["promises_broken"] == 0
+        assert (tasks[tasks.promised].state == "completed").all()
+    done = tasks[tasks.state == "completed"]
+    both = done.groupby("agent_id").booked_at.agg(lambda b: b.notna().any() and b.isna().any())
+    assert both.any()
 
 
 def test_lead_mode_enters_a_booking_its_lead_before_departure(tmp_path):
@@ -267,3 +282,16 @@ def test_lead_mode_enters_a_booking_its_lead_before_departure(tmp_path):
     assert t.picked_up_at == pytest.approx(1000.0)
     ev = tables["events"]
     assert ev[ev.event == "release"].t.iloc[0] == pytest.approx(880.0)
+
+
+@pytest.mark.parametrize("allocator,capacity", [("hungarian", 1), ("hungarian", 3), ("rtv", 3)])
+def test_walking_riders_booked_ahead_board_no_sooner(tmp_path, allocator, capacity):
+    """Meeting points and bookings together: a booked rider boarding at the origin itself (no
+    walk) still boards no sooner than the requested departure, as at any other point."""
+    _trace(tmp_path, 3, n=40, share=0.6)
+    tasks = 'source = "trace"\ntrace = "trips.csv"\nmax_wait = 240.0\nmax_walk = 150.0'
+    summary, tables = _run(_scenario(tmp_path, allocator=allocator, capacity=capacity,
+                                     tasks=tasks, agents=2))
+    check_promises(summary, tables)
+    t = tables["tasks"]
+    assert t[t.booked_at.notna()].picked_up_at.notna().sum() > 0

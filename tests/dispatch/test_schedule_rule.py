@@ -224,12 +224,13 @@ def test_the_plan_change_keeps_the_rule():
 
 
 def _rtv_case(rng, nplan_max=4):
-    """One vehicle with a plan of every kind and a group of 1-2 new requests, as rtv's kernel
-    takes them, and the same as reference rows."""
+    """One vehicle with a plan of every kind and a group of 1-2 new requests (some pickups
+    with an earliest time, as a booked request's), as rtv's kernel takes them, and the same as
+    reference rows."""
     c = _plan_case(rng)
     c["stops"] = c["stops"][:nplan_max]
     c["arr"] = c["arr"][:nplan_max]
-    c["reqs"] = [r[:7] + (-math.inf,) for r in c["reqs"][:int(rng.integers(1, 3))]]
+    c["reqs"] = c["reqs"][:int(rng.integers(1, 3))]
     return c
 
 
@@ -259,7 +260,8 @@ def _rtv_arrays(c):
     reqs_args = dict(
         vn=vn, pn=pn, np_=np_, nn=nn, r_pax=f([r[2] for r in reqs], np.int64),
         r_lp=f([r[3] for r in reqs]), r_ld=f([r[4] for r in reqs]), r_rel=np.zeros(m),
-        r_direct=np.zeros(m), r_hasdrop=np.ones(m, bool), old_end=f([end_old]))
+        r_direct=np.zeros(m), r_hasdrop=np.ones(m, bool), r_e=f([r[7] for r in reqs]),
+        until=f([c.get("until", math.inf)]), old_end=f([end_old]))
     return args, reqs_args, pp, ppa
 
 
@@ -267,7 +269,9 @@ def _rtv_reference(c, keep_plan_order: bool):
     """The least added time over every order of the plan's stops and the group's (each
     pickup before its drop-off; with ``keep_plan_order`` the plan's order kept), simulated by
     the reference: the plan's first stop, reached first, at its planned time (the drive the
-    vehicle is on); any other first stop by the drive from where the vehicle is."""
+    vehicle is on); any other first stop by the drive from where the vehicle is; a new pickup
+    waits for its earliest time; an order leaving its last stop after ``c["until"]`` (where
+    given) is out."""
     tt, rows, reqs, ready = c["tt"], c["stops"], c["reqs"], c["ready"]
     svc = reqs[0][6]
     items = [("plan", u) for u in range(len(rows))] + \
@@ -292,7 +296,7 @@ def _rtv_reference(c, keep_plan_order: bool):
                 plan.append(rows[u])
             else:
                 p, d, n, lp, ld = reqs[u][:5]
-                plan.append((p, n, lp, 0.0, -math.inf) if kind == "p" else
+                plan.append((p, n, lp, 0.0, reqs[u][7]) if kind == "p" else
                             (d, -n, ld, svc, -math.inf))
         head = order[0] == ("plan", 0)
 
@@ -300,23 +304,27 @@ def _rtv_reference(c, keep_plan_order: bool):
             return c["arr"][0] - ready if head else tt(0, loc)
 
         got = simulate(ready, first_tt, tt, plan, c["load"], c["cap"])
-        if got is not None:
+        if got is not None and got[1] <= c.get("until", math.inf) + S.TOL:
             best = min(best, got[1] - end_old)
     return best
 
 
-@pytest.mark.parametrize("reorder", [False, True])
-def test_rtv_orders_with_every_stop_kind_equal_the_reference(reorder):
+@pytest.mark.parametrize("reorder,until", [(False, False), (True, False), (False, True),
+                                           (True, True)])
+def test_rtv_orders_with_every_stop_kind_equal_the_reference(reorder, until):
     from allocators._rtv_kernel import best_orders, best_orders_any
 
-    rng = np.random.default_rng(280 + reorder)
-    feasible = cases = 0
+    rng = np.random.default_rng(280 + reorder + 2 * until)
+    feasible = cases = waits = ended = 0
     while cases < 200:
         c = _rtv_case(rng, 3 if reorder else 4)  # (every order of up to 7 stops)
+        waits += any(r[7] > -math.inf for r in c["reqs"])
+        if until:  # a shift's end: the route leaves its last stop by it
+            c["until"] = c["ready"] + float(rng.uniform(200.0, 2000.0))
         # (rtv's plans: a stop's limit is at least its planned time; drop-offs serve)
         c["stops"] = [(r[0], r[1], max(r[2], a), r[3], r[4]) for r, a in zip(c["stops"], c["arr"])]
         svc = float(rng.choice([0.0, 15.0]))
-        c["reqs"] = [r[:6] + (svc, -math.inf) for r in c["reqs"]]
+        c["reqs"] = [r[:6] + (svc, r[7]) for r in c["reqs"]]
         cases += 1
         args, rargs, pp, ppa = _rtv_arrays(c)
         k, m = len(c["stops"]), len(c["reqs"])
@@ -325,7 +333,7 @@ def test_rtv_orders_with_every_stop_kind_equal_the_reference(reorder):
         common = [args[x] for x in ("groups", "gveh", "start", "first_eta", "load", "cap", "off",
                                     "p_pax", "p_limit", "p_svc", "p_eta", "p_drop", "p_e")]
         tail = [rargs[x] for x in ("vn", "pn", "np_", "nn", "r_pax", "r_lp", "r_ld", "r_rel",
-                                   "r_direct", "r_hasdrop", "old_end")]
+                                   "r_direct", "r_hasdrop", "r_e", "until", "old_end")]
         if reorder:
             vp = np.array([c["tt"](0, r[0]) for r in c["stops"]]).reshape(k)
             best_orders_any(*common, np.full(k, -1, np.int64), vp, np.zeros(1, np.int64), ppa,
@@ -335,7 +343,12 @@ def test_rtv_orders_with_every_stop_kind_equal_the_reference(reorder):
         want = _rtv_reference(c, keep_plan_order=not reorder)
         if math.isinf(want):
             assert math.isinf(out[0][0]), (want, out)
+            if until:  # (the shift's end alone ruled every order out)
+                ended += math.isfinite(_rtv_reference({**c, "until": math.inf},
+                                                      keep_plan_order=not reorder))
             continue
         feasible += 1
         assert out[0][0] == pytest.approx(want, abs=1e-6)
-    assert 50 < feasible < cases  # both outcomes exercised
+    # both outcomes exercised, new pickups that wait, routes only the shift's end rules out
+    assert (20 if until else 50) < feasible < cases and waits > 20
+    assert ended > 3 or not until

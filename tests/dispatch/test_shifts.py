@@ -13,7 +13,6 @@ import pandas as pd
 import pytest
 
 from dispatch.errors import ScenarioError
-from dispatch.plugins import check_runs
 from dispatch.runner import run_one
 from dispatch.scenario import load_scenario
 from tests.dispatch.test_trips import road_scenario, write_csv
@@ -72,6 +71,24 @@ def test_no_pickup_outside_the_shift_and_home_by_its_end(tmp_path, allocator, ca
                                                          max_delay):
     summary, tables = _run(tmp_path, allocator=allocator, capacity=capacity, grace=grace,
                            max_delay=max_delay)
+    check_shifts(summary, tables, grace)
+
+
+@pytest.mark.parametrize("capacity,grace,max_delay,reorder", [
+    (3, 0.0, 300.0, False), (2, 45.0, None, False), (3, 0.0, None, True),
+    (4, 30.0, 400.0, True)])
+def test_rtv_keeps_every_shift_limit(tmp_path, capacity, grace, max_delay, reorder):
+    """``rtv`` routes its groups itself, each route ending by the vehicle's shift end plus the
+    grace (``problem.until``): the same checks as the single-request allocators'."""
+    extra = "\n[dispatch.allocator_params.rtv]\nreorder = true" if reorder else ""
+    summary, tables = _run(tmp_path, allocator="rtv", capacity=capacity, grace=grace,
+                           max_delay=max_delay, extra=extra)
+    check_shifts(summary, tables, grace)
+
+
+def check_shifts(summary: dict, tables: dict, grace: float) -> None:
+    """No request assigned outside a vehicle's shift, every pickup and completion within it
+    and the grace, each vehicle left once at its depot (an overrun counted), its hours."""
     ev, veh = tables["events"], tables["vehicles"].set_index("agent_id")
     tasks = tables["tasks"]
     assert summary["tasks_completed"] > 10
@@ -216,16 +233,6 @@ def test_date_time_shifts(tmp_path):
                          'start = "2014-12-21T00:00"', fleet='start = "fleet.csv"')
     sc = load_scenario(path)
     assert sc.fleet.shifts.start == (300.0, 0.0) and sc.fleet.shifts.end == (900.0, math.inf)
-
-
-def test_multi_request_allocator_refused_with_shift_ends(tmp_path):
-    _trace(tmp_path, 0)
-    write_csv(tmp_path / "fleet.csv", ["vehicle_id", "node", "shift_end"], [(0, 0, 300)])
-    path = road_scenario(tmp_path, tasks='source = "trace"\ntrace = "trips.csv"',
-                         fleet='start = "fleet.csv"\ncapacity = 2', allocator="rtv")
-    sc = load_scenario(path)
-    with pytest.raises(ScenarioError, match="fleet.csv: shift_end: allocator 'rtv'"):
-        check_runs(sc, ["dijkstra"], (), ["rtv"])
 
 
 def test_unknown_sizer(tmp_path):
