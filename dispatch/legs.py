@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from bisect import bisect_right
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -53,12 +54,14 @@ class Leg:
     metres: np.ndarray  # float64
     prev: int = -1
 
-    @property
+    # cached: the operator reads them several times per leg (a leg's arrays are not written
+    # after it is made)
+    @cached_property
     def seconds(self) -> float:
         """Seconds from the start point to the last node."""
         return float(self.times[-1])
 
-    @property
+    @cached_property
     def length(self) -> float:
         """Metres from the start point to the last node."""
         return float(self.metres[-1])

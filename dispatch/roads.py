@@ -284,7 +284,11 @@ class RoadNetwork(Space):
                 p = _as_point(start)
                 node, rem, rem_m = p.node, max(p.remaining, 0.0), max(p.remaining_m, 0.0)
                 prev = p.prev if not p.on_node else -1
-            arr = np.asarray(nodes, dtype=np.int64).reshape(-1)
+            # (a planner's list: np.array converts it faster than asarray + reshape)
+            arr = np.array(nodes, dtype=np.int64) if type(nodes) is list else \
+                np.asarray(nodes, dtype=np.int64)
+            if arr.ndim != 1:
+                arr = arr.reshape(-1)
             if arr.size and int(arr[0]) == node:
                 times, metres, ok = sums(*self._leg_csr, arr, rem, rem_m)
                 if ok:  # Leg(arr, times, metres, prev), without a frozen __init__
