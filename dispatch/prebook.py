@@ -107,24 +107,10 @@ class PrebookSource(TaskSource):
         """Release ``req`` now; ``booking``: ``(booked_at, departure)`` of a booked one."""
         if booking is None:
             return super().release(req)
-        env = self.env
-        wait = req.max_wait if not math.isnan(req.max_wait) else (
-            self.cfg.max_wait if self.cfg.max_wait is not None else math.nan)
-        delay = req.max_delay if not math.isnan(req.max_delay) else (
-            self.cfg.max_delay if self.cfg.max_delay is not None else math.nan)
-        task = self.book.release(req.kind, req.loc, req.dropoff, max_wait=wait,
-                                 snap_m=req.snap_m, dropoff_snap_m=req.dropoff_snap_m,
-                                 passengers=req.passengers, max_delay=delay)
+        task = self._made(req)
         task.booked_at, task.released_at = float(booking[0]), float(booking[1])
-        if not self.demand.valid(req.loc) or (req.dropoff is not None
-                                              and not self.demand.valid(req.dropoff)):
-            self.book.close(task, TaskState.UNREACHABLE)
-            return task
-        limit = self._limit(task)  # counted from the requested departure
-        if limit < math.inf:
-            env.process(self._expire(task, task.released_at + limit - env.now))
-        self.notify()
-        return task
+        # its limits count from the requested departure
+        return self._opened(task, task.released_at + self._limit(task) - self.env.now)
 
     def _expire(self, task, after: float):
         yield self.env.timeout(after)

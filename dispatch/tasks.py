@@ -362,6 +362,13 @@ class TaskSource:
         self.on_done()
 
     def release(self, req: Request) -> Task:
+        """Release ``req`` now: a task of the book, open (or closed unreachable), its expiry
+        timer started and the dispatcher told."""
+        task = self._made(req)
+        return self._opened(task, self._limit(task))
+
+    def _made(self, req: Request) -> Task:
+        """The book's task of ``req`` with the scenario's limits where the request has none."""
         wait = req.max_wait if not math.isnan(req.max_wait) else (
             self.cfg.max_wait if self.cfg.max_wait is not None else math.nan)
         delay = req.max_delay if not math.isnan(req.max_delay) else (
@@ -374,14 +381,18 @@ class TaskSource:
             task.max_walk = walk
             task.walk_speed = (req.walk_speed if req.walk_speed == req.walk_speed
                                else self.cfg.walk_speed)
-        if not self.demand.valid(req.loc) or (req.dropoff is not None
-                                              and not self.demand.valid(req.dropoff)):
+        return task
+
+    def _opened(self, task: Task, expire_after: float) -> Task:
+        """``task`` open for dispatch (closed unreachable where it lies in an obstacle), its
+        expiry ``expire_after`` seconds from now (``inf``: never)."""
+        if not self.demand.valid(task.loc) or (task.dropoff is not None
+                                               and not self.demand.valid(task.dropoff)):
             log.warning("task %d lies in an obstacle; closed as unreachable", task.id)
             self.book.close(task, TaskState.UNREACHABLE)
             return task
-        limit = self._limit(task)
-        if limit < math.inf:
-            self.env.process(self._expire(task, limit))
+        if expire_after < math.inf:
+            self.env.process(self._expire(task, expire_after))
         self.notify()
         return task
 

@@ -322,6 +322,7 @@ def test_a_booked_rider_who_walks_boards_after_departure_and_walk(tmp_path):
     t = tables["tasks"]
     booked = t[t.booked_at.notna() & t.picked_up_at.notna()]
     assert len(booked) >= 5 and summary["promises"] >= 5
+    assert (booked.walk_to_board_m + booked.walk_from_alight_m > 0).any()  # booked ones walk too
     walk_s = booked.walk_to_board_m / SPEED
     assert (booked.picked_up_at >= booked.released_at + walk_s - EPS).all()
 
