@@ -47,6 +47,11 @@ class Insertions:
     shift1: np.ndarray
     shift2: np.ndarray
 
+    def take(self, q: np.ndarray) -> Insertions:
+        """The insertions of the pairs ``q`` (indices), aligned with it."""
+        return Insertions(self.cost[q], self.i[q], self.j[q], self.pickup_at[q],
+                          self.dropoff_at[q], self.shift1[q], self.shift2[q])
+
     def of(self, q: int) -> Insertion:
         """Pair ``q``'s insertion."""
         return Insertion(int(self.i[q]), int(self.j[q]), float(self.pickup_at[q]),

@@ -41,7 +41,7 @@ With ``max_walk`` = 0 everywhere nothing here runs (the decision has no candidat
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
@@ -171,8 +171,7 @@ class MeetingInserts:
         rows = np.fromiter((k[0] for k in self._q), np.int64, len(self._q))
         cols = np.fromiter((k[1] for k in self._q), np.int64, len(self._q))
         q = np.fromiter(self._q.values(), np.int64, len(self._q))
-        ins = self._ins
-        return rows, cols, replace(ins, **{f.name: getattr(ins, f.name)[q] for f in fields(ins)})
+        return rows, cols, self._ins.take(q)
 
 
 def _pairs(walks: Walks, tasks: list, svc: float, planner: Planner):

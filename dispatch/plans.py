@@ -16,7 +16,6 @@ The dispatcher (:mod:`dispatch.dispatcher`) decides; this is the plan machinery 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import fields, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -60,8 +59,7 @@ class Inserts:
         """``(rows, cols, insertions)``: every feasible pair kept and its insertion's arrays
         (:class:`dispatch.insertion.Insertions`, aligned with the pairs)."""
         ins, q = self._ins, self._q
-        cut = {f.name: getattr(ins, f.name)[q] for f in fields(ins)}
-        return self._rows, self._cols, replace(ins, **cut)
+        return self._rows, self._cols, ins.take(q)
 
     def _find(self, key) -> int:
         if self._keys is None:
