@@ -327,6 +327,19 @@ def render_one(s: dict, console=None, *, dynamic: bool = False) -> None:
                                   f"vehicle-km), {_f(s['shared_rate'], 1, 100)} % of rides "
                                   f"shared, delay {_f(s['delay_mean'])} s mean, detour ratio "
                                   f"{_f(s['detour_ratio'], 2)}")
+    if s.get("meeting_points", 0):  # meeting points (dispatch.meeting)
+        t.add_row("walking", f"{_f(s['walk_mean'], 0)} m walked per ride (to board plus from "
+                             f"alighting); {s['meeting_points']} candidate points, "
+                             f"{s['meeting_cut']} left out by tasks.meeting_points")
+    if s.get("promises", 0):  # prebooking (dispatch.prebook)
+        t.add_row("promises", f"{s['promises']} booked rides promised, "
+                              f"{s['promises_broken']} broken")
+    hours = s.get("vehicle_hours", math.nan)
+    if hours < s["n_agents"] * s["sim_time"] / 3600 - 1e-9 or s.get("shift_overruns", 0):
+        # shifts or sizing took vehicles off duty (dispatch.shifts)
+        t.add_row("shifts", f"{_f(hours, 1)} vehicle-hours on duty, "
+                            f"{_f(s['riders_per_vehicle_hour'], 2)} riders per vehicle-hour, "
+                            f"{s.get('shift_overruns', 0)} home late")
     if road and s.get("reposition", "stay") != "stay":
         t.add_row("repositioning", f"{s['reposition']}: {s.get('repositions', 0)} drives, "
                                    f"{_f(s.get('reposition_distance', 0.0) / 1000, 1)} km")

@@ -277,3 +277,23 @@ def test_electric_runs_get_an_energy_table_that_fits_80_columns():
     # 2 h queued, 12.3 % lowest, 45.6 % at the end, 1 stranded
     assert line.split()[2:] == ["3.38", "1.12", "35", "2.0", "12.3", "45.6", "1"], line
     assert "Energy" not in _render([_summary("fcfs", 8, s, "road") for s in (0, 1)])
+
+
+def test_one_run_says_walks_promises_and_shifts_only_where_used():
+    """The demand-responsive features each get a line of one run's summary where the run
+    used them: metres walked (meeting points), promises kept and broken (prebooking),
+    vehicle-hours on duty (shifts: fewer than the whole fleet all run)."""
+    base = _summary("hungarian", 1200, 0, "road")
+    full = base["n_agents"] * base["sim_time"] / 3600
+    plain = " ".join(_render([{**base, "vehicle_hours": full, "meeting_points": 0,
+                               "promises": 0}]).split())
+    assert "walking" not in plain and "promises" not in plain and "shifts" not in plain
+    s = {**base, "walk_mean": 215.4, "meeting_points": 5510, "meeting_cut": 6176,
+         "promises": 207, "promises_broken": 1, "vehicle_hours": full / 2,
+         "riders_per_vehicle_hour": 2.5, "shift_overruns": 3}
+    text = " ".join(_render([s]).split())
+    assert ("walking 215 m walked per ride (to board plus from alighting); 5510 candidate "
+            "points, 6176 left out by tasks.meeting_points") in text
+    assert "promises 207 booked rides promised, 1 broken" in text
+    assert f"shifts {full / 2:.1f} vehicle-hours on duty, 2.50 riders per vehicle-hour, " \
+           "3 home late" in text
