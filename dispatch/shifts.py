@@ -52,7 +52,7 @@ import numpy as np
 from dispatch.errors import ScenarioError
 from dispatch.stops import REPOSITION, TOL, leave
 from dispatch.table_files import CELLS, Table
-from dispatch.traces import parse_datetime
+from dispatch.traces import parse_datetime, seconds_between
 
 if TYPE_CHECKING:
     from dispatch.sizing import Sizer
@@ -99,11 +99,7 @@ def _seconds(path: Path, row: int, name: str, v, start: datetime | None) -> floa
     except (TypeError, ValueError):
         raise ScenarioError(path, f"row {row}", f"{name} {v!r} is not a number of seconds or "
                             "a date-time (ISO 8601, e.g. 2014-12-21 08:30:00)") from None
-    s0 = start
-    if (d.tzinfo is None) != (s0.tzinfo is None):
-        d, s0 = (d.replace(tzinfo=s0.tzinfo), s0) if d.tzinfo is None else \
-            (d, s0.replace(tzinfo=d.tzinfo))
-    return (d - s0).total_seconds()
+    return seconds_between(d, start)
 
 
 def read_shifts(path: Path, rows: int, start: datetime | None,

@@ -121,6 +121,17 @@ def parse_datetime(v) -> datetime:
     raise ValueError(f"not a date-time: {v!r}")
 
 
+def seconds_between(d: datetime, start: datetime) -> float:
+    """Seconds from ``start`` to ``d``; where one is naive and the other aware, the naive one
+    is read in the other's time zone."""
+    if (d.tzinfo is None) != (start.tzinfo is None):
+        if d.tzinfo is None:
+            d = d.replace(tzinfo=start.tzinfo)
+        else:
+            start = start.replace(tzinfo=d.tzinfo)
+    return (d - start).total_seconds()
+
+
 def _seconds_since(path: Path, values: list, start: datetime) -> np.ndarray:
     """Seconds from ``start`` of each date-time of the ``departure_time`` column (a naive one
     and an aware one: the naive one is read in the other's time zone); a bad cell names its
@@ -136,13 +147,7 @@ def _seconds_since(path: Path, values: list, start: datetime) -> np.ndarray:
             except (TypeError, ValueError):
                 raise ScenarioError(path, f"row {i + 1}", f"{DATETIME_COLUMN} {v!r} is not a "
                                     "date-time (ISO 8601, e.g. 2014-12-21 08:30:00)") from None
-            s0 = start
-            if (d.tzinfo is None) != (s0.tzinfo is None):
-                if d.tzinfo is None:
-                    d = d.replace(tzinfo=s0.tzinfo)
-                else:
-                    s0 = s0.replace(tzinfo=d.tzinfo)
-            got = (d - s0).total_seconds()
+            got = seconds_between(d, start)
             if key is not None:
                 seen[key] = got
         out[i] = got
