@@ -195,8 +195,7 @@ def _pairs(walks: Walks, tasks: list, svc: float, planner: Planner):
     lp = np.array([t.deadline for t in tasks])[col]
     ld = np.array([t.dropoff_deadline for t in tasks])[col] - wa / spd
     # boarding no sooner than the rider gets there, nor than a booked ride's requested departure
-    booked = np.array([t.booked_at == t.booked_at for t in tasks])[col]
-    e = np.where((wb > 0) | booked, release + wb / spd, -np.inf)
+    e = np.where(wb > 0, release + wb / spd, np.array([t.earliest_pickup for t in tasks])[col])
     n = np.array([0 if t.dropoff is None else t.passengers for t in tasks], np.int64)[col]
     trips = np.flatnonzero(~point)
     pd = np.zeros(col.size)

@@ -103,8 +103,7 @@ class Operator(Breakdowns):
         if m is not None and not task.transfers:  # meeting points (dispatch.meeting)
             return [Stop(PICKUP, task, m.board, n, task.deadline, False, earliest=m.earliest),
                     Stop(DROPOFF, task, m.alight, -n, m.latest_drop, True, service=svc)]
-        # a booked request is picked up no sooner than its requested departure (prebook)
-        e = task.released_at if task.booked_at == task.booked_at else -math.inf
+        e = task.earliest_pickup  # (a booked request's requested departure: prebook)
         if task.dropoff is None:
             return [Stop(PICKUP, task, task.loc, 0, task.deadline, True, service=svc,
                          earliest=e)]

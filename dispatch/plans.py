@@ -206,7 +206,7 @@ def insertion_costs_of(cost: np.ndarray, slots: np.ndarray, tasks: list, now: fl
     ld = np.array([t.dropoff_deadline for t in tasks])
     n_req = np.array([0 if t.dropoff is None else t.passengers for t in tasks], np.int64)
     # a booked request's pickup opens at its requested departure (dispatch.prebook)
-    ep = np.array([t.released_at if t.booked_at == t.booked_at else -np.inf for t in tasks])
+    ep = np.array([t.earliest_pickup for t in tasks])
     point = np.array([t.dropoff is None for t in tasks])
     pd = np.array([0.0 if t.dropoff is None else t.direct_time for t in tasks])
     if getattr(planner, "inner", None) is not None and not point.all():

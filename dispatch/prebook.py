@@ -81,8 +81,8 @@ def earliest_views(requests: list, views: tuple) -> tuple:
     meeting point's, kept where later); ``views`` itself where none is booked."""
     if not any(t.booked_at == t.booked_at for t in requests):  # (nan: not booked)
         return views
-    return tuple(v if t.booked_at != t.booked_at or v.earliest >= t.released_at
-                 else replace(v, earliest=t.released_at) for t, v in zip(requests, views))
+    return tuple(v if v.earliest >= t.earliest_pickup else replace(v, earliest=t.earliest_pickup)
+                 for t, v in zip(requests, views))
 
 
 class PrebookSource(TaskSource):

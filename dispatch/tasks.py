@@ -129,6 +129,12 @@ class Task:
         return self.loc
 
     @property
+    def earliest_pickup(self) -> float:
+        """The pickup's earliest time at the door: a booked request's requested departure (its
+        ``released_at``, see dispatch.prebook), ``-inf`` for an immediate one."""
+        return self.released_at if self.booked_at == self.booked_at else -math.inf
+
+    @property
     def deadline(self) -> float:
         """Latest pickup time the request accepts (inf without a max_wait, and once its
         passenger has been picked up: a transfer is owed, whatever the time)."""
