@@ -38,6 +38,7 @@ from dispatch.comms import comm_graph, components, diameter
 from dispatch.problem import AllocationProblem, TaskView
 from dispatch.scenario import load_scenario
 from dispatch.world import world_for
+from dispatch.placement import place_fleet
 from dispatch.streams import STREAM_ALLOCATOR, STREAM_FLEET, STREAM_TASKS, rng_for
 from dispatch.demand import VoxelDemand
 
@@ -63,7 +64,7 @@ def instance(scenario, n: int, seed: int, planner_cls):
     """Agents, tasks, cost matrix and agent positions (metres) of the first decision."""
     spec = scenario.runs(allocator="hungarian", agents=n, seed=seed)[0]
     world = world_for(scenario.world, seed)
-    fleet = world.place(spec, rng_for(seed, STREAM_FLEET))
+    fleet = place_fleet(world, spec, rng_for(seed, STREAM_FLEET))
     demand = VoxelDemand(world.grid, scenario.tasks.ground_fraction, rng_for(seed, STREAM_TASKS))
     tasks = tuple(TaskView(i, (r := demand.draw()).kind, r.loc, 0.0)
                   for i in range(spec.n_static_tasks))

@@ -41,6 +41,7 @@ from scipy.sparse.csgraph import dijkstra  # noqa: E402
 from dispatch.problem import AgentView, TaskView  # noqa: E402
 from dispatch.scenario import load_scenario  # noqa: E402
 from dispatch.world import world_for  # noqa: E402
+from dispatch.placement import place_fleet
 from dispatch.streams import STREAM_FLEET, STREAM_TASKS, rng_for  # noqa: E402
 from dispatch.demand import VoxelDemand  # noqa: E402
 
@@ -56,7 +57,7 @@ def instance(scenario, n: int, seed: int):
     """The paper's world, fleet of ``n`` and ``n`` ground tasks on distinct cells."""
     spec = scenario.runs(allocator="hungarian", agents=n, seed=seed)[0]
     world = world_for(scenario.world, seed)
-    agents = tuple(v.view() for v in world.place(spec, rng_for(seed, STREAM_FLEET)))
+    agents = tuple(v.view() for v in place_fleet(world, spec, rng_for(seed, STREAM_FLEET)))
     demand = VoxelDemand(world.grid, scenario.tasks.ground_fraction, rng_for(seed, STREAM_TASKS))
     cells: dict = {}
     while len(cells) < n:

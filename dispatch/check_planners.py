@@ -13,11 +13,14 @@ equal to it, and ``exact`` equal to the costs, all to 1e-9 relative, each on a f
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from dispatch import registry
+from dispatch.legs import RoadPoint
+from dispatch.problem import AgentView, TaskView
 from dispatch.check_common import Report, declared, describe_error, perturb_global_rng, replay
 from dispatch.space import KINDS, space_class
 
@@ -59,7 +62,7 @@ def _check_planner_on(report: Report, cls, caps: registry.Capabilities, space, s
     bounded = caps.lower_bounds
     replayed = 0  # query sets whose costs were valid (the deterministic and rng checks')
     for k, (n, m) in enumerate(shapes):
-        agents, tasks = space.sample_views(np.random.default_rng(seed * 100 + k), n, m)
+        agents, tasks = SAMPLERS[space.kind](space, np.random.default_rng(seed * 100 + k), n, m)
         label = f"{n} agents x {m} tasks"
         try:
             perturb_global_rng(1)
@@ -139,3 +142,39 @@ def _bound_faults(lower, known, ex, c, finite, slack, label: str) -> list[str]:
             (np.abs(ex - c.ravel())[finite.ravel()] > slack.ravel()[finite.ravel()]).any():
         bad.append(f"{label}: exact() differs from costs()")
     return bad
+
+
+Views = tuple[tuple[AgentView, ...], tuple[TaskView, ...]]
+
+
+def voxel_views(world, rng: np.random.Generator, n: int, m: int) -> Views:
+    """``n`` agents and ``m`` tasks in a voxel world: UAVs (odd positions) in free cells up to
+    2 cells high, UGVs on the ground; tasks in any free cell (``ground`` on layer 0, else
+    ``air``)."""
+    free = world.grid.free_cells()
+    ground = free[free[:, 2] == 0]
+
+    def pick(pool, k):
+        return [tuple(int(v) for v in pool[i]) for i in rng.integers(0, len(pool), k)]
+
+    a_cells = pick(free[free[:, 2] <= 2], n)
+    kinds = ["uav" if i % 2 else "ugv" for i in range(n)]
+    a_cells = [c if k == "uav" else pick(ground, 1)[0] for c, k in zip(a_cells, kinds)]
+    t_cells = pick(free, m)
+    agents = tuple(AgentView(100 + i, kinds[i], a_cells[i],
+                             5.0 if kinds[i] == "uav" else 3.0) for i in range(n))
+    tasks = tuple(TaskView(500 + j, "ground" if c[2] == 0 else "air", c, 0.0)
+                  for j, c in enumerate(t_cells))
+    return agents, tasks
+
+
+def road_views(net, rng: np.random.Generator, n: int, m: int) -> Views:
+    """``n`` cars on random nodes (as road points) and ``m`` trips to random nodes."""
+    nodes = rng.integers(0, net.n, n + m)
+    agents = tuple(AgentView(100 + i, "car", RoadPoint(int(nodes[i])), 10.0) for i in range(n))
+    tasks = tuple(TaskView(500 + j, "trip", int(nodes[n + j]), 0.0) for j in range(m))
+    return agents, tasks
+
+
+#: random agent and task views of each space kind, for the checks: ``(space, rng, n, m)``
+SAMPLERS: dict[str, Callable[..., Views]] = {"voxel": voxel_views, "road": road_views}

@@ -289,9 +289,10 @@ def build_plugins(sc, specs, *, force: bool = False) -> None:
 
                 check_planner_budget(sc, specs, planner, name)
         if sc.fleet.start:  # a start file's rows: known nodes, inside the world, one per cell
+            from dispatch.placement import place_fleet
             from dispatch.streams import STREAM_FLEET, rng_for
 
-            space.place(specs[0], rng_for(specs[0].seed, STREAM_FLEET))
+            place_fleet(space, specs[0], rng_for(specs[0].seed, STREAM_FLEET))
 
 
 def _run(args, console) -> int:

@@ -7,17 +7,21 @@
   nodes with destination != origin; a trace gives node ids, metres or latitude / longitude,
   positions snapped to the nearest node (the snapping distance is kept per trip).
 
-Every draw comes from the generator the demand is given.
+Every draw comes from the generator the demand is given. :func:`demand_for` builds a run's
+demand from its space: each space kind of :data:`dispatch.space.KINDS` has its builder in
+:data:`BUILDERS` (the space itself answers only where things are).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 import numpy as np
 
+from dispatch.config import TaskConfig
 from dispatch.errors import ScenarioError
+from dispatch.space import Space
 from dispatch.tasks import Demand, Request
 from dispatch.traces import Trips
 from dispatch.voxels import Grid
@@ -69,6 +73,19 @@ class RoadDemand(Demand):
         origin, snap_o = _nodes(net, trips, trips.origin)
         dest, snap_d = (None, None) if trips.dest is None else _nodes(net, trips, trips.dest)
         return _road_requests(trips, origin, snap_o, dest, snap_d)
+
+
+#: the demand of each space kind: ``(space, [tasks] configuration, generator) -> Demand``
+BUILDERS: dict[str, Callable[[Space, TaskConfig, np.random.Generator], Demand]] = {
+    "voxel": lambda world, tasks, rng: VoxelDemand(world.grid, tasks.ground_fraction, rng),
+    "road": lambda net, tasks, rng: RoadDemand(net, rng),
+}
+
+
+def demand_for(space: Space, tasks: TaskConfig, rng: np.random.Generator) -> Demand:
+    """The run's demand in ``space``: generated requests and a trace's trips as requests there
+    (:class:`VoxelDemand`, :class:`RoadDemand`); every draw from ``rng``."""
+    return BUILDERS[space.kind](space, tasks, rng)
 
 
 def _road_requests(trips: Trips, origin: np.ndarray, snap_o: np.ndarray,

@@ -2,9 +2,8 @@
 
 The simulation's truth is the grid and SimPy time; PyBullet mirrors it so that collisions can
 be checked, rays cast (sampling planners) and images rendered. The client runs in DIRECT mode
-(headless) unless ``gui=True``. The voxel world builds its mirror
-(:meth:`dispatch.world.World.mirror`), which reads the world's ``boxes`` and ``cell`` and so
-imports nothing of it.
+(headless) unless ``gui=True``. A run in a voxel world builds its mirror with
+:func:`mirror_of`, which reads the world's ``boxes`` and ``cell`` and so imports nothing of it.
 """
 
 from __future__ import annotations
@@ -132,6 +131,14 @@ class Physics:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def mirror_of(world, bus, vehicles) -> Physics:
+    """The PyBullet mirror of a run in a voxel ``world`` (``[world] physics``; a road network
+    has none, which the scenario checks refuse): a :class:`Physics` that follows ``bus``."""
+    physics = Physics(world)
+    mirror(physics, bus, world, vehicles)
+    return physics
 
 
 def mirror(physics: Physics, bus, space, vehicles) -> None:

@@ -1,7 +1,7 @@
 """Where the fleet starts: at random (seeded), or where a start file puts it.
 
-Each space places its fleet (:meth:`dispatch.space.Space.place_vehicles`) with a function of
-this module. Voxel world (:func:`place_voxel`): UAVs (the first ``n_uav`` vehicles) in free
+:func:`place_fleet` places a run's fleet in its space with the function of the space's kind
+(:data:`PLACERS`; the space itself answers only where things are). Voxel world (:func:`place_voxel`): UAVs (the first ``n_uav`` vehicles) in free
 cells at or below the start altitude, UGVs in free ground cells, no two in one cell. Road
 network (:func:`place_cars`): cars on nodes drawn uniformly
 (several may share one, as taxis share a rank), or with ``[fleet] placement = "demand"`` on the
@@ -13,6 +13,7 @@ on roads).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -23,9 +24,16 @@ from dispatch.vehicles import Vehicle
 
 
 def place_fleet(space: Space, spec: RunSpec, rng: np.random.Generator) -> list[Vehicle]:
-    """The run's vehicles at their start locations, with their seats: the space's answer
-    (:meth:`dispatch.space.Space.place`)."""
-    return space.place(spec, rng)
+    """The run's vehicles at their start locations (:data:`PLACERS` of the space's kind; random
+    draws from ``rng``), with their seats (``[fleet] capacity``, or a start file's
+    ``capacity`` column)."""
+    vehicles = PLACERS[space.kind](space, spec, rng)
+    fleet = spec.fleet
+    if fleet.capacity != 1 or fleet.capacities:
+        seats = fleet.capacities
+        for k, v in enumerate(vehicles):  # start-file rows are in the vehicles' order
+            v.capacity = seats[k] if k < len(seats) and seats[k] else fleet.capacity
+    return vehicles
 
 
 def place_cars(net, spec: RunSpec, rng: np.random.Generator) -> list[Vehicle]:
@@ -57,8 +65,8 @@ def place_cars(net, spec: RunSpec, rng: np.random.Generator) -> list[Vehicle]:
 
 
 def place_voxel(world, spec: RunSpec, rng: np.random.Generator) -> list[Vehicle]:
-    """Each space places its fleet (:meth:`dispatch.space.Space.place_vehicles`) with a function of
-this module. Voxel world: UAVs and UGVs in distinct free cells (see the module docstring)."""
+    """:func:`place_fleet` places a run's fleet in its space with the function of the space's kind
+(:data:`PLACERS`; the space itself answers only where things are). Voxel world: UAVs and UGVs in distinct free cells (see the module docstring)."""
     fleet, grid = spec.fleet, world.grid
     rows = fleet.start[: fleet.agents]
     taken: set = set()
@@ -93,3 +101,8 @@ this module. Voxel world: UAVs and UGVs in distinct free cells (see the module d
         vehicles.append(Vehicle(i, "uav" if flies else "ugv",
                                 fleet.uav_speed if flies else fleet.ugv_speed, cell))
     return vehicles
+
+
+#: how each space kind places a fleet: ``(space, run, generator) -> vehicles``, seats aside
+PLACERS: dict[str, Callable[[Space, RunSpec, np.random.Generator], list[Vehicle]]] = {
+    "voxel": place_voxel, "road": place_cars}

@@ -54,6 +54,9 @@ NEEDS: dict[str, tuple[str, ...]] = {
     "travel_times": ("between",),
     "reservation_aware": ("plan_timed",),
 }
+#: The spaces a reservation-aware planner may serve: timed execution reserves their cells
+#: (:class:`dispatch.reservations.Traffic`)
+TIMED_SPACES = ("voxel",)
 
 
 @dataclass(frozen=True)
@@ -175,6 +178,10 @@ def capabilities(kind: str, plugin) -> Capabilities:
         caps = Capabilities(kind, p.name, passive=bool(p.passive))
     else:
         caps = Capabilities(kind, p.name)
+    if caps.reservation_aware and set(caps.spaces) - set(TIMED_SPACES):
+        raise PluginError(f"{kind} {caps.name or cls.__qualname__!r} declares reservation_aware"
+                          f" but serves {', '.join(caps.spaces)}: reservations are kept in the "
+                          f"cells of a space of {', '.join(TIMED_SPACES)}")
     mro = cls.__mro__
     own = mro[:mro.index(base)]  # the classes whose definitions win over the base class's
     for flag, methods in NEEDS.items():

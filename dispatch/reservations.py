@@ -264,6 +264,14 @@ class Traffic:
         for t in self.vehicles.values():
             self._reserve(t)
 
+    @classmethod
+    def in_space(cls, env: simpy.Environment, planner: Planner, space, vehicles,
+                 emit: Callable[..., None]) -> Traffic:
+        """The traffic of a run in ``space``, a voxel world: its grid holds the reservations
+        (a reservation-aware planner serves voxel worlds only; the registry refuses one that
+        declares another space, :func:`dispatch.registry.capabilities`)."""
+        return cls(env, planner, space.grid, vehicles, emit)
+
     def execution(self, op) -> TimedExecution:
         """The operator's execution on this traffic (``execution`` of
         :class:`dispatch.operator.Operator`, which calls it with itself)."""

@@ -475,30 +475,10 @@ class RoadNetwork(Space):
         return manhattan(6, 5, 100.0, 10.0)
 
     # ------------------------------------------------- the space contract: a run's
-    def demand(self, tasks, rng: np.random.Generator):
-        from dispatch.demand import RoadDemand
-
-        return RoadDemand(self, rng)
-
-    def place_vehicles(self, spec, rng: np.random.Generator):
-        from dispatch.placement import place_cars
-
-        return place_cars(self, spec, rng)
-
     def driver(self, planner, bus, cfg, clock):
         from dispatch.congestion import road_driver
 
         return road_driver(self, planner, bus, cfg, clock)
-
-    def sample_views(self, rng: np.random.Generator, n: int, m: int):
-        """Cars on random nodes (as road points), trips to random nodes."""
-        from dispatch.problem import AgentView, TaskView
-
-        nodes = rng.integers(0, self.n, n + m)
-        agents = tuple(AgentView(100 + i, "car", RoadPoint(int(nodes[i])), 10.0)
-                       for i in range(n))
-        tasks = tuple(TaskView(500 + j, "trip", int(nodes[n + j]), 0.0) for j in range(m))
-        return agents, tasks
 
     def reaches(self, path, start, goal) -> bool:
         try:

@@ -40,17 +40,21 @@ import simpy
 from dispatch.battery import Energy
 from dispatch.charging import Charging, Stations
 from dispatch.decision import Pipeline
+from dispatch.demand import demand_for
 from dispatch.dispatcher import Dispatcher, Wakeup
 from dispatch.energy_summary import EnergyTally, energy_columns
 from dispatch.events import EventBus
 from dispatch.faults import FaultInjector, blackout_filter
 from dispatch.meeting import Walks
 from dispatch.operator import Hooks, Operator, Towing
+from dispatch.physics import mirror_of
+from dispatch.placement import place_fleet
 from dispatch.plugins import (check_repositioner, describe, make_charger, make_plugin,
                               make_repositioner, make_sizer)
 from dispatch.offering import offering_for
 from dispatch.prebook import task_source
 from dispatch.recording import RunRecording
+from dispatch.reservations import Traffic
 from dispatch.reposition import Repositioning, summary_of
 from dispatch.shifts import Shifts, fleet_summary
 from dispatch.space import space_for
@@ -113,16 +117,16 @@ class Simulation:
         recorder.metadata["dispatch.allocator_info"] = self.allocator_info
         self.bus = bus = EventBus()
         self.book = book = TaskBook(env, bus)
-        self.fleet = Fleet(space.place(spec, rng_for(spec.seed, STREAM_FLEET)), space)
+        self.fleet = Fleet(place_fleet(space, spec, rng_for(spec.seed, STREAM_FLEET)), space)
         self.vehicles = self.fleet.vehicles
         #: the run's tables, metadata and summary statistics (dispatch.recording)
         self.recording = RunRecording(recorder, space)
         self.stats = self.recording.stats
-        demand = space.demand(sc.tasks, rng_for(spec.seed, STREAM_TASKS))
+        demand = demand_for(space, sc.tasks, rng_for(spec.seed, STREAM_TASKS))
         driver = space.driver(self.planner, bus, sc.world, lambda: self.env.now)
         self.planner = driver.planner  # (a space's driver may wrap it: congestion)
         recorder.metadata.update(driver.metadata)
-        self.physics = space.mirror(bus, self.vehicles) if sc.world.physics else None
+        self.physics = mirror_of(space, bus, self.vehicles) if sc.world.physics else None
         self.recording.attach(bus)
         self._record_event = self.recording.event
         self._record_task = self.recording.task
@@ -130,7 +134,7 @@ class Simulation:
         book.on_close += [lambda t: self.planner.task_closed(t.id), *self.recording.on_close,
                           self._check_finished]
         #: reservation-based execution, with a reservation-aware planner only
-        self.traffic = (space.traffic(env, self.planner, self.vehicles, bus.emit)
+        self.traffic = (Traffic.in_space(env, self.planner, space, self.vehicles, bus.emit)
                         if self.planner.reservation_aware else None)
         self.finished = env.event()
         # the dispatcher's wake-up call first: the operator, the task source, repositioning

@@ -9,21 +9,28 @@ answers every question about location (RidePy's ``TransportSpace`` is the model)
   offers (:attr:`Space.features`), how a fleet start file and a trace are read in it, the
   validate-time checks and size bounds, a small instance for plugin checks;
 * once built: positions in metres (for the recorded tables, the communication range and the
-  plots), the run's demand (generated draws and trace conversion), where the fleet starts,
-  the driver that follows the planner's paths, the static tables it adds to the results, and
-  random agent and task views for plugin checks.
+  plots), the driver that follows the planner's paths, where a location stands on the node
+  arrays and whether a path reaches a goal, and the static tables it adds to the results.
+
+What is built from a space is built by its own module, with one function per space kind in a
+table there: the run's demand (:func:`dispatch.demand.demand_for`), where the fleet starts
+(:func:`dispatch.placement.place_fleet`), random views for the plugin checks
+(:data:`dispatch.check_planners.SAMPLERS`); the PyBullet mirror
+(:func:`dispatch.physics.mirror_of`) and reservation-based execution
+(:meth:`dispatch.reservations.Traffic.in_space`) exist for voxel worlds only.
 
 Two spaces ship with the kernel, registered in :data:`KINDS`:
 
 * ``"voxel"``: :class:`dispatch.world.World`, the paper's 3D occupancy grid; a location is a
-  cell ``(i, j, k)`` (:data:`Cell`);
+  cell ``(i, j, k)`` (:data:`dispatch.locations.Cell`);
 * ``"road"``: :class:`dispatch.roads.RoadNetwork`, a directed graph with travel times; a
   location is a node index (``int``) or, for a vehicle, a :class:`dispatch.legs.RoadPoint`
   (on a node, or part-way along an edge).
 
 A third space is one module with a :class:`Space` subclass (the abstract methods below, and
-the class attributes it changes), a planner that serves its kind, an entry in :data:`KINDS`
-and its branch in the ``[world]`` parsing of :mod:`dispatch.scenario_sections`.
+the class attributes it changes), a planner that serves its kind, an entry in :data:`KINDS`,
+its entry in each builder table above (a test checks that every kind has one) and its branch
+in the ``[world]`` parsing of :mod:`dispatch.scenario_sections`.
 
 Planners declare the spaces they serve (:attr:`dispatch.contracts.Planner.spaces`); a planner
 asked to work in another space is a scenario error found at validate time.
@@ -31,11 +38,9 @@ asked to work in another space is a scenario error found at validate time.
 Where it stands: this contract is on the kernel's ground floor, under everything that holds a
 location or a space (tasks, vehicles, contracts, the configuration). So it imports none of
 them: the objects its hooks take and build (a ``[world]`` configuration,
-:class:`dispatch.config.RunSpec`, :class:`dispatch.tasks.Demand`,
-:class:`dispatch.vehicles.Vehicle`, :class:`dispatch.drivers.Driver`) are named in the
-docstrings. The two spaces stand above their parts (demand, placement, drivers), which know
-them only through the small types below both: :mod:`dispatch.locations`,
-:mod:`dispatch.voxels` and :mod:`dispatch.legs`.
+:class:`dispatch.drivers.Driver`) are named in the docstrings. The builders stand above it and
+the two spaces; the spaces' own parts (drivers) know them only through the small types below
+both: :mod:`dispatch.locations`, :mod:`dispatch.voxels` and :mod:`dispatch.legs`.
 """
 
 from __future__ import annotations
@@ -48,7 +53,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from dispatch.locations import Cell, Location, Position
+from dispatch.locations import Location, Position
 
 __all__ = ["KINDS", "Space", "space_class", "space_for"]
 
@@ -158,27 +163,6 @@ class Space(ABC):
         """A few ``dispatch.*`` metadata entries describing the space (stored with results)."""
 
     @abstractmethod
-    def demand(self, tasks, rng: np.random.Generator):
-        """The run's demand (:class:`dispatch.tasks.Demand`): generated requests and a trace's
-        trips as requests in this space; every draw from ``rng``."""
-
-    @abstractmethod
-    def place_vehicles(self, spec, rng: np.random.Generator) -> list:
-        """The run's vehicles (:class:`dispatch.vehicles.Vehicle`) at their start locations for
-        a :class:`dispatch.config.RunSpec` (random draws from ``rng``)."""
-
-    def place(self, spec, rng: np.random.Generator) -> list:
-        """The run's vehicles where :meth:`place_vehicles` puts them, with their seats
-        (``[fleet] capacity``, or a start file's ``capacity`` column)."""
-        vehicles = self.place_vehicles(spec, rng)
-        fleet = spec.fleet
-        if fleet.capacity != 1 or fleet.capacities:
-            seats = fleet.capacities
-            for k, v in enumerate(vehicles):  # start-file rows are in the vehicles' order
-                v.capacity = seats[k] if k < len(seats) and seats[k] else fleet.capacity
-        return vehicles
-
-    @abstractmethod
     def driver(self, planner, bus, cfg, clock):
         """The driver (:class:`dispatch.drivers.Driver`) that follows ``planner``'s paths in
         this space; its ``planner`` is the one the run uses (it may wrap ``planner``, e.g.
@@ -195,23 +179,6 @@ class Space(ABC):
         network's nodes and edges, which :mod:`analysis` reads): name -> {column: array}.
         Default: none."""
         return {}
-
-    def mirror(self, bus, vehicles):
-        """A physics mirror of the run subscribed to ``bus`` (``[world] physics``), with a
-        ``close()``; None where the space has none."""
-        return None
-
-    def traffic(self, env, planner, vehicles, emit):
-        """Reservation-based execution (:class:`dispatch.reservations.Traffic`) for a
-        reservation-aware planner; ValueError where the space has none."""
-        raise ValueError(f"reservation-based execution needs a voxel world, not a {self.kind} "
-                         "space")
-
-    @abstractmethod
-    def sample_views(self, rng: np.random.Generator, n: int, m: int):
-        """``n`` random agent views and ``m`` random task views in the space (for the planner
-        checks of :mod:`dispatch.check_planners`): a pair of tuples of
-        :class:`dispatch.problem.AgentView` and :class:`dispatch.problem.TaskView`."""
 
     def stands(self, loc: Location) -> tuple[int, float, bool] | None:
         """Where ``loc`` stands in the space's node arrays (kept by

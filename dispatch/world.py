@@ -107,16 +107,6 @@ class World(Space):
                            np.random.default_rng(seed))
 
     # ------------------------------------------------------------ once built
-    def demand(self, tasks, rng: np.random.Generator):
-        from dispatch.demand import VoxelDemand
-
-        return VoxelDemand(self.grid, tasks.ground_fraction, rng)
-
-    def place_vehicles(self, spec, rng: np.random.Generator):
-        from dispatch.placement import place_voxel
-
-        return place_voxel(self, spec, rng)
-
     def driver(self, planner, bus, cfg, clock):
         from dispatch.drivers import CellDriver
 
@@ -127,40 +117,6 @@ class World(Space):
                 "dispatch.cell": str(self.cell)}
         rows = [dict(x0=b.x0, y0=b.y0, z0=b.z0, x1=b.x1, y1=b.y1, z1=b.z1) for b in self.boxes]
         return {"obstacles": (meta, rows)}
-
-    def mirror(self, bus, vehicles):
-        """The PyBullet mirror (``[world] physics``): a subscriber of ``bus``."""
-        from dispatch.physics import Physics, mirror
-
-        physics = Physics(self)
-        mirror(physics, bus, self, vehicles)
-        return physics
-
-    def traffic(self, env, planner, vehicles, emit):
-        from dispatch.reservations import Traffic
-
-        return Traffic(env, planner, self.grid, vehicles, emit)
-
-    def sample_views(self, rng: np.random.Generator, n: int, m: int):
-        """UAVs (odd positions) in free cells up to 2 cells high, UGVs on the ground; tasks in
-        any free cell (``ground`` on layer 0, else ``air``)."""
-        from dispatch.problem import AgentView, TaskView
-
-        free = self.grid.free_cells()
-        ground = free[free[:, 2] == 0]
-
-        def pick(pool, k):
-            return [tuple(int(v) for v in pool[i]) for i in rng.integers(0, len(pool), k)]
-
-        a_cells = pick(free[free[:, 2] <= 2], n)
-        kinds = ["uav" if i % 2 else "ugv" for i in range(n)]
-        a_cells = [c if k == "uav" else pick(ground, 1)[0] for c, k in zip(a_cells, kinds)]
-        t_cells = pick(free, m)
-        agents = tuple(AgentView(100 + i, kinds[i], a_cells[i],
-                                 5.0 if kinds[i] == "uav" else 3.0) for i in range(n))
-        tasks = tuple(TaskView(500 + j, "ground" if c[2] == 0 else "air", c, 0.0)
-                      for j, c in enumerate(t_cells))
-        return agents, tasks
 
     def reaches(self, path, start, goal) -> bool:
         return path[0] == start and path[-1] == goal

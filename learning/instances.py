@@ -33,8 +33,10 @@ def first_decision(scenario: Scenario | str | Path, seed: int, n_agents: int,
                    n_tasks: int | None = None) -> FirstDecision:
     """The first decision of the run of ``scenario`` (a static scenario, or its file) with
     fleet size ``n_agents`` and ``seed``: the space of the seed, the fleet as the run places
-    it (:meth:`Space.place`), and ``n_tasks`` tasks (default: the run's static task count)
-    drawn from the run's task stream (:meth:`Space.demand`), all released at time 0."""
+    it (:func:`dispatch.placement.place_fleet`), and ``n_tasks`` tasks (default: the run's static task count)
+    drawn from the run's task stream (:func:`dispatch.demand.demand_for`), all released at time 0."""
+    from dispatch.demand import demand_for
+    from dispatch.placement import place_fleet
     from dispatch.scenario import load_scenario
     from dispatch.space import space_for
     from dispatch.streams import STREAM_FLEET, STREAM_TASKS, rng_for
@@ -43,8 +45,8 @@ def first_decision(scenario: Scenario | str | Path, seed: int, n_agents: int,
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     spec = sc.runs(agents=n_agents, seed=seed)[0]
     space = space_for(sc.world, seed, sc.path)
-    vehicles = space.place(spec, rng_for(seed, STREAM_FLEET))
-    demand = space.demand(sc.tasks, rng_for(seed, STREAM_TASKS))
+    vehicles = place_fleet(space, spec, rng_for(seed, STREAM_FLEET))
+    demand = demand_for(space, sc.tasks, rng_for(seed, STREAM_TASKS))
     m = n_tasks if n_tasks is not None else spec.n_static_tasks
     tasks = [Task(j, (r := demand.draw()).kind, r.loc, 0.0) for j in range(m)]
     return FirstDecision(spec, space, tuple(v.view() for v in vehicles),

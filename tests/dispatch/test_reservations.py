@@ -369,6 +369,7 @@ def corridor_run(tmp_path, monkeypatch, vehicles, tasks, plan, *, service=0.0):
     from dispatch import sim as sim_mod
     from dispatch.vehicles import Vehicle
     from dispatch.voxels import Grid
+    from dispatch.placement import PLACERS
     from dispatch.world import World
 
     occ = np.ones((8, 4, 1), dtype=bool)
@@ -378,7 +379,7 @@ def corridor_run(tmp_path, monkeypatch, vehicles, tasks, plan, *, service=0.0):
     fleet = [Vehicle(i, kind, 5.0 if kind == "uav" else 3.0, cell)
              for i, (kind, cell) in enumerate(vehicles)]
     monkeypatch.setattr(sim_mod, "space_for", lambda cfg, seed, path=None: world)
-    monkeypatch.setattr(World, "place_vehicles", lambda w, spec, rng: fleet)
+    monkeypatch.setitem(PLACERS, "voxel", lambda w, spec, rng: fleet)
     trace = tmp_path / "trace.csv"
     trace.write_text("release_time,x,y,z\n" + "".join(
         f"{t},{c[0] + 0.5},{c[1] + 0.5},0.5\n" for t, c in tasks), encoding="utf-8")

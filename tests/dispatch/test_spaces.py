@@ -17,6 +17,8 @@ import numpy as np
 import pytest
 
 from dispatch import registry
+from dispatch.check_planners import SAMPLERS
+from dispatch.demand import BUILDERS, demand_for
 from dispatch.drivers import CellDriver, Driver, RoadDriver
 from dispatch.errors import PluginError, ScenarioError
 from dispatch.events import EventBus
@@ -24,6 +26,7 @@ from dispatch.legs import RoadPoint
 from dispatch.roads import RoadNetwork
 from dispatch.scenario import load_scenario
 from dispatch.locations import Cell
+from dispatch.placement import PLACERS, place_fleet
 from dispatch.space import KINDS, Space, space_class, space_for
 from dispatch.streams import STREAM_FLEET, rng_for
 from dispatch.traces import read_fleet_start
@@ -78,7 +81,7 @@ def test_placement_is_the_same_as_before():
     sc = load_scenario(PAPER)
     spec = sc.runs()[0]
     space = space_for(sc.world, 0, sc.path)
-    vs = space.place(spec, rng_for(0, STREAM_FLEET))
+    vs = place_fleet(space, spec, rng_for(0, STREAM_FLEET))
     assert [(v.id, v.kind, v.speed, _cell(v.loc)) for v in vs[:4]] == [
         (0, "uav", 5.0, (32, 40, 3)), (1, "uav", 5.0, (33, 28, 4)),
         (2, "ugv", 3.0, (17, 49, 0)), (3, "ugv", 3.0, (12, 21, 0))]
@@ -88,21 +91,21 @@ def test_placement_is_the_same_as_before():
     fleet = dataclasses.replace(sc.fleet, start=(), start_file=None, agents=6, capacity=3)
     spec = dataclasses.replace(sc.runs()[0], scenario=dataclasses.replace(sc, fleet=fleet))
     net = space_for(sc.world, 0, sc.path)
-    cars = net.place(spec, rng_for(0, STREAM_FLEET))
+    cars = place_fleet(net, spec, rng_for(0, STREAM_FLEET))
     assert [(v.id, v.kind, v.speed, v.loc) for v in cars[:6]] == [
         (0, "car", 10.0, 264), (1, "car", 10.0, 270), (2, "car", 10.0, 141),
         (3, "car", 10.0, 97), (4, "car", 10.0, 31), (5, "car", 10.0, 244)]
-    assert {v.capacity for v in cars} == {3}  # the seats are the base class's part
+    assert {v.capacity for v in cars} == {3}  # the seats are place_fleet's part, every space's
 
 
 def test_demand_is_the_same_as_before():
     sc = load_scenario(PAPER)
-    d = space_for(sc.world, 0).demand(sc.tasks, np.random.default_rng(5))
+    d = demand_for(space_for(sc.world, 0), sc.tasks, np.random.default_rng(5))
     assert [(r.kind, _cell(r.loc), r.dropoff) for r in (d.draw() for _ in range(6))] == [
         ("air", (1, 0, 20), None), ("air", (39, 30, 9), None), ("ground", (49, 2, 0), None),
         ("ground", (2, 7, 0), None), ("ground", (6, 37, 0), None), ("ground", (1, 40, 0), None)]
     sc = load_scenario(MANHATTAN)
-    d = space_for(sc.world, 0, sc.path).demand(sc.tasks, np.random.default_rng(5))
+    d = demand_for(space_for(sc.world, 0, sc.path), sc.tasks, np.random.default_rng(5))
     assert [(r.kind, r.loc, r.dropoff) for r in (d.draw() for _ in range(6))] == [
         ("trip", 268, 322), ("trip", 9, 323), ("trip", 187, 206), ("trip", 252, 114),
         ("trip", 391, 21), ("trip", 111, 153)]
@@ -191,7 +194,7 @@ def test_where_a_location_stands():
 @pytest.mark.parametrize("kind", sorted(KINDS))
 def test_sample_views_and_reaches(kind):
     space = space_class(kind).small()
-    agents, tasks = space.sample_views(np.random.default_rng(3), 4, 5)
+    agents, tasks = SAMPLERS[kind](space, np.random.default_rng(3), 4, 5)
     assert len(agents) == 4 and len(tasks) == 5
     planner = registry.load("planner", space.default_planner)(space)
     for a in agents:
@@ -210,8 +213,24 @@ def test_static_tables_belong_to_the_space():
     assert meta == {"dispatch.world_size": "[50.0, 50.0, 30.0]", "dispatch.cell": "1.0"}
     assert len(rows) == len(w.boxes) and set(rows[0]) == {"x0", "y0", "z0", "x1", "y1", "z1"}
     assert space_class("road").small().tables() == {}
-    with pytest.raises(ValueError, match="needs a voxel world"):
-        space_class("road").small().traffic(None, None, [], None)
+
+
+@pytest.mark.parametrize("table", [BUILDERS, PLACERS, SAMPLERS], ids=["demand", "placement",
+                                                                       "views"])
+def test_every_space_kind_has_its_builders(table):
+    """What is built from a space is built by its own module, one function per space kind:
+    a new kind in KINDS without its entry would fail at its first run."""
+    assert set(table) == set(KINDS)
+
+
+def test_a_reservation_aware_planner_serves_voxel_worlds_only():
+    base = registry.load("planner", "reservation")
+
+    class RoadReservations(base):
+        spaces = ("voxel", "road")
+
+    with pytest.raises(PluginError, match="declares reservation_aware but serves voxel, road"):
+        registry.capabilities("planner", RoadReservations)
 
 
 #: location switches: the pattern of the issue's count (scripts in the issue's notes)
@@ -250,5 +269,7 @@ def test_sim_imports_few_kernel_modules():
     # operator, and the decision's pipeline, all wired here: sim.py is the one place the
     # simulation is put together; 20: the demand-responsive features, each wired once by
     # one call: meeting points, prebooking's task source, the offer step, shifts, and the
-    # energy summary and the decisions' tally in modules of their own)
-    assert len(set(re.findall(r"from dispatch[a-z_.]*", text))) <= 20
+    # energy summary and the decisions' tally in modules of their own; 24: what was built by
+    # the space's hooks is built by the builders' modules, each called here: the demand, the
+    # fleet's placement, the physics mirror and the reservations' traffic)
+    assert len(set(re.findall(r"from dispatch[a-z_.]*", text))) <= 24

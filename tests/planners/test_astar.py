@@ -636,6 +636,7 @@ def test_costs_on_paper_world_equal_scipy_after_moves():
     moved (fields reused: no new Dijkstra)."""
     from dispatch.scenario import load_scenario
     from dispatch.world import world_for
+    from dispatch.placement import place_fleet
     from dispatch.streams import STREAM_FLEET, STREAM_TASKS, rng_for
     from dispatch.demand import VoxelDemand
 
@@ -644,7 +645,7 @@ def test_costs_on_paper_world_equal_scipy_after_moves():
     spec = scenario.runs(allocator="hungarian", agents=20, seed=3)[0]
     world = world_for(scenario.world, 3)
     grid = world.grid
-    agents = tuple(v.view() for v in world.place(spec, rng_for(3, STREAM_FLEET)))
+    agents = tuple(v.view() for v in place_fleet(world, spec, rng_for(3, STREAM_FLEET)))
     demand = VoxelDemand(grid, 0.5, rng_for(3, STREAM_TASKS))  # ground and air tasks
     tasks = tuple(TaskView(i, (r := demand.draw()).kind, r.loc, 0.0) for i in range(20))
 
