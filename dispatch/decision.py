@@ -76,17 +76,24 @@ log = logging.getLogger(__name__)
 # ----------------------------------------------------------------------------- the steps
 
 
-def direct_times(book: TaskBook, free: Planner) -> None:
-    """Set the free-flow direct drive time of open requests that have none yet (the first
-    decision that considers a request), from ``free`` (a congested planner's inner,
-    free-flow one)."""
-    need = [t for t in book.open.values()
-            if t.dropoff is not None and t.direct_time != t.direct_time]
-    if not need:
-        return
-    times = free.between([t.loc for t in need], [t.dropoff for t in need], pairwise=True)
-    for t, x in zip(need, np.asarray(times, dtype=float).tolist()):
-        t.direct_time = x
+def direct_times(book: TaskBook, free: Planner, seen: int) -> int:
+    """Set the free-flow direct drive time of the open requests released since the decision
+    that saw the ids up to ``seen`` (a request gets it at the first decision that considers
+    it), from ``free`` (a congested planner's inner, free-flow one); return the last id seen.
+    The book keeps open requests in id order, so only the new ones are read (thousands may
+    wait in an overloaded run)."""
+    need = []
+    for t in reversed(book.open.values()):
+        if t.id <= seen:
+            break
+        if t.dropoff is not None and t.direct_time != t.direct_time:
+            need.append(t)
+    if need:
+        need.reverse()
+        times = free.between([t.loc for t in need], [t.dropoff for t in need], pairwise=True)
+        for t, x in zip(need, np.asarray(times, dtype=float).tolist()):
+            t.direct_time = x
+    return book.released - 1
 
 
 def candidates(fleet: Fleet, book: TaskBook, held: dict, pooled: bool
@@ -286,6 +293,8 @@ class Pipeline:
         #: with plans, the fleet's plans as the compiled insertion reads them, kept between
         #: decisions (a row rewritten when its vehicle's plan changed)
         self.table = PlanTable(len(fleet)) if self.plans else None
+        #: the last request id whose direct drive time a decision has set (direct_times)
+        self._seen = -1
 
     def build(self, now: float) -> Decision | None:
         """The problem of a decision at ``now`` over the candidate vehicles and the open
@@ -296,7 +305,7 @@ class Pipeline:
         if not self.book.open and not held:
             return None
         if self.routes:
-            direct_times(self.book, self.planner.free_flow)
+            self._seen = direct_times(self.book, self.planner.free_flow, self._seen)
         idle, open_tasks, holder = candidates(self.fleet, self.book, held, self.pooled)
         if not idle.size:
             return None

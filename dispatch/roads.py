@@ -170,8 +170,11 @@ class RoadNetwork(Space):
         """``(len(locs), 3)`` positions (see :meth:`position`); vectorized for integer arrays."""
         if isinstance(locs, np.ndarray) and locs.dtype.kind in "iu":
             return self._xyz[locs.reshape(-1)]
-        if isinstance(locs, (list, tuple)) and all(type(loc) is int for loc in locs):
-            return self._xyz[np.array(locs, dtype=np.int64).reshape(-1)]
+        if isinstance(locs, (list, tuple)) and locs and type(locs[0]) is not RoadPoint:
+            try:  # node indices, as a decision's open requests are (thousands when overloaded)
+                return self._xyz[np.fromiter(locs, np.int64, len(locs))]
+            except (TypeError, ValueError):  # a road point among them
+                pass
         if isinstance(locs, (list, tuple)) and len(locs) <= _FEW_POINTS:
             # one point at a time (a decision asks for each vehicle part-way along an edge
             # alone): the same float operations as below, without a dozen numpy calls each
