@@ -43,6 +43,9 @@ class Bench:
         p.add_argument("--ray", action="store_true", help="run the runs as Ray tasks")
         p.add_argument("--instance", action="append", metavar="NAME",
                        help="only this instance of the suite (repeat)")
+        p.add_argument("--time-limit", type=float, metavar="MINUTES",
+                       help="wall minutes one run may take; a run past it is stopped and its "
+                            "rows say timeout (default: 30)")
 
     def run(self, args, out) -> int:
         from bench.against import compare
@@ -50,13 +53,18 @@ class Bench:
         from bench.run import BenchError, parse_params, run_bench
         from bench.table import read_csv, write_csv
 
+        from bench.run import TIME_LIMIT_MIN
+
         if args.workers is not None and args.workers < 1:
             raise BenchError(f"--workers must be >= 1, got {args.workers}")
+        limit = TIME_LIMIT_MIN if args.time_limit is None else args.time_limit
+        if not limit > 0:
+            raise BenchError(f"--time-limit must be > 0 minutes, got {args.time_limit}")
         before = read_csv(args.against) if args.against else None  # a bad file: before work
         params = parse_params(args.param)
         res = run_bench(args.allocators, args.out, suite=args.suite, quick=args.quick,
                         seeds=args.seeds, params=params, workers=args.workers, ray=args.ray,
-                        only=args.instance)
+                        only=args.instance, time_limit=limit * 60.0)
         folder = Path(args.out)
         write_csv(res.rows, folder / "bench.csv")
         write_markdown(res.rows, folder / "bench.md", res.machine, res.seconds)
@@ -65,7 +73,8 @@ class Bench:
         drew = write_figure(res.rows, folder / "bench.png")
         c = res.counts
         out.print(f"{len(res.rows)} row(s): {c['done']} run, {c['skipped']} reused, "
-                  f"{c['failed']} failed, {c['unsupported']} unsupported; {res.seconds:.1f} s")
+                  f"{c['failed']} failed, {c['timeout']} past the time limit, "
+                  f"{c['unsupported']} unsupported; {res.seconds:.1f} s")
         out.print(f"board: {folder / 'bench.md'}; table: {folder / 'bench.csv'}"
                   + (f"; picture: {folder / 'bench.png'}" if drew else ""))
         for r in res.rows:

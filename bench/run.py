@@ -4,8 +4,10 @@ per run (:mod:`bench.metrics`) and the files of :mod:`bench.report`.
 
 An allocator that cannot run an instance (it serves other spaces, lacks a capability the
 instance needs, rejects the instance's parameters) gets rows with status ``unsupported: …``; a
-run that raises gets ``failed: …`` (its traceback in ``DIR/runs/errors/``); neither stops the
-bench.
+run that raises gets ``failed: …`` (its traceback in ``DIR/runs/errors/``); a run past the
+wall-clock limit of one run (``--time-limit``, :data:`TIME_LIMIT_MIN` minutes) is stopped and
+gets ``timeout: …``, and is not tried again by a later call with a limit no longer than the
+time it ran; none of them stops the bench.
 """
 
 from __future__ import annotations
@@ -31,6 +33,10 @@ from dispatch.overrides import key_values
 log = logging.getLogger(__name__)
 
 RUNS = "runs"
+#: Minutes of wall time one run may take (``--time-limit``): the full suite fits in about two
+#: hours on 2 cores only if no allocator spends hours on one instance (``auction`` on the
+#: 10,000-vehicle grid day ran 30 simulated minutes in more than 10 wall minutes)
+TIME_LIMIT_MIN = 30.0
 
 
 class BenchError(ValueError):
@@ -152,6 +158,25 @@ def _read(out: Path, spec, table: str):
     return read_table(path, spec.partition, table) if path.exists() else None
 
 
+def _timed_out(out: Path, spec, limit: float) -> str | None:
+    """The error message of an earlier run of ``spec`` stopped at a wall-clock limit after at
+    least ``limit`` seconds (trying it again would stop again); None if there is none."""
+    from dispatch.runner import ERRORS, partition_dir
+
+    path = out / ERRORS / partition_dir(spec) / "part-0.parquet"
+    if not path.exists():
+        return None
+    import pyarrow.parquet as pq
+
+    try:
+        row = pq.read_table(path, columns=["error_type", "message", "seconds"]).to_pylist()[0]
+    except (OSError, IndexError, ValueError):
+        return None
+    if row["error_type"] == "PastTimeLimit" and row["seconds"] >= limit:
+        return row["message"]
+    return None
+
+
 def _wall(out: Path, spec) -> float:
     from dispatch.runner import marker_path
 
@@ -173,9 +198,11 @@ def run_bench(named: list[str], out: Path, *, suite: str = "all", quick: bool = 
               seeds: int | None = None, params: dict[str, Any] | None = None,
               workers: int | None = None, ray: bool = False,
               only: list[str] | None = None,
-              on_done: Callable[[Any], None] | None = None) -> BenchResult:
+              on_done: Callable[[Any], None] | None = None,
+              time_limit: float = TIME_LIMIT_MIN * 60.0) -> BenchResult:
     """Run the bench into ``out`` (runs in ``out/runs``; finished ones are reused) and return
-    its rows (``bench.csv``'s, in suite order). ``only``: instance names to keep (tests)."""
+    its rows (``bench.csv``'s, in suite order). ``only``: instance names to keep (tests);
+    ``time_limit``: wall seconds one run may take (see the module docstring)."""
     from dispatch.runner import sweep
 
     check_allocators(named)
@@ -189,13 +216,27 @@ def run_bench(named: list[str], out: Path, *, suite: str = "all", quick: bool = 
     info = machine()
     p = plan(chosen, list(named), quick=quick, seeds=seeds, params=params or {})
     runs = (Path(out) / RUNS).resolve()
-    outcomes = sweep([s for _, _, s in p.specs], runs, workers=workers, ray=ray,
-                     on_done=on_done) if p.specs else []
     rows = list(p.unsupported)
-    counts = {"done": 0, "skipped": 0, "failed": 0, "unsupported": len(p.unsupported)}
-    for (inst, alloc, spec), o in zip(p.specs, outcomes):
-        counts[o.status] += 1
+    counts = {"done": 0, "skipped": 0, "failed": 0, "timeout": 0,
+              "unsupported": len(p.unsupported)}
+    todo = []
+    for inst, alloc, spec in p.specs:
+        past = _timed_out(runs, spec, time_limit)
+        if past is None:
+            todo.append((inst, alloc, spec))
+            continue
+        counts["timeout"] += 1
+        rows.append(_row(inst, inst.world(), alloc, spec.seed, f"timeout: {past}"))
+    outcomes = sweep([s for _, _, s in todo], runs, workers=workers, ray=ray,
+                     on_done=on_done, time_limit=time_limit) if todo else []
+    for (inst, alloc, spec), o in zip(todo, outcomes):
         world = inst.world()
+        if o.status == "failed" and o.error.startswith("PastTimeLimit: "):
+            counts["timeout"] += 1
+            rows.append(_row(inst, world, alloc, spec.seed,
+                             "timeout: " + o.error.removeprefix("PastTimeLimit: ")))
+            continue
+        counts[o.status] += 1
         if o.status == "failed":
             rows.append(_row(inst, world, alloc, spec.seed, f"failed: {o.error}"))
             continue
@@ -212,5 +253,6 @@ def run_bench(named: list[str], out: Path, *, suite: str = "all", quick: bool = 
                              r["seed"]))
     fill_gaps(rows)
     info.update(suite=VERSION, which=suite, quick=quick, allocators=list(named),
-                params=params or {}, workers=workers or os.cpu_count(), ray=ray)
+                params=params or {}, workers=workers or os.cpu_count(), ray=ray,
+                time_limit_s=time_limit)
     return BenchResult(rows, counts, time.perf_counter() - started, info)

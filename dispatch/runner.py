@@ -153,6 +153,25 @@ def run_one(spec: RunSpec, out: Path | None = None, *,
     return result
 
 
+class PastTimeLimit(RuntimeError):
+    """A run of a sweep stopped at its wall-clock limit (``sweep(time_limit=...)``); its
+    failure row in the errors table has this type and the seconds it ran."""
+
+
+def _time_limited(seconds: float) -> Callable[[float, float, int, int], None]:
+    """A progress callback (:class:`dispatch.sim.Simulation`'s, called every
+    ``duration / PROGRESS_TICKS`` simulated seconds) that stops the run with
+    :class:`PastTimeLimit` once ``seconds`` of wall time have passed since it was made."""
+    started = time.perf_counter()
+
+    def check(now: float, duration: float, released: int, closed: int) -> None:
+        if time.perf_counter() - started > seconds:
+            raise PastTimeLimit(f"past its limit of {seconds:.0f} s of wall time at "
+                                f"{now:,.0f} of {duration:,.0f} simulated s ({released:,} "
+                                f"requests released, {closed:,} closed)")
+    return check
+
+
 def default_out(spec: RunSpec) -> Path:
     """``runs/<scenario name>``, the name made safe as one folder name (no separators, no
     ``..``, no absolute path): results never land outside ``runs/``."""
@@ -368,14 +387,16 @@ def _run_and_mark(spec: RunSpec, out: Path, flush_rows: int = DEFAULT_FLUSH_ROWS
     return result, files
 
 
-def run_partition(spec: RunSpec, out: str | Path) -> Outcome:
+def run_partition(spec: RunSpec, out: str | Path, time_limit: float | None = None) -> Outcome:
     """Run one spec of a sweep into its partition of ``out`` and mark it complete; an
-    exception is recorded in the errors table and returned as a failed :class:`Outcome`.
-    This is what pool workers and Ray tasks execute (a top-level function: spawn-safe)."""
+    exception is recorded in the errors table and returned as a failed :class:`Outcome`
+    (a run past ``time_limit`` wall seconds: :class:`PastTimeLimit`). This is what pool
+    workers and Ray tasks execute (a top-level function: spawn-safe)."""
     out = Path(out)
     started = time.perf_counter()
+    progress = None if time_limit is None else _time_limited(time_limit)
     try:
-        result, files = _run_and_mark(spec, out)
+        result, files = _run_and_mark(spec, out, progress=progress)
     except Exception as e:  # noqa: BLE001 - any failure of one run is recorded, not raised
         seconds = time.perf_counter() - started
         log.warning("%s failed: %s: %s", spec.run_id, type(e).__name__, e)
@@ -454,6 +475,7 @@ def sweep(
     address: str | None = None,
     force: bool = False,
     on_done: Callable[[Outcome], None] | None = None,
+    time_limit: float | None = None,
 ) -> list[Outcome]:
     """Run ``specs`` into the Hive-partitioned folder ``out``, skipping complete runs.
 
@@ -461,8 +483,10 @@ def sweep(
     or CPUs of a local Ray instance. ``ray``: run every run as a Ray task, on the cluster at
     ``address`` or on a local Ray started here (workers of a cluster need this package
     installed and ``out`` on a file system they share). ``force``: redo complete runs too.
-    ``on_done`` is called in this process as each run finishes or is skipped. Returns the
-    outcomes in the order of ``specs``.
+    ``on_done`` is called in this process as each run finishes or is skipped.
+    ``time_limit``: wall seconds a run may take; one past it stops and fails with
+    :class:`PastTimeLimit` (checked at each progress tick, every 1/500 of the simulated
+    duration). Returns the outcomes in the order of ``specs``.
     """
     out = Path(out).resolve()
     outcomes: dict[int, Outcome] = {}
@@ -485,11 +509,11 @@ def sweep(
     if todo:
         workers = workers or os.cpu_count() or 1
         if ray:
-            stream = _on_ray(todo, out, workers, address)
+            stream = _on_ray(todo, out, workers, address, time_limit)
         elif workers == 1:
-            stream = ((i, run_partition(spec, out)) for i, spec in todo)
+            stream = ((i, run_partition(spec, out, time_limit)) for i, spec in todo)
         else:
-            stream = _on_pool(todo, out, workers)
+            stream = _on_pool(todo, out, workers, time_limit)
         with _sigterm_exits():
             try:
                 for i, outcome in stream:
@@ -558,7 +582,8 @@ def _crashed(out: Path, spec: RunSpec, e: BaseException) -> Outcome:
     return Outcome(spec, "failed", error=msg)
 
 
-def _on_pool(todo, out: Path, workers: int) -> Iterator[tuple[int, Outcome]]:
+def _on_pool(todo, out: Path, workers: int, time_limit: float | None = None
+             ) -> Iterator[tuple[int, Outcome]]:
     """A spawn-context process pool, ``workers`` runs in flight at a time; if a worker dies
     the runs it held are recorded as failed and a fresh pool takes the rest."""
     import multiprocessing
@@ -576,7 +601,7 @@ def _on_pool(todo, out: Path, workers: int) -> Iterator[tuple[int, Outcome]]:
             while (pending or running) and not broken:
                 while pending and len(running) < workers:
                     i, spec = pending.popleft()
-                    running[pool.submit(run_partition, spec, str(out))] = (i, spec)
+                    running[pool.submit(run_partition, spec, str(out), time_limit)] = (i, spec)
                 done, _ = wait(running, return_when=FIRST_COMPLETED)
                 for fut in done:
                     i, spec = running.pop(fut)
@@ -594,7 +619,8 @@ def _on_pool(todo, out: Path, workers: int) -> Iterator[tuple[int, Outcome]]:
             pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _on_ray(todo, out: Path, workers: int, address: str | None) -> Iterator[tuple[int, Outcome]]:
+def _on_ray(todo, out: Path, workers: int, address: str | None,
+            time_limit: float | None = None) -> Iterator[tuple[int, Outcome]]:
     """One Ray task per run (local Ray with ``workers`` CPUs, or the cluster at ``address``)."""
     try:
         import ray
@@ -612,7 +638,7 @@ def _on_ray(todo, out: Path, workers: int, address: str | None) -> Iterator[tupl
         started = True
     try:
         task = ray.remote(num_cpus=1, max_retries=0)(run_partition)
-        refs = {task.remote(spec, str(out)): (i, spec) for i, spec in todo}
+        refs = {task.remote(spec, str(out), time_limit): (i, spec) for i, spec in todo}
         pending = list(refs)
         while pending:
             done, pending = ray.wait(pending, num_returns=1)

@@ -112,7 +112,8 @@ def test_a_tiny_bench_writes_its_files_is_deterministic_and_resumes(tiny, tmp_pa
         (i, a, s) for i in ("tiny_voxel", "tiny_road")
         for a in ("hungarian", "auction", "greedy") for s in (0, 1)]
     assert all(r["status"] == "ok" for r in rows), [r["status"] for r in rows]
-    assert res.counts == {"done": 12, "skipped": 0, "failed": 0, "unsupported": 0}
+    assert res.counts == {"done": 12, "skipped": 0, "failed": 0, "timeout": 0,
+                          "unsupported": 0}
     assert {r["world"] for r in rows if r["instance"] == "tiny_road"} == {"road"}
     assert all(r["gap"] == 0.0 for r in rows if r["allocator"] == "hungarian")
     road = [r for r in rows if r["world"] == "road"]
@@ -140,7 +141,8 @@ def test_a_tiny_bench_writes_its_files_is_deterministic_and_resumes(tiny, tmp_pa
         "scenario=bench_tiny_road/allocator=greedy/**/seed=1/done.json"))
     marker.unlink()
     again = _bench(tmp_path / "a")
-    assert again.counts == {"done": 1, "skipped": 11, "failed": 0, "unsupported": 0}
+    assert again.counts == {"done": 1, "skipped": 11, "failed": 0, "timeout": 0,
+                            "unsupported": 0}
     _same(_untimed(again.rows), _untimed(rows))
     # the same bench from scratch gives the same numbers apart from timings
     other = _bench(tmp_path / "b")
@@ -252,6 +254,24 @@ def test_a_run_that_fails_gets_a_row(tiny, tmp_path, monkeypatch):
     monkeypatch.setattr(dispatch.runner, "run_one", boom)
     res = run_bench([], tmp_path, workers=1, only=["tiny_voxel"], seeds=1)
     assert [r["status"] for r in res.rows] == ["failed: RuntimeError: planted failure"] * 2
+
+
+def test_a_run_past_the_time_limit_is_stopped_and_not_tried_again(tiny, tmp_path, capsys):
+    """A run past --time-limit stops at a progress tick and its row says timeout; a later
+    call with a limit no longer than the time it ran does not run it again, a longer one
+    does (and finishes it)."""
+    res = run_bench([], tmp_path, workers=1, only=["tiny_road"], seeds=1, time_limit=0.0)
+    assert res.counts == {"done": 0, "skipped": 0, "failed": 0, "timeout": 2,
+                          "unsupported": 0}
+    assert all(r["status"].startswith("timeout: past its limit of 0 s of wall time at ")
+               and math.isnan(r["served_share"]) for r in res.rows), res.rows
+    again = run_bench([], tmp_path, workers=1, only=["tiny_road"], seeds=1, time_limit=0.0)
+    assert again.counts["timeout"] == 2 and again.counts["done"] == 0
+    assert [r["status"] for r in again.rows] == [r["status"] for r in res.rows]
+    longer = run_bench([], tmp_path, workers=1, only=["tiny_road"], seeds=1, time_limit=600.0)
+    assert longer.counts["done"] == 2 and all(r["status"] == "ok" for r in longer.rows)
+    assert main(["bench", "greedy", "--time-limit", "0", "--out", str(tmp_path)]) == 2
+    assert "--time-limit must be > 0 minutes" in capsys.readouterr().err
 
 
 # ------------------------------------------------------------------------- above the kernel
