@@ -1,7 +1,8 @@
 """``dispatch replay --kepler``: a road run's vehicle trips as kepler.gl trips GeoJSON.
 
 As HIVE writes them: a FeatureCollection with one LineString per vehicle and state spell
-(the fleet states of :func:`analysis.timeline.fleet_states`), each position
+(the fleet states of :func:`analysis.timeline.fleet_states`, with the shifts' ``to_depot``
+and ``off_shift`` laid over them as the replay shows them), each position
 ``[longitude, latitude, 0, epoch seconds]`` and properties ``vehicle_id``, ``state`` and
 ``passengers`` (riders on board during the spell). Times are the run's simulated seconds plus
 ``epoch`` (the Unix time of second 0; default 0). Positions are the replay's keyframes (the
@@ -19,6 +20,7 @@ import numpy as np
 
 from analysis.replay import _network, keyframes, route_keyframes
 from analysis.replay_data import ReplayInputError, choose_run, read_table
+from analysis.replay_duty import duty_spells, overlay
 from analysis.timeline import fleet_states
 
 
@@ -62,6 +64,9 @@ def trips(folder: str | Path, run_id: str | None = None, epoch: float = 0.0) -> 
     end = float(events["t"].max()) if len(events) else 0.0
     st = fleet_states(events.assign(run_id=run.run_id), vehicles.assign(run_id=run.run_id),
                       end=end, passengers=riders)
+    # the shifts over the fleet states, as the replay shows them (to_depot, off_shift)
+    st = overlay(st.sort_values(["agent_id", "start"], kind="stable"),
+                 duty_spells(events, vehicles, end))
     lon, lat = convert(kf["x"].to_numpy(), kf["y"].to_numpy())
     kt = kf["t"].to_numpy(dtype=float)
     ka = kf["agent_id"].to_numpy()

@@ -103,8 +103,11 @@ def positions_at(traj: dict[int, pd.DataFrame], t: float) -> dict[int, np.ndarra
 #: point tasks, serving the task), ``occupied_2`` and ``occupied_3+`` (shared rides: two, three
 #: or more passengers on board), ``repositioning`` (idle, driving empty where a repositioning
 #: policy sends it), ``failed`` (broken down, until repaired), ``idle``; electric fleets
-#: (``[fleet.energy]``): ``to_charger`` (driving to a station), ``queueing`` (waiting for a
-#: plug), ``charging`` (plugged in).
+#: (``[fleet.energy]``): ``to_charger`` (driving to a station: a drive without a task, from
+#: idle, that ends at a station or with the battery empty, or that the run's end cuts, in a
+#: vehicle without shifts), ``queueing`` (waiting for a plug),
+#: ``charging`` (plugged in). A drive home at the end of a shift is ``idle`` here; the replay
+#: and its Kepler export lay the shifts over these states (``analysis.replay_duty``).
 FLEET_STATES = ("idle", "to_pickup", "occupied", "occupied_2", "occupied_3+", "repositioning",
                 "failed", "to_charger", "queueing", "charging")
 #: the electric fleets' states: plots show them only where some vehicle had them
@@ -113,7 +116,10 @@ CHARGING_STATES = ("to_charger", "queueing", "charging")
 OCCUPIED = ("occupied", "occupied_2", "occupied_3+")
 
 _FLEET_EVENTS = ("assign", "reassign", "pickup", "arrive", "dropoff", "idle", "breakdown",
-                 "reposition", "depart", "queue", "charge_start")
+                 "reposition", "depart", "queue", "charge_start", "stranded")
+#: the events that end a drive to a charger: it arrives (and queues or plugs in), or its
+#: battery runs out on the way
+_AT_CHARGER = ("queue", "charge_start", "stranded")
 
 
 def _occupied(onboard: int) -> str:
@@ -143,6 +149,9 @@ def fleet_states(events: pd.DataFrame, vehicles: pd.DataFrame,
     by_run = dict(iter(ev.groupby("run_id", sort=False)))
     for run, vs in vehicles.groupby("run_id", sort=False):
         stop = float(end if end is not None else ends.get(run, 0.0))
+        on_shifts = (set(vs.loc[np.isfinite(vs["shift_end"].to_numpy(dtype=float)),
+                                "agent_id"].astype(int))
+                     if "shift_end" in vs.columns else set())
         g = by_run.get(run)
         by_agent = dict(iter(g.groupby("agent_id", sort=False))) if g is not None else {}
         for agent in sorted(vs["agent_id"].astype(int)):
@@ -150,8 +159,9 @@ def fleet_states(events: pd.DataFrame, vehicles: pd.DataFrame,
             shown = 0  # onboard of the open interval
             mine = by_agent.get(agent)
             if mine is not None:
-                for t, kind, task in zip(mine["t"].to_numpy(dtype=float), mine["event"],
-                                         mine["task_id"].to_numpy(dtype=np.int64)):
+                kinds = mine["event"].tolist()
+                for k, (t, kind, task) in enumerate(zip(mine["t"].to_numpy(dtype=float), kinds,
+                                                        mine["task_id"].to_numpy(dtype=np.int64))):
                     task = int(task)
                     new = state
                     if state == "failed" and kind != "idle":
@@ -176,8 +186,13 @@ def fleet_states(events: pd.DataFrame, vehicles: pd.DataFrame,
                         new, onboard, pending = "failed", 0, set()
                     elif kind == "reposition" and state == "idle":
                         new = "repositioning"
-                    elif kind == "depart" and task < 0 and state == "idle":
-                        new = "to_charger"  # (a repositioning drive starts "repositioning")
+                    elif kind == "depart" and task < 0 and state == "idle" and (
+                            kinds[k + 1] in _AT_CHARGER if k + 1 < len(kinds)
+                            else agent not in on_shifts):
+                        # (a repositioning drive starts "repositioning"; a drive home at
+                        # the end of a shift ends with an idle, no charger's event; one the
+                        # run's end cuts is a charger's unless the vehicle works shifts)
+                        new = "to_charger"
                     elif kind == "queue":
                         new = "queueing"
                     elif kind == "charge_start":

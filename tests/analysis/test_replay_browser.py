@@ -649,7 +649,10 @@ def test_duty_spells_of_driver_shifts(shift_run, road_run):
     for r in off.itertuples(index=False):
         mine = picks[picks["agent_id"] == r.agent_id]
         assert not ((mine["t"] > r.start) & (mine["t"] < r.end)).any(), r
-    st = overlay(fleet_states(ev.assign(run_id="r"), veh.assign(run_id="r"), end=end), sp)
+    plain = fleet_states(ev.assign(run_id="r"), veh.assign(run_id="r"), end=end)
+    assert "to_charger" not in set(plain["state"])  # (no battery: a drive home is no charger's)
+    st = overlay(plain, sp)
+    assert set(st.loc[st["state"] == "to_depot", "agent_id"]) == set(home["agent_id"])
     for _, g in st.groupby("agent_id"):
         assert g["start"].iloc[0] == 0.0 and g["end"].iloc[-1] == end
         np.testing.assert_array_equal(g["start"].to_numpy()[1:], g["end"].to_numpy()[:-1])
