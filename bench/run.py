@@ -61,14 +61,23 @@ def allocators_for(instance: Instance, named: list[str]) -> list[str]:
     return out
 
 
-def check_allocators(named: list[str]) -> None:
-    """BenchError naming the first allocator that is not installed."""
-    from dispatch.registry import available, base_name
+def check_allocators(named: list[str], params: dict[str, Any] | None = None) -> None:
+    """BenchError naming the first allocator that is not installed, or a named variant
+    (``magnnet:paper``) its plugin does not declare, unless ``params`` (``--param``) make it
+    (they set its ``variant``)."""
+    from dispatch.registry import available, base_name, declaration
 
     have = available("allocator")
     for name in named:
         if base_name(name) not in have:
             raise BenchError(f"unknown allocator {name!r}; installed: {', '.join(sorted(have))}")
+        base, _, variant = name.partition(":")
+        declared = declaration("allocator", base).variants
+        if variant and variant not in declared and "variant" not in (params or {}):
+            raise BenchError(f"allocator {name!r}: {base!r} declares "
+                             + (f"the variants {', '.join(declared)}" if declared else
+                                "no variants")
+                             + "; name one of them, or make this one with --param KEY=VALUE")
 
 
 def parse_params(items: list[str]) -> dict[str, Any]:
@@ -205,7 +214,7 @@ def run_bench(named: list[str], out: Path, *, suite: str = "all", quick: bool = 
     ``time_limit``: wall seconds one run may take (see the module docstring)."""
     from dispatch.runner import sweep
 
-    check_allocators(named)
+    check_allocators(named, params)
     chosen = instances(suite, quick)
     if only is not None:
         unknown = sorted(set(only) - {i.name for i in chosen})

@@ -83,6 +83,12 @@ class Allocator(ABC):
     #: by ``problem.until``. Others give an agent at most one request, inserted where the
     #: decision's cost says.
     multi_request: ClassVar[bool] = False
+    #: Named variants the plugin runs by name: ``"<name>:<variant>"`` (a scenario's
+    #: ``allocator``, ``dispatch bench``) builds it with ``variant = "<variant>"`` unless the
+    #: variant's own table, ``[dispatch.allocator_params."<name>:<variant>"]``, sets
+    #: ``variant``; the constructor then takes a ``variant`` keyword (``magnnet``: ``match``,
+    #: ``paper``, ``paper_nb``, ``ppo``). A name with another variant needs its table.
+    variants: ClassVar[tuple[str, ...]] = ()
 
     @abstractmethod
     def allocate(self, problem: AllocationProblem) -> Allocation:

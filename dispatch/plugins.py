@@ -8,7 +8,7 @@ constructor raises becomes one PluginError naming the plugin, its parameters and
 from __future__ import annotations
 
 import json
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from dispatch import registry
 from dispatch.errors import PluginError, ScenarioError
@@ -23,10 +23,40 @@ __all__ = ["check_repositioner", "check_runs", "describe", "make_acceptor", "mak
 
 
 def make_plugin(kind: str, name: str, params, *args):
-    """Build an allocator or planner from its scenario parameters. Whatever its constructor
-    raises (TypeError, ValueError, an error of a library it calls) becomes one PluginError
-    naming the plugin, its parameters and the reason."""
+    """Build an allocator or planner from its scenario parameters (an allocator's declared
+    variant named ``name:variant`` with ``variant`` set: :func:`variant_params`). Whatever
+    its constructor raises (TypeError, ValueError, an error of a library it calls) becomes
+    one PluginError naming the plugin, its parameters and the reason."""
+    if kind == "allocator":
+        params = variant_params(name, params)
     return _construct(kind, name, params, args, f"dispatch.{kind}_params")
+
+
+def variant_params(name: str, params) -> tuple[tuple[str, Any], ...]:
+    """An allocator's constructor parameters: ``params``, and for a name ``base:variant``
+    whose plugin declares ``variant`` (:attr:`dispatch.contracts.Allocator.variants`)
+    ``variant = "<variant>"`` unless ``params`` set it."""
+    params = tuple(dict(params).items())
+    base, _, variant = name.partition(":")
+    if variant and variant in registry.declaration("allocator", base).variants \
+            and "variant" not in dict(params):
+        params = (*params, ("variant", variant))
+    return params
+
+
+def check_variant(sc: Scenario, name: str, key: str = "dispatch.allocator") -> None:
+    """ScenarioError unless a named variant ``base:variant`` means something: its plugin
+    declares the variant, or the scenario has its table
+    (``[dispatch.allocator_params."base:variant"]``). Plain names pass."""
+    base, _, variant = name.partition(":")
+    if not variant or variant in registry.declaration("allocator", base).variants \
+            or name in dict(sc.dispatch.allocator_tables):
+        return
+    declared = registry.declaration("allocator", base).variants
+    raise ScenarioError(sc.path, key, f"allocator {name!r}: {base!r} declares "
+                        + (f"the variants {', '.join(declared)}" if declared else "no variants")
+                        + f", and the scenario has no [dispatch.allocator_params.\"{name}\"] "
+                          "table to make one")
 
 
 def _construct(kind: str, name: str, params, args, key: str):
@@ -117,6 +147,8 @@ def check_runs(sc: Scenario, planners, repositioners=(), allocators=()) -> None:
     it has). ``allocators``: the names of the allocators that run (their declarations may
     need more of the planner)."""
     space = sc.world.space
+    for name in allocators:
+        check_variant(sc, name)
     for name in repositioners:
         check_repositioner(sc, name)
     need = travel_times_needed(sc, allocators)

@@ -67,7 +67,7 @@ class Capabilities:
     serve any). Allocators: ``decentralized`` (agents decide from local information),
     ``minimizes_total_cost`` (a maximum-cardinality, minimum-total-cost answer, no rng: lazy
     exact costs may certify it), ``multi_request`` (several requests to one agent, with
-    routes). Planners: ``lower_bounds`` (``bounds`` and ``exact``), ``travel_times``
+    routes), ``variants`` (the variants it runs by name, ``magnnet:paper``). Planners: ``lower_bounds`` (``bounds`` and ``exact``), ``travel_times``
     (``between``: shared rides, drop-off limits, the added_time objective, energy and
     multi-request allocators need it), ``reservation_aware`` (``plan_timed``: execution with
     reservations). Repositioners: ``passive`` (never moves a vehicle; the kernel never calls
@@ -86,6 +86,7 @@ class Capabilities:
     reservation_aware: bool = False
     passive: bool = False
     declines: bool = False
+    variants: tuple[str, ...] = ()
 
     def declared(self) -> frozenset[str]:
         """The names of the capabilities it declares."""
@@ -165,7 +166,8 @@ def capabilities(kind: str, plugin) -> Capabilities:
     if kind == "allocator":
         caps = Capabilities(kind, p.name, decentralized=bool(p.decentralized),
                             minimizes_total_cost=bool(p.minimizes_total_cost),
-                            multi_request=bool(p.multi_request))
+                            multi_request=bool(p.multi_request),
+                            variants=tuple(str(v) for v in p.variants))
     elif kind == "planner":
         caps = Capabilities(kind, p.name, tuple(p.spaces), lower_bounds=bool(p.lower_bounds),
                             travel_times=bool(p.travel_times),

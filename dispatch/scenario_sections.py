@@ -273,7 +273,7 @@ def parse_allocators(d: Table, s: Table, disp: DispatchConfig,
     ``[dispatch.allocator_params]`` split into the flat keys (every allocator gets them) and
     one table per allocator or named variant (``[dispatch.allocator_params.magnnet]``,
     ``[dispatch.allocator_params."magnnet:paper"]``); a variant ``name:v`` in a list needs its
-    table."""
+    table, unless its plugin declares ``v`` (:attr:`dispatch.contracts.Allocator.variants`)."""
     from dispatch import registry
 
     installed = registry.available("allocator")
@@ -298,11 +298,15 @@ def parse_allocators(d: Table, s: Table, disp: DispatchConfig,
     for tab, names in ((d, (disp.allocator,)), (s, sweep.allocator)):
         for name in names:
             known(tab, "allocator", name)
-            if ":" in name and name not in dict(tables):
-                raise tab.fail("allocator", f"{name!r} names a variant of "
-                                            f"{name.partition(':')[0]!r} without parameters: "
-                                            f"add a [dispatch.allocator_params.\"{name}\"] "
-                                            "table")
+            base, _, variant = name.partition(":")
+            if variant and name not in dict(tables) \
+                    and variant not in registry.declaration("allocator", base).variants:
+                declared = registry.declaration("allocator", base).variants
+                raise tab.fail("allocator", f"{name!r} names a variant of {base!r} without "
+                                            f"parameters: add a [dispatch.allocator_params."
+                                            f"\"{name}\"] table"
+                                            + (f" (or name one it declares: "
+                                               f"{', '.join(declared)})" if declared else ""))
     return replace(disp, allocator_params=tuple(flat), allocator_tables=tuple(tables))
 
 

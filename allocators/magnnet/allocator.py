@@ -219,6 +219,7 @@ class MagnnetAllocator(DecentralizedAllocator):
     ``paper`` / ``paper_nb`` (one checkpoint per N = M); see the module doc."""
 
     name = "magnnet"
+    variants = VARIANTS
 
     def __init__(self, variant: str = "match", checkpoint: str | None = None,
                  view_checkpoint: str | None = None, partial: str = "view",

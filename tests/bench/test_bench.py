@@ -292,3 +292,12 @@ def test_the_kernel_imports_nothing_of_bench_and_bench_no_plugin():
     assert [i for i in imports("dispatch") if i[1] == "bench"] == []
     plugins = {"allocators", "planners", "repositioners", "chargers", "analysis", "learning"}
     assert [i for i in imports("bench") if i[1] in plugins] == []
+
+
+def test_a_named_variant_must_be_declared_or_made_by_params():
+    from bench.run import BenchError, check_allocators
+
+    check_allocators(["magnnet:paper", "magnnet:ppo", "greedy"])
+    check_allocators(["magnnet:mine"], {"variant": "paper"})
+    with pytest.raises(BenchError, match="'magnnet:nope'.*declares the variants match"):
+        check_allocators(["magnnet:nope"])

@@ -308,3 +308,33 @@ def test_batteries_need_a_planner_with_travel_times(installed, tmp_path):
     with pytest.raises(ScenarioError, match=r"fleet\.energy.*batteries.*'slow_roads' does not"):
         check_runs(sc, ["slow_roads"])
     check_runs(sc, ["dijkstra"])
+
+
+def test_a_declared_variant_runs_by_name_and_an_undeclared_one_needs_its_table(tmp_path):
+    """``magnnet:paper`` builds magnnet with variant = "paper" (it was the default match model
+    under the variant's name); a variant the plugin does not declare and the scenario does
+    not make with its table is refused at validate time, naming what is declared."""
+    from pathlib import Path
+
+    from dispatch.plugins import check_variant, variant_params
+    from dispatch.runner import run_one
+
+    assert registry.declaration("allocator", "magnnet").variants == (
+        "match", "paper", "paper_nb", "ppo")
+    assert registry.declaration("allocator", "hungarian").variants == ()
+    assert variant_params("magnnet:paper", ()) == (("variant", "paper"),)
+    assert variant_params("magnnet:paper", (("variant", "match"),)) == (("variant", "match"),)
+    assert variant_params("hungarian", (("x", 1),)) == (("x", 1),)
+    paper = Path(__file__).resolve().parents[2] / "scenarios" / "paper_static.toml"
+    sc = load_scenario(paper)
+    spec, = sc.runs(allocator="magnnet:paper", agents=4, seed=0)
+    info = run_one(spec, tmp_path / "out").summary["allocator_info"]
+    assert '"variant": "paper"' in info and "paper_n4.pt" in info
+    check_variant(sc, "magnnet:ppo")
+    check_variant(sc, "hungarian")
+    with pytest.raises(ScenarioError, match=r"'magnnet:nope'.*declares the variants match, "
+                                            r"paper, paper_nb, ppo.*no \[dispatch\.allocator_"
+                                            r"params\.\"magnnet:nope\"\] table"):
+        check_variant(sc, "magnnet:nope")
+    with pytest.raises(ScenarioError, match="'hungarian' declares no variants"):
+        check_variant(sc, "hungarian:fast")
