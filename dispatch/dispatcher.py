@@ -411,16 +411,17 @@ class Dispatcher:
     def _set_out_estimates(self, v, task, decided: float, cost: float
                            ) -> tuple[float, float, bool]:
         """Estimates of ``v`` driving ``task``'s stops from where it is now (the operator's
-        route times, no limit), or from the decision's cost where those cannot be had."""
+        route times, no limit; a booked pickup waits for its departure, as the plan will), or
+        from the decision's cost where those cannot be had."""
         n = task.passengers
         rows = [PlannedStop(PICKUP, task.id, task.loc, n if task.dropoff is not None else 0,
-                            math.inf, task.dropoff is None)]
+                            math.inf, task.dropoff is None, task.earliest_pickup)]
         if task.dropoff is not None:
             rows.append(PlannedStop(DROPOFF, task.id, task.dropoff, -n, math.inf, True))
         times, _ = self.operator.route_times(v, rows)
         if times is None:
             return plain_estimates(task, decided, cost)
-        return times[0], times[-1], False
+        return route_estimates(task, rows, times, 0)
 
     def _follow(self, p: _Pending, allocation: Allocation, routes: dict,
                 pair_cost: list[float]) -> None:

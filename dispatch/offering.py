@@ -34,9 +34,10 @@ log = logging.getLogger(__name__)
 
 def plain_estimates(task: Task, decided_at: float, cost: float) -> tuple[float, float, bool]:
     """``(pickup_at, dropoff_at, pooled)`` of a vehicle without a plan: it reaches the pickup
-    ``cost`` seconds after the decision and drives the direct route (0 s where it is unknown
-    or the request has no drop-off); never pooled."""
-    pickup = decided_at + cost
+    ``cost`` seconds after the decision (a booked pickup no sooner than its departure: the
+    vehicle waits there) and drives the direct route (0 s where it is unknown or the request
+    has no drop-off); never pooled."""
+    pickup = max(decided_at + cost, task.earliest_pickup)
     direct = task.direct_time
     ride = direct if task.dropoff is not None and direct == direct else 0.0
     return pickup, pickup + ride, False
@@ -45,21 +46,26 @@ def plain_estimates(task: Task, decided_at: float, cost: float) -> tuple[float, 
 def insertion_estimates(task: Task, stops: list, load: int, at) -> tuple[float, float, bool]:
     """``(pickup_at, dropoff_at, pooled)`` of an insertion ``at``
     (:class:`dispatch.insertion.Insertion`) into the plan ``stops`` of a vehicle with ``load``
-    on board: its planned times, and whether another rider is on board at the pickup or
+    on board: its planned times (the pickup's service start: its arrival, or its earliest
+    time where the vehicle arrives sooner), and whether another rider is on board at the pickup or
     between the pickup and the drop-off (the stops ``at.i .. at.j - 1`` of the plan)."""
     before = load if at.i == 0 else stops[at.i - 1].occupancy
     pooled = before > 0 or (task.dropoff is not None
                             and any(stops[k].occupancy > 0 for k in range(at.i, at.j)))
-    dropoff = at.dropoff_at if task.dropoff is not None else at.pickup_at
-    return at.pickup_at, dropoff, bool(pooled)
+    # the pickup's service starts no sooner than its earliest time (a walking rider's
+    # boarding, a booked departure): the vehicle waits there
+    e = at.meeting.earliest if at.meeting is not None else task.earliest_pickup
+    pickup = max(at.pickup_at, e)
+    dropoff = at.dropoff_at if task.dropoff is not None else pickup
+    return pickup, dropoff, bool(pooled)
 
 
 def route_estimates(task: Task, rows: list, times: list[float], load: int
                     ) -> tuple[float, float, bool]:
     """``(pickup_at, dropoff_at, pooled)`` of ``task`` in a route (stop rows and planned
     arrival ``times``, :meth:`dispatch.operator.Operator.route_times`) of a vehicle with
-    ``load`` on board: pooled when more than its own riders are on board at any stop of the
-    ride."""
+    ``load`` on board (the pickup's service start, no sooner than its row's earliest time):
+    pooled when more than its own riders are on board at any stop of the ride."""
     tid = task.id
     kp = next(k for k, r in enumerate(rows) if r.kind == PICKUP and r.task_id == tid)
     kd = next((k for k, r in enumerate(rows) if r.kind == DROPOFF and r.task_id == tid), kp)
@@ -71,7 +77,8 @@ def route_estimates(task: Task, rows: list, times: list[float], load: int
             pooled = True  # someone on board when it is picked up
         if kp <= k < kd and on > task.passengers:
             pooled = True
-    return times[kp], times[kd], pooled
+    pickup = max(times[kp], rows[kp].earliest)  # (service waits for its earliest time)
+    return pickup, (times[kd] if kd != kp else pickup), pooled
 
 
 class Offering:

@@ -295,3 +295,30 @@ def test_walking_riders_booked_ahead_board_no_sooner(tmp_path, allocator, capaci
     check_promises(summary, tables)
     t = tables["tasks"]
     assert t[t.booked_at.notna()].picked_up_at.notna().sum() > 0
+
+
+@pytest.mark.parametrize("capacity", [1, 3])
+def test_an_offer_to_a_booked_rider_estimates_the_pickup_at_its_departure(tmp_path,
+                                                                         monkeypatch, capacity):
+    """A booked rider offered a ride (an acceptor that may decline) is told a pickup no sooner
+    than the requested departure, as the plan will pick up: the estimate of a vehicle setting
+    out follows the schedule rule's earliest time, as the insertion's and a route's do."""
+    from dispatch.offering import Offering
+
+    seen = []
+    real = Offering.offer
+
+    def offer(self, task, vehicle_id, now, estimates):
+        seen.append((task.earliest_pickup, now, estimates[0]))
+        return real(self, task, vehicle_id, now, estimates)
+
+    monkeypatch.setattr(Offering, "offer", offer)
+    _trace(tmp_path, 5, share=1.0, lead=(600.0, 900.0))
+    path = _scenario(tmp_path, capacity=capacity)
+    path.write_text(path.read_text() + '\n[acceptor]\nname = "threshold"\n'
+                    '[acceptor.threshold]\nmax_wait = 1e9\n', encoding="utf-8")
+    summary, tables = _run(path)
+    booked = [(e, now, at) for e, now, at in seen if e > now]  # offered before departure
+    assert len(booked) >= 3, seen
+    assert all(at >= e - EPS for e, _, at in booked), [x for x in booked if x[2] < x[0]]
+    check_promises(summary, tables)
