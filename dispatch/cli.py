@@ -18,6 +18,8 @@ from dispatch.progress import Heartbeat
 
 #: the commands of this module; a registered command of one of these names is not added
 OWN_COMMANDS = ("run", "validate", "check", "plugins", "new", "train", "sweep")
+#: the plugin kinds ``dispatch check`` checks
+CHECKED_KINDS = ("allocator", "planner", "repositioner", "charger", "acceptor", "sizer")
 
 
 def _logging_options(p: argparse.ArgumentParser, default) -> None:
@@ -75,11 +77,11 @@ def _parser(commands=None) -> argparse.ArgumentParser:
     # (run's and sweep's plugin, size and seed options: validate lists the file's runs)
     v.set_defaults(allocator=None, planner=None, agents=None, seed=None, duration=None)
 
-    c = sub.add_parser("check", help="check an installed allocator, planner or repositioner "
-                       "plugin on random problems (valid answers, no mutation, determinism, rng "
-                       "use)")
+    c = sub.add_parser("check", help="check an installed allocator, planner, repositioner, "
+                       "charger, acceptor or fleet sizer plugin on sample problems (valid "
+                       "answers, no mutation, determinism, rng use)")
     c.add_argument("name", help="plugin name (see dispatch plugins)")
-    c.add_argument("--kind", choices=("allocator", "planner", "repositioner", "charger"),
+    c.add_argument("--kind", choices=CHECKED_KINDS,
                    help="which kind NAME is (needed only when two kinds have that name)")
     c.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="a constructor parameter (VALUE read as TOML, else as a string); repeat")
@@ -538,20 +540,19 @@ def _check(args, console) -> int:
     one line per check; exit 0 when all pass, 1 otherwise."""
     from dispatch.errors import PluginError
     from dispatch.registry import available, load
+    from dispatch.check_acceptors import check_acceptor
     from dispatch.check_allocators import check_allocator
     from dispatch.check_chargers import check_charger
     from dispatch.check_planners import check_planner
     from dispatch.check_repositioners import check_repositioner
+    from dispatch.check_sizers import check_sizer
 
-    all_kinds = ("allocator", "planner", "repositioner", "charger")
-    kinds = [k for k in all_kinds if args.name in available(k)]
+    kinds = [k for k in CHECKED_KINDS if args.name in available(k)]
     if args.kind:
         kinds = [args.kind]
     if not kinds:
-        raise PluginError(f"no allocator, planner or repositioner named {args.name!r}; "
-                          f"installed: {', '.join(available('allocator'))} (allocators), "
-                          f"{', '.join(available('planner'))} (planners), "
-                          f"{', '.join(available('repositioner'))} (repositioners)")
+        raise PluginError(f"no plugin named {args.name!r}; installed: " + "; ".join(
+            f"{', '.join(available(k)) or 'none'} ({k}s)" for k in CHECKED_KINDS))
     if len(kinds) > 1:
         raise DispatchError(f"{args.name!r} is both {' and '.join(kinds)}; say --kind")
     from dispatch.overrides import key_values
@@ -564,6 +565,10 @@ def _check(args, console) -> int:
         report = check_planner(cls, seed=args.seed, **params)
     elif kinds[0] == "charger":
         report = check_charger(cls, seed=args.seed, **params)
+    elif kinds[0] == "acceptor":
+        report = check_acceptor(cls, seed=args.seed, **params)
+    elif kinds[0] == "sizer":
+        report = check_sizer(cls, seed=args.seed, **params)
     else:
         report = check_repositioner(cls, seed=args.seed, **params)
     for r in report.results:

@@ -61,8 +61,9 @@ class UtilizationSizer(Sizer):
         if not short and (u != u or self.low <= u <= self.high):
             return self._bounded(n, view)
         want = math.ceil(n * u / self.target) if n and u == u else self.min_vehicles + 1
-        if short:
-            want = max(want, math.ceil(max(n, 1) / (1.0 - miss)), n + 1)
+        if short:  # (every request unserved: as many as the bounds allow)
+            grow = math.ceil(max(n, 1) / (1.0 - miss)) if miss < 1.0 else view.on_duty + view.pool
+            want = max(want, grow, n + 1)
         if self.step is not None:
             want = max(n - self.step, min(n + self.step, want))
         return self._bounded(want, view)

@@ -291,7 +291,79 @@ def test_cli_check_bad_param_and_unknown_name(capsys):
     out = capsys.readouterr().out
     assert "FAIL construct" in out and "w (the suboptimality bound)" in out
     assert cli.main(["check", "no_such_plugin"]) == 2
-    assert "no allocator, planner or repositioner named 'no_such_plugin'" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "no plugin named 'no_such_plugin'" in err and "(acceptors)" in err and "(sizers)" in err
+
+
+@pytest.mark.parametrize("name,kind", [("always", "acceptor"), ("threshold", "acceptor"),
+                                       ("logit", "acceptor"), ("fixed", "sizer"),
+                                       ("utilization", "sizer")])
+def test_cli_check_shipped_acceptors_and_sizers(capsys, name, kind):
+    assert cli.main(["check", name, "--kind", kind]) == 0
+    assert f"{kind} {name!r}" in capsys.readouterr().out
+
+
+def test_broken_acceptors_and_sizers_are_caught():
+    """Each check catches its failure: a non-bool answer, an acceptor declaring it never
+    declines that declines, one reading the global random state; a sizer answering beyond its
+    fleet, one that raises (the utilization sizer divided by zero when every request went
+    unserved), a bad interval."""
+    import random
+
+    from dispatch.check_acceptors import check_acceptor
+    from dispatch.check_sizers import check_sizer
+    from dispatch.offers import Acceptor
+    from dispatch.sizing import Sizer
+
+    class Maybe(Acceptor):
+        name = "maybe"
+
+        def accept(self, offer, rng):
+            return "yes"
+
+    class Liar(Acceptor):
+        name = "liar"
+        declines = False
+
+        def accept(self, offer, rng):
+            return offer.wait < 600
+
+    class Global(Acceptor):
+        name = "global"
+
+        def accept(self, offer, rng):
+            return random.random() < 0.5
+
+    class Greedy(Sizer):
+        name = "greedy_sizer"
+
+        def size(self, view):
+            return view.on_duty + view.pool + 1
+
+    class Divides(Sizer):
+        name = "divides"
+
+        def size(self, view):
+            miss = view.unserved if view.unserved == view.unserved else 0.0
+            return int(view.on_duty / (1.0 - miss))
+
+    class Never(Sizer):
+        name = "never"
+        interval = 0.0
+
+        def size(self, view):
+            return view.on_duty
+
+    def failed(report):
+        return {r.name for r in report.results if not r.ok and not r.skipped}
+
+    assert failed(check_acceptor(Maybe)) == {"valid"}
+    assert failed(check_acceptor(Liar)) == {"declines"}
+    assert failed(check_acceptor(Global)) >= {"rng"}
+    assert failed(check_sizer(Greedy)) == {"valid"}
+    assert failed(check_sizer(Divides)) == {"valid"}
+    assert "ZeroDivisionError" in str(check_sizer(Divides).results)
+    assert failed(check_sizer(Never)) == {"interval"}
 
 
 # ----------------------------------------------------------------------------- inside a run

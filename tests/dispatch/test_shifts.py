@@ -264,6 +264,7 @@ def test_utilization_rule():
     assert s.size(view(20, 0.95, pool=3)) == 23  # not beyond the pool
     assert s.size(view(20, 0.5, unserved=0.2)) == 25  # 20 / (1 - 0.2)
     assert s.size(view(20, 0.2, unserved=0.2)) == 25  # unserved: no shrinking
+    assert s.size(view(20, 0.5, unserved=1.0)) == 40  # none served: all the bounds allow
     assert s.size(view(20, float("nan"))) == 20
     assert s.initial(view(0, float("nan"), pool=50)) == 5
     with pytest.raises(ValueError, match="max_vehicles"):
