@@ -45,7 +45,7 @@ class Bench:
                        help="only this instance of the suite (repeat)")
         p.add_argument("--time-limit", type=float, metavar="MINUTES",
                        help="wall minutes one run may take; a run past it is stopped and its "
-                            "rows say timeout (default: 30)")
+                            "rows say timeout (default: 20)")
 
     def run(self, args, out) -> int:
         from bench.against import compare

@@ -35,8 +35,9 @@ log = logging.getLogger(__name__)
 RUNS = "runs"
 #: Minutes of wall time one run may take (``--time-limit``): the full suite fits in about two
 #: hours on 2 cores only if no allocator spends hours on one instance (``auction`` on the
-#: 10,000-vehicle grid day ran 30 simulated minutes in more than 10 wall minutes)
-TIME_LIMIT_MIN = 30.0
+#: 10,000-vehicle grid day ran 30 simulated minutes in more than 10 wall minutes; one of its
+#: decisions there takes minutes)
+TIME_LIMIT_MIN = 20.0
 
 
 class BenchError(ValueError):

@@ -34,8 +34,10 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
+import math
 import os
 import signal
+import sys
 import tempfile
 import threading
 import time
@@ -153,23 +155,48 @@ def run_one(spec: RunSpec, out: Path | None = None, *,
     return result
 
 
-class PastTimeLimit(RuntimeError):
+class PastTimeLimit(BaseException):
     """A run of a sweep stopped at its wall-clock limit (``sweep(time_limit=...)``); its
-    failure row in the errors table has this type and the seconds it ran."""
+    failure row in the errors table has this type and the seconds it ran. A BaseException,
+    as KeyboardInterrupt is: the timer may fire inside a plugin, whose ``except Exception``
+    must not turn it into an error of its own."""
 
 
-def _time_limited(seconds: float) -> Callable[[float, float, int, int], None]:
-    """A progress callback (:class:`dispatch.sim.Simulation`'s, called every
-    ``duration / PROGRESS_TICKS`` simulated seconds) that stops the run with
-    :class:`PastTimeLimit` once ``seconds`` of wall time have passed since it was made."""
+@contextmanager
+def _time_limit(seconds: float) -> Iterator[Callable[[float, float, int, int], None]]:
+    """While in the block, a run stops with :class:`PastTimeLimit` once ``seconds`` of wall
+    time have passed: by ``SIGALRM`` in whatever it is doing (in the main thread, on POSIX:
+    one decision may take minutes), else at its next progress tick. Yields the progress
+    callback (:class:`dispatch.sim.Simulation`'s, called every ``duration / PROGRESS_TICKS``
+    simulated seconds), which also keeps where the run was for the message."""
     started = time.perf_counter()
+    at = [math.nan, math.nan, 0, 0]  # simulated time, duration, released, closed
+
+    def past() -> PastTimeLimit:
+        now, duration, released, closed = at
+        where = (f" at {now:,.0f} of {duration:,.0f} simulated s ({released:,} requests "
+                 f"released, {closed:,} closed)" if now == now else "")
+        return PastTimeLimit(f"past its limit of {seconds:.0f} s of wall time{where}")
 
     def check(now: float, duration: float, released: int, closed: int) -> None:
+        at[:] = [now, duration, released, closed]
         if time.perf_counter() - started > seconds:
-            raise PastTimeLimit(f"past its limit of {seconds:.0f} s of wall time at "
-                                f"{now:,.0f} of {duration:,.0f} simulated s ({released:,} "
-                                f"requests released, {closed:,} closed)")
-    return check
+            raise past()
+
+    if sys.platform == "win32" or threading.current_thread() is not threading.main_thread():
+        yield check
+        return
+
+    def alarm(signum, frame):
+        raise past()
+
+    previous = signal.signal(signal.SIGALRM, alarm)
+    signal.setitimer(signal.ITIMER_REAL, max(seconds, 1e-3))
+    try:
+        yield check
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0.0)
+        signal.signal(signal.SIGALRM, previous)
 
 
 def default_out(spec: RunSpec) -> Path:
@@ -394,11 +421,14 @@ def run_partition(spec: RunSpec, out: str | Path, time_limit: float | None = Non
     workers and Ray tasks execute (a top-level function: spawn-safe)."""
     out = Path(out)
     started = time.perf_counter()
-    progress = None if time_limit is None else _time_limited(time_limit)
     try:
-        result, files = _run_and_mark(spec, out, progress=progress)
-    except Exception as e:  # noqa: BLE001 - any failure of one run is recorded, not raised
-        seconds = time.perf_counter() - started
+        if time_limit is None:
+            result, files = _run_and_mark(spec, out)
+        else:
+            with _time_limit(time_limit) as progress:
+                result, files = _run_and_mark(spec, out, progress=progress)
+    except (Exception, PastTimeLimit) as e:  # noqa: BLE001 - any failure of one run is
+        seconds = time.perf_counter() - started  # recorded, not raised
         log.warning("%s failed: %s: %s", spec.run_id, type(e).__name__, e)
         tb = traceback.format_exc()
         record_failure(out, spec, type(e).__name__, str(e), tb, seconds)
@@ -485,8 +515,8 @@ def sweep(
     installed and ``out`` on a file system they share). ``force``: redo complete runs too.
     ``on_done`` is called in this process as each run finishes or is skipped.
     ``time_limit``: wall seconds a run may take; one past it stops and fails with
-    :class:`PastTimeLimit` (checked at each progress tick, every 1/500 of the simulated
-    duration). Returns the outcomes in the order of ``specs``.
+    :class:`PastTimeLimit` (a timer in the worker's main thread, else the next progress
+    tick, every 1/500 of the simulated duration). Returns the outcomes in the order of ``specs``.
     """
     out = Path(out).resolve()
     outcomes: dict[int, Outcome] = {}
