@@ -63,7 +63,10 @@ def write_markdown(rows: list[dict], path: Path, machine: dict, seconds: float) 
              "",
              f"Allocators: {', '.join(machine.get('allocators', [])) or '(baselines only)'}"
              + (f"; parameters {machine['params']}" if machine.get("params") else "")
-             + f"; suite {machine.get('which', 'all')}.",
+             + f"; suite {machine.get('which', 'all')}"
+             + (f", instances {', '.join(machine['only'])} only" if machine.get("only") else "")
+             + (f"; a run stopped after {machine['time_limit_s'] / 60:g} min of wall time"
+                if machine.get("time_limit_s") else "") + ".",
              f"Machine: {machine.get('cores')} cores ({machine.get('processor')}), "
              f"Python {machine.get('python')}, {machine.get('platform')}; load "
              f"{machine.get('load_1min_at_start', math.nan):.1f} at start; "

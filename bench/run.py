@@ -264,5 +264,5 @@ def run_bench(named: list[str], out: Path, *, suite: str = "all", quick: bool = 
     fill_gaps(rows)
     info.update(suite=VERSION, which=suite, quick=quick, allocators=list(named),
                 params=params or {}, workers=workers or os.cpu_count(), ray=ray,
-                time_limit_s=time_limit)
+                time_limit_s=time_limit, only=[i.name for i in chosen] if only else None)
     return BenchResult(rows, counts, time.perf_counter() - started, info)
