@@ -38,6 +38,9 @@ exclude_patterns = [
     # study outputs written by the benchmarks; their pages include them
     "nyc_study/*.md",
     "lookahead/README.md",
+    # the published bench boards (dispatch bench's bench.md), included by howto/bench_board.md
+    "howto/bench_board/*.md",
+    "howto/bench_board/variants/*.md",
 ]
 
 autodoc_member_order = "bysource"
