@@ -32,19 +32,29 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 
-def plain_estimates(task: Task, decided_at: float, cost: float) -> tuple[float, float, bool]:
-    """``(pickup_at, dropoff_at, pooled)`` of a vehicle without a plan: it reaches the pickup
+#: ``(pickup_at, dropoff_at, pooled, ready_at)``: the pickup's service start, the drop-off,
+#: whether the ride is shared, and when the rider is ready at the pickup (the release; a booked
+#: rider's departure, a walker's arrival at the meeting point)
+Estimates = tuple[float, float, bool, float]
+
+
+def _ready(task: Task, earliest: float) -> float:
+    return earliest if earliest > task.released_at else task.released_at
+
+
+def plain_estimates(task: Task, decided_at: float, cost: float) -> Estimates:
+    """:data:`Estimates` of a vehicle without a plan: it reaches the pickup
     ``cost`` seconds after the decision (a booked pickup no sooner than its departure: the
     vehicle waits there) and drives the direct route (0 s where it is unknown or the request
     has no drop-off); never pooled."""
     pickup = max(decided_at + cost, task.earliest_pickup)
     direct = task.direct_time
     ride = direct if task.dropoff is not None and direct == direct else 0.0
-    return pickup, pickup + ride, False
+    return pickup, pickup + ride, False, _ready(task, task.earliest_pickup)
 
 
-def insertion_estimates(task: Task, stops: list, load: int, at) -> tuple[float, float, bool]:
-    """``(pickup_at, dropoff_at, pooled)`` of an insertion ``at``
+def insertion_estimates(task: Task, stops: list, load: int, at) -> Estimates:
+    """:data:`Estimates` of an insertion ``at``
     (:class:`dispatch.insertion.Insertion`) into the plan ``stops`` of a vehicle with ``load``
     on board: its planned times (the pickup's service start: its arrival, or its earliest
     time where the vehicle arrives sooner), and whether another rider is on board at the pickup or
@@ -57,12 +67,11 @@ def insertion_estimates(task: Task, stops: list, load: int, at) -> tuple[float, 
     e = at.meeting.earliest if at.meeting is not None else task.earliest_pickup
     pickup = max(at.pickup_at, e)
     dropoff = at.dropoff_at if task.dropoff is not None else pickup
-    return pickup, dropoff, bool(pooled)
+    return pickup, dropoff, bool(pooled), _ready(task, e)
 
 
-def route_estimates(task: Task, rows: list, times: list[float], load: int
-                    ) -> tuple[float, float, bool]:
-    """``(pickup_at, dropoff_at, pooled)`` of ``task`` in a route (stop rows and planned
+def route_estimates(task: Task, rows: list, times: list[float], load: int) -> Estimates:
+    """:data:`Estimates` of ``task`` in a route (stop rows and planned
     arrival ``times``, :meth:`dispatch.operator.Operator.route_times`) of a vehicle with
     ``load`` on board (the pickup's service start, no sooner than its row's earliest time):
     pooled when more than its own riders are on board at any stop of the ride."""
@@ -78,7 +87,7 @@ def route_estimates(task: Task, rows: list, times: list[float], load: int
         if kp <= k < kd and on > task.passengers:
             pooled = True
     pickup = max(times[kp], rows[kp].earliest)  # (service waits for its earliest time)
-    return pickup, (times[kd] if kd != kp else pickup), pooled
+    return pickup, (times[kd] if kd != kp else pickup), pooled, _ready(task, rows[kp].earliest)
 
 
 class Offering:
@@ -113,17 +122,16 @@ class Offering:
         return self.pricing.fare(metres, direct, pooled)
 
     def offer(self, task: Task, vehicle_id: int, now: float,
-              estimates: tuple[float, float, bool]) -> bool:
-        """Make ``task``'s rider the offer of ``estimates`` (``(pickup_at, dropoff_at,
-        pooled)``) from vehicle ``vehicle_id``: True when accepted. A declined request is
+              estimates: Estimates) -> bool:
+        """Make ``task``'s rider the offer of ``estimates`` (:data:`Estimates`) from vehicle ``vehicle_id``: True when accepted. A declined request is
         closed ``declined`` once it has been offered ``retries + 1`` times; before that it
         stays open for a later decision."""
-        pickup_at, dropoff_at, pooled = estimates
+        pickup_at, dropoff_at, pooled, ready_at = estimates
         task.offers += 1
         fare = self.fare(task, pooled)
         task.fare = fare
         offer = Offer(task.view(), vehicle_id, now, task.released_at, pickup_at, dropoff_at,
-                      task.direct_time, fare, pooled, task.offers)
+                      task.direct_time, fare, pooled, task.offers, ready_at)
         try:
             yes = bool(self.acceptor.accept(offer, self.rng))
         except Exception as e:  # a plugin's bug: one line naming it and where

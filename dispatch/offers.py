@@ -48,7 +48,9 @@ class Offer:
     riders, limits), the vehicle's id, and the estimates of the plan the decision chose
     (simulated seconds).
 
-    ``wait``: pickup estimate minus the request's release; ``ivt``: in-vehicle seconds
+    ``wait``: pickup estimate minus when the rider is ready at the pickup (``ready_at``: the
+    release; a booked rider's departure; a walker's arrival at the meeting point, so that the
+    walk is not counted as waiting; nan: the release); ``ivt``: in-vehicle seconds
     (drop-off estimate minus pickup estimate; 0 for a request without a drop-off);
     ``direct``: the free-flow direct drive (nan where unknown); ``detour``: ``ivt - direct``
     (0 where the direct drive is unknown); ``fare``: the price (nan without ``[pricing]``);
@@ -65,10 +67,12 @@ class Offer:
     fare: float
     pooled: bool
     attempt: int
+    ready_at: float = math.nan
 
     @property
     def wait(self) -> float:
-        return self.pickup_at - self.released_at
+        ready = self.ready_at if self.ready_at == self.ready_at else self.released_at
+        return self.pickup_at - ready
 
     @property
     def ivt(self) -> float:
