@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from dispatch.check_common import Report, constructed, describe_error, perturb_global_rng, replay
+from dispatch.check_common import Report, add_replayed, constructed, first_answer
 from dispatch.offers import Offer
 from dispatch.problem import TaskView
 
@@ -45,11 +45,8 @@ def check_acceptor(cls, *, seed: int = 0, **params: Any) -> Report:
         rng = np.random.default_rng(seed)
         return [a.accept(o, rng) for o in offers]
 
-    try:
-        perturb_global_rng(1)
-        first = answers()
-    except Exception as e:  # noqa: BLE001 - any exception is a failure of the plugin
-        report.add("valid", [f"accept raised {describe_error(e)}"], "")
+    ok, first = first_answer(report, answers, "accept")
+    if not ok:
         return report
     bad = [f"offer {k + 1}: answered {a!r}, not a bool" for k, a in enumerate(first)
            if not isinstance(a, (bool, np.bool_))]
@@ -58,9 +55,6 @@ def check_acceptor(cls, *, seed: int = 0, **params: Any) -> Report:
         [f"declares declines = False but declined offer {first.index(False) + 1}"]
     report.add("declines", never, "declines offers" if caps.declines else
                "accepts every offer, as it declares")
-    differs, global_rng = [], []
-    replay("offers", lambda: [bool(a) for a in answers()], [bool(a) for a in first], differs,
-           global_rng, given="offers and seed")
-    report.add("deterministic", differs, "same offers and seed, same answers")
-    report.add("rng", global_rng, "answers do not depend on the global random state")
+    add_replayed(report, lambda: [bool(a) for a in answers()], [bool(a) for a in first],
+                 "offers and seed", "answers")
     return report

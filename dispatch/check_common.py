@@ -152,6 +152,27 @@ def replay(label: str, call: Callable[[], Any], first: Any, differs: list[str],
                           f"generator it is given")
 
 
+def first_answer(report: Report, call: Callable[[], Any], what: str) -> tuple[bool, Any]:
+    """``(True, call())`` under a fixed global random state; ``(False, None)`` when it raised,
+    with the failed "valid" check saying ``what`` raised what."""
+    try:
+        perturb_global_rng(1)
+        return True, call()
+    except Exception as e:  # noqa: BLE001 - any exception is a failure of the plugin
+        report.add("valid", [f"{what} raised {describe_error(e)}"], "")
+        return False, None
+
+
+def add_replayed(report: Report, call: Callable[[], Any], first: Any, given: str,
+                 answers: str) -> None:
+    """The "deterministic" and "rng" checks of :func:`replay` on one input (``given``: what
+    the plugin is given; ``answers``: what it answers), added to ``report``."""
+    differs, global_rng = [], []
+    replay(given, call, first, differs, global_rng, given=given)
+    report.add("deterministic", differs, f"same {given}, same {answers}")
+    report.add("rng", global_rng, f"{answers} do not depend on the global random state")
+
+
 def same_snapshot(a: tuple, b: tuple) -> bool:
     for x, y in zip(a, b):
         if isinstance(x, np.ndarray):

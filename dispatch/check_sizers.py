@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from dispatch.check_common import Report, constructed, describe_error, perturb_global_rng, replay
+from dispatch.check_common import Report, add_replayed, constructed, first_answer
 from dispatch.sizing import SizingView
 
 #: (label, on_duty, busy, pool, utilization, unserved)
@@ -40,11 +40,8 @@ def check_sizer(cls, *, seed: int = 0, **params: Any) -> Report:
             out.append((s.initial(view), s.size(view)))
         return out
 
-    try:
-        perturb_global_rng(1)
-        first = answers()
-    except Exception as e:  # noqa: BLE001 - any exception is a failure of the plugin
-        report.add("valid", [f"initial or size raised {describe_error(e)}"], "")
+    ok, first = first_answer(report, answers, "initial or size")
+    if not ok:
         return report
     bad = []
     for (label, on, _, pool, _, _), pair in zip(VIEWS, first):
@@ -53,10 +50,6 @@ def check_sizer(cls, *, seed: int = 0, **params: Any) -> Report:
                     or not 0 <= n <= on + pool:
                 bad.append(f"{label}: {what} answered {n!r}, not an int from 0 to {on + pool}")
     report.add("valid", bad, f"{len(VIEWS)} views, initial and size within the fleet")
-    differs, global_rng = [], []
-    replay("views", lambda: [tuple(int(x) for x in p) for p in answers()],
-           [tuple(int(x) for x in p) for p in first], differs, global_rng,
-           given="views and seed")
-    report.add("deterministic", differs, "same views and seed, same sizes")
-    report.add("rng", global_rng, "sizes do not depend on the global random state")
+    add_replayed(report, lambda: [tuple(int(x) for x in p) for p in answers()],
+                 [tuple(int(x) for x in p) for p in first], "views and seed", "sizes")
     return report
