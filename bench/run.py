@@ -66,19 +66,16 @@ def check_allocators(named: list[str], params: dict[str, Any] | None = None) -> 
     """BenchError naming the first allocator that is not installed, or a named variant
     (``magnnet:paper``) its plugin does not declare, unless ``params`` (``--param``) make it
     (they set its ``variant``)."""
-    from dispatch.registry import available, base_name, declaration
+    from dispatch.registry import available, base_name, undeclared_variant
 
     have = available("allocator")
     for name in named:
         if base_name(name) not in have:
             raise BenchError(f"unknown allocator {name!r}; installed: {', '.join(sorted(have))}")
-        base, _, variant = name.partition(":")
-        declared = declaration("allocator", base).variants
-        if variant and variant not in declared and "variant" not in (params or {}):
-            raise BenchError(f"allocator {name!r}: {base!r} declares "
-                             + (f"the variants {', '.join(declared)}" if declared else
-                                "no variants")
-                             + "; name one of them, or make this one with --param KEY=VALUE")
+        why = undeclared_variant(name)
+        if why is not None and "variant" not in (params or {}):
+            raise BenchError(f"allocator {name!r}: {why}; name one of them, or make this one "
+                             "with --param KEY=VALUE")
 
 
 def parse_params(items: list[str]) -> dict[str, Any]:

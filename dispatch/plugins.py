@@ -37,9 +37,8 @@ def variant_params(name: str, params) -> tuple[tuple[str, Any], ...]:
     whose plugin declares ``variant`` (:attr:`dispatch.contracts.Allocator.variants`)
     ``variant = "<variant>"`` unless ``params`` set it."""
     params = tuple(dict(params).items())
-    base, _, variant = name.partition(":")
-    if variant and variant in registry.declaration("allocator", base).variants \
-            and "variant" not in dict(params):
+    variant = name.partition(":")[2]
+    if variant and registry.undeclared_variant(name) is None and "variant" not in dict(params):
         params = (*params, ("variant", variant))
     return params
 
@@ -48,15 +47,11 @@ def check_variant(sc: Scenario, name: str, key: str = "dispatch.allocator") -> N
     """ScenarioError unless a named variant ``base:variant`` means something: its plugin
     declares the variant, or the scenario has its table
     (``[dispatch.allocator_params."base:variant"]``). Plain names pass."""
-    base, _, variant = name.partition(":")
-    if not variant or variant in registry.declaration("allocator", base).variants \
-            or name in dict(sc.dispatch.allocator_tables):
+    why = registry.undeclared_variant(name)
+    if why is None or name in dict(sc.dispatch.allocator_tables):
         return
-    declared = registry.declaration("allocator", base).variants
-    raise ScenarioError(sc.path, key, f"allocator {name!r}: {base!r} declares "
-                        + (f"the variants {', '.join(declared)}" if declared else "no variants")
-                        + f", and the scenario has no [dispatch.allocator_params.\"{name}\"] "
-                          "table to make one")
+    raise ScenarioError(sc.path, key, f"allocator {name!r}: {why}, and the scenario has no "
+                                      f"[dispatch.allocator_params.\"{name}\"] table to make one")
 
 
 def _construct(kind: str, name: str, params, args, key: str):

@@ -122,6 +122,21 @@ def base_name(name: str) -> str:
     return name.partition(":")[0]
 
 
+def undeclared_variant(name: str) -> str | None:
+    """None when the allocator name ``name`` is plain or a variant its plugin declares (it runs
+    by name, :attr:`dispatch.contracts.Allocator.variants`); else what the plugin does declare,
+    in words for an error (``'magnnet' declares the variants match, paper, …``, ``'hungarian'
+    declares no variants``): such a variant needs its own parameter table."""
+    base, _, variant = name.partition(":")
+    if not variant:
+        return None
+    declared = declaration("allocator", base).variants
+    if variant in declared:
+        return None
+    return f"{base!r} declares " + (f"the variants {', '.join(declared)}" if declared else
+                                    "no variants")
+
+
 def unknown(kind: str, name: str) -> str:
     """``unknown allocator 'hungrian' (did you mean 'hungarian'?); installed allocators: ...``"""
     plugins = available(kind)

@@ -298,15 +298,12 @@ def parse_allocators(d: Table, s: Table, disp: DispatchConfig,
     for tab, names in ((d, (disp.allocator,)), (s, sweep.allocator)):
         for name in names:
             known(tab, "allocator", name)
-            base, _, variant = name.partition(":")
-            if variant and name not in dict(tables) \
-                    and variant not in registry.declaration("allocator", base).variants:
-                declared = registry.declaration("allocator", base).variants
-                raise tab.fail("allocator", f"{name!r} names a variant of {base!r} without "
-                                            f"parameters: add a [dispatch.allocator_params."
-                                            f"\"{name}\"] table"
-                                            + (f" (or name one it declares: "
-                                               f"{', '.join(declared)})" if declared else ""))
+            why = None if name in dict(tables) else registry.undeclared_variant(name)
+            if why is not None:
+                raise tab.fail("allocator", f"{name!r} names a variant of "
+                                            f"{name.partition(':')[0]!r} without parameters: "
+                                            f"add a [dispatch.allocator_params.\"{name}\"] "
+                                            f"table ({why})")
     return replace(disp, allocator_params=tuple(flat), allocator_tables=tuple(tables))
 
 
