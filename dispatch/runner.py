@@ -34,10 +34,8 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
-import math
 import os
 import signal
-import sys
 import tempfile
 import threading
 import time
@@ -56,6 +54,7 @@ from dispatch import __version__
 from dispatch.recorder import SCHEMAS, Recorder, json_meta, partition_path, write_atomic
 from dispatch.runkeys import RUN_KEYS, key_names, point_settings
 from dispatch.config import RunSpec
+from dispatch.time_limit import PastTimeLimit, time_limit_of
 
 log = logging.getLogger(__name__)
 
@@ -153,50 +152,6 @@ def run_one(spec: RunSpec, out: Path | None = None, *,
     result = RunResult(spec, summary, Path(out), files)
     result._tmp = tmp  # a TemporaryDirectory removes its folder when garbage collected
     return result
-
-
-class PastTimeLimit(BaseException):
-    """A run of a sweep stopped at its wall-clock limit (``sweep(time_limit=...)``); its
-    failure row in the errors table has this type and the seconds it ran. A BaseException,
-    as KeyboardInterrupt is: the timer may fire inside a plugin, whose ``except Exception``
-    must not turn it into an error of its own."""
-
-
-@contextmanager
-def _time_limit(seconds: float) -> Iterator[Callable[[float, float, int, int], None]]:
-    """While in the block, a run stops with :class:`PastTimeLimit` once ``seconds`` of wall
-    time have passed: by ``SIGALRM`` in whatever it is doing (in the main thread, on POSIX:
-    one decision may take minutes), else at its next progress tick. Yields the progress
-    callback (:class:`dispatch.sim.Simulation`'s, called every ``duration / PROGRESS_TICKS``
-    simulated seconds), which also keeps where the run was for the message."""
-    started = time.perf_counter()
-    at = [math.nan, math.nan, 0, 0]  # simulated time, duration, released, closed
-
-    def past() -> PastTimeLimit:
-        now, duration, released, closed = at
-        where = (f" at {now:,.0f} of {duration:,.0f} simulated s ({released:,} requests "
-                 f"released, {closed:,} closed)" if now == now else "")
-        return PastTimeLimit(f"past its limit of {seconds:.0f} s of wall time{where}")
-
-    def check(now: float, duration: float, released: int, closed: int) -> None:
-        at[:] = [now, duration, released, closed]
-        if time.perf_counter() - started > seconds:
-            raise past()
-
-    if sys.platform == "win32" or threading.current_thread() is not threading.main_thread():
-        yield check
-        return
-
-    def alarm(signum, frame):
-        raise past()
-
-    previous = signal.signal(signal.SIGALRM, alarm)
-    signal.setitimer(signal.ITIMER_REAL, max(seconds, 1e-3))
-    try:
-        yield check
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0.0)
-        signal.signal(signal.SIGALRM, previous)
 
 
 def default_out(spec: RunSpec) -> Path:
@@ -417,7 +372,7 @@ def _run_and_mark(spec: RunSpec, out: Path, flush_rows: int = DEFAULT_FLUSH_ROWS
 def run_partition(spec: RunSpec, out: str | Path, time_limit: float | None = None) -> Outcome:
     """Run one spec of a sweep into its partition of ``out`` and mark it complete; an
     exception is recorded in the errors table and returned as a failed :class:`Outcome`
-    (a run past ``time_limit`` wall seconds: :class:`PastTimeLimit`). This is what pool
+    (a run past ``time_limit`` wall seconds: :class:`dispatch.time_limit.PastTimeLimit`). This is what pool
     workers and Ray tasks execute (a top-level function: spawn-safe)."""
     out = Path(out)
     started = time.perf_counter()
@@ -425,7 +380,7 @@ def run_partition(spec: RunSpec, out: str | Path, time_limit: float | None = Non
         if time_limit is None:
             result, files = _run_and_mark(spec, out)
         else:
-            with _time_limit(time_limit) as progress:
+            with time_limit_of(time_limit) as progress:
                 result, files = _run_and_mark(spec, out, progress=progress)
     except (Exception, PastTimeLimit) as e:  # noqa: BLE001 - any failure of one run is
         seconds = time.perf_counter() - started  # recorded, not raised
@@ -515,7 +470,7 @@ def sweep(
     installed and ``out`` on a file system they share). ``force``: redo complete runs too.
     ``on_done`` is called in this process as each run finishes or is skipped.
     ``time_limit``: wall seconds a run may take; one past it stops and fails with
-    :class:`PastTimeLimit` (a timer in the worker's main thread, else the next progress
+    :class:`dispatch.time_limit.PastTimeLimit` (a timer in the worker's main thread, else the next progress
     tick, every 1/500 of the simulated duration). Returns the outcomes in the order of ``specs``.
     """
     out = Path(out).resolve()
