@@ -80,7 +80,8 @@ from dispatch.decision import Pipeline
 from dispatch.tally import Blame, Tally, one_line
 from dispatch.errors import AllocationError, DispatchError, PluginError
 from dispatch.heap import keep_large_blocks
-from dispatch.offering import Offering, insertion_estimates, plain_estimates, route_estimates
+from dispatch.offering import (Estimates, Offering, insertion_estimates, plain_estimates,
+                               route_estimates)
 from dispatch.plans import Inserts
 from dispatch.problem import Allocation, AllocationProblem
 from dispatch.stops import DROPOFF, PICKUP, PlannedStop
@@ -408,8 +409,7 @@ class Dispatcher:
                 routes[aid] = (rows, times)
         return tuple(kept), routes
 
-    def _set_out_estimates(self, v, task, decided: float, cost: float
-                           ) -> tuple[float, float, bool]:
+    def _set_out_estimates(self, v, task, decided: float, cost: float) -> Estimates:
         """Estimates of ``v`` driving ``task``'s stops from where it is now (the operator's
         route times, no limit; a booked pickup waits for its departure, as the plan will), or
         from the decision's cost where those cannot be had."""
