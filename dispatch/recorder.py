@@ -397,13 +397,19 @@ class ConstantColumn(tuple):
         return out
 
 
+#: Python values a float (int) column is built from as numbers: numpy's doubles (int64s) are
+#: those numbers exactly, as ``pa.array`` converts them
+_FLOATS, _INTS = {float, np.float64}, {int, np.int64}
+
+
 def arrow_column(values, typ: pa.DataType) -> pa.Array:
     """``values`` (a sequence of Python scalars) as an Arrow array of type ``typ``: the same
-    array as ``pa.array(values, typ)``. Columns of plain floats, ints, bools or strings are
-    built from numpy buffers: several times faster, and without ``pa.array``'s import of pandas
-    (about half a second the first time, inside a run). Anything else (None, numpy scalars,
-    ints in a float column, values out of range) goes through ``pa.array``, which converts or
-    rejects it as it always did."""
+    array as ``pa.array(values, typ)``. Columns of plain floats (numpy doubles among them),
+    ints (numpy int64s among them), bools or strings are built from numpy buffers: several
+    times faster, and without ``pa.array``'s import of pandas (about half a second the first
+    time, inside a run). Anything else (None, other numpy scalars, ints in a float column,
+    values out of range) goes through ``pa.array``, which converts or rejects it as it always
+    did."""
     n = len(values)
     if isinstance(values, np.ndarray) and values.ndim == 1 and (
             (typ == _F and values.dtype == np.float64) or (typ == _I and values.dtype == np.int64)):
@@ -416,9 +422,9 @@ def arrow_column(values, typ: pa.DataType) -> pa.Array:
                                                pa.py_buffer(one * n))
     kinds = set(map(type, values))
     try:
-        if typ == _F and kinds <= {float}:
+        if typ == _F and kinds <= _FLOATS:
             buf = np.fromiter(values, np.float64, n)
-        elif typ == _I and kinds <= {int}:
+        elif typ == _I and kinds <= _INTS:
             buf = np.fromiter(values, np.int64, n)
         elif typ == _B and kinds <= {bool}:
             buf = np.packbits(np.fromiter(values, np.bool_, n), bitorder="little")

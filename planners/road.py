@@ -426,11 +426,11 @@ class RoadPlanner(Planner):
         index = self._index
         # only the smaller side is made distinct (the other may be a whole fleet's stops)
         if not pairwise and node.size < tnode.size:
-            snodes, sinv = np.unique(node, return_inverse=True)
+            snodes, sinv = _distinct(node)
             fwd = self._forward(snodes)  # (distinct sources, n)
             at = tnode if index is None else index[tnode]
             return fwd[sinv][:, at] + rem[:, None]
-        tnodes, tinv = np.unique(tnode, return_inverse=True)
+        tnodes, tinv = _distinct(tnode)
         fields = [self._to(n) for n in tnodes.tolist()]
         at = node if index is None else index[node]
         if pairwise:
@@ -567,6 +567,17 @@ class RoadPlanner(Planner):
             field = self._fields.pop(node, None)
             if field is not None:
                 self._retire(node, field)
+
+
+def _distinct(nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.unique(nodes, return_inverse=True)``; a few nodes (a decision's new requests)
+    without numpy's sort, whose fixed cost is most of the work at that size."""
+    if nodes.size > 16:
+        return np.unique(nodes, return_inverse=True)
+    values = nodes.tolist()
+    distinct = sorted(set(values))
+    at = {x: k for k, x in enumerate(distinct)}
+    return np.array(distinct, dtype=np.int64), np.array([at[x] for x in values], dtype=np.int64)
 
 
 def _loc_arrays(locs: Sequence[Any]) -> tuple[np.ndarray, np.ndarray]:

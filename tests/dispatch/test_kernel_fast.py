@@ -83,6 +83,10 @@ def test_recorder_columns_equal_pa_array():
         ((1, 2.5), pa.float64()),  # an int in a float column: pa.array's conversion
         ((None, 1.0), pa.float64()),  # a null
         ((np.float64(2.0), 1.0), pa.float64()),
+        ((np.float64(-0.0), np.float64(nan), 3.0), pa.float64()),
+        ((np.int64(-2**63), 7, np.int64(5)), pa.int64()),
+        ((np.int32(4), 1), pa.int64()),
+        ((np.float32(0.1), 1.0), pa.float64()),
         ((True, 1), pa.int64()),
     ]
     for values, typ in cases:

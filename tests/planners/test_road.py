@@ -372,3 +372,17 @@ def test_between_equals_scipy_in_every_form():
     diag = np.diag(expect)
     assert np.allclose(p.between(src, tgt, pairwise=True), diag, atol=1e-9)
     assert np.allclose(p.between(src[:4], tgt[:4], pairwise=True), diag[:4], atol=1e-9)
+
+
+def test_distinct_nodes_are_numpys_unique():
+    """The road planner's small-array ``np.unique`` (a decision's few new requests) answers as
+    numpy's does, sizes on both sides of its cut-over."""
+    from planners.road import _distinct
+
+    rng = np.random.default_rng(3)
+    for n in (0, 1, 2, 7, 16, 17, 200):
+        nodes = rng.integers(0, 9, n).astype(np.int64)
+        got, want = _distinct(nodes), np.unique(nodes, return_inverse=True)
+        for g, w in zip(got, want):
+            assert g.dtype == w.dtype and g.shape == w.shape
+            np.testing.assert_array_equal(g, w)
