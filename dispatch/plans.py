@@ -234,8 +234,8 @@ def insertion_costs_of(cost: np.ndarray, slots: np.ndarray, tasks: list, now: fl
     if not busy.size:
         return out, {}
     ready = np.maximum(fleet.free_at[slots[busy]], now)
-    rows, cols = np.nonzero((ready[:, None] + cost[busy] <= lp + 1e-9)
-                            & (n_req <= cap[busy, None]))
+    rows, cols = ((ready[:, None] + cost[busy] <= lp + 1e-9)
+                  & (n_req <= cap[busy, None])).nonzero()
     if not rows.size:
         return out, {}
     # the busy vehicles' plans, flat (rows come sorted: np.nonzero is row-major); requests

@@ -294,9 +294,11 @@ class RoadNetwork(Space):
                 arr = arr.reshape(-1)
             if arr.size and int(arr[0]) == node:
                 times, metres, ok = sums(*self._leg_csr, arr, rem, rem_m)
-                if ok:  # Leg(arr, times, metres, prev), without a frozen __init__
+                if ok:  # Leg(arr, times, metres, prev), without a frozen __init__ (and its
+                    # cached seconds and metres set, as the operator reads them at once)
                     leg = object.__new__(Leg)
-                    leg.__dict__.update(nodes=arr, times=times, metres=metres, prev=prev)
+                    leg.__dict__.update(nodes=arr, times=times, metres=metres, prev=prev,
+                                        seconds=float(times[-1]), length=float(metres[-1]))
                     return leg
             nodes = arr  # not a path from the start: the checks below say why
         p = _as_point(start)

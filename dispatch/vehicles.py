@@ -276,6 +276,8 @@ class Fleet:
 
 _NO_POINTS = np.zeros(0, dtype=np.int64)
 _NO_POINTS.setflags(write=False)
+_ZERO = np.zeros(1)  # (np.r_'s result, without its index-trick machinery)
+_ZERO.setflags(write=False)
 
 
 # ----------------------------------------------------------------------------- drivers
@@ -286,6 +288,7 @@ def stop_leg(v: Vehicle, now: float) -> None:
     (with the passengers on board) and it stands where it got (a node, or a road point
     part-way along an edge)."""
     leg, t = v.leg, now - v.leg_start
-    v.drove(float(np.interp(t, np.r_[0.0, leg.times], np.r_[0.0, leg.metres])), t)
+    v.drove(float(np.interp(t, np.concatenate((_ZERO, leg.times)),
+                            np.concatenate((_ZERO, leg.metres)))), t)
     point = leg.point_at(t)
     v.loc, v.leg = (point.node if point.on_node else point), None

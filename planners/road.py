@@ -572,7 +572,7 @@ class RoadPlanner(Planner):
 def _distinct(nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``np.unique(nodes, return_inverse=True)``; a few nodes (a decision's new requests)
     without numpy's sort, whose fixed cost is most of the work at that size."""
-    if nodes.size > 16:
+    if nodes.size > 64:
         return np.unique(nodes, return_inverse=True)
     values = nodes.tolist()
     distinct = sorted(set(values))

@@ -380,7 +380,7 @@ def test_distinct_nodes_are_numpys_unique():
     from planners.road import _distinct
 
     rng = np.random.default_rng(3)
-    for n in (0, 1, 2, 7, 16, 17, 200):
+    for n in (0, 1, 2, 7, 64, 65, 200):
         nodes = rng.integers(0, 9, n).astype(np.int64)
         got, want = _distinct(nodes), np.unique(nodes, return_inverse=True)
         for g, w in zip(got, want):
