@@ -129,6 +129,8 @@ class PlanTable:
 
     def __init__(self, n: int, width: int = 8) -> None:
         self._src: list = [None] * n  # the plan_arrays tuple each row was written from
+        #: the vehicle's ``plan_version`` when its row was last checked (-1: never)
+        self._checked = np.full(n, -1, dtype=np.int64)
         self.length = np.zeros(n, dtype=np.int64)
         #: every stop written so far lies on a node (an integer): ``nodes`` holds them
         self.on_nodes = True
@@ -164,20 +166,30 @@ class PlanTable:
         self.length[k] = n
         self._src[k] = arrays
 
-    def gather(self, vehicles: list, slots: list[int], plan_of):
+    def gather(self, fleet: Fleet, slots: np.ndarray, plan_of, now: float):
         """``(off, arrival, service, latest, occupancy, locations, earliest, load)`` of the
         vehicles at fleet positions ``slots`` (``plan_of``: ``Operator.plan_arrays``), flat as
         :func:`dispatch.insertion.insertion_costs` takes them: vehicle ``i``'s stops are
         ``off[i]:off[i + 1]``; the locations an int64 array of nodes where every stop is on a
-        node, else a list; ``load`` on board now, per vehicle."""
-        src, write = self._src, self._write
-        vs = [vehicles[k] for k in slots]
-        for k, got in zip(slots, [plan_of(v) for v in vs]):
-            if got is not src[k]:
-                write(k, got)
-        load = [v.load for v in vs]
-        idx = np.array(slots, dtype=np.int64)
-        lens = self.length[idx]
+        node, else a list; ``load`` on board now, per vehicle.
+
+        ``plan_of`` is asked only for the vehicles whose plan arrays may differ from their
+        row's: a ``plan_version`` since the row was checked, or standing (no stop headed for,
+        no service running: its plan's times start at ``now``), as ``plan_of``'s own cache
+        key says; the others' rows are read as they are."""
+        src, write, checked = self._src, self._write, self._checked
+        idx = np.asarray(slots, dtype=np.int64)
+        version = fleet.plan_version.take(idx)
+        ask = (checked.take(idx) != version) \
+            | (fleet.heading_none.take(idx) & (fleet.free_at.take(idx) <= now))
+        if ask.any():
+            vehicles = fleet.vehicles
+            for k in idx[ask].tolist():
+                got = plan_of(vehicles[k])
+                if got is not src[k]:
+                    write(k, got)
+            checked[idx[ask]] = version[ask]
+        lens = self.length.take(idx)
         off = np.zeros(idx.size + 1, dtype=np.int64)
         np.cumsum(lens, out=off[1:])
         # each stop's place in the (row-major) tables: one ``take`` per field
@@ -186,8 +198,8 @@ class PlanTable:
         if self.on_nodes:
             locs = node
         else:
-            locs = [x for k in slots for x in src[k][4]]
-        return off, arr, svc, lat, oc, locs, ear, np.array(load, dtype=np.int64)
+            locs = [x for k in idx.tolist() for x in src[k][4]]
+        return off, arr, svc, lat, oc, locs, ear, fleet.load.take(idx)
 
 
 def insertion_costs_of(cost: np.ndarray, slots: np.ndarray, tasks: list, now: float,
@@ -246,7 +258,7 @@ def insertion_costs_of(cost: np.ndarray, slots: np.ndarray, tasks: list, now: fl
     used = rows[first]
     row_of = np.cumsum(first) - 1  # each pair's vehicle among ``used``
     off, s_arr, s_svc, s_latest, s_occ, locs, s_e, load = table.gather(
-        fleet.vehicles, slots[busy[used]].tolist(), operator.plan_arrays)
+        fleet, slots[busy[used]], operator.plan_arrays, now)
     seen = np.zeros(m, dtype=bool)
     seen[cols] = True
     ucols = np.flatnonzero(seen)

@@ -43,7 +43,6 @@ class Vehicle:
     #: the plan: stops still to make, in order (see :mod:`dispatch.stops`); the vehicle's
     #: process drives it, decisions insert into it, breakdowns and re-assignments remove from it
     stops: list = field(default_factory=list, repr=False)
-    load: int = 0  # passengers on board
     distance: float = 0.0  # metres travelled
     empty_distance: float = 0.0  # ... without a passenger (to pickups, repositioning)
     occupied_distance: float = 0.0  # ... with one or more on board
@@ -51,9 +50,6 @@ class Vehicle:
     #: in service at a stop until then (the stop's task completes at that time)
     free_at: float = -math.inf
     serving: Task | None = field(default=None, repr=False)  # ... that task
-    #: the stop its current drive goes to (None: standing, serving or idle)
-    heading: Any = field(default=None, repr=False)
-    plan_version: int = 0  # bumped at every change of the plan or of the drive along it
     plan_cache: Any = field(default=None, repr=False)  # (key, arrays) of Operator.plan_arrays
     busy_seconds: float = 0.0
     busy_since: float = 0.0
@@ -78,6 +74,11 @@ class Vehicle:
     _leg: Leg | None = field(default=None, init=False, repr=False)
     _fleet: Fleet | None = field(default=None, init=False, repr=False)
     _slot: int = field(default=-1, init=False, repr=False)
+    # ``load``, ``heading`` and ``plan_version`` too: a decision reads them as the fleet's
+    # arrays (dispatch.plans.PlanTable), without a Python step per vehicle
+    _load: int = field(default=0, init=False, repr=False)
+    _heading: Any = field(default=None, init=False, repr=False)
+    _plan_version: int = field(default=0, init=False, repr=False)
 
     def __post_init__(self) -> None:
         self._loc = self.start
@@ -107,6 +108,40 @@ class Vehicle:
             i = self._slot
             fleet.driving[i] = value is not None
             fleet.driving_or_off_node[i] = value is not None or fleet._off_node[i]
+            fleet.leg_version[i] += 1
+
+    @property
+    def load(self) -> int:
+        """Passengers on board."""
+        return self._load
+
+    @load.setter
+    def load(self, value: int) -> None:
+        self._load = value
+        if self._fleet is not None:
+            self._fleet.load[self._slot] = value
+
+    @property
+    def heading(self) -> Any:
+        """The stop its current drive goes to (None: standing, serving or idle)."""
+        return self._heading
+
+    @heading.setter
+    def heading(self, value: Any) -> None:
+        self._heading = value
+        if self._fleet is not None:
+            self._fleet.heading_none[self._slot] = value is None
+
+    @property
+    def plan_version(self) -> int:
+        """Bumped at every change of the plan or of the drive along it."""
+        return self._plan_version
+
+    @plan_version.setter
+    def plan_version(self, value: int) -> None:
+        self._plan_version = value
+        if self._fleet is not None:
+            self._fleet.plan_version[self._slot] = value
 
     @property
     def cell(self):
@@ -192,7 +227,14 @@ class Fleet:
         self.driving_or_off_node = np.zeros(n, dtype=bool)
         self._off_node = [False] * n  # off_node, as Python bools (read by the leg setter)
         self._stands = space.stands
-        self.legs = LegTable(n)  # the driving vehicles' legs as arrays (dispatch.leg_table)
+        #: bumped at every leg set (the leg setter): which rows of ``legs`` are stale
+        self.leg_version = np.zeros(n, dtype=np.int64)
+        self.legs = LegTable(n, self.driving, self.leg_version)  # (dispatch.leg_table)
+        #: each vehicle's ``load``, ``heading is None`` and ``plan_version``, kept by their
+        #: setters (dispatch.plans.PlanTable reads them)
+        self.load = np.fromiter((v.load for v in self.vehicles), np.int64, n)
+        self.heading_none = np.fromiter((v.heading is None for v in self.vehicles), bool, n)
+        self.plan_version = np.fromiter((v.plan_version for v in self.vehicles), np.int64, n)
         #: the node arrays hold (the space has nodes)
         self.road = n > 0 and all(space.stands(v.loc) is not None for v in self.vehicles)
         for i, v in enumerate(self.vehicles):
@@ -249,7 +291,7 @@ class Fleet:
             return AgentViews(ids, make, node, np.zeros(idx.size), _NO_POINTS, ascending)
         rem = self.remaining.take(idx)
         # driving (a leg: where is it now?) or stopped part-way along an edge
-        points = self.legs.where(vs, idx, looked.nonzero()[0].tolist(), node, rem, now,
+        points = self.legs.where(vs, idx, looked.nonzero()[0], node, rem, now,
                                  self._stands)
         return AgentViews(ids, make, node, rem, points, ascending)
 

@@ -28,17 +28,22 @@ def _leg(rng) -> Leg:
 def test_where_equals_next_at_leg_by_leg():
     rng = np.random.default_rng(3)
     fleet = 30
-    table = LegTable(fleet, width=4)  # legs outgrow it
     vehicles = [_Vehicle(_leg(rng), float(rng.integers(0, 100))) for _ in range(fleet)]
+    # what the fleet keeps for the table (the vehicle's leg setter): driving, leg versions
+    driving = np.ones(fleet, dtype=bool)
+    version = np.zeros(fleet, dtype=np.int64)
+    table = LegTable(fleet, driving, version, width=4)  # legs outgrow it
 
     def stands(loc):  # stopped off a node: a stand-in answer of the space
         return loc, 2.5, True
 
     for decision in range(300):
-        for v in vehicles:
+        for i, v in enumerate(vehicles):
             if rng.random() < 0.2:  # a new leg (or a stop part-way along an edge)
                 v._leg = None if rng.random() < 0.2 else _leg(rng)
                 v.leg_start, v.loc = float(rng.integers(0, 100)), int(rng.integers(0, 400))
+                driving[i] = v._leg is not None
+                version[i] += 1
         now = float(rng.integers(0, 400)) + float(rng.choice([0.0, 0.5, 0.25]))
         idx = np.sort(rng.choice(fleet, size=int(rng.integers(1, fleet)), replace=False))
         looked = sorted(rng.choice(idx.size, size=int(rng.integers(0, idx.size + 1)),
