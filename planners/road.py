@@ -429,18 +429,19 @@ class RoadPlanner(Planner):
             snodes, sinv = _distinct(node)
             fwd = self._forward(snodes)  # (distinct sources, n)
             at = tnode if index is None else index[tnode]
-            return fwd[sinv][:, at] + rem[:, None]
+            out = fwd[sinv][:, at]
+            return out if rem is None else out + rem[:, None]
         tnodes, tinv = _distinct(tnode)
         fields = [self._to(n) for n in tnodes.tolist()]
         at = node if index is None else index[node]
         if pairwise:
             out = np.fromiter((fields[k][a] for k, a in zip(tinv.tolist(), at.tolist())),
                               np.float64, tnode.size)
-            return out + rem
+            return out if rem is None else out + rem
         out = np.empty((node.size, tnode.size))
         for p, k in enumerate(tinv.tolist()):
             out[:, p] = fields[k][at]
-        return out + rem[:, None]
+        return out if rem is None else out + rem[:, None]
 
     def _to(self, n: int) -> np.ndarray:
         """The field of seconds to node ``n``: an open task's, a kept one, or a new one (kept)."""
@@ -580,10 +581,13 @@ def _distinct(nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.array(distinct, dtype=np.int64), np.array([at[x] for x in values], dtype=np.int64)
 
 
-def _loc_arrays(locs: Sequence[Any]) -> tuple[np.ndarray, np.ndarray]:
-    """``(node, remaining seconds)`` of locations (node ints or road points)."""
+def _loc_arrays(locs: Sequence[Any]) -> tuple[np.ndarray, np.ndarray | None]:
+    """``(node, remaining seconds)`` of locations (node ints or road points); the seconds
+    None where every location is a node (nothing left to drive first: nothing to add)."""
+    if isinstance(locs, np.ndarray) and locs.dtype.kind in "iu":  # a plan table's nodes
+        return locs.astype(np.int64, copy=False).reshape(-1), None
     try:  # nodes only (a plan's stops): nothing to unpack
-        return np.array(locs, dtype=np.int64), np.zeros(len(locs))
+        return np.array(locs, dtype=np.int64), None
     except TypeError:  # road points among them
         pass
     node = np.empty(len(locs), dtype=np.int64)
@@ -602,4 +606,5 @@ def _agent_arrays(agents: Sequence[Any]) -> tuple[np.ndarray, np.ndarray]:
     nodes = getattr(agents, "nodes", None)
     if nodes is not None:
         return nodes, agents.remaining
-    return _loc_arrays([a.loc for a in agents])
+    node, rem = _loc_arrays([a.loc for a in agents])
+    return node, np.zeros(node.size) if rem is None else rem
