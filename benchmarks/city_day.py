@@ -19,8 +19,12 @@ A reference measured in the same run: a fixed Python + numpy calibration loop ti
 each run (its seconds are printed; on this 2-core machine shared with other jobs the load
 changes from minute to minute, so read the wall times next to it).
 
+``--trace``: the same Manhattan workload written first as files a user brings (``trips.csv``,
+one row per request with a trip id; ``fleet.csv``, the taxis' start nodes) and read from them
+(demand from a trace streams: rows become requests as the clock reaches them).
+
 Run: ``.venv/bin/python benchmarks/city_day.py [--network chicago] [--reps 3]
-[--requests 100000] [--vehicles 1000] [--only fcfs|hungarian]``.
+[--requests 100000] [--vehicles 1000] [--only fcfs|hungarian] [--trace]``.
 """
 
 from __future__ import annotations
@@ -44,8 +48,31 @@ TARGETS = {("manhattan", "fcfs"): (30.0, 1024.0), ("manhattan", "hungarian"): (6
            ("chicago", "hungarian"): (180.0, 2048.0), ("chicago", "fcfs"): (None, 2048.0)}
 
 
-def scenario_text(network: str, allocator: str, requests: int, vehicles: int, seed: int) -> str:
-    """The workload as a scenario file."""
+def write_trace(folder: Path, requests: int, vehicles: int, seed: int, nodes: int = 400) -> None:
+    """The Manhattan workload as files a user brings: ``trips.csv`` (release time, origin and
+    destination node, a trip id: one row per request, Poisson over 24 h, uniform over the
+    ``nodes`` intersections) and ``fleet.csv`` (each taxi's start node), seeded."""
+    import numpy as np
+
+    rng = np.random.default_rng([seed, 28])
+    t = np.cumsum(rng.exponential(DAY / requests, requests))
+    o = rng.integers(0, nodes, requests)
+    d = rng.integers(0, nodes - 1, requests)
+    d += d >= o
+    with (folder / "trips.csv").open("w") as fh:
+        fh.write("t,origin_node,dest_node,trip_id\n")
+        for k in range(0, requests, 100_000):
+            fh.write("".join(f"{t[i]:.3f},{o[i]},{d[i]},trip-{i:07d}\n"
+                             for i in range(k, min(requests, k + 100_000))))
+    start = rng.integers(0, nodes, vehicles)
+    (folder / "fleet.csv").write_text("vehicle_id,node\n" + "".join(
+        f"{i},{n}\n" for i, n in enumerate(start.tolist())))
+
+
+def scenario_text(network: str, allocator: str, requests: int, vehicles: int, seed: int,
+                  trace: Path | None = None) -> str:
+    """The workload as a scenario file (``trace``: the folder of :func:`write_trace`'s files,
+    the requests and starts read from them)."""
     if network == "manhattan":
         world = ('network = "manhattan"\nblocks = [20, 20]\nblock = 200.0\nspeed = 10.0\n')
         wait = ""
@@ -53,9 +80,15 @@ def scenario_text(network: str, allocator: str, requests: int, vehicles: int, se
         world = 'network = "chicago"\n'
         wait = "max_wait = 600.0\n"
     batch = "batch_window = 30.0\n" if allocator == "hungarian" else ""
+    if trace is None:
+        fleet = f"agents = {vehicles}\n"
+        tasks = f'source = "poisson"\nrate = {requests / DAY!r}\ncount = {requests}\n'
+    else:
+        fleet = f'start = "{trace / "fleet.csv"}"\n'
+        tasks = f'source = "trace"\ntrace = "{trace / "trips.csv"}"\n'
     return (f'name = "city_day_{network}"\nseed = {seed}\nduration = {DAY + 7200.0}\n'
-            f"[world]\n{world}[fleet]\nagents = {vehicles}\n"
-            f'[tasks]\nsource = "poisson"\nrate = {requests / DAY!r}\ncount = {requests}\n{wait}'
+            f"[world]\n{world}[fleet]\n{fleet}"
+            f'[tasks]\n{tasks}{wait}'
             f'[dispatch]\nallocator = "{allocator}"\nplanner = "dijkstra"\n{batch}')
 
 
@@ -102,7 +135,8 @@ def child(args) -> None:
     with tempfile.TemporaryDirectory(prefix="city-day-") as tmp:
         path = Path(tmp) / "city_day.toml"
         path.write_text(scenario_text(args.network, args.allocator, args.requests,
-                                      args.vehicles, args.seed))
+                                      args.vehicles, args.seed,
+                                      Path(args.trace_dir) if args.trace_dir else None))
         sc = load_scenario(path, force=True)
         spec = sc.runs()[0]
         t0, c0 = time.perf_counter(), time.process_time()
@@ -128,7 +162,7 @@ def child(args) -> None:
 def run_child(network, allocator, args) -> dict:
     cmd = [sys.executable, __file__, "--child", "--network", network, "--allocator", allocator,
            "--requests", str(args.requests), "--vehicles", str(args.vehicles),
-           "--seed", str(args.seed)]
+           "--seed", str(args.seed)] + (["--trace-dir", args.trace_dir] if args.trace_dir else [])
     return child_result(cmd)
 
 
@@ -150,12 +184,30 @@ def main() -> None:
     p.add_argument("--reps", type=int, default=3)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--only", choices=("fcfs", "hungarian"))
+    p.add_argument("--trace", action="store_true",
+                   help="read the requests and the taxis' starts from files (manhattan only)")
     p.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--allocator", help=argparse.SUPPRESS)
+    p.add_argument("--trace-dir", help=argparse.SUPPRESS)
     args = p.parse_args()
     if args.child:
         child(args)
         return
+    if args.trace:
+        if args.network != "manhattan":
+            p.error("--trace: the Manhattan grid only")
+        with tempfile.TemporaryDirectory(prefix="city-day-trace-") as folder:
+            write_trace(Path(folder), args.requests, args.vehicles, args.seed)
+            size = (Path(folder) / "trips.csv").stat().st_size / 1e6
+            print(f"trace: {args.requests:,} rows, {size:.0f} MB")
+            args.trace_dir = folder
+            report(args)
+        return
+    report(args)
+
+
+def report(args) -> None:
+    """Run the children and print the tables."""
     from rich.console import Console
     from rich.table import Table
 
