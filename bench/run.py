@@ -117,19 +117,38 @@ def plan(chosen: list[Instance], named: list[str], *, quick: bool, seeds: int | 
                     check_runs(sc, sorted({sc.dispatch.planner}), (), [alloc])
                 except DispatchError as e:  # a capability the instance needs
                     why = str(e).replace(f"{inst.path}: ", "")
+            sizes = None
             if why is None:
                 try:
-                    make_plugin("allocator", alloc, sc.dispatch.params_for(alloc))
+                    sizes = make_plugin("allocator", alloc, sc.dispatch.params_for(alloc)
+                                        ).team_sizes
                 except DispatchError as e:  # its parameters (--param): the caller's mistake
                     raise BenchError(f"{alloc}: {e}") from None
             for seed in seeds_of(inst, quick, seeds):
+                spec = None
+                if why is None:
+                    spec, = sc.runs(allocator=alloc, seed=seed)
+                    why = team_size_refusal(alloc, sizes, spec)
                 if why is not None:
                     out.unsupported.append(_row(inst, world, alloc, seed,
                                                 f"unsupported: {why}"))
                 else:
-                    spec, = sc.runs(allocator=alloc, seed=seed)
                     out.specs.append((inst, alloc, spec))
     return out
+
+
+def team_size_refusal(alloc: str, sizes: tuple[int, ...] | None, spec) -> str | None:
+    """Why an allocator that decides only some team sizes (``Allocator.team_sizes``) cannot
+    run ``spec``, or None where it can."""
+    if sizes is None:
+        return None
+    n, static = spec.agents, spec.scenario.tasks.source == "static"
+    if static and spec.n_static_tasks == n and n in sizes:
+        return None
+    what = (f"N = {n} agents, M = {spec.n_static_tasks} tasks" if static
+            else f"{spec.scenario.tasks.source} tasks")
+    return (f"{alloc} decides static problems of N = M in {{{', '.join(map(str, sizes))}}} "
+            f"only, not {what}")
 
 
 def _row(inst: Instance, world: str, alloc: str, seed: int, status: str) -> dict:

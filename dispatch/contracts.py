@@ -89,6 +89,12 @@ class Allocator(ABC):
     #: ``variant``; the constructor then takes a ``variant`` keyword (``magnnet``: ``match``,
     #: ``paper``, ``paper_nb``, ``ppo``). A name with another variant needs its table.
     variants: ClassVar[tuple[str, ...]] = ()
+    #: The problems it decides where that is not every one: None (any), or the team sizes N
+    #: of the static problems with as many tasks as agents that it decides (a network trained
+    #: for one size: ``magnnet``'s ``paper`` variants); set by the constructor. ``dispatch
+    #: bench`` reports another instance as ``unsupported``; a run of one fails at its first
+    #: decision with the allocator's error.
+    team_sizes: tuple[int, ...] | None = None
 
     @abstractmethod
     def allocate(self, problem: AllocationProblem) -> Allocation:

@@ -346,6 +346,7 @@ class MagnnetAllocator(DecentralizedAllocator):
         if not self.paper:
             raise ValueError(f"no checkpoint of variant {self.variant!r} ships; train one "
                              f"with `dispatch train magnnet --variant {self.variant}`")
+        self.team_sizes = tuple(sorted(self.paper))  # (N = M, static: see allocate)
         for model, size in self.paper.values():  # warm-up
             n = model.n_agents
             p = _dummy(n)

@@ -320,3 +320,23 @@ def test_a_named_variant_must_be_declared_or_made_by_params():
     check_allocators(["magnnet:mine"], {"variant": "paper"})
     with pytest.raises(BenchError, match="'magnnet:nope'.*declares the variants match"):
         check_allocators(["magnnet:nope"])
+
+
+def test_a_network_trained_per_team_size_is_unsupported_on_other_sizes():
+    """``magnnet:paper`` ships networks for N = M in {4, 8, 12, 20}: the bench runs it on those
+    static instances and reports the others (another size, a dynamic problem) as unsupported,
+    naming the sizes, instead of failing at the first decision."""
+    from bench.run import plan
+
+    chosen = [i for i in suite.SUITE if i.name in ("static_n8", "static_n50", "dynamic_n8")]
+    p = plan(chosen, ["magnnet:paper", "hungarian"], quick=False, seeds=1, params={})
+    ran = {(i.name, a) for i, a, _ in p.specs}
+    assert {x for x in ran if x[1] == "magnnet:paper"} == {("static_n8", "magnnet:paper")}
+    assert {x for x in ran if x[1] == "hungarian"} == {
+        ("static_n8", "hungarian"), ("static_n50", "hungarian"), ("dynamic_n8", "hungarian")}
+    why = {r["instance"]: r["status"] for r in p.unsupported}
+    assert why == {
+        "static_n50": "unsupported: magnnet:paper decides static problems of N = M in "
+                      "{4, 8, 12, 20} only, not N = 50 agents, M = 50 tasks",
+        "dynamic_n8": "unsupported: magnnet:paper decides static problems of N = M in "
+                      "{4, 8, 12, 20} only, not poisson tasks"}
