@@ -50,10 +50,8 @@ class Bench:
     def run(self, args, out) -> int:
         from bench.against import compare
         from bench.report import write_figure, write_markdown
-        from bench.run import BenchError, parse_params, run_bench
+        from bench.run import TIME_LIMIT_MIN, BenchError, parse_params, run_bench
         from bench.table import read_csv, write_csv
-
-        from bench.run import TIME_LIMIT_MIN
 
         if args.workers is not None and args.workers < 1:
             raise BenchError(f"--workers must be >= 1, got {args.workers}")

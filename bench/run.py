@@ -125,7 +125,6 @@ def plan(chosen: list[Instance], named: list[str], *, quick: bool, seeds: int | 
                 except DispatchError as e:  # its parameters (--param): the caller's mistake
                     raise BenchError(f"{alloc}: {e}") from None
             for seed in seeds_of(inst, quick, seeds):
-                spec = None
                 if why is None:
                     spec, = sc.runs(allocator=alloc, seed=seed)
                     why = team_size_refusal(alloc, sizes, spec)

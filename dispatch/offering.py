@@ -123,9 +123,10 @@ class Offering:
 
     def offer(self, task: Task, vehicle_id: int, now: float,
               estimates: Estimates) -> bool:
-        """Make ``task``'s rider the offer of ``estimates`` (:data:`Estimates`) from vehicle ``vehicle_id``: True when accepted. A declined request is
-        closed ``declined`` once it has been offered ``retries + 1`` times; before that it
-        stays open for a later decision."""
+        """Make ``task``'s rider the offer of ``estimates`` (:data:`Estimates`) from vehicle
+        ``vehicle_id``: True when accepted. A declined request is closed ``declined`` once it
+        has been offered ``retries + 1`` times; before that it stays open for a later
+        decision."""
         pickup_at, dropoff_at, pooled, ready_at = estimates
         task.offers += 1
         fare = self.fare(task, pooled)

@@ -251,6 +251,8 @@ class Operator(Breakdowns):
         each stop, latest times, occupancies after each stop, locations, earliest times
         (lists; kept until the plan or the vehicle's state changes: :meth:`changed`)."""
         now = self.env.now
+        # (a standing vehicle's times start at ``now``; dispatch.plans.PlanTable.gather asks
+        # again by this same key, read from the fleet's arrays: change both together)
         key = (v.plan_version, now if v.heading is None and v.free_at <= now else None)
         cached = v.plan_cache
         if cached is not None and cached[0] == key:

@@ -67,13 +67,14 @@ class Capabilities:
     serve any). Allocators: ``decentralized`` (agents decide from local information),
     ``minimizes_total_cost`` (a maximum-cardinality, minimum-total-cost answer, no rng: lazy
     exact costs may certify it), ``multi_request`` (several requests to one agent, with
-    routes), ``variants`` (the variants it runs by name, ``magnnet:paper``). Planners: ``lower_bounds`` (``bounds`` and ``exact``), ``travel_times``
-    (``between``: shared rides, drop-off limits, the added_time objective, energy and
-    multi-request allocators need it), ``reservation_aware`` (``plan_timed``: execution with
-    reservations). Repositioners: ``passive`` (never moves a vehicle; the kernel never calls
-    it). Acceptors: ``declines`` (may decline an offer; ``always`` does not, and the kernel
-    then skips the offer step). Fleet sizers (``dispatch.sizers``, :mod:`dispatch.sizing`):
-    ``passive`` (never changes the fleet). The flags of other kinds are False."""
+    routes), ``variants`` (the variants it runs by name, ``magnnet:paper``). Planners:
+    ``lower_bounds`` (``bounds`` and ``exact``), ``travel_times`` (``between``: shared rides,
+    drop-off limits, the added_time objective, energy and multi-request allocators need it),
+    ``reservation_aware`` (``plan_timed``: execution with reservations). Repositioners:
+    ``passive`` (never moves a vehicle; the kernel never calls it). Acceptors: ``declines``
+    (may decline an offer; ``always`` does not, and the kernel then skips the offer step).
+    Fleet sizers (``dispatch.sizers``, :mod:`dispatch.sizing`): ``passive`` (never changes the
+    fleet). The flags of other kinds are False."""
 
     kind: str
     name: str

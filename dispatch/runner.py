@@ -372,8 +372,8 @@ def _run_and_mark(spec: RunSpec, out: Path, flush_rows: int = DEFAULT_FLUSH_ROWS
 def run_partition(spec: RunSpec, out: str | Path, time_limit: float | None = None) -> Outcome:
     """Run one spec of a sweep into its partition of ``out`` and mark it complete; an
     exception is recorded in the errors table and returned as a failed :class:`Outcome`
-    (a run past ``time_limit`` wall seconds: :class:`dispatch.time_limit.PastTimeLimit`). This is what pool
-    workers and Ray tasks execute (a top-level function: spawn-safe)."""
+    (a run past ``time_limit`` wall seconds: :class:`dispatch.time_limit.PastTimeLimit`).
+    This is what pool workers and Ray tasks execute (a top-level function: spawn-safe)."""
     out = Path(out)
     started = time.perf_counter()
     try:
@@ -470,8 +470,9 @@ def sweep(
     installed and ``out`` on a file system they share). ``force``: redo complete runs too.
     ``on_done`` is called in this process as each run finishes or is skipped.
     ``time_limit``: wall seconds a run may take; one past it stops and fails with
-    :class:`dispatch.time_limit.PastTimeLimit` (a timer in the worker's main thread, else the next progress
-    tick, every 1/500 of the simulated duration). Returns the outcomes in the order of ``specs``.
+    :class:`dispatch.time_limit.PastTimeLimit` (a timer in the worker's main thread, else the
+    next progress tick, every 1/500 of the simulated duration). Returns the outcomes in the
+    order of ``specs``.
     """
     out = Path(out).resolve()
     outcomes: dict[int, Outcome] = {}
