@@ -10,6 +10,7 @@ import pyarrow as pa
 import pytest
 
 from dispatch.table_files import numbers_of
+from tests.dispatch.test_trips import road_scenario, write_csv
 
 COLUMNS = [
     pa.chunked_array([], type=pa.float64()),
@@ -30,36 +31,20 @@ def test_numbers_are_pyarrows_own(col):
 
 
 def test_a_trace_run_reads_its_files_without_pandas(tmp_path):
-    (tmp_path / "trips.csv").write_text("t,origin_node,dest_node\n0,0,5\n3.5,7,2\n")
-    (tmp_path / "fleet.csv").write_text("vehicle_id,node\n0,1\n1,3\n")
-    (tmp_path / "s.toml").write_text(textwrap.dedent("""\
-        name = "t"
-        seed = 0
-        duration = 600.0
-        [world]
-        network = "manhattan"
-        blocks = [4, 4]
-        block = 100.0
-        speed = 10.0
-        [fleet]
-        start = "fleet.csv"
-        [tasks]
-        source = "trace"
-        trace = "trips.csv"
-        [dispatch]
-        allocator = "fcfs"
-        planner = "dijkstra"
-        """))
+    write_csv(tmp_path / "trips.csv", ["t", "origin_node", "dest_node"], [(0, 0, 5), (3.5, 7, 2)])
+    write_csv(tmp_path / "fleet.csv", ["vehicle_id", "node"], [(0, 1), (1, 3)])
+    path = road_scenario(tmp_path, tasks='source = "trace"\ntrace = "trips.csv"',
+                         fleet='start = "fleet.csv"')
     code = textwrap.dedent(f"""\
         import sys
         from dispatch.runner import run_one
         from dispatch.scenario import load_scenario
-        [spec] = load_scenario({str(tmp_path / "s.toml")!r}, force=True).runs()
+        [spec] = load_scenario({str(path)!r}, force=True).runs()
         result = run_one(spec, {str(tmp_path / "out")!r})
         assert int(result.summary["tasks_completed"]) == 2, result.summary
         print("pandas" in sys.modules)
         """)
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path,
-                         check=False)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         cwd=tmp_path, check=False)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.strip().splitlines()[-1] == "False"
