@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dispatch.offers import Acceptor, Offer
+from dispatch.api.acceptor import Acceptor, Offer
 
 
 class AlwaysAcceptor(Acceptor):

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from dispatch.offers import Acceptor, Offer, logistic
+from dispatch.api.acceptor import Acceptor, Offer, logistic
 
 
 def _coefficient(key: str, value) -> float:

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from dispatch.offers import Acceptor, Offer
+from dispatch.api.acceptor import Acceptor, Offer
 
 
 def _limit(key: str, value) -> float:

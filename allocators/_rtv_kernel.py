@@ -4,8 +4,8 @@ vehicle's plan, the plan's own order kept: :func:`best_orders`; or over every or
 plan's stops and the group's together: :func:`best_orders_any`), for many (vehicle, group)
 candidates in one call.
 
-The schedule is the kernel's one rule (:mod:`dispatch.stops`, compiled in
-:mod:`dispatch._plan_kernel`: departures by its ``leave``): arrival at a stop = departure from the
+The schedule is the kernel's one rule (:mod:`dispatch.plan.stops`, compiled in
+:mod:`dispatch.plan._kernel`: departures by its ``leave``): arrival at a stop = departure from the
 one before + the drive between them; service starts at ``max(arrival, earliest)`` (``p_e``: a
 plan stop's earliest time, ``r_e``: a new request's pickup's, e.g. a booked request's requested
 departure; a drop-off is open); departure = that start + the service time of a stop that
@@ -28,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from dispatch._compiled import jit
-from dispatch._plan_kernel import leave
+from dispatch.plan._kernel import leave
 
 #: codes in a returned order: ``>= 0`` a new stop (``2 i`` the pickup, ``2 i + 1`` the drop-off
 #: of the group's ``i``-th request), ``< 0`` the plan's stop ``-code - 1``

@@ -41,7 +41,7 @@ Hand-out and conflicts
     The simulator serves one task per vehicle at a time, so each agent *claims* only the first
     task of its path (the first it would visit); the rest of its bundle stays open and is
     allocated again when vehicles become idle. Claims go to the tasks' arbiters in one round of
-    the shared decision rounds (:func:`dispatch.decentralized.run_rounds`): on a connected graph
+    the shared decision rounds (:func:`dispatch.api.decentralized.run_rounds`): on a connected graph
     at convergence they never collide; on a disconnected graph (or when ``max_rounds`` stopped
     consensus) colliding claims are settled by the conflict rule, reported as conflicts in the
     request log, and the losers go on requesting tasks they still believe open (cheapest first)
@@ -63,10 +63,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from allocators import _cbba_fast
-from dispatch.comms import Channel, components
-from dispatch.contracts import Allocator
-from dispatch.decentralized import run_rounds
-from dispatch.problem import Allocation, AllocationProblem
+from dispatch.api.comms import Channel, components
+from dispatch.api.contracts import Allocator
+from dispatch.api.decentralized import run_rounds
+from dispatch.api.problem import Allocation, AllocationProblem
 
 NONE = -1
 _BIG = np.iinfo(np.int64).max

@@ -3,15 +3,15 @@
 In each decision round each deciding agent requests its cheapest open task that it can serve
 (ties to the lowest task index). It never rejects while it has such a task, so the rounds go on
 until no unassigned agent has a feasible open task left. Conflicts are settled by the shared
-rule in :mod:`dispatch.decentralized` (the cheaper requester wins).
+rule in :mod:`dispatch.api.decentralized` (the cheaper requester wins).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from dispatch.decentralized import DecentralizedAllocator
-from dispatch.problem import AllocationProblem
+from dispatch.api.decentralized import DecentralizedAllocator
+from dispatch.api.problem import AllocationProblem
 
 
 class GreedyAllocator(DecentralizedAllocator):

@@ -13,8 +13,8 @@ import math
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from dispatch.contracts import Allocator
-from dispatch.problem import Allocation, AllocationProblem
+from dispatch.api.contracts import Allocator
+from dispatch.api.problem import Allocation, AllocationProblem
 
 
 class HungarianAllocator(Allocator):

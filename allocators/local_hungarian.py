@@ -7,9 +7,9 @@ over the links, as MAGNNET's graph network sees them; ``view = "component"``: it
 connected component, as if cost vectors were flooded), and the tasks it believes open, solves
 that assignment optimally (:func:`allocators.hungarian.optimal_pairs`) and requests the task
 its own solution gives it. Different views can give one task to two agents: the shared
-conflict rule of :class:`~dispatch.decentralized.DecentralizedAllocator` settles it, and the
+conflict rule of :class:`~dispatch.api.decentralized.DecentralizedAllocator` settles it, and the
 losers solve again next round with what they learned. An agent its own solution leaves
-without a task waits (:data:`~dispatch.decentralized.WAIT`) for ``patience`` rounds (default
+without a task waits (:data:`~dispatch.api.decentralized.WAIT`) for ``patience`` rounds (default
 3), then rejects. On a complete graph every agent solves the same problem: the answer is the
 optimal assignment in one round, conflict-free.
 """
@@ -19,9 +19,9 @@ from __future__ import annotations
 import numpy as np
 
 from allocators.hungarian import optimal_pairs
-from dispatch.comms import components
-from dispatch.decentralized import WAIT, DecentralizedAllocator
-from dispatch.problem import AllocationProblem
+from dispatch.api.comms import components
+from dispatch.api.decentralized import WAIT, DecentralizedAllocator
+from dispatch.api.problem import AllocationProblem
 
 VIEWS = ("two_hop", "component")
 

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from dispatch.decentralized import DecentralizedAllocator
-from dispatch.problem import AllocationProblem
+from dispatch.api.decentralized import DecentralizedAllocator
+from dispatch.api.problem import AllocationProblem
 
 
 class RandomAllocator(DecentralizedAllocator):

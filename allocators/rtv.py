@@ -30,7 +30,7 @@ Each decision (a batch of open requests, the idle vehicles and the busy ones wit
    taken). A batch whose groups are all single requests is a linear assignment
    (:func:`allocators.hungarian.optimal_pairs`, exact).
 
-Times: every order is timed by the kernel's one schedule rule (:mod:`dispatch.stops`): a stop
+Times: every order is timed by the kernel's one schedule rule (:mod:`dispatch.plan.stops`): a stop
 reached before its earliest time waits (a booked request's pickup, ``TaskView.earliest``: its
 requested departure; a plan's stop, ``StopView.earliest``), and with driver shifts a route ends
 (leaves its last stop) by its vehicle's ``problem.until`` (shift end plus grace). Waits only
@@ -69,8 +69,8 @@ import time
 
 import numpy as np
 
-from dispatch.contracts import Allocator
-from dispatch.problem import Allocation, AllocationProblem, Bid
+from dispatch.api.contracts import Allocator
+from dispatch.api.problem import Allocation, AllocationProblem, Bid
 
 OBJECTIVES = {"delay": 0, "added_time": 1}
 TOL = 5e-10  # (the kernel checks limits with +1e-9; half of it absorbs rounding differences)

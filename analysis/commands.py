@@ -1,6 +1,7 @@
 """``dispatch report`` and ``dispatch render``: the analysis package's commands on the
 ``dispatch`` command line, registered in the entry-point group ``dispatch.commands`` (see
-``pyproject.toml``; the protocol: ``dispatch.commands``). Nothing here imports ``dispatch``;
+``pyproject.toml``; the protocol: ``dispatch.run.commands.Command``). Nothing here imports
+``dispatch``;
 the work is imported when a command runs."""
 
 from __future__ import annotations

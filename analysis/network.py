@@ -3,7 +3,8 @@ hold: the map's edges and the trips' direct free-flow times.
 
 A road run writes its network once per results folder, under ``_spaces/road-<digest>/``
 (``nodes.parquet``: x, y; ``edges.parquet``: u, v, seconds, metres), and names that folder in
-its files' ``dispatch.space_files`` metadata (the writer: ``dispatch/space_files.py``). This
+its files' ``dispatch.output.space_files`` metadata (the writer:
+``dispatch/output/space_files.py``). This
 module reads it with pyarrow and scipy and needs nothing of ``dispatch``. Where the folder
 cannot be found (a folder written before networks were stored, or copied without
 ``_spaces/``), :func:`road_network` returns None and the callers do without (a map without
@@ -27,7 +28,7 @@ from scipy.sparse.csgraph import dijkstra
 log = logging.getLogger(__name__)
 
 #: the metadata key that names a run's space folder, relative to its results folder
-METADATA_KEY = "dispatch.space_files"
+METADATA_KEY = "dispatch.output.space_files"
 #: origins per Dijkstra call (bounds the ``(block, n)`` distance array)
 BLOCK = 256
 

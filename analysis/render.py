@@ -40,7 +40,7 @@ HIDDEN = (0.0, 0.0, -1e4)
 def _quiet_c_output():
     """C-level stdout and stderr to the null device inside the block (PyBullet's build banner
     at import, its lines at connect); Python's and C's buffers flushed around it. The same as
-    ``dispatch.physics.quiet_c_output``: analysis does not import ``dispatch``."""
+    ``dispatch.space.physics.quiet_c_output``: analysis does not import ``dispatch``."""
     import sys
 
     def c_flush() -> None:

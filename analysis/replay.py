@@ -18,17 +18,17 @@ released at or before ``t``, not picked up and not closed by ``t``; ``onboard``:
 at or before ``t`` and not closed by ``t``; ``delivered``: completed at or before ``t``;
 ``rejected``: closed at or before ``t`` in state ``rejected`` or ``expired``
 (:data:`REFUSED_STATES`); ``declined``: closed at or before ``t`` in state ``declined`` (the
-rider declined the offer, ``dispatch.offers``); ``cutoff``: closed at or before ``t`` in state
+rider declined the offer, ``dispatch.api.acceptor``); ``cutoff``: closed at or before ``t`` in state
 ``cancelled`` (:data:`CUT_OFF_STATE`: the run's end cut it off, labelled "cut off" as in the
 report); ``booked``: booked ahead (``booked_at``) at or before ``t``, not picked up and not
-closed by ``t`` (``dispatch.prebook``); ``walking``: riders on foot at ``t`` (meeting points,
-``dispatch.meeting``): from release to the boarding point (``walk_to_board_m`` at the walking
+closed by ``t`` (``dispatch.decide.prebook``); ``walking``: riders on foot at ``t`` (meeting points,
+``dispatch.decide.meeting``): from release to the boarding point (``walk_to_board_m`` at the walking
 speed, until the pickup or the close if sooner) and from the alighting point after the
 drop-off (``walk_from_alight_m``). The walking speed is the scenario's ``[tasks] walk_speed``
 (default 1.4 m/s; a trace's per-row speeds are not in the results). :func:`counts_at`
 computes them in Python (the tests compare the page with it).
 
-Vehicles with driver shifts (``dispatch.shifts``) are also ``off_shift`` (not drawn) and
+Vehicles with driver shifts (``dispatch.fleet.shifts``) are also ``off_shift`` (not drawn) and
 ``to_depot`` (driving home): :mod:`analysis.replay_duty`.
 """
 
@@ -249,7 +249,7 @@ def route_keyframes(kf: pd.DataFrame, x: np.ndarray, y: np.ndarray, u: np.ndarra
 def _network(run: RunFiles):
     """(node x, y arrays, undirected edge index pairs, directed edges u, v, seconds) of a
     road run, or None."""
-    rel = run.metadata.get("dispatch.space_files")
+    rel = run.metadata.get("dispatch.output.space_files")
     if not rel:
         return None
     folder = run.root / rel

@@ -3,7 +3,7 @@ rebuilt from a run's ``events`` (``shift_start``, ``shift_end``) and ``vehicles`
 (``vehicle_hours``) tables, and laid over the fleet states of
 :func:`analysis.timeline.fleet_states`.
 
-A vehicle (see ``dispatch.shifts``) is **off shift** before it enters the fleet and after it
+A vehicle (see ``dispatch.fleet.shifts``) is **off shift** before it enters the fleet and after it
 leaves it: from a ``shift_end`` event to its next ``shift_start`` event (or the run's end).
 At time 0 it is off shift when its first shift event is a ``shift_start``, or, without any
 shift event, when it was never on duty (``vehicle_hours`` 0: a vehicle a sizing strategy

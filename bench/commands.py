@@ -1,5 +1,5 @@
 """``dispatch bench``: the bench's command on the ``dispatch`` command line (entry-point group
-``dispatch.commands``; the protocol: :mod:`dispatch.commands`). The work is imported when the
+``dispatch.commands``; the protocol: :mod:`dispatch.run.commands`). The work is imported when the
 command runs."""
 
 from __future__ import annotations

@@ -28,7 +28,7 @@ from bench.metrics import COLUMNS, run_metrics
 from bench.stats import fill_gaps
 from bench.suite import REFERENCE, VERSION, Instance, instances, seeds_of
 from dispatch.errors import DispatchError
-from dispatch.overrides import key_values
+from dispatch.scenario.overrides import key_values
 
 log = logging.getLogger(__name__)
 
@@ -66,7 +66,7 @@ def check_allocators(named: list[str], params: dict[str, Any] | None = None) -> 
     """BenchError naming the first allocator that is not installed, or a named variant
     (``magnnet:paper``) its plugin does not declare, unless ``params`` (``--param``) make it
     (they set its ``variant``)."""
-    from dispatch.registry import available, base_name, undeclared_variant
+    from dispatch.api.registry import available, base_name, undeclared_variant
 
     have = available("allocator")
     for name in named:
@@ -80,7 +80,8 @@ def check_allocators(named: list[str], params: dict[str, Any] | None = None) -> 
 
 def parse_params(items: list[str]) -> dict[str, Any]:
     """``KEY=VALUE`` strings as ``dispatch check --param`` reads them
-    (:func:`dispatch.overrides.key_values`: VALUE as TOML, else a string); BenchError for an
+    (:func:`dispatch.scenario.overrides.key_values`: VALUE as TOML, else a string); BenchError for
+    an
     item without a key or an ``=``."""
     try:
         return key_values(items)
@@ -92,10 +93,10 @@ def plan(chosen: list[Instance], named: list[str], *, quick: bool, seeds: int | 
          params: dict[str, Any]) -> Plan:
     """The specs of every (instance, allocator, seed), each allocator checked against the
     instance first."""
+    from dispatch.api.registry import base_name, declaration
     from dispatch.errors import DispatchError
-    from dispatch.plugins import check_runs, make_plugin
-    from dispatch.registry import base_name, declaration
-    from dispatch.scenario import parse_scenario
+    from dispatch.run.plugins import check_runs, make_plugin
+    from dispatch.scenario.load import parse_scenario
 
     out = Plan()
     parsed: dict[str, Any] = {}  # text -> scenario: the allocators without params share one
@@ -177,7 +178,7 @@ def machine() -> dict[str, Any]:
 
 
 def _read(out: Path, spec, table: str):
-    from dispatch.runner import partition_dir, read_table
+    from dispatch.run.runner import partition_dir, read_table
 
     path = out / table / partition_dir(spec) / "part-0.parquet"
     return read_table(path, spec.partition, table) if path.exists() else None
@@ -186,7 +187,7 @@ def _read(out: Path, spec, table: str):
 def _timed_out(out: Path, spec, limit: float) -> str | None:
     """The error message of an earlier run of ``spec`` stopped at a wall-clock limit after at
     least ``limit`` seconds (trying it again would stop again); None if there is none."""
-    from dispatch.runner import ERRORS, partition_dir
+    from dispatch.run.runner import ERRORS, partition_dir
 
     path = out / ERRORS / partition_dir(spec) / "part-0.parquet"
     if not path.exists():
@@ -203,7 +204,7 @@ def _timed_out(out: Path, spec, limit: float) -> str | None:
 
 
 def _wall(out: Path, spec) -> float:
-    from dispatch.runner import marker_path
+    from dispatch.run.runner import marker_path
 
     try:
         return float(json.loads(marker_path(out, spec).read_text(encoding="utf-8"))["seconds"])
@@ -228,7 +229,7 @@ def run_bench(named: list[str], out: Path, *, suite: str = "all", quick: bool = 
     """Run the bench into ``out`` (runs in ``out/runs``; finished ones are reused) and return
     its rows (``bench.csv``'s, in suite order). ``only``: instance names to keep (tests);
     ``time_limit``: wall seconds one run may take (see the module docstring)."""
-    from dispatch.runner import sweep
+    from dispatch.run.runner import sweep
 
     check_allocators(named, params)
     chosen = instances(suite, quick)

@@ -31,7 +31,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from dispatch.voxels import Grid  # noqa: E402
+from dispatch.api.voxels import Grid  # noqa: E402
 
 t_import = time.perf_counter()
 from planners import graph as G  # noqa: E402  (loads or compiles the numba kernels)

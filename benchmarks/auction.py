@@ -1,4 +1,5 @@
-"""Benchmark: the CBBA auction (and MAGNNET-match, greedy) under limited communication, vs Hungarian.
+"""Benchmark: the CBBA auction (and MAGNNET-match, greedy) under limited communication, vs
+Hungarian.
 
 For N = M in {4, 8, 12, 20, 50, 100} and communication ranges {unlimited, 20 m, 10 m}, on the
 first decision of the paper's static scenario (``scenarios/paper_static.toml``: the same world,
@@ -8,7 +9,7 @@ each allocator answers the same problem and we report, averaged over seeds:
 * gap to Hungarian: (total cost - Hungarian's) / Hungarian's, on the pairs handed out;
 * conflict-free rate: share of tasks assigned to exactly one agent without ever being in
   conflict (DESIGN.md, Metrics); "assigned" is the share of tasks assigned at all;
-* rounds, messages (transmissions) and hops of the decision (see dispatch/comms.py);
+* rounds, messages (transmissions) and hops of the decision (see dispatch/api/comms.py);
 * time: wall milliseconds of ``allocate`` (the cost matrix is shared and not counted), its
   ratio to Hungarian's time measured in the same process, and the per-agent critical path
   (the largest per-agent compute time: agents think in parallel on their own hardware);
@@ -33,14 +34,14 @@ from rich.console import Console
 from rich.progress import Progress
 from rich.table import Table
 
-from dispatch import registry
-from dispatch.comms import comm_graph, components, diameter
-from dispatch.problem import AllocationProblem, TaskView
-from dispatch.scenario import load_scenario
-from dispatch.world import world_for
-from dispatch.placement import place_fleet
+from dispatch.api import registry
+from dispatch.api.comms import comm_graph, components, diameter
+from dispatch.api.problem import AllocationProblem, TaskView
+from dispatch.fleet.placement import place_fleet
+from dispatch.plan.demand import VoxelDemand
+from dispatch.scenario.load import load_scenario
+from dispatch.space.world import world_for
 from dispatch.streams import STREAM_ALLOCATOR, STREAM_FLEET, STREAM_TASKS, rng_for
-from dispatch.demand import VoxelDemand
 
 ROOT = Path(__file__).resolve().parents[1]
 SIZES = (4, 8, 12, 20, 50, 100)

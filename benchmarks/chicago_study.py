@@ -8,15 +8,15 @@ construct is skipped with a message) x ``--batch-windows`` (default 0 = immediat
 a run key: ``batch_window=0`` / ``batch_window=30`` partitions of scenario ``chicago_study``) x
 ``--repositioners`` (default ``stay demand``) x ``--agents`` (default 500 1000). The derived
 scenario is written to ``<out>/chicago_study.toml`` and run through the normal resumable sweep
-(:func:`dispatch.runner.sweep`) on ``--workers`` processes (default 2): rerunning skips every
+(:func:`dispatch.run.runner.sweep`) on ``--workers`` processes (default 2): rerunning skips every
 run already complete in ``--out``, so an interrupted study resumes, and a rerun with other
 ``--allocators`` / ``--repositioners`` / ``--agents`` / ``--batch-windows`` adds only the runs
 missing from the folder (a run is the same run whatever lists it was swept in:
-:func:`dispatch.runner.run_digest`); the table and the report cover every run of the folder.
+:func:`dispatch.run.runner.run_digest`); the table and the report cover every run of the folder.
 SIGTERM or Ctrl-C stops the study's worker processes with it.
 
 ``--comm-range METRES`` gives the vehicles a radio range: the derived scenario gets a ``[comms]``
-table with ``range = METRES`` (see :mod:`dispatch.comms`: the idle vehicles of a decision within
+table with ``range = METRES`` (see :mod:`dispatch.api.comms`: the idle vehicles of a decision within
 that straight-line distance of each other hear each other). Decentralized allocators
 (``auction``, ``magnnet``, ``local_hungarian``) then decide on what reaches them over that graph
 and may conflict; centralized ones (``fcfs``, ``greedy``, ``hungarian``) ignore it. Omitted:
@@ -94,8 +94,7 @@ def parse_args(argv=None) -> argparse.Namespace:
 def usable(kind: str, names: list[str]) -> list[str]:
     """The plugins of ``names`` that are installed and construct with their defaults; a
     message on stderr for each one left out."""
-    from dispatch import registry
-
+    from dispatch.api import registry
     ok = []
     for name in names:
         try:
@@ -142,8 +141,8 @@ def derived_text(a: argparse.Namespace, allocators: list[str], repositioners: li
 
 def run_study(a: argparse.Namespace) -> tuple[Path, list]:
     """Write the derived scenario into ``a.out`` and sweep it there (resumable)."""
-    from dispatch.runner import sweep
-    from dispatch.scenario import load_scenario
+    from dispatch.run.runner import sweep
+    from dispatch.scenario.load import load_scenario
 
     allocators = usable("allocator", a.allocators)
     repositioners = usable("repositioner", a.repositioners)

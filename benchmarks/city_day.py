@@ -111,10 +111,10 @@ def child(args) -> None:
     """One run in this process; prints one JSON line."""
     import resource
 
-    from dispatch.recorder import Recorder
-    from dispatch.runner import make_recorder
-    from dispatch.scenario import load_scenario
-    from dispatch.sim import Simulation
+    from dispatch.output.parquet import Recorder
+    from dispatch.run.runner import make_recorder
+    from dispatch.run.sim import Simulation
+    from dispatch.scenario.load import load_scenario
 
     timers = {"record": 0.0, "plan": 0.0}
 

@@ -38,12 +38,12 @@ sys.path.insert(0, str(ROOT))
 
 from scipy.sparse.csgraph import dijkstra  # noqa: E402
 
-from dispatch.problem import AgentView, TaskView  # noqa: E402
-from dispatch.scenario import load_scenario  # noqa: E402
-from dispatch.world import world_for  # noqa: E402
-from dispatch.placement import place_fleet
+from dispatch.api.problem import AgentView, TaskView  # noqa: E402
+from dispatch.fleet.placement import place_fleet
+from dispatch.plan.demand import VoxelDemand  # noqa: E402
+from dispatch.scenario.load import load_scenario  # noqa: E402
+from dispatch.space.world import world_for  # noqa: E402
 from dispatch.streams import STREAM_FLEET, STREAM_TASKS, rng_for  # noqa: E402
-from dispatch.demand import VoxelDemand  # noqa: E402
 
 t_import = time.perf_counter()
 from planners import _fast  # noqa: E402

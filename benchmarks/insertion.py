@@ -1,4 +1,5 @@
-"""Benchmark: the cheapest feasible insertion (``dispatch.insertion.insertion_costs``) against the
+"""Benchmark: the cheapest feasible insertion (``dispatch.plan.insertion.insertion_costs``) against
+the
 exhaustive search that re-simulates every plan
 (``tests.dispatch.reference.brute_force_insertion``, the reference the tests hold it to), on
 the same random pairs, in the same run.
@@ -25,10 +26,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from dispatch.insertion import insertion_costs  # noqa: E402
-from dispatch.stops import ADDED_TIME  # noqa: E402
+from dispatch.plan.insertion import insertion_costs  # noqa: E402
+from dispatch.plan.stops import ADDED_TIME  # noqa: E402
 from tests.dispatch.reference import brute_force_insertion  # noqa: E402
-
 
 #: pairs per simulated decision
 BATCH = 500

@@ -2,7 +2,7 @@
 
 Runs the city-day workload of :mod:`benchmarks.city_day` (Manhattan 20 x 20, 1000 taxis,
 ``--requests`` Poisson requests over 24 simulated hours, ``fcfs`` immediate by default) through
-:class:`dispatch.sim.Simulation` with its Parquet recorder, and takes the wall clock (and CPU
+:class:`dispatch.run.sim.Simulation` with its Parquet recorder, and takes the wall clock (and CPU
 clock) each time another 10,000 requests have been released. Prints the seconds of each block
 of 10,000 and the ratio of each block to the first, measured in the same run: the issue's
 target is last / first <= 1.2 (a kernel whose step scans the run's history grows instead).
@@ -41,9 +41,9 @@ def main() -> None:
     from rich.console import Console
     from rich.table import Table
 
-    from dispatch.runner import make_recorder
-    from dispatch.scenario import load_scenario
-    from dispatch.sim import Simulation
+    from dispatch.run.runner import make_recorder
+    from dispatch.run.sim import Simulation
+    from dispatch.scenario.load import load_scenario
 
     console = Console(width=80)
     marks: list[tuple[float, float, float]] = []  # (wall, cpu, simulated) at each block's end

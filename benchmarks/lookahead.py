@@ -95,7 +95,7 @@ def spec_of(series: str, sc, agents: int, seed: int, value: str | None, weight: 
 
 def run(series: str, sc, agents: int, seed: int, value, weight, value_demand=None,
         day_checkpoint=None) -> dict:
-    from dispatch.runner import run_one
+    from dispatch.run.runner import run_one
 
     t0 = time.perf_counter()
     s = run_one(spec_of(series, sc, agents, seed, value, weight, value_demand,

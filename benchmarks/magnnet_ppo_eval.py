@@ -5,7 +5,7 @@ Instances: the first decision of ``scenarios/paper_static.toml`` for the evaluat
 2 000 000 .. 2 000 000 + count - 1 (:mod:`allocators.magnnet.problems`; training and
 validation draw from seeds 1 000 000 on, so they never overlap). Every allocator answers
 through the plugin interface (decision rounds, conflict rule and message model of
-:func:`dispatch.decentralized.run_rounds`), at unlimited radio range and at ``--ranges``.
+:func:`dispatch.api.decentralized.run_rounds`), at unlimited radio range and at ``--ranges``.
 
 Per N, range and method: gap to Hungarian's total (mean over the instances fully assigned,
 %, with a 95 % t-interval over instances), conflict-free share (tasks assigned without ever
@@ -48,7 +48,7 @@ def interval(values) -> tuple[float, float]:
 
 
 def build(name: str, checkpoint: str | None):
-    from dispatch.registry import load
+    from dispatch.api.registry import load
 
     plugin, _, variant = name.partition(":")
     cls = load("allocator", plugin)
@@ -60,7 +60,7 @@ def build(name: str, checkpoint: str | None):
 
 
 def evaluate(pool, allocators: dict, comm_range: float | None) -> dict:
-    from dispatch.registry import load
+    from dispatch.api.registry import load
 
     hung = load("allocator", "hungarian")()
     res = {k: {"gap": [], "cf": [], "complete": [], "rounds": [], "ms": []} for k in allocators}

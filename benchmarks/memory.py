@@ -52,8 +52,8 @@ planner = "dijkstra"
 CHILD = textwrap.dedent("""
     import json, resource, sys, time
     from pathlib import Path
-    from dispatch.runner import run_one
-    from dispatch.scenario import load_scenario
+    from dispatch.run.runner import run_one
+    from dispatch.scenario.load import load_scenario
     [spec] = load_scenario(Path(sys.argv[1])).runs()
     t0 = time.perf_counter()
     r = run_one(spec, Path(sys.argv[2]), flush_rows=int(sys.argv[3]))

@@ -60,9 +60,9 @@ def run_arguments(p: argparse.ArgumentParser) -> None:
 def run(a, seats: int, method: str, fleet: int, seed: int, params: dict | None = None) -> dict:
     """One run's numbers (the simulation in this process); ``params``: allocator parameters
     over the scenario's (e.g. rtv's ``reorder``)."""
-    from dispatch.runner import make_recorder
-    from dispatch.scenario import load_scenario
-    from dispatch.sim import Simulation
+    from dispatch.run.runner import make_recorder
+    from dispatch.run.sim import Simulation
+    from dispatch.scenario.load import load_scenario
 
     sc = load_scenario(ROOT / "scenarios" / "nyc_manhattan.toml")
     s = dataclasses.replace(

@@ -42,7 +42,7 @@ def evaluate(pool, allocators: dict) -> dict:
     """``{name: {"gap", "cf", "cf_paper", "complete", "rounds"}}`` (means over ``pool``)."""
     res = {name: {k: [] for k in ("gap", "cf", "cf_paper", "complete", "rounds")}
            for name in allocators}
-    from dispatch.registry import load
+    from dispatch.api.registry import load
 
     hung = load("allocator", "hungarian")()
     for k in range(len(pool)):
@@ -67,7 +67,7 @@ def evaluate(pool, allocators: dict) -> dict:
 def main(argv=None) -> int:
     from allocators.magnnet.allocator import clear_model_cache
     from allocators.magnnet.problems import load_pool
-    from dispatch.registry import load
+    from dispatch.api.registry import load
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--count", type=int, default=50)

@@ -3,7 +3,7 @@
 Instances: the first decision of ``scenarios/paper_static.toml`` (exact A* costs, UAV/UGV mix,
 M = N tasks) for evaluation seeds 2 000 000 + k (training used seeds from 1 000 000; see
 :mod:`allocators.magnnet.problems`), cached under ``.cache/magnnet``. Every allocator answers
-the same :class:`~dispatch.problem.AllocationProblem`: the paper's complete communication
+the same :class:`~dispatch.api.problem.AllocationProblem`: the paper's complete communication
 graph by default, or the graph of ``--comm-range`` metres between the agents' positions, with
 ``--loss`` (probability that one reception of a broadcast is lost).
 
@@ -21,7 +21,8 @@ component; shown as ``local_hung:comp``), ``magnnet`` (default: views flooded to
 component plans of the match model, the DAgger-trained view model otherwise; see
 :mod:`allocators.magnnet.allocator`), ``magnnet:view2`` (``view_hops = 2``: the rule before
 the flooding), ``magnnet:match_only`` (the match model on two-hop partial views too: what
-``magnnet`` did before the view model; an ablation), ``magnnet:paper`` / ``magnnet:paper_nb`` (the paper's network, per
+``magnnet`` did before the view model; an ablation), ``magnnet:paper`` / ``magnnet:paper_nb`` (the
+paper's network, per
 N = M; left out where no checkpoint ships), ``auction`` (CBBA), ``greedy``, ``random``.
 
     .venv/bin/python benchmarks/paper_tables.py [--count 100] [--sizes 4 8 12 20]
@@ -35,8 +36,8 @@ import time
 
 import numpy as np
 
-from dispatch.problem import AgentView, AllocationProblem, TaskView
-from dispatch.registry import load
+from dispatch.api.problem import AgentView, AllocationProblem, TaskView
+from dispatch.api.registry import load
 
 PAPER = {  # Table I and III of the paper: (MAGNNET cost, gap %, success %)
     4: (20.3, 0.0, 100), 8: (61.2, 1.5, 100), 12: (134.7, 2.1, 90), 20: (321.5, 26.4, 80)}
@@ -58,7 +59,7 @@ def problem_of(pool, k: int, seed: int, comm_range: float | None = None,
                              5.0 if pool.flies[k, i] else 3.0) for i in range(n))
     tasks = tuple(TaskView(j, "ground", tuple(int(v) for v in np.floor(pool.task_pos[k, j])),
                            0.0) for j in range(m))
-    from dispatch.comms import comm_graph
+    from dispatch.api.comms import comm_graph
 
     return AllocationProblem(0.0, agents, tasks, cost.copy(),
                              comm_graph(pool.agent_pos[k], comm_range),

@@ -11,7 +11,7 @@ peers' do, unless the workload gives limits. A workload of shared rides
 from the workload, and the row gets the shared-ride metrics (``peers_workload.metrics``): the
 direct times are the workload's (checked against the run's ``direct_time`` column), shared
 from the tasks' ``shared`` column, passenger-metres from the summary. The wall
-time is :func:`dispatch.runner.run_one`'s: the network built, the day simulated, every table
+time is :func:`dispatch.run.runner.run_one`'s: the network built, the day simulated, every table
 written to Parquet (module imports excluded, as the peers' are; compiled code loaded from
 numba's cache or compiled on first use is inside the clock).
 """
@@ -77,10 +77,10 @@ def main(folder: Path, out: Path, allocator: str = "fcfs", objective: str = "pic
     import pyarrow.compute as pc
 
     importlib.import_module(f"allocators.{allocator}")
-    import dispatch.sim  # noqa: F401
+    import dispatch.run.sim  # noqa: F401
     import planners.road  # noqa: F401
-    from dispatch.runner import run_one
-    from dispatch.scenario import load_scenario
+    from dispatch.run.runner import run_one
+    from dispatch.scenario.load import load_scenario
 
     w, t, origin, dest, _ = read(folder)
     batch_window = float(batch_window)

@@ -7,7 +7,8 @@ this project.
 A workload folder holds
 
 * ``trips.csv``: ``t, origin_node, dest_node`` (the project's trace format, node ids of
-  :func:`dispatch.roads.manhattan`: node ``row * columns + column`` at ``(column, row) * block``);
+  :func:`dispatch.space.roads.manhattan`: node ``row * columns + column`` at ``(column, row) *
+  block``);
 * ``fleet.csv``: ``vehicle_id, node`` (the project's start-file format);
 * ``workload.json``: grid size, block, speed, seed, horizon and end time; for shared rides
   (``benchmarks/pooling.py``) also the seats per vehicle, the requests' limits and the streets'

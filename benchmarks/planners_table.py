@@ -1,6 +1,6 @@
 """Benchmark: the paper's Table II (mean path length per N) for A*, RRT* and R*.
 
-Every run is a real simulation (:func:`dispatch.runner.run_one`) of the paper's static scenario
+Every run is a real simulation (:func:`dispatch.run.runner.run_one`) of the paper's static scenario
 ``scenarios/paper_static.toml`` (50 x 50 x 30 m world, 10 obstacles, N = M, half UAVs at 5 m/s,
 half UGVs at 3 m/s, every task on the ground), Hungarian allocating, with the planner
 overridden: the same worlds, fleets and tasks for every planner (instances are paired by seed).
@@ -36,9 +36,9 @@ import pyarrow.parquet as pq
 from rich.console import Console
 from rich.table import Table
 
-from dispatch.runner import run_one
-from dispatch.scenario import load_scenario
-from dispatch.world import world_for
+from dispatch.run.runner import run_one
+from dispatch.scenario.load import load_scenario
+from dispatch.space.world import world_for
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = ROOT / "scenarios" / "paper_static.toml"

@@ -53,9 +53,9 @@ def scenario_text(allocator: str, window: float | None, requests: int, hours: fl
 def child(args) -> None:
     import resource
 
-    from dispatch.runner import make_recorder
-    from dispatch.scenario import load_scenario
-    from dispatch.sim import Simulation
+    from dispatch.run.runner import make_recorder
+    from dispatch.run.sim import Simulation
+    from dispatch.scenario.load import load_scenario
 
     allocator, window = METHODS[args.method]
     with tempfile.TemporaryDirectory(prefix="pooled-day-") as tmp:

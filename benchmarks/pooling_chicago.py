@@ -24,8 +24,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from dispatch.runner import run_one  # noqa: E402
-from dispatch.scenario import load_scenario  # noqa: E402
+from dispatch.run.runner import run_one  # noqa: E402
+from dispatch.scenario.load import load_scenario  # noqa: E402
 
 
 def interval(values: list[float]) -> str:

@@ -77,8 +77,8 @@ def scenario_text(share: int, agents: int, seed: int, start: str, hours: float, 
 def one(share: int, agents: int, seed: int, start: str, hours: float, mode: str,
         lead: float | None, allocator: str = "hungarian", capacity: int = 1) -> dict:
     """One run's figures."""
-    from dispatch.runner import run_one
-    from dispatch.scenario import load_scenario
+    from dispatch.run.runner import run_one
+    from dispatch.scenario.load import load_scenario
 
     with tempfile.TemporaryDirectory(prefix="prebook-") as tmp:
         path = Path(tmp) / "nyc_manhattan_prebook.toml"

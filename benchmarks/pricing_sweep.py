@@ -35,8 +35,8 @@ from rich.console import Console  # noqa: E402
 from rich.table import Table  # noqa: E402
 
 from benchmarks.nyc_study import interval  # noqa: E402
-from dispatch.runner import run_one  # noqa: E402
-from dispatch.scenario import load_scenario  # noqa: E402
+from dispatch.run.runner import run_one  # noqa: E402
+from dispatch.scenario.load import load_scenario  # noqa: E402
 
 SCENARIO = ROOT / "scenarios" / "nyc_manhattan_offers.toml"
 

@@ -59,7 +59,7 @@ DAYS = {"chicago": chicago, "pooled": pooled}
 
 
 def simulate(scenario: Path, out: Path, duration: float | None) -> float:
-    cmd = [sys.executable, "-c", "import sys; from dispatch.cli import main; sys.exit(main())",
+    cmd = [sys.executable, "-c", "import sys; from dispatch.run.cli import main; sys.exit(main())",
            "run", str(scenario), "--out", str(out), "--force"]
     if duration:
         cmd += ["--duration", str(duration)]

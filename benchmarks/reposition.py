@@ -1,7 +1,8 @@
 """Benchmark: what the ``demand`` repositioner buys against ``stay`` when demand has a hotspot.
 
 The setup of ``scenarios/manhattan.toml`` (a 20 x 20 grid, 200 m blocks, 10 m/s; 2 h of
-requests at 0.1/s; 80 taxis (``--agents``) on uniform random nodes; ``fcfs``; ``max_wait`` 600 s) with a
+requests at 0.1/s; 80 taxis (``--agents``) on uniform random nodes; ``fcfs``; ``max_wait`` 600 s)
+with a
 demand imbalance: a share ``--hot`` of the pickups falls in a hotspot, the 5 x 5 intersections
 of the lower-left corner (a 800 m square), the rest uniform; drop-offs uniform anywhere (so
 taxis carry riders out of the hotspot and, staying where they drop them, leave it short of
@@ -32,8 +33,8 @@ sys.path.insert(0, str(ROOT))
 from rich.console import Console  # noqa: E402
 from rich.table import Table  # noqa: E402
 
-from dispatch.runner import run_one  # noqa: E402
-from dispatch.scenario import load_scenario  # noqa: E402
+from dispatch.run.runner import run_one  # noqa: E402
+from dispatch.scenario.load import load_scenario  # noqa: E402
 
 COLUMNS, ROWS, HOT = 20, 20, 5
 

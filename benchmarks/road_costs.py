@@ -44,12 +44,14 @@ from rich.console import Console  # noqa: E402
 from rich.table import Table  # noqa: E402
 from scipy.sparse.csgraph import dijkstra  # noqa: E402
 
-from dispatch.legs import RoadPoint  # noqa: E402
-from dispatch.roads import RoadNetwork, load_network  # noqa: E402
+from dispatch.api.legs import RoadPoint  # noqa: E402
+from dispatch.space.roads import RoadNetwork, load_network  # noqa: E402
 
 t_import = time.perf_counter()
-from planners import _road_fast  # noqa: E402
-from planners import road  # noqa: E402
+from planners import (
+    _road_fast,  # noqa: E402
+    road,  # noqa: E402
+)
 from planners.road import RoadPlanner  # noqa: E402
 
 t_import = time.perf_counter() - t_import

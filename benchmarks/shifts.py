@@ -51,8 +51,8 @@ def depots(n: int, seed: int = 0) -> list[int]:
 
 @functools.cache
 def _depots(seed: int, n: int) -> list[int]:
-    from dispatch.scenario import load_scenario
-    from dispatch.space import space_for
+    from dispatch.api.space import space_for
+    from dispatch.scenario.load import load_scenario
 
     sc = load_scenario(ROOT / "scenarios" / "nyc_manhattan.toml")
     net = space_for(sc.world, 0, sc.path)
@@ -82,8 +82,8 @@ def write_fleet(path: Path, sizes: list[int] | None, n_all: int, nodes: list[int
 
 def run(a, sizes: list[int] | None, n_all: int = 0) -> dict:
     """One full-day run with the fleet of :func:`write_fleet`."""
-    from dispatch.runner import run_one
-    from dispatch.scenario import load_scenario
+    from dispatch.run.runner import run_one
+    from dispatch.scenario.load import load_scenario
 
     nodes = depots(sum(sizes) if sizes else n_all)
     base = (ROOT / "scenarios" / "nyc_manhattan.toml").read_text()

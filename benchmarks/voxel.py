@@ -19,7 +19,7 @@ cache cold); the fields must be equal (bit for bit: both compute the unique fixe
 float64 relaxations), and the ratio scipy / ours is printed with the per-field times.
 
 With ``--lazy`` each world also runs with ``[dispatch] lazy_costs = true`` on the same seed
-(:mod:`dispatch.lazy`: decisions on lower bounds, exact costs by A* only for the pairs the
+(:mod:`dispatch.decide.lazy`: decisions on lower bounds, exact costs by A* only for the pairs the
 optimal answer needs), and a second table puts the two side by side: wall and CPU ms per task,
 UAV distance fields and A* searches per task, certificate rounds (allocator calls) per decision,
 peak RSS, tasks completed and expired, mean wait. ``--verify`` adds one more lazy run (not
@@ -83,8 +83,8 @@ CHILD = textwrap.dedent("""
     t_start = time.perf_counter()
     from pathlib import Path
     import numpy as np
-    from dispatch.runner import run_one
-    from dispatch.scenario import load_scenario
+    from dispatch.run.runner import run_one
+    from dispatch.scenario.load import load_scenario
     import planners.astar as A
     from planners import graph as G
 
@@ -92,8 +92,8 @@ CHILD = textwrap.dedent("""
     cells, cost_s = [], [0.0]
     real = A.AStarPlanner.costs
     # the counters: the dispatcher (certificate rounds, exact pairs) and UAV fields computed
-    import dispatch.dispatcher as D
-    from dispatch.answers import finders
+    import dispatch.decide.dispatcher as D
+    from dispatch.decide.answers import finders
     kept, uav_fields, check = {}, [0], {"decisions": 0, "differ": 0, "worst": 0.0}
     real_values = A.field_values
 
@@ -110,7 +110,7 @@ CHILD = textwrap.dedent("""
         kept["d"] = self
         if verify:  # each decision against hungarian on the exact matrix (fields, own grid)
             from allocators.hungarian import optimal_pairs
-            from dispatch.world import Grid, World
+            from dispatch.space.world import Grid, World
             w = self.pipeline.problems.space
             ref = A.AStarPlanner(World(size=w.size, grid=Grid(np.array(w.grid.occupied),
                                                                 w.grid.cell), boxes=()))
@@ -165,7 +165,7 @@ CHILD = textwrap.dedent("""
 
     # the reference: scipy's Dijkstra and ours on the same UAV graph, cold cache, one thread
     from scipy.sparse.csgraph import dijkstra
-    from dispatch.world import world_for
+    from dispatch.space.world import world_for
     grid = world_for(load_scenario(Path(sys.argv[1])).world, spec.seed).grid
     g = G.graph(grid, True)
     nodes = [g.node(c) for c in cells if grid.is_free(c)]

@@ -52,9 +52,9 @@ def scenario_text(allocator: str, walk: float, agents: int, seed: int, trace: Pa
 def child(args) -> None:
     import pandas as pd
 
-    from dispatch.runner import make_recorder
-    from dispatch.scenario import load_scenario
-    from dispatch.sim import Simulation
+    from dispatch.run.runner import make_recorder
+    from dispatch.run.sim import Simulation
+    from dispatch.scenario.load import load_scenario
 
     with tempfile.TemporaryDirectory(prefix="walking-") as tmp:
         trips = pd.read_csv(TRACE)

@@ -1,6 +1,6 @@
 """Charging strategy plugins (entry-point group ``dispatch.chargers``): which idle electric
 vehicles go charging, where, and to what state of charge. The contract is
-:class:`dispatch.charging_strategy.ChargingStrategy`; parameters come from ``[charging.<name>]``.
+:class:`dispatch.api.charger.ChargingStrategy`; parameters come from ``[charging.<name>]``.
 
 * ``threshold`` (:mod:`chargers.threshold`): below ``low`` go to the station of least drive +
   queue time and charge to ``high``;

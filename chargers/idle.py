@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from chargers.threshold import _check
-from dispatch.charging_strategy import ChargingStrategy, ChargingView
+from dispatch.api.charger import ChargingStrategy, ChargingView
 
 
 class IdleCharging(ChargingStrategy):

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dispatch.charging_strategy import ChargingStrategy, ChargingView
+from dispatch.api.charger import ChargingStrategy, ChargingView
 
 
 def _check(low: float, high: float) -> None:

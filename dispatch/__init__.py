@@ -2,7 +2,7 @@
 
 The kernel: scenario loading, world, vehicles, tasks, SimPy processes, the allocator and
 planner contracts, the plugin registry, Parquet recording and the CLI. It imports no concrete
-allocator or planner; those are found through the registry (``dispatch.registry``).
+allocator or planner; those are found through the registry (``dispatch.api.registry``).
 """
 
 from importlib.metadata import PackageNotFoundError, version

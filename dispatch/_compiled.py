@@ -54,10 +54,10 @@ def leg_sums(indptr, indices, seconds, metres, nodes, t0, m0):  # pragma: no cov
 @jit
 def legs_at(times, nodes, length, prev, rows, now, starts, out_k, node, rem, out_i,
             on):  # pragma: no cover - compiled
-    """Where vehicles driving legs are at ``now`` (:class:`dispatch.leg_table.LegTable`): for
+    """Where vehicles driving legs are at ``now`` (:class:`dispatch.plan.en_route.LegTable`): for
     each ``q``, the leg in row ``rows[q]`` of ``times`` / ``nodes`` (its first ``length``
     entries; ``prev``: its start point's), started at ``starts[q]``: writes
-    :meth:`dispatch.legs.Leg.next_at`'s ``(node, remaining)`` of ``now - starts[q]`` into
+    :meth:`dispatch.api.legs.Leg.next_at`'s ``(node, remaining)`` of ``now - starts[q]`` into
     ``node[out_k[q]]``, ``rem[out_k[q]]`` and whether it stands on the node into
     ``on[out_i[q]]``, by the same comparisons and subtractions (``max``, ``bisect_right``)."""
     for q in range(rows.size):

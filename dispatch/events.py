@@ -44,7 +44,7 @@ stranded       a vehicle's battery ran empty on a leg (agent; where it stopped);
                ``breakdown`` follows, and after ``[faults] tow`` s a ``repair`` at the
                nearest station
 shift_start    a vehicle enters the fleet at its depot (its shift starts, or the sizing
-               brings it in; :mod:`dispatch.shifts`)
+               brings it in; :mod:`dispatch.fleet.shifts`)
 shift_end      a vehicle leaves the fleet on reaching its depot (its shift is over, or the
                sizing sent it home)
 =============  ===========================================================================

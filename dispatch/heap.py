@@ -10,7 +10,7 @@ heap's top), so every decision page-faults its arrays in again: on a batched day
 from (and return to) the heap. Allocation only: no number a run computes changes; the peak
 memory stays about the same (the blocks were resident while in use either way).
 
-It is process-wide and set once (each :class:`dispatch.dispatcher.Dispatcher` asks); it does
+It is process-wide and set once (each :class:`dispatch.decide.dispatcher.Dispatcher` asks); it does
 nothing off glibc, or where the user set the heap's parameters through the environment
 (``MALLOC_*_`` variables, ``GLIBC_TUNABLES``).
 """

@@ -12,11 +12,11 @@ import numpy as np
 
 (STREAM_WORLD, STREAM_FLEET, STREAM_TASKS, STREAM_ALLOCATOR, STREAM_SOURCE, STREAM_FAULTS,
  STREAM_REPOSITION, STREAM_CHARGING) = range(8)
-#: which requests are booked ahead ([tasks] prebook_share; dispatch.prebook)
+#: which requests are booked ahead ([tasks] prebook_share; dispatch.decide.prebook)
 STREAM_PREBOOK = 8
-#: the riders' answers to offers (dispatch.offers); a number of its own, clear of the others
+#: the riders' answers to offers (dispatch.api.acceptor); a number of its own, clear of the others
 STREAM_OFFERS = 31
-#: fleet sizing (dispatch.shifts); numbered apart from the streams above
+#: fleet sizing (dispatch.fleet.shifts); numbered apart from the streams above
 STREAM_SIZING = 12
 
 

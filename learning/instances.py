@@ -5,7 +5,7 @@ allocator's training pools (``allocators/magnnet/problems.py``), benchmarks.
 space (the world of its seed), its fleet (placed as the run places it) and its first tasks
 (drawn from the run's task stream), each from the same seeded stream as in the run, so an
 instance of seed ``s`` is the one the run of seed ``s`` starts with. The caller costs it with
-a planner of its choice (``dispatch.registry.load("planner", name)(instance.space)``).
+a planner of its choice (``dispatch.api.registry.load("planner", name)(instance.space)``).
 """
 
 from __future__ import annotations
@@ -13,9 +13,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from dispatch.config import RunSpec, Scenario
-from dispatch.problem import AgentView, TaskView
-from dispatch.space import Space
+from dispatch.api.problem import AgentView, TaskView
+from dispatch.api.space import Space
+from dispatch.config.scenario import RunSpec, Scenario
 
 
 @dataclass(frozen=True)
@@ -33,14 +33,16 @@ def first_decision(scenario: Scenario | str | Path, seed: int, n_agents: int,
                    n_tasks: int | None = None) -> FirstDecision:
     """The first decision of the run of ``scenario`` (a static scenario, or its file) with
     fleet size ``n_agents`` and ``seed``: the space of the seed, the fleet as the run places
-    it (:func:`dispatch.placement.place_fleet`), and ``n_tasks`` tasks (default: the run's static task count)
-    drawn from the run's task stream (:func:`dispatch.demand.demand_for`), all released at time 0."""
-    from dispatch.demand import demand_for
-    from dispatch.placement import place_fleet
-    from dispatch.scenario import load_scenario
-    from dispatch.space import space_for
+    it (:func:`dispatch.fleet.placement.place_fleet`), and ``n_tasks`` tasks (default: the run's
+    static task count)
+    drawn from the run's task stream (:func:`dispatch.plan.demand.demand_for`), all released at time
+    0."""
+    from dispatch.api.space import space_for
+    from dispatch.fleet.placement import place_fleet
+    from dispatch.plan.demand import demand_for
+    from dispatch.plan.tasks import Task
+    from dispatch.scenario.load import load_scenario
     from dispatch.streams import STREAM_FLEET, STREAM_TASKS, rng_for
-    from dispatch.tasks import Task
 
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     spec = sc.runs(agents=n_agents, seed=seed)[0]

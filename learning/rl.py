@@ -11,11 +11,11 @@ vehicles, requests, congestion, rejections and summary as ``dispatch run``):
   decisions, seen locally: each vehicle observes its own costs to the open requests and, over
   the radio graph of the decision (``[comms] range``), the best cost of a neighbour for each;
   each idle vehicle answers one request or none; two vehicles asking for the same request
-  are a conflict, won by the smaller cost (the paper's rule, as :mod:`dispatch.decentralized`).
+  are a conflict, won by the smaller cost (the paper's rule, as :mod:`dispatch.api.decentralized`).
 
 How control is inverted (no threads). The environment swaps the run's allocator for a
 deferring one: when the dispatcher asks it, it keeps the :class:`AllocationProblem` and raises
-:class:`dispatch.dispatcher.DecisionDeferred`; the dispatcher's loop then waits on an event.
+:class:`dispatch.decide.dispatcher.DecisionDeferred`; the dispatcher's loop then waits on an event.
 The environment stops stepping SimPy there and returns the observation. ``step(action)`` turns
 the action into an :class:`Allocation`, triggers the event (at the same instant, ahead of any
 other queued event) and steps SimPy again: the dispatcher builds the same problem again, gets
@@ -54,12 +54,12 @@ import numpy as np
 import simpy
 from simpy.events import URGENT
 
-from dispatch.contracts import Allocator
-from dispatch.dispatcher import DecisionDeferred
+from dispatch.api.contracts import Allocator
+from dispatch.api.problem import Allocation, AllocationProblem
+from dispatch.config.scenario import RunSpec, Scenario, SweepConfig
+from dispatch.decide.dispatcher import DecisionDeferred
 from dispatch.errors import AllocationError, ScenarioError
-from dispatch.config import RunSpec, Scenario, SweepConfig
-from dispatch.problem import Allocation, AllocationProblem
-from dispatch.scenario import load_scenario
+from dispatch.scenario.load import load_scenario
 from learning.zones import Zones
 
 __all__ = ["Decisions", "DispatchEnv", "FleetEnv", "pairs_from_choices"]
@@ -129,7 +129,7 @@ class _Deferring(Allocator):
 def _scenario(scenario: str | Path | Scenario, agents: int | None,
               batch_window: float | None) -> Scenario:
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
-    from dispatch.space import space_class
+    from dispatch.api.space import space_class
 
     if "rl" not in space_class(sc.world.space).features:
         raise ScenarioError(sc.path, "world.network", "learning.rl needs a road scenario")
@@ -154,7 +154,7 @@ class Decisions:
 
     def __init__(self, scenario: Scenario, seed: int, zone: float = 2000.0,
                  demand_window: float = 1800.0) -> None:
-        from dispatch.sim import Simulation
+        from dispatch.run.sim import Simulation
 
         self.scenario = scenario
         spec = RunSpec(scenario, "hungarian", scenario.dispatch.planner,
@@ -241,7 +241,7 @@ class Decisions:
         return {"pickups": self._pickups, "lost": self._lost}
 
     def _finish(self) -> None:
-        """The end of the run: :meth:`dispatch.sim.Simulation.run` itself, its SimPy run made
+        """The end of the run: :meth:`dispatch.run.sim.Simulation.run` itself, its SimPy run made
         a no-op (this driver has already stepped the run to the stop ``Simulation.run`` would
         reach: ``until`` processed or an empty queue), so the legs driven, the requests left
         open (cancelled), the vehicles' times and the summary come out exactly as in a run."""

@@ -281,7 +281,7 @@ def fit_trips(tasks, t_col: str = "picked_up_at") -> np.ndarray:
 def _day(sc, allocator: str, params: dict, agents: int, seed: int, reposition: str | None = None):
     """Run one day (with the ``reposition`` policy, if one); its tasks and vehicles tables
     (pandas) and summary."""
-    from dispatch.runner import run_one
+    from dispatch.run.runner import run_one
 
     sc = replace(sc, dispatch=replace(sc.dispatch, allocator_params=tuple(params.items())))
     if reposition is not None:
@@ -296,8 +296,8 @@ def scenario_for(path: str | Path, batch_window: float, hours: float | None = No
                  trips_per_day: float | None = None):
     """The scenario of a study: its sweep dropped, the batch window fixed, optionally a
     shorter run (``hours``) or another demand (``trips_per_day``)."""
-    from dispatch.config import SweepConfig
-    from dispatch.scenario import load_scenario
+    from dispatch.config.scenario import SweepConfig
+    from dispatch.scenario.load import load_scenario
 
     sc = load_scenario(path)
     sc = replace(sc, sweep=SweepConfig(),
@@ -317,7 +317,7 @@ def train(scenario: str | Path, out: str | Path, *, agents: int = 500, batch_win
     """Learn a :class:`ZoneValue` from simulated days and save it to ``out``. ``reposition``:
     the days run with that repositioning policy (e.g. ``"demand"``): the value of where a
     vehicle ends up when idle vehicles are moved, for allocators run with it."""
-    from dispatch.space import space_for
+    from dispatch.api.space import space_for
 
     sc = scenario_for(scenario, batch_window, hours)
     space = space_for(sc.world, 0, sc.path)

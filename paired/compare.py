@@ -1,7 +1,7 @@
 """How runs are compared: the allocator order of every table and figure, the instance a run is
 paired on, the paired gap to a reference allocator and the label of a batch window.
 
-One definition, used by the CLI's tables (:mod:`dispatch.tables`, on summary dicts) and by
+One definition, used by the CLI's tables (:mod:`dispatch.output.printed`, on summary dicts) and by
 :mod:`analysis.metrics` (on DataFrames). Standard library only, and outside both packages: it
 imports neither pandas nor ``dispatch`` nor ``analysis``, so the kernel's tables and the
 analysis share it without importing each other.

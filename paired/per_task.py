@@ -1,5 +1,6 @@
 """The per-task figures of a run, from its summary: one definition for the CLI's tables
-(:mod:`dispatch.tables`, on summary dicts) and :mod:`analysis.metrics` (on a DataFrame's rows).
+(:mod:`dispatch.output.printed`, on summary dicts) and :mod:`analysis.metrics` (on a DataFrame's
+rows).
 
 Planned costs summed over a dynamic run are not comparable between allocators that drive
 different trajectories and serve different numbers of tasks, so the tables of dynamic runs

@@ -2,7 +2,7 @@
 
 Promises
     * ``costs`` is exact: ``cost[a, t]`` is the shortest legal path length in metres (movement
-      rules of :mod:`dispatch.motion`) from ``agents[a].cell`` to ``tasks[t].cell``, divided by
+      rules of :mod:`dispatch.api.motion`) from ``agents[a].cell`` to ``tasks[t].cell``, divided by
       ``agents[a].speed``. It is ``inf`` for a UGV and a task that is not on the ground layer
       (``kind != "ground"`` or ``k != 0``), for an agent whose cell is blocked, out of bounds,
       or (UGV) off the ground layer, and where no path exists.
@@ -19,13 +19,14 @@ Promises
     * ``plan`` is a true A* search (octile heuristic, consistent) returning an optimal path whose
       length equals the distance-field cost (up to float rounding), or None.
 
-    * Lazy costs (``[dispatch] lazy_costs``, :mod:`dispatch.lazy`): ``bounds`` gives lower
+    * Lazy costs (``[dispatch] lazy_costs``, :mod:`dispatch.decide.lazy`): ``bounds`` gives lower
       bounds without any UAV field (the obstacle-free 26-connected lattice distance, scaled by
       ``1 - 1e-12`` so that rounding never lifts it above the exact length; ``inf`` across
       connected components of free space, computed once per grid), ``exact`` computes single
       pairs by A* and remembers them per task and vehicle cell until the task closes.
 
-Statistics: ``stats.cost_queries`` counts calls to ``costs`` and ``bounds``, ``stats.plans`` calls to ``plan``;
+Statistics: ``stats.cost_queries`` counts calls to ``costs`` and ``bounds``, ``stats.plans`` calls
+to ``plan``;
 ``stats.extra`` holds ``fields_computed`` (Dijkstra runs) and ``field_reuses`` (fields read
 from the cache), ``astar_pairs`` (pairs ``exact`` searched) and ``pair_reuses`` (remembered
 pairs ``bounds`` gave as exact).
@@ -35,10 +36,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from dispatch.contracts import Planner
+from dispatch.api.contracts import Planner
+from dispatch.api.problem import AgentView, TaskView
 from dispatch.locations import Cell
-from dispatch.problem import AgentView, TaskView
-from dispatch.world import World
+from dispatch.space.world import World
 from planners.graph import astar, components, field_cache, field_values, lattice_bound
 
 
@@ -114,7 +115,7 @@ class AStarPlanner(Planner):
         return out
 
     def bounds(self, agents, tasks: tuple[TaskView, ...]) -> tuple[np.ndarray, np.ndarray]:
-        """``(lower, exact)`` (see :meth:`dispatch.contracts.Planner.bounds`) without any UAV
+        """``(lower, exact)`` (see :meth:`dispatch.api.contracts.Planner.bounds`) without any UAV
         distance field: a UAV pair's bound is the obstacle-free lattice distance
         (:func:`planners.graph.lattice_bound`) over the speed, ``inf`` (exact) across
         connected components of free space (:func:`planners.graph.components`); it is exact

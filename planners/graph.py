@@ -1,6 +1,6 @@
 """Grid graphs, distance fields and a single-pair A* for the two movement models.
 
-The movement rules are those of :mod:`dispatch.motion` (not redefined here):
+The movement rules are those of :mod:`dispatch.api.motion` (not redefined here):
 
 * **UAV** (``flies=True``): 26-connected over every cell of the grid. Node ``n`` is the C-order
   flat index of cell ``(i, j, k)`` in ``grid.shape`` (``np.ravel_multi_index``).
@@ -8,7 +8,7 @@ The movement rules are those of :mod:`dispatch.motion` (not redefined here):
   C-order flat index of ``(i, j)`` in ``grid.shape[:2]``; the cell is ``(i, j, 0)``.
 
 A step is an edge only if every cell of its bounding box is free (the MovingAI no-corner-cutting
-rule, :func:`dispatch.motion.step_is_legal`); blocked cells have no edges at all. Edge weights
+rule, :func:`dispatch.api.motion.step_is_legal`); blocked cells have no edges at all. Edge weights
 are in **metres** (step length in cells times ``grid.cell``). Both graphs are symmetric.
 
 The graph is implicit: a per-node bit mask of legal steps (``GridGraph.dirs``, vectorized with
@@ -18,7 +18,7 @@ length (several fields at once on threads), single pairs by A* with a radix heap
 ``scipy.sparse`` adjacency (``GridGraph.csr``) is built only on request, for references and
 other tools.
 
-Everything here depends only on the immutable :class:`~dispatch.voxels.Grid`, so it is cached
+Everything here depends only on the immutable :class:`~dispatch.api.voxels.Grid`, so it is cached
 on ``grid.cache``: the graphs (built once per grid and model) and a :class:`FieldCache` of
 distance fields that owns them, bounded in bytes (the cost path reads fields in place and
 never keeps one, see :func:`field_values`).
@@ -37,9 +37,9 @@ from functools import cache, cached_property, partial
 import numpy as np
 from scipy.sparse import csr_matrix
 
-from dispatch.motion import offsets
+from dispatch.api.motion import offsets
+from dispatch.api.voxels import Grid
 from dispatch.locations import Cell
-from dispatch.voxels import Grid
 from planners import _fast
 
 #: Most distance fields kept per grid (both movement models together).
@@ -548,7 +548,7 @@ def astar(grid: Grid, start: Cell, goal: Cell, flies: bool,
     Returns the shortest path length in metres and the path as cells from ``start`` to
     ``goal``, both included (``(0.0, [start])`` when they are equal), or ``(inf, None)`` when
     either cell is blocked, out of bounds, off the ground layer for a UGV, or no path exists.
-    The heuristic is the octile distance of :func:`dispatch.motion.octile` (consistent), ties
+    The heuristic is the octile distance of :func:`dispatch.api.motion.octile` (consistent), ties
     in ``f`` go to the larger ``g``; the path is optimal (equal to the distance field up to
     float rounding). Compiled (:func:`planners._fast.astar`); on lattices larger than
     :data:`MASK_MAX_NODES` whose move masks are not cached yet, moves are read from a padded

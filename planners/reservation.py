@@ -2,7 +2,8 @@
 
 Costs and untimed paths are the ``astar`` planner's (exact distance fields, A*): the allocation
 sees the paper's ``c_ij`` = shortest path length / speed. Execution is reservation-based
-(:mod:`dispatch.reservations`): the kernel asks :meth:`ReservationPlanner.plan_timed` for a timed
+(:mod:`dispatch.plan.reservations`): the kernel asks :meth:`ReservationPlanner.plan_timed` for a
+timed
 route around the other vehicles' reservations, which are intervals of continuous time per cell
 (vehicles have different speeds, so there is no common time step).
 
@@ -36,13 +37,12 @@ import itertools
 import math
 from collections.abc import Callable, Sequence
 
-from dispatch.contracts import Reservations
-from dispatch.motion import offsets
-from dispatch.problem import AgentView
-from dispatch.reservations import EPS, step_box, step_seconds
+from dispatch.api.contracts import Reservations
+from dispatch.api.motion import EPS, offsets, step_box, step_seconds
+from dispatch.api.problem import AgentView
+from dispatch.api.voxels import Grid
 from dispatch.locations import Cell
-from dispatch.voxels import Grid
-from dispatch.world import World
+from dispatch.space.world import World
 from planners.astar import AStarPlanner
 from planners.graph import distance_field, graph
 
@@ -77,7 +77,7 @@ class ReservationPlanner(AStarPlanner):
         """Why a run would not finish (None: it would): a vehicle that finds no timed route
         tries again every ``retry_after`` seconds, so vehicles kept waiting make up to
         ``agents × duration / retry_after`` retries, each a search (see
-        :mod:`dispatch.budget`)."""
+        :mod:`dispatch.scenario.budget`)."""
         retries = agents * duration / self.retry_after
         if retries <= self.MAX_RUN_RETRIES:
             return None
@@ -89,7 +89,7 @@ class ReservationPlanner(AStarPlanner):
                    t0: float) -> list[tuple[float, Cell]] | None:
         """The earliest-arriving timed route from ``agent.cell`` at ``t0`` to ``goal`` (or,
         for ``goal=None``, to the nearest cell nobody reserves later) that overlaps none of
-        ``reservations`` (see :meth:`dispatch.contracts.Planner.plan_timed`), or None when
+        ``reservations`` (see :meth:`dispatch.api.contracts.Planner.plan_timed`), or None when
         there is none (or the search hit ``max_expansions``)."""
         extra = self.stats.extra
         extra["timed_plans"] += 1

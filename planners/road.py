@@ -7,7 +7,7 @@ Promises
       edge (it finishes the edge first), the shortest time from the node for an ``int``.
       The network's times are the vehicles' times (``agent.speed`` is not used: a road's time
       already says how fast it is driven). ``inf`` only where no path exists (never inside one
-      network from :mod:`dispatch.roads`, which keeps a strongly connected component).
+      network from :mod:`dispatch.space.roads`, which keeps a strongly connected component).
       "Exact" means equal to ``scipy.sparse.csgraph.dijkstra`` on the network's ``time`` matrix
       up to the rounding order of the float64 sums (a few ulps; tests hold it to 1e-9 s).
     * A task's column comes from the field "seconds from every node to the task's node",
@@ -52,9 +52,9 @@ from typing import Any
 
 import numpy as np
 
-from dispatch.contracts import Planner
-from dispatch.legs import RoadPoint
-from dispatch.roads import RoadNetwork
+from dispatch.api.contracts import Planner
+from dispatch.api.legs import RoadPoint
+from dispatch.space.roads import RoadNetwork
 from planners import _road_fast
 
 log = logging.getLogger(__name__)
@@ -602,7 +602,7 @@ def _loc_arrays(locs: Sequence[Any]) -> tuple[np.ndarray, np.ndarray | None]:
 
 def _agent_arrays(agents: Sequence[Any]) -> tuple[np.ndarray, np.ndarray]:
     """``(node, remaining seconds)`` of the agents' locations (points or node ints): read from
-    the arrays of a :class:`dispatch.problem.AgentViews` where it has them (no view built)."""
+    the arrays of a :class:`dispatch.api.problem.AgentViews` where it has them (no view built)."""
     nodes = getattr(agents, "nodes", None)
     if nodes is not None:
         return nodes, agents.remaining

@@ -21,7 +21,7 @@ How it works
       supercover walk of each segment; loops are cut, face steps merged into diagonal steps
       where the motion rules allow, and any illegal step repaired by a short local A*
       (:func:`planners.sampling.snap_polyline`). The returned path always passes
-      :func:`dispatch.motion.check_path`; its length is ``>=`` the exact shortest path.
+      :func:`dispatch.api.motion.check_path`; its length is ``>=`` the exact shortest path.
     * **Costs** are the snapped path's length in metres divided by the agent's speed: ``inf``
       for a UGV and a task above the ground layer, for pairs in different connected components
       of the grid (checked once per grid, no sampling wasted on them), and for pairs the tree
@@ -51,19 +51,13 @@ import math
 
 import numpy as np
 
-from dispatch.contracts import Planner
-from dispatch.motion import path_length
+from dispatch.api.contracts import Planner
+from dispatch.api.motion import path_length
+from dispatch.api.problem import AgentView, TaskView
 from dispatch.locations import Cell
-from dispatch.problem import AgentView, TaskView
-from dispatch.world import World
-from planners.sampling import (
-    GoalCache,
-    RayWorld,
-    connected,
-    on_lattice,
-    snap_polyline,
-    unit_ball_volume,
-)
+from dispatch.space.world import World
+from planners.sampling import (GoalCache, RayWorld, connected, on_lattice, snap_polyline,
+                               unit_ball_volume)
 
 #: Trees kept for goals that are no task's (``plan`` called directly); oldest dropped first.
 MAX_LOOSE_TREES = 64
@@ -278,7 +272,7 @@ class RRTStarPlanner(Planner):
         (two for a ground task), so a run costs about ``2 × tasks × max_iterations``
         iterations; and each iteration tests its new node against its rewiring neighbours
         (:meth:`tree_rays`), which a tiny ``step`` makes every node of the tree (see
-        :mod:`dispatch.budget`)."""
+        :mod:`dispatch.scenario.budget`)."""
         work = 2 * tasks * self.max_iterations
         if work > self.MAX_RUN_ITERATIONS:
             return (f"about {work:.3g} tree iterations (2 trees x {tasks:,.0f} tasks x "

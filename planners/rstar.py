@@ -7,7 +7,7 @@ The algorithm
     to the grid, free, in the start's connected component) plus the goal when it lies within
     ``delta``. An edge ``(s, s')`` first costs its heuristic ``c_low = h(s, s')``; its real path
     is found lazily, only when ``s'`` is selected for expansion, by a *local* weighted A*
-    (weight ``w``, octile heuristic, the motion rules of :mod:`dispatch.motion`). A local search
+    (weight ``w``, octile heuristic, the motion rules of :mod:`dispatch.api.motion`). A local search
     that needs more than ``local_expansions`` expansions is abandoned and ``s'`` is labelled
     AVOID: OPEN is ordered by ``[AVOID, g + w h(s, goal)]``, so hard-to-solve states (and states
     with ``g(s) > w h(start, s)``) are only processed once nothing easy is left, and then their
@@ -17,7 +17,7 @@ The algorithm
     chain of local paths (loops cut).
 
 Guarantees (stated and tested)
-    * Every path returned is legal (:func:`dispatch.motion.check_path`).
+    * Every path returned is legal (:func:`dispatch.api.motion.check_path`).
     * **Bound.** The paper's guarantee is w-suboptimality with respect to Γ, probabilistic with
       respect to the true optimum. We make it deterministic (``enforce_bound=True``, the
       default): the R* path is *certified* when its cost is ``<= w * h(start, goal)`` (``h`` is
@@ -55,21 +55,14 @@ import math
 
 import numpy as np
 
-from dispatch.contracts import Planner
-from dispatch.motion import octile, offsets
+from dispatch.api.contracts import Planner
+from dispatch.api.motion import octile, offsets
+from dispatch.api.problem import AgentView, TaskView
+from dispatch.api.voxels import Grid
 from dispatch.locations import Cell
-from dispatch.problem import AgentView, TaskView
-from dispatch.voxels import Grid
-from dispatch.world import World
-from planners.sampling import (
-    GoalCache,
-    components,
-    flat_index,
-    lattice,
-    legal_moves,
-    on_lattice,
-    unflat,
-)
+from dispatch.space.world import World
+from planners.sampling import (GoalCache, components, flat_index, lattice, legal_moves, on_lattice,
+                               unflat)
 
 _C2 = math.sqrt(2.0) - 1.0
 _C3 = math.sqrt(3.0) - math.sqrt(2.0)

@@ -1,7 +1,7 @@
 """Helpers shared by the randomized planners (``rrt_star``, ``rstar``).
 
 * :func:`legal_moves` — per cell, a bit mask of the legal steps of one movement model (the rule
-  of :func:`dispatch.motion.step_is_legal`, vectorized), cached on ``grid.cache``.
+  of :func:`dispatch.api.motion.step_is_legal`, vectorized), cached on ``grid.cache``.
 * :func:`components` — connected components of the free cells under one movement model, cached:
   a query whose two cells lie in different components is answered ``inf`` without searching.
 * :func:`segment_cells` — the cells a straight segment passes through (a 3-D supercover walk,
@@ -9,7 +9,7 @@
 * :func:`snap_polyline` — a continuous path (metres) turned into a legal grid path: supercover
   walk of every segment, loops cut, runs of face steps merged into diagonal steps where the
   motion rules allow, and any illegal step repaired by a short local A*
-  (:func:`planners.graph.astar`). The result always passes :func:`dispatch.motion.check_path`.
+  (:func:`planners.graph.astar`). The result always passes :func:`dispatch.api.motion.check_path`.
 * :class:`RayWorld` — a private PyBullet DIRECT client holding the obstacle boxes inflated by a
   clearance, answering batched segment visibility queries with ``p.rayTestBatch``.
 
@@ -27,10 +27,10 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
-from dispatch.motion import offsets
+from dispatch.api.motion import offsets
+from dispatch.api.voxels import Box, Grid
 from dispatch.locations import Cell
-from dispatch.voxels import Box, Grid
-from dispatch.world import World
+from dispatch.space.world import World
 
 _MOVES_KEY = "planners.sampling.moves"
 _COMPONENTS_KEY = "planners.sampling.components"
@@ -53,7 +53,8 @@ def legal_moves(grid: Grid, flies: bool) -> np.ndarray:
     """Per node of :func:`lattice` (C-order flat index), the bit mask of legal steps.
 
     Bit ``b`` is set when the step ``offsets(flies)[b]`` is legal from that cell (every cell of
-    the step's bounding box free, both ends in bounds; see :mod:`dispatch.motion`). Blocked cells
+    the step's bounding box free, both ends in bounds; see :mod:`dispatch.api.motion`). Blocked
+    cells
     have no legal steps. Read-only, cached on ``grid.cache``.
     """
     per = grid.cache.setdefault(_MOVES_KEY, {})
@@ -265,7 +266,7 @@ def collision_boxes(world: World) -> tuple[Box, ...]:
     """The obstacle boxes to test rays against, in metres.
 
     ``world.boxes`` when they rasterize exactly to the grid's occupancy (worlds built by
-    :func:`dispatch.world.build_world`); otherwise (a grid made by hand, boxes missing) boxes
+    :func:`dispatch.space.world.build_world`); otherwise (a grid made by hand, boxes missing) boxes
     are rebuilt from the occupied voxels by a greedy merge (runs along z, then y, then x), so
     the collision geometry always equals the grid. Cached on ``grid.cache``.
     """
@@ -328,7 +329,7 @@ class RayWorld:
     """
 
     def __init__(self, world: World, clearance: float) -> None:
-        from dispatch.physics import connect_direct, import_pybullet
+        from dispatch.space.physics import connect_direct, import_pybullet
 
         self.p = p = import_pybullet()
         self.client = connect_direct(p)

@@ -31,7 +31,7 @@ from collections.abc import Mapping
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from dispatch.reposition import Repositioner, RepositionView
+from dispatch.api.repositioner import Repositioner, RepositionView
 from repositioners.zones import Zones
 
 

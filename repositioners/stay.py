@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from dispatch.reposition import Repositioner, RepositionView
+from dispatch.api.repositioner import Repositioner, RepositionView
 
 
 class StayRepositioner(Repositioner):

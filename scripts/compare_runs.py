@@ -4,7 +4,7 @@ Compares every ``part-0.parquet`` under folder A with the file at the same relat
 folder B (``dispatch run --out A`` before a change, ``--out B`` after it): same files, same
 columns, same rows in the same order, every value exactly equal (NaN equal to NaN), leaving out
 only the wall-clock figures, which differ between identical runs: the timing columns
-(:data:`dispatch.recorder.TIMING_COLUMNS`) and the solver seconds an allocator writes into
+(:data:`dispatch.output.parquet.TIMING_COLUMNS`) and the solver seconds an allocator writes into
 ``allocator_info`` (:data:`TIMING_KEYS`). Prints one line per file and exits 1 at the first
 difference it describes.
 
@@ -27,7 +27,7 @@ import pyarrow.parquet as pq
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from dispatch.recorder import TIMING_COLUMNS  # noqa: E402
+from dispatch.output.parquet import TIMING_COLUMNS  # noqa: E402
 
 
 def files(folder: Path) -> dict[Path, Path]:

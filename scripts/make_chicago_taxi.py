@@ -10,7 +10,7 @@ copy of 15,002 City of Chicago "Taxi Trips"). Writes, beside dispatch/data/chica
   7 = Saturday), ``origin_node`` / ``dest_node`` (Chicago Regional TNTP node numbers: the
   nearest node to the pickup / drop-off point), ``origin_snap_m`` / ``dest_snap_m`` (metres to
   that node), ``trip_seconds``, ``pickup_community_area``;
-* ``congestion.csv``: per hour of day the factor of :func:`dispatch.hourly.calibrate`
+* ``congestion.csv``: per hour of day the factor of :func:`dispatch.files.hourly.calibrate`
   (median observed / free-flow seconds), the trips it was taken over and the pooling width.
 
 Prints the snapping and filtering statistics.
@@ -27,8 +27,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from dispatch.hourly import calibrate
-from dispatch.roads import load_network
+from dispatch.files.hourly import calibrate
+from dispatch.space.roads import load_network
 
 DEFAULT = ROOT.parent / "shared" / "data" / "taxi" / "chicago_taxi_trips_sample.csv"
 OUT = ROOT / "dispatch" / "data" / "chicago_taxi"

@@ -8,7 +8,7 @@ PY=${PY:-.venv/bin/python}
 export OMP_NUM_THREADS=1
 sizes=${*:-4 8 12 20}
 for n in $sizes; do
-  /usr/bin/time -f "N=$n wall %e s" "$PY" -m dispatch.cli train magnnet --variant paper \
+  /usr/bin/time -f "N=$n wall %e s" "$PY" -m dispatch.run.cli train magnnet --variant paper \
     --agents "$n" --out "runs/train/paper_ppo_n$n"
 done
 args=()

@@ -1,2 +1,2 @@
 """Fleet-sizing strategies (``dispatch.sizers`` plugins; the contract is
-:mod:`dispatch.sizing`)."""
+:mod:`dispatch.api.sizer`)."""

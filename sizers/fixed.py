@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dispatch.sizing import Sizer, SizingView
+from dispatch.api.sizer import Sizer, SizingView
 
 
 class FixedSizer(Sizer):

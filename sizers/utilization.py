@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 
-from dispatch.sizing import Sizer, SizingView
+from dispatch.api.sizer import Sizer, SizingView
 
 
 class UtilizationSizer(Sizer):

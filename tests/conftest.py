@@ -121,9 +121,11 @@ def make_scenario(tmp_path):
 
 
 def run_cli(*args, cwd: Path | None = None, timeout: float = 120) -> subprocess.CompletedProcess:
-    """Run the installed ``dispatch`` console script (falling back to ``python -m dispatch.cli``)
+    """Run the installed ``dispatch`` console script (falling back to ``python -m
+    dispatch.run.cli``)
     with a wide terminal, so that rich does not wrap long messages."""
-    cmd = [str(DISPATCH_EXE)] if DISPATCH_EXE.exists() else [sys.executable, "-m", "dispatch.cli"]
+    cmd = [str(DISPATCH_EXE)] if DISPATCH_EXE.exists() else \
+        [sys.executable, "-m", "dispatch.run.cli"]
     env = {**os.environ, "COLUMNS": "400", "NO_COLOR": "1", "TERM": "dumb"}
     return subprocess.run(
         [*cmd, *map(str, args)], capture_output=True, text=True, cwd=cwd or ROOT, env=env,

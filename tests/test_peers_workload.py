@@ -126,8 +126,8 @@ def test_limits_and_jittered_streets(tmp_path):
     """The windows are release + max_wait and release + direct + max_delay; direct times are
     Manhattan distances on the plain grid and Dijkstra's on jittered streets, and the GraphML
     the project reads gives the same fastest times."""
-    from dispatch.road_files import read_graphml
-    from dispatch.roads import RoadNetwork
+    from dispatch.files.roads import read_graphml
+    from dispatch.space.roads import RoadNetwork
 
     w, t, o, d, s = pw.generate(50, 3, 1.0, seed=2, columns=5, rows=4, max_wait=120.0,
                                 max_delay=300.0)
@@ -171,7 +171,7 @@ def test_ours_runner_pools(tmp_path, window):
     the release."""
     import pyarrow.parquet as pq
 
-    from dispatch.scenario import load_scenario
+    from dispatch.scenario.load import load_scenario
 
     w, t, o, d, s = pw.generate(60, 3, 0.25, seed=4, drain=2000.0, capacity=4, max_wait=300.0,
                                 max_delay=300.0)

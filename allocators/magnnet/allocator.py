@@ -27,7 +27,8 @@ Variants (``[dispatch.allocator_params] variant = ...``):
     ``benchmarks/paper_tables.py``).
 
     An agent that does not know its whole component (and every agent after round 0) acts on its
-    two-hop view with the view model ``view.pt`` (:mod:`allocators.magnnet.views`: the match network plus the
+    two-hop view with the view model ``view.pt`` (:mod:`allocators.magnnet.views`: the match network
+    plus the
     view's hop, status and size features and "not mine / outside my view" heads, trained
     CTDE with DAgger for partial views); it waits while unsure and must request from round
     ``view_patience`` on. ``partial = "match"`` runs ``match.pt`` on partial views instead (what
@@ -69,7 +70,7 @@ round from which the match model on partial views, ``partial = "match"``, reques
 ``view_patience`` (default 12: the round from which the view model requests its part of its
 view's assignment, and from twice that its best task regardless), ``view_hops`` (default 6,
 at least 2: see above), ``claims`` (default 0: claim exchanges before each round's requests,
-:func:`dispatch.decentralized.run_rounds`; measured: they raise the conflict-free share of the
+:func:`dispatch.api.decentralized.run_rounds`; measured: they raise the conflict-free share of the
 two-hop rule but not its gap, and add nothing once the views are flooded),
 ``cost_scale`` (default
 ``"auto"``: a view whose median travel time exceeds :data:`TRAIN_MAX_S`, 30 s, the longest the
@@ -116,9 +117,9 @@ from pathlib import Path
 
 import numpy as np
 
-from dispatch.decentralized import DecentralizedAllocator
+from dispatch.api.decentralized import DecentralizedAllocator
+from dispatch.api.problem import AgentViews, AllocationProblem
 from dispatch.errors import AllocationError
-from dispatch.problem import AgentViews, AllocationProblem
 
 CHECKPOINTS = Path(__file__).resolve().parent / "checkpoints"
 #: Positions are divided by the size of the world the shipped models were trained in.
@@ -685,7 +686,7 @@ def flood(problem: AllocationProblem, hops: int) -> tuple[np.ndarray, int]:
     agent ``j``'s cost vector and neighbour list, and the broadcasts sent. In each step every
     agent with neighbours that learned something since its last broadcast sends one (all it
     knows); each reception is lost with ``problem.loss`` (drawn from ``problem.rng``)."""
-    from dispatch.comms import Channel
+    from dispatch.api.comms import Channel
 
     n = len(problem.comm)
     channel = Channel(problem.comm, problem.loss, problem.rng)
@@ -714,7 +715,7 @@ def _exists(path: Path) -> Path:
 
 
 def _dummy(n: int) -> AllocationProblem:
-    from dispatch.problem import AgentView, TaskView
+    from dispatch.api.problem import AgentView, TaskView
 
     agents = tuple(AgentView(i, "uav" if i % 2 else "ugv", (i, 0, 0), 3.0) for i in range(n))
     tasks = tuple(TaskView(j, "ground", (j, 1, 0), 0.0) for j in range(n))

@@ -14,10 +14,10 @@ that the policy trained is the policy deployed:
   then a feed-forward block. Nothing depends on ``N`` or ``M``: one model for every size.
   The actor scores ``{wait, task 1 .. task M}`` per agent; the critic (training only,
   centralized) pools every pair and agent and gives one value per agent;
-* :func:`requests` — the decision rule: action ``0`` is :data:`~dispatch.decentralized.WAIT`
+* :func:`requests` — the decision rule: action ``0`` is :data:`~dispatch.api.decentralized.WAIT`
   (request nothing this round, decide again) until round :func:`patience`, then ``-1`` (done
   waiting: a round where nobody requests or waits ends the decision, as
-  :func:`dispatch.decentralized.run_rounds` does); action ``j + 1`` requests task ``j``.
+  :func:`dispatch.api.decentralized.run_rounds` does); action ``j + 1`` requests task ``j``.
 
 Decentralized execution. A pair's state after ``L`` layers depends on the agent's own costs,
 the open tasks, and the costs of the agents within ``L`` radio hops (column attention is
@@ -34,7 +34,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from dispatch.decentralized import WAIT
+from dispatch.api.decentralized import WAIT
 
 #: Seconds per model cost unit, and the cap (also the value of unavailable pairs).
 COST_SCALE = 10.0
@@ -198,7 +198,7 @@ class AttentionPolicy(nn.Module):
 
 def requests(actions: np.ndarray, round_: int, m: int) -> np.ndarray:
     """Actions (``0``: wait, ``j + 1``: task ``j``) as the requests of
-    :meth:`dispatch.decentralized.DecentralizedAllocator.choose`: a task index, ``WAIT``, or
+    :meth:`dispatch.api.decentralized.DecentralizedAllocator.choose`: a task index, ``WAIT``, or
     ``-1`` for a wait from round :func:`patience` on."""
     a = np.asarray(actions, np.int64)
     idle = WAIT if round_ < patience(m) else -1

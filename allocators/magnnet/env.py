@@ -80,7 +80,7 @@ class MagnnetEnv(ParallelEnv):
         cost, apos, tpos, flies, size = inst
         comm = None
         if self.comm_range is not None:
-            from dispatch.comms import comm_graph
+            from dispatch.api.comms import comm_graph
 
             comm = comm_graph(apos, self.comm_range)
         self.game = Game(cost, apos, tpos, flies, size, comm)

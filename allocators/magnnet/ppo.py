@@ -139,7 +139,7 @@ class Sampler:
             c, a, t, f, s = self.draw(len(slots))
             comm = None
             if self.comm_ranges is not None:
-                from dispatch.comms import comm_graph
+                from dispatch.api.comms import comm_graph
 
                 lo, hi = self.comm_ranges
                 comm = np.stack([

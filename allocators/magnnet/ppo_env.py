@@ -2,13 +2,13 @@
 under the plugin's own decision rounds and conflict rule (issue 33).
 
 A decision is a cost matrix (seconds, ``inf`` infeasible), the agents' kinds and a radio
-graph. It is played in rounds exactly as :func:`dispatch.decentralized.run_rounds` plays it on
+graph. It is played in rounds exactly as :func:`dispatch.api.decentralized.run_rounds` plays it on
 a complete graph without loss (every agent hears every request): the agents that decide are
 those unassigned with an open feasible task; each is given its observation
 (:func:`allocators.magnnet.attention.observe`), acts, and its action becomes a request by
 :func:`allocators.magnnet.attention.requests` (the plugin's rule); a round in which nobody
 requests or waits ends the decision; the requests are settled by the kernel's conflict rule
-(:func:`dispatch.decentralized.resolve_conflicts`: the cheapest requester wins, ties to the
+(:func:`dispatch.api.decentralized.resolve_conflicts`: the cheapest requester wins, ties to the
 lowest index). No SimPy: a static decision needs only its cost matrix. Games of a radio graph
 (training under limited range) still learn of every won task at once (the game's beliefs are
 global); the plugin under limited range relays the news hop by hop.
@@ -16,7 +16,8 @@ global); the plugin under limited range relays the news hop by hop.
 Rewards come from the cost matrix only (no optimal assignment, no teacher), per agent:
 
 * ``w (R_WIN - c_ij / c_mean)`` when it wins task ``j`` (``w``: ``cost_weight``, default 1;
-  it weighs the win and stall rewards against the conflict penalty) (``c_mean``: the instance's mean finite
+  it weighs the win and stall rewards against the conflict penalty) (``c_mean``: the instance's mean
+  finite
   cost): a win is worth more the cheaper it is, and requesting is worth more than waiting
   (without ``R_WIN`` a win is an immediate loss and waiting is paid only at the end: the
   first training run waited);
@@ -34,7 +35,7 @@ import numpy as np
 import torch
 
 from allocators.magnnet.attention import observe, requests
-from dispatch.decentralized import WAIT, resolve_conflicts
+from dispatch.api.decentralized import WAIT, resolve_conflicts
 
 R_WIN = 2.0
 R_CONFLICT = -1.0

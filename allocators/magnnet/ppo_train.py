@@ -84,7 +84,7 @@ class Sampler:
             fls.append(fl[a])
             comm = np.ones((n, n), bool)
             if self.comm_ranges is not None and rng.random() < self.p_range:
-                from dispatch.comms import comm_graph
+                from dispatch.api.comms import comm_graph
 
                 comm = comm_graph(p.agent_pos[k][a], rng.uniform(*self.comm_ranges))
             comms.append(comm)

@@ -4,7 +4,8 @@ An instance of seed ``s`` and fleet size ``N`` is the first decision of the stat
 (``scenarios/paper_static.toml`` by default) run with seed ``s``
 (:func:`learning.instances.first_decision`: the world of the seed, the run's fleet and its
 ``M = N`` first tasks), costed with the exact A* travel times of the ``astar`` planner (found
-through the registry: this package imports ``dispatch`` only). Training uses seeds from :data:`TRAIN_SEED0` on; evaluation uses seeds from
+through the registry: this package imports ``dispatch`` only). Training uses seeds from
+:data:`TRAIN_SEED0` on; evaluation uses seeds from
 :data:`EVAL_SEED0` on, so the two never overlap.
 
 Computing A* costs takes seconds per instance (one distance field per task), so pools are built
@@ -52,8 +53,8 @@ class Pool:
 def instance(seed: int, n_agents: int, scenario: str | Path = DEFAULT_SCENARIO,
              n_tasks: int | None = None):
     """``(cost, agent_pos, task_pos, flies, world_size)`` of the first decision of one run."""
+    from dispatch.api.registry import load
     from learning.instances import first_decision
-    from dispatch.registry import load
 
     first = first_decision(scenario, seed, n_agents, n_tasks)
     world, agents, views = first.space, first.agents, first.tasks

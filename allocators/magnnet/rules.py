@@ -3,7 +3,7 @@
 One episode is one decision of the dispatcher: ``N`` agents, ``M`` tasks, a cost matrix
 ``cost[i, j]`` (travel seconds, ``inf`` where agent ``i`` cannot serve task ``j``) and the
 agents' communication adjacency. It is played in *rounds*, with the rules of the shared loop
-:func:`dispatch.decentralized.run_rounds` on a complete graph without loss (every agent hears of
+:func:`dispatch.api.decentralized.run_rounds` on a complete graph without loss (every agent hears of
 every won task):
 
 * an agent *decides* while it is unassigned and some open task is feasible for it;

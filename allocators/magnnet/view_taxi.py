@@ -38,7 +38,7 @@ DAY = (7.0, 10.0)
 def snapshot(problem, seed: int):
     """A plain copy of a dispatcher's decision (views built, arrays copied, its own ``rng``):
     it stays valid after the run moves on."""
-    from dispatch.problem import AllocationProblem
+    from dispatch.api.problem import AllocationProblem
 
     return AllocationProblem(float(problem.time), tuple(problem.agents), tuple(problem.tasks),
                              np.array(problem.cost, float), np.array(problem.comm, bool),

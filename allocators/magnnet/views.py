@@ -26,7 +26,7 @@ that round and retrains on everything collected so far.
 Execution (:func:`view_request`): the deciding agent requests its best task when the pair is
 mutual best in its view (the task's best agent, the outside head included, is itself) and both
 softmaxes (row and column, null heads included) give it at least ``confidence``; otherwise it
-waits (:data:`dispatch.decentralized.WAIT`). From round ``patience`` on it must request: its
+waits (:data:`dispatch.api.decentralized.WAIT`). From round ``patience`` on it must request: its
 part of the view's best-score assignment (every agent of a view computes the same one), and
 from twice that round its best task regardless, so a decision never stalls.
 """
@@ -42,7 +42,7 @@ import torch
 from torch import nn
 
 from allocators.magnnet.match import (EDGE_FEATURES, EdgeLayer, MatchPolicy, aggregates,
-                                     edge_features, scaled)
+                                      edge_features, scaled)
 
 log = logging.getLogger(__name__)
 
@@ -364,8 +364,8 @@ def sub_problem(pool, k: int, n: int, comm_range: float | None, loss: float,
                 rng: np.random.Generator):
     """A random ``n x n`` sub-problem (agents and tasks drawn without replacement) of
     instance ``k`` of ``pool``, as an AllocationProblem whose ids are indices."""
-    from dispatch.comms import comm_graph
-    from dispatch.problem import AgentView, AllocationProblem, TaskView
+    from dispatch.api.comms import comm_graph
+    from dispatch.api.problem import AgentView, AllocationProblem, TaskView
 
     big_n, big_m = pool.cost.shape[1:]
     ai = np.sort(rng.choice(big_n, min(n, big_n), replace=False))

@@ -2,12 +2,12 @@
 
 One source of truth each, read at build time, never copied by hand:
 
-* scenario keys: the typed configuration's frozen dataclasses (``dispatch.config``, and the
+* scenario keys: the typed configuration's frozen dataclasses (``dispatch.config.scenario``, and the
   ``[faults]``, ``[fleet.energy]`` and ``[chargers]`` dataclasses wherever they live), their
   types and defaults from :func:`dataclasses.fields`, their meaning from the comment on or
   above each field in the source;
-* the command line: the argument parser of ``dispatch.cli`` (the plugin commands included);
-* the Parquet tables: ``dispatch.recorder.SCHEMAS`` (column names and Arrow types), each
+* the command line: the argument parser of ``dispatch.run.cli`` (the plugin commands included);
+* the Parquet tables: ``dispatch.output.parquet.SCHEMAS`` (column names and Arrow types), each
   column's meaning from the table of the results page (``explanation/output.md``) where it
   has one, else from the comment above it in the recorder;
 
@@ -146,7 +146,8 @@ def file_keys() -> set[str]:
     """Every string literal of the scenario parser: a field the parser never names is built
     from others (a file's rows, a derived flag) and is not a key of the file."""
     keys = set()
-    for mod in ("scenario", "scenario_sections", "config"):
+    for mod in ("scenario/load", "scenario/sections", "config/scenario", "config/faults",
+                "config/offers", "config/energy"):
         tree = ast.parse((ROOT / "dispatch" / f"{mod}.py").read_text(encoding="utf-8"))
         keys |= {n.value for n in ast.walk(tree)
                  if isinstance(n, ast.Constant) and isinstance(n.value, str)}
@@ -195,8 +196,7 @@ def key_table(title: str, table: str, cls: type, keys: set[str], skip=(),
 
 
 def scenario_keys() -> str:
-    from dispatch import config
-
+    from dispatch.config import scenario as config
     keys = file_keys() | {"blocks", "block", "speed", "network", "congestion"}
     sections = [
         ("top level", "", config.Scenario, ("name", "path", "text", "charging", "acceptor",
@@ -247,11 +247,11 @@ def _fmt_action(a: argparse.Action) -> str:
 
 
 def command_line() -> str:
-    from dispatch import cli
-    from dispatch.commands import installed
+    from dispatch.run import cli
+    from dispatch.run.commands import installed
 
     parser = cli._parser(installed(reserved=cli.OWN_COMMANDS))
-    out = ["# Command line", "", "Generated from the argument parser of `dispatch.cli`, "
+    out = ["# Command line", "", "Generated from the argument parser of `dispatch.run.cli`, "
            "the commands that other packages register (`dispatch.commands` entry points) "
            "included.", "", "```text", parser.format_usage().strip(), "```", "",
            "| option | meaning |", "|---|---|"]
@@ -303,7 +303,7 @@ def output_meanings() -> dict[str, dict[str, str]]:
 
 def recorder_comments() -> dict[str, dict[str, str]]:
     """``{table: {column: the comment above its group}}`` in the recorder's schemas."""
-    src = (ROOT / "dispatch" / "recorder.py").read_text(encoding="utf-8")
+    src = (ROOT / "dispatch" / "output" / "parquet.py").read_text(encoding="utf-8")
     out, table, comment = {}, None, []
     for line in src.splitlines():
         m = re.match(r'\s*"(\w+)": pa\.schema', line)
@@ -322,13 +322,13 @@ def recorder_comments() -> dict[str, dict[str, str]]:
 
 
 def parquet_tables() -> str:
-    from dispatch.recorder import SCHEMAS
+    from dispatch.output.parquet import SCHEMAS
 
     meanings, comments = output_meanings(), recorder_comments()
     out = ["# Parquet tables", "",
-           "Generated from the recorder's schemas (`dispatch.recorder.SCHEMAS`): every table a "
-           "run writes, under `OUT/<table>/<partition>/part-0.parquet` (Hive partitions: the "
-           "run keys). The meaning (with its unit) comes from the "
+           "Generated from the recorder's schemas (`dispatch.output.parquet.SCHEMAS`): every "
+           "table a run writes, under `OUT/<table>/<partition>/part-0.parquet` (Hive "
+           "partitions: the run keys). The meaning (with its unit) comes from the "
            "[results page](../../explanation/output.md), else from the recorder's comment.", ""]
     for name, schema in SCHEMAS.items():
         out += [f"## {name}", "", "| column | type | meaning |", "|---|---|---|"]
@@ -360,8 +360,8 @@ class ContractDirective(SphinxDirective):
     optional_arguments = 20
 
     def run(self):
-        from docutils.statemachine import StringList
         from docutils import nodes
+        from docutils.statemachine import StringList
 
         lines = []
         for name in self.arguments:

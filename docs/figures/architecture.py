@@ -28,26 +28,46 @@ def arrow(ax, a, b, text=None):
                 va="center", color="#333333")
 
 
+#: the kernel's floors, top down: (sub-packages side by side, what they hold)
+FLOORS = [
+    (("run/",), "wiring of a run · runner and sweeps · plugins built · command line"),
+    (("checks/", "scenario/"), "plugin checks · scaffold  |  TOML read once · --set · budget"),
+    (("output/",), "Parquet recorder · rows · summary · printed tables"),
+    (("fleet/",), "batteries · charger visits · repositioning · shifts · faults"),
+    (("decide/",), "dispatcher · pipeline · costs · answers · meeting · offers · prebook"),
+    (("space/",), "voxel world (PyBullet) · road network · congestion · drivers"),
+    (("plan/",), "tasks · vehicles · stops and the schedule rule · operator"),
+    (("config/",), "the typed configuration: data only"),
+    (("api/",), "what a plugin author reads: problem · contracts · registry"),
+    (("files/", "ground"), "trips · roads · tables  |  errors · locations · events"),
+]
+
+
 def house(ax):
     ax.set_title("The house: who imports whom", fontsize=11, weight="bold")
-    ax.add_patch(Polygon([(0.06, 0.80), (0.5, 0.98), (0.94, 0.80)], fc=PURPLE, ec="#555555"))
-    ax.text(0.5, 0.855, "analysis/  reports, figures, animations\n(reads the Parquet files only)",
-            ha="center", va="center", fontsize=8.5)
-    box(ax, 0.08, 0.66, 0.84, 0.12, "Parquet tables  summary · tasks · events · vehicles ·\n"
-        "decisions · assignments · chargers · soc", GREY, 8.5)
-    for i, (name, what) in enumerate((("allocators/", "who serves\nwhich request"),
-                                      ("planners/", "paths and\ntravel times"),
-                                      ("repositioners/", "where idle\nvehicles go"),
-                                      ("chargers/", "when cars\ncharge"))):
-        box(ax, 0.08 + i * 0.215, 0.44, 0.195, 0.19, f"{name}\n{what}", ORANGE, 8)
-    ax.text(0.5, 0.405, "plugins: entry points, found by name", ha="center", fontsize=7.5,
-            style="italic")
-    box(ax, 0.08, 0.18, 0.84, 0.2, "dispatch/  the kernel (imports no plugin)\n"
-        "SimPy events · task book · dispatcher · vehicles and stop lists\n"
-        "typed scenario config · recorder · command line", BLUE, 8.5, "bold")
-    box(ax, 0.08, 0.04, 0.40, 0.11, "voxel world\n(drones, robots; PyBullet)", GREEN, 8)
-    box(ax, 0.52, 0.04, 0.40, 0.11, "road network\n(OSMnx, TNTP, grid; taxis)", GREEN, 8)
-    ax.text(0.5, 0.005, "spaces", ha="center", fontsize=7.5, style="italic")
+    ax.add_patch(Polygon([(0.06, 0.88), (0.5, 0.99), (0.94, 0.88)], fc=PURPLE, ec="#555555"))
+    ax.text(0.5, 0.915, "analysis/  reports, figures, replay (reads Parquet only)",
+            ha="center", va="center", fontsize=8)
+    box(ax, 0.09, 0.815, 0.82, 0.045,
+        "Parquet tables  summary · tasks · events · vehicles · ...", GREY, 8)
+    names = ("allocators/", "planners/", "repositioners/", "chargers/", "acceptors/", "sizers/")
+    for i, name in enumerate(names):
+        box(ax, 0.09 + i * 0.142, 0.73, 0.112, 0.05, name, ORANGE, 7)
+    ax.text(0.5, 0.695, "plugins: entry points, found by name; they import dispatch/api/",
+            ha="center", fontsize=7, style="italic")
+    ax.add_patch(FancyBboxPatch((0.06, 0.005), 0.88, 0.675,
+                                boxstyle="round,pad=0.005,rounding_size=0.02",
+                                fc="white", ec="#555555", lw=1))
+    ax.text(0.5, 0.662, "dispatch/  the kernel in floors: each imports only floors below it",
+            ha="center", va="center", fontsize=7.5, weight="bold")
+    h, y = 0.0605, 0.645
+    for names, what in FLOORS:
+        y -= h
+        color = GREEN if names == ("space/",) else BLUE
+        w = 0.84 / len(names)
+        for i, name in enumerate(names):
+            part = what.split("  |  ")[i] if len(names) > 1 else what
+            box(ax, 0.09 + i * w, y + 0.011, w - 0.03, h - 0.022, f"{name}  {part}", color, 6.8)
 
 
 def flow(ax):
@@ -72,7 +92,7 @@ def flow(ax):
 
 
 def main() -> None:
-    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 5.2))
+    fig, (a, b) = plt.subplots(1, 2, figsize=(12, 6.2))
     for ax in (a, b):
         ax.set_xlim(0, 1)
         ax.set_ylim(0, 1)

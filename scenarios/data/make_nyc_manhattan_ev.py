@@ -1,10 +1,13 @@
-"""Make scenarios/data/nyc_manhattan_ev_*.csv from HIVE's Manhattan files (../shared/data/nyc_manhattan,
+"""Make scenarios/data/nyc_manhattan_ev_*.csv from HIVE's Manhattan files
+(../shared/data/nyc_manhattan,
 BSD 3-Clause: its LICENSE.txt is copied beside them as nyc_manhattan_ev_LICENSE.txt):
 
-* nyc_manhattan_ev_fleet.csv: HIVE's 1,200 vehicles (vehicle_id = the number of ``v<k>``) at their lon/lat
+* nyc_manhattan_ev_fleet.csv: HIVE's 1,200 vehicles (vehicle_id = the number of ``v<k>``) at their
+lon/lat
   projected to the network's metres (x, y; the run snaps them to the nearest intersection),
   ``soc`` = HIVE's initial_soc (0.8);
-* nyc_manhattan_ev_stations.csv: HIVE's 15 DCFC stations (on-shift access; the four LEVEL_2 depots with 1,000
+* nyc_manhattan_ev_stations.csv: HIVE's 15 DCFC stations (on-shift access; the four LEVEL_2 depots
+with 1,000
   plugs each are for off-shift vehicles in HIVE and are left out), 50 kW, ``plugs`` as in HIVE
   (20) or ``--plugs K`` for each.
 
@@ -46,7 +49,7 @@ def main(argv: list[str]) -> None:
                         plugs if plugs is not None else r["charger_count"], 50.0])
     if out_name != PREFIX + "stations.csv":
         return
-    from dispatch.roads import load_network
+    from dispatch.space.roads import load_network
 
     net = load_network("manhattan_osm", base=HERE)
     with open(src / "hive_fleet_1200.csv", newline="") as f:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dispatch.problem import AgentView, AllocationProblem, TaskView
+from dispatch.api.problem import AgentView, AllocationProblem, TaskView
 
 
 def make_problem(cost, seed: int = 0, max_rounds: int = 1000) -> AllocationProblem:

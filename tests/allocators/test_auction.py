@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 
 from allocators.auction import AuctionAllocator, better
-from dispatch import registry
-from dispatch.comms import comm_graph, components, diameter
+from dispatch.api import registry
+from dispatch.api.comms import comm_graph, components, diameter
+from dispatch.api.problem import AgentView, AllocationProblem, TaskView
 from dispatch.errors import PluginError
-from dispatch.plugins import make_plugin
-from dispatch.problem import AgentView, AllocationProblem, TaskView
+from dispatch.run.plugins import make_plugin
 
 from .helpers import assert_valid, index_pairs, make_problem, random_problem, total_cost
 

@@ -10,7 +10,7 @@ import pytest
 from allocators.greedy import GreedyAllocator
 from allocators.hungarian import HungarianAllocator
 from allocators.randomized import RandomAllocator
-from dispatch.decentralized import DecentralizedAllocator
+from dispatch.api.decentralized import DecentralizedAllocator
 from dispatch.errors import AllocationError
 
 from .helpers import assert_valid, index_pairs, make_problem, random_problem, total_cost
@@ -214,8 +214,7 @@ def test_complete_graph_shortcut_gives_the_general_delivery_answer(cls, monkeypa
     """Everyone hearing everyone without loss takes a shortcut (one OR over the senders per
     round, no relay matrix); it must give exactly what the general broadcast delivery gives:
     pairs, request log, rounds, messages and hops."""
-    from dispatch import decentralized
-
+    from dispatch.api import decentralized
     def answers():
         out = []
         for seed, n, m, p_inf in _shapes():

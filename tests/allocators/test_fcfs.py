@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from allocators.fcfs import FcfsAllocator
-from dispatch.answers import validate
-from dispatch.problem import AgentView, AllocationProblem, TaskView
+from dispatch.api.problem import AgentView, AllocationProblem, TaskView
+from dispatch.decide.answers import validate
 
 
 def problem(cost, released, agent_ids=None) -> AllocationProblem:

@@ -10,7 +10,7 @@ import pytest
 
 from allocators.hungarian import optimal_pairs
 from allocators.local_hungarian import LocalHungarianAllocator
-from dispatch.decentralized import WAIT
+from dispatch.api.decentralized import WAIT
 
 from .helpers import assert_valid, index_pairs, make_problem, random_problem, total_cost
 

@@ -14,8 +14,8 @@ from allocators.magnnet.ppo import save_checkpoint  # noqa: E402
 from allocators.magnnet.ppo_env import RoundsEnv  # noqa: E402
 from allocators.magnnet.ppo_train import Config, Sampler, collect, play, train  # noqa: E402
 from allocators.magnnet.problems import Pool  # noqa: E402
-from dispatch.decentralized import WAIT  # noqa: E402
-from dispatch.problem import AgentView, AllocationProblem, TaskView  # noqa: E402
+from dispatch.api.decentralized import WAIT  # noqa: E402
+from dispatch.api.problem import AgentView, AllocationProblem, TaskView  # noqa: E402
 
 
 @pytest.fixture(autouse=True)

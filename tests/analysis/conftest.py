@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from dispatch.runner import sweep
-from dispatch.scenario import load_scenario
+from dispatch.run.runner import sweep
+from dispatch.scenario.load import load_scenario
 from tests.conftest import write_scenario
 
 SWEEP = {"allocator": ["hungarian", "greedy", "random"], "agents": [2, 3], "seed": [0, 1, 2]}
@@ -30,7 +30,7 @@ def small_sweep(tmp_path_factory) -> Path:
 def single_run(tmp_path_factory) -> Path:
     """The folder of one busy dynamic run (``dispatch run``: the same Hive layout as a sweep,
     one partition): Poisson tasks, some expire."""
-    from dispatch.runner import execute
+    from dispatch.run.runner import execute
 
     d = tmp_path_factory.mktemp("single_run")
     scenario = write_scenario(d, fleet={"agents": 3},

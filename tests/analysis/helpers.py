@@ -26,8 +26,8 @@ def run_tiny_road(d: Path, name: str, sweep: str = "") -> Path:
     """Run the hand-checked taxi day in ``d``: a 3 x 2 Manhattan grid (100 m blocks, 10 m/s),
     two taxis at nodes 0 and 5, four trips (one with a 5 s ``max_wait``), ``fcfs``; ``sweep``
     is appended as the scenario's ``[sweep]`` lines. Returns the results folder."""
-    from dispatch.runner import execute
-    from dispatch.scenario import load_scenario
+    from dispatch.run.runner import execute
+    from dispatch.scenario.load import load_scenario
 
     (d / "trips.csv").write_text("t,origin_node,dest_node,max_wait\n0,0,2,\n1,3,5,\n"
                                  "2,4,3,5\n30,1,0,\n")

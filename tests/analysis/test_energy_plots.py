@@ -30,8 +30,8 @@ def test_soc_quantiles():
 
 def test_report_draws_the_energy_pictures(tmp_path):
     from analysis.report import write_report
-    from dispatch.runner import run_one
-    from dispatch.scenario import load_scenario
+    from dispatch.run.runner import run_one
+    from dispatch.scenario.load import load_scenario
 
     (tmp_path / "st.csv").write_text("station_id,node,plugs,kw\nA,0,1,20\nB,99,2,20\n")
     p = tmp_path / "ev.toml"
@@ -100,8 +100,8 @@ def _ev_scenario(d, name: str, energy: bool = True):
 @pytest.fixture(scope="module")
 def two_scenarios(tmp_path_factory):
     """An electric scenario (two allocators) and a plain one, run into one folder."""
-    from dispatch.runner import run_one
-    from dispatch.scenario import load_scenario
+    from dispatch.run.runner import run_one
+    from dispatch.scenario.load import load_scenario
 
     d = tmp_path_factory.mktemp("two")
     for name, energy in (("ev", True), ("plain", False)):

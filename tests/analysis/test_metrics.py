@@ -15,8 +15,8 @@ from scipy import stats
 
 from analysis import metrics as M
 from analysis.io import NoResultsError, open_results
-from paired.stats import mean_ci, t_quantile
 from analysis.timeline import positions_at, trajectories, vehicle_intervals
+from paired.stats import mean_ci, t_quantile
 from tests.analysis.helpers import read_hive_rows
 from tests.conftest import ROOT
 
@@ -76,7 +76,7 @@ def test_old_single_run_folders_still_read(single_run, tmp_path):
     """Results of older versions: one run as ``<table>.parquet`` files (no partition folders,
     the run keys inside the summary), tasks with ``arrived_at`` and decisions with ``n_agents``
     (the idle vehicles) for what are now ``picked_up_at`` and ``n_idle``."""
-    from dispatch.runner import read_table
+    from dispatch.run.runner import read_table
 
     new = open_results(single_run)
     run_id = new.run_ids()[0]

@@ -15,8 +15,8 @@ import pandas as pd
 import pyarrow.dataset as ds
 import pytest
 
-from dispatch.runner import execute
-from dispatch.scenario import load_scenario
+from dispatch.run.runner import execute
+from dispatch.scenario.load import load_scenario
 from tests.conftest import run_cli
 
 CHROMIUM = Path("/usr/bin/chromium")

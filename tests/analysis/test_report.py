@@ -168,8 +168,8 @@ def test_polars_reads_the_sweep(small_sweep):
 @pytest.fixture(scope="module")
 def road_sweep(tmp_path_factory):
     """Two allocators on a 6 x 6 grid: 6 taxis, Poisson trips for 40 simulated minutes."""
-    from dispatch.runner import sweep
-    from dispatch.scenario import load_scenario
+    from dispatch.run.runner import sweep
+    from dispatch.scenario.load import load_scenario
 
     d = tmp_path_factory.mktemp("road_sweep")
     path = d / "grid.toml"

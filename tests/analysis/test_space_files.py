@@ -1,4 +1,4 @@
-"""A road run's network stored beside its results (dispatch/space_files.py) and read back by
+"""A road run's network stored beside its results (dispatch/output/space_files.py) and read back by
 analysis.network without dispatch: once per folder, the same nodes, edges and free-flow times
 as the network the run drove on; a folder without it gives no network (and says why)."""
 
@@ -21,7 +21,7 @@ def road_folder(tmp_path_factory):
 
 
 def test_stored_once_and_equal_to_the_network_driven(road_folder):
-    from dispatch.roads import manhattan
+    from dispatch.space.roads import manhattan
 
     stored = sorted((road_folder / "_spaces").iterdir())
     assert len(stored) == 1 and stored[0].name.startswith("road-")  # two runs, one network
@@ -47,8 +47,8 @@ def test_stored_once_and_equal_to_the_network_driven(road_folder):
 
 
 def test_a_voxel_run_keeps_no_space_files(tmp_path):
-    from dispatch.runner import execute
-    from dispatch.scenario import load_scenario
+    from dispatch.run.runner import execute
+    from dispatch.scenario.load import load_scenario
     from tests.conftest import write_scenario
 
     out = tmp_path / "out"

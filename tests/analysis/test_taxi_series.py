@@ -18,9 +18,9 @@ import pytest
 from analysis import metrics as M
 from analysis import taxi_plots as TP
 from analysis.io import open_results
-from paired.compare import window_label
 from analysis.report import write_report
-from dispatch.scenario import load_scenario
+from dispatch.scenario.load import load_scenario
+from paired.compare import window_label
 from tests.analysis.helpers import run_tiny_road
 
 LABELS = ["fcfs imm", "fcfs imm + demand", "fcfs 30s", "fcfs 30s + demand"]
@@ -159,7 +159,7 @@ TINY = ('name = "tiny"\nduration = 1000.0\n[world]\nnetwork = "manhattan"\nblock
 def two_texts(tmp_path_factory):
     """One folder, runs of two scenario texts (as chicago_study.py called twice with other
     lists): fcfs (one run) and greedy + demand (two seeds, so two runs of one series)."""
-    from dispatch.runner import sweep
+    from dispatch.run.runner import sweep
 
     d = tmp_path_factory.mktemp("two_texts")
     (d / "trips.csv").write_text("t,origin_node,dest_node,max_wait\n0,0,2,\n1,3,5,\n"

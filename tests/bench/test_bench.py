@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import csv
 import math
+
 import pytest
 
 from bench import against, stats, suite
@@ -14,7 +15,7 @@ from bench.metrics import COLUMNS, TIMING
 from bench.run import run_bench
 from bench.suite import DELETE, Instance
 from bench.table import BenchFileError, read_csv, write_csv
-from dispatch.cli import main
+from dispatch.run.cli import main
 from tests.conftest import TINY_DISPATCH, TINY_FLEET, TINY_OBSTACLES, TINY_TASKS, TINY_WORLD
 
 # ------------------------------------------------------------------------- the suite is fixed
@@ -246,12 +247,12 @@ def test_wrong_inputs_give_one_line(tmp_path, capsys):
 
 
 def test_a_run_that_fails_gets_a_row(tiny, tmp_path, monkeypatch):
-    import dispatch.runner
+    import dispatch.run.runner
 
     def boom(spec, out, flush_rows=0, progress=None):
         raise RuntimeError("planted failure")
 
-    monkeypatch.setattr(dispatch.runner, "run_one", boom)
+    monkeypatch.setattr(dispatch.run.runner, "run_one", boom)
     res = run_bench([], tmp_path, workers=1, only=["tiny_voxel"], seeds=1)
     assert [r["status"] for r in res.rows] == ["failed: RuntimeError: planted failure"] * 2
 
@@ -279,7 +280,7 @@ def test_a_run_stuck_in_one_long_call_is_stopped_by_the_timer(tiny, tmp_path, mo
     minutes: the timer stops it there."""
     import time
 
-    import dispatch.runner
+    import dispatch.run.runner
 
     slept = []
 
@@ -287,7 +288,7 @@ def test_a_run_stuck_in_one_long_call_is_stopped_by_the_timer(tiny, tmp_path, mo
         time.sleep(30.0)
         slept.append(spec.run_id)  # (reached only if nothing stopped the call)
 
-    monkeypatch.setattr(dispatch.runner, "run_one", stuck)
+    monkeypatch.setattr(dispatch.run.runner, "run_one", stuck)
     res = run_bench([], tmp_path, workers=1, only=["tiny_voxel"], seeds=1, time_limit=0.5)
     assert slept == []  # both calls were stopped inside the sleep
     assert [r["status"] for r in res.rows] == ["timeout: past its limit of 0 s of wall time"] * 2

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 
-PICKUP_TIME = 0  # (dispatch.stops' objective codes)
+PICKUP_TIME = 0  # (dispatch.plan.stops' objective codes)
 
 
 def simulate(ready: float, first_tt, tt, plan, load: int, cap: int):
@@ -34,7 +34,7 @@ def simulate(ready: float, first_tt, tt, plan, load: int, cap: int):
 
 def brute_force_insertion(ready: float, first_tt, stops: list[tuple], load: int, cap: int,
                           request: tuple, tt, objective: int):
-    """The exhaustive search :func:`dispatch.insertion.insertion_costs` must agree with: every
+    """The exhaustive search :func:`dispatch.plan.insertion.insertion_costs` must agree with: every
     (pickup, drop-off) position pair, each new plan re-simulated from scratch. ``stops``:
     ``(loc, passengers, latest, service[, earliest])``; ``request``: ``(pickup loc, drop-off
     loc, passengers, pickup latest, drop-off latest, service at pickup, service at drop-off[,

@@ -6,12 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dispatch.answers import validate
+from dispatch.api.legs import RoadPoint
+from dispatch.api.problem import AgentView, AgentViews, Allocation, AllocationProblem
+from dispatch.decide.answers import validate
 from dispatch.errors import AllocationError
-from dispatch.legs import RoadPoint
-from dispatch.problem import AgentView, AgentViews, Allocation, AllocationProblem
-from dispatch.roads import manhattan
-from dispatch.vehicles import Fleet, Vehicle
+from dispatch.plan.vehicles import Fleet, Vehicle
+from dispatch.space.roads import manhattan
 
 
 def _fleet():
@@ -70,9 +70,9 @@ def test_one_task_cost_column_equals_scipy_and_the_general_path():
     scipy's Dijkstra plus the seconds left on an edge, and those of its general path."""
     from scipy.sparse.csgraph import dijkstra
 
-    from dispatch.congestion import CongestedPlanner
-    from dispatch.hourly import HourlyFactors
-    from dispatch.problem import TaskView
+    from dispatch.api.problem import TaskView
+    from dispatch.files.hourly import HourlyFactors
+    from dispatch.space.congestion import CongestedPlanner
     from planners.road import RoadPlanner
 
     net = manhattan(5, 5, 100.0, 10.0)

@@ -7,10 +7,10 @@ from __future__ import annotations
 
 import pytest
 
-from dispatch import cli
+from dispatch.config.scenario import Limits, safe_name
 from dispatch.errors import ScenarioError
-from dispatch.config import Limits, safe_name
-from dispatch.scenario import load_scenario
+from dispatch.run import cli
+from dispatch.scenario.load import load_scenario
 from tests.conftest import ROOT, write_scenario
 
 CHECKPOINTS = ROOT / "allocators" / "magnnet" / "checkpoints"
@@ -115,8 +115,7 @@ def test_deep_nesting_and_huge_integer(tmp_path, capsys):
 
 
 def test_file_size_limits_and_force(tmp_path, capsys, monkeypatch):
-    from dispatch import scenario
-
+    from dispatch.scenario import load as scenario
     path = write_scenario(tmp_path, tasks={"source": "trace", "trace": "t.csv",
                                            "ground_fraction": None})
     (tmp_path / "t.csv").write_text("t,x,y,z\n0,1.5,1.5,0.5\n", encoding="utf-8")
@@ -199,7 +198,7 @@ def test_scenario_name_is_sanitised_for_paths(tmp_path):
     path = write_scenario(tmp_path, name="../../outside")
     sc = load_scenario(path)
     assert "/" not in sc.name and ".." not in sc.name
-    from dispatch.runner import default_out
+    from dispatch.run.runner import default_out
 
     out = default_out(sc.runs()[0])
     assert out.parts[0] == "runs" and len(out.parts) == 2
@@ -242,7 +241,7 @@ def test_old_hive_folders_without_scenario_still_read(tmp_path, capsys):
     import pyarrow.parquet as pq
 
     from analysis.io import open_results
-    from dispatch.runner import read_table
+    from dispatch.run.runner import read_table
 
     path = write_scenario(tmp_path)
     new = tmp_path / "new"

@@ -1,4 +1,4 @@
-"""Work bounds (dispatch.budget): the fuzzed runs that ran past 30 s without a word are
+"""Work bounds (dispatch.scenario.budget): the fuzzed runs that ran past 30 s without a word are
 refused by ``dispatch validate`` with the estimate and the bound (``--force`` runs them), the
 shipped scenarios are not; a long run says where it is on stderr when not on a terminal."""
 
@@ -21,7 +21,7 @@ def dispatch(*args, env=None, timeout=120):
     env = {**os.environ, "COLUMNS": "400", "NO_COLOR": "1", "TERM": "dumb", **(env or {})}
     env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), os.environ.get("PYTHONPATH"))
                                         if p)
-    return subprocess.run([sys.executable, "-m", "dispatch.cli", *map(str, args)],
+    return subprocess.run([sys.executable, "-m", "dispatch.run.cli", *map(str, args)],
                           capture_output=True, text=True, env=env, timeout=timeout, cwd=ROOT)
 
 
@@ -110,10 +110,10 @@ def voxel_trace(path, rows: int, seconds: float) -> None:
 
 def test_the_overloaded_batch_is_counted_with_the_candidate_cut(tmp_path):
     """Poisson 100/s living 120 s on 4 vehicles batched 5 s: up to 12,000 open tasks, but a
-    decision past 2,000 considers 132 of them (dispatch.candidates), so the run is within the
+    decision past 2,000 considers 132 of them (dispatch.decide.candidates), so the run is within the
     bound (it used to reach 85 of 120 simulated seconds in 5 minutes)."""
-    from dispatch.budget import task_decisions
-    from dispatch.scenario import load_scenario
+    from dispatch.scenario.budget import task_decisions
+    from dispatch.scenario.load import load_scenario
 
     path = write_scenario(tmp_path, **POISSON_OVERLOAD)
     work, how = task_decisions(load_scenario(path).runs()[0])
@@ -168,9 +168,9 @@ def test_rrt_star_with_a_tiny_step_is_refused(tmp_path):
 
 
 def test_shipped_scenarios_are_within_the_bounds():
-    from dispatch.budget import check_work
     from dispatch.errors import ScenarioError
-    from dispatch.scenario import load_scenario
+    from dispatch.scenario.budget import check_work
+    from dispatch.scenario.load import load_scenario
 
     def refuse(key, what):
         return ScenarioError("f", key, what)

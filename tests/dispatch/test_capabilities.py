@@ -11,18 +11,18 @@ from importlib.metadata import EntryPoint
 import numpy as np
 import pytest
 
-from dispatch import registry
-from dispatch.commands import Command
-from dispatch.congestion import CongestedPlanner
-from dispatch.hourly import HourlyFactors
-from dispatch.contracts import Allocator, Planner
+from dispatch.api import registry
+from dispatch.api.contracts import Allocator, Planner
+from dispatch.api.problem import Allocation
+from dispatch.checks.allocators import check_allocator
+from dispatch.checks.common import small_network
+from dispatch.checks.planners import check_planner
 from dispatch.errors import PluginError, ScenarioError
-from dispatch.plugins import check_runs, travel_times_needed
-from dispatch.problem import Allocation
-from dispatch.scenario import load_scenario
-from dispatch.check_allocators import check_allocator
-from dispatch.check_common import small_network
-from dispatch.check_planners import check_planner
+from dispatch.files.hourly import HourlyFactors
+from dispatch.run.commands import Command
+from dispatch.run.plugins import check_runs, travel_times_needed
+from dispatch.scenario.load import load_scenario
+from dispatch.space.congestion import CongestedPlanner
 from planners.astar import AStarPlanner
 from planners.road import RoadPlanner
 from tests.dispatch.test_trips import SOURCES, road_scenario, write_csv
@@ -209,10 +209,10 @@ def test_an_inherited_method_serves_the_declaration(installed):
 
 def test_a_plugin_that_does_not_subclass_its_base_is_refused_at_load(installed):
     with pytest.raises(PluginError, match=r"planner plugin 'not_a_planner'.*is refused.*does "
-                                          r"not subclass dispatch\.contracts\.Planner"):
+                                          r"not subclass dispatch\.api\.contracts\.Planner"):
         registry.load("planner", "not_a_planner")
     report = check_allocator(NotAPlanner)  # as an allocator: not an Allocator either
-    assert not report.ok and "dispatch.contracts.Allocator" in str(report)
+    assert not report.ok and "dispatch.api.contracts.Allocator" in str(report)
 
 
 def test_a_refused_plugin_is_listed_as_broken_with_its_reason(installed):
@@ -290,7 +290,7 @@ def test_a_multi_request_allocator_needs_a_planner_with_travel_times(installed, 
 
 
 def test_dispatch_validate_refuses_it_in_one_line(installed, tmp_path, capsys):
-    from dispatch.cli import main
+    from dispatch.run.cli import main
 
     path = road_scenario(tmp_path, tasks=SOURCES["static"], fleet="agents = 2\ncapacity = 3")
     path.write_text(path.read_text().replace('planner = "dijkstra"', 'planner = "slow_roads"'))
@@ -316,8 +316,8 @@ def test_a_declared_variant_runs_by_name_and_an_undeclared_one_needs_its_table(t
     not make with its table is refused at validate time, naming what is declared."""
     from pathlib import Path
 
-    from dispatch.plugins import check_variant, variant_params
-    from dispatch.runner import run_one
+    from dispatch.run.plugins import check_variant, variant_params
+    from dispatch.run.runner import run_one
 
     assert registry.declaration("allocator", "magnnet").variants == (
         "match", "paper", "paper_nb", "ppo")

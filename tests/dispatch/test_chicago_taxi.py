@@ -13,24 +13,17 @@ import numpy as np
 import pytest
 from scipy.stats import chisquare
 
-from dispatch import cli
-from dispatch.congestion import CongestedPlanner, scale_leg
-from dispatch.hourly import NO_CONGESTION, HourlyFactors, calibrate
-from dispatch.empirical import (
-    MIN_POOL,
-    WEEKDAYS,
-    draw_day,
-    hour_pools,
-    load_factors,
-    load_sample,
-    pickup_weights,
-)
-from dispatch.legs import RoadPoint
-from dispatch.roads import load_network, manhattan
-from dispatch.runner import default_out, run_one
-from dispatch.scenario import load_scenario
-from tests.dispatch.test_trips import road_scenario, write_csv
+from dispatch.api.legs import RoadPoint
+from dispatch.files.empirical import (MIN_POOL, WEEKDAYS, draw_day, hour_pools, load_factors,
+                                      load_sample, pickup_weights)
+from dispatch.files.hourly import NO_CONGESTION, HourlyFactors, calibrate
+from dispatch.run import cli
+from dispatch.run.runner import default_out, run_one
+from dispatch.scenario.load import load_scenario
+from dispatch.space.congestion import CongestedPlanner, scale_leg
+from dispatch.space.roads import load_network, manhattan
 from tests.conftest import missing_data
+from tests.dispatch.test_trips import road_scenario, write_csv
 
 ROOT = Path(__file__).resolve().parents[2]
 RAW = ROOT.parent / "shared" / "data" / "taxi" / "chicago_taxi_trips_sample.csv"
@@ -186,7 +179,7 @@ def test_factor_of_time_and_scaled_costs_by_hand():
     leg = net.leg(RoadPoint(1, 0, 7.0, 70.0), [1, 2])  # 7 s left on 0 -> 1, then 10 s
     scaled = scale_leg(leg, 2.0)
     assert scaled.times.tolist() == [7.0, 27.0] and scaled.metres.tolist() == leg.metres.tolist()
-    from dispatch.problem import AgentView, TaskView
+    from dispatch.api.problem import AgentView, TaskView
     from planners.road import RoadPlanner
 
     clock = [10.0]

@@ -9,8 +9,8 @@ import pyarrow.parquet as pq
 import pytest
 
 from dispatch import __version__
-from dispatch.recorder import SCHEMAS
-from dispatch.registry import available
+from dispatch.api.registry import available
+from dispatch.output.parquet import SCHEMAS
 from tests.conftest import write_scenario
 
 #: The partition of the module's single run: every run writes
@@ -167,12 +167,12 @@ def test_usage_error_exits_2(cli):
 
 
 def test_module_entry_point(tiny_scenario, tmp_path):
-    """``python -m dispatch.cli`` works as well as the console script."""
+    """``python -m dispatch.run.cli`` works as well as the console script."""
     import subprocess
     import sys
 
-    proc = subprocess.run([sys.executable, "-m", "dispatch.cli", "validate", str(tiny_scenario)],
-                          capture_output=True, text=True, timeout=120)
+    proc = subprocess.run([sys.executable, "-m", "dispatch.run.cli", "validate",
+                           str(tiny_scenario)], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
     assert "ok" in proc.stdout
 
@@ -181,8 +181,7 @@ def test_module_entry_point(tiny_scenario, tmp_path):
 
 
 def test_negative_seed_override_is_a_clean_error(tiny_scenario, tmp_path, capsys):
-    from dispatch import cli as cli_module
-
+    from dispatch.run import cli as cli_module
     out = tmp_path / "neg"
     assert cli_module.main(["run", str(tiny_scenario), "--seed", "-1", "--out", str(out)]) == 2
     assert "--seed" in capsys.readouterr().err
@@ -194,7 +193,7 @@ def test_negative_seed_override_is_a_clean_error(tiny_scenario, tmp_path, capsys
 
 @pytest.mark.parametrize("flags", [["--debug"], ["-v"]])
 def test_logging_flag_before_or_after_the_command(tiny_scenario, flags):
-    from dispatch.cli import _parser
+    from dispatch.run.cli import _parser
 
     before = _parser().parse_args([*flags, "validate", str(tiny_scenario)])
     after = _parser().parse_args(["validate", str(tiny_scenario), *flags])
@@ -227,8 +226,8 @@ def test_every_argument_has_help():
     package's) says what it is in --help."""
     import argparse
 
-    from dispatch.cli import OWN_COMMANDS, _parser
-    from dispatch.commands import installed
+    from dispatch.run.cli import OWN_COMMANDS, _parser
+    from dispatch.run.commands import installed
 
     ours = {n: c for n, c in installed(reserved=OWN_COMMANDS).items()
             if c.target.startswith(("dispatch.", "analysis."))}
@@ -256,10 +255,10 @@ def test_snap_warning_printed_once_with_duration(tmp_path, caplog):
     beyond ``max_snap`` are reported once."""
     import logging
 
-    from dispatch.cli import main
+    from dispatch.run.cli import main
     from tests.conftest import ROOT
 
-    caplog.set_level(logging.WARNING, logger="dispatch.scenario")
+    caplog.set_level(logging.WARNING, logger="dispatch.scenario.load")
     assert main(["run", str(ROOT / "scenarios" / "nyc_manhattan.toml"), "--duration", "30",
                  "--out", str(tmp_path / "out")]) == 0
     left_out = [r for r in caplog.records if "trips left out" in r.getMessage()]

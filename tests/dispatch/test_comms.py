@@ -12,22 +12,15 @@ import pytest
 
 from allocators.greedy import GreedyAllocator
 from allocators.randomized import RandomAllocator
-from dispatch.comms import (
-    Channel,
-    comm_graph,
-    components,
-    diameter,
-    hop_distances,
-    neighbours,
-    relay_needed,
-)
-from dispatch.decentralized import DecentralizedAllocator, run_rounds
-from dispatch.problem import Allocation, Bid
-from dispatch import registry
+from dispatch.api import registry
+from dispatch.api.comms import (Channel, comm_graph, components, diameter, hop_distances,
+                                neighbours, relay_needed)
+from dispatch.api.decentralized import DecentralizedAllocator, run_rounds
+from dispatch.api.problem import Allocation, Bid
+from dispatch.config.scenario import CommsConfig
 from dispatch.errors import PluginError, ScenarioError
-from dispatch.runner import run_one
-from dispatch.config import CommsConfig
-from dispatch.scenario import load_scenario
+from dispatch.run.runner import run_one
+from dispatch.scenario.load import load_scenario
 from tests.allocators.helpers import assert_valid, make_problem, random_problem
 from tests.dispatch.test_determinism import bitwise
 

@@ -1,4 +1,5 @@
-"""The decision's pipeline (dispatch.decision) step by step, and the run's wiring: the wake-up
+"""The decision's pipeline (dispatch.decide.pipeline) step by step, and the run's wiring: the
+wake-up
 call made first and shared, a problem built on a small road run checked against the planner's
 costs with the deadline applied by hand, the late and unreachable requests closed, the columns
 renumbered, the allocator's generator untouched by building, and clear errors for a planner's
@@ -13,15 +14,15 @@ import numpy as np
 import pytest
 import simpy
 
-from dispatch.comms import Hearing, comm_graph
-from dispatch.decision import deadlines, keep_servable, reject_late
-from dispatch.planner_costs import PlannerCosts, lazy_costs
-from dispatch.tally import Blame, Tally
-from dispatch.dispatcher import Wakeup
+from dispatch.api.comms import Hearing, comm_graph
+from dispatch.decide.dispatcher import Wakeup
+from dispatch.decide.pipeline import deadlines, keep_servable, reject_late
+from dispatch.decide.planner_costs import PlannerCosts, lazy_costs
+from dispatch.decide.tally import Blame, Tally
 from dispatch.errors import PluginError
-from dispatch.scenario import load_scenario
-from dispatch.sim import Simulation
-from dispatch.tasks import TaskState
+from dispatch.plan.tasks import TaskState
+from dispatch.run.sim import Simulation
+from dispatch.scenario.load import load_scenario
 from tests.dispatch.test_trips import road_scenario, write_csv
 
 
@@ -142,7 +143,7 @@ def test_lazy_costs_need_bounds_a_total_cost_minimizer_and_no_plans(caplog):
     total = SimpleNamespace(name="a", minimizes_total_cost=True)
     assert lazy_costs(cfg, bounds, total, plans=False)
     assert not lazy_costs(SimpleNamespace(lazy_costs=False), bounds, total, plans=False)
-    with caplog.at_level("WARNING", logger="dispatch.planner_costs"):
+    with caplog.at_level("WARNING", logger="dispatch.decide.planner_costs"):
         assert not lazy_costs(cfg, SimpleNamespace(name="p", lower_bounds=False), total, plans=False)
         assert not lazy_costs(cfg, bounds, total, plans=True)
     assert "computes no lower bounds" in caplog.text and "insertions exactly" in caplog.text
@@ -184,7 +185,7 @@ def _batched_run(tmp_path):
                          network='network = "manhattan"\nblocks = [5, 2]\nblock = 100.0\n'
                                  'speed = 10.0', extra="batch_window = 10.0")
     [spec] = load_scenario(path).runs()
-    from dispatch.runner import make_recorder
+    from dispatch.run.runner import make_recorder
 
     return Simulation(spec, make_recorder(spec, tmp_path / "out"))
 

@@ -10,9 +10,9 @@ import pyarrow.dataset as ds
 import pyarrow.parquet as pq
 import pytest
 
-from dispatch.recorder import SCHEMAS, TIMING_COLUMNS
-from dispatch.runner import execute
-from dispatch.scenario import load_scenario
+from dispatch.output.parquet import SCHEMAS, TIMING_COLUMNS
+from dispatch.run.runner import execute
+from dispatch.scenario.load import load_scenario
 from tests.conftest import write_scenario
 
 TABLES = tuple(SCHEMAS)

@@ -12,12 +12,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from dispatch.charging import charge_seconds, power_kw, soc_after
+from dispatch.checks.chargers import charging_views, check_charger
 from dispatch.errors import ScenarioError
-from dispatch.recorder import TIMING_COLUMNS
-from dispatch.runner import run_one
-from dispatch.scenario import load_scenario
-from dispatch.check_chargers import charging_views, check_charger
+from dispatch.fleet.chargers import charge_seconds, power_kw, soc_after
+from dispatch.output.parquet import TIMING_COLUMNS
+from dispatch.run.runner import run_one
+from dispatch.scenario.load import load_scenario
 
 GRID = 'network = "manhattan"\nblocks = [6, 2]\nblock = 200.0\nspeed = 10.0'
 TERMINAL = {"completed", "expired", "rejected", "unreachable", "cancelled", "failed"}
@@ -220,8 +220,7 @@ def test_a_queue_forms_at_a_one_plug_station(tmp_path):
 
 @pytest.mark.parametrize("name", ["threshold", "idle", "valley"])
 def test_strategies_pass_check_charger(name):
-    from dispatch import registry
-
+    from dispatch.api import registry
     report = check_charger(registry.load("charger", name))
     assert report.ok, str(report)
 
@@ -230,8 +229,8 @@ def tiny_view(socs, in_use=(0, 0), waiting=(0, 0)):
     """Vehicles at node 0 of a 6 x 5 grid (100 m blocks, 10 m/s); station a (1 plug) at node
     0, b (1 plug) at node 10, 5 edges = 50 s away; 50 kW, 50 kWh: a mean charge (20 % -> 80 %)
     takes 2,160 s."""
-    from dispatch.charging_strategy import ChargingView
-    from dispatch.check_common import small_network
+    from dispatch.api.charger import ChargingView
+    from dispatch.checks.common import small_network
 
     n = len(socs)
     ro = np.asarray
@@ -287,8 +286,8 @@ def test_bad_configuration_is_one_clear_error(tmp_path):
 
 
 def test_a_strategy_rejecting_its_parameters_stops_validation(tmp_path):
-    from dispatch.cli import build_plugins
     from dispatch.errors import PluginError
+    from dispatch.run.cli import build_plugins
 
     p = grid(tmp_path, "battery_kwh = 1.0", [(1.0, 1, 2)],
              extra="[charging.threshold]\nlow = 0.9\nhigh = 0.5\n")

@@ -1,4 +1,4 @@
-"""The summary's energy columns (dispatch.energy_summary): what the vehicles table and the
+"""The summary's energy columns (dispatch.output.energy): what the vehicles table and the
 event stream of the same run say, and NaN / 0 for a run without energy."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from dispatch.energy_summary import ENERGY_COLUMNS
+from dispatch.output.energy import ENERGY_COLUMNS
 from tests.dispatch.test_energy import grid, random_run, run
 
 

@@ -15,8 +15,8 @@ import pandas as pd
 import pytest
 
 from dispatch.errors import ScenarioError
-from dispatch.runner import run_one
-from dispatch.scenario import load_scenario
+from dispatch.run.runner import run_one
+from dispatch.scenario.load import load_scenario
 from tests.conftest import write_scenario
 
 TERMINAL = {"completed": "complete", "expired": "expire", "rejected": "reject",
@@ -206,7 +206,7 @@ def test_a_trip_not_yet_picked_up_is_reassigned_and_repaired_vehicles_return(tmp
 
 
 def decentralized_allocators() -> list[str]:
-    from dispatch.registry import available, load
+    from dispatch.api.registry import available, load
 
     return [n for n in available("allocator") if getattr(load("allocator", n),
                                                          "decentralized", False)]
@@ -258,9 +258,8 @@ def test_breakdowns_with_reservations_keep_vehicles_apart(tmp_path, seed, on_boa
     """Reservation-based execution (the crowded scenario's world): a broken-down vehicle holds
     its cell hard, releases the rest of its route, never moves while failed; nobody ever
     shares a cell; every task still ends once."""
+    from dispatch.space.world import world_for
     from tests.dispatch.test_reservations import Recorded, check_run
-
-    from dispatch.world import world_for
 
     path = write_scenario(tmp_path, world={"size": [10, 10, 3]},
                           obstacles={"count": 8, "min_size": [1, 1, 3], "max_size": [3, 3, 3]},

@@ -37,8 +37,8 @@ from pathlib import Path
 
 import pytest
 
-from dispatch import cli
-from dispatch.traces import SHIPPED_TRACES, shipped_trace
+from dispatch.files.traces import SHIPPED_TRACES, shipped_trace
+from dispatch.run import cli
 from tests.conftest import ROOT
 
 SCENARIOS = ROOT / "scenarios"
@@ -421,7 +421,7 @@ def validate_case(case: Case) -> None:
 
 
 def first_run_overrides(case: Case) -> list[str]:
-    from dispatch.scenario import load_scenario
+    from dispatch.scenario.load import load_scenario
 
     spec = load_scenario(case.path).runs()[0]
     return ["--allocator", spec.allocator, "--planner", spec.planner, "--agents",
@@ -472,7 +472,7 @@ def _limit_memory() -> None:  # in the child, before exec
 
 
 def run_case(case: Case, out: Path) -> tuple[str, str]:
-    cmd = [sys.executable, "-m", "dispatch.cli", "run", str(case.path), "--out", str(out),
+    cmd = [sys.executable, "-m", "dispatch.run.cli", "run", str(case.path), "--out", str(out),
            *case.overrides]
     env = {**os.environ, "COLUMNS": "400", "NO_COLOR": "1", "TERM": "dumb",
            "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}

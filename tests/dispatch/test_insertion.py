@@ -1,4 +1,5 @@
-"""The compiled cheapest insertion (dispatch.insertion.insertion_costs) against an exhaustive search
+"""The compiled cheapest insertion (dispatch.plan.insertion.insertion_costs) against an exhaustive
+search
 that re-simulates every plan (tests.dispatch.reference.brute_force_insertion), on random stop
 lists of up to 6 stops, random capacities, limits and travel times (a metric: points in the
 plane)."""
@@ -10,8 +11,8 @@ import math
 import numpy as np
 import pytest
 
-from dispatch.insertion import insertion_costs
-from dispatch.stops import ADDED_TIME, PICKUP_TIME
+from dispatch.plan.insertion import insertion_costs
+from dispatch.plan.stops import ADDED_TIME, PICKUP_TIME
 from tests.dispatch.reference import brute_force_insertion
 
 

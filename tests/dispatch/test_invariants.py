@@ -1,7 +1,7 @@
 """Invariants of every run, on random small scenarios of every task-source kind.
 
 For each (source, allocator, seed) a random tiny scenario is drawn (fleet mix, task mix, ttl,
-service time, batching window, horizon), run with :func:`dispatch.runner.run_one`, and its
+service time, batching window, horizon), run with :func:`dispatch.run.runner.run_one`, and its
 tables are checked:
 
 * every released task ends in exactly one terminal state, with exactly one terminal event;
@@ -24,11 +24,11 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from dispatch.motion import step_is_legal, step_length
-from dispatch.runner import RunResult, run_one
-from dispatch.config import RunSpec
-from dispatch.scenario import load_scenario
-from dispatch.world import world_for
+from dispatch.api.motion import step_is_legal, step_length
+from dispatch.config.scenario import RunSpec
+from dispatch.run.runner import RunResult, run_one
+from dispatch.scenario.load import load_scenario
+from dispatch.space.world import world_for
 from tests.conftest import write_scenario
 
 SOURCES = ("static", "periodic", "poisson", "trace_csv", "trace_parquet")

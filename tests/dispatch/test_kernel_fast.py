@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dispatch.legs import Leg, RoadPoint
-from dispatch.roads import load_network, manhattan
+from dispatch.api.legs import Leg, RoadPoint
+from dispatch.space.roads import load_network, manhattan
 
 
 @pytest.fixture(scope="module")
@@ -74,7 +74,7 @@ def test_recorder_columns_equal_pa_array():
     same errors)."""
     import pyarrow as pa
 
-    from dispatch.recorder import arrow_column
+    from dispatch.output.parquet import arrow_column
 
     nan, inf = float("nan"), float("inf")
     cases = [
@@ -115,7 +115,7 @@ def test_recorder_columns_equal_pa_array():
 def test_recorder_constant_column(value, n):
     import pyarrow as pa
 
-    from dispatch.recorder import ConstantColumn, arrow_column
+    from dispatch.output.parquet import ConstantColumn, arrow_column
 
     got = arrow_column(ConstantColumn(value, n), pa.string())
     got.validate(full=True)
@@ -123,7 +123,7 @@ def test_recorder_constant_column(value, n):
 
 
 def test_centralized_allocation_equals_the_constructed_one():
-    from dispatch.problem import Allocation, AllocationProblem, Bid
+    from dispatch.api.problem import Allocation, AllocationProblem, Bid
 
     rng = np.random.default_rng(5)
     cost = rng.uniform(1, 9, (4, 3))
@@ -136,7 +136,7 @@ def test_centralized_allocation_equals_the_constructed_one():
                       requests=(Bid(0, 12, 7, float(cost[2, 0]), True),
                                 Bid(0, 10, 9, float(cost[0, 2]), True)))
     # besides the fields, the answer made by index carries its (row, column) pairs: a hint
-    # that dispatch.answers.validate verifies against the problem
+    # that dispatch.decide.answers.validate verifies against the problem
     assert got.index == ((2, 0), (0, 2))
     assert got == want and dataclasses.replace(got, index=()).__dict__ == want.__dict__
     assert [r.__dict__ for r in got.requests] == [r.__dict__ for r in want.requests]
@@ -147,9 +147,9 @@ def test_centralized_allocation_equals_the_constructed_one():
 def test_fleet_arrays_follow_the_vehicles(tmp_path, reassign):
     """``driving_or_off_node`` stays ``driving | off_node`` through trips, breakdowns
     (vehicles stopped part-way along an edge) and re-assignments, checked after every event."""
-    from dispatch.runner import make_recorder
-    from dispatch.scenario import load_scenario
-    from dispatch.sim import Simulation
+    from dispatch.run.runner import make_recorder
+    from dispatch.run.sim import Simulation
+    from dispatch.scenario.load import load_scenario
 
     path = tmp_path / "f.toml"
     path.write_text(
@@ -181,10 +181,10 @@ def test_event_rows_placed_per_chunk_equal_per_event_positions(tmp_path, flush_r
 
     import pyarrow.parquet as pq
 
-    from dispatch.legs import RoadPoint
-    from dispatch.runner import make_recorder
-    from dispatch.scenario import load_scenario
-    from dispatch.sim import Simulation
+    from dispatch.api.legs import RoadPoint
+    from dispatch.run.runner import make_recorder
+    from dispatch.run.sim import Simulation
+    from dispatch.scenario.load import load_scenario
 
     path = tmp_path / "e.toml"
     path.write_text(
@@ -213,7 +213,7 @@ def test_event_rows_placed_per_chunk_equal_per_event_positions(tmp_path, flush_r
 
 
 def test_appender_columns_must_name_every_column(tmp_path):
-    from dispatch.recorder import Recorder
+    from dispatch.output.parquet import Recorder
 
     rec = Recorder(tmp_path, "r", {}, {})
     append = rec.appender("events", lambda items: {"t": [i for i in items]})
@@ -225,7 +225,7 @@ def test_appender_columns_must_name_every_column(tmp_path):
 def test_problem_made_equals_the_constructed_one():
     import dataclasses
 
-    from dispatch.problem import AgentView, AllocationProblem, TaskView
+    from dispatch.api.problem import AgentView, AllocationProblem, TaskView
 
     agents = (AgentView(3, "ugv", (0, 0, 0), 1.0), AgentView(5, "uav", (1, 0, 2), 2.0))
     tasks = (TaskView(9, "ground", (2, 1, 0), 0.0),)
@@ -247,7 +247,7 @@ def test_problem_made_equals_the_constructed_one():
 def test_problem_with_lazy_positions_pickles():
     import pickle
 
-    from dispatch.problem import AgentView, AllocationProblem, TaskView
+    from dispatch.api.problem import AgentView, AllocationProblem, TaskView
 
     agents = (AgentView(3, "ugv", (0, 0, 0), 1.0),)
     tasks = (TaskView(9, "ground", (2, 1, 0), 0.0),)

@@ -17,11 +17,11 @@ from scipy.optimize import linear_sum_assignment
 
 import tests.dispatch.test_invariants as inv
 from allocators.hungarian import HungarianAllocator
-from dispatch.answers import validate
+from dispatch.api.problem import AgentView, AllocationProblem, TaskView
+from dispatch.decide.answers import validate
+from dispatch.decide.lazy import certify, in_time, resolve_open
 from dispatch.errors import ScenarioError
-from dispatch.lazy import certify, in_time, resolve_open
-from dispatch.problem import AgentView, AllocationProblem, TaskView
-from dispatch.scenario import load_scenario
+from dispatch.scenario.load import load_scenario
 from planners.astar import AStarPlanner
 from tests.conftest import write_scenario
 from tests.planners.test_astar import random_world
@@ -110,8 +110,8 @@ def test_lazy_decision_is_optimal_for_the_exact_matrix(seed):
 
 def _copy(world):
     """The same world on a new grid (its own, empty cache)."""
-    from dispatch.voxels import Grid
-    from dispatch.world import World
+    from dispatch.api.voxels import Grid
+    from dispatch.space.world import World
 
     return World(size=world.size, grid=Grid(np.array(world.grid.occupied), world.grid.cell),
                  boxes=())
@@ -178,9 +178,9 @@ def test_first_decision_and_terminal_states_match_exact_costs(tmp_path, seed):
 def test_a_walled_in_pocket_is_unreachable_with_lazy_costs(tmp_path, monkeypatch, seed):
     """Tasks in a free column walled in on every side (no obstacle at their cell: only the
     components tell) end ``unreachable``, as with exact costs; the others are served."""
-    from dispatch import world as sim  # the voxel space's module builds (and caches) worlds
-    from dispatch.voxels import Grid
-    from dispatch.world import World
+    from dispatch.api.voxels import Grid
+    from dispatch.space import world as sim  # the voxel space's module builds (and caches) worlds
+    from dispatch.space.world import World
 
     real = sim.build_world
 
@@ -261,7 +261,7 @@ def test_lazy_costs_without_support_fall_back_with_a_warning(tmp_path, caplog):
         d = tmp_path / str(on)
         d.mkdir()
         path = write_scenario(d, dispatch={"allocator": "greedy", "lazy_costs": on})
-        with caplog.at_level(logging.WARNING, logger="dispatch.planner_costs"):
+        with caplog.at_level(logging.WARNING, logger="dispatch.decide.planner_costs"):
             results.append(inv.run_scenario(path))
     assert "lazy_costs is on but" in caplog.text
     assert results[0].summary["total_cost"] == results[1].summary["total_cost"]
@@ -270,7 +270,7 @@ def test_lazy_costs_without_support_fall_back_with_a_warning(tmp_path, caplog):
 def test_check_planner_checks_the_bounds():
     """``check_planner`` passes ``astar``'s bounds and catches bounds above the costs and
     exact marks on entries that are not exact."""
-    from dispatch.check_planners import check_planner
+    from dispatch.checks.planners import check_planner
 
     assert check_planner(AStarPlanner).ok
 

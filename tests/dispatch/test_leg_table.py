@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from dispatch.leg_table import LegTable
-from dispatch.legs import Leg
+from dispatch.api.legs import Leg
+from dispatch.plan.en_route import LegTable
 
 
 class _Vehicle:

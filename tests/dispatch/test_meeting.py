@@ -1,4 +1,4 @@
-"""Meeting points (dispatch.meeting): every decision's costs equal an exhaustive search over
+"""Meeting points (dispatch.decide.meeting): every decision's costs equal an exhaustive search over
 every candidate boarding and alighting point and every pair of stop positions (the independent
 reference of tests/dispatch/reference.py) on the plans of small pooled runs; the rides keep the
 walking limits (boarding no sooner than release + walk time, walks within ``max_walk``, the
@@ -14,12 +14,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import dispatch.decision as decision
+import dispatch.decide.pipeline as decision
+from dispatch.decide.meeting import Walks, meeting_costs
 from dispatch.errors import ScenarioError
-from dispatch.meeting import Walks, meeting_costs
-from dispatch.roads import manhattan
-from dispatch.runner import run_one
-from dispatch.scenario import load_scenario
+from dispatch.run.runner import run_one
+from dispatch.scenario.load import load_scenario
+from dispatch.space.roads import manhattan
 from tests.dispatch.reference import brute_force_insertion
 from tests.dispatch.test_pooling import check_invariants
 from tests.dispatch.test_trips import road_scenario, write_csv

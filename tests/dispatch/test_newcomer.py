@@ -48,7 +48,7 @@ def dispatch(*args, site: Path | None = None, columns: int = 400):
     env = {**os.environ, "COLUMNS": str(columns), "NO_COLOR": "1", "TERM": "dumb"}
     path = [str(ROOT), *([str(site)] if site else []), env.get("PYTHONPATH", "")]
     env["PYTHONPATH"] = os.pathsep.join(p for p in path if p)
-    return subprocess.run([sys.executable, "-m", "dispatch.cli", *map(str, args)],
+    return subprocess.run([sys.executable, "-m", "dispatch.run.cli", *map(str, args)],
                           capture_output=True, text=True, env=env, timeout=300, cwd=ROOT)
 
 
@@ -89,7 +89,7 @@ def test_plugins_descriptions_plain_never_empty_targets_whole(plugin_site):
     assert "scipy.optimize.linear_sum_assignment" in out  # hungarian's, without the role
     assert "NoDocAllocator from my_plugins, no docstring" in out
     assert "Raises on its first decision (see _explode)." in out
-    from dispatch.registry import available
+    from dispatch.api.registry import available
 
     for kind in ("allocator", "planner", "repositioner"):
         for target in available(kind).values():
@@ -98,10 +98,10 @@ def test_plugins_descriptions_plain_never_empty_targets_whole(plugin_site):
 
 
 def test_plain_strips_sphinx_markup():
-    from dispatch.registry import plain
+    from dispatch.api.registry import plain
 
     assert plain("via :func:`scipy.optimize.linear_sum_assignment`, see\n  "
-                 ":class:`~dispatch.contracts.Allocator`, ``problem.rng`` and "
+                 ":class:`~dispatch.api.contracts.Allocator`, ``problem.rng`` and "
                  ":py:meth:`the rule <a.b>`") == (
         "via scipy.optimize.linear_sum_assignment, see Allocator, problem.rng and the rule")
 
@@ -138,7 +138,7 @@ def test_parameters_per_allocator_and_named_variants(tmp_path):
     """hungarian (no parameters) beside auction with bundle_size = 2 and the named variant
     auction:cbaa (bundle_size = 1), in one file and one sweep; the flat form still goes to
     every allocator."""
-    from dispatch.scenario import load_scenario
+    from dispatch.scenario.load import load_scenario
 
     path = write_scenario(tmp_path, sweep={"allocator": ["hungarian", "auction", "auction:cbaa"]},
                           extra=PER_ALLOCATOR)
@@ -205,7 +205,7 @@ def test_no_pybullet_banner_in_any_output(tmp_path):
     assert "pybullet build time" not in proc.stdout + proc.stderr
     code = textwrap.dedent('''
         import ctypes, sys
-        from dispatch.physics import quiet_c_output
+        from dispatch.space.physics import quiet_c_output
         print("before", flush=False)
         with quiet_c_output():
             libc = ctypes.CDLL(None)
@@ -254,7 +254,7 @@ def test_documented_run_counts_match_validate():
     expands to (paper_static is 200, not 240)."""
     import re
 
-    from dispatch.scenario import load_scenario
+    from dispatch.scenario.load import load_scenario
 
     pages = [ROOT / "README.md", ROOT / "scenarios" / "README.md",
              *sorted((ROOT / "docs").rglob("*.md"))]

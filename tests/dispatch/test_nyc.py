@@ -22,11 +22,11 @@ import pytest
 from pyproj import Transformer
 
 from dispatch.errors import ScenarioError
-from dispatch.road_files import manhattan_osm_file, read_graphml, read_node_link
-from dispatch.roads import RoadNetwork, load_network
-from dispatch.runner import run_metadata, run_one
-from dispatch.scenario import load_scenario
-from dispatch.traces import shipped_trace
+from dispatch.files.roads import manhattan_osm_file, read_graphml, read_node_link
+from dispatch.files.traces import shipped_trace
+from dispatch.run.runner import run_metadata, run_one
+from dispatch.scenario.load import load_scenario
+from dispatch.space.roads import RoadNetwork, load_network
 
 ROOT = Path(__file__).resolve().parents[2]
 SHARED = ROOT.parent / "shared" / "data" / "nyc_manhattan"
@@ -223,7 +223,7 @@ def test_degrees_without_a_crs_are_read_as_metres_with_a_warning(tmp_path, caplo
                                                      {"id": "b", "x": -73.98, "y": 40.75}],
            "links": [{"source": "a", "target": "b", "length": 800.0, "travel_time": 60.0}]}
     (tmp_path / "nocrs.json").write_text(json.dumps(doc))
-    with caplog.at_level(logging.WARNING, logger="dispatch.road_files"):
+    with caplog.at_level(logging.WARNING, logger="dispatch.files.roads"):
         net = RoadNetwork.from_graph(read_node_link(tmp_path / "nocrs.json"))
     assert "crs = 'epsg:4326'" in caplog.text and net.crs is None
     assert net.edge(0, 1) == net.edge(1, 0) == (60.0, 800.0)  # undirected: both ways
@@ -277,7 +277,7 @@ def test_departure_times_are_seconds_from_start(tmp_path):
 
 def test_points_beyond_max_snap_are_left_out_with_a_count(tmp_path, net, caplog):
     _trace(tmp_path / "trips.csv", ROWS)
-    with caplog.at_level(logging.WARNING, logger="dispatch.scenario"):
+    with caplog.at_level(logging.WARNING, logger="dispatch.scenario.load"):
         sc = load_scenario(_scenario(tmp_path, f'trace = "trips.csv"\nstart = "{START}"\n'
                                                'max_snap = 250.0'))
     trips = sc.tasks.trips

@@ -1,4 +1,4 @@
-"""Offers riders may decline (``[acceptor]``, ``[pricing]``; dispatch.offers): ``always``
+"""Offers riders may decline (``[acceptor]``, ``[pricing]``; dispatch.api.acceptor): ``always``
 changes nothing, even when the offer step runs; a seeded ``logit`` run is reproducible and its
 accept share matches the closed form; ``threshold`` declines exactly past its limits;
 ``declined`` is one terminal state; bad input fails in one line naming the file and key."""
@@ -13,11 +13,11 @@ import pytest
 
 from acceptors.logit import LogitAcceptor
 from acceptors.threshold import ThresholdAcceptor
+from dispatch.api.acceptor import Offer, Pricing, logistic
+from dispatch.api.problem import TaskView
 from dispatch.errors import ScenarioError
-from dispatch.offers import Offer, Pricing, logistic
-from dispatch.problem import TaskView
-from dispatch.runner import run_one
-from dispatch.scenario import load_scenario
+from dispatch.run.runner import run_one
+from dispatch.scenario.load import load_scenario
 from tests.dispatch.test_trips import road_scenario, write_csv
 
 GRID = 'network = "manhattan"\nblocks = [6, 5]\nblock = 100.0\nspeed = 10.0'

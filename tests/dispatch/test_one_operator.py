@@ -1,6 +1,6 @@
 """One operator drives every stop: a vehicle that charges, is dispatched part-way through a
 repositioning move, runs its battery empty with a rider on board (stranded: a breakdown) and is
-towed, all through :class:`dispatch.operator.Operator`'s process; the invariants checked from
+towed, all through :class:`dispatch.plan.operator.Operator`'s process; the invariants checked from
 the events (occupancy within capacity, energy balance, one terminal state per request)."""
 
 from __future__ import annotations
@@ -10,9 +10,9 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from dispatch.runner import make_recorder
-from dispatch.scenario import load_scenario
-from dispatch.sim import Simulation
+from dispatch.run.runner import make_recorder
+from dispatch.run.sim import Simulation
+from dispatch.scenario.load import load_scenario
 
 TERMINAL = {"complete", "expire", "reject", "unreachable", "cancel", "failed"}
 #: 10 x 2 intersections, 200 m blocks at 10 m/s: an edge is 20 s; node = row * 10 + column

@@ -1,4 +1,5 @@
-"""Overload without a cliff (dispatch.candidates): past CUT_TASKS open tasks a decision offers
+"""Overload without a cliff (dispatch.decide.candidates): past CUT_TASKS open tasks a decision
+offers
 each vehicle its nearest tasks and the oldest, counted in the ``decisions`` table's ``n_cut``;
 at or below it nothing changes. The cut against a brute force, and the overloaded batches of
 the fuzz run (Poisson and trace, few vehicles) finishing with the cut counted."""
@@ -10,9 +11,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from dispatch.candidates import CUT_TASKS, NEAREST, considered, cut, per_vehicle
-from dispatch.runner import run_one
-from dispatch.scenario import check_limits, load_scenario
+from dispatch.decide.candidates import CUT_TASKS, NEAREST, considered, cut, per_vehicle
+from dispatch.run.runner import run_one
+from dispatch.scenario.load import check_limits, load_scenario
 from tests.conftest import write_scenario
 
 

@@ -8,10 +8,10 @@ import tomllib
 import pyarrow.parquet as pq
 import pytest
 
-from dispatch import cli
 from dispatch.errors import ScenarioError
-from dispatch.overrides import apply_overrides, parse_set
-from dispatch.scenario import load_scenario
+from dispatch.run import cli
+from dispatch.scenario.load import load_scenario
+from dispatch.scenario.overrides import apply_overrides, parse_set
 
 #: a small road scenario whose fleet may carry several riders
 POOLED = ('name = "p"\nduration = 1000.0  # the horizon\n[world]\nnetwork = "manhattan"\n'

@@ -25,8 +25,8 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from dispatch.runner import run_one
-from dispatch.scenario import load_scenario
+from dispatch.run.runner import run_one
+from dispatch.scenario.load import load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 GOLDEN = pd.read_csv(ROOT / "tests" / "data" / "golden_summaries.csv")

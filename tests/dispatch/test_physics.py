@@ -8,13 +8,12 @@ import itertools
 import numpy as np
 import pytest
 
-from dispatch.physics import Physics
-from dispatch.runner import make_recorder
-from dispatch.scenario import load_scenario
-from dispatch.tasks import TaskState
-from dispatch.sim import Simulation
-from dispatch.world import world_for
-from dispatch.world import build_world
+from dispatch.plan.tasks import TaskState
+from dispatch.run.runner import make_recorder
+from dispatch.run.sim import Simulation
+from dispatch.scenario.load import load_scenario
+from dispatch.space.physics import Physics
+from dispatch.space.world import build_world, world_for
 from tests.conftest import write_scenario
 
 SEEDS = (0, 1, 2)

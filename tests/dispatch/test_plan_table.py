@@ -1,7 +1,7 @@
 """The fleet's plan and leg tables, read at a decision without a Python step per vehicle, hold
 what the vehicles themselves say at that moment: every row a decision reads equals the
-vehicle's own plan arrays (:meth:`dispatch.operator.Operator.plan_arrays`) and load, and every
-driving vehicle's place equals its leg's :meth:`dispatch.legs.Leg.next_at`. Checked at every
+vehicle's own plan arrays (:meth:`dispatch.plan.operator.Operator.plan_arrays`) and load, and every
+driving vehicle's place equals its leg's :meth:`dispatch.api.legs.Leg.next_at`. Checked at every
 decision of pooled runs with service times, breakdowns (riders transferred) and re-routes."""
 
 from __future__ import annotations
@@ -9,10 +9,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dispatch.leg_table import LegTable
-from dispatch.plans import PlanTable
-from dispatch.runner import run_one
-from dispatch.scenario import load_scenario
+from dispatch.decide.plan_costs import PlanTable
+from dispatch.plan.en_route import LegTable
+from dispatch.run.runner import run_one
+from dispatch.scenario.load import load_scenario
 from tests.dispatch.test_trips import road_scenario, write_csv
 
 

@@ -1,5 +1,6 @@
-"""The plugin checks (dispatch.check_*): every built-in plugin passes the checks; deliberately
-broken plugins are caught by the check that names their bug; the documented allocator passes; ``dispatch check``;
+"""The plugin checks (dispatch.checks): every built-in plugin passes the checks; deliberately
+broken plugins are caught by the check that names their bug; the documented allocator passes;
+``dispatch check``;
 a misbehaving plugin inside a run stops it with one line naming the plugin, run and decision."""
 
 from __future__ import annotations
@@ -10,13 +11,13 @@ import re
 import numpy as np
 import pytest
 
-from dispatch import cli
-from dispatch.contracts import Allocator
+from dispatch.api.contracts import Allocator
+from dispatch.api.problem import Allocation, AllocationProblem
+from dispatch.api.registry import load
+from dispatch.checks.allocators import check_allocator
+from dispatch.checks.planners import check_planner
 from dispatch.errors import AllocationError, PluginError
-from dispatch.problem import Allocation, AllocationProblem
-from dispatch.registry import load
-from dispatch.check_allocators import check_allocator
-from dispatch.check_planners import check_planner
+from dispatch.run import cli
 from tests.conftest import ROOT
 
 BUILTIN_ALLOCATORS = ["hungarian", "fcfs", "greedy", "random", "auction", "magnnet",
@@ -310,10 +311,10 @@ def test_broken_acceptors_and_sizers_are_caught():
     unserved), a bad interval."""
     import random
 
-    from dispatch.check_acceptors import check_acceptor
-    from dispatch.check_sizers import check_sizer
-    from dispatch.offers import Acceptor
-    from dispatch.sizing import Sizer
+    from dispatch.api.acceptor import Acceptor
+    from dispatch.api.sizer import Sizer
+    from dispatch.checks.acceptors import check_acceptor
+    from dispatch.checks.sizers import check_sizer
 
     class Maybe(Acceptor):
         name = "maybe"
@@ -378,9 +379,9 @@ def test_broken_acceptors_and_sizers_are_caught():
 ])
 def test_misbehaving_allocator_in_a_run_is_one_line_naming_it(tiny_scenario, allocator, error,
                                                               words, monkeypatch):
-    import dispatch.sim as sim_module
-    from dispatch.runner import run_one
-    from dispatch.scenario import load_scenario
+    import dispatch.run.sim as sim_module
+    from dispatch.run.runner import run_one
+    from dispatch.scenario.load import load_scenario
 
     spec = load_scenario(tiny_scenario).runs()[0]
     real = sim_module.make_plugin
@@ -396,8 +397,8 @@ def test_misbehaving_allocator_in_a_run_is_one_line_naming_it(tiny_scenario, all
 
 def test_plugin_exception_in_the_loop_is_a_plugin_error(tiny_scenario, monkeypatch):
     """Not a traceback through simpy: the exception becomes a PluginError with the context."""
-    from dispatch.runner import run_one
-    from dispatch.scenario import load_scenario
+    from dispatch.run.runner import run_one
+    from dispatch.scenario.load import load_scenario
 
     class Boom(Allocator):
         name = "boom"
@@ -405,7 +406,7 @@ def test_plugin_exception_in_the_loop_is_a_plugin_error(tiny_scenario, monkeypat
         def allocate(self, problem: AllocationProblem):
             raise KeyError("lost")
 
-    import dispatch.sim as sim_module
+    import dispatch.run.sim as sim_module
 
     real = sim_module.make_plugin
     monkeypatch.setattr(sim_module, "make_plugin", lambda kind, name, params, *args: Boom()
@@ -422,9 +423,9 @@ def test_plugin_exception_in_the_loop_is_a_plugin_error(tiny_scenario, monkeypat
 ])
 def test_misbehaving_planner_in_a_run_is_one_line_naming_it(make_scenario, monkeypatch, bug,
                                                             words):
-    import dispatch.sim as sim_module
-    from dispatch.runner import run_one
-    from dispatch.scenario import load_scenario
+    import dispatch.run.sim as sim_module
+    from dispatch.run.runner import run_one
+    from dispatch.scenario.load import load_scenario
     from planners.astar import AStarPlanner
 
     class Bad(AStarPlanner):
@@ -455,9 +456,9 @@ def test_misbehaving_plan_in_a_run_is_one_line_naming_it(make_scenario, monkeypa
                                                          words, tmp_path):
     """plan() runs inside a vehicle's process: its failure is one PluginError line naming the
     planner, the run, the vehicle and the time (not a traceback through simpy)."""
-    import dispatch.sim as sim_module
-    from dispatch.runner import run_one
-    from dispatch.scenario import load_scenario
+    import dispatch.run.sim as sim_module
+    from dispatch.run.runner import run_one
+    from dispatch.scenario.load import load_scenario
     from planners.astar import AStarPlanner
 
     class Bad(AStarPlanner):
@@ -508,8 +509,8 @@ def test_checks_that_could_not_run_are_skipped_not_passed():
 
 
 def test_repositioner_that_always_raises_is_not_passed():
-    from dispatch.check_repositioners import check_repositioner
-    from dispatch.reposition import Repositioner
+    from dispatch.api.repositioner import Repositioner
+    from dispatch.checks.repositioners import check_repositioner
 
     class Broken(Repositioner):
         name = "broken"

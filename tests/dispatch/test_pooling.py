@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from dispatch.errors import ScenarioError
-from dispatch.runner import run_one
-from dispatch.scenario import load_scenario
+from dispatch.run.runner import run_one
+from dispatch.scenario.load import load_scenario
 from tests.dispatch.test_trips import road_scenario, write_csv
 
 ALLOCATORS = ("hungarian", "greedy", "fcfs", "auction", "local_hungarian", "random", "magnnet")
@@ -234,8 +234,8 @@ def test_allocators_read_the_plans_read_only(tmp_path):
     vehicle has it (kinds, requests, occupancies, planned times in order), and cannot be
     changed through it."""
     from allocators.hungarian import HungarianAllocator
-    from dispatch.runner import make_recorder
-    from dispatch.sim import Simulation
+    from dispatch.run.runner import make_recorder
+    from dispatch.run.sim import Simulation
 
     write_csv(tmp_path / "trips.csv", ["t", "origin_node", "dest_node"],
               [(0.0, 0, 4), (1.0, 1, 3)])
@@ -267,10 +267,10 @@ def test_allocators_read_the_plans_read_only(tmp_path):
 def _two_requests_one_taxi(tmp_path, route, capacity=2):
     """Two requests released together, one taxi, an allocator that gives it both along
     ``route`` (``Allocation.routes``); returns the run's tables or raises its error."""
-    from dispatch.contracts import Allocator
-    from dispatch.problem import Allocation
-    from dispatch.runner import make_recorder
-    from dispatch.sim import Simulation
+    from dispatch.api.contracts import Allocator
+    from dispatch.api.problem import Allocation
+    from dispatch.run.runner import make_recorder
+    from dispatch.run.sim import Simulation
 
     write_csv(tmp_path / "trips.csv", ["t", "origin_node", "dest_node"],
               [(0.0, 1, 4), (0.0, 2, 3)])

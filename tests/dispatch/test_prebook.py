@@ -1,4 +1,5 @@
-"""Prebooking (dispatch.prebook): requests booked ahead are promises that are kept or counted.
+"""Prebooking (dispatch.decide.prebook): requests booked ahead are promises that are kept or
+counted.
 
 Random runs on a small grid (allocators, both entry modes, breakdowns that transfer or fail
 riders) checked from the tables alone: every promise ends completed, or failed after a
@@ -15,9 +16,9 @@ import numpy as np
 import pytest
 
 from dispatch.errors import ScenarioError
-from dispatch.recorder import TIMING_COLUMNS
-from dispatch.runner import run_one
-from dispatch.scenario import load_scenario
+from dispatch.output.parquet import TIMING_COLUMNS
+from dispatch.run.runner import run_one
+from dispatch.scenario.load import load_scenario
 from tests.dispatch.test_trips import road_scenario, write_csv
 
 EPS = 1e-6
@@ -303,7 +304,7 @@ def test_an_offer_to_a_booked_rider_estimates_the_pickup_at_its_departure(tmp_pa
     """A booked rider offered a ride (an acceptor that may decline) is told a pickup no sooner
     than the requested departure, as the plan will pick up: the estimate of a vehicle setting
     out follows the schedule rule's earliest time, as the insertion's and a route's do."""
-    from dispatch.offering import Offering
+    from dispatch.decide.offer_step import Offering
 
     seen = []
     real = Offering.offer

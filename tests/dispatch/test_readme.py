@@ -13,7 +13,7 @@ import statistics
 import pandas as pd
 import pytest
 
-from dispatch.scenario import load_scenario
+from dispatch.scenario.load import load_scenario
 from tests.conftest import ROOT
 
 README = (ROOT / "README.md").read_text(encoding="utf-8")

@@ -16,8 +16,8 @@ import pandas as pd
 import pytest
 
 from dispatch.errors import ScenarioError
-from dispatch.runner import run_one
-from dispatch.scenario import load_scenario
+from dispatch.run.runner import run_one
+from dispatch.scenario.load import load_scenario
 from tests.dispatch.test_trips import road_scenario, write_csv
 
 TERMINAL_EVENTS = {"complete", "expire", "reject", "unreachable", "cancel", "failed"}

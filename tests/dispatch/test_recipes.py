@@ -8,8 +8,8 @@ from pathlib import Path
 import pyarrow.dataset as ds
 import pytest
 
-from dispatch import cli
-from dispatch.scenario import load_scenario
+from dispatch.run import cli
+from dispatch.scenario.load import load_scenario
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
 

@@ -19,9 +19,9 @@ import pyarrow.parquet as pq
 import pytest
 
 from dispatch import __version__
-from dispatch.recorder import SCHEMAS, TIMING_COLUMNS, Recorder
-from dispatch.runner import read_table, run_one
-from dispatch.scenario import load_scenario
+from dispatch.output.parquet import SCHEMAS, TIMING_COLUMNS, Recorder
+from dispatch.run.runner import read_table, run_one
+from dispatch.scenario.load import load_scenario
 from tests.conftest import ROOT, write_scenario
 from tests.dispatch.test_determinism import bitwise, without_timing
 
@@ -184,7 +184,7 @@ def test_run_one_without_out_cleans_up(tiny_scenario):
 
 def test_failing_run_is_aborted(tmp_path, monkeypatch):
     """An exception half-way: the chunks written so far stay (readable), no part-0 file."""
-    from dispatch.recording import DecisionWriter
+    from dispatch.output.rows import DecisionWriter
 
     path = write_scenario(tmp_path, tasks={"source": "periodic", "interval": 0.5, "count": 40,
                                            "ttl": 1.0})
@@ -209,8 +209,8 @@ def test_failing_run_is_aborted(tmp_path, monkeypatch):
 KILLED_RUN = """
 import sys
 from pathlib import Path
-from dispatch.runner import run_one
-from dispatch.scenario import load_scenario
+from dispatch.run.runner import run_one
+from dispatch.scenario.load import load_scenario
 [spec] = load_scenario(Path(sys.argv[1])).runs()
 run_one(spec, Path(sys.argv[2]), flush_rows=200)
 """
@@ -285,8 +285,7 @@ def test_rows_are_tied_to_columns_by_name():
     """Every table written during a run declares the columns its row function fills, checked
     against the schema when the run starts (a schema column without a value, or a value
     without a column, fails at once, naming it); each value lands in its named column."""
-    from dispatch import recording
-
+    from dispatch.output import rows as recording
     for table, cols in (("tasks", recording.TASK_COLUMNS),
                         ("decisions", recording.DECISION_COLUMNS),
                         ("assignments", recording.ASSIGNMENT_COLUMNS),

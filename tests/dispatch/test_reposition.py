@@ -13,9 +13,9 @@ import pandas as pd
 import pytest
 
 from dispatch.errors import PluginError, ScenarioError
-from dispatch.recorder import TIMING_COLUMNS
-from dispatch.runner import execute, run_one
-from dispatch.scenario import load_scenario
+from dispatch.output.parquet import TIMING_COLUMNS
+from dispatch.run.runner import execute, run_one
+from dispatch.scenario.load import load_scenario
 
 TERMINAL = {"completed": "complete", "expired": "expire", "rejected": "reject",
             "unreachable": "unreachable", "cancelled": "cancel", "failed": "failed"}
@@ -282,7 +282,7 @@ def test_results_without_repositioning_read_as_stay(tmp_path):
 
 def one_line_error(path: Path, error=ScenarioError):
     with pytest.raises(error) as info:
-        from dispatch.cli import _specs
+        from dispatch.run.cli import _specs
 
         class Args:
             scenario = path
@@ -371,7 +371,7 @@ class _Bad:
 ])
 def test_a_misbehaving_repositioner_stops_the_run_with_one_line(tmp_path, monkeypatch, answer,
                                                                 words):
-    import dispatch.sim as sim_module
+    import dispatch.run.sim as sim_module
 
     monkeypatch.setattr(sim_module, "make_repositioner", lambda sc, name: _Bad(answer))
     [spec] = load_scenario(scenario(tmp_path, trips=[*HOTSPOT, (500.0, 5, 11, None)])).runs()
@@ -384,8 +384,8 @@ def test_a_misbehaving_repositioner_stops_the_run_with_one_line(tmp_path, monkey
 
 
 def test_the_plugin_check_catches_a_bad_repositioner():
-    from dispatch.reposition import Repositioner
-    from dispatch.check_repositioners import check_repositioner
+    from dispatch.api.repositioner import Repositioner
+    from dispatch.checks.repositioners import check_repositioner
 
     class Wild(Repositioner):
         name = "wild"
@@ -405,7 +405,7 @@ def test_the_plugin_check_catches_a_bad_repositioner():
 
 
 def test_cli_lists_and_checks_repositioners(capsys):
-    from dispatch.cli import main
+    from dispatch.run.cli import main
 
     assert main(["plugins"]) == 0
     out = capsys.readouterr().out

@@ -4,7 +4,7 @@ The checks read the recorded tables only, not the planner's or the kernel's book
 vehicle's occupancy is rebuilt from its start cell (``vehicles`` table) and its ``move`` events
 (a step into a cell ends at the move's time and took step length / speed seconds, so it started
 that much earlier; the vehicle stood in its cell until then) and checked against the time model
-of :mod:`dispatch.reservations`: a standing vehicle holds its cell, a stepping one the step's
+of :mod:`dispatch.plan.reservations`: a standing vehicle holds its cell, a stepping one the step's
 from and to cells (and the corner cells of a diagonal). Across random crowded scenarios (a
 10 x 10 x 3 world with one-cell passages, 6-12 vehicles, static and periodic tasks):
 
@@ -30,20 +30,14 @@ import pandas as pd
 import pyarrow.parquet as pq
 import pytest
 
-from dispatch.contracts import Allocator
-from dispatch.motion import step_is_legal, step_length
-from dispatch.physics import Physics
-from dispatch.reservations import (
-    EPS,
-    ReservationTable,
-    occupancy,
-    overlaps,
-    step_box,
-)
-from dispatch.runner import RunResult, make_recorder
-from dispatch.scenario import load_scenario
-from dispatch.sim import Simulation
-from dispatch.world import world_for
+from dispatch.api.contracts import Allocator
+from dispatch.api.motion import step_is_legal, step_length
+from dispatch.plan.reservations import (EPS, ReservationTable, occupancy, overlaps, step_box)
+from dispatch.run.runner import RunResult, make_recorder
+from dispatch.run.sim import Simulation
+from dispatch.scenario.load import load_scenario
+from dispatch.space.physics import Physics
+from dispatch.space.world import world_for
 from tests.conftest import write_scenario
 from tests.dispatch.test_determinism import bitwise
 from tests.dispatch.test_invariants import TERMINAL_EVENT, run_scenario
@@ -354,7 +348,7 @@ class Scripted(Allocator):
         self.plan = plan
 
     def allocate(self, problem):
-        from dispatch.problem import Allocation
+        from dispatch.api.problem import Allocation
 
         agents = {a.id: i for i, a in enumerate(problem.agents)}
         pairs = [(agents[self.plan[t.id]], j) for j, t in enumerate(problem.tasks)
@@ -366,11 +360,11 @@ def corridor_run(tmp_path, monkeypatch, vehicles, tasks, plan, *, service=0.0):
     """Run a hand-built world: a corridor one cell wide along x at y = 1 (8 cells, ground
     only), with one side pocket at (3, 2). ``vehicles``: (kind, start cell); ``tasks``:
     (release time, cell); ``plan``: which vehicle gets each task (by task id = index)."""
-    from dispatch import sim as sim_mod
-    from dispatch.vehicles import Vehicle
-    from dispatch.voxels import Grid
-    from dispatch.placement import PLACERS
-    from dispatch.world import World
+    from dispatch.api.voxels import Grid
+    from dispatch.fleet.placement import PLACERS
+    from dispatch.plan.vehicles import Vehicle
+    from dispatch.run import sim as sim_mod
+    from dispatch.space.world import World
 
     occ = np.ones((8, 4, 1), dtype=bool)
     occ[:, 1, 0] = False
@@ -468,7 +462,7 @@ def test_astar_runs_record_no_waits(tmp_path):
 
 
 def test_crowded_scenario_file_runs():
-    from dispatch.runner import run_one
+    from dispatch.run.runner import run_one
 
     root = Path(__file__).resolve().parents[2]
     spec = load_scenario(root / "scenarios" / "crowded.toml").runs()[0]
@@ -481,7 +475,7 @@ def test_crowded_scenario_file_runs():
 
 
 def test_same_seed_same_run(tmp_path):
-    from dispatch.recorder import TIMING_COLUMNS
+    from dispatch.output.parquet import TIMING_COLUMNS
 
     path = crowded_scenario(tmp_path, 48)
     a, b = (run_scenario(path).result.tables for _ in range(2))

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from scipy.sparse.csgraph import connected_components, dijkstra
 
-from dispatch.legs import Leg, RoadPoint
-from dispatch.road_files import MILE, MPH, US_SURVEY_FOOT, chicago_files, read_graphml, read_tntp
-from dispatch.roads import RoadNetwork, load_network, manhattan
+from dispatch.api.legs import Leg, RoadPoint
+from dispatch.files.roads import MILE, MPH, US_SURVEY_FOOT, chicago_files, read_graphml, read_tntp
+from dispatch.space.roads import RoadNetwork, load_network, manhattan
 
 SHARED = Path("/work/shared/data/roads/chicago_regional")
 
@@ -283,7 +283,7 @@ def _tiny_tntp(tmp_path: Path) -> Path:
 
 def test_tntp_drops_zones_and_derives_zero_times(tmp_path, caplog):
     net_file = _tiny_tntp(tmp_path)
-    with caplog.at_level("INFO", logger="dispatch.roads"):
+    with caplog.at_level("INFO", logger="dispatch.space.roads"):
         net = RoadNetwork.from_graph(read_tntp(net_file, tmp_path / "Tiny_node.tntp"))
     # zones 1, 2 dropped; node 6 (reached only by 5 -> 6, never left) is outside the largest SCC
     assert list(net.ids) == [3, 4, 5] and net.crs == "EPSG:26771" and net.name == "Tiny"
@@ -360,7 +360,7 @@ def test_nearest_equals_brute_force(chicago):
 def test_positions_point_by_point_equal_vectorized_bit_for_bit(chicago):
     """A short list (the per-vehicle calls of a decision) takes a pure-Python path; it must
     give exactly the floats of the vectorized path, edge starts and ends included."""
-    from dispatch.roads import _FEW_POINTS
+    from dispatch.space.roads import _FEW_POINTS
 
     rng = np.random.default_rng(11)
     pts = _mid_edge_points(chicago, rng, 200)

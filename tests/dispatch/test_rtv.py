@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from allocators.rtv import RtvAllocator
-from dispatch.answers import route_stops, validate
-from dispatch.allocation_problems import pooled_problem, route_schedule
-from dispatch.check_allocators import check_allocator
+from dispatch.checks.allocators import check_allocator
+from dispatch.checks.random_problems import pooled_problem, route_schedule
+from dispatch.decide.answers import route_stops, validate
 from tests.dispatch.test_pooling import _run, check_invariants
 
 
@@ -43,7 +43,7 @@ def _all_orders(plan_keys, new_ids):
     its drop-off (a plan's drop-off after its pickup where that is in the plan too), any stop
     first (the kernel re-routes a vehicle whose first stop changes: it finishes the edge it is
     on and drives to the new first stop; the drive it is on counts only when its stop stays
-    first: :func:`dispatch.allocation_problems.route_schedule`)."""
+    first: :func:`dispatch.checks.random_problems.route_schedule`)."""
     stops = list(plan_keys) + [(k, t) for t in new_ids for k in ("pickup", "dropoff")]
     out = []
 
@@ -286,9 +286,9 @@ def test_one_taxi_gets_two_requests_at_once(tmp_path):
 
 
 def _drive(tmp_path: Path, allocator):
-    from dispatch.runner import make_recorder
-    from dispatch.scenario import load_scenario
-    from dispatch.sim import Simulation
+    from dispatch.run.runner import make_recorder
+    from dispatch.run.sim import Simulation
+    from dispatch.scenario.load import load_scenario
     from tests.dispatch.test_trips import road_scenario, write_csv
 
     write_csv(tmp_path / "trips.csv", ["t", "origin_node", "dest_node"],
@@ -339,7 +339,7 @@ def test_invariants_on_random_pooled_runs_with_rtv(tmp_path):
 def test_rtv_answers_single_requests_without_travel():
     """Without ``problem.travel`` (a voxel world) it is the linear assignment."""
     from allocators.hungarian import HungarianAllocator
-    from dispatch.allocation_problems import allocation_problems
+    from dispatch.checks.random_problems import allocation_problems
 
     for _, build in allocation_problems(0):
         p = build()
@@ -445,7 +445,7 @@ def test_invariants_on_random_pooled_runs_with_rtv_reorder(tmp_path, monkeypatch
         made.append(self)
 
     monkeypatch.setattr(RtvAllocator, "__init__", init)
-    from dispatch.operator import Operator
+    from dispatch.plan.operator import Operator
 
     swapped = moved = 0
     follow = Operator.follow

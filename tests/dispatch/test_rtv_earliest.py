@@ -1,7 +1,7 @@
 """``rtv`` with stop earliest times (booked pickups, plan stops that wait) and vehicles whose
 routes must end by a shift limit (``problem.until``): the kernel's route costs are those of the
-one schedule rule (:func:`dispatch.stops.timetable`, through
-:func:`dispatch.allocation_problems.route_schedule`) on its chosen order, its best order is the
+one schedule rule (:func:`dispatch.plan.stops.timetable`, through
+:func:`dispatch.checks.random_problems.route_schedule`) on its chosen order, its best order is the
 best of every order, and its answers serve as many requests at the same cost as an exhaustive
 search over every grouping and every order."""
 
@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from allocators.rtv import RtvAllocator, _Batch
-from dispatch.allocation_problems import pooled_problem, route_schedule
-from dispatch.answers import route_stops, validate
-from dispatch.stops import leave
+from dispatch.checks.random_problems import pooled_problem, route_schedule
+from dispatch.decide.answers import route_stops, validate
+from dispatch.plan.stops import leave
 from tests.dispatch.test_rtv import _all_orders, _orders, _route_cost, _value, brute_force
 
 

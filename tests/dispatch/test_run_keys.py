@@ -1,4 +1,5 @@
-"""The sweep's dimensions declared once (:mod:`dispatch.runkeys`): the sweep lists, a run's keys,
+"""The sweep's dimensions declared once (:mod:`dispatch.config.runkeys`): the sweep lists, a run's
+keys,
 partition, run id, digest and file metadata all follow the one tuple; ``batch_window`` is a run
 key like ``n_agents``; the CLI's trip table shows 95 % intervals over seeds; ``dispatch sweep``
 takes ``--duration``."""
@@ -14,12 +15,13 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 
-from dispatch import cli, runkeys
-from dispatch.recorder import SCHEMAS
-from dispatch.runner import _base_settings, run_digest
-from dispatch.config import SweepConfig
-from dispatch.scenario import load_scenario
-from dispatch.tables import print_tables
+from dispatch.config import runkeys
+from dispatch.config.scenario import SweepConfig
+from dispatch.output.parquet import SCHEMAS
+from dispatch.output.printed import print_tables
+from dispatch.run import cli
+from dispatch.run.runner import _base_settings, run_digest
+from dispatch.scenario.load import load_scenario
 from tests.analysis.helpers import run_tiny_road
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -165,7 +167,7 @@ def test_a_sweep_over_an_older_folder_of_variants_resumes_it(tmp_path):
     table's rows with their run's window; ``force`` redoes them in the new layout and the older
     copies go."""
     from analysis.io import open_results
-    from dispatch.runner import execute, holds_results, legacy_variant, sweep
+    from dispatch.run.runner import execute, holds_results, legacy_variant, sweep
 
     out = run_tiny_road(tmp_path, "tiny", "[sweep]\nbatch_window = [0.0, 30.0]\n")
     for f in list(out.iterdir()):  # keep only the older layout, written below

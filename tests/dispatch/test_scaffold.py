@@ -18,7 +18,7 @@ def _env(*paths):
 
 
 def _dispatch(*args, env):
-    return subprocess.run([sys.executable, "-m", "dispatch.cli", *map(str, args)],
+    return subprocess.run([sys.executable, "-m", "dispatch.run.cli", *map(str, args)],
                           capture_output=True, text=True, env=env, timeout=300, cwd=ROOT)
 
 

@@ -9,9 +9,9 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from dispatch import cli
 from dispatch.errors import ScenarioError
-from dispatch.scenario import load_scenario
+from dispatch.run import cli
+from dispatch.scenario.load import load_scenario
 from tests.conftest import ROOT, scenario_text, write_scenario
 
 SCENARIOS = sorted((ROOT / "scenarios").glob("*.toml"))
@@ -346,7 +346,7 @@ def test_scenario_is_frozen(tiny_scenario):
 
 
 def test_obstacle_wider_than_world_is_a_scenario_error(tmp_path):
-    from dispatch.runner import run_one
+    from dispatch.run.runner import run_one
 
     path = write_scenario(tmp_path, obstacles={"count": 1, "max_size": [20, 3, 6]})
     try:
@@ -359,7 +359,7 @@ def test_obstacle_wider_than_world_is_a_scenario_error(tmp_path):
 
 def test_validated_obstacles_build_for_every_seed(tmp_path):
     from dispatch.errors import WorldError
-    from dispatch.world import world_for
+    from dispatch.space.world import world_for
 
     path = write_scenario(tmp_path, obstacles={"count": 2, "min_size": [5, 5, 1],
                                                "max_size": [5, 5, 1]})

@@ -1,4 +1,4 @@
-"""The one schedule rule (dispatch.stops) against an independent brute force
+"""The one schedule rule (dispatch.plan.stops) against an independent brute force
 (tests/dispatch/reference.py) over every order of small plans holding every stop kind: pickups
 and drop-offs among charge, reposition, wait and depot stops, with earliest and latest times,
 capacities and service times (random small instances, seeded).
@@ -17,9 +17,9 @@ import math
 import numpy as np
 import pytest
 
-from dispatch import stops as S
-from dispatch._plan_kernel import timetable as compiled_timetable
-from dispatch.insertion import insertion_costs
+from dispatch.plan import stops as S
+from dispatch.plan._kernel import timetable as compiled_timetable
+from dispatch.plan.insertion import insertion_costs
 from tests.dispatch.reference import brute_force_insertion, simulate
 
 #: every kind a plan may hold, with what a stop of it changes on board
@@ -73,7 +73,7 @@ def _sequence(rng, ready: float):
 
 
 def _rule(first, tt, rows, load, cap, compiled: bool):
-    """Arrival times by :func:`dispatch.stops.timetable` (or its compiled twin), None where a
+    """Arrival times by :func:`dispatch.plan.stops.timetable` (or its compiled twin), None where a
     stop breaks a limit."""
     legs = [tt(a[0], b[0]) for a, b in zip(rows, rows[1:])]
     cols = [legs, [r[4] for r in rows], [r[3] for r in rows], [r[2] for r in rows],

@@ -1,4 +1,5 @@
-"""Driver shifts and fleet sizing (dispatch.shifts): no pickup outside a vehicle's shift, every
+"""Driver shifts and fleet sizing (dispatch.fleet.shifts): no pickup outside a vehicle's shift,
+every
 vehicle at its depot by its shift's end plus the grace or the overrun counted, neutral
 machinery reproducing the runs without it, the ``utilization`` sizer within its bounds, and
 one-line errors for bad shift columns."""
@@ -13,8 +14,8 @@ import pandas as pd
 import pytest
 
 from dispatch.errors import ScenarioError
-from dispatch.runner import run_one
-from dispatch.scenario import load_scenario
+from dispatch.run.runner import run_one
+from dispatch.scenario.load import load_scenario
 from tests.dispatch.test_trips import road_scenario, write_csv
 
 EPS = 1e-6
@@ -247,7 +248,7 @@ def test_utilization_rule():
     """The strategy's answer from its view, by its rule: in the band it keeps the fleet; above
     it, the size at the target utilisation; below it, smaller; a share unserved above
     max_unserved grows it; always within the bounds and what the pool allows."""
-    from dispatch.sizing import SizingView
+    from dispatch.api.sizer import SizingView
     from sizers.utilization import UtilizationSizer
 
     s = UtilizationSizer(min_vehicles=5, max_vehicles=40, low=0.4, high=0.8, target=0.6)

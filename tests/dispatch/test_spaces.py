@@ -1,4 +1,4 @@
-"""Each space answers every question about location (dispatch.space.Space), the same as the
+"""Each space answers every question about location (dispatch.api.space.Space), the same as the
 kernel's branches did before the spaces owned them, and no location switch comes back outside
 the space modules and the one ``[world]`` config branch.
 
@@ -16,22 +16,22 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dispatch import registry
-from dispatch.check_planners import SAMPLERS
-from dispatch.demand import BUILDERS, demand_for
-from dispatch.drivers import CellDriver, Driver, RoadDriver
+from dispatch.api import registry
+from dispatch.api.legs import RoadPoint
+from dispatch.api.space import KINDS, Space, space_class, space_for
+from dispatch.checks.planners import SAMPLERS
 from dispatch.errors import PluginError, ScenarioError
 from dispatch.events import EventBus
-from dispatch.legs import RoadPoint
-from dispatch.roads import RoadNetwork
-from dispatch.scenario import load_scenario
+from dispatch.files.traces import read_fleet_start
+from dispatch.fleet.placement import PLACERS, place_fleet
 from dispatch.locations import Cell
-from dispatch.placement import PLACERS, place_fleet
-from dispatch.space import KINDS, Space, space_class, space_for
+from dispatch.plan.demand import BUILDERS, demand_for
+from dispatch.plan.vehicles import Fleet, Vehicle
+from dispatch.scenario.load import load_scenario
+from dispatch.space.drivers import CellDriver, Driver, RoadDriver
+from dispatch.space.roads import RoadNetwork
+from dispatch.space.world import World
 from dispatch.streams import STREAM_FLEET, rng_for
-from dispatch.traces import read_fleet_start
-from dispatch.vehicles import Fleet, Vehicle
-from dispatch.world import World
 
 ROOT = Path(__file__).resolve().parents[2]
 PAPER = ROOT / "scenarios" / "paper_dynamic.toml"
@@ -57,8 +57,8 @@ def test_kinds_are_registered_once_and_answer_their_class_questions():
 
 
 def test_cell_is_one_type_from_dispatch_locations():
-    from dispatch import contracts, world
-
+    from dispatch.api import contracts
+    from dispatch.space import world
     assert world.Cell is Cell and contracts.Cell is Cell
 
 
@@ -241,10 +241,12 @@ SWITCH = re.compile(r'roads is (not )?None|kind [!=]= "(road|voxel)"|_is_node|'
 #: (config.py's WorldConfig.space) and the parser's empirical sample on the Chicago network
 #: (scenario.py); the road planner checking
 #: its own space; tables and analysis reading the recorded ``space`` column of results
-ALLOWED = {"dispatch/space.py": 99, "dispatch/world.py": 99, "dispatch/roads.py": 99,
-           "dispatch/config.py": 1, "dispatch/scenario.py": 1,
+ALLOWED = {"dispatch/api/space.py": 99, "dispatch/space/world.py": 99,
+           "dispatch/space/roads.py": 99, "dispatch/config/scenario.py": 1,
+           "dispatch/scenario/load.py": 1,
            # [chargers] max_snap: stations given in lon/lat are snapped to the road network
-           "dispatch/scenario_sections.py": 1, "planners/road.py": 1, "dispatch/tables.py": 1,
+           "dispatch/scenario/sections.py": 1, "planners/road.py": 1,
+           "dispatch/output/printed.py": 1,
            "analysis/report.py": 2,
            # the replay draws a stored run (analysis reads Parquet, it cannot ask the kernel's
            # space): streets for a road run, obstacles and cells for a voxel run
@@ -260,11 +262,11 @@ def test_no_location_switch_outside_the_spaces():
                 if SWITCH.search(line) and not line.lstrip().startswith("#"):
                     found.setdefault(rel, []).append(line.strip())
     over = {f: lines for f, lines in found.items() if len(lines) > ALLOWED.get(f, 0)}
-    assert not over, f"ask the space (dispatch.space.Space) instead of switching: {over}"
+    assert not over, f"ask the space (dispatch.api.space.Space) instead of switching: {over}"
 
 
 def test_sim_imports_few_kernel_modules():
-    text = (ROOT / "dispatch" / "sim.py").read_text(encoding="utf-8")
+    text = (ROOT / "dispatch" / "run" / "sim.py").read_text(encoding="utf-8")
     # (14: energy.py split into battery and charging, vehicles.py into vehicles and the
     # operator, and the decision's pipeline, all wired here: sim.py is the one place the
     # simulation is put together; 20: the demand-responsive features, each wired once by

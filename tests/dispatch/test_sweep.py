@@ -14,18 +14,10 @@ import pyarrow.dataset as ds
 import pyarrow.parquet as pq
 import pytest
 
-from dispatch.recorder import SCHEMAS
-from dispatch.runner import (
-    ERRORS,
-    MARKERS,
-    execute,
-    foreign_runs,
-    is_complete,
-    marker_path,
-    partition_dir,
-    sweep,
-)
-from dispatch.scenario import load_scenario
+from dispatch.output.parquet import SCHEMAS
+from dispatch.run.runner import (ERRORS, MARKERS, execute, foreign_runs, is_complete, marker_path,
+                                 partition_dir, sweep)
+from dispatch.scenario.load import load_scenario
 from tests.conftest import DISPATCH_EXE, ROOT, write_scenario
 from tests.dispatch.test_determinism import assert_same_content, without_timing
 
@@ -168,8 +160,7 @@ def test_changed_scenario_or_force_redoes_everything(small, tmp_path):
 
 
 def test_failing_run_is_recorded_and_retried(small, tmp_path, monkeypatch):
-    from dispatch import runner
-
+    from dispatch.run import runner
     _, specs, serial = small
     out = tmp_path / "out"
     real = runner.run_one
@@ -206,7 +197,7 @@ def test_failing_run_is_recorded_and_retried(small, tmp_path, monkeypatch):
 
 def _sweep_cli(*args, **kw) -> subprocess.Popen:
     cmd = [str(DISPATCH_EXE)] if DISPATCH_EXE.exists() else [os.sys.executable, "-m",
-                                                             "dispatch.cli"]
+                                                             "dispatch.run.cli"]
     env = {**os.environ, "COLUMNS": "400", "NO_COLOR": "1", "TERM": "dumb"}
     return subprocess.Popen([*cmd, "sweep", *map(str, args)], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, cwd=ROOT, env=env, **kw)
@@ -256,9 +247,8 @@ def test_cli_sweep_bad_plugin_parameters_stop_before_any_run(make_scenario, tmp_
 
 def test_cli_sweep_failures_exit_1_and_the_others_go_on(make_scenario, tmp_path, monkeypatch,
                                                          capsys):
-    from dispatch import cli as cli_module
-    from dispatch import runner
-
+    from dispatch.run import cli as cli_module
+    from dispatch.run import runner
     path = make_scenario(sweep={"allocator": ["hungarian", "greedy"], "seed": [0, 1]})
     out = tmp_path / "out"
     real = runner.run_one
@@ -338,7 +328,7 @@ def test_changed_sweep_lists_resume_the_same_runs(tmp_path):
     """A sweep rerun with other [sweep] lists (and other comments) skips the runs it shares
     with the first one and runs only the new ones; runs of values dropped since stay and are
     not counted as another scenario's; a change outside [sweep] still redoes everything."""
-    from dispatch.runner import run_digest
+    from dispatch.run.runner import run_digest
 
     first = write_scenario(tmp_path, "a.toml", sweep={"allocator": ["hungarian"], "seed": [0]})
     out = tmp_path / "out"

@@ -9,7 +9,7 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from dispatch.table_files import numbers_of
+from dispatch.files.tables import numbers_of
 from tests.dispatch.test_trips import road_scenario, write_csv
 
 COLUMNS = [
@@ -37,8 +37,8 @@ def test_a_trace_run_reads_its_files_without_pandas(tmp_path):
                          fleet='start = "fleet.csv"')
     code = textwrap.dedent(f"""\
         import sys
-        from dispatch.runner import run_one
-        from dispatch.scenario import load_scenario
+        from dispatch.run.runner import run_one
+        from dispatch.scenario.load import load_scenario
         [spec] = load_scenario({str(path)!r}, force=True).runs()
         result = run_one(spec, {str(tmp_path / "out")!r})
         assert int(result.summary["tasks_completed"]) == 2, result.summary

@@ -8,7 +8,7 @@ import itertools
 
 import pytest
 
-from dispatch.tables import aggregate, print_tables
+from dispatch.output.printed import aggregate, print_tables
 
 ALLOCATORS = [
     "hungarian",
@@ -158,10 +158,9 @@ def test_tables_and_analysis_share_one_gap_and_order():
     """The CLI's tables and analysis.metrics compute the same paired gaps and the same
     allocator order (one definition: paired.compare)."""
     pd = pytest.importorskip("pandas")
-    from paired import compare
     from analysis import metrics as M
-    from dispatch import tables
-
+    from dispatch.output import printed as tables
+    from paired import compare
     runs = _variant_runs()
     assert list(M.paired_gaps(pd.DataFrame(runs))) == pytest.approx(compare.paired_gaps(runs))
     assert tables.allocator_order is compare.allocator_order is M.allocator_order

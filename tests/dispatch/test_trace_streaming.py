@@ -14,14 +14,14 @@ import numpy as np
 import pytest
 import simpy
 
-from dispatch import table_files
-from dispatch.demand import RoadDemand
 from dispatch.errors import ScenarioError
 from dispatch.events import EventBus
-from dispatch.roads import manhattan
-from dispatch.scenario import load_scenario
-from dispatch.tasks import SourceConfig, TaskBook, TaskSource
-from dispatch.traces import read_trace
+from dispatch.files import tables as table_files
+from dispatch.files.traces import read_trace
+from dispatch.plan.demand import RoadDemand
+from dispatch.plan.tasks import SourceConfig, TaskBook, TaskSource
+from dispatch.scenario.load import load_scenario
+from dispatch.space.roads import manhattan
 
 HEADER = ["request_id", "t", "origin_x", "origin_y", "dest_x", "dest_y", "max_wait",
           "passengers"]

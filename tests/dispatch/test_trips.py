@@ -14,12 +14,12 @@ import pandas as pd
 import pytest
 from scipy.sparse.csgraph import dijkstra
 
+from dispatch.api.legs import RoadPoint
 from dispatch.errors import ScenarioError
-from dispatch.legs import RoadPoint
-from dispatch.roads import load_network, manhattan
-from dispatch.runner import run_one
-from dispatch.scenario import load_scenario
-from dispatch.plugins import check_runs
+from dispatch.run.plugins import check_runs
+from dispatch.run.runner import run_one
+from dispatch.scenario.load import load_scenario
+from dispatch.space.roads import load_network, manhattan
 from tests.conftest import missing_data
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -233,8 +233,8 @@ def test_chicago_trace_by_latitude_longitude(tmp_path):
 def test_a_vehicle_mid_leg_is_costed_from_where_it_is():
     """Where a decision finds a vehicle part-way along a leg: the rest of its edge plus the
     fastest path from the edge's end (scipy), as the planner prices it."""
-    from dispatch.problem import AgentView, TaskView
-    from dispatch.registry import load
+    from dispatch.api.problem import AgentView, TaskView
+    from dispatch.api.registry import load
 
     net = manhattan(6, 5, 100.0, 10.0)
     leg = net.route(0, 29)

@@ -8,9 +8,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from dispatch.answers import validate
+from dispatch.api.problem import Allocation
+from dispatch.decide.answers import validate
 from dispatch.errors import AllocationError
-from dispatch.problem import Allocation
 from tests.allocators.helpers import make_problem, random_problem
 
 

@@ -13,9 +13,9 @@ pytest.importorskip("gymnasium")
 pytest.importorskip("pettingzoo")
 
 from allocators.hungarian import HungarianAllocator
+from dispatch.run.runner import run_one
+from dispatch.scenario.load import load_scenario
 from learning.rl import DispatchEnv, FleetEnv, pairs_from_choices
-from dispatch.runner import run_one
-from dispatch.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 MANHATTAN = ROOT / "scenarios" / "manhattan.toml"

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from allocators.hungarian import HungarianAllocator
-from dispatch.problem import AgentView, AllocationProblem, TaskView
+from dispatch.api.problem import AgentView, AllocationProblem, TaskView
 from learning.value import ZoneValue, td_learn, train
 from learning.zones import Zones
 
@@ -83,7 +83,7 @@ def test_value_file_round_trip_and_hungarian_option(tmp_path):
 
 
 def test_train_on_a_short_day_and_run_with_it(tmp_path):
-    from dispatch.runner import run_one
+    from dispatch.run.runner import run_one
     from learning.value import scenario_for
 
     out = tmp_path / "value.npz"

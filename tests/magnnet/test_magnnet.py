@@ -172,7 +172,7 @@ def _shipped(name):
 def test_shipped_checkpoints_load_and_beat_random(n):
     from allocators.magnnet.ppo import load_checkpoint
     from allocators.randomized import RandomAllocator
-    from dispatch.registry import load
+    from dispatch.api.registry import load
     from tests.allocators.helpers import assert_valid, make_problem, total_cost
 
     for name in (f"paper_n{n}.pt", f"paper_nb_n{n}.pt"):
@@ -249,7 +249,7 @@ def test_train_cli_smoke(tmp_path, monkeypatch):
     """`dispatch train magnnet` end to end on a tiny pool: checkpoint, Parquet log, figures."""
     import pyarrow.parquet as pq
 
-    from dispatch.cli import main
+    from dispatch.run.cli import main
 
     monkeypatch.setenv("MAGNNET_CACHE", str(tmp_path / "cache"))
     out = tmp_path / "out"

@@ -110,7 +110,7 @@ def test_confident_pairs_go_first():
 
 def test_allocator_is_conflict_free_on_complete_graphs():
     """Every agent shares the one view: no task is ever requested twice; N >= M assigns all."""
-    from dispatch.registry import load
+    from dispatch.api.registry import load
 
     alloc = load("allocator", "magnnet")()
     rng = np.random.default_rng(2)
@@ -130,7 +130,7 @@ def test_allocator_is_conflict_free_on_complete_graphs():
 def test_patience_never_forces_agents_that_hear_everyone():
     """On a complete graph an agent knows its view is everyone's: no forced requests, so no
     conflicts, even with ``patience = 0``."""
-    from dispatch.registry import load
+    from dispatch.api.registry import load
 
     alloc = load("allocator", "magnnet")(patience=0)
     rng = np.random.default_rng(8)
@@ -175,7 +175,7 @@ def test_action_ignores_agents_beyond_two_hops():
 def test_no_communication_still_assigns_everything():
     """Range so small nobody talks: every agent's view is itself, it requests its best task,
     the conflict rule settles the rest; nothing is lost."""
-    from dispatch.registry import load
+    from dispatch.api.registry import load
 
     alloc = load("allocator", "magnnet")()
     rng = np.random.default_rng(5)

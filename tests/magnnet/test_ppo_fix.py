@@ -130,7 +130,7 @@ def test_paper_reading_hand_computed():
     1: agent 1 requests task 2 (wins). The paper's reading: 3 of 4 requests won; ours: task 0
     was in conflict, so 2 of 3 tasks are conflict-free."""
     from benchmarks.paper_ppo import ours, paper_reading
-    from dispatch.problem import Allocation, Bid
+    from dispatch.api.problem import Allocation, Bid
 
     a = Allocation(pairs=((0, 0), (2, 1), (1, 2)), rounds=2, requests=(
         Bid(0, 0, 0, 1.0, True), Bid(0, 1, 0, 2.0, False),
@@ -142,7 +142,8 @@ def test_paper_reading_hand_computed():
 @pytest.mark.slow
 def test_pure_ppo_learns_to_assign_without_stalling():
     """From random weights, the recipe's PPO (no imitation, 160k steps) at N = 4 on random
-    instances, with the trainer's validation picking the kept weights: those assign every task on most
+    instances, with the trainer's validation picking the kept weights: those assign every task on
+    most
     held-out instances and are conflict-free more often than the initial weights. (Without
     the validation the last weights may leave instances incomplete: the argmax policy can
     reject all round, the weakness docs/explanation/magnnet.md describes.)"""

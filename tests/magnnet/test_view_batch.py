@@ -20,7 +20,7 @@ from allocators.magnnet.views import (  # noqa: E402
     view_scores,
     view_scores_many,
 )
-from dispatch.comms import comm_graph  # noqa: E402
+from dispatch.api.comms import comm_graph  # noqa: E402
 from tests.allocators.helpers import make_problem  # noqa: E402
 
 
@@ -144,7 +144,7 @@ def test_view_skips_are_the_agents_their_view_cuts(view_candidates):
 def test_flood_equals_int64_products():
     """The flooded views (float32 products) equal the int64 computation they replace, with
     and without loss (the same draws)."""
-    from dispatch.comms import Channel
+    from dispatch.api.comms import Channel
 
     def reference(problem, hops):
         n = len(problem.comm)

@@ -12,7 +12,7 @@ import pytest
 from allocators.magnnet import view_taxi, views
 from allocators.magnnet.allocator import MagnnetAllocator, shipped
 from allocators.magnnet.ppo import load_checkpoint
-from dispatch.problem import AgentView, AllocationProblem, TaskView
+from dispatch.api.problem import AgentView, AllocationProblem, TaskView
 
 ROOT = Path(__file__).resolve().parents[2]
 MANHATTAN = ROOT / "scenarios" / "manhattan.toml"

@@ -26,7 +26,7 @@ from allocators.magnnet.views import (  # noqa: E402
     view_request,
     view_scores,
 )
-from dispatch.decentralized import WAIT  # noqa: E402
+from dispatch.api.decentralized import WAIT  # noqa: E402
 from dispatch.errors import AllocationError  # noqa: E402
 from tests.allocators.helpers import assert_valid, make_problem  # noqa: E402
 
@@ -74,7 +74,7 @@ def test_view_request_hand_computed():
 def test_teacher_labels_are_the_optimal_assignment_of_what_remains():
     """Round 1 after agent 0 won task 0: the teacher solves agents {1, 2} x tasks {1, 2};
     inactive rows and taken tasks point at the null heads."""
-    from dispatch.problem import Allocation, Bid
+    from dispatch.api.problem import Allocation, Bid
 
     cost = np.array([[1.0, 9.0, 9.0], [9.0, 5.0, 1.0], [9.0, 1.0, 5.0]])
     p = make_problem(cost)
@@ -252,8 +252,8 @@ def test_run_summary_and_metadata_record_the_model(tmp_path):
     model, variant and checkpoint ran; an allocator without ``describe`` records ``{}``."""
     import pyarrow.parquet as pq
 
-    from dispatch.runner import run_one
-    from dispatch.scenario import load_scenario
+    from dispatch.run.runner import run_one
+    from dispatch.scenario.load import load_scenario
     from tests.conftest import write_scenario
 
     for allocator, params in (("magnnet", 'variant = "paper"\n'), ("greedy", "")):
@@ -287,7 +287,7 @@ def test_flood_spreads_views_one_hop_per_step():
     """Without loss, ``known`` after H steps is exactly "within H hops" (scipy's shortest
     paths); on a line of 5, 3 steps cost 5 + 5 + 5 broadcasts (everyone learns something in
     each of the first two steps); with loss it knows no more, and the same seed repeats."""
-    from dispatch.comms import hop_distances
+    from dispatch.api.comms import hop_distances
 
     rng = np.random.default_rng(3)
     for _ in range(10):

@@ -1,7 +1,8 @@
 """The ``astar`` planner and its grid graphs are exact.
 
 References are built independently here: plain Python loops over cells with
-:func:`dispatch.motion.step_is_legal`, then scipy's Dijkstra; and the published optimal lengths of
+:func:`dispatch.api.motion.step_is_legal`, then scipy's Dijkstra; and the published optimal lengths
+of
 the MovingAI 2D benchmark.
 """
 
@@ -15,10 +16,10 @@ import pytest
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from dispatch.motion import check_path, offsets, path_length, step_is_legal, step_length
-from dispatch.problem import AgentView, TaskView
-from dispatch.voxels import Grid
-from dispatch.world import World
+from dispatch.api.motion import check_path, offsets, path_length, step_is_legal, step_length
+from dispatch.api.problem import AgentView, TaskView
+from dispatch.api.voxels import Grid
+from dispatch.space.world import World
 from planners import graph as G
 from planners.astar import AStarPlanner
 from tests.conftest import missing_data
@@ -343,7 +344,7 @@ def test_distance_fields_batch_equals_single(monkeypatch, flies):
 
 @pytest.mark.parametrize("flies", [True, False], ids=["uav", "ugv"])
 def test_astar_on_obstacle_free_grid_matches_octile(flies):
-    from dispatch.motion import octile
+    from dispatch.api.motion import octile
 
     grid = Grid(np.zeros((9, 7, 5), dtype=bool), 1.0)
     rng = np.random.default_rng(7)
@@ -634,11 +635,11 @@ def test_costs_on_paper_world_equal_scipy_after_moves():
     """The paper's world (50x50x30, 10 boxes), N = M = 20 as `dispatch run` places them: the
     matrix equals scipy shortest paths on the explicit adjacency, cold and after every vehicle
     moved (fields reused: no new Dijkstra)."""
-    from dispatch.scenario import load_scenario
-    from dispatch.world import world_for
-    from dispatch.placement import place_fleet
+    from dispatch.fleet.placement import place_fleet
+    from dispatch.plan.demand import VoxelDemand
+    from dispatch.scenario.load import load_scenario
+    from dispatch.space.world import world_for
     from dispatch.streams import STREAM_FLEET, STREAM_TASKS, rng_for
-    from dispatch.demand import VoxelDemand
 
     root = Path(__file__).resolve().parents[2]
     scenario = load_scenario(root / "scenarios" / "paper_static.toml")

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from scipy.sparse.csgraph import connected_components
 
-from dispatch.motion import octile
-from dispatch.problem import AgentView, TaskView
+from dispatch.api.motion import octile
+from dispatch.api.problem import AgentView, TaskView
 from planners import graph as G
 from planners.astar import AStarPlanner
 from tests.planners.test_astar import random_world, reference_graph

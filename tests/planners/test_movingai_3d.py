@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dispatch.motion import check_path, path_length
-from dispatch.voxels import Grid
+from dispatch.api.motion import check_path, path_length
+from dispatch.api.voxels import Grid
 from planners import graph as G
 from tests.conftest import missing_data
 
@@ -83,7 +83,7 @@ def test_map_and_problems_load(voxels, problems):
     assert int(voxels.occupied.sum()) == 123_236
     assert problems.shape == (5000, 8)
     # the listed ratio is optimal / octile: the 3D octile distance of motion.octile
-    from dispatch.motion import octile
+    from dispatch.api.motion import octile
 
     r = problems[0]
     assert r[6] / octile(tuple(r[:3]), tuple(r[3:6])) == pytest.approx(r[7], abs=1e-3)

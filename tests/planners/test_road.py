@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from scipy.sparse.csgraph import dijkstra
 
-from dispatch.contracts import Planner
-from dispatch.registry import load
-from dispatch.legs import RoadPoint
-from dispatch.roads import RoadNetwork, load_network, manhattan
+from dispatch.api.contracts import Planner
+from dispatch.api.legs import RoadPoint
+from dispatch.api.registry import load
+from dispatch.space.roads import RoadNetwork, load_network, manhattan
 from planners import road
 from planners.road import RoadPlanner
 
@@ -350,8 +350,8 @@ def test_between_equals_scipy_in_every_form():
     counting what is left of their edge."""
     from scipy.sparse.csgraph import dijkstra
 
-    from dispatch.legs import RoadPoint
-    from dispatch.roads import manhattan
+    from dispatch.api.legs import RoadPoint
+    from dispatch.space.roads import manhattan
     from planners.road import RoadPlanner
 
     net = manhattan(6, 5, 100.0, 10.0)

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from scipy.sparse.csgraph import dijkstra
 
-from dispatch.legs import RoadPoint
-from dispatch.problem import AgentView, TaskView
-from dispatch.roads import load_network, manhattan
+from dispatch.api.legs import RoadPoint
+from dispatch.api.problem import AgentView, TaskView
+from dispatch.space.roads import load_network, manhattan
 from planners.road import RoadPlanner
 
 

@@ -1,7 +1,7 @@
 """The ``rrt_star`` planner: legal snapped paths, costs >= exact, seeded, usable in a run.
 
 References: exact shortest paths from :func:`planners.graph.distance_field` (Dijkstra) and the
-movement rules of :func:`dispatch.motion.check_path`.
+movement rules of :func:`dispatch.api.motion.check_path`.
 """
 
 from __future__ import annotations
@@ -11,13 +11,13 @@ import math
 import numpy as np
 import pytest
 
-from dispatch import registry
-from dispatch.motion import check_path, path_length
-from dispatch.problem import AgentView, TaskView
-from dispatch.runner import run_one
-from dispatch.scenario import load_scenario
-from dispatch.voxels import Grid
-from dispatch.world import World, build_world
+from dispatch.api import registry
+from dispatch.api.motion import check_path, path_length
+from dispatch.api.problem import AgentView, TaskView
+from dispatch.api.voxels import Grid
+from dispatch.run.runner import run_one
+from dispatch.scenario.load import load_scenario
+from dispatch.space.world import World, build_world
 from planners.graph import distance_field
 from planners.rrt_star import RRTStarPlanner
 from planners.sampling import RayWorld, collision_boxes, segment_cells, snap_polyline

@@ -13,13 +13,13 @@ import math
 import numpy as np
 import pytest
 
-from dispatch import registry
-from dispatch.motion import check_path, path_length
-from dispatch.problem import AgentView, TaskView
-from dispatch.runner import run_one
-from dispatch.scenario import load_scenario
-from dispatch.voxels import Grid
-from dispatch.world import World, build_world
+from dispatch.api import registry
+from dispatch.api.motion import check_path, path_length
+from dispatch.api.problem import AgentView, TaskView
+from dispatch.api.voxels import Grid
+from dispatch.run.runner import run_one
+from dispatch.scenario.load import load_scenario
+from dispatch.space.world import World, build_world
 from planners.graph import distance_field
 from planners.rstar import RStarPlanner
 

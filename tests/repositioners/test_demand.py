@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from scipy.sparse.csgraph import dijkstra
 
-from dispatch.legs import RoadPoint
-from dispatch.roads import manhattan
-from dispatch.check_repositioners import check_repositioner, reposition_view
+from dispatch.api.legs import RoadPoint
+from dispatch.checks.repositioners import check_repositioner, reposition_view
+from dispatch.space.roads import manhattan
 from repositioners.demand import DemandRepositioner, shares
 from repositioners.stay import StayRepositioner
 from repositioners.zones import Zones

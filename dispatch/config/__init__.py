@@ -1,0 +1,2 @@
+"""A scenario's typed configuration: frozen dataclasses, data only (no behaviour), each default
+written once."""

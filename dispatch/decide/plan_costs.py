@@ -1,0 +1,285 @@
+"""A decision's costs when vehicles have plans (shared rides, drop-off limits, the
+added-time objective): where a new request's stops go in a vehicle's plan and what that adds.
+
+* :func:`insertion_costs_of`: the cost matrix with plans, from the drives to each pickup; an
+  empty plan takes the pickup and drop-off in that order, a busy vehicle's plan the cheapest
+  feasible insertion (:func:`dispatch.plan.insertion.insertion_costs`); :class:`Inserts` keeps where
+  the stops go for the pairs handed out;
+* :class:`Plans`: the agents' stop lists as an allocation problem shows them
+  (:attr:`AllocationProblem.plans`), read from the vehicles when asked;
+* :class:`PlanTable`: the fleet's plans kept as arrays between decisions, gathered for the
+  busy vehicles of a decision without a Python loop over their stops.
+
+The dispatcher (:mod:`dispatch.decide.dispatcher`) decides; this is the plan machinery it asks.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from dispatch.api.contracts import Planner
+from dispatch.api.problem import StopView
+from dispatch.plan.insertion import Insertion, insertion_costs
+from dispatch.plan.stops import PICKUP_TIME
+
+if TYPE_CHECKING:
+    from dispatch.plan.operator import Operator
+    from dispatch.plan.vehicles import Fleet
+
+
+class Inserts:
+    """Where a decision's stops go (:class:`dispatch.plan.insertion.Insertion`), for its busy
+    vehicles' feasible pairs, by ``(row, col)``: kept as the arrays the insertion computed and
+    looked up only for the pairs handed out (a pooled batch has thousands of feasible pairs
+    and hands out a few dozen)."""
+
+    def __init__(self, ins, rows: np.ndarray, cols: np.ndarray, m: int) -> None:
+        ok = np.isfinite(ins.cost)
+        self._ins, self._q = ins, np.flatnonzero(ok)
+        self._rows, self._cols, self._m = rows[ok], cols[ok], m
+        self._keys = None
+
+    def __bool__(self) -> bool:
+        return bool(self._q.size)
+
+    def kept(self, servable: np.ndarray) -> Inserts:
+        """The same, for the columns of ``servable`` only (renumbered as they are kept)."""
+        col = np.cumsum(servable) - 1
+        keep = servable[self._cols]
+        out = object.__new__(Inserts)
+        out._ins, out._q = self._ins, self._q[keep]
+        out._rows, out._cols = self._rows[keep], col[self._cols[keep]]
+        out._m, out._keys = int(servable.sum()), None
+        return out
+
+    def pairs(self):
+        """``(rows, cols, insertions)``: every feasible pair kept and its insertion's arrays
+        (:class:`dispatch.plan.insertion.Insertions`, aligned with the pairs)."""
+        ins, q = self._ins, self._q
+        return self._rows, self._cols, ins.take(q)
+
+    def _find(self, key) -> int:
+        if self._keys is None:
+            keys = self._rows.astype(np.int64) * self._m + self._cols
+            order = np.argsort(keys, kind="stable")
+            self._keys, self._order = keys[order], order
+        r, c = key
+        k = int(r) * self._m + int(c)
+        i = int(np.searchsorted(self._keys, k))
+        return int(self._order[i]) if i < self._keys.size and self._keys[i] == k else -1
+
+    def get(self, key, default=None) -> Insertion | None:
+        i = self._find(key)
+        return default if i < 0 else self._ins.of(int(self._q[i]))
+
+    def __contains__(self, key) -> bool:
+        return self._find(key) >= 0
+
+
+class Plans(Mapping):
+    """:attr:`AllocationProblem.plans`: the stop lists of a decision's agents that have one,
+    read from the vehicles when asked (within the decision: nothing moves meanwhile)."""
+
+    def __init__(self, fleet: Fleet, operator: Operator, slots: np.ndarray) -> None:
+        self._fleet, self._slots, self._operator = fleet, slots, operator
+        self._by_id: dict | None = None  # agent id -> vehicle, of those with stops (on use)
+        self._cache: dict[int, tuple] = {}
+
+    @property
+    def _ids(self) -> dict:
+        if self._by_id is None:
+            vs = self._fleet.vehicles
+            self._by_id = {v.id: v for v in (vs[k] for k in self._slots.tolist())
+                           if self._operator.kept(v)}
+        return self._by_id
+
+    def __getitem__(self, agent_id: int) -> tuple[StopView, ...]:
+        got = self._cache.get(agent_id)
+        if got is None:
+            v = self._ids[agent_id]
+            times = self._operator.plan_arrays(v)[0]
+            got = self._cache[agent_id] = tuple(
+                StopView(s.kind, -1 if s.task is None else s.task.id, s.loc, s.passengers,
+                         s.latest, s.occupancy, t, s.earliest)
+                for s, t in zip(v.stops, times))
+        return got
+
+    def __iter__(self):
+        return iter(self._ids)
+
+    def __len__(self) -> int:
+        return len(self._ids)
+
+
+class PlanTable:
+    """The fleet's plans as the compiled insertion reads them: for each vehicle (by fleet
+    position) a row of each field of :meth:`dispatch.plan.operator.Operator.plan_arrays` (planned
+    arrival, service, latest, occupancy, earliest; the locations as node ids where every stop
+    lies on a node, else kept as the lists), so that a decision gathers the plans of its busy
+    vehicles with a few numpy operations (:meth:`gather`) instead of concatenating lists
+    vehicle by vehicle.
+
+    A row is written when the vehicle's plan arrays are not the ones it was written from
+    (``plan_arrays`` answers the same tuple until the plan, the drive along it or, for a
+    standing vehicle, the clock changes): a decision rewrites the few plans that changed
+    since the last one. The values are those lists' (the same doubles, in the same order)."""
+
+    def __init__(self, n: int, width: int = 8) -> None:
+        self._src: list = [None] * n  # the plan_arrays tuple each row was written from
+        #: the vehicle's ``plan_version`` when its row was last checked (-1: never)
+        self._checked = np.full(n, -1, dtype=np.int64)
+        self.length = np.zeros(n, dtype=np.int64)
+        #: every stop written so far lies on a node (an integer): ``nodes`` holds them
+        self.on_nodes = True
+        self._fields = self._alloc(n, width, ())
+
+    def _alloc(self, n: int, width: int, old: tuple) -> tuple:
+        """The fields (arrival, service, latest, occupancy, earliest, node), ``width`` stops
+        wide, holding the ``old`` fields' values."""
+        self.width = width
+        fields = (np.zeros((n, width)), np.zeros((n, width)), np.zeros((n, width)),
+                  np.zeros((n, width), dtype=np.int64), np.zeros((n, width)),
+                  np.zeros((n, width), dtype=np.int64))
+        for new, was in zip(fields, old):
+            new[:, :was.shape[1]] = was
+        return fields
+
+    def _write(self, k: int, arrays) -> None:
+        times, svcs, latest, occ, where, earliest = arrays
+        n = len(times)
+        if n > self.width:
+            self._fields = self._alloc(len(self._src), max(n, 2 * self.width), self._fields)
+        arr, svc, lat, oc, ear, node = self._fields
+        arr[k, :n] = times
+        svc[k, :n] = svcs
+        lat[k, :n] = latest
+        oc[k, :n] = occ
+        ear[k, :n] = earliest
+        if self.on_nodes:
+            if all(isinstance(x, (int, np.integer)) and not isinstance(x, bool) for x in where):
+                node[k, :n] = where
+            else:
+                self.on_nodes = False
+        self.length[k] = n
+        self._src[k] = arrays
+
+    def gather(self, fleet: Fleet, slots: np.ndarray, plan_of, now: float):
+        """``(off, arrival, service, latest, occupancy, locations, earliest, load)`` of the
+        vehicles at fleet positions ``slots`` (``plan_of``: ``Operator.plan_arrays``), flat as
+        :func:`dispatch.plan.insertion.insertion_costs` takes them: vehicle ``i``'s stops are
+        ``off[i]:off[i + 1]``; the locations an int64 array of nodes where every stop is on a
+        node, else a list; ``load`` on board now, per vehicle.
+
+        ``plan_of`` is asked only for the vehicles whose plan arrays may differ from their
+        row's: a ``plan_version`` since the row was checked, or standing (no stop headed for,
+        no service running: its plan's times start at ``now``), as ``plan_of``'s own cache
+        key says; the others' rows are read as they are."""
+        src, write, checked = self._src, self._write, self._checked
+        idx = np.asarray(slots, dtype=np.int64)
+        version = fleet.plan_version.take(idx)
+        ask = (checked.take(idx) != version) \
+            | (fleet.heading_none.take(idx) & (fleet.free_at.take(idx) <= now))
+        if ask.any():
+            vehicles = fleet.vehicles
+            for k in idx[ask].tolist():
+                got = plan_of(vehicles[k])
+                if got is not src[k]:
+                    write(k, got)
+            checked[idx[ask]] = version[ask]
+        lens = self.length.take(idx)
+        off = np.zeros(idx.size + 1, dtype=np.int64)
+        np.cumsum(lens, out=off[1:])
+        # each stop's place in the (row-major) tables: one ``take`` per field
+        at = np.repeat(idx * self.width - off[:-1], lens) + np.arange(off[-1])
+        arr, svc, lat, oc, ear, node = (f.take(at) for f in self._fields)
+        if self.on_nodes:
+            locs = node
+        else:
+            locs = [x for k in idx.tolist() for x in src[k][4]]
+        return off, arr, svc, lat, oc, locs, ear, fleet.load.take(idx)
+
+
+def insertion_costs_of(cost: np.ndarray, slots: np.ndarray, tasks: list, now: float,
+                       holders: set, *, fleet: Fleet, operator: Operator, planner: Planner,
+                       objective: int, table: PlanTable) -> tuple[np.ndarray, Inserts | dict]:
+    """A decision's costs with plans (see :mod:`dispatch.plan.stops`): for a vehicle with an
+    empty plan (idle, or about to give its task up) the request's pickup and drop-off in
+    that order; for a busy one the cheapest feasible insertion into its plan; ``inf``
+    where none keeps the capacity and every limit. ``cost`` holds the drives from each
+    vehicle to each pickup. Returns ``(costs by the objective, {(row, col): where the
+    stops go})`` for the busy vehicles' finite pairs. ``table``: the run's
+    :class:`PlanTable` (the busy vehicles' plans are read through it)."""
+    svc = operator.service_time
+    m = len(tasks)
+    lp = np.array([t.deadline for t in tasks])
+    ld = np.array([t.dropoff_deadline for t in tasks])
+    n_req = np.array([0 if t.dropoff is None else t.passengers for t in tasks], np.int64)
+    # a booked request's pickup opens at its requested departure (dispatch.decide.prebook)
+    ep = np.array([t.earliest_pickup for t in tasks])
+    point = np.array([t.dropoff is None for t in tasks])
+    pd = np.array([0.0 if t.dropoff is None else t.direct_time for t in tasks])
+    if getattr(planner, "inner", None) is not None and not point.all():
+        # a congested planner (dispatch.space.congestion): the drive at this hour, not free flow
+        trips = np.flatnonzero(~point)
+        pd[trips] = planner.between([tasks[k].loc for k in trips.tolist()],
+                                         [tasks[k].dropoff for k in trips.tolist()],
+                                         pairwise=True)
+    svc_p = np.where(point, svc, 0.0)
+    svc_d = np.where(point, 0.0, svc)
+    cap = fleet.capacity[slots]
+    planned = fleet.busy_mask[slots]  # (a busy vehicle has stops or is serving)
+    if holders:  # [dispatch] reassign: a holder decides as if its plan were empty
+        planned = planned & ~np.isin(fleet.ids[slots], list(holders))
+    out = np.full(cost.shape, np.inf)
+    empty = np.flatnonzero(~planned)
+    if empty.size:
+        c = cost[empty]
+        arr_p = now + c
+        arr_d = np.maximum(arr_p, ep) + svc_p + pd
+        ok = (arr_p <= lp + 1e-9) & (arr_d <= ld + 1e-9) & (n_req <= cap[empty, None])
+        value = c if objective == PICKUP_TIME else c + svc_p + pd + svc_d
+        out[empty] = np.where(ok, value, np.inf)
+    busy = np.flatnonzero(planned)
+    if not busy.size:
+        return out, {}
+    ready = np.maximum(fleet.free_at[slots[busy]], now)
+    rows, cols = ((ready[:, None] + cost[busy] <= lp + 1e-9)
+                  & (n_req <= cap[busy, None])).nonzero()
+    if not rows.size:
+        return out, {}
+    # the busy vehicles' plans, flat (rows come sorted: np.nonzero is row-major); requests
+    # by column
+    first = np.empty(rows.size, dtype=bool)
+    first[0] = True
+    np.not_equal(rows[1:], rows[:-1], out=first[1:])
+    used = rows[first]
+    row_of = np.cumsum(first) - 1  # each pair's vehicle among ``used``
+    off, s_arr, s_svc, s_latest, s_occ, locs, s_e, load = table.gather(
+        fleet, slots[busy[used]], operator.plan_arrays, now)
+    seen = np.zeros(m, dtype=bool)
+    seen[cols] = True
+    ucols = np.flatnonzero(seen)
+    cmap = np.full(m, -1, np.int64)
+    cmap[ucols] = np.arange(ucols.size)
+    picks = [tasks[c].loc for c in ucols.tolist()]
+    drops = [tasks[c].loc if tasks[c].dropoff is None else tasks[c].dropoff
+             for c in ucols.tolist()]
+    between = planner.between
+    g = off[-1]
+    if g:
+        to_p, from_p = between(locs, picks), between(picks, locs)
+        to_d, from_d = between(locs, drops), between(drops, locs)
+    else:
+        to_p = to_d = np.zeros((0, ucols.size))
+        from_p = from_d = np.zeros((ucols.size, 0))
+    vrow = busy[rows]
+    ins = insertion_costs(
+        row_of, cmap[cols], ready[used], cost[vrow, cols], off, s_arr, s_svc,
+        s_latest, s_occ, load, cap[busy[used]], to_p, from_p, to_d, from_d, pd[ucols],
+        n_req[ucols], lp[ucols], ld[ucols], svc_p[ucols], svc_d[ucols], objective, s_e,
+        ep[ucols])
+    out[vrow, cols] = ins.cost
+    return out, Inserts(ins, vrow, cols, m)
