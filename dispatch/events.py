@@ -47,6 +47,8 @@ shift_start    a vehicle enters the fleet at its depot (its shift starts, or the
                brings it in; :mod:`dispatch.fleet.shifts`)
 shift_end      a vehicle leaves the fleet on reaching its depot (its shift is over, or the
                sizing sent it home)
+break_start    ``[fleet.breaks]``: a vehicle's driver starts a break (agent; where it
+break_end      stands); ``break_end`` when it is over (:mod:`dispatch.plan.breaks`)
 =============  ===========================================================================
 """
 
@@ -61,7 +63,7 @@ KINDS = ("release", "assign", "depart", "move", "pickup", "dropoff", "complete",
          "replan", "expire", "reject", "unreachable", "cancel", "failed", "skipped",
          "breakdown", "repair", "reopen", "reassign", "reposition", "insert",
          "queue", "charge_start", "charge_end", "stranded", "decline", "shift_start",
-         "shift_end")
+         "shift_end", "break_start", "break_end")
 
 
 class Event(NamedTuple):

@@ -73,8 +73,7 @@ class Grid:
 
     def cell_of(self, point) -> Cell:
         """The cell holding a point given in metres."""
-        # type: ignore[return-value]
-        return tuple(int(np.floor(float(p) / self.cell)) for p in point)
+        return tuple(int(np.floor(float(p) / self.cell)) for p in point)  # type: ignore[return-value]
 
     def centre(self, c: Cell) -> tuple[float, float, float]:
         """The centre of a cell, in metres."""

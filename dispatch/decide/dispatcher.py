@@ -384,7 +384,7 @@ class Dispatcher:
                 rows, times = routes[aid]
                 est = route_estimates(task, rows, times, v.load)
             elif at is not None:
-                est = insertion_estimates(task, op.kept(v), v.load, at)
+                est = insertion_estimates(task, v.plan.kept(), v.load, at)
             elif plans:  # a vehicle setting out on the request's stops, by the schedule rule
                 est = self._set_out_estimates(v, task, decided, float(cost[ij]))
             else:

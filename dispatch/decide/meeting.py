@@ -256,7 +256,7 @@ def meeting_costs(walks: Walks, cost: np.ndarray, slots: np.ndarray, agents, tas
     for r in used.tolist():
         v = vehicles[int(slots[r])]
         if planned[r]:
-            times, svcs, latest, occ, where, earliest = operator.plan_arrays(v)
+            times, svcs, latest, occ, where, earliest = v.plan.arrays(now)
             s_arr += times
             s_svc += svcs
             s_latest += latest

@@ -180,7 +180,7 @@ class Problems:
         def tpos():
             return space.positions([t.loc for t in tasks])
 
-        plans = Plans(self.fleet, self.operator, slots) if self.pooled else None
+        plans = Plans(self.fleet, slots, now) if self.pooled else None
         seats = self.fleet.capacity[slots] if self.pooled else None
         ready = np.maximum(self.fleet.free_at[slots], now) if self.pooled else None
         travel = self.planner.between if self.routes else None

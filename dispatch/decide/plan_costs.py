@@ -24,6 +24,7 @@ from dispatch.api.contracts import Planner
 from dispatch.api.problem import StopView
 from dispatch.plan.insertion import Insertion, insertion_costs
 from dispatch.plan.stops import PICKUP_TIME
+from dispatch.plan.vehicle_plan import starts_now
 
 if TYPE_CHECKING:
     from dispatch.plan.operator import Operator
@@ -83,8 +84,8 @@ class Plans(Mapping):
     """:attr:`AllocationProblem.plans`: the stop lists of a decision's agents that have one,
     read from the vehicles when asked (within the decision: nothing moves meanwhile)."""
 
-    def __init__(self, fleet: Fleet, operator: Operator, slots: np.ndarray) -> None:
-        self._fleet, self._slots, self._operator = fleet, slots, operator
+    def __init__(self, fleet: Fleet, slots: np.ndarray, now: float) -> None:
+        self._fleet, self._slots, self._now = fleet, slots, now
         self._by_id: dict | None = None  # agent id -> vehicle, of those with stops (on use)
         self._cache: dict[int, tuple] = {}
 
@@ -93,18 +94,18 @@ class Plans(Mapping):
         if self._by_id is None:
             vs = self._fleet.vehicles
             self._by_id = {v.id: v for v in (vs[k] for k in self._slots.tolist())
-                           if self._operator.kept(v)}
+                           if v.plan.kept()}
         return self._by_id
 
     def __getitem__(self, agent_id: int) -> tuple[StopView, ...]:
         got = self._cache.get(agent_id)
         if got is None:
             v = self._ids[agent_id]
-            times = self._operator.plan_arrays(v)[0]
+            times = v.plan.arrays(self._now)[0]
             got = self._cache[agent_id] = tuple(
                 StopView(s.kind, -1 if s.task is None else s.task.id, s.loc, s.passengers,
                          s.latest, s.occupancy, t, s.earliest)
-                for s, t in zip(v.stops, times))
+                for s, t in zip(v.plan, times))
         return got
 
     def __iter__(self):
@@ -116,19 +117,19 @@ class Plans(Mapping):
 
 class PlanTable:
     """The fleet's plans as the compiled insertion reads them: for each vehicle (by fleet
-    position) a row of each field of :meth:`dispatch.plan.operator.Operator.plan_arrays` (planned
+    position) a row of each field of :meth:`dispatch.plan.vehicle_plan.Plan.arrays` (planned
     arrival, service, latest, occupancy, earliest; the locations as node ids where every stop
     lies on a node, else kept as the lists), so that a decision gathers the plans of its busy
     vehicles with a few numpy operations (:meth:`gather`) instead of concatenating lists
     vehicle by vehicle.
 
     A row is written when the vehicle's plan arrays are not the ones it was written from
-    (``plan_arrays`` answers the same tuple until the plan, the drive along it or, for a
+    (``Plan.arrays`` answers the same tuple until the plan, the drive along it or, for a
     standing vehicle, the clock changes): a decision rewrites the few plans that changed
     since the last one. The values are those lists' (the same doubles, in the same order)."""
 
     def __init__(self, n: int, width: int = 8) -> None:
-        self._src: list = [None] * n  # the plan_arrays tuple each row was written from
+        self._src: list = [None] * n  # the Plan.arrays tuple each row was written from
         #: the vehicle's ``plan_version`` when its row was last checked (-1: never)
         self._checked = np.full(n, -1, dtype=np.int64)
         self.length = np.zeros(n, dtype=np.int64)
@@ -166,26 +167,26 @@ class PlanTable:
         self.length[k] = n
         self._src[k] = arrays
 
-    def gather(self, fleet: Fleet, slots: np.ndarray, plan_of, now: float):
+    def gather(self, fleet: Fleet, slots: np.ndarray, now: float):
         """``(off, arrival, service, latest, occupancy, locations, earliest, load)`` of the
-        vehicles at fleet positions ``slots`` (``plan_of``: ``Operator.plan_arrays``), flat as
+        vehicles at fleet positions ``slots`` (each vehicle's ``plan.arrays(now)``), flat as
         :func:`dispatch.plan.insertion.insertion_costs` takes them: vehicle ``i``'s stops are
         ``off[i]:off[i + 1]``; the locations an int64 array of nodes where every stop is on a
         node, else a list; ``load`` on board now, per vehicle.
 
-        ``plan_of`` is asked only for the vehicles whose plan arrays may differ from their
-        row's: a ``plan_version`` since the row was checked, or standing (no stop headed for,
-        no service running: its plan's times start at ``now``), as ``plan_of``'s own cache
-        key says; the others' rows are read as they are."""
+        A vehicle's plan is asked only where its arrays may differ from its row's: a
+        ``plan_version`` since the row was checked, or its times starting at ``now``
+        (:func:`dispatch.plan.vehicle_plan.starts_now`, the rule the plan's own cache is keyed
+        by); the others' rows are read as they are."""
         src, write, checked = self._src, self._write, self._checked
         idx = np.asarray(slots, dtype=np.int64)
         version = fleet.plan_version.take(idx)
         ask = (checked.take(idx) != version) \
-            | (fleet.heading_none.take(idx) & (fleet.free_at.take(idx) <= now))
+            | starts_now(fleet.heading_none.take(idx), fleet.free_at.take(idx), now)
         if ask.any():
             vehicles = fleet.vehicles
             for k in idx[ask].tolist():
-                got = plan_of(vehicles[k])
+                got = vehicles[k].plan.arrays(now)
                 if got is not src[k]:
                     write(k, got)
             checked[idx[ask]] = version[ask]
@@ -258,7 +259,7 @@ def insertion_costs_of(cost: np.ndarray, slots: np.ndarray, tasks: list, now: fl
     used = rows[first]
     row_of = np.cumsum(first) - 1  # each pair's vehicle among ``used``
     off, s_arr, s_svc, s_latest, s_occ, locs, s_e, load = table.gather(
-        fleet, slots[busy[used]], operator.plan_arrays, now)
+        fleet, slots[busy[used]], now)
     seen = np.zeros(m, dtype=bool)
     seen[cols] = True
     ucols = np.flatnonzero(seen)

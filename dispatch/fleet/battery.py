@@ -116,7 +116,7 @@ class Energy:
         """``cost`` with ``inf`` where vehicle ``slots[i]`` would end below the reserve after
         the plan and request ``j`` (``drive``: seconds from each vehicle to each pickup)."""
         vs = self.fleet.vehicles
-        plan_s = np.array([sum(s.leg for s in vs[k].stops) for k in slots.tolist()]) \
+        plan_s = np.array([sum(s.leg for s in vs[k].plan) for k in slots.tolist()]) \
             if slots.size else np.zeros(0)
         direct = np.array([0.0 if t.dropoff is None or t.direct_time != t.direct_time
                            else t.direct_time for t in tasks])

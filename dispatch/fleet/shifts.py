@@ -285,7 +285,7 @@ class Shifts:
                 n_stops = np.zeros(len(slots), np.int64)
                 for r in np.unique(rows).tolist():
                     v = vs[int(slots[r])]
-                    times, svcs, _, _, _, earliest = self.operator.plan_arrays(v)
+                    times, svcs, _, _, _, earliest = v.plan.arrays(now)
                     n_stops[r] = len(times)
                     last[r] = leave(times[-1], earliest[-1], svcs[-1]) if times else \
                         max(v.free_at, now)
@@ -337,7 +337,7 @@ class Shifts:
     def _free(self, v: Vehicle) -> bool:
         """``v`` has nothing left to do (its plan empty, or a repositioning move)."""
         return not v.failed and v.serving is None and (
-            not v.stops or (len(v.stops) == 1 and v.stops[0].kind is REPOSITION))
+            not v.plan or (len(v.plan) == 1 and v.plan[0].kind is REPOSITION))
 
     def _idle(self, ev) -> None:
         """Bus subscriber: a vehicle whose shift is over (or that the sizing sends home) and
@@ -347,9 +347,9 @@ class Shifts:
         if not d.on:
             return
         if d.home:
-            if not v.stops and v.loc == d.depot:
+            if not v.plan and v.loc == d.depot:
                 self._leave(v)
-            elif self._free(v) and not v.stops:  # (repaired on its way home: drive on)
+            elif self._free(v) and not v.plan:  # (repaired on its way home: drive on)
                 self.operator.to_depot(v, d.depot)
         elif d.ended and self._free(v):
             self._go_home(v)
@@ -359,7 +359,7 @@ class Shifts:
         d.home = True
         self.until[v._slot] = -math.inf
         v.off_duty = True
-        if v.loc == d.depot and v.leg is None and not v.stops:
+        if v.loc == d.depot and v.leg is None and not v.plan:
             self.fleet.refresh(v)
             self._leave(v)
             return

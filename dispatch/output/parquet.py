@@ -153,6 +153,9 @@ SCHEMAS: dict[str, pa.Schema] = {
         # shifts (dispatch.fleet.shifts): its shift (0, inf: none), its on-duty hours, and how late
         # it reached its depot after its shift's end and grace (0: in time)
         ("shift_start", _F), ("shift_end", _F), ("vehicle_hours", _F), ("overrun_seconds", _F),
+        # [fleet.breaks] (0 without): seconds its driver spent on breaks
+        # (dispatch.plan.breaks)
+        ("break_seconds", _F),
     ]),
     # [fleet.energy]: every vehicle's state of charge (0-1) every [fleet.energy] sample
     # seconds from 0 (no rows without energy)

@@ -97,7 +97,7 @@ VEHICLE_COLUMNS = (
     "occupied_distance", "busy_seconds", "tasks_completed", "waits", "replans", "wait_seconds",
     "failures", "down_seconds", "capacity", "passenger_distance", "kwh_drawn", "kwh_charged",
     "charge_seconds", "queue_seconds", "soc_min", "soc_end", "shift_start", "shift_end",
-    "vehicle_hours", "overrun_seconds")
+    "vehicle_hours", "overrun_seconds", "break_seconds")
 
 
 def vehicle_row(v, p, down: float, c, b,
@@ -114,7 +114,7 @@ def vehicle_row(v, p, down: float, c, b,
     return (v.id, v.kind, v.speed, p[0], p[1], p[2], v.distance, v.empty_distance,
             v.occupied_distance, v.busy_seconds, v.completed, c["waits"], c["replans"],
             c["wait_seconds"], v.failures, down, v.capacity, v.passenger_distance, *energy,
-            *duty)
+            *duty, v.break_seconds)
 
 
 class TaskWriter:

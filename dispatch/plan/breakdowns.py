@@ -46,8 +46,8 @@ class Breakdowns:
         if v.busy:
             v.busy_seconds += env.now - v.busy_since
         v.failed, v.failures, v.down_since = True, v.failures + 1, env.now
-        v.stops, v.load, v.serving, v.heading = [], 0, None, None
-        self.changed(v)
+        v.load, v.serving, v.heading = 0, None, None
+        v.plan.clear()
         self.fleet.refresh(v)
         self.bus.emit(env.now, "breakdown", v.id, tasks[0].id if tasks else -1, v.loc)
         for task in tasks:
@@ -78,7 +78,7 @@ class Breakdowns:
         ``reassign`` event names both. It stays busy: the caller hands it its new task or
         :meth:`stand_idle`. Returns the task given up."""
         env = self.env
-        task = v.stops[0].task if v.stops else None
+        task = v.plan[0].task if v.plan else None
         assert task is not None and task.state is TaskState.ASSIGNED
         proc = v.proc
         if proc is not None and proc.is_alive and proc is not env.active_process \
@@ -89,8 +89,8 @@ class Breakdowns:
             stop_leg(v, env.now)
         v.busy_seconds += env.now - v.busy_since
         v.busy_since = env.now
-        v.stops, v.heading = [], None
-        self.changed(v)
+        v.heading = None
+        v.plan.clear()
         self.bus.emit(env.now, "reassign", v.id, task.id, v.loc)
         self.book.unassign(task)
         return task

@@ -10,11 +10,15 @@ execution at its construction, from itself.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
-from dispatch.plan.stops import PICKUP, occupancies
+from dispatch.plan.stops import PICKUP
 from dispatch.plan.tasks import Task
+from dispatch.plan.vehicle_plan import request_stops
 from dispatch.plan.vehicles import Vehicle
+
+if TYPE_CHECKING:
+    from dispatch.plan.insertion import Insertion
 
 
 class Execution(Protocol):
@@ -22,9 +26,10 @@ class Execution(Protocol):
     its construction from the operator): :class:`PlanExecution` (the operator's plan process)
     or :class:`dispatch.plan.reservations.TimedExecution` (timed routes on reservations)."""
 
-    def set_out(self, v: Vehicle, task: Task, cost: float, at: tuple | None) -> None:
+    def set_out(self, v: Vehicle, task: Task, cost: float, at: Insertion | None) -> None:
         """``v``, with an empty plan, is given ``task`` at ``cost`` (``at``: the decision's
-        planned times, see :meth:`dispatch.plan.operator.Operator.assign`) and sets out now."""
+        insertion, with its planned times, see :meth:`dispatch.plan.operator.Operator.assign`)
+        and sets out now."""
 
     def halt(self, v: Vehicle, again: Callable[[], Any]) -> list[Task] | None:
         """``v`` breaks down now: stop what drives it and return the tasks of its plan; or
@@ -49,28 +54,27 @@ class Execution(Protocol):
 class PlanExecution:
     """The operator's own execution (every run without reservations): a vehicle that sets out
     gets its task's stops as its plan and one process drives them
-    (:meth:`dispatch.plan.operator.Operator._run`); a
-    breakdown interrupts that process at once."""
+    (:meth:`dispatch.plan.operator.Operator.drive`); a breakdown interrupts that process at
+    once."""
 
     def __init__(self, op) -> None:
         self.op = op  # the operator (which imports this module)
 
-    def set_out(self, v: Vehicle, task: Task, cost: float, at: tuple | None) -> None:
-        op = self.op
-        new = op._stops(task)
-        path = op.driver.plan(v, new[0].loc, op.env.now)
+    def set_out(self, v: Vehicle, task: Task, cost: float, at: Insertion | None) -> None:
+        op, now = self.op, self.op.env.now
+        new = request_stops(task, op.service_time)
+        path = op.driver.plan(v, new[0].loc, now)
         op.book.assign(task, v.id, cost)
+        times = None
         if at is not None:  # the planned times of the decision
-            op._set_legs(v, new, [at[2], at[3]][:len(new)])
+            times = [at.pickup_at, at.dropoff_at][:len(new)]
         else:  # (legs only matter to later insertions: pooled runs always pass ``at``)
             new[0].leg = op.driver.leg_seconds(path)
             if len(new) > 1:
                 new[1].leg = task.direct_time
-        v.stops = new
-        occupancies(v.load, v.stops)
-        op.changed(v)
+        v.plan.replace(new, times, now)
         op.fleet.refresh(v)
-        v.proc = op.env.process(op._run(v, path, new[0]))
+        v.proc = op.env.process(op.drive(v, path, new[0]))
 
     def halt(self, v: Vehicle, again: Callable[[], Any]) -> list[Task]:
         tasks = v.tasks()
@@ -84,7 +88,7 @@ class PlanExecution:
         return False
 
     def holds(self, v: Vehicle) -> Task | None:
-        s = v.stops[0] if v.stops else None
+        s = v.plan[0] if v.plan else None
         return s.task if s is not None and s.kind is PICKUP else None
 
     def repaired(self, v: Vehicle) -> None:

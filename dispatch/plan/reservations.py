@@ -71,7 +71,7 @@ import simpy
 from dispatch.api.motion import EPS, step_box, step_is_legal, step_length, step_seconds
 from dispatch.api.problem import AgentView
 from dispatch.locations import Cell
-from dispatch.plan.tasks import COMPLETED as _COMPLETED
+from dispatch.plan.vehicle_plan import request_stops
 
 if TYPE_CHECKING:
     from dispatch.api.contracts import Planner
@@ -461,12 +461,13 @@ class Traffic:
 
 class DriveContext:
     """What the timed drives need of the run (the operator's): the task book, the fleet's
-    index, the service time, the dispatcher's wake-up and a breakdown to finish later."""
+    index, the service time, the dispatcher's wake-up, a breakdown to finish later and the
+    vehicle's return to idle (:meth:`dispatch.plan.operator.Operator.go_idle`)."""
 
     def __init__(self, book, fleet, service_time: float, notify: Callable[[], None],
-                 breakdown: Callable[..., bool]) -> None:
+                 breakdown: Callable[..., bool], go_idle: Callable[..., None]) -> None:
         self.book, self.fleet, self.service_time = book, fleet, service_time
-        self.notify, self.breakdown = notify, breakdown
+        self.notify, self.breakdown, self.go_idle = notify, breakdown, go_idle
 
 
 def _start(traffic: Traffic, ctx: DriveContext) -> None:
@@ -495,14 +496,10 @@ def _finish(traffic: Traffic, ctx: DriveContext, t: TimedVehicle):
     env, v, task = traffic.env, t.vehicle, t.task
     if ctx.service_time > 0:
         yield env.timeout(ctx.service_time)
-    v.busy_seconds += env.now - v.busy_since
     t.task = None
     v.completed += 1
-    v.stops = []
-    ctx.fleet.refresh(v)
-    ctx.book.close(task, _COMPLETED)
-    traffic.emit(env.now, "idle", v.id, -1, v.loc)
-    ctx.notify()
+    v.plan.clear()
+    ctx.go_idle(v, task)
 
 
 def _drive(traffic: Traffic, ctx: DriveContext, t: TimedVehicle):
@@ -570,7 +567,8 @@ class TimedExecution:
 
     def __init__(self, traffic: Traffic, op) -> None:
         self.traffic, self.op = traffic, op
-        self.context = DriveContext(op.book, op.fleet, op.service_time, op.notify, op.breakdown)
+        self.context = DriveContext(op.book, op.fleet, op.service_time, op.notify, op.breakdown,
+                                    op.go_idle)
         _start(traffic, self.context)
 
     @property
@@ -582,8 +580,7 @@ class TimedExecution:
         its priority."""
         op = self.op
         op.book.assign(task, v.id, cost)
-        v.stops = op._stops(task)
-        op.changed(v)
+        v.plan.replace(request_stops(task, op.service_time), None, self.env.now)
         op.fleet.refresh(v)
         t = self.traffic.of(v)
         t.task, v.busy_since = task, self.env.now

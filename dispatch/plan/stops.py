@@ -3,11 +3,13 @@
 A :class:`Stop` is one thing a vehicle will do at one place, of a declared kind: pick a
 request's passengers up (:data:`PICKUP`; a point task of the voxel world is a pickup that
 completes the task), drop them off (:data:`DROPOFF`), charge (:data:`CHARGE`), reposition
-(:data:`REPOSITION`), wait or park (:data:`WAIT`), return to a depot (:data:`DEPOT`). A stop
-serving no request has ``task=None``. A vehicle owns an ordered list of them
-(:attr:`dispatch.plan.vehicles.Vehicle.stops`); its SimPy process drives the list stop by stop
-(:class:`dispatch.plan.operator.Operator`), a decision inserts stops (:func:`insert`), a breakdown
-or a re-assignment removes them.
+(:data:`REPOSITION`), return to a depot (:data:`DEPOT`), take a driver's break
+(:data:`dispatch.plan.breaks.BREAK`). A stop serving no request has ``task=None``. Each kind
+is one declaration and one handler (a :class:`StopKind`), found in the table of
+:mod:`dispatch.plan.kinds`. A vehicle owns an ordered list of stops, its plan
+(:class:`dispatch.plan.vehicle_plan.Plan`); its SimPy process drives the plan stop by stop
+(:class:`dispatch.plan.operator.Operator`), a decision inserts stops (:func:`insert`), a
+breakdown or a re-assignment removes them.
 
 **The schedule rule** (the only one: the compiled insertion, ``rtv``'s orders, the answer
 checks, :meth:`dispatch.plan.operator.Operator.route_times` and the test references all use
@@ -35,12 +37,11 @@ if TYPE_CHECKING:
     from dispatch.plan.tasks import Task
 
 #: stop kinds (the values may be written to Parquet): a charging visit (no request;
-#: :mod:`dispatch.fleet.chargers`) and a repositioning move (no request;
-#: :mod:`dispatch.api.repositioner`)
-#: are driven by the operator like any stop
-PICKUP, DROPOFF, CHARGE, REPOSITION, WAIT, DEPOT = (
-    "pickup", "dropoff", "charge", "reposition", "wait", "depot")
-KINDS = (PICKUP, DROPOFF, CHARGE, REPOSITION, WAIT, DEPOT)
+#: :mod:`dispatch.fleet.chargers`), a repositioning move (no request;
+#: :mod:`dispatch.fleet.repositioning`) and a return to the depot (:mod:`dispatch.fleet.shifts`)
+#: are driven by the operator like any stop; their handlers: :mod:`dispatch.plan.kinds`
+PICKUP, DROPOFF, CHARGE, REPOSITION, DEPOT = ("pickup", "dropoff", "charge", "reposition",
+                                              "depot")
 #: ``objective`` codes of :func:`dispatch.plan.insertion.insertion_costs`
 PICKUP_TIME, ADDED_TIME = 0, 1
 OBJECTIVES = {"pickup_time": PICKUP_TIME, "added_time": ADDED_TIME}
@@ -52,8 +53,8 @@ TOL = 1e-9
 class Stop:
     """One stop of a vehicle's plan.
 
-    ``kind`` one of :data:`KINDS`; ``task`` the request it serves (None: none, e.g. a charger
-    visit). ``passengers`` is what the stop changes on board (+n at a pickup, -n at a
+    ``kind`` a kind of :data:`dispatch.plan.kinds.TABLE`; ``task`` the request it serves
+    (None: none, e.g. a charger visit). ``passengers`` is what the stop changes on board (+n at a pickup, -n at a
     drop-off, 0 otherwise); ``occupancy`` what is on board after it. ``latest`` is the time
     window's end (``inf``: none), ``earliest`` its start (service starts no sooner: the
     vehicle waits; ``-inf``: none, as for a request's stops, open since its release).
@@ -75,6 +76,9 @@ class Stop:
     #: a charge stop's visit (:class:`dispatch.fleet.chargers.Visit`: the station, the target, what
     #: the vehicle does there); None for every other stop
     visit: Any = None
+    #: the stop holds every seat (a driver's break): its ``occupancy`` is the vehicle's
+    #: capacity, so no insertion carries a rider across it (:func:`occupancies`)
+    holds_seats: bool = False
 
 
 class PlannedStop(NamedTuple):
@@ -153,11 +157,12 @@ def schedule(first: float, stops: list[Stop]) -> list[float]:
     return out
 
 
-def occupancies(load: int, stops: list[Stop]) -> None:
-    """Set each stop's ``occupancy`` from ``load`` on board before the first."""
+def occupancies(load: int, stops: list[Stop], cap: int) -> None:
+    """Set each stop's ``occupancy`` from ``load`` on board before the first; a stop that
+    holds the seats (all ``cap`` of them) counts as full."""
     for s in stops:
         load += s.passengers
-        s.occupancy = load
+        s.occupancy = cap if s.holds_seats else load
 
 
 # ----------------------------------------------------------------------------- plan changes
@@ -187,3 +192,41 @@ def pushed(times: list[float], stops: list[Stop], i: int, j: int, shift1: float,
         out.append(t + push)
         push = later(push, t, s.earliest)
     return out
+
+
+# ----------------------------------------------------------------------------- stop kinds
+class StopKind:
+    """How the operator drives one kind of stop: its declaration (what the stop means for the
+    vehicle's state) and its handler (what happens on arrival). One instance per kind, in the
+    table of :mod:`dispatch.plan.kinds`; a subclass that names no kind or handles no arrival
+    is refused when it is defined."""
+
+    #: the kind's name (:attr:`Stop.kind`)
+    name: str = ""
+    #: a vehicle whose plan holds it (and no request) is idle: a decision may give it a
+    #: request (a repositioning move, the way home); else neither idle nor busy (a charging
+    #: visit, a break)
+    idle: bool = True
+    #: a decision keeps it in the plan; False: giving the vehicle a request cuts it (a move)
+    kept: bool = True
+    #: the drive to it checks the battery (a repositioning move drives on at 0 kWh, as it
+    #: always has: checking it strands such vehicles)
+    checks_battery: bool = True
+
+    def __init_subclass__(cls, **kw) -> None:
+        super().__init_subclass__(**kw)
+        if not cls.name or cls.arrive is StopKind.arrive:
+            raise TypeError(f"stop kind {cls.__name__} must set name and define arrive()")
+
+    def there(self, v, stop: Stop, now: float) -> bool:
+        """The vehicle needs no drive to ``stop`` (it stands there already)."""
+        return False
+
+    def arrive(self, op, v, stop: Stop):
+        """Generator run by the operator's process on arrival at ``stop`` (the first of
+        ``v``'s plan): make the stop and take it off the plan. Returns True to drive on to
+        the next stop, False when the process ends (the vehicle idle, or interrupted)."""
+        raise NotImplementedError
+
+    def dropped(self, op, v, stop: Stop) -> None:
+        """The drive to ``stop`` ended without reaching it (a breakdown, an empty battery)."""

@@ -1,8 +1,9 @@
 """Vehicles and the fleet: what a vehicle is and has (its plan, its position, its counters),
 and the fleet's arrays a decision reads instead of looping over the vehicles.
 
-A vehicle's plan is data: its stop list (:mod:`dispatch.plan.stops`), which it owns; the operator
-(:class:`dispatch.plan.operator.Operator`) inserts a decision's stops into it and drives it. What a
+A vehicle owns its plan (:class:`dispatch.plan.vehicle_plan.Plan`: its stops, their times, the
+arrays a decision reads); the operator (:class:`dispatch.plan.operator.Operator`) drives it and
+a decision inserts into it. What a
 vehicle drove, and with how many on board, is counted in one place (:meth:`Vehicle.drove`).
 On roads a vehicle part-way through a leg is interpolated from its route when someone asks
 (:meth:`Vehicle.location`); :func:`stop_leg` stops it there.
@@ -20,8 +21,9 @@ from dispatch.api.problem import AgentView, AgentViews
 from dispatch.api.space import Space
 from dispatch.locations import Location
 from dispatch.plan.en_route import LegTable
-from dispatch.plan.stops import CHARGE
+from dispatch.plan.kinds import TABLE as KINDS
 from dispatch.plan.tasks import Task
+from dispatch.plan.vehicle_plan import Plan
 
 if TYPE_CHECKING:
     from dispatch.api.legs import Leg
@@ -40,20 +42,19 @@ class Vehicle:
     busy: bool = False
     #: seats (``[fleet] capacity``); a request of more passengers than this never rides in it
     capacity: int = 1
-    #: the plan: stops still to make, in order (see :mod:`dispatch.plan.stops`); the vehicle's
-    #: process drives it, decisions insert into it, breakdowns and re-assignments remove from it
-    stops: list = field(default_factory=list, repr=False)
+    #: the plan: stops still to make, in order (:class:`dispatch.plan.vehicle_plan.Plan`); the
+    #: operator drives it, decisions insert into it, breakdowns and re-assignments empty it
+    plan: Plan = field(init=False, repr=False)
     distance: float = 0.0  # metres travelled
     empty_distance: float = 0.0  # ... without a passenger (to pickups, repositioning)
     occupied_distance: float = 0.0  # ... with one or more on board
     passenger_distance: float = 0.0  # passenger-metres: metres times passengers on board
-    #: in service at a stop until then (the stop's task completes at that time)
-    free_at: float = -math.inf
-    serving: Task | None = field(default=None, repr=False)  # ... that task
-    plan_cache: Any = field(default=None, repr=False)  # (key, arrays) of Operator.plan_arrays
+    serving: Task | None = field(default=None, repr=False)  # in service for that task
     busy_seconds: float = 0.0
     busy_since: float = 0.0
     completed: int = 0
+    #: seconds its driver spent on breaks (``[fleet.breaks]``, :mod:`dispatch.plan.breaks`)
+    break_seconds: float = 0.0
     # ---- roads: when the leg being driven (:attr:`leg`) started
     leg_start: float = 0.0
     # ---- faults (see dispatch.fleet.faults)
@@ -81,9 +82,12 @@ class Vehicle:
     _load: int = field(default=0, init=False, repr=False)
     _heading: Any = field(default=None, init=False, repr=False)
     _plan_version: int = field(default=0, init=False, repr=False)
+    _free_at: float = field(default=-math.inf, init=False, repr=False)
+    _room: bool = field(default=True, init=False, repr=False)
 
     def __post_init__(self) -> None:
         self._loc = self.start
+        self.plan = Plan(self)
 
     @property
     def loc(self) -> Location:
@@ -146,6 +150,28 @@ class Vehicle:
             self._fleet.plan_version[self._slot] = value
 
     @property
+    def free_at(self) -> float:
+        """In service at a stop until then (the stop's task completes at that time)."""
+        return self._free_at
+
+    @free_at.setter
+    def free_at(self, value: float) -> None:
+        self._free_at = value
+        if self._fleet is not None:
+            self._fleet.free_at[self._slot] = value
+
+    @property
+    def room(self) -> bool:
+        """A seat is free somewhere in its plan (set by :meth:`Plan.changed`)."""
+        return self._room
+
+    @room.setter
+    def room(self, value: bool) -> None:
+        self._room = value
+        if self._fleet is not None:
+            self._fleet.room[self._slot] = value
+
+    @property
     def cell(self):
         """The voxel name of :attr:`loc`."""
         return self.loc
@@ -173,9 +199,9 @@ class Vehicle:
     def tasks(self) -> list[Task]:
         """The tasks of its plan (the one in service first), each once, in plan order."""
         out = [] if self.serving is None else [self.serving]
-        for s in self.stops:
-            if s.task is not None and s.task not in out:
-                out.append(s.task)
+        for task in self.plan.tasks():
+            if task not in out:
+                out.append(task)
         return out
 
     def location(self, now: float) -> Location:
@@ -188,12 +214,10 @@ class Vehicle:
         """What a decision at ``now`` sees of it (kept while it stands still: a fleet of idle
         vehicles is viewed at every decision)."""
         if self.leg is not None and now is not None:
-            # type: ignore[arg-type]
-            return AgentView(self.id, self.kind, self.location(now), self.speed)
+            return AgentView(self.id, self.kind, self.location(now), self.speed)  # type: ignore[arg-type]
         v = self._view
         if v is None or v.loc is not self.loc:
-            # type: ignore[arg-type]
-            v = self._view = AgentView(self.id, self.kind, self.loc, self.speed)
+            v = self._view = AgentView(self.id, self.kind, self.loc, self.speed)  # type: ignore[arg-type]
         return v
 
 
@@ -218,7 +242,7 @@ class Fleet:
         self._ids_are_slots = bool((self.ids == np.arange(n)).all())
         self.idle_mask = np.ones(n, dtype=bool)
         self.busy_mask = np.zeros(n, dtype=bool)
-        #: a free seat somewhere in its plan (kept by Operator.changed)
+        #: a free seat somewhere in its plan (kept by Plan.changed)
         self.room = np.ones(n, dtype=bool)
         #: seats; the end of the service it is in (-inf: none), as the vehicles have them
         self.capacity = np.fromiter((v.capacity for v in self.vehicles), np.int64, n)
@@ -309,11 +333,11 @@ class Fleet:
         if not v.failed and not v.off_duty:
             busy = v.serving is not None
             idle = not busy
-            for s in v.stops:  # (a loop, not any(): it runs at every assignment and idle)
+            for s in v.plan:  # (a loop, not any(): it runs at every assignment and idle)
                 if s.task is not None:
                     busy, idle = True, False
                     break
-                if s.kind is CHARGE:
+                if not KINDS[s.kind].idle:  # a charging visit, a break
                     idle = False
         v.busy = busy
         self.idle_mask[v._slot] = idle

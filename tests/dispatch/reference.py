@@ -5,7 +5,8 @@ stop order by the schedule rule, in its own words.
 The schedule rule: arrival at a stop = departure from the stop before + the drive; service
 starts when the vehicle is there and the stop is open (its earliest time); departure = start
 + the stop's service. Feasible: every occupancy within the capacity and every arrival within
-its latest time (+1e-9 s).
+its latest time (+1e-9 s). A stop that holds the seats (a driver's break) is made with no one on
+board, and the seats stay held until the next stop is reached: no pickup right after it.
 """
 
 from __future__ import annotations
@@ -16,16 +17,22 @@ PICKUP_TIME = 0  # (dispatch.plan.stops' objective codes)
 
 
 def simulate(ready: float, first_tt, tt, plan, load: int, cap: int):
-    """``plan``: ``(loc, passengers, latest, service, earliest)`` rows driven in order from
-    where the vehicle stands (it can leave at ``ready``; ``first_tt(loc)`` seconds to the
-    first stop, ``tt(a, b)`` between stops). Returns ``(arrivals, departure from the last)``
-    or None where a stop breaks a limit."""
-    t, occ, prev, arrivals = ready, load, None, []
-    for loc, pax, latest, svc, earliest in plan:
+    """``plan``: ``(loc, passengers, latest, service, earliest[, holds])`` rows driven in
+    order from where the vehicle stands (it can leave at ``ready``; ``first_tt(loc)`` seconds
+    to the first stop, ``tt(a, b)`` between stops); ``holds``: the stop holds the seats (a
+    break). Returns ``(arrivals, departure from the last)`` or None where a stop breaks a
+    limit."""
+    t, occ, prev, arrivals, held = ready, load, None, [], False
+    for loc, pax, latest, svc, earliest, *holds in plan:
         t += first_tt(loc) if prev is None else tt(prev, loc)
+        if held and pax > 0:
+            return None  # the seats are held until this stop is reached
         occ += pax
         if occ > cap or t > latest + 1e-9:
             return None
+        held = bool(holds and holds[0])
+        if held and occ > 0:
+            return None  # no one on board at a break
         arrivals.append(t)
         t = max(t, earliest) + svc
         prev = loc
@@ -43,7 +50,7 @@ def brute_force_insertion(ready: float, first_tt, stops: list[tuple], load: int,
     inf)``."""
     p, d, n, lp, ld, svc_p, svc_d, *rest = request
     ep = rest[0] if rest else -math.inf
-    stops = [s if len(s) == 5 else (*s, -math.inf) for s in stops]
+    stops = [s if len(s) >= 5 else (*s, -math.inf) for s in stops]
     base = simulate(ready, first_tt, tt, stops, load, cap)
     end_old = ready if not stops else base[1] if base else math.nan
     best = (math.inf, -1, -1, math.inf)

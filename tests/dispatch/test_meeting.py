@@ -83,7 +83,7 @@ def _brute(walks, cost, slots, agents, tasks, now, holders, fleet, operator, pla
         ready = max(float(fleet.free_at[k]), now) if planned else now
         stops, load, legs = [], 0, {}
         if planned:
-            times, svcs, latest, occ, where, earliest = operator.plan_arrays(v)
+            times, svcs, latest, occ, where, earliest = v.plan.arrays(now)
             load = before = v.load
             for g, (x, s, lt, o, e) in enumerate(zip(where, svcs, latest, occ, earliest)):
                 stops.append(((g, int(x)), o - before, lt, s, e))

@@ -91,7 +91,7 @@ def test_charge_reposition_cut_strand_and_tow_by_one_operator(tmp_path):
     # one operator: every stop's events come from its processes (its repair is its
     # Breakdowns base's), no charging or repositioning process of their own
     owners = {q for k, q in by if k in DRIVEN}
-    assert owners <= {"Operator._run", "Breakdowns._repair"}, owners
+    assert owners <= {"Operator.drive", "Breakdowns._repair"}, owners
     assert all(q.startswith(("Operator.", "Breakdowns.")) for k, q in by if k == "idle")
 
     # occupancy never above the capacity (a breakdown empties the vehicle)

@@ -1,6 +1,6 @@
 """The fleet's plan and leg tables, read at a decision without a Python step per vehicle, hold
 what the vehicles themselves say at that moment: every row a decision reads equals the
-vehicle's own plan arrays (:meth:`dispatch.plan.operator.Operator.plan_arrays`) and load, and every
+vehicle's own plan arrays (:meth:`dispatch.plan.vehicle_plan.Plan.arrays`) and load, and every
 driving vehicle's place equals its leg's :meth:`dispatch.api.legs.Leg.next_at`. Checked at every
 decision of pooled runs with service times, breakdowns (riders transferred) and re-routes."""
 
@@ -41,12 +41,12 @@ def test_the_tables_a_decision_reads_are_the_vehicles_own(tmp_path, monkeypatch,
     checked = {"plans": 0, "legs": 0}
     gather, where = PlanTable.gather, LegTable.where
 
-    def checked_gather(self, fleet, slots, plan_of, now):
-        out = gather(self, fleet, slots, plan_of, now)
+    def checked_gather(self, fleet, slots, now):
+        out = gather(self, fleet, slots, now)
         off, arr, svc, lat, occ, locs, ear, load = out
         for i, k in enumerate(np.asarray(slots).tolist()):
             v = fleet.vehicles[k]
-            times, svcs, latest, occs, where_, earliest = plan_of(v)  # asked afresh
+            times, svcs, latest, occs, where_, earliest = v.plan.arrays(now)  # asked afresh
             a, b = off[i], off[i + 1]
             assert arr[a:b].tolist() == times and svc[a:b].tolist() == svcs
             assert lat[a:b].tolist() == latest and occ[a:b].tolist() == occs

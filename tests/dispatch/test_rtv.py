@@ -452,7 +452,7 @@ def test_invariants_on_random_pooled_runs_with_rtv_reorder(tmp_path, monkeypatch
 
     def spy(self, v, rows, times, tasks, costs):  # what the kernel is handed to drive
         nonlocal swapped, moved
-        old = [(s.kind, s.task.id) for s in v.stops]
+        old = [(s.kind, s.task.id) for s in v.plan]
         mine = [(r[0], r[1]) for r in rows if (r[0], r[1]) in old]
         if mine != old:
             swapped += 1

@@ -1,7 +1,8 @@
 """The one schedule rule (dispatch.plan.stops) against an independent brute force
 (tests/dispatch/reference.py) over every order of small plans holding every stop kind: pickups
-and drop-offs among charge, reposition, wait and depot stops, with earliest and latest times,
-capacities and service times (random small instances, seeded).
+and drop-offs among charge, reposition, depot and break stops, with earliest and latest times,
+capacities and service times (random small instances, seeded). A break (dispatch.plan.breaks)
+opens when it is due, lasts its service and holds the seats: no rider on board across it.
 
 Held to the reference: the rule over a stop sequence (``timetable``, in Python and compiled,
 and ``schedule`` over Stop objects), the compiled insertion (its slack path and its
@@ -19,11 +20,12 @@ import pytest
 
 from dispatch.plan import stops as S
 from dispatch.plan._kernel import timetable as compiled_timetable
+from dispatch.plan.breaks import BREAK
 from dispatch.plan.insertion import insertion_costs
 from tests.dispatch.reference import brute_force_insertion, simulate
 
 #: every kind a plan may hold, with what a stop of it changes on board
-KINDS = (S.PICKUP, S.DROPOFF, S.CHARGE, S.REPOSITION, S.WAIT, S.DEPOT)
+KINDS = (S.PICKUP, S.DROPOFF, S.CHARGE, S.REPOSITION, BREAK, S.DEPOT)
 
 
 def _metric(rng):
@@ -36,16 +38,18 @@ def _metric(rng):
 
 
 def _stop(rng, kind: str, loc: int, pax: int, ready: float):
-    """A ``(loc, passengers, latest, service, earliest)`` row of ``kind``: a charger visit
-    takes long and may open later (a booked slot), a wait stop holds until its time, a depot
-    closes at some time; requests' stops never wait."""
+    """A ``(loc, passengers, latest, service, earliest, holds)`` row of ``kind``: a charger
+    visit takes long and may open later (a booked slot), a break opens when it is due, lasts
+    its duration and holds the seats, a depot closes at some time; requests' stops never
+    wait."""
     earliest, service, latest = -math.inf, 0.0, math.inf
     if kind == S.CHARGE:
         service = float(rng.uniform(60, 600))
         if rng.random() < 0.5:
             earliest = ready + float(rng.uniform(0, 400))
-    elif kind == S.WAIT:
+    elif kind == BREAK:
         earliest = ready + float(rng.uniform(0, 500))
+        service = float(rng.uniform(60, 900))
     elif kind == S.REPOSITION:
         if rng.random() < 0.3:
             earliest = ready + float(rng.uniform(0, 200))
@@ -56,7 +60,7 @@ def _stop(rng, kind: str, loc: int, pax: int, ready: float):
         service = float(rng.choice([0.0, 15.0]))
     if kind in (S.PICKUP, S.DROPOFF) and rng.random() < 0.6:
         latest = ready + float(rng.uniform(100, 1500))
-    return (loc, pax, latest, service, earliest)
+    return (loc, pax, latest, service, earliest, kind == BREAK)
 
 
 def _sequence(rng, ready: float):
@@ -75,7 +79,7 @@ def _sequence(rng, ready: float):
 def _rule(first, tt, rows, load, cap, compiled: bool):
     """Arrival times by :func:`dispatch.plan.stops.timetable` (or its compiled twin), None where a
     stop breaks a limit."""
-    legs = [tt(a[0], b[0]) for a, b in zip(rows, rows[1:])]
+    legs = [tt(a[0], b[0]) for a, b in zip(rows, rows[1:])]  # (the timing: seats aside)
     cols = [legs, [r[4] for r in rows], [r[3] for r in rows], [r[2] for r in rows],
             [r[1] for r in rows]]
     out = [0.0] * len(rows)
@@ -95,6 +99,7 @@ def test_timetable_equals_the_reference_over_every_order(seed):
         tt = _metric(rng)
         ready = float(rng.uniform(0, 100))
         rows, load, cap = _sequence(rng, ready)
+        rows = [r[:5] for r in rows]  # (timetable times a route: a break's seats aside)
         for order in itertools.permutations(rows):
             order = list(order)
             want = simulate(ready, lambda loc: tt(0, loc), tt, order, load, cap)
@@ -109,17 +114,17 @@ def test_timetable_equals_the_reference_over_every_order(seed):
             feasible += 1
             assert got == pytest.approx(want[0], abs=1e-9)
             # the same schedule from Stop objects and their legs
-            plan = [S.Stop(S.WAIT, None, r[0], r[1], r[2], False, leg=tt(a[0], r[0]) if k else 0.0,
-                           earliest=r[4], service=r[3])
+            plan = [S.Stop(BREAK, None, r[0], r[1], r[2], False,
+                           leg=tt(a[0], r[0]) if k else 0.0, earliest=r[4], service=r[3])
                     for k, (a, r) in enumerate(zip([order[0]] + order, order))]
             assert S.schedule(first, plan) == got
     assert feasible > 200 and orders - feasible > 200  # both outcomes exercised
 
 
-def _plan_case(rng):
-    """A plan of requests' stops with charge, reposition, wait and depot stops among them
-    (some waiting), planned by the rule, limits with random slack; 5 new requests (some
-    prebooked: a pickup that opens later)."""
+def _plan_case(rng, breaks: bool = True):
+    """A plan of requests' stops with charge, reposition, depot and (``breaks``) break stops
+    among them (some waiting; a break where no one is on board), planned by the rule, limits
+    with random slack; 5 new requests (some prebooked: a pickup that opens later)."""
     tt = _metric(rng)
     ready = float(rng.uniform(0, 50))
     cap = int(rng.integers(1, 5))
@@ -133,14 +138,18 @@ def _plan_case(rng):
             kind = S.REPOSITION
         if kind == S.DROPOFF and occ <= 0:
             kind = S.CHARGE
+        if kind == BREAK and (occ > 0 or not breaks):  # (no one on board at a break)
+            kind = S.REPOSITION
         pax = {S.PICKUP: 1, S.DROPOFF: -1}.get(kind, 0)
         occ += pax
         rows.append(_stop(rng, kind, k + 1, pax, ready))
     got = simulate(ready, lambda loc: tt(0, loc), tt,
-                   [(r[0], r[1], math.inf, r[3], r[4]) for r in rows], load, cap)
-    arr = got[0] if got else []
-    rows = [(r[0], r[1], a + float(rng.choice([0.0, rng.uniform(0, 300), math.inf])), r[3], r[4])
-            for r, a in zip(rows, arr)]
+                   [(r[0], r[1], math.inf, r[3], r[4], r[5]) for r in rows], load, cap)
+    if got is None:  # (a pickup right after a break: the seats are held) once more
+        return _plan_case(rng, breaks)
+    arr = got[0]
+    rows = [(r[0], r[1], a + float(rng.choice([0.0, rng.uniform(0, 300), math.inf])), r[3], r[4],
+             r[5]) for r, a in zip(rows, arr)]
     reqs = []
     for _ in range(5):
         p, d = int(rng.integers(20, 60)), int(rng.integers(20, 60))
@@ -160,7 +169,7 @@ def _insertions(c, objective):
     occ, s_occ = c["load"], []
     for s in rows:
         occ += s[1]
-        s_occ.append(occ)
+        s_occ.append(c["cap"] if s[5] else occ)  # (a break holds the seats: occupancies())
     return insertion_costs(
         np.zeros(m, np.int64), np.arange(m), [c["ready"]], [tt(0, r[0]) for r in reqs], [0, k],
         c["arr"], [s[3] for s in rows], [s[2] for s in rows], s_occ, [c["load"]], [c["cap"]],
@@ -177,7 +186,7 @@ def _insertions(c, objective):
 def test_insertion_with_every_stop_kind_equals_the_reference(objective):
     rng = np.random.default_rng(28 + objective)
     cases = feasible = waited = 0
-    while cases < 300:
+    while cases < 400:
         c = _plan_case(rng)
         cases += 1
         got = _insertions(c, objective)
@@ -207,8 +216,8 @@ def test_the_plan_change_keeps_the_rule():
             continue
         got = _insertions(c, S.ADDED_TIME)
         tt, ready = c["tt"], c["ready"]
-        plan = [S.Stop(S.REPOSITION, None, s[0], s[1], s[2], False, earliest=s[4], service=s[3])
-                for s in c["stops"]]
+        plan = [S.Stop(BREAK if s[5] else S.REPOSITION, None, s[0], s[1], s[2], False,
+                       earliest=s[4], service=s[3], holds_seats=s[5]) for s in c["stops"]]
         for q, (p, d, n, lp, ld, sp, sd, ep) in enumerate(c["reqs"]):
             if math.isinf(got.cost[q]):
                 continue
@@ -227,7 +236,7 @@ def _rtv_case(rng, nplan_max=4):
     """One vehicle with a plan of every kind and a group of 1-2 new requests (some pickups
     with an earliest time, as a booked request's), as rtv's kernel takes them, and the same as
     reference rows."""
-    c = _plan_case(rng)
+    c = _plan_case(rng, breaks=False)  # (rtv refuses breaks: the scenario check)
     c["stops"] = c["stops"][:nplan_max]
     c["arr"] = c["arr"][:nplan_max]
     c["reqs"] = c["reqs"][:int(rng.integers(1, 3))]
@@ -316,7 +325,7 @@ def test_rtv_orders_with_every_stop_kind_equal_the_reference(reorder, until):
 
     rng = np.random.default_rng(280 + reorder + 2 * until)
     feasible = cases = waits = ended = 0
-    while cases < 200:
+    while cases < 400:
         c = _rtv_case(rng, 3 if reorder else 4)  # (every order of up to 7 stops)
         waits += any(r[7] > -math.inf for r in c["reqs"])
         if until:  # a shift's end: the route leaves its last stop by it
