@@ -56,7 +56,8 @@ from simpy.events import URGENT
 
 from dispatch.api.contracts import Allocator
 from dispatch.api.problem import Allocation, AllocationProblem
-from dispatch.config.scenario import RunSpec, Scenario, SweepConfig
+from dispatch.config.scenario import RunSpec, Scenario
+from dispatch.config.sweep import SweepConfig
 from dispatch.decide.dispatcher import DecisionDeferred
 from dispatch.errors import AllocationError, ScenarioError
 from dispatch.scenario.load import load_scenario

@@ -296,7 +296,7 @@ def scenario_for(path: str | Path, batch_window: float, hours: float | None = No
                  trips_per_day: float | None = None):
     """The scenario of a study: its sweep dropped, the batch window fixed, optionally a
     shorter run (``hours``) or another demand (``trips_per_day``)."""
-    from dispatch.config.scenario import SweepConfig
+    from dispatch.config.sweep import SweepConfig
     from dispatch.scenario.load import load_scenario
 
     sc = load_scenario(path)

@@ -58,7 +58,7 @@ from dispatch.locations import Location, Position
 __all__ = ["KINDS", "Space", "space_class", "space_for"]
 
 #: The spaces, by the kind a scenario's ``[world]`` table parses to
-#: (:attr:`dispatch.config.scenario.WorldConfig.space`): ``"module:Class"`` of each, imported when
+#: (:attr:`dispatch.config.world.WorldConfig.space`): ``"module:Class"`` of each, imported when
 #: first asked for (a voxel run never imports the road network's libraries).
 KINDS: dict[str, str] = {"voxel": "dispatch.space.world:World",
                          "road": "dispatch.space.roads:RoadNetwork"}

@@ -32,7 +32,7 @@ class RunKey:
     """One dimension of a run.
 
     ``name``: the summary column, the Hive partition key and the name in ``dispatch.run_keys``.
-    ``sweep``: its ``[sweep]`` list (:class:`dispatch.config.scenario.SweepConfig` field; None: not
+    ``sweep``: its ``[sweep]`` list (:class:`dispatch.config.sweep.SweepConfig` field; None: not
     swept). ``setting``: ``(table, key)`` of the scenario setting a run's value replaces
     (``""``: top level; None: none). ``tag``: the prefix of its value in the run id.
     ``optional``: named in the partition and run id only where the scenario declares it.

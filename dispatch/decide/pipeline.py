@@ -67,7 +67,8 @@ from dispatch.plan.stops import OBJECTIVES
 from dispatch.plan.tasks import TaskBook, TaskState
 
 if TYPE_CHECKING:
-    from dispatch.config.scenario import CommsConfig, DispatchConfig
+    from dispatch.config.comms import CommsConfig
+    from dispatch.config.dispatching import DispatchConfig
     from dispatch.plan.operator import Operator
     from dispatch.plan.tasks import Task
     from dispatch.plan.vehicles import Fleet

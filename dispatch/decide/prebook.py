@@ -155,11 +155,10 @@ class PrebookSource(TaskSource):
         self.release(req, booking)
 
     def _run(self):
-        cfg = self.cfg
-        if cfg.kind == "trace":
+        if self.kind == "trace":
             trips = self.trips
-            if cfg.count is not None:
-                trips = trips.subset(np.arange(len(trips)) < cfg.count, "tasks.count")
+            if self.count is not None:
+                trips = trips.subset(np.arange(len(trips)) < self.count, "tasks.count")
             if self.share > 0 and not trips.prebooked:
                 trips = synthesize(trips, self.share, self.lead, self.booking_rng)
             trips, entry = in_entry_order(trips,

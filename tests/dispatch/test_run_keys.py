@@ -16,7 +16,7 @@ from pathlib import Path
 import pyarrow.parquet as pq
 
 from dispatch.config import runkeys
-from dispatch.config.scenario import SweepConfig
+from dispatch.config.sweep import SweepConfig
 from dispatch.output.parquet import SCHEMAS
 from dispatch.output.printed import print_tables
 from dispatch.run import cli

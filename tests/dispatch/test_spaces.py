@@ -238,11 +238,11 @@ SWITCH = re.compile(r'roads is (not )?None|kind [!=]= "(road|voxel)"|_is_node|'
                     r'space [!=]= "(road|voxel)"|isinstance\([^)]*(World|RoadNetwork|Node)\)|'
                     r'hasattr\([^)]*"node"\)|\.space == |get\("space", "voxel"\)')
 #: where a switch may stay, and how many: the space modules; the config branch
-#: (config.py's WorldConfig.space) and the parser's empirical sample on the Chicago network
-#: (scenario.py); the road planner checking
-#: its own space; tables and analysis reading the recorded ``space`` column of results
+#: (dispatch/config/world.py's WorldConfig.space) and the parser's empirical sample on the
+#: Chicago network (dispatch/scenario/load.py); the road planner checking its own space; tables
+#: and analysis reading the recorded ``space`` column of results
 ALLOWED = {"dispatch/api/space.py": 99, "dispatch/space/world.py": 99,
-           "dispatch/space/roads.py": 99, "dispatch/config/scenario.py": 1,
+           "dispatch/space/roads.py": 99, "dispatch/config/world.py": 1,
            "dispatch/scenario/load.py": 1,
            # [chargers] max_snap: stations given in lon/lat are snapped to the road network
            "dispatch/scenario/sections.py": 1, "planners/road.py": 1,
