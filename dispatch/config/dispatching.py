@@ -10,8 +10,6 @@ from typing import Any
 @dataclass(frozen=True)
 class DispatchConfig:
     allocator: str = "hungarian"
-    #: the planner (the voxel world's default; a road network's default planner is its space's,
-    #: :attr:`dispatch.api.space.Space.default_planner`)
     planner: str = "astar"
     batch_window: float = 0.0  # seconds the dispatcher waits after a wake-up to batch events
     max_rounds: int = 1000  # decision-round limit for decentralized allocators

@@ -14,7 +14,8 @@ import numpy as np
 from dispatch.files.traces import Trips
 
 SOURCES = ("static", "periodic", "poisson", "trace", "empirical")
-#: seconds a request of the empirical sample waits for its pickup where ``max_wait`` is not set
+#: seconds a request of the empirical sample accepts to wait for its pickup where ``[tasks]
+#: max_wait`` is not set (other sources: no limit, the field's None)
 EMPIRICAL_MAX_WAIT = 600.0
 
 
@@ -28,9 +29,7 @@ class TaskConfig:
     ground_fraction: float = 0.5  # probability that a generated task is on the ground layer
     service_time: float = 0.0  # seconds a vehicle spends at the task after arriving
     ttl: float | None = None  # seconds an unassigned task waits before it expires
-    #: seconds a request accepts to wait for its pickup (None: no limit; the empirical source:
-    #: EMPIRICAL_MAX_WAIT)
-    max_wait: float | None = None
+    max_wait: float | None = None  # seconds a request accepts to wait for its pickup
     #: seconds of delay a request accepts at its drop-off, over release + direct drive time
     max_delay: float | None = None
     trace: Path | None = None  # trace: CSV or Parquet file of trips (see dispatch.files.traces)

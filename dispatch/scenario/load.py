@@ -105,10 +105,11 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
         placement=f.string("placement", choices=("uniform", "demand")),
         capacity=f.number("capacity", lo=1, hi=10_000, integer=True),
     )
-    start = f.get("start", None)  # the file's name (None: left out)
+    start = f.given("start")  # the file's name
     if start is not None:
         if not isinstance(start, str) or not start:
-            raise f.fail("start", f"must be a CSV file of vehicle_id and node or x, y; got {start!r}")
+            raise f.fail("start", f"must be a CSV file of vehicle_id and node or x, y; "
+                                  f"got {start!r}")
         start_path = (path.parent / start).resolve()
         kind = space_class(world.space)
         rows = read_fleet_start(start_path, kind.start_nodes, kind.start_z, max_bytes)
@@ -373,9 +374,9 @@ def _within_snap(t: Table, trips: Trips, world: WorldConfig, max_snap: float) ->
 def _windows(s: Table) -> tuple[float, ...]:
     """``[sweep] batch_window``: distinct finite seconds >= 0."""
     v = s.get("batch_window")
-    if not isinstance(v, (list, tuple)) or any(isinstance(x, bool) or not isinstance(x, (int, float))
-                                      or not math.isfinite(x) or x < 0 for x in v) \
-            or len(set(v)) != len(v):
+    if not isinstance(v, (list, tuple)) or any(
+            isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x)
+            or x < 0 for x in v) or len(set(v)) != len(v):
         raise s.fail("batch_window", f"must be a list of distinct seconds >= 0, got {_short(v)}")
     return tuple(float(x) for x in v)
 

@@ -1,7 +1,8 @@
 """The self-contained tables of a scenario file, each parsed into its part of the typed
-configuration (:mod:`dispatch.config`; a key left out takes its field's default): ``[world]`` (a voxel world or a road network, its
-obstacles and congestion), ``[faults]``, ``[fleet.energy]``, ``[chargers]`` and
-``[charging]``, ``[reposition]``, and the allocators a file names. :mod:`dispatch.scenario.load`
+configuration (:mod:`dispatch.config`; a key left out takes its field's default): ``[world]``
+(a voxel world or a road network, its obstacles and congestion), ``[faults]``,
+``[fleet.energy]``, ``[chargers]`` and ``[charging]``, ``[reposition]``, ``[pricing]``,
+``[acceptor]``, and the allocators a file names. :mod:`dispatch.scenario.load`
 reads the file and the tables that depend on one another.
 """
 
@@ -26,7 +27,9 @@ from dispatch.scenario.toml_table import Table
 
 def parse_world(w: Table, path: Path) -> WorldConfig:
     """``[world]``: a voxel world (size, cell, obstacles) or a road network (network, ...)."""
-    physics = w.flag("physics", None)  # None: left out (on in a voxel world, off on roads)
+    physics = w.given("physics")  # None: left out (on in a voxel world, off on roads)
+    if physics is not None and not isinstance(physics, bool):
+        raise w.fail("physics", f"must be true or false, got {_short(physics)}")
     if "network" in w.data:
         for k in VOXEL_KEYS:
             if k in w.data:
@@ -120,7 +123,7 @@ def parse_faults(f: Table, path: Path) -> FaultConfig:
             or repair <= 0:
         raise f.fail("repair", f"must be a number of seconds > 0 (inf: for good), got {repair!r}")
     events: tuple = ()
-    file = f.get("file", None)  # None: left out
+    file = f.given("file")
     if file is not None:
         if not isinstance(file, str) or not file:
             raise f.fail("file", f"must be a CSV file of t, vehicle_id, duration; got {file!r}")
@@ -134,7 +137,7 @@ def parse_faults(f: Table, path: Path) -> FaultConfig:
                    or x < 0 for x in w) or w[0] >= w[1] for w in windows):
         raise f.fail("blackout", f"must be a list of [t0, t1] windows with 0 <= t0 < t1, "
                                  f"got {windows!r}")
-    region = f.get("blackout_region", f.default("region"))
+    region = f.given("blackout_region")
     if region is not None:
         if not isinstance(region, list) or len(region) != 4 or any(
                 isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x)

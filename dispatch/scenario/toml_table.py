@@ -66,6 +66,11 @@ class Table:
             return self.data[k]
         return self.default(k) if default is FIELD else default
 
+    def given(self, k: str) -> Any:
+        """The file's value of ``k`` as it is; None where the file leaves it out."""
+        self.used.add(k)
+        return self.data.get(k)
+
     def table(self, k: str, *of: type) -> Table:
         """The sub-table ``k`` (empty where left out), read into the dataclasses ``of``."""
         return Table(self.file, self.key(k) + ".", self.get(k, {}), of)
