@@ -337,9 +337,9 @@ class TaskSource:
         self.process = env.process(self._run())
 
     @classmethod
-    def of(cls, env: simpy.Environment, book: TaskBook, demand: Demand, tasks, count,
-           day_rng: Callable[[], np.random.Generator], rng: np.random.Generator,
-           notify: Callable[[], None], **extra) -> TaskSource:
+    def of(cls, env: simpy.Environment, book: TaskBook, demand: Demand, tasks: TaskConfig,
+           count: int | None, day_rng: Callable[[], np.random.Generator],
+           rng: np.random.Generator, notify: Callable[[], None], **extra) -> TaskSource:
         """The source of a scenario's ``[tasks]`` releasing ``count`` tasks where it has a
         count (static: the run's). An empirical day is drawn now (from ``day_rng()``) and
         released as a trace. ``extra``: a subclass's own arguments
