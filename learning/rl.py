@@ -69,6 +69,8 @@ __all__ = ["Decisions", "DispatchEnv", "FleetEnv", "pairs_from_choices"]
 class _NullRecorder:
     """A recorder that keeps nothing (the environments need the summary, not the tables)."""
 
+    out = None  # no results folder (the space's shared tables are not written)
+
     def __init__(self) -> None:
         self.metadata: dict = {}
         self.table_metadata: dict = {}
