@@ -337,7 +337,7 @@ class _Common:
         return self.run.node_xy[np.asarray(nodes, dtype=np.int64)]
 
     def _agent_nodes(self, problem: AllocationProblem) -> np.ndarray:
-        nodes = getattr(problem.agents, "nodes", None)
+        nodes = problem.agents.nodes
         if nodes is not None:
             return np.asarray(nodes, dtype=np.int64)
         return np.array([getattr(a.loc, "node", a.loc) for a in problem.agents], np.int64)

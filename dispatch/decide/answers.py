@@ -14,7 +14,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from dispatch.api.problem import AgentViews, Allocation, AllocationProblem
+from dispatch.api.problem import Allocation, AllocationProblem
 from dispatch.errors import AllocationError
 from dispatch.plan.stops import DROPOFF, PICKUP, PlannedStop
 
@@ -173,8 +173,7 @@ def finders(problem: AllocationProblem):
     f = problem.__dict__.get("_finders")
     if f is None:
         f = problem.__dict__["_finders"] = (
-            _rows(problem.agent_ids,
-                  isinstance(problem.agents, AgentViews) and problem.agents.ascending),
+            _rows(problem.agent_ids, problem.agents.ascending),
             _rows(problem.task_ids))
     return f
 
