@@ -13,8 +13,8 @@ vehicles, requests, congestion, rejections and summary as ``dispatch run``):
   each idle vehicle answers one request or none; two vehicles asking for the same request
   are a conflict, won by the smaller cost (the paper's rule, as :mod:`dispatch.api.decentralized`).
 
-How control is inverted (no threads). The environment swaps the run's allocator for a
-deferring one: when the dispatcher asks it, it keeps the :class:`AllocationProblem` and raises
+How control is inverted (no threads). The environment builds the run with a deferring
+allocator (``Simulation(..., allocator=...)``): when the dispatcher asks it, it keeps the :class:`AllocationProblem` and raises
 :class:`dispatch.decide.dispatcher.DecisionDeferred`; the dispatcher's loop then waits on an event.
 The environment stops stepping SimPy there and returns the observation. ``step(action)`` turns
 the action into an :class:`Allocation`, triggers the event (at the same instant, ahead of any
@@ -159,13 +159,12 @@ class Decisions:
         from dispatch.run.sim import Simulation
 
         self.scenario = scenario
-        spec = RunSpec(scenario, "hungarian", scenario.dispatch.planner,
-                       scenario.fleet.agents, int(seed), scenario.reposition.policy)
-        self.sim = sim = Simulation(spec, _NullRecorder())
-        sim.spec = replace(spec, allocator="rl")  # the summary names the run's decider
-        self.env = env = sim.env
+        # the summary names the run's decider: the shim, which defers every decision here
+        spec = RunSpec(scenario, "rl", scenario.dispatch.planner, scenario.fleet.agents,
+                       int(seed), scenario.reposition.policy)
+        self.env = env = simpy.Environment()
         self.shim = _Deferring(env)
-        sim.allocator = self.shim
+        self.sim = sim = Simulation(spec, _NullRecorder(), allocator=self.shim, env=env)
         horizon = env.timeout(scenario.duration)  # as Simulation.run, before any step
         self.until = env.any_of([sim.finished, horizon])
         self.space = sim.space
