@@ -88,7 +88,7 @@ class ZoneValue:
         if cost.size == 0 or w == 0:
             return cost
         now = float(problem.time)
-        nodes = getattr(problem.agents, "nodes", None)
+        nodes = problem.agents.nodes
         if nodes is None:
             nodes = [getattr(a.loc, "node", a.loc) for a in problem.agents]
         picks = [t.loc for t in problem.tasks]

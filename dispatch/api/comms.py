@@ -120,10 +120,10 @@ def relay_needed(comm: np.ndarray) -> np.ndarray:
 
 
 
-def _positions(space, agents) -> np.ndarray:
-    """``(N, 3)`` positions of a decision's agents: from their node array where the sequence
-    carries one (road points part-way along an edge one by one), else view by view."""
-    nodes = agents.nodes if isinstance(agents, AgentViews) else None
+def _positions(space, agents: AgentViews) -> np.ndarray:
+    """``(N, 3)`` positions of a decision's agents: from their node array where they carry
+    one (road points part-way along an edge one by one), else view by view."""
+    nodes = agents.nodes
     if nodes is None:
         return space.positions([a.loc for a in agents])
     out = space.positions(nodes)
@@ -141,7 +141,7 @@ class Hearing:
         self.space, self.comms, self.links = space, comms, links
         self._everyone: dict[int, np.ndarray] = {}  # n -> read-only all-True (n, n), no memory
 
-    def __call__(self, agents, now: float):
+    def __call__(self, agents: AgentViews, now: float):
         """``(comm, positions)`` of a decision's agents: who hears whom (the ``[comms]`` range,
         a blackout's links) and their ``(N, 3)`` positions; with an unlimited range and no
         faults a broadcast all-True ``comm`` (no N x N matrix) and the positions as a function
@@ -152,7 +152,7 @@ class Hearing:
             comm = self._everyone.get(len(agents))
             if comm is None:
                 comm = self._everyone[len(agents)] = np.broadcast_to(np.True_, (len(agents),) * 2)
-            nodes = agents.nodes if isinstance(agents, AgentViews) else None
+            nodes = agents.nodes
             if nodes is not None and not agents.points.size:
                 def apos():  # node positions (fixed now), computed if someone reads them
                     return space.positions(nodes)

@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any, Protocol
 
+from dispatch.plan.insertion import Insertion
 from dispatch.plan.stops import PICKUP, occupancies
 from dispatch.plan.tasks import Task
 from dispatch.plan.vehicles import Vehicle
@@ -22,7 +23,7 @@ class Execution(Protocol):
     its construction from the operator): :class:`PlanExecution` (the operator's plan process)
     or :class:`dispatch.plan.reservations.TimedExecution` (timed routes on reservations)."""
 
-    def set_out(self, v: Vehicle, task: Task, cost: float, at: tuple | None) -> None:
+    def set_out(self, v: Vehicle, task: Task, cost: float, at: Insertion | None) -> None:
         """``v``, with an empty plan, is given ``task`` at ``cost`` (``at``: the decision's
         planned times, see :meth:`dispatch.plan.operator.Operator.assign`) and sets out now."""
 
@@ -55,7 +56,7 @@ class PlanExecution:
     def __init__(self, op) -> None:
         self.op = op  # the operator (which imports this module)
 
-    def set_out(self, v: Vehicle, task: Task, cost: float, at: tuple | None) -> None:
+    def set_out(self, v: Vehicle, task: Task, cost: float, at: Insertion | None) -> None:
         op = self.op
         new = op._stops(task)
         path = op.driver.plan(v, new[0].loc, op.env.now)

@@ -19,7 +19,7 @@ import pytest
 from dispatch.api import registry
 from dispatch.api.legs import RoadPoint
 from dispatch.api.space import KINDS, Space, space_class, space_for
-from dispatch.checks.planners import SAMPLERS
+from dispatch.checks.planners import GUARDED, SAMPLERS
 from dispatch.errors import PluginError, ScenarioError
 from dispatch.events import EventBus
 from dispatch.files.traces import read_fleet_start
@@ -215,8 +215,8 @@ def test_static_tables_belong_to_the_space():
     assert space_class("road").small().tables() == {}
 
 
-@pytest.mark.parametrize("table", [BUILDERS, PLACERS, SAMPLERS], ids=["demand", "placement",
-                                                                       "views"])
+@pytest.mark.parametrize("table", [BUILDERS, PLACERS, SAMPLERS, GUARDED],
+                         ids=["demand", "placement", "views", "guarded"])
 def test_every_space_kind_has_its_builders(table):
     """What is built from a space is built by its own module, one function per space kind:
     a new kind in KINDS without its entry would fail at its first run."""
