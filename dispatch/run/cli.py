@@ -67,8 +67,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _run(args, console) -> int:
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
     from dispatch.run.resume import holds_results
     from dispatch.run.runner import default_out, execute
 
@@ -84,7 +82,10 @@ def _run(args, console) -> int:
     if single:  # one long run: simulated time, wall time, requests released and closed
         with _run_progress(console, specs[0]) as report:
             summaries = execute(specs, out, progress=report)
-    else:
+    else:  # (rich.progress imported here: a single run off a terminal does without it)
+        from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
+                                   TimeElapsedColumn)
+
         finished = []
         with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                       TimeElapsedColumn(), console=console, transient=True) as progress, \
