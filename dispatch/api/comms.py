@@ -38,7 +38,6 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components, shortest_path
-from scipy.spatial import cKDTree
 
 from dispatch.api.problem import AgentViews
 
@@ -58,7 +57,10 @@ def comm_graph(positions, comm_range: float | None) -> np.ndarray:
     adj = np.zeros((n, n), dtype=bool)
     if n > 1:
         # candidate pairs from a k-d tree (a fleet of 1,000 vehicles: no N x N distances),
-        # then the same test as a dense comparison would make, pair by pair
+        # then the same test as a dense comparison would make, pair by pair (scipy.spatial
+        # imported here: only a run with a communication range pays for it)
+        from scipy.spatial import cKDTree
+
         pairs = cKDTree(pos).query_pairs(comm_range + 1e-6, output_type="ndarray")
         if len(pairs):
             a, b = pairs[:, 0], pairs[:, 1]

@@ -6,7 +6,7 @@ One source of truth each, read at build time, never copied by hand:
   ``dispatch.config``, and ``[pricing]``'s wherever it lives), their types and defaults from
   :func:`dataclasses.fields`, their meaning from the comment on or above each field in the
   source;
-* the command line: the argument parser of ``dispatch.run.cli`` (the plugin commands included);
+* the command line: the argument parser of ``dispatch.run.parser`` (the plugin commands included);
 * the Parquet tables: ``dispatch.output.parquet.SCHEMAS`` (column names and Arrow types), each
   column's meaning from the table of the results page (``explanation/output.md``) where it
   has one, else from the comment above it in the recorder;
@@ -247,11 +247,12 @@ def _fmt_action(a: argparse.Action) -> str:
 
 
 def command_line() -> str:
-    from dispatch.run import cli
     from dispatch.run.commands import installed
+    from dispatch.run.parser import OWN_COMMANDS
+    from dispatch.run.parser import parser as command_parser
 
-    parser = cli._parser(installed(reserved=cli.OWN_COMMANDS))
-    out = ["# Command line", "", "Generated from the argument parser of `dispatch.run.cli`, "
+    parser = command_parser(installed(reserved=OWN_COMMANDS))
+    out = ["# Command line", "", "Generated from the argument parser of `dispatch.run.parser`, "
            "the commands that other packages register (`dispatch.commands` entry points) "
            "included.", "", "```text", parser.format_usage().strip(), "```", "",
            "| option | meaning |", "|---|---|"]

@@ -31,7 +31,7 @@ def _python_leg(net, start, nodes):
 @pytest.mark.parametrize("which", ["manhattan", "chicago"])
 def test_compiled_legs_equal_python_sums_bit_for_bit(which, chicago):
     net = manhattan(9, 7, block=173.0, speed=7.3) if which == "manhattan" else chicago
-    assert net._leg_sums is not None  # the compiled path serves these networks
+    assert net._edges.leg_sums is not None  # the compiled path serves these networks
     rng = np.random.default_rng(3)
     coo = net.time.tocoo()
     for k in range(40):
