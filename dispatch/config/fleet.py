@@ -36,6 +36,8 @@ class FleetConfig:
     #: as ``fixed``: every vehicle on duty over its shift) and its ``[fleet.sizing_params]``
     sizing: str | None = None
     sizing_params: tuple[tuple[str, Any], ...] = ()
+    #: ``[fleet.breaks]`` (:class:`dispatch.config.breaks.BreaksConfig`); None: no breaks
+    breaks: Any = None
 
     @property
     def pooled(self) -> bool:

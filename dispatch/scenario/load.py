@@ -25,6 +25,7 @@ from dispatch.api.acceptor import Pricing
 from dispatch.api.space import space_class
 from dispatch.config.comms import CommsConfig
 from dispatch.config.dispatching import DispatchConfig
+from dispatch.config.breaks import BreaksConfig
 from dispatch.config.energy import EnergyConfig
 from dispatch.config.faults import FaultConfig
 from dispatch.config.fleet import FleetConfig
@@ -41,9 +42,9 @@ from dispatch.files.tables import check_file, decode_text, read_bytes
 from dispatch.files.traces import (Trips, parse_datetime, read_fleet_capacities, read_fleet_start,
                                    read_trace, shipped_trace, within_snap)
 from dispatch.fleet.shifts import read_shifts
-from dispatch.scenario.sections import (parse_acceptor, parse_allocators, parse_charging,
-                                        parse_energy, parse_faults, parse_pricing, parse_reposition,
-                                        parse_world)
+from dispatch.scenario.sections import (parse_acceptor, parse_allocators, parse_breaks,
+                                        parse_charging, parse_energy, parse_faults, parse_pricing,
+                                        parse_reposition, parse_world)
 from dispatch.scenario.toml_table import Table
 
 log = logging.getLogger(__name__)
@@ -122,6 +123,8 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     if "energy" in f.data:
         fleet = replace(fleet, energy=parse_energy(f.table("energy", EnergyConfig), fleet,
                                                    world))
+    if "breaks" in f.data:
+        fleet = replace(fleet, breaks=parse_breaks(f.table("breaks", BreaksConfig), world))
     fleet = _parse_sizing(f, fleet)
     f.done()
 

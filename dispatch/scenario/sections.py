@@ -152,6 +152,18 @@ def parse_faults(f: Table, path: Path) -> FaultConfig:
                        region=None if region is None else tuple(float(x) for x in region))
 
 
+def parse_breaks(b: Table, world: WorldConfig):
+    """``[fleet.breaks]`` (see :mod:`dispatch.plan.breaks`): drivers' breaks on a road
+    network."""
+    from dispatch.config.breaks import BreaksConfig
+
+    if "depots" not in space_class(world.space).features:
+        raise b.fail("after", "drivers' breaks need a road network ([world] network)")
+    out = BreaksConfig(after=b.number("after", gt=0.0), duration=b.number("duration", gt=0.0))
+    b.done()
+    return out
+
+
 def parse_energy(e: Table, fleet: FleetConfig, world: WorldConfig):
     """``[fleet.energy]`` (see :mod:`dispatch.fleet.battery`): batteries on a road network."""
     from dispatch.config.energy import EnergyConfig, read_socs
