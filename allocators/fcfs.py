@@ -40,7 +40,7 @@ def fcfs_pairs(problem: AllocationProblem) -> list[tuple[int, int]]:
         best = float(col[a])
         if not math.isfinite(best):
             return []
-        if not (getattr(problem.agents, "ascending", False) or n < 2):
+        if not (problem.agents.ascending or n < 2):
             agent_ids = problem.agent_ids
             if not bool((agent_ids[1:] > agent_ids[:-1]).all()):
                 ties = np.flatnonzero(col == best)
@@ -49,7 +49,7 @@ def fcfs_pairs(problem: AllocationProblem) -> list[tuple[int, int]]:
     # lexsort keys, last one primary: tasks by (release time, id); agents by id among ties
     order = np.lexsort((problem.task_ids, [t.released_at for t in problem.tasks])).tolist()
     agent_ids = problem.agent_ids
-    ascending = getattr(problem.agents, "ascending", False) or n < 2 \
+    ascending = problem.agents.ascending or n < 2 \
         or bool((agent_ids[1:] > agent_ids[:-1]).all())
     taken = np.zeros(n, dtype=bool)
     pairs = []

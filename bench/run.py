@@ -178,7 +178,8 @@ def machine() -> dict[str, Any]:
 
 
 def _read(out: Path, spec, table: str):
-    from dispatch.run.runner import partition_dir, read_table
+    from dispatch.run.resume import partition_dir
+    from dispatch.run.runner import read_table
 
     path = out / table / partition_dir(spec) / "part-0.parquet"
     return read_table(path, spec.partition, table) if path.exists() else None
@@ -187,7 +188,7 @@ def _read(out: Path, spec, table: str):
 def _timed_out(out: Path, spec, limit: float) -> str | None:
     """The error message of an earlier run of ``spec`` stopped at a wall-clock limit after at
     least ``limit`` seconds (trying it again would stop again); None if there is none."""
-    from dispatch.run.runner import ERRORS, partition_dir
+    from dispatch.run.resume import ERRORS, partition_dir
 
     path = out / ERRORS / partition_dir(spec) / "part-0.parquet"
     if not path.exists():
@@ -204,7 +205,7 @@ def _timed_out(out: Path, spec, limit: float) -> str | None:
 
 
 def _wall(out: Path, spec) -> float:
-    from dispatch.run.runner import marker_path
+    from dispatch.run.resume import marker_path
 
     try:
         return float(json.loads(marker_path(out, spec).read_text(encoding="utf-8"))["seconds"])

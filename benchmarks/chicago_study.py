@@ -12,7 +12,7 @@ scenario is written to ``<out>/chicago_study.toml`` and run through the normal r
 run already complete in ``--out``, so an interrupted study resumes, and a rerun with other
 ``--allocators`` / ``--repositioners`` / ``--agents`` / ``--batch-windows`` adds only the runs
 missing from the folder (a run is the same run whatever lists it was swept in:
-:func:`dispatch.run.runner.run_digest`); the table and the report cover every run of the folder.
+:func:`dispatch.run.resume.run_digest`); the table and the report cover every run of the folder.
 SIGTERM or Ctrl-C stops the study's worker processes with it.
 
 ``--comm-range METRES`` gives the vehicles a radio range: the derived scenario gets a ``[comms]``

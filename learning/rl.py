@@ -13,8 +13,8 @@ vehicles, requests, congestion, rejections and summary as ``dispatch run``):
   each idle vehicle answers one request or none; two vehicles asking for the same request
   are a conflict, won by the smaller cost (the paper's rule, as :mod:`dispatch.api.decentralized`).
 
-How control is inverted (no threads). The environment swaps the run's allocator for a
-deferring one: when the dispatcher asks it, it keeps the :class:`AllocationProblem` and raises
+How control is inverted (no threads). The environment builds the run with a deferring
+allocator (``Simulation(..., allocator=...)``): when the dispatcher asks it, it keeps the :class:`AllocationProblem` and raises
 :class:`dispatch.decide.dispatcher.DecisionDeferred`; the dispatcher's loop then waits on an event.
 The environment stops stepping SimPy there and returns the observation. ``step(action)`` turns
 the action into an :class:`Allocation`, triggers the event (at the same instant, ahead of any
@@ -56,7 +56,8 @@ from simpy.events import URGENT
 
 from dispatch.api.contracts import Allocator
 from dispatch.api.problem import Allocation, AllocationProblem
-from dispatch.config.scenario import RunSpec, Scenario, SweepConfig
+from dispatch.config.scenario import RunSpec, Scenario
+from dispatch.config.sweep import SweepConfig
 from dispatch.decide.dispatcher import DecisionDeferred
 from dispatch.errors import AllocationError, ScenarioError
 from dispatch.scenario.load import load_scenario
@@ -68,6 +69,8 @@ __all__ = ["Decisions", "DispatchEnv", "FleetEnv", "pairs_from_choices"]
 # ------------------------------------------------------------------------------ the driver
 class _NullRecorder:
     """A recorder that keeps nothing (the environments need the summary, not the tables)."""
+
+    out = None  # no results folder (the space's shared tables are not written)
 
     def __init__(self) -> None:
         self.metadata: dict = {}
@@ -157,13 +160,12 @@ class Decisions:
         from dispatch.run.sim import Simulation
 
         self.scenario = scenario
-        spec = RunSpec(scenario, "hungarian", scenario.dispatch.planner,
-                       scenario.fleet.agents, int(seed), scenario.reposition.policy)
-        self.sim = sim = Simulation(spec, _NullRecorder())
-        sim.spec = replace(spec, allocator="rl")  # the summary names the run's decider
-        self.env = env = sim.env
+        # the summary names the run's decider: the shim, which defers every decision here
+        spec = RunSpec(scenario, "rl", scenario.dispatch.planner, scenario.fleet.agents,
+                       int(seed), scenario.reposition.policy)
+        self.env = env = simpy.Environment()
         self.shim = _Deferring(env)
-        sim.allocator = self.shim
+        self.sim = sim = Simulation(spec, _NullRecorder(), allocator=self.shim, env=env)
         horizon = env.timeout(scenario.duration)  # as Simulation.run, before any step
         self.until = env.any_of([sim.finished, horizon])
         self.space = sim.space
@@ -335,7 +337,7 @@ class _Common:
         return self.run.node_xy[np.asarray(nodes, dtype=np.int64)]
 
     def _agent_nodes(self, problem: AllocationProblem) -> np.ndarray:
-        nodes = getattr(problem.agents, "nodes", None)
+        nodes = problem.agents.nodes
         if nodes is not None:
             return np.asarray(nodes, dtype=np.int64)
         return np.array([getattr(a.loc, "node", a.loc) for a in problem.agents], np.int64)

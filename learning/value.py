@@ -88,7 +88,7 @@ class ZoneValue:
         if cost.size == 0 or w == 0:
             return cost
         now = float(problem.time)
-        nodes = getattr(problem.agents, "nodes", None)
+        nodes = problem.agents.nodes
         if nodes is None:
             nodes = [getattr(a.loc, "node", a.loc) for a in problem.agents]
         picks = [t.loc for t in problem.tasks]
@@ -296,7 +296,7 @@ def scenario_for(path: str | Path, batch_window: float, hours: float | None = No
                  trips_per_day: float | None = None):
     """The scenario of a study: its sweep dropped, the batch window fixed, optionally a
     shorter run (``hours``) or another demand (``trips_per_day``)."""
-    from dispatch.config.scenario import SweepConfig
+    from dispatch.config.sweep import SweepConfig
     from dispatch.scenario.load import load_scenario
 
     sc = load_scenario(path)

@@ -2,7 +2,7 @@
 their idle supply.
 
 Zones are the cells of a regular grid of ``zone`` metres over the network's node coordinates
-(:class:`repositioners.zones.Zones`); a vehicle sent to a zone drives to its centre node (the
+(:class:`learning.zones.Zones`); a vehicle sent to a zone drives to its centre node (the
 node nearest the mean position of the zone's nodes). At each call (every ``[reposition]
 interval`` seconds):
 
@@ -32,7 +32,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from dispatch.api.repositioner import Repositioner, RepositionView
-from repositioners.zones import Zones
+from learning.zones import Zones
 
 
 def shares(total: int, weights: np.ndarray) -> np.ndarray:
@@ -65,13 +65,13 @@ class DemandRepositioner(Repositioner):
     def zones(self, space) -> Zones:
         """The zones of ``space`` (computed once per network)."""
         if self._net is not space or self._zones is None:
-            self._zones, self._net = Zones.grid(space.xy, self.zone), space
+            self._zones, self._net = Zones(space.xy, self.zone), space
         return self._zones
 
     def reposition(self, view: RepositionView) -> Mapping[int, int]:
         """The moves of one call (see the module docstring)."""
         zones = self.zones(view.space)
-        nz = zones.count
+        nz = zones.n
         demand = np.bincount(zones.of_node[view.request_nodes], minlength=nz)
         if view.n_vehicles == 0 or demand.sum() == 0:
             return {}
@@ -89,12 +89,12 @@ class DemandRepositioner(Repositioner):
         rank = np.arange(slot_zone.size) - np.repeat(np.cumsum(deficit) - deficit, deficit)
         slot_zone = slot_zone[np.lexsort((slot_zone, -(deficit[slot_zone] - rank)))[:k]]
         rows = np.flatnonzero(still & (surplus[vz] > 0))
-        times = view.travel_times(rows, zones.centre[slot_zone])
+        times = view.travel_times(rows, zones.centre_nodes[slot_zone])
         keep = np.repeat(np.flatnonzero(surplus), (movable - surplus)[surplus > 0])
         finite = times[np.isfinite(times)]
         big = (float(finite.max()) + 1.0 if finite.size else 1.0) * (k + keep.size + 1)
         cost = np.hstack([np.where(np.isfinite(times), times, big),
                           np.where(vz[rows][:, None] == keep[None, :], 0.0, big)])
         r, c = linear_sum_assignment(cost)
-        return {int(view.vehicle_ids[rows[i]]): int(zones.centre[slot_zone[j]])
+        return {int(view.vehicle_ids[rows[i]]): int(zones.centre_nodes[slot_zone[j]])
                 for i, j in zip(r, c) if j < k and cost[i, j] < big}

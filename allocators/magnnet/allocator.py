@@ -118,7 +118,7 @@ from pathlib import Path
 import numpy as np
 
 from dispatch.api.decentralized import DecentralizedAllocator
-from dispatch.api.problem import AgentViews, AllocationProblem
+from dispatch.api.problem import AllocationProblem
 from dispatch.errors import AllocationError
 
 CHECKPOINTS = Path(__file__).resolve().parent / "checkpoints"
@@ -553,10 +553,10 @@ class MagnnetAllocator(DecentralizedAllocator):
         return self._flies_all[rows]
 
     def _flies(self, problem, rows: np.ndarray) -> np.ndarray:
-        """Whether the agents at ``rows`` fly. A run's vehicles (the dispatcher's
-        :class:`AgentViews`) are read once per vehicle id: a vehicle keeps its kind, and views
-        are built lazily (a thousand per decision is slow)."""
-        if not isinstance(problem.agents, AgentViews):  # views built already (hand-made)
+        """Whether the agents at ``rows`` fly. A run's vehicles (the dispatcher's lazy
+        :class:`~dispatch.api.problem.AgentViews`) are read once per vehicle id: a vehicle
+        keeps its kind, and views are built lazily (a thousand per decision is slow)."""
+        if not problem.agents.lazy:  # views built already (hand-made): ids may be reused
             return np.array([problem.agents[r].flies for r in rows.tolist()], bool)
         known = self.__dict__.setdefault("_flies_by_id", {})
         ids = problem.agent_ids[rows].tolist()

@@ -127,7 +127,7 @@ class DayTrainer:
         v_now = v_drop = np.zeros(1)
         if self.value is not None and n and m:
             zv = self.value.value
-            nodes = getattr(problem.agents, "nodes", None)
+            nodes = problem.agents.nodes
             if nodes is None:
                 nodes = [a.loc for a in problem.agents]
             v_now = zv.value(zv.zones.of_node[np.asarray(nodes, np.int64)], now)

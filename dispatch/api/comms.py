@@ -38,7 +38,6 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components, shortest_path
-from scipy.spatial import cKDTree
 
 from dispatch.api.problem import AgentViews
 
@@ -58,7 +57,10 @@ def comm_graph(positions, comm_range: float | None) -> np.ndarray:
     adj = np.zeros((n, n), dtype=bool)
     if n > 1:
         # candidate pairs from a k-d tree (a fleet of 1,000 vehicles: no N x N distances),
-        # then the same test as a dense comparison would make, pair by pair
+        # then the same test as a dense comparison would make, pair by pair (scipy.spatial
+        # imported here: only a run with a communication range pays for it)
+        from scipy.spatial import cKDTree
+
         pairs = cKDTree(pos).query_pairs(comm_range + 1e-6, output_type="ndarray")
         if len(pairs):
             a, b = pairs[:, 0], pairs[:, 1]
@@ -120,10 +122,10 @@ def relay_needed(comm: np.ndarray) -> np.ndarray:
 
 
 
-def _positions(space, agents) -> np.ndarray:
-    """``(N, 3)`` positions of a decision's agents: from their node array where the sequence
-    carries one (road points part-way along an edge one by one), else view by view."""
-    nodes = agents.nodes if isinstance(agents, AgentViews) else None
+def _positions(space, agents: AgentViews) -> np.ndarray:
+    """``(N, 3)`` positions of a decision's agents: from their node array where they carry
+    one (road points part-way along an edge one by one), else view by view."""
+    nodes = agents.nodes
     if nodes is None:
         return space.positions([a.loc for a in agents])
     out = space.positions(nodes)
@@ -141,7 +143,7 @@ class Hearing:
         self.space, self.comms, self.links = space, comms, links
         self._everyone: dict[int, np.ndarray] = {}  # n -> read-only all-True (n, n), no memory
 
-    def __call__(self, agents, now: float):
+    def __call__(self, agents: AgentViews, now: float):
         """``(comm, positions)`` of a decision's agents: who hears whom (the ``[comms]`` range,
         a blackout's links) and their ``(N, 3)`` positions; with an unlimited range and no
         faults a broadcast all-True ``comm`` (no N x N matrix) and the positions as a function
@@ -152,7 +154,7 @@ class Hearing:
             comm = self._everyone.get(len(agents))
             if comm is None:
                 comm = self._everyone[len(agents)] = np.broadcast_to(np.True_, (len(agents),) * 2)
-            nodes = agents.nodes if isinstance(agents, AgentViews) else None
+            nodes = agents.nodes
             if nodes is not None and not agents.points.size:
                 def apos():  # node positions (fixed now), computed if someone reads them
                     return space.positions(nodes)

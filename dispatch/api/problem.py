@@ -67,9 +67,11 @@ class AgentViews(Sequence[AgentView]):
     ``remaining`` (seconds left to that node: > 0 only part-way along an edge), with
     ``points`` the indices of those agents part-way along an edge (``remaining`` is 0 for all
     others). ``ascending`` is True when the ids are known to be strictly increasing.
+    ``lazy`` is True where the views are built when first read (the dispatcher's: each id
+    names a run's vehicle, which keeps its kind), False where they were given (:meth:`of`).
     """
 
-    __slots__ = ("ids", "nodes", "remaining", "points", "ascending", "_make", "_views")
+    __slots__ = ("ids", "nodes", "remaining", "points", "ascending", "lazy", "_make", "_views")
 
     def __init__(self, ids: np.ndarray, make, nodes: np.ndarray | None = None,
                  remaining: np.ndarray | None = None, points: np.ndarray | None = None,
@@ -77,6 +79,7 @@ class AgentViews(Sequence[AgentView]):
         self.ids = np.asarray(ids, dtype=np.int64)
         self.ids.setflags(write=False)
         self.ascending = ascending
+        self.lazy = True
         self._make = make
         self._views: list[AgentView | None] | None = None
         self.nodes, self.remaining = nodes, remaining
@@ -93,6 +96,7 @@ class AgentViews(Sequence[AgentView]):
         views = tuple(views)
         out = cls(np.fromiter((v.id for v in views), np.int64, len(views)), views.__getitem__)
         out._views = list(views)
+        out.lazy = False
         return out
 
     def __len__(self) -> int:
@@ -216,15 +220,15 @@ class AllocationProblem:
     straight-line distances; costs come from ``cost``). ``cell_size`` (metres) is the voxel
     world's cell (1.0 on roads).
 
-    ``agents`` is a sequence of views: the dispatcher passes an :class:`AgentViews` (lazy, with
-    arrays), hand-made problems may pass a tuple; :attr:`agent_ids` / :attr:`task_ids` give the
-    ids as arrays either way. With an unlimited communication range ``comm`` is a read-only
+    ``agents`` is an :class:`AgentViews`: the dispatcher's (lazy, with arrays), or the views a
+    hand-made problem gives (any sequence), wrapped by :meth:`AgentViews.of`;
+    :attr:`agent_ids` / :attr:`task_ids` give the ids as arrays. With an unlimited communication range ``comm`` is a read-only
     all-True broadcast array (no ``N x N`` memory). ``agent_pos`` / ``task_pos`` may be given as
     zero-argument callables (the dispatcher does): computed when first read, then kept.
     """
 
     time: float
-    agents: Sequence[AgentView]
+    agents: AgentViews
     tasks: tuple[TaskView, ...]
     cost: np.ndarray
     comm: np.ndarray
@@ -273,6 +277,8 @@ class AllocationProblem:
         return obj
 
     def __post_init__(self) -> None:
+        if not isinstance(self.agents, AgentViews):  # views given by hand: one type to read
+            self.__dict__["agents"] = AgentViews.of(self.agents)
         n, m = len(self.agents), len(self.tasks)
         for name in ("agent_pos", "task_pos"):
             arr = self.__dict__["_" + name]
@@ -316,21 +322,13 @@ class AllocationProblem:
     def n_agents(self) -> int:
         return len(self.agents)
 
-    # agent_ids / task_ids are cached by hand: functools.cached_property takes a lock on
-    # every first read, and a run builds a problem per decision
     @property
     def agent_ids(self) -> np.ndarray:
         """The agents' ids (int64, aligned with ``agents``; read-only)."""
-        ids = self.__dict__.get("_agent_ids")
-        if ids is None:
-            if isinstance(self.agents, AgentViews):
-                ids = self.agents.ids
-            else:
-                ids = np.fromiter((a.id for a in self.agents), np.int64, len(self.agents))
-                ids.setflags(write=False)
-            self.__dict__["_agent_ids"] = ids
-        return ids
+        return self.agents.ids
 
+    # task_ids is cached by hand: functools.cached_property takes a lock on every first
+    # read, and a run builds a problem per decision
     @property
     def task_ids(self) -> np.ndarray:
         """The tasks' ids (int64, aligned with ``tasks``; read-only)."""

@@ -15,7 +15,8 @@ answers every question about location (RidePy's ``TransportSpace`` is the model)
 What is built from a space is built by its own module, with one function per space kind in a
 table there: the run's demand (:func:`dispatch.plan.demand.demand_for`), where the fleet starts
 (:func:`dispatch.fleet.placement.place_fleet`), random views for the plugin checks
-(:data:`dispatch.checks.planners.SAMPLERS`); the PyBullet mirror
+(:data:`dispatch.checks.planners.SAMPLERS`) and what they compare
+(:data:`~dispatch.checks.planners.GUARDED`); the PyBullet mirror
 (:func:`dispatch.space.physics.mirror_of`) and reservation-based execution
 (:meth:`dispatch.plan.reservations.Traffic.in_space`) exist for voxel worlds only.
 
@@ -58,7 +59,7 @@ from dispatch.locations import Location, Position
 __all__ = ["KINDS", "Space", "space_class", "space_for"]
 
 #: The spaces, by the kind a scenario's ``[world]`` table parses to
-#: (:attr:`dispatch.config.scenario.WorldConfig.space`): ``"module:Class"`` of each, imported when
+#: (:attr:`dispatch.config.world.WorldConfig.space`): ``"module:Class"`` of each, imported when
 #: first asked for (a voxel run never imports the road network's libraries).
 KINDS: dict[str, str] = {"voxel": "dispatch.space.world:World",
                          "road": "dispatch.space.roads:RoadNetwork"}
@@ -101,6 +102,10 @@ class Space(ABC):
     #: metres of a cell's side where the space is a grid of cells (the voxel world's
     #: :attr:`dispatch.api.problem.AllocationProblem.cell_size`); 1.0 in a space without cells
     cell: float = 1.0
+    #: ``(x, y, z)`` of each node, in node order, as Python floats (node ``i``'s
+    #: :meth:`position`), where locations may be node indices (a road network); None in a
+    #: space without nodes
+    node_positions: Sequence[Position] | None = None
 
     # ------------------------------------------------------------ of its configuration
     @classmethod

@@ -13,6 +13,8 @@ from typing import Any
 
 import numpy as np
 
+from dispatch.config.faults import FaultConfig
+
 
 @dataclass(frozen=True)
 class EnergyConfig:
@@ -73,7 +75,7 @@ class ChargingConfig:
     params: tuple[tuple[str, tuple[tuple[str, Any], ...]], ...] = ()
     sweep: tuple[str, ...] = ()
     #: [faults] tow: seconds until a stranded vehicle stands charged-able at the nearest station
-    tow: float = 3600.0
+    tow: float = FaultConfig.tow
 
     def params_of(self, name: str) -> tuple[tuple[str, Any], ...]:
         return dict(self.params).get(name, ())

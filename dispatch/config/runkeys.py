@@ -7,7 +7,7 @@ walks the sweep's dimensions reads this tuple: the ``[sweep]`` lists a scenario 
 (:meth:`dispatch.config.scenario.Scenario.runs`), the run's partition and run id
 (:class:`dispatch.config.scenario.RunSpec`), the settings a run's point replaces in a scenario's
 digest
-(:mod:`dispatch.run.runner`), the ``dispatch.run_keys`` metadata every file of a run carries (so
+(:mod:`dispatch.run.resume`), the ``dispatch.run_keys`` metadata every file of a run carries (so
 that readers, :mod:`analysis` among them, learn the run keys from the files) and the
 instance a run is paired on in the CLI's tables (every run key but the allocator).
 
@@ -32,12 +32,12 @@ class RunKey:
     """One dimension of a run.
 
     ``name``: the summary column, the Hive partition key and the name in ``dispatch.run_keys``.
-    ``sweep``: its ``[sweep]`` list (:class:`dispatch.config.scenario.SweepConfig` field; None: not
+    ``sweep``: its ``[sweep]`` list (:class:`dispatch.config.sweep.SweepConfig` field; None: not
     swept). ``setting``: ``(table, key)`` of the scenario setting a run's value replaces
     (``""``: top level; None: none). ``tag``: the prefix of its value in the run id.
     ``optional``: named in the partition and run id only where the scenario declares it.
     ``default``: the value of runs whose files lack the key (written before it existed).
-    ``digest``: its name in a run's digest (:func:`dispatch.run.runner.run_digest`; kept as the
+    ``digest``: its name in a run's digest (:func:`dispatch.run.resume.run_digest`; kept as the
     digests of earlier versions spelt it, so complete runs stay complete)."""
 
     name: str

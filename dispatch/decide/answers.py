@@ -3,20 +3,35 @@ task once, at a finite cost (:func:`validate`); a multi-request answer's routes 
 stops in a feasible order (:func:`route_stops`). Ids are looked up by binary search
 (:func:`finders`), so a decision's answer is checked without a dict over all its agents.
 
-The dispatcher checks every answer with these before the hand-out;
-:mod:`dispatch.checks.allocators` and plugin tests use them too.
+The dispatcher checks every answer with these before the hand-out and passes it on as a
+:class:`Checked`; :mod:`dispatch.checks.allocators` and plugin tests use them too.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from typing import NamedTuple
 
 import numpy as np
 
-from dispatch.api.problem import AgentViews, Allocation, AllocationProblem
+from dispatch.api.problem import Allocation, AllocationProblem
 from dispatch.errors import AllocationError
 from dispatch.plan.stops import DROPOFF, PICKUP, PlannedStop
+
+
+class Checked(NamedTuple):
+    """An allocator's answer to ``problem`` as the dispatcher checked it: the ``allocation``,
+    the allocator's ``seconds``, for a multi-request answer the checked ``routes`` (agent id
+    -> (stop rows of :func:`route_stops`, planned arrival times); empty otherwise) and each
+    pair's ``(row, column)`` in the problem, last (:func:`dispatch.decide.lazy.certify` reads
+    an answer's last item as its pairs)."""
+
+    problem: AllocationProblem
+    allocation: Allocation
+    seconds: float
+    routes: dict
+    index: list
 
 
 def _ids(ids) -> str:
@@ -168,15 +183,10 @@ def route_stops(problem: AllocationProblem, aid: int, route, new: dict) -> list[
 
 
 def finders(problem: AllocationProblem):
-    """``(agent row finder, task column finder)`` of a problem (see :func:`_rows`), made once
-    per problem (kept in its ``__dict__``: the problem is frozen, the finders derive from it)."""
-    f = problem.__dict__.get("_finders")
-    if f is None:
-        f = problem.__dict__["_finders"] = (
-            _rows(problem.agent_ids,
-                  isinstance(problem.agents, AgentViews) and problem.agents.ascending),
-            _rows(problem.task_ids))
-    return f
+    """``(agent row finder, task column finder)`` of a problem (see :func:`_rows`); cheap to
+    make (a dict of a few ids, else a sort only where the ids do not ascend), so callers that
+    look up many ids make them once."""
+    return _rows(problem.agent_ids, problem.agents.ascending), _rows(problem.task_ids)
 
 
 def _rows(ids: np.ndarray, ascending: bool = False) -> Callable[[object], int]:

@@ -78,7 +78,7 @@ from typing import TYPE_CHECKING
 from dispatch.api.comms import components
 from dispatch.api.contracts import Allocator
 from dispatch.api.problem import Allocation, AllocationProblem
-from dispatch.decide.answers import finders, route_stops, validate
+from dispatch.decide.answers import Checked, finders, route_stops, validate
 from dispatch.decide.offer_step import (Estimates, Offering, insertion_estimates, plain_estimates,
                                         route_estimates)
 from dispatch.decide.pipeline import Pipeline
@@ -100,7 +100,7 @@ log = logging.getLogger(__name__)
 
 class DecisionDeferred(BaseException):
     """Raised by an allocator's ``allocate`` to answer the decision later, from outside the
-    simulation (:mod:`dispatch.rl`): the dispatcher's loop waits for ``resume`` (an event
+    simulation (:mod:`learning.rl`): the dispatcher's loop waits for ``resume`` (an event
     the deferring code triggers at the same simulated instant, once it holds the answer) and
     then decides again (see :meth:`Dispatcher._decide_or_defer`). A ``BaseException`` so
     that the dispatcher's wrapping of plugin errors lets it through; raise it only before
@@ -124,6 +124,8 @@ class _Pending:
     components: int
     holder: dict = field(default_factory=dict)  # reassign: task id -> vehicle id at decision
     index: list = field(default_factory=list)  # each pair's (row, column) in the problem
+    #: a multi-request answer's checked routes (:attr:`Checked.routes`; cut by the offers)
+    routes: dict = field(default_factory=dict)
     #: shared rides: (row, column) of a pair whose vehicle has a plan -> where its stops go
     #: (see :class:`dispatch.plan.insertion.Insertion`)
     inserts: Inserts | dict = field(default_factory=dict)
@@ -188,11 +190,11 @@ class Dispatcher:
 
     def _decide_or_defer(self):
         """:meth:`decide`, or, when the allocator defers it (:class:`DecisionDeferred`: the
-        answer comes from outside the simulation, see :mod:`dispatch.rl`), wait for the
+        answer comes from outside the simulation, see :mod:`learning.rl`), wait for the
         deferring allocator's ``resume`` event and decide again: nothing moved meanwhile (the
         event is triggered at the same instant, ahead of the events already queued), so the
         same problem is built again and the allocator now answers it. The hook that lets
-        :mod:`dispatch.rl` drive decisions step by step without threads; a run with an
+        :mod:`learning.rl` drive decisions step by step without threads; a run with an
         ordinary allocator goes through :meth:`decide` exactly as before."""
         try:
             self.decide()
@@ -213,7 +215,8 @@ class Dispatcher:
         d = self.pipeline.build(self.env.now)
         if d is None:
             return
-        problem, allocation, decide_s, index = self.pipeline.answer(d, self._ask)
+        answer = self.pipeline.answer(d, self._ask)
+        problem, allocation, decide_s = answer.problem, answer.allocation, answer.seconds
         self.tally.decide_seconds += decide_s
         delay = allocation.hops * self.latency
         conflicted = allocation.conflicted_tasks() if allocation.requests else set()
@@ -223,7 +226,8 @@ class Dispatcher:
         comm = d.comm
         n_comp = 1 if comm.strides == (0, 0) else components(comm)[0]
         self._pending = _Pending(problem, allocation, d.requests, d.cost_s, decide_s, delay,
-                                 n_comp, d.holder, index, d.inserts, d.cut)
+                                 n_comp, d.holder, answer.index, answer.routes, d.inserts,
+                                 d.cut)
         if delay <= 0:
             self._hand_out()
 
@@ -231,9 +235,8 @@ class Dispatcher:
         """Where an allocator's error happened (see :class:`dispatch.decide.pipeline.Blame`)."""
         return self.blame.where("allocator", self.allocator)
 
-    def _ask(self, problem: AllocationProblem):
-        """The allocator's answer to ``problem``, checked: ``(allocation, seconds it took,
-        each pair's (row, column))``."""
+    def _ask(self, problem: AllocationProblem) -> Checked:
+        """The allocator's answer to ``problem``, checked."""
         t1 = time.perf_counter()
         cost_given = problem.cost
         try:
@@ -255,9 +258,7 @@ class Dispatcher:
             routes = self._routes(problem, allocation) if multi and allocation.routes else {}
         except AllocationError as e:
             raise AllocationError(f"{self._where()}: {e}") from None
-        if routes:
-            object.__setattr__(allocation, "_checked_routes", routes)  # (a cache, frozen)
-        return allocation, decide_s, index
+        return Checked(problem, allocation, decide_s, routes, index)
 
     def _routes(self, problem: AllocationProblem, allocation: Allocation) -> dict:
         """The routes of a multi-request answer, checked: agent id -> (stop rows of
@@ -297,9 +298,8 @@ class Dispatcher:
                 allocation = self._offered(p, allocation)
             handed = tuple(allocation.pairs)
             pair_cost = [float(cost[i, j]) for i, j in p.index]
-            routes = allocation.__dict__.get("_checked_routes")
-            if routes:
-                self._follow(p, allocation, routes, pair_cost)
+            if p.routes:
+                self._follow(p, allocation, p.routes, pair_cost)
                 return
             if p.inserts:
                 at = [p.inserts.get(ij) for ij in p.index]
@@ -323,15 +323,13 @@ class Dispatcher:
 
             handed = tuple((a, t) for a, t in allocation.pairs
                            if available(t) and vehicle_unchanged(a))
-            routes = allocation.__dict__.get("_checked_routes") or {}
-            if routes:  # a route planned before the deliberation is stale: dropped
-                handed = tuple((a, t) for a, t in handed if a not in routes)
+            if p.routes:  # a route planned before the deliberation is stale: dropped
+                handed = tuple((a, t) for a, t in handed if a not in p.routes)
+            row, col = finders(p.problem)
             if p.inserts:  # a pooled pair is stale once its vehicle has moved on: dropped
-                row, col = finders(p.problem)
                 handed = tuple((a, t) for a, t in handed
                                if (row(a), col(t)) not in p.inserts)
             if self.offering is not None:  # (plain pairs only: routes, insertions dropped)
-                row, col = finders(p.problem)
                 index = [(row(a), col(t)) for a, t in handed]
                 handed, _ = self._offer(p, handed, index, {})
             if len(handed) != len(allocation.pairs):
@@ -339,7 +337,6 @@ class Dispatcher:
                           self.tally.decisions, len(allocation.pairs) - len(handed))
                 allocation = replace(allocation, pairs=handed)
                 self.wakeup()
-            row, col = finders(p.problem)
             pair_cost = [float(cost[row(a), col(t)]) for a, t in allocation.pairs]
         self._recorded(p, allocation, pair_cost)
         if not holding:
@@ -350,17 +347,15 @@ class Dispatcher:
 
     def _offered(self, p: _Pending, allocation: Allocation) -> Allocation:
         """``allocation`` less the pairs whose riders decline their offers (``p.index`` cut
-        to match; a routed vehicle's route re-timed without the declined requests' stops)."""
-        routes = allocation.__dict__.get("_checked_routes") or {}
-        kept, routes = self._offer(p, allocation.pairs, p.index, routes)
+        to match; a routed vehicle's route in ``p.routes`` re-timed without the declined
+        requests' stops)."""
+        kept, routes = self._offer(p, allocation.pairs, p.index, p.routes)
         if len(kept) == len(allocation.pairs):
             return allocation
         keep = set(kept)
         p.index = [ij for pair, ij in zip(allocation.pairs, p.index) if pair in keep]
-        allocation = replace(allocation, pairs=tuple(kept))
-        if routes:
-            object.__setattr__(allocation, "_checked_routes", routes)  # (a cache, frozen)
-        return allocation
+        p.routes = routes
+        return replace(allocation, pairs=tuple(kept))
 
     def _offer(self, p: _Pending, pairs, index, routes: dict) -> tuple[tuple, dict]:
         """``(pairs accepted, routes)``: each of ``pairs`` (at ``index``, its (row, column)

@@ -55,6 +55,7 @@ from dispatch.api.comms import Hearing
 from dispatch.api.contracts import Allocator, Planner
 from dispatch.api.problem import AgentViews, AllocationProblem
 from dispatch.api.space import Space
+from dispatch.decide.answers import Checked
 from dispatch.decide.candidates import cut as candidate_cut
 from dispatch.decide.lazy import certify, resolve_open
 from dispatch.decide.meeting import meeting_costs, view_at
@@ -67,7 +68,8 @@ from dispatch.plan.stops import OBJECTIVES
 from dispatch.plan.tasks import TaskBook, TaskState
 
 if TYPE_CHECKING:
-    from dispatch.config.scenario import CommsConfig, DispatchConfig
+    from dispatch.config.comms import CommsConfig
+    from dispatch.config.dispatching import DispatchConfig
     from dispatch.plan.operator import Operator
     from dispatch.plan.tasks import Task
     from dispatch.plan.vehicles import Fleet
@@ -194,16 +196,17 @@ class Problems:
         return make
 
 
-#: ``ask(problem) -> (allocation, seconds it took, each pair's (row, column))``: the
-#: dispatcher's question to the allocator, its answer checked.
-Ask = Callable[[AllocationProblem], tuple]
+#: ``ask(problem) -> Checked``: the dispatcher's question to the allocator, its answer
+#: checked.
+Ask = Callable[[AllocationProblem], Checked]
 
 
-def certified(ask, cost, exact, compute, now: float, deadline: np.ndarray, tally: Tally):
+def certified(ask, cost, exact, compute, now: float, deadline: np.ndarray,
+              tally: Tally) -> tuple[Checked, float]:
     """The certificate loop of lazy costs (:func:`dispatch.decide.lazy.certify`) around ``ask``
-    (``cost -> (problem, allocation, allocator seconds, pair indices)``): ``(problem,
-    allocation, allocator seconds, pair indices, seconds spent computing exact pairs)``; the
-    latter, the rounds and the pairs computed are added to ``tally``."""
+    (``cost -> Checked``): ``(the last answer, its seconds the allocator's in every round;
+    the seconds spent computing exact pairs)``; the latter, the rounds and the pairs computed
+    are added to ``tally``."""
     spent = [0.0]
 
     def timed(c):
@@ -213,13 +216,12 @@ def certified(ask, cost, exact, compute, now: float, deadline: np.ndarray, tally
         return answer
 
     t0 = time.perf_counter()
-    (problem, allocation, _, index), rounds, pairs = certify(
-        timed, cost, exact, compute, now, deadline)
+    answer, rounds, pairs = certify(timed, cost, exact, compute, now, deadline)
     extra = time.perf_counter() - t0 - spent[0]
     tally.cost_seconds += extra
     tally.lazy_rounds += rounds
     tally.lazy_pairs += pairs
-    return problem, allocation, spent[0], index, extra
+    return answer._replace(seconds=spent[0]), extra
 
 
 # ----------------------------------------------------------------------------- composed
@@ -391,19 +393,17 @@ class Pipeline:
             out.append(view if p is None else view_at(t, p))
         return tuple(out)
 
-    def answer(self, d: Decision, ask: Ask) -> tuple:
-        """``(problem, allocation, allocator seconds, pair indices)`` of decision ``d``:
-        ``ask``'s answer to its problem, or with lazy costs the certified one (the seconds
-        spent computing exact pairs are added to ``d.cost_s``)."""
-        def solve(cost: np.ndarray):
-            problem = d.make(cost)
-            allocation, decide_s, index = ask(problem)
-            return problem, allocation, decide_s, index
+    def answer(self, d: Decision, ask: Ask) -> Checked:
+        """``ask``'s answer to decision ``d``'s problem, or with lazy costs the certified one
+        (its seconds those of every round; the seconds spent computing exact pairs are added
+        to ``d.cost_s``)."""
+        def solve(cost: np.ndarray) -> Checked:
+            return ask(d.make(cost))
 
         if not self.lazy:
             return solve(d.cost)
-        problem, allocation, decide_s, index, extra = certified(
+        answer, extra = certified(
             solve, d.cost, d.exact, self.costs.exact(d.agents, d.tasks), d.now,
             np.array([t.deadline for t in d.requests]), self.tally)
         d.cost_s += extra  # computing exact pairs is cost time
-        return problem, allocation, decide_s, index
+        return answer

@@ -222,7 +222,7 @@ def insertion_costs_of(cost: np.ndarray, slots: np.ndarray, tasks: list, now: fl
     ep = np.array([t.earliest_pickup for t in tasks])
     point = np.array([t.dropoff is None for t in tasks])
     pd = np.array([0.0 if t.dropoff is None else t.direct_time for t in tasks])
-    if getattr(planner, "inner", None) is not None and not point.all():
+    if planner.free_flow is not planner and not point.all():
         # a congested planner (dispatch.space.congestion): the drive at this hour, not free flow
         trips = np.flatnonzero(~point)
         pd[trips] = planner.between([tasks[k].loc for k in trips.tolist()],

@@ -15,7 +15,7 @@ from dispatch.plan.tasks import TaskBook, TaskState
 
 if TYPE_CHECKING:
     from dispatch.api.contracts import Allocator, Planner
-    from dispatch.config.scenario import DispatchConfig
+    from dispatch.config.dispatching import DispatchConfig
     from dispatch.decide.tally import Blame
     from dispatch.plan.vehicles import Fleet
 

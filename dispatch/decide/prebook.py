@@ -36,7 +36,7 @@ booked rider up before the requested departure.
 from __future__ import annotations
 
 import math
-from dataclasses import fields, replace
+from dataclasses import replace
 
 import numpy as np
 
@@ -69,11 +69,7 @@ def entry_times(trips: Trips, mode: str, lead: float) -> np.ndarray:
 def in_entry_order(trips: Trips, entry: np.ndarray) -> tuple[Trips, np.ndarray]:
     """``(trips, entry)`` reordered by entry time (stable: ties keep the trace's order)."""
     order = np.argsort(entry, kind="stable")
-    n = len(trips)
-    cut = {f.name: getattr(trips, f.name)[order] for f in fields(trips)
-           if isinstance(getattr(trips, f.name), np.ndarray)
-           and getattr(trips, f.name).shape[:1] == (n,)}
-    return replace(trips, **cut), entry[order]
+    return trips.take(order), entry[order]
 
 
 def earliest_views(requests: list, views: tuple) -> tuple:
@@ -155,11 +151,10 @@ class PrebookSource(TaskSource):
         self.release(req, booking)
 
     def _run(self):
-        cfg = self.cfg
-        if cfg.kind == "trace":
+        if self.kind == "trace":
             trips = self.trips
-            if cfg.count is not None:
-                trips = trips.subset(np.arange(len(trips)) < cfg.count, "tasks.count")
+            if self.count is not None:
+                trips = trips.subset(np.arange(len(trips)) < self.count, "tasks.count")
             if self.share > 0 and not trips.prebooked:
                 trips = synthesize(trips, self.share, self.lead, self.booking_rng)
             trips, entry = in_entry_order(trips,

@@ -102,10 +102,18 @@ class Trips:
         n_out = int(keep.size - keep.sum())
         if n_out == 0:
             return self
-        cut = {f.name: getattr(self, f.name)[keep] for f in fields(self)
-               if isinstance(getattr(self, f.name), np.ndarray)
-               and getattr(self, f.name).shape[:1] == keep.shape}
-        return replace(self, **cut, dropped=self.dropped + ((reason, n_out),))
+        return replace(self.take(keep), dropped=self.dropped + ((reason, n_out),))
+
+    def take(self, index: np.ndarray) -> Trips:
+        """The trips at ``index`` (a boolean mask or positions, e.g. a new order): every
+        per-trip array is cut alike; :attr:`dropped` is kept."""
+        n = len(self)
+        cut = {}
+        for f in fields(self):
+            column = getattr(self, f.name)
+            if isinstance(column, np.ndarray) and column.shape[:1] == (n,):
+                cut[f.name] = column[index]
+        return replace(self, **cut)
 
 
 def parse_datetime(v) -> datetime:

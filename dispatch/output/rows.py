@@ -171,7 +171,7 @@ def event_writer(recorder, space):
     trip): it keeps the event itself; its position is looked up when the chunk is written,
     for the whole chunk at once (on roads, a gather from the nodes' positions)."""
     position = space.position
-    nodes = getattr(space, "node_positions", None)
+    nodes = space.node_positions
     n = len(nodes) if nodes is not None else 0
     xyz = np.array(nodes, dtype=np.float64).reshape(-1, 3) if nodes is not None else None
 
@@ -203,9 +203,10 @@ def event_writer(recorder, space):
 
 
 class RunRecording:
-    """What one run records into ``recorder``: made when the run is built (the space's
-    metadata and its static tables' metadata are set at once), :meth:`attach`-ed to the event
-    bus, and finished by :meth:`end_tables`, :meth:`chargers` and :meth:`summary`.
+    """What one run records into ``recorder`` (its ``out``: the results folder, None for a
+    recorder that keeps none): made when the run is built (the space's metadata and its
+    static tables' metadata are set at once), :meth:`attach`-ed to the event bus, and finished
+    by :meth:`end_tables`, :meth:`chargers` and :meth:`summary`.
 
     ``stats`` (:class:`dispatch.output.stats.RunStats`) counts the closed tasks; ``on_close`` are
     the task book's closure subscribers (the statistics, then the ``tasks`` row);
@@ -216,7 +217,7 @@ class RunRecording:
         self.stats = RunStats()
         recorder.metadata.update(space.describe())
         # the space's shared tables (a road network), once per results folder
-        recorder.metadata.update(space_files.store(getattr(recorder, "out", None), space))
+        recorder.metadata.update(space_files.store(recorder.out, space))
         self.static = space.tables()
         for name, (meta, _rows) in self.static.items():
             recorder.table_metadata[name] = meta

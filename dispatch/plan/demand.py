@@ -21,7 +21,7 @@ import numpy as np
 
 from dispatch.api.space import Space
 from dispatch.api.voxels import Grid
-from dispatch.config.scenario import TaskConfig
+from dispatch.config.tasks import TaskConfig
 from dispatch.errors import ScenarioError
 from dispatch.files.traces import Trips
 from dispatch.plan.tasks import Demand, Request

@@ -34,6 +34,7 @@ import numpy as np
 import simpy
 
 from dispatch.api.problem import TaskView
+from dispatch.config.tasks import TaskConfig
 from dispatch.events import EventBus
 from dispatch.locations import Location
 
@@ -118,9 +119,10 @@ class Task:
     offers: int = 0  # offers made to its rider (dispatch.api.acceptor; 0 without an acceptor)
     fare: float = math.nan  # the fare of its last offer ([pricing]; nan without)
     #: meeting points (dispatch.decide.meeting): metres the rider may walk to a boarding point and
-    #: from an alighting point (0: door to door), and their walking speed (m/s)
+    #: from an alighting point (0: door to door), and their walking speed (m/s); a source sets
+    #: both, from its request or the scenario's ``[tasks]``, where the rider walks
     max_walk: float = 0.0
-    walk_speed: float = 1.4
+    walk_speed: float = TaskConfig.walk_speed
     #: the meeting points of its ride as handed out (None: door to door) and the metres walked
     meeting: object = None
 
@@ -315,54 +317,39 @@ class Demand:
 # ----------------------------------------------------------------------------- sources
 
 
-@dataclass
-class SourceConfig:
-    """What a task source needs from the scenario (seconds; None where unused)."""
-
-    kind: str
-    count: int | None
-    interval: float | None
-    rate: float | None
-    max_active: int | None
-    ttl: float | None
-    max_wait: float | None
-    max_delay: float | None = None
-    max_walk: float = 0.0
-    walk_speed: float = 1.4
-
-
 class TaskSource:
     """The SimPy process that releases tasks into the book, starts their expiry timers and
     wakes the dispatcher; ``finished`` turns True (and ``on_done`` is called) when it has
-    nothing more to release."""
+    nothing more to release.
+
+    ``tasks``: the scenario's ``[tasks]``, whose limits hold for a request without its own;
+    ``count``: tasks to release (a generated source; None: no end) or the first trips of
+    ``trips`` to release (None: all): a trace's, or an empirical day's, released as a trace."""
 
     def __init__(self, env: simpy.Environment, book: TaskBook, demand: Demand,
-                 cfg: SourceConfig, rng: np.random.Generator, notify: Callable[[], None],
-                 trips=None) -> None:
-        self.env, self.book, self.demand, self.cfg = env, book, demand, cfg
-        self.rng, self.notify, self.trips = rng, notify, trips
+                 tasks: TaskConfig, count: int | None, rng: np.random.Generator,
+                 notify: Callable[[], None], trips=None) -> None:
+        self.env, self.book, self.demand, self.tasks = env, book, demand, tasks
+        self.kind = "trace" if tasks.source in ("trace", "empirical") else tasks.source
+        self.count, self.rng, self.notify, self.trips = count, rng, notify, trips
         self.finished = False
         self.on_done: Callable[[], None] = lambda: None
         self.process = env.process(self._run())
 
     @classmethod
-    def of(cls, env: simpy.Environment, book: TaskBook, demand: Demand, tasks, count,
-           day_rng: Callable[[], np.random.Generator], rng: np.random.Generator,
-           notify: Callable[[], None], **extra) -> TaskSource:
-        """The source of a scenario's ``[tasks]`` (:class:`dispatch.config.scenario.TaskConfig`)
-        releasing ``count`` tasks where it has a count (static: the run's). An empirical day
-        is drawn now (from ``day_rng()``) and released as a trace. ``extra``: a subclass's
-        own arguments (:class:`dispatch.decide.prebook.PrebookSource`)."""
-        kind, trips = tasks.source, tasks.trips
-        if kind == "empirical":
+    def of(cls, env: simpy.Environment, book: TaskBook, demand: Demand, tasks: TaskConfig,
+           count: int | None, day_rng: Callable[[], np.random.Generator],
+           rng: np.random.Generator, notify: Callable[[], None], **extra) -> TaskSource:
+        """The source of a scenario's ``[tasks]`` releasing ``count`` tasks where it has a
+        count (static: the run's). An empirical day is drawn now (from ``day_rng()``) and
+        released as a trace. ``extra``: a subclass's own arguments
+        (:class:`dispatch.decide.prebook.PrebookSource`)."""
+        trips = tasks.trips
+        if tasks.source == "empirical":
             from dispatch.files.empirical import draw_day, load_sample
 
-            kind = "trace"
             trips = draw_day(load_sample(), tasks.trips_per_day, day_rng(), tasks.weekday)
-        cfg = SourceConfig(kind, count, tasks.interval, tasks.rate, tasks.max_active,
-                           tasks.ttl, tasks.max_wait, tasks.max_delay, tasks.max_walk,
-                           tasks.walk_speed)
-        return cls(env, book, demand, cfg, rng, notify, trips, **extra)
+        return cls(env, book, demand, tasks, count, rng, notify, trips, **extra)
 
     def _done(self) -> None:
         self.finished = True
@@ -375,19 +362,18 @@ class TaskSource:
         return self._opened(task, self._limit(task))
 
     def _made(self, req: Request) -> Task:
-        """The book's task of ``req`` with the scenario's limits where the request has none."""
-        wait = req.max_wait if not math.isnan(req.max_wait) else (
-            self.cfg.max_wait if self.cfg.max_wait is not None else math.nan)
-        delay = req.max_delay if not math.isnan(req.max_delay) else (
-            self.cfg.max_delay if self.cfg.max_delay is not None else math.nan)
+        """The book's task of ``req`` with the scenario's limits where the request has none
+        (its nan)."""
+        t = self.tasks
+        wait = req.max_wait if not math.isnan(req.max_wait) else _nan_if_none(t.max_wait)
+        delay = req.max_delay if not math.isnan(req.max_delay) else _nan_if_none(t.max_delay)
         task = self.book.release(req.kind, req.loc, req.dropoff, max_wait=wait,
                                  snap_m=req.snap_m, dropoff_snap_m=req.dropoff_snap_m,
                                  passengers=req.passengers, max_delay=delay)
-        walk = req.max_walk if req.max_walk == req.max_walk else self.cfg.max_walk
+        walk = t.max_walk if math.isnan(req.max_walk) else req.max_walk
         if walk > 0:  # (door to door otherwise: the task's defaults)
             task.max_walk = walk
-            task.walk_speed = (req.walk_speed if req.walk_speed == req.walk_speed
-                               else self.cfg.walk_speed)
+            task.walk_speed = t.walk_speed if math.isnan(req.walk_speed) else req.walk_speed
         return task
 
     def _opened(self, task: Task, expire_after: float) -> Task:
@@ -405,7 +391,7 @@ class TaskSource:
 
     def _limit(self, task: Task) -> float:
         """Seconds from release after which an open task expires (ttl, max_wait)."""
-        return min(self.cfg.ttl if self.cfg.ttl is not None else math.inf,
+        return min(self.tasks.ttl if self.tasks.ttl is not None else math.inf,
                    math.inf if math.isnan(task.max_wait) else task.max_wait)
 
     def rearm(self, task: Task) -> None:
@@ -431,31 +417,30 @@ class TaskSource:
     def _generate(self):
         """Process steps: the generated requests (static, periodic, poisson), each handed to
         :meth:`_released` when drawn; ends when the count is reached (never without one)."""
-        cfg = self.cfg
-        if cfg.kind == "static":
-            for _ in range(cfg.count or 0):
+        t, count = self.tasks, self.count
+        if self.kind == "static":
+            for _ in range(count or 0):
                 self._released(self.demand.draw())
             return
-        if cfg.kind == "periodic":
+        if self.kind == "periodic":
             def gap():
-                return cfg.interval
+                return t.interval
         else:
             def gap():
-                return float(self.rng.exponential(1.0 / cfg.rate))
+                return float(self.rng.exponential(1.0 / t.rate))
         released = 0
-        while cfg.count is None or released < cfg.count:
+        while count is None or released < count:
             yield self.env.timeout(gap())
-            if cfg.max_active is not None and self.book.live >= cfg.max_active:
+            if t.max_active is not None and self.book.live >= t.max_active:
                 self.book.bus.emit(self.env.now, "skipped")
                 continue
             self._released(self.demand.draw())
             released += 1
 
     def _run(self):
-        cfg = self.cfg
-        if cfg.kind == "trace":
+        if self.kind == "trace":
             requests = self.demand.from_trace(self.trips)
-            for t in self.trips.t[: cfg.count]:
+            for t in self.trips.t[: self.count]:
                 if t > self.env.now:
                     yield self.env.timeout(t - self.env.now)
                 self.release(next(requests))  # made now, not before its time
@@ -463,5 +448,10 @@ class TaskSource:
             return
         yield from self._generate()
         self._done()
-        if cfg.kind == "static":
+        if self.kind == "static":
             yield self.env.timeout(0)
+
+
+def _nan_if_none(limit: float | None) -> float:
+    """A scenario's limit as a task holds it: nan where the scenario sets none."""
+    return math.nan if limit is None else limit

@@ -4,121 +4,15 @@ from the analysis package)."""
 
 from __future__ import annotations
 
-import argparse
 import logging
 import os
 import sys
 import time
-from pathlib import Path
 
-from dispatch import __version__
 from dispatch.errors import DispatchError
+from dispatch.run.parser import CHECKED_KINDS, OWN_COMMANDS, parser
+from dispatch.run.prepare import checked_specs
 from dispatch.run.progress import Heartbeat
-
-#: the commands of this module; a registered command of one of these names is not added
-OWN_COMMANDS = ("run", "validate", "check", "plugins", "new", "train", "sweep")
-#: the plugin kinds ``dispatch check`` checks
-CHECKED_KINDS = ("allocator", "planner", "repositioner", "charger", "acceptor", "sizer")
-
-
-def _logging_options(p: argparse.ArgumentParser, default) -> None:
-    """``-v`` and ``--debug``, on the top parser (``default`` False) and again on each
-    subcommand (``default`` SUPPRESS, so that a flag given before the subcommand is kept)."""
-    p.add_argument("-v", "--verbose", action="store_true", default=default,
-                   help="log progress of every run; an error prints its traceback too")
-    p.add_argument("--debug", action="store_true", default=default,
-                   help="debug logging; an error (a plugin's included) prints its whole "
-                        "traceback, the plugin's own frames among them")
-
-
-def _override_options(p: argparse.ArgumentParser) -> None:
-    """The scenario-key overrides of run, sweep and validate
-    (:mod:`dispatch.scenario.overrides`)."""
-    p.add_argument("--capacity", type=int, metavar="N",
-                   help="seats per vehicle (sets fleet.capacity)")
-    p.add_argument("--batch-window", type=float, metavar="SECONDS",
-                   help="seconds between batched decisions, 0: each request at once (sets "
-                        "dispatch.batch_window, and replaces the sweep's batch_window list)")
-    p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
-                   dest="overrides",
-                   help="set any scenario key (VALUE read as TOML, else as a string; e.g. "
-                        "--set tasks.max_delay=600); checked like the file; repeat")
-
-
-def _parser(commands=None) -> argparse.ArgumentParser:
-    """The parser of the command line: this module's commands, then each of ``commands``
-    (name -> :class:`dispatch.run.commands.Command`)."""
-    p = argparse.ArgumentParser(prog="dispatch", description=__doc__)
-    p.add_argument("--version", action="version", version=f"dispatch {__version__}")
-    _logging_options(p, False)
-    sub = p.add_subparsers(dest="command", required=True)
-
-    r = sub.add_parser("run", help="run a scenario (every combination of its sweep)")
-    r.add_argument("scenario", type=Path, help="the scenario file (TOML)")
-    r.add_argument("--out", type=Path, help="output folder (default: runs/<scenario name>/)")
-    r.add_argument("--allocator", help="allocator name (overrides the file and its sweep)")
-    r.add_argument("--planner", help="planner name (overrides the file and its sweep)")
-    r.add_argument("--agents", type=int, help="fleet size N (overrides the file and its sweep)")
-    r.add_argument("--seed", type=int, help="seed (overrides the file and its sweep)")
-    r.add_argument("--duration", type=float, metavar="SECONDS",
-                   help="simulated seconds before the run stops (overrides the file's "
-                        "duration; the scenario text stored with the results says so)")
-    r.add_argument("--force", action="store_true",
-                   help="overwrite earlier results of these runs in the output folder, and run "
-                        "past the resource limits (world cells, releases, tasks, runs, sizes)")
-    _override_options(r)
-
-    v = sub.add_parser("validate", help="check a scenario file and list the runs it expands to")
-    v.add_argument("scenario", type=Path, help="the scenario file (TOML)")
-    v.add_argument("--force", action="store_true",
-                   help="accept what is past the resource limits (world cells, releases, tasks, "
-                        "runs, file sizes)")
-    _override_options(v)
-    # (run's and sweep's plugin, size and seed options: validate lists the file's runs)
-    v.set_defaults(allocator=None, planner=None, agents=None, seed=None, duration=None)
-
-    c = sub.add_parser("check", help="check an installed allocator, planner, repositioner, "
-                       "charger, acceptor or fleet sizer plugin on sample problems (valid "
-                       "answers, no mutation, determinism, rng use)")
-    c.add_argument("name", help="plugin name (see dispatch plugins)")
-    c.add_argument("--kind", choices=CHECKED_KINDS,
-                   help="which kind NAME is (needed only when two kinds have that name)")
-    c.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
-                   help="a constructor parameter (VALUE read as TOML, else as a string); repeat")
-    c.add_argument("--seed", type=int, default=0, help="seed of the random problems")
-
-    sub.add_parser("plugins", help="list installed allocators, planners, repositioners, "
-                   "chargers, acceptors and commands")
-    n = sub.add_parser("new", help="write a new plugin package (`dispatch new allocator NAME`): "
-                       "installs with pip and passes `dispatch check NAME`")
-    n.add_argument("kind", choices=("allocator",), help="the kind of plugin to write")
-    n.add_argument("name", help="the plugin's name (lower-case letters, digits, _)")
-    n.add_argument("--out", type=Path, default=Path("."),
-                   help="folder to write dispatch-NAME/ into (default: here)")
-    n.add_argument("--force", action="store_true", help="overwrite the files of an existing "
-                   "dispatch-NAME/")
-    trainers = _trainers()
-    t = sub.add_parser("train", help="train a learned allocator (e.g. `dispatch train magnnet "
-                       "--agents 8`); options after the name go to its trainer (`dispatch "
-                       "train NAME --help`)",
-                       epilog="installed trainers (entry-point group dispatch.trainers): "
-                              + (", ".join(trainers) or "none"))
-    t.add_argument("trainer", help="trainer name: " + (", ".join(trainers) or "none installed"))
-    t.add_argument("trainer_args", nargs=argparse.REMAINDER,
-                   help="the trainer's own options (its --help lists them)")
-    _add_sweep_parser(sub)
-    for command in (commands or {}).values():
-        command.add_parser(sub)
-    for name, action in sub.choices.items():
-        _logging_options(action, argparse.SUPPRESS)
-    return p
-
-
-def _trainers() -> list[str]:
-    """The installed trainers' names (entry-point group dispatch.trainers), sorted."""
-    from importlib.metadata import entry_points
-
-    return sorted(ep.name for ep in entry_points(group="dispatch.trainers"))
 
 
 class _Output:
@@ -142,7 +36,7 @@ def main(argv: list[str] | None = None) -> int:
     from dispatch.run.commands import installed
 
     commands = installed(reserved=OWN_COMMANDS)
-    args = _parser(commands).parse_args(argv)
+    args = parser(commands).parse_args(argv)
     level = logging.DEBUG if args.debug else logging.INFO if args.verbose else logging.WARNING
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
     from rich.console import Console
@@ -172,138 +66,11 @@ def main(argv: list[str] | None = None) -> int:
         return 130
 
 
-def _specs(args):
-    """Parse the scenario and expand its runs, checking all that can be checked before a run:
-    the file, the resource limits (unless ``--force``), the plugins (each distinct allocator
-    and planner is built once with the scenario's parameters) and the space they serve."""
-    from dispatch.api.registry import load
-    from dispatch.errors import PluginError
-    from dispatch.scenario.load import check_limits, load_scenario
-
-    force = args.force
-    sc = load_scenario(args.scenario, force=force, overrides=overrides(args))
-    specs = sc.runs(allocator=args.allocator, planner=args.planner, agents=args.agents,
-                    seed=args.seed, batch_window=args.batch_window)
-    if not force:
-        check_limits(sc, specs)
-    allocators = sorted({s.allocator for s in specs})
-    planners = sorted({s.planner for s in specs})
-    repositioners = sorted({s.reposition for s in specs})
-    for kind, names, given, swept, default in (
-            ("allocator", allocators, args.allocator, sc.sweep.allocator, sc.dispatch.allocator),
-            ("planner", planners, args.planner, sc.sweep.planner, sc.dispatch.planner),
-            ("repositioner", repositioners, None, sc.sweep.reposition, sc.reposition.policy)):
-        for name in names:
-            try:
-                load(kind, name)
-            except PluginError as e:  # name the file and the key that names the plugin
-                key = _key_of(kind, name, given, swept, default)
-                raise PluginError(f"{sc.path}: {key}: {e}") from e
-    from dispatch.run.plugins import check_runs
-
-    check_runs(sc, planners, repositioners, allocators)
-    build_plugins(sc, specs, force=force)
-    return sc, specs
-
-
-def overrides(args) -> list[tuple[str, str, str]]:
-    """The scenario keys the command line sets, as :func:`dispatch.scenario.load.load_scenario`
-    takes them: ``--duration``, ``--capacity``, ``--batch-window``, then each ``--set`` in
-    order (a later one wins)."""
-    import math
-
-    from dispatch.errors import ScenarioError
-    from dispatch.scenario.overrides import parse_set
-
-    out = []
-    duration = args.duration
-    if duration is not None:
-        if not math.isfinite(duration) or duration <= 0:
-            raise ScenarioError(args.scenario, "--duration", f"must be a number of seconds > 0, "
-                                                             f"got {duration!r}")
-        out.append(("duration", repr(float(duration)), "run --duration"))
-    if args.capacity is not None:
-        out.append(("fleet.capacity", str(args.capacity), "--capacity"))
-    window = args.batch_window
-    if window is not None:
-        if not math.isfinite(window):  # TOML has inf; the file's own check says >= 0
-            raise ScenarioError(args.scenario, "--batch-window", f"must be a number of seconds "
-                                                                 f">= 0, got {window!r}")
-        out.append(("dispatch.batch_window", repr(float(window)), "--batch-window"))
-    for item in args.overrides:
-        out.append((*parse_set(item, args.scenario), "--set"))
-    return out
-
-
-def _key_of(kind: str, name: str, given: str | None, swept: tuple[str, ...],
-            default: str) -> str:
-    """Where plugin ``name`` of ``kind`` came from: its command-line option (``given``), the
-    sweep's list (``swept``) or the file's key (whose value is ``default``)."""
-    if given == name:
-        return f"--{kind}"
-    if name in swept:
-        return f"sweep.{kind if kind != 'repositioner' else 'reposition'}"
-    if kind == "repositioner":
-        return "reposition.policy"
-    return f"dispatch.{kind}" if name == default else kind
-
-
-def build_plugins(sc, specs, *, force: bool = False) -> None:
-    """Build every distinct allocator and planner of ``specs`` once (constructors are cheap;
-    a planner is built on the space of the first run's seed), so that a parameter the plugin
-    rejects stops here with one line, not in the middle of a sweep; place the first run's fleet
-    when a start file places it (its rows are checked against the space)."""
-    from dispatch.api.space import space_for
-    from dispatch.errors import PluginError
-    from dispatch.run.plugins import make_plugin, make_repositioner
-
-    def build(kind, name, params, *args):
-        try:
-            return make_plugin(kind, name, params, *args)
-        except PluginError as e:  # name the file too: "file: key: reason"
-            tables = dict(sc.dispatch.allocator_tables) if kind == "allocator" else {}
-            own = [k for k in (name, name.partition(":")[0]) if k in tables]
-            key = f"dispatch.{kind}_params" + ("" if not own else f'."{own[0]}"'
-                                               if ":" in own[0] else f".{own[0]}")
-            raise PluginError(f"{sc.path}: {key}: {e}") from e
-
-    for name in sorted({s.allocator for s in specs}):
-        build("allocator", name, sc.dispatch.params_for(name))
-    for name in sorted({s.reposition for s in specs}):
-        try:
-            make_repositioner(sc, name)
-        except PluginError as e:
-            raise PluginError(f"{sc.path}: {e}") from e
-    if sc.charging is not None:  # [fleet.energy]: the charging strategy
-        from dispatch.run.plugins import make_charger
-
-        try:
-            make_charger(sc, sc.charging.strategy)
-        except PluginError as e:
-            raise PluginError(f"{sc.path}: {e}") from e
-    planners = sorted({s.planner for s in specs})
-    if planners:
-        space = space_for(sc.world, specs[0].seed, sc.path)
-        for name in planners:
-            planner = build("planner", name, sc.dispatch.planner_params, space)
-            # its own work bound (dispatch.scenario.budget), e.g. rrt_star's iterations
-            if not force:
-                from dispatch.scenario.budget import check_planner_budget
-
-                check_planner_budget(sc, specs, planner, name)
-        if sc.fleet.start:  # a start file's rows: known nodes, inside the world, one per cell
-            from dispatch.fleet.placement import place_fleet
-            from dispatch.streams import STREAM_FLEET, rng_for
-
-            place_fleet(space, specs[0], rng_for(specs[0].seed, STREAM_FLEET))
-
-
 def _run(args, console) -> int:
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+    from dispatch.run.resume import holds_results
+    from dispatch.run.runner import default_out, execute
 
-    from dispatch.run.runner import default_out, execute, holds_results
-
-    sc, specs = _specs(args)
+    sc, specs = checked_specs(args)
     out = args.out or default_out(specs[0])
     held = [s.run_id for s in specs if holds_results(out, s)]
     if held and not args.force:
@@ -315,7 +82,10 @@ def _run(args, console) -> int:
     if single:  # one long run: simulated time, wall time, requests released and closed
         with _run_progress(console, specs[0]) as report:
             summaries = execute(specs, out, progress=report)
-    else:
+    else:  # (rich.progress imported here: a single run off a terminal does without it)
+        from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
+                                   TimeElapsedColumn)
+
         finished = []
         with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                       TimeElapsedColumn(), console=console, transient=True) as progress, \
@@ -399,7 +169,7 @@ def _tables(summaries, console, sc) -> None:
 
 
 def _validate(args, console) -> int:
-    sc, specs = _specs(args)
+    sc, specs = checked_specs(args)
     from dispatch.api.space import space_class
 
     world = space_class(sc.world.space).label(sc.world)
@@ -453,43 +223,18 @@ def _plugins(args, console) -> int:
     return 0
 
 
-# ----------------------------------------------------------------------------- sweep (the work
-# is in dispatch.run.runner)
-
-
-def _add_sweep_parser(sub) -> None:
-    s = sub.add_parser("sweep", help="run a scenario's sweep on a process pool or Ray; "
-                       "resumable (complete runs are skipped)")
-    s.add_argument("scenario", type=Path, help="the scenario file (TOML)")
-    s.add_argument("--out", type=Path, help="output folder (default: runs/<scenario name>/)")
-    s.add_argument("--workers", type=int, metavar="K",
-                   help="worker processes (or local Ray CPUs); default: the CPU count")
-    s.add_argument("--ray", nargs="?", const="", metavar="ADDRESS",
-                   help="run the runs as Ray tasks: on a local Ray, or on the cluster at "
-                        "ADDRESS (e.g. auto or ray://host:10001)")
-    s.add_argument("--force", action="store_true", help="redo runs that are already complete, "
-                   "and run past the resource limits (world cells, releases, tasks, runs, sizes)")
-    s.add_argument("--allocator", help="allocator name (overrides the file and its sweep)")
-    s.add_argument("--planner", help="planner name (overrides the file and its sweep)")
-    s.add_argument("--agents", type=int, help="fleet size N (overrides the file and its sweep)")
-    s.add_argument("--seed", type=int, help="seed (overrides the file and its sweep)")
-    s.add_argument("--duration", type=float, metavar="SECONDS",
-                   help="simulated seconds before each run stops (overrides the file's "
-                        "duration; the scenario text stored with the results says so)")
-    _override_options(s)
-
-
 def _sweep(args, console) -> int:
     from collections import Counter
 
     from rich.markup import escape
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from dispatch.run.runner import default_out, foreign_runs, sweep
+    from dispatch.run.resume import foreign_runs
+    from dispatch.run.runner import default_out, sweep
 
     if args.workers is not None and args.workers < 1:
         raise DispatchError(f"--workers must be >= 1, got {args.workers}")
-    sc, specs = _specs(args)
+    sc, specs = checked_specs(args)
     out = args.out or default_out(specs[0])
     counts: Counter = Counter()
     where = (f"Ray ({args.ray or 'local'})" if args.ray is not None

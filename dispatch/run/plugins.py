@@ -152,6 +152,7 @@ def check_runs(sc: Scenario, planners, repositioners=(), allocators=()) -> None:
         check_variant(sc, name)
     for name in repositioners:
         check_repositioner(sc, name)
+    _check_breaks(sc, allocators)
     need = travel_times_needed(sc, allocators)
     for name in planners:
         caps = registry.declaration("planner", name)
@@ -166,6 +167,24 @@ def check_runs(sc: Scenario, planners, repositioners=(), allocators=()) -> None:
                                               f"of plans, which needs a planner that declares "
                                               f"travel_times; planner {name!r} does not")
     space_class(space).check_runs(sc, planners)
+
+
+def _check_breaks(sc: Scenario, allocators) -> None:
+    """``[fleet.breaks]`` are planned into plans by the kernel's insertion: an allocator that
+    routes several requests per vehicle would plan around them blind, and giving a task up
+    (``[dispatch] reassign``) would drop a planned break with the plan."""
+    if sc.fleet.breaks is None:
+        return
+    for name in allocators:
+        if registry.declaration("allocator", name).multi_request:
+            raise ScenarioError(sc.path, "fleet.breaks",
+                                f"drivers' breaks are planned by the kernel's insertion; "
+                                f"allocator {name!r} routes several requests per vehicle "
+                                f"(multi_request) and cannot plan around them")
+    if sc.dispatch.reassign:
+        raise ScenarioError(sc.path, "fleet.breaks", "drivers' breaks and [dispatch] reassign "
+                                                     "do not go together: giving a task up "
+                                                     "drops the plan and its break")
 
 
 def offering_for(sc, book: TaskBook, space, rng: np.random.Generator, blame: Blame

@@ -1,5 +1,5 @@
 """Running runs: one (:func:`run_one`), one after another (:func:`execute`), or as a resumable
-sweep (:func:`sweep`) on a local process pool or on Ray.
+sweep (:func:`sweep`) on a local process pool or on Ray (:mod:`dispatch.run.pools`).
 
 Every run, whatever the number of runs, is streamed by a :class:`~dispatch.output.parquet.Recorder`
 into its own Hive partition of ``out`` (``<table>/scenario=…/allocator=…/planner=…/n_agents=…/
@@ -9,21 +9,8 @@ repositioning, a ``[reposition]`` table or sweep, has a ``reposition=…`` level
 batch window has a ``batch_window=…`` level before ``n_agents=…`` and ``__bw<seconds>`` in its
 run ids: the levels and ids follow :data:`dispatch.config.runkeys.RUN_KEYS`; chunk files
 ``_inflight-NNNNN.parquet.chunk`` while it runs) and, once all of its tables are written, gets a
-completion marker ``out/_runs/<partition>/done.json`` (written
-atomically) that lists the files and their sizes. Rerunning a sweep (or a sweep over the output
-of ``dispatch run``) skips every run whose marker is there, names the same run of the same
-scenario and whose files are all present with those sizes; any other run (never started,
-killed half-way, failed, or its files touched since) is cleared and run again. "The same run"
-is :func:`run_digest`: the scenario's settings outside ``[sweep]`` (parsed, so comments and
-layout do not count) and the run's own point (allocator, planner, repositioner, N, seed,
-batch window). Adding a value to a sweep list therefore runs only the new runs, and removing
-one leaves its runs in the folder (:func:`foreign_runs` does not count them as another
-scenario's). A folder written before the batch window was a run key (each window a scenario
-``<name>-batch30s``, :func:`legacy_variant`) resumes too: its complete runs count as this
-sweep's, the others are cleared and redone in the new layout. A run that raises
-is recorded in the ``errors`` table (same partition layout: run_id, scenario, error_type,
-message, traceback, seconds) and the sweep goes on; its error partition is removed once it
-succeeds. Folders starting with ``_`` are ignored by pyarrow, DuckDB's and polars' Hive readers.
+completion marker; a sweep skips the runs whose marker says they are complete and records a run
+that raises in the ``errors`` table, then goes on (:mod:`dispatch.run.resume`).
 
 Every run (of a sweep or of :func:`execute`) starts from cold caches (no world or planner cache
 of an earlier run in the same process), so its wall-clock columns mean the same whatever the
@@ -32,39 +19,27 @@ number of workers and the order of the runs: every allocator pays for its own co
 
 from __future__ import annotations
 
-import hashlib
-import json
 import logging
 import os
-import signal
 import tempfile
-import threading
 import time
 import traceback
-from collections import deque
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
-from dataclasses import dataclass, field, replace
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from dispatch import __version__
-from dispatch.config.runkeys import RUN_KEYS, key_names, point_settings
+from dispatch.config.runkeys import key_names
 from dispatch.config.scenario import RunSpec
-from dispatch.output.parquet import SCHEMAS, Recorder, json_meta, partition_path, write_atomic
+from dispatch.output.parquet import SCHEMAS, Recorder, json_meta
+from dispatch.run.pools import Outcome, on_pool, on_ray, sigterm_exits
+from dispatch.run.resume import (clear_partition, is_complete, legacy_variant, read_summary,
+                                 record_failure, write_marker)
 from dispatch.run.time_limit import PastTimeLimit, time_limit_of
 
 log = logging.getLogger(__name__)
-
-MARKERS = "_runs"
-ERRORS = "errors"
-ERRORS_SCHEMA = pa.schema([("run_id", pa.string()), ("scenario", pa.string()),
-                           ("error_type", pa.string()), ("message", pa.string()),
-                           ("traceback", pa.string()), ("seconds", pa.float64())])
-
 
 DEFAULT_FLUSH_ROWS = 10_000
 
@@ -163,20 +138,6 @@ def default_out(spec: RunSpec) -> Path:
     return Path("runs") / safe_name(spec.scenario.name)
 
 
-def holds_results(out: Path, spec: RunSpec) -> bool:
-    """Whether ``out`` already holds results (complete or not) of ``spec``'s partition (or
-    of the partition an older version wrote the same run into, :func:`legacy_variant`)."""
-    old = legacy_variant(spec)
-    for run in (spec,) if old is None else (spec, old):
-        if marker_path(out, run).exists():
-            return True
-        if any((Path(out) / table / partition_dir(run)).is_dir()
-               and any((Path(out) / table / partition_dir(run)).iterdir())
-               for table in ("summary", ERRORS)):
-            return True
-    return False
-
-
 def execute(
     specs: list[RunSpec],
     out: Path,
@@ -202,153 +163,6 @@ def execute(
 # ----------------------------------------------------------------------------- sweeps
 
 
-@dataclass
-class Outcome:
-    """What became of one run of a sweep. ``status``: ``done`` (run now), ``skipped`` (complete
-    from an earlier sweep) or ``failed`` (``error`` says why; recorded in the errors table)."""
-
-    spec: RunSpec
-    status: str
-    summary: dict | None = None
-    error: str = ""
-    seconds: float = 0.0
-    files: list[str] = field(default_factory=list)
-    traceback: str = ""  # of a failed run (also in the errors table); -v / --debug print it
-
-    @property
-    def run_id(self) -> str:
-        return self.spec.run_id
-
-
-def partition_dir(spec: RunSpec) -> Path:
-    return partition_path(spec.partition)
-
-
-def marker_path(out: Path, spec: RunSpec) -> Path:
-    return Path(out) / MARKERS / partition_dir(spec) / "done.json"
-
-
-def _digest(spec: RunSpec) -> str:
-    """SHA-256 of the whole scenario text (the markers' ``scenario_sha256``)."""
-    return hashlib.sha256(spec.scenario.text.encode()).hexdigest()
-
-
-#: Keys a sweep (or a run's point) sets: left out of a scenario's base settings
-_POINT_KEYS = point_settings()
-
-
-def _base_settings(text: str) -> dict | None:
-    """The settings of a scenario text without its ``[sweep]`` and without the keys a run's
-    point overrides (None: the text does not parse)."""
-    import tomllib
-
-    try:
-        doc = tomllib.loads(text)
-    except (tomllib.TOMLDecodeError, TypeError):
-        return None
-    for table, keys in _POINT_KEYS.items():
-        t = doc if not table else doc.get(table)
-        if isinstance(t, dict):
-            for k in keys:
-                t.pop(k, None)
-    return doc
-
-
-def _sha(obj) -> str:
-    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()
-
-
-def base_digest(text: str) -> str | None:
-    """SHA-256 of :func:`_base_settings` (None: the text does not parse)."""
-    doc = _base_settings(text)
-    return None if doc is None else _sha(doc)
-
-
-def run_digest(spec: RunSpec, text: str | None = None) -> str | None:
-    """What identifies a run's results: SHA-256 of the base settings of ``text`` (default:
-    the spec's scenario text) and the spec's point. Two scenario texts that differ only in
-    their ``[sweep]`` lists, comments or the values a sweep overrides give their common runs
-    the same digest. None: the text does not parse."""
-    doc = _base_settings(spec.scenario.text if text is None else text)
-    if doc is None:
-        return None
-    keys = spec.keys
-    return _sha({"base": doc, "run_id": spec.run_id,
-                 **{k.digest: keys[k.name] for k in RUN_KEYS if k.digest}})
-
-
-def _stored_text(out: Path, partition: Path) -> str | None:
-    """The scenario text a finished run was made from (its summary file's metadata)."""
-    try:
-        meta = pq.read_schema(Path(out) / "summary" / partition / "part-0.parquet").metadata
-        return meta[b"dispatch.scenario"].decode()
-    except (OSError, KeyError, TypeError, AttributeError, pa.ArrowException):
-        return None
-
-
-def is_complete(out: Path, spec: RunSpec) -> bool:
-    """Whether ``spec``'s partition was finished by a sweep of the same run (the same scenario
-    text, or one whose :func:`run_digest` for this run is the same) and all of its files are
-    still there, whole."""
-    try:
-        marker = json.loads(marker_path(out, spec).read_text(encoding="utf-8"))
-        if marker["run_id"] != spec.run_id:
-            return False
-        if marker["scenario_sha256"] != _digest(spec):  # another text: is it the same run?
-            want = run_digest(spec)
-            got = marker.get("run_sha256")
-            if got is None:  # a marker written before run digests: ask the run's own text
-                text = _stored_text(out, partition_dir(spec))
-                got = None if text is None else run_digest(spec, text)
-            if want is None or got != want:
-                return False
-        for rel, size in marker["files"].items():
-            if (Path(out) / rel).stat().st_size != size:
-                return False
-        return bool(marker["files"])
-    except (OSError, ValueError, KeyError, TypeError):
-        return False
-
-
-def clear_partition(out: Path, spec: RunSpec) -> None:
-    """Remove a run's marker (first), then every file of its partition in every table (and a
-    marker half-written by a process killed meanwhile)."""
-    marker = marker_path(out, spec)
-    marker.unlink(missing_ok=True)
-    if marker.parent.is_dir():
-        for f in marker.parent.glob(f".{marker.name}.tmp-*"):
-            f.unlink(missing_ok=True)
-    for table in (*SCHEMAS, ERRORS):
-        leaf = Path(out) / table / partition_dir(spec)
-        if leaf.is_dir():
-            for f in leaf.iterdir():
-                if f.is_file():
-                    f.unlink()
-
-
-def _write_json_atomic(obj: dict, path: Path) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    tmp.write_text(json.dumps(obj, indent=1, sort_keys=True), encoding="utf-8")
-    os.replace(tmp, path)
-
-
-def record_failure(out: Path, spec: RunSpec, error_type: str, message: str, tb: str,
-                   seconds: float) -> None:
-    """Write the run's row of the ``errors`` table (its own partition)."""
-    meta = {"dispatch.version": __version__, "dispatch.run_id": spec.run_id,
-            "dispatch.scenario": spec.scenario.text, "dispatch.seed": str(spec.seed)}
-    schema = ERRORS_SCHEMA  # the partition columns live in the path, not in the file
-    for k in spec.partition:
-        if k in schema.names:
-            schema = schema.remove(schema.get_field_index(k))
-    row = {"run_id": spec.run_id, "scenario": spec.scenario.name, "error_type": error_type,
-           "message": message, "traceback": tb, "seconds": seconds}
-    table = pa.Table.from_pylist([{k: row[k] for k in schema.names}],
-                                 schema=schema.with_metadata(meta))
-    write_atomic(table, Path(out) / ERRORS / partition_dir(spec) / "part-0.parquet")
-
-
 def _run_and_mark(spec: RunSpec, out: Path, flush_rows: int = DEFAULT_FLUSH_ROWS,
                   progress=None) -> tuple[RunResult, dict[str, int]]:
     """Clear ``spec``'s partition of ``out``, run it there from cold caches and write its
@@ -362,11 +176,7 @@ def _run_and_mark(spec: RunSpec, out: Path, flush_rows: int = DEFAULT_FLUSH_ROWS
     result = run_one(spec, out, flush_rows=flush_rows, progress=progress)
     seconds = time.perf_counter() - started
     files = {str(p.relative_to(out)): p.stat().st_size for p in result.files.values()}
-    _write_json_atomic({"run_id": spec.run_id, "scenario_sha256": _digest(spec),
-                        "run_sha256": run_digest(spec),
-                        "base_sha256": base_digest(spec.scenario.text),
-                        "version": __version__, "seconds": seconds, "files": files},
-                       marker_path(out, spec))
+    write_marker(out, spec, seconds, files)
     return result, files
 
 
@@ -403,53 +213,6 @@ def _cold_start() -> None:
     from dispatch.space.world import world_for
 
     world_for.cache_clear()
-
-
-def foreign_runs(out: Path, specs: list[RunSpec]) -> list[str]:
-    """Run ids of complete partitions in ``out`` written from another scenario than
-    ``specs``' (another scenario, or another version of this one: other settings outside
-    ``[sweep]``): readers of ``out`` will see them next to this sweep's runs. Runs of the same
-    scenario with another sweep list (a value since dropped from it) are not foreign."""
-    texts = {_digest(s) for s in specs}
-    bases = {base_digest(t) for t in {s.scenario.text for s in specs}} - {None}
-    found = []
-    root = Path(out) / MARKERS
-    for m in sorted(root.rglob("done.json")):
-        try:
-            marker = json.loads(m.read_text(encoding="utf-8"))
-            if marker["scenario_sha256"] in texts:
-                continue
-            base = marker.get("base_sha256")
-            if base is None:  # a marker written before base digests
-                text = _stored_text(out, m.parent.relative_to(root))
-                base = None if text is None else base_digest(text)
-            if base is None or base not in bases:
-                found.append(marker["run_id"])
-        except (OSError, ValueError, KeyError, TypeError):
-            continue
-    return found
-
-
-def legacy_variant(spec: RunSpec) -> RunSpec | None:
-    """The run as versions before the batch window was a run key wrote it (None for a
-    scenario that does not sweep its window): a scenario of its own, ``<name>-immediate`` (0
-    s) or ``<name>-batch<w>s``, without a ``batch_window=`` level or run-id part. A sweep
-    over such a folder takes its complete runs as this spec's (same text or same
-    :func:`run_digest`, as for any run) and clears the others, so that the folder holds each
-    run once; :mod:`analysis.io` reads them as scenario ``<name>`` with their window."""
-    if not spec.names_batch_window:
-        return None
-    sc, w = spec.scenario, spec.batch_window
-    name = f"{sc.name}-{'immediate' if w == 0 else f'batch{w:g}s'}"
-    return replace(spec, scenario=replace(sc, name=name,
-                                          sweep=replace(sc.sweep, batch_window=())))
-
-
-def read_summary(out: Path, spec: RunSpec) -> dict:
-    """The summary row of a finished partition, with its partition columns put back."""
-    path = Path(out) / "summary" / partition_dir(spec) / "part-0.parquet"
-    row = pq.read_table(path).to_pylist()[0]
-    return {**row, **spec.partition}
 
 
 def sweep(
@@ -496,12 +259,12 @@ def sweep(
     if todo:
         workers = workers or os.cpu_count() or 1
         if ray:
-            stream = _on_ray(todo, out, workers, address, time_limit)
+            stream = on_ray(todo, out, workers, address, run_partition, time_limit)
         elif workers == 1:
             stream = ((i, run_partition(spec, out, time_limit)) for i, spec in todo)
         else:
-            stream = _on_pool(todo, out, workers, time_limit)
-        with _sigterm_exits():
+            stream = on_pool(todo, out, workers, run_partition, time_limit)
+        with sigterm_exits():
             try:
                 for i, outcome in stream:
                     outcomes[i] = outcome
@@ -510,131 +273,3 @@ def sweep(
             finally:
                 stream.close()  # (every stream is a generator: a pool's stops its workers now)
     return [outcomes[i] for i in range(len(specs))]
-
-
-class SweepTerminated(SystemExit):
-    """Raised in a sweep when its process gets SIGTERM (exit status 143, as the signal's
-    default), so that ``finally`` blocks run: the pool's workers are stopped, not orphaned."""
-
-
-@contextmanager
-def _sigterm_exits():
-    """While in the block (in the main thread), SIGTERM raises :class:`SweepTerminated`
-    instead of ending the process at once; the previous handler is put back after."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def handler(signum, _frame):
-        raise SweepTerminated(128 + signum)
-
-    previous = signal.signal(signal.SIGTERM, handler)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-
-
-def _exit_with_parent(parent: int) -> None:
-    """Pool worker initializer: a daemon thread ends this worker when its parent is gone (a
-    parent killed with SIGKILL runs no cleanup; its workers must not go on writing)."""
-    def watch() -> None:
-        while True:
-            time.sleep(0.5)
-            if os.getppid() != parent:
-                os._exit(1)
-
-    threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
-
-
-def _stop_workers(pool) -> None:
-    """Terminate the processes of a ProcessPoolExecutor now (SIGTERM, then SIGKILL for any
-    still alive after 5 s): their runs are abandoned half-way, to be redone by a rerun."""
-    procs = list((pool._processes or {}).values())  # (None once the pool is shut down)
-    for proc in procs:
-        if proc.is_alive():
-            proc.terminate()
-    deadline = time.monotonic() + 5.0
-    for proc in procs:
-        proc.join(max(0.0, deadline - time.monotonic()))
-        if proc.is_alive():
-            proc.kill()
-            proc.join(1.0)
-
-
-def _crashed(out: Path, spec: RunSpec, e: BaseException) -> Outcome:
-    """A run whose worker died (no Python exception came back from it)."""
-    msg = f"worker died: {type(e).__name__}: {e}"
-    record_failure(out, spec, type(e).__name__, msg, "", 0.0)
-    return Outcome(spec, "failed", error=msg)
-
-
-def _on_pool(todo, out: Path, workers: int, time_limit: float | None = None
-             ) -> Iterator[tuple[int, Outcome]]:
-    """A spawn-context process pool, ``workers`` runs in flight at a time; if a worker dies
-    the runs it held are recorded as failed and a fresh pool takes the rest."""
-    import multiprocessing
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-    from concurrent.futures.process import BrokenProcessPool
-
-    ctx = multiprocessing.get_context("spawn")
-    pending = deque(todo)
-    while pending:
-        pool = ProcessPoolExecutor(max_workers=min(workers, len(pending)), mp_context=ctx,
-                                   initializer=_exit_with_parent, initargs=(os.getpid(),))
-        running: dict = {}
-        try:
-            broken = False
-            while (pending or running) and not broken:
-                while pending and len(running) < workers:
-                    i, spec = pending.popleft()
-                    running[pool.submit(run_partition, spec, str(out), time_limit)] = (i, spec)
-                done, _ = wait(running, return_when=FIRST_COMPLETED)
-                for fut in done:
-                    i, spec = running.pop(fut)
-                    try:
-                        yield i, fut.result()
-                    except BrokenProcessPool as e:
-                        broken = True
-                        yield i, _crashed(out, spec, e)
-            for i, spec in running.values():  # the pool broke under them
-                yield i, _crashed(out, spec, BrokenProcessPool("the process pool broke"))
-        except BaseException:  # SIGTERM, Ctrl-C, the consumer stopped: no orphan workers
-            _stop_workers(pool)
-            raise
-        finally:
-            pool.shutdown(wait=True, cancel_futures=True)
-
-
-def _on_ray(todo, out: Path, workers: int, address: str | None,
-            time_limit: float | None = None) -> Iterator[tuple[int, Outcome]]:
-    """One Ray task per run (local Ray with ``workers`` CPUs, or the cluster at ``address``)."""
-    try:
-        import ray
-    except ImportError as e:
-        from dispatch.errors import DispatchError
-
-        raise DispatchError("--ray needs Ray: pip install 'dispatch-sim[ray]'") from e
-    started = False
-    if not ray.is_initialized():
-        opts = {"include_dashboard": False, "log_to_driver": False}
-        if address:
-            ray.init(address=address, **opts)
-        else:
-            ray.init(num_cpus=workers, **opts)
-        started = True
-    try:
-        task = ray.remote(num_cpus=1, max_retries=0)(run_partition)
-        refs = {task.remote(spec, str(out), time_limit): (i, spec) for i, spec in todo}
-        pending = list(refs)
-        while pending:
-            done, pending = ray.wait(pending, num_returns=1)
-            for ref in done:
-                i, spec = refs[ref]
-                try:
-                    yield i, ray.get(ref)
-                except Exception as e:  # noqa: BLE001 - a dead worker, a lost node
-                    yield i, _crashed(out, spec, e)
-    finally:
-        if started:
-            ray.shutdown()

@@ -101,15 +101,22 @@ class Simulation:
     ``progress``, if given, is called as ``progress(sim_time, duration, released, closed)``
     (seconds; task counts) ``PROGRESS_TICKS`` times over the run's duration and once at the
     end, from a SimPy process that touches nothing else (the run's results do not depend on
-    it). The CLI draws its progress bar with it; library code prints nothing."""
+    it). The CLI draws its progress bar with it; library code prints nothing.
 
-    def __init__(self, spec, recorder, progress=None) -> None:
+    ``allocator``, if given, decides instead of the one ``spec`` names (a test's scripted
+    answers; :mod:`learning.rl`'s, which defers each decision to the environment's step), and
+    ``env`` is the SimPy environment to run in where such an allocator was made with it
+    (default: a fresh one)."""
+
+    def __init__(self, spec, recorder, progress=None, *, allocator=None,
+                 env: simpy.Environment | None = None) -> None:
         sc = spec.scenario
         self.spec, self.recorder = spec, recorder
-        self.env = env = simpy.Environment()
+        self.env = env = simpy.Environment() if env is None else env
         self.space = space = space_for(sc.world, spec.seed, sc.path)
         self.world = space  # the voxel name, for callers that know they are in one
-        allocator = make_plugin("allocator", spec.allocator, sc.dispatch.allocator_params)
+        if allocator is None:
+            allocator = make_plugin("allocator", spec.allocator, sc.dispatch.allocator_params)
         self.planner = make_plugin("planner", spec.planner, sc.dispatch.planner_params, space)
         check_repositioner(sc, spec.reposition)
         self.repositioner = make_repositioner(sc, spec.reposition)
@@ -239,12 +246,8 @@ class Simulation:
 
     @property
     def allocator(self):
+        """The run's allocator (:class:`dispatch.api.contracts.Allocator`)."""
         return self.dispatcher.allocator
-
-    @allocator.setter
-    def allocator(self, value) -> None:
-        """Swap the allocator before the run (tests script decisions this way)."""
-        self.dispatcher.allocator = value
 
     def _check_finished(self, _task: Task | None = None) -> None:
         if self.source.finished and not self.finished.triggered and self.book.live == 0:

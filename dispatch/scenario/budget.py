@@ -18,12 +18,13 @@ what to change (``--force`` runs anyway), as the size bounds do:
   (a trace's per-trip ``max_wait``) makes them expire. The bound, 600,000 on a grid of up to
   75,000 cells (the paper's 50 × 50 × 30 m world: about 20 s on one core), shrinks in
   proportion for larger grids (the fields grow with the grid).
-* **a planner's own work**: a planner plugin may define ``budget(agents, tasks, duration)``,
-  returning a sentence when a run of that many vehicles and tasks over that many simulated
-  seconds is past its own bound (``rrt_star``: tree iterations, and the ray tests its
-  parameters cost: a tiny ``step`` keeps a tree within a rewiring radius of its goal, so each
-  iteration tests every node; ``reservation``: the retries of blocked vehicles,
-  ``agents × duration / retry_after``); :func:`check_planner_budget` calls it.
+* **a planner's own work**: a planner plugin may override
+  :meth:`~dispatch.api.contracts.Planner.budget`, returning a sentence when a run of that many
+  vehicles and tasks over that many simulated seconds is past its own bound (``rrt_star``:
+  tree iterations, and the ray tests its parameters cost: a tiny ``step`` keeps a tree within
+  a rewiring radius of its goal, so each iteration tests every node; ``reservation``: the
+  retries of blocked vehicles, ``agents × duration / retry_after``);
+  :func:`check_planner_budget` calls it.
 
 Road networks have no task-decision bound: a decision reads cached Dijkstra trees (a city
 day of 100,000 trips takes about a minute), and their size bounds are the releases'.
@@ -187,9 +188,6 @@ def check_planner_budget(sc, specs, planner, name: str) -> None:
     ``dispatch.planner_params``) with its sentence when not."""
     from dispatch.errors import FORCE_HINT, ScenarioError
 
-    budget = getattr(planner, "budget", None)
-    if not callable(budget):
-        return
     seen = set()
     for s in specs:
         if s.planner != name:
@@ -198,7 +196,7 @@ def check_planner_budget(sc, specs, planner, name: str) -> None:
         if key in seen:
             continue
         seen.add(key)
-        reason = budget(agents=s.agents, tasks=key[1], duration=s.scenario.duration)
+        reason = planner.budget(agents=s.agents, tasks=key[1], duration=s.scenario.duration)
         if reason:
             raise ScenarioError(sc.path, "dispatch.planner_params",
                                 f"planner {name!r}: {reason}; {FORCE_HINT}")

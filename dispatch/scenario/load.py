@@ -1,13 +1,13 @@
 """Scenario files: TOML parsed once into the frozen, typed configuration of
-:mod:`dispatch.config.scenario`; the tables that depend on one another (fleet, tasks, dispatch,
-comms,
+:mod:`dispatch.config` (one dataclass per section; a key left out takes its field's default,
+written there once); the tables that depend on one another (fleet, tasks, dispatch, comms,
 sweep) here, the self-contained ones in :mod:`dispatch.scenario.sections`; and the limits a
 scenario's runs must keep (:func:`check_limits`).
 
 Every mistake (an unknown key, a wrong type, an impossible value) raises one
 :class:`~dispatch.errors.ScenarioError` that names the file, the dotted key and the reason.
 See ``scenarios/README.md`` for every key with its default; the configuration classes are
-:mod:`dispatch.config.scenario`'s.
+:mod:`dispatch.config`'s.
 """
 
 from __future__ import annotations
@@ -21,19 +21,30 @@ from dataclasses import replace
 from datetime import datetime
 from pathlib import Path
 
+from dispatch.api.acceptor import Pricing
 from dispatch.api.space import space_class
-from dispatch.config.scenario import (LIMITS, MAX_SEED, SOURCES, CommsConfig, DispatchConfig,
-                                      FleetConfig, Limits, RunSpec, Scenario, SweepConfig,
-                                      TaskConfig, WorldConfig, _check_fits, _short, safe_name)
+from dispatch.config.comms import CommsConfig
+from dispatch.config.dispatching import DispatchConfig
+from dispatch.config.breaks import BreaksConfig
+from dispatch.config.energy import EnergyConfig
+from dispatch.config.faults import FaultConfig
+from dispatch.config.fleet import FleetConfig
+from dispatch.config.offers import AcceptorConfig
+from dispatch.config.reposition import RepositionConfig
+from dispatch.config.scenario import (LIMITS, MAX_SEED, Limits, RunSpec, Scenario, _check_fits,
+                                      _short, safe_name)
+from dispatch.config.sweep import SweepConfig
+from dispatch.config.tasks import EMPIRICAL_MAX_WAIT, SOURCES, TaskConfig
+from dispatch.config.world import RoadConfig, WorldConfig
 from dispatch.decide.prebook import MODES as PREBOOK_MODES
 from dispatch.errors import FORCE_HINT, ScenarioError
 from dispatch.files.tables import check_file, decode_text, read_bytes
 from dispatch.files.traces import (Trips, parse_datetime, read_fleet_capacities, read_fleet_start,
                                    read_trace, shipped_trace, within_snap)
 from dispatch.fleet.shifts import read_shifts
-from dispatch.scenario.sections import (parse_acceptor, parse_allocators, parse_charging,
-                                        parse_energy, parse_faults, parse_pricing, parse_reposition,
-                                        parse_world)
+from dispatch.scenario.sections import (parse_acceptor, parse_allocators, parse_breaks,
+                                        parse_charging, parse_energy, parse_faults, parse_pricing,
+                                        parse_reposition, parse_world)
 from dispatch.scenario.toml_table import Table
 
 log = logging.getLogger(__name__)
@@ -73,32 +84,33 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     """Validate an already-decoded TOML document (see :func:`load_scenario`); ``limits`` bound
     the size of the files it names (None: no bound)."""
     max_bytes = None if limits is None else limits.input_bytes
-    root = Table(path, "", data)
+    root = Table(path, "", data, (Scenario,))
     name = safe_name(root.string("name", path.stem), safe_name(path.stem))
-    description = root.get("description", "")
+    description = root.get("description")
     if not isinstance(description, str):
         raise root.fail("description", "must be a string")
-    seed = root.number("seed", 0, lo=0, hi=MAX_SEED, integer=True)
-    duration = root.number("duration", 3600.0, gt=0.0)
+    seed = root.number("seed", lo=0, hi=MAX_SEED, integer=True)
+    duration = root.number("duration", gt=0.0)
 
-    w = root.table("world")
+    w = root.table("world", WorldConfig, RoadConfig)
     world = parse_world(w, path)
     w.done()
 
-    f = root.table("fleet")
+    f = root.table("fleet", FleetConfig)
     fleet = FleetConfig(
-        agents=f.number("agents", 8, lo=1, integer=True),
-        uav_fraction=f.number("uav_fraction", 0.5, lo=0.0, hi=1.0),
-        uav_speed=f.number("uav_speed", 5.0, gt=0.0),
-        ugv_speed=f.number("ugv_speed", 3.0, gt=0.0),
-        uav_max_start_altitude=f.number("uav_max_start_altitude", 10.0, lo=0.0),
-        placement=f.string("placement", "uniform", ("uniform", "demand")),
-        capacity=f.number("capacity", 1, lo=1, hi=10_000, integer=True),
+        agents=f.number("agents", lo=1, integer=True),
+        uav_fraction=f.number("uav_fraction", lo=0.0, hi=1.0),
+        uav_speed=f.number("uav_speed", gt=0.0),
+        ugv_speed=f.number("ugv_speed", gt=0.0),
+        uav_max_start_altitude=f.number("uav_max_start_altitude", lo=0.0),
+        placement=f.string("placement", choices=("uniform", "demand")),
+        capacity=f.number("capacity", lo=1, hi=10_000, integer=True),
     )
-    start = f.get("start", None)
+    start = f.given("start")  # the file's name
     if start is not None:
         if not isinstance(start, str) or not start:
-            raise f.fail("start", f"must be a CSV file of vehicle_id and node or x, y; got {start!r}")
+            raise f.fail("start", f"must be a CSV file of vehicle_id and node or x, y; "
+                                  f"got {start!r}")
         start_path = (path.parent / start).resolve()
         kind = space_class(world.space)
         rows = read_fleet_start(start_path, kind.start_nodes, kind.start_z, max_bytes)
@@ -109,32 +121,35 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
         fleet = replace(fleet, agents=agents, start=rows, start_file=start_path,
                         capacities=read_fleet_capacities(start_path, max_bytes)[:agents])
     if "energy" in f.data:
-        fleet = replace(fleet, energy=parse_energy(f.table("energy"), fleet, world))
+        fleet = replace(fleet, energy=parse_energy(f.table("energy", EnergyConfig), fleet,
+                                                   world))
+    if "breaks" in f.data:
+        fleet = replace(fleet, breaks=parse_breaks(f.table("breaks", BreaksConfig), world))
     fleet = _parse_sizing(f, fleet)
     f.done()
 
-    t = root.table("tasks")
-    source = t.string("source", "static", SOURCES)
+    t = root.table("tasks", TaskConfig)
+    source = t.string("source", choices=SOURCES)
     tasks = TaskConfig(
         source=source,
-        count=t.number("count", None, lo=1, integer=True, optional=True),
-        interval=t.number("interval", None, gt=0.0, optional=True),
-        rate=t.number("rate", None, gt=0.0, optional=True),
-        max_active=t.number("max_active", None, lo=1, integer=True, optional=True),
-        ground_fraction=t.number("ground_fraction", 0.5, lo=0.0, hi=1.0),
-        service_time=t.number("service_time", 0.0, lo=0.0),
-        ttl=t.number("ttl", None, gt=0.0, optional=True),
+        count=t.number("count", lo=1, integer=True),
+        interval=t.number("interval", gt=0.0),
+        rate=t.number("rate", gt=0.0),
+        max_active=t.number("max_active", lo=1, integer=True),
+        ground_fraction=t.number("ground_fraction", lo=0.0, hi=1.0),
+        service_time=t.number("service_time", lo=0.0),
+        ttl=t.number("ttl", gt=0.0),
     )
-    tasks = replace(tasks, max_wait=t.number("max_wait", 600.0 if source == "empirical"
-                                             else None, gt=0.0, optional=True),
-                    max_delay=t.number("max_delay", None, lo=0.0, optional=True),
-                    max_walk=t.number("max_walk", 0.0, lo=0.0),
-                    walk_speed=t.number("walk_speed", 1.4, gt=0.0),
-                    meeting_points=t.number("meeting_points", 8, lo=1, integer=True))
+    max_wait = EMPIRICAL_MAX_WAIT if source == "empirical" else t.default("max_wait")
+    tasks = replace(tasks, max_wait=t.number("max_wait", max_wait, gt=0.0),
+                    max_delay=t.number("max_delay", lo=0.0),
+                    max_walk=t.number("max_walk", lo=0.0),
+                    walk_speed=t.number("walk_speed", gt=0.0),
+                    meeting_points=t.number("meeting_points", lo=1, integer=True))
     tasks = _parse_empirical(t, tasks, world, fleet)
-    tasks = replace(tasks, prebook_share=t.number("prebook_share", 0.0, lo=0.0, hi=1.0),
-                    prebook_lead=t.number("prebook_lead", 3600.0, lo=0.0))
-    trace = t.get("trace", None)
+    tasks = replace(tasks, prebook_share=t.number("prebook_share", lo=0.0, hi=1.0),
+                    prebook_lead=t.number("prebook_lead", lo=0.0))
+    trace = t.get("trace")
     if source == "periodic" and tasks.interval is None:
         raise t.fail("interval", "is required when source = 'periodic'")
     if source == "poisson" and tasks.rate is None:
@@ -165,48 +180,44 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
         fleet = replace(fleet, shifts=read_shifts(fleet.start_file, fleet.agents, start,
                                                   max_bytes))
 
-    d = root.table("dispatch")
-    reassign = d.get("reassign", False)
-    if not isinstance(reassign, bool):
-        raise d.fail("reassign", f"must be true or false, got {reassign!r}")
+    d = root.table("dispatch", DispatchConfig)
+    reassign = d.flag("reassign")
     features = space_class(world.space).features
     if reassign and "reassign" not in features:
         raise d.fail("reassign", "re-assignment before pickup needs a road network "
                                  "([world] network)")
-    lazy = d.get("lazy_costs", False)
-    if not isinstance(lazy, bool):
-        raise d.fail("lazy_costs", f"must be true or false, got {lazy!r}")
+    lazy = d.flag("lazy_costs")
     disp = DispatchConfig(
-        allocator=d.string("allocator", "hungarian"),
+        allocator=d.string("allocator"),
         planner=d.string("planner", space_class(world.space).default_planner),
-        batch_window=d.number("batch_window", 0.0, lo=0.0),
-        max_rounds=d.number("max_rounds", 1000, lo=1, integer=True),
+        batch_window=d.number("batch_window", lo=0.0),
+        max_rounds=d.number("max_rounds", lo=1, integer=True),
         reassign=reassign,
         lazy_costs=lazy,
-        objective=d.string("objective", "pickup_time", ("pickup_time", "added_time")),
+        objective=d.string("objective", choices=("pickup_time", "added_time")),
         allocator_params=d.params("allocator_params"),
         planner_params=d.params("planner_params"),
     )
-    disp = replace(disp, prebook=d.string("prebook", "at_booking", PREBOOK_MODES),
-                   prebook_lead=d.number("prebook_lead", None, gt=0.0, optional=True))
+    disp = replace(disp, prebook=d.string("prebook", choices=PREBOOK_MODES),
+                   prebook_lead=d.number("prebook_lead", gt=0.0))
     d.done()
     _check_prebooking(path, world, tasks, disp)
     _check_pooling(path, world, fleet, tasks, disp)
 
-    c = root.table("comms")
+    c = root.table("comms", CommsConfig)
     comms = CommsConfig(
-        range=c.number("range", None, lo=0.0, optional=True),
-        latency=c.number("latency", 0.0, lo=0.0),
-        loss=c.number("loss", 0.0, lo=0.0),
+        range=c.number("range", lo=0.0),
+        latency=c.number("latency", lo=0.0),
+        loss=c.number("loss", lo=0.0),
     )
     if comms.loss >= 1.0:
         raise c.fail("loss", f"must be < 1 (a link that drops every message is no link; use "
                              f"a small range for agents that cannot talk), got {comms.loss!r}")
     c.done()
 
-    faults = parse_faults(root.table("faults"), path)
+    faults = parse_faults(root.table("faults", FaultConfig), path)
 
-    s = root.table("sweep")
+    s = root.table("sweep", SweepConfig)
     sweep = SweepConfig(
         allocator=s.str_list("allocator"),
         planner=s.str_list("planner"),
@@ -217,10 +228,10 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     )
     disp = parse_allocators(d, s, disp, sweep)
     declared = "reposition" in root.data
-    reposition = parse_reposition(root.table("reposition"), sweep, s)
+    reposition = parse_reposition(root.table("reposition", RepositionConfig), sweep, s)
     charging = parse_charging(root, path, fleet, faults, world)
-    pricing = parse_pricing(root.table("pricing"), world)
-    acceptor = parse_acceptor(root.table("acceptor"), pricing)
+    pricing = parse_pricing(root.table("pricing", Pricing), world)
+    acceptor = parse_acceptor(root.table("acceptor", AcceptorConfig), pricing)
     s.done()
     root.done()
 
@@ -284,20 +295,20 @@ def _parse_sizing(f: Table, fleet: FleetConfig) -> FleetConfig:
     """``[fleet] shift_grace`` (seconds), ``sizing`` (a ``dispatch.sizers`` plugin) and its
     ``[fleet.sizing_params]`` (see :mod:`dispatch.fleet.shifts`)."""
     from dispatch.api import registry
-    sizing = f.string("sizing", "fixed") if "sizing" in f.data else None
+    sizing = f.string("sizing")  # None: left out
     if sizing is not None and sizing not in registry.available("sizer"):
         raise f.fail("sizing", registry.unknown("sizer", sizing))
     if sizing is None and "sizing_params" in f.data:
         raise f.fail("sizing_params", "is only used with [fleet] sizing")
-    return replace(fleet, shift_grace=f.number("shift_grace", 0.0, lo=0.0), sizing=sizing,
+    return replace(fleet, shift_grace=f.number("shift_grace", lo=0.0), sizing=sizing,
                    sizing_params=f.params("sizing_params"))
 
 
 def _parse_start(t: Table, source: str) -> datetime | None:
     """``[tasks] start``: the date-time of second 0 of a trace of ``departure_time`` date-times
     (an ISO 8601 string such as "2014-12-21T00:00", or a TOML date-time)."""
-    v = t.get("start", None)
-    if v is None:
+    v = t.get("start")
+    if v is None:  # left out
         return None
     if source != "trace":
         raise t.fail("start", f"is only used when source = 'trace' (not {source!r})")
@@ -311,7 +322,7 @@ def _parse_start(t: Table, source: str) -> datetime | None:
 def _parse_max_snap(t: Table, source: str, world: WorldConfig) -> float | None:
     """``[tasks] max_snap``: metres (> 0) a trace's pickup or drop-off may lie from the road
     network's nearest node."""
-    v = t.number("max_snap", None, gt=0.0, optional=True)
+    v = t.number("max_snap", gt=0.0)
     if v is not None and (source != "trace" or "snap" not in space_class(world.space).features):
         raise t.fail("max_snap", "is only used with a trace on a road network "
                                  "(source = 'trace', [world] network)")
@@ -365,10 +376,10 @@ def _within_snap(t: Table, trips: Trips, world: WorldConfig, max_snap: float) ->
 
 def _windows(s: Table) -> tuple[float, ...]:
     """``[sweep] batch_window``: distinct finite seconds >= 0."""
-    v = s.get("batch_window", [])
-    if not isinstance(v, list) or any(isinstance(x, bool) or not isinstance(x, (int, float))
-                                      or not math.isfinite(x) or x < 0 for x in v) \
-            or len(set(v)) != len(v):
+    v = s.get("batch_window")
+    if not isinstance(v, (list, tuple)) or any(
+            isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x)
+            or x < 0 for x in v) or len(set(v)) != len(v):
         raise s.fail("batch_window", f"must be a list of distinct seconds >= 0, got {_short(v)}")
     return tuple(float(x) for x in v)
 
@@ -393,8 +404,8 @@ def _parse_empirical(t: Table, tasks: TaskConfig, world: WorldConfig,
     if "trips_per_day" not in t.data:
         raise t.fail("trips_per_day", "is required when source = 'empirical' (the expected "
                                       "number of trips over the 24 h day)")
-    return replace(tasks, trips_per_day=t.number("trips_per_day", None, gt=0.0),
-                   weekday=t.string("weekday", "all", ("all", *WEEKDAYS)))
+    return replace(tasks, trips_per_day=t.number("trips_per_day", gt=0.0),
+                   weekday=t.string("weekday", choices=("all", *WEEKDAYS)))
 
 
 def check_limits(sc: Scenario, specs: list[RunSpec], limits: Limits = LIMITS) -> None:

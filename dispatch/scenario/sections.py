@@ -1,7 +1,8 @@
 """The self-contained tables of a scenario file, each parsed into its part of the typed
-configuration (:mod:`dispatch.config.scenario`): ``[world]`` (a voxel world or a road network, its
-obstacles and congestion), ``[faults]``, ``[fleet.energy]``, ``[chargers]`` and
-``[charging]``, ``[reposition]``, and the allocators a file names. :mod:`dispatch.scenario.load`
+configuration (:mod:`dispatch.config`; a key left out takes its field's default): ``[world]``
+(a voxel world or a road network, its obstacles and congestion), ``[faults]``,
+``[fleet.energy]``, ``[chargers]`` and ``[charging]``, ``[reposition]``, ``[pricing]``,
+``[acceptor]``, and the allocators a file names. :mod:`dispatch.scenario.load`
 reads the file and the tables that depend on one another.
 """
 
@@ -12,29 +13,33 @@ from dataclasses import replace
 from pathlib import Path
 
 from dispatch.api.space import space_class
+from dispatch.config.dispatching import DispatchConfig
 from dispatch.config.faults import FaultConfig
-from dispatch.config.scenario import (MAX_AXIS_CELLS, ROAD_KEYS, VOXEL_KEYS, DispatchConfig,
-                                      FleetConfig, ObstacleConfig, RepositionConfig, RoadConfig,
-                                      SweepConfig, WorldConfig, _short)
+from dispatch.config.fleet import FleetConfig
+from dispatch.config.reposition import RepositionConfig
+from dispatch.config.scenario import _short
+from dispatch.config.sweep import SweepConfig
+from dispatch.config.world import (MAX_AXIS_CELLS, ROAD_KEYS, VOXEL_KEYS, ObstacleConfig,
+                                   RoadConfig, WorldConfig)
 from dispatch.files.failures import read_failures
 from dispatch.scenario.toml_table import Table
 
 
 def parse_world(w: Table, path: Path) -> WorldConfig:
     """``[world]``: a voxel world (size, cell, obstacles) or a road network (network, ...)."""
-    physics = w.get("physics", None)
+    physics = w.given("physics")  # None: left out (on in a voxel world, off on roads)
     if physics is not None and not isinstance(physics, bool):
-        raise w.fail("physics", f"must be true or false, got {physics!r}")
+        raise w.fail("physics", f"must be true or false, got {_short(physics)}")
     if "network" in w.data:
         for k in VOXEL_KEYS:
             if k in w.data:
                 raise w.fail(k, "is a voxel-world key; a road network (world.network) has none")
-        network = w.string("network", "manhattan")
-        blocks = w.int_list("blocks", lo=2) if "blocks" in w.data else (20, 20)
+        network = w.string("network")
+        blocks = w.int_list("blocks", lo=2)
         if len(blocks) != 2:
             raise w.fail("blocks", f"must be [columns, rows] (intersections), got {list(blocks)}")
-        block = w.number("block", 200.0, gt=0.0)
-        speed = w.number("speed", 10.0, gt=0.0)
+        block = w.number("block", gt=0.0)
+        speed = w.number("speed", gt=0.0)
         if network != "manhattan":
             for k in ("blocks", "block", "speed"):
                 if k in w.data:
@@ -42,17 +47,15 @@ def parse_world(w: Table, path: Path) -> WorldConfig:
         if physics:
             raise w.fail("physics", "the PyBullet mirror shows voxel worlds; a road network "
                                     "runs without it")
-        edge_events = w.get("edge_events", False)
-        if not isinstance(edge_events, bool):
-            raise w.fail("edge_events", f"must be true or false, got {edge_events!r}")
+        edge_events = w.flag("edge_events")
         roads = RoadConfig(network=network, base=path.parent.resolve(), blocks=tuple(blocks),
                            block=block, speed=speed, congestion=_parse_congestion(w, network))
         return WorldConfig(roads=roads, physics=bool(physics), edge_events=edge_events)
     for k in (*ROAD_KEYS, "edge_events", "congestion"):
         if k in w.data:
             raise w.fail(k, "describes a road network; set world.network to use one")
-    size = w.vec3("size", [50, 50, 30])
-    cell = w.number("cell", 1.0, gt=0.0)
+    size = w.vec3("size")
+    cell = w.number("cell", gt=0.0)
     for axis, s in zip("xyz", size):
         if not s / cell <= MAX_AXIS_CELLS:
             raise w.fail("cell", f"{cell} m cells make the world {s / cell:.3g} cells along "
@@ -60,11 +63,11 @@ def parse_world(w: Table, path: Path) -> WorldConfig:
     for axis, s in zip("xyz", size):
         if abs(s / cell - round(s / cell)) > 1e-9 or round(s / cell) < 1:
             raise w.fail("size", f"{axis} size {s} is not a whole number of {cell} m cells")
-    o = w.table("obstacles")
+    o = w.table("obstacles", ObstacleConfig)
     obstacles = ObstacleConfig(
-        count=o.number("count", 10, lo=0, integer=True),
-        min_size=o.vec3("min_size", [3, 3, 5]),
-        max_size=o.vec3("max_size", [10, 10, 30]),
+        count=o.number("count", lo=0, integer=True),
+        min_size=o.vec3("min_size"),
+        max_size=o.vec3("max_size"),
     )
     for a, (lo_, hi_, s) in enumerate(zip(obstacles.min_size, obstacles.max_size, size)):
         if lo_ > hi_:
@@ -73,7 +76,7 @@ def parse_world(w: Table, path: Path) -> WorldConfig:
             raise o.fail("max_size", f"entry {a} ({hi_} m) does not fit in the world ({s} m)")
     o.done()
     world = WorldConfig(size=size, cell=cell, obstacles=obstacles,
-                        physics=True if physics is None else physics)
+                        physics=w.default("physics") if physics is None else physics)
     _check_obstacles_fit(o, world)
     return world
 
@@ -96,9 +99,9 @@ def _check_obstacles_fit(o: Table, world: WorldConfig) -> None:
 def _parse_congestion(w: Table, network: str) -> tuple[float, ...]:
     """``[world] congestion``: "chicago_taxi" (the factors calibrated from the taxi sample), a
     list of 24 factors > 0 (hour 0 first), or false / absent (free-flow times)."""
-    v = w.get("congestion", False)
-    if v is False:
-        return ()
+    v = w.get("congestion")
+    if v is False or "congestion" not in w.data:
+        return w.default("congestion")
     if v == "chicago_taxi":
         from dispatch.files.empirical import load_factors
 
@@ -114,27 +117,27 @@ def _parse_congestion(w: Table, network: str) -> tuple[float, ...]:
 
 def parse_faults(f: Table, path: Path) -> FaultConfig:
     """``[faults]``: vehicle breakdowns (a rate, a file) and communication blackouts."""
-    rate = f.number("rate", 0.0, lo=0.0)
-    repair = f.get("repair", 600.0)
+    rate = f.number("rate", lo=0.0)
+    repair = f.get("repair")
     if isinstance(repair, bool) or not isinstance(repair, (int, float)) or math.isnan(repair) \
             or repair <= 0:
         raise f.fail("repair", f"must be a number of seconds > 0 (inf: for good), got {repair!r}")
     events: tuple = ()
-    file = f.get("file", None)
+    file = f.given("file")
     if file is not None:
         if not isinstance(file, str) or not file:
             raise f.fail("file", f"must be a CSV file of t, vehicle_id, duration; got {file!r}")
         events = read_failures((path.parent / file).resolve())
-    on_board = f.string("on_board", "transfer", ("transfer", "fail"))
-    tow = f.number("tow", 3600.0, gt=0.0)
-    windows = f.get("blackout", [])
-    if not isinstance(windows, list) or any(
+    on_board = f.string("on_board", choices=("transfer", "fail"))
+    tow = f.number("tow", gt=0.0)
+    windows = f.get("blackout")
+    if not isinstance(windows, (list, tuple)) or any(
             not isinstance(w, list) or len(w) != 2
             or any(isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x)
                    or x < 0 for x in w) or w[0] >= w[1] for w in windows):
         raise f.fail("blackout", f"must be a list of [t0, t1] windows with 0 <= t0 < t1, "
                                  f"got {windows!r}")
-    region = f.get("blackout_region", None)
+    region = f.given("blackout_region")
     if region is not None:
         if not isinstance(region, list) or len(region) != 4 or any(
                 isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x)
@@ -149,13 +152,25 @@ def parse_faults(f: Table, path: Path) -> FaultConfig:
                        region=None if region is None else tuple(float(x) for x in region))
 
 
+def parse_breaks(b: Table, world: WorldConfig):
+    """``[fleet.breaks]`` (see :mod:`dispatch.plan.breaks`): drivers' breaks on a road
+    network."""
+    from dispatch.config.breaks import BreaksConfig
+
+    if "depots" not in space_class(world.space).features:
+        raise b.fail("after", "drivers' breaks need a road network ([world] network)")
+    out = BreaksConfig(after=b.number("after", gt=0.0), duration=b.number("duration", gt=0.0))
+    b.done()
+    return out
+
+
 def parse_energy(e: Table, fleet: FleetConfig, world: WorldConfig):
     """``[fleet.energy]`` (see :mod:`dispatch.fleet.battery`): batteries on a road network."""
     from dispatch.config.energy import EnergyConfig, read_socs
 
     if "energy" not in space_class(world.space).features:
         raise e.fail("battery_kwh", "energy needs a road network ([world] network)")
-    wh = e.get("wh_per_km", 140.0)
+    wh = e.get("wh_per_km")
     table: tuple = ()
     if isinstance(wh, list):
         if len(wh) < 2 or any(not isinstance(r, list) or len(r) != 2 or any(
@@ -167,15 +182,14 @@ def parse_energy(e: Table, fleet: FleetConfig, world: WorldConfig):
         table = tuple((float(a), float(b)) for a, b in wh)
         wh = sum(b for _, b in table) / len(table)
     else:
-        wh = e.number("wh_per_km", 140.0, gt=0.0)
+        wh = e.number("wh_per_km", gt=0.0)
     socs = () if fleet.start_file is None else read_socs(fleet.start_file)[:fleet.agents]
     cfg = EnergyConfig(
-        battery_kwh=e.number("battery_kwh", 50.0, gt=0.0), wh_per_km=wh, speed_table=table,
-        idle_kwh_per_hour=e.number("idle_kwh_per_hour", 0.0, lo=0.0),
-        soc0=e.number("soc0", 1.0, lo=0.0, hi=1.0), reserve=e.number("reserve", 0.1, lo=0.0,
-                                                                     hi=1.0),
-        max_charge_kw=e.number("max_charge_kw", 1e9, gt=0.0), socs=socs,
-        sample=e.number("sample", 900.0, gt=0.0))
+        battery_kwh=e.number("battery_kwh", gt=0.0), wh_per_km=wh, speed_table=table,
+        idle_kwh_per_hour=e.number("idle_kwh_per_hour", lo=0.0),
+        soc0=e.number("soc0", lo=0.0, hi=1.0), reserve=e.number("reserve", lo=0.0, hi=1.0),
+        max_charge_kw=e.number("max_charge_kw", gt=0.0), socs=socs,
+        sample=e.number("sample", gt=0.0))
     e.done()
     return cfg
 
@@ -185,16 +199,16 @@ def parse_charging(root: Table, path: Path, fleet: FleetConfig, faults, world):
     ``[charging]`` (strategy, interval, ``[charging.<name>]``); None unless the fleet has
     energy."""
     from dispatch.api import registry
-    from dispatch.config.energy import STATION_MAX_SNAP, ChargingConfig, read_stations
+    from dispatch.config.energy import ChargingConfig, read_stations
 
-    c, g = root.table("chargers"), root.table("charging")
+    c, g = root.table("chargers", ChargingConfig), root.table("charging", ChargingConfig)
     if fleet.energy is None:
         for t, k in ((c, "file"), (g, "strategy")):
             if t.data:
                 raise t.fail(next(iter(t.data)), "needs [fleet.energy]")
         return None
     stations: tuple = ()
-    file = c.get("file", None)
+    file = c.get("file")
     if file is not None:
         if not isinstance(file, str) or not file:
             raise c.fail("file", f"must be a CSV file of stations, got {_short(file)}")
@@ -205,17 +219,17 @@ def parse_charging(root: Table, path: Path, fleet: FleetConfig, faults, world):
             raise c.fail("file", str(err)) from None
     else:
         fpath = None
-    taper_from = c.number("taper_from", 0.8, lo=0.0, hi=1.0)
-    taper_floor = c.number("taper_floor", 0.2, gt=0.0, hi=1.0)
-    max_snap = c.number("max_snap", STATION_MAX_SNAP, gt=0.0)
+    taper_from = c.number("taper_from", lo=0.0, hi=1.0)
+    taper_floor = c.number("taper_floor", gt=0.0, hi=1.0)
+    max_snap = c.number("max_snap", gt=0.0)
     _check_station_snap(c, stations, world, max_snap)
     c.done()
     installed = registry.available("charger")
-    strategy = g.string("strategy", "threshold")
+    strategy = g.string("strategy")
     if strategy not in installed:
         raise g.fail("strategy", f"unknown charging strategy {strategy!r}; installed: "
                                  f"{', '.join(installed)}")
-    interval = g.number("interval", 60.0, gt=0.0)
+    interval = g.number("interval", gt=0.0)
     params = []
     for name in sorted(k for k in g.data if k not in ("strategy", "interval")):
         if not isinstance(g.data[name], dict) or name not in installed:
@@ -224,8 +238,8 @@ def parse_charging(root: Table, path: Path, fleet: FleetConfig, faults, world):
         params.append((name, g.params(name)))
     g.done()
     return ChargingConfig(stations=stations, file=fpath, taper_from=taper_from,
-                          taper_floor=taper_floor, max_snap=max_snap, strategy=strategy, interval=interval,
-                          params=tuple(params), tow=faults.tow)
+                          taper_floor=taper_floor, max_snap=max_snap, strategy=strategy,
+                          interval=interval, params=tuple(params), tow=faults.tow)
 
 
 def _check_station_snap(c: Table, stations, world, max_snap: float) -> None:
@@ -305,9 +319,9 @@ def parse_reposition(r: Table, sweep: SweepConfig, s: Table) -> RepositionConfig
     (``dispatch validate`` does both)."""
     from dispatch.api import registry
     installed = registry.available("repositioner")
-    policy = r.string("policy", "stay")
-    interval = r.number("interval", 300.0, gt=0.0)
-    horizon = r.number("horizon", 1800.0, gt=0.0)
+    policy = r.string("policy")
+    interval = r.number("interval", gt=0.0)
+    horizon = r.number("horizon", gt=0.0)
 
     def known(tab: Table, key: str, name: str) -> None:
         if name not in installed:
@@ -344,9 +358,9 @@ def parse_pricing(p: Table, world: WorldConfig):
         return None
     if "pricing" not in space_class(world.space).features:
         raise p.fail(next(iter(p.data)), "fares need a road network ([world] network)")
-    pricing = Pricing(base=p.number("base", 0.0, lo=0.0), per_km=p.number("per_km", 0.0, lo=0.0),
-                      per_minute=p.number("per_minute", 0.0, lo=0.0),
-                      sharing_discount=p.number("sharing_discount", 0.0, lo=0.0, hi=1.0))
+    pricing = Pricing(base=p.number("base", lo=0.0), per_km=p.number("per_km", lo=0.0),
+                      per_minute=p.number("per_minute", lo=0.0),
+                      sharing_discount=p.number("sharing_discount", lo=0.0, hi=1.0))
     p.done()
     return pricing
 
@@ -364,10 +378,10 @@ def parse_acceptor(a: Table, pricing):
     if not a.data:  # every rider accepts: nothing to load
         return AcceptorConfig()
     installed = registry.available("acceptor")
-    name = a.string("name", "always")
+    name = a.string("name")
     if name not in installed:
         raise a.fail("name", registry.unknown("acceptor", name))
-    retries = a.number("retries", 0, lo=0, integer=True)
+    retries = a.number("retries", lo=0, integer=True)
     for k in sorted(k for k in a.data if k not in ("name", "retries")):
         if not isinstance(a.data[k], dict):
             raise a.fail(k, "unknown key (known keys here: name, retries, and the "

@@ -1,22 +1,50 @@
 """A TOML table of a scenario file being read: typed getters that raise one
 :class:`~dispatch.errors.ScenarioError` naming the file, the dotted key and the reason, and the
-check that no key is left unread (an unknown key)."""
+check that no key is left unread (an unknown key).
+
+A table is read into its section's dataclasses (``of``): a key the file leaves out takes the
+default of the field of the same name, written once, in the dataclass (:func:`default_of`);
+a getter is given a default of its own only where the default is not a field's (it depends on
+another setting, or it marks a key the file left out).
+"""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 from typing import Any
 
-from dispatch.config.scenario import Vec3, _short
+from dispatch.config.scenario import _short
+from dispatch.config.world import Vec3
 from dispatch.errors import ScenarioError
+
+#: a getter's default when it is not given: the default of the section's field of the key's name
+FIELD: Any = object()
+
+
+def default_of(classes: tuple[type, ...], name: str) -> Any:
+    """The default of field ``name`` of the first of the dataclasses ``classes`` that has one
+    (a ``default_factory`` called); LookupError where none has a field ``name`` with a
+    default (a parser that asks for it has a bug)."""
+    for cls in classes:
+        for f in dataclasses.fields(cls):
+            if f.name != name:
+                continue
+            if f.default is not dataclasses.MISSING:
+                return f.default
+            if f.default_factory is not dataclasses.MISSING:
+                return f.default_factory()
+            raise LookupError(f"{cls.__name__}.{name} has no default")
+    raise LookupError(f"no field {name!r} in {', '.join(c.__name__ for c in classes)}")
 
 
 class Table:
-    """A TOML table being read: typed getters that raise ScenarioError, unknown-key check."""
+    """A TOML table being read into the dataclasses ``of``: typed getters that raise
+    ScenarioError and take a left-out key's default from its field, unknown-key check."""
 
-    def __init__(self, file: Path, prefix: str, data: Any) -> None:
-        self.file, self.prefix = file, prefix
+    def __init__(self, file: Path, prefix: str, data: Any, of: tuple[type, ...] = ()) -> None:
+        self.file, self.prefix, self.of = file, prefix, of
         if not isinstance(data, dict):
             raise ScenarioError(file, prefix.rstrip(".") or "<root>", "must be a table")
         self.data, self.used = data, set()
@@ -27,17 +55,32 @@ class Table:
     def fail(self, k: str, reason: str) -> ScenarioError:
         return ScenarioError(self.file, self.key(k), reason)
 
-    def get(self, k: str, default: Any) -> Any:
+    def default(self, name: str) -> Any:
+        """The default of this table's field ``name`` (see :func:`default_of`)."""
+        return default_of(self.of, name)
+
+    def get(self, k: str, default: Any = FIELD) -> Any:
+        """The file's value of ``k`` as it is; left out: ``default`` (not given: the field's)."""
         self.used.add(k)
-        return self.data.get(k, default)
+        if k in self.data:
+            return self.data[k]
+        return self.default(k) if default is FIELD else default
 
-    def table(self, k: str) -> Table:
-        return Table(self.file, self.key(k) + ".", self.get(k, {}))
+    def given(self, k: str) -> Any:
+        """The file's value of ``k`` as it is; None where the file leaves it out."""
+        self.used.add(k)
+        return self.data.get(k)
 
-    def number(self, k, default, *, lo=None, gt=None, hi=None, integer=False, optional=False):
+    def table(self, k: str, *of: type) -> Table:
+        """The sub-table ``k`` (empty where left out), read into the dataclasses ``of``."""
+        return Table(self.file, self.key(k) + ".", self.get(k, {}), of)
+
+    def number(self, k, default=FIELD, *, lo=None, gt=None, hi=None, integer=False):
+        """The number ``k``, checked (finite; ``>= lo``, ``> gt``, ``<= hi``; an integer);
+        left out: ``default`` as it is (not given: the field's, which may be None or inf)."""
         v = self.get(k, default)
-        if v is None and optional:
-            return None
+        if k not in self.data:
+            return v
         kind = "an integer" if integer else "a number"
         if isinstance(v, bool) or not isinstance(v, (int, float) if not integer else int):
             raise self.fail(k, f"must be {kind}, got {_short(v)}")
@@ -51,16 +94,32 @@ class Table:
             raise self.fail(k, f"must be <= {hi}, got {_short(v)}")
         return int(v) if integer else float(v)
 
-    def string(self, k, default, choices=None) -> str:
+    def string(self, k, default=FIELD, choices=None) -> str:
+        """The non-empty string ``k``, one of ``choices`` where given; left out: ``default``
+        (not given: the field's)."""
         v = self.get(k, default)
+        if k not in self.data:
+            return v
         if not isinstance(v, str) or not v:
             raise self.fail(k, f"must be a non-empty string, got {_short(v)}")
         if choices and v not in choices:
             raise self.fail(k, f"must be one of {', '.join(choices)}; got {_short(v)}")
         return v
 
-    def vec3(self, k, default, *, gt=0.0) -> Vec3:
+    def flag(self, k, default=FIELD) -> bool:
+        """``k``, true or false; left out: ``default`` (not given: the field's)."""
         v = self.get(k, default)
+        if k not in self.data:
+            return v
+        if not isinstance(v, bool):
+            raise self.fail(k, f"must be true or false, got {_short(v)}")
+        return v
+
+    def vec3(self, k, default=FIELD, *, gt=0.0) -> Vec3:
+        """Three finite numbers > ``gt``; left out: ``default`` (not given: the field's)."""
+        v = self.get(k, default)
+        if k not in self.data:
+            return v
         if (
             not isinstance(v, (list, tuple))
             or len(v) != 3
@@ -72,13 +131,19 @@ class Table:
         return tuple(float(x) for x in v)  # type: ignore[return-value]
 
     def str_list(self, k) -> tuple[str, ...]:
-        v = self.get(k, [])
+        """A list of names; left out: the field's default."""
+        v = self.get(k)
+        if k not in self.data:
+            return v
         if not isinstance(v, list) or any(not isinstance(x, str) or not x for x in v):
             raise self.fail(k, f"must be a list of names, got {_short(v)}")
         return tuple(v)
 
     def int_list(self, k, lo=None, hi=None) -> tuple[int, ...]:
-        v = self.get(k, [])
+        """A list of integers in ``[lo, hi]``; left out: the field's default."""
+        v = self.get(k)
+        if k not in self.data:
+            return v
         if not isinstance(v, list) or any(isinstance(x, bool) or not isinstance(x, int) for x in v):
             raise self.fail(k, f"must be a list of integers, got {_short(v)}")
         if lo is not None and any(x < lo for x in v):

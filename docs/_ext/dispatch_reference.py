@@ -2,11 +2,11 @@
 
 One source of truth each, read at build time, never copied by hand:
 
-* scenario keys: the typed configuration's frozen dataclasses (``dispatch.config.scenario``, and the
-  ``[faults]``, ``[fleet.energy]`` and ``[chargers]`` dataclasses wherever they live), their
-  types and defaults from :func:`dataclasses.fields`, their meaning from the comment on or
-  above each field in the source;
-* the command line: the argument parser of ``dispatch.run.cli`` (the plugin commands included);
+* scenario keys: the typed configuration's frozen dataclasses (one per section, in the modules of
+  ``dispatch.config``, and ``[pricing]``'s wherever it lives), their types and defaults from
+  :func:`dataclasses.fields`, their meaning from the comment on or above each field in the
+  source;
+* the command line: the argument parser of ``dispatch.run.parser`` (the plugin commands included);
 * the Parquet tables: ``dispatch.output.parquet.SCHEMAS`` (column names and Arrow types), each
   column's meaning from the table of the results page (``explanation/output.md``) where it
   has one, else from the comment above it in the recorder;
@@ -143,12 +143,13 @@ def guide_comments() -> dict[tuple[str, str], str]:
 
 
 def file_keys() -> set[str]:
-    """Every string literal of the scenario parser: a field the parser never names is built
-    from others (a file's rows, a derived flag) and is not a key of the file."""
+    """Every string literal of the scenario parser and of the configuration: a field the
+    parser never names is built from others (a file's rows, a derived flag) and is not a key
+    of the file."""
     keys = set()
-    for mod in ("scenario/load", "scenario/sections", "config/scenario", "config/faults",
-                "config/offers", "config/energy"):
-        tree = ast.parse((ROOT / "dispatch" / f"{mod}.py").read_text(encoding="utf-8"))
+    paths = [ROOT / "dispatch" / "scenario" / f"{mod}.py" for mod in ("load", "sections")]
+    for path in [*paths, *sorted((ROOT / "dispatch" / "config").glob("*.py"))]:
+        tree = ast.parse(path.read_text(encoding="utf-8"))
         keys |= {n.value for n in ast.walk(tree)
                  if isinstance(n, ast.Constant) and isinstance(n.value, str)}
     return keys
@@ -196,23 +197,22 @@ def key_table(title: str, table: str, cls: type, keys: set[str], skip=(),
 
 
 def scenario_keys() -> str:
-    from dispatch.config import scenario as config
     keys = file_keys() | {"blocks", "block", "speed", "network", "congestion"}
     sections = [
-        ("top level", "", config.Scenario, ("name", "path", "text", "charging", "acceptor",
-                                            "pricing")),
-        ("[world]", "world", config.WorldConfig, ("roads",)),
-        ("[world] (road networks)", "world", config.RoadConfig, ("base",)),
-        ("[world.obstacles]", "world.obstacles", config.ObstacleConfig, ()),
-        ("[fleet]", "fleet", config.FleetConfig, ("energy",)),
+        ("top level", "", find_class("Scenario"), ("name", "path", "text", "charging",
+                                                   "acceptor", "pricing")),
+        ("[world]", "world", find_class("WorldConfig"), ("roads",)),
+        ("[world] (road networks)", "world", find_class("RoadConfig"), ("base",)),
+        ("[world.obstacles]", "world.obstacles", find_class("ObstacleConfig"), ()),
+        ("[fleet]", "fleet", find_class("FleetConfig"), ("energy",)),
         ("[fleet.energy]", "fleet.energy", find_class("EnergyConfig"), ()),
-        ("[tasks]", "tasks", config.TaskConfig, ()),
-        ("[dispatch]", "dispatch", config.DispatchConfig, ()),
-        ("[comms]", "comms", config.CommsConfig, ()),
+        ("[tasks]", "tasks", find_class("TaskConfig"), ()),
+        ("[dispatch]", "dispatch", find_class("DispatchConfig"), ()),
+        ("[comms]", "comms", find_class("CommsConfig"), ()),
         ("[faults]", "faults", find_class("FaultConfig"), ()),
-        ("[reposition]", "reposition", config.RepositionConfig, ()),
+        ("[reposition]", "reposition", find_class("RepositionConfig"), ()),
         ("[chargers] and [charging]", "chargers", find_class("ChargingConfig"), ()),
-        ("[sweep]", "sweep", config.SweepConfig, ()),
+        ("[sweep]", "sweep", find_class("SweepConfig"), ()),
         ("[acceptor]", "acceptor", find_class("AcceptorConfig"), ()),
         ("[pricing]", "pricing", find_class("Pricing"), ()),
     ]
@@ -247,11 +247,12 @@ def _fmt_action(a: argparse.Action) -> str:
 
 
 def command_line() -> str:
-    from dispatch.run import cli
     from dispatch.run.commands import installed
+    from dispatch.run.parser import OWN_COMMANDS
+    from dispatch.run.parser import parser as command_parser
 
-    parser = cli._parser(installed(reserved=cli.OWN_COMMANDS))
-    out = ["# Command line", "", "Generated from the argument parser of `dispatch.run.cli`, "
+    parser = command_parser(installed(reserved=OWN_COMMANDS))
+    out = ["# Command line", "", "Generated from the argument parser of `dispatch.run.parser`, "
            "the commands that other packages register (`dispatch.commands` entry points) "
            "included.", "", "```text", parser.format_usage().strip(), "```", "",
            "| option | meaning |", "|---|---|"]

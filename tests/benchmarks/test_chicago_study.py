@@ -81,7 +81,7 @@ def test_rerun_with_other_lists_resumes_the_runs_it_shares(study, tmp_path):
     """Calling the study again with other --allocators / --repositioners / --agents writes
     another derived text, but a run both calls make is the same run (run_digest), under the
     same scenario names: the sweep skips it and adds only the missing ones."""
-    from dispatch.run.runner import run_digest
+    from dispatch.run.resume import run_digest
 
     def specs(args, allocs, reps, name):
         a = study.parse_args(["--hours", "1", *args])
@@ -103,7 +103,7 @@ def test_rerun_with_other_lists_resumes_the_runs_it_shares(study, tmp_path):
 def test_comm_range_sets_the_radio_range_and_makes_other_runs(study, tmp_path):
     """``--comm-range 2000`` gives the derived scenario ``[comms] range = 2000``; without it
     the range stays unlimited; the runs of the two are different runs (other digests)."""
-    from dispatch.run.runner import run_digest
+    from dispatch.run.resume import run_digest
 
     def load(args, name):
         a = study.parse_args(["--hours", "1", "--agents", "500", *args])

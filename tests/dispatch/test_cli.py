@@ -193,11 +193,11 @@ def test_negative_seed_override_is_a_clean_error(tiny_scenario, tmp_path, capsys
 
 @pytest.mark.parametrize("flags", [["--debug"], ["-v"]])
 def test_logging_flag_before_or_after_the_command(tiny_scenario, flags):
-    from dispatch.run.cli import _parser
+    from dispatch.run.parser import parser
 
-    before = _parser().parse_args([*flags, "validate", str(tiny_scenario)])
-    after = _parser().parse_args(["validate", str(tiny_scenario), *flags])
-    neither = _parser().parse_args(["validate", str(tiny_scenario)])
+    before = parser().parse_args([*flags, "validate", str(tiny_scenario)])
+    after = parser().parse_args(["validate", str(tiny_scenario), *flags])
+    neither = parser().parse_args(["validate", str(tiny_scenario)])
     key = "debug" if flags == ["--debug"] else "verbose"
     assert getattr(before, key) and getattr(after, key)
     assert not neither.debug and not neither.verbose
@@ -226,7 +226,7 @@ def test_every_argument_has_help():
     package's) says what it is in --help."""
     import argparse
 
-    from dispatch.run.cli import OWN_COMMANDS, _parser
+    from dispatch.run.parser import OWN_COMMANDS, parser
     from dispatch.run.commands import installed
 
     ours = {n: c for n, c in installed(reserved=OWN_COMMANDS).items()
@@ -245,7 +245,7 @@ def test_every_argument_has_help():
             elif not action.help or action.help == argparse.SUPPRESS:
                 missing.append(f"{name} {'/'.join(action.option_strings) or action.dest}")
 
-    walk(_parser(ours), "dispatch")
+    walk(parser(ours), "dispatch")
     assert {"report", "render"} <= set(ours)
     assert missing == []
 

@@ -17,7 +17,7 @@ from dispatch.api.comms import (Channel, comm_graph, components, diameter, hop_d
                                 neighbours, relay_needed)
 from dispatch.api.decentralized import DecentralizedAllocator, run_rounds
 from dispatch.api.problem import Allocation, Bid
-from dispatch.config.scenario import CommsConfig
+from dispatch.config.comms import CommsConfig
 from dispatch.errors import PluginError, ScenarioError
 from dispatch.run.runner import run_one
 from dispatch.scenario.load import load_scenario

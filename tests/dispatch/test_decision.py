@@ -15,6 +15,7 @@ import pytest
 import simpy
 
 from dispatch.api.comms import Hearing, comm_graph
+from dispatch.api.problem import AgentViews
 from dispatch.decide.dispatcher import Wakeup
 from dispatch.decide.pipeline import deadlines, keep_servable, reject_late
 from dispatch.decide.planner_costs import PlannerCosts, lazy_costs
@@ -157,7 +158,7 @@ def test_hearing_broadcasts_without_a_range_and_builds_the_graph_with_one():
             Space.read += 1
             return np.array([[float(x), 0.0, 0.0] for x in locs])
 
-    agents = [SimpleNamespace(loc=x) for x in (0.0, 5.0, 30.0)]
+    agents = AgentViews.of(SimpleNamespace(id=k, loc=x) for k, x in enumerate((0.0, 5.0, 30.0)))
     comm, apos = Hearing(Space(), SimpleNamespace(range=None))(agents, 0.0)
     assert comm.shape == (3, 3) and comm.all() and comm.strides == (0, 0)
     assert Space.read == 0 and apos()[:, 0].tolist() == [0.0, 5.0, 30.0]  # read when asked

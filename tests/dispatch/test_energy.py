@@ -287,7 +287,7 @@ def test_bad_configuration_is_one_clear_error(tmp_path):
 
 def test_a_strategy_rejecting_its_parameters_stops_validation(tmp_path):
     from dispatch.errors import PluginError
-    from dispatch.run.cli import build_plugins
+    from dispatch.run.prepare import build_plugins
 
     p = grid(tmp_path, "battery_kwh = 1.0", [(1.0, 1, 2)],
              extra="[charging.threshold]\nlow = 0.9\nhigh = 0.5\n")

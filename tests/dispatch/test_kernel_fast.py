@@ -31,7 +31,7 @@ def _python_leg(net, start, nodes):
 @pytest.mark.parametrize("which", ["manhattan", "chicago"])
 def test_compiled_legs_equal_python_sums_bit_for_bit(which, chicago):
     net = manhattan(9, 7, block=173.0, speed=7.3) if which == "manhattan" else chicago
-    assert net._leg_sums is not None  # the compiled path serves these networks
+    assert net._edges.leg_sums is not None  # the compiled path serves these networks
     rng = np.random.default_rng(3)
     coo = net.time.tocoo()
     for k in range(40):
@@ -123,14 +123,13 @@ def test_recorder_constant_column(value, n):
 
 
 def test_centralized_allocation_equals_the_constructed_one():
-    from dispatch.api.problem import Allocation, AllocationProblem, Bid
+    from dispatch.api.problem import Allocation, AllocationProblem, AgentView, Bid, TaskView
 
     rng = np.random.default_rng(5)
     cost = rng.uniform(1, 9, (4, 3))
-    problem = AllocationProblem(0.0, (), (), np.zeros((0, 0)), np.zeros((0, 0), bool), rng)
-    object.__setattr__(problem, "cost", cost)  # a bare problem: only ids and costs are read
-    problem.__dict__["_agent_ids"] = np.array([10, 11, 12, 13])
-    problem.__dict__["_task_ids"] = np.array([7, 8, 9])
+    agents = tuple(AgentView(10 + k, "ugv", (k, 0, 0), 1.0) for k in range(4))
+    tasks = tuple(TaskView(7 + k, "ground", (k, 1, 0), 0.0) for k in range(3))
+    problem = AllocationProblem(0.0, agents, tasks, cost, np.ones((4, 4), bool), rng)
     got = Allocation.centralized(problem, [(2, 0), (0, 2)])
     want = Allocation(pairs=((12, 7), (10, 9)), rounds=1, messages=0,
                       requests=(Bid(0, 12, 7, float(cost[2, 0]), True),

@@ -10,6 +10,8 @@ import pytest
 
 from dispatch.errors import ScenarioError
 from dispatch.run import cli
+from dispatch.run.parser import parser
+from dispatch.run.prepare import checked_specs, overrides
 from dispatch.scenario.load import load_scenario
 from dispatch.scenario.overrides import apply_overrides, parse_set
 
@@ -60,7 +62,7 @@ def test_bad_value_names_the_key(pooled, capsys):
 
 def test_set_equals_option_equals_file(pooled):
     by_set = load_scenario(pooled, overrides=[(*parse_set("fleet.capacity=4", pooled), "--set")])
-    by_option = load_scenario(pooled, overrides=cli.overrides(cli._parser().parse_args(
+    by_option = load_scenario(pooled, overrides=overrides(parser().parse_args(
         ["run", str(pooled), "--capacity", "4"])))
     written = pooled.with_name("w.toml")
     written.write_text(POOLED.replace("agents = 2\n", "agents = 2\ncapacity = 4\n"))
@@ -99,8 +101,8 @@ def test_bare_word_is_a_string(pooled):
 def test_batch_window_replaces_the_sweep(pooled):
     text = POOLED + "batch_window = [0.0, 30.0]\n"
     pooled.write_text(text)
-    args = cli._parser().parse_args(["validate", str(pooled), "--batch-window", "10"])
-    _, specs = cli._specs(args)
+    args = parser().parse_args(["validate", str(pooled), "--batch-window", "10"])
+    _, specs = checked_specs(args)
     assert sorted({s.scenario.dispatch.batch_window for s in specs}) == [10.0]
     assert len(specs) == 2  # the two seeds
 

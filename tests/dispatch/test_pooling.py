@@ -243,7 +243,6 @@ def test_allocators_read_the_plans_read_only(tmp_path):
     path = road_scenario(tmp_path, tasks='source = "trace"\ntrace = "trips.csv"',
                          fleet='start = "fleet.csv"\ncapacity = 2')
     [spec] = load_scenario(path).runs()
-    sim = Simulation(spec, make_recorder(spec, tmp_path / "out"))
     seen = []
 
     class Spy(HungarianAllocator):
@@ -253,7 +252,7 @@ def test_allocators_read_the_plans_read_only(tmp_path):
                 problem.plans[0] = ()  # type: ignore[index]
             return super().allocate(problem)
 
-    sim.allocator = Spy()
+    sim = Simulation(spec, make_recorder(spec, tmp_path / "out"), allocator=Spy())
     sim.run()
     assert seen[0] == {}  # the first request: the taxi is idle
     [(agent, stops)] = seen[1].items()
@@ -281,7 +280,6 @@ def _two_requests_one_taxi(tmp_path, route, capacity=2):
                          network='network = "manhattan"\nblocks = [5, 2]\nblock = 100.0\n'
                                  'speed = 10.0')
     [spec] = load_scenario(path).runs()
-    sim = Simulation(spec, make_recorder(spec, tmp_path / "out"))
 
     class Both(Allocator):
         name = "both"
@@ -292,7 +290,7 @@ def _two_requests_one_taxi(tmp_path, route, capacity=2):
                 return Allocation(pairs=())
             return Allocation(pairs=((0, 0), (0, 1)), routes={0: route})
 
-    sim.allocator = Both()
+    sim = Simulation(spec, make_recorder(spec, tmp_path / "out"), allocator=Both())
     sim.run()
     sim.recorder.finish()
     import pyarrow.parquet as pq

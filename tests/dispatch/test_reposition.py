@@ -282,7 +282,7 @@ def test_results_without_repositioning_read_as_stay(tmp_path):
 
 def one_line_error(path: Path, error=ScenarioError):
     with pytest.raises(error) as info:
-        from dispatch.run.cli import _specs
+        from dispatch.run.prepare import checked_specs
 
         class Args:
             scenario = path
@@ -291,7 +291,7 @@ def one_line_error(path: Path, error=ScenarioError):
             capacity = batch_window = None  # the override options run, sweep and validate have
             overrides: list[str] = []
 
-        _specs(Args)
+        checked_specs(Args)
     msg = str(info.value)
     assert "\n" not in msg
     return msg

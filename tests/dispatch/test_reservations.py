@@ -385,8 +385,7 @@ def corridor_run(tmp_path, monkeypatch, vehicles, tasks, plan, *, service=0.0):
                           duration=60.0)
     spec = load_scenario(path).runs()[0]
     recorder = make_recorder(spec, tmp_path / "out")
-    sim = Simulation(spec, recorder)
-    sim.allocator = Scripted(plan)
+    sim = Simulation(spec, recorder, allocator=Scripted(plan))
     summary = sim.run()
     result = RunResult(spec, summary, tmp_path / "out", recorder.finish())
     t = {name: table.to_pandas() for name, table in result.tables.items()}

@@ -300,8 +300,7 @@ def _drive(tmp_path: Path, allocator):
                          network='network = "manhattan"\nblocks = [5, 2]\nblock = 100.0\n'
                                  'speed = 10.0', allocator="rtv", extra="batch_window = 5.0")
     [spec] = load_scenario(path).runs()
-    sim = Simulation(spec, make_recorder(spec, tmp_path / "out"))
-    sim.allocator = allocator
+    sim = Simulation(spec, make_recorder(spec, tmp_path / "out"), allocator=allocator)
     sim.run()
     sim.recorder.finish()
     import pyarrow.parquet as pq

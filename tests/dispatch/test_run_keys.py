@@ -16,11 +16,11 @@ from pathlib import Path
 import pyarrow.parquet as pq
 
 from dispatch.config import runkeys
-from dispatch.config.scenario import SweepConfig
+from dispatch.config.sweep import SweepConfig
 from dispatch.output.parquet import SCHEMAS
 from dispatch.output.printed import print_tables
 from dispatch.run import cli
-from dispatch.run.runner import _base_settings, run_digest
+from dispatch.run.resume import _base_settings, run_digest
 from dispatch.scenario.load import load_scenario
 from tests.analysis.helpers import run_tiny_road
 
@@ -167,7 +167,8 @@ def test_a_sweep_over_an_older_folder_of_variants_resumes_it(tmp_path):
     table's rows with their run's window; ``force`` redoes them in the new layout and the older
     copies go."""
     from analysis.io import open_results
-    from dispatch.run.runner import execute, holds_results, legacy_variant, sweep
+    from dispatch.run.resume import holds_results, legacy_variant
+    from dispatch.run.runner import execute, sweep
 
     out = run_tiny_road(tmp_path, "tiny", "[sweep]\nbatch_window = [0.0, 30.0]\n")
     for f in list(out.iterdir()):  # keep only the older layout, written below

@@ -19,7 +19,7 @@ import pytest
 from dispatch.api import registry
 from dispatch.api.legs import RoadPoint
 from dispatch.api.space import KINDS, Space, space_class, space_for
-from dispatch.checks.planners import SAMPLERS
+from dispatch.checks.planners import GUARDED, SAMPLERS
 from dispatch.errors import PluginError, ScenarioError
 from dispatch.events import EventBus
 from dispatch.files.traces import read_fleet_start
@@ -215,8 +215,8 @@ def test_static_tables_belong_to_the_space():
     assert space_class("road").small().tables() == {}
 
 
-@pytest.mark.parametrize("table", [BUILDERS, PLACERS, SAMPLERS], ids=["demand", "placement",
-                                                                       "views"])
+@pytest.mark.parametrize("table", [BUILDERS, PLACERS, SAMPLERS, GUARDED],
+                         ids=["demand", "placement", "views", "guarded"])
 def test_every_space_kind_has_its_builders(table):
     """What is built from a space is built by its own module, one function per space kind:
     a new kind in KINDS without its entry would fail at its first run."""
@@ -238,11 +238,11 @@ SWITCH = re.compile(r'roads is (not )?None|kind [!=]= "(road|voxel)"|_is_node|'
                     r'space [!=]= "(road|voxel)"|isinstance\([^)]*(World|RoadNetwork|Node)\)|'
                     r'hasattr\([^)]*"node"\)|\.space == |get\("space", "voxel"\)')
 #: where a switch may stay, and how many: the space modules; the config branch
-#: (config.py's WorldConfig.space) and the parser's empirical sample on the Chicago network
-#: (scenario.py); the road planner checking
-#: its own space; tables and analysis reading the recorded ``space`` column of results
+#: (dispatch/config/world.py's WorldConfig.space) and the parser's empirical sample on the
+#: Chicago network (dispatch/scenario/load.py); the road planner checking its own space; tables
+#: and analysis reading the recorded ``space`` column of results
 ALLOWED = {"dispatch/api/space.py": 99, "dispatch/space/world.py": 99,
-           "dispatch/space/roads.py": 99, "dispatch/config/scenario.py": 1,
+           "dispatch/space/roads.py": 99, "dispatch/config/world.py": 1,
            "dispatch/scenario/load.py": 1,
            # [chargers] max_snap: stations given in lon/lat are snapped to the road network
            "dispatch/scenario/sections.py": 1, "planners/road.py": 1,

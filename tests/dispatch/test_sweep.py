@@ -15,8 +15,9 @@ import pyarrow.parquet as pq
 import pytest
 
 from dispatch.output.parquet import SCHEMAS
-from dispatch.run.runner import (ERRORS, MARKERS, execute, foreign_runs, is_complete, marker_path,
-                                 partition_dir, sweep)
+from dispatch.run.resume import (ERRORS, MARKERS, foreign_runs, is_complete, marker_path,
+                                 partition_dir)
+from dispatch.run.runner import execute, sweep
 from dispatch.scenario.load import load_scenario
 from tests.conftest import DISPATCH_EXE, ROOT, write_scenario
 from tests.dispatch.test_determinism import assert_same_content, without_timing
@@ -328,7 +329,7 @@ def test_changed_sweep_lists_resume_the_same_runs(tmp_path):
     """A sweep rerun with other [sweep] lists (and other comments) skips the runs it shares
     with the first one and runs only the new ones; runs of values dropped since stay and are
     not counted as another scenario's; a change outside [sweep] still redoes everything."""
-    from dispatch.run.runner import run_digest
+    from dispatch.run.resume import run_digest
 
     first = write_scenario(tmp_path, "a.toml", sweep={"allocator": ["hungarian"], "seed": [0]})
     out = tmp_path / "out"

@@ -14,12 +14,13 @@ import numpy as np
 import pytest
 import simpy
 
+from dispatch.config.tasks import TaskConfig
 from dispatch.errors import ScenarioError
 from dispatch.events import EventBus
 from dispatch.files import tables as table_files
 from dispatch.files.traces import read_trace
 from dispatch.plan.demand import RoadDemand
-from dispatch.plan.tasks import SourceConfig, TaskBook, TaskSource
+from dispatch.plan.tasks import TaskBook, TaskSource
 from dispatch.scenario.load import load_scenario
 from dispatch.space.roads import manhattan
 
@@ -187,8 +188,8 @@ def test_trace_requests_are_made_as_the_clock_reaches_them(tmp_path, count):
     env = simpy.Environment()
     book = TaskBook(env, EventBus())
     demand = CountingDemand(manhattan(6, 6, 100.0, 10.0), np.random.default_rng(0))
-    cfg = SourceConfig("trace", count, None, None, None, None, 600.0)
-    TaskSource(env, book, demand, cfg, np.random.default_rng(0), lambda: None, trips)
+    tasks = TaskConfig(source="trace", max_wait=600.0, trips=trips)
+    TaskSource(env, book, demand, tasks, count, np.random.default_rng(0), lambda: None, trips)
     for t in sorted({*trips.t.tolist(), trips.t[-1] + 1.0}):
         env.run(until=t + 1e-9)
         assert demand.made == book.released  # none made before its release

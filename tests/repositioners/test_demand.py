@@ -14,7 +14,7 @@ from dispatch.checks.repositioners import check_repositioner, reposition_view
 from dispatch.space.roads import manhattan
 from repositioners.demand import DemandRepositioner, shares
 from repositioners.stay import StayRepositioner
-from repositioners.zones import Zones
+from learning.zones import Zones
 
 #: 6 x 2 intersections, 200 m blocks at 10 m/s (20 s an edge): node row * 6 + column at
 #: (200 column, 200 row). With 600 m zones, columns 0-2 are zone 0 and columns 3-5 zone 1.
@@ -22,16 +22,16 @@ NET = manhattan(6, 2, 200.0, 10.0)
 
 
 def test_grid_zones_by_hand():
-    z = Zones.grid(NET.xy, 600.0)
-    assert z.count == 2
+    z = Zones(NET.xy, 600.0)
+    assert z.n == 2
     assert z.of_node.tolist() == [0, 0, 0, 1, 1, 1, 0, 0, 0, 1, 1, 1]
     # zone 0's nodes average (200, 100): nodes 1 (200, 0) and 7 (200, 200) tie, the lower wins
-    assert z.centre.tolist() == [1, 4]
-    one = Zones.grid(NET.xy, 5000.0)
-    assert one.count == 1 and set(one.of_node.tolist()) == {0}
+    assert z.centre_nodes.tolist() == [1, 4]
+    one = Zones(NET.xy, 5000.0)
+    assert one.n == 1 and set(one.of_node.tolist()) == {0}
     # 200 m zones: every column of each row... x and y both split: 12 zones, one node each
-    fine = Zones.grid(NET.xy, 200.0)
-    assert fine.count == 12 and sorted(fine.centre.tolist()) == list(range(12))
+    fine = Zones(NET.xy, 200.0)
+    assert fine.n == 12 and sorted(fine.centre_nodes.tolist()) == list(range(12))
 
 
 @pytest.mark.parametrize("total, weights, want", [
@@ -93,10 +93,10 @@ def _brute_force(view, zones, surplus, slots):
     zone = {i: zones.of_node[view.nodes[i]] for i in still}
     best = np.inf
     for chosen in itertools.permutations(still, len(slots)):
-        counts = np.bincount([zone[i] for i in chosen], minlength=zones.count)
+        counts = np.bincount([zone[i] for i in chosen], minlength=zones.n)
         if (counts > surplus).any():
             continue
-        best = min(best, sum(times[view.nodes[i], zones.centre[z]]
+        best = min(best, sum(times[view.nodes[i], zones.centre_nodes[z]]
                              for i, z in zip(chosen, slots)))
     return best
 
@@ -113,8 +113,8 @@ def test_the_assignment_is_the_cheapest_admissible_one_brute_force():
         req = [(float(i), int(n)) for i, n in enumerate(g.integers(0, NET.n, g.integers(1, 8)))]
         view = reposition_view(NET, vehicles, req)
         moves = rep.reposition(view)
-        demand = np.bincount(zones.of_node[[n for _, n in req]], minlength=zones.count)
-        supply = np.bincount(zones.of_node[view.nodes], minlength=zones.count)
+        demand = np.bincount(zones.of_node[[n for _, n in req]], minlength=zones.n)
+        supply = np.bincount(zones.of_node[view.nodes], minlength=zones.n)
         share = shares(nv, demand.astype(float))
         surplus = np.maximum(supply - share, 0)
         deficit = np.maximum(share - supply, 0)
@@ -123,7 +123,7 @@ def test_the_assignment_is_the_cheapest_admissible_one_brute_force():
         # the slots are the k largest gaps; which zones they are is fixed, so the brute force
         # enumerates the vehicles for the same slots
         slots = sorted(zones.of_node[list(moves.values())].tolist())
-        gaps = sorted(((deficit[z] - j, -z) for z in range(zones.count)
+        gaps = sorted(((deficit[z] - j, -z) for z in range(zones.n)
                        for j in range(deficit[z])), reverse=True)[:k]
         assert slots == sorted(-z for _, z in gaps)
         got = sum(times[vehicles[v], node] for v, node in moves.items())
