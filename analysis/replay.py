@@ -68,11 +68,11 @@ KPIS = ("waiting", "onboard", "delivered", "rejected", "declined", "cutoff", "bo
 #: vehicle events whose x, y, z are the vehicle's own position
 POSITION_EVENTS = ("depart", "move", "wait", "pickup", "dropoff", "arrive", "complete", "idle",
                    "breakdown", "repair", "queue", "charge_start", "charge_end", "stranded",
-                   "reassign", "insert")
+                   "reassign", "insert", "break_start", "break_end")
 #: event kinds the page can jump to (those the run has)
 JUMP_EVENTS = ("release", "assign", "pickup", "dropoff", "reject", "expire", "reassign",
                "insert", "reposition", "queue", "charge_start", "breakdown", "repair",
-               "stranded", "decline", "shift_start", "shift_end")
+               "stranded", "decline", "shift_start", "shift_end", "break_start")
 ASSETS = "replay_assets"
 
 

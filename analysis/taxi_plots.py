@@ -34,12 +34,12 @@ from analysis.timeline import CHARGING_STATES, FLEET_STATES
 FLEET_COLOURS = {"idle": "#c7c7c7", "to_pickup": "#ff7f0e", "occupied": "#1f77b4",
                  "occupied_2": "#17becf", "occupied_3+": "#2ca02c",
                  "repositioning": "#9467bd", "failed": "#d62728", "to_charger": "#bcbd22",
-                 "queueing": "#8c564b", "charging": "#e377c2"}
+                 "queueing": "#8c564b", "charging": "#e377c2", "on_break": "#7f7f7f"}
 FLEET_LABELS = {"idle": "idle", "to_pickup": "driving to a pickup", "occupied":
                 "1 on board", "occupied_2": "2 on board", "occupied_3+": "3+ on board",
                 "repositioning": "repositioning", "failed": "broken down",
                 "to_charger": "driving to a charger", "queueing": "queueing at a charger",
-                "charging": "charging"}
+                "charging": "charging", "on_break": "driver on a break"}
 
 
 def time_bin(horizon_s: float) -> float:
@@ -525,7 +525,8 @@ def fleet_state(fleet: pd.DataFrame, path: Path, *, bin_s: float, title: str = "
     axes = np.atleast_1d(fig.subplots(rows, cols, sharex=True, sharey=True, squeeze=False)).ravel()
     width = bin_s / 3600
     # by passengers on board: the shared-ride states only where some vehicle had them
-    shown = [s for s in FLEET_STATES if s not in ("occupied_2", "occupied_3+", *CHARGING_STATES)
+    shown = [s for s in FLEET_STATES
+             if s not in ("occupied_2", "occupied_3+", *CHARGING_STATES, "on_break")
              or (s in fleet and (fleet[s].fillna(0) > 0).any())]
     for ax, (key, label, g) in zip(axes, groups):
         g = g.sort_values("t_h")

@@ -106,17 +106,19 @@ def positions_at(traj: dict[int, pd.DataFrame], t: float) -> dict[int, np.ndarra
 #: (``[fleet.energy]``): ``to_charger`` (driving to a station: a drive without a task, from
 #: idle, that ends at a station or with the battery empty, or that the run's end cuts, in a
 #: vehicle without shifts), ``queueing`` (waiting for a plug),
-#: ``charging`` (plugged in). A drive home at the end of a shift is ``idle`` here; the replay
-#: and its Kepler export lay the shifts over these states (``analysis.replay_duty``).
+#: ``charging`` (plugged in); drivers' breaks (``[fleet.breaks]``): ``on_break``. A drive home at
+#: the end of a shift is ``idle`` here; the replay and its Kepler export lay the shifts over
+#: these states (``analysis.replay_duty``).
 FLEET_STATES = ("idle", "to_pickup", "occupied", "occupied_2", "occupied_3+", "repositioning",
-                "failed", "to_charger", "queueing", "charging")
+                "failed", "to_charger", "queueing", "charging", "on_break")
 #: the electric fleets' states: plots show them only where some vehicle had them
 CHARGING_STATES = ("to_charger", "queueing", "charging")
 #: the states of a vehicle with one or more on board (or serving)
 OCCUPIED = ("occupied", "occupied_2", "occupied_3+")
 
 _FLEET_EVENTS = ("assign", "reassign", "pickup", "arrive", "dropoff", "idle", "breakdown",
-                 "reposition", "depart", "queue", "charge_start", "stranded")
+                 "reposition", "depart", "queue", "charge_start", "stranded", "break_start",
+                 "break_end")
 #: the events that end a drive to a charger: it arrives (and queues or plugs in), or its
 #: battery runs out on the way
 _AT_CHARGER = ("queue", "charge_start", "stranded")
@@ -137,7 +139,8 @@ def fleet_states(events: pd.DataFrame, vehicles: pd.DataFrame,
     by the passengers on board; ``dropoff`` -> occupied by those left, or to_pickup when nobody
     is left and a pickup is pending, else (the service at the end of a ride) occupied until
     ``idle``; ``breakdown`` -> failed (only ``idle``, after a ``repair``, ends it);
-    ``reposition`` -> repositioning (only from idle)."""
+    ``reposition`` -> repositioning (only from idle); ``break_start`` -> on_break,
+    ``break_end`` -> to_pickup when a pickup is pending, else idle."""
     cols = ["run_id", "agent_id", "state", "start", "end", "onboard"]
     rows = []
     ev = events.loc[(events["agent_id"] >= 0) & events["event"].isin(list(_FLEET_EVENTS))]
@@ -197,6 +200,10 @@ def fleet_states(events: pd.DataFrame, vehicles: pd.DataFrame,
                         new = "queueing"
                     elif kind == "charge_start":
                         new = "charging"
+                    elif kind == "break_start":
+                        new = "on_break"
+                    elif kind == "break_end":  # (no one on board: a break holds the seats)
+                        new = "to_pickup" if pending else "idle"
                     if new != state or onboard != shown:
                         if t > since:
                             rows.append((run, agent, state, since, min(t, stop), shown))

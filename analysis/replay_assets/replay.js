@@ -49,7 +49,7 @@
     idle: "#9aa0a6", to_pickup: "#f5a623", occupied: "#2e86de", occupied_2: "#1b4f9c",
     "occupied_3+": "#7b1fa2", repositioning: "#26a69a", failed: "#d32f2f",
     to_charger: "#9ccc65", queueing: "#c0ca33", charging: "#2e7d32",
-    to_depot: "#546e7a", off_shift: "#b0b7bf"
+    on_break: "#8d6e63", to_depot: "#546e7a", off_shift: "#b0b7bf"
   };
   // marks of the demand-responsive features (prebooking, offers, meeting points)
   var MARKS = { booked: "#d81b60", declined: "#ffb300", walk: "#5d4037", refused: "#d32f2f" };
@@ -58,13 +58,13 @@
     occupied_2: "carrying 2 riders", "occupied_3+": "carrying 3+ riders",
     repositioning: "repositioning", failed: "broken down", to_charger: "to a charger",
     queueing: "at a charger, queueing", charging: "at a charger, charging",
-    to_depot: "driving to its depot (shift over)", off_shift: "off shift (not in the fleet)"
+    on_break: "driver on a break", to_depot: "driving to its depot (shift over)", off_shift: "off shift (not in the fleet)"
   };
   var VOXEL_LABELS = {
     idle: "idle", to_pickup: "to its task", occupied: "at its task (serving)",
     occupied_2: "2 tasks", "occupied_3+": "3+ tasks", repositioning: "repositioning",
     failed: "broken down", to_charger: "to a charger", queueing: "queueing", charging: "charging",
-    to_depot: "to its depot (shift over)", off_shift: "off shift"
+    on_break: "on a break", to_depot: "to its depot (shift over)", off_shift: "off shift"
   };
 
   // ---------------------------------------------------------------- one run

@@ -48,18 +48,25 @@ class Break(StopKind):
         return v.location(now) == stop.loc
 
     def arrive(self, op, v, stop: Stop):
+        # made as a request's service is: off the plan at once, the vehicle free at its end
+        # (decisions plan the stops after it from then on), neither idle nor busy meanwhile
         env = op.env
         start = env.now
+        v.plan.done()
+        v.free_at, v.break_since = start + stop.service, start
+        v.plan.changed()
+        op.fleet.refresh(v)
         op.bus.emit(start, "break_start", v.id, -1, v.loc)
         try:
             yield env.timeout(stop.service)
         except simpy.Interrupt:  # a breakdown during the break: the rest is the repair's
             v.break_seconds += env.now - start
+            v.free_at, v.break_since = env.now, None
             return False
         v.break_seconds += env.now - start
+        v.break_since = None
+        op.fleet.refresh(v)
         op.bus.emit(env.now, "break_end", v.id, -1, v.loc)
-        v.plan.done()
-        v.plan.changed()
         return True
 
 

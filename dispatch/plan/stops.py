@@ -54,8 +54,8 @@ class Stop:
     """One stop of a vehicle's plan.
 
     ``kind`` a kind of :data:`dispatch.plan.kinds.TABLE`; ``task`` the request it serves
-    (None: none, e.g. a charger visit). ``passengers`` is what the stop changes on board (+n at a pickup, -n at a
-    drop-off, 0 otherwise); ``occupancy`` what is on board after it. ``latest`` is the time
+    (None: none, e.g. a charger visit). ``passengers`` is what the stop changes on board (+n
+    at a pickup, -n at a drop-off, 0 otherwise); ``occupancy`` what is on board after it. ``latest`` is the time
     window's end (``inf``: none), ``earliest`` its start (service starts no sooner: the
     vehicle waits; ``-inf``: none, as for a request's stops, open since its release).
     ``leg`` is the planned drive in seconds from the stop before it (for the first stop: from

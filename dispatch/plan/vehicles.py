@@ -55,6 +55,9 @@ class Vehicle:
     completed: int = 0
     #: seconds its driver spent on breaks (``[fleet.breaks]``, :mod:`dispatch.plan.breaks`)
     break_seconds: float = 0.0
+    #: when its driver's break under way began (None: not on a break); on a break it is
+    #: neither idle nor busy, unless its plan holds requests
+    break_since: float | None = None
     # ---- roads: when the leg being driven (:attr:`leg`) started
     leg_start: float = 0.0
     # ---- faults (see dispatch.fleet.faults)
@@ -332,7 +335,7 @@ class Fleet:
         busy = idle = False
         if not v.failed and not v.off_duty:
             busy = v.serving is not None
-            idle = not busy
+            idle = not busy and v.break_since is None
             for s in v.plan:  # (a loop, not any(): it runs at every assignment and idle)
                 if s.task is not None:
                     busy, idle = True, False

@@ -53,6 +53,7 @@ from dispatch.fleet.repositioning import Repositioning, summary_of
 from dispatch.fleet.shifts import Shifts, fleet_summary
 from dispatch.output.energy import EnergyTally, energy_columns
 from dispatch.output.rows import RunRecording
+from dispatch.plan.breaks import Breaks
 from dispatch.plan.demand import demand_for
 from dispatch.plan.operator import Hooks, Operator, Towing
 from dispatch.plan.reservations import Traffic
@@ -166,6 +167,10 @@ class Simulation:
         if sc.fleet.shifts is not None or (sizer is not None and not sizer.passive):
             self.shifts = Shifts(env, bus, self.fleet, self.operator, space, sc.fleet, wakeup,
                                  sizer, rng_for(spec.seed, STREAM_SIZING))
+        #: [fleet.breaks]: drivers' breaks planned into plans (dispatch.plan.breaks), or None
+        breaks = sc.fleet.breaks
+        self.breaks = None if breaks is None else Breaks(
+            env, bus, self.operator, self.fleet.vehicles, breaks.after, breaks.duration)
         #: [fleet.energy]: charges and strandings, for the summary (None without energy)
         self.energy_tally = None if self.energy is None else EnergyTally(bus)
         #: what the decisions add up to (the summary's columns); the errors' context
@@ -276,6 +281,8 @@ class Simulation:
             for v in self.vehicles:
                 if v.busy:
                     v.busy_seconds += env.now - v.busy_since
+                if v.break_since is not None:  # a break the end cut: the part taken counts
+                    v.break_seconds += env.now - v.break_since
             self.operator.execution.end(env.now)
             return self._finish()
         finally:
