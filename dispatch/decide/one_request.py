@@ -5,6 +5,7 @@ problem of one request by the least finite cost of its column, the lowest agent 
 ones. For such a decision :func:`decided` gives the answer the allocator would give, checked as
 the dispatcher checks it, without building the :class:`AllocationProblem`, asking the allocator
 or checking its answer: the column's first minimum (the decision's agents ascend by id).
+(``d``, a decision, is the :class:`dispatch.decide.pipeline.Decision` the pipeline built.)
 What the hand-out and the recorder read of the problem (its time, sizes and cost) is
 :class:`OneProblem`; anything else read of it builds the general problem then.
 
@@ -15,13 +16,9 @@ from __future__ import annotations
 
 import math
 import time
-from typing import TYPE_CHECKING
 
 from dispatch.api.problem import Allocation, Bid
 from dispatch.decide.answers import Checked
-
-if TYPE_CHECKING:
-    from dispatch.decide.pipeline import Decision
 
 #: True: every decision takes the general path (tests compare the two)
 GENERAL = False
@@ -34,7 +31,7 @@ class OneProblem:
 
     __slots__ = ("time", "cost", "n_agents", "n_tasks", "_make", "_full")
 
-    def __init__(self, d: Decision) -> None:
+    def __init__(self, d) -> None:
         self.time = d.now
         self.cost = d.cost
         self.n_agents, self.n_tasks = d.cost.shape
@@ -48,13 +45,13 @@ class OneProblem:
         return getattr(self._full, name)
 
 
-def fits(d: Decision) -> bool:
+def fits(d) -> bool:
     """Whether :func:`decided` may answer decision ``d``: one request, agents in ascending id
     order (the first minimum is then the lowest id among equal costs), and the switch off."""
     return d.cost.shape[1] == 1 and d.agents.ascending and not GENERAL
 
 
-def decided(d: Decision) -> Checked:
+def decided(d) -> Checked:
     """The answer of an allocator that decides one request by its cost minimum (see the
     module) to decision ``d``: its request to the agent of least finite cost, the first of
     equal ones, or nothing where no cost is finite; the seconds it took."""
