@@ -22,6 +22,7 @@ class FcfsAllocator(Allocator):
 
     name = "fcfs"
     decentralized = False
+    one_by_minimum = True  # one request: the soonest vehicle, ties to the lowest id
 
     def allocate(self, problem: AllocationProblem) -> Allocation:
         return Allocation.centralized(problem, fcfs_pairs(problem))

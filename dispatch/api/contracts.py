@@ -35,7 +35,8 @@ Reservation-aware planners
 
 Capabilities are declared
     What a plugin can do beyond the required methods is a boolean class attribute of its base
-    class set to True (``decentralized``, ``minimizes_total_cost``, ``multi_request``;
+    class set to True (``decentralized``, ``minimizes_total_cost``, ``multi_request``,
+    ``one_by_minimum``;
     ``lower_bounds``, ``travel_times``, ``reservation_aware``), and the methods a capability
     needs are methods of the base class the plugin then defines (the base class's say what
     they must do; the kernel calls them only on plugins that declare the capability). The
@@ -85,6 +86,14 @@ class Allocator(ABC):
     #: by ``problem.until``. Others give an agent at most one request, inserted where the
     #: decision's cost says.
     multi_request: ClassVar[bool] = False
+    #: True for methods whose answer to a problem of one task is that task to the agent of the
+    #: least finite cost (the lowest agent id among equal costs), or nothing where every cost
+    #: is ``inf``, as :meth:`~dispatch.api.problem.Allocation.centralized` builds it from that
+    #: one pair, drawing nothing from ``problem.rng`` (``fcfs``, ``hungarian``). The dispatcher
+    #: may then decide such a problem itself, without building it or asking the allocator
+    #: (:mod:`dispatch.decide.one_request`); a method that claims it wrongly is not asked
+    #: about one-request decisions at all.
+    one_by_minimum: ClassVar[bool] = False
     #: Named variants the plugin runs by name: ``"<name>:<variant>"`` (a scenario's
     #: ``allocator``, ``dispatch bench``) builds it with ``variant = "<variant>"`` unless the
     #: variant's own table, ``[dispatch.allocator_params."<name>:<variant>"]``, sets

@@ -32,7 +32,8 @@ in the order they run:
    links) and where the agents are.
 9. :class:`Problems`: the :class:`AllocationProblem` of a cost matrix, everything else fixed.
 10. :func:`certified`: with lazy costs the certificate loop (:mod:`dispatch.decide.lazy`) around the
-    allocator; without them one question.
+    allocator; without them one question; a decision of one request for an allocator that
+    decides it by its cost minimum none (:mod:`dispatch.decide.one_request`).
 
 A step reads the run's objects it is given when the pipeline is built (the task book, the
 fleet, the operator, the planner, the space, the configuration) and the decision's values it
@@ -59,6 +60,7 @@ from dispatch.decide.answers import Checked
 from dispatch.decide.candidates import cut as candidate_cut
 from dispatch.decide.lazy import certify, resolve_open
 from dispatch.decide.meeting import meeting_costs, view_at
+from dispatch.decide.one_request import decided, fits
 from dispatch.decide.plan_costs import Inserts, Plans, PlanTable, insertion_costs_of
 from dispatch.decide.planner_costs import PlannerCosts, close_unreachable, lazy_costs
 from dispatch.decide.prebook import earliest_views
@@ -286,6 +288,11 @@ class Pipeline:
         self.lazy = lazy_costs(cfg, planner, allocator, self.plans)
         self.planner = planner
         self.costs = PlannerCosts(planner, self.lazy, blame)
+        #: a one-request decision is decided here, without the general problem
+        #: (dispatch.decide.one_request): the allocator declares it decides one request by
+        #: its cost minimum, and no certificate loop or re-assignment asks more of it
+        self.one_request = bool(getattr(allocator, "one_by_minimum", False)) \
+            and not allocator.multi_request and not self.lazy and not self.reassign
         #: [fleet.energy]: ``(cost, drive, slots, tasks) -> cost`` with ``inf`` where a vehicle
         #: would end below its reserve (dispatch.fleet.battery.Energy.filter); None without energy
         self.energy_filter = energy_filter
@@ -400,6 +407,8 @@ class Pipeline:
         def solve(cost: np.ndarray) -> Checked:
             return ask(d.make(cost))
 
+        if self.one_request and fits(d):
+            return decided(d)
         if not self.lazy:
             return solve(d.cost)
         answer, extra = certified(
