@@ -291,7 +291,7 @@ class Pipeline:
         #: a one-request decision is decided here, without the general problem
         #: (dispatch.decide.one_request): the allocator declares it decides one request by
         #: its cost minimum, and no certificate loop or re-assignment asks more of it
-        self.one_request = bool(getattr(allocator, "one_by_minimum", False)) \
+        self.one_request = allocator.one_by_minimum \
             and not allocator.multi_request and not self.lazy and not self.reassign
         #: [fleet.energy]: ``(cost, drive, slots, tasks) -> cost`` with ``inf`` where a vehicle
         #: would end below its reserve (dispatch.fleet.battery.Energy.filter); None without energy
