@@ -86,6 +86,7 @@ from dispatch.decide.plan_costs import Inserts
 from dispatch.decide.tally import Blame, Tally, one_line
 from dispatch.errors import AllocationError, DispatchError, PluginError
 from dispatch.heap import keep_large_blocks
+from dispatch.plan.operator import KEEP
 from dispatch.plan.stops import DROPOFF, PICKUP, PlannedStop
 from dispatch.plan.tasks import OPEN, TaskBook, TaskState
 
@@ -130,6 +131,9 @@ class _Pending:
     #: (see :class:`dispatch.plan.insertion.Insertion`)
     inserts: Inserts | dict = field(default_factory=dict)
     cut: int = 0  # open tasks the candidate cut left out (dispatch.decide.candidates)
+    #: task id -> the meeting points it was planned at (one point per request; see
+    #: :attr:`dispatch.decide.pipeline.Decision.meetings`)
+    meetings: dict = field(default_factory=dict)
 
 
 class Wakeup:
@@ -227,7 +231,7 @@ class Dispatcher:
         n_comp = 1 if comm.strides == (0, 0) else components(comm)[0]
         self._pending = _Pending(problem, allocation, d.requests, d.cost_s, decide_s, delay,
                                  n_comp, d.holder, answer.index, answer.routes, d.inserts,
-                                 d.cut)
+                                 d.cut, d.meetings)
         if delay <= 0:
             self._hand_out()
 
@@ -341,7 +345,8 @@ class Dispatcher:
         self._recorded(p, allocation, pair_cost)
         if not holding:
             for (aid, tid), c in zip(handed, pair_cost):  # allocation.pairs is handed
-                self.operator.assign(by_task[tid], by_id[aid], c)
+                self.operator.assign(by_task[tid], by_id[aid], c,
+                                     meeting=p.meetings.get(tid, KEEP))
             return
         self._reassign(p, holding, handed, pair_cost, vehicle_unchanged)
 
@@ -439,11 +444,12 @@ class Dispatcher:
         self._recorded(p, allocation, pair_cost)
         for (aid, tid), c, ij in zip(allocation.pairs, pair_cost, p.index):
             if aid not in routes:
-                self.operator.assign(by_task[tid], by_id[aid], c, p.inserts.get(ij))
+                self.operator.assign(by_task[tid], by_id[aid], c, p.inserts.get(ij),
+                                     meeting=p.meetings.get(tid, KEEP))
         for aid, costs in mine.items():
             rows, times = routes[aid]
             self.operator.follow(by_id[aid], rows, times, {t: by_task[t] for t in costs},
-                                 costs)
+                                 costs, p.meetings)
 
     def _recorded(self, p: _Pending, allocation: Allocation, pair_cost: list[float]) -> None:
         """Count and record a decision's hand-out (``allocation`` as handed out)."""
@@ -477,7 +483,8 @@ class Dispatcher:
         self.tally.reassignments += len(give)
         for (aid, tid), c in zip(handed, pair_cost):
             if holding.get(aid) != tid:
-                self.operator.assign(by_task[tid], by_id[aid], c)
+                self.operator.assign(by_task[tid], by_id[aid], c,
+                                     meeting=p.meetings.get(tid, KEEP))
         for a in give:
             if a not in new_task:
                 self.operator.stand_idle(by_id[a])

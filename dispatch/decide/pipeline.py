@@ -47,7 +47,7 @@ import logging
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -250,6 +250,9 @@ class Decision:
     cost_s: float
     make: Callable[[np.ndarray], AllocationProblem]
     cut: int = 0  # open tasks the candidate cut left out (dispatch.decide.candidates)
+    #: (one point per request, dispatch.decide.meeting) task id -> the meeting points it was
+    #: planned at; handed out, the operator makes them the task's (Task.meeting's one writer)
+    meetings: dict = field(default_factory=dict)
 
 
 class Pipeline:
@@ -345,13 +348,17 @@ class Pipeline:
             if not servable.all():
                 open_tasks, tasks, cost, exact, inserts = keep_servable(
                     servable, open_tasks, cost, exact, inserts)
+        meetings = {}
         if self.one_point:  # the requests planned at their meeting points (dispatch.decide.meeting)
-            tasks = self._at_points(open_tasks, tasks)
+            meetings = {t.id: self._points.get(t.id) for t in open_tasks}
+            tasks = tuple(view if meetings[t.id] is None else view_at(t, meetings[t.id])
+                          for t, view in zip(open_tasks, tasks))
         if self.routed:  # booked pickups' earliest times, for the allocator's own routes
             tasks = earliest_views(open_tasks, tasks)
         comm, apos = self.hearing(agents, now)
         return Decision(now, idle, agents, open_tasks, tasks, cost, exact, inserts, holder, comm,
-                        cost_s, self.problems.of(now, agents, tasks, idle, comm, apos), n_cut)
+                        cost_s, self.problems.of(now, agents, tasks, idle, comm, apos), n_cut,
+                        meetings)
 
     def limits(self, now: float, agents, tasks, idle: np.ndarray, open_tasks: list,
                holder: dict, cost: np.ndarray, exact, servable):
@@ -389,16 +396,6 @@ class Pipeline:
                                                       now, limits)
             servable = reject_late(self.book, open_tasks, cost, servable)
         return cost, exact, servable, inserts
-
-    def _at_points(self, requests: list, views: tuple) -> tuple:
-        """The views of ``requests`` at the meeting points chosen for them (each request's
-        :attr:`dispatch.plan.tasks.Task.meeting` set to it: handed out, it is where it rides)."""
-        out = []
-        for t, view in zip(requests, views):
-            p = self._points.get(t.id)
-            t.meeting = p
-            out.append(view if p is None else view_at(t, p))
-        return tuple(out)
 
     def answer(self, d: Decision, ask: Ask) -> Checked:
         """``ask``'s answer to decision ``d``'s problem, or with lazy costs the certified one

@@ -39,6 +39,10 @@ if TYPE_CHECKING:
     from dispatch.plan.insertion import Insertion
 
 
+#: a hand-out that plans no meeting points keeps the task's (:meth:`Operator.assign`)
+KEEP = object()
+
+
 def _task_id(s: Stop) -> int:
     """The id of the request a stop serves; -1 for a stop that serves none."""
     return -1 if s.task is None else s.task.id
@@ -101,15 +105,18 @@ class Operator(Breakdowns):
         self.execution: Execution = (execution or PlanExecution)(self)
 
     # ------------------------------------------------------------------ the plan
-    def assign(self, task: Task, v: Vehicle, cost: float, at: Insertion | None = None) -> None:
+    def assign(self, task: Task, v: Vehicle, cost: float, at: Insertion | None = None,
+               meeting=KEEP) -> None:
         """Give ``task`` to ``v`` at the decision's ``cost``: an idle vehicle (or one that has
         just given its task up, :meth:`give_up`) starts a plan of the task's stops; a busy one
         (pooling) gets them inserted where ``at`` says (:meth:`dispatch.plan.vehicle_plan.Plan.
-        insert`), and re-routes if its next stop changed."""
+        insert`), and re-routes if its next stop changed. The rider boards and alights at the
+        meeting points the decision planned: ``at.meeting``, or ``meeting`` where the decision
+        planned each request at one pair (:mod:`dispatch.decide.meeting`; None: door to door;
+        :data:`KEEP`: as the task has them)."""
         env = self.env
         self._cut(v)  # a repositioning move ends here: the vehicle sets out from where it is
-        if at is not None and at.meeting is not None:  # where the rider boards and alights
-            task.meeting = at.meeting
+        self._meet(task, at.meeting if at is not None and at.meeting is not None else meeting)
         if not v.plan and v.serving is None:  # an empty plan: the vehicle sets out now
             self.execution.set_out(v, task, cost, at)
             return
@@ -119,6 +126,13 @@ class Operator(Breakdowns):
         self.bus.emit(env.now, "insert", v.id, task.id, v.loc)
         if at.i == 0:
             self._reroute(v)  # its next stop is the new pickup
+
+    @staticmethod
+    def _meet(task: Task, meeting) -> None:
+        """``task`` is handed out to ride from and to ``meeting`` (None: door to door;
+        :data:`KEEP`: as it has them): the one place a task's meeting points are written."""
+        if meeting is not KEEP:
+            task.meeting = meeting
 
     def _reroute(self, v: Vehicle) -> None:
         """``v``'s first stop changed: a drive under way stops where it is and heads there."""
@@ -178,10 +192,11 @@ class Operator(Breakdowns):
                      f"{r.latest:.6g} s"
 
     def follow(self, v: Vehicle, rows: list[PlannedStop], times: list[float], tasks: dict,
-               costs: dict) -> None:
+               costs: dict, meetings: dict | None = None) -> None:
         """A multi-request decision (``Allocation.routes``): ``v`` gets the requests ``tasks``
         (task id -> Task, each handed at ``costs[task id]``) and drives the stops ``rows`` in
-        that order (planned arrival ``times``, checked by :meth:`route_times`)."""
+        that order (planned arrival ``times``, checked by :meth:`route_times`); ``meetings``:
+        the meeting points each request was planned at (task id -> them; see :meth:`assign`)."""
         env = self.env
         self._cut(v)  # a repositioning move ends here: the vehicle sets out from where it is
         old = {(s.kind, _task_id(s)): s for s in v.plan}
@@ -198,6 +213,7 @@ class Operator(Breakdowns):
         if empty:
             path = self.driver.plan(v, stops[0].loc, env.now)
         for tid, task in tasks.items():
+            self._meet(task, (meetings or {}).get(tid, KEEP))
             self.book.assign(task, v.id, costs[tid])
         v.plan.replace(stops, times, env.now)
         if empty:

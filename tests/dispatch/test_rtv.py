@@ -449,14 +449,14 @@ def test_invariants_on_random_pooled_runs_with_rtv_reorder(tmp_path, monkeypatch
     swapped = moved = 0
     follow = Operator.follow
 
-    def spy(self, v, rows, times, tasks, costs):  # what the kernel is handed to drive
+    def spy(self, v, rows, times, tasks, costs, meetings=None):  # what the kernel drives
         nonlocal swapped, moved
         old = [(s.kind, s.task.id) for s in v.plan]
         mine = [(r[0], r[1]) for r in rows if (r[0], r[1]) in old]
         if mine != old:
             swapped += 1
             moved += v.leg is not None and mine[0] != old[0]  # its head moved, mid-drive
-        return follow(self, v, rows, times, tasks, costs)
+        return follow(self, v, rows, times, tasks, costs, meetings)
 
     monkeypatch.setattr(Operator, "follow", spy)
     shared = _pooled_runs(tmp_path)
