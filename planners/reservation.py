@@ -2,7 +2,7 @@
 
 Costs and untimed paths are the ``astar`` planner's (exact distance fields, A*): the allocation
 sees the paper's ``c_ij`` = shortest path length / speed. Execution is reservation-based
-(:mod:`dispatch.plan.reservations`): the kernel asks :meth:`ReservationPlanner.plan_timed` for a
+(:mod:`dispatch.plan.traffic`): the kernel asks :meth:`ReservationPlanner.plan_timed` for a
 timed
 route around the other vehicles' reservations, which are intervals of continuous time per cell
 (vehicles have different speeds, so there is no common time step).

@@ -29,9 +29,10 @@ Lazy exact costs
 
 Reservation-aware planners
     A planner that sets ``reservation_aware = True`` and implements :meth:`Planner.plan_timed`
-    makes the kernel execute routes with reservations (:mod:`dispatch.plan.reservations`: the time
-    model, the conflict rule, waits and replans). Other planners need neither; their vehicles
-    follow :meth:`Planner.plan`'s paths without reservations.
+    makes the kernel execute routes with reservations (:mod:`dispatch.plan.traffic`: the conflict
+    rule, replans and waits; the time model is :func:`dispatch.api.motion.occupancy`). Other
+    planners need neither; their vehicles follow :meth:`Planner.plan`'s paths without
+    reservations.
 
 Capabilities are declared
     What a plugin can do beyond the required methods is a boolean class attribute of its base
@@ -211,7 +212,7 @@ class Planner(ABC):
         The route is ``[(t0, agent.cell), (t1, c1), ..., (tn, goal)]``: ``t_i`` is when the step
         into ``c_i`` ends; each step is a legal move that takes its length / ``agent.speed``
         seconds and may start after a wait. Under the time model of
-        :func:`dispatch.plan.reservations.occupancy` (standing cells, the step's bounding box, the
+        :func:`dispatch.api.motion.occupancy` (standing cells, the step's bounding box, the
         goal held to infinity) the route must overlap none of ``reservations.blocked(cell)``.
         The kernel checks this and stops the run with an error naming the planner otherwise.
         A planner should return the earliest-arriving such route (SIPP does).

@@ -79,7 +79,7 @@ def as_array(cells) -> np.ndarray:
 
 
 #: Seconds by which two reservations of one cell may overlap without conflicting (float noise;
-#: :mod:`dispatch.plan.reservations`).
+#: :func:`occupancy`).
 EPS = 1e-9
 
 
@@ -92,3 +92,49 @@ def step_box(a: Cell, b: Cell) -> list[Cell]:
     """Every cell of the bounding box of the step ``a -> b`` (both ends included), C order."""
     ranges = [range(min(x, y), max(x, y) + 1) for x, y in zip(a, b)]
     return [c for c in itertools.product(*ranges)]  # type: ignore[misc]
+
+
+# ----------------------------------------------------------------------------- timed routes
+
+Route = list[tuple[float, Cell]]
+
+
+def overlaps(s1: float, e1: float, s2: float, e2: float) -> bool:
+    """Whether ``[s1, e1)`` and ``[s2, e2)`` overlap by more than :data:`EPS`."""
+    return s1 < e2 - EPS and s2 < e1 - EPS
+
+
+def occupancy(route: Route, speed: float, cell_m: float) -> list[tuple[Cell, float, float]]:
+    """The reservations ``(cell, start, end)`` of a timed route (the one definition of the time
+    model: the kernel, planners and tests all use it).
+
+    A *timed route* is a list ``[(t0, c0), (t1, c1), ..., (tn, cn)]`` of cells and the times the
+    vehicle is *in* them: it stands in ``c0`` from ``t0``, and step ``i`` (``c_{i-1} -> c_i``, a
+    legal move) takes ``d_i = step length x cell size / speed`` seconds and ends at ``t_i``; it
+    starts at ``t_i - d_i >= t_{i-1}`` (the difference is a wait in ``c_{i-1}``). Reservations
+    are half-open intervals ``[start, end)`` of continuous time on cells:
+
+    * a cell a vehicle stands in is held from when it started entering it until the end of the
+      step that leaves it;
+    * during a step the vehicle holds every cell of the step's bounding box (from cell, to cell
+      and, for a diagonal, the corner cells it sweeps past: the same box that must be free of
+      obstacles), so two vehicles can never cross diagonals in one 2x2 block; a head-on swap
+      (``A -> B`` while another goes ``B -> A`` at overlapping times) holds both cells twice and
+      is a conflict like any other;
+    * the route's last cell is held to infinity: a vehicle that arrives, serves, goes idle (or
+      never had a task) stands where it is, holding its cell until it is given a route again.
+      So a plan may end only in a cell nobody else reserves later.
+
+    Two reservations conflict when they share a cell and overlap by more than :data:`EPS`
+    seconds (:func:`overlaps`: a vehicle may enter a cell at the instant another's step out of
+    it ends).
+    """
+    out: list[tuple[Cell, float, float]] = []
+    since = route[0][0]
+    for (_, a), (t, b) in zip(route, route[1:]):
+        dep = t - step_seconds(a, b, speed, cell_m)
+        out.append((a, since, t))
+        out.extend((c, dep, t) for c in step_box(a, b) if c != a and c != b)
+        since = dep
+    out.append((route[-1][1], since, math.inf))
+    return out

@@ -56,7 +56,7 @@ NEEDS: dict[str, tuple[str, ...]] = {
     "reservation_aware": ("plan_timed",),
 }
 #: The spaces a reservation-aware planner may serve: timed execution reserves their cells
-#: (:class:`dispatch.plan.reservations.Traffic`)
+#: (:class:`dispatch.plan.traffic.Traffic`)
 TIMED_SPACES = ("voxel",)
 
 

@@ -18,7 +18,7 @@ table there: the run's demand (:func:`dispatch.plan.demand.demand_for`), where t
 (:data:`dispatch.checks.planners.SAMPLERS`) and what they compare
 (:data:`~dispatch.checks.planners.GUARDED`); the PyBullet mirror
 (:func:`dispatch.space.physics.mirror_of`) and reservation-based execution
-(:meth:`dispatch.plan.reservations.Traffic.in_space`) exist for voxel worlds only.
+(:meth:`dispatch.plan.traffic.Traffic.in_space`) exist for voxel worlds only.
 
 Two spaces ship with the kernel, registered in :data:`KINDS`:
 

@@ -140,7 +140,7 @@ SCHEMAS: dict[str, pa.Schema] = {
         ("busy_seconds", _F), ("tasks_completed", _I),
         # execution with reservations (0 otherwise): wait episodes, routes replaced by a
         # higher-priority vehicle, seconds spent standing on the way (see
-        # dispatch.plan.reservations)
+        # dispatch.plan.traffic)
         ("waits", _I), ("replans", _I), ("wait_seconds", _F),
         # breakdowns ([faults]) and seconds out of service
         ("failures", _I), ("down_seconds", _F),

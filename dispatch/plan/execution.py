@@ -1,8 +1,8 @@
 """How the operator's vehicles execute their plans: the :class:`Execution` protocol (set out,
 halt for a breakdown, repair, the run's end, the counts the ``vehicles`` table reports) and the
 operator's own :class:`PlanExecution`. The other execution is
-:class:`dispatch.plan.reservations.TimedExecution`: with a reservation-aware planner (voxel only,
-capacity 1) timed drives follow routes that the run's :class:`dispatch.plan.reservations.Traffic`
+:class:`dispatch.plan.timed_drives.TimedExecution`: with a reservation-aware planner (voxel only,
+capacity 1) timed drives follow routes that the run's :class:`dispatch.plan.traffic.Traffic`
 keeps conflict-free and owns. The operator (:class:`dispatch.plan.operator.Operator`) makes its
 execution at its construction, from itself.
 """
@@ -24,7 +24,7 @@ if TYPE_CHECKING:
 class Execution(Protocol):
     """How the operator's vehicles execute their plans (a driver the operator uses, made at
     its construction from the operator): :class:`PlanExecution` (the operator's plan process)
-    or :class:`dispatch.plan.reservations.TimedExecution` (timed routes on reservations)."""
+    or :class:`dispatch.plan.timed_drives.TimedExecution` (timed routes on reservations)."""
 
     def set_out(self, v: Vehicle, task: Task, cost: float, at: Insertion | None) -> None:
         """``v``, with an empty plan, is given ``task`` at ``cost`` (``at``: the decision's

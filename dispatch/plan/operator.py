@@ -83,7 +83,7 @@ class Operator(Breakdowns):
     halted is its ``execution`` (:class:`~dispatch.plan.execution.Execution`, made by
     ``execution(operator)``): :class:`~dispatch.plan.execution.PlanExecution`, or with reservations
     (voxel, capacity 1) one ``drive`` process per vehicle following a timed route (see
-    :mod:`dispatch.plan.reservations`)."""
+    :mod:`dispatch.plan.timed_drives`)."""
 
     def __init__(self, env: simpy.Environment, bus: EventBus, book: TaskBook, fleet: Fleet,
                  driver, service_time: float, hooks: Hooks,

@@ -35,6 +35,7 @@ import gc
 import logging
 import math
 from contextlib import contextmanager
+from functools import partial
 
 import simpy
 
@@ -56,8 +57,9 @@ from dispatch.output.rows import RunRecording
 from dispatch.plan.breaks import Breaks
 from dispatch.plan.demand import demand_for
 from dispatch.plan.operator import Hooks, Operator, Towing
-from dispatch.plan.reservations import Traffic
 from dispatch.plan.tasks import Task, TaskBook, TaskState
+from dispatch.plan.timed_drives import TimedExecution
+from dispatch.plan.traffic import Traffic
 from dispatch.plan.vehicles import Fleet, stop_leg
 from dispatch.run.plugins import (check_repositioner, describe, make_charger, make_plugin,
                                   make_repositioner, make_sizer, offering_for)
@@ -156,7 +158,8 @@ class Simulation:
             sc.charging.tow, self.stations.nearest_node, sc.faults.on_board == "transfer")
         self.operator = Operator(env, bus, book, self.fleet, driver, sc.tasks.service_time,
                                  Hooks(wakeup, lambda task: self.source.rearm(task)),
-                                 None if self.traffic is None else self.traffic.execution,
+                                 None if self.traffic is None
+                                 else partial(TimedExecution, self.traffic),
                                  towing)
         #: [fleet.energy]: batteries and the reserve rule (dispatch.fleet.battery.Energy), or None
         self.energy = self._energy(sc)

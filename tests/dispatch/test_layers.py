@@ -1,7 +1,7 @@
 """The kernel in floors (docs/explanation/layout.md): every sub-package of ``dispatch/`` imports
 only its own floor and the floors below it (imports inside functions and under
-``TYPE_CHECKING`` counted too), no two modules reach each other, and every folder reads in one
-sitting."""
+``TYPE_CHECKING`` counted too), no two modules reach each other, and every folder and every
+module reads in one sitting (at most 20 modules a folder, 500 lines a module)."""
 
 from __future__ import annotations
 
@@ -70,6 +70,13 @@ def test_the_kernel_has_no_import_circle():
 def test_a_floor_holds_at_most_twenty_modules(floor):
     modules = [p for p in (ROOT / "dispatch" / floor).glob("*.py") if p.stem != "__init__"]
     assert 0 < len(modules) <= 20
+
+
+def test_no_module_is_over_five_hundred_lines():
+    """Every module of ``dispatch/`` reads in one sitting (issue 39's form target)."""
+    long = {str(p.relative_to(ROOT)): n for p in sorted((ROOT / "dispatch").rglob("*.py"))
+            if (n := len(p.read_text(encoding="utf-8").splitlines())) > 500}
+    assert long == {}
 
 
 def test_a_plugin_contract_lives_in_api():

@@ -4,8 +4,8 @@ The checks read the recorded tables only, not the planner's or the kernel's book
 vehicle's occupancy is rebuilt from its start cell (``vehicles`` table) and its ``move`` events
 (a step into a cell ends at the move's time and took step length / speed seconds, so it started
 that much earlier; the vehicle stood in its cell until then) and checked against the time model
-of :mod:`dispatch.plan.reservations`: a standing vehicle holds its cell, a stepping one the step's
-from and to cells (and the corner cells of a diagonal). Across random crowded scenarios (a
+of :func:`dispatch.api.motion.occupancy`: a standing vehicle holds its cell, a stepping one the
+step's from and to cells (and the corner cells of a diagonal). Across random crowded scenarios (a
 10 x 10 x 3 world with one-cell passages, 6-12 vehicles, static and periodic tasks):
 
 * no two vehicles hold one cell at overlapping times, and no two swap cells head-on;
@@ -31,8 +31,8 @@ import pyarrow.parquet as pq
 import pytest
 
 from dispatch.api.contracts import Allocator
-from dispatch.api.motion import step_is_legal, step_length
-from dispatch.plan.reservations import (EPS, ReservationTable, occupancy, overlaps, step_box)
+from dispatch.api.motion import EPS, occupancy, overlaps, step_box, step_is_legal, step_length
+from dispatch.plan.reservation_table import ReservationTable
 from dispatch.run.runner import RunResult, make_recorder
 from dispatch.run.sim import Simulation
 from dispatch.scenario.load import load_scenario

@@ -1,7 +1,7 @@
 """The ``reservation`` planner: A* costs, SIPP timed routes that respect reservations.
 
 References are independent of the planner: the ``astar`` planner (costs, lengths), the time
-model of :func:`dispatch.plan.reservations.occupancy` (a route's reservations must overlap none of
+model of :func:`dispatch.api.motion.occupancy` (a route's reservations must overlap none of
 the blocked intervals) and, for optimality, a breadth-first search over (cell, whole second)
 states on mazes where every step takes one second (corridors one cell wide: only straight
 steps are legal), with blocked intervals on whole seconds, where the earliest continuous-time
@@ -17,10 +17,9 @@ import numpy as np
 import pytest
 
 from dispatch.api import registry
-from dispatch.api.motion import check_path, path_length
+from dispatch.api.motion import check_path, occupancy, overlaps, path_length
 from dispatch.api.problem import AgentView, TaskView
 from dispatch.api.voxels import Grid
-from dispatch.plan.reservations import occupancy, overlaps
 from dispatch.space.world import World
 from planners.astar import AStarPlanner
 from planners.graph import distance_field
