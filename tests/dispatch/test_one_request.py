@@ -38,8 +38,9 @@ def column_problem(cost: np.ndarray, ids: np.ndarray) -> AllocationProblem:
     agents = AgentViews.of([AgentView(int(i), "car", 0, 1.0) for i in ids])
     tasks = (TaskView(7, "trip", 0, 0.0),)
     return AllocationProblem.made(0.0, agents, tasks, cost, np.ones((len(ids), len(ids)), bool),
-                                  np.random.default_rng(0), 1, 0.0, 0.0, 1.0,
-                                  np.zeros((len(ids), 3)), np.zeros((1, 3)))
+                                  np.random.default_rng(0), max_rounds=1, loss=0.0, latency=0.0,
+                                  cell_size=1.0, agent_pos=np.zeros((len(ids), 3)),
+                                  task_pos=np.zeros((1, 3)))
 
 
 @pytest.mark.parametrize("seed", range(200))
