@@ -92,14 +92,17 @@ def main(argv=None) -> int:
                     from_p[q, q * k + m] = tt[lo + q, k + 1, m + 1]
                     to_d[q * k + m, q] = tt[lo + q, m + 1, k + 2]
                     from_d[q, q * k + m] = tt[lo + q, k + 2, m + 1]
-            args = (np.arange(b), np.arange(b), np.zeros(b), first[lo:hi], off, s_arr,
-                    np.zeros(g), s_lat, s_occ, [c[3] for c in part], np.full(b, 4), to_p, from_p,
-                    to_d, from_d, tt[lo:hi, k + 1, k + 2], np.ones(b, np.int64), lp[lo:hi],
-                    ld[lo:hi], np.zeros(b), np.zeros(b), ADDED_TIME)
+            rows, cols = np.arange(b), np.arange(b)
+            kw = dict(ready=np.zeros(b), first_tt=first[lo:hi], off=off, s_arr=s_arr,
+                      s_svc=np.zeros(g), s_latest=s_lat, s_occ=s_occ,
+                      load=[c[3] for c in part], cap=np.full(b, 4), to_p=to_p, from_p=from_p,
+                      to_d=to_d, from_d=from_d, pd_tt=tt[lo:hi, k + 1, k + 2],
+                      req_n=np.ones(b, np.int64), req_lp=lp[lo:hi], req_ld=ld[lo:hi],
+                      req_svc_p=np.zeros(b), req_svc_d=np.zeros(b), objective=ADDED_TIME)
             if lo == 0:
-                insertion_costs(*args)  # compiled on the first call: not timed
+                insertion_costs(rows, cols, **kw)  # compiled on the first call: not timed
             t0 = time.perf_counter()
-            cost[lo:hi] = insertion_costs(*args).cost
+            cost[lo:hi] = insertion_costs(rows, cols, **kw).cost
             t_ours += time.perf_counter() - t0
         sample = min(n, 2000)
         t0 = time.perf_counter()

@@ -93,8 +93,14 @@ class Allocator(ABC):
     #: one pair, drawing nothing from ``problem.rng`` (``fcfs``, ``hungarian``). The dispatcher
     #: may then decide such a problem itself, without building it or asking the allocator
     #: (:mod:`dispatch.decide.one_request`); a method that claims it wrongly is not asked
-    #: about one-request decisions at all.
+    #: about one-request decisions at all. A subclass that overrides :meth:`allocate` without
+    #: declaring it again does not inherit it (its own ``allocate`` is asked every time).
     one_by_minimum: ClassVar[bool] = False
+
+    def __init_subclass__(cls, **kw) -> None:
+        super().__init_subclass__(**kw)
+        if "allocate" in vars(cls) and "one_by_minimum" not in vars(cls):
+            cls.one_by_minimum = False
     #: Named variants the plugin runs by name: ``"<name>:<variant>"`` (a scenario's
     #: ``allocator``, ``dispatch bench``) builds it with ``variant = "<variant>"`` unless the
     #: variant's own table, ``[dispatch.allocator_params."<name>:<variant>"]``, sets

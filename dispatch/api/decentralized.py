@@ -161,9 +161,10 @@ def run_rounds(
             choice = _choose_local(problem, choose, deciding, believed_open, start_round + r,
                                    seconds)
         if claim_steps and not (r == 0 and first is not None):
-            sent, steps = _exchange_claims(problem, choose, channel, has_nb, deciding,
-                                           believed_open, choice, start_round + r, seconds,
-                                           claim_steps)
+            sent, steps = _exchange_claims(problem, choose, channel, has_nb=has_nb,
+                                           deciding=deciding, believed_open=believed_open,
+                                           choice=choice, round_=start_round + r,
+                                           seconds=seconds, steps=claim_steps)
             messages += sent
             hops += steps
         rounds = r + 1
@@ -257,7 +258,7 @@ def _choose_local(problem, choose, deciding, believed_open, round_, seconds) -> 
     return choice
 
 
-def _exchange_claims(problem, choose, channel, has_nb, deciding, believed_open, choice, round_,
+def _exchange_claims(problem, choose, channel, *, has_nb, deciding, believed_open, choice, round_,
                      seconds, steps: int) -> tuple[int, int]:
     """The claim exchanges of one round (see :func:`run_rounds`); updates ``choice`` in place
     and returns ``(messages, hops)``.

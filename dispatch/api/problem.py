@@ -259,7 +259,7 @@ class AllocationProblem:
 
     @classmethod
     def made(cls, time: float, agents, tasks, cost: np.ndarray, comm: np.ndarray,
-             rng: np.random.Generator, max_rounds: int, loss: float, latency: float,
+             rng: np.random.Generator, *, max_rounds: int, loss: float, latency: float,
              cell_size: float, agent_pos, task_pos, plans=None, capacity=None,
              service_time: float = 0.0, travel=None, ready=None,
              until=None) -> AllocationProblem:

@@ -38,7 +38,7 @@ def check_planner(cls, space=None, *, seed: int = 0, **params: Any) -> Report:
         spaces = [space]
     for sp in spaces:
         tag = f" [{sp.kind}]" if len(spaces) > 1 else ""
-        _check_planner_on(report, cls, caps, sp, seed, params, tag)
+        _check_planner_on(report, cls, caps, sp, seed=seed, params=params, tag=tag)
     return report
 
 
@@ -46,7 +46,7 @@ def _costs(planner, agents, tasks) -> np.ndarray:
     return np.asarray(planner.costs(agents, tasks))
 
 
-def _check_planner_on(report: Report, cls, caps: registry.Capabilities, space, seed: int,
+def _check_planner_on(report: Report, cls, caps: registry.Capabilities, space, *, seed: int,
                       params: dict, tag: str) -> None:
     try:
         cls(space, **params)
@@ -126,10 +126,10 @@ def _check_bounds(cls, space, params: dict, agents, tasks, c: np.ndarray,
     finite = np.isfinite(c)
     slack = 1e-9 * np.where(finite, np.abs(c), 0.0)
     with np.errstate(invalid="ignore"):  # inf - inf where both are inf: not compared
-        return bad + _bound_faults(lower, known, ex, c, finite, slack, label)
+        return bad + _bound_faults(lower, known, ex, c, finite, slack, label=label)
 
 
-def _bound_faults(lower, known, ex, c, finite, slack, label: str) -> list[str]:
+def _bound_faults(lower, known, ex, c, finite, slack, *, label: str) -> list[str]:
     bad = []
     if not np.array_equal(np.isinf(lower), ~finite):
         bad.append(f"{label}: a bound is inf where the cost is finite or the other way round")

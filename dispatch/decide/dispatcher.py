@@ -167,8 +167,8 @@ class Dispatcher:
     problem, ask the allocator, check the answer and hand it out (after the comms delay)."""
 
     def __init__(self, env: simpy.Environment, wakeup: Wakeup, pipeline: Pipeline,
-                 fleet: Fleet, operator: Operator, allocator: Allocator, tally: Tally,
-                 blame: Blame, on_decision: Callable[..., None], *, window: float = 0.0,
+                 fleet: Fleet, operator: Operator, allocator: Allocator, *, tally: Tally,
+                 blame: Blame, on_decision: Callable[..., None], window: float = 0.0,
                  latency: float = 0.0, offering: Offering | None = None) -> None:
         self.env, self.wakeup, self.pipeline = env, wakeup, pipeline
         self.fleet, self.operator, self.allocator = fleet, operator, allocator

@@ -46,7 +46,7 @@ def in_time(values: np.ndarray, now: float, deadlines: np.ndarray) -> np.ndarray
 
 
 def settle(cost: np.ndarray, exact: np.ndarray, rows, cols, compute: Compute, now: float,
-           deadlines: np.ndarray) -> int:
+           *, deadlines: np.ndarray) -> int:
     """Replace ``cost[rows, cols]`` by the exact costs (``inf`` where late) and mark them exact,
     in place. Returns how many pairs were computed."""
     rows = np.asarray(rows, dtype=np.int64)
@@ -76,7 +76,7 @@ def resolve_open(cost: np.ndarray, exact: np.ndarray, compute: Compute, now: flo
         for i in np.argsort(column, kind="stable").tolist():
             if not np.isfinite(cost[i, j]):
                 break  # the rest are inf (late or unreachable): exact
-            computed += settle(cost, exact, [i], [j], compute, now, deadlines)
+            computed += settle(cost, exact, [i], [j], compute, now, deadlines=deadlines)
             if np.isfinite(cost[i, j]):
                 break
     return computed
@@ -96,4 +96,4 @@ def certify(ask: Callable[[np.ndarray], tuple], cost: np.ndarray, exact: np.ndar
         if not todo:
             return answer, rounds, computed
         rows, cols = zip(*todo)
-        computed += settle(cost, exact, rows, cols, compute, now, deadlines)
+        computed += settle(cost, exact, rows, cols, compute, now, deadlines=deadlines)

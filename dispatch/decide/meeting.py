@@ -209,7 +209,7 @@ def _pairs(walks: Walks, tasks: list, svc: float, planner: Planner):
 
 
 def meeting_costs(walks: Walks, cost: np.ndarray, slots: np.ndarray, agents, tasks: list,
-                  now: float, holders: set, *, fleet: Fleet, operator: Operator,
+                  now: float, *, holders: set, fleet: Fleet, operator: Operator,
                   planner: Planner, objective: int, one_point: bool = False):
     """A decision's costs with meeting points (what
     :func:`dispatch.decide.plan_costs.insertion_costs_of`
@@ -278,9 +278,11 @@ def meeting_costs(walks: Walks, cost: np.ndarray, slots: np.ndarray, agents, tas
         to_p = to_d = np.zeros((0, uc.size))
         from_p = from_d = np.zeros((uc.size, 0))
     ins = insertion_costs(
-        remap[rows], cmap[vcols], ready[used], first[rows, vcols], off, s_arr, s_svc,
-        s_latest, s_occ, load, cap[used], to_p, from_p, to_d, from_d, pd[uc], n_req[uc],
-        lp[uc], ld[uc], svc_p[uc], svc_d[uc], objective, s_e, e[uc])
+        remap[rows], cmap[vcols], ready=ready[used], first_tt=first[rows, vcols], off=off,
+        s_arr=s_arr, s_svc=s_svc, s_latest=s_latest, s_occ=s_occ, load=load, cap=cap[used],
+        to_p=to_p, from_p=from_p, to_d=to_d, from_d=from_d, pd_tt=pd[uc], req_n=n_req[uc],
+        req_lp=lp[uc], req_ld=ld[uc], req_svc_p=svc_p[uc], req_svc_d=svc_d[uc],
+        objective=objective, s_earliest=s_e, req_earliest=e[uc])
     task_of = col[vcols]
     chosen: dict[int, Meeting] = {}
     if one_point:  # each request's pair: its cheapest insertion's (then the pair first listed)
@@ -291,7 +293,7 @@ def meeting_costs(walks: Walks, cost: np.ndarray, slots: np.ndarray, agents, tas
         pick[task_of[order[head]]] = vcols[order[head]]
         best = np.flatnonzero((vcols == pick[task_of]) & np.isfinite(ins.cost))
         for k in np.unique(vcols[best]).tolist():
-            chosen[int(col[k])] = _meeting(k, b, a, wb, wa, e, ld)
+            chosen[int(col[k])] = _meeting(k, b, a, wb, wa, e, ld=ld)
     else:  # each (vehicle, request)'s cheapest candidate pair (then the pair first listed)
         key = rows * m + task_of
         order = np.lexsort((vcols, ins.cost, key))
@@ -303,12 +305,12 @@ def meeting_costs(walks: Walks, cost: np.ndarray, slots: np.ndarray, agents, tas
     meet: list = [None] * rows.size
     q_of = {}
     for q in best.tolist():
-        meet[q] = _meeting(int(vcols[q]), b, a, wb, wa, e, ld)
+        meet[q] = _meeting(int(vcols[q]), b, a, wb, wa, e, ld=ld)
         q_of[(int(rows[q]), int(task_of[q]))] = q
     return out, MeetingInserts(ins, q_of, meet), chosen
 
 
-def _meeting(k: int, b, a, wb, wa, e, ld) -> Meeting:
+def _meeting(k: int, b, a, wb, wa, e, *, ld) -> Meeting:
     return Meeting(int(b[k]), int(a[k]), float(wb[k]), float(wa[k]), float(e[k]), float(ld[k]))
 
 

@@ -95,7 +95,7 @@ class Offering:
     counts and closes what riders decline."""
 
     def __init__(self, book: TaskBook, acceptor: Acceptor, rng: np.random.Generator,
-                 retries: int, pricing: Pricing | None,
+                 *, retries: int, pricing: Pricing | None,
                  metres: Callable[[object, object], float] | None, blame: Blame) -> None:
         self.book, self.acceptor, self.rng = book, acceptor, rng
         self.retries, self.pricing, self.metres, self.blame = retries, pricing, metres, blame

@@ -162,7 +162,7 @@ class Problems:
     time, travel times between locations when the planner routes) and the decision's."""
 
     def __init__(self, fleet: Fleet, operator: Operator, planner: Planner, space: Space,
-                 cfg: DispatchConfig, comms: CommsConfig, rng: np.random.Generator,
+                 cfg: DispatchConfig, comms: CommsConfig, *, rng: np.random.Generator,
                  pooled: bool, routes: bool, until: np.ndarray | None = None) -> None:
         self.fleet, self.operator, self.planner, self.space = fleet, operator, planner, space
         #: driver shifts: each fleet position's latest plan end (dispatch.fleet.shifts.Shifts.until,
@@ -192,9 +192,12 @@ class Problems:
 
         def make(cost: np.ndarray) -> AllocationProblem:
             return AllocationProblem.made(now, agents, tasks, np.array(cost, order="C"), comm,
-                                          self.rng, self.max_rounds, self.loss, self.latency,
-                                          self.cell_size, apos, tpos, plans, seats,
-                                          self.operator.service_time, travel, ready, until)
+                                          self.rng, max_rounds=self.max_rounds, loss=self.loss,
+                                          latency=self.latency, cell_size=self.cell_size,
+                                          agent_pos=apos, task_pos=tpos, plans=plans,
+                                          capacity=seats,
+                                          service_time=self.operator.service_time,
+                                          travel=travel, ready=ready, until=until)
         return make
 
 
@@ -204,7 +207,7 @@ Ask = Callable[[AllocationProblem], Checked]
 
 
 def certified(ask, cost, exact, compute, now: float, deadline: np.ndarray,
-              tally: Tally) -> tuple[Checked, float]:
+              *, tally: Tally) -> tuple[Checked, float]:
     """The certificate loop of lazy costs (:func:`dispatch.decide.lazy.certify`) around ``ask``
     (``cost -> Checked``): ``(the last answer, its seconds the allocator's in every round;
     the seconds spent computing exact pairs)``; the latter, the rounds and the pairs computed
@@ -259,9 +262,9 @@ class Pipeline:
     """The steps of a decision's problem (see the module), composed in :meth:`build`."""
 
     def __init__(self, book: TaskBook, fleet: Fleet, operator: Operator, planner: Planner,
-                 allocator: Allocator, space: Space, cfg: DispatchConfig, comms: CommsConfig,
+                 allocator: Allocator, space: Space, *, cfg: DispatchConfig, comms: CommsConfig,
                  rng: np.random.Generator, tally: Tally, blame: Blame, links=None,
-                 energy_filter=None, *, pooled: bool = False, max_delay: bool = False,
+                 energy_filter=None, pooled: bool = False, max_delay: bool = False,
                  shifts=None, walks=None) -> None:
         self.book, self.fleet, self.operator, self.tally = book, fleet, operator, tally
         self.space = space
@@ -303,8 +306,9 @@ class Pipeline:
         #: the vehicle's shift and grace); None without shift ends
         self.shifts = shifts
         self.hearing = Hearing(space, comms, links)
-        self.problems = Problems(fleet, operator, planner, space, cfg, comms, rng, self.pooled,
-                                 self.routes, None if shifts is None else shifts.until)
+        self.problems = Problems(fleet, operator, planner, space, cfg, comms, rng=rng,
+                                 pooled=self.pooled, routes=self.routes,
+                                 until=None if shifts is None else shifts.until)
         #: with plans, the fleet's plans as the compiled insertion reads them, kept between
         #: decisions (a row rewritten when its vehicle's plan changed)
         self.table = PlanTable(len(fleet)) if self.plans else None
@@ -335,11 +339,12 @@ class Pipeline:
                               [t for t, ok in zip(open_tasks, servable) if not ok], now)
         drive = cost if self.energy_filter is not None or self.shifts is not None else None
         cost, exact, servable, inserts = self.limits(now, agents, tasks, idle, open_tasks, holder,
-                                                     cost, exact, servable)
+                                                     cost=cost, exact=exact, servable=servable)
         if self.energy_filter is not None:  # [fleet.energy]: below the reserve after the trip: inf
             cost = self.energy_filter(cost, drive, idle, open_tasks)
         if self.shifts is not None:  # shifts: a plan ending after the shift and grace: inf
-            cost = self.shifts.limit(cost, drive, now, idle, open_tasks, inserts, self.plans)
+            cost = self.shifts.limit(cost, drive, now, idle, open_tasks, inserts,
+                                     plans=self.plans)
         cost_s = time.perf_counter() - t0
         self.tally.cost_seconds += cost_s
         if servable is not None:
@@ -361,7 +366,7 @@ class Pipeline:
                         meetings)
 
     def limits(self, now: float, agents, tasks, idle: np.ndarray, open_tasks: list,
-               holder: dict, cost: np.ndarray, exact, servable):
+               holder: dict, *, cost: np.ndarray, exact, servable):
         """``(cost, exact, servable, inserts)`` within every limit: with plans the insertion
         costs by the objective (and where a busy vehicle's stops would go); without, ``inf``
         where a vehicle would reach the pickup after the deadline (with lazy costs each
@@ -375,7 +380,7 @@ class Pipeline:
                 servable = np.ones(len(open_tasks), dtype=bool)
             if self.walks is not None:  # meeting points: the cheapest candidate pair's
                 cost, inserts, points = meeting_costs(
-                    self.walks, cost, idle, agents, open_tasks, now, set(holder.values()),
+                    self.walks, cost, idle, agents, open_tasks, now, holders=set(holder.values()),
                     fleet=self.fleet, operator=self.operator, planner=self.planner,
                     objective=self.objective, one_point=self.one_point)
                 self._points = {open_tasks[c].id: p for c, p in points.items()}
@@ -410,6 +415,6 @@ class Pipeline:
             return solve(d.cost)
         answer, extra = certified(
             solve, d.cost, d.exact, self.costs.exact(d.agents, d.tasks), d.now,
-            np.array([t.deadline for t in d.requests]), self.tally)
+            np.array([t.deadline for t in d.requests]), tally=self.tally)
         d.cost_s += extra  # computing exact pairs is cost time
         return answer

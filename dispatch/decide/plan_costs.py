@@ -278,9 +278,10 @@ def insertion_costs_of(cost: np.ndarray, slots: np.ndarray, tasks: list, now: fl
         from_p = from_d = np.zeros((ucols.size, 0))
     vrow = busy[rows]
     ins = insertion_costs(
-        row_of, cmap[cols], ready[used], cost[vrow, cols], off, s_arr, s_svc,
-        s_latest, s_occ, load, cap[busy[used]], to_p, from_p, to_d, from_d, pd[ucols],
-        n_req[ucols], lp[ucols], ld[ucols], svc_p[ucols], svc_d[ucols], objective, s_e,
-        ep[ucols])
+        row_of, cmap[cols], ready=ready[used], first_tt=cost[vrow, cols], off=off, s_arr=s_arr,
+        s_svc=s_svc, s_latest=s_latest, s_occ=s_occ, load=load, cap=cap[busy[used]],
+        to_p=to_p, from_p=from_p, to_d=to_d, from_d=from_d, pd_tt=pd[ucols],
+        req_n=n_req[ucols], req_lp=lp[ucols], req_ld=ld[ucols], req_svc_p=svc_p[ucols],
+        req_svc_d=svc_d[ucols], objective=objective, s_earliest=s_e, req_earliest=ep[ucols])
     out[vrow, cols] = ins.cost
     return out, Inserts(ins, vrow, cols, m)

@@ -264,11 +264,13 @@ class Table:
                 continue  # a blank line (csv.DictReader skips them too)
             chunk.append(row)
             if len(chunk) == CHUNK_ROWS:
-                self._convert(chunk, n, want, where, parts, errors, dedup)
+                self._convert(chunk, n, want=want, where=where, parts=parts, errors=errors,
+                              dedup=dedup)
                 n += len(chunk)
                 chunk = []
         if chunk:
-            self._convert(chunk, n, want, where, parts, errors, dedup)
+            self._convert(chunk, n, want=want, where=where, parts=parts, errors=errors,
+                          dedup=dedup)
             n += len(chunk)
         numbers = {name: np.concatenate(p) if p else np.empty(0) for name, p in parts.items()
                    if want[name] != CELLS}
@@ -276,7 +278,7 @@ class Table:
                  if want[name] == CELLS}
         return Columns(self.path, n, numbers, cells, errors)
 
-    def _convert(self, chunk: list[list[str]], first: int, want: dict[str, str],
+    def _convert(self, chunk: list[list[str]], first: int, *, want: dict[str, str],
                  where: dict[str, int], parts: dict[str, list],
                  errors: dict[str, ScenarioError], dedup: dict) -> None:
         width = min(map(len, chunk))

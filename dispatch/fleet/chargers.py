@@ -241,7 +241,7 @@ class Charging:
     """The charging strategy's timer and the visits it starts, on the run's ``stations``."""
 
     def __init__(self, env: simpy.Environment, bus: EventBus, fleet: Fleet, operator: Operator,
-                 energy: Energy, cfg: ChargingConfig, stations: Stations, space,
+                 energy: Energy, cfg: ChargingConfig, *, stations: Stations, space,
                  strategy: ChargingStrategy | None, rng: np.random.Generator,
                  run_id: str = "") -> None:
         self.env, self.bus, self.fleet, self.op = env, bus, fleet, operator

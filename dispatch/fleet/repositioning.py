@@ -33,7 +33,7 @@ class Repositioning:
     (:attr:`dispatch.plan.operator.Operator.reposition_distance`)."""
 
     def __init__(self, env: simpy.Environment, bus: EventBus, fleet: Fleet, operator: Operator,
-                 space: RoadNetwork, repositioner: Repositioner, interval: float, horizon: float,
+                 space: RoadNetwork, repositioner: Repositioner, *, interval: float, horizon: float,
                  rng: np.random.Generator, run_id: str = "") -> None:
         self.env, self.bus, self.fleet, self.operator = env, bus, fleet, operator
         self.space, self.repositioner, self.rng = space, repositioner, rng

@@ -205,7 +205,7 @@ class Shifts:
     """The run's shifts and sizing (see the module): who is on duty, the decision's shift
     limit, the drives home."""
 
-    def __init__(self, env, bus, fleet: Fleet, operator, space, cfg, notify,
+    def __init__(self, env, bus, fleet: Fleet, operator, space, cfg, *, notify,
                  sizer: Sizer | None, rng: np.random.Generator) -> None:
         self.env, self.bus, self.fleet, self.operator = env, bus, fleet, operator
         self.notify, self.sizer, self.rng = notify, sizer, rng
@@ -257,7 +257,7 @@ class Shifts:
             self.until[k] = -math.inf if (d.ended or not d.on or d.home) else d.until
 
     def limit(self, cost: np.ndarray, drive: np.ndarray, now: float, slots: np.ndarray,
-              tasks: list, inserts, plans: bool) -> np.ndarray:
+              tasks: list, inserts, *, plans: bool) -> np.ndarray:
         """``cost`` with ``inf`` where vehicle ``slots[i]`` would complete its plan's last
         stop after its shift's end plus the grace with request ``j`` (see the module);
         ``drive``: the seconds from each vehicle to each pickup; ``inserts``: where a busy

@@ -72,7 +72,7 @@ DECISION_COLUMNS = (
     "comm_components", "n_cut")
 
 
-def decision_row(i: int, p, a, total: float, cost_s: float, decide_s: float, hops: int,
+def decision_row(i: int, p, a, *, total: float, cost_s: float, decide_s: float, hops: int,
                  comm_delay: float, agent_seconds: float, components: int, cut: int) -> tuple:
     """The ``decisions`` row of decision ``i``: its problem ``p``, allocation ``a`` and figures
     (:data:`DECISION_COLUMNS`)."""
@@ -152,8 +152,10 @@ class DecisionWriter:
         append, alloc_s = self.append, cost_s + decide_s
         for r in allocation.requests:
             append("assignments", assignment_row(index, r, alloc_s))
-        append("decisions", decision_row(index, problem, allocation, total, cost_s, decide_s,
-                                         hops, comm_delay, agent_seconds, components, cut))
+        append("decisions", decision_row(index, problem, allocation, total=total,
+                                         cost_s=cost_s, decide_s=decide_s, hops=hops,
+                                         comm_delay=comm_delay, agent_seconds=agent_seconds,
+                                         components=components, cut=cut))
 
 
 def write_vehicles(recorder, space, vehicles, now: float, counts) -> None:

@@ -59,7 +59,7 @@ class LegTable:
         self._written[k] = self.version[k]
 
     def where(self, vehicles: list, idx: np.ndarray, looked: np.ndarray, node: np.ndarray,
-              rem: np.ndarray, now: float, stands) -> np.ndarray:
+              rem: np.ndarray, now: float, *, stands) -> np.ndarray:
         """For the vehicles at fleet positions ``idx[k]``, ``k`` in ``looked`` (ascending; each
         driving a leg or stopped off a node): write where each is at ``now`` into ``node[k]``
         and ``rem[k]`` (a driving one: :meth:`dispatch.api.legs.Leg.next_at` of its leg at ``now``

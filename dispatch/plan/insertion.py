@@ -59,7 +59,7 @@ class Insertions:
                          float(self.shift2[q]))
 
 
-def insertion_costs(rows, cols, ready, first_tt, off, s_arr, s_svc, s_latest, s_occ, load, cap,
+def insertion_costs(rows, cols, *, ready, first_tt, off, s_arr, s_svc, s_latest, s_occ, load, cap,
                     to_p, from_p, to_d, from_d, pd_tt, req_n, req_lp, req_ld, req_svc_p,
                     req_svc_d, objective: int, s_earliest=None, req_earliest=None
                     ) -> Insertions:

@@ -86,7 +86,7 @@ class Operator(Breakdowns):
     :mod:`dispatch.plan.timed_drives`)."""
 
     def __init__(self, env: simpy.Environment, bus: EventBus, book: TaskBook, fleet: Fleet,
-                 driver, service_time: float, hooks: Hooks,
+                 driver, service_time: float, *, hooks: Hooks,
                  execution: Callable[[Operator], Execution] | None = None,
                  towing: Towing | None = None) -> None:
         self.env, self.bus, self.book, self.fleet = env, bus, book, fleet

@@ -328,7 +328,7 @@ class TaskSource:
 
     def __init__(self, env: simpy.Environment, book: TaskBook, demand: Demand,
                  tasks: TaskConfig, count: int | None, rng: np.random.Generator,
-                 notify: Callable[[], None], trips=None) -> None:
+                 *, notify: Callable[[], None], trips=None) -> None:
         self.env, self.book, self.demand, self.tasks = env, book, demand, tasks
         self.kind = "trace" if tasks.source in ("trace", "empirical") else tasks.source
         self.count, self.rng, self.notify, self.trips = count, rng, notify, trips
@@ -338,7 +338,7 @@ class TaskSource:
 
     @classmethod
     def of(cls, env: simpy.Environment, book: TaskBook, demand: Demand, tasks: TaskConfig,
-           count: int | None, day_rng: Callable[[], np.random.Generator],
+           count: int | None, *, day_rng: Callable[[], np.random.Generator],
            rng: np.random.Generator, notify: Callable[[], None], **extra) -> TaskSource:
         """The source of a scenario's ``[tasks]`` releasing ``count`` tasks where it has a
         count (static: the run's). An empirical day is drawn now (from ``day_rng()``) and
@@ -349,7 +349,7 @@ class TaskSource:
             from dispatch.files.empirical import draw_day, load_sample
 
             trips = draw_day(load_sample(), tasks.trips_per_day, day_rng(), tasks.weekday)
-        return cls(env, book, demand, tasks, count, rng, notify, trips, **extra)
+        return cls(env, book, demand, tasks, count, rng, notify=notify, trips=trips, **extra)
 
     def _done(self) -> None:
         self.finished = True

@@ -323,7 +323,7 @@ class Fleet:
         rem = self.remaining.take(idx)
         # driving (a leg: where is it now?) or stopped part-way along an edge
         points = self.legs.where(vs, idx, looked.nonzero()[0], node, rem, now,
-                                 self._stands)
+                                 stands=self._stands)
         return AgentViews(ids, make, node, rem, points, ascending)
 
     def refresh(self, v: Vehicle) -> None:

@@ -200,4 +200,5 @@ def offering_for(sc, book: TaskBook, space, rng: np.random.Generator, blame: Bla
         return None
     # fares are of rides on a road network (the parser refuses [pricing] elsewhere)
     metres = space.path_metres if sc.pricing is not None else None
-    return Offering(book, acceptor, rng, acc.retries, sc.pricing, metres, blame)
+    return Offering(book, acceptor, rng, retries=acc.retries, pricing=sc.pricing, metres=metres,
+                    blame=blame)

@@ -157,10 +157,10 @@ class Simulation:
         towing = None if self.stations is None else Towing(
             sc.charging.tow, self.stations.nearest_node, sc.faults.on_board == "transfer")
         self.operator = Operator(env, bus, book, self.fleet, driver, sc.tasks.service_time,
-                                 Hooks(wakeup, lambda task: self.source.rearm(task)),
-                                 None if self.traffic is None
+                                 hooks=Hooks(wakeup, lambda task: self.source.rearm(task)),
+                                 execution=None if self.traffic is None
                                  else partial(TimedExecution, self.traffic),
-                                 towing)
+                                 towing=towing)
         #: [fleet.energy]: batteries and the reserve rule (dispatch.fleet.battery.Energy), or None
         self.energy = self._energy(sc)
         #: driver shifts and fleet sizing (dispatch.fleet.shifts); None without shift columns and
@@ -168,8 +168,9 @@ class Simulation:
         self.shifts = None
         sizer = None if sc.fleet.sizing is None else make_sizer(sc)
         if sc.fleet.shifts is not None or (sizer is not None and not sizer.passive):
-            self.shifts = Shifts(env, bus, self.fleet, self.operator, space, sc.fleet, wakeup,
-                                 sizer, rng_for(spec.seed, STREAM_SIZING))
+            self.shifts = Shifts(env, bus, self.fleet, self.operator, space, sc.fleet,
+                                 notify=wakeup, sizer=sizer,
+                                 rng=rng_for(spec.seed, STREAM_SIZING))
         #: [fleet.breaks]: drivers' breaks planned into plans (dispatch.plan.breaks), or None
         breaks = sc.fleet.breaks
         self.breaks = None if breaks is None else Breaks(
@@ -183,17 +184,18 @@ class Simulation:
         self.walks = (Walks(space, sc.tasks.meeting_points) if sc.tasks.walking else None)
         if self.walks is not None:
             book.on_close.append(lambda t: self.walks.forget((t.id,)))
-        pipeline = Pipeline(book, self.fleet, self.operator, self.planner, allocator, space, d,
-                            sc.comms, rng_for(spec.seed, STREAM_ALLOCATOR), self.tally, blame,
-                            blackout_filter(sc.faults),
-                            None if self.energy is None else self.energy.filter,
+        pipeline = Pipeline(book, self.fleet, self.operator, self.planner, allocator, space,
+                            cfg=d, comms=sc.comms, rng=rng_for(spec.seed, STREAM_ALLOCATOR),
+                            tally=self.tally, blame=blame, links=blackout_filter(sc.faults),
+                            energy_filter=None if self.energy is None else self.energy.filter,
                             pooled=any(v.capacity > 1 for v in self.vehicles)
                             or sc.tasks.prebooked,  # (a promise waits in a plan)
                             max_delay=sc.tasks.delay_limited,
                             shifts=self.shifts if self.shifts is not None
                             and self.shifts.limited else None, walks=self.walks)
         self.dispatcher = Dispatcher(env, wakeup, pipeline, self.fleet, self.operator,
-                                     allocator, self.tally, blame, self._record_decision,
+                                     allocator, tally=self.tally, blame=blame,
+                                     on_decision=self._record_decision,
                                      window=d.batch_window, latency=sc.comms.latency,
                                      offering=offering_for(sc, book, self.space,
                                                            rng_for(spec.seed, STREAM_OFFERS),
@@ -203,16 +205,18 @@ class Simulation:
         source, extra = task_source(sc, rng_for(spec.seed, STREAM_PREBOOK))
         self.source = source.of(env, book, demand, t,
                                 spec.n_static_tasks if t.source == "static" else t.count,
-                                lambda: rng_for(spec.seed, STREAM_TASKS),
-                                rng_for(spec.seed, STREAM_SOURCE), wakeup, **extra)
+                                day_rng=lambda: rng_for(spec.seed, STREAM_TASKS),
+                                rng=rng_for(spec.seed, STREAM_SOURCE), notify=wakeup, **extra)
         self.source.on_done = self._check_finished
         #: the repositioning timer and drives (None: a passive repositioner, e.g. ``stay``)
         self.repositioning = None
         if not self.repositioner.passive:
             r = sc.reposition
             self.repositioning = Repositioning(env, bus, self.fleet, self.operator, self.space,
-                                               self.repositioner, r.interval, r.horizon,
-                                               rng_for(spec.seed, STREAM_REPOSITION), spec.run_id)
+                                               self.repositioner, interval=r.interval,
+                                               horizon=r.horizon,
+                                               rng=rng_for(spec.seed, STREAM_REPOSITION),
+                                               run_id=spec.run_id)
         self.faults = (FaultInjector(env, sc.faults, self.fleet, self.operator,
                                      rng_for(spec.seed, STREAM_FAULTS))
                        if sc.faults.vehicles else None)
@@ -249,8 +253,9 @@ class Simulation:
         cfg = sc.charging
         strategy = make_charger(sc, cfg.strategy) if cfg.stations else None
         self.charging = Charging(self.env, self.bus, self.fleet, self.operator, self.energy,
-                                 cfg, self.stations, net, strategy,
-                                 rng_for(self.spec.seed, STREAM_CHARGING), self.spec.run_id)
+                                 cfg, stations=self.stations, space=net, strategy=strategy,
+                                 rng=rng_for(self.spec.seed, STREAM_CHARGING),
+                                 run_id=self.spec.run_id)
 
     @property
     def allocator(self):

@@ -80,7 +80,7 @@ class RoadNetwork(Space):
 
     # ---------------------------------------------------------------- construction
     @classmethod
-    def from_edges(cls, name: str, xy: np.ndarray, ids: Any, u: np.ndarray, v: np.ndarray,
+    def from_edges(cls, name: str, xy: np.ndarray, ids: Any, u: np.ndarray, v: np.ndarray, *,
                    seconds: np.ndarray, metres: np.ndarray, crs: str | None = None) -> RoadNetwork:
         """Build a network from directed edges ``u[k] -> v[k]`` (node indices into ``xy``).
 
@@ -121,8 +121,8 @@ class RoadNetwork(Space):
     @classmethod
     def from_graph(cls, graph: RoadGraph) -> RoadNetwork:
         """The network of a file's graph (see :meth:`from_edges`)."""
-        return cls.from_edges(graph.name, graph.xy, graph.ids, graph.u, graph.v, graph.seconds,
-                              graph.metres, graph.crs)
+        return cls.from_edges(graph.name, graph.xy, graph.ids, graph.u, graph.v,
+                              seconds=graph.seconds, metres=graph.metres, crs=graph.crs)
 
     # ---------------------------------------------------------------- ids and positions
     @property
@@ -452,7 +452,7 @@ def manhattan(columns: int, rows: int, block: float = 200.0, speed: float = 10.0
     u, v = np.concatenate([a, b]), np.concatenate([b, a])
     seconds, metres = np.full(u.size, block / speed), np.full(u.size, float(block))
     return RoadNetwork.from_edges(f"manhattan-{columns}x{rows}", xy, np.arange(columns * rows),
-                                  u, v, seconds, metres)
+                                  u, v, seconds=seconds, metres=metres)
 
 
 

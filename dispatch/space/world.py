@@ -137,6 +137,7 @@ def place_obstacles(
     min_cells: tuple[int, int, int],
     max_cells: tuple[int, int, int],
     rng: np.random.Generator,
+    *,
     max_tries: int = 2_000,
     max_restarts: int = 50,
 ) -> list[tuple[int, int, int, int, int, int]]:

@@ -133,12 +133,15 @@ def test_the_insertion_never_carries_a_rider_across_a_break():
     arr = [10.0, 10.0, 120.0]
     req = (3, 4)  # a request from node 3 to node 4, loose windows
     got = insertion_costs(
-        np.zeros(1, np.int64), np.arange(1), [0.0], [tt(0, req[0])], [0, 3], arr,
-        [s.service for s in plan], [s.latest for s in plan], [s.occupancy for s in plan], [1],
-        [4], np.array([[tt(x, req[0])] for x in locs]), np.array([[tt(req[0], x) for x in locs]]),
-        np.array([[tt(x, req[1])] for x in locs]), np.array([[tt(req[1], x) for x in locs]]),
-        [tt(*req)], [1], [1e9], [1e9], [0.0], [0.0], ADDED_TIME, [s.earliest for s in plan],
-        [-np.inf])
+        np.zeros(1, np.int64), np.arange(1), ready=[0.0], first_tt=[tt(0, req[0])], off=[0, 3],
+        s_arr=arr, s_svc=[s.service for s in plan], s_latest=[s.latest for s in plan],
+        s_occ=[s.occupancy for s in plan], load=[1], cap=[4],
+        to_p=np.array([[tt(x, req[0])] for x in locs]),
+        from_p=np.array([[tt(req[0], x) for x in locs]]),
+        to_d=np.array([[tt(x, req[1])] for x in locs]),
+        from_d=np.array([[tt(req[1], x) for x in locs]]), pd_tt=[tt(*req)], req_n=[1],
+        req_lp=[1e9], req_ld=[1e9], req_svc_p=[0.0], req_svc_d=[0.0], objective=ADDED_TIME,
+        s_earliest=[s.earliest for s in plan], req_earliest=[-np.inf])
     at = got.of(0)
     assert np.isfinite(got.cost[0])
     # the pickup and the drop-off both before the break, or both after the stop after it

@@ -100,11 +100,13 @@ def _compiled(c, objective):
         occ += s[1]
         s_occ.append(occ)
     return insertion_costs(
-        np.zeros(m, np.int64), np.arange(m), [c["ready"]],
-        [tt(c["here"], r[0]) for r in reqs], [0, k], c["arr"], [s[3] for s in stops],
-        [s[2] for s in stops], s_occ, [c["load"]], [c["cap"]], to_p, from_p, to_d, from_d,
-        [tt(r[0], r[1]) for r in reqs], [r[2] for r in reqs], [r[3] for r in reqs],
-        [r[4] for r in reqs], [r[5] for r in reqs], [r[6] for r in reqs], objective)
+        np.zeros(m, np.int64), np.arange(m), ready=[c["ready"]],
+        first_tt=[tt(c["here"], r[0]) for r in reqs], off=[0, k], s_arr=c["arr"],
+        s_svc=[s[3] for s in stops], s_latest=[s[2] for s in stops], s_occ=s_occ,
+        load=[c["load"]], cap=[c["cap"]], to_p=to_p, from_p=from_p, to_d=to_d, from_d=from_d,
+        pd_tt=[tt(r[0], r[1]) for r in reqs], req_n=[r[2] for r in reqs],
+        req_lp=[r[3] for r in reqs], req_ld=[r[4] for r in reqs],
+        req_svc_p=[r[5] for r in reqs], req_svc_d=[r[6] for r in reqs], objective=objective)
 
 
 @pytest.mark.parametrize("objective", [PICKUP_TIME, ADDED_TIME])

@@ -229,18 +229,19 @@ def test_problem_made_equals_the_constructed_one():
     agents = (AgentView(3, "ugv", (0, 0, 0), 1.0), AgentView(5, "uav", (1, 0, 2), 2.0))
     tasks = (TaskView(9, "ground", (2, 1, 0), 0.0),)
     rng = np.random.default_rng(0)
-    args = (4.0, agents, tasks, np.array([[1.0], [2.0]]), np.ones((2, 2), bool), rng, 7, 0.1,
-            0.5, 2.0)
+    args = (4.0, agents, tasks, np.array([[1.0], [2.0]]), np.ones((2, 2), bool), rng)
+    kw = dict(max_rounds=7, loss=0.1, latency=0.5, cell_size=2.0)
     made = AllocationProblem.made(*(a.copy() if isinstance(a, np.ndarray) else a for a in args),
-                                  None, lambda: np.zeros((1, 3)))
-    built = AllocationProblem(*args, agent_pos=None, task_pos=np.zeros((1, 3)))
+                                  **kw, agent_pos=None, task_pos=lambda: np.zeros((1, 3)))
+    built = AllocationProblem(*args, **kw, agent_pos=None, task_pos=np.zeros((1, 3)))
     for f in dataclasses.fields(AllocationProblem):  # every field, the same value
         a, b = getattr(made, f.name), getattr(built, f.name)
         assert (np.array_equal(a, b) if isinstance(a, np.ndarray) else a == b), f.name
     assert set(made.__dict__) == set(built.__dict__)
     assert not made.cost.flags.writeable and not made.agent_pos.flags.writeable
     with pytest.raises(ValueError, match="cost has shape"):
-        AllocationProblem.made(*args[:3], np.ones((3, 1)), *args[4:], None, None)
+        AllocationProblem.made(*args[:3], np.ones((3, 1)), *args[4:], **kw, agent_pos=None,
+                               task_pos=None)
 
 
 def test_problem_with_lazy_positions_pickles():
@@ -257,7 +258,8 @@ def test_problem_with_lazy_positions_pickles():
         return np.full((1, 3), 7.0)
 
     p = AllocationProblem.made(1.0, agents, tasks, np.ones((1, 1)), np.ones((1, 1), bool),
-                               np.random.default_rng(1), 5, 0.0, 0.0, 1.0, where, None)
+                               np.random.default_rng(1), max_rounds=5, loss=0.0, latency=0.0,
+                               cell_size=1.0, agent_pos=where, task_pos=None)
     assert calls == []  # not computed until read
     q = pickle.loads(pickle.dumps(p))
     assert calls == [1]

@@ -84,3 +84,32 @@ def test_a_plugin_contract_lives_in_api():
     from dispatch.api import registry
 
     assert all(base.startswith("dispatch.api.") for base in registry.BASES.values())
+
+
+#: functions numba compiles, which keep positional parameters (numba's compiled functions take
+#: no keyword-only ones): by their decorator, ``jit`` or ``_inline`` (dispatch._compiled,
+#: dispatch.plan._kernel), and by name the schedule rule of dispatch.plan.stops, written in
+#: plain Python and compiled as written by dispatch.plan._kernel's ``_twin``
+COMPILED_DECORATORS = {"jit", "_inline"}
+COMPILED_TWINS = {("dispatch/plan/stops.py", name)
+                  for name in ("timetable", "leave", "leave_late", "later")}
+
+
+def test_no_function_takes_more_than_six_positional_parameters():
+    """Issue 39: a function of more than six parameters takes the rest by keyword (``self``
+    and ``cls`` not counted), compiled kernels aside."""
+    long = []
+    for path in sorted((ROOT / "dispatch").rglob("*.py")):
+        rel = path.relative_to(ROOT).as_posix()
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                continue
+            if ({ast.unparse(d) for d in node.decorator_list} & COMPILED_DECORATORS
+                    or (rel, node.name) in COMPILED_TWINS):
+                continue
+            names = [a.arg for a in node.args.posonlyargs + node.args.args]
+            if names[:1] in (["self"], ["cls"]):
+                names = names[1:]
+            if len(names) > 6:
+                long.append(f"{rel}:{node.lineno} {node.name} ({len(names)})")
+    assert long == []

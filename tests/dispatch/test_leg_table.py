@@ -50,7 +50,7 @@ def test_where_equals_next_at_leg_by_leg():
                                    replace=False).tolist())
         node = np.full(idx.size, -7, dtype=np.int64)
         rem = np.full(idx.size, -7.0)
-        points = table.where(vehicles, idx, looked, node, rem, now, stands)
+        points = table.where(vehicles, idx, looked, node, rem, now, stands=stands)
         want_points = []
         for k in looked:
             v = vehicles[int(idx[k])]

@@ -127,12 +127,12 @@ def test_costs_equal_a_brute_force_over_points_and_positions(tmp_path, monkeypat
     """Each decision of a small pooled run: the meeting costs are the exhaustive minimum."""
     checked = []
 
-    def spy(walks, cost, slots, agents, tasks, now, holders, *, fleet, operator, planner,
+    def spy(walks, cost, slots, agents, tasks, now, *, holders, fleet, operator, planner,
             objective, one_point):
         assert not one_point
-        got, inserts, _ = meeting_costs(walks, cost, slots, agents, tasks, now, holders,
-                                        fleet=fleet, operator=operator, planner=planner,
-                                        objective=objective)
+        got, inserts, _ = meeting_costs(walks, cost, slots, agents, tasks, now,
+                                        holders=holders, fleet=fleet, operator=operator,
+                                        planner=planner, objective=objective)
         each = _brute(walks, cost, slots, agents, tasks, now, holders, fleet, operator,
                       planner, objective)
         want = each.min(axis=2)
@@ -163,12 +163,13 @@ def test_one_point_per_request_equals_a_brute_force(tmp_path, monkeypatch, seed)
     vehicle's cost is that pair's exhaustive minimum over positions."""
     checked = []
 
-    def spy(walks, cost, slots, agents, tasks, now, holders, *, fleet, operator, planner,
+    def spy(walks, cost, slots, agents, tasks, now, *, holders, fleet, operator, planner,
             objective, one_point):
         assert one_point
-        got, inserts, chosen = meeting_costs(walks, cost, slots, agents, tasks, now, holders,
-                                             fleet=fleet, operator=operator, planner=planner,
-                                             objective=objective, one_point=True)
+        got, inserts, chosen = meeting_costs(walks, cost, slots, agents, tasks, now,
+                                             holders=holders, fleet=fleet, operator=operator,
+                                             planner=planner, objective=objective,
+                                             one_point=True)
         each = _brute(walks, cost, slots, agents, tasks, now, holders, fleet, operator,
                       planner, objective)
         for c, t in enumerate(tasks):

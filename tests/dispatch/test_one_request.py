@@ -38,8 +38,9 @@ def column_problem(cost: np.ndarray, ids: np.ndarray) -> AllocationProblem:
     agents = AgentViews.of([AgentView(int(i), "car", 0, 1.0) for i in ids])
     tasks = (TaskView(7, "trip", 0, 0.0),)
     return AllocationProblem.made(0.0, agents, tasks, cost, np.ones((len(ids), len(ids)), bool),
-                                  np.random.default_rng(0), 1, 0.0, 0.0, 1.0,
-                                  np.zeros((len(ids), 3)), np.zeros((1, 3)))
+                                  np.random.default_rng(0), max_rounds=1, loss=0.0, latency=0.0,
+                                  cell_size=1.0, agent_pos=np.zeros((len(ids), 3)),
+                                  task_pos=np.zeros((1, 3)))
 
 
 @pytest.mark.parametrize("seed", range(200))
@@ -105,3 +106,22 @@ def test_every_one_request_decision_takes_it(tmp_path, monkeypatch):
     path."""
     tables, n_fast = run_tables("manhattan.toml", tmp_path, False, monkeypatch, "fcfs")
     assert n_fast == tables["decisions"].column("n_tasks").to_pylist().count(1) > 0
+
+
+def test_a_subclass_that_answers_itself_is_asked_every_time():
+    """``one_by_minimum`` is not inherited by a subclass that overrides ``allocate`` (a spy,
+    a variant): its own method is asked about one-request decisions too."""
+    from allocators.hungarian import HungarianAllocator
+
+    class Own(HungarianAllocator):
+        def allocate(self, problem):
+            return super().allocate(problem)
+
+    class Same(HungarianAllocator):
+        """Hungarian under another name."""
+
+    class Declared(Own):
+        one_by_minimum = True
+
+    assert HungarianAllocator.one_by_minimum and Same.one_by_minimum
+    assert not Own.one_by_minimum and Declared.one_by_minimum

@@ -55,8 +55,8 @@ def test_the_tables_a_decision_reads_are_the_vehicles_own(tmp_path, monkeypatch,
             checked["plans"] += 1
         return out
 
-    def checked_where(self, vehicles, idx, looked, node, rem, now, stands):
-        points = where(self, vehicles, idx, looked, node, rem, now, stands)
+    def checked_where(self, vehicles, idx, looked, node, rem, now, *, stands):
+        points = where(self, vehicles, idx, looked, node, rem, now, stands=stands)
         for k in np.asarray(looked).tolist():
             v = vehicles[int(idx[k])]
             if v.leg is not None:

@@ -171,15 +171,18 @@ def _insertions(c, objective):
         occ += s[1]
         s_occ.append(c["cap"] if s[5] else occ)  # (a break holds the seats: occupancies())
     return insertion_costs(
-        np.zeros(m, np.int64), np.arange(m), [c["ready"]], [tt(0, r[0]) for r in reqs], [0, k],
-        c["arr"], [s[3] for s in rows], [s[2] for s in rows], s_occ, [c["load"]], [c["cap"]],
-        np.array([[tt(x, r[0]) for r in reqs] for x in g]).reshape(k, m),
-        np.array([[tt(r[0], x) for x in g] for r in reqs]).reshape(m, k),
-        np.array([[tt(x, r[1]) for r in reqs] for x in g]).reshape(k, m),
-        np.array([[tt(r[1], x) for x in g] for r in reqs]).reshape(m, k),
-        [tt(r[0], r[1]) for r in reqs], [r[2] for r in reqs], [r[3] for r in reqs],
-        [r[4] for r in reqs], [r[5] for r in reqs], [r[6] for r in reqs], objective,
-        [s[4] for s in rows], [r[7] for r in reqs])
+        np.zeros(m, np.int64), np.arange(m), ready=[c["ready"]],
+        first_tt=[tt(0, r[0]) for r in reqs], off=[0, k], s_arr=c["arr"],
+        s_svc=[s[3] for s in rows], s_latest=[s[2] for s in rows], s_occ=s_occ,
+        load=[c["load"]], cap=[c["cap"]],
+        to_p=np.array([[tt(x, r[0]) for r in reqs] for x in g]).reshape(k, m),
+        from_p=np.array([[tt(r[0], x) for x in g] for r in reqs]).reshape(m, k),
+        to_d=np.array([[tt(x, r[1]) for r in reqs] for x in g]).reshape(k, m),
+        from_d=np.array([[tt(r[1], x) for x in g] for r in reqs]).reshape(m, k),
+        pd_tt=[tt(r[0], r[1]) for r in reqs], req_n=[r[2] for r in reqs],
+        req_lp=[r[3] for r in reqs], req_ld=[r[4] for r in reqs],
+        req_svc_p=[r[5] for r in reqs], req_svc_d=[r[6] for r in reqs], objective=objective,
+        s_earliest=[s[4] for s in rows], req_earliest=[r[7] for r in reqs])
 
 
 @pytest.mark.parametrize("objective", [S.PICKUP_TIME, S.ADDED_TIME])

@@ -189,7 +189,8 @@ def test_trace_requests_are_made_as_the_clock_reaches_them(tmp_path, count):
     book = TaskBook(env, EventBus())
     demand = CountingDemand(manhattan(6, 6, 100.0, 10.0), np.random.default_rng(0))
     tasks = TaskConfig(source="trace", max_wait=600.0, trips=trips)
-    TaskSource(env, book, demand, tasks, count, np.random.default_rng(0), lambda: None, trips)
+    TaskSource(env, book, demand, tasks, count, np.random.default_rng(0), notify=lambda: None,
+               trips=trips)
     for t in sorted({*trips.t.tolist(), trips.t[-1] + 1.0}):
         env.run(until=t + 1e-9)
         assert demand.made == book.released  # none made before its release
