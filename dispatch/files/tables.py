@@ -225,9 +225,8 @@ class Table:
         """The columns of ``want`` read by pyarrow's CSV reader, where the file is one it
         reads as the ``csv`` module does and every cell of them is a finite number; None
         otherwise (the file is then read row by row, for the same result or the error of the
-        cell or row at fault)."""
-        if not want or any(kind == CELLS for kind in want.values()) \
-                or len(set(self.names)) != len(self.names) or b"\0" in self._data \
+        cell or row at fault). :data:`CELLS` columns are read as strings, as written."""
+        if not want or len(set(self.names)) != len(self.names) or b"\0" in self._data \
                 or _longest_line(self._data) >= csv.field_size_limit():
             return None  # (the csv module refuses a NUL byte and a field past its limit)
         import pyarrow as pa
@@ -239,17 +238,24 @@ class Table:
                 read_options=pc.ReadOptions(use_threads=False),  # as fast here, less memory
                 parse_options=pc.ParseOptions(newlines_in_values=b'"' in self._data),
                 convert_options=pc.ConvertOptions(
-                    include_columns=list(want), column_types=dict.fromkeys(want, pa.float64()),
+                    include_columns=list(want),
+                    column_types={name: pa.string() if kind == CELLS else pa.float64()
+                                  for name, kind in want.items()},
                     null_values=[], strings_can_be_null=False))
         except (pa.ArrowInvalid, pa.ArrowKeyError):
             return None  # a ragged row, a cell that is no number (or a blank one), ...
-        numbers = {}
-        for name in want:
+        numbers, cells = {}, {}
+        for name, kind in want.items():
+            if kind == CELLS:  # one str per distinct cell (traces repeat their date-times)
+                col = table.column(name).combine_chunks().dictionary_encode()
+                words = col.dictionary.to_pylist()
+                cells[name] = [words[i] for i in col.indices.to_numpy(zero_copy_only=False)]
+                continue
             values = numbers_of(table.column(name))
             if not np.isfinite(values).all():
                 return None
             numbers[name] = values
-        return Columns(self.path, table.num_rows, numbers, {}, {})
+        return Columns(self.path, table.num_rows, numbers, cells, {})
 
     def _read_csv(self, want: dict[str, str]) -> Columns:
         # DictReader's rules: the last column of a repeated name; None past a short row's end

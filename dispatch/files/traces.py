@@ -7,8 +7,11 @@ scenario's ``[tasks] start``), its pickup and, optionally, its drop-off, and an 
 number >= 1; blank: 1), ``max_walk`` (metres) and ``walk_speed`` (m/s) of meeting points
 (:mod:`dispatch.decide.meeting`; blank: the scenario's) and ``booked_at`` (when the trip was booked:
 seconds, or a date-time where the trace's time column is ``departure_time``; blank: not
-booked; never after the requested departure; see :mod:`dispatch.decide.prebook`). Other columns
-(``request_id``, ...) are ignored.
+booked; never after the requested departure; see :mod:`dispatch.decide.prebook`). The trip's
+id is the first of the columns ``request_id``, ``trip_id``, ``id`` the trace has, kept as written
+(a string; blank ids and an id of two rows are refused); without one, a trip's id is its 1-based
+data row. The tasks table's ``request_id`` is it, whatever the order the trips enter the run in.
+Other columns are ignored.
 Where things are, by space:
 
 * voxel world: ``x, y, z`` (metres; the pickup), optionally ``dest_x, dest_y, dest_z``;
@@ -44,6 +47,8 @@ TIME_COLUMNS = ("t", "release_time", "departure_time")
 DATETIME_COLUMN = "departure_time"
 #: when a trip was booked (optional; :mod:`dispatch.decide.prebook`)
 BOOKED_COLUMN = "booked_at"
+#: the columns that may hold a trip's id, the first found used (:attr:`Trips.ids`)
+ID_COLUMNS = ("request_id", "trip_id", "id")
 #: the column sets a trace may use, by space: (name, pickup columns, drop-off columns)
 LAYOUTS = {
     "voxel": (("xyz", ("x", "y", "z"), ("dest_x", "dest_y", "dest_z")),),
@@ -86,6 +91,10 @@ class Trips:
     #: when each trip was booked (seconds of the run, ``booked_at`` column; nan: not booked,
     #: it is requested at its release time): see :mod:`dispatch.decide.prebook`
     booked_at: np.ndarray | None = None
+    #: each trip's id as the file wrote it (strings: its id column's cells, or its 1-based
+    #: data row where it has none); None for trips not read from a file (an empirical day):
+    #: each task's id is then its own
+    ids: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.t)
@@ -197,7 +206,8 @@ def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
     optional = [c for c in ("max_wait", "max_delay", "passengers", "max_walk", "walk_speed")
                 if c in columns]
     booked = BOOKED_COLUMN in columns
-    cols = table.read({tcol: CELLS if tcol == DATETIME_COLUMN else NUMBER,
+    idcol = next((c for c in ID_COLUMNS if c in columns), None)
+    cols = table.read({**({idcol: CELLS} if idcol else {}),tcol: CELLS if tcol == DATETIME_COLUMN else NUMBER,
                        **{c: NUMBER for c in pick + (drop if has_dest else ())},
                        **{c: NUMBER_OR_BLANK for c in optional},
                        **({BOOKED_COLUMN: CELLS if tcol == DATETIME_COLUMN else NUMBER_OR_BLANK}
@@ -219,6 +229,7 @@ def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
         booked_at = booking_times(path, cols, tcol == DATETIME_COLUMN, start, t)
     max_walk = cols.numbers(("max_walk",))[:, 0] if "max_walk" in columns else None
     walk_speed = cols.numbers(("walk_speed",))[:, 0] if "walk_speed" in columns else None
+    ids = trip_ids(path, idcol, cols.cells(idcol) if idcol else None, len(t))
     del cols
     early = t < 0 if tcol == DATETIME_COLUMN else np.zeros(len(t), dtype=bool)
 
@@ -288,13 +299,36 @@ def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
                   passengers[order].astype(np.int64), max_delay[order],
                   None if max_walk is None else max_walk[order],
                   None if walk_speed is None else walk_speed[order],
-                  booked_at=None if booked_at is None else booked_at[order])
+                  booked_at=None if booked_at is None else booked_at[order], ids=ids[order])
     if early.any():
         trips = trips.subset(~early[order], f"departed before tasks.start ({start.isoformat()})")
     if early.any() and not len(trips):
         raise ScenarioError(path, DATETIME_COLUMN, f"no trip departs at or after tasks.start "
                                                    f"({start.isoformat()})")
     return trips
+
+
+def trip_ids(path: Path, column: str | None, cells: list | None, n: int) -> np.ndarray:
+    """The ids of a trace's ``n`` rows in file order, as strings: the ``column``'s ``cells``
+    as written (an integer of a Parquet file in decimal), or, without an id column
+    (``column`` None), each row's 1-based data row. A blank cell or an id of an earlier row
+    raises a ScenarioError naming the file, the row and the column."""
+    if column is None:
+        return np.array([str(i) for i in range(1, n + 1)], dtype=object)
+    ids = np.empty(n, dtype=object)
+    seen: dict[str, int] = {}
+    for i, v in enumerate(cells):
+        s = v if isinstance(v, str) else "" if v is None or v != v else str(v)
+        if not s.strip():
+            raise ScenarioError(path, f"row {i + 1}, column {column}", "the id is blank: "
+                                "every trip needs its own id")
+        first = seen.setdefault(s, i)
+        if first != i:
+            raise ScenarioError(path, f"row {i + 1}, column {column}",
+                                f"{column} {s!r} is also the id of row {first + 1}: ids must "
+                                "be unique")
+        ids[i] = s
+    return ids
 
 
 def booking_times(path: Path, cols, datetimes: bool, start: datetime | None,

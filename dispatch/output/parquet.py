@@ -95,8 +95,10 @@ SCHEMAS: dict[str, pa.Schema] = {
         ("walk_mean", _F), ("meeting_points", _I), ("meeting_cut", _I),
     ]),
     "tasks": pa.schema([
-        ("run_id", _S), ("task_id", _I), ("kind", _S), ("x", _F), ("y", _F), ("z", _F),
-        ("dropoff_x", _F), ("dropoff_y", _F), ("dropoff_z", _F),
+        # request_id: the user's id of the task's request (a trace row's id as written, or its
+        # row number; generated demand: the task_id), to join results to the trips
+        ("run_id", _S), ("task_id", _I), ("request_id", _S), ("kind", _S), ("x", _F),
+        ("y", _F), ("z", _F), ("dropoff_x", _F), ("dropoff_y", _F), ("dropoff_z", _F),
         ("released_at", _F), ("max_wait", _F), ("snap_m", _F), ("dropoff_snap_m", _F),
         ("assigned_at", _F), ("agent_id", _I), ("cost", _F),
         ("picked_up_at", _F), ("completed_at", _F), ("state", _S), ("conflicted", _B),

@@ -47,8 +47,8 @@ def check_columns(table: str, columns: tuple[str, ...]) -> None:
 
 #: the columns :func:`task_row` returns, in order
 TASK_COLUMNS = (
-    "task_id", "kind", "x", "y", "z", "dropoff_x", "dropoff_y", "dropoff_z", "released_at",
-    "max_wait", "snap_m", "dropoff_snap_m", "assigned_at", "agent_id", "cost", "picked_up_at",
+    "task_id", "request_id", "kind", "x", "y", "z", "dropoff_x", "dropoff_y", "dropoff_z",
+    "released_at", "max_wait", "snap_m", "dropoff_snap_m", "assigned_at", "agent_id", "cost", "picked_up_at",
     "completed_at", "state", "conflicted", "closed_at", "reassigned", "transfers", "passengers",
     "direct_time", "max_delay", "shared", "booked_at", "promised", "offers", "fare",
     "board_x", "board_y", "alight_x", "alight_y", "walk_to_board_m", "walk_from_alight_m")
@@ -58,7 +58,7 @@ def task_row(t, p, d, b=NAN3, a=NAN3, walk=NAN3[:2]) -> tuple:
     """The ``tasks`` row of the task ``t`` with the positions of its pickup ``p`` and drop-off
     ``d``, of where its rider boarded ``b`` and alighted ``a`` and the metres ``walk`` to the
     one and from the other (:data:`TASK_COLUMNS`)."""
-    return (t.id, t.kind, p[0], p[1], p[2], d[0], d[1], d[2], t.released_at,
+    return (t.id, t.request_id, t.kind, p[0], p[1], p[2], d[0], d[1], d[2], t.released_at,
             t.max_wait, t.snap_m, t.dropoff_snap_m, t.assigned_at, t.agent_id, t.cost,
             t.picked_up_at, t.completed_at, t.state._value_, t.conflicted, t.closed_at,
             t.reassigned, t.transfers, t.passengers, t.direct_time, t.max_delay, t.shared,

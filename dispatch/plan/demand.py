@@ -50,7 +50,7 @@ class VoxelDemand(Demand):
             kind = "ground" if cell[2] == 0 and (drop is None or drop[2] == 0) else "air"
             yield Request(kind, cell, drop, float(trips.max_wait[i]),
                           passengers=_int(trips.passengers, i),
-                          max_delay=_float(trips.max_delay, i))
+                          max_delay=_float(trips.max_delay, i), request_id=_id(trips.ids, i))
 
     def valid(self, loc) -> bool:
         return self.grid.is_free(loc)
@@ -96,11 +96,17 @@ def _road_requests(trips: Trips, origin: np.ndarray, snap_o: np.ndarray,
                       float(trips.max_wait[i]), float(snap_o[i]),
                       nan if snap_d is None else float(snap_d[i]),
                       _int(trips.passengers, i), _float(trips.max_delay, i),
-                      _float(trips.max_walk, i), _float(trips.walk_speed, i))
+                      _float(trips.max_walk, i), _float(trips.walk_speed, i),
+                      _id(trips.ids, i))
 
 
 def _int(column, i: int) -> int:
     return 1 if column is None else int(column[i])
+
+
+def _id(column, i: int) -> str:
+    """Trip ``i``'s id ("" where the trips have none: the task's own id stands)."""
+    return "" if column is None else column[i]
 
 
 def _float(column, i: int) -> float:

@@ -125,6 +125,9 @@ class Task:
     walk_speed: float = TaskConfig.walk_speed
     #: the meeting points of its ride as handed out (None: door to door) and the metres walked
     meeting: object = None
+    #: the user's id of its request: a trace row's id (dispatch.files.traces.Trips.ids), else
+    #: its own ``id`` as a string (generated demand); the tasks table's ``request_id``
+    request_id: str = ""
 
     @property
     def cell(self):
@@ -195,9 +198,12 @@ class TaskBook:
     def release(self, kind: str, loc: Location, dropoff: Location | None = None, *,
                 max_wait: float = math.nan, snap_m: float = math.nan,
                 dropoff_snap_m: float = math.nan, passengers: int = 1,
-                max_delay: float = math.nan) -> Task:
+                max_delay: float = math.nan, request_id: str = "") -> Task:
+        """A new open task released now, numbered in release order; its ``request_id`` is the
+        one given, or its own id as a string where none is."""
         task = Task(self.released, kind, loc, float(self.env.now), dropoff, max_wait, snap_m,
                     dropoff_snap_m)
+        task.request_id = request_id or str(task.id)
         if passengers != 1:
             task.passengers = passengers
         if max_delay == max_delay:
@@ -294,6 +300,7 @@ class Request:
     max_delay: float = math.nan
     max_walk: float = math.nan  # nan: the scenario's
     walk_speed: float = math.nan
+    request_id: str = ""  # its trace row's id ("": generated, the task's own id)
 
 
 class Demand:
@@ -369,7 +376,8 @@ class TaskSource:
         delay = req.max_delay if not math.isnan(req.max_delay) else _nan_if_none(t.max_delay)
         task = self.book.release(req.kind, req.loc, req.dropoff, max_wait=wait,
                                  snap_m=req.snap_m, dropoff_snap_m=req.dropoff_snap_m,
-                                 passengers=req.passengers, max_delay=delay)
+                                 passengers=req.passengers, max_delay=delay,
+                                 request_id=req.request_id)
         walk = t.max_walk if math.isnan(req.max_walk) else req.max_walk
         if walk > 0:  # (door to door otherwise: the task's defaults)
             task.max_walk = walk
