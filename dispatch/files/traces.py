@@ -207,7 +207,8 @@ def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
                 if c in columns]
     booked = BOOKED_COLUMN in columns
     idcol = next((c for c in ID_COLUMNS if c in columns), None)
-    cols = table.read({**({idcol: CELLS} if idcol else {}),tcol: CELLS if tcol == DATETIME_COLUMN else NUMBER,
+    cols = table.read({**({idcol: CELLS} if idcol else {}),
+                       tcol: CELLS if tcol == DATETIME_COLUMN else NUMBER,
                        **{c: NUMBER for c in pick + (drop if has_dest else ())},
                        **{c: NUMBER_OR_BLANK for c in optional},
                        **({BOOKED_COLUMN: CELLS if tcol == DATETIME_COLUMN else NUMBER_OR_BLANK}

@@ -48,9 +48,9 @@ def check_columns(table: str, columns: tuple[str, ...]) -> None:
 #: the columns :func:`task_row` returns, in order
 TASK_COLUMNS = (
     "task_id", "request_id", "kind", "x", "y", "z", "dropoff_x", "dropoff_y", "dropoff_z",
-    "released_at", "max_wait", "snap_m", "dropoff_snap_m", "assigned_at", "agent_id", "cost", "picked_up_at",
-    "completed_at", "state", "conflicted", "closed_at", "reassigned", "transfers", "passengers",
-    "direct_time", "max_delay", "shared", "booked_at", "promised", "offers", "fare",
+    "released_at", "max_wait", "snap_m", "dropoff_snap_m", "assigned_at", "agent_id", "cost",
+    "picked_up_at", "completed_at", "state", "conflicted", "closed_at", "reassigned", "transfers",
+    "passengers", "direct_time", "max_delay", "shared", "booked_at", "promised", "offers", "fare",
     "board_x", "board_y", "alight_x", "alight_y", "walk_to_board_m", "walk_from_alight_m")
 
 

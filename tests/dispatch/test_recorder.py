@@ -311,7 +311,8 @@ def test_rows_are_tied_to_columns_by_name():
         ("b", "c", "e", "f")
     assert (row["walk_to_board_m"], row["walk_from_alight_m"]) == ("w", "W")
     assert (row["x"], row["z"], row["dropoff_y"]) == ("x", "z", "Y")
-    assert all(row[c] == c for c in ("request_id", "released_at", "max_wait", "snap_m", "dropoff_snap_m",
+    assert all(row[c] == c for c in ("request_id", "released_at", "max_wait", "snap_m",
+                                     "dropoff_snap_m",
                                      "assigned_at", "agent_id", "cost", "picked_up_at",
                                      "completed_at", "conflicted", "closed_at", "reassigned",
                                      "transfers", "passengers", "direct_time", "max_delay",
