@@ -16,6 +16,7 @@ import functools
 import hashlib
 import logging
 import math
+import re
 import tomllib
 from dataclasses import replace
 from datetime import datetime
@@ -49,6 +50,20 @@ from dispatch.scenario.toml_table import Table
 
 log = logging.getLogger(__name__)
 
+#: the sections and keys of a scenario file's top level, checked before anything is read
+ROOT_KEYS = ("name", "description", "seed", "duration", "world", "fleet", "tasks", "dispatch",
+             "comms", "faults", "sweep", "reposition", "chargers", "charging", "pricing",
+             "acceptor")
+#: ``[fleet]``'s keys, checked before its start file is read
+FLEET_KEYS = ("agents", "uav_fraction", "uav_speed", "ugv_speed", "uav_max_start_altitude",
+              "placement", "capacity", "start", "energy", "breaks", "sizing", "sizing_params",
+              "shift_grace")
+#: ``[tasks]``'s keys, checked before its trace is read
+TASK_KEYS = ("source", "count", "interval", "rate", "max_active", "ground_fraction",
+             "service_time", "ttl", "max_wait", "max_delay", "max_walk", "walk_speed",
+             "meeting_points", "trips_per_day", "weekday", "prebook_share", "prebook_lead",
+             "trace", "start", "max_snap")
+
 
 def load_scenario(path: str | Path, *, force: bool = False,
                   overrides: list[tuple[str, str, str]] = ()) -> Scenario:
@@ -65,7 +80,7 @@ def load_scenario(path: str | Path, *, force: bool = False,
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
-        raise ScenarioError(path, "<syntax>", f"invalid TOML: {e}") from None
+        raise _syntax_error(path, e) from None
     except RecursionError:
         raise ScenarioError(path, "<syntax>", "invalid TOML: arrays or tables nested too "
                                               "deeply") from None
@@ -79,12 +94,28 @@ def load_scenario(path: str | Path, *, force: bool = False,
     return parse_scenario(doc, path, text, limits=limits)
 
 
+def _syntax_error(path: Path, e: tomllib.TOMLDecodeError) -> ScenarioError:
+    """``file: line L, column C: TOML syntax: what`` for tomllib's ``what (at line L, column
+    C)``."""
+    what = str(e)
+    at = re.search(r"\s*\(at line (\d+), column (\d+)\)$", what)
+    if at is None:
+        return ScenarioError(path, "<syntax>", f"TOML syntax: {what}")
+    return ScenarioError(path, f"line {at[1]}, column {at[2]}",
+                         f"TOML syntax: {what[:at.start()]}")
+
+
 def parse_scenario(data: dict, path: Path, text: str = "", *,
                    limits: Limits | None = LIMITS) -> Scenario:
     """Validate an already-decoded TOML document (see :func:`load_scenario`); ``limits`` bound
     the size of the files it names (None: no bound)."""
     max_bytes = None if limits is None else limits.input_bytes
     root = Table(path, "", data, (Scenario,))
+    root.expect(ROOT_KEYS)
+    for section in ("fleet", "tasks"):  # the tables whose keys name files: checked before
+        if isinstance(data.get(section), dict):   # any file is read
+            Table(path, f"{section}.", data[section]).expect(
+                FLEET_KEYS if section == "fleet" else TASK_KEYS)
     name = safe_name(root.string("name", path.stem), safe_name(path.stem))
     description = root.get("description")
     if not isinstance(description, str):
@@ -97,6 +128,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     w.done()
 
     f = root.table("fleet", FleetConfig)
+    f.expect(FLEET_KEYS)
     fleet = FleetConfig(
         agents=f.number("agents", lo=1, integer=True),
         uav_fraction=f.number("uav_fraction", lo=0.0, hi=1.0),
@@ -113,22 +145,26 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
                                   f"got {start!r}")
         start_path = (path.parent / start).resolve()
         kind = space_class(world.space)
-        rows = read_fleet_start(start_path, kind.start_nodes, kind.start_z, max_bytes)
+        with f.reading("start", start_path):
+            rows = read_fleet_start(start_path, kind.start_nodes, kind.start_z, max_bytes)
+            capacities = read_fleet_capacities(start_path, max_bytes)
         agents = fleet.agents if "agents" in f.data else len(rows)
         if agents > len(rows):
             raise f.fail("agents", f"{agents} vehicles but the start file {start} places "
                                    f"{len(rows)}")
         fleet = replace(fleet, agents=agents, start=rows, start_file=start_path,
-                        capacities=read_fleet_capacities(start_path, max_bytes)[:agents])
+                        capacities=capacities[:agents])
     if "energy" in f.data:
-        fleet = replace(fleet, energy=parse_energy(f.table("energy", EnergyConfig), fleet,
-                                                   world))
+        with f.reading("start", fleet.start_file or path):  # its soc column
+            fleet = replace(fleet, energy=parse_energy(f.table("energy", EnergyConfig), fleet,
+                                                       world))
     if "breaks" in f.data:
         fleet = replace(fleet, breaks=parse_breaks(f.table("breaks", BreaksConfig), world))
     fleet = _parse_sizing(f, fleet)
     f.done()
 
     t = root.table("tasks", TaskConfig)
+    t.expect(TASK_KEYS)
     source = t.string("source", choices=SOURCES)
     tasks = TaskConfig(
         source=source,
@@ -159,8 +195,9 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
         if not isinstance(trace, str) or not trace:
             raise t.fail("trace", "is required when source = 'trace' (a CSV or Parquet file)")
         trace_path = shipped_trace(trace) or (path.parent / trace).resolve()
-        trips = _read_trace(trace_path, world.space,
-                            space_class(world.space).trace_bounds(world), max_bytes, start)
+        with t.reading("trace", trace_path):
+            trips = _read_trace(trace_path, world.space,
+                                space_class(world.space).trace_bounds(world), max_bytes, start)
         if max_snap is not None:
             trips = _within_snap(t, trips, world, max_snap)
         for reason, n in trips.dropped:
@@ -177,8 +214,9 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
             raise t.fail(k, f"is only used when source is {' or '.join(allowed)} (not {source!r})")
     t.done()
     if fleet.start_file is not None:  # (date-times in the shift columns need [tasks] start)
-        fleet = replace(fleet, shifts=read_shifts(fleet.start_file, fleet.agents, start,
-                                                  max_bytes))
+        with f.reading("start", fleet.start_file):
+            fleet = replace(fleet, shifts=read_shifts(fleet.start_file, fleet.agents, start,
+                                                      max_bytes))
 
     d = root.table("dispatch", DispatchConfig)
     reassign = d.flag("reassign")
