@@ -46,23 +46,10 @@ from dispatch.fleet.shifts import read_shifts
 from dispatch.scenario.sections import (parse_acceptor, parse_allocators, parse_breaks,
                                         parse_charging, parse_energy, parse_faults, parse_pricing,
                                         parse_reposition, parse_world)
+from dispatch.scenario.keys import KEYS, check_keys
 from dispatch.scenario.toml_table import Table
 
 log = logging.getLogger(__name__)
-
-#: the sections and keys of a scenario file's top level, checked before anything is read
-ROOT_KEYS = ("name", "description", "seed", "duration", "world", "fleet", "tasks", "dispatch",
-             "comms", "faults", "sweep", "reposition", "chargers", "charging", "pricing",
-             "acceptor")
-#: ``[fleet]``'s keys, checked before its start file is read
-FLEET_KEYS = ("agents", "uav_fraction", "uav_speed", "ugv_speed", "uav_max_start_altitude",
-              "placement", "capacity", "start", "energy", "breaks", "sizing", "sizing_params",
-              "shift_grace")
-#: ``[tasks]``'s keys, checked before its trace is read
-TASK_KEYS = ("source", "count", "interval", "rate", "max_active", "ground_fraction",
-             "service_time", "ttl", "max_wait", "max_delay", "max_walk", "walk_speed",
-             "meeting_points", "trips_per_day", "weekday", "prebook_share", "prebook_lead",
-             "trace", "start", "max_snap")
 
 
 def load_scenario(path: str | Path, *, force: bool = False,
@@ -111,11 +98,8 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     the size of the files it names (None: no bound)."""
     max_bytes = None if limits is None else limits.input_bytes
     root = Table(path, "", data, (Scenario,))
-    root.expect(ROOT_KEYS)
-    for section in ("fleet", "tasks"):  # the tables whose keys name files: checked before
-        if isinstance(data.get(section), dict):   # any file is read
-            Table(path, f"{section}.", data[section]).expect(
-                FLEET_KEYS if section == "fleet" else TASK_KEYS)
+    check_keys(path, data)  # before any file is read
+    root.expect(KEYS[""])
     name = safe_name(root.string("name", path.stem), safe_name(path.stem))
     description = root.get("description")
     if not isinstance(description, str):
@@ -128,7 +112,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     w.done()
 
     f = root.table("fleet", FleetConfig)
-    f.expect(FLEET_KEYS)
+    f.expect(KEYS["fleet"])
     fleet = FleetConfig(
         agents=f.number("agents", lo=1, integer=True),
         uav_fraction=f.number("uav_fraction", lo=0.0, hi=1.0),
@@ -164,7 +148,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     f.done()
 
     t = root.table("tasks", TaskConfig)
-    t.expect(TASK_KEYS)
+    t.expect(KEYS["tasks"])
     source = t.string("source", choices=SOURCES)
     tasks = TaskConfig(
         source=source,
@@ -219,6 +203,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
                                                       max_bytes))
 
     d = root.table("dispatch", DispatchConfig)
+    d.expect(KEYS["dispatch"])
     reassign = d.flag("reassign")
     features = space_class(world.space).features
     if reassign and "reassign" not in features:
@@ -243,6 +228,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     _check_pooling(path, world, fleet, tasks, disp)
 
     c = root.table("comms", CommsConfig)
+    c.expect(KEYS["comms"])
     comms = CommsConfig(
         range=c.number("range", lo=0.0),
         latency=c.number("latency", lo=0.0),
@@ -256,6 +242,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     faults = parse_faults(root.table("faults", FaultConfig), path)
 
     s = root.table("sweep", SweepConfig)
+    s.expect(KEYS["sweep"])
     sweep = SweepConfig(
         allocator=s.str_list("allocator"),
         planner=s.str_list("planner"),

@@ -8,6 +8,7 @@ import pytest
 
 import dispatch.scenario.load as load
 from dispatch.errors import ScenarioError
+from dispatch.scenario.keys import KEYS
 from dispatch.scenario.load import load_scenario
 
 
@@ -55,6 +56,10 @@ def test_key_typo_reported_before_the_trace_is_read(tmp_path, monkeypatch):
     # a [tasks] typo comes before [fleet]'s start file is read too
     msg = error_of(tmp_path, "[fleet]\nstart = 'broken.csv'\n[tasks]\nsourse = 'static'\n")
     assert "tasks.sourse: unknown key (did you mean 'source'?)" in msg
+    # and so does a typo in a later section
+    msg = error_of(tmp_path, "[tasks]\nsource = 'trace'\ntrace = 'broken.csv'\n"
+                             "[dispatch]\nbatch_windw = 5.0\n")
+    assert "dispatch.batch_windw: unknown key (did you mean 'batch_window'?)" in msg
 
 
 def test_missing_trace_names_the_key_and_the_scenario(tmp_path):
@@ -76,5 +81,5 @@ def test_toml_syntax_error_gives_line_and_column(tmp_path):
 def test_fleet_known_keys_list_every_accepted_key(tmp_path):
     msg = error_of(tmp_path, "[fleet]\nagentz = 3\n")
     known = msg.split("known keys here: ")[1].rstrip(")").split(", ")
-    assert set(load.FLEET_KEYS) <= set(known)
+    assert set(KEYS["fleet"]) <= set(known)
     assert {"sizing", "sizing_params", "energy", "breaks", "shift_grace"} <= set(known)
