@@ -16,6 +16,7 @@ import functools
 import hashlib
 import logging
 import math
+import re
 import tomllib
 from dataclasses import replace
 from datetime import datetime
@@ -45,6 +46,7 @@ from dispatch.fleet.shifts import read_shifts
 from dispatch.scenario.sections import (parse_acceptor, parse_allocators, parse_breaks,
                                         parse_charging, parse_energy, parse_faults, parse_pricing,
                                         parse_reposition, parse_world)
+from dispatch.scenario.keys import KEYS, check_keys
 from dispatch.scenario.toml_table import Table
 
 log = logging.getLogger(__name__)
@@ -65,7 +67,7 @@ def load_scenario(path: str | Path, *, force: bool = False,
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
-        raise ScenarioError(path, "<syntax>", f"invalid TOML: {e}") from None
+        raise _syntax_error(path, e) from None
     except RecursionError:
         raise ScenarioError(path, "<syntax>", "invalid TOML: arrays or tables nested too "
                                               "deeply") from None
@@ -79,12 +81,25 @@ def load_scenario(path: str | Path, *, force: bool = False,
     return parse_scenario(doc, path, text, limits=limits)
 
 
+def _syntax_error(path: Path, e: tomllib.TOMLDecodeError) -> ScenarioError:
+    """``file: line L, column C: TOML syntax: what`` for tomllib's ``what (at line L, column
+    C)``."""
+    what = str(e)
+    at = re.search(r"\s*\(at line (\d+), column (\d+)\)$", what)
+    if at is None:
+        return ScenarioError(path, "<syntax>", f"TOML syntax: {what}")
+    return ScenarioError(path, f"line {at[1]}, column {at[2]}",
+                         f"TOML syntax: {what[:at.start()]}")
+
+
 def parse_scenario(data: dict, path: Path, text: str = "", *,
                    limits: Limits | None = LIMITS) -> Scenario:
     """Validate an already-decoded TOML document (see :func:`load_scenario`); ``limits`` bound
     the size of the files it names (None: no bound)."""
     max_bytes = None if limits is None else limits.input_bytes
     root = Table(path, "", data, (Scenario,))
+    check_keys(path, data)  # before any file is read
+    root.expect(KEYS[""])
     name = safe_name(root.string("name", path.stem), safe_name(path.stem))
     description = root.get("description")
     if not isinstance(description, str):
@@ -97,6 +112,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     w.done()
 
     f = root.table("fleet", FleetConfig)
+    f.expect(KEYS["fleet"])
     fleet = FleetConfig(
         agents=f.number("agents", lo=1, integer=True),
         uav_fraction=f.number("uav_fraction", lo=0.0, hi=1.0),
@@ -113,22 +129,26 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
                                   f"got {start!r}")
         start_path = (path.parent / start).resolve()
         kind = space_class(world.space)
-        rows = read_fleet_start(start_path, kind.start_nodes, kind.start_z, max_bytes)
+        with f.reading("start", start_path):
+            rows = read_fleet_start(start_path, kind.start_nodes, kind.start_z, max_bytes)
+            capacities = read_fleet_capacities(start_path, max_bytes)
         agents = fleet.agents if "agents" in f.data else len(rows)
         if agents > len(rows):
             raise f.fail("agents", f"{agents} vehicles but the start file {start} places "
                                    f"{len(rows)}")
         fleet = replace(fleet, agents=agents, start=rows, start_file=start_path,
-                        capacities=read_fleet_capacities(start_path, max_bytes)[:agents])
+                        capacities=capacities[:agents])
     if "energy" in f.data:
-        fleet = replace(fleet, energy=parse_energy(f.table("energy", EnergyConfig), fleet,
-                                                   world))
+        with f.reading("start", fleet.start_file or path):  # its soc column
+            fleet = replace(fleet, energy=parse_energy(f.table("energy", EnergyConfig), fleet,
+                                                       world))
     if "breaks" in f.data:
         fleet = replace(fleet, breaks=parse_breaks(f.table("breaks", BreaksConfig), world))
     fleet = _parse_sizing(f, fleet)
     f.done()
 
     t = root.table("tasks", TaskConfig)
+    t.expect(KEYS["tasks"])
     source = t.string("source", choices=SOURCES)
     tasks = TaskConfig(
         source=source,
@@ -159,8 +179,9 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
         if not isinstance(trace, str) or not trace:
             raise t.fail("trace", "is required when source = 'trace' (a CSV or Parquet file)")
         trace_path = shipped_trace(trace) or (path.parent / trace).resolve()
-        trips = _read_trace(trace_path, world.space,
-                            space_class(world.space).trace_bounds(world), max_bytes, start)
+        with t.reading("trace", trace_path):
+            trips = _read_trace(trace_path, world.space,
+                                space_class(world.space).trace_bounds(world), max_bytes, start)
         if max_snap is not None:
             trips = _within_snap(t, trips, world, max_snap)
         for reason, n in trips.dropped:
@@ -177,10 +198,12 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
             raise t.fail(k, f"is only used when source is {' or '.join(allowed)} (not {source!r})")
     t.done()
     if fleet.start_file is not None:  # (date-times in the shift columns need [tasks] start)
-        fleet = replace(fleet, shifts=read_shifts(fleet.start_file, fleet.agents, start,
-                                                  max_bytes))
+        with f.reading("start", fleet.start_file):
+            fleet = replace(fleet, shifts=read_shifts(fleet.start_file, fleet.agents, start,
+                                                      max_bytes))
 
     d = root.table("dispatch", DispatchConfig)
+    d.expect(KEYS["dispatch"])
     reassign = d.flag("reassign")
     features = space_class(world.space).features
     if reassign and "reassign" not in features:
@@ -205,6 +228,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     _check_pooling(path, world, fleet, tasks, disp)
 
     c = root.table("comms", CommsConfig)
+    c.expect(KEYS["comms"])
     comms = CommsConfig(
         range=c.number("range", lo=0.0),
         latency=c.number("latency", lo=0.0),
@@ -218,6 +242,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     faults = parse_faults(root.table("faults", FaultConfig), path)
 
     s = root.table("sweep", SweepConfig)
+    s.expect(KEYS["sweep"])
     sweep = SweepConfig(
         allocator=s.str_list("allocator"),
         planner=s.str_list("planner"),

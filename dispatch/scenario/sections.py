@@ -127,7 +127,9 @@ def parse_faults(f: Table, path: Path) -> FaultConfig:
     if file is not None:
         if not isinstance(file, str) or not file:
             raise f.fail("file", f"must be a CSV file of t, vehicle_id, duration; got {file!r}")
-        events = read_failures((path.parent / file).resolve())
+        fpath = (path.parent / file).resolve()
+        with f.reading("file", fpath):
+            events = read_failures(fpath)
     on_board = f.string("on_board", choices=("transfer", "fail"))
     tow = f.number("tow", gt=0.0)
     windows = f.get("blackout")
@@ -214,7 +216,8 @@ def parse_charging(root: Table, path: Path, fleet: FleetConfig, faults, world):
             raise c.fail("file", f"must be a CSV file of stations, got {_short(file)}")
         fpath = (path.parent / file).resolve()
         try:
-            stations = read_stations(fpath)
+            with c.reading("file", fpath):
+                stations = read_stations(fpath)
         except (OSError, ValueError) as err:
             raise c.fail("file", str(err)) from None
     else:

@@ -11,6 +11,7 @@ another setting, or it marks a key the file left out).
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import math
 from pathlib import Path
 from typing import Any
@@ -39,6 +40,12 @@ def default_of(classes: tuple[type, ...], name: str) -> Any:
     raise LookupError(f"no field {name!r} in {', '.join(c.__name__ for c in classes)}")
 
 
+def did_you_mean(word: str, known) -> str:
+    """`` (did you mean 'x'?)`` for the closest of ``known`` to ``word``; "" where none is close."""
+    close = difflib.get_close_matches(str(word), [str(k) for k in known], n=1)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
 class Table:
     """A TOML table being read into the dataclasses ``of``: typed getters that raise
     ScenarioError and take a left-out key's default from its field, unknown-key check."""
@@ -48,6 +55,7 @@ class Table:
         if not isinstance(data, dict):
             raise ScenarioError(file, prefix.rstrip(".") or "<root>", "must be a table")
         self.data, self.used = data, set()
+        self.known: set[str] = set()  # keys declared by expect(), read or not
 
     def key(self, k: str) -> str:
         return f"{self.prefix}{k}"
@@ -61,6 +69,8 @@ class Table:
 
     def get(self, k: str, default: Any = FIELD) -> Any:
         """The file's value of ``k`` as it is; left out: ``default`` (not given: the field's)."""
+        if self.known and k not in self.known:  # a parser bug: expect() would refuse the key
+            raise LookupError(f"{self.key(k)} is read but not declared in expect()")
         self.used.add(k)
         if k in self.data:
             return self.data[k]
@@ -68,8 +78,7 @@ class Table:
 
     def given(self, k: str) -> Any:
         """The file's value of ``k`` as it is; None where the file leaves it out."""
-        self.used.add(k)
-        return self.data.get(k)
+        return self.get(k, None)
 
     def table(self, k: str, *of: type) -> Table:
         """The sub-table ``k`` (empty where left out), read into the dataclasses ``of``."""
@@ -103,7 +112,8 @@ class Table:
         if not isinstance(v, str) or not v:
             raise self.fail(k, f"must be a non-empty string, got {_short(v)}")
         if choices and v not in choices:
-            raise self.fail(k, f"must be one of {', '.join(choices)}; got {_short(v)}")
+            raise self.fail(k, f"must be one of {', '.join(choices)}; got {_short(v)}"
+                               f"{did_you_mean(v, choices)}")
         return v
 
     def flag(self, k, default=FIELD) -> bool:
@@ -163,8 +173,42 @@ class Table:
         self.used.update(self.data)
         return tuple(sorted(self.data.items()))
 
+    def expect(self, known) -> None:
+        """Refuse a key not in ``known`` now, before any value is read (a value may name a file
+        that takes long to read or fails); ``known`` joins the keys :meth:`done` lists."""
+        self.known.update(known)
+        self._refuse_unknown(self.known)
+
     def done(self) -> None:
-        unknown = sorted(set(self.data) - self.used)
+        """Refuse a key that was neither read nor declared (:meth:`expect`), naming the closest
+        known key."""
+        self._refuse_unknown(self.used | self.known)
+
+    def _refuse_unknown(self, known: set[str]) -> None:
+        unknown = sorted(set(self.data) - known)
         if unknown:
-            known = ", ".join(sorted(self.used))
-            raise self.fail(unknown[0], f"unknown key (known keys here: {known})")
+            hint = did_you_mean(unknown[0], known)
+            raise self.fail(unknown[0], f"unknown key{hint} (known keys here: "
+                                        f"{', '.join(sorted(known))})")
+
+    def reading(self, k: str, file: Path):
+        """A context in which ``file``, named by key ``k``, is read: its ScenarioError is raised
+        again naming this scenario file and ``k`` (the file's own name and row in the reason)."""
+        return _Reading(self, k, file)
+
+
+class _Reading:
+    """See :meth:`Table.reading`."""
+
+    def __init__(self, table: Table, k: str, file: Path) -> None:
+        self.table, self.k, self.file = table, k, file
+
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, kind, err, tb) -> bool:
+        if not isinstance(err, ScenarioError) or err.file == str(self.table.file):
+            return False
+        name = Path(err.file).name
+        where = f"{name}" if err.key == "<file>" else f"{name}: {err.key}:"
+        raise self.table.fail(self.k, f"{where} {err.reason}") from None

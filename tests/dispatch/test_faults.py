@@ -245,7 +245,7 @@ def test_voxel_breakdowns(make_scenario):
     ('on_board = "eject"', "faults.on_board"),
     ("blackout = [[5.0, 1.0]]", "faults.blackout"),
     ("blackout_region = [0.0, 0.0, 1.0, 1.0]", "faults.blackout_region"),
-    ('file = "nope.csv"', "<file>"),
+    ('file = "nope.csv"', "faults.file: nope.csv cannot be read: file not found"),
 ])
 def test_bad_fault_settings_are_named(make_scenario, faults, key):
     with pytest.raises(ScenarioError, match=key.replace(".", r"\.")):

@@ -36,6 +36,17 @@ def assert_names(err: ScenarioError, file: Path, key: str, reason: str) -> None:
     assert err.__cause__ is None
 
 
+def assert_in_trace(err: ScenarioError, trace: Path, where: str, reason: str) -> None:
+    """A trace's error names the scenario file and ``tasks.trace``, then the trace, ``where``
+    in it (a row, ``<header>``; ``<file>``: the file as a whole) and the reason."""
+    msg = str(err)
+    assert err.key == "tasks.trace" and Path(err.file).suffix == ".toml", msg
+    assert f"tasks.trace: {trace.name}" in msg, msg
+    assert where == "<file>" or f"{trace.name}: {where}: " in msg, msg
+    assert reason in err.reason, msg
+    assert err.__cause__ is None
+
+
 # ----------------------------------------------------------------------------- bad files
 
 BAD_SCENARIOS = {
@@ -94,7 +105,8 @@ def test_toml_syntax_error(tmp_path):
     path = tmp_path / "broken.toml"
     path.write_text(scenario_text().replace("[fleet]", "[fleet"), encoding="utf-8")
     err = load_error(path)
-    assert_names(err, path, "<syntax>", "invalid TOML")
+    line = scenario_text().splitlines().index("[fleet]") + 1
+    assert_names(err, path, f"line {line}, column 7", "TOML syntax: Expected ']'")
     assert err.__suppress_context__  # the TOMLDecodeError is not shown as a second traceback
 
 
@@ -138,42 +150,42 @@ def test_good_trace_loads_sorted(tmp_path):
 def test_trace_task_outside_world_names_row(tmp_path, row, reason):
     trace = write_csv(tmp_path / "outside.csv", ["0.0,1.5,1.5,0.5", "1.0,2.5,2.5,0.5", row])
     err = load_error(trace_scenario(tmp_path, "outside.csv"))
-    assert_names(err, trace, "row 3", reason)
+    assert_in_trace(err, trace, "row 3", reason)
 
 
 def test_trace_non_numeric_cell_names_row(tmp_path):
     trace = write_csv(tmp_path / "words.csv", ["0.0,1.5,1.5,0.5", "1.0,two,2.5,0.5"])
     err = load_error(trace_scenario(tmp_path, "words.csv"))
-    assert_names(err, trace, "row 2", "x is not a number")
+    assert_in_trace(err, trace, "row 2", "x is not a number")
     assert "'two'" in str(err)
 
 
 def test_trace_empty_cell_names_row(tmp_path):
     trace = write_csv(tmp_path / "holes.csv", ["0.0,1.5,1.5,0.5", "1.0,1.5,,0.5"])
-    assert_names(load_error(trace_scenario(tmp_path, "holes.csv")), trace, "row 2",
+    assert_in_trace(load_error(trace_scenario(tmp_path, "holes.csv")), trace, "row 2",
                  "y is not a number")
 
 
 def test_trace_negative_time(tmp_path):
     trace = write_csv(tmp_path / "early.csv", ["-1.0,1.5,1.5,0.5"])
-    assert_names(load_error(trace_scenario(tmp_path, "early.csv")), trace, "row 1", "negative")
+    assert_in_trace(load_error(trace_scenario(tmp_path, "early.csv")), trace, "row 1", "negative")
 
 
 def test_trace_missing_column(tmp_path):
     trace = write_csv(tmp_path / "flat.csv", ["0.0,1.5,1.5"], header="release_time,x,y")
-    assert_names(load_error(trace_scenario(tmp_path, "flat.csv")), trace, "<header>",
+    assert_in_trace(load_error(trace_scenario(tmp_path, "flat.csv")), trace, "<header>",
                  "missing column(s): z")
 
 
 def test_trace_file_missing(tmp_path):
     err = load_error(trace_scenario(tmp_path, "absent.csv"))
-    assert_names(err, tmp_path / "absent.csv", "<file>", "not found")
+    assert_in_trace(err, tmp_path / "absent.csv", "<file>", "not found")
 
 
 def test_trace_wrong_suffix(tmp_path):
     trace = tmp_path / "trace.txt"
     trace.write_text("release_time,x,y,z\n0,1,1,0\n", encoding="utf-8")
-    assert_names(load_error(trace_scenario(tmp_path, "trace.txt")), trace, "<file>",
+    assert_in_trace(load_error(trace_scenario(tmp_path, "trace.txt")), trace, "<file>",
                  ".csv or .parquet")
 
 
@@ -181,14 +193,14 @@ def test_trace_parquet_outside_world(tmp_path):
     trace = tmp_path / "trace.parquet"
     pq.write_table(pa.table({"t": [0.0, 1.0], "x": [1.5, 1.5], "y": [1.5, 30.0],
                              "z": [0.5, 0.5]}), trace)
-    assert_names(load_error(trace_scenario(tmp_path, "trace.parquet")), trace, "row 2",
+    assert_in_trace(load_error(trace_scenario(tmp_path, "trace.parquet")), trace, "row 2",
                  "y = 30.0 is outside the world")
 
 
 def test_trace_parquet_that_is_not_parquet(tmp_path):
     trace = tmp_path / "fake.parquet"
     trace.write_bytes(b"this is not parquet")
-    assert_names(load_error(trace_scenario(tmp_path, "fake.parquet")), trace, "<file>",
+    assert_in_trace(load_error(trace_scenario(tmp_path, "fake.parquet")), trace, "<file>",
                  "cannot be read as a table")
 
 
