@@ -98,16 +98,16 @@ def plan_break(v, due: float, duration: float, now: float, driver
                 continue
             s = stops[k - 1]
             loc, arrive = s.loc, leave(times[k - 1], s.earliest, s.service)
-        stop = Stop(BREAK, None, loc, 0, math.inf, False, earliest=due, service=duration,
-                    holds_seats=True)
-        dep = leave(arrive, due, duration)
         after: list[float] = []
         if k < n:
-            nxt = dep + (_drive(driver, loc, stops[0].loc) if k == 0 else stops[k].leg)
+            nxt = leave(arrive, due, duration) + (
+                _drive(driver, loc, stops[0].loc) if k == 0 else stops[k].leg)
             push = nxt - times[k]
             after = pushed(times, stops, k, k, push, push)[k:]
             if any(t > s.latest + TOL for t, s in zip(after, stops[k:])):
                 continue
+        stop = Stop(BREAK, None, loc, 0, math.inf, False, earliest=due, service=duration,
+                    holds_seats=True)
         return k, stop, times[:k] + [arrive] + after
     return None
 
