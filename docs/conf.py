@@ -16,6 +16,7 @@ extensions = [
     "sphinx.ext.autodoc",
     "sphinx.ext.napoleon",
     "dispatch_reference",  # writes reference/generated/ from the code before reading
+    "bench_pages",  # writes howto/generated/ from the published bench boards
 ]
 
 html_theme = "furo"
@@ -41,6 +42,8 @@ exclude_patterns = [
     # the published bench boards (dispatch bench's bench.md), included by howto/bench_board.md
     "howto/bench_board/*.md",
     "howto/bench_board/variants/*.md",
+    # the boards' pages (bench_pages), included by howto/bench_board.md
+    "howto/generated/*.md",
 ]
 
 autodoc_member_order = "bysource"
