@@ -112,7 +112,7 @@ def summary(rows: list[dict[str, str]]) -> tuple[list[str], dict[str, str]]:
             lines.append(f"| {inst} | " + " | ".join(texts[a] for a in allocs) + " |")
         lines.append("")
     notes = {}
-    for status, allocs in long_status.items():
+    for status in long_status:
         word = short_status(status)
         if word == "unsupported":
             notes[status] = word
