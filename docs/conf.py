@@ -1,11 +1,24 @@
 """Sphinx configuration of the dispatch site (built by ``bash scripts/docs.sh``)."""
 
+import atexit
+import os
+import shutil
 import sys
+import tempfile
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))  # the project, for autodoc and the generated reference
 sys.path.insert(0, str(HERE / "_ext"))
+
+# The tutorials' kernels read their configuration from a private IPython directory: the
+# build's own (_ext/ipython_kernel_config.py: ipykernel's notice that the local TCP link to
+# Sphinx is unencrypted, once per kernel, left out), not the user's profile.
+_IPYTHONDIR = Path(tempfile.mkdtemp(prefix="dispatch-docs-ipython-"))
+(_IPYTHONDIR / "profile_default").mkdir()
+shutil.copy(HERE / "_ext" / "ipython_kernel_config.py", _IPYTHONDIR / "profile_default")
+os.environ["IPYTHONDIR"] = str(_IPYTHONDIR)
+atexit.register(shutil.rmtree, _IPYTHONDIR, ignore_errors=True)
 
 project = "dispatch"
 author = "the dispatch authors"
