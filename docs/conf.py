@@ -1,6 +1,7 @@
 """Sphinx configuration of the dispatch site (built by ``bash scripts/docs.sh``)."""
 
 import atexit
+import logging
 import os
 import shutil
 import sys
@@ -19,6 +20,26 @@ _IPYTHONDIR = Path(tempfile.mkdtemp(prefix="dispatch-docs-ipython-"))
 shutil.copy(HERE / "_ext" / "ipython_kernel_config.py", _IPYTHONDIR / "profile_default")
 os.environ["IPYTHONDIR"] = str(_IPYTHONDIR)
 atexit.register(shutil.rmtree, _IPYTHONDIR, ignore_errors=True)
+
+
+def _keep_root_logging() -> None:
+    """accessible-pygments (furo's dependency; its styles load with every Pygments style)
+    calls ``logging.basicConfig(level=INFO)`` on import, which printed an INFO line of
+    nbclient's per tutorial into the build's output. Import it now and put the root logger
+    back as Python sets it (no handler, level WARNING): warnings still reach stderr."""
+    root = logging.getLogger()
+    handlers, level = list(root.handlers), root.level
+    try:
+        import a11y_pygments  # noqa: F401
+    except ImportError:
+        return
+    for h in root.handlers[:]:
+        if h not in handlers:
+            root.removeHandler(h)
+    root.setLevel(level)
+
+
+_keep_root_logging()
 
 project = "dispatch"
 author = "the dispatch authors"
