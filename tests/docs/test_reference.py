@@ -41,7 +41,7 @@ def test_every_key_has_a_meaning_and_a_toml_type(rows):
     for title, row in rows:
         where = f"{title} {row['key']}"
         meaning = row["meaning"].strip()
-                assert meaning and meaning not in ("—", "-"), f"{where}: no meaning"
+        assert meaning and meaning not in ("—", "-"), f"{where}: no meaning"
         assert not re.search(r"\b(None|True|False)\b", meaning), f"{where}: Python in {meaning!r}"
         assert TOML_WORDS.match(row["type"]), f"{where}: {row['type']!r} is not a TOML type"
         assert not PYTHON_WORDS.search(row["type"]), f"{where}: {row['type']!r} is Python"
