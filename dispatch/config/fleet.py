@@ -34,7 +34,7 @@ class FleetConfig:
     shifts: Any = None
     #: seconds after its shift's end a vehicle may still complete its plan's last stop
     shift_grace: float = 0.0
-        #: ``[fleet] sizing``: the fleet-sizing strategy (``dispatch.sizers``; unset: as ``fixed``,
+    #: ``[fleet] sizing``: the fleet-sizing strategy (``dispatch.sizers``; unset: as ``fixed``,
     #: every vehicle on duty over its shift) and its ``[fleet.sizing_params]``
     sizing: str | None = None
     #: the ``[fleet.sizing_params]`` table: keyword arguments of the sizing strategy's
