@@ -250,6 +250,38 @@ def key_rows(table: str, cls: type, keys: set[str], skip=(), guide=None
     return rows, derived
 
 
+#: what a section is for, in a user's words (a dataclass's docstring speaks to the code's
+#: readers; the sections without an entry here use it)
+INTROS = {
+    "top level": "The keys outside any table.",
+    "[world]": "The voxel world of the robot teams: its size and cells (its obstacles in "
+               "`[world.obstacles]`). With `network` (next section) the run is on a road "
+               "network instead, where `size`, `cell`, `physics` and obstacles are refused.",
+    "[world] (road networks)": "A road network instead of the voxel world: the keys "
+                               "`network`, `blocks`, `block`, `speed` and `congestion` of "
+                               "`[world]`.",
+    "[world.obstacles]": "Boxes standing on the ground of the voxel world.",
+    "[fleet]": "The vehicles: how many, their speeds and seats, where they start (a start file "
+               "may add shifts: [driver shifts](../../howto/shifts.md)) and the fleet-sizing "
+               "strategy.",
+    "[fleet.energy]": "Batteries (road networks; no batteries without the table): capacity, "
+                      "consumption, idle draw, the reserve a car keeps.",
+    "[tasks]": "The requests: a generated source (`static`, `periodic`, `poisson`, "
+               "`empirical`) or a trace of your own trips, and the limits a rider accepts.",
+    "[dispatch]": "Who decides, and how: the allocator and the planner, batching, what a "
+                  "pair costs, the plugins' parameters, when a booked ride enters.",
+    "[faults]": "Breakdowns and radio blackouts; none by default.",
+    "[reposition]": "What idle vehicles do (road networks): the repositioner, how often it is "
+                    "called and what it sees; its parameters in `[reposition.<name>]`.",
+    "[chargers] and [charging]": "Charging stations (`[chargers]`, with `[fleet.energy]`) and "
+                                 "the charging strategy (`[charging]`; its parameters in "
+                                 "`[charging.<name>]`).",
+    "[sweep]": "Lists of run keys: every combination is one run, written to its own partition.",
+    "[acceptor]": "Offers riders may decline: the acceptor, how often a declined ride is "
+                  "offered again, its parameters in `[acceptor.<name>]`; every rider accepts "
+                  "without the table.",
+}
+
 #: the TOML type of the keys the parser reads into a field of another name (the guide's)
 GUIDE_TYPES = {
     ("faults", "file"): "string (a CSV file, relative to the scenario file)",
@@ -260,11 +292,14 @@ GUIDE_TYPES = {
 def key_table(title: str, table: str, cls: type, keys: set[str], skip=(),
               guide=None) -> list[str]:
     rows, derived = key_rows(table, cls, keys, skip, guide)
-    out = [f"## {title}", "", f"From the dataclass `{cls.__name__}`."]
-    if cls.__doc__ and not cls.__doc__.startswith(cls.__name__ + "("):
-        out += ["", esc(inspect.cleandoc(cls.__doc__))]
+    out = [f"## {title}", ""]
+    if title in INTROS:
+        out += [INTROS[title]]
+    elif cls.__doc__ and not cls.__doc__.startswith(cls.__name__ + "("):
+        out += [esc(inspect.cleandoc(cls.__doc__))]
     elif (guide or {}).get((table, "")):
-        out += ["", esc(guide[(table, "")]) + " *(scenario guide)*"]
+        out += [esc(guide[(table, "")]) + " *(scenario guide)*"]
+    out += ["", f"Read into the dataclass `{cls.__name__}`."]
     out += ["", "| key | TOML type | default | meaning |", "|---|---|---|---|",
             *(f"| `{r['key']}` | {esc(r['type'])} | `{esc(r['default'])}` | "
               f"{esc(r['meaning'])} |" for r in rows)]
