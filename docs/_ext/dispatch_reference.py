@@ -114,6 +114,13 @@ def toml_type(f: dataclasses.Field, unit: str = "") -> str:
     return f"{base} ({unit})" if unit and "(" not in base else base
 
 
+def toml_words(doc: str) -> str:
+    """A field comment in the file's words: Python's ``None`` is a key left out (``unset``),
+    ``True`` / ``False`` are TOML's ``true`` / ``false``."""
+    doc = re.sub(r"\bNone\b", "unset", doc)
+    return re.sub(r"\b(True|False)\b", lambda m: m.group(1).lower(), doc)
+
+
 def toml_value(v) -> str:
     """``v`` written as in a TOML file."""
     if isinstance(v, bool):
@@ -235,6 +242,7 @@ def key_rows(table: str, cls: type, keys: set[str], skip=(), guide=None
         if not doc and cls.__name__ == "SweepConfig":
             doc = (f"a list of `{f.name}` values (a run key): every combination of the "
                    "lists is one run")
+        doc = toml_words(doc)
         unit = split_unit(doc)[0]  # the meaning keeps it: "seconds before the run stops"
         meaning = "; ".join(m for m in (doc, accepted_values(cls, f.name)) if m)
         rows.append({"key": f.name, "type": toml_type(f, unit), "default": default_text(f),

@@ -86,3 +86,4 @@ def test_types_follow_the_annotation_and_the_unit(reference):
     with pytest.raises(LookupError, match="params"):
         reference.toml_type(fields["params"])
     assert reference.toml_value((1.0, True, "a", float("inf"))) == '[1.0, true, "a", inf]'
+    assert reference.toml_words("cap (None: no cap; True: on)") == "cap (unset: no cap; true: on)"
