@@ -66,9 +66,12 @@ def safe_name(name: str, fallback: str = "scenario") -> str:
 class Scenario:
     """A parsed scenario file. ``text`` is the file's exact content (stored with results)."""
 
-    name: str
+    #: names the run ids, the ``scenario=`` partition and the default output folder
+    name: str = field(metadata={"default": "(the file's stem)"})
     path: Path
     text: str
+    #: free text saying what the scenario is for; kept with the file's text in the results,
+    #: never read by a run
     description: str = ""
     seed: int = 0
     duration: float = 3600.0  # simulated seconds before the run stops

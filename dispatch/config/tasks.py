@@ -22,7 +22,7 @@ EMPIRICAL_MAX_WAIT = 600.0
 @dataclass(frozen=True)
 class TaskConfig:
     source: str = "static"
-    count: int | None = None  # static: number of tasks (None: as many as agents); others: cap
+    count: int | None = None  # static: number of tasks (unset: as many as agents); others: cap
     interval: float | None = None  # periodic: seconds between releases
     rate: float | None = None  # poisson: releases per second
     max_active: int | None = None  # periodic/poisson: a release is skipped while this many are open
@@ -39,7 +39,7 @@ class TaskConfig:
     #: trace: the date-time of second 0 (a trace's departure_time is read from it)
     start: datetime | None = None
     #: trace on roads: metres a pickup / drop-off may lie from the nearest node (farther:
-    #: the trip is left out before the run, counted in trips.dropped); None: no bound
+    #: the trip is left out before the run, counted in trips.dropped); unset: no bound
     max_snap: float | None = None
     #: share of the requests booked ahead (each drawn from the run's prebooking stream; a
     #: trace's booked_at column instead: see dispatch.decide.prebook)
