@@ -84,7 +84,8 @@ def metres(lon1, lat1, lon2, lat2) -> float:
 def near_network(stations: list[dict], radius: float) -> set[str]:
     """Ids of the stations within ``radius`` metres of a node of the Manhattan street network
     (a grid of 0.01-degree cells finds each station's candidate nodes)."""
-    graph = json.load(gzip.open(NETWORK))
+    with gzip.open(NETWORK) as fh:
+        graph = json.load(fh)
     cells: dict[tuple[int, int], list[tuple[float, float]]] = {}
     for node in graph["nodes"]:
         cells.setdefault((int(node["x"] // 0.01), int(node["y"] // 0.01)), []).append(
