@@ -168,7 +168,7 @@ def _index(src: _Source, name: str, column: str, values, keys, what: str):
     return np.asarray(idx.fill_null(-1), dtype=np.int64)
 
 
-def _numbers(src: _Source, name: str, column: str, values, lo: float, hi: float,
+def _numbers(src: _Source, name: str, column: str, values, lo: float, hi: float, *,
              blank_ok: np.ndarray | None = None) -> np.ndarray:
     """Floats of a column (within ``[lo, hi]``); blank is NaN where ``blank_ok``."""
     out = np.full(len(values), np.nan)
@@ -329,8 +329,8 @@ def _stops(src: _Source):
     for c in ("stop_lat", "stop_lon"):
         if c not in stops:
             raise ScenarioError(src.label(name), c, "column is missing")
-    lat = _numbers(src, name, "stop_lat", stops["stop_lat"], -90, 90, blank_ok)
-    lon = _numbers(src, name, "stop_lon", stops["stop_lon"], -180, 180, blank_ok)
+    lat = _numbers(src, name, "stop_lat", stops["stop_lat"], -90, 90, blank_ok=blank_ok)
+    lon = _numbers(src, name, "stop_lon", stops["stop_lon"], -180, 180, blank_ok=blank_ok)
     parent = np.full(n, -1, dtype=np.int64)
     if "parent_station" in stops:
         has = np.asarray(pc.not_equal(stops["parent_station"], ""))
@@ -370,7 +370,8 @@ def _transfers(src: _Source, stops) -> tuple[np.ndarray, np.ndarray, np.ndarray]
                "stop of stops.txt")
     b = _index(src, name, "to_stop_id", tr["to_stop_id"], stops["stop_id"], "stop of stops.txt")
     secs = (_numbers(src, name, "min_transfer_time", tr["min_transfer_time"], 0, 86400,
-                     np.ones(n, dtype=bool)) if "min_transfer_time" in tr else np.full(n, np.nan))
+                     blank_ok=np.ones(n, dtype=bool)) if "min_transfer_time" in tr
+            else np.full(n, np.nan))
     return a[keep], b[keep], secs[keep]
 
 
