@@ -148,6 +148,30 @@ class _Source:
         return {c: pc.utf8_trim_whitespace(table.column(c).combine_chunks()) for c in keep}
 
 
+def _array(arr, dtype) -> np.ndarray:
+    """A numeric or boolean pyarrow array as numpy (its null cells' values undefined: callers
+    raise on them first), copied from its buffers: pyarrow's own conversion imports pandas,
+    which a run never loads (so does any Python scalar handed to pyarrow)."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    if pa.types.is_boolean(arr.type):
+        arr = pc.cast(arr, pa.int8())
+    if isinstance(arr, pa.ChunkedArray):
+        arr = arr.combine_chunks()
+    kind = np.dtype(arr.type.to_pandas_dtype())
+    return np.frombuffer(arr.buffers()[1], dtype=kind, count=len(arr),
+                         offset=arr.offset * kind.itemsize).astype(dtype)
+
+
+def _blank(values) -> np.ndarray:
+    """Which cells of a pyarrow string array are empty (without a Python scalar, whose
+    conversion imports pandas)."""
+    import pyarrow.compute as pc
+
+    return _array(pc.utf8_length(values), np.int64) == 0
+
+
 def _bad(label: str, column: str, mask: np.ndarray, values, reason: str) -> None:
     """Raise the first row where ``mask`` is True: ``row N: column 'value' reason``."""
     rows = np.flatnonzero(mask)
@@ -163,16 +187,16 @@ def _index(src: _Source, name: str, column: str, values, keys, what: str):
     import pyarrow.compute as pc
 
     idx = pc.index_in(values, value_set=keys)
-    missing = np.asarray(idx.is_null())
+    missing = _array(idx.is_null(), bool)
     _bad(src.label(name), column, missing, values, f"names no {what}")
-    return np.asarray(idx.fill_null(-1), dtype=np.int64)
+    return _array(idx, np.int64)
 
 
 def _numbers(src: _Source, name: str, column: str, values, lo: float, hi: float, *,
              blank_ok: np.ndarray | None = None) -> np.ndarray:
     """Floats of a column (within ``[lo, hi]``); blank is NaN where ``blank_ok``."""
     out = np.full(len(values), np.nan)
-    cells = values.to_numpy(zero_copy_only=False)
+    cells = values.to_pylist()
     for i, cell in enumerate(cells):
         if cell == "" and blank_ok is not None and blank_ok[i]:
             continue
@@ -240,12 +264,13 @@ def _times(label: str, column: str, values) -> np.ndarray:
     import pyarrow.compute as pc
 
     parts = pc.extract_regex(values, TIME)
-    ok = np.asarray(parts.is_valid())
-    blank = np.asarray(pc.equal(values, ""))
+    valid = parts.is_valid()
+    ok = _array(valid, bool)
+    blank = _blank(values)
     _bad(label, column, ~ok & ~blank, values, "is not a time H:MM:SS")
     out = np.full(len(values), np.nan)
     if ok.any():
-        hms = [np.asarray(pc.cast(parts.field(k).filter(ok), "int64"), dtype=np.float64)
+        hms = [_array(pc.cast(parts.field(k).filter(valid), "int64"), np.float64)
                for k in ("h", "m", "s")]
         out[ok] = hms[0] * 3600 + hms[1] * 60 + hms[2]
     return out
@@ -284,9 +309,9 @@ def _calls(src: _Source, stops, trips_all, keep_trip: np.ndarray):
                          "stop_sequence"))
     trip = _index(src, name, "trip_id", st["trip_id"], trips_all["trip_id"], "trip of trips.txt")
     stop = _index(src, name, "stop_id", st["stop_id"], stops["stop_id"], "stop of stops.txt")
-    seq_ok = np.asarray(pc.match_substring_regex(st["stop_sequence"], r"^\d{1,9}$"))
+    seq_ok = _array(pc.match_substring_regex(st["stop_sequence"], r"^\d{1,9}$"), bool)
     _bad(label, "stop_sequence", ~seq_ok, st["stop_sequence"], "is not a whole number >= 0")
-    seq = np.asarray(pc.cast(st["stop_sequence"], "int64"))
+    seq = _array(pc.cast(st["stop_sequence"], "int64"), np.int64)
     arr = _times(label, "arrival_time", st["arrival_time"])
     dep = _times(label, "departure_time", st["departure_time"])
     arr, dep = np.where(np.isnan(arr), dep, arr), np.where(np.isnan(dep), arr, dep)
@@ -312,6 +337,7 @@ def _calls(src: _Source, stops, trips_all, keep_trip: np.ndarray):
 
 def _stops(src: _Source):
     """``(columns, lon, lat, parent)`` of ``stops.txt``, checked."""
+    import pyarrow as pa
     import pyarrow.compute as pc
 
     name = "stops.txt"
@@ -323,7 +349,7 @@ def _stops(src: _Source):
                                counts.field("counts").to_pylist()) if c > 1]
     if twice:
         raise ScenarioError(src.label(name), "stop_id", f"{twice[0]!r} appears twice")
-    kind = (stops["location_type"].to_numpy(zero_copy_only=False)
+    kind = (np.asarray(stops["location_type"].to_pylist(), dtype=object)
             if "location_type" in stops else np.full(n, "", dtype=object))
     blank_ok = np.isin(kind, ["3", "4"])  # generic nodes and boarding areas need no place
     for c in ("stop_lat", "stop_lon"):
@@ -333,22 +359,22 @@ def _stops(src: _Source):
     lon = _numbers(src, name, "stop_lon", stops["stop_lon"], -180, 180, blank_ok=blank_ok)
     parent = np.full(n, -1, dtype=np.int64)
     if "parent_station" in stops:
-        has = np.asarray(pc.not_equal(stops["parent_station"], ""))
+        has = ~_blank(stops["parent_station"])
         if has.any():
             rows = np.flatnonzero(has)
-            sub = stops["parent_station"].filter(has)
+            sub = stops["parent_station"].filter(
+                pc.cast(pc.utf8_length(stops["parent_station"]), pa.bool_()))
             idx = pc.index_in(sub, value_set=stops["stop_id"])
             bad = np.zeros(n, dtype=bool)
-            bad[rows] = np.asarray(idx.is_null())
+            bad[rows] = _array(idx.is_null(), bool)
             _bad(src.label(name), "parent_station", bad, stops["parent_station"],
                  "names no stop of stops.txt")
-            parent[rows] = np.asarray(idx, dtype=np.int64)
+            parent[rows] = _array(idx, np.int64)
     return stops, lon, lat, parent
 
 
 def _transfers(src: _Source, stops) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(from, to, seconds)`` rows of ``transfers.txt`` kept (see the module's docstring)."""
-    import pyarrow.compute as pc
 
     name = "transfers.txt"
     if not src.has(name):
@@ -360,9 +386,10 @@ def _transfers(src: _Source, stops) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     keep = np.ones(n, dtype=bool)
     for c in ("from_trip_id", "to_trip_id", "from_route_id", "to_route_id"):
         if c in tr:
-            keep &= np.asarray(pc.equal(tr[c], ""))
+            keep &= _blank(tr[c])
     if "transfer_type" in tr:
-        keep &= np.isin(tr["transfer_type"].to_numpy(zero_copy_only=False), ["", "0", "1", "2"])
+        keep &= np.isin(np.asarray(tr["transfer_type"].to_pylist(), dtype=object),
+                        ["", "0", "1", "2"])
     if not keep.all():
         log.info("%s: %d rows of other transfer types or naming trips or routes left out",
                  src.label(name), int((~keep).sum()))
@@ -386,7 +413,8 @@ def read_gtfs(path: str | Path, service_date: dt.date) -> Feed:
     trips = src.read("trips.txt", ("route_id", "service_id", "trip_id"))
     route = _index(src, "trips.txt", "route_id", trips["route_id"], routes["route_id"],
                    "route of routes.txt")
-    on = np.isin(trips["service_id"].to_numpy(zero_copy_only=False), list(services))
+    on = np.fromiter((sid in services for sid in trips["service_id"].to_pylist()), dtype=bool,
+                     count=len(trips["service_id"]))
     trip, stop, arr, dep = _calls(src, stops, trips, on)
     kept, counts = np.unique(trip, return_counts=True)
     kept = kept[counts >= 2]
@@ -400,7 +428,7 @@ def read_gtfs(path: str | Path, service_date: dt.date) -> Feed:
                                       dtype=object),
                 stop_lon=lon, stop_lat=lat, stop_parent=parent,
                 route_ids=np.asarray(routes["route_id"].to_pylist(), dtype=object),
-                trip_ids=np.asarray(trips["trip_id"].take(kept).to_pylist(), dtype=object),
+                trip_ids=np.asarray(trips["trip_id"].to_pylist(), dtype=object)[kept],
                 trip_route=route[kept], call_trip=row[trip[keep]], call_stop=stop[keep],
                 call_arrival=arr[keep], call_departure=dep[keep], transfer_from=t_from,
                 transfer_to=t_to, transfer_seconds=t_secs)

@@ -76,8 +76,9 @@ def tiny_tables() -> dict[str, list[dict]]:
             "stops.txt": stops,
             "routes.txt": [{"route_id": r, "route_short_name": r, "route_type": 1}
                            for r in ("R", "G")],
-            "trips.txt": trips, "stop_times.txt": times, "calendar.txt": CALENDAR,
-            "calendar_dates.txt": CALENDAR_DATES,
+            "trips.txt": trips, "stop_times.txt": times,
+            "calendar.txt": [dict(r) for r in CALENDAR],
+            "calendar_dates.txt": [dict(r) for r in CALENDAR_DATES],
             "transfers.txt": [{"from_stop_id": "B", "to_stop_id": "B", "transfer_type": 2,
                                "min_transfer_time": 180}]}
 
@@ -131,8 +132,8 @@ def random_tables(rng: np.random.Generator, *, stations: int = 24, lines: int = 
                       "min_transfer_time": 200})
     return {"stops.txt": stops,
             "routes.txt": [{"route_id": f"L{i}", "route_type": 1} for i in range(lines)],
-            "trips.txt": trips, "stop_times.txt": times, "calendar.txt": CALENDAR,
-            "transfers.txt": transfers}
+            "trips.txt": trips, "stop_times.txt": times,
+            "calendar.txt": [dict(r) for r in CALENDAR], "transfers.txt": transfers}
 
 
 class Reference:

@@ -186,3 +186,28 @@ def test_the_stations_snap_to_the_manhattan_streets(subway):
     assert nodes.shape == metres.shape == (150,)
     assert ((0 <= nodes) & (nodes < len(net.xy))).all()
     assert np.median(metres) < 50 and metres.max() < 200  # measured: 20 m, 150 m
+
+
+def test_reading_and_routing_import_no_pandas():
+    """A run must not load pandas (pyarrow's conversions to numpy would): a fresh process
+    reads the shipped feed, builds its timetable and routes, and ends without pandas."""
+    import os
+    import subprocess
+    import sys
+
+    from tests.conftest import ROOT
+
+    code = ("import sys, datetime as dt\n"
+            "from pathlib import Path\n"
+            "from dispatch.files.gtfs import feed_path, read_gtfs\n"
+            "from dispatch.space.transit import Timetable\n"
+            "from dispatch.space.csa import earliest_arrivals\n"
+            "tt = Timetable.from_feed(read_gtfs(feed_path('nyc_subway', Path('.')), "
+            "dt.date(2026, 9, 23)))\n"
+            "a = earliest_arrivals(tt, {tt.station('A02'): 30000.0})\n"
+            "assert a.journey(tt.station('R27'))\n"
+            "print('pandas' in sys.modules)\n")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=300, check=False, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "False"
