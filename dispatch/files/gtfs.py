@@ -28,7 +28,9 @@ from __future__ import annotations
 import codecs
 import csv
 import datetime as dt
+import functools
 import logging
+import os
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -434,6 +436,22 @@ def read_gtfs(path: str | Path, service_date: dt.date) -> Feed:
                 transfer_to=t_to, transfer_seconds=t_secs)
     log.info("%r", feed)
     return feed
+
+
+def load_feed(path: str | Path, service_date: dt.date) -> Feed:
+    """:func:`read_gtfs`, read once per (resolved path, modification time, day): the scenario's
+    check and the run share one read; an edited feed is read again."""
+    path = Path(path).resolve()
+    try:
+        mtime = os.stat(path).st_mtime_ns
+    except OSError:
+        mtime = -1  # read_gtfs says what is wrong
+    return _cached(str(path), mtime, service_date)
+
+
+@functools.lru_cache(maxsize=4)
+def _cached(path: str, mtime: int, service_date: dt.date) -> Feed:
+    return read_gtfs(path, service_date)
 
 
 def feed_path(source: str, base: Path) -> Path:
