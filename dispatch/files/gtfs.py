@@ -8,7 +8,9 @@ the date in ``start_date .. end_date`` on a weekday flagged 1; then ``calendar_d
 both) and their calls (``stop_times.txt``), times in seconds on the service day's clock (GTFS
 "noon minus 12 h": midnight except on the days clocks change); times past ``24:00:00`` are
 trips of this service day running after midnight and are kept as such (``25:10:00`` =
-90,600 s). Trips of the day before that run past midnight are not included.
+90,600 s). The trips of the day before that run past its midnight are included too, 24 h
+earlier (``25:10:00`` of the day before = 4,200 s; their calls before midnight negative), so
+that the first hours of the day have the night's trains.
 
 A call with neither time between two timed calls of its trip gets a time interpolated
 linearly by call index; a call with one of the two times has both equal to it. A trip whose
@@ -46,6 +48,7 @@ SHIPPED = {"nyc_subway": ("nyc_subway", "manhattan_subway.zip")}
 WEEKDAYS = ("monday", "tuesday", "wednesday", "thursday", "friday", "saturday", "sunday")
 #: a GTFS time: hours of any width (past 24 allowed), minutes and seconds of two digits
 TIME = r"^\s*(?P<h>\d{1,3}):(?P<m>[0-5]\d):(?P<s>[0-5]\d)\s*$"
+DAY = 86400.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -55,8 +58,10 @@ class Feed:
     ``stop_*``: every stop of ``stops.txt`` in file order (``stop_parent``: the row of its
     ``parent_station``, -1 for none; ``stop_lon`` / ``stop_lat`` NaN where the file gives none,
     which it may for nodes and boarding areas only). ``route_ids``: every route. ``trip_*``:
-    the trips that run on ``service_date`` and call at least twice, in file order
-    (``trip_route``: a row of ``route_ids``). ``call_*``: their calls, by trip then
+    the trips that run on ``service_date`` and call at least twice, in file order, then those
+    of the day before still running after its midnight (``trip_day`` -1, their times less
+    24 h; 0 for the day's own; a trip id may so appear twice); ``trip_route``: a row of
+    ``route_ids``. ``call_*``: their calls, by trip then
     ``stop_sequence`` (``call_trip``: a row of ``trip_ids``; ``call_stop``: a row of
     ``stop_ids``; ``call_arrival`` / ``call_departure``: seconds on the service day's clock,
     ``arrival <= departure <=`` the next call's arrival). ``transfer_*``: rows of
@@ -72,6 +77,7 @@ class Feed:
     route_ids: np.ndarray
     trip_ids: np.ndarray
     trip_route: np.ndarray
+    trip_day: np.ndarray
     call_trip: np.ndarray
     call_stop: np.ndarray
     call_arrival: np.ndarray
@@ -220,8 +226,9 @@ def _date(label: str, key: str, text: str) -> dt.date:
         raise ScenarioError(label, key, f"{text!r} is not a date YYYYMMDD") from None
 
 
-def _services(src: _Source, day: dt.date) -> set[str]:
-    """The service ids that run on ``day`` (see the module's docstring)."""
+def _services(src: _Source, day: dt.date, *, required: bool = True) -> set[str]:
+    """The service ids that run on ``day`` (see the module's docstring); none is an error
+    where ``required``."""
     if not src.has("calendar.txt") and not src.has("calendar_dates.txt"):
         raise ScenarioError(src.label("calendar.txt"), "<file>",
                             "is missing, and so is calendar_dates.txt: a feed needs one")
@@ -253,7 +260,7 @@ def _services(src: _Source, day: dt.date) -> set[str]:
                                     f"exception_type {kind!r} is not 1 (added) or 2 (removed)")
             if when == day:
                 (on.add if kind == "1" else on.discard)(sid)
-    if not on:
+    if not on and required:
         covers = f" (its dates run from {min(span)} to {max(span)})" if span else ""
         raise ScenarioError(src.label("calendar.txt" if src.has("calendar.txt")
                                       else "calendar_dates.txt"), "service_date",
@@ -415,14 +422,27 @@ def read_gtfs(path: str | Path, service_date: dt.date) -> Feed:
     trips = src.read("trips.txt", ("route_id", "service_id", "trip_id"))
     route = _index(src, "trips.txt", "route_id", trips["route_id"], routes["route_id"],
                    "route of routes.txt")
-    on = np.fromiter((sid in services for sid in trips["service_id"].to_pylist()), dtype=bool,
-                     count=len(trips["service_id"]))
-    trip, stop, arr, dep = _calls(src, stops, trips, on)
-    kept, counts = np.unique(trip, return_counts=True)
-    kept = kept[counts >= 2]
-    row = np.full(len(trips["trip_id"]), -1, dtype=np.int64)
-    row[kept] = np.arange(kept.size)
-    keep = row[trip] >= 0
+    before = _services(src, service_date - dt.timedelta(days=1), required=False)
+    sids = trips["service_id"].to_pylist()
+    on = np.fromiter((sid in services for sid in sids), dtype=bool, count=len(sids))
+    prev = np.fromiter((sid in before for sid in sids), dtype=bool, count=len(sids))
+    trip, stop, arr, dep = _calls(src, stops, trips, on | prev)
+    late = np.zeros(len(sids), dtype=bool)
+    late[trip[dep >= DAY]] = True  # the day before's trips still running after midnight
+    kept, day, calls = [], [], []
+    for offset, mask in ((0, on), (-1, prev & late)):
+        rows = np.flatnonzero(mask[trip])
+        uniq, counts = np.unique(trip[rows], return_counts=True)
+        uniq = uniq[counts >= 2]
+        row = np.full(len(sids), -1, dtype=np.int64)
+        row[uniq] = sum(k.size for k in kept) + np.arange(uniq.size)
+        rows = rows[row[trip[rows]] >= 0]
+        calls.append((row[trip[rows]], stop[rows], arr[rows] + offset * DAY,
+                      dep[rows] + offset * DAY))
+        kept.append(uniq)
+        day.append(np.full(uniq.size, offset, dtype=np.int64))
+    kept_rows = np.concatenate(kept)
+    c_trip, c_stop, c_arr, c_dep = (np.concatenate(x) for x in zip(*calls))
     t_from, t_to, t_secs = _transfers(src, stops)
     feed = Feed(source=str(path), service_date=service_date,
                 stop_ids=np.asarray(stops["stop_id"].to_pylist(), dtype=object),
@@ -430,10 +450,10 @@ def read_gtfs(path: str | Path, service_date: dt.date) -> Feed:
                                       dtype=object),
                 stop_lon=lon, stop_lat=lat, stop_parent=parent,
                 route_ids=np.asarray(routes["route_id"].to_pylist(), dtype=object),
-                trip_ids=np.asarray(trips["trip_id"].to_pylist(), dtype=object)[kept],
-                trip_route=route[kept], call_trip=row[trip[keep]], call_stop=stop[keep],
-                call_arrival=arr[keep], call_departure=dep[keep], transfer_from=t_from,
-                transfer_to=t_to, transfer_seconds=t_secs)
+                trip_ids=np.asarray(trips["trip_id"].to_pylist(), dtype=object)[kept_rows],
+                trip_route=route[kept_rows], trip_day=np.concatenate(day), call_trip=c_trip,
+                call_stop=c_stop, call_arrival=c_arr, call_departure=c_dep,
+                transfer_from=t_from, transfer_to=t_to, transfer_seconds=t_secs)
     log.info("%r", feed)
     return feed
 

@@ -15,7 +15,7 @@ the walks between them (changes inside a station are no leg: the rider waits the
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -82,7 +82,9 @@ class TransitLeg:
     ``from_stop`` at its departure ``start``, left at ``to_stop`` at its arrival ``end``) or
     ``"walk"`` (between two stations, from arriving at ``from_stop`` to being ready to board
     at ``to_stop``). Stops are the feed's station ids; times seconds on the service day's
-    clock."""
+    clock. ``trip``: the row of the feed's trips (-1 for a walk), which tells a trip of the
+    day before still running after midnight from the day's own of the same ``trip_id``
+    (:attr:`dispatch.files.gtfs.Feed.trip_day`); not compared."""
 
     mode: str
     from_stop: str
@@ -91,6 +93,7 @@ class TransitLeg:
     end: float
     trip_id: str | None = None
     route_id: str | None = None
+    trip: int = field(default=-1, compare=False)
 
 
 @dataclass(frozen=True, eq=False)
@@ -127,7 +130,7 @@ class Arrivals:
             legs.append(TransitLeg("train", str(tt.station_ids[tt.frm[e]]),
                                    str(tt.station_ids[tt.to[c]]), float(tt.dep[e]),
                                    float(tt.arr[c]), str(tt.feed.trip_ids[t]),
-                                   str(tt.feed.route_ids[tt.feed.trip_route[t]])))
+                                   str(tt.feed.route_ids[tt.feed.trip_route[t]]), t))
             u = int(tt.frm[e])
             c, e = int(self.r_exit[u]), int(self.r_enter[u])
             if c >= 0 and int(tt.to[c]) != u:

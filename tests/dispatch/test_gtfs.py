@@ -24,15 +24,21 @@ def tiny(tmp_path) -> Path:
     return write_feed(tmp_path / "tiny", tiny_tables())
 
 
-def _trips(feed) -> set[str]:
-    return set(feed.trip_ids)
+def _trips(feed, day: int = 0) -> set[str]:
+    return set(feed.trip_ids[feed.trip_day == day])
 
 
 def test_the_calendar_picks_the_days_trips(tiny):
-    """Service WK runs on weekdays; on 2026-03-04 calendar_dates removes it and adds HOL."""
-    assert _trips(read_gtfs(tiny, WED)) == {"R1", "R2", "R3", "G1", "G2"}
-    assert _trips(read_gtfs(tiny, THU)) == {"R1", "R2", "R3", "G1", "G2"}
+    """Service WK runs on weekdays; on 2026-03-04 calendar_dates removes it and adds HOL.
+    The day before's R3 (24:10 to 24:20) runs after its midnight, so a day after a weekday
+    has it too."""
+    every = {"R1", "R2", "R3", "G1", "G2"}
+    assert _trips(read_gtfs(tiny, WED)) == every and _trips(read_gtfs(tiny, WED), -1) == {"R3"}
+    assert _trips(read_gtfs(tiny, THU)) == every and _trips(read_gtfs(tiny, THU), -1) == set()
     assert _trips(read_gtfs(tiny, HOLIDAY)) == {"R9"}
+    assert _trips(read_gtfs(tiny, HOLIDAY), -1) == {"R3"}
+    monday = read_gtfs(tiny, dt.date(2026, 3, 9))
+    assert _trips(monday) == every and _trips(monday, -1) == set()  # Sunday runs nothing
     with pytest.raises(ScenarioError, match="calendar.txt: service_date: no service runs on "
                                             "2026-03-07"):
         read_gtfs(tiny, SAT)
@@ -40,10 +46,12 @@ def test_the_calendar_picks_the_days_trips(tiny):
 
 def test_calls_are_seconds_of_the_service_day_past_midnight_too(tiny):
     feed = read_gtfs(tiny, WED)
-    r3 = int(np.flatnonzero(feed.trip_ids == "R3")[0])
-    calls = feed.call_trip == r3
+    today, before = np.flatnonzero(feed.trip_ids == "R3")
+    assert feed.trip_day[today] == 0 and feed.trip_day[before] == -1
+    calls = feed.call_trip == today
     assert feed.call_arrival[calls].tolist() == [24 * 3600 + 600, 24 * 3600 + 900,
                                                  24 * 3600 + 1200]
+    assert feed.call_arrival[feed.call_trip == before].tolist() == [600, 900, 1200]
     assert list(feed.stop_ids[feed.call_stop[calls]]) == ["A", "BR", "C"]
     # every trip's calls in order: arrival <= departure <= the next call's arrival
     same = feed.call_trip[1:] == feed.call_trip[:-1]
@@ -66,17 +74,20 @@ def test_untimed_calls_are_interpolated_and_a_zip_reads_as_its_folder(tmp_path):
         for p in folder.iterdir():
             zf.write(p, f"inner/{p.name}")  # members in one folder of the zip
     z = read_gtfs(tmp_path / "f.zip", WED)
-    for name in ("stop_ids", "trip_ids", "call_trip", "call_stop", "call_arrival",
+    for name in ("stop_ids", "trip_ids", "trip_day", "call_trip", "call_stop", "call_arrival",
                  "call_departure", "stop_lon", "transfer_seconds"):
         assert np.array_equal(getattr(z, name), getattr(feed, name)), name
 
 
 def test_the_shipped_manhattan_subway_feed():
-    """The shipped feed's weekday: 150 stations' 300 platforms, 7,444 trips, 25 routes."""
+    """The shipped feed's weekday: 150 stations' 300 platforms, 7,444 trips (and 180 of the
+    day before running after midnight), 25 routes."""
     path = feed_path("nyc_subway", Path("."))
     assert path.stat().st_size < 2**20 and (path.parent / "NOTICE.md").exists()
     feed = read_gtfs(path, dt.date(2026, 9, 23))
-    assert feed.trip_ids.size == 7444 and feed.call_trip.size == 93010
+    today = feed.trip_day[feed.call_trip] == 0
+    assert (feed.trip_day == 0).sum() == 7444 and today.sum() == 93010
+    assert (feed.trip_day == -1).sum() == 180
     assert (feed.stop_parent < 0).sum() == 150 and feed.route_ids.size == 25
     assert feed.call_departure.max() > 24 * 3600  # trips run past midnight
     lon, lat = feed.stop_lon, feed.stop_lat

@@ -51,6 +51,7 @@ def _arrive(tt: Timetable, origin: str, t0: str, goal: str) -> float:
     ("A", "08:00:00", "E", "08:18:00"),  # R1 to B (08:05), 180 s change misses G1 (08:07): G2
     ("D", "08:00:00", "C", "08:20:00"),  # G1 to B (08:07), R1 has left (08:05): R2 (08:15)
     ("A", "23:00:00", "C", "24:20:00"),  # R3 past midnight
+    ("A", "00:00:00", "C", "00:20:00"),  # the day before's R3, after its midnight
 ])
 def test_the_tiny_feed_known_answers(tiny, origin, t0, goal, expected):
     assert _arrive(tiny, origin, t0, goal) == h(expected)
@@ -133,14 +134,13 @@ def test_the_shipped_feed_against_the_reference_in_a_window(subway):
         assert np.array_equal(got, ref.arrivals(origin, t0))
 
 
-def _calls_by_trip(feed) -> dict[str, list[tuple[str, float, float]]]:
+def _calls_by_trip(feed) -> dict[int, list[tuple[str, float, float]]]:
     parent = feed.stop_parent
     station = np.where(parent >= 0, parent, np.arange(parent.size))
-    out: dict[str, list] = {}
+    out: dict[int, list] = {}
     for t, s, a, d in zip(feed.call_trip, feed.call_stop, feed.call_arrival,
                           feed.call_departure):
-        out.setdefault(str(feed.trip_ids[t]), []).append((str(feed.stop_ids[station[s]]),
-                                                          float(a), float(d)))
+        out.setdefault(int(t), []).append((str(feed.stop_ids[station[s]]), float(a), float(d)))
     return out
 
 
@@ -151,10 +151,10 @@ def test_every_train_leg_is_consistent_with_the_feed(subway):
     arrival; the last leg ends at the station's earliest arrival."""
     rng = np.random.default_rng(3)
     calls = _calls_by_trip(subway.feed)
-    trains = 0
+    trains = night = 0
     for _ in range(300):
         o, d = (int(x) for x in rng.integers(subway.n_stations, size=2))
-        t0 = float(rng.uniform(5 * 3600, 23 * 3600))
+        t0 = float(rng.uniform(0, 23 * 3600))  # from midnight: the night's trains too
         a = earliest_arrivals(subway, {o: t0})
         legs = a.journey(d)
         if o == d or not np.isfinite(a.arrival[d]):
@@ -166,16 +166,17 @@ def test_every_train_leg_is_consistent_with_the_feed(subway):
             assert leg.from_stop == where and leg.start >= at and leg.end >= leg.start
             if leg.mode == "train":
                 trains += 1
-                seq = calls[leg.trip_id]
+                assert subway.feed.trip_ids[leg.trip] == leg.trip_id
+                seq = calls[leg.trip]
                 i = next(k for k, c in enumerate(seq) if c[0] == leg.from_stop
                          and c[2] == leg.start)
                 assert any(c[0] == leg.to_stop and c[1] == leg.end for c in seq[i + 1:])
-                assert subway.feed.route_ids[subway.feed.trip_route[
-                    list(subway.feed.trip_ids).index(leg.trip_id)]] == leg.route_id
+                assert subway.feed.route_ids[subway.feed.trip_route[leg.trip]] == leg.route_id
+                night += int(subway.feed.trip_day[leg.trip] == -1)
             else:
                 assert leg.mode == "walk" and leg.to_stop != leg.from_stop
             at, where = leg.end, leg.to_stop
-    assert trains > 300
+    assert trains > 300 and night > 0
 
 
 def test_the_stations_snap_to_the_manhattan_streets(subway):
