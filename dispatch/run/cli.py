@@ -289,6 +289,7 @@ def _check(args, console) -> int:
     from dispatch.checks.acceptors import check_acceptor
     from dispatch.checks.allocators import check_allocator
     from dispatch.checks.chargers import check_charger
+    from dispatch.checks.mode_choices import check_mode_choice
     from dispatch.checks.planners import check_planner
     from dispatch.checks.repositioners import check_repositioner
     from dispatch.checks.sizers import check_sizer
@@ -316,6 +317,8 @@ def _check(args, console) -> int:
         report = check_acceptor(cls, seed=args.seed, **params)
     elif kinds[0] == "sizer":
         report = check_sizer(cls, seed=args.seed, **params)
+    elif kinds[0] == "mode_choice":
+        report = check_mode_choice(cls, seed=args.seed, **params)
     else:
         report = check_repositioner(cls, seed=args.seed, **params)
     for r in report.results:

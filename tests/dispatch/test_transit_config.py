@@ -163,3 +163,46 @@ def test_logit_follows_its_closed_form():
     for bad in (0, -1, math.inf, True, "x"):
         with pytest.raises(ValueError, match="scale must be a finite number > 0"):
             registry.load("mode_choice", "logit")(scale=bad)
+
+
+@pytest.mark.parametrize("name", ["cheapest", "logit"])
+def test_the_shipped_mode_choices_pass_their_checks(name, capsys):
+    from dispatch.checks.mode_choices import check_mode_choice
+    from dispatch.run import cli
+
+    assert check_mode_choice(registry.load("mode_choice", name)).ok
+    assert cli.main(["check", name, "--kind", "mode_choice"]) == 0
+    assert f"mode_choice {name!r}" in capsys.readouterr().out
+
+
+def test_broken_mode_choices_are_caught():
+    """An answer past the options, a bool for an index, a draw from the global random state:
+    each fails its check."""
+    import random
+
+    from dispatch.api.mode_choice import ModeChoice
+    from dispatch.checks.mode_choices import check_mode_choice
+
+    class Past(ModeChoice):
+        name = "past"
+
+        def choose(self, options, weights, rng):
+            return len(options)
+
+    class Yes(ModeChoice):
+        name = "yes"
+
+        def choose(self, options, weights, rng):
+            return True
+
+    class Global(ModeChoice):
+        name = "global"
+
+        def choose(self, options, weights, rng):
+            return random.randrange(len(options))
+
+    def failed(cls):
+        return {r.name for r in check_mode_choice(cls).failed()}
+
+    assert failed(Past) == failed(Yes) == {"valid"}
+    assert "rng" in failed(Global)
