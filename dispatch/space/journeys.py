@@ -1,17 +1,20 @@
-"""Door-to-door transit journeys on a :class:`~dispatch.space.transit.Timetable`: the stations
-a rider reaches on foot from a point (:func:`access`), the best journey from where a rider is
-ready to where they are going (:func:`best_journey`: walks to and from stations, trains and the
-changes between them), summed up as a mode choice :class:`~dispatch.api.mode_choice.Option`.
+"""Door-to-door journeys with public transport on a :class:`~dispatch.space.transit.Timetable`,
+and the options a rider has (:func:`rider_options`), summed up as mode choice
+:class:`~dispatch.api.mode_choice.Option`\\ s.
 
-Walks to and from stations are straight lines at the walk speed (as the timetable's footpaths
-are). A feeder by the fleet plugs in through the same call: the fleet's drop-off at a station
-is a source (``sources = {station: drop-off estimate}``, no access walk), and a fleet leg
-after the train is an egress (``egress[station]`` = the fleet's estimate from the station to
-the goal, including its wait), so one scan finds the best station for either.
+A journey is an access to a first station, trains (and walks between stations), and an egress
+from a last station to the goal. An access or an egress is a :class:`Part`: the seconds it
+spends waiting, aboard and walking. On foot (:func:`access`) it is a straight-line walk at the
+walk speed (as the timetable's footpaths are); by the fleet it is the fleet's estimate (its
+wait for the pickup, its ride) and the walk between the street node the vehicle stops at and
+the station (:meth:`Timetable.snap <dispatch.space.transit.Timetable.snap>`). One scan of the
+connections (:func:`best_journey`) finds the best pair of first and last stations among those
+given.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,66 +24,126 @@ from dispatch.space.csa import TransitLeg, earliest_arrivals
 from dispatch.space.transit import Timetable
 
 
+@dataclass(frozen=True)
+class Part:
+    """An access to a station or an egress from one, in seconds: ``wait`` (for a vehicle),
+    ``ivt`` (aboard it), ``walk``."""
+
+    wait: float = 0.0
+    ivt: float = 0.0
+    walk: float = 0.0
+
+    @property
+    def seconds(self) -> float:
+        return self.wait + self.ivt + self.walk
+
+
+#: the fleet's estimate of a ride ``(from node, to node, ready time) -> (wait, ride)`` seconds
+#: (None: no vehicle would take it); what the dispatcher's offer estimate gives
+FleetEstimate = Callable[[int, int, float], tuple[float, float] | None]
+
+
 def access(tt: Timetable, lon: float, lat: float, *, max_walk: float,
-           walk_speed: float) -> dict[int, float]:
-    """``{station: seconds}`` of the stations within ``max_walk`` metres (straight line) of a
-    point, walked at ``walk_speed`` m/s."""
+           walk_speed: float) -> dict[int, Part]:
+    """The walks to (or from) the stations within ``max_walk`` metres (straight line) of a
+    point, at ``walk_speed`` m/s."""
     stations, metres = tt.near(lon, lat, max_walk)
-    return {int(s): float(m) / walk_speed for s, m in zip(stations, metres)}
+    return {int(s): Part(walk=float(m) / walk_speed) for s, m in zip(stations, metres)}
 
 
 @dataclass(frozen=True)
 class Journey:
-    """A transit journey from ``depart`` (when the rider is ready at the origin) to
-    ``arrive`` at the goal: ``access_walk`` seconds to the first station (or a fleet's
-    drop-off there), the ``legs`` between stations in time order (trains, and walks between
-    stations), then ``egress`` seconds to the goal (a walk or a fleet leg, as the caller's
-    egress was), and the :class:`~dispatch.api.mode_choice.Option` that sums it up."""
+    """A journey from ``depart`` (when the rider is ready at the origin) to ``arrive`` at the
+    goal: ``first`` (the access to the first station), the ``legs`` between stations in time
+    order (trains, and walks between stations), ``last`` (the egress from the last station),
+    and the :class:`~dispatch.api.mode_choice.Option` that sums it up."""
 
     depart: float
     arrive: float
+    first: Part
     legs: tuple[TransitLeg, ...]
-    access_walk: float
-    egress: float
+    last: Part
     option: Option
 
 
-def best_journey(tt: Timetable, depart: float, sources: dict[int, float],
-                 egress: dict[int, float], *, kind: str = "train", access_walks: bool = True,
-                 egress_walks: bool = True) -> Journey | None:
-    """The journey that reaches the goal first: ``sources`` (``{station: seconds from the
-    origin}``: the access walks, or a fleet's drop-off less ``depart``) and ``egress``
-    (``{station: seconds to the goal}``). ``access_walks`` / ``egress_walks``: the access /
-    egress is a walk (counted as walking), else a fleet leg (counted as in-vehicle time, its
-    wait included). None when no
-    station of ``egress`` is reached (or either is empty), or when walking to the goal by way
-    of a station beats every train. The option's ``wait + ivt + walk + change`` is
+def best_journey(tt: Timetable, depart: float, sources: dict[int, Part],
+                 egress: dict[int, Part], *, kind: str = "train") -> Journey | None:
+    """The journey that reaches the goal first, from the accesses ``sources`` (by first
+    station) to the egresses ``egress`` (by last station). None when no station of
+    ``egress`` is reached (or either is empty), or when going from a source station to the
+    goal without a train beats every train. The option's ``wait + ivt + walk + change`` is
     ``arrive - depart``."""
     if not sources or not egress:
         return None
     eg = np.full(tt.n_stations, np.inf)
-    for s, sec in egress.items():
-        eg[s] = min(eg[s], sec)
-    a = earliest_arrivals(tt, {s: depart + sec for s, sec in sources.items()}, egress=eg)
+    for s, part in egress.items():
+        eg[s] = part.seconds
+    a = earliest_arrivals(tt, {s: depart + p.seconds for s, p in sources.items()}, egress=eg)
     end, total = a.best(eg)
     if end < 0:
         return None
     legs = a.journey(end)
     trains = [leg for leg in legs if leg.mode == "train"]
-    if not trains:  # walking to the goal by way of a station beats every train
+    if not trains:
         return None
-    walk_in = float(sources[tt.station(trains[0].from_stop)])
-    ivt = sum(leg.end - leg.start for leg in trains)
-    changes = len(trains) - 1
+    first, last = sources[tt.station(trains[0].from_stop)], egress[end]
     # walks and waits between trains; a journey starts with a train, so any other walk
     # leg is after the last train (to a station nearer the goal)
-    change = trains[-1].start - trains[0].end - sum(leg.end - leg.start for leg in trains[1:-1]) \
-        if changes else 0.0
-    wait = trains[0].start - depart - walk_in
+    gaps = trains[-1].start - trains[0].end - sum(leg.end - leg.start for leg in trains[1:-1])
     walk_out = sum(leg.end - leg.start for leg in legs
                    if leg.mode == "walk" and leg.start >= trains[-1].end)
-    last = float(eg[end])
-    walk = walk_out + (walk_in if access_walks else 0.0) + (last if egress_walks else 0.0)
-    ivt += (0.0 if access_walks else walk_in) + (0.0 if egress_walks else last)
-    option = Option(kind, total, ivt=ivt, wait=wait, walk=walk, change=change, changes=changes)
-    return Journey(depart, total, tuple(legs), walk_in, last, option)
+    option = Option(kind, total,
+                    ivt=first.ivt + sum(leg.end - leg.start for leg in trains) + last.ivt,
+                    wait=first.wait + (trains[0].start - depart - first.seconds) + last.wait,
+                    walk=first.walk + walk_out + last.walk,
+                    change=gaps if len(trains) > 1 else 0.0, changes=len(trains) - 1)
+    return Journey(depart, total, first, tuple(legs), last, option)
+
+
+def _fleet_parts(fleet: FleetEstimate, pairs, ready: float,
+                 walks: np.ndarray) -> dict[int, Part]:
+    """``{station: Part}`` of fleet rides ``(station, from node, to node)``, each with the
+    walk between the station and its node."""
+    out = {}
+    for s, u, v in pairs:
+        est = fleet(int(u), int(v), ready)
+        if est is not None:
+            out[int(s)] = Part(wait=float(est[0]), ivt=float(est[1]), walk=float(walks[s]))
+    return out
+
+
+def rider_options(tt: Timetable, depart: float, ends: tuple[tuple[float, float], ...],
+                  nodes: tuple[int, int], fleet: FleetEstimate | None, *,
+                  snapped: tuple[np.ndarray, np.ndarray], max_walk: float, walk_speed: float,
+                  feeders: int = 3) -> list[tuple[Option, Journey | None]]:
+    """The options of a rider ready at ``depart`` to go from ``ends[0]`` to ``ends[1]``
+    (longitude, latitude), street nodes ``nodes``: door to door by the fleet; a walk, trains
+    and a walk; the fleet to one of the ``feeders`` stations nearest the origin, trains and a
+    walk; a walk, trains and the fleet from one of the ``feeders`` stations nearest the goal
+    (its estimate asked for ``depart``: the train's arrival is not known before the scan).
+    ``snapped``: per station, its street node and the walk between them in metres
+    (:meth:`~dispatch.space.transit.Timetable.snap`). Options no vehicle or train serves are
+    left out; ``fleet`` None: no fleet."""
+    (olon, olat), (glon, glat) = ends
+    walks = snapped[1] / walk_speed
+    out: list[tuple[Option, Journey | None]] = []
+    if fleet is not None:
+        est = fleet(nodes[0], nodes[1], depart)
+        if est is not None:
+            out.append((Option("fleet", depart + est[0] + est[1], ivt=est[1], wait=est[0],
+                               walk=0.0), None))
+    walk_in = access(tt, olon, olat, max_walk=max_walk, walk_speed=walk_speed)
+    walk_out = access(tt, glon, glat, max_walk=max_walk, walk_speed=walk_speed)
+    plans = [("train", walk_in, walk_out)]
+    if fleet is not None:
+        near_o = tt.near(olon, olat, np.inf)[0][:feeders]
+        near_g = tt.near(glon, glat, np.inf)[0][:feeders]
+        plans.append(("fleet+train", _fleet_parts(
+            fleet, [(s, nodes[0], snapped[0][s]) for s in near_o], depart, walks), walk_out))
+        plans.append(("train+fleet", walk_in, _fleet_parts(
+            fleet, [(s, snapped[0][s], nodes[1]) for s in near_g], depart, walks)))
+    for kind, sources, egress in plans:
+        j = best_journey(tt, depart, sources, egress, kind=kind)
+        if j is not None:
+            out.append((j.option, j))
+    return out
