@@ -29,6 +29,7 @@ from dispatch.config.reposition import RepositionConfig
 from dispatch.config.runkeys import RUN_KEYS
 from dispatch.config.sweep import SweepConfig
 from dispatch.config.tasks import TaskConfig
+from dispatch.config.transit import TransitConfig
 from dispatch.config.world import WorldConfig
 from dispatch.errors import ScenarioError
 
@@ -89,6 +90,8 @@ class Scenario:
     acceptor: AcceptorConfig = field(default_factory=AcceptorConfig)
     #: ``[pricing]`` (the fare of a ride, read by acceptors); None: no fares
     pricing: Pricing | None = None
+    #: ``[transit]``: public transport riders may combine with the fleet; None: none
+    transit: TransitConfig | None = None
 
     def runs(
         self,

@@ -196,7 +196,8 @@ def _train(args, console) -> int:
 
 
 def _plugins(args, console) -> int:
-    """One table per kind (allocators, planners, repositioners, chargers and the commands
+    """One table per kind (allocators, planners, repositioners, chargers, acceptors, fleet
+    sizers, mode choices and the commands
     other packages add to this command line): name, spaces served (planners, repositioners,
     chargers) and the description
     (plain text, never empty) with the entry point's target on a line of its own below it, so
@@ -207,11 +208,11 @@ def _plugins(args, console) -> int:
     from dispatch.api.registry import describe
 
     for kind in ("allocator", "planner", "repositioner", "charger", "acceptor", "sizer",
-                 "command"):
+                 "mode_choice", "command"):
         t = Table(title=f"{kind}s (entry-point group dispatch.{kind}s)", title_justify="left")
         t.add_column("name", no_wrap=True)
         # plugins that serve some spaces
-        spaced = kind not in ("allocator", "acceptor", "sizer", "command")
+        spaced = kind not in ("allocator", "acceptor", "sizer", "mode_choice", "command")
         if spaced:
             t.add_column("spaces")
         t.add_column("description; target (module:object)", overflow="fold")
@@ -288,6 +289,7 @@ def _check(args, console) -> int:
     from dispatch.checks.acceptors import check_acceptor
     from dispatch.checks.allocators import check_allocator
     from dispatch.checks.chargers import check_charger
+    from dispatch.checks.mode_choices import check_mode_choice
     from dispatch.checks.planners import check_planner
     from dispatch.checks.repositioners import check_repositioner
     from dispatch.checks.sizers import check_sizer
@@ -315,6 +317,8 @@ def _check(args, console) -> int:
         report = check_acceptor(cls, seed=args.seed, **params)
     elif kinds[0] == "sizer":
         report = check_sizer(cls, seed=args.seed, **params)
+    elif kinds[0] == "mode_choice":
+        report = check_mode_choice(cls, seed=args.seed, **params)
     else:
         report = check_repositioner(cls, seed=args.seed, **params)
     for r in report.results:

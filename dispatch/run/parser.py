@@ -15,7 +15,8 @@ DESCRIPTION = ("The dispatch command line: run, validate, check, plugins, new, t
 #: the commands of :mod:`dispatch.run.cli`; a registered command of one of these names is not added
 OWN_COMMANDS = ("run", "validate", "check", "plugins", "new", "train", "sweep")
 #: the plugin kinds ``dispatch check`` checks
-CHECKED_KINDS = ("allocator", "planner", "repositioner", "charger", "acceptor", "sizer")
+CHECKED_KINDS = ("allocator", "planner", "repositioner", "charger", "acceptor", "sizer",
+                 "mode_choice")
 
 
 def _logging_options(p: argparse.ArgumentParser, default) -> None:
@@ -75,7 +76,8 @@ def parser(commands=None) -> argparse.ArgumentParser:
     v.set_defaults(allocator=None, planner=None, agents=None, seed=None, duration=None)
 
     c = sub.add_parser("check", help="check an installed allocator, planner, repositioner, "
-                       "charger, acceptor or fleet sizer plugin on sample problems (valid "
+                       "charger, acceptor, fleet sizer or mode choice plugin on sample "
+                       "problems (valid "
                        "answers, no mutation, determinism, rng use)")
     c.add_argument("name", help="plugin name (see dispatch plugins)")
     c.add_argument("--kind", choices=CHECKED_KINDS,

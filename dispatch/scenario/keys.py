@@ -17,7 +17,7 @@ from dispatch.scenario.toml_table import Table
 KEYS: dict[str, tuple[str, ...]] = {
     "": ("name", "description", "seed", "duration", "world", "fleet", "tasks", "dispatch",
          "comms", "faults", "sweep", "reposition", "chargers", "charging", "pricing",
-         "acceptor"),
+         "acceptor", "transit"),
     "fleet": ("agents", "uav_fraction", "uav_speed", "ugv_speed", "uav_max_start_altitude",
               "placement", "capacity", "start", "energy", "breaks", "sizing", "sizing_params",
               "shift_grace"),

@@ -36,6 +36,7 @@ from dispatch.config.scenario import (LIMITS, MAX_SEED, Limits, RunSpec, Scenari
                                       _short, safe_name)
 from dispatch.config.sweep import SweepConfig
 from dispatch.config.tasks import EMPIRICAL_MAX_WAIT, SOURCES, TaskConfig
+from dispatch.config.transit import TransitConfig
 from dispatch.config.world import RoadConfig, WorldConfig
 from dispatch.decide.prebook import MODES as PREBOOK_MODES
 from dispatch.errors import FORCE_HINT, ScenarioError
@@ -47,6 +48,7 @@ from dispatch.scenario.sections import (parse_acceptor, parse_allocators, parse_
                                         parse_charging, parse_energy, parse_faults, parse_pricing,
                                         parse_reposition, parse_world)
 from dispatch.scenario.keys import KEYS, check_keys
+from dispatch.scenario.transit import parse_transit
 from dispatch.scenario.toml_table import Table
 
 log = logging.getLogger(__name__)
@@ -257,6 +259,8 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     charging = parse_charging(root, path, fleet, faults, world)
     pricing = parse_pricing(root.table("pricing", Pricing), world)
     acceptor = parse_acceptor(root.table("acceptor", AcceptorConfig), pricing)
+    transit = (parse_transit(root.table("transit", TransitConfig), path, world)
+               if "transit" in root.data else None)
     s.done()
     root.done()
 
@@ -264,7 +268,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
                   duration=duration, world=world, fleet=fleet, tasks=tasks, dispatch=disp,
                   sweep=sweep, comms=comms, faults=faults,
                   reposition=replace(reposition, declared=declared or bool(sweep.reposition)),
-                  charging=charging, acceptor=acceptor, pricing=pricing)
+                  charging=charging, acceptor=acceptor, pricing=pricing, transit=transit)
     for n in sweep.agents or (fleet.agents,):
         _check_fits(sc, n, "sweep.agents" if sweep.agents else "fleet.agents")
     return sc
