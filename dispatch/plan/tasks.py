@@ -27,7 +27,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from enum import Enum
 
 import numpy as np
@@ -125,9 +125,10 @@ class Task:
     walk_speed: float = TaskConfig.walk_speed
     #: the meeting points of its ride as handed out (None: door to door) and the metres walked
     meeting: object = None
-    #: the user's id of its request: a trace row's id (dispatch.files.traces.Trips.ids), else
-    #: its own ``id`` as a string (generated demand); the tasks table's ``request_id``
-    request_id: str = ""
+    #: the user's id of its request (an int or a str): a trace row's id
+    #: (dispatch.files.traces.Trips.ids), else its number among the requests drawn (generated
+    #: demand, an empirical day); the results' ``request_id``
+    request_id: int | str = -1
 
     @property
     def cell(self):
@@ -176,6 +177,9 @@ class TaskBook:
         self.open: dict[int, Task] = {}
         self.live = 0
         self.released = 0
+        #: every released task's request id, by task id (the events and assignments tables
+        #: name the request of each row: they are written after the task left the book)
+        self.request_ids: list[int | str] = []
         self.on_close: list[Callable[[Task], None]] = []
         self._active: dict[int, Task] = {}  # assigned or picked up
         #: assigned, not yet picked up (a vehicle is driving to its pickup), by id
@@ -198,12 +202,14 @@ class TaskBook:
     def release(self, kind: str, loc: Location, dropoff: Location | None = None, *,
                 max_wait: float = math.nan, snap_m: float = math.nan,
                 dropoff_snap_m: float = math.nan, passengers: int = 1,
-                max_delay: float = math.nan, request_id: str = "") -> Task:
+                max_delay: float = math.nan, request_id: int | str | None = None) -> Task:
         """A new open task released now, numbered in release order; its ``request_id`` is the
-        one given, or its own id as a string where none is."""
+        one given, or its own id where none is. Every request id is kept in
+        :attr:`request_ids` (by task id) for the rows written after the task closed."""
         task = Task(self.released, kind, loc, float(self.env.now), dropoff, max_wait, snap_m,
                     dropoff_snap_m)
-        task.request_id = request_id or str(task.id)
+        task.request_id = task.id if request_id is None else request_id
+        self.request_ids.append(task.request_id)
         if passengers != 1:
             task.passengers = passengers
         if max_delay == max_delay:
@@ -300,7 +306,8 @@ class Request:
     max_delay: float = math.nan
     max_walk: float = math.nan  # nan: the scenario's
     walk_speed: float = math.nan
-    request_id: str = ""  # its trace row's id ("": generated, the task's own id)
+    #: its trace row's id, or its number among the requests drawn (None: the task's own id)
+    request_id: int | str | None = None
 
 
 class Demand:
@@ -356,6 +363,8 @@ class TaskSource:
             from dispatch.files.empirical import draw_day, load_sample
 
             trips = draw_day(load_sample(), tasks.trips_per_day, day_rng(), tasks.weekday)
+            # each request's id: its number in the day drawn (0 the first)
+            trips = replace(trips, ids=np.arange(len(trips), dtype=np.int64))
         return cls(env, book, demand, tasks, count, rng, notify=notify, trips=trips, **extra)
 
     def _done(self) -> None:
@@ -427,8 +436,8 @@ class TaskSource:
         :meth:`_released` when drawn; ends when the count is reached (never without one)."""
         t, count = self.tasks, self.count
         if self.kind == "static":
-            for _ in range(count or 0):
-                self._released(self.demand.draw())
+            for i in range(count or 0):
+                self._released(self._draw(i))
             return
         if self.kind == "periodic":
             def gap():
@@ -442,8 +451,13 @@ class TaskSource:
             if t.max_active is not None and self.book.live >= t.max_active:
                 self.book.bus.emit(self.env.now, "skipped")
                 continue
-            self._released(self.demand.draw())
+            self._released(self._draw(released))
             released += 1
+
+    def _draw(self, i: int) -> Request:
+        """The generated request ``i`` (0: the first drawn), its request id ``i``: the draw
+        order, which a booked request entering later keeps."""
+        return replace(self.demand.draw(), request_id=i)
 
     def _run(self):
         if self.kind == "trace":

@@ -138,7 +138,7 @@ class Simulation:
         self.fleet = Fleet(place_fleet(space, spec, rng_for(spec.seed, STREAM_FLEET)), space)
         self.vehicles = self.fleet.vehicles
         #: the run's tables, metadata and summary statistics (dispatch.output.rows)
-        self.recording = RunRecording(recorder, space)
+        self.recording = RunRecording(recorder, space, book.request_ids)
         self.stats = self.recording.stats
         demand = demand_for(space, sc.tasks, rng_for(spec.seed, STREAM_TASKS))
         driver = space.driver(self.planner, bus, sc.world, lambda: self.env.now)
