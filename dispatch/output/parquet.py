@@ -49,7 +49,7 @@ SCHEMAS: dict[str, pa.Schema] = {
         ("conflicts", _I), ("cost_seconds", _F), ("decide_seconds", _F),
         ("first_decision_cost", _F), ("first_decision_seconds", _F), ("realized_travel", _F),
         ("wait_time_mean", _F), ("tasks_expired", _I), ("tasks_rejected", _I),
-        ("tasks_unreachable", _I), ("tasks_cancelled", _I), ("tasks_failed", _I),
+        ("tasks_unreachable", _I), ("tasks_cut_off", _I), ("tasks_failed", _I),
         ("sim_time", _F), ("comm_delay", _F), ("agent_seconds", _F),
         ("distance", _F), ("empty_distance", _F), ("occupied_distance", _F),
         # [faults]: vehicle breakdowns; tasks re-opened by one; of those, passengers transferred

@@ -95,8 +95,9 @@ def assignment_row(i: int, r, alloc_s: float, request_id) -> tuple:
 
 def request_id_array(tasks, ids, typ: pa.DataType) -> pa.Array:
     """The ``request_id`` column of rows about the tasks ``tasks`` (task ids; -1: about no
-    task, a null): ``ids[t]``, the request id of task ``t`` (an int or str, as ``typ``)."""
-    k = len(tasks)
+    task, a null): ``ids[t]``, the request id of task ``t`` (an int or str, as ``typ``;
+    ``ids``: :class:`dispatch.plan.tasks.RequestIds`)."""
+    k, ids = len(tasks), ids.values
     valid = np.fromiter((t >= 0 for t in tasks), np.bool_, k)
     nulls = k - int(valid.sum())
     bitmap = None if not nulls else pa.py_buffer(np.packbits(valid, bitorder="little"))
@@ -167,7 +168,7 @@ class DecisionWriter:
     """The dispatcher's ``on_decision``: a ``decisions`` row and one ``assignments`` row per
     bid of the decision's rounds."""
 
-    def __init__(self, recorder, request_ids: list) -> None:
+    def __init__(self, recorder, request_ids) -> None:
         check_columns("decisions", DECISION_COLUMNS)
         check_columns("assignments", ASSIGNMENT_COLUMNS)
         self.append, self.request_ids = recorder.append, request_ids
@@ -194,7 +195,7 @@ def write_vehicles(recorder, space, vehicles, now: float, counts) -> None:
                                                 v.battery, duty_columns(v, now)))
 
 
-def event_writer(recorder, space, request_ids: list):
+def event_writer(recorder, space, request_ids):
     """The subscriber that writes each event as a row of the ``events`` table (several per
     trip): it keeps the event itself; its position and its task's request id
     (``request_ids[task_id]``) are looked up when the chunk is written, for the whole chunk at
@@ -243,7 +244,7 @@ class RunRecording:
     id of every task, by task id (:attr:`dispatch.plan.tasks.TaskBook.request_ids`), which the
     events and assignments rows carry."""
 
-    def __init__(self, recorder, space, request_ids: list) -> None:
+    def __init__(self, recorder, space, request_ids) -> None:
         self.recorder, self.space, self.request_ids = recorder, space, request_ids
         self.stats = RunStats()
         recorder.metadata.update(space.describe())

@@ -286,7 +286,7 @@ class Simulation:
             for v in self.vehicles:  # the part of a leg driven before the horizon counts
                 if v.leg is not None:
                     stop_leg(v, env.now)
-            self.book.close_all(TaskState.CANCELLED)
+            self.book.close_all(TaskState.CUT_OFF)
             if self.energy is not None:
                 if self.charging is not None:
                     self.charging.finish()  # the charges cut by the end count

@@ -186,7 +186,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
             try:
                 trips = _read_trace(trace_path, world.space,
                                     space_class(world.space).trace_bounds(world), max_bytes,
-                                    start, id_column)
+                                    start, id_column=id_column)
             except IdColumnMissing as e:
                 raise t.fail("id_column", f"{trace_path.name} has no column {e.column!r}"
                                           f"{did_you_mean(e.column, e.columns)} (its columns: "
@@ -369,7 +369,7 @@ def _parse_max_snap(t: Table, source: str, world: WorldConfig) -> float | None:
 
 
 def _read_trace(path: Path, space: str, bounds, max_bytes: int | None,
-                start: datetime | None, id_column: str | None) -> Trips:
+                start: datetime | None, *, id_column: str | None) -> Trips:
     """:func:`dispatch.files.traces.read_trace`, the trips kept for the file's bytes as they are: a
     scenario parsed again (the same file in one process: tests, notebooks, a second command)
     does not read a large trace again."""
@@ -380,11 +380,12 @@ def _read_trace(path: Path, space: str, bounds, max_bytes: int | None,
     except OSError:
         return read_trace(path, space, bounds, max_bytes, start=start,  # it says why
                           id_column=id_column)
-    return _read_trace_of(path, digest, space, bounds, max_bytes, start, id_column)
+    return _read_trace_of(path, digest, space, bounds, max_bytes, start=start,
+                          id_column=id_column)
 
 
 @functools.lru_cache(maxsize=1)
-def _read_trace_of(path: Path, digest: bytes, space: str, bounds, max_bytes: int | None,
+def _read_trace_of(path: Path, digest: bytes, space: str, bounds, max_bytes: int | None, *,
                    start: datetime | None, id_column: str | None) -> Trips:
     return read_trace(path, space, bounds, max_bytes, start=start, id_column=id_column)
 
