@@ -356,13 +356,16 @@ def test_an_outside_join_finds_each_trip(tmp_path):
 
 
 def test_a_start_files_vehicle_ids_are_the_ids_in_every_table(tmp_path):
-    """Vehicles numbered 17, 3, 42, 8 by their start file, placed on nodes 0, 5, 24, 29: the
-    vehicles table places each id where the file does, and every table names vehicles by
-    those ids only; each vehicle's first drive starts from its own start."""
+    """Vehicles numbered 17, 3, 42, 8 by their start file, placed on nodes 0, 5, 24, 29, and
+    vehicle 42 breaking down for good at 300 s by a faults file: the vehicles table places
+    each id where the file does, and every table names vehicles by those ids only; each
+    vehicle's first drive starts from its own start; 42's breakdown is 42's."""
     fleet = {17: 0, 3: 5, 42: 24, 8: 29}
     write_csv(tmp_path / "fleet.csv", ["vehicle_id", "node"], list(fleet.items()))
+    write_csv(tmp_path / "fail.csv", ["t", "vehicle_id", "duration"], [(300.0, 42, "inf")])
     rows = _rows(6, 30, None)
-    tables = _tables(tmp_path, _write(tmp_path, rows), fleet='start = "fleet.csv"')
+    tables = _tables(tmp_path, _write(tmp_path, rows), fleet='start = "fleet.csv"',
+                     extra='[faults]\nfile = "fail.csv"')
     vehicles = tables["vehicles"].to_pandas().set_index("agent_id")
     assert sorted(vehicles.index) == sorted(fleet)
     for vid, node in fleet.items():
@@ -376,6 +379,10 @@ def test_a_start_files_vehicle_ids_are_the_ids_in_every_table(tmp_path):
     first = events[events["event"] == "depart"].groupby("agent_id").first()
     for vid, node in fleet.items():
         assert tuple(first.loc[vid, ["x", "y"]]) == _xy(node)
+    broke = events[events["event"] == "breakdown"]
+    assert broke["agent_id"].tolist() == [42] and broke["t"].tolist() == [300.0]
+    assert vehicles["failures"].to_dict() == {vid: int(vid == 42) for vid in vehicles.index}
+    assert (events.loc[events["t"] > 300.0, "agent_id"] != 42).all()  # down for good
     # the completions per vehicle agree between tables written apart
     done = tasks[tasks["state"] == "completed"].groupby("agent_id").size()
     assert (vehicles["tasks_completed"] == done.reindex(vehicles.index, fill_value=0)).all()
