@@ -178,7 +178,7 @@ def test_every_row_joins_to_its_own_trip(tmp_path, case, mode):
         t = got["tasks"].to_pandas()
         assert t["booked_at"].notna().any()
         # booked trips enter first: the task ids do not follow the file's rows
-        assert not t.sort_values("task_id")["request_id"].tolist() == \
+        assert t.sort_values("task_id")["request_id"].tolist() != \
             [i for k, i in enumerate(ids) if k not in left_out]
     _check_join(got, rows, ids, left_out, walking=mode == "walking")
 
