@@ -246,7 +246,7 @@ class Decisions:
         """The end of the run: :meth:`dispatch.run.sim.Simulation.run` itself, its SimPy run made
         a no-op (this driver has already stepped the run to the stop ``Simulation.run`` would
         reach: ``until`` processed or an empty queue), so the legs driven, the requests left
-        open (cancelled), the vehicles' times and the summary come out exactly as in a run."""
+        open (cut off), the vehicles' times and the summary come out exactly as in a run."""
         sim, env = self.sim, self.env
         self.terminated = bool(sim.finished.triggered)
         self.truncated = not self.terminated

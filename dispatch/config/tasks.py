@@ -33,6 +33,9 @@ class TaskConfig:
     #: seconds of delay a request accepts at its drop-off, over release + direct drive time
     max_delay: float | None = None
     trace: Path | None = None  # trace: CSV or Parquet file of trips (see dispatch.files.traces)
+    #: trace: the column of each trip's id, carried into the results as ``request_id`` (None:
+    #: the first of request_id, trip_id, id the trace has; without one, the row's number)
+    id_column: str | None = None
     trips: Trips | None = None
     trips_per_day: float | None = None  # empirical: expected trips over the 24 h day
     weekday: str = "all"  # empirical: the sample's trips of this weekday ("all": every day)

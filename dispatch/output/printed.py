@@ -191,8 +191,8 @@ _TRIP_FIGURES = (
     ("served", 1, 100, "%", lambda r: per_task(r)["served_share"]),
     ("rej.", 1, 100, "%", lambda r: ratio(r["tasks_rejected"] + r["tasks_expired"]
                                            + r.get("tasks_unreachable", 0), r["n_tasks"])),
-    # the summary's tasks_cancelled: trips the run's end cut off (still waiting or aboard)
-    ("cut", 1, 100, "%", lambda r: ratio(r["tasks_cancelled"], r["n_tasks"])),
+    # the summary's tasks_cut_off: trips the run's end cut off (still waiting or aboard)
+    ("cut", 1, 100, "%", lambda r: ratio(r["tasks_cut_off"], r["n_tasks"])),
     ("wait", 1, 1.0, "", lambda r: r["wait_time_mean"]),
     ("empty", 0, 100, "%", lambda r: ratio(r["empty_distance"], r["distance"])),
     # thousands of km: a city day fits 80 columns
@@ -297,8 +297,8 @@ def render_one(s: dict, console=None, *, dynamic: bool = False) -> None:
                      f"{s['seed']}, {s.get('space', 'voxel')}{window}")
     what = "trips" if road else "tasks"
     rejected = s["tasks_rejected"] + s["tasks_expired"] + s.get("tasks_unreachable", 0)
-    # tasks_cancelled: the tasks the run's end cut off (a count of its own, not a rejection)
-    t.add_row(what, f"{n} released, {done} served{share}, {s['tasks_cancelled']} cut off by "
+    # tasks_cut_off: the tasks the run's end cut off (a count of its own, not a rejection)
+    t.add_row(what, f"{n} released, {done} served{share}, {s['tasks_cut_off']} cut off by "
                     f"the end of the run (still waiting or {'aboard' if road else 'under way'}"
                     f"); rejected {s['tasks_rejected']} at once, expired "
                     f"{s['tasks_expired']}, unreachable {s.get('tasks_unreachable', 0)} "

@@ -33,7 +33,7 @@ import pyarrow.parquet as pq
 
 from dispatch.config.runkeys import key_names
 from dispatch.config.scenario import RunSpec
-from dispatch.output.parquet import SCHEMAS, Recorder, json_meta
+from dispatch.output.parquet import REQUEST_ID, SCHEMAS, Recorder, json_meta, request_id_type
 from dispatch.run.pools import Outcome, on_pool, on_ray, sigterm_exits
 from dispatch.run.resume import (clear_partition, is_complete, legacy_variant, read_summary,
                                  record_failure, write_marker)
@@ -97,9 +97,11 @@ def run_metadata(spec: RunSpec) -> dict[str, str]:
 
 
 def make_recorder(spec: RunSpec, out: Path, *, flush_rows: int = DEFAULT_FLUSH_ROWS) -> Recorder:
-    """The recorder of ``spec`` writing into its partition of ``out``."""
+    """The recorder of ``spec`` writing into its partition of ``out`` (its ``request_id``
+    columns typed as its trips' ids are)."""
     return Recorder(Path(out), spec.run_id, run_metadata(spec), spec.partition,
-                    flush_rows=flush_rows)
+                    flush_rows=flush_rows,
+                    types={REQUEST_ID: request_id_type(spec.scenario.tasks.trips)})
 
 
 def run_one(spec: RunSpec, out: Path | None = None, *,

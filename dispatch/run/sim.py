@@ -138,7 +138,7 @@ class Simulation:
         self.fleet = Fleet(place_fleet(space, spec, rng_for(spec.seed, STREAM_FLEET)), space)
         self.vehicles = self.fleet.vehicles
         #: the run's tables, metadata and summary statistics (dispatch.output.rows)
-        self.recording = RunRecording(recorder, space)
+        self.recording = RunRecording(recorder, space, book.request_ids)
         self.stats = self.recording.stats
         demand = demand_for(space, sc.tasks, rng_for(spec.seed, STREAM_TASKS))
         driver = space.driver(self.planner, bus, sc.world, lambda: self.env.now)
@@ -286,7 +286,7 @@ class Simulation:
             for v in self.vehicles:  # the part of a leg driven before the horizon counts
                 if v.leg is not None:
                     stop_leg(v, env.now)
-            self.book.close_all(TaskState.CANCELLED)
+            self.book.close_all(TaskState.CUT_OFF)
             if self.energy is not None:
                 if self.charging is not None:
                     self.charging.finish()  # the charges cut by the end count

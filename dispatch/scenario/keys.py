@@ -24,7 +24,7 @@ KEYS: dict[str, tuple[str, ...]] = {
     "tasks": ("source", "count", "interval", "rate", "max_active", "ground_fraction",
               "service_time", "ttl", "max_wait", "max_delay", "max_walk", "walk_speed",
               "meeting_points", "trips_per_day", "weekday", "prebook_share", "prebook_lead",
-              "trace", "start", "max_snap"),
+              "trace", "id_column", "start", "max_snap"),
     "dispatch": ("allocator", "planner", "batch_window", "max_rounds", "reassign", "lazy_costs",
                  "objective", "allocator_params", "planner_params", "prebook", "prebook_lead"),
     "comms": ("range", "latency", "loss"),

@@ -41,15 +41,15 @@ from dispatch.config.world import RoadConfig, WorldConfig
 from dispatch.decide.prebook import MODES as PREBOOK_MODES
 from dispatch.errors import FORCE_HINT, ScenarioError
 from dispatch.files.tables import check_file, decode_text, read_bytes
-from dispatch.files.traces import (Trips, parse_datetime, read_fleet_capacities, read_fleet_start,
-                                   read_trace, shipped_trace, within_snap)
+from dispatch.files.traces import (IdColumnMissing, Trips, parse_datetime, read_fleet_capacities,
+                                   read_fleet_start, read_trace, shipped_trace, within_snap)
 from dispatch.fleet.shifts import read_shifts
 from dispatch.scenario.sections import (parse_acceptor, parse_allocators, parse_breaks,
                                         parse_charging, parse_energy, parse_faults, parse_pricing,
                                         parse_reposition, parse_world)
 from dispatch.scenario.keys import KEYS, check_keys
 from dispatch.scenario.transit import parse_transit
-from dispatch.scenario.toml_table import Table
+from dispatch.scenario.toml_table import Table, did_you_mean
 
 log = logging.getLogger(__name__)
 
@@ -177,21 +177,31 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     if source == "poisson" and tasks.rate is None:
         raise t.fail("rate", "is required when source = 'poisson'")
     start, max_snap = _parse_start(t, source), _parse_max_snap(t, source, world)
+    id_column = t.string("id_column")
     if source == "trace":
         if not isinstance(trace, str) or not trace:
             raise t.fail("trace", "is required when source = 'trace' (a CSV or Parquet file)")
         trace_path = shipped_trace(trace) or (path.parent / trace).resolve()
         with t.reading("trace", trace_path):
-            trips = _read_trace(trace_path, world.space,
-                                space_class(world.space).trace_bounds(world), max_bytes, start)
+            try:
+                trips = _read_trace(trace_path, world.space,
+                                    space_class(world.space).trace_bounds(world), max_bytes,
+                                    start, id_column=id_column)
+            except IdColumnMissing as e:
+                raise t.fail("id_column", f"{trace_path.name} has no column {e.column!r}"
+                                          f"{did_you_mean(e.column, e.columns)} (its columns: "
+                                          f"{', '.join(e.columns)})") from None
         if max_snap is not None:
             trips = _within_snap(t, trips, world, max_snap)
         for reason, n in trips.dropped:
             log.warning("%s: %d of %d trips left out: %s", trace_path.name, n,
                         n + len(trips), reason)
-        tasks = replace(tasks, trace=trace_path, trips=trips, start=start, max_snap=max_snap)
+        tasks = replace(tasks, trace=trace_path, trips=trips, start=start, max_snap=max_snap,
+                        id_column=id_column)
     elif trace is not None:
         raise t.fail("trace", f"is only used when source = 'trace' (source is {source!r})")
+    elif id_column is not None:
+        raise t.fail("id_column", f"is only used when source = 'trace' (source is {source!r})")
     for k, value, allowed in (("interval", tasks.interval, ("periodic",)),
                               ("rate", tasks.rate, ("poisson",)),
                               ("max_active", tasks.max_active, ("periodic", "poisson")),
@@ -359,7 +369,7 @@ def _parse_max_snap(t: Table, source: str, world: WorldConfig) -> float | None:
 
 
 def _read_trace(path: Path, space: str, bounds, max_bytes: int | None,
-                start: datetime | None) -> Trips:
+                start: datetime | None, *, id_column: str | None) -> Trips:
     """:func:`dispatch.files.traces.read_trace`, the trips kept for the file's bytes as they are: a
     scenario parsed again (the same file in one process: tests, notebooks, a second command)
     does not read a large trace again."""
@@ -368,14 +378,16 @@ def _read_trace(path: Path, space: str, bounds, max_bytes: int | None,
         with open(path, "rb") as fh:
             digest = hashlib.file_digest(fh, "blake2b").digest()
     except OSError:
-        return read_trace(path, space, bounds, max_bytes, start=start)  # it says why
-    return _read_trace_of(path, digest, space, bounds, max_bytes, start)
+        return read_trace(path, space, bounds, max_bytes, start=start,  # it says why
+                          id_column=id_column)
+    return _read_trace_of(path, digest, space, bounds, max_bytes, start=start,
+                          id_column=id_column)
 
 
 @functools.lru_cache(maxsize=1)
-def _read_trace_of(path: Path, digest: bytes, space: str, bounds, max_bytes: int | None,
-                   start: datetime | None) -> Trips:
-    return read_trace(path, space, bounds, max_bytes, start=start)
+def _read_trace_of(path: Path, digest: bytes, space: str, bounds, max_bytes: int | None, *,
+                   start: datetime | None, id_column: str | None) -> Trips:
+    return read_trace(path, space, bounds, max_bytes, start=start, id_column=id_column)
 
 
 def _within_snap(t: Table, trips: Trips, world: WorldConfig, max_snap: float) -> Trips:

@@ -154,7 +154,7 @@ def expected_counts(tasks: pd.DataFrame, t: float, walk_speed: float = 1.4) -> d
             "delivered": int(at_or_before("completed_at").sum()),
             "rejected": int((closed & tasks["state"].isin(["rejected", "expired"])).sum()),
             "declined": int((closed & (tasks["state"] == "declined")).sum()),
-            "cutoff": int((closed & (tasks["state"] == "cancelled")).sum()),
+            "cutoff": int((closed & (tasks["state"] == "cut_off")).sum()),
             "booked": int((at_or_before("booked_at") & ~picked & ~closed).sum()),
             "walking": int(walking)}
 
@@ -613,7 +613,7 @@ def test_the_page_data_carry_walks_bookings_and_offers(walk_run, shift_run, road
     np.testing.assert_allclose(arr(tk["ay"]) + d["origin"][1], tasks["alight_y"], atol=0.01)
     codes = arr(tk["state"])
     states = np.array(d["taskStates"])[codes]
-    np.testing.assert_array_equal(states, tasks["state"].to_numpy())  # cancelled: its own code
+    np.testing.assert_array_equal(states, tasks["state"].to_numpy())  # cut_off: its own code
     s = build_run(choose_run(shift_run, None), route=False)
     assert "declined" in set(np.array(s["taskStates"])[arr(s["tasks"]["state"])])
     plain = build_run(choose_run(road_run, None), route=False)["tasks"]
@@ -727,7 +727,7 @@ def test_browser_declined_offers(shift_run, browser, tmp_path):
 
 def test_browser_cut_off_requests(walk_run, browser, tmp_path):
     tasks = _table(walk_run, "tasks")
-    n = int((tasks["state"] == "cancelled").sum())
+    n = int((tasks["state"] == "cut_off").sum())
     assert n > 0, "the run's end cut nothing off"
     page = _write(walk_run, tmp_path / "replay.html")
     p = Page(browser, page, float(tasks["closed_at"].max()))

@@ -93,7 +93,7 @@ def _trip_summary(alloc: str, seed: int, served: int) -> dict:
     return {"scenario": "c", "allocator": alloc, "planner": "dijkstra", "n_agents": 10,
             "seed": seed, "space": "road", "batch_window": 0.0, "n_tasks": 100,
             "tasks_completed": served, "tasks_rejected": 100 - served, "tasks_expired": 0,
-            "tasks_unreachable": 0, "tasks_cancelled": 0, "tasks_failed": 0,
+            "tasks_unreachable": 0, "tasks_cut_off": 0, "tasks_failed": 0,
             "wait_time_mean": 60.0 + seed, "empty_distance": 1000.0, "distance": 4000.0,
             "alloc_seconds": 0.5, "total_cost": 1.0, "decisions": 10,
             "conflict_free_rate": 1.0, "first_decision_seconds": 0.01}

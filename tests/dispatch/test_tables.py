@@ -51,7 +51,7 @@ def _summary(alloc: str, n: int, seed: int, space: str = "voxel") -> dict:
         "tasks_expired": 100,
         "tasks_rejected": 200,
         "tasks_unreachable": 0,
-        "tasks_cancelled": 45,
+        "tasks_cut_off": 45,
         "tasks_failed": 0,
         "sim_time": 86400.0,
         "comm_delay": 0.0,
@@ -174,7 +174,7 @@ def test_tables_and_analysis_share_one_gap_and_order():
 
 def test_trip_table_shows_cut_off_trips_and_fits_with_variant_labels():
     """The trip table has a column of the trips the run's end cut off (summary
-    ``tasks_cancelled``; served + rejected + cut off + failed add up to the trips), named so,
+    ``tasks_cut_off``; served + rejected + cut off + failed add up to the trips), named so,
     and fits 80 columns uncut with the longest labels (a swept batch window)."""
     rows = []
     for a, n, s in itertools.product(["local_hungarian", "magnnet_match", "fcfs"],
@@ -183,7 +183,7 @@ def test_trip_table_shows_cut_off_trips_and_fits_with_variant_labels():
             rows.append({**_summary("hungarian", n, s, "road"), "allocator": a,
                          "batch_window": window, "n_tasks": 1000, "tasks_completed": 900,
                          "tasks_rejected": 40, "tasks_expired": 20, "tasks_unreachable": 0,
-                         "tasks_cancelled": 38, "tasks_failed": 2})
+                         "tasks_cut_off": 38, "tasks_failed": 2})
     text = _render(rows)
     assert "…" not in text and max(map(len, text.splitlines())) <= 80
     line = next(ln for ln in text.splitlines() if ln.split()[:2] == ["local_hungarian", "30s"])
