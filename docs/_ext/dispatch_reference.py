@@ -92,6 +92,7 @@ TOML_TYPES = {
     "Path": "string (a file, relative to the scenario file)",
     "datetime": "string (a date-time, e.g. \"2014-12-21T00:00\")",
     "Vec3": "array of [x, y, z] (3 floats)",
+    "dt.date": "date (a TOML local date, e.g. 2026-09-23)",
     "tuple[int, int]": "array of 2 integers",
     "tuple[float, ...]": "array of floats",
     "tuple[int, ...]": "array of integers",
@@ -215,7 +216,8 @@ def file_keys() -> set[str]:
     parser never names is built from others (a file's rows, a derived flag) and is not a key
     of the file."""
     keys = set()
-    paths = [ROOT / "dispatch" / "scenario" / f"{mod}.py" for mod in ("load", "sections")]
+    paths = [ROOT / "dispatch" / "scenario" / f"{mod}.py" for mod in ("load", "sections",
+                                                                         "transit")]
     for path in [*paths, *sorted((ROOT / "dispatch" / "config").glob("*.py"))]:
         tree = ast.parse(path.read_text(encoding="utf-8"))
         keys |= {n.value for n in ast.walk(tree)
@@ -321,7 +323,7 @@ def sections() -> list[tuple[str, str, type, tuple[str, ...]]]:
     """``(title, table, dataclass, fields left out)`` of each section of the reference."""
     return [
         ("top level", "", find_class("Scenario"), ("path", "text", "charging", "acceptor",
-                                                   "pricing")),
+                                                   "pricing", "transit")),
         ("[world]", "world", find_class("WorldConfig"), ("roads",)),
         ("[world] (road networks)", "world", find_class("RoadConfig"), ("base",)),
         ("[world.obstacles]", "world.obstacles", find_class("ObstacleConfig"), ()),
@@ -338,6 +340,7 @@ def sections() -> list[tuple[str, str, type, tuple[str, ...]]]:
         ("[sweep]", "sweep", find_class("SweepConfig"), ()),
         ("[acceptor]", "acceptor", find_class("AcceptorConfig"), ()),
         ("[pricing]", "pricing", find_class("Pricing"), ()),
+        ("[transit]", "transit", find_class("TransitConfig"), ()),
     ]
 
 

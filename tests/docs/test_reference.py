@@ -17,7 +17,7 @@ from dispatch.scenario.keys import KEYS
 EXT = Path(__file__).resolve().parents[2] / "docs" / "_ext" / "dispatch_reference.py"
 
 #: a TOML type starts with one of TOML's own words
-TOML_WORDS = re.compile(r"^(string|integer|float|boolean|array|table)\b")
+TOML_WORDS = re.compile(r"^(string|integer|float|boolean|date|array|table)\b")
 #: what a Python annotation leaves in a type's text
 PYTHON_WORDS = re.compile(r"tuple\[|\bAny\b|\bNone\b|\bstr\b|\bint\b|\bbool\b|\bPath\b|"
                           r"\bdatetime\b|\bVec3\b|\|")
@@ -54,7 +54,8 @@ def test_every_declared_key_of_the_file_is_in_the_reference(rows):
     titles = {"": "top level", "fleet": "[fleet]", "tasks": "[tasks]",
               "dispatch": "[dispatch]", "comms": "[comms]", "sweep": "[sweep]"}
     tables = {"world", "fleet", "tasks", "dispatch", "comms", "faults", "sweep", "reposition",
-              "chargers", "charging", "pricing", "acceptor", "energy", "breaks"}
+              "chargers", "charging", "pricing", "acceptor", "energy", "breaks",
+              "transit"}
     have = {(title, row["key"]) for title, row in rows}
     missing = [f"{section or 'top level'}.{key}" for section, keys in KEYS.items()
                for key in keys if key not in tables and (titles[section], key) not in have]
