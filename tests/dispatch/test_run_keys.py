@@ -197,6 +197,6 @@ def test_a_sweep_over_an_older_folder_of_variants_resumes_it(tmp_path):
     by_run = tasks.groupby("run_id")["batch_window"].unique()
     assert {r: list(v) for r, v in by_run.items()} == dict(zip(s["run_id"],
                                                                ([w] for w in s["batch_window"])))
-    assert [o.status for o in sweep(more, out, workers=1, force=True)] == ["done"] * 4
+    assert [o.status for o in sweep(more, out, workers=1, overwrite=True)] == ["done"] * 4
     assert not any("-batch30s" in str(p) or "-immediate" in str(p) for p in out.rglob("*.parquet"))
     assert len(open_results(out).summary) == 4
