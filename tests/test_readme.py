@@ -130,3 +130,34 @@ def test_readme_runs_in_order(tmp_path):
     assert sorted(skipped) == sorted(NOT_RUN)
     assert len(done) >= 10, done
     print("\n".join(f"{s:7.1f} s  {line}" for line, s in done))
+
+
+def test_readme_lists_every_howto():
+    """Each recipe of docs/howto/ (but the index) is named in the README's list."""
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    howtos = sorted(p.name for p in (ROOT / "docs" / "howto").glob("*.md") if p.stem != "index")
+    missing = [name for name in howtos if f"`{name}`" not in text]
+    assert howtos and not missing, missing
+
+
+def test_readme_says_what_not_when():
+    """The README speaks to a user: no issue numbers, development waves or targets met."""
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    for pattern in (r"\bissue\s+#?\d+", r"\bwaves?\b", r"\btargets?\b.{0,40}\bmet\b",
+                    r"\bnot met\b"):
+        assert not re.search(pattern, text, flags=re.I), pattern
+
+
+def test_light_install_extras_exist():
+    """Every extra the README's *Light install* names is declared in pyproject.toml."""
+    import tomllib
+
+    extras = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"][
+        "optional-dependencies"]
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    light = text[text.index("## Light install"):text.index("## A first run")]
+    named = set(re.findall(r'"\.\[([\w,]+)\]"', light))
+    named = {e for group in named for e in group.split(",")}
+    named |= set(re.findall(r"the `(\w+)`\s+extra", light))
+    assert named >= {"analysis", "city", "magnnet", "learning", "ray", "docs"}, named
+    assert named <= set(extras), named - set(extras)
