@@ -17,13 +17,17 @@ from dispatch.run.progress import Heartbeat
 
 class _Output:
     """What a registered command writes through: ``print`` a line of output, ``warn`` a
-    warning on stderr (one line each, as the CLI's own)."""
+    warning on stderr (one line each, as the CLI's own), ``show`` a rich renderable (a table,
+    laid out to the terminal's width)."""
 
     def __init__(self, console, err) -> None:
         self.console, self.err = console, err
 
     def print(self, text: str) -> None:
         self.console.print(text, highlight=False, soft_wrap=True, markup=False, emoji=False)
+
+    def show(self, renderable) -> None:
+        self.console.print(renderable)
 
     def warn(self, text: str) -> None:
         from rich.markup import escape

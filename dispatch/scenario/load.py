@@ -186,9 +186,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
                                 space_class(world.space).trace_bounds(world), max_bytes, start)
         if max_snap is not None:
             trips = _within_snap(t, trips, world, max_snap)
-        for reason, n in trips.dropped:
-            log.warning("%s: %d of %d trips left out: %s", trace_path.name, n,
-                        n + len(trips), reason)
+        _say_dropped(trace_path, trips)
         tasks = replace(tasks, trace=trace_path, trips=trips, start=start, max_snap=max_snap)
     elif trace is not None:
         raise t.fail("trace", f"is only used when source = 'trace' (source is {source!r})")
@@ -376,6 +374,28 @@ def _read_trace(path: Path, space: str, bounds, max_bytes: int | None,
 def _read_trace_of(path: Path, digest: bytes, space: str, bounds, max_bytes: int | None,
                    start: datetime | None) -> Trips:
     return read_trace(path, space, bounds, max_bytes, start=start)
+
+
+#: the share of a trace's trips left out (by ``max_snap`` or ``start``) past which loading warns:
+#: past it the trace and the network (or the start) probably do not match (another city,
+#: coordinates in another CRS); below it the count is said at INFO level (``-v``)
+DROPPED_WARN_SHARE = 0.25
+#: (trace, reason, count) already said in this process: a sweep, a bench or ``validate`` then
+#: ``run`` load the same trace many times, and the same count need be said once
+_SAID: set[tuple[str, str, int]] = set()
+
+
+def _say_dropped(trace_path: Path, trips: Trips) -> None:
+    """Log the trips a trace's reading left out, once per trace, reason and count in a
+    process: a warning past :data:`DROPPED_WARN_SHARE` of the file's trips, else at INFO."""
+    total = len(trips) + sum(n for _, n in trips.dropped)
+    for reason, n in trips.dropped:
+        key = (str(trace_path), reason, n)
+        if key in _SAID:
+            continue
+        _SAID.add(key)
+        level = logging.WARNING if n > DROPPED_WARN_SHARE * total else logging.INFO
+        log.log(level, "%s: %d of %d trips left out: %s", trace_path.name, n, total, reason)
 
 
 def _within_snap(t: Table, trips: Trips, world: WorldConfig, max_snap: float) -> Trips:

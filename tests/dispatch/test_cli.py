@@ -281,6 +281,13 @@ def test_an_electric_run_prints_its_energy_and_cut_off_trips(tmp_path, cli):
     text = " ".join(proc.stdout.split())
     assert f"{s['tasks_cancelled']} cut off by the end of the run" in text
     assert "cancel" not in text
-    assert (f"energy {s['kwh_drawn']:,.1f} kWh drawn ({s['kwh_drawn']:.2f} per vehicle), "
+    # the auxiliary load, 0.36 kWh/h on every vehicle never plugged in for the run's 50 s, apart
+    # from the driving part (a kWh per km is the driving part over the km)
+    aux = s["kwh_auxiliary"]
+    assert aux == pytest.approx(0.36 * 50 / 3600 * s["n_agents"], rel=1e-9)
+    assert 0 < aux < s["kwh_drawn"]
+    per = s["kwh_drawn"] / s["n_agents"]
+    assert (f"energy {s['kwh_drawn']:,.1f} kWh drawn ({per:.2f} kWh per vehicle; "
+            f"{s['kwh_drawn'] - aux:,.1f} kWh driving, {aux:,.1f} kWh the auxiliary load), "
             f"0.0 kWh charged in 0 charges, 0.0 h queued; state of charge lowest "
             f"{100 * s['soc_min']:.1f}%") in text
