@@ -3,8 +3,8 @@ snippet runs, one after the other, in a copy of the repository (its tracked file
 
 The run is marked ``readme`` and left out of the default test command (the lines take minutes:
 runs of the paper's scenario, Manhattan hours, a report, a replay, a quick bench); CI runs it
-once, after the suite (``.ci/run``: ``bash scripts/test.sh -m readme``). Nothing is shortened: a line
-runs as written, with ``dispatch`` the command line of this checkout and ``python`` this
+once, after the suite (``.ci/run``: ``bash scripts/test.sh -m readme``). Nothing is shortened:
+a line runs as written, with ``dispatch`` the command line of this checkout and ``python`` this
 interpreter. The only lines not run are those of :data:`NOT_RUN`, each with its reason, and the
 test fails when the README gains or loses one of them, so none is left out silently.
 """

@@ -44,6 +44,7 @@ from dispatch.files.tables import check_file, decode_text, read_bytes
 from dispatch.files.traces import (Trips, parse_datetime, read_fleet_capacities, read_fleet_start,
                                    read_trace, shipped_trace, within_snap)
 from dispatch.fleet.shifts import read_shifts
+from dispatch.scenario.notes import say_dropped
 from dispatch.scenario.sections import (parse_acceptor, parse_allocators, parse_breaks,
                                         parse_charging, parse_energy, parse_faults, parse_pricing,
                                         parse_reposition, parse_world)
@@ -60,8 +61,9 @@ def load_scenario(path: str | Path, *, ignore_limits: bool = False,
     ``overrides`` (``(dotted key, TOML value, option)``, see :mod:`dispatch.scenario.overrides`) are
     written into its text before it is parsed, once.
 
-    The file must be a regular file of at most ``Limits.file_bytes`` (``ignore_limits``: any size) in
-    UTF-8; the traces and start files it names are size-checked before they are read too."""
+    The file must be a regular file of at most ``Limits.file_bytes`` (``ignore_limits``: any
+    size) in UTF-8; the traces and start files it names are size-checked before they are read
+    too."""
     path = Path(path)
     limits = None if ignore_limits else LIMITS
     data = read_bytes(path, None if limits is None else limits.file_bytes, "scenario file")
@@ -186,7 +188,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
                                 space_class(world.space).trace_bounds(world), max_bytes, start)
         if max_snap is not None:
             trips = _within_snap(t, trips, world, max_snap)
-        _say_dropped(trace_path, trips)
+        say_dropped(trace_path, trips)
         tasks = replace(tasks, trace=trace_path, trips=trips, start=start, max_snap=max_snap)
     elif trace is not None:
         raise t.fail("trace", f"is only used when source = 'trace' (source is {source!r})")
@@ -374,28 +376,6 @@ def _read_trace(path: Path, space: str, bounds, max_bytes: int | None,
 def _read_trace_of(path: Path, digest: bytes, space: str, bounds, max_bytes: int | None,
                    start: datetime | None) -> Trips:
     return read_trace(path, space, bounds, max_bytes, start=start)
-
-
-#: the share of a trace's trips left out (by ``max_snap`` or ``start``) past which loading warns:
-#: past it the trace and the network (or the start) probably do not match (another city,
-#: coordinates in another CRS); below it the count is said at INFO level (``-v``)
-DROPPED_WARN_SHARE = 0.25
-#: (trace, reason, count) already said in this process: a sweep, a bench or ``validate`` then
-#: ``run`` load the same trace many times, and the same count need be said once
-_SAID: set[tuple[str, str, int]] = set()
-
-
-def _say_dropped(trace_path: Path, trips: Trips) -> None:
-    """Log the trips a trace's reading left out, once per trace, reason and count in a
-    process: a warning past :data:`DROPPED_WARN_SHARE` of the file's trips, else at INFO."""
-    total = len(trips) + sum(n for _, n in trips.dropped)
-    for reason, n in trips.dropped:
-        key = (str(trace_path), reason, n)
-        if key in _SAID:
-            continue
-        _SAID.add(key)
-        level = logging.WARNING if n > DROPPED_WARN_SHARE * total else logging.INFO
-        log.log(level, "%s: %d of %d trips left out: %s", trace_path.name, n, total, reason)
 
 
 def _within_snap(t: Table, trips: Trips, world: WorldConfig, max_snap: float) -> Trips:

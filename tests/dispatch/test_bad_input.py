@@ -1,7 +1,7 @@
 """Bad input in one line (exit 2, no traceback) and output safety: plugin parameters the
 constructor rejects, checkpoints that are not checkpoints, undecodable or unreadable files,
-resource limits and ``--ignore-limits``, sanitised output folders, no silent overwrite, two scenarios
-in one folder."""
+resource limits and ``--ignore-limits``, sanitised output folders, no silent overwrite (a run
+already there is shown, not rerun; ``--overwrite`` reruns it), two scenarios in one folder."""
 
 from __future__ import annotations
 

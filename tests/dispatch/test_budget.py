@@ -1,6 +1,7 @@
 """Work bounds (dispatch.scenario.budget): the fuzzed runs that ran past 30 s without a word are
-refused by ``dispatch validate`` with the estimate and the bound (``--ignore-limits`` runs them), the
-shipped scenarios are not; a long run says where it is on stderr when not on a terminal."""
+refused by ``dispatch validate`` with the estimate and the bound (``--ignore-limits`` runs
+them), the shipped scenarios are not; a long run says where it is on stderr when not on a
+terminal."""
 
 from __future__ import annotations
 

@@ -10,8 +10,9 @@ import logging
 
 import pytest
 
-from dispatch.scenario import load as scenario_load
-from dispatch.scenario.load import DROPPED_WARN_SHARE, load_scenario
+from dispatch.scenario import notes
+from dispatch.scenario.load import load_scenario
+from dispatch.scenario.notes import DROPPED_WARN_SHARE
 from tests.conftest import ROOT
 
 NYC = ROOT / "dispatch" / "data" / "nyc_manhattan" / "nyc_taxi_2014-12-21_20k.csv"
@@ -20,7 +21,7 @@ JFK = "40.6413,-73.7781"  # far from every Manhattan intersection
 
 @pytest.fixture(autouse=True)
 def _fresh(monkeypatch):
-    monkeypatch.setattr(scenario_load, "_SAID", set())
+    monkeypatch.setattr(notes, "SAID", set())
 
 
 def _said(caplog) -> list[logging.LogRecord]:
