@@ -28,8 +28,9 @@ def _cell(iv, scale: float, star: bool) -> str:
 
 
 def board_tables(rows: list[dict]) -> list:
-    """The printed board of ``rows`` (``bench.csv``'s): one :class:`rich.table.Table` per group
-    present, instances in the suite's order, each instance's allocators below its name."""
+    """The printed board of ``rows`` (``bench.csv``'s): per group present a title line and a
+    :class:`rich.table.Table` (no edge: a box's edges are lines of spaces), instances in the
+    suite's order, each instance's allocators below its name."""
     from rich import box
     from rich.table import Table
     from rich.text import Text
@@ -40,8 +41,7 @@ def board_tables(rows: list[dict]) -> list:
         order = [(i, a) for i, a in _ordered(rows) if _group(i, rows) == group]
         if not order:
             continue
-        t = Table(title=f"{group}: mean ± 95 % half-width over the seeds", title_justify="left",
-                  box=box.SIMPLE_HEAD, pad_edge=False)
+        t = Table(box=box.SIMPLE_HEAD, pad_edge=False, show_edge=False)
         t.add_column("instance / allocator", no_wrap=True)
         for _, heading, _ in columns:
             t.add_column(heading, justify="right", no_wrap=True)
@@ -63,7 +63,7 @@ def board_tables(rows: list[dict]) -> list:
                             and abs(d.mean) > d.half)
                     cells.append(_cell(ivs[(instance, a, metric)], scale, star))
                 t.add_row(f"  {a}", *cells)
-        tables.append(t)
+        tables.append((f"{group}: mean ± 95 % half-width over the seeds", t))
     return tables
 
 
@@ -76,7 +76,7 @@ def interval_note(rows: list[dict]) -> str:
                      for i, _ in _ordered(rows)})
     low = counts[0] if counts else 0
     seeds = f"{low}" if len(counts) <= 1 else f"{low} to {counts[-1]}"
-    factor = (f"; with {low} seeds a half-width is {student.ppf(0.975, low - 1):.1f} standard "
-              "errors" if low >= 2 else "; one seed gives no interval")
-    return (f"{seeds} seed(s) per instance{factor}; * : differs from {REFERENCE} beyond the "
-            "paired interval (same seeds); --seeds K runs the first K seeds of each instance")
+    factor = (f": ± is {student.ppf(0.975, low - 1):.1f} standard errors" if low >= 2
+              else ": one seed gives no interval")
+    return (f"{seeds} seed(s) per instance{factor} (--seeds K: more seeds)\n"
+            f"* : differs from {REFERENCE} beyond the paired interval (same seeds)")

@@ -75,7 +75,8 @@ class Bench:
         out.print(f"{len(res.rows)} row(s): {c['done']} run, {c['skipped']} reused, "
                   f"{c['failed']} failed, {c['timeout']} past the time limit, "
                   f"{c['unsupported']} unsupported; {res.seconds:.1f} s")
-        for table in board_tables(res.rows):
+        for title, table in board_tables(res.rows):
+            out.print(title)
             out.show(table)
         if res.rows:
             out.print(interval_note(res.rows))

@@ -209,7 +209,8 @@ def test_the_printed_board_fits_80_columns_and_marks_separated_allocators():
     buf = io.StringIO()
     console = Console(file=buf, width=80, force_terminal=False)
     tables = board_tables(rows)
-    for t in tables:
+    for title, t in tables:
+        console.print(title)
         console.print(t)
     lines = buf.getvalue().splitlines()
     assert len(tables) == 2 and max(len(line) for line in lines) <= 80
@@ -229,6 +230,7 @@ def test_the_printed_board_fits_80_columns_and_marks_separated_allocators():
     assert ["static_n4", "(2", "seeds)"] in [x.split() for x in lines]
     note = interval_note(rows)
     assert "2 to 3 seed(s)" in note and "12.7 standard errors" in note
+    assert max(len(line) for line in note.splitlines()) <= 80
 
 
 # ------------------------------------------------------------------------- --against
