@@ -31,10 +31,12 @@ def _logging_options(p: argparse.ArgumentParser, default) -> None:
 
 class _SplitFlag(argparse.Action):
     """``--force``, which once meant both ``--overwrite`` and ``--ignore-limits``: refused with
-    a line naming the two, so that an old script says which it meant."""
+    a line naming the two, so that an old script says which it meant (``--help`` says so too:
+    every option there says what it is)."""
 
     def __init__(self, option_strings, dest, **kwargs) -> None:
-        super().__init__(option_strings, dest, nargs=0, help=argparse.SUPPRESS)
+        super().__init__(option_strings, dest, nargs=0,
+                         help="no longer accepted: say --overwrite or --ignore-limits")
 
     def __call__(self, parser, namespace, values, option_string=None) -> None:
         parser.error("--force is now two flags: --overwrite (replace results the output folder "
