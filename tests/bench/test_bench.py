@@ -388,3 +388,17 @@ def test_a_network_trained_per_team_size_is_unsupported_on_other_sizes():
                       "{4, 8, 12, 20} only, not N = 50 agents, M = 50 tasks",
         "dynamic_n8": "unsupported: magnnet:paper decides static problems of N = M in "
                       "{4, 8, 12, 20} only, not poisson tasks"}
+
+
+def test_the_default_output_folder_is_ignored_by_git():
+    """``dispatch bench`` writes ``bench_out/`` by default: git ignores it, so a bench does not
+    leave the working tree dirty."""
+    import shutil
+    import subprocess
+
+    from tests.conftest import ROOT
+
+    if shutil.which("git") is None or not (ROOT / ".git").exists():
+        pytest.skip("needs git and a git checkout")
+    proc = subprocess.run(["git", "check-ignore", "-q", "bench_out/bench.csv"], cwd=ROOT)
+    assert proc.returncode == 0
