@@ -358,8 +358,10 @@ def build_run(run: RunFiles, route: bool = True) -> dict:
     # fleet states (the analysis' own definitions: analysis.timeline)
     riders = (dict(zip(tasks["task_id"].astype(int), tasks["passengers"].fillna(1).astype(int)))
               if len(tasks) and "passengers" in tasks.columns else None)
+    # (at_end: the last frame shows the state a vehicle ended in, e.g. idle after its last
+    # task completed at the run's last instant, not "at its task" with nothing left)
     st = fleet_states(events.assign(run_id=run.run_id), vehicles.assign(run_id=run.run_id),
-                      end=end, passengers=riders)
+                      end=end, passengers=riders, at_end=True)
     st = st.sort_values(["agent_id", "start"], kind="stable")
     st = overlay(st, duty_spells(events, vehicles, end))
     states = (*FLEET_STATES, *DUTY_STATES)

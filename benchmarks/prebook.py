@@ -84,12 +84,12 @@ def one(share: int, agents: int, seed: int, start: str, hours: float, mode: str,
         path = Path(tmp) / "nyc_manhattan_prebook.toml"
         text = scenario_text(share, agents, seed, start, hours, mode, lead, allocator, capacity)
         path.write_text(text)
-        trips = load_scenario(path, force=True).tasks.trips
+        trips = load_scenario(path, ignore_limits=True).tasks.trips
         # the window's requests only: those departing before its end (the hour after it
         # finishes their rides)
         n = int((trips.t < hours * 3600.0).sum())
         path.write_text(text.replace("[tasks]\n", f"[tasks]\ncount = {n}\n"))
-        [spec] = load_scenario(path, force=True).runs()
+        [spec] = load_scenario(path, ignore_limits=True).runs()
         t0 = time.perf_counter()
         r = run_one(spec)
         wall = time.perf_counter() - t0

@@ -363,12 +363,12 @@ try:  # the base classes when the (optional) packages are installed
     import gymnasium as _gymnasium
 
     _GymEnv = _gymnasium.Env
-except ImportError:  # pragma: no cover - the magnnet extra brings gymnasium
+except ImportError:  # pragma: no cover - the learning (or magnnet) extra brings gymnasium
     _GymEnv = object
 
 try:
     from pettingzoo import ParallelEnv as _ParallelEnv
-except ImportError:  # pragma: no cover - the magnnet extra brings pettingzoo
+except ImportError:  # pragma: no cover - the learning (or magnnet) extra brings pettingzoo
     _ParallelEnv = object
 
 

@@ -191,7 +191,7 @@ class Planner(ABC):
     def budget(self, *, agents: int, tasks: float, duration: float) -> str | None:
         """A sentence saying why a run of that many vehicles and (expected) tasks over that
         many simulated seconds would not finish with this planner's parameters, None when it
-        would (the default); ``dispatch validate`` refuses the run with it (``--force`` runs
+        would (the default); ``dispatch validate`` refuses the run with it (``--ignore-limits`` runs
         anyway). See :mod:`dispatch.scenario.budget`."""
         return None
 

@@ -34,13 +34,13 @@ from dispatch.config.world import WorldConfig
 from dispatch.errors import ScenarioError
 
 #: Resource bounds. Past a ``Limits`` value a scenario is refused with a clear error that
-#: names the override (``--force``); past a hard bound it is refused whatever.
+#: names the override (``--ignore-limits``); past a hard bound it is refused whatever.
 MAX_SEED = 2**63 - 1  # seeds are stored as int64 (Parquet); hard
 
 
 @dataclass(frozen=True)
 class Limits:
-    """Soft resource bounds, checked by :func:`check_limits` (``--force`` skips them)."""
+    """Soft resource bounds, checked by :func:`check_limits` (``--ignore-limits`` skips them)."""
 
     file_bytes: int = 8 * 2**20  # a scenario file
     input_bytes: int = 512 * 2**20  # a trace or fleet start file

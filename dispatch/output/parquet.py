@@ -86,9 +86,10 @@ SCHEMAS: dict[str, pa.Schema] = {
         # [fleet.energy] (nan, and 0 charges and strandings, without): the fleet's kWh drawn
         # and charged, charges started (plug-ins), vehicles stranded (battery empty), the
         # lowest state of charge a vehicle reached and the fleet's mean at the end (0-1),
-        # seconds the fleet queued at stations (dispatch.output.energy)
+        # seconds the fleet queued at stations, the part of kwh_drawn the auxiliary load
+        # (idle_kwh_per_hour, idle or driving) drew: the rest is driving (dispatch.output.energy)
         ("kwh_drawn", _F), ("kwh_charged", _F), ("charges", _I), ("strandings", _I),
-        ("soc_min", _F), ("soc_end_mean", _F), ("queue_seconds", _F),
+        ("soc_min", _F), ("soc_end_mean", _F), ("queue_seconds", _F), ("kwh_auxiliary", _F),
         # meeting points (dispatch.decide.meeting): mean metres walked per completed ride (to board
         # plus from alighting; 0 door to door), candidate points found, and points within a
         # radius left out by [tasks] meeting_points

@@ -17,13 +17,17 @@ from dispatch.run.progress import Heartbeat
 
 class _Output:
     """What a registered command writes through: ``print`` a line of output, ``warn`` a
-    warning on stderr (one line each, as the CLI's own)."""
+    warning on stderr (one line each, as the CLI's own), ``show`` a rich renderable (a table,
+    laid out to the terminal's width)."""
 
     def __init__(self, console, err) -> None:
         self.console, self.err = console, err
 
     def print(self, text: str) -> None:
         self.console.print(text, highlight=False, soft_wrap=True, markup=False, emoji=False)
+
+    def show(self, renderable) -> None:
+        self.console.print(renderable)
 
     def warn(self, text: str) -> None:
         from rich.markup import escape
@@ -67,40 +71,64 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _run(args, console) -> int:
-    from dispatch.run.resume import holds_results
+    """Run the scenario's runs into ``--out``. A run the folder already holds whole, made from
+    the same scenario settings, is not run again: its stored summary is shown and a line says
+    where it is (``--overwrite`` runs it again); a partition holding anything else (another
+    text's run of the same id, a run cut short) is refused, not silently replaced."""
+    from dispatch.run.resume import holds_results, is_complete, read_summary
     from dispatch.run.runner import default_out, execute
 
     sc, specs = checked_specs(args)
     out = args.out or default_out(specs[0])
-    held = [s.run_id for s in specs if holds_results(out, s)]
-    if held and not args.force:
-        more = f" and {len(held) - 1} more" if len(held) > 1 else ""
-        raise DispatchError(f"{out}/ already holds results of {held[0]}{more}; use --force to "
-                            f"overwrite them, another --out, or dispatch sweep to resume")
+    stored: dict[int, dict] = {}
+    if not args.overwrite:
+        other = []
+        for i, s in enumerate(specs):
+            if holds_results(out, s):
+                if is_complete(out, s):
+                    stored[i] = {**read_summary(out, s), **s.keys}
+                else:
+                    other.append(s.run_id)
+        if other:
+            more = f" and {len(other) - 1} more" if len(other) > 1 else ""
+            raise DispatchError(f"{out}/ already holds other results of {other[0]}{more} (another "
+                                f"version of the scenario, or a run cut short); use --overwrite "
+                                f"to replace them, or another --out")
+    todo = [s for i, s in enumerate(specs) if i not in stored]
     started = time.perf_counter()
-    single = len(specs) == 1
-    if single:  # one long run: simulated time, wall time, requests released and closed
-        with _run_progress(console, specs[0]) as report:
-            summaries = execute(specs, out, progress=report)
-    else:  # (rich.progress imported here: a single run off a terminal does without it)
+    if len(todo) == 1:  # one long run: simulated time, wall time, requests released and closed
+        with _run_progress(console, todo[0]) as report:
+            fresh = execute(todo, out, progress=report)
+    elif todo:  # (rich.progress imported here: a single run off a terminal does without it)
         from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
                                    TimeElapsedColumn)
 
         finished = []
         with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                       TimeElapsedColumn(), console=console, transient=True) as progress, \
-                Heartbeat(console, lambda: f"{sc.name}: {len(finished)} of {len(specs)} "
+                Heartbeat(console, lambda: f"{sc.name}: {len(finished)} of {len(todo)} "
                            "runs done" + (f" (last: {finished[-1]})" if finished else "")):
-            bar = progress.add_task(f"{sc.name}", total=len(specs))
+            bar = progress.add_task(f"{sc.name}", total=len(todo))
 
             def done(result):
                 finished.append(result.spec.run_id)
                 progress.update(bar, advance=1, description=result.spec.run_id)
 
-            summaries = execute(specs, out, on_done=done)
+            fresh = execute(todo, out, on_done=done)
+    else:
+        fresh = []
+    ran = iter(fresh)
+    summaries = [stored[i] if i in stored else next(ran) for i in range(len(specs))]
     _tables(summaries, console, sc)
-    console.print(f"{len(specs)} run(s) in {time.perf_counter() - started:.1f} s; "
-                  f"Parquet written to {out}/", soft_wrap=True)
+    if stored:
+        first = specs[min(stored)].run_id
+        more = f" and {len(stored) - 1} more" if len(stored) > 1 else ""
+        console.print(f"[yellow]note[/]: {len(stored)} run(s) already in {out}/ ({first}{more}) "
+                      "shown from there, not run again; --overwrite runs them again",
+                      highlight=False, soft_wrap=True)
+    if todo:
+        console.print(f"{len(todo)} run(s) in {time.perf_counter() - started:.1f} s; "
+                      f"Parquet written to {out}/", soft_wrap=True)
     return 0
 
 
@@ -256,7 +284,7 @@ def _sweep(args, console) -> int:
                                                             sorted(counts.items())))
 
         outcomes = sweep(specs, out, workers=args.workers, ray=args.ray is not None,
-                         address=args.ray or None, force=args.force, on_done=done)
+                         address=args.ray or None, overwrite=args.overwrite, on_done=done)
     summaries = [o.summary for o in outcomes if o.summary is not None]
     if summaries:
         _tables(summaries, console, sc)
@@ -337,7 +365,7 @@ def _new(args, console) -> int:
     """``dispatch new allocator NAME``: see :mod:`dispatch.checks.scaffold`."""
     from dispatch.checks.scaffold import new_allocator
 
-    root = new_allocator(args.name, args.out, force=args.force)
+    root = new_allocator(args.name, args.out, overwrite=args.overwrite)
     console.print(f"wrote {root}/ (pyproject.toml, dispatch_{args.name}/allocator.py, tests, "
                   f"README.md); next: pip install -e {root} && dispatch check {args.name}",
                   highlight=False, soft_wrap=True)

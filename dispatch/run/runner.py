@@ -224,7 +224,7 @@ def sweep(
     workers: int | None = None,
     ray: bool = False,
     address: str | None = None,
-    force: bool = False,
+    overwrite: bool = False,
     on_done: Callable[[Outcome], None] | None = None,
     time_limit: float | None = None,
 ) -> list[Outcome]:
@@ -233,7 +233,7 @@ def sweep(
     ``workers``: processes of the local pool (default: the CPU count; 1 runs in this process)
     or CPUs of a local Ray instance. ``ray``: run every run as a Ray task, on the cluster at
     ``address`` or on a local Ray started here (workers of a cluster need this package
-    installed and ``out`` on a file system they share). ``force``: redo complete runs too.
+    installed and ``out`` on a file system they share). ``overwrite``: run complete runs again too.
     ``on_done`` is called in this process as each run finishes or is skipped.
     ``time_limit``: wall seconds a run may take; one past it stops and fails with
     :class:`dispatch.run.time_limit.PastTimeLimit` (a timer in the worker's main thread, else the
@@ -245,7 +245,7 @@ def sweep(
     todo: list[tuple[int, RunSpec]] = []
     for i, spec in enumerate(specs):
         old = legacy_variant(spec)
-        done = None if force else spec if is_complete(out, spec) else \
+        done = None if overwrite else spec if is_complete(out, spec) else \
             old if old is not None and is_complete(out, old) else None
         if done is not None:
             try:  # a run of an older layout reads as this one (its name, its window)

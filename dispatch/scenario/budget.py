@@ -3,7 +3,7 @@
 The size bounds of :class:`dispatch.config.scenario.Limits` (cells, vehicles, releases, ...) keep a
 run in memory; these keep it in time. Each estimates the work of a run from the scenario
 alone, before anything is built, and refuses past a bound with the estimate, the bound and
-what to change (``--force`` runs anyway), as the size bounds do:
+what to change (``--ignore-limits`` runs anyway), as the size bounds do:
 
 * **task-decisions** (voxel worlds): every decision looks at every open task it considers (a
   distance field each, recomputed when the field cache cannot hold them all), so a run's work
@@ -186,7 +186,7 @@ def check_planner_budget(sc, specs, planner, name: str) -> None:
     """Ask ``planner`` (built with the scenario's parameters) whether the runs of ``specs``
     that use it are within its own bound; raise ScenarioError (key
     ``dispatch.planner_params``) with its sentence when not."""
-    from dispatch.errors import FORCE_HINT, ScenarioError
+    from dispatch.errors import LIMITS_HINT, ScenarioError
 
     seen = set()
     for s in specs:
@@ -199,4 +199,4 @@ def check_planner_budget(sc, specs, planner, name: str) -> None:
         reason = planner.budget(agents=s.agents, tasks=key[1], duration=s.scenario.duration)
         if reason:
             raise ScenarioError(sc.path, "dispatch.planner_params",
-                                f"planner {name!r}: {reason}; {FORCE_HINT}")
+                                f"planner {name!r}: {reason}; {LIMITS_HINT}")

@@ -39,11 +39,12 @@ from dispatch.config.tasks import EMPIRICAL_MAX_WAIT, SOURCES, TaskConfig
 from dispatch.config.transit import TransitConfig
 from dispatch.config.world import RoadConfig, WorldConfig
 from dispatch.decide.prebook import MODES as PREBOOK_MODES
-from dispatch.errors import FORCE_HINT, ScenarioError
+from dispatch.errors import LIMITS_HINT, ScenarioError
 from dispatch.files.tables import check_file, decode_text, read_bytes
 from dispatch.files.traces import (IdColumnMissing, Trips, parse_datetime, read_fleet_capacities,
                                    read_fleet_start, read_trace, shipped_trace, within_snap)
 from dispatch.fleet.shifts import read_shifts
+from dispatch.scenario.notes import say_dropped
 from dispatch.scenario.sections import (parse_acceptor, parse_allocators, parse_breaks,
                                         parse_charging, parse_energy, parse_faults, parse_pricing,
                                         parse_reposition, parse_world)
@@ -54,16 +55,17 @@ from dispatch.scenario.toml_table import Table, did_you_mean
 log = logging.getLogger(__name__)
 
 
-def load_scenario(path: str | Path, *, force: bool = False,
+def load_scenario(path: str | Path, *, ignore_limits: bool = False,
                   overrides: list[tuple[str, str, str]] = ()) -> Scenario:
     """Read and validate a scenario file; raise ScenarioError naming file, key and reason.
     ``overrides`` (``(dotted key, TOML value, option)``, see :mod:`dispatch.scenario.overrides`) are
     written into its text before it is parsed, once.
 
-    The file must be a regular file of at most ``Limits.file_bytes`` (``force``: any size) in
-    UTF-8; the traces and start files it names are size-checked before they are read too."""
+    The file must be a regular file of at most ``Limits.file_bytes`` (``ignore_limits``: any
+    size) in UTF-8; the traces and start files it names are size-checked before they are read
+    too."""
     path = Path(path)
-    limits = None if force else LIMITS
+    limits = None if ignore_limits else LIMITS
     data = read_bytes(path, None if limits is None else limits.file_bytes, "scenario file")
     text = decode_text(path, data)
     try:
@@ -193,9 +195,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
                                           f"{', '.join(e.columns)})") from None
         if max_snap is not None:
             trips = _within_snap(t, trips, world, max_snap)
-        for reason, n in trips.dropped:
-            log.warning("%s: %d of %d trips left out: %s", trace_path.name, n,
-                        n + len(trips), reason)
+        say_dropped(trace_path, trips)
         tasks = replace(tasks, trace=trace_path, trips=trips, start=start, max_snap=max_snap,
                         id_column=id_column)
     elif trace is not None:
@@ -450,12 +450,12 @@ def _parse_empirical(t: Table, tasks: TaskConfig, world: WorldConfig,
 
 
 def check_limits(sc: Scenario, specs: list[RunSpec], limits: Limits = LIMITS) -> None:
-    """Refuse runs that would not finish or not fit in memory (``--force`` skips this): too
+    """Refuse runs that would not finish or not fit in memory (``--ignore-limits`` skips this): too
     many runs, voxel cells, vehicles, static tasks, releases of a generated source, or
     intersections of a generated grid. Each refusal names the key, the amount and the bound."""
 
     def refuse(key: str, what: str) -> ScenarioError:
-        return ScenarioError(sc.path, key, f"{what}; {FORCE_HINT}")
+        return ScenarioError(sc.path, key, f"{what}; {LIMITS_HINT}")
 
     sweep_key = "sweep" if sc.sweep.declared else "<runs>"
     if len(specs) > limits.runs:

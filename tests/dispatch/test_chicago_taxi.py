@@ -271,7 +271,7 @@ def test_a_short_empirical_run(tmp_path):
     ('size = [10, 10, 5]\ncongestion = "chicago_taxi"', "", 'source = "static"',
      ["world.congestion", "road network"]),
     ('network = "chicago"', "", 'source = "empirical"\ntrips_per_day = 3e6',
-     ["tasks.trips_per_day", "--force"]),
+     ["tasks.trips_per_day", "--ignore-limits"]),
 ])
 def test_bad_keys_one_line(tmp_path, capsys, world, fleet, tasks, words):
     path = tmp_path / "bad.toml"

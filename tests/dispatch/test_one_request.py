@@ -78,7 +78,7 @@ def run_tables(name: str, out: Path, general: bool, monkeypatch, allocator) -> t
         return real(d)
 
     monkeypatch.setattr(pipeline, "decided", counted)
-    scenario = load_scenario(ROOT / "scenarios" / name, force=True,
+    scenario = load_scenario(ROOT / "scenarios" / name, ignore_limits=True,
                              overrides=[("duration", "1200.0", "test")])
     specs = scenario.runs(allocator=allocator)
     execute(specs[:1], out)
