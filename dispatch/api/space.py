@@ -106,6 +106,13 @@ class Space(ABC):
     #: :meth:`position`), where locations may be node indices (a road network); None in a
     #: space without nodes
     node_positions: Sequence[Position] | None = None
+    #: Metres per second that no drive beats in a straight line, where the space has nodes
+    #: and promises it: for any nodes ``a`` and ``b``, the distance between
+    #: ``node_positions[a]`` and ``node_positions[b]`` over ``top_speed`` never exceeds the
+    #: seconds of the fastest drive from ``a`` to ``b`` by the space's own times (a road
+    #: network: the largest straight-line speed of any one edge, so by the triangle
+    #: inequality of every path). None: no such promise (the default).
+    top_speed: float | None = None
 
     # ------------------------------------------------------------ of its configuration
     @classmethod

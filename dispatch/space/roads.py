@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import functools
 import logging
+import math
 from collections.abc import Sequence
 from functools import cached_property
 from pathlib import Path
@@ -37,9 +38,9 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from dispatch.api.legs import Leg, RoadPoint
 from dispatch.api.legs import as_point as _as_point
 from dispatch.api.space import Space
-from dispatch.space.road_edges import EdgeTable
 from dispatch.files.roads import RoadGraph, locate, read_graph
 from dispatch.locations import Position
+from dispatch.space.road_edges import EdgeTable
 
 log = logging.getLogger(__name__)
 
@@ -151,6 +152,18 @@ class RoadNetwork(Space):
         """``(x, y, 0.0)`` of every node as Python floats (events are placed one by one):
         ``position(i)`` of node ``i`` is ``node_positions[i]``."""
         return [(float(x), float(y), 0.0) for x, y in self.xy.tolist()]
+
+    @cached_property
+    def top_speed(self) -> float | None:
+        """The largest straight-line speed of any edge (metres between its ends over its
+        seconds): no path is faster in a straight line, since its straight line is at most
+        the sum of its edges' (:attr:`dispatch.api.space.Space.top_speed`). None for a
+        network without edges or whose nodes all stand on one point."""
+        t = self.time
+        rows = np.repeat(np.arange(self.n), np.diff(t.indptr))
+        straight = np.hypot(*(self.xy[t.indices] - self.xy[rows]).T) / t.data
+        top = float(straight.max()) if straight.size else 0.0
+        return top if top > 0 and math.isfinite(top) else None
 
     def position(self, loc: RoadPoint | int) -> Position:
         """``(x, y, 0.0)`` metres: the node's, or for a point part-way along ``prev -> node``
