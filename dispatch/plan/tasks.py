@@ -36,6 +36,7 @@ import simpy
 from dispatch.api.problem import TaskView
 from dispatch.config.tasks import TaskConfig
 from dispatch.events import EventBus
+from dispatch.files.empirical import draw_day, load_sample
 from dispatch.locations import Location
 
 log = logging.getLogger(__name__)
@@ -353,8 +354,6 @@ class TaskSource:
         (:class:`dispatch.decide.prebook.PrebookSource`)."""
         trips = tasks.trips
         if tasks.source == "empirical":
-            from dispatch.files.empirical import draw_day, load_sample
-
             trips = draw_day(load_sample(), tasks.trips_per_day, day_rng(), tasks.weekday)
         return cls(env, book, demand, tasks, count, rng, notify=notify, trips=trips, **extra)
 

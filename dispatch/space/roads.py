@@ -38,6 +38,7 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from dispatch.api.legs import Leg, RoadPoint
 from dispatch.api.legs import as_point as _as_point
 from dispatch.api.space import Space
+from dispatch.errors import ScenarioError
 from dispatch.files.roads import RoadGraph, locate, read_graph
 from dispatch.locations import Position
 from dispatch.space.road_edges import EdgeTable
@@ -404,8 +405,6 @@ def network_for(cfg, scenario_path=None) -> RoadNetwork:
     """The road network of a ``[world]`` road configuration (loading is cached by the loader);
     a file that cannot be loaded is a ScenarioError naming the scenario file and
     ``world.network``."""
-    from dispatch.errors import ScenarioError
-
     try:
         return load_network(cfg.network, base=cfg.base, blocks=cfg.blocks, block=cfg.block,
                             speed=cfg.speed)
