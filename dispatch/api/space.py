@@ -110,9 +110,13 @@ class Space(ABC):
     #: and promises it: for any nodes ``a`` and ``b``, the distance between
     #: ``node_positions[a]`` and ``node_positions[b]`` over ``top_speed`` never exceeds the
     #: seconds of the fastest drive from ``a`` to ``b`` by the space's own times (a road
-    #: network: the largest straight-line speed of any one edge, so by the triangle
-    #: inequality of every path). None: no such promise (the default).
+    #: network: the fastest edge's straight-line speed, so by the triangle inequality of
+    #: every path's). None: no such promise (the default).
     top_speed: float | None = None
+    #: Further promises of that kind, each ``(speed, slack)``: the distance less ``slack``
+    #: metres, over ``speed``, never exceeds the fastest drive's seconds (a slower speed that
+    #: all but a few edges keep to, the metres those exceed it by in all). Empty: none.
+    speed_slacks: tuple[tuple[float, float], ...] = ()
 
     # ------------------------------------------------------------ of its configuration
     @classmethod

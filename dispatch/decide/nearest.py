@@ -3,11 +3,11 @@
 An allocator that declares :attr:`dispatch.api.contracts.Allocator.nearest_cut` gives a
 request of its own to the vehicle of least cost (the lowest id among equal costs), so only
 the vehicles that might have that cost matter. Where the space promises a top speed
-(:attr:`dispatch.api.space.Space.top_speed`) and the planner that no cost beats it
-(:attr:`dispatch.api.contracts.Planner.drive_floor`), each idle vehicle's straight line to the
-pickup over that speed, times the floor, is a lower bound of its drive there, and every cost
-a decision gives an idle vehicle (the drive; with plans the drive plus the service and the
-direct trip; ``inf`` past a limit) is at least its drive. :func:`visit` therefore takes the
+(:attr:`dispatch.api.space.Space.top_speed`, and slower ones with their slack) and the
+planner that no cost beats it (:attr:`dispatch.api.contracts.Planner.drive_floor`), each idle
+vehicle's straight line to the pickup over that speed (:func:`seconds`), times the floor, is a
+lower bound of its drive there, and every cost a decision gives an idle vehicle (the drive; with plans the drive
+plus the service and the direct trip; ``inf`` past a limit) is at least its drive. :func:`visit` therefore takes the
 idle vehicles standing nearest first, ring by ring of the fleet's index
 (:class:`dispatch.plan.idle_places.IdlePlaces`), costs those whose bound is at most the least
 cost found so far, and stops once every vehicle not yet reached is bound to cost more, or to
@@ -42,6 +42,18 @@ WHOLE = object()
 SLACK = 1e-9
 
 
+def seconds(metres: np.ndarray, speeds: tuple[tuple[float, float], ...]) -> np.ndarray:
+    """The least seconds in which a drive covers ``metres`` of straight line: the largest of
+    ``(metres - slack) / speed`` over the promises ``speeds`` (``(speed, slack)`` pairs: the
+    top speed with no slack, and slower speeds with theirs: see
+    :attr:`dispatch.api.space.Space.speed_slacks`), at least 0, less :data:`SLACK` of itself."""
+    metres = np.asarray(metres, dtype=np.float64)
+    out = np.zeros(metres.shape)
+    for speed, slack in speeds:
+        np.maximum(out, (metres - slack) / speed, out=out)
+    return out * (1.0 - SLACK)
+
+
 def cap(deadline: float, now: float) -> float:
     """Seconds of drive past which a vehicle reaches a pickup of ``deadline`` too late at
     ``now`` (the decision's limit is ``now + cost <= deadline + 1e-9``), with room for the
@@ -50,16 +62,16 @@ def cap(deadline: float, now: float) -> float:
 
 
 def visit(rings: Iterable[tuple[list[int], float]], bound: Callable[[np.ndarray], np.ndarray],
-          cost: Callable[[np.ndarray], float], *, speed: float, best: float = math.inf,
-          late: float = math.inf) -> float:
+          cost: Callable[[np.ndarray], float], *, speeds: tuple[tuple[float, float], ...],
+          best: float = math.inf, late: float = math.inf) -> float:
     """Cost the vehicles of ``rings`` (``(slots, beyond)`` ring by ring, as
     :meth:`dispatch.plan.idle_places.IdlePlaces.rings` yields them: ``beyond`` the metres
     every later vehicle stands at least away) while one may cost at most the least cost found;
     return that least cost (``inf``: none found).
 
     ``bound(slots)``: a lower bound of each vehicle's cost (seconds); ``cost(slots)``: costs
-    those vehicles (ascending positions), returns their least cost; ``speed``: metres per
-    second that turn ``beyond`` into a bound; ``best``: the least cost of vehicles costed
+    those vehicles (ascending positions), returns their least cost; ``speeds``: the
+    ``(speed, slack)`` promises that turn ``beyond`` into a bound (:func:`seconds`); ``best``: the least cost of vehicles costed
     before; ``late``: seconds of bound past which a vehicle's cost is ``inf`` anyway.
 
     Every vehicle whose bound is at most the returned cost (and at most ``late``) is costed,
@@ -76,7 +88,7 @@ def visit(rings: Iterable[tuple[list[int], float]], bound: Callable[[np.ndarray]
         if take.any():
             best = min(best, cost(np.sort(slots[take])))
             slots, bounds = slots[~take], bounds[~take]
-        if beyond / speed * (1.0 - SLACK) > min(best, late):
+        if seconds(beyond, speeds) > min(best, late):
             break
     return best
 
@@ -144,7 +156,7 @@ def search(pipe, now: float):
     def cost(slots: np.ndarray) -> float:
         return parts.add(slots, *costed(pipe, now, slots, requests, views))
 
-    places, best, speed = fleet.places, math.inf, pipe.speed
+    places, best, speeds = fleet.places, math.inf, pipe.speeds
     first = np.fromiter(places.moving, np.int64, len(places.moving))
     if pipe.pooled:  # busy vehicles with a free seat: no bound, costed always
         first = np.union1d(first, np.flatnonzero(fleet.busy_mask & fleet.room))
@@ -155,9 +167,9 @@ def search(pipe, now: float):
 
     def bound(slots: np.ndarray) -> np.ndarray:
         d = xy[fleet.node[slots]] - (x, y)
-        return np.hypot(d[:, 0], d[:, 1]) / speed * (1.0 - SLACK)
+        return seconds(np.hypot(d[:, 0], d[:, 1]), speeds)
 
-    best = visit(places.rings(x, y), bound, cost, speed=speed, best=best,
+    best = visit(places.rings(x, y), bound, cost, speeds=speeds, best=best,
                  late=cap(task.deadline, now))
     slots, drive, cost_col, inserts = parts.joined()
     if math.isfinite(best):

@@ -310,12 +310,14 @@ class Pipeline:
         self.table = PlanTable(len(fleet)) if self.plans else None
         #: the last request id whose direct drive time a decision has set (direct_times)
         self._seen = -1
-        #: the exact vehicle cut (dispatch.decide.nearest): metres per second of the bound of
-        #: a vehicle's cost where it may be taken (a one-request decision of an allocator
-        #: that declares it, in a space and with a planner that promise the bound, everyone
-        #: hearing everyone), else None
+        #: the exact vehicle cut (dispatch.decide.nearest): the ``(speed, slack)`` promises
+        #: that bound a vehicle's cost from its straight line (the planner's floor taken in),
+        #: where it may be taken (a one-request decision of an allocator that declares it, in
+        #: a space and with a planner that promise the bound, everyone hearing everyone); None
+        #: where not
         top, floor = space.top_speed, planner.drive_floor
-        self.speed = top / floor if (
+        self.speeds = tuple((s / floor, slack) for s, slack in
+                            ((top, 0.0), *space.speed_slacks)) if (
             self.one_request and allocator.nearest_cut and walks is None and links is None
             and fleet.places is not None and top and floor and floor > 0
             and (comms.range is None or math.isinf(comms.range))) else None
@@ -330,7 +332,7 @@ class Pipeline:
             return None
         if self.routes:
             self._seen = direct_times(self.book, self.planner.free_flow, self._seen)
-        if self.speed is not None and len(self.book.open) == 1 and not nearest.FULL \
+        if self.speeds is not None and len(self.book.open) == 1 and not nearest.FULL \
                 and not one_request.GENERAL:
             d = self.nearest(now)
             if d is not nearest.WHOLE:

@@ -155,16 +155,39 @@ class RoadNetwork(Space):
         return [(float(x), float(y), 0.0) for x, y in self.xy.tolist()]
 
     @cached_property
-    def top_speed(self) -> float | None:
-        """The largest straight-line speed of any edge (metres between its ends over its
-        seconds): no path is faster in a straight line, since its straight line is at most
-        the sum of its edges' (:attr:`dispatch.api.space.Space.top_speed`). None for a
-        network without edges or whose nodes all stand on one point."""
+    def _straight_line(self) -> tuple[float | None, tuple[tuple[float, float], ...]]:
+        """``(top_speed, speed_slacks)`` (see :attr:`dispatch.api.space.Space.top_speed`): a
+        fastest drive's straight line is at most the sum of its edges' straight lines, each at
+        most ``speed`` times the edge's seconds plus what it exceeds that by, and a fastest
+        path takes an edge at most once, so the excesses of all edges bound the slack. The
+        top speed is the fastest edge's (no slack); the slower speeds are a few percentiles
+        of the edges' own, each with its slack: a few edges whose ends lie further apart than
+        their time would let a car drive (a zone's connector) would otherwise weaken every
+        bound."""
         t = self.time
         rows = np.repeat(np.arange(self.n), np.diff(t.indptr))
-        straight = np.hypot(*(self.xy[t.indices] - self.xy[rows]).T) / t.data
-        top = float(straight.max()) if straight.size else 0.0
-        return top if top > 0 and math.isfinite(top) else None
+        straight = np.hypot(*(self.xy[t.indices] - self.xy[rows]).T)
+        speed = straight / t.data
+        top = float(speed.max()) if speed.size else 0.0
+        if not (top > 0 and math.isfinite(top)):
+            return None, ()
+        margin = 1e-9 * float(straight.sum())  # (the rounding of the sums)
+        slower = []
+        for s in np.unique(np.percentile(speed, [90, 95, 99, 99.5, 99.9, 99.99])).tolist():
+            if 0 < s < top:
+                slower.append((s, float(np.maximum(straight - s * t.data, 0.0).sum()) + margin))
+        return top, tuple(slower)
+
+    @property
+    def top_speed(self) -> float | None:
+        """See :attr:`_straight_line`; None for a network without edges or whose nodes all
+        stand on one point."""
+        return self._straight_line[0]
+
+    @property
+    def speed_slacks(self) -> tuple[tuple[float, float], ...]:
+        """See :attr:`_straight_line`."""
+        return self._straight_line[1]
 
     def position(self, loc: RoadPoint | int) -> Position:
         """``(x, y, 0.0)`` metres: the node's, or for a point part-way along ``prev -> node``

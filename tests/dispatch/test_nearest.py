@@ -87,12 +87,18 @@ def column_problem(cost: np.ndarray, ids: np.ndarray) -> AllocationProblem:
 
 @pytest.mark.parametrize("seed", range(300))
 def test_top_speed_bounds_every_drive(seed):
-    """No drive between two nodes is shorter than their straight line over the top speed."""
+    """No drive between two nodes is shorter than their straight line, less the slack, over
+    the top speed; the top speed is no faster than the fastest edge's."""
     net = random_network(np.random.default_rng(seed))
-    top = net.top_speed
     t = dijkstra(net.time)
     d = np.hypot(*(net.xy[:, None, :] - net.xy[None, :, :]).transpose(2, 0, 1))
-    assert top is not None and (d / top * (1 - nearest.SLACK) <= t).all()
+    assert net.top_speed is not None
+    assert (d / net.top_speed * (1 - nearest.SLACK) <= t).all()
+    for speed, slack in net.speed_slacks:
+        assert 0 < speed < net.top_speed and slack >= 0
+        assert (nearest.seconds(d, ((speed, slack),)) <= t).all()
+    speeds = ((net.top_speed, 0.0), *net.speed_slacks)
+    assert (nearest.seconds(d, speeds) <= t).all()
 
 
 @pytest.mark.parametrize("seed", range(400))
@@ -131,12 +137,12 @@ def test_cut_chooses_what_the_full_column_chooses(seed):
     if moving.size:
         best = cost(moving)
     x, y = net.xy[task]
-    speed = net.top_speed
+    speeds = ((net.top_speed, 0.0), *net.speed_slacks)
 
     def bound(slots):
-        return np.hypot(*(net.xy[node[slots]] - (x, y)).T) / speed * (1 - nearest.SLACK)
+        return nearest.seconds(np.hypot(*(net.xy[node[slots]] - (x, y)).T), speeds)
 
-    best = nearest.visit(places.rings(x, y), bound, cost, speed=speed, best=best,
+    best = nearest.visit(places.rings(x, y), bound, cost, speeds=speeds, best=best,
                          late=nearest.cap(late, 0.0))
     assert len(costed) == len(set(costed)) and set(costed) <= set(idle.tolist())
     skipped = np.setdiff1d(idle, costed)
@@ -192,11 +198,7 @@ def run_tables(name: str, out: Path, full: bool, monkeypatch, allocator, hours=N
     the fleet's arrays."""
     monkeypatch.setattr(nearest, "FULL", full)
     costed = [0]
-    real_costed, real_search = nearest.costed, nearest.search
-
-    def counted(pipe, now, slots, requests, views):
-        costed[0] += len(slots)
-        return real_costed(pipe, now, slots, requests, views)
+    real_search = nearest.search
 
     def checked(pipe, now):
         fleet = pipe.fleet
@@ -208,7 +210,6 @@ def run_tables(name: str, out: Path, full: bool, monkeypatch, allocator, hours=N
             assert fleet.places.key[s] == fleet.places.cell_of_node[fleet.node[s]]
         return real_search(pipe, now)
 
-    monkeypatch.setattr(nearest, "costed", counted)
     monkeypatch.setattr(nearest, "search", checked)
     real_call = pipeline.PlannerCosts.__call__
 
