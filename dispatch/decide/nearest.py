@@ -19,7 +19,9 @@ shared rides, busy vehicles with a free seat are costed always (their costs have
 bound).
 
 The decision still counts every candidate vehicle (``n_idle`` of the ``decisions`` table), so
-its rows are those of the whole column. :data:`FULL` (a test switch) turns the cut off.
+its rows are those of the whole column. A decision of fewer than :data:`MIN_CANDIDATES`
+candidates costs the whole column (it takes fewer operations); :data:`FULL` (a test switch)
+turns the cut off.
 """
 
 from __future__ import annotations
@@ -35,6 +37,15 @@ from dispatch.decide.planner_costs import deadlines, reject_late
 
 #: True: every decision costs the whole column (tests compare the two)
 FULL = False
+#: The fewest candidate vehicles a decision is cut at. Below it the whole column costs fewer
+#: operations than the search: with the road planner a vehicle's cost is one read of the
+#: pickup's cached field (a gather over the column), while the search pays a fixed few dozen
+#: array operations per decision (the rings, the bounds, a costing per batch, the parts
+#: joined). Tests set it to 0.
+MIN_CANDIDATES = 2048
+#: Vehicles gathered from the rings before they are costed (unless the rings end or the next
+#: ring is bound to be dearer first): fewer, larger costings.
+BATCH = 16
 #: :func:`search`'s answer where only the whole column can tell
 WHOLE = object()
 #: Relative slack taken off every bound: the rounding of a long path's summed edge times, and
@@ -42,13 +53,14 @@ WHOLE = object()
 SLACK = 1e-9
 
 
-def seconds(metres: np.ndarray, speeds: tuple[tuple[float, float], ...]) -> np.ndarray:
-    """The least seconds in which a drive covers ``metres`` of straight line: the largest of
-    ``(metres - slack) / speed`` over the promises ``speeds`` (``(speed, slack)`` pairs: the
-    top speed with no slack, and slower speeds with theirs: see
+def seconds(metres, speeds: tuple[tuple[float, float], ...]):
+    """The least seconds in which a drive covers ``metres`` of straight line (a number or an
+    array): the largest of ``(metres - slack) / speed`` over the promises ``speeds``
+    (``(speed, slack)`` pairs: the top speed with no slack, and slower speeds with theirs: see
     :attr:`dispatch.api.space.Space.speed_slacks`), at least 0, less :data:`SLACK` of itself."""
-    metres = np.asarray(metres, dtype=np.float64)
-    out = np.zeros(metres.shape)
+    if isinstance(metres, float):
+        return max(0.0, *((metres - slack) / speed for speed, slack in speeds)) * (1.0 - SLACK)
+    out = np.zeros(np.shape(metres))
     for speed, slack in speeds:
         np.maximum(out, (metres - slack) / speed, out=out)
     return out * (1.0 - SLACK)
@@ -71,24 +83,30 @@ def visit(rings: Iterable[tuple[list[int], float]], bound: Callable[[np.ndarray]
 
     ``bound(slots)``: a lower bound of each vehicle's cost (seconds); ``cost(slots)``: costs
     those vehicles (ascending positions), returns their least cost; ``speeds``: the
-    ``(speed, slack)`` promises that turn ``beyond`` into a bound (:func:`seconds`); ``best``: the least cost of vehicles costed
-    before; ``late``: seconds of bound past which a vehicle's cost is ``inf`` anyway.
+    ``(speed, slack)`` promises that turn ``beyond`` into a bound (:func:`seconds`); ``best``:
+    the least cost of vehicles costed before; ``late``: seconds of bound past which a
+    vehicle's cost is ``inf`` anyway.
 
     Every vehicle whose bound is at most the returned cost (and at most ``late``) is costed,
-    each once."""
-    slots = np.zeros(0, np.int64)
-    bounds = np.zeros(0)
+    each once. Rings are gathered until :data:`BATCH` vehicles wait or the next ring is bound
+    to cost more than the least cost found: the vehicles waiting are then costed together."""
+    got: list[int] = []  # gathered, not yet bounded
+    slots, bounds = np.zeros(0, np.int64), np.zeros(0)
     for ring, beyond in rings:
-        if ring:
-            got = np.fromiter(ring, np.int64, len(ring))
-            slots = np.concatenate((slots, got))
-            bounds = np.concatenate((bounds, bound(got)))
-        limit = min(best, late)
-        take = bounds <= limit
+        got.extend(ring)
+        edge = seconds(float(beyond), speeds)
+        last = math.isinf(beyond)
+        if edge <= min(best, late) and len(got) + slots.size < BATCH and not last:
+            continue
+        if got:
+            new = np.array(got, np.int64)
+            slots, bounds = np.concatenate((slots, new)), np.concatenate((bounds, bound(new)))
+            got = []
+        take = bounds <= min(best, late)
         if take.any():
             best = min(best, cost(np.sort(slots[take])))
             slots, bounds = slots[~take], bounds[~take]
-        if seconds(beyond, speeds) > min(best, late):
+        if edge > min(best, late) or last:
             break
     return best
 
@@ -140,8 +158,9 @@ def search(pipe, now: float):
     costs and where a busy one's stops would go, and when it began (``perf_counter``); None
     where the decision has nothing to decide (no candidate vehicle; or none serves the
     request in time, which is then closed as the whole column would close it); :data:`WHOLE`
-    where only the whole column can tell (the request is not on a node; no vehicle found to
-    serve it, and more than its deadline might say why)."""
+    where the whole column is costed instead (fewer than :data:`MIN_CANDIDATES` candidates)
+    or only it can tell (the request is not on a node; no vehicle found to serve it, and more
+    than its deadline might say why)."""
     fleet, t0 = pipe.fleet, time.perf_counter()
     task = next(iter(pipe.book.open.values()))
     node, _, off = pipe.space.stands(task.loc)
@@ -151,13 +170,15 @@ def search(pipe, now: float):
     n = int(np.count_nonzero(mask))
     if not n:
         return None
+    if n < MIN_CANDIDATES:
+        return WHOLE
     requests, views, parts = [task], (task.view(),), Parts()
 
     def cost(slots: np.ndarray) -> float:
         return parts.add(slots, *costed(pipe, now, slots, requests, views))
 
     places, best, speeds = fleet.places, math.inf, pipe.speeds
-    first = np.fromiter(places.moving, np.int64, len(places.moving))
+    first = np.array(sorted(places.moving), np.int64)
     if pipe.pooled:  # busy vehicles with a free seat: no bound, costed always
         first = np.union1d(first, np.flatnonzero(fleet.busy_mask & fleet.room))
     if first.size:

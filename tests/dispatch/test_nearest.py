@@ -102,7 +102,7 @@ def test_top_speed_bounds_every_drive(seed):
 
 
 @pytest.mark.parametrize("seed", range(400))
-def test_cut_chooses_what_the_full_column_chooses(seed):
+def test_cut_chooses_what_the_full_column_chooses(seed, monkeypatch):
     """Random networks and fleets (idle vehicles standing, some driving, some busy; several on
     one node), a request's deadline and a cost above the drive (a plan's service and trip),
     some vehicles ruled out (a battery, a shift): every allocator that declares it may be cut
@@ -110,6 +110,7 @@ def test_cut_chooses_what_the_full_column_chooses(seed):
     too; every vehicle the cut skipped costs more than the least cost (or is late), and none
     is costed twice."""
     rng = np.random.default_rng(seed)
+    monkeypatch.setattr(nearest, "BATCH", int(rng.choice([1, 4, 16])))
     net = random_network(rng)
     n_fleet = int(rng.integers(1, 80))
     node = rng.integers(0, net.n, n_fleet)
@@ -197,6 +198,7 @@ def run_tables(name: str, out: Path, full: bool, monkeypatch, allocator, hours=N
     vehicles whose costs were computed. Each cut decision checks the fleet's index against
     the fleet's arrays."""
     monkeypatch.setattr(nearest, "FULL", full)
+    monkeypatch.setattr(nearest, "MIN_CANDIDATES", 0)
     costed = [0]
     real_search = nearest.search
 
