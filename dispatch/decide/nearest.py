@@ -45,7 +45,7 @@ FULL = False
 MIN_CANDIDATES = 2048
 #: Vehicles gathered from the rings before they are costed (unless the rings end or the next
 #: ring is bound to be dearer first): fewer, larger costings.
-BATCH = 16
+BATCH = 4
 #: :func:`search`'s answer where only the whole column can tell
 WHOLE = object()
 #: Relative slack taken off every bound: the rounding of a long path's summed edge times, and

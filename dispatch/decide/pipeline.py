@@ -319,8 +319,9 @@ class Pipeline:
         self.speeds = tuple((s / floor, slack) for s, slack in
                             ((top, 0.0), *space.speed_slacks)) if (
             self.one_request and allocator.nearest_cut and walks is None and links is None
-            and fleet.places is not None and top and floor and floor > 0
-            and (comms.range is None or math.isinf(comms.range))) else None
+            and top and floor and floor > 0 and len(fleet) >= nearest.MIN_CANDIDATES
+            and (comms.range is None or math.isinf(comms.range))
+            and fleet.index_places() is not None) else None
 
     def build(self, now: float) -> Decision | None:
         """The problem of a decision at ``now`` over the candidate vehicles and the open

@@ -271,11 +271,10 @@ class Fleet:
         self.plan_version = np.fromiter((v.plan_version for v in self.vehicles), np.int64, n)
         #: the node arrays hold (the space has nodes)
         self.road = n > 0 and all(space.stands(v.loc) is not None for v in self.vehicles)
-        #: the idle vehicles by place (dispatch.plan.idle_places), where the space promises a
-        #: top speed between its nodes (a decision may then search them nearest first:
-        #: dispatch.decide.nearest); None otherwise
-        self.places = IdlePlaces(np.asarray(space.node_positions, dtype=np.float64)[:, :2], n) \
-            if self.road and space.top_speed else None
+        #: the idle vehicles by place (dispatch.plan.idle_places), kept once a decision asks
+        #: for them (:meth:`index_places`); None until then
+        self.places: IdlePlaces | None = None
+        self._space = space
         for i, v in enumerate(self.vehicles):
             v._fleet, v._slot = self, i
             self.driving[i] = v.leg is not None
@@ -296,6 +295,17 @@ class Fleet:
         self.driving_or_off_node[i] = off or self.vehicles[i]._leg is not None
         if self.places is not None:
             self.place(i)
+
+    def index_places(self) -> IdlePlaces | None:
+        """Keep the idle vehicles by place from now on (:attr:`places`; a decision searches
+        them nearest first: :mod:`dispatch.decide.nearest`), where the space has nodes and
+        promises a top speed between them; None where it does not."""
+        if self.places is None and self.road and self._space.top_speed:
+            xy = np.asarray(self._space.node_positions, dtype=np.float64)[:, :2]
+            self.places = IdlePlaces(xy, len(self.vehicles))
+            for i in range(len(self.vehicles)):
+                self.place(i)
+        return self.places
 
     def place(self, i: int) -> None:
         """Put vehicle ``i`` where it belongs in :attr:`places`: out unless idle; idle and
