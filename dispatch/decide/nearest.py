@@ -4,14 +4,14 @@ An allocator that declares :attr:`dispatch.api.contracts.Allocator.nearest_cut` 
 request of its own to the vehicle of least cost (the lowest id among equal costs), so only
 the vehicles that might have that cost matter. Where the space promises a top speed
 (:attr:`dispatch.api.space.Space.top_speed`, and slower ones with their slack) and the
-planner that no cost beats it (:attr:`dispatch.api.contracts.Planner.drive_floor`), each idle
-vehicle's straight line to the pickup over that speed (:func:`seconds`), times the floor, is a
-lower bound of its drive there, and every cost a decision gives an idle vehicle (the drive; with plans the drive
-plus the service and the direct trip; ``inf`` past a limit) is at least its drive. :func:`visit` therefore takes the
-idle vehicles standing nearest first, ring by ring of the fleet's index
-(:class:`dispatch.plan.idle_places.IdlePlaces`), costs those whose bound is at most the least
-cost found so far, and stops once every vehicle not yet reached is bound to cost more, or to
-arrive after the request's deadline. Vehicles it never costs cost more than the least cost
+planner that no cost beats it (:attr:`dispatch.api.contracts.Planner.drive_floor`), each
+idle vehicle's straight line to the pickup over that speed (:func:`seconds`), times the
+floor, is a lower bound of its drive there, and every cost a decision gives an idle vehicle
+(the drive; with plans the drive plus the service and the direct trip; ``inf`` past a limit)
+is at least its drive. :func:`visit` therefore takes the idle vehicles standing nearest
+first, ring by ring of the fleet's index (:class:`dispatch.plan.idle_places.IdlePlaces`),
+costs those whose bound is at most the least cost found so far, and stops once every vehicle
+not yet reached is bound to cost more, or to arrive after the request's deadline. Vehicles it never costs cost more than the least cost
 found (strictly: a vehicle bound to cost exactly as much is costed, as it may have a lower
 id), so the decision over the vehicles it costed, in id order, takes the vehicle the whole
 column takes, at the same cost. Idle vehicles that are driving (repositioning) and, with

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import functools
 import logging
-import math
 from collections.abc import Sequence
 from functools import cached_property
 from pathlib import Path
@@ -41,7 +40,7 @@ from dispatch.api.space import Space
 from dispatch.errors import ScenarioError
 from dispatch.files.roads import RoadGraph, locate, read_graph
 from dispatch.locations import Position
-from dispatch.space.road_edges import EdgeTable
+from dispatch.space.road_edges import EdgeTable, straight_line
 
 log = logging.getLogger(__name__)
 
@@ -156,27 +155,8 @@ class RoadNetwork(Space):
 
     @cached_property
     def _straight_line(self) -> tuple[float | None, tuple[tuple[float, float], ...]]:
-        """``(top_speed, speed_slacks)`` (see :attr:`dispatch.api.space.Space.top_speed`): a
-        fastest drive's straight line is at most the sum of its edges' straight lines, each at
-        most ``speed`` times the edge's seconds plus what it exceeds that by, and a fastest
-        path takes an edge at most once, so the excesses of all edges bound the slack. The
-        top speed is the fastest edge's (no slack); the slower speeds are a few percentiles
-        of the edges' own, each with its slack: a few edges whose ends lie further apart than
-        their time would let a car drive (a zone's connector) would otherwise weaken every
-        bound."""
-        t = self.time
-        rows = np.repeat(np.arange(self.n), np.diff(t.indptr))
-        straight = np.hypot(*(self.xy[t.indices] - self.xy[rows]).T)
-        speed = straight / t.data
-        top = float(speed.max()) if speed.size else 0.0
-        if not (top > 0 and math.isfinite(top)):
-            return None, ()
-        margin = 1e-9 * float(straight.sum())  # (the rounding of the sums)
-        slower = []
-        for s in np.unique(np.percentile(speed, [90, 95, 99, 99.5, 99.9, 99.99])).tolist():
-            if 0 < s < top:
-                slower.append((s, float(np.maximum(straight - s * t.data, 0.0).sum()) + margin))
-        return top, tuple(slower)
+        """``(top_speed, speed_slacks)``: :func:`dispatch.space.road_edges.straight_line`."""
+        return straight_line(self.xy, self.time)
 
     @property
     def top_speed(self) -> float | None:
