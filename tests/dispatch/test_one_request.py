@@ -54,7 +54,7 @@ def test_decided_is_each_declared_allocators_answer(seed):
     ids = np.sort(rng.choice(1000, n, replace=False))
     problem = column_problem(cost, ids)
     d = SimpleNamespace(now=0.0, cost=cost, agents=problem.agents,
-                        requests=[SimpleNamespace(id=7)], make=lambda c: problem)
+                        requests=[SimpleNamespace(id=7)], make=lambda c: problem, n_idle=None)
     got = one_request.decided(d)
     for allocator in DECLARED:
         want = allocator.allocate(problem)
