@@ -19,6 +19,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+from dispatch.api.registry import available
 from dispatch.errors import DispatchError
 
 NAME = re.compile(r"^[a-z][a-z0-9_]{0,40}$")
@@ -142,7 +143,6 @@ def new_allocator(name: str, where: Path, *, overwrite: bool = False) -> Path:
     if not NAME.match(name):
         raise DispatchError(f"allocator name {name!r}: use lower-case letters, digits and _ "
                             "(a Python identifier starting with a letter, at most 41 chars)")
-    from dispatch.api.registry import available
 
     if name in available("allocator"):
         raise DispatchError(f"an allocator named {name!r} is installed already; pick another "

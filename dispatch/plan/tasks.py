@@ -37,6 +37,7 @@ import simpy
 from dispatch.api.problem import TaskView
 from dispatch.config.tasks import TaskConfig
 from dispatch.events import EventBus
+from dispatch.files.empirical import draw_day, load_sample
 from dispatch.locations import Location
 
 log = logging.getLogger(__name__)
@@ -381,8 +382,6 @@ class TaskSource:
         (:class:`dispatch.decide.prebook.PrebookSource`)."""
         trips = tasks.trips
         if tasks.source == "empirical":
-            from dispatch.files.empirical import draw_day, load_sample
-
             trips = draw_day(load_sample(), tasks.trips_per_day, day_rng(), tasks.weekday)
             # each request's id: its number in the day drawn (0 the first)
             trips = replace(trips, ids=np.arange(len(trips), dtype=np.int64))

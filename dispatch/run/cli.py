@@ -9,7 +9,9 @@ import os
 import sys
 import time
 
-from dispatch.errors import DispatchError
+from dispatch.api.registry import available, describe, load
+from dispatch.errors import DispatchError, PluginError
+from dispatch.run.commands import installed
 from dispatch.run.parser import CHECKED_KINDS, OWN_COMMANDS, parser
 from dispatch.run.prepare import checked_specs
 from dispatch.run.progress import Heartbeat
@@ -37,8 +39,6 @@ class _Output:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from dispatch.run.commands import installed
-
     commands = installed(reserved=OWN_COMMANDS)
     args = parser(commands).parse_args(argv)
     level = logging.DEBUG if args.debug else logging.INFO if args.verbose else logging.WARNING
@@ -211,8 +211,6 @@ def _train(args, console) -> int:
     import importlib
     from importlib.metadata import entry_points
 
-    from dispatch.errors import PluginError
-
     found = {ep.name: ep.value for ep in entry_points(group="dispatch.trainers")}
     if args.trainer not in found:
         raise PluginError(f"unknown trainer {args.trainer!r}; installed: {', '.join(found)}")
@@ -232,8 +230,6 @@ def _plugins(args, console) -> int:
     that neither is cut in an 80-column terminal."""
     from rich.table import Table
     from rich.text import Text
-
-    from dispatch.api.registry import describe
 
     for kind in ("allocator", "planner", "repositioner", "charger", "acceptor", "sizer",
                  "mode_choice", "command"):
@@ -313,7 +309,6 @@ def _check(args, console) -> int:
     """``dispatch check NAME``: run the plugin checks (:mod:`dispatch.checks.allocators`, ...) on
     an installed plugin;
     one line per check; exit 0 when all pass, 1 otherwise."""
-    from dispatch.api.registry import available, load
     from dispatch.checks.acceptors import check_acceptor
     from dispatch.checks.allocators import check_allocator
     from dispatch.checks.chargers import check_charger
@@ -321,7 +316,6 @@ def _check(args, console) -> int:
     from dispatch.checks.planners import check_planner
     from dispatch.checks.repositioners import check_repositioner
     from dispatch.checks.sizers import check_sizer
-    from dispatch.errors import PluginError
 
     kinds = [k for k in CHECKED_KINDS if args.name in available(k)]
     if args.kind:

@@ -5,13 +5,14 @@ the file and the key, not in the middle of a sweep."""
 
 from __future__ import annotations
 
+from dispatch.api.registry import load
+from dispatch.errors import PluginError, ScenarioError
+
 
 def checked_specs(args):
     """Parse the scenario and expand its runs, checking all that can be checked before a run:
     the file, the resource limits (unless ``--ignore-limits``), the plugins (each distinct allocator
     and planner is built once with the scenario's parameters) and the space they serve."""
-    from dispatch.api.registry import load
-    from dispatch.errors import PluginError
     from dispatch.scenario.load import check_limits, load_scenario
 
     ignore = args.ignore_limits
@@ -46,7 +47,6 @@ def overrides(args) -> list[tuple[str, str, str]]:
     order (a later one wins)."""
     import math
 
-    from dispatch.errors import ScenarioError
     from dispatch.scenario.overrides import parse_set
 
     out = []
@@ -88,7 +88,6 @@ def build_plugins(sc, specs, *, ignore_limits: bool = False) -> None:
     rejects stops here with one line, not in the middle of a sweep; place the first run's fleet
     when a start file places it (its rows are checked against the space)."""
     from dispatch.api.space import space_for
-    from dispatch.errors import PluginError
     from dispatch.run.plugins import make_plugin, make_repositioner
 
     def build(kind, name, params, *args):

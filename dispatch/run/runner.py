@@ -32,7 +32,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from dispatch.config.runkeys import key_names
-from dispatch.config.scenario import RunSpec
+from dispatch.config.scenario import RunSpec, safe_name
 from dispatch.output.parquet import REQUEST_ID, SCHEMAS, Recorder, json_meta, request_id_type
 from dispatch.run.pools import Outcome, on_pool, on_ray, sigterm_exits
 from dispatch.run.resume import (clear_partition, is_complete, legacy_variant, read_summary,
@@ -135,8 +135,6 @@ def run_one(spec: RunSpec, out: Path | None = None, *,
 def default_out(spec: RunSpec) -> Path:
     """``runs/<scenario name>``, the name made safe as one folder name (no separators, no
     ``..``, no absolute path): results never land outside ``runs/``."""
-    from dispatch.config.scenario import safe_name
-
     return Path("runs") / safe_name(spec.scenario.name)
 
 

@@ -34,7 +34,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from dispatch.api.space import space_class
 from dispatch.decide.candidates import CUT_TASKS, considered, per_vehicle
+from dispatch.errors import LIMITS_HINT, ScenarioError
 
 #: Task-decisions (decisions × open tasks) of one run on a grid of :data:`REFERENCE_CELLS`.
 TASK_DECISIONS = 600_000
@@ -149,8 +151,6 @@ def task_decisions(spec) -> tuple[float, str]:
 def check_work(sc, specs, refuse) -> None:
     """Refuse (``refuse(key, what)``, a ScenarioError) a voxel run past :data:`TASK_DECISIONS`
     (scaled to its grid)."""
-    from dispatch.api.space import space_class
-
     cells = space_class(sc.world.space).work_cells(sc.world)
     if cells is None or not specs:  # no bound in this space (road networks)
         return
@@ -186,8 +186,6 @@ def check_planner_budget(sc, specs, planner, name: str) -> None:
     """Ask ``planner`` (built with the scenario's parameters) whether the runs of ``specs``
     that use it are within its own bound; raise ScenarioError (key
     ``dispatch.planner_params``) with its sentence when not."""
-    from dispatch.errors import LIMITS_HINT, ScenarioError
-
     seen = set()
     for s in specs:
         if s.planner != name:

@@ -22,6 +22,7 @@ from dataclasses import replace
 from datetime import datetime
 from pathlib import Path
 
+from dispatch.api import registry
 from dispatch.api.acceptor import Pricing
 from dispatch.api.space import space_class
 from dispatch.config.comms import CommsConfig
@@ -40,6 +41,7 @@ from dispatch.config.transit import TransitConfig
 from dispatch.config.world import RoadConfig, WorldConfig
 from dispatch.decide.prebook import MODES as PREBOOK_MODES
 from dispatch.errors import LIMITS_HINT, ScenarioError
+from dispatch.files.empirical import WEEKDAYS
 from dispatch.files.tables import check_file, decode_text, read_bytes
 from dispatch.files.traces import (IdColumnMissing, Trips, parse_datetime, read_fleet_capacities,
                                    read_fleet_start, read_trace, shipped_trace, within_snap)
@@ -333,7 +335,6 @@ def _check_pooling(path: Path, world: WorldConfig, fleet: FleetConfig, tasks: Ta
 def _parse_sizing(f: Table, fleet: FleetConfig) -> FleetConfig:
     """``[fleet] shift_grace`` (seconds), ``sizing`` (a ``dispatch.sizers`` plugin) and its
     ``[fleet.sizing_params]`` (see :mod:`dispatch.fleet.shifts`)."""
-    from dispatch.api import registry
     sizing = f.string("sizing")  # None: left out
     if sizing is not None and sizing not in registry.available("sizer"):
         raise f.fail("sizing", registry.unknown("sizer", sizing))
@@ -429,8 +430,6 @@ def _parse_empirical(t: Table, tasks: TaskConfig, world: WorldConfig,
                      fleet: FleetConfig) -> TaskConfig:
     """``[tasks] source = "empirical"``: ``trips_per_day`` and ``weekday`` (see
     :mod:`dispatch.files.empirical`); the sample is snapped to the Chicago network only."""
-    from dispatch.files.empirical import WEEKDAYS
-
     if tasks.source != "empirical":
         for k in ("trips_per_day", "weekday"):
             if k in t.data:
