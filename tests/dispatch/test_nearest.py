@@ -221,7 +221,7 @@ def run_tables(name: str, out: Path, full: bool, monkeypatch, allocator) -> tupl
         return real_call(self, agents, tasks)
 
     monkeypatch.setattr(pipeline.PlannerCosts, "__call__", whole)
-    scenario = load_scenario(ROOT / "scenarios" / name, force=True,
+    scenario = load_scenario(ROOT / "scenarios" / name, ignore_limits=True,
                              overrides=[("duration", "1200.0", "test")])
     execute(scenario.runs(allocator=allocator)[:1], out)
     return read_run(out), costed[0]
