@@ -20,6 +20,8 @@ naming the file (and the node, edge or attribute). Nothing here imports ``dispat
 
 from __future__ import annotations
 
+import difflib
+
 import importlib.resources
 import logging
 from dataclasses import dataclass
@@ -455,6 +457,12 @@ def locate(source: str, base: Path) -> tuple[Path, str | None, tuple[int, int]]:
         path, name = (Path(base) / source).resolve(), None
         if path.suffix.lower() != ".tntp" and graph_suffix(path) is None:
             suffix = path.suffix or "(no suffix)"
+            # a name without a suffix is most likely a shipped network's, misspelt
+            close = difflib.get_close_matches(source, ["manhattan", *SHIPPED], n=1)
+            if not path.suffix and close:
+                raise ValueError(f"{source!r} is neither a shipped network nor a file (did you "
+                                 f"mean {close[0]!r}?); shipped: 'manhattan', "
+                                 f"{', '.join(repr(k) for k in SHIPPED)}")
             raise ValueError(f"{path}: unknown road network format {suffix!r}; expected "
                              f"'manhattan', {', '.join(repr(k) for k in SHIPPED)}, a .graphml, "
                              "a node-link .json (or either .gz) or an X_net.tntp file")

@@ -83,3 +83,26 @@ def test_fleet_known_keys_list_every_accepted_key(tmp_path):
     known = msg.split("known keys here: ")[1].rstrip(")").split(", ")
     assert set(KEYS["fleet"]) <= set(known)
     assert {"sizing", "sizing_params", "energy", "breaks", "shift_grace"} <= set(known)
+
+
+def test_misspelt_network_key_suggests_network(tmp_path):
+    """A misspelt ``network`` leaves a table that looks like a voxel world's: the hint must
+    still come from both kinds' keys."""
+    msg = error_of(tmp_path, "[world]\nnetwrok = 'manhattan_osm'\n")
+    assert "world.netwrok: unknown key (did you mean 'network'?)" in msg
+
+
+def test_misspelt_shipped_network_suggests_the_closest(tmp_path):
+    """The network is read when the run starts: the error then names the key and the closest
+    shipped network."""
+    from dispatch.config.scenario import RunSpec
+    from dispatch.run.runner import run_one
+
+    path = tmp_path / "s.toml"
+    path.write_text("[world]\nnetwork = 'manhatan_osm'\n", encoding="utf-8")
+    sc = load_scenario(path)
+    with pytest.raises(ScenarioError) as info:
+        run_one(RunSpec(sc, "fcfs", "dijkstra", 1, 0))
+    msg = str(info.value)
+    assert msg.startswith(f"{path}: world.network: ") and "\n" not in msg
+    assert "(did you mean 'manhattan_osm'?)" in msg
