@@ -81,6 +81,19 @@ def load_scenario(path: str | Path, *, force: bool = False,
     return parse_scenario(doc, path, text, limits=limits)
 
 
+#: plugin parameters that name a file: read relative to the scenario file, as its other paths
+FILE_PARAMS = ("value",)
+
+
+def _near(params: tuple, path: Path) -> tuple:
+    """``params`` with each relative path of :data:`FILE_PARAMS` made absolute from the
+    scenario file's folder (a learned value named in ``[dispatch.allocator_params]`` or a
+    ``[reposition.<name>]`` table)."""
+    return tuple((k, str((path.parent / v).resolve())
+                  if k in FILE_PARAMS and isinstance(v, str) and not Path(v).is_absolute()
+                  else v) for k, v in params)
+
+
 def _syntax_error(path: Path, e: tomllib.TOMLDecodeError) -> ScenarioError:
     """``file: line L, column C: TOML syntax: what`` for tomllib's ``what (at line L, column
     C)``."""
@@ -252,8 +265,12 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
         reposition=s.str_list("reposition"),
     )
     disp = parse_allocators(d, s, disp, sweep)
+    disp = replace(disp, allocator_params=_near(disp.allocator_params, path),
+                   allocator_tables=tuple((k, _near(v, path)) for k, v in disp.allocator_tables))
     declared = "reposition" in root.data
     reposition = parse_reposition(root.table("reposition", RepositionConfig), sweep, s)
+    reposition = replace(reposition, params=tuple((k, _near(v, path))
+                                                  for k, v in reposition.params))
     charging = parse_charging(root, path, fleet, faults, world)
     pricing = parse_pricing(root.table("pricing", Pricing), world)
     acceptor = parse_acceptor(root.table("acceptor", AcceptorConfig), pricing)
