@@ -222,7 +222,8 @@ def train(args) -> dict:
     from allocators.magnnet.allocator import shipped
     from allocators.magnnet.ppo import PPOConfig, load_checkpoint, ppo_update, save_checkpoint
     from learning.rl import Decisions
-    from learning.value import ValueOption, scenario_for
+    from learning.value import ValueOption
+    from learning.value_train import scenario_for
 
     torch.manual_seed(args.seed)
     torch.set_num_threads(args.threads)

@@ -173,7 +173,7 @@ class Problems:
         self.pooled, self.routes = pooled, routes
         self.cell_size = float(space.cell)
 
-    def of(self, now: float, agents, tasks, slots: np.ndarray, comm: np.ndarray, apos,
+    def of(self, now: float, agents, tasks, slots: np.ndarray, comm: np.ndarray, apos, *,
            post=None) -> Callable[[np.ndarray], AllocationProblem]:
         """``make(cost)``: the problem of these agents (at fleet positions ``slots``), tasks
         and comm graph with a C-ordered copy of ``cost`` (the certificate loop changes its
@@ -368,10 +368,10 @@ class Pipeline:
         comm, apos = self.hearing(agents, now)
         post = None
         if self.looks_ahead and self.plans and self.walks is None and self.table.on_nodes:
-            post = PlanEnds(now, idle, open_tasks, inserts, self.table, self.fleet,
-                            self.objective, self.operator.service_time)
+            post = PlanEnds(now, idle, open_tasks, inserts, self.table, fleet=self.fleet,
+                            objective=self.objective, service=self.operator.service_time)
         return Decision(now, idle, agents, open_tasks, tasks, cost, exact, inserts, holder, comm,
-                        cost_s, self.problems.of(now, agents, tasks, idle, comm, apos, post),
+                        cost_s, self.problems.of(now, agents, tasks, idle, comm, apos, post=post),
                         n_cut, meetings)
 
     def limits(self, now: float, agents, tasks, idle: np.ndarray, open_tasks: list,

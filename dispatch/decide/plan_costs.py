@@ -299,7 +299,7 @@ class PlanEnds:
     shift (an upper bound where a stop's wait absorbs some of it). Free seats: the seats less
     the most on board along the plan and the request's passengers (none below 0)."""
 
-    def __init__(self, now: float, slots: np.ndarray, tasks: list, inserts, table: PlanTable,
+    def __init__(self, now: float, slots: np.ndarray, tasks: list, inserts, table: PlanTable, *,
                  fleet: Fleet, objective: int, service: float) -> None:
         self.now, self.slots, self.tasks, self.inserts = now, slots, tasks, inserts
         self.objective, self.service = objective, service
