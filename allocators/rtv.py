@@ -41,6 +41,14 @@ Costs (``objective``): ``delay`` (default): the new requests' delays (drop-off t
 direct drive) plus how much later the plan's own drop-offs come; ``added_time``: how much later
 the vehicle's plan ends.
 
+Look-ahead (``value``, a file of ``dispatch train value``; ``value_weight`` seconds per unit of
+value, default the file's): the assignment compares each candidate's score, its cost less
+``value_weight`` x (the value of where and when its route ends -- the kernel's end of its best
+order -- discounted to now, with the seats its vehicle then holds free, minus the value of the
+vehicle where it is now), instead of its cost (:meth:`_Batch.value_scores`, one vectorised
+call per batch; :mod:`dispatch.api.value`). Still the most requests first; the requests record
+their costs. A value of zero decides exactly as no value.
+
 Bounds and what they cut (``stats``, also :meth:`describe`): ``max_vehicles`` candidate vehicles
 per request (the cheapest; None: all) and ``max_requests`` candidate requests per vehicle
 (``pairs_cut``: feasible pairs left out by either), ``max_groups`` groups per vehicle

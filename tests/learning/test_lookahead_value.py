@@ -181,3 +181,66 @@ def test_a_value_path_is_read_next_to_the_scenario_file(tmp_path):
     (tmp_path / "sc.toml").write_text(text)
     sc = load_scenario(tmp_path / "sc.toml")
     assert dict(sc.dispatch.allocator_params)["value"] == str(tmp_path / "values" / "v.npz")
+
+
+@pytest.mark.parametrize("setup", sorted(SETUPS))
+def test_a_value_that_is_not_zero_changes_what_is_decided(tmp_path, setup):
+    """The same runs with a value of random numbers (seeded): some decision differs, so the
+    zero-value identity above is not that the value is never asked."""
+    allocator, seats, objective, repo = SETUPS[setup]
+    sc = scenario_for(MANHATTAN, 30.0, hours=0.4, capacity=seats)
+    sc = replace(sc, dispatch=replace(sc.dispatch, objective=objective))
+    path = _zero_file(tmp_path, sc, seats + 1 if seats > 1 else 1)
+    v = ZoneValue.load(path)
+    v.table = np.random.default_rng(5).uniform(0.0, 3.0, v.table.shape)
+    v.save(path)
+    if repo is None:
+        plain, _ = _tables(sc, allocator, {})
+        valued, _ = _tables(sc, allocator, {"value": str(path)})
+    else:
+        plain, _ = _tables(sc, allocator, {}, repo)
+        valued, _ = _tables(sc, allocator, {}, repo, (("value", str(path)),))
+    assert not plain["events"].equals(valued["events"])
+
+
+def test_the_pooled_post_decision_states_are_the_plans_ends(tmp_path, monkeypatch):
+    """Every pair's post-decision state in a pooled run (capacity 3, added time): an empty
+    vehicle's plan ends at the request's drop-off ``cost`` seconds from now (the added time
+    of an empty plan is its whole trip); a busy one's ends at the drop-off or at its plan's
+    last stop, no earlier than that stop; free seats within [0, seats - passengers]."""
+    import dispatch.api.value as api
+
+    seen = []
+    real = api.post_decision
+
+    def spy(problem, value):
+        got = real(problem, value)
+        # the plans as the decision sees them (the mapping reads the vehicles when asked)
+        plans = {aid: problem.plans.get(aid, ()) for aid in problem.agent_ids.tolist()}
+        seen.append((problem, plans, got))
+        return got
+
+    monkeypatch.setattr(api, "post_decision", spy)
+    sc = scenario_for(MANHATTAN, 30.0, hours=0.4, capacity=3)
+    sc = replace(sc, dispatch=replace(sc.dispatch, objective="added_time"))
+    _tables(sc, "hungarian", {"value": str(_zero_file(tmp_path, sc, 4))})
+    busy_pairs = ends_at_drop = 0
+    for problem, plans, post in seen:
+        assert problem.post is not None
+        now = problem.time
+        drops = np.array([t.dropoff for t in problem.tasks])
+        finite = np.isfinite(problem.cost)
+        for i, aid in enumerate(problem.agent_ids.tolist()):
+            plan = plans[aid]
+            for j in np.flatnonzero(finite[i]).tolist():
+                assert 0 <= post.seats[i, j] <= 3 - problem.tasks[j].passengers
+                if not plan:
+                    assert post.place[i, j] == drops[j]
+                    assert post.after[i, j] == pytest.approx(problem.cost[i, j])
+                    continue
+                busy_pairs += 1
+                last = plan[-1]
+                assert post.place[i, j] in (drops[j], last.loc)
+                ends_at_drop += post.place[i, j] == drops[j]
+                assert now + post.after[i, j] >= last.eta - 1e-6
+    assert busy_pairs > 20 and 0 < ends_at_drop < busy_pairs  # both kinds of end seen
