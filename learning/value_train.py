@@ -138,10 +138,11 @@ def _day(sc, allocator: str, params: dict, agents: int, seed: int, reposition: s
 
 
 def scenario_for(path: str | Path, batch_window: float, hours: float | None = None,
-                 trips_per_day: float | None = None, capacity: int | None = None):
+                 trips_per_day: float | None = None, capacity: int | None = None,
+                 objective: str | None = None):
     """The scenario of a study: its sweep dropped, the batch window fixed, optionally a
-    shorter run (``hours``), another demand (``trips_per_day``) or other seats
-    (``capacity``)."""
+    shorter run (``hours``), another demand (``trips_per_day``), other seats (``capacity``)
+    or another ``[dispatch] objective``."""
     from dispatch.config.sweep import SweepConfig
     from dispatch.scenario.load import load_scenario
 
@@ -154,6 +155,8 @@ def scenario_for(path: str | Path, batch_window: float, hours: float | None = No
         sc = replace(sc, tasks=replace(sc.tasks, trips_per_day=float(trips_per_day)))
     if capacity is not None:
         sc = replace(sc, fleet=replace(sc.fleet, capacity=int(capacity)))
+    if objective is not None:
+        sc = replace(sc, dispatch=replace(sc.dispatch, objective=objective))
     return sc
 
 
@@ -211,7 +214,8 @@ def train(scenario: str | Path, out: str | Path, *, agents: int = 500, batch_win
           half_life: float = 3600.0, weight: float = 300.0, shrink: float = 5.0,
           hours: float | None = None, cache: str | Path | None = None,
           reposition: str | None = None, allocator: str = "hungarian",
-          capacity: int | None = None, log=print, progress=None) -> ZoneValue:
+          capacity: int | None = None, objective: str | None = None, log=print,
+          progress=None) -> ZoneValue:
     """Learn a :class:`ZoneValue` from simulated days of ``allocator`` and save it to ``out``
     (see the module doc). ``reposition``: the days run with that repositioning policy (e.g.
     ``"demand"``): the value of where a vehicle ends up when idle vehicles are moved.
@@ -221,7 +225,7 @@ def train(scenario: str | Path, out: str | Path, *, agents: int = 500, batch_win
 
     from dispatch.api.space import space_for
 
-    sc = scenario_for(scenario, batch_window, hours, capacity=capacity)
+    sc = scenario_for(scenario, batch_window, hours, capacity=capacity, objective=objective)
     cap = int(sc.fleet.capacity)
     space = space_for(sc.world, 0, sc.path)
     node_xy = np.asarray(space.node_positions, dtype=float)[:, :2]
@@ -239,7 +243,8 @@ def train(scenario: str | Path, out: str | Path, *, agents: int = 500, batch_win
             got = None
             plain = cache is not None and value is None  # days without a value are reusable
             if plain:
-                key = Path(cache) / (f"{allocator}_c{cap}_n{agents}_w{batch_window:g}_h{hours}"
+                key = Path(cache) / (f"{allocator}_{sc.dispatch.objective}_c{cap}_n{agents}"
+                                     f"_w{batch_window:g}_h{hours}"
                                      f"_s{seed}" + (f"_r{reposition}" if reposition else ""))
                 if (key / "summary.json").exists():
                     got = (pd.read_parquet(key / "tasks.parquet"),
@@ -272,6 +277,7 @@ def train(scenario: str | Path, out: str | Path, *, agents: int = 500, batch_win
         fit = fit_trips(pd.concat(trips))
         meta = {"scenario": Path(scenario).name, "agents": agents, "batch_window": batch_window,
                 "allocator": allocator, "capacity": cap, "seeds": list(seeds),
+                "objective": sc.dispatch.objective,
                 "held_out": "evaluate on seeds other than 'seeds' (the studies: 0-9)",
                 "iterations": it + 1, "half_life": half_life, "zone": zone, "bin": bin_s,
                 "shrink": shrink, "weight": weight, "transitions": len(tr["z"]),
@@ -302,6 +308,9 @@ def main(argv=None) -> int:
     p.add_argument("--capacity", type=int, default=None,
                    help="seats per vehicle (default: the scenario's); above 1 the value has a "
                         "class per number of free seats")
+    p.add_argument("--objective", default=None, choices=("pickup_time", "added_time"),
+                   help="the [dispatch] objective of the training days (default: the "
+                        "scenario's)")
     p.add_argument("--zone", type=float, default=3000.0, help="zone side (metres)")
     p.add_argument("--bin", type=float, default=3600.0, help="time bin (seconds)")
     p.add_argument("--half-life", type=float, default=3600.0,
@@ -324,6 +333,7 @@ def main(argv=None) -> int:
               iterations=a.iterations, zone=a.zone, bin_s=a.bin, half_life=a.half_life,
               weight=a.weight, shrink=a.shrink, hours=a.hours, cache=a.cache,
               reposition=a.reposition, allocator=a.allocator, capacity=a.capacity,
+              objective=a.objective,
               log=bar.console.print,
               progress=lambda done, total: bar.update(task, completed=done))
     return 0
