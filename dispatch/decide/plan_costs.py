@@ -301,8 +301,15 @@ class PlanEnds:
 
     def __init__(self, now: float, slots: np.ndarray, tasks: list, inserts, table: PlanTable, *,
                  fleet: Fleet, objective: int, service: float) -> None:
-        self.now, self.slots, self.tasks, self.inserts = now, slots, tasks, inserts
+        self.now, self.slots, self.inserts = now, slots, inserts
         self.objective, self.service = objective, service
+        # the requests' drop-offs, riders and direct drives (arrays: nothing of the kernel's
+        # tasks is kept)
+        self.drops = np.array([t.loc if t.dropoff is None else t.dropoff for t in tasks],
+                              np.int64)
+        self.n_req = np.array([0 if t.dropoff is None else t.passengers for t in tasks],
+                              np.int64)
+        self.trip = np.array([0.0 if t.dropoff is None else t.direct_time for t in tasks])
         # the busy vehicles' plans as the decision's insertion read them (the table's rows)
         self.length = table.length[slots].copy()
         last = np.maximum(self.length - 1, 0)
@@ -321,15 +328,12 @@ class PlanEnds:
 
         cost = np.asarray(problem.cost, dtype=float)
         n, m = cost.shape
-        tasks = self.tasks
-        drops = np.array([t.loc if t.dropoff is None else t.dropoff for t in tasks], np.int64)
-        n_req = np.array([0 if t.dropoff is None else t.passengers for t in tasks], np.int64)
+        drops, n_req = self.drops, self.n_req
         place = np.broadcast_to(drops[None, :], (n, m)).copy()
         c = np.where(np.isfinite(cost), cost, 0.0)
         after = c
         if self.objective == PICKUP_TIME:  # the cost is the drive to the pickup: add the trip
-            trip = np.array([0.0 if t.dropoff is None else t.direct_time for t in tasks])
-            after = c + (trip + self.service)[None, :]
+            after = c + (self.trip + self.service)[None, :]
         after = after.copy()
         seats = np.maximum(self.cap[:, None] - self.most[:, None] - n_req[None, :], 0)
         if self.inserts:
