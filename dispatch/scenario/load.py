@@ -43,9 +43,9 @@ from dispatch.files.tables import check_file, decode_text, read_bytes
 from dispatch.files.traces import (Trips, parse_datetime, read_fleet_capacities, read_fleet_start,
                                    read_trace, shipped_trace, within_snap)
 from dispatch.fleet.shifts import read_shifts
-from dispatch.scenario.sections import (parse_acceptor, parse_allocators, parse_breaks,
-                                        parse_charging, parse_energy, parse_faults, parse_pricing,
-                                        parse_reposition, parse_world)
+from dispatch.scenario.sections import (files_near, parse_acceptor, parse_allocators,
+                                        parse_breaks, parse_charging, parse_energy, parse_faults,
+                                        parse_pricing, parse_reposition, parse_world)
 from dispatch.scenario.keys import KEYS, check_keys
 from dispatch.scenario.toml_table import Table
 
@@ -79,19 +79,6 @@ def load_scenario(path: str | Path, *, force: bool = False,
 
         text, doc = apply_overrides(text, doc, list(overrides), path)
     return parse_scenario(doc, path, text, limits=limits)
-
-
-#: plugin parameters that name a file: read relative to the scenario file, as its other paths
-FILE_PARAMS = ("value",)
-
-
-def _near(params: tuple, path: Path) -> tuple:
-    """``params`` with each relative path of :data:`FILE_PARAMS` made absolute from the
-    scenario file's folder (a learned value named in ``[dispatch.allocator_params]`` or a
-    ``[reposition.<name>]`` table)."""
-    return tuple((k, str((path.parent / v).resolve())
-                  if k in FILE_PARAMS and isinstance(v, str) and not Path(v).is_absolute()
-                  else v) for k, v in params)
 
 
 def _syntax_error(path: Path, e: tomllib.TOMLDecodeError) -> ScenarioError:
@@ -265,12 +252,9 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
         reposition=s.str_list("reposition"),
     )
     disp = parse_allocators(d, s, disp, sweep)
-    disp = replace(disp, allocator_params=_near(disp.allocator_params, path),
-                   allocator_tables=tuple((k, _near(v, path)) for k, v in disp.allocator_tables))
     declared = "reposition" in root.data
     reposition = parse_reposition(root.table("reposition", RepositionConfig), sweep, s)
-    reposition = replace(reposition, params=tuple((k, _near(v, path))
-                                                  for k, v in reposition.params))
+    disp, reposition = files_near(path, disp, reposition)  # (plugins' files: by the scenario)
     charging = parse_charging(root, path, fleet, faults, world)
     pricing = parse_pricing(root.table("pricing", Pricing), world)
     acceptor = parse_acceptor(root.table("acceptor", AcceptorConfig), pricing)
