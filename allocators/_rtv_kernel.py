@@ -39,12 +39,12 @@ INF = np.inf
 def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, p_svc, p_eta,
                 p_drop, p_e, pp, vn, pn, np_, nn, r_pax, r_lp, r_ld, r_rel, r_direct, r_hasdrop,
                 r_e, until, old_end, svc, objective, budget, tol, out_cost, out_order,
-                out_cut):  # pragma: no cover - compiled
+                out_cut, out_end):  # pragma: no cover - compiled
     """For each candidate ``g``: vehicle ``gveh[g]`` (row of the per-vehicle arrays) and the
     requests ``groups[g, :]`` (indices of the batch's requests, ``-1`` padded): the cheapest
     feasible order (``out_cost[g]``, ``inf`` if none; ``out_order[g, :]`` its codes, ``-99``
-    padded). ``out_cut[g]`` is True when the search stopped after ``budget`` nodes (the answer
-    is then the best found, maybe none).
+    padded; ``out_end[g]`` when that order leaves its last stop). ``out_cut[g]`` is True when
+    the search stopped after ``budget`` nodes (the answer is then the best found, maybe none).
 
     Vehicle ``j``: it can leave at ``start[j]``; reaching its plan's first stop first it arrives
     at ``first_eta[j]`` (the kernel's planned time); ``load[j]`` on board, ``cap[j]`` seats;
@@ -82,6 +82,7 @@ def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, 
                 init_mask |= 2 << (2 * i)
                 total -= 1
         best = INF
+        best_end = INF
         nodes = 0
         cut = False
         st_time[0] = start[j]
@@ -188,6 +189,7 @@ def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, 
                         cost = st_time[d] - old_end[j]
                     if cost < best - 1e-12:
                         best = cost
+                        best_end = st_time[d]
                         for q in range(total):
                             out_order[g, q] = path[q]
                         for q in range(total, L):
@@ -198,13 +200,14 @@ def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, 
                 break
         out_cost[g] = best
         out_cut[g] = cut
+        out_end[g] = best_end
 
 
 @jit
 def best_orders_any(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, p_svc,
                     p_eta, p_drop, p_e, p_pred, vp, poff, ppa, vn, pn, np_, nn, r_pax, r_lp, r_ld,
                     r_rel, r_direct, r_hasdrop, r_e, until, old_end, svc, objective, budget, tol,
-                    out_cost, out_order, out_cut):  # pragma: no cover - compiled
+                    out_cost, out_order, out_cut, out_end):  # pragma: no cover - compiled
     """:func:`best_orders` with the plan's stops reordered too (Alonso-Mora et al.'s whole-trip
     routing): every order of the plan's stops and the group's, each pickup before its drop-off
     (a plan's drop-off after its pickup where that is in the plan too: ``p_pred[s]``, the flat
@@ -241,6 +244,7 @@ def best_orders_any(groups, gveh, start, first_eta, load, cap, off, p_pax, p_lim
                 init_mask |= np.int64(1) << np.int64(nplan + 2 * i + 1)
                 total -= 1
         best = INF
+        best_end = INF
         nodes = 0
         cut = False
         st_time[0] = start[j]
@@ -345,6 +349,7 @@ def best_orders_any(groups, gveh, start, first_eta, load, cap, off, p_pax, p_lim
                         cost = st_time[d] - old_end[j]
                     if cost < best - 1e-12:
                         best = cost
+                        best_end = st_time[d]
                         for q2 in range(total):
                             out_order[g, q2] = path[q2]
                         for q2 in range(total, L):
@@ -355,6 +360,7 @@ def best_orders_any(groups, gveh, start, first_eta, load, cap, off, p_pax, p_lim
                 break
         out_cost[g] = best
         out_cut[g] = cut
+        out_end[g] = best_end
 
 
 _ORDERS = np.array([[0, 1, 2], [0, 2, 1], [1, 0, 2]], np.int64)

@@ -36,12 +36,15 @@ class HungarianAllocator(Allocator):
         discounted value of the vehicle's zone and time after the trip, plus its value now
         (``value_weight`` seconds per unit of value; default: the file's). Still maximum
         cardinality, then the minimum of these costs; the cost recorded for a pair stays
-        its travel time."""
+        its travel time. With plans (shared rides, the ``added_time`` objective) the value is
+        of where each pair's insertion leaves the vehicle's plan ending, and its free seats
+        (:func:`dispatch.api.value.value_costs`)."""
         self.value = None
         if value is not None:
             from learning.value import ValueOption
 
             self.value = ValueOption(value, value_weight)
+            self.value_function = self.value.value
             self.minimizes_total_cost = False  # of the adjusted costs, not problem.cost
             self.one_by_minimum = self.nearest_cut = False
 

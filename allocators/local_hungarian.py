@@ -16,6 +16,8 @@ optimal assignment in one round, conflict-free.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from allocators.hungarian import optimal_pairs
@@ -34,7 +36,18 @@ class LocalHungarianAllocator(DecentralizedAllocator):
 
     name = "local_hungarian"
 
-    def __init__(self, view: str = "two_hop", patience: int = 3) -> None:
+    def __init__(self, view: str = "two_hop", patience: int = 3, value: str | None = None,
+                 value_weight: float | None = None) -> None:
+        """``value`` / ``value_weight``: a learned value of where a pair leaves the vehicle, as
+        ``hungarian``'s (:class:`learning.value.ValueOption`): every agent solves its view on
+        the value-adjusted costs (a pair's adjustment depends on its own agent only, so each
+        agent computes its own row); requests record the travel times."""
+        self.value = None
+        if value is not None:
+            from learning.value import ValueOption
+
+            self.value = ValueOption(value, value_weight)
+            self.value_function = self.value.value
         if view not in VIEWS:
             raise TypeError(f"view must be one of {', '.join(VIEWS)}, got {view!r}")
         if isinstance(patience, bool) or not isinstance(patience, int) or patience < 0:
@@ -42,7 +55,22 @@ class LocalHungarianAllocator(DecentralizedAllocator):
         self.view, self.patience = view, patience
 
     def describe(self) -> dict[str, str]:
-        return {"view": self.view}
+        out = {"view": self.view}
+        if self.value is not None:
+            out.update(value=Path(self.value.path).name, value_weight=f"{self.value.weight:g}")
+        return out
+
+    def allocate(self, problem: AllocationProblem):
+        """The decentralized decision (see the module doc), on the value-adjusted costs where
+        there is a ``value`` (the requests then record the travel times)."""
+        if self.value is None:
+            return super().allocate(problem)
+        from dataclasses import replace
+
+        from learning.value import travel_costs
+
+        adjusted = replace(problem, cost=np.ascontiguousarray(self.value.costs(problem)))
+        return travel_costs(super().allocate(adjusted), problem)
 
     def members(self, comm: np.ndarray, i: int, deciding: np.ndarray,
                 labels: np.ndarray | None) -> np.ndarray:

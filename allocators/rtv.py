@@ -41,6 +41,14 @@ Costs (``objective``): ``delay`` (default): the new requests' delays (drop-off t
 direct drive) plus how much later the plan's own drop-offs come; ``added_time``: how much later
 the vehicle's plan ends.
 
+Look-ahead (``value``, a file of ``dispatch train value``; ``value_weight`` seconds per unit of
+value, default the file's): the assignment compares each candidate's score, its cost less
+``value_weight`` x (the value of where and when its route ends -- the kernel's end of its best
+order -- discounted to now, with the seats its vehicle then holds free, minus the value of the
+vehicle where it is now), instead of its cost (:meth:`_Batch.value_scores`, one vectorised
+call per batch; :mod:`dispatch.api.value`). Still the most requests first; the requests record
+their costs. A value of zero decides exactly as no value.
+
 Bounds and what they cut (``stats``, also :meth:`describe`): ``max_vehicles`` candidate vehicles
 per request (the cheapest; None: all) and ``max_requests`` candidate requests per vehicle
 (``pairs_cut``: feasible pairs left out by either), ``max_groups`` groups per vehicle
@@ -97,7 +105,8 @@ class RtvAllocator(Allocator):
                  max_vehicles: int | None = 30, max_requests: int = 24,
                  max_groups: int = 200, max_nodes: int = 50_000,
                  time_limit: float = 10.0, solver: str = "milp",
-                 reorder: bool = False) -> None:
+                 reorder: bool = False, value: str | None = None,
+                 value_weight: float | None = None) -> None:
         if objective not in OBJECTIVES:
             raise TypeError(f"objective must be one of {', '.join(OBJECTIVES)}, got {objective!r}")
         if solver not in ("milp", "greedy"):
@@ -116,6 +125,13 @@ class RtvAllocator(Allocator):
             raise TypeError(f"reorder must be true or false, got {reorder!r}")
         self.solver = solver
         self.reorder = reorder
+        #: a learned value of where a route leaves its vehicle (module doc, "Look-ahead")
+        self.value = None
+        if value is not None:
+            from learning.value import ValueOption
+
+            self.value = ValueOption(value, value_weight)
+            self.value_function = self.value.value
         self.stats = {k: 0 for k in (
             "batches", "groups", "groups_feasible", "largest_group", "pairs_cut", "groups_cut",
             "orders_cut", "levels_cut", "ilp", "lp_whole", "ilp_time_limit", "ilp_failed",
@@ -132,6 +148,10 @@ class RtvAllocator(Allocator):
                "solver": self.solver}
         if self.reorder:  # (only then: the answers and summaries of reorder = false as before)
             out["reorder"] = "True"
+        if self.value is not None:
+            from pathlib import Path
+
+            out.update(value=Path(self.value.path).name, value_weight=f"{self.value.weight:g}")
         if self.stats["batches"]:
             out.update({k: (f"{v:.3f}" if isinstance(v, float) else str(v))
                         for k, v in self.stats.items()})
@@ -156,7 +176,7 @@ class RtvAllocator(Allocator):
     def _allocate(self, problem: AllocationProblem, t_start: float) -> Allocation:
         from allocators.hungarian import optimal_pairs
 
-        cost = problem.cost
+        cost = problem.cost if self.value is None else self.value.costs(problem)
         if problem.travel is None:  # no routing between arbitrary places: one request each
             return Allocation.centralized(problem, optimal_pairs(cost))
         b = _Batch(problem, self)
@@ -166,7 +186,9 @@ class RtvAllocator(Allocator):
         self.stats["groups_feasible"] += len(gveh)
         if not len(gveh):
             return Allocation(pairs=())
-        chosen = self._assign(b, groups, gveh, gcost, t_start)
+        score = gcost if self.value is None \
+            else b.value_scores(groups, gveh, gcost, gorder, self.value)
+        chosen = self._assign(b, groups, gveh, score, t_start)
         return b.answer(chosen, groups, gveh, gorder)
 
     def _assign(self, b, groups, gveh, gcost, t_start: float) -> list[int]:
@@ -221,7 +243,8 @@ def _warm(reorder: bool = False) -> None:
                         np.full(1, -1, np.int64), z, np.zeros(2, np.int64), z,
                         np.zeros((1, 2)), np.zeros((1, 2)), np.zeros((2, 1)), np.zeros((2, 2)),
                         i, z + 1, z + 1, z, z, np.ones(1, bool), z - np.inf, z + np.inf, z, 0.0,
-                        0, 10, TOL, np.zeros(1), np.zeros((1, 3), np.int64), np.zeros(1, bool))
+                        0, 10, TOL, np.zeros(1), np.zeros((1, 3), np.int64), np.zeros(1, bool),
+                        np.zeros(1))
         _WARM.add("any")
     if "order" in _WARM:
         return
@@ -232,7 +255,7 @@ def _warm(reorder: bool = False) -> None:
                 np.zeros(2, np.int64), i, z, z, z, np.zeros(1, bool), z, z, np.zeros((1, 2)),
                 np.zeros((1, 2)), np.zeros((2, 1)), np.zeros((2, 2)), i, z + 1, z + 1, z, z,
                 np.ones(1, bool), z - np.inf, z + np.inf, z, 0.0, 0, 10, TOL, np.zeros(1),
-                np.zeros((1, 2), np.int64), np.zeros(1, bool))
+                np.zeros((1, 2), np.int64), np.zeros(1, bool), np.zeros(1))
     pair_shareable(0.0, np.zeros((2, 2)), i, z, z, z - np.inf, 0.0, 1, TOL)
     _WARM.add("order")
 
@@ -371,11 +394,13 @@ class _Batch:
         new_locs = []
         for t in tasks:
             new_locs += [t.loc, t.loc if t.dropoff is None else t.dropoff]
+        self.new_locs = new_locs
         nn = np.asarray(travel(new_locs, new_locs), float)
         self.nn = np.ascontiguousarray(nn)
         self.direct = np.where(self.hasdrop, nn[2 * np.arange(m), 2 * np.arange(m) + 1], 0.0)
         # vehicles: where they are (a node and the seconds left to it, or a location)
         src, rem = _where(problem.agents, vrows)
+        self.src = src
         self.vn = np.ascontiguousarray(np.asarray(travel(src, new_locs), float) + rem[:, None])
         # plans, flat
         off = [0]
@@ -384,6 +409,7 @@ class _Batch:
             flat += p
             off.append(len(flat))
         self.off = np.array(off, np.int64)
+        self.flat = flat
         S = len(flat)
         self.p_pax = np.array([s.passengers for s in flat], np.int64)
         self.p_eta = np.array([s.eta for s in flat], float)
@@ -533,7 +559,8 @@ class _Batch:
 
     def evaluate(self, groups: np.ndarray, gveh: np.ndarray):
         """Best orders of candidates ``groups`` (rows of request indices, -1 padded) on the
-        vehicles ``gveh``: ``(cost, order codes, cut)``; with ``reorder`` the plan's stops
+        vehicles ``gveh``: ``(cost, order codes, cut, end)`` (``end``: when the order leaves
+        its last stop); with ``reorder`` the plan's stops
         are reordered too (:func:`allocators._rtv_kernel.best_orders_any`)."""
         G, K = groups.shape
         plan_len = int((self.off[1:] - self.off[:-1]).max()) if self.nv else 0
@@ -542,7 +569,7 @@ class _Batch:
             return self._evaluate_in_order(groups, gveh, L)
         from allocators._rtv_kernel import best_orders_any
 
-        cost = np.empty(G)
+        cost, end = np.empty(G), np.empty(G)
         order = np.full((G, L), -99, np.int64)
         cut = np.zeros(G, bool)
         lens = (self.off[1:] - self.off[:-1])[gveh] + 2 * (groups >= 0).sum(axis=1)
@@ -552,9 +579,10 @@ class _Batch:
         else:
             sel = np.flatnonzero(fits)
             rest = np.flatnonzero(~fits)
-            c2, o2, k2 = self._evaluate_in_order(groups[rest], gveh[rest], L)
-            cost[rest], order[rest], cut[rest] = c2, o2, k2
+            c2, o2, k2, e2 = self._evaluate_in_order(groups[rest], gveh[rest], L)
+            cost[rest], order[rest], cut[rest], end[rest] = c2, o2, k2, e2
         c1, o1, k1 = np.empty(len(groups[sel])), order[sel].copy(), cut[sel].copy()
+        e1 = np.empty(len(c1))
         best_orders_any(np.ascontiguousarray(groups[sel], np.int64),
                         np.ascontiguousarray(gveh[sel], np.int64), self.start,
                         self.first_eta, self.load, self.cap, self.off, self.p_pax,
@@ -564,16 +592,16 @@ class _Batch:
                         self.pax, self.lp, self.ld, self.rel, self.direct, self.hasdrop,
                         self.r_e, self.until, self.old_end, self.svc,
                         OBJECTIVES[self.alloc.objective],
-                        self.alloc.max_nodes, TOL, c1, o1, k1)
-        cost[sel], order[sel], cut[sel] = c1, o1, k1
-        return cost, order, cut
+                        self.alloc.max_nodes, TOL, c1, o1, k1, e1)
+        cost[sel], order[sel], cut[sel], end[sel] = c1, o1, k1, e1
+        return cost, order, cut, end
 
     def _evaluate_in_order(self, groups: np.ndarray, gveh: np.ndarray, L: int):
         """:meth:`evaluate` with the plan's stops in their order (:func:`best_orders`)."""
         from allocators._rtv_kernel import best_orders
 
         G = len(groups)
-        cost = np.empty(G)
+        cost, end = np.empty(G), np.empty(G)
         order = np.full((G, L), -99, np.int64)
         cut = np.zeros(G, bool)
         if G:
@@ -585,8 +613,8 @@ class _Batch:
                         self.pn, self.np_, self.nn, self.pax, self.lp, self.ld, self.rel,
                         self.direct, self.hasdrop, self.r_e, self.until, self.old_end, self.svc,
                         OBJECTIVES[self.alloc.objective], self.alloc.max_nodes, TOL, cost,
-                        order, cut)
-        return cost, order, cut
+                        order, cut, end)
+        return cost, order, cut, end
 
     def groups(self, t_start: float):
         """All feasible (vehicle, group) candidates: ``(groups (G, K) -1 padded, vehicles,
@@ -597,11 +625,12 @@ class _Batch:
         # size 1
         gveh = np.concatenate([np.full(c.size, j, np.int64) for j, c in enumerate(self.cand)])
         g1 = np.concatenate(self.cand).astype(np.int64)[:, None]
-        cost, order, cut = self.evaluate(g1, gveh)
+        cost, order, cut, end = self.evaluate(g1, gveh)
         stats["groups"] += len(gveh)
         stats["orders_cut"] += int(cut.sum())
         ok = np.isfinite(cost)
         out = [(g1[ok], gveh[ok], cost[ok], order[ok])]
+        self.ends = [end[ok]]  # when each feasible candidate's route ends (its value's time)
         stats["largest_group"] = max(stats["largest_group"], 1 if ok.any() else 0)
         feasible: list[set] = [set() for _ in range(self.nv)]
         for j, r in zip(gveh[ok].tolist(), g1[ok, 0].tolist()):
@@ -648,7 +677,7 @@ class _Batch:
                 break
             gk = np.array(cand_rows, np.int64)
             gv = np.array(cand_veh, np.int64)
-            cost, order, cut = self.evaluate(gk, gv)
+            cost, order, cut, end = self.evaluate(gk, gv)
             stats["groups"] += len(gv)
             stats["orders_cut"] += int(cut.sum())
             ok = np.isfinite(cost)
@@ -656,6 +685,7 @@ class _Batch:
                 break
             stats["largest_group"] = max(stats["largest_group"], k)
             out.append((gk[ok], gv[ok], cost[ok], order[ok]))
+            self.ends.append(end[ok])
             nxt: list[set] = [set() for _ in range(self.nv)]
             for j, g in zip(gv[ok].tolist(), gk[ok].tolist()):
                 nxt[j].add(tuple(g))
@@ -669,6 +699,41 @@ class _Batch:
                                  for *_, o in out])
         return (groups, np.concatenate([v for _, v, _, _ in out]),
                 np.concatenate([c for _, _, c, _ in out]), orders)
+
+    def value_scores(self, groups, gveh, gcost, gorder, option) -> np.ndarray:
+        """Each candidate's cost less ``weight`` x (the discounted value of where and when its
+        route ends, with the seats its vehicle then holds free, minus the value of the vehicle
+        where it is now): the scores the assignment compares (module doc, "Look-ahead")."""
+        vf, w = option.value, option.weight
+        G = len(gveh)
+        ints = all(isinstance(x, (int, np.integer)) for x in (*self.new_locs, *self.src,
+                                                                *(s.loc for s in self.flat)))
+        if w == 0 or not G or not ints:  # (no value, or locations that are not nodes)
+            return gcost
+        vf.check(self.problem)
+        end = np.concatenate(self.ends)
+        n_codes = (gorder != -99).sum(axis=1)
+        last = gorder[np.arange(G), np.maximum(n_codes - 1, 0)]
+        new = last >= 0  # the route ends at a new request's stop, else at a plan's stop
+        r = groups[np.arange(G), np.where(new, last // 2, 0)]
+        new_nodes = np.asarray(self.new_locs, np.int64)
+        plan_nodes = np.array([s.loc for s in self.flat], np.int64)
+        place = np.empty(G, np.int64)
+        place[new] = new_nodes[2 * r[new] + last[new] % 2]
+        if (~new).any():
+            place[~new] = plan_nodes[self.off[gveh[~new]] + (-last[~new] - 1)]
+        # seats free after the decision: the seats less who is aboard, who the plan will pick
+        # up and the group's passengers (as the trainer counts them: requests held)
+        owner = np.repeat(np.arange(self.nv), self.off[1:] - self.off[:-1])
+        pending = np.bincount(owner, weights=np.where(self.p_drop, 0, self.p_pax),
+                              minlength=self.nv)
+        held = self.load + pending.astype(np.int64)
+        gpax = np.where(groups >= 0, self.pax[np.maximum(groups, 0)], 0).sum(axis=1)
+        seats = np.maximum(self.cap[gveh] - held[gveh] - gpax, 0)
+        now = self.now
+        after = np.power(vf.gamma, np.maximum(end - now, 0.0)) * vf.value(place, end, seats)
+        before = vf.value(np.asarray(self.src, np.int64), np.full(self.nv, now), self.cap)
+        return gcost - w * (after - before[gveh])
 
     def answer(self, chosen, groups, gveh, gorder) -> Allocation:
         """The allocation of the chosen candidates: pairs, and each vehicle's whole route."""

@@ -54,7 +54,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from learning.value import scenario_for
+from learning.value_train import scenario_for
 
 SERIES = ("hungarian", "hungarian + demand", "hungarian + value", "hungarian + value + demand",
           "hungarian + value(d) + demand", "magnnet", "magnnet + value",

@@ -20,6 +20,13 @@ interval`` seconds):
    vehicles, in which each surplus zone keeps its share (zero-cost "stay" columns that only
    its own vehicles may fill), so no zone gives away more than its surplus.
 
+With a learned ``value`` (a file of ``dispatch train value``, :mod:`learning.value`), step 3
+splits the idle vehicles by a mix of demand and value: zone ``z``'s weight is ``(1 - value_mix)
+d[z] / sum(d) + value_mix v[z] / sum(v)``, with ``v[z]`` the value now of a vehicle at the
+zone's centre node (negative values counted as 0), so idle vehicles are also moved toward
+where the value says a vehicle will serve more, not only where requests came lately. A value
+that is zero everywhere (or ``value_mix = 0``) moves exactly as without one.
+
 Deterministic: no randomness is drawn.
 """
 
@@ -52,13 +59,23 @@ class DemandRepositioner(Repositioner):
     name = "demand"
     spaces = ("road",)
 
-    def __init__(self, zone: float = 1000.0, max_moves: int = 20) -> None:
+    def __init__(self, zone: float = 1000.0, max_moves: int = 20, value: str | None = None,
+                 value_mix: float = 0.5) -> None:
         if isinstance(zone, bool) or not isinstance(zone, (int, float)) \
                 or not math.isfinite(zone) or zone <= 0:
             raise ValueError(f"zone must be a number of metres > 0, got {zone!r}")
         if isinstance(max_moves, bool) or not isinstance(max_moves, int) or max_moves < 1:
             raise ValueError(f"max_moves must be an integer >= 1, got {max_moves!r}")
         self.zone, self.max_moves = float(zone), max_moves
+        if isinstance(value_mix, bool) or not isinstance(value_mix, (int, float)) \
+                or not 0.0 <= value_mix <= 1.0:
+            raise ValueError(f"value_mix must be a number in [0, 1], got {value_mix!r}")
+        self.value_mix = float(value_mix)
+        self.value = None
+        if value is not None:
+            from learning.value import ZoneValue
+
+            self.value = ZoneValue.load(value)
         self._net = None
         self._zones: Zones | None = None
 
@@ -67,6 +84,24 @@ class DemandRepositioner(Repositioner):
         if self._net is not space or self._zones is None:
             self._zones, self._net = Zones(space.xy, self.zone), space
         return self._zones
+
+    def weights(self, view: RepositionView, zones: Zones, demand: np.ndarray) -> np.ndarray:
+        """Each zone's weight in the split of the idle vehicles: its demand, mixed with the
+        value of its centre node now where there is a value (module doc)."""
+        d = demand.astype(np.float64)
+        if self.value is None or self.value_mix == 0.0:
+            return d
+        from dispatch.api.value import check_network
+
+        check_network(self.value, view.space.xy, f"the demand repositioner's value "
+                      f"{self.value.meta.get('file', '')}")
+        centre = zones.centre_nodes
+        v = np.zeros(zones.n)
+        has = centre >= 0
+        v[has] = np.maximum(self.value.value(centre[has], np.full(has.sum(), view.time)), 0.0)
+        if not v.sum() > 0:  # a value of zero: demand alone, exactly
+            return d
+        return (1.0 - self.value_mix) * d / d.sum() + self.value_mix * v / v.sum()
 
     def reposition(self, view: RepositionView) -> Mapping[int, int]:
         """The moves of one call (see the module docstring)."""
@@ -78,7 +113,7 @@ class DemandRepositioner(Repositioner):
         vz = zones.of_node[np.where(view.moving, view.targets, view.nodes)]
         still = ~view.moving
         supply = np.bincount(vz, minlength=nz)
-        share = shares(view.n_vehicles, demand.astype(np.float64))
+        share = shares(view.n_vehicles, self.weights(view, zones, demand))
         movable = np.bincount(vz[still], minlength=nz)
         surplus = np.minimum(np.maximum(supply - share, 0), movable)
         deficit = np.maximum(share - supply, 0)

@@ -275,6 +275,7 @@ class MagnnetAllocator(DecentralizedAllocator):
             from learning.value import ValueOption
 
             self.value = ValueOption(value, value_weight)
+            self.value_function = self.value.value  # (with plans: the plans' ends)
         self.files: dict[str, str] = {}  # checkpoint file -> sha, of what this allocator loaded
         if variant == "match":
             self._init_match(checkpoint, view_checkpoint, taxi_view_checkpoint)

@@ -130,9 +130,9 @@ class DayTrainer:
             nodes = problem.agents.nodes
             if nodes is None:
                 nodes = [a.loc for a in problem.agents]
-            v_now = zv.value(zv.zones.of_node[np.asarray(nodes, np.int64)], now)
+            v_now = zv.value(np.asarray(nodes, np.int64), now)
             drops = [t.loc if t.dropoff is None else t.dropoff for t in problem.tasks]
-            v_drop = zv.value(zv.zones.of_node[np.asarray(drops, np.int64)], now)
+            v_drop = zv.value(np.asarray(drops, np.int64), now)
         feas = float(np.isfinite(problem.cost).mean()) if n and m else 0.0
         return np.array([math.sin(h), math.cos(h), n / 100.0, m / 10.0, v_now.mean(),
                          v_now.std(), v_drop.mean(), feas], np.float32)
@@ -222,7 +222,8 @@ def train(args) -> dict:
     from allocators.magnnet.allocator import shipped
     from allocators.magnnet.ppo import PPOConfig, load_checkpoint, ppo_update, save_checkpoint
     from learning.rl import Decisions
-    from learning.value import ValueOption, scenario_for
+    from learning.value import ValueOption
+    from learning.value_train import scenario_for
 
     torch.manual_seed(args.seed)
     torch.set_num_threads(args.threads)

@@ -59,7 +59,7 @@ def taxi_decisions(scenario, agents: int, seed: int, windows=(NIGHT, DAY), every
     window (or ``limit`` decisions)."""
     from allocators.hungarian import HungarianAllocator
     from learning.rl import Decisions
-    from learning.value import scenario_for
+    from learning.value_train import scenario_for
 
     end = max(w[1] for w in windows)
     sc = scenario_for(scenario, batch_window, end)

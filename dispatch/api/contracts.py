@@ -124,6 +124,15 @@ class Allocator(ABC):
     #: bench`` reports another instance as ``unsupported``; a run of one fails at its first
     #: decision with the allocator's error.
     team_sizes: tuple[int, ...] | None = None
+    #: A learned value of a vehicle's post-decision state the allocator adds to its pairs'
+    #: costs (a :class:`dispatch.api.value.ValueFunction`, e.g. from a ``value = "file.npz"``
+    #: parameter; None: it decides on the present only). Set by the constructor. Where it is
+    #: set and the vehicles have plans, the dispatcher gives each problem
+    #: :attr:`~dispatch.api.problem.AllocationProblem.post` (where each pair's cheapest
+    #: insertion leaves the plan ending); the allocator asks
+    #: :func:`dispatch.api.value.value_costs` for the adjusted costs (one vectorised call per
+    #: decision) and records each pair's travel cost, not the adjusted one.
+    value_function: object = None
 
     @abstractmethod
     def allocate(self, problem: AllocationProblem) -> Allocation:

@@ -256,13 +256,18 @@ class AllocationProblem:
     #: its shift's end plus the grace, ``-inf`` once it ended; aligned with ``agents``); None:
     #: no limit. A multi-request allocator's routes keep it (the dispatcher checks them)
     until: np.ndarray | None = None
+    #: with plans: ``post(problem)``, where and when each pair's cheapest insertion leaves the
+    #: agent's plan ending and the seats then free (a
+    #: :class:`dispatch.api.value.PostDecision`; read by :func:`dispatch.api.value.value_costs`
+    #: for allocators that look ahead); None: the dispatcher gives none
+    post: Callable[..., object] | None = None
 
     @classmethod
     def made(cls, time: float, agents, tasks, cost: np.ndarray, comm: np.ndarray,
              rng: np.random.Generator, *, max_rounds: int, loss: float, latency: float,
              cell_size: float, agent_pos, task_pos, plans=None, capacity=None,
              service_time: float = 0.0, travel=None, ready=None,
-             until=None) -> AllocationProblem:
+             until=None, post=None) -> AllocationProblem:
         """The problem ``cls(...)`` of these fields (all of them, positionally) makes, checked
         the same way, without the field-by-field ``object.__setattr__`` of a frozen
         ``__init__`` (the dispatcher makes one per decision)."""
@@ -272,7 +277,7 @@ class AllocationProblem:
                             cell_size=cell_size, _agent_pos=agent_pos, _task_pos=task_pos,
                             plans={} if plans is None else plans, capacity=capacity,
                             service_time=service_time, travel=travel, ready=ready,
-                            until=until)
+                            until=until, post=post)
         obj.__post_init__()
         return obj
 

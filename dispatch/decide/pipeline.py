@@ -66,7 +66,7 @@ from dispatch.decide.candidates import cut as candidate_cut
 from dispatch.decide.lazy import certify, resolve_open
 from dispatch.decide.meeting import meeting_costs, view_at
 from dispatch.decide.one_request import decided, fits
-from dispatch.decide.plan_costs import Inserts, Plans, PlanTable, insertion_costs_of
+from dispatch.decide.plan_costs import Inserts, PlanEnds, Plans, PlanTable, insertion_costs_of
 from dispatch.decide.planner_costs import (
     PlannerCosts,
     close_unreachable,
@@ -166,8 +166,8 @@ class Problems:
         self.pooled, self.routes = pooled, routes
         self.cell_size = float(space.cell)
 
-    def of(self, now: float, agents, tasks, slots: np.ndarray, comm: np.ndarray, apos
-           ) -> Callable[[np.ndarray], AllocationProblem]:
+    def of(self, now: float, agents, tasks, slots: np.ndarray, comm: np.ndarray, apos, *,
+           post=None) -> Callable[[np.ndarray], AllocationProblem]:
         """``make(cost)``: the problem of these agents (at fleet positions ``slots``), tasks
         and comm graph with a C-ordered copy of ``cost`` (the certificate loop changes its
         matrix between questions); the task positions, the plans, seats and ready times
@@ -190,7 +190,8 @@ class Problems:
                                           agent_pos=apos, task_pos=tpos, plans=plans,
                                           capacity=seats,
                                           service_time=self.operator.service_time,
-                                          travel=travel, ready=ready, until=until)
+                                          travel=travel, ready=ready, until=until,
+                                          post=post)
         return make
 
 
@@ -275,6 +276,10 @@ class Pipeline:
         #: an allocator routing several requests itself reads each pickup's earliest time
         #: from the views (dispatch.decide.prebook.earliest_views); the others insert by the costs
         self.routed = allocator.multi_request
+        #: the allocator asks the value of its pairs' post-decision states
+        #: (:attr:`dispatch.api.contracts.Allocator.value_function`): with plans, the problem
+        #: says where each pair's plan ends (:class:`dispatch.decide.plan_costs.PlanEnds`)
+        self.looks_ahead = getattr(allocator, "value_function", None) is not None
         self._points: dict = {}  # (one_point) task id -> its Meeting, of the last limits
         self.plans = self.pooled or cfg.objective != "pickup_time" or bool(max_delay) \
             or walks is not None
@@ -374,9 +379,13 @@ class Pipeline:
         if self.routed:  # booked pickups' earliest times, for the allocator's own routes
             tasks = earliest_views(open_tasks, tasks)
         comm, apos = self.hearing(agents, now)
+        post = None
+        if self.looks_ahead and self.plans and self.walks is None and self.table.on_nodes:
+            post = PlanEnds(now, idle, open_tasks, inserts, self.table, fleet=self.fleet,
+                            objective=self.objective, service=self.operator.service_time)
         return Decision(now, idle, agents, open_tasks, tasks, cost, exact, inserts, holder, comm,
-                        cost_s, self.problems.of(now, agents, tasks, idle, comm, apos), n_cut,
-                        meetings)
+                        cost_s, self.problems.of(now, agents, tasks, idle, comm, apos, post=post),
+                        n_cut, meetings)
 
     def nearest(self, now: float):
         """The decision at ``now`` of the one open request over the vehicles the exact cut

@@ -293,3 +293,63 @@ def insertion_costs_of(cost: np.ndarray, slots: np.ndarray, tasks: list, now: fl
         req_svc_d=svc_d[ucols], objective=objective, s_earliest=s_e, req_earliest=ep[ucols])
     out[vrow, cols] = ins.cost
     return out, Inserts(ins, vrow, cols, m)
+
+
+class PlanEnds:
+    """:attr:`AllocationProblem.post` of a decision with plans: for each (vehicle, request)
+    pair, where and when the vehicle's plan ends once the request is inserted the cheapest way,
+    and its free seats (:class:`dispatch.api.value.PostDecision`), computed when an allocator
+    asks (a value of the post-decision state, :mod:`dispatch.api.value`), never otherwise.
+
+    An empty plan ends at the request's drop-off, the pair's cost plus (pickup-time objective)
+    the service and the direct drive after now; a busy vehicle's at the drop-off when it is
+    inserted after the plan's last stop, else at the last stop, later by the insertion's
+    shift (an upper bound where a stop's wait absorbs some of it). Free seats: the seats less
+    the most on board along the plan and the request's passengers (none below 0)."""
+
+    def __init__(self, now: float, slots: np.ndarray, tasks: list, inserts, table: PlanTable, *,
+                 fleet: Fleet, objective: int, service: float) -> None:
+        self.now, self.slots, self.inserts = now, slots, inserts
+        self.objective, self.service = objective, service
+        # the requests' drop-offs, riders and direct drives (arrays: nothing of the kernel's
+        # tasks is kept)
+        self.drops = np.array([t.loc if t.dropoff is None else t.dropoff for t in tasks],
+                              np.int64)
+        self.n_req = np.array([0 if t.dropoff is None else t.passengers for t in tasks],
+                              np.int64)
+        self.trip = np.array([0.0 if t.dropoff is None else t.direct_time for t in tasks])
+        # the busy vehicles' plans as the decision's insertion read them (the table's rows)
+        self.length = table.length[slots].copy()
+        last = np.maximum(self.length - 1, 0)
+        arr, svc, _, occ, _, node = table._fields
+        self.last_node = node[slots, last].copy()
+        self.last_end = arr[slots, last] + svc[slots, last]
+        width = occ.shape[1]
+        used = np.arange(width)[None, :] < self.length[:, None]
+        # (only a busy vehicle's row is current: the decision gathered it)
+        most = np.where(used, occ[slots], 0).max(axis=1, initial=0)
+        self.most = np.maximum(np.where(fleet.busy_mask[slots], most, 0), fleet.load[slots])
+        self.cap = fleet.capacity[slots].astype(np.int64)
+
+    def __call__(self, problem):
+        from dispatch.api.value import PostDecision
+
+        cost = np.asarray(problem.cost, dtype=float)
+        n, m = cost.shape
+        drops, n_req = self.drops, self.n_req
+        place = np.broadcast_to(drops[None, :], (n, m)).copy()
+        c = np.where(np.isfinite(cost), cost, 0.0)
+        after = c
+        if self.objective == PICKUP_TIME:  # the cost is the drive to the pickup: add the trip
+            after = c + (self.trip + self.service)[None, :]
+        after = after.copy()
+        seats = np.maximum(self.cap[:, None] - self.most[:, None] - n_req[None, :], 0)
+        if self.inserts:
+            rows, cols, ins = self.inserts.pairs()
+            inside = ins.j < self.length[rows]  # the drop-off before the plan's last stop
+            r, k = rows[inside], cols[inside]
+            place[r, k] = self.last_node[r]
+            after[r, k] = self.last_end[r] + ins.shift2[inside] - self.now
+            out = ~inside
+            after[rows[out], cols[out]] = ins.dropoff_at[out] + self.service - self.now
+        return PostDecision(place, np.maximum(after, 0.0), seats)

@@ -47,9 +47,9 @@ from dispatch.files.traces import (IdColumnMissing, Trips, parse_datetime, read_
                                    read_fleet_start, read_trace, shipped_trace, within_snap)
 from dispatch.fleet.shifts import read_shifts
 from dispatch.scenario.notes import say_dropped
-from dispatch.scenario.sections import (parse_acceptor, parse_allocators, parse_breaks,
-                                        parse_charging, parse_energy, parse_faults, parse_pricing,
-                                        parse_reposition, parse_world)
+from dispatch.scenario.sections import (files_near, parse_acceptor, parse_allocators,
+                                        parse_breaks, parse_charging, parse_energy, parse_faults,
+                                        parse_pricing, parse_reposition, parse_world)
 from dispatch.scenario.keys import KEYS, check_keys
 from dispatch.scenario.transit import parse_transit
 from dispatch.scenario.toml_table import Table, did_you_mean
@@ -268,6 +268,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     disp = parse_allocators(d, s, disp, sweep)
     declared = "reposition" in root.data
     reposition = parse_reposition(root.table("reposition", RepositionConfig), sweep, s)
+    disp, reposition = files_near(path, disp, reposition)  # (plugins' files: by the scenario)
     charging = parse_charging(root, path, fleet, faults, world)
     pricing = parse_pricing(root.table("pricing", Pricing), world)
     acceptor = parse_acceptor(root.table("acceptor", AcceptorConfig), pricing)

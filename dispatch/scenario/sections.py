@@ -407,3 +407,21 @@ def parse_acceptor(a: Table, pricing):
     if made.uses_fare and pricing is None:
         raise a.fail("name", f"acceptor {name!r} weighs the fare: add a [pricing] section")
     return AcceptorConfig(name=name, retries=retries, params=tuple(params))
+
+
+#: plugin parameters that name a file: read relative to the scenario file, as its other paths
+FILE_PARAMS = ("value",)
+
+
+def files_near(path: Path, disp, reposition):
+    """``(disp, reposition)`` with each relative path of :data:`FILE_PARAMS` in the allocators'
+    parameters and the repositioners' tables made absolute from the scenario file's folder (a
+    learned value named in ``[dispatch.allocator_params]`` or ``[reposition.<name>]``)."""
+    def near(params: tuple) -> tuple:
+        return tuple((k, str((path.parent / v).resolve())
+                      if k in FILE_PARAMS and isinstance(v, str) and not Path(v).is_absolute()
+                      else v) for k, v in params)
+
+    return (replace(disp, allocator_params=near(disp.allocator_params),
+                    allocator_tables=tuple((k, near(v)) for k, v in disp.allocator_tables)),
+            replace(reposition, params=tuple((k, near(v)) for k, v in reposition.params)))

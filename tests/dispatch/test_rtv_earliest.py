@@ -108,11 +108,11 @@ def test_route_costs_are_the_rule_and_the_best_of_every_order(seed, n, m, cap, s
                 for g in combinations(range(batch.m), k):
                     groups.append(list(g) + [-1] * (3 - k))
                     gveh.append(j)
-        cost, order, cut = batch.evaluate(np.array(groups, np.int64),
-                                          np.array(gveh, np.int64))
+        cost, order, cut, end = batch.evaluate(np.array(groups, np.int64),
+                                               np.array(gveh, np.int64))
         assert not cut.any()
         orders = _all_orders if reorder else _orders
-        for g, j, c, codes in zip(groups, gveh, cost.tolist(), order):
+        for g, j, c, codes, e in zip(groups, gveh, cost.tolist(), order, end.tolist()):
             rs = [r for r in g if r >= 0]
             aid = int(batch.aids[j])
             new = {problem.tasks[r].id: problem.tasks[r] for r in rs}
@@ -126,6 +126,8 @@ def test_route_costs_are_the_rule_and_the_best_of_every_order(seed, n, m, cap, s
                               objective)
             assert got is not None and got == pytest.approx(c, abs=1e-6)
             assert c == pytest.approx(min(every), abs=1e-6)
+            if objective == "added_time":  # the route ends that much after the plan did
+                assert e == pytest.approx(batch.old_end[j] + c, abs=1e-6)
 
 
 CASES = [(seed, 1 + seed % 3, 2 + seed % 4, 1 + (seed // 3) % 3, (0.0, 0.5, 1.0)[seed % 3],

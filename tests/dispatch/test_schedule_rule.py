@@ -341,7 +341,8 @@ def test_rtv_orders_with_every_stop_kind_equal_the_reference(reorder, until):
         args, rargs, pp, ppa = _rtv_arrays(c)
         k, m = len(c["stops"]), len(c["reqs"])
         L = k + 2 * m
-        out = np.full(1, np.inf), np.full((1, L), -99, np.int64), np.zeros(1, bool)
+        out = (np.full(1, np.inf), np.full((1, L), -99, np.int64), np.zeros(1, bool),
+               np.full(1, np.nan))
         common = [args[x] for x in ("groups", "gveh", "start", "first_eta", "load", "cap", "off",
                                     "p_pax", "p_limit", "p_svc", "p_eta", "p_drop", "p_e")]
         tail = [rargs[x] for x in ("vn", "pn", "np_", "nn", "r_pax", "r_lp", "r_ld", "r_rel",
@@ -361,6 +362,8 @@ def test_rtv_orders_with_every_stop_kind_equal_the_reference(reorder, until):
             continue
         feasible += 1
         assert out[0][0] == pytest.approx(want, abs=1e-6)
+        # the added-time objective: the route ends that much after the plan's old end
+        assert out[3][0] == pytest.approx(rargs["old_end"][0] + out[0][0], abs=1e-6)
     # both outcomes exercised, new pickups that wait, routes only the shift's end rules out
     assert (20 if until else 50) < feasible < cases and waits > 20
     assert ended > 3 or not until

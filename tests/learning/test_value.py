@@ -10,7 +10,8 @@ import pytest
 
 from allocators.hungarian import HungarianAllocator
 from dispatch.api.problem import AgentView, AllocationProblem, TaskView
-from learning.value import ZoneValue, td_learn, train
+from learning.value import ZoneValue
+from learning.value_train import td_learn, train
 from learning.zones import Zones
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -39,8 +40,11 @@ def test_td_learns_the_discounted_trips_of_a_chain():
     assert table[0, 0] > 1.0
 
 
+XY = np.array([[0.0, 0.0], [5000.0, 0.0], [0.0, 5000.0]])  # a three-node network
+
+
 def _value(weight=100.0) -> ZoneValue:
-    xy = np.array([[0.0, 0.0], [5000.0, 0.0], [0.0, 5000.0]])
+    xy = XY
     zones = Zones(xy, 1000.0)
     table = np.zeros((zones.n, 2))
     table[zones.of_node[1]] = 3.0  # node 1's zone is worth three requests
@@ -84,7 +88,7 @@ def test_value_file_round_trip_and_hungarian_option(tmp_path):
 
 def test_train_on_a_short_day_and_run_with_it(tmp_path):
     from dispatch.run.runner import run_one
-    from learning.value import scenario_for
+    from learning.value_train import scenario_for
 
     out = tmp_path / "value.npz"
     v = train(MANHATTAN, out, agents=50, seeds=(0,), zone=1000.0, hours=0.5, log=lambda s: None)
@@ -105,10 +109,12 @@ def _road_problem(seed: int, n: int, m: int, comm=None) -> AllocationProblem:
                    for i in range(n))
     tasks = tuple(TaskView(id=200 + j, kind="trip", loc=int(rng.integers(3)), released_at=0.0,
                            dropoff=int(rng.integers(3))) for j in range(m))
+    # the pickups' positions are their nodes' (the value checks it is on its network)
+    task_pos = np.column_stack([XY[[t.loc for t in tasks]], np.zeros(m)])
     return AllocationProblem(time=600.0, agents=agents, tasks=tasks, cost=cost,
                              comm=np.ones((n, n), bool) if comm is None else comm,
                              rng=np.random.default_rng(seed), agent_pos=rng.random((n, 3)),
-                             task_pos=rng.random((m, 3)))
+                             task_pos=task_pos)
 
 
 @pytest.mark.parametrize("ranged", [False, True])

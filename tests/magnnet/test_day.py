@@ -21,7 +21,7 @@ def _decision():
     from dataclasses import replace
 
     from learning.rl import Decisions, pairs_from_choices
-    from learning.value import scenario_for
+    from learning.value_train import scenario_for
 
     sc = scenario_for(MANHATTAN, 30.0, hours=0.3)
     sc = replace(sc, fleet=replace(sc.fleet, agents=30))

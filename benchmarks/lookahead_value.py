@@ -1,0 +1,156 @@
+"""Held-out days of a learned value of the post-decision state against the best myopic rule.
+
+Each ``--series`` is ``ALLOCATOR[/OBJECTIVE][+demand][+value=FILE[@WEIGHT]]`` (e.g.
+``hungarian/added_time+demand`` or ``hungarian/added_time+demand+value=v.npz@100``;
+``+dvalue=FILE`` gives the value to the ``demand`` repositioner, ``+dmix=0.3`` its mix),
+run on ``--scenario`` for each ``--agents`` N and ``--seeds`` S, batched every
+``--batch-window`` seconds; keep the value's training seeds (its file's ``seeds``) out.
+Writes ``--out`` (CSV: ``series, n_agents, seed, served_share, wait_mean, passenger_km,
+vehicle_km``; appended run by run, runs already there skipped) and prints per series and N the
+mean served share and wait with 95 % t-intervals over the seeds and, against the first series,
+the paired difference by seed.
+
+Run (the measurement of docs/explanation/learning.md's look-ahead section):
+``PYTHONPATH=. python benchmarks/lookahead_value.py --seeds 0 1 2 --agents 500 --series
+hungarian/added_time+demand "hungarian/added_time+demand+value=FILE" --out runs/lv.csv``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from learning.value_train import scenario_for  # noqa: E402
+
+FIELDS = ("series", "n_agents", "seed", "served_share", "wait_mean", "passenger_km",
+          "vehicle_km")
+
+
+def parse(series: str) -> dict:
+    """The parts of a series name (see the module doc)."""
+    head, *extras = series.split("+")
+    allocator, _, objective = head.partition("/")
+    out = {"allocator": allocator, "objective": objective or None, "demand": False,
+           "params": {}, "demand_params": {}}
+    for e in extras:
+        key, _, val = e.partition("=")
+        if key == "demand":
+            out["demand"] = True
+        elif key == "value":
+            path, _, w = val.partition("@")
+            out["params"]["value"] = path
+            if w:
+                out["params"]["value_weight"] = float(w)
+        elif key == "dvalue":
+            out["demand_params"]["value"] = val
+        elif key == "dmix":
+            out["demand_params"]["value_mix"] = float(val)
+        else:
+            raise SystemExit(f"unknown series part {e!r} in {series!r}")
+    return out
+
+
+def run(sc, spec: dict, agents: int, seed: int) -> dict:
+    """One day of a series: its served share, mean wait and kilometres."""
+    from dispatch.run.runner import run_one
+
+    sc = replace(sc, dispatch=replace(sc.dispatch, allocator_params=tuple(spec["params"].items()),
+                                      allocator_tables=()))
+    if spec["objective"]:
+        sc = replace(sc, dispatch=replace(sc.dispatch, objective=spec["objective"]))
+    if spec["demand"]:
+        sc = replace(sc, reposition=replace(
+            sc.reposition, policy="demand", declared=True,
+            params=(("demand", tuple(sorted(spec["demand_params"].items()))),)))
+    res = run_one(sc.runs(allocator=spec["allocator"], agents=agents, seed=seed)[0])
+    s = res.summary
+    tasks = res.tables["tasks"].to_pandas()
+    done = tasks[tasks["state"] == "completed"]
+    pkm = float(np.hypot(done["dropoff_x"] - done["x"], done["dropoff_y"] - done["y"]).sum()
+                / 1000.0)
+    veh = res.tables["vehicles"].to_pandas()
+    vkm = float(veh["distance"].sum() / 1000.0) if "distance" in veh else float("nan")
+    return {"served_share": s["tasks_completed"] / max(1, s["n_tasks"]),
+            "wait_mean": s.get("wait_time_mean"), "passenger_km": round(pkm, 1),
+            "vehicle_km": round(vkm, 1)}
+
+
+def interval(x) -> tuple[float, float]:
+    """Mean and 95 % t half-width."""
+    from scipy import stats
+
+    x = np.asarray(x, float)
+    if len(x) < 2:
+        return float(x.mean()), float("nan")
+    return float(x.mean()), float(stats.t.ppf(0.975, len(x) - 1) * x.std(ddof=1)
+                                  / math.sqrt(len(x)))
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--scenario", default=str(ROOT / "scenarios" / "chicago_taxi.toml"))
+    p.add_argument("--series", nargs="+", required=True)
+    p.add_argument("--agents", type=int, nargs="+", default=[500])
+    p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    p.add_argument("--batch-window", type=float, default=30.0)
+    p.add_argument("--hours", type=float, default=None)
+    p.add_argument("--capacity", type=int, default=None)
+    p.add_argument("--out", type=Path, required=True)
+    a = p.parse_args(argv)
+    sc = scenario_for(a.scenario, a.batch_window, a.hours, capacity=a.capacity)
+    rows = []
+    if a.out.exists():
+        with a.out.open() as f:
+            rows = list(csv.DictReader(f))
+    have = {(r["series"], int(r["n_agents"]), int(r["seed"])) for r in rows}
+    a.out.parent.mkdir(parents=True, exist_ok=True)
+    for n in a.agents:
+        for seed in a.seeds:
+            for name in a.series:
+                if (name, n, seed) in have:
+                    continue
+                got = {"series": name, "n_agents": n, "seed": seed,
+                       **run(sc, parse(name), n, seed)}
+                print(f"{name} N={n} seed {seed}: served {100 * got['served_share']:.2f} %, "
+                      f"wait {got['wait_mean']:.1f} s", flush=True)
+                new = not a.out.exists()
+                with a.out.open("a", newline="") as f:
+                    w = csv.DictWriter(f, FIELDS)
+                    if new:
+                        w.writeheader()
+                    w.writerow(got)
+                rows.append({k: str(v) for k, v in got.items()})
+    base = a.series[0]
+    for n in a.agents:
+        by = {(r["series"], int(r["seed"])): r for r in rows if int(r["n_agents"]) == n}
+        for name in a.series:
+            seeds = [s for s in a.seeds if (name, s) in by and (base, s) in by]
+            if not seeds:
+                continue
+            served = [100 * float(by[(name, s)]["served_share"]) for s in seeds]
+            wait = [float(by[(name, s)]["wait_mean"]) for s in seeds]
+            m, h = interval(served)
+            mw, hw = interval(wait)
+            line = f"N={n} {name}: served {m:.2f} ± {h:.2f} %, wait {mw:.1f} ± {hw:.1f} s"
+            if name != base:
+                d = [x - 100 * float(by[(base, s)]["served_share"]) for x, s in zip(served, seeds)]
+                dw = [100 * (x / float(by[(base, s)]["wait_mean"]) - 1) for x, s in
+                      zip(wait, seeds)]
+                dm, dh = interval(d)
+                wm, wh = interval(dw)
+                line += f"; vs {base}: {dm:+.2f} ± {dh:.2f} pts, wait {wm:+.1f} ± {wh:.1f} %"
+            print(line)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
