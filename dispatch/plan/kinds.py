@@ -62,7 +62,7 @@ class Pickup(_Request):
                 if s.kind is DROPOFF and s.task.state is PICKED_UP:
                     s.task.shared = True
         v.load += stop.passengers
-        op.book.picked_up(task)
+        op.book.picked_up(task, at=v.loc)
 
 
 class Dropoff(_Request):

@@ -250,12 +250,13 @@ class TaskBook:
         task.assigned_at, task.agent_id, task.cost = float(self.env.now), agent_id, cost
         self.bus.emit(self.env.now, "assign", agent_id, task.id, task.loc)
 
-    def picked_up(self, task: Task) -> None:
+    def picked_up(self, task: Task, at: Location | None = None) -> None:
         self._move(task, PICKED_UP)
         self._active[task.id] = task
         if math.isnan(task.picked_up_at):  # a transferred passenger keeps their first pickup
             task.picked_up_at = float(self.env.now)
-        self.bus.emit(self.env.now, "pickup", task.agent_id, task.id, task.loc)
+        self.bus.emit(self.env.now, "pickup", task.agent_id, task.id,  # at: where it boards
+                      task.loc if at is None else at)
 
     def reopen(self, task: Task, pickup: Location | None = None) -> None:
         """Give a task back to the pool because its vehicle broke down: an assigned one as it

@@ -133,9 +133,9 @@ def _check_join(tables: dict[str, pa.Table], rows: list[dict], ids: list, left_o
     assert len(release) == len(tasks)
     assert np.allclose(release[["x", "y"]].to_numpy(), release[["origin_x", "origin_y"]])
     assert (release["t"] <= release["t_task"] + 1e-9).all()  # "t" of the file: t_task
-    # a pickup event is at the requested pickup (where the rider walked from, walking), a
+    # a pickup event is where the vehicle took the rider on (the boarding point, walking), a
     # drop-off event where the vehicle let the rider off
-    for event, cols in (("pickup", ["origin_x", "origin_y"]),
+    for event, cols in (("pickup", ["board_x", "board_y"]),
                         ("dropoff", ["alight_x", "alight_y"])):
         got = ev[ev["event"] == event]
         assert len(got) == (tasks["picked_up_at"].notna() if event == "pickup" else
