@@ -190,7 +190,8 @@ class PlanTable:
         idx = np.asarray(slots, dtype=np.int64)
         version = fleet.plan_version.take(idx)
         ask = (checked.take(idx) != version) \
-            | starts_now(fleet.heading_none.take(idx), fleet.free_at.take(idx), now)
+            | starts_now(fleet.heading_none.take(idx), fleet.waiting.take(idx),
+                         fleet.free_at.take(idx), now)
         if ask.any():
             vehicles = fleet.vehicles
             for k in idx[ask].tolist():

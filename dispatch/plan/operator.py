@@ -368,9 +368,16 @@ class Operator(Breakdowns):
                         yield from self.driver.drive(env, v, path, tid)
                     if stop.earliest > env.now:  # (the rule) a rider still walking to it, a
                         stop.leg = 0.0  # booked ride's departure: it waits where the stop is
-                        v.plan_version += 1  # (a new first stop interrupts the wait: reroute)
+                        # (a new first stop interrupts the wait: reroute); while it waits its
+                        # plan's times start at each decision's now, as a standing vehicle's
+                        # (a decision reading them as of the wait's start would time an
+                        # insertion before this stop from a stale arrival)
+                        v.plan_version += 1
+                        v.waiting = True
                         yield env.timeout(stop.earliest - env.now)
+                        v.waiting = False
             except simpy.Interrupt as i:
+                v.waiting = False
                 if i.cause != "reroute":
                     kind.dropped(self, v, stop)
                     return

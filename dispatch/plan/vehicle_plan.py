@@ -24,13 +24,14 @@ if TYPE_CHECKING:
     from dispatch.plan.tasks import Task
 
 
-def starts_now(heading_none, free_at, now: float):
-    """Whether a plan's times start at ``now`` (the vehicle heads for no stop and is in no
-    service), for one vehicle (bools) or many (numpy arrays): then its arrays are stale at
-    every new ``now`` even when its ``plan_version`` is not. The one place this rule is
-    written: :meth:`Plan.arrays` keys its cache by it, and the decisions' plan table asks
-    for a vehicle's arrays by it."""
-    return heading_none & (free_at <= now)
+def starts_now(heading_none, waiting, free_at, now: float):
+    """Whether a plan's times start at ``now`` (the vehicle heads for no stop, or stands at
+    its first stop waiting for the stop's ``earliest`` time, and is in no service), for one
+    vehicle (bools) or many (numpy arrays): then its arrays are stale at every new ``now``
+    even when its ``plan_version`` is not. The one place this rule is written:
+    :meth:`Plan.arrays` keys its cache by it, and the decisions' plan table asks for a
+    vehicle's arrays by it."""
+    return (heading_none | waiting) & (free_at <= now)
 
 
 def request_stops(task: Task, service: float) -> list[Stop]:
@@ -93,7 +94,8 @@ class Plan:
         (lists; kept until the plan, the drive along it or, where its times start at
         ``now`` (:func:`starts_now`), the time changes)."""
         v = self.vehicle
-        key = (v.plan_version, now if starts_now(v.heading is None, v.free_at, now) else None)
+        key = (v.plan_version,
+               now if starts_now(v.heading is None, v.waiting, v.free_at, now) else None)
         cached = self._cache
         if cached is not None and cached[0] == key:
             return cached[1]

@@ -85,6 +85,7 @@ class Vehicle:
     # arrays (dispatch.decide.plan_costs.PlanTable), without a Python step per vehicle
     _load: int = field(default=0, init=False, repr=False)
     _heading: Any = field(default=None, init=False, repr=False)
+    _waiting: bool = field(default=False, init=False, repr=False)
     _plan_version: int = field(default=0, init=False, repr=False)
     _free_at: float = field(default=-math.inf, init=False, repr=False)
     _room: bool = field(default=True, init=False, repr=False)
@@ -143,6 +144,20 @@ class Vehicle:
         self._heading = value
         if self._fleet is not None:
             self._fleet.heading_none[self._slot] = value is None
+
+    @property
+    def waiting(self) -> bool:
+        """It stands at its first stop (:attr:`heading`) until the stop's ``earliest`` time
+        (a booked ride's departure, a walking rider's arrival): its plan's times start at
+        each new ``now``, as a standing vehicle's do
+        (:func:`dispatch.plan.vehicle_plan.starts_now`)."""
+        return self._waiting
+
+    @waiting.setter
+    def waiting(self, value: bool) -> None:
+        self._waiting = value
+        if self._fleet is not None:
+            self._fleet.waiting[self._slot] = value
 
     @property
     def plan_version(self) -> int:
@@ -264,10 +279,11 @@ class Fleet:
         #: bumped at every leg set (the leg setter): which rows of ``legs`` are stale
         self.leg_version = np.zeros(n, dtype=np.int64)
         self.legs = LegTable(n, self.driving, self.leg_version)  # (dispatch.plan.en_route)
-        #: each vehicle's ``load``, ``heading is None`` and ``plan_version``, kept by their
-        #: setters (dispatch.decide.plan_costs.PlanTable reads them)
+        #: each vehicle's ``load``, ``heading is None``, ``waiting`` and ``plan_version``, kept
+        #: by their setters (dispatch.decide.plan_costs.PlanTable reads them)
         self.load = np.fromiter((v.load for v in self.vehicles), np.int64, n)
         self.heading_none = np.fromiter((v.heading is None for v in self.vehicles), bool, n)
+        self.waiting = np.fromiter((v.waiting for v in self.vehicles), bool, n)
         self.plan_version = np.fromiter((v.plan_version for v in self.vehicles), np.int64, n)
         #: the node arrays hold (the space has nodes)
         self.road = n > 0 and all(space.stands(v.loc) is not None for v in self.vehicles)

@@ -37,12 +37,15 @@ def _metric(rng):
     return tt
 
 
-def _stop(rng, kind: str, loc: int, pax: int, ready: float):
+def _stop(rng, kind: str, loc: int, pax: int, ready: float, booked: bool = False):
     """A ``(loc, passengers, latest, service, earliest, holds)`` row of ``kind``: a charger
     visit takes long and may open later (a booked slot), a break opens when it is due, lasts
-    its duration and holds the seats, a depot closes at some time; requests' stops never
-    wait."""
+    its duration and holds the seats, a depot closes at some time; a request's drop-off never
+    waits, nor its pickup unless ``booked`` (then some open later: a booked ride's requested
+    departure or a walking rider's arrival, its window no sooner closed than opened)."""
     earliest, service, latest = -math.inf, 0.0, math.inf
+    if kind == S.PICKUP and booked and rng.random() < 0.5:
+        earliest = ready + float(rng.uniform(0, 400))
     if kind == S.CHARGE:
         service = float(rng.uniform(60, 600))
         if rng.random() < 0.5:
@@ -121,10 +124,11 @@ def test_timetable_equals_the_reference_over_every_order(seed):
     assert feasible > 200 and orders - feasible > 200  # both outcomes exercised
 
 
-def _plan_case(rng, breaks: bool = True):
+def _plan_case(rng, breaks: bool = True, booked: bool = False):
     """A plan of requests' stops with charge, reposition, depot and (``breaks``) break stops
-    among them (some waiting; a break where no one is on board), planned by the rule, limits
-    with random slack; 5 new requests (some prebooked: a pickup that opens later)."""
+    among them (some waiting; a break where no one is on board; with ``booked`` pickups that
+    open later among them), planned by the rule, limits with random slack; 5 new requests
+    (some prebooked: a pickup that opens later)."""
     tt = _metric(rng)
     ready = float(rng.uniform(0, 50))
     cap = int(rng.integers(1, 5))
@@ -142,14 +146,16 @@ def _plan_case(rng, breaks: bool = True):
             kind = S.REPOSITION
         pax = {S.PICKUP: 1, S.DROPOFF: -1}.get(kind, 0)
         occ += pax
-        rows.append(_stop(rng, kind, k + 1, pax, ready))
+        rows.append(_stop(rng, kind, k + 1, pax, ready, booked))
     got = simulate(ready, lambda loc: tt(0, loc), tt,
                    [(r[0], r[1], math.inf, r[3], r[4], r[5]) for r in rows], load, cap)
     if got is None:  # (a pickup right after a break: the seats are held) once more
-        return _plan_case(rng, breaks)
+        return _plan_case(rng, breaks, booked)
     arr = got[0]
-    rows = [(r[0], r[1], a + float(rng.choice([0.0, rng.uniform(0, 300), math.inf])), r[3], r[4],
-             r[5]) for r, a in zip(rows, arr)]
+    # (a pickup's window closes no sooner than it opens: a booked ride's from its departure)
+    rows = [(r[0], r[1], (max(a, r[4]) if r[1] > 0 else a)
+             + float(rng.choice([0.0, rng.uniform(0, 300), math.inf])), r[3], r[4], r[5])
+            for r, a in zip(rows, arr)]
     reqs = []
     for _ in range(5):
         p, d = int(rng.integers(20, 60)), int(rng.integers(20, 60))
@@ -185,12 +191,42 @@ def _insertions(c, objective):
         s_earliest=[s[4] for s in rows], req_earliest=[r[7] for r in reqs])
 
 
+def _waiting_case(rng):
+    """A vehicle standing at its first stop, a booked pickup that opens later (it waits
+    there: the stop's arrival is now, as its plan times it while it waits), then a plan as
+    :func:`_plan_case` draws one with booked pickups among its stops (the rider picked up
+    first rides to the end of it)."""
+    while True:
+        c = _plan_case(rng, breaks=False, booked=True)
+        tt, ready, cap, load = c["tt"], c["ready"], c["cap"], c["load"]
+        if load >= cap:
+            continue
+        e = ready + float(rng.uniform(30, 400))
+        rows = [(0, 1, math.inf, 0.0, e, False)] \
+            + [(r[0], r[1], math.inf, r[3], r[4], r[5]) for r in c["stops"]] \
+            + [(int(rng.integers(20, 60)), -1, math.inf, 0.0, -math.inf, False)]
+        got = simulate(ready, lambda loc: tt(0, loc), tt, rows, load, cap)
+        if got is None:  # (the extra rider over the seats somewhere) once more
+            continue
+        arr = got[0]
+        assert arr[0] == ready  # (it stands there: tt(0, 0) = 0)
+        rows = [(r[0], r[1], (max(a, r[4]) if r[1] > 0 else a)
+                 + float(rng.choice([0.0, rng.uniform(0, 300), math.inf])), r[3], r[4], r[5])
+                for r, a in zip(rows, arr)]
+        return {**c, "stops": rows, "arr": arr}
+
+
+CASES = {"plan": _plan_case, "booked": lambda rng: _plan_case(rng, booked=True),
+         "waiting": _waiting_case}
+
+
+@pytest.mark.parametrize("case", list(CASES))
 @pytest.mark.parametrize("objective", [S.PICKUP_TIME, S.ADDED_TIME])
-def test_insertion_with_every_stop_kind_equals_the_reference(objective):
+def test_insertion_with_every_stop_kind_equals_the_reference(objective, case):
     rng = np.random.default_rng(28 + objective)
     cases = feasible = waited = 0
     while cases < 400:
-        c = _plan_case(rng)
+        c = CASES[case](rng)
         cases += 1
         got = _insertions(c, objective)
         tt, ready = c["tt"], c["ready"]
@@ -207,14 +243,17 @@ def test_insertion_with_every_stop_kind_equals_the_reference(objective):
     assert feasible > 300 and waited > 100
 
 
-def test_the_plan_change_keeps_the_rule():
+@pytest.mark.parametrize("case", list(CASES))
+def test_the_plan_change_keeps_the_rule(case):
     """After :func:`insert` of a request where the compiled insertion says, the times the
     operator keeps (:func:`pushed`, then the pickup's and drop-off's) are the rule's for the
-    new plan, waits for charge slots and wait stops included."""
+    new plan, waits for charge slots, wait stops and booked pickups included, and for a
+    vehicle waiting at its first stop (its times from now: inserted before that stop, the
+    request's stops are driven first and the stop is reached later)."""
     rng = np.random.default_rng(5)
-    checked = 0
+    checked = before = 0
     while checked < 300:
-        c = _plan_case(rng)
+        c = CASES[case](rng)
         if not c["stops"]:
             continue
         got = _insertions(c, S.ADDED_TIME)
@@ -233,6 +272,8 @@ def test_the_plan_change_keeps_the_rule():
             times = S.insert(times, [at.pickup_at, at.dropoff_at], at.i, at.j)
             assert times == pytest.approx(want[0], abs=1e-6)
             checked += 1
+            before += at.i == 0
+    assert before > 50  # (insertions before the first stop: for "waiting", the stop it waits at)
 
 
 def _rtv_case(rng, nplan_max=4):
