@@ -9,8 +9,8 @@ released (red), turn yellow when assigned and vanish when closed. Each frame is 
 GPU is needed; Pillow writes the GIF (an ``.mp4`` needs ``imageio`` with ``imageio-ffmpeg``).
 
 PyBullet and Pillow are imported when :func:`render_run` is called, never at import; the
-world's boxes and vehicles are drawn as the run's own PyBullet mirror draws them
-(:mod:`dispatch.space.physics`, imported then too).
+world's boxes and vehicles are drawn as the run's own PyBullet mirror draws them, by
+:mod:`paired.voxel_bodies` (which imports PyBullet only when asked to).
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ import numpy as np
 
 from analysis.io import Results, open_results
 from analysis.timeline import positions_at, trajectories
+from paired import voxel_bodies
 
 log = logging.getLogger(__name__)
 
@@ -34,20 +35,11 @@ TASK_ASSIGNED = (0.95, 0.80, 0.10, 1)
 HIDDEN = (0.0, 0.0, -1e4)
 
 
-def _physics():
-    """The kernel's drawing of the voxel world (:mod:`dispatch.space.physics`: PyBullet
-    imported and connected quietly, boxes, vehicles' bodies, their colours), imported when a
-    voxel run is drawn: importing :mod:`analysis` needs no ``dispatch``."""
-    from dispatch.space import physics
-
-    return physics
-
-
 class _Scene:
     """A DIRECT PyBullet client holding visual-only bodies of one run."""
 
     def __init__(self, world, obstacles, vehicles, tasks, marker: float) -> None:
-        self.draw = draw = _physics()
+        self.draw = draw = voxel_bodies
         self.p = p = draw.import_pybullet()
         self.c = draw.connect_direct(p)
         w, d, _ = world
@@ -179,8 +171,7 @@ def _caption(rgb: np.ndarray, text: str, title: str):
     draw = ImageDraw.Draw(img)
     draw.rectangle((0, 0, img.width, 16), fill=(255, 255, 255))
     draw.text((4, 2), f"{title}   {text}", fill=(0, 0, 0))
-    physics = _physics()
-    legend = (("UAV", physics.UAV_RGBA), ("UGV", physics.UGV_RGBA), ("task open", TASK_OPEN),
+    legend = (("UAV", voxel_bodies.UAV_RGBA), ("UGV", voxel_bodies.UGV_RGBA), ("task open", TASK_OPEN),
               ("assigned", TASK_ASSIGNED))
     x = 4
     for label, rgba in legend:

@@ -105,6 +105,16 @@ def make_sizer(sc: Scenario):
                       "fleet.sizing_params")
 
 
+def refuse_transit(sc: Scenario) -> None:
+    """ScenarioError for a scenario with ``[transit]``: the section is read and its feed
+    checked, but a run does not hand riders to trains yet; refusing beats a run that silently
+    leaves the trains out."""
+    if sc.transit is not None:
+        raise ScenarioError(sc.path, "transit", "a run does not hand riders to trains yet: the "
+                            "section is read and its feed checked, and the router is used from "
+                            "Python (docs/howto/transit.md); leave [transit] out to run")
+
+
 def check_repositioner(sc: Scenario, name: str) -> None:
     """ScenarioError unless repositioner ``name`` serves the scenario's space (the kernel moves
     idle vehicles only in a space with the ``reposition`` feature, road networks: a voxel world

@@ -45,7 +45,6 @@ from dispatch.decide.meeting import Walks
 from dispatch.decide.pipeline import Pipeline
 from dispatch.decide.prebook import task_source
 from dispatch.decide.tally import Blame, Tally
-from dispatch.errors import ScenarioError
 from dispatch.events import EventBus
 from dispatch.fleet.battery import Energy
 from dispatch.fleet.chargers import Charging, Stations
@@ -63,7 +62,7 @@ from dispatch.plan.timed_drives import TimedExecution
 from dispatch.plan.traffic import Traffic
 from dispatch.plan.vehicles import Fleet, stop_leg
 from dispatch.run.plugins import (check_repositioner, describe, make_charger, make_plugin,
-                                  make_repositioner, make_sizer, offering_for)
+                                  make_repositioner, make_sizer, offering_for, refuse_transit)
 from dispatch.space.physics import mirror_of
 from dispatch.streams import (STREAM_ALLOCATOR, STREAM_CHARGING, STREAM_FAULTS, STREAM_FLEET,
                               STREAM_OFFERS, STREAM_PREBOOK, STREAM_REPOSITION, STREAM_SIZING,
@@ -115,13 +114,7 @@ class Simulation:
     def __init__(self, spec, recorder, progress=None, *, allocator=None,
                  env: simpy.Environment | None = None) -> None:
         sc = spec.scenario
-        if sc.transit is not None:
-            # read and checked, but not yet wired into a run: refusing beats a run that
-            # silently leaves the trains out
-            raise ScenarioError(sc.path, "transit", "a run does not hand riders to trains "
-                                "yet: the section is read and its feed checked, and the router "
-                                "is used from Python (docs/howto/transit.md); leave [transit] "
-                                "out to run")
+        refuse_transit(sc)
         self.spec, self.recorder = spec, recorder
         self.env = env = simpy.Environment() if env is None else env
         self.space = space = space_for(sc.world, spec.seed, sc.path)

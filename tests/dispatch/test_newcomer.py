@@ -205,7 +205,7 @@ def test_no_pybullet_banner_in_any_output(tmp_path):
     assert "pybullet build time" not in proc.stdout + proc.stderr
     code = textwrap.dedent('''
         import ctypes, sys
-        from dispatch.space.physics import quiet_c_output
+        from paired.voxel_bodies import quiet_c_output
         print("before", flush=False)
         with quiet_c_output():
             libc = ctypes.CDLL(None)

@@ -286,7 +286,7 @@ def one_line_error(path: Path, error=ScenarioError):
 
         class Args:
             scenario = path
-            force = False
+            ignore_limits = False
             allocator = planner = agents = seed = duration = None
             capacity = batch_window = None  # the override options run, sweep and validate have
             overrides: list[str] = []
