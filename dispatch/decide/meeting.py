@@ -241,7 +241,10 @@ def meeting_costs(walks: Walks, cost: np.ndarray, slots: np.ndarray, agents, tas
     ready = np.where(planned, np.maximum(fleet.free_at[slots], now), now)
     drive = np.asarray(planner.between([ag.loc for ag in agents], ub.tolist()), float)
     first = drive[:, b_at]  # (vehicles, candidate pairs)
-    ok = (ready[:, None] + first <= lp + 1e-9) & (n_req <= cap[:, None])
+    # a boarding point the rider reaches only after the latest pickup is no candidate: the
+    # insertion waits for the rider (``e``) but checks the vehicle's arrival against ``lp``
+    ok = (ready[:, None] + first <= lp + 1e-9) & (n_req <= cap[:, None]) \
+        & (e <= lp + 1e-9)[None, :]
     if one_point:  # boarding points the rider reaches first, from when the ride may start
         start = np.maximum(np.array([t.released_at for t in tasks])[col], now)
         ok &= (e <= start + first.min(axis=0) + 1e-9)[None, :]

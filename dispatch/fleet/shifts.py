@@ -335,8 +335,10 @@ class Shifts:
             self._go_home(v)
 
     def _free(self, v: Vehicle) -> bool:
-        """``v`` has nothing left to do (its plan empty, or a repositioning move)."""
-        return not v.failed and v.serving is None and (
+        """``v`` has nothing left to do (its plan empty, or a repositioning move) and is not
+        on a break (a break's stop leaves the plan when it starts: the drive home waits for
+        its end, whose ``idle`` event sends it)."""
+        return not v.failed and v.serving is None and v.break_since is None and (
             not v.plan or (len(v.plan) == 1 and v.plan[0].kind is REPOSITION))
 
     def _idle(self, ev) -> None:

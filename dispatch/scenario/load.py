@@ -290,7 +290,7 @@ def _check_prebooking(path: Path, world: WorldConfig, tasks: TaskConfig,
 def _check_pooling(path: Path, world: WorldConfig, fleet: FleetConfig, tasks: TaskConfig,
                    disp: DispatchConfig) -> None:
     """Shared rides (a capacity above 1) and drop-off limits are for road networks; a pooled
-    fleet decides with exact costs and without re-assignment before pickup."""
+    fleet, or riders who walk, decide without re-assignment before pickup."""
     pooled = fleet.pooled
     pooling = "pooling" in space_class(world.space).features
     if not pooling:
@@ -310,6 +310,12 @@ def _check_pooling(path: Path, world: WorldConfig, fleet: FleetConfig, tasks: Ta
     if pooled and disp.reassign:
         raise ScenarioError(path, "dispatch.reassign", "re-assignment before pickup is for "
                                                        "vehicles of capacity 1")
+    if tasks.walking and disp.reassign:
+        # a decision hands meeting points out as insertions, which re-assignment's hand-out
+        # drops as stale: the same decision came back at the same instant, forever
+        raise ScenarioError(path, "dispatch.reassign", "re-assignment before pickup and "
+                                                       "meeting points (max_walk) do not go "
+                                                       "together")
     trips = tasks.trips
     if trips is not None and trips.passengers is not None and len(trips) and not pooling \
             and int(trips.passengers.max()) > 1:
