@@ -81,13 +81,15 @@ def _p(rng, p: float) -> bool:
     return bool(rng.random() < p)
 
 
-def draw(seed: int, world: str | None = None) -> Case:
-    """The scenario of ``seed`` (in ``world``, else either at random): the same seed, the same
+def draw(seed: int, index: int = 0, world: str | None = None) -> Case:
+    """Run ``index`` of the soak of ``seed`` (in ``world``, else either at random): drawn from
+    ``numpy.random.default_rng([seed, index])`` alone, so the same pair gives the same
     scenario and files."""
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng([seed, index])
     world = world or _pick(rng, WORLDS)
     case = _road(rng) if world == "road" else _voxel(rng)
-    case.doc = {"name": f"soak{seed}", "seed": int(rng.integers(0, 2**31 - 1)), **case.doc}
+    case.doc = {"name": f"soak{seed}_{index}", "seed": int(rng.integers(0, 2**31 - 1)),
+                **case.doc}
     return case
 
 
@@ -170,8 +172,8 @@ def _road(rng) -> Case:
         dispatch["batch_window"] = _pick(rng, (5.0, 30.0, _r(rng, 0.5, 60)))
     if _p(rng, 0.5 if capacity > 1 else 0.2):
         dispatch["objective"] = "added_time"
-    if not prebook and _p(rng, 0.15):
-        dispatch["reassign"] = True
+    if not prebook and capacity == 1 and "max_walk" not in tasks and _p(rng, 0.15):
+        dispatch["reassign"] = True  # (refused with shared rides, bookings and walks)
     if _p(rng, 0.1):
         dispatch["lazy_costs"] = True
     _road_fleet(rng, doc, fleet, files, nodes, dispatch)

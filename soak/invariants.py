@@ -8,6 +8,7 @@ every invariant in the order the soak's table prints them.
 
 from __future__ import annotations
 
+import json
 import math
 from collections import defaultdict
 from pathlib import Path
@@ -323,11 +324,21 @@ def same_tables(a: dict[str, pd.DataFrame], b: dict[str, pd.DataFrame]) -> list[
         if name not in a or name not in b:
             diff.append(f"{name}: in one run only")
             continue
-        x = a[name].drop(columns=[c for c in WALL_COLUMNS if c in a[name]])
-        y = b[name].drop(columns=[c for c in WALL_COLUMNS if c in b[name]])
+        x, y = _timeless(a[name]), _timeless(b[name])
         if not x.equals(y):
             diff.append(name)
     return diff
+
+
+def _timeless(df: pd.DataFrame) -> pd.DataFrame:
+    """``df`` without its wall-clock columns (and the wall-clock entries, ``*seconds*``, of an
+    allocator's ``allocator_info`` JSON)."""
+    df = df.drop(columns=[c for c in WALL_COLUMNS if c in df])
+    if "allocator_info" in df:
+        df = df.assign(allocator_info=[
+            {k: v for k, v in json.loads(s).items() if "seconds" not in k}
+            if isinstance(s, str) and s.startswith("{") else s for s in df.allocator_info])
+    return df
 
 
 def counts_by(found) -> dict[str, int]:
