@@ -64,6 +64,20 @@ class Case:
         path.write_text(dumps(self.doc), encoding="utf-8")
         return path
 
+    @classmethod
+    def read(cls, directory: Path, name: str = "scenario.toml") -> Case:
+        """The case written in ``directory`` (its scenario and every CSV file beside it; the
+        cells kept as text)."""
+        import tomllib
+
+        doc = tomllib.loads((directory / name).read_text(encoding="utf-8"))
+        files = {}
+        for f in sorted(directory.glob("*.csv")):
+            with f.open(encoding="utf-8", newline="") as fh:
+                header, *rows = list(csv.reader(fh))
+            files[f.name] = (header, rows)
+        return cls("road" if "network" in doc.get("world", {}) else "voxel", doc, files)
+
     def text(self) -> str:
         """The scenario's TOML text (its files aside)."""
         return dumps(self.doc)
