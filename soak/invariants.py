@@ -188,9 +188,9 @@ def _break(doc, tdoc, tables, tasks, events, vehicles):
                 on_break = True
                 if aboard:
                     yield f"vehicle {agent}: break at {e.t:.3f} s with riders {sorted(aboard)}"
-            elif e.event == "break_end":
-                on_break = False
-            elif on_break and e.event != "breakdown":
+            elif e.event in ("break_end", "breakdown"):
+                on_break = False  # (a breakdown cuts a break: the rest is the repair's)
+            elif on_break:
                 yield f"vehicle {agent}: {e.event} at {e.t:.3f} s during its break"
                 on_break = False
             if e.event == "pickup":
