@@ -235,12 +235,17 @@ def _soc(doc, tdoc, tables, tasks, events, vehicles):
 def _promise(doc, tdoc, tables, tasks, events, vehicles):
     if "promised" not in tasks:
         return
+    # a promise fails only by a breakdown: re-opened by one (its vehicle broke down before
+    # the pickup), or aboard the vehicle that broke down (on_board = "fail")
     reopened = set(events.task_id[events.event == "reopen"])
+    downs = events[events.event == "breakdown"]
     broken = tasks[tasks.promised.astype(bool) & ~tasks.state.isin(["completed", "cancelled"])]
     for t in broken.itertuples():
-        if t.state != "failed" or t.task_id not in reopened:
+        named = t.task_id in reopened or bool(
+            ((downs.agent_id == t.agent_id) & (downs.t <= t.closed_at + TOL)).any())
+        if t.state != "failed" or not named:
             yield (f"promise {t.task_id} ended {t.state}"
-                   + ("" if t.task_id in reopened else " with no breakdown of its vehicle"))
+                   + ("" if named else " with no breakdown of its vehicle"))
 
 
 def _reachable(doc, tdoc, tables, tasks, events, vehicles):

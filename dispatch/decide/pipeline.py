@@ -103,6 +103,19 @@ def direct_times(book: TaskBook, free: Planner, seen: int) -> int:
     return book.released - 1
 
 
+def rides(planner, tasks) -> np.ndarray | None:
+    """Each trip's drive from pickup to drop-off at this hour (0 for a point task); None on a
+    planner without congestion, where it is the trip's free-flow ``direct_time``."""
+    if planner.free_flow is planner:
+        return None
+    out = np.zeros(len(tasks))
+    trips = [k for k, t in enumerate(tasks) if t.dropoff is not None]
+    if trips:
+        out[trips] = planner.between([tasks[k].loc for k in trips],
+                                     [tasks[k].dropoff for k in trips], pairwise=True)
+    return out
+
+
 def _breaking(v) -> bool:
     """``v`` is on a driver's break or has one in its plan (dispatch.plan.breaks)."""
     return v.break_since is not None or any(s.kind == BREAK for s in v.plan.stops)
@@ -353,7 +366,7 @@ class Pipeline:
             cost = self.energy_filter(cost, drive, idle, open_tasks)
         if self.shifts is not None:  # shifts: a plan ending after the shift and grace: inf
             cost = self.shifts.limit(cost, drive, now, idle, open_tasks, inserts,
-                                     plans=self.plans)
+                                     plans=self.plans, ride=rides(self.planner, open_tasks))
         cost_s = time.perf_counter() - t0
         self.tally.cost_seconds += cost_s
         if servable is not None:

@@ -257,11 +257,14 @@ class Shifts:
             self.until[k] = -math.inf if (d.ended or not d.on or d.home) else d.until
 
     def limit(self, cost: np.ndarray, drive: np.ndarray, now: float, slots: np.ndarray,
-              tasks: list, inserts, *, plans: bool) -> np.ndarray:
+              tasks: list, inserts, *, plans: bool, ride: np.ndarray | None = None
+              ) -> np.ndarray:
         """``cost`` with ``inf`` where vehicle ``slots[i]`` would complete its plan's last
         stop after its shift's end plus the grace with request ``j`` (see the module);
         ``drive``: the seconds from each vehicle to each pickup; ``inserts``: where a busy
-        vehicle's stops go (:class:`dispatch.decide.plan_costs.Inserts`)."""
+        vehicle's stops go (:class:`dispatch.decide.plan_costs.Inserts`); ``ride``: each
+        request's drive to its drop-off at this hour (congestion; None: its free-flow
+        ``direct_time``)."""
         lim = self.until[slots]
         if not (lim < math.inf).any() or not cost.size:
             return cost
@@ -269,6 +272,8 @@ class Shifts:
         point = np.array([t.dropoff is None for t in tasks])
         pd = np.array([0.0 if t.dropoff is None or t.direct_time != t.direct_time
                        else t.direct_time for t in tasks])
+        if ride is not None:
+            pd = np.where(point, 0.0, ride)
         svc_p = np.where(point, svc, 0.0)
         svc_d = np.where(point, 0.0, svc)
         end = now + drive + (svc_p + pd + svc_d)[None, :]

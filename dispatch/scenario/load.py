@@ -441,8 +441,9 @@ def _parse_empirical(t: Table, tasks: TaskConfig, world: WorldConfig,
 
 def check_limits(sc: Scenario, specs: list[RunSpec], limits: Limits = LIMITS) -> None:
     """Refuse runs that would not finish or not fit in memory (``--force`` skips this): too
-    many runs, voxel cells, vehicles, static tasks, releases of a generated source, or
-    intersections of a generated grid. Each refusal names the key, the amount and the bound."""
+    many runs, voxel cells, vehicles, static tasks, releases of a generated source,
+    intersections of a generated grid, or calls of a periodic process (a period too short).
+    Each refusal names the key, the amount and the bound."""
 
     def refuse(key: str, what: str) -> ScenarioError:
         return ScenarioError(sc.path, key, f"{what}; {FORCE_HINT}")
@@ -476,8 +477,9 @@ def check_limits(sc: Scenario, specs: list[RunSpec], limits: Limits = LIMITS) ->
                                             f"{limits.releases:,})")
     elif t.trips is not None and len(t.trips) > limits.releases:
         raise refuse("tasks.trace", f"{len(t.trips):,} trips (more than {limits.releases:,})")
-    from dispatch.scenario.budget import check_work  # work bounds: runs that would not finish
+    from dispatch.scenario.budget import check_periodic, check_work  # runs that would not end
 
+    check_periodic(sc, limits.periodic_calls, refuse)
     check_work(sc, specs, refuse)
 
 
