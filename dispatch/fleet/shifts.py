@@ -276,7 +276,9 @@ class Shifts:
             pd = np.where(point, 0.0, ride)
         svc_p = np.where(point, svc, 0.0)
         svc_d = np.where(point, 0.0, svc)
-        end = now + drive + (svc_p + pd + svc_d)[None, :]
+        # a booked pickup waits for its requested departure (dispatch.decide.prebook)
+        ep = np.array([t.earliest_pickup for t in tasks])
+        end = np.maximum(now + drive, ep[None, :]) + (svc_p + pd + svc_d)[None, :]
         if plans:
             fleet, vs = self.fleet, self.fleet.vehicles
             planned = fleet.busy_mask[slots]
