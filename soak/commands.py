@@ -33,8 +33,9 @@ def table_lines(tally, width: int = 80) -> list[str]:
     t.add_column("new", justify="right")
     for name, n, k in tally.rows():
         t.add_row(name, str(n), str(k), str(n - k))
-    console = Console(width=min(width, 80), record=True, file=open("/dev/null", "w"),
-                      color_system=None)
+    import io
+
+    console = Console(width=min(width, 80), record=True, file=io.StringIO(), color_system=None)
     console.print(t)
     lines = [head, *console.export_text().rstrip("\n").splitlines()]
     lines += [f"  {run}: {msg[:70]}" for run, msg in tally.failures[:10]]

@@ -69,7 +69,7 @@ def run_case(case: Case, directory: Path, *, limit: float = 60.0,
     except DispatchError as e:
         return Outcome("refused", message=str(e).replace(str(directory) + "/", ""),
                        seconds=time.perf_counter() - start)
-    except Exception as e:  # a crash: the soak's finding, with where it was raised
+    except Exception as e:  # noqa: BLE001 - a crash is the soak's finding: kept with where
         tb = traceback.extract_tb(e.__traceback__)[-1]
         return Outcome("crash", message=f"{type(e).__name__}: {e} ({tb.filename}:{tb.lineno})",
                        seconds=time.perf_counter() - start)

@@ -59,7 +59,7 @@ def _drop_rows(case: Case, test, name: str, keep_one: bool = True) -> Case:
 
 
 def _drop_column(case: Case, test, name: str) -> Case:
-    header, rows = case.files[name]
+    header = case.files[name][0]
     for col in list(header[3:] if name == "trips.csv" else header[2:]):
         if col not in header:
             continue
@@ -69,7 +69,7 @@ def _drop_column(case: Case, test, name: str) -> Case:
         c.files[name] = (h[:j] + h[j + 1:], [row[:j] + row[j + 1:] for row in r])
         if test(c):
             case = c
-            header, rows = case.files[name]
+            header = case.files[name][0]
     return case
 
 

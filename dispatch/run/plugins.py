@@ -24,9 +24,9 @@ if TYPE_CHECKING:
     from dispatch.decide.tally import Blame
     from dispatch.plan.tasks import TaskBook
 
-__all__ = ["check_repositioner", "check_runs", "describe", "make_acceptor", "make_charger",
-           "make_plugin", "make_repositioner", "make_sizer", "offering_for", "travel_times_needed",
-           "UnknownParameter"]
+__all__ = ["UnknownParameter", "check_repositioner", "check_runs", "describe", "make_acceptor",
+           "make_charger", "make_plugin", "make_repositioner", "make_sizer", "offering_for",
+           "travel_times_needed"]
 
 
 def make_plugin(kind: str, name: str, params, *args):

@@ -323,8 +323,8 @@ def test_bad_configuration_is_one_line_naming_the_key(tmp_path, extra, words):
     ("zone = -5.0", ("repositioner 'demand' rejected its parameters (reposition.demand: "
                      "zone = -5.0): ValueError: zone must be a number of metres > 0, got -5.0")),
     # a typo names the key itself, not Python's TypeError
-    ("radius = 3", "reposition.demand.radius: repositioner 'demand' takes no parameter "
-                   "'radius'; its parameters: zone, max_moves"),
+    ("radius = 3", ("reposition.demand.radius: repositioner 'demand' takes no parameter "
+                    "'radius'; its parameters: zone, max_moves")),
 ])
 def test_bad_policy_parameters_are_one_line_naming_the_table(tmp_path, params, words):
     extra = f'[reposition]\npolicy = "demand"\n[reposition.demand]\n{params}\n'

@@ -8,8 +8,8 @@ from __future__ import annotations
 import pytest
 
 from dispatch.errors import DispatchError
-from dispatch.run.prepare import checked_specs
 from dispatch.run.parser import parser
+from dispatch.run.prepare import checked_specs
 from dispatch.scenario.load import check_limits, load_scenario
 from tests.conftest import ROOT
 from tests.dispatch.test_trips import road_scenario, write_csv
@@ -65,9 +65,9 @@ def _prepared_error(path) -> str:
 
 
 @pytest.mark.parametrize("fleet, extra, key, words", [
-    ('agents = 2', '[dispatch.allocator_params]\nvalue_wieght = 1.0', "dispatch.allocator_params"
-     ".value_wieght", "allocator 'hungarian' takes no parameter 'value_wieght' (did you mean "
-     "'value_weight'?)"),
+    ('agents = 2', '[dispatch.allocator_params]\nvalue_wieght = 1.0',
+     "dispatch.allocator_params.value_wieght",
+     "allocator 'hungarian' takes no parameter 'value_wieght' (did you mean 'value_weight'?)"),
     ('agents = 2', '[dispatch.allocator_params.hungarian]\nvalu = 1.0',
      "dispatch.allocator_params.hungarian.valu", "(did you mean 'value'?)"),
     ('agents = 2', '[dispatch.planner_params]\nspeeed = 3', "dispatch.planner_params.speeed",
@@ -75,8 +75,7 @@ def _prepared_error(path) -> str:
     ('agents = 2', '[reposition]\npolicy = "demand"\n[reposition.demand]\nzonee = 100.0',
      "reposition.demand.zonee", "(did you mean 'zone'?); its parameters: zone, max_moves"),
     ('start = "fleet.csv"\n\n' + ENERGY + '[charging.threshold]\nlo = 0.1', '',
-     "charging.threshold.lo", "charger 'threshold' takes no parameter 'lo' (did you mean "
-     "'low'?)"),
+     "charging.threshold.lo", "charger 'threshold' takes no parameter 'lo' (did you mean 'low'?)"),
     ('agents = 2', '[acceptor]\nname = "logit"\n[acceptor.logit]\nb_waitt = -0.1',
      "acceptor.logit.b_waitt", "(did you mean 'b_wait'?)"),
     ('start = "fleet.csv"\nsizing = "utilization"\n[fleet.sizing_params]\nmin_vehicle = 1', '',
