@@ -40,12 +40,15 @@ class Outcome:
 
 
 def _simulate(path: Path, out: Path, limit: float):
+    """Check the scenario as ``dispatch run`` does (the file, the resource bounds, the
+    plugins and the space), then run it into ``out``."""
+    from dispatch.run.parser import parser
+    from dispatch.run.prepare import checked_specs
     from dispatch.run.runner import run_one
     from dispatch.run.time_limit import time_limit_of
-    from dispatch.scenario.load import load_scenario
 
     with time_limit_of(limit) as tick:
-        [spec] = load_scenario(path).runs()
+        _, [spec] = checked_specs(parser().parse_args(["run", str(path)]))
         run_one(spec, out, progress=tick)
 
 

@@ -66,7 +66,6 @@ from dispatch.decide.planner_costs import PlannerCosts, close_unreachable, lazy_
 from dispatch.decide.prebook import earliest_views
 from dispatch.decide.tally import Blame, Tally
 from dispatch.errors import PluginError
-from dispatch.plan.breaks import BREAK
 from dispatch.plan.stops import OBJECTIVES
 from dispatch.plan.tasks import TaskBook, TaskState
 
@@ -116,11 +115,6 @@ def rides(planner, tasks) -> np.ndarray | None:
     return out
 
 
-def _breaking(v) -> bool:
-    """``v`` is on a driver's break or has one in its plan (dispatch.plan.breaks)."""
-    return v.break_since is not None or any(s.kind == BREAK for s in v.plan.stops)
-
-
 def candidates(fleet: Fleet, book: TaskBook, held: dict, pooled: bool
                ) -> tuple[np.ndarray, list[Task], dict[int, int]]:
     """``(slots, requests, holder)`` of a decision: the fleet positions of its vehicles,
@@ -133,9 +127,6 @@ def candidates(fleet: Fleet, book: TaskBook, held: dict, pooled: bool
     else:
         idle = fleet.idle_index()
     holder: dict[int, int] = {}  # task id -> the vehicle driving to its pickup
-    # (not one on a driver's break or with one planned: giving its task up, it would drive
-    # off during the break or drop it)
-    held = {k: t for k, t in held.items() if not _breaking(fleet.by_id[t.agent_id])}
     if held:  # [dispatch] reassign: vehicles driving to a pickup take part, with their tasks
         holder = {t.id: t.agent_id for t in held.values()}
         slots = np.array([fleet.by_id[a]._slot for a in holder.values()], np.int64)

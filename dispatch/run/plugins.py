@@ -167,6 +167,14 @@ def check_runs(sc: Scenario, planners, repositioners=(), allocators=()) -> None:
     for name in repositioners:
         check_repositioner(sc, name)
     _check_breaks(sc, allocators)
+    for name in allocators if sc.dispatch.reassign else ():
+        if registry.declaration("allocator", name).multi_request:
+            # (its routes are handed out only where no vehicle holds a task: with one that
+            # does, every decision was dropped and came back at the same instant, forever)
+            raise ScenarioError(sc.path, "dispatch.reassign",
+                                f"re-assignment before pickup gives single tasks up; "
+                                f"allocator {name!r} routes several requests per vehicle "
+                                f"(multi_request): they do not go together")
     need = travel_times_needed(sc, allocators)
     for name in planners:
         caps = registry.declaration("planner", name)

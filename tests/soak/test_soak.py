@@ -166,9 +166,11 @@ def test_shrink_finds_the_smallest_failing_case(tmp_path, monkeypatch):
 def test_regression_case(path, tmp_path):
     case = Case.read(path.parent)
     got = run_case(case, tmp_path / "run")
-    assert got.status in ("ok", "refused"), (got.status, got.message, got.violations[:3])
-    if path.parent.name == "reassign_walk_loop":
-        assert got.status == "refused" and "dispatch.reassign" in got.message
+    head = path.read_text(encoding="utf-8").split("\nname", 1)[0]
+    if "now refused" in head:  # a combination that cannot work: one line naming the key
+        assert got.status == "refused" and "dispatch.reassign" in got.message, got.message
+    else:
+        assert got.status == "ok", (got.status, got.message, got.violations[:3])
 
 
 def test_ci_slice(tmp_path):
