@@ -89,6 +89,7 @@ from dispatch.heap import keep_large_blocks
 from dispatch.plan.operator import KEEP
 from dispatch.plan.stops import DROPOFF, PICKUP, PlannedStop
 from dispatch.plan.tasks import OPEN, TaskBook, TaskState
+from dispatch.plan.vehicle_plan import fixed_version
 
 if TYPE_CHECKING:
     import simpy
@@ -234,9 +235,9 @@ class Dispatcher:
         self._pending = _Pending(problem, allocation, d.requests, d.cost_s, decide_s, delay,
                                  n_comp, d.holder, answer.index, answer.routes, d.inserts,
                                  d.cut, d.meetings)
-        if delay > 0:
-            by_id = self.fleet.by_id
-            self._pending.versions = {a: by_id[a].plan_version for a, _ in allocation.pairs}
+        if delay > 0:  # (the hand-out tells a stale insertion by them)
+            self._pending.versions = {a: fixed_version(self.fleet.by_id[a], self.env.now)
+                                      for a, _ in allocation.pairs}
         if delay <= 0:
             self._hand_out()
 
@@ -320,7 +321,7 @@ class Dispatcher:
         else:
             def vehicle_unchanged(a: int) -> bool:  # a vehicle of the decision, as it was then
                 v = by_id[a]
-                if a not in holding:  # (a busy one whose plan is as it was: its insertion holds)
+                if a not in holding:  # (a standing one whose plan is as it was: it holds)
                     return not v.busy or v.plan_version == p.versions.get(a)
                 task = self.operator.holds(v)
                 return task is not None and task.id == holding[a] \
@@ -337,8 +338,7 @@ class Dispatcher:
                 handed = tuple((a, t) for a, t in handed if a not in p.routes)
             row, col = finders(p.problem)
             if p.inserts:  # a pair planned into a plan that changed since is stale: dropped
-                # (an idle vehicle's pair with meeting points is an insertion too: kept while
-                # its plan is as it was, else every such decision came back, forever)
+                # (not one into a plan as it was: else such decisions came back forever)
                 handed = tuple((a, t) for a, t in handed
                                if (row(a), col(t)) not in p.inserts
                                or by_id[a].plan_version == p.versions.get(a))

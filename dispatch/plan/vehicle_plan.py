@@ -33,6 +33,16 @@ def starts_now(heading_none, free_at, now: float):
     return heading_none & (free_at <= now)
 
 
+def fixed_version(v, now: float) -> int | None:
+    """``v``'s ``plan_version`` where an insertion planned at ``now`` still holds later while
+    the version stays: the vehicle stands (an empty plan, or a stop it is serving); None where
+    it drives (a re-route from where it got to costs more than the plan said) or its times
+    start at ``now`` (:func:`starts_now`) and move with the clock."""
+    if v.heading is not None or (v.plan and starts_now(True, v.free_at, now)):
+        return None
+    return v.plan_version
+
+
 def request_stops(task: Task, service: float) -> list[Stop]:
     """The stops of ``task``: its pickup (which completes a point task) and its drop-off (at
     its meeting points where it walks: :mod:`dispatch.decide.meeting`; a booked ride's pickup

@@ -11,7 +11,6 @@ from dispatch.errors import DispatchError
 from dispatch.run.parser import parser
 from dispatch.run.prepare import checked_specs
 from dispatch.scenario.load import check_limits, load_scenario
-from tests.conftest import ROOT
 from tests.dispatch.test_trips import road_scenario, write_csv
 
 ENERGY = ('[fleet.energy]\nbattery_kwh = 10.0\n[chargers]\nfile = "st.csv"\n[charging]\n'
@@ -87,16 +86,3 @@ def test_a_plugin_parameter_typo_is_one_line_naming_its_key(tmp_path, fleet, ext
     assert msg.startswith(f"{path}: {key}: "), msg
     assert words in msg and "TypeError" not in msg and "\n" not in msg
 
-
-def test_with_latency_a_pair_into_an_unchanged_plan_is_handed_out(tmp_path):
-    """Two-seat taxis, auction over a radio with latency: the second request is inserted into
-    the busy vehicle's plan (its plan unchanged during the deliberation), in one decision."""
-    from soak.generate import Case
-    from soak.invariants import read_tables
-    from soak.runner import run_case
-
-    case = Case.read(ROOT / "tests" / "soak_cases" / "latency_busy_insert")
-    assert run_case(case, tmp_path / "run").status == "ok"
-    t = read_tables(tmp_path / "run" / "out")
-    assert len(t["decisions"]) == 2 and (t["events"].event == "insert").sum() == 1
-    assert (t["tasks"].state == "completed").all() and (t["tasks"].agent_id == 0).all()
