@@ -23,6 +23,7 @@ class FcfsAllocator(Allocator):
     name = "fcfs"
     decentralized = False
     one_by_minimum = True  # one request: the soonest vehicle, ties to the lowest id
+    nearest_cut = True  # ... found among the vehicles a lower bound cannot rule out
 
     def allocate(self, problem: AllocationProblem) -> Allocation:
         return Allocation.centralized(problem, fcfs_pairs(problem))

@@ -28,6 +28,7 @@ class HungarianAllocator(Allocator):
     decentralized = False
     minimizes_total_cost = True  # maximum cardinality, then minimum total cost; no rng
     one_by_minimum = True  # one task: the first cheapest finite row (see optimal_pairs)
+    nearest_cut = True  # ... found among the vehicles a lower bound cannot rule out
 
     def __init__(self, value: str | None = None, value_weight: float | None = None) -> None:
         """``value``: a learned value of where vehicles end up (a file of ``dispatch train
@@ -42,7 +43,7 @@ class HungarianAllocator(Allocator):
 
             self.value = ValueOption(value, value_weight)
             self.minimizes_total_cost = False  # of the adjusted costs, not problem.cost
-            self.one_by_minimum = False
+            self.one_by_minimum = self.nearest_cut = False
 
     def allocate(self, problem: AllocationProblem) -> Allocation:
         if self.value is None:

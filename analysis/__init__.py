@@ -2,8 +2,10 @@
 
 Reads Parquet only and imports neither torch nor PyBullet nor the ``dispatch`` package, so a
 results folder can be analysed on any machine with pyarrow, pandas, scipy and matplotlib (a road
-run's network is read from the results folder too); ``dispatch report``, ``dispatch render`` and ``dispatch replay``
-reach the command line through the entry-point group ``dispatch.commands``
+run's network is read from the results folder too; drawing a voxel run with PyBullet borrows the
+kernel's drawing of the world, :mod:`dispatch.space.physics`, when it is drawn); ``dispatch
+report``, ``dispatch render`` and ``dispatch replay`` reach the command line through the
+entry-point group ``dispatch.commands``
 (:mod:`analysis.commands`):
 
 * :mod:`analysis.io` - :func:`~analysis.io.open_results` on run / sweep folders;

@@ -91,11 +91,21 @@ class Source:
             part = ds.partitioning(ps, flavor="hive")
             d = ds.dataset(self.path / table, format="parquet", partitioning=part)
         schemas = [f.physical_schema for f in d.get_fragments()]
-        unified = pa.unify_schemas([d.schema, *schemas])
+        unified = pa.unify_schemas([_text_ids(s, schemas) for s in (d.schema, *schemas)])
         if unified.equals(d.schema):
             return d
         return ds.dataset(self.path / table, format="parquet", partitioning=part,
                           schema=unified)
+
+
+def _text_ids(schema: pa.Schema, schemas: list[pa.Schema]) -> pa.Schema:
+    """``schema`` with its ``request_id`` a string where ``schemas`` (a table's files) hold
+    both types: runs of integer ids beside runs of string ids read as strings (the integers in
+    decimal, as the traces wrote them)."""
+    types = {s.field("request_id").type for s in schemas if "request_id" in s.names}
+    if len(types) < 2 or "request_id" not in schema.names:
+        return schema
+    return schema.set(schema.get_field_index("request_id"), pa.field("request_id", pa.string()))
 
 
 def _kind(path: Path) -> str | None:
@@ -372,7 +382,20 @@ class Results:
 
 
 #: Columns renamed since older versions wrote them: table -> {old name: new name}.
-RENAMED = {"tasks": {"arrived_at": "picked_up_at"}}
+RENAMED = {"tasks": {"arrived_at": "picked_up_at"},
+           # a request the run's end cut off was called "cancelled" (no rider cancelled it)
+           "summary": {"tasks_cancelled": "tasks_cut_off"}}
+#: Old value -> new value, by column, of what older versions wrote: the state and the event of
+#: a request the run's end cut off
+RENAMED_VALUES = {"state": {"cancelled": "cut_off"}, "event": {"cancel": "cut_off"}}
+
+
+def legacy_values(df):
+    """``df`` with the values older versions wrote renamed (:data:`RENAMED_VALUES`)."""
+    for col, names in RENAMED_VALUES.items():
+        if col in df.columns and len(df) and df[col].isin(list(names)).any():
+            df[col] = df[col].replace(names)
+    return df
 
 
 def _legacy_renames(name: str, src: Source, names: list[str]) -> dict[str, str]:
@@ -384,7 +407,9 @@ def _legacy_renames(name: str, src: Source, names: list[str]) -> dict[str, str]:
 
 
 def _normalise(df):
-    """Partition columns come back as int32 / categorical: make them int64 / float / str."""
+    """Partition columns come back as int32 / categorical: make them int64 / float / str;
+    values older versions wrote are renamed (:func:`legacy_values`)."""
+    legacy_values(df)
     for k in ("n_agents", "seed"):
         if k in df.columns and str(df[k].dtype) != "int64":
             df[k] = df[k].astype("int64")

@@ -31,7 +31,7 @@ FleetPy's evaluation label in :data:`FLEETPY_LABELS`), tasks pooled over the gro
         the fleet did not serve in time: ``rejected`` at once (no vehicle could reach the pickup
         within ``max_wait``), ``expired`` while open (``max_wait`` / ``ttl`` ran out) or
         ``unreachable``); ``cut_off`` (still waiting or aboard when the run ended: tasks of
-        state ``cancelled``, cut off by the run's ``duration``, not a rider's choice) and
+        state ``cut_off``, cut off by the run's ``duration``, not a rider's choice) and
         ``failed`` (a breakdown with the passenger aboard), so that rides + rejections +
         cut_off + failed = requests; ``rejectionRate`` = rejections / requests;
         ``service_rate`` = rides / requests; ``cutOffRate`` = cut_off / requests;
@@ -258,8 +258,8 @@ def customer_stats(trips: pd.DataFrame) -> dict:
     requests = len(trips)
     rides = int((trips["state"] == "completed").sum())
     rejections = int(trips["state"].isin(REJECTED_STATES).sum())
-    # the tasks table's state "cancelled": the run's end cut the trip off
-    cut_off = int((trips["state"] == "cancelled").sum())
+    # the tasks table's state "cut_off": the run's end cut the trip off
+    cut_off = int((trips["state"] == "cut_off").sum())
     wait = trips["wait"].to_numpy(dtype=float)
     return {
         "requests": requests, "rides": rides, "rejections": rejections,
@@ -442,7 +442,7 @@ RUN_VALUES = {
     "service_rate": lambda s: s["tasks_completed"] / s["n_tasks"],
     "rejectionRate": lambda s: (s["tasks_rejected"] + s["tasks_expired"]
                                 + s.get("tasks_unreachable", 0)) / s["n_tasks"],
-    "cutOffRate": lambda s: s["tasks_cancelled"] / s["n_tasks"],
+    "cutOffRate": lambda s: s["tasks_cut_off"] / s["n_tasks"],
     "wait_average": lambda s: s["wait_time_mean"],
     "emptyRatio": lambda s: s["empty_distance"] / s["distance"],
 }

@@ -21,9 +21,9 @@ STATE_COLOURS = {"travel": "#1f77b4", "service": "#2ca02c", "waiting": "#ff7f0e"
                  "reposition": "#9edae5", "idle": "#d9d9d9", "down": "#d62728"}
 MARKERS = ("o", "s", "^", "D", "v", "P", "X")
 TASK_COLOURS = {"completed": "#2ca02c", "expired": "#d62728", "unreachable": "#7f7f7f",
-                "cancelled": "#9467bd", "rejected": "#ff7f0e", "failed": "#8c564b"}
-#: How a legend names a task state: the state ``cancelled`` is a task the run's end cut off.
-TASK_LABELS = {"cancelled": "cut off by the end"}
+                "cut_off": "#9467bd", "rejected": "#ff7f0e", "failed": "#8c564b"}
+#: How a legend names a task state: the state ``cut_off`` is a task the run's end cut off.
+TASK_LABELS = {"cut_off": "cut off by the end"}
 
 
 def _figure(w: float = 6.4, h: float = 4.2):

@@ -8,13 +8,14 @@ released (red), turn yellow when assigned and vanish when closed. Each frame is 
 ``getCameraImage`` with the CPU ``ER_TINY_RENDERER`` of a ``DIRECT`` client, so no display or
 GPU is needed; Pillow writes the GIF (an ``.mp4`` needs ``imageio`` with ``imageio-ffmpeg``).
 
-PyBullet and Pillow are imported when :func:`render_run` is called, never at import.
+PyBullet and Pillow are imported when :func:`render_run` is called, never at import; the
+world's boxes and vehicles are drawn as the run's own PyBullet mirror draws them
+(:mod:`dispatch.space.physics`, imported then too).
 """
 
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import logging
 import math
 import os
@@ -28,89 +29,46 @@ from analysis.timeline import positions_at, trajectories
 log = logging.getLogger(__name__)
 
 GROUND = (0.80, 0.82, 0.78, 1)
-OBSTACLE = (0.55, 0.55, 0.62, 1)
-UAV = (0.10, 0.40, 0.90, 1)
-UGV = (0.90, 0.50, 0.10, 1)
 TASK_OPEN = (0.85, 0.10, 0.10, 1)
 TASK_ASSIGNED = (0.95, 0.80, 0.10, 1)
 HIDDEN = (0.0, 0.0, -1e4)
 
 
-@contextlib.contextmanager
-def _quiet_c_output():
-    """C-level stdout and stderr to the null device inside the block (PyBullet's build banner
-    at import, its lines at connect); Python's and C's buffers flushed around it. The same as
-    ``dispatch.space.physics.quiet_c_output``: analysis does not import ``dispatch``."""
-    import sys
+def _physics():
+    """The kernel's drawing of the voxel world (:mod:`dispatch.space.physics`: PyBullet
+    imported and connected quietly, boxes, vehicles' bodies, their colours), imported when a
+    voxel run is drawn: importing :mod:`analysis` needs no ``dispatch``."""
+    from dispatch.space import physics
 
-    def c_flush() -> None:
-        with contextlib.suppress(Exception):
-            ctypes.CDLL(None).fflush(None)
-
-    for stream in (sys.stdout, sys.stderr):
-        with contextlib.suppress(Exception):
-            stream.flush()
-    c_flush()
-    saved = {}
-    for fd in (1, 2):
-        with contextlib.suppress(OSError):
-            saved[fd] = os.dup(fd)
-    null = os.open(os.devnull, os.O_WRONLY)
-    try:
-        for fd in saved:
-            os.dup2(null, fd)
-        yield
-    finally:
-        c_flush()
-        for fd, copy in saved.items():
-            os.dup2(copy, fd)
-            os.close(copy)
-        os.close(null)
-
-
-def _pybullet():
-    """Import pybullet without its build banner (C-level stdout or stderr)."""
-    with _quiet_c_output():
-        import pybullet
-    return pybullet
+    return physics
 
 
 class _Scene:
     """A DIRECT PyBullet client holding visual-only bodies of one run."""
 
     def __init__(self, world, obstacles, vehicles, tasks, marker: float) -> None:
-        self.p = p = _pybullet()
-        with _quiet_c_output():
-            self.c = p.connect(p.DIRECT)
+        self.draw = draw = _physics()
+        self.p = p = draw.import_pybullet()
+        self.c = draw.connect_direct(p)
         w, d, _ = world
         self._box((0, 0, -0.1), (w, d, 0.0), GROUND)
         for b in obstacles.itertuples(index=False):
-            self._box((b.x0, b.y0, b.z0), (b.x1, b.y1, b.z1), OBSTACLE)
-        self.vehicles = {}
-        for v in vehicles.itertuples(index=False):
-            pos = (v.x0, v.y0, v.z0)
-            if v.kind == "uav":
-                shape = p.createVisualShape(p.GEOM_SPHERE, radius=marker, rgbaColor=UAV,
-                                            physicsClientId=self.c)
-            else:
-                shape = p.createVisualShape(p.GEOM_BOX, halfExtents=(marker, marker, marker * 0.7),
-                                            rgbaColor=UGV, physicsClientId=self.c)
-            self.vehicles[int(v.agent_id)] = self._body(shape, pos)
+            self._box((b.x0, b.y0, b.z0), (b.x1, b.y1, b.z1), draw.OBSTACLE_RGBA)
+        self.vehicles = {
+            int(v.agent_id): draw.vehicle_body(p, self.c, v.kind == "uav", (v.x0, v.y0, v.z0),
+                                               radius=marker, half=(marker, marker, marker * 0.7))
+            for v in vehicles.itertuples(index=False)}
         self.tasks = {}
         for t in tasks.itertuples(index=False):
             shape = p.createVisualShape(p.GEOM_CYLINDER, radius=marker * 0.8,
                                         length=marker * 0.5, rgbaColor=TASK_OPEN,
                                         physicsClientId=self.c)
-            self.tasks[int(t.task_id)] = (self._body(shape, HIDDEN), (t.x, t.y, t.z))
-
-    def _body(self, shape: int, pos) -> int:
-        return self.p.createMultiBody(0, -1, shape, basePosition=pos, physicsClientId=self.c)
+            body = p.createMultiBody(0, -1, shape, basePosition=HIDDEN, physicsClientId=self.c)
+            self.tasks[int(t.task_id)] = (body, (t.x, t.y, t.z))
 
     def _box(self, lo, hi, rgba) -> int:
-        he = [(b - a) / 2 for a, b in zip(lo, hi)]
-        shape = self.p.createVisualShape(self.p.GEOM_BOX, halfExtents=he, rgbaColor=rgba,
-                                         physicsClientId=self.c)
-        return self._body(shape, [(a + b) / 2 for a, b in zip(lo, hi)])
+        return self.draw.box_body(self.p, self.c, [(a + b) / 2 for a, b in zip(lo, hi)],
+                                  [(b - a) / 2 for a, b in zip(lo, hi)], rgba)
 
     def place(self, body: int, pos) -> None:
         self.p.resetBasePositionAndOrientation(body, list(map(float, pos)), (0, 0, 0, 1),
@@ -221,7 +179,9 @@ def _caption(rgb: np.ndarray, text: str, title: str):
     draw = ImageDraw.Draw(img)
     draw.rectangle((0, 0, img.width, 16), fill=(255, 255, 255))
     draw.text((4, 2), f"{title}   {text}", fill=(0, 0, 0))
-    legend = (("UAV", UAV), ("UGV", UGV), ("task open", TASK_OPEN), ("assigned", TASK_ASSIGNED))
+    physics = _physics()
+    legend = (("UAV", physics.UAV_RGBA), ("UGV", physics.UGV_RGBA), ("task open", TASK_OPEN),
+              ("assigned", TASK_ASSIGNED))
     x = 4
     for label, rgba in legend:
         colour = tuple(int(255 * c) for c in rgba[:3])

@@ -19,7 +19,7 @@ at or before ``t`` and not closed by ``t``; ``delivered``: completed at or befor
 ``rejected``: closed at or before ``t`` in state ``rejected`` or ``expired``
 (:data:`REFUSED_STATES`); ``declined``: closed at or before ``t`` in state ``declined`` (the
 rider declined the offer, ``dispatch.api.acceptor``); ``cutoff``: closed at or before ``t`` in state
-``cancelled`` (:data:`CUT_OFF_STATE`: the run's end cut it off, labelled "cut off" as in the
+``cut_off`` (:data:`CUT_OFF_STATE`: the run's end cut it off, labelled "cut off" as in the
 report); ``booked``: booked ahead (``booked_at``) at or before ``t``, not picked up and not
 closed by ``t`` (``dispatch.decide.prebook``); ``walking``: riders on foot at ``t`` (meeting points,
 ``dispatch.decide.meeting``): from release to the boarding point (``walk_to_board_m`` at the walking
@@ -57,9 +57,9 @@ log = logging.getLogger(__name__)
 #: task states that count as refused in the panel's ``rejected`` count
 REFUSED_STATES = ("rejected", "expired")
 #: the task state of a request the run's end cut off (the page and the report say "cut off")
-CUT_OFF_STATE = "cancelled"
+CUT_OFF_STATE = "cut_off"
 #: task states in the page's order (code = index; anything else: "open")
-TASK_STATES = ("completed", "rejected", "expired", "unreachable", "cancelled", "failed",
+TASK_STATES = ("completed", "rejected", "expired", "unreachable", "cut_off", "failed",
                "declined", "open")
 #: the riders' walking speed (m/s) where the scenario does not set ``[tasks] walk_speed``
 WALK_SPEED = 1.4
@@ -358,8 +358,10 @@ def build_run(run: RunFiles, route: bool = True) -> dict:
     # fleet states (the analysis' own definitions: analysis.timeline)
     riders = (dict(zip(tasks["task_id"].astype(int), tasks["passengers"].fillna(1).astype(int)))
               if len(tasks) and "passengers" in tasks.columns else None)
+    # (at_end: the last frame shows the state a vehicle ended in, e.g. idle after its last
+    # task completed at the run's last instant, not "at its task" with nothing left)
     st = fleet_states(events.assign(run_id=run.run_id), vehicles.assign(run_id=run.run_id),
-                      end=end, passengers=riders)
+                      end=end, passengers=riders, at_end=True)
     st = st.sort_values(["agent_id", "start"], kind="stable")
     st = overlay(st, duty_spells(events, vehicles, end))
     states = (*FLEET_STATES, *DUTY_STATES)

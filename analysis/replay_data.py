@@ -16,7 +16,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from analysis.io import NoResultsError, find_sources
+from analysis.io import NoResultsError, find_sources, legacy_values
 
 #: the tables the replay reads (a missing one reads as empty)
 TABLES = ("summary", "tasks", "vehicles", "events", "decisions", "assignments", "soc",
@@ -117,4 +117,4 @@ def read_table(run: RunFiles, table: str, won_only: bool = False) -> pd.DataFram
     df = pd.concat(frames, ignore_index=True) if len(frames) > 1 else frames[0]
     if "run_id" in df.columns:
         df = df.loc[df["run_id"] == run.run_id].reset_index(drop=True)
-    return df
+    return legacy_values(df)  # (an older run's "cancelled": cut_off)

@@ -4,8 +4,10 @@
 
 * ``report.md`` (or ``report.html``): the tables and the figures below, with definitions;
 * ``allocators.csv`` (Tables I and III per allocator and N, see
-  :func:`analysis.metrics.allocator_metrics`) and ``taxi.csv`` (taxi-style metrics,
-  :func:`analysis.metrics.taxi_metrics`), ``runs.csv`` (taxi-style metrics per run);
+  :func:`analysis.metrics.allocator_metrics`) and the service metrics per allocator and N
+  (:func:`analysis.metrics.taxi_metrics`): ``taxi.csv`` where the folder holds road runs,
+  ``service.csv`` where it holds only voxel runs (robots, not taxis); ``runs.csv`` (the same
+  metrics per run);
 * voxel runs of static scenarios: ``cost_vs_n.png``, ``success_vs_n.png``,
   ``alloc_time_vs_n.png``, ``wait_times.png``, ``timeline.png`` (vehicle Gantt of one run) and
   ``paths_3d.png`` (that run in 3D);
@@ -216,20 +218,23 @@ def write_report(source: Results | str | os.PathLike | list, out: str | os.PathL
     events = res.table("events", columns=["run_id", "t", "event", "agent_id", "task_id",
                                           "x", "y", "z"])
     direct = _direct_times(res, road, tasks) if len(road) else None
+    # the service metrics' file: robots are not taxis
+    service = "taxi.csv" if len(road) else "service.csv"
     written: list[Path] = []
     sections = _head(res, summary)
     if len(voxel):
         sections += _voxel_part(res, voxel, tasks, vehicles, events, out, written,
-                                run_id if run_id in set(voxel["run_id"]) else None, reference)
+                                run_id if run_id in set(voxel["run_id"]) else None, reference,
+                                service=service)
     if len(road):
         sections += _road_part(res, road, tasks, vehicles, events, direct, out, written, series,
                                run_id if run_id in set(road["run_id"]) else None)
     taxi = M.taxi_metrics(summary, tasks, vehicles, events, direct)
     per_run = M.run_metrics(summary, tasks, vehicles, events, direct)
-    for name, df in (("taxi.csv", taxi), ("runs.csv", per_run)):
+    for name, df in ((service, taxi), ("runs.csv", per_run)):
         df.to_csv(out / name, index=False)
     at = 1 if written and written[0].name in ("allocators.csv", "dynamic.csv") else 0
-    written[at:at] = [out / "taxi.csv", out / "runs.csv"]
+    written[at:at] = [out / service, out / "runs.csv"]
     errors = res.errors()
     if len(errors):
         cols = [c for c in ("run_id", "error_type", "message") if c in errors.columns]
@@ -287,7 +292,8 @@ def duplicates_note(res: Results) -> str:
             f"folder that holds them): {d[0].run_id} in {d[0].kept} and {d[0].dropped}{more}")
 
 
-def _voxel_part(res, summary, tasks, vehicles, events, out, written, run_id, reference) -> list:
+def _voxel_part(res, summary, tasks, vehicles, events, out, written, run_id, reference, *,
+                service: str = "service.csv") -> list:
     """Tables I and III (static: summed cost and gap; dynamic: per task), their plots, the
     service metrics, one run in detail."""
     sources = task_sources(res, summary)
@@ -360,7 +366,7 @@ def _voxel_part(res, summary, tasks, vehicles, events, out, written, run_id, ref
                  "(rejected + expired + unreachable) / requests; approach_delay = realized "
                  "approach time − planned cost (reservation waits, replans); path_stretch = "
                  "metres driven / straight line per leg; utilization = time driving to a task "
-                 "or serving it / time not broken down. All columns: taxi.csv.")),
+                 f"or serving it / time not broken down. All columns: {service}.")),
           ("table", _taxi_view(taxi, VOXEL_TAXI_COLUMNS)),
           ("img", "wait_times.png")]
     run_id = run_id or default_run(summary, reference)
@@ -464,35 +470,44 @@ def _road_part(res, summary, tasks, vehicles, events, direct, out, written, only
     return [
         ("h2", "Taxi study: customers and fleet"),
         ("p", ("Per series (allocator, fleet size N and, where they differ, batch window, "
-               "scenario and repositioner), requests pooled over the seeds. Names as "
-               "MATSim DRT's customer and vehicle stats print them: rides = served trips; "
-               "rejections = rejected at once + expired waiting + unreachable; cut_off = "
-               "still waiting or aboard when the run ended (the run's end cut them off; a "
-               "count of their own, not a rejection); failed = aboard a vehicle that broke "
-               "down (rides + rejections + cut_off + failed = requests); service_rate, "
-               "rejectionRate, cutOffRate = rides, rejections, cut_off / requests (%, one "
-               "decimal, as utilization, emptyRatio and shared_rate; taxi.csv holds 0-1); "
-               "wait = release → pickup (s; median, p90 by linear interpolation); "
-               "a ± gives the half-width of the 95 % Student-t interval of the mean over "
-               "seeds (the runs' own values; none with one seed); "
-               "inVehicleTravelTime = pickup → drop-off (s); detour_ratio = in-vehicle time / "
-               "the trip's direct free-flow time (1: driven straight at free flow); "
-               "utilization = share of the vehicles' available time (not broken down) driving "
-               "to a pickup or with a passenger (FleetPy's '% fleet utilization'); "
-               "emptyRatio = km without a passenger / all km (FleetPy's '% empty vkm'); "
-               "vkm_per_ride = vehicle km per served trip; with shared rides occupancy = "
-               "passenger-km / vehicle-km (MATSim DRT's), shared_rate = share of the rides "
-               "during which another request was on board, delay_mean = drop-off - release - "
-               "direct free-flow time (s). All columns: taxi.csv; per hour "
-               "(customers by hour of release, fleet by clock hour): hourly_customers.csv, "
-               "hourly_fleet.csv.")),
+               "scenario and repositioner), requests pooled over the seeds; a ± gives the "
+               "half-width of the 95 % Student-t interval of the mean over seeds (the runs' "
+               "own values; none with one seed). The columns are defined below the table.")),
         ("table", _taxi_view(taxi, TAXI_COLUMNS + (SHARED_COLUMNS if _pooled(taxi) else []))),
+        ("p", "Columns (named as MATSim DRT's customer and vehicle stats print them):"),
+        ("list", TAXI_GLOSSARY),
+        ("p", "All columns: taxi.csv; per hour (customers by hour of release, fleet by clock "
+              "hour): hourly_customers.csv, hourly_fleet.csv."),
         ("img", "map.png"),
         ("p", f"Over time, in bins of {unit} (the CSV files are per hour):"),
         ("img", "hourly.png"), ("img", "fleet_state.png"), ("img", "wait_by_allocator.png"),
         *energy,
     ]
 
+
+#: What the taxi table's columns mean: one short line each, below the table (a paragraph
+#: above it hid the table under 250 words)
+TAXI_GLOSSARY = (
+    "rides: served trips",
+    "rejections: rejected at once + expired waiting + unreachable",
+    "cut_off: still waiting or aboard when the run ended (the run's end cut them off; a count "
+    "of their own, not a rejection)",
+    "failed: aboard a vehicle that broke down (rides + rejections + cut_off + failed = "
+    "requests)",
+    "service_rate, rejectionRate, cutOffRate: rides, rejections, cut_off / requests (%, one "
+    "decimal, as utilization, emptyRatio and shared_rate; taxi.csv holds 0-1)",
+    "wait: release → pickup (s; median, p90 by linear interpolation)",
+    "inVehicleTravelTime: pickup → drop-off (s)",
+    "detour_ratio: in-vehicle time / the trip's direct free-flow time (1: driven straight at "
+    "free flow)",
+    "utilization: share of the vehicles' available time (not broken down) driving to a "
+    "pickup or with a passenger (FleetPy's '% fleet utilization')",
+    "emptyRatio: km without a passenger / all km (FleetPy's '% empty vkm')",
+    "vkm_per_ride: vehicle km per served trip",
+    "with shared rides: occupancy = passenger-km / vehicle-km (MATSim DRT's), shared_rate = "
+    "share of the rides during which another request was on board, delay_mean = drop-off - "
+    "release - direct free-flow time (s)",
+)
 
 #: What the energy table says (taxi.csv's energy columns, :mod:`analysis.energy_metrics`).
 ENERGY_NOTE = ("Per series: kWh drawn (driving and auxiliary load) and charged, mean per "
@@ -511,6 +526,8 @@ def _markdown(sections) -> str:
             parts.append(f"## {body}")
         elif kind == "p":
             parts.append(body)
+        elif kind == "list":
+            parts.append("\n".join(f"- {item}" for item in body))
         elif kind == "table":
             parts.append(markdown_table(body))
         elif kind == "img":
@@ -529,6 +546,9 @@ def _html(sections) -> str:
             parts.append(f"<{kind}>{html.escape(body)}</{kind}>")
         elif kind == "p":
             parts.append(f"<p>{html.escape(body).replace('**', '')}</p>")
+        elif kind == "list":
+            parts.append("<ul>" + "".join(f"<li>{html.escape(item)}</li>" for item in body)
+                         + "</ul>")
         elif kind == "table":
             view = body.map(_fmt) if hasattr(body, "map") else body.applymap(_fmt)
             parts.append(view.to_html(index=False, escape=True))

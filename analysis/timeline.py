@@ -129,11 +129,15 @@ def _occupied(onboard: int) -> str:
 
 
 def fleet_states(events: pd.DataFrame, vehicles: pd.DataFrame,
-                 end: float | None = None, passengers=None) -> pd.DataFrame:
+                 end: float | None = None, passengers=None, *,
+                 at_end: bool = False) -> pd.DataFrame:
     """Columns run_id, agent_id, state (one of :data:`FLEET_STATES`), start, end, onboard
     (passengers on board): every vehicle of every run covered from 0 to ``end`` (default: the
     run's last event) without gaps or overlaps. ``passengers``: riders per task id (a mapping
     or Series; default 1 each: the tasks table's ``passengers`` column gives them).
+    ``at_end``: a vehicle whose state changes at the end instant itself (its last task
+    completed as the run ends) gets a last, zero-length row ``[end, end]`` in the new state, so
+    that a view of the end instant (the replay's last frame) shows it, not the state before.
 
     Transitions: ``assign`` -> to_pickup (from idle or repositioning); ``pickup`` -> occupied
     by the passengers on board; ``dropoff`` -> occupied by those left, or to_pickup when nobody
@@ -210,6 +214,8 @@ def fleet_states(events: pd.DataFrame, vehicles: pd.DataFrame,
                         state, since, shown = new, t, onboard
             if stop > since:
                 rows.append((run, agent, state, since, stop, shown))
+            elif at_end and since == stop and rows and rows[-1][:2] == (run, agent):
+                rows.append((run, agent, state, stop, stop, shown))
     return pd.DataFrame(rows, columns=cols)
 
 

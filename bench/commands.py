@@ -29,7 +29,8 @@ class Bench:
                        help="installed allocators (or variants, magnnet:paper) to bench")
         p.add_argument("--suite", choices=("robots", "fleets", "all"), default="all")
         p.add_argument("--quick", action="store_true",
-                       help="the quick suite: fewer instances, 2 seeds, shorter days")
+                       help="the quick suite: fewer instances, 2 seeds, shorter days (wide "
+                            "intervals: the board says how wide; --seeds K for more)")
         p.add_argument("--seeds", type=int, metavar="K",
                        help="the first K seeds of each instance (default: the suite's)")
         p.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
@@ -49,6 +50,7 @@ class Bench:
 
     def run(self, args, out) -> int:
         from bench.against import compare
+        from bench.board import board_tables, interval_note
         from bench.report import write_figure, write_markdown
         from bench.run import TIME_LIMIT_MIN, BenchError, parse_params, run_bench
         from bench.table import read_csv, write_csv
@@ -73,7 +75,12 @@ class Bench:
         out.print(f"{len(res.rows)} row(s): {c['done']} run, {c['skipped']} reused, "
                   f"{c['failed']} failed, {c['timeout']} past the time limit, "
                   f"{c['unsupported']} unsupported; {res.seconds:.1f} s")
-        out.print(f"board: {folder / 'bench.md'}; table: {folder / 'bench.csv'}"
+        for title, table in board_tables(res.rows):
+            out.print(title)
+            out.show(table)
+        if res.rows:
+            out.print(interval_note(res.rows))
+        out.print(f"every column: {folder / 'bench.md'}; rows: {folder / 'bench.csv'}"
                   + (f"; picture: {folder / 'bench.png'}" if drew else ""))
         for r in res.rows:
             if r["status"].startswith("failed"):

@@ -62,6 +62,14 @@ def allocators_for(instance: Instance, named: list[str]) -> list[str]:
     return out
 
 
+def _plugin_name(name: str) -> str:
+    """``name`` as ``dispatch new allocator`` takes it (lower-case letters, digits, _), else
+    a placeholder."""
+    import re
+
+    return name if re.fullmatch(r"[a-z][a-z0-9_]*", name) else "NAME"
+
+
 def check_allocators(named: list[str], params: dict[str, Any] | None = None) -> None:
     """BenchError naming the first allocator that is not installed, or a named variant
     (``magnnet:paper``) its plugin does not declare, unless ``params`` (``--param``) make it
@@ -71,7 +79,9 @@ def check_allocators(named: list[str], params: dict[str, Any] | None = None) -> 
     have = available("allocator")
     for name in named:
         if base_name(name) not in have:
-            raise BenchError(f"unknown allocator {name!r}; installed: {', '.join(sorted(have))}")
+            raise BenchError(f"unknown allocator {name!r}; installed: {', '.join(sorted(have))}. "
+                             f"Your own: `dispatch new allocator {_plugin_name(name)}` writes a "
+                             "plugin package to fill in; pip install -e it, then bench it")
         why = undeclared_variant(name)
         if why is not None and "variant" not in (params or {}):
             raise BenchError(f"allocator {name!r}: {why}; name one of them, or make this one "

@@ -25,12 +25,12 @@ are other runs than the unlimited ones (use another ``--out``).
 
 ``--hours H`` (default 24) runs a shorter day for a quick look: the trips are still drawn for a
 whole day (the sample's hour profile), the run stops at H h, so only the first H hours are
-released; requests still open or aboard at the end count as cancelled, not rejected. A full day
+released; requests still open or aboard at the end count as cut off, not rejected. A full day
 (H = 24) runs 26 h, as the scenario does, so the last trips can finish.
 
 Then it prints (80 columns) and writes ``<out>/study.md``: per series (allocator, N, batch
-window, repositioner) the share of the requests served, rejected and cancelled (open or aboard
-at the end: served + rejected + cancelled + failed = 100 %), the wait (release to pickup) mean
+window, repositioner) the share of the requests served, rejected and cut off (open or aboard
+at the end: served + rejected + cut off + failed = 100 %), the wait (release to pickup) mean
 and p90, each share and the mean wait with the half-width of its 95 % Student-t interval over
 the seeds (``--seeds``, default 0 1 2), the fleet utilization, the empty share of the km, the
 conflicts (tasks requested by two vehicles in one round at least once; ``study.md`` also the
@@ -182,9 +182,9 @@ def wall_seconds(out: Path) -> dict[str, float]:
 
 
 def study_table(out: Path) -> pd.DataFrame:
-    """Per series: ``label``, ``N``, ``served``, ``rejected``, ``cancelled`` and
+    """Per series: ``label``, ``N``, ``served``, ``rejected``, ``cut_off`` and
     ``failed_share`` (shares of the requests; they add up to 1), ``wait_mean`` / ``wait_p90``
-    (s), ``served_ci``, ``rejected_ci``, ``cancelled_ci``, ``wait_mean_ci`` (half-widths of the
+    (s), ``served_ci``, ``rejected_ci``, ``cut_off_ci``, ``wait_mean_ci`` (half-widths of the
     95 % intervals over seeds, NaN with one seed), ``utilization``, ``empty`` (share of km),
     ``conflicts`` (tasks requested by two vehicles in one round at least once: only
     decentralized allocators under a limited range, and ``greedy``, have any) and
@@ -213,11 +213,11 @@ def study_table(out: Path) -> pd.DataFrame:
             "allocator": r["allocator"], "N": int(r["n_agents"]),
             "window": window_label(r["batch_window"]), "reposition": r["reposition"],
             "runs": int(r["runs"]), "served": r["service_rate"], "rejected": r["rejectionRate"],
-            "cancelled": r.get("cutOffRate", math.nan), "failed_share": (
+            "cut_off": r.get("cutOffRate", math.nan), "failed_share": (
                 r.get("failed", 0) / r["requests"] if r["requests"] else math.nan),
             "served_ci": r.get("service_rate_ci95", math.nan),
             "rejected_ci": r.get("rejectionRate_ci95", math.nan),
-            "cancelled_ci": r.get("cutOffRate_ci95", math.nan),
+            "cut_off_ci": r.get("cutOffRate_ci95", math.nan),
             "wait_mean_ci": r.get("wait_average_ci95", math.nan),
             "wait_mean": r["wait_average"], "wait_p90": r["wait_p90"],
             "utilization": r["utilization"], "empty": r["emptyRatio"],
@@ -250,15 +250,15 @@ def _pm(r, col: str, *, pct: bool, digits: int, md: bool) -> str:
 
 
 #: (header, width in the terminal table (0: only in study.md), cell of a row (md: for
-#: study.md)); served + rejected + cancelled (+ failed) add up to the requests.
+#: study.md)); served + rejected + cut off (+ failed) add up to the requests.
 COLUMNS = [
     ("series", 17, lambda r, md: str(r["label"])),
     ("N", 4, lambda r, md: str(r["N"])),
     ("served%", 9, lambda r, md: _pm(r, "served", pct=True, digits=1, md=md)),
     ("rej%", 5, lambda r, md: _pm(r, "rejected", pct=True, digits=1, md=md) if md
      else _num(100 * r["rejected"], 1)),
-    ("canc%", 5, lambda r, md: _pm(r, "cancelled", pct=True, digits=1, md=md) if md
-     else _num(100 * r.get("cancelled", math.nan), 1)),
+    ("cut%", 5, lambda r, md: _pm(r, "cut_off", pct=True, digits=1, md=md) if md
+     else _num(100 * r.get("cut_off", math.nan), 1)),
     ("wait s", 7, lambda r, md: _pm(r, "wait_mean", pct=False, digits=0, md=md)),
     ("p90", 0, lambda r, md: _num(r["wait_p90"])),
     ("util%", 5, lambda r, md: _pct(r["utilization"]) if md else _num(100 * r["utilization"], 1)),
@@ -273,7 +273,7 @@ MD_SKIP = {"emp%"}  # the terminal's short form of a study.md column
 
 def text_table(t: pd.DataFrame) -> str:
     """The study table in at most 80 columns (a long series label is cut with '…'; the
-    p90 wait, the intervals of the rejected and cancelled shares and the conflict-free share
+    p90 wait, the intervals of the rejected and cut-off shares and the conflict-free share
     only in :func:`markdown_table`)."""
     def line(cells):
         out = []
@@ -371,7 +371,7 @@ def main(argv=None) -> int:
     intro = (f"Chicago taxi study ({path.name}): {hours}, {a.trips_per_day:g} trips per day, "
              f"{radio}, seeds {a.seeds}. Per series (allocator, N, batch window, "
              "repositioner): share "
-             "of the requests served, rejected (at once or expired) and cancelled (open or "
+             "of the requests served, rejected (at once or expired) and cut off (open or "
              "aboard when the run ended; with the few failed these add up to 100 %), mean and "
              "p90 wait "
              "from release to pickup (s), fleet utilization (driving to a pickup or with a "

@@ -137,7 +137,7 @@ def child(args) -> None:
         path.write_text(scenario_text(args.network, args.allocator, args.requests,
                                       args.vehicles, args.seed,
                                       Path(args.trace_dir) if args.trace_dir else None))
-        sc = load_scenario(path, force=True)
+        sc = load_scenario(path, ignore_limits=True)
         spec = sc.runs()[0]
         t0, c0 = time.perf_counter(), time.process_time()
         recorder = make_recorder(spec, Path(tmp) / "out")

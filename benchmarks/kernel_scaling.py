@@ -51,7 +51,7 @@ def main() -> None:
         path = Path(tmp) / "day.toml"
         path.write_text(scenario_text(args.network, args.allocator, args.requests,
                                       args.vehicles, args.seed))
-        spec = load_scenario(path, force=True).runs()[0]
+        spec = load_scenario(path, ignore_limits=True).runs()[0]
         recorder = make_recorder(spec, Path(tmp) / "out")
         sim = Simulation(spec, recorder)
 

@@ -87,7 +87,7 @@ def run(a, seats: int, method: str, fleet: int, seed: int, params: dict | None =
     d = sim.tally
     released = r["n_tasks"]
     if a.hours < 24:  # requests released before the cut (the rest never were)
-        released = max(1, r["n_tasks"] - r.get("tasks_cancelled", 0))
+        released = max(1, r["n_tasks"] - r.get("tasks_cut_off", 0))
     return {"seats": seats, "method": method, "fleet": fleet, "seed": seed, "hours": a.hours,
             "max_wait": a.max_wait, "max_delay": a.max_delay, "requests": r["n_tasks"],
             "served": r["tasks_completed"] / released, "wait": r["wait_time_mean"],

@@ -62,7 +62,7 @@ def child(args) -> None:
         path = Path(tmp) / "pooled_day.toml"
         path.write_text(scenario_text(allocator, window, args.requests, args.hours,
                                       args.vehicles, args.capacity, args.seed, args.params))
-        spec = load_scenario(path, force=True).runs()[0]
+        spec = load_scenario(path, ignore_limits=True).runs()[0]
         t0 = time.perf_counter()
         recorder = make_recorder(spec, Path(tmp) / "out")
         sim = Simulation(spec, recorder)

@@ -84,12 +84,12 @@ def one(share: int, agents: int, seed: int, start: str, hours: float, mode: str,
         path = Path(tmp) / "nyc_manhattan_prebook.toml"
         text = scenario_text(share, agents, seed, start, hours, mode, lead, allocator, capacity)
         path.write_text(text)
-        trips = load_scenario(path, force=True).tasks.trips
+        trips = load_scenario(path, ignore_limits=True).tasks.trips
         # the window's requests only: those departing before its end (the hour after it
         # finishes their rides)
         n = int((trips.t < hours * 3600.0).sum())
         path.write_text(text.replace("[tasks]\n", f"[tasks]\ncount = {n}\n"))
-        [spec] = load_scenario(path, force=True).runs()
+        [spec] = load_scenario(path, ignore_limits=True).runs()
         t0 = time.perf_counter()
         r = run_one(spec)
         wall = time.perf_counter() - t0
@@ -104,7 +104,7 @@ def one(share: int, agents: int, seed: int, start: str, hours: float, mode: str,
                 served_immediate=float(done[~booked].mean()),
                 promises=int(s["promises"]), promises_broken=int(s["promises_broken"]),
                 wait=float((t.picked_up_at - t.released_at)[picked].mean()),
-                cancelled=int((t.state == "cancelled").sum()), wall=wall)
+                cut_off=int((t.state == "cut_off").sum()), wall=wall)
 
 
 def interval(values: list[float], scale: float = 1.0, fmt: str = ".2f") -> str:
@@ -147,8 +147,8 @@ def main(argv: list[str] | None = None) -> None:
                   f"booked; served {100 * r['served']:.2f} % (booked "
                   f"{100 * r['served_booked']:.2f} %, immediate "
                   f"{100 * r['served_immediate']:.2f} %); promises {r['promises']}, broken "
-                  f"{r['promises_broken']}; wait {r['wait']:.1f} s; cancelled at the end "
-                  f"{r['cancelled']}; {r['wall']:.0f} s wall", flush=True)
+                  f"{r['promises_broken']}; wait {r['wait']:.1f} s; cut off by the end "
+                  f"{r['cut_off']}; {r['wall']:.0f} s wall", flush=True)
             if a.json:
                 a.json.write_text(json.dumps(rows, indent=1))
     print(f"\n{a.agents} taxis of {a.capacity} seat(s), {a.allocator}, window {a.start} + "

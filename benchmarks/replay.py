@@ -60,7 +60,7 @@ DAYS = {"chicago": chicago, "pooled": pooled}
 
 def simulate(scenario: Path, out: Path, duration: float | None) -> float:
     cmd = [sys.executable, "-c", "import sys; from dispatch.run.cli import main; sys.exit(main())",
-           "run", str(scenario), "--out", str(out), "--force"]
+           "run", str(scenario), "--out", str(out), "--overwrite"]
     if duration:
         cmd += ["--duration", str(duration)]
     t = time.perf_counter()

@@ -67,7 +67,7 @@ def child(args) -> None:
         path.write_text(scenario_text(args.allocator, args.walk, args.agents, args.seed, trace,
                                       args.start, args.hours * 3600.0 + 3600.0,
                                       args.meeting_points))
-        spec = load_scenario(path, force=True).runs()[0]
+        spec = load_scenario(path, ignore_limits=True).runs()[0]
         w0 = time.perf_counter()
         recorder = make_recorder(spec, Path(tmp) / "out")
         summary = Simulation(spec, recorder).run()

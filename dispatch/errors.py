@@ -31,4 +31,4 @@ class WorldError(DispatchError):
 
 
 #: what a refusal for size or work says a user can do about it
-FORCE_HINT = "use --force to run anyway"
+LIMITS_HINT = "use --ignore-limits to run anyway"

@@ -21,7 +21,7 @@ wait / replan  reservation-based execution: a vehicle stands, or its route was r
 expire         an open task's ``ttl`` or ``max_wait`` ran out
 reject         no vehicle could reach a request's pickup within its ``max_wait``
 unreachable    no vehicle of the fleet can ever reach the task
-cancel         the run ended before the task did
+cut_off        the run ended before the task did (still waiting or aboard)
 skipped        a generated release was skipped because ``max_active`` tasks were open
 breakdown      a vehicle fails where it is (its task, if any; ``[faults]``)
 repair         a failed vehicle works again (then ``idle``)
@@ -60,7 +60,7 @@ from typing import NamedTuple
 from dispatch.locations import Location
 
 KINDS = ("release", "assign", "depart", "move", "pickup", "dropoff", "complete", "idle", "wait",
-         "replan", "expire", "reject", "unreachable", "cancel", "failed", "skipped",
+         "replan", "expire", "reject", "unreachable", "cut_off", "failed", "skipped",
          "breakdown", "repair", "reopen", "reassign", "reposition", "insert",
          "queue", "charge_start", "charge_end", "stranded", "decline", "shift_start",
          "shift_end", "break_start", "break_end")

@@ -1,11 +1,45 @@
 """Sphinx configuration of the dispatch site (built by ``bash scripts/docs.sh``)."""
 
+import atexit
+import logging
+import os
+import shutil
 import sys
+import tempfile
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))  # the project, for autodoc and the generated reference
 sys.path.insert(0, str(HERE / "_ext"))
+
+# The tutorials' kernels read their configuration from a private IPython directory: the
+# build's own (_ext/ipython_kernel_config.py: ipykernel's notice that the local TCP link to
+# Sphinx is unencrypted, once per kernel, left out), not the user's profile.
+_IPYTHONDIR = Path(tempfile.mkdtemp(prefix="dispatch-docs-ipython-"))
+(_IPYTHONDIR / "profile_default").mkdir()
+shutil.copy(HERE / "_ext" / "ipython_kernel_config.py", _IPYTHONDIR / "profile_default")
+os.environ["IPYTHONDIR"] = str(_IPYTHONDIR)
+atexit.register(shutil.rmtree, _IPYTHONDIR, ignore_errors=True)
+
+
+def _keep_root_logging() -> None:
+    """accessible-pygments (furo's dependency; its styles load with every Pygments style)
+    calls ``logging.basicConfig(level=INFO)`` on import, which printed an INFO line of
+    nbclient's per tutorial into the build's output. Import it now and put the root logger
+    back as Python sets it (no handler, level WARNING): warnings still reach stderr."""
+    root = logging.getLogger()
+    handlers, level = list(root.handlers), root.level
+    try:
+        import a11y_pygments  # noqa: F401
+    except ImportError:
+        return
+    for h in root.handlers[:]:
+        if h not in handlers:
+            root.removeHandler(h)
+    root.setLevel(level)
+
+
+_keep_root_logging()
 
 project = "dispatch"
 author = "the dispatch authors"
@@ -16,6 +50,7 @@ extensions = [
     "sphinx.ext.autodoc",
     "sphinx.ext.napoleon",
     "dispatch_reference",  # writes reference/generated/ from the code before reading
+    "bench_pages",  # writes howto/generated/ from the published bench boards
 ]
 
 html_theme = "furo"
@@ -41,6 +76,8 @@ exclude_patterns = [
     # the published bench boards (dispatch bench's bench.md), included by howto/bench_board.md
     "howto/bench_board/*.md",
     "howto/bench_board/variants/*.md",
+    # the boards' pages (bench_pages), included by howto/bench_board.md
+    "howto/generated/*.md",
 ]
 
 autodoc_member_order = "bysource"

@@ -246,7 +246,7 @@ class Decisions:
         """The end of the run: :meth:`dispatch.run.sim.Simulation.run` itself, its SimPy run made
         a no-op (this driver has already stepped the run to the stop ``Simulation.run`` would
         reach: ``until`` processed or an empty queue), so the legs driven, the requests left
-        open (cancelled), the vehicles' times and the summary come out exactly as in a run."""
+        open (cut off), the vehicles' times and the summary come out exactly as in a run."""
         sim, env = self.sim, self.env
         self.terminated = bool(sim.finished.triggered)
         self.truncated = not self.terminated
@@ -363,12 +363,12 @@ try:  # the base classes when the (optional) packages are installed
     import gymnasium as _gymnasium
 
     _GymEnv = _gymnasium.Env
-except ImportError:  # pragma: no cover - the magnnet extra brings gymnasium
+except ImportError:  # pragma: no cover - the learning (or magnnet) extra brings gymnasium
     _GymEnv = object
 
 try:
     from pettingzoo import ParallelEnv as _ParallelEnv
-except ImportError:  # pragma: no cover - the magnnet extra brings pettingzoo
+except ImportError:  # pragma: no cover - the learning (or magnnet) extra brings pettingzoo
     _ParallelEnv = object
 
 

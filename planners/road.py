@@ -259,6 +259,7 @@ class RoadPlanner(Planner):
     name = "dijkstra"
     spaces = ("road",)
     travel_times = True
+    drive_floor = 1.0  # costs are the network's times: no faster than its top speed
 
     def __init__(self, space: RoadNetwork) -> None:
         if not isinstance(space, RoadNetwork):

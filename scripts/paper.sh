@@ -3,5 +3,6 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
-# --force: the script rewrites its own results folder (runs/paper_static) on every call
-exec .venv/bin/dispatch run scenarios/paper_static.toml --force "$@"
+# --overwrite: the script reruns and rewrites its own results folder (runs/paper_static) on
+# every call (without it, runs already there would be shown from the folder, not rerun)
+exec .venv/bin/dispatch run scenarios/paper_static.toml --overwrite "$@"

@@ -182,7 +182,7 @@ def test_ours_runner_pools(tmp_path, window):
                     "hungarian", "added_time", *extra], check=True, cwd=BENCH.parent)
     row = json.loads(out.read_text())
     name = "ours_hungarian" if window is None else "ours_hungarian_bw30"
-    [spec] = load_scenario(tmp_path / f"{name}.toml", force=True).runs()
+    [spec] = load_scenario(tmp_path / f"{name}.toml", ignore_limits=True).runs()
     assert spec.scenario.dispatch.batch_window == (window or 0.0)
     [part] = (tmp_path / f"{name}_out" / "tasks").rglob("part-*.parquet")
     tasks = pq.read_table(part)

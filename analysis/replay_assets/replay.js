@@ -564,7 +564,9 @@
       x[1].textContent = String(byState[i]);
       x[0].style.display = byState[i] || d.fleetStates[i] === "idle" || i < 3 ? "" : "none";
     });
-    this.occ.textContent = "riders on board " + riders + " in " + inUse + " vehicles; seats taken " +
+    // robots serve tasks, not riders: no seats to fill
+    this.occ.textContent = run.voxel ? "vehicles at a task: " + inUse + " of " + run.n :
+      "riders on board " + riders + " in " + inUse + " vehicles; seats taken " +
       (seats ? (100 * riders / seats).toFixed(1) : "0") + " %";
     if (this.socText) {
       var q = run.socAt(t);
@@ -738,7 +740,9 @@
     span.appendChild(document.createTextNode(runs[0].labels[s] + (s === "off_shift" ? " – hidden; the layer shows rings at their depots" : "")));
     legend.appendChild(span);
   });
-  [["request", "#ff7043", "request waiting for its pickup (hollow: a vehicle is on its way; circle: a task in the air)", true],
+  var anyVoxel = runs.some(function (r) { return r.voxel; });
+  [["request", "#ff7043", (anyVoxel ? "task waiting for a vehicle (hollow: a vehicle is on its way; circle: a task in the air)" :
+                                      "request waiting for its pickup (hollow: a vehicle is on its way)"), true],
    ["booked", MARKS.booked, "booked ahead: diamond from booking to pickup (hollow: a promise a vehicle's plan holds)", feature("booked")],
    ["walk", MARKS.walk, "rider walking (dotted): origin to boarding point, alighting point to destination", feature("walks")],
    ["ride", "rgba(46,134,222,.6)", "ride: arc from pickup to drop-off while on board", true],

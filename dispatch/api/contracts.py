@@ -96,11 +96,22 @@ class Allocator(ABC):
     #: about one-request decisions at all. A subclass that overrides :meth:`allocate` without
     #: declaring it again does not inherit it (its own ``allocate`` is asked every time).
     one_by_minimum: ClassVar[bool] = False
+    #: True for methods of :attr:`one_by_minimum` whose one-task answer may also be decided
+    #: over only the agents that a lower bound of their cost cannot rule out: where the space
+    #: and the planner promise such a bound (:attr:`dispatch.api.space.Space.top_speed`,
+    #: :attr:`Planner.drive_floor`), the dispatcher then visits the idle vehicles nearest
+    #: first and stops once the bound of every vehicle left exceeds the least cost found
+    #: (:mod:`dispatch.decide.nearest`). The answer is the same; the decision still counts
+    #: every candidate vehicle (``n_idle``). Like :attr:`one_by_minimum` it is not inherited
+    #: by a subclass that overrides :meth:`allocate` without declaring it again.
+    nearest_cut: ClassVar[bool] = False
 
     def __init_subclass__(cls, **kw) -> None:
         super().__init_subclass__(**kw)
         if "allocate" in vars(cls) and "one_by_minimum" not in vars(cls):
             cls.one_by_minimum = False
+        if "allocate" in vars(cls) and "nearest_cut" not in vars(cls):
+            cls.nearest_cut = False
     #: Named variants the plugin runs by name: ``"<name>:<variant>"`` (a scenario's
     #: ``allocator``, ``dispatch bench``) builds it with ``variant = "<variant>"`` unless the
     #: variant's own table, ``[dispatch.allocator_params."<name>:<variant>"]``, sets
@@ -169,6 +180,15 @@ class Planner(ABC):
     #: added_time objective, energy and multi-request allocators need it: the kernel routes
     #: between the stops of a plan).
     travel_times: ClassVar[bool] = False
+    #: A promise that lets a decision order vehicles by a lower bound of their cost
+    #: (:mod:`dispatch.decide.nearest`): None (the default) promises nothing; a factor ``f >
+    #: 0`` promises that the cost of a vehicle standing on node ``a`` (or stopped part-way
+    #: along an edge into ``a``) to a task on node ``b`` is at least ``f`` times the straight
+    #: line from ``a`` to ``b`` over the space's :attr:`~dispatch.api.space.Space.top_speed`,
+    #: and that a vehicle's cost does not depend on which other vehicles are costed with it
+    #: (the road planner: 1, its costs are the network's times; under congestion the
+    #: smallest hourly factor).
+    drive_floor: float | None = None
     #: Seconds after which a vehicle that found no timed route tries again (it also tries when
     #: other vehicles' reservations are released). Used only when ``reservation_aware``.
     retry_after: float = 1.0
@@ -191,7 +211,7 @@ class Planner(ABC):
     def budget(self, *, agents: int, tasks: float, duration: float) -> str | None:
         """A sentence saying why a run of that many vehicles and (expected) tasks over that
         many simulated seconds would not finish with this planner's parameters, None when it
-        would (the default); ``dispatch validate`` refuses the run with it (``--force`` runs
+        would (the default); ``dispatch validate`` refuses the run with it (``--ignore-limits`` runs
         anyway). See :mod:`dispatch.scenario.budget`."""
         return None
 

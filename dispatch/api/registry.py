@@ -5,7 +5,7 @@ can do.
 The entry points are the only list of plugins: built-ins are registered in ``pyproject.toml``
 under the same groups as third-party plugins (``dispatch.allocators``, ``dispatch.planners``,
 ``dispatch.repositioners``, ``dispatch.chargers``, ``dispatch.acceptors``,
-``dispatch.sizers``; ``dispatch.commands`` for commands such as
+``dispatch.sizers``, ``dispatch.mode_choices``; ``dispatch.commands`` for commands such as
 the :mod:`analysis` package's ``report`` and ``render``, see :mod:`dispatch.run.commands`), so both
 are first-class and the kernel names no module of theirs.
 
@@ -36,7 +36,7 @@ log = logging.getLogger(__name__)
 GROUPS = {"allocator": "dispatch.allocators", "planner": "dispatch.planners",
           "repositioner": "dispatch.repositioners", "charger": "dispatch.chargers",
           "command": "dispatch.commands", "acceptor": "dispatch.acceptors",
-          "sizer": "dispatch.sizers"}
+          "sizer": "dispatch.sizers", "mode_choice": "dispatch.mode_choices"}
 
 #: The base class a plugin of each kind subclasses (``"module:Class"``, imported when a plugin
 #: of the kind is first loaded). Commands have none: they are plain classes of packages that
@@ -46,7 +46,8 @@ BASES = {"allocator": "dispatch.api.contracts:Allocator",
          "repositioner": "dispatch.api.repositioner:Repositioner",
          "charger": "dispatch.api.charger:ChargingStrategy",
          "acceptor": "dispatch.api.acceptor:Acceptor",
-         "sizer": "dispatch.api.sizer:Sizer"}
+         "sizer": "dispatch.api.sizer:Sizer",
+         "mode_choice": "dispatch.api.mode_choice:ModeChoice"}
 
 #: The methods of its contract a plugin declaring a capability must define itself (the base
 #: class's are there to document them; the kernel calls them only on plugins that declare it).

@@ -106,6 +106,17 @@ class Space(ABC):
     #: :meth:`position`), where locations may be node indices (a road network); None in a
     #: space without nodes
     node_positions: Sequence[Position] | None = None
+    #: Metres per second that no drive beats in a straight line, where the space has nodes
+    #: and promises it: for any nodes ``a`` and ``b``, the distance between
+    #: ``node_positions[a]`` and ``node_positions[b]`` over ``top_speed`` never exceeds the
+    #: seconds of the fastest drive from ``a`` to ``b`` by the space's own times (a road
+    #: network: the fastest edge's straight-line speed, so by the triangle inequality of
+    #: every path's). None: no such promise (the default).
+    top_speed: float | None = None
+    #: Further promises of that kind, each ``(speed, slack)``: the distance less ``slack``
+    #: metres, over ``speed``, never exceeds the fastest drive's seconds (a slower speed that
+    #: all but a few edges keep to, the metres those exceed it by in all). Empty: none.
+    speed_slacks: tuple[tuple[float, float], ...] = ()
 
     # ------------------------------------------------------------ of its configuration
     @classmethod

@@ -36,6 +36,7 @@ from dispatch.api.problem import Allocation, AllocationProblem
 from dispatch.checks.common import (Report, constructed, describe_error, perturb_global_rng, replay,
                                     same_snapshot)
 from dispatch.checks.random_problems import allocation_problems, pooled_problems, route_schedule
+from dispatch.decide.answers import route_stops, validate
 from dispatch.errors import AllocationError
 
 
@@ -53,8 +54,6 @@ def _answer(a: Allocation) -> tuple:
 def _check_routes(problem: AllocationProblem, allocation: Allocation) -> None:
     """AllocationError unless each route of a multi-request answer holds its agent's plan and
     new requests once each, pickups first, within the capacity and every limit."""
-    from dispatch.decide.answers import route_stops
-
     routes = allocation.routes
     if not routes:
         return
@@ -72,8 +71,6 @@ def _check_routes(problem: AllocationProblem, allocation: Allocation) -> None:
 
 def check_allocator(cls, *, seed: int = 0, **params: Any) -> Report:
     """Run every allocator check (see the module docstring) on ``cls(**params)``."""
-    from dispatch.decide.answers import validate
-
     report, caps = constructed("allocator", cls, params)
     if not report.ok:
         return report

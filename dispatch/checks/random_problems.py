@@ -16,8 +16,9 @@ from collections.abc import Callable
 import numpy as np
 
 from dispatch.api import registry
-from dispatch.api.problem import AgentView, AllocationProblem, TaskView
+from dispatch.api.problem import AgentView, AllocationProblem, StopView, TaskView
 from dispatch.checks.common import small_network
+from dispatch.decide.answers import route_stops
 from dispatch.plan.stops import DROPOFF, TOL, PlannedStop, leave, timetable
 
 
@@ -96,8 +97,6 @@ def pooled_problem(seed: int, n: int, m: int, capacity: int = 3, *, busy: float 
     30-300 s of the direct drive), ``problem.travel`` the road planner's, costs as a pooled
     decision has them: seconds to the pickup of the request's earliest feasible insertion into
     the vehicle's plan (``inf`` where none is feasible)."""
-    from dispatch.api.problem import StopView
-
     net = small_network()
     travel = registry.load("planner", net.default_planner)(net).between
     g = np.random.default_rng([seed, n, m, capacity, 7])
@@ -165,7 +164,6 @@ def pooled_problem(seed: int, n: int, m: int, capacity: int = 3, *, busy: float 
 
     # the costs a pooled decision has: the earliest pickup (seconds from now) of the request's
     # cheapest feasible insertion into the vehicle's plan, inf where none is feasible
-    from dispatch.decide.answers import route_stops
 
     drive, cost = cost, np.full((n, m), np.inf)
     draft = build(drives=True)

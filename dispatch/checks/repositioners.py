@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from dispatch.api.legs import as_point
+from dispatch.api.legs import RoadPoint, as_point
 from dispatch.checks.common import (Report, constructed, describe_error, perturb_global_rng, replay,
                                     same_snapshot, small_network)
 
@@ -46,8 +46,6 @@ def reposition_view(space, vehicles, requests=(), *, time: float = 0.0, horizon:
 
 def _reposition_views(space, seed: int):
     """Labelled view factories (each call builds the same view with a fresh rng)."""
-    from dispatch.api.legs import RoadPoint
-
     g = np.random.default_rng(seed)
     n = space.n
 

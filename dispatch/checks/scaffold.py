@@ -19,6 +19,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+from dispatch.api.registry import available
 from dispatch.errors import DispatchError
 
 NAME = re.compile(r"^[a-z][a-z0-9_]{0,40}$")
@@ -135,14 +136,13 @@ allocator = ["hungarian", "{name}"]  # compare it with the built-ins
 '''
 
 
-def new_allocator(name: str, where: Path, *, force: bool = False) -> Path:
+def new_allocator(name: str, where: Path, *, overwrite: bool = False) -> Path:
     """Write the package ``where / dispatch-<name>`` (see the module docstring); returns its
     folder. Refuses a name that is not a lower-case identifier, or a folder that exists
-    (unless ``force``)."""
+    (unless ``overwrite``)."""
     if not NAME.match(name):
         raise DispatchError(f"allocator name {name!r}: use lower-case letters, digits and _ "
                             "(a Python identifier starting with a letter, at most 41 chars)")
-    from dispatch.api.registry import available
 
     if name in available("allocator"):
         raise DispatchError(f"an allocator named {name!r} is installed already; pick another "
@@ -151,8 +151,8 @@ def new_allocator(name: str, where: Path, *, force: bool = False) -> Path:
     pkg = f"dispatch_{name}"
     cls = "".join(part.capitalize() for part in name.split("_")) + "Allocator"
     root = Path(where) / f"dispatch-{dist}"
-    if root.exists() and not force:
-        raise DispatchError(f"{root} exists; remove it or use --force to overwrite its files")
+    if root.exists() and not overwrite:
+        raise DispatchError(f"{root} exists; remove it or use --overwrite to overwrite its files")
     fields = {"name": name, "dist": dist, "pkg": pkg, "cls": cls}
     files = {
         root / "pyproject.toml": PYPROJECT,

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 class CommsConfig:
     """Who can talk at a decision, and what a message costs (see :mod:`dispatch.api.comms`)."""
 
-    range: float | None = None  # metres; None: unlimited
+    range: float | None = None  # metres a message carries (unset: unlimited)
     latency: float = 0.0  # simulated seconds per message hop
     loss: float = 0.0  # probability that one reception of a message is lost, in [0, 1)
 

@@ -23,7 +23,11 @@ class DispatchConfig:
     #: what a pair's cost is: "pickup_time" (seconds until the pickup) or "added_time" (how
     #: much longer the vehicle's whole plan gets; see dispatch.plan.stops)
     objective: str = "pickup_time"
+    #: the ``[dispatch.allocator_params]`` table: keyword arguments of the allocator's
+    #: constructor (every allocator of a sweep), and ``[dispatch.allocator_params.<name>]``
+    #: tables for one allocator or a named variant (``"magnnet:paper"``)
     allocator_params: tuple[tuple[str, Any], ...] = ()
+    #: the ``[dispatch.planner_params]`` table: keyword arguments of the planner's constructor
     planner_params: tuple[tuple[str, Any], ...] = ()
     #: ``[dispatch.allocator_params.<name>]`` tables: parameters of one allocator (``magnnet``)
     #: or of a named variant (``"magnnet:paper"``), over the flat ones (see :meth:`params_for`)

@@ -8,7 +8,7 @@ The batteries are :mod:`dispatch.fleet.battery`, the stations and charging visit
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -22,13 +22,21 @@ class EnergyConfig:
     sorted by speed (empty: the constant ``wh_per_km``); ``socs``: a start file's ``soc``
     column per vehicle (row order; nan: ``soc0``)."""
 
-    battery_kwh: float = 50.0
-    wh_per_km: float = 140.0
+    battery_kwh: float = 50.0  # kWh: usable battery of every car
+    #: Wh/km: consumption, a constant, or ``[[km/h, Wh/km], ...]`` with rising speeds,
+    #: interpolated at each leg's mean speed (HIVE's tabular powertrain)
+    wh_per_km: float = field(
+        default=140.0, metadata={"toml": "float, or array of [km/h, Wh/km] pairs"})
     speed_table: tuple[tuple[float, float], ...] = ()
+    #: kW: auxiliary draw (kWh per hour) over every second not plugged in, driving included
     idle_kwh_per_hour: float = 0.0
+    #: share of the battery charged at the start (state of charge); a start file's soc
+    #: column wins
     soc0: float = 1.0
+    #: share of the battery a car keeps: a car whose plan and a new trip would leave less is
+    #: no candidate for the trip
     reserve: float = 0.1
-    max_charge_kw: float = math.inf
+    max_charge_kw: float = math.inf  # kW: the car's charging power cap (inf: none)
     socs: tuple[float, ...] = ()
     #: seconds between two rows per vehicle of the ``soc`` table
     sample: float = 900.0
@@ -65,8 +73,14 @@ class ChargingConfig:
     parameters (``[charging.<name>]``), the timer."""
 
     stations: tuple[StationRow, ...] = ()
-    file: Any = None
+    #: the stations: station_id, node (an id of the network) or lon, lat, plugs, kw (HIVE's
+    #: charger_count / charger_id = LEVEL_1 | LEVEL_2 | DCFC read too)
+    file: Any = field(
+        default=None, metadata={"toml": "string (a CSV file, relative to the scenario file)"})
+    #: share of the battery (state of charge) up to which a car charges at the plug's full
+    #: power, then linearly less
     taper_from: float = 0.8
+    #: share of the plug's power left at a full battery (a 50 kW plug ends at 10 kW)
     taper_floor: float = 0.2
     #: metres a station given by lon/lat may lie from the nearest node (farther: refused)
     max_snap: float = STATION_MAX_SNAP

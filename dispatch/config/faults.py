@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 
 @dataclass(frozen=True)
@@ -12,7 +12,10 @@ class FaultConfig:
     events: tuple[tuple[float, int, float], ...] = ()  # (t, vehicle_id, duration) from a file
     on_board: str = "transfer"  # "transfer" | "fail"
     tow: float = 3600.0  # seconds until a stranded vehicle ([fleet.energy]) is towed
-    blackout: tuple[tuple[float, float], ...] = ()
+    #: windows [t0, t1) in which every communication link is down (or only links with an end
+    #: in ``blackout_region``)
+    blackout: tuple[tuple[float, float], ...] = field(
+        default=(), metadata={"toml": "array of [t0, t1] (simulated seconds)"})
     region: tuple[float, float, float, float] | None = None
 
     @property

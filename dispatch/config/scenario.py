@@ -29,17 +29,18 @@ from dispatch.config.reposition import RepositionConfig
 from dispatch.config.runkeys import RUN_KEYS
 from dispatch.config.sweep import SweepConfig
 from dispatch.config.tasks import TaskConfig
+from dispatch.config.transit import TransitConfig
 from dispatch.config.world import WorldConfig
 from dispatch.errors import ScenarioError
 
 #: Resource bounds. Past a ``Limits`` value a scenario is refused with a clear error that
-#: names the override (``--force``); past a hard bound it is refused whatever.
+#: names the override (``--ignore-limits``); past a hard bound it is refused whatever.
 MAX_SEED = 2**63 - 1  # seeds are stored as int64 (Parquet); hard
 
 
 @dataclass(frozen=True)
 class Limits:
-    """Soft resource bounds, checked by :func:`check_limits` (``--force`` skips them)."""
+    """Soft resource bounds, checked by :func:`check_limits` (``--ignore-limits`` skips them)."""
 
     file_bytes: int = 8 * 2**20  # a scenario file
     input_bytes: int = 512 * 2**20  # a trace or fleet start file
@@ -69,9 +70,12 @@ def safe_name(name: str, fallback: str = "scenario") -> str:
 class Scenario:
     """A parsed scenario file. ``text`` is the file's exact content (stored with results)."""
 
-    name: str
+    #: names the run ids, the ``scenario=`` partition and the default output folder
+    name: str = field(metadata={"default": "(the file's stem)"})
     path: Path
     text: str
+    #: free text saying what the scenario is for; kept with the file's text in the results,
+    #: never read by a run
     description: str = ""
     seed: int = 0
     duration: float = 3600.0  # simulated seconds before the run stops
@@ -89,6 +93,8 @@ class Scenario:
     acceptor: AcceptorConfig = field(default_factory=AcceptorConfig)
     #: ``[pricing]`` (the fare of a ride, read by acceptors); None: no fares
     pricing: Pricing | None = None
+    #: ``[transit]``: public transport riders may combine with the fleet; None: none
+    transit: TransitConfig | None = None
 
     def runs(
         self,

@@ -22,7 +22,7 @@ EMPIRICAL_MAX_WAIT = 600.0
 @dataclass(frozen=True)
 class TaskConfig:
     source: str = "static"
-    count: int | None = None  # static: number of tasks (None: as many as agents); others: cap
+    count: int | None = None  # static: number of tasks (unset: as many as agents); others: cap
     interval: float | None = None  # periodic: seconds between releases
     rate: float | None = None  # poisson: releases per second
     max_active: int | None = None  # periodic/poisson: a release is skipped while this many are open
@@ -33,13 +33,16 @@ class TaskConfig:
     #: seconds of delay a request accepts at its drop-off, over release + direct drive time
     max_delay: float | None = None
     trace: Path | None = None  # trace: CSV or Parquet file of trips (see dispatch.files.traces)
+    #: trace: the column of each trip's id, carried into the results as ``request_id`` (None:
+    #: the first of request_id, trip_id, id the trace has; without one, the row's number)
+    id_column: str | None = None
     trips: Trips | None = None
     trips_per_day: float | None = None  # empirical: expected trips over the 24 h day
     weekday: str = "all"  # empirical: the sample's trips of this weekday ("all": every day)
     #: trace: the date-time of second 0 (a trace's departure_time is read from it)
     start: datetime | None = None
     #: trace on roads: metres a pickup / drop-off may lie from the nearest node (farther:
-    #: the trip is left out before the run, counted in trips.dropped); None: no bound
+    #: the trip is left out before the run, counted in trips.dropped); unset: no bound
     max_snap: float | None = None
     #: share of the requests booked ahead (each drawn from the run's prebooking stream; a
     #: trace's booked_at column instead: see dispatch.decide.prebook)

@@ -15,17 +15,21 @@ MAX_AXIS_CELLS = 1_000_000  # cells along one axis of a voxel world; a hard reso
 @dataclass(frozen=True)
 class ObstacleConfig:
     count: int = 10
-    min_size: Vec3 = (3.0, 3.0, 5.0)  # metres (x, y, height)
-    max_size: Vec3 = (10.0, 10.0, 30.0)
+    min_size: Vec3 = (3.0, 3.0, 5.0)  # metres (x, y, height): the smallest box
+    max_size: Vec3 = (10.0, 10.0, 30.0)  # metres (x, y, height): the largest box
 
 
 @dataclass(frozen=True)
 class RoadConfig:
     """A road network: ``network`` is ``"manhattan"`` (generated from ``blocks``, ``block``,
-    ``speed``), ``"chicago"`` (the Chicago Regional network shipped with the package) or a
-    GraphML / TNTP file, relative to ``base`` (the scenario's folder)."""
+    ``speed``), a network shipped with the package (``"chicago"``: Chicago Regional;
+    ``"manhattan_osm"``: Manhattan's OSMnx street network) or a GraphML / node-link JSON / TNTP
+    file, relative to ``base`` (the scenario's folder)."""
 
-    network: str
+    #: the road network the run drives on: a generated grid, a network shipped with the
+    #: package, or a file of your own (relative to the scenario file); without it the run is
+    #: in the voxel world
+    network: str = field(metadata={"default": "(none: the voxel world)"})
     base: Path
     blocks: tuple[int, int] = (20, 20)  # intersections along x (columns) and y (rows)
     block: float = 200.0  # metres between neighbouring intersections
@@ -36,8 +40,9 @@ class RoadConfig:
 
 @dataclass(frozen=True)
 class WorldConfig:
-    size: Vec3 = (50.0, 50.0, 30.0)  # metres
-    cell: float = 1.0  # metres
+    #: metres: the voxel world's extent along x, y and z (each a whole number of cells)
+    size: Vec3 = (50.0, 50.0, 30.0)
+    cell: float = 1.0  # metres: the edge of one voxel cell (the planners' resolution)
     obstacles: ObstacleConfig = field(default_factory=ObstacleConfig)
     roads: RoadConfig | None = None  # a road network instead of the voxel world
     physics: bool = True  # mirror the run in PyBullet (default: on in voxel worlds, off on roads)

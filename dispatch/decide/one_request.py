@@ -35,6 +35,8 @@ class OneProblem:
         self.time = d.now
         self.cost = d.cost
         self.n_agents, self.n_tasks = d.cost.shape
+        if d.n_idle is not None:  # the vehicle cut costed fewer (dispatch.decide.nearest)
+            self.n_agents = d.n_idle
         self._make, self._full = d.make, None
 
     def __getattr__(self, name: str):

@@ -19,11 +19,11 @@ in the order they run:
    insertion
    into each vehicle's plan; with meeting points :func:`dispatch.decide.meeting.meeting_costs`, the
    cheapest over its candidate boarding and alighting points too); without,
-   :func:`deadlines` (``inf`` where a vehicle would reach the pickup after the deadline;
-   with lazy costs each request's feasibility made exact,
+   :func:`~dispatch.decide.planner_costs.deadlines` (``inf`` where a vehicle would reach the
+   pickup after the deadline; with lazy costs each request's feasibility made exact,
    :func:`dispatch.decide.lazy.resolve_open`).
    A request no vehicle reaches in time is rejected the first time it is offered
-   (:func:`reject_late`).
+   (:func:`~dispatch.decide.planner_costs.reject_late`).
 6. The energy filter (``[fleet.energy]``, :meth:`dispatch.fleet.battery.Energy.filter`): ``inf``
    where a vehicle would end below its reserve; the shift limit (:meth:`dispatch.fleet.shifts.
    Shifts.limit`): ``inf`` where a plan would end after the vehicle's shift and its grace.
@@ -34,6 +34,10 @@ in the order they run:
 10. :func:`certified`: with lazy costs the certificate loop (:mod:`dispatch.decide.lazy`) around the
     allocator; without them one question; a decision of one request for an allocator that
     decides it by its cost minimum none (:mod:`dispatch.decide.one_request`).
+
+An allocator that also declares it may be cut decides a one-request decision over only the
+vehicles a lower bound of their cost cannot rule out, nearest first (steps 2-7 on those:
+:meth:`Pipeline.nearest`, :mod:`dispatch.decide.nearest`).
 
 A step reads the run's objects it is given when the pipeline is built (the task book, the
 fleet, the operator, the planner, the space, the configuration) and the decision's values it
@@ -56,18 +60,25 @@ from dispatch.api.comms import Hearing
 from dispatch.api.contracts import Allocator, Planner
 from dispatch.api.problem import AgentViews, AllocationProblem
 from dispatch.api.space import Space
+from dispatch.decide import nearest, one_request
 from dispatch.decide.answers import Checked
 from dispatch.decide.candidates import cut as candidate_cut
 from dispatch.decide.lazy import certify, resolve_open
 from dispatch.decide.meeting import meeting_costs, view_at
 from dispatch.decide.one_request import decided, fits
 from dispatch.decide.plan_costs import Inserts, Plans, PlanTable, insertion_costs_of
-from dispatch.decide.planner_costs import PlannerCosts, close_unreachable, lazy_costs
+from dispatch.decide.planner_costs import (
+    PlannerCosts,
+    close_unreachable,
+    deadlines,
+    lazy_costs,
+    reject_late,
+)
 from dispatch.decide.prebook import earliest_views
 from dispatch.decide.tally import Blame, Tally
 from dispatch.errors import PluginError
 from dispatch.plan.stops import OBJECTIVES
-from dispatch.plan.tasks import TaskBook, TaskState
+from dispatch.plan.tasks import TaskBook
 
 if TYPE_CHECKING:
     from dispatch.config.comms import CommsConfig
@@ -135,24 +146,6 @@ def candidates(fleet: Fleet, book: TaskBook, held: dict, pooled: bool
     else:
         open_tasks = list(book.open.values())
     return idle, open_tasks, holder
-
-
-def reject_late(book: TaskBook, open_tasks: list, cost: np.ndarray, servable: np.ndarray
-                ) -> np.ndarray:
-    """``servable`` less the tasks no vehicle can reach in time (no finite cost); of those,
-    a task offered for the first time is closed ``rejected`` at once (see
-    :mod:`dispatch.decide.dispatcher`), one offered before waits for its deadline."""
-    late = servable & ~np.isfinite(cost).any(axis=0)
-    for t, bad in zip(open_tasks, late):
-        if bad and not t.offered:
-            book.close(t, TaskState.REJECTED)
-    return servable & ~late
-
-
-def deadlines(cost: np.ndarray, deadline: np.ndarray, now: float) -> np.ndarray:
-    """``cost`` with ``inf`` where a vehicle would reach the pickup after the request's
-    deadline (``now + cost <= deadline``, to 1e-9 s)."""
-    return np.where(now + cost <= deadline + 1e-9, cost, np.inf)
 
 
 def keep_servable(servable: np.ndarray, requests: list, cost: np.ndarray, exact, inserts):
@@ -269,6 +262,9 @@ class Decision:
     #: (one point per request, dispatch.decide.meeting) task id -> the meeting points it was
     #: planned at; handed out, the operator makes them the task's (Task.meeting's one writer)
     meetings: dict = field(default_factory=dict)
+    #: the candidate vehicles where the vehicle cut costed only some (dispatch.decide.nearest):
+    #: the decision's agents are those it costed; None: they are all the candidates
+    n_idle: int | None = None
 
 
 class Pipeline:
@@ -327,6 +323,18 @@ class Pipeline:
         self.table = PlanTable(len(fleet)) if self.plans else None
         #: the last request id whose direct drive time a decision has set (direct_times)
         self._seen = -1
+        #: the exact vehicle cut (dispatch.decide.nearest): the ``(speed, slack)`` promises
+        #: that bound a vehicle's cost from its straight line (the planner's floor taken in),
+        #: where it may be taken (a one-request decision of an allocator that declares it, in
+        #: a space and with a planner that promise the bound, everyone hearing everyone); None
+        #: where not
+        top, floor = space.top_speed, planner.drive_floor
+        self.speeds = tuple((s / floor, slack) for s, slack in
+                            ((top, 0.0), *space.speed_slacks)) if (
+            self.one_request and allocator.nearest_cut and walks is None and links is None
+            and top and floor and floor > 0 and len(fleet) >= nearest.MIN_CANDIDATES
+            and (comms.range is None or math.isinf(comms.range))
+            and fleet.index_places() is not None) else None
 
     def build(self, now: float) -> Decision | None:
         """The problem of a decision at ``now`` over the candidate vehicles and the open
@@ -338,6 +346,11 @@ class Pipeline:
             return None
         if self.routes:
             self._seen = direct_times(self.book, self.planner.free_flow, self._seen)
+        if self.speeds is not None and len(self.book.open) == 1 and not nearest.FULL \
+                and not one_request.GENERAL:
+            d = self.nearest(now)
+            if d is not nearest.WHOLE:
+                return d
         idle, open_tasks, holder = candidates(self.fleet, self.book, held, self.pooled)
         if not idle.size:
             return None
@@ -377,6 +390,24 @@ class Pipeline:
         return Decision(now, idle, agents, open_tasks, tasks, cost, exact, inserts, holder, comm,
                         cost_s, self.problems.of(now, agents, tasks, idle, comm, apos), n_cut,
                         meetings)
+
+    def nearest(self, now: float):
+        """The decision at ``now`` of the one open request over the vehicles the exact cut
+        costs (:func:`dispatch.decide.nearest.search`): the same as :meth:`build`'s over all
+        of them; None where :meth:`build` finds nothing to decide (the request closed as it
+        would close it); :data:`dispatch.decide.nearest.WHOLE` where only the whole column
+        can tell."""
+        got = nearest.search(self, now)
+        if got is None or got is nearest.WHOLE:
+            return got
+        n, open_tasks, tasks, slots, cost, inserts, t0 = got
+        agents = self.fleet.views(slots, now, ascending=True)
+        cost_s = time.perf_counter() - t0
+        self.tally.cost_seconds += cost_s
+        comm, apos = self.hearing(agents, now)
+        return Decision(now, slots, agents, open_tasks, tasks, cost, None, inserts, {}, comm,
+                        cost_s, self.problems.of(now, agents, tasks, slots, comm, apos),
+                        n_idle=n)
 
     def limits(self, now: float, agents, tasks, idle: np.ndarray, open_tasks: list,
                holder: dict, *, cost: np.ndarray, exact, servable):

@@ -56,6 +56,14 @@ class Inserts:
         out._m, out._keys = int(servable.sum()), None
         return out
 
+    def moved(self, rows: np.ndarray) -> Inserts:
+        """The same, with row ``r`` renumbered ``rows[r]`` (a decision whose vehicles were
+        costed in parts: :mod:`dispatch.decide.nearest`)."""
+        out = object.__new__(Inserts)
+        out._ins, out._q, out._cols, out._m = self._ins, self._q, self._cols, self._m
+        out._rows, out._keys = np.asarray(rows)[self._rows], None
+        return out
+
     def pairs(self):
         """``(rows, cols, insertions)``: every feasible pair kept and its insertion's arrays
         (:class:`dispatch.plan.insertion.Insertions`, aligned with the pairs)."""

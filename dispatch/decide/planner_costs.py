@@ -1,6 +1,7 @@
 """The planner's side of a decision: whether it uses lazy exact costs, the cost matrix (or
-lower bounds) checked for shape and type, exact costs of chosen pairs, and the tasks no vehicle
-of the fleet can reach."""
+lower bounds) checked for shape and type, exact costs of chosen pairs, the tasks no vehicle
+of the fleet can reach, and the costs past a request's deadline (``inf``: :func:`deadlines`;
+a request no vehicle reaches in time: :func:`reject_late`)."""
 
 from __future__ import annotations
 
@@ -123,3 +124,21 @@ def close_unreachable(book: TaskBook, fleet: Fleet, costs: PlannerCosts, tasks, 
         tasks = [t for t, ok in zip(tasks, np.isfinite(c).any(axis=0)) if not ok]
     for t in tasks:
         book.close(t, TaskState.UNREACHABLE)
+
+
+def reject_late(book: TaskBook, open_tasks: list, cost: np.ndarray, servable: np.ndarray
+                ) -> np.ndarray:
+    """``servable`` less the tasks no vehicle can reach in time (no finite cost); of those,
+    a task offered for the first time is closed ``rejected`` at once (see
+    :mod:`dispatch.decide.dispatcher`), one offered before waits for its deadline."""
+    late = servable & ~np.isfinite(cost).any(axis=0)
+    for t, bad in zip(open_tasks, late):
+        if bad and not t.offered:
+            book.close(t, TaskState.REJECTED)
+    return servable & ~late
+
+
+def deadlines(cost: np.ndarray, deadline: np.ndarray, now: float) -> np.ndarray:
+    """``cost`` with ``inf`` where a vehicle would reach the pickup after the request's
+    deadline (``now + cost <= deadline``, to 1e-9 s)."""
+    return np.where(now + cost <= deadline + 1e-9, cost, np.inf)

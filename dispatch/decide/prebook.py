@@ -19,7 +19,7 @@ decision may insert other requests around them); only a breakdown takes them out
 request is open again for any vehicle to take (moved between vehicles) until its pickup window
 closes, when it ends ``failed`` (the breakdown broke the promise; the ``events`` table names
 the vehicle's ``breakdown``). The summary counts ``promises`` and ``promises_broken`` (promised
-requests that ended ``failed`` or ``expired``; one the run's end cuts is ``cancelled``, not
+requests that ended ``failed`` or ``expired``; one the run's end cuts is ``cut_off``, not
 broken).
 
 Prebooking needs plans (a road network): with it on, every decision inserts into the vehicles'

@@ -43,7 +43,7 @@ def check_file(path: Path, max_bytes: int | None, what: str = "file") -> int:
     if max_bytes is not None and st.st_size > max_bytes:
         raise ScenarioError(path, "<file>", f"is {st.st_size / 2**20:.1f} MiB; a {what} of "
                                             f"more than {max_bytes / 2**20:.0f} MiB is refused "
-                                            "(use --force to read it anyway)")
+                                            "(use --ignore-limits to read it anyway)")
     return st.st_size
 
 

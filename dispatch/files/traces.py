@@ -8,10 +8,12 @@ number >= 1; blank: 1), ``max_walk`` (metres) and ``walk_speed`` (m/s) of meetin
 (:mod:`dispatch.decide.meeting`; blank: the scenario's) and ``booked_at`` (when the trip was booked:
 seconds, or a date-time where the trace's time column is ``departure_time``; blank: not
 booked; never after the requested departure; see :mod:`dispatch.decide.prebook`). The trip's
-id is the first of the columns ``request_id``, ``trip_id``, ``id`` the trace has, kept as written
-(a string; blank ids and an id of two rows are refused); without one, a trip's id is its 1-based
-data row. The tasks table's ``request_id`` is it, whatever the order the trips enter the run in.
-Other columns are ignored.
+id is its id column's cell: the column ``[tasks] id_column`` names, else the first of
+``request_id``, ``trip_id``, ``id`` the trace has; kept as written (blank ids and an id of two rows
+are refused), an integer where every id is one written plainly (``42``, ``-7``; not ``007``,
+``+7`` or ``7.0``), else a string; without an id column, a trip's id is its 1-based data row. The
+results' ``request_id`` is it, whatever the order the trips enter the run in. Other columns are
+ignored.
 Where things are, by space:
 
 * voxel world: ``x, y, z`` (metres; the pickup), optionally ``dest_x, dest_y, dest_z``;
@@ -33,6 +35,7 @@ raises a ScenarioError naming the file and its 1-based data row.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, fields, replace
 from datetime import date, datetime
 from pathlib import Path
@@ -91,9 +94,10 @@ class Trips:
     #: when each trip was booked (seconds of the run, ``booked_at`` column; nan: not booked,
     #: it is requested at its release time): see :mod:`dispatch.decide.prebook`
     booked_at: np.ndarray | None = None
-    #: each trip's id as the file wrote it (strings: its id column's cells, or its 1-based
-    #: data row where it has none); None for trips not read from a file (an empirical day):
-    #: each task's id is then its own
+    #: each trip's id as the file wrote it (:func:`trip_ids`): int64 where every id is an
+    #: integer written plainly (or the 1-based data rows of a trace without an id column),
+    #: else Python strings; None for trips not read from a file (an empirical day): each
+    #: request's id is then its number in the day
     ids: np.ndarray | None = None
 
     def __len__(self) -> int:
@@ -171,14 +175,29 @@ def _seconds_since(path: Path, values: list, start: datetime) -> np.ndarray:
     return out
 
 
+class IdColumnMissing(ScenarioError):
+    """The id column a scenario names (``[tasks] id_column``) is not in the trace: ``column``
+    and the trace's ``columns`` (in the file's order) for the scenario's own error."""
+
+    def __init__(self, file: Path, column: str, columns: list[str]) -> None:
+        self.column, self.columns = column, columns
+        super().__init__(file, "<header>", f"no column {column!r} (its columns: "
+                                           f"{', '.join(columns)})")
+
+
 def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
-               max_bytes: int | None = None, *, start: datetime | None = None) -> Trips:
+               max_bytes: int | None = None, *, start: datetime | None = None,
+               id_column: str | None = None) -> Trips:
     """Read and validate a trip trace for a ``space`` (``"voxel"``: ``size`` is the world's);
     a file of more than ``max_bytes`` is refused before it is read. A ``departure_time``
     column (date-times) needs ``start``: times are seconds from it, and trips departing before
-    it are left out (counted in :attr:`Trips.dropped`)."""
+    it are left out (counted in :attr:`Trips.dropped`). ``id_column``: the column of the trips'
+    ids (None: the first of :data:`ID_COLUMNS` the trace has); one the trace lacks raises
+    :class:`IdColumnMissing` once the header is read."""
     table = Table(path, max_bytes)
     columns = set(table.names)
+    if id_column is not None and id_column not in columns:
+        raise IdColumnMissing(path, id_column, list(dict.fromkeys(table.names)))
     tcol = next((c for c in TIME_COLUMNS if c in columns), None)
     layout = next((lay for lay in LAYOUTS[space] if all(c in columns for c in lay[1])), None)
     if tcol is None or layout is None:
@@ -206,7 +225,7 @@ def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
     optional = [c for c in ("max_wait", "max_delay", "passengers", "max_walk", "walk_speed")
                 if c in columns]
     booked = BOOKED_COLUMN in columns
-    idcol = next((c for c in ID_COLUMNS if c in columns), None)
+    idcol = id_column or next((c for c in ID_COLUMNS if c in columns), None)
     cols = table.read({**({idcol: CELLS} if idcol else {}),
                        tcol: CELLS if tcol == DATETIME_COLUMN else NUMBER,
                        **{c: NUMBER for c in pick + (drop if has_dest else ())},
@@ -309,13 +328,19 @@ def read_trace(path: Path, space: str, size: tuple[float, float, float] | None,
     return trips
 
 
+#: an integer id written plainly: no sign but a minus, no leading zero, no point
+_PLAIN_INT = re.compile(r"-?(0|[1-9][0-9]*)")
+
+
 def trip_ids(path: Path, column: str | None, cells: list | None, n: int) -> np.ndarray:
-    """The ids of a trace's ``n`` rows in file order, as strings: the ``column``'s ``cells``
-    as written (an integer of a Parquet file in decimal), or, without an id column
-    (``column`` None), each row's 1-based data row. A blank cell or an id of an earlier row
-    raises a ScenarioError naming the file, the row and the column."""
+    """The ids of a trace's ``n`` rows in file order: the ``column``'s ``cells`` as written,
+    as int64 where every one is an integer written plainly (``42``, ``-7``; an integer of a
+    Parquet file), else as strings (``007``, ``7.0`` and ``trip-7`` are kept as written);
+    without an id column (``column`` None), each row's 1-based data row (int64). A blank cell
+    or an id of an earlier row raises a ScenarioError naming the file, the row and the
+    column."""
     if column is None:
-        return np.array([str(i) for i in range(1, n + 1)], dtype=object)
+        return np.arange(1, n + 1, dtype=np.int64)
     ids = np.empty(n, dtype=object)
     seen: dict[str, int] = {}
     for i, v in enumerate(cells):
@@ -329,6 +354,12 @@ def trip_ids(path: Path, column: str | None, cells: list | None, n: int) -> np.n
                                 f"{column} {s!r} is also the id of row {first + 1}: ids must "
                                 "be unique")
         ids[i] = s
+    plain = _PLAIN_INT.fullmatch
+    if all(plain(s) for s in seen):
+        try:
+            return np.array([int(s) for s in ids], dtype=np.int64)
+        except OverflowError:  # beyond int64: kept as written
+            pass
     return ids
 
 

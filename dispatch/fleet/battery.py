@@ -38,7 +38,7 @@ class Battery:
     """One vehicle's battery (kWh). ``now`` gives the simulated time (auxiliary draw is
     settled lazily: :meth:`settle`)."""
 
-    __slots__ = ("cfg", "capacity", "kwh", "kwh0", "drawn", "charged", "charge_seconds",
+    __slots__ = ("cfg", "capacity", "kwh", "kwh0", "drawn", "aux", "charged", "charge_seconds",
                  "queue_seconds", "kwh_min", "t", "plugged", "now", "arr", "slot")
 
     def __init__(self, cfg: EnergyConfig, soc: float, now: Callable[[], float],
@@ -46,6 +46,7 @@ class Battery:
         self.cfg, self.capacity = cfg, cfg.battery_kwh
         self.kwh = self.kwh0 = self.kwh_min = soc * cfg.battery_kwh
         self.drawn = self.charged = self.charge_seconds = self.queue_seconds = 0.0
+        self.aux = 0.0  # the part of drawn the auxiliary load took (the rest: driving)
         self.t, self.plugged, self.now = 0.0, False, now
         self.arr, self.slot = arr, slot
         arr[slot] = self.kwh
@@ -54,20 +55,21 @@ class Battery:
     def soc(self) -> float:
         return self.kwh / self.capacity
 
-    def _take(self, e: float) -> None:
+    def _take(self, e: float) -> float:
         take = min(max(e, 0.0), self.kwh)
         self.kwh -= take
         self.drawn += take
         if self.kwh < self.kwh_min:
             self.kwh_min = self.kwh
         self.arr[self.slot] = self.kwh
+        return take
 
     def settle(self) -> None:
         """Draw the auxiliary load up to now (nothing while plugged in)."""
         now = self.now()
         if now > self.t:
             if not self.plugged and self.cfg.idle_kwh_per_hour:
-                self._take(self.cfg.idle_kwh_per_hour * (now - self.t) / 3600.0)
+                self.aux += self._take(self.cfg.idle_kwh_per_hour * (now - self.t) / 3600.0)
             self.t = now
 
     def leg_kwh(self, metres: float, seconds: float) -> float:

@@ -21,6 +21,7 @@ import numpy as np
 from dispatch.api.space import Space
 from dispatch.config.scenario import RunSpec
 from dispatch.errors import ScenarioError
+from dispatch.files.empirical import load_sample, pickup_weights
 from dispatch.plan.vehicles import Vehicle
 
 
@@ -44,8 +45,6 @@ def place_cars(net, spec: RunSpec, rng: np.random.Generator) -> list[Vehicle]:
     # a car's speed is informational (costs are the network's travel times): its mean speed
     speed = float(net.length.data.sum() / net.time.data.sum())
     if not rows and fleet.placement == "demand":
-        from dispatch.files.empirical import load_sample, pickup_weights
-
         ids, p = pickup_weights(load_sample(), spec.scenario.tasks.weekday)
         nodes = [net.index_of(int(i)) for i in rng.choice(ids, size=fleet.agents, p=p)]
         return [Vehicle(i, "car", speed, int(n)) for i, n in enumerate(nodes)]

@@ -49,7 +49,7 @@ SCHEMAS: dict[str, pa.Schema] = {
         ("conflicts", _I), ("cost_seconds", _F), ("decide_seconds", _F),
         ("first_decision_cost", _F), ("first_decision_seconds", _F), ("realized_travel", _F),
         ("wait_time_mean", _F), ("tasks_expired", _I), ("tasks_rejected", _I),
-        ("tasks_unreachable", _I), ("tasks_cancelled", _I), ("tasks_failed", _I),
+        ("tasks_unreachable", _I), ("tasks_cut_off", _I), ("tasks_failed", _I),
         ("sim_time", _F), ("comm_delay", _F), ("agent_seconds", _F),
         ("distance", _F), ("empty_distance", _F), ("occupied_distance", _F),
         # [faults]: vehicle breakdowns; tasks re-opened by one; of those, passengers transferred
@@ -86,9 +86,10 @@ SCHEMAS: dict[str, pa.Schema] = {
         # [fleet.energy] (nan, and 0 charges and strandings, without): the fleet's kWh drawn
         # and charged, charges started (plug-ins), vehicles stranded (battery empty), the
         # lowest state of charge a vehicle reached and the fleet's mean at the end (0-1),
-        # seconds the fleet queued at stations (dispatch.output.energy)
+        # seconds the fleet queued at stations, the part of kwh_drawn the auxiliary load
+        # (idle_kwh_per_hour, idle or driving) drew: the rest is driving (dispatch.output.energy)
         ("kwh_drawn", _F), ("kwh_charged", _F), ("charges", _I), ("strandings", _I),
-        ("soc_min", _F), ("soc_end_mean", _F), ("queue_seconds", _F),
+        ("soc_min", _F), ("soc_end_mean", _F), ("queue_seconds", _F), ("kwh_auxiliary", _F),
         # meeting points (dispatch.decide.meeting): mean metres walked per completed ride (to board
         # plus from alighting; 0 door to door), candidate points found, and points within a
         # radius left out by [tasks] meeting_points
@@ -96,8 +97,9 @@ SCHEMAS: dict[str, pa.Schema] = {
     ]),
     "tasks": pa.schema([
         # request_id: the user's id of the task's request (a trace row's id as written, or its
-        # row number; generated demand: the task_id), to join results to the trips
-        ("run_id", _S), ("task_id", _I), ("request_id", _S), ("kind", _S), ("x", _F),
+        # row number; generated demand: its draw number), to join results to the trips; int64,
+        # or string where a trace's ids are not all integers (see request_id_type)
+        ("run_id", _S), ("task_id", _I), ("request_id", _I), ("kind", _S), ("x", _F),
         ("y", _F), ("z", _F), ("dropoff_x", _F), ("dropoff_y", _F), ("dropoff_z", _F),
         ("released_at", _F), ("max_wait", _F), ("snap_m", _F), ("dropoff_snap_m", _F),
         ("assigned_at", _F), ("agent_id", _I), ("cost", _F),
@@ -120,7 +122,7 @@ SCHEMAS: dict[str, pa.Schema] = {
     ]),
     "assignments": pa.schema([
         ("run_id", _S), ("decision", _I), ("round", _I), ("agent_id", _I), ("task_id", _I),
-        ("cost", _F), ("won", _B), ("alloc_seconds", _F),
+        ("request_id", _I), ("cost", _F), ("won", _B), ("alloc_seconds", _F),
     ]),
     "decisions": pa.schema([
         ("run_id", _S), ("decision", _I), ("t", _F), ("n_idle", _I), ("n_tasks", _I),
@@ -131,8 +133,9 @@ SCHEMAS: dict[str, pa.Schema] = {
         ("n_cut", _I),
     ]),
     "events": pa.schema([
+        # request_id: the task's (null where the row is about no task: task_id -1)
         ("run_id", _S), ("t", _F), ("event", _S), ("agent_id", _I), ("task_id", _I),
-        ("x", _F), ("y", _F), ("z", _F),
+        ("request_id", _I), ("x", _F), ("y", _F), ("z", _F),
     ]),
     "vehicles": pa.schema([
         ("run_id", _S), ("agent_id", _I), ("kind", _S), ("speed", _F), ("x0", _F), ("y0", _F),
@@ -173,6 +176,19 @@ SCHEMAS: dict[str, pa.Schema] = {
     ]),
 }
 
+#: the column of the user's request ids, in every table about requests; its type is a run's
+#: own (:func:`request_id_type`): the schemas above give the integer one
+REQUEST_ID = "request_id"
+
+
+def request_id_type(trips) -> pa.DataType:
+    """The type of a run's ``request_id`` columns: string where its trips' ids are strings
+    (``trips``: :class:`dispatch.files.traces.Trips`, None for generated demand), else int64
+    (integer ids, a trace's row numbers, generated demand's draw numbers)."""
+    ids = None if trips is None else trips.ids
+    return _S if ids is not None and ids.dtype == object else _I
+
+
 #: Columns that hold wall-clock measurements: they differ between identical runs.
 TIMING_COLUMNS = {"alloc_seconds", "cost_seconds", "decide_seconds", "first_decision_seconds",
                   "agent_seconds"}
@@ -204,10 +220,14 @@ class Recorder:
     """
 
     def __init__(self, out: Path, run_id: str, metadata: dict[str, str],
-                 partition: dict[str, Any], *, flush_rows: int = 10_000) -> None:
+                 partition: dict[str, Any], *, flush_rows: int = 10_000,
+                 types: dict[str, pa.DataType] | None = None) -> None:
         if flush_rows < 1:
             raise ValueError(f"flush_rows must be >= 1, got {flush_rows}")
         self.out = Path(out)
+        #: column name -> this run's type of it in every table that has it (``request_id``:
+        #: :func:`request_id_type`); the others as :data:`SCHEMAS` gives them
+        self.types = dict(types or {})
         self.run_id = run_id
         self.partition = dict(partition)
         self.flush_rows = flush_rows
@@ -235,6 +255,9 @@ class Recorder:
     def file_schema(self, table: str) -> pa.Schema:
         """``table``'s schema in the files: without the partition columns, with metadata."""
         schema = SCHEMAS[table]
+        for k, typ in self.types.items():
+            if k in schema.names:
+                schema = schema.set(schema.get_field_index(k), pa.field(k, typ))
         for k in self.partition:
             if k in schema.names:
                 schema = schema.remove(schema.get_field_index(k))
@@ -417,6 +440,8 @@ def arrow_column(values, typ: pa.DataType) -> pa.Array:
     time, inside a run). Anything else (None, other numpy scalars, ints in a float column,
     values out of range) goes through ``pa.array``, which converts or rejects it as it always
     did."""
+    if isinstance(values, pa.Array) and values.type == typ:
+        return values  # (built by a table's columns(): the request ids of events)
     n = len(values)
     if isinstance(values, np.ndarray) and values.ndim == 1 and (
             (typ == _F and values.dtype == np.float64) or (typ == _I and values.dtype == np.int64)):

@@ -101,11 +101,27 @@ def _new_table(title: str, columns: list[str], collapse: bool = False):
     from rich.table import Table
 
     # collapse: one space between columns (the box's own divider), for the widest tables
+    # (no edge: a box's top and bottom edges are lines of spaces)
     t = Table(title=title, box=box.SIMPLE_HEAD, padding=(0, 0) if collapse else (0, 1),
-              pad_edge=False, title_justify="left")
+              pad_edge=False, show_edge=False, title_justify="left")
     for i, col in enumerate(columns):
         t.add_column(col, justify="left" if i == 0 else "right", no_wrap=i == 0)
     return t
+
+
+def _show(console, t) -> None:
+    """Print table ``t`` with its title above it as a paragraph of the console's width (rich
+    wraps a title to the table's width, 48 columns for a narrow table, and pads its lines with
+    spaces), then the table."""
+    import textwrap
+
+    from rich.text import Text
+
+    title, t.title = t.title, None
+    if title:
+        console.print(Text(textwrap.fill(str(title), width=max(console.width, 20)),
+                           style="table.title"), soft_wrap=True)
+    console.print(t)
 
 
 def _grouped_rows(agg: dict):
@@ -160,8 +176,8 @@ def render(summaries: list[dict], console=None, *, dynamic: bool = False) -> Non
             t1.add_row(a, str(n), str(r["runs"]), _f(r["total_cost"]), gap, end_section=last)
             t3.add_row(a, str(n), _f(r["conflict_free_rate"], 1, 100, "%"),
                        _f(r["first_decision_seconds"], 1, 1000), end_section=last)
-    console.print(t1)
-    console.print(t3)
+    _show(console, t1)
+    _show(console, t3)
 
 
 def render_trips(summaries: list[dict], console=None) -> None:
@@ -191,8 +207,8 @@ _TRIP_FIGURES = (
     ("served", 1, 100, "%", lambda r: per_task(r)["served_share"]),
     ("rej.", 1, 100, "%", lambda r: ratio(r["tasks_rejected"] + r["tasks_expired"]
                                            + r.get("tasks_unreachable", 0), r["n_tasks"])),
-    # the summary's tasks_cancelled: trips the run's end cut off (still waiting or aboard)
-    ("cut", 1, 100, "%", lambda r: ratio(r["tasks_cancelled"], r["n_tasks"])),
+    # the summary's tasks_cut_off: trips the run's end cut off (still waiting or aboard)
+    ("cut", 1, 100, "%", lambda r: ratio(r["tasks_cut_off"], r["n_tasks"])),
     ("wait", 1, 1.0, "", lambda r: r["wait_time_mean"]),
     ("empty", 0, 100, "%", lambda r: ratio(r["empty_distance"], r["distance"])),
     # thousands of km: a city day fits 80 columns
@@ -234,7 +250,7 @@ def _render_trips(summaries: list[dict], console, repositioner: str | None) -> N
             t.add_row("", "", *("" if math.isnan(h) else "±" + _f(h, d, sc, u)
                                 for (_, h), d, sc, u in r["figures"]), style="dim",
                       end_section=last)
-    console.print(t)
+    _show(console, t)
     if any(_pooled(r) for r in summaries):
         _render_shared(groups, runs, console)
     if any(electric(r) for r in summaries):
@@ -261,7 +277,7 @@ def _render_shared(groups: dict, runs: int, console) -> None:
     for a, n, r, last in _grouped_rows(agg):
         t.add_row(a, str(n), _f(r["occ"], 2), _f(r["shared"], 1, 100, "%"), _f(r["delay"]),
                   _f(r["detour"], 2), end_section=last)
-    console.print(t)
+    _show(console, t)
 
 
 def _render_energy(groups: dict, runs: int, console) -> None:
@@ -276,7 +292,7 @@ def _render_energy(groups: dict, runs: int, console) -> None:
            for key, rows in groups.items()}
     for a, n, r, last in _grouped_rows(agg):
         t.add_row(a, str(n), *(_f(m, d, sc) for m, d, sc in r["figures"]), end_section=last)
-    console.print(t)
+    _show(console, t)
 
 
 def render_one(s: dict, console=None, *, dynamic: bool = False) -> None:
@@ -297,8 +313,8 @@ def render_one(s: dict, console=None, *, dynamic: bool = False) -> None:
                      f"{s['seed']}, {s.get('space', 'voxel')}{window}")
     what = "trips" if road else "tasks"
     rejected = s["tasks_rejected"] + s["tasks_expired"] + s.get("tasks_unreachable", 0)
-    # tasks_cancelled: the tasks the run's end cut off (a count of its own, not a rejection)
-    t.add_row(what, f"{n} released, {done} served{share}, {s['tasks_cancelled']} cut off by "
+    # tasks_cut_off: the tasks the run's end cut off (a count of its own, not a rejection)
+    t.add_row(what, f"{n} released, {done} served{share}, {s['tasks_cut_off']} cut off by "
                     f"the end of the run (still waiting or {'aboard' if road else 'under way'}"
                     f"); rejected {s['tasks_rejected']} at once, expired "
                     f"{s['tasks_expired']}, unreachable {s.get('tasks_unreachable', 0)} "
@@ -352,7 +368,7 @@ def render_one(s: dict, console=None, *, dynamic: bool = False) -> None:
     t.add_row("deciding", f"{s['decisions']} decisions, {_f(s['alloc_seconds'], 3)} s wall "
                           f"(first: {_f(s['first_decision_seconds'], 1, 1000)} ms)")
     t.add_row("simulated", f"{_f(s['sim_time'])} s")
-    console.print(t)
+    _show(console, t)
 
 
 def print_tables(summaries: list[dict], console=None, *, dynamic: bool = False) -> None:

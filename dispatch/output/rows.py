@@ -23,11 +23,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pyarrow as pa
 
 from dispatch.decide.meeting import walk_m
 from dispatch.fleet.shifts import duty_columns
 from dispatch.output import space_files
-from dispatch.output.parquet import SCHEMAS
+from dispatch.output.parquet import REQUEST_ID, SCHEMAS
 from dispatch.output.stats import RunStats
 
 NAN3 = (math.nan, math.nan, math.nan)
@@ -82,13 +83,34 @@ def decision_row(i: int, p, a, *, total: float, cost_s: float, decide_s: float, 
 
 
 #: the columns :func:`assignment_row` returns, in order
-ASSIGNMENT_COLUMNS = ("decision", "round", "agent_id", "task_id", "cost", "won", "alloc_seconds")
+ASSIGNMENT_COLUMNS = ("decision", "round", "agent_id", "task_id", "request_id", "cost", "won",
+                      "alloc_seconds")
 
 
-def assignment_row(i: int, r, alloc_s: float) -> tuple:
+def assignment_row(i: int, r, alloc_s: float, request_id) -> tuple:
     """The ``assignments`` row of the bid ``r`` (:class:`dispatch.api.problem.Bid`) of decision
-    ``i`` (:data:`ASSIGNMENT_COLUMNS`)."""
-    return (i, r.round, r.agent_id, r.task_id, r.cost, r.won, alloc_s)
+    ``i``, for the request ``request_id`` (:data:`ASSIGNMENT_COLUMNS`)."""
+    return (i, r.round, r.agent_id, r.task_id, request_id, r.cost, r.won, alloc_s)
+
+
+def request_id_array(tasks, ids, typ: pa.DataType) -> pa.Array:
+    """The ``request_id`` column of rows about the tasks ``tasks`` (task ids; -1: about no
+    task, a null): ``ids[t]``, the request id of task ``t`` (an int or str, as ``typ``;
+    ``ids``: :class:`dispatch.plan.tasks.RequestIds`)."""
+    k, ids = len(tasks), ids.values
+    valid = np.fromiter((t >= 0 for t in tasks), np.bool_, k)
+    nulls = k - int(valid.sum())
+    bitmap = None if not nulls else pa.py_buffer(np.packbits(valid, bitorder="little"))
+    if typ == pa.string():
+        data = [ids[t].encode() if t >= 0 else b"" for t in tasks]
+        offsets = np.zeros(k + 1, dtype=np.int64)
+        np.cumsum(np.fromiter(map(len, data), np.int64, k), out=offsets[1:])
+        if offsets[-1] >= 2**31:
+            return pa.array([ids[t] if t >= 0 else None for t in tasks], typ)
+        return pa.StringArray.from_buffers(k, pa.py_buffer(offsets.astype(np.int32)),
+                                           pa.py_buffer(b"".join(data)), bitmap, nulls)
+    values = np.fromiter((ids[t] if t >= 0 else 0 for t in tasks), np.int64, k)
+    return pa.Array.from_buffers(typ, k, [bitmap, pa.py_buffer(values)], nulls)
 
 
 #: the columns :func:`vehicle_row` returns, in order
@@ -117,6 +139,11 @@ def vehicle_row(v, p, down: float, c, b,
             *duty, v.break_seconds)
 
 
+def id_type(recorder) -> pa.DataType:
+    """The type of ``recorder``'s ``request_id`` columns (a recorder of no files: int64)."""
+    return getattr(recorder, "types", {}).get(REQUEST_ID, SCHEMAS["tasks"].field(REQUEST_ID).type)
+
+
 class TaskWriter:
     """Subscriber of the task book's closures: the task's ``tasks`` row."""
 
@@ -141,17 +168,17 @@ class DecisionWriter:
     """The dispatcher's ``on_decision``: a ``decisions`` row and one ``assignments`` row per
     bid of the decision's rounds."""
 
-    def __init__(self, recorder) -> None:
+    def __init__(self, recorder, request_ids) -> None:
         check_columns("decisions", DECISION_COLUMNS)
         check_columns("assignments", ASSIGNMENT_COLUMNS)
-        self.append = recorder.append
+        self.append, self.request_ids = recorder.append, request_ids
 
     def __call__(self, index: int, problem, allocation, total: float, cost_s: float,
                  decide_s: float, *, hops: int = 0, comm_delay: float = 0.0,
                  agent_seconds: float = math.nan, components: int = 1, cut: int = 0) -> None:
-        append, alloc_s = self.append, cost_s + decide_s
+        append, alloc_s, ids = self.append, cost_s + decide_s, self.request_ids
         for r in allocation.requests:
-            append("assignments", assignment_row(index, r, alloc_s))
+            append("assignments", assignment_row(index, r, alloc_s, ids[r.task_id]))
         append("decisions", decision_row(index, problem, allocation, total=total,
                                          cost_s=cost_s, decide_s=decide_s, hops=hops,
                                          comm_delay=comm_delay, agent_seconds=agent_seconds,
@@ -168,11 +195,12 @@ def write_vehicles(recorder, space, vehicles, now: float, counts) -> None:
                                                 v.battery, duty_columns(v, now)))
 
 
-def event_writer(recorder, space):
+def event_writer(recorder, space, request_ids):
     """The subscriber that writes each event as a row of the ``events`` table (several per
-    trip): it keeps the event itself; its position is looked up when the chunk is written,
-    for the whole chunk at once (on roads, a gather from the nodes' positions)."""
-    position = space.position
+    trip): it keeps the event itself; its position and its task's request id
+    (``request_ids[task_id]``) are looked up when the chunk is written, for the whole chunk at
+    once (on roads, a gather from the nodes' positions)."""
+    position, typ = space.position, id_type(recorder)
     nodes = space.node_positions
     n = len(nodes) if nodes is not None else 0
     xyz = np.array(nodes, dtype=np.float64).reshape(-1, 3) if nodes is not None else None
@@ -199,7 +227,7 @@ def event_writer(recorder, space):
                             nodes[loc] if type(loc) is int and 0 <= loc < n else
                             position(loc) for loc in locs)) if k else ((), (), ())
         return {"t": t, "event": kind, "agent_id": agent, "task_id": task,
-                "x": x, "y": y, "z": z}
+                "request_id": request_id_array(task, request_ids, typ), "x": x, "y": y, "z": z}
 
     return recorder.appender("events", columns)
 
@@ -212,10 +240,12 @@ class RunRecording:
 
     ``stats`` (:class:`dispatch.output.stats.RunStats`) counts the closed tasks; ``on_close`` are
     the task book's closure subscribers (the statistics, then the ``tasks`` row);
-    ``decision`` is the dispatcher's ``on_decision``."""
+    ``decision`` is the dispatcher's ``on_decision``. ``request_ids``: the task book's request
+    id of every task, by task id (:attr:`dispatch.plan.tasks.TaskBook.request_ids`), which the
+    events and assignments rows carry."""
 
-    def __init__(self, recorder, space) -> None:
-        self.recorder, self.space = recorder, space
+    def __init__(self, recorder, space, request_ids) -> None:
+        self.recorder, self.space, self.request_ids = recorder, space, request_ids
         self.stats = RunStats()
         recorder.metadata.update(space.describe())
         # the space's shared tables (a road network), once per results folder
@@ -225,12 +255,12 @@ class RunRecording:
             recorder.table_metadata[name] = meta
         self.event = None
         self.task = TaskWriter(recorder, space)
-        self.decision = DecisionWriter(recorder)
+        self.decision = DecisionWriter(recorder, request_ids)
         self.on_close = [self.stats.closed, self.task]
 
     def attach(self, bus) -> None:
         """Write every event of ``bus`` as a row of ``events``."""
-        self.event = event_writer(self.recorder, self.space)
+        self.event = event_writer(self.recorder, self.space, self.request_ids)
         bus.subscribe(self.event)
 
     def end_tables(self, vehicles, now: float, counts) -> None:

@@ -55,9 +55,9 @@ class RunStats:
         self.conflicts += t.conflicted
         if t.promised:
             self.promises += 1
-            # (cancelled: cut by the run's end, not broken)
+            # (cut_off: cut by the run's end, not broken)
             self.promises_broken += t.state is not COMPLETED \
-                and t.state is not TaskState.CANCELLED
+                and t.state is not TaskState.CUT_OFF
         self.offers += t.offers
         if t.state is COMPLETED and t.fare == t.fare:
             self.revenue += t.fare
@@ -99,7 +99,7 @@ class RunStats:
             realized_travel=self.travel,
             wait_time_mean=self.waits / self.picked if self.picked else math.nan,
             tasks_expired=c[TaskState.EXPIRED], tasks_rejected=c[TaskState.REJECTED],
-            tasks_unreachable=c[TaskState.UNREACHABLE], tasks_cancelled=c[TaskState.CANCELLED],
+            tasks_unreachable=c[TaskState.UNREACHABLE], tasks_cut_off=c[TaskState.CUT_OFF],
             tasks_failed=c[TaskState.FAILED], sim_time=sim_time, comm_delay=d.comm_delay,
             agent_seconds=d.agent_seconds,
             distance=sum(v.distance for v in vehicles),

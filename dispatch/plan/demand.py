@@ -104,9 +104,13 @@ def _int(column, i: int) -> int:
     return 1 if column is None else int(column[i])
 
 
-def _id(column, i: int) -> str:
-    """Trip ``i``'s id ("" where the trips have none: the task's own id stands)."""
-    return "" if column is None else column[i]
+def _id(column, i: int) -> int | str | None:
+    """Trip ``i``'s id, a Python int or str (None where the trips have none: the task's own
+    id stands)."""
+    if column is None:
+        return None
+    v = column[i]
+    return int(v) if column.dtype.kind == "i" else v
 
 
 def _float(column, i: int) -> float:

@@ -29,8 +29,8 @@ from dispatch.plan.breakdowns import Breakdowns
 from dispatch.plan.breaks import plan_break
 from dispatch.plan.execution import Execution, PlanExecution
 from dispatch.plan.kinds import TABLE as KINDS
-from dispatch.plan.stops import (CHARGE, DEPOT, REPOSITION, TOL, PlannedStop, Stop, insert,
-                                 leave, timetable)
+from dispatch.plan.stops import (CHARGE, DEPOT, REPOSITION, TOL, PlannedStop, Stop, leave,
+                                 timetable)
 from dispatch.plan.tasks import COMPLETED, Task, TaskBook
 from dispatch.plan.vehicle_plan import request_stops
 from dispatch.plan.vehicles import Fleet, Vehicle, stop_leg

@@ -4,12 +4,12 @@ A task is a **trip**: a pickup and, for taxis, a drop-off (the paper's point tas
 without one). Life cycle::
 
     open -> assigned -> picked_up -> completed
-      \\-> expired | rejected | unreachable | cancelled | failed   (terminal, from any live state)
+      \\-> expired | rejected | unreachable | cut_off | failed   (terminal, from any live state)
       \\-> declined   (terminal, from open: its rider declined the offer, see dispatch.api.acceptor)
 
 ``expired``: its ``ttl`` or ``max_wait`` ran out while it was open; ``rejected``: when the
 dispatcher first considered it, no vehicle could reach its pickup within its ``max_wait``;
-``unreachable``: no vehicle of the fleet can ever reach it; ``cancelled``: the run ended first;
+``unreachable``: no vehicle of the fleet can ever reach it; ``cut_off``: the run ended first;
 ``failed``: its vehicle broke down with the passenger on board. A vehicle holds its tasks as
 stops of its plan (:mod:`dispatch.plan.stops`), so pooling adds stops to a vehicle, not states to a
 task. A request carries ``passengers`` (default 1) and two limits (Alonso-Mora et al.): pickup by
@@ -26,8 +26,9 @@ from __future__ import annotations
 
 import logging
 import math
+from array import array
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from enum import Enum
 
 import numpy as np
@@ -36,6 +37,7 @@ import simpy
 from dispatch.api.problem import TaskView
 from dispatch.config.tasks import TaskConfig
 from dispatch.events import EventBus
+from dispatch.files.empirical import draw_day, load_sample
 from dispatch.locations import Location
 
 log = logging.getLogger(__name__)
@@ -49,7 +51,8 @@ class TaskState(str, Enum):
     EXPIRED = "expired"
     REJECTED = "rejected"
     UNREACHABLE = "unreachable"
-    CANCELLED = "cancelled"
+    #: the run ended first, the request still waiting or aboard (no rider cancelled it)
+    CUT_OFF = "cut_off"
     FAILED = "failed"
     DECLINED = "declined"
 
@@ -63,22 +66,22 @@ class TaskState(str, Enum):
 OPEN, ASSIGNED, PICKED_UP, COMPLETED = (TaskState.OPEN, TaskState.ASSIGNED, TaskState.PICKED_UP,
                                         TaskState.COMPLETED)
 TERMINAL = frozenset({TaskState.COMPLETED, TaskState.EXPIRED, TaskState.REJECTED,
-                      TaskState.UNREACHABLE, TaskState.CANCELLED, TaskState.FAILED,
+                      TaskState.UNREACHABLE, TaskState.CUT_OFF, TaskState.FAILED,
                       TaskState.DECLINED})
 #: the event emitted when a task enters a terminal state
 CLOSE_EVENT = {TaskState.COMPLETED: "complete", TaskState.EXPIRED: "expire",
                TaskState.REJECTED: "reject", TaskState.UNREACHABLE: "unreachable",
-               TaskState.CANCELLED: "cancel", TaskState.FAILED: "failed",
+               TaskState.CUT_OFF: "cut_off", TaskState.FAILED: "failed",
                TaskState.DECLINED: "decline"}
 #: the states a task may move to from each live state
 MOVES = {
     TaskState.OPEN: {TaskState.ASSIGNED, TaskState.EXPIRED, TaskState.REJECTED,
-                     TaskState.UNREACHABLE, TaskState.CANCELLED, TaskState.DECLINED,
+                     TaskState.UNREACHABLE, TaskState.CUT_OFF, TaskState.DECLINED,
                      # (failed: a promise a breakdown broke: dispatch.decide.prebook)
                      TaskState.FAILED},
-    TaskState.ASSIGNED: {TaskState.PICKED_UP, TaskState.OPEN, TaskState.CANCELLED,
+    TaskState.ASSIGNED: {TaskState.PICKED_UP, TaskState.OPEN, TaskState.CUT_OFF,
                          TaskState.FAILED},
-    TaskState.PICKED_UP: {TaskState.COMPLETED, TaskState.OPEN, TaskState.CANCELLED,
+    TaskState.PICKED_UP: {TaskState.COMPLETED, TaskState.OPEN, TaskState.CUT_OFF,
                           TaskState.FAILED},
 }
 
@@ -125,9 +128,10 @@ class Task:
     walk_speed: float = TaskConfig.walk_speed
     #: the meeting points of its ride as handed out (None: door to door) and the metres walked
     meeting: object = None
-    #: the user's id of its request: a trace row's id (dispatch.files.traces.Trips.ids), else
-    #: its own ``id`` as a string (generated demand); the tasks table's ``request_id``
-    request_id: str = ""
+    #: the user's id of its request (an int or a str): a trace row's id
+    #: (dispatch.files.traces.Trips.ids), else its number among the requests drawn (generated
+    #: demand, an empirical day); the results' ``request_id``
+    request_id: int | str = -1
 
     @property
     def cell(self):
@@ -164,6 +168,26 @@ class Task:
                         self.dropoff, self.deadline, self.passengers, self.dropoff_deadline)
 
 
+class RequestIds:
+    """The request id of every task of a run, by task id (``ids[task_id]``; :attr:`values`:
+    the sequence itself). Integer ids are kept as int64s (a day of a million requests: 8 MB,
+    not the 36 MB of as many Python ints), string ids as references."""
+
+    __slots__ = ("values",)
+
+    def __init__(self) -> None:
+        self.values: array | list = array("q")
+
+    def append(self, request_id: int | str) -> None:
+        try:
+            self.values.append(request_id)
+        except (TypeError, OverflowError):  # a string (an int beyond int64): a list from now
+            self.values = [*self.values, request_id]
+
+    def __getitem__(self, task_id: int) -> int | str:
+        return self.values[task_id]
+
+
 class TaskBook:
     """The live tasks of a run and their state changes (each emitted as an event).
 
@@ -176,6 +200,9 @@ class TaskBook:
         self.open: dict[int, Task] = {}
         self.live = 0
         self.released = 0
+        #: every released task's request id, by task id (the events and assignments tables
+        #: name the request of each row: they are written after the task left the book)
+        self.request_ids = RequestIds()
         self.on_close: list[Callable[[Task], None]] = []
         self._active: dict[int, Task] = {}  # assigned or picked up
         #: assigned, not yet picked up (a vehicle is driving to its pickup), by id
@@ -198,12 +225,13 @@ class TaskBook:
     def release(self, kind: str, loc: Location, dropoff: Location | None = None, *,
                 max_wait: float = math.nan, snap_m: float = math.nan,
                 dropoff_snap_m: float = math.nan, passengers: int = 1,
-                max_delay: float = math.nan, request_id: str = "") -> Task:
-        """A new open task released now, numbered in release order; its ``request_id`` is the
-        one given, or its own id as a string where none is."""
+                max_delay: float = math.nan, request_id: int | str | None = None) -> Task:
+        """A new open task released now, numbered in release order; its ``request_id`` (kept
+        in :attr:`request_ids`) is the one given, or its own id where none is."""
         task = Task(self.released, kind, loc, float(self.env.now), dropoff, max_wait, snap_m,
                     dropoff_snap_m)
-        task.request_id = request_id or str(task.id)
+        task.request_id = task.id if request_id is None else request_id
+        self.request_ids.append(task.request_id)
         if passengers != 1:
             task.passengers = passengers
         if max_delay == max_delay:
@@ -300,7 +328,8 @@ class Request:
     max_delay: float = math.nan
     max_walk: float = math.nan  # nan: the scenario's
     walk_speed: float = math.nan
-    request_id: str = ""  # its trace row's id ("": generated, the task's own id)
+    #: its trace row's id, or its number among the requests drawn (None: the task's own id)
+    request_id: int | str | None = None
 
 
 class Demand:
@@ -353,9 +382,9 @@ class TaskSource:
         (:class:`dispatch.decide.prebook.PrebookSource`)."""
         trips = tasks.trips
         if tasks.source == "empirical":
-            from dispatch.files.empirical import draw_day, load_sample
-
             trips = draw_day(load_sample(), tasks.trips_per_day, day_rng(), tasks.weekday)
+            # each request's id: its number in the day drawn (0 the first)
+            trips = replace(trips, ids=np.arange(len(trips), dtype=np.int64))
         return cls(env, book, demand, tasks, count, rng, notify=notify, trips=trips, **extra)
 
     def _done(self) -> None:
@@ -427,8 +456,8 @@ class TaskSource:
         :meth:`_released` when drawn; ends when the count is reached (never without one)."""
         t, count = self.tasks, self.count
         if self.kind == "static":
-            for _ in range(count or 0):
-                self._released(self.demand.draw())
+            for i in range(count or 0):
+                self._released(self._draw(i))
             return
         if self.kind == "periodic":
             def gap():
@@ -442,8 +471,13 @@ class TaskSource:
             if t.max_active is not None and self.book.live >= t.max_active:
                 self.book.bus.emit(self.env.now, "skipped")
                 continue
-            self._released(self.demand.draw())
+            self._released(self._draw(released))
             released += 1
+
+    def _draw(self, i: int) -> Request:
+        """The generated request ``i`` (0: the first drawn), its request id ``i``: the draw
+        order, which a booked request entering later keeps."""
+        return replace(self.demand.draw(), request_id=i)
 
     def _run(self):
         if self.kind == "trace":

@@ -21,6 +21,7 @@ from dispatch.api.problem import AgentView, AgentViews
 from dispatch.api.space import Space
 from dispatch.locations import Location
 from dispatch.plan.en_route import LegTable
+from dispatch.plan.idle_places import MOVING, NOT_IDLE, IdlePlaces
 from dispatch.plan.kinds import TABLE as KINDS
 from dispatch.plan.tasks import Task
 from dispatch.plan.vehicle_plan import Plan
@@ -118,6 +119,8 @@ class Vehicle:
             fleet.driving[i] = value is not None
             fleet.driving_or_off_node[i] = value is not None or fleet._off_node[i]
             fleet.leg_version[i] += 1
+            if fleet.places is not None:
+                fleet.place(i)
 
     @property
     def load(self) -> int:
@@ -268,6 +271,10 @@ class Fleet:
         self.plan_version = np.fromiter((v.plan_version for v in self.vehicles), np.int64, n)
         #: the node arrays hold (the space has nodes)
         self.road = n > 0 and all(space.stands(v.loc) is not None for v in self.vehicles)
+        #: the idle vehicles by place (dispatch.plan.idle_places), kept once a decision asks
+        #: for them (:meth:`index_places`); None until then
+        self.places: IdlePlaces | None = None
+        self._space = space
         for i, v in enumerate(self.vehicles):
             v._fleet, v._slot = self, i
             self.driving[i] = v.leg is not None
@@ -286,6 +293,30 @@ class Fleet:
         self.off_node[i] = off
         self._off_node[i] = off
         self.driving_or_off_node[i] = off or self.vehicles[i]._leg is not None
+        if self.places is not None:
+            self.place(i)
+
+    def index_places(self) -> IdlePlaces | None:
+        """Keep the idle vehicles by place from now on (:attr:`places`; a decision searches
+        them nearest first: :mod:`dispatch.decide.nearest`), where the space has nodes and
+        promises a top speed between them; None where it does not."""
+        if self.places is None and self.road and self._space.top_speed:
+            xy = np.asarray(self._space.node_positions, dtype=np.float64)[:, :2]
+            self.places = IdlePlaces(xy, len(self.vehicles))
+            for i in range(len(self.vehicles)):
+                self.place(i)
+        return self.places
+
+    def place(self, i: int) -> None:
+        """Put vehicle ``i`` where it belongs in :attr:`places`: out unless idle; idle and
+        driving, with the moving ones; else in the cell of the node it stands on."""
+        places = self.places
+        if not self.idle_mask[i]:
+            places.put(i, NOT_IDLE)
+        elif self.driving[i]:
+            places.put(i, MOVING)
+        else:
+            places.put(i, places.cell_of_node[self.node[i]])
 
     def idle_index(self) -> np.ndarray:
         """Positions (in :attr:`vehicles`, id order) of the idle vehicles."""
@@ -345,6 +376,8 @@ class Fleet:
         v.busy = busy
         self.idle_mask[v._slot] = idle
         self.busy_mask[v._slot] = busy
+        if self.places is not None:
+            self.place(v._slot)
 
 
 _NO_POINTS = np.zeros(0, dtype=np.int64)

@@ -9,7 +9,9 @@ import os
 import sys
 import time
 
-from dispatch.errors import DispatchError
+from dispatch.api.registry import available, describe, load
+from dispatch.errors import DispatchError, PluginError
+from dispatch.run.commands import installed
 from dispatch.run.parser import CHECKED_KINDS, OWN_COMMANDS, parser
 from dispatch.run.prepare import checked_specs
 from dispatch.run.progress import Heartbeat
@@ -17,13 +19,17 @@ from dispatch.run.progress import Heartbeat
 
 class _Output:
     """What a registered command writes through: ``print`` a line of output, ``warn`` a
-    warning on stderr (one line each, as the CLI's own)."""
+    warning on stderr (one line each, as the CLI's own), ``show`` a rich renderable (a table,
+    laid out to the terminal's width)."""
 
     def __init__(self, console, err) -> None:
         self.console, self.err = console, err
 
     def print(self, text: str) -> None:
         self.console.print(text, highlight=False, soft_wrap=True, markup=False, emoji=False)
+
+    def show(self, renderable) -> None:
+        self.console.print(renderable)
 
     def warn(self, text: str) -> None:
         from rich.markup import escape
@@ -33,8 +39,6 @@ class _Output:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from dispatch.run.commands import installed
-
     commands = installed(reserved=OWN_COMMANDS)
     args = parser(commands).parse_args(argv)
     level = logging.DEBUG if args.debug else logging.INFO if args.verbose else logging.WARNING
@@ -67,40 +71,64 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _run(args, console) -> int:
-    from dispatch.run.resume import holds_results
+    """Run the scenario's runs into ``--out``. A run the folder already holds whole, made from
+    the same scenario settings, is not run again: its stored summary is shown and a line says
+    where it is (``--overwrite`` runs it again); a partition holding anything else (another
+    text's run of the same id, a run cut short) is refused, not silently replaced."""
+    from dispatch.run.resume import holds_results, is_complete, read_summary
     from dispatch.run.runner import default_out, execute
 
     sc, specs = checked_specs(args)
     out = args.out or default_out(specs[0])
-    held = [s.run_id for s in specs if holds_results(out, s)]
-    if held and not args.force:
-        more = f" and {len(held) - 1} more" if len(held) > 1 else ""
-        raise DispatchError(f"{out}/ already holds results of {held[0]}{more}; use --force to "
-                            f"overwrite them, another --out, or dispatch sweep to resume")
+    stored: dict[int, dict] = {}
+    if not args.overwrite:
+        other = []
+        for i, s in enumerate(specs):
+            if holds_results(out, s):
+                if is_complete(out, s):
+                    stored[i] = {**read_summary(out, s), **s.keys}
+                else:
+                    other.append(s.run_id)
+        if other:
+            more = f" and {len(other) - 1} more" if len(other) > 1 else ""
+            raise DispatchError(f"{out}/ already holds other results of {other[0]}{more} (another "
+                                f"version of the scenario, or a run cut short); use --overwrite "
+                                f"to replace them, or another --out")
+    todo = [s for i, s in enumerate(specs) if i not in stored]
     started = time.perf_counter()
-    single = len(specs) == 1
-    if single:  # one long run: simulated time, wall time, requests released and closed
-        with _run_progress(console, specs[0]) as report:
-            summaries = execute(specs, out, progress=report)
-    else:  # (rich.progress imported here: a single run off a terminal does without it)
+    if len(todo) == 1:  # one long run: simulated time, wall time, requests released and closed
+        with _run_progress(console, todo[0]) as report:
+            fresh = execute(todo, out, progress=report)
+    elif todo:  # (rich.progress imported here: a single run off a terminal does without it)
         from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
                                    TimeElapsedColumn)
 
         finished = []
         with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                       TimeElapsedColumn(), console=console, transient=True) as progress, \
-                Heartbeat(console, lambda: f"{sc.name}: {len(finished)} of {len(specs)} "
+                Heartbeat(console, lambda: f"{sc.name}: {len(finished)} of {len(todo)} "
                            "runs done" + (f" (last: {finished[-1]})" if finished else "")):
-            bar = progress.add_task(f"{sc.name}", total=len(specs))
+            bar = progress.add_task(f"{sc.name}", total=len(todo))
 
             def done(result):
                 finished.append(result.spec.run_id)
                 progress.update(bar, advance=1, description=result.spec.run_id)
 
-            summaries = execute(specs, out, on_done=done)
+            fresh = execute(todo, out, on_done=done)
+    else:
+        fresh = []
+    ran = iter(fresh)
+    summaries = [stored[i] if i in stored else next(ran) for i in range(len(specs))]
     _tables(summaries, console, sc)
-    console.print(f"{len(specs)} run(s) in {time.perf_counter() - started:.1f} s; "
-                  f"Parquet written to {out}/", soft_wrap=True)
+    if stored:
+        first = specs[min(stored)].run_id
+        more = f" and {len(stored) - 1} more" if len(stored) > 1 else ""
+        console.print(f"[yellow]note[/]: {len(stored)} run(s) already in {out}/ ({first}{more}) "
+                      "shown from there, not run again; --overwrite runs them again",
+                      highlight=False, soft_wrap=True)
+    if todo:
+        console.print(f"{len(todo)} run(s) in {time.perf_counter() - started:.1f} s; "
+                      f"Parquet written to {out}/", soft_wrap=True)
     return 0
 
 
@@ -183,8 +211,6 @@ def _train(args, console) -> int:
     import importlib
     from importlib.metadata import entry_points
 
-    from dispatch.errors import PluginError
-
     found = {ep.name: ep.value for ep in entry_points(group="dispatch.trainers")}
     if args.trainer not in found:
         raise PluginError(f"unknown trainer {args.trainer!r}; installed: {', '.join(found)}")
@@ -196,7 +222,8 @@ def _train(args, console) -> int:
 
 
 def _plugins(args, console) -> int:
-    """One table per kind (allocators, planners, repositioners, chargers and the commands
+    """One table per kind (allocators, planners, repositioners, chargers, acceptors, fleet
+    sizers, mode choices and the commands
     other packages add to this command line): name, spaces served (planners, repositioners,
     chargers) and the description
     (plain text, never empty) with the entry point's target on a line of its own below it, so
@@ -204,14 +231,12 @@ def _plugins(args, console) -> int:
     from rich.table import Table
     from rich.text import Text
 
-    from dispatch.api.registry import describe
-
     for kind in ("allocator", "planner", "repositioner", "charger", "acceptor", "sizer",
-                 "command"):
+                 "mode_choice", "command"):
         t = Table(title=f"{kind}s (entry-point group dispatch.{kind}s)", title_justify="left")
         t.add_column("name", no_wrap=True)
         # plugins that serve some spaces
-        spaced = kind not in ("allocator", "acceptor", "sizer", "command")
+        spaced = kind not in ("allocator", "acceptor", "sizer", "mode_choice", "command")
         if spaced:
             t.add_column("spaces")
         t.add_column("description; target (module:object)", overflow="fold")
@@ -255,7 +280,7 @@ def _sweep(args, console) -> int:
                                                             sorted(counts.items())))
 
         outcomes = sweep(specs, out, workers=args.workers, ray=args.ray is not None,
-                         address=args.ray or None, force=args.force, on_done=done)
+                         address=args.ray or None, overwrite=args.overwrite, on_done=done)
     summaries = [o.summary for o in outcomes if o.summary is not None]
     if summaries:
         _tables(summaries, console, sc)
@@ -284,14 +309,13 @@ def _check(args, console) -> int:
     """``dispatch check NAME``: run the plugin checks (:mod:`dispatch.checks.allocators`, ...) on
     an installed plugin;
     one line per check; exit 0 when all pass, 1 otherwise."""
-    from dispatch.api.registry import available, load
     from dispatch.checks.acceptors import check_acceptor
     from dispatch.checks.allocators import check_allocator
     from dispatch.checks.chargers import check_charger
+    from dispatch.checks.mode_choices import check_mode_choice
     from dispatch.checks.planners import check_planner
     from dispatch.checks.repositioners import check_repositioner
     from dispatch.checks.sizers import check_sizer
-    from dispatch.errors import PluginError
 
     kinds = [k for k in CHECKED_KINDS if args.name in available(k)]
     if args.kind:
@@ -315,6 +339,8 @@ def _check(args, console) -> int:
         report = check_acceptor(cls, seed=args.seed, **params)
     elif kinds[0] == "sizer":
         report = check_sizer(cls, seed=args.seed, **params)
+    elif kinds[0] == "mode_choice":
+        report = check_mode_choice(cls, seed=args.seed, **params)
     else:
         report = check_repositioner(cls, seed=args.seed, **params)
     for r in report.results:
@@ -333,7 +359,7 @@ def _new(args, console) -> int:
     """``dispatch new allocator NAME``: see :mod:`dispatch.checks.scaffold`."""
     from dispatch.checks.scaffold import new_allocator
 
-    root = new_allocator(args.name, args.out, force=args.force)
+    root = new_allocator(args.name, args.out, overwrite=args.overwrite)
     console.print(f"wrote {root}/ (pyproject.toml, dispatch_{args.name}/allocator.py, tests, "
                   f"README.md); next: pip install -e {root} && dispatch check {args.name}",
                   highlight=False, soft_wrap=True)

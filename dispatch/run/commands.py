@@ -10,7 +10,8 @@ has:
 * ``help``: the line ``dispatch --help`` shows for it;
 * ``add_arguments(parser)``: adds its arguments to its ``argparse`` sub-parser;
 * ``run(args, out) -> int``: runs with the parsed arguments and returns the exit status;
-  ``out.print(text)`` writes a line of output, ``out.warn(text)`` a warning on stderr;
+  ``out.print(text)`` writes a line of output, ``out.warn(text)`` a warning on stderr,
+  ``out.show(renderable)`` a ``rich`` renderable (a table) laid out to the terminal's width;
 * ``user_errors() -> tuple``: the exception types that mean the input was wrong (a folder
   without results, an unknown run id), asked only when the command raised: the CLI prints
   their message as one ``error:`` line, as it does for its own errors; anything else is a

@@ -15,7 +15,8 @@ DESCRIPTION = ("The dispatch command line: run, validate, check, plugins, new, t
 #: the commands of :mod:`dispatch.run.cli`; a registered command of one of these names is not added
 OWN_COMMANDS = ("run", "validate", "check", "plugins", "new", "train", "sweep")
 #: the plugin kinds ``dispatch check`` checks
-CHECKED_KINDS = ("allocator", "planner", "repositioner", "charger", "acceptor", "sizer")
+CHECKED_KINDS = ("allocator", "planner", "repositioner", "charger", "acceptor", "sizer",
+                 "mode_choice")
 
 
 def _logging_options(p: argparse.ArgumentParser, default) -> None:
@@ -26,6 +27,28 @@ def _logging_options(p: argparse.ArgumentParser, default) -> None:
     p.add_argument("--debug", action="store_true", default=default,
                    help="debug logging; an error (a plugin's included) prints its whole "
                         "traceback, the plugin's own frames among them")
+
+
+class _SplitFlag(argparse.Action):
+    """``--force``, which once meant both ``--overwrite`` and ``--ignore-limits``: refused with
+    a line naming the two, so that an old script says which it meant (``--help`` says so too:
+    every option there says what it is)."""
+
+    def __init__(self, option_strings, dest, **kwargs) -> None:
+        super().__init__(option_strings, dest, nargs=0,
+                         help="no longer accepted: say --overwrite or --ignore-limits")
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:
+        parser.error("--force is now two flags: --overwrite (replace results the output folder "
+                     "already holds) and --ignore-limits (run past the resource limits)")
+
+
+def _limits_option(p: argparse.ArgumentParser) -> None:
+    """``--ignore-limits`` (run, validate, sweep), and the old ``--force`` pointing at it."""
+    p.add_argument("--ignore-limits", action="store_true",
+                   help="run past the resource limits (world cells, releases, tasks, vehicles, "
+                        "runs, file sizes, a planner's work bound)")
+    p.add_argument("--force", action=_SplitFlag)
 
 
 def _override_options(p: argparse.ArgumentParser) -> None:
@@ -60,22 +83,22 @@ def parser(commands=None) -> argparse.ArgumentParser:
     r.add_argument("--duration", type=float, metavar="SECONDS",
                    help="simulated seconds before the run stops (overrides the file's "
                         "duration; the scenario text stored with the results says so)")
-    r.add_argument("--force", action="store_true",
-                   help="overwrite earlier results of these runs in the output folder, and run "
-                        "past the resource limits (world cells, releases, tasks, runs, sizes)")
+    r.add_argument("--overwrite", action="store_true",
+                   help="run again runs whose results the output folder already holds, replacing "
+                        "them (without it, complete runs are shown from the folder, not rerun)")
+    _limits_option(r)
     _override_options(r)
 
     v = sub.add_parser("validate", help="check a scenario file and list the runs it expands to")
     v.add_argument("scenario", type=Path, help="the scenario file (TOML)")
-    v.add_argument("--force", action="store_true",
-                   help="accept what is past the resource limits (world cells, releases, tasks, "
-                        "runs, file sizes)")
+    _limits_option(v)
     _override_options(v)
     # (run's and sweep's plugin, size and seed options: validate lists the file's runs)
     v.set_defaults(allocator=None, planner=None, agents=None, seed=None, duration=None)
 
     c = sub.add_parser("check", help="check an installed allocator, planner, repositioner, "
-                       "charger, acceptor or fleet sizer plugin on sample problems (valid "
+                       "charger, acceptor, fleet sizer or mode choice plugin on sample "
+                       "problems (valid "
                        "answers, no mutation, determinism, rng use)")
     c.add_argument("name", help="plugin name (see dispatch plugins)")
     c.add_argument("--kind", choices=CHECKED_KINDS,
@@ -92,8 +115,9 @@ def parser(commands=None) -> argparse.ArgumentParser:
     n.add_argument("name", help="the plugin's name (lower-case letters, digits, _)")
     n.add_argument("--out", type=Path, default=Path("."),
                    help="folder to write dispatch-NAME/ into (default: here)")
-    n.add_argument("--force", action="store_true", help="overwrite the files of an existing "
-                   "dispatch-NAME/")
+    n.add_argument("--overwrite", action="store_true", help="overwrite the files of an "
+                   "existing dispatch-NAME/")
+    n.add_argument("--force", action=_SplitFlag)
     trainers = _trainers()
     t = sub.add_parser("train", help="train a learned allocator (e.g. `dispatch train magnnet "
                        "--agents 8`); options after the name go to its trainer (`dispatch "
@@ -128,8 +152,9 @@ def _add_sweep_parser(sub) -> None:
     s.add_argument("--ray", nargs="?", const="", metavar="ADDRESS",
                    help="run the runs as Ray tasks: on a local Ray, or on the cluster at "
                         "ADDRESS (e.g. auto or ray://host:10001)")
-    s.add_argument("--force", action="store_true", help="redo runs that are already complete, "
-                   "and run past the resource limits (world cells, releases, tasks, runs, sizes)")
+    s.add_argument("--overwrite", action="store_true", help="run again runs that are already "
+                   "complete, replacing their results")
+    _limits_option(s)
     s.add_argument("--allocator", help="allocator name (overrides the file and its sweep)")
     s.add_argument("--planner", help="planner name (overrides the file and its sweep)")
     s.add_argument("--agents", type=int, help="fleet size N (overrides the file and its sweep)")

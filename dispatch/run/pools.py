@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from dispatch.config.scenario import RunSpec
+from dispatch.errors import DispatchError
 from dispatch.run.resume import record_failure
 
 #: a sweep's task: ``(spec, out, time_limit) -> Outcome`` (a top-level function: spawn-safe)
@@ -142,8 +143,6 @@ def on_ray(todo, out: Path, workers: int, address: str | None, task: Task,
     try:
         import ray
     except ImportError as e:
-        from dispatch.errors import DispatchError
-
         raise DispatchError("--ray needs Ray: pip install 'dispatch-sim[ray]'") from e
     started = False
     if not ray.is_initialized():

@@ -5,20 +5,21 @@ the file and the key, not in the middle of a sweep."""
 
 from __future__ import annotations
 
+from dispatch.api.registry import load
+from dispatch.errors import PluginError, ScenarioError
+
 
 def checked_specs(args):
     """Parse the scenario and expand its runs, checking all that can be checked before a run:
-    the file, the resource limits (unless ``--force``), the plugins (each distinct allocator
+    the file, the resource limits (unless ``--ignore-limits``), the plugins (each distinct allocator
     and planner is built once with the scenario's parameters) and the space they serve."""
-    from dispatch.api.registry import load
-    from dispatch.errors import PluginError
     from dispatch.scenario.load import check_limits, load_scenario
 
-    force = args.force
-    sc = load_scenario(args.scenario, force=force, overrides=overrides(args))
+    ignore = args.ignore_limits
+    sc = load_scenario(args.scenario, ignore_limits=ignore, overrides=overrides(args))
     specs = sc.runs(allocator=args.allocator, planner=args.planner, agents=args.agents,
                     seed=args.seed, batch_window=args.batch_window)
-    if not force:
+    if not ignore:
         check_limits(sc, specs)
     allocators = sorted({s.allocator for s in specs})
     planners = sorted({s.planner for s in specs})
@@ -36,7 +37,7 @@ def checked_specs(args):
     from dispatch.run.plugins import check_runs
 
     check_runs(sc, planners, repositioners, allocators)
-    build_plugins(sc, specs, force=force)
+    build_plugins(sc, specs, ignore_limits=ignore)
     return sc, specs
 
 
@@ -46,7 +47,6 @@ def overrides(args) -> list[tuple[str, str, str]]:
     order (a later one wins)."""
     import math
 
-    from dispatch.errors import ScenarioError
     from dispatch.scenario.overrides import parse_set
 
     out = []
@@ -82,13 +82,12 @@ def _key_of(kind: str, name: str, given: str | None, swept: tuple[str, ...],
     return f"dispatch.{kind}" if name == default else kind
 
 
-def build_plugins(sc, specs, *, force: bool = False) -> None:
+def build_plugins(sc, specs, *, ignore_limits: bool = False) -> None:
     """Build every distinct allocator and planner of ``specs`` once (constructors are cheap;
     a planner is built on the space of the first run's seed), so that a parameter the plugin
     rejects stops here with one line, not in the middle of a sweep; place the first run's fleet
     when a start file places it (its rows are checked against the space)."""
     from dispatch.api.space import space_for
-    from dispatch.errors import PluginError
     from dispatch.run.plugins import UnknownParameter, make_plugin, make_repositioner, make_sizer
 
     def build(kind, name, params, *args):
@@ -129,7 +128,7 @@ def build_plugins(sc, specs, *, force: bool = False) -> None:
         for name in planners:
             planner = build("planner", name, sc.dispatch.planner_params, space)
             # its own work bound (dispatch.scenario.budget), e.g. rrt_star's iterations
-            if not force:
+            if not ignore_limits:
                 from dispatch.scenario.budget import check_planner_budget
 
                 check_planner_budget(sc, specs, planner, name)

@@ -32,8 +32,8 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from dispatch.config.runkeys import key_names
-from dispatch.config.scenario import RunSpec
-from dispatch.output.parquet import SCHEMAS, Recorder, json_meta
+from dispatch.config.scenario import RunSpec, safe_name
+from dispatch.output.parquet import REQUEST_ID, SCHEMAS, Recorder, json_meta, request_id_type
 from dispatch.run.pools import Outcome, on_pool, on_ray, sigterm_exits
 from dispatch.run.resume import (clear_partition, is_complete, legacy_variant, read_summary,
                                  record_failure, write_marker)
@@ -97,9 +97,11 @@ def run_metadata(spec: RunSpec) -> dict[str, str]:
 
 
 def make_recorder(spec: RunSpec, out: Path, *, flush_rows: int = DEFAULT_FLUSH_ROWS) -> Recorder:
-    """The recorder of ``spec`` writing into its partition of ``out``."""
+    """The recorder of ``spec`` writing into its partition of ``out`` (its ``request_id``
+    columns typed as its trips' ids are)."""
     return Recorder(Path(out), spec.run_id, run_metadata(spec), spec.partition,
-                    flush_rows=flush_rows)
+                    flush_rows=flush_rows,
+                    types={REQUEST_ID: request_id_type(spec.scenario.tasks.trips)})
 
 
 def run_one(spec: RunSpec, out: Path | None = None, *,
@@ -133,8 +135,6 @@ def run_one(spec: RunSpec, out: Path | None = None, *,
 def default_out(spec: RunSpec) -> Path:
     """``runs/<scenario name>``, the name made safe as one folder name (no separators, no
     ``..``, no absolute path): results never land outside ``runs/``."""
-    from dispatch.config.scenario import safe_name
-
     return Path("runs") / safe_name(spec.scenario.name)
 
 
@@ -222,7 +222,7 @@ def sweep(
     workers: int | None = None,
     ray: bool = False,
     address: str | None = None,
-    force: bool = False,
+    overwrite: bool = False,
     on_done: Callable[[Outcome], None] | None = None,
     time_limit: float | None = None,
 ) -> list[Outcome]:
@@ -231,7 +231,7 @@ def sweep(
     ``workers``: processes of the local pool (default: the CPU count; 1 runs in this process)
     or CPUs of a local Ray instance. ``ray``: run every run as a Ray task, on the cluster at
     ``address`` or on a local Ray started here (workers of a cluster need this package
-    installed and ``out`` on a file system they share). ``force``: redo complete runs too.
+    installed and ``out`` on a file system they share). ``overwrite``: run complete runs again too.
     ``on_done`` is called in this process as each run finishes or is skipped.
     ``time_limit``: wall seconds a run may take; one past it stops and fails with
     :class:`dispatch.run.time_limit.PastTimeLimit` (a timer in the worker's main thread, else the
@@ -243,7 +243,7 @@ def sweep(
     todo: list[tuple[int, RunSpec]] = []
     for i, spec in enumerate(specs):
         old = legacy_variant(spec)
-        done = None if force else spec if is_complete(out, spec) else \
+        done = None if overwrite else spec if is_complete(out, spec) else \
             old if old is not None and is_complete(out, old) else None
         if done is not None:
             try:  # a run of an older layout reads as this one (its name, its window)

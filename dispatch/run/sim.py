@@ -45,6 +45,7 @@ from dispatch.decide.meeting import Walks
 from dispatch.decide.pipeline import Pipeline
 from dispatch.decide.prebook import task_source
 from dispatch.decide.tally import Blame, Tally
+from dispatch.errors import ScenarioError
 from dispatch.events import EventBus
 from dispatch.fleet.battery import Energy
 from dispatch.fleet.chargers import Charging, Stations
@@ -114,6 +115,13 @@ class Simulation:
     def __init__(self, spec, recorder, progress=None, *, allocator=None,
                  env: simpy.Environment | None = None) -> None:
         sc = spec.scenario
+        if sc.transit is not None:
+            # read and checked, but not yet wired into a run: refusing beats a run that
+            # silently leaves the trains out
+            raise ScenarioError(sc.path, "transit", "a run does not hand riders to trains "
+                                "yet: the section is read and its feed checked, and the router "
+                                "is used from Python (docs/howto/transit.md); leave [transit] "
+                                "out to run")
         self.spec, self.recorder = spec, recorder
         self.env = env = simpy.Environment() if env is None else env
         self.space = space = space_for(sc.world, spec.seed, sc.path)
@@ -130,7 +138,7 @@ class Simulation:
         self.fleet = Fleet(place_fleet(space, spec, rng_for(spec.seed, STREAM_FLEET)), space)
         self.vehicles = self.fleet.vehicles
         #: the run's tables, metadata and summary statistics (dispatch.output.rows)
-        self.recording = RunRecording(recorder, space)
+        self.recording = RunRecording(recorder, space, book.request_ids)
         self.stats = self.recording.stats
         demand = demand_for(space, sc.tasks, rng_for(spec.seed, STREAM_TASKS))
         driver = space.driver(self.planner, bus, sc.world, lambda: self.env.now)
@@ -278,7 +286,7 @@ class Simulation:
             for v in self.vehicles:  # the part of a leg driven before the horizon counts
                 if v.leg is not None:
                     stop_leg(v, env.now)
-            self.book.close_all(TaskState.CANCELLED)
+            self.book.close_all(TaskState.CUT_OFF)
             if self.energy is not None:
                 if self.charging is not None:
                     self.charging.finish()  # the charges cut by the end count

@@ -3,7 +3,7 @@
 The size bounds of :class:`dispatch.config.scenario.Limits` (cells, vehicles, releases, ...) keep a
 run in memory; these keep it in time. Each estimates the work of a run from the scenario
 alone, before anything is built, and refuses past a bound with the estimate, the bound and
-what to change (``--force`` runs anyway), as the size bounds do:
+what to change (``--ignore-limits`` runs anyway), as the size bounds do:
 
 * **task-decisions** (voxel worlds): every decision looks at every open task it considers (a
   distance field each, recomputed when the field cache cannot hold them all), so a run's work
@@ -34,7 +34,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from dispatch.api.space import space_class
 from dispatch.decide.candidates import CUT_TASKS, considered, per_vehicle
+from dispatch.errors import LIMITS_HINT, ScenarioError
 
 #: Task-decisions (decisions × open tasks) of one run on a grid of :data:`REFERENCE_CELLS`.
 TASK_DECISIONS = 600_000
@@ -149,8 +151,6 @@ def task_decisions(spec) -> tuple[float, str]:
 def check_work(sc, specs, refuse) -> None:
     """Refuse (``refuse(key, what)``, a ScenarioError) a voxel run past :data:`TASK_DECISIONS`
     (scaled to its grid)."""
-    from dispatch.api.space import space_class
-
     cells = space_class(sc.world.space).work_cells(sc.world)
     if cells is None or not specs:  # no bound in this space (road networks)
         return
@@ -186,8 +186,6 @@ def check_planner_budget(sc, specs, planner, name: str) -> None:
     """Ask ``planner`` (built with the scenario's parameters) whether the runs of ``specs``
     that use it are within its own bound; raise ScenarioError (key
     ``dispatch.planner_params``) with its sentence when not."""
-    from dispatch.errors import FORCE_HINT, ScenarioError
-
     seen = set()
     for s in specs:
         if s.planner != name:
@@ -199,7 +197,7 @@ def check_planner_budget(sc, specs, planner, name: str) -> None:
         reason = planner.budget(agents=s.agents, tasks=key[1], duration=s.scenario.duration)
         if reason:
             raise ScenarioError(sc.path, "dispatch.planner_params",
-                                f"planner {name!r}: {reason}; {FORCE_HINT}")
+                                f"planner {name!r}: {reason}; {LIMITS_HINT}")
 
 
 def periods(sc) -> list[tuple[str, float]]:

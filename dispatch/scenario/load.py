@@ -22,6 +22,7 @@ from dataclasses import replace
 from datetime import datetime
 from pathlib import Path
 
+from dispatch.api import registry
 from dispatch.api.acceptor import Pricing
 from dispatch.api.space import space_class
 from dispatch.config.comms import CommsConfig
@@ -36,32 +37,37 @@ from dispatch.config.scenario import (LIMITS, MAX_SEED, Limits, RunSpec, Scenari
                                       _short, safe_name)
 from dispatch.config.sweep import SweepConfig
 from dispatch.config.tasks import EMPIRICAL_MAX_WAIT, SOURCES, TaskConfig
+from dispatch.config.transit import TransitConfig
 from dispatch.config.world import RoadConfig, WorldConfig
 from dispatch.decide.prebook import MODES as PREBOOK_MODES
-from dispatch.errors import FORCE_HINT, ScenarioError
+from dispatch.errors import LIMITS_HINT, ScenarioError
+from dispatch.files.empirical import WEEKDAYS
 from dispatch.files.tables import check_file, decode_text, read_bytes
-from dispatch.files.traces import (Trips, parse_datetime, read_fleet_capacities, read_fleet_start,
-                                   read_trace, shipped_trace, within_snap)
+from dispatch.files.traces import (IdColumnMissing, Trips, parse_datetime, read_fleet_capacities,
+                                   read_fleet_start, read_trace, shipped_trace, within_snap)
 from dispatch.fleet.shifts import read_shifts
+from dispatch.scenario.notes import say_dropped
 from dispatch.scenario.sections import (parse_acceptor, parse_allocators, parse_breaks,
                                         parse_charging, parse_energy, parse_faults, parse_pricing,
                                         parse_reposition, parse_world)
 from dispatch.scenario.keys import KEYS, check_keys
-from dispatch.scenario.toml_table import Table
+from dispatch.scenario.transit import parse_transit
+from dispatch.scenario.toml_table import Table, did_you_mean
 
 log = logging.getLogger(__name__)
 
 
-def load_scenario(path: str | Path, *, force: bool = False,
+def load_scenario(path: str | Path, *, ignore_limits: bool = False,
                   overrides: list[tuple[str, str, str]] = ()) -> Scenario:
     """Read and validate a scenario file; raise ScenarioError naming file, key and reason.
     ``overrides`` (``(dotted key, TOML value, option)``, see :mod:`dispatch.scenario.overrides`) are
     written into its text before it is parsed, once.
 
-    The file must be a regular file of at most ``Limits.file_bytes`` (``force``: any size) in
-    UTF-8; the traces and start files it names are size-checked before they are read too."""
+    The file must be a regular file of at most ``Limits.file_bytes`` (``ignore_limits``: any
+    size) in UTF-8; the traces and start files it names are size-checked before they are read
+    too."""
     path = Path(path)
-    limits = None if force else LIMITS
+    limits = None if ignore_limits else LIMITS
     data = read_bytes(path, None if limits is None else limits.file_bytes, "scenario file")
     text = decode_text(path, data)
     try:
@@ -175,21 +181,29 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     if source == "poisson" and tasks.rate is None:
         raise t.fail("rate", "is required when source = 'poisson'")
     start, max_snap = _parse_start(t, source), _parse_max_snap(t, source, world)
+    id_column = t.string("id_column")
     if source == "trace":
         if not isinstance(trace, str) or not trace:
             raise t.fail("trace", "is required when source = 'trace' (a CSV or Parquet file)")
         trace_path = shipped_trace(trace) or (path.parent / trace).resolve()
         with t.reading("trace", trace_path):
-            trips = _read_trace(trace_path, world.space,
-                                space_class(world.space).trace_bounds(world), max_bytes, start)
+            try:
+                trips = _read_trace(trace_path, world.space,
+                                    space_class(world.space).trace_bounds(world), max_bytes,
+                                    start, id_column=id_column)
+            except IdColumnMissing as e:
+                raise t.fail("id_column", f"{trace_path.name} has no column {e.column!r}"
+                                          f"{did_you_mean(e.column, e.columns)} (its columns: "
+                                          f"{', '.join(e.columns)})") from None
         if max_snap is not None:
             trips = _within_snap(t, trips, world, max_snap)
-        for reason, n in trips.dropped:
-            log.warning("%s: %d of %d trips left out: %s", trace_path.name, n,
-                        n + len(trips), reason)
-        tasks = replace(tasks, trace=trace_path, trips=trips, start=start, max_snap=max_snap)
+        say_dropped(trace_path, trips)
+        tasks = replace(tasks, trace=trace_path, trips=trips, start=start, max_snap=max_snap,
+                        id_column=id_column)
     elif trace is not None:
         raise t.fail("trace", f"is only used when source = 'trace' (source is {source!r})")
+    elif id_column is not None:
+        raise t.fail("id_column", f"is only used when source = 'trace' (source is {source!r})")
     for k, value, allowed in (("interval", tasks.interval, ("periodic",)),
                               ("rate", tasks.rate, ("poisson",)),
                               ("max_active", tasks.max_active, ("periodic", "poisson")),
@@ -257,6 +271,8 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     charging = parse_charging(root, path, fleet, faults, world)
     pricing = parse_pricing(root.table("pricing", Pricing), world)
     acceptor = parse_acceptor(root.table("acceptor", AcceptorConfig), pricing)
+    transit = (parse_transit(root.table("transit", TransitConfig), path, world)
+               if "transit" in root.data else None)
     s.done()
     root.done()
 
@@ -264,7 +280,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
                   duration=duration, world=world, fleet=fleet, tasks=tasks, dispatch=disp,
                   sweep=sweep, comms=comms, faults=faults,
                   reposition=replace(reposition, declared=declared or bool(sweep.reposition)),
-                  charging=charging, acceptor=acceptor, pricing=pricing)
+                  charging=charging, acceptor=acceptor, pricing=pricing, transit=transit)
     for n in sweep.agents or (fleet.agents,):
         _check_fits(sc, n, "sweep.agents" if sweep.agents else "fleet.agents")
     return sc
@@ -325,7 +341,6 @@ def _check_pooling(path: Path, world: WorldConfig, fleet: FleetConfig, tasks: Ta
 def _parse_sizing(f: Table, fleet: FleetConfig) -> FleetConfig:
     """``[fleet] shift_grace`` (seconds), ``sizing`` (a ``dispatch.sizers`` plugin) and its
     ``[fleet.sizing_params]`` (see :mod:`dispatch.fleet.shifts`)."""
-    from dispatch.api import registry
     sizing = f.string("sizing")  # None: left out
     if sizing is not None and sizing not in registry.available("sizer"):
         raise f.fail("sizing", registry.unknown("sizer", sizing))
@@ -361,7 +376,7 @@ def _parse_max_snap(t: Table, source: str, world: WorldConfig) -> float | None:
 
 
 def _read_trace(path: Path, space: str, bounds, max_bytes: int | None,
-                start: datetime | None) -> Trips:
+                start: datetime | None, *, id_column: str | None) -> Trips:
     """:func:`dispatch.files.traces.read_trace`, the trips kept for the file's bytes as they are: a
     scenario parsed again (the same file in one process: tests, notebooks, a second command)
     does not read a large trace again."""
@@ -370,14 +385,16 @@ def _read_trace(path: Path, space: str, bounds, max_bytes: int | None,
         with open(path, "rb") as fh:
             digest = hashlib.file_digest(fh, "blake2b").digest()
     except OSError:
-        return read_trace(path, space, bounds, max_bytes, start=start)  # it says why
-    return _read_trace_of(path, digest, space, bounds, max_bytes, start)
+        return read_trace(path, space, bounds, max_bytes, start=start,  # it says why
+                          id_column=id_column)
+    return _read_trace_of(path, digest, space, bounds, max_bytes, start=start,
+                          id_column=id_column)
 
 
 @functools.lru_cache(maxsize=1)
-def _read_trace_of(path: Path, digest: bytes, space: str, bounds, max_bytes: int | None,
-                   start: datetime | None) -> Trips:
-    return read_trace(path, space, bounds, max_bytes, start=start)
+def _read_trace_of(path: Path, digest: bytes, space: str, bounds, max_bytes: int | None, *,
+                   start: datetime | None, id_column: str | None) -> Trips:
+    return read_trace(path, space, bounds, max_bytes, start=start, id_column=id_column)
 
 
 def _within_snap(t: Table, trips: Trips, world: WorldConfig, max_snap: float) -> Trips:
@@ -419,8 +436,6 @@ def _parse_empirical(t: Table, tasks: TaskConfig, world: WorldConfig,
                      fleet: FleetConfig) -> TaskConfig:
     """``[tasks] source = "empirical"``: ``trips_per_day`` and ``weekday`` (see
     :mod:`dispatch.files.empirical`); the sample is snapped to the Chicago network only."""
-    from dispatch.files.empirical import WEEKDAYS
-
     if tasks.source != "empirical":
         for k in ("trips_per_day", "weekday"):
             if k in t.data:
@@ -440,13 +455,13 @@ def _parse_empirical(t: Table, tasks: TaskConfig, world: WorldConfig,
 
 
 def check_limits(sc: Scenario, specs: list[RunSpec], limits: Limits = LIMITS) -> None:
-    """Refuse runs that would not finish or not fit in memory (``--force`` skips this): too
-    many runs, voxel cells, vehicles, static tasks, releases of a generated source,
+    """Refuse runs that would not finish or not fit in memory (``--ignore-limits`` skips this):
+    too many runs, voxel cells, vehicles, static tasks, releases of a generated source,
     intersections of a generated grid, or calls of a periodic process (a period too short).
     Each refusal names the key, the amount and the bound."""
 
     def refuse(key: str, what: str) -> ScenarioError:
-        return ScenarioError(sc.path, key, f"{what}; {FORCE_HINT}")
+        return ScenarioError(sc.path, key, f"{what}; {LIMITS_HINT}")
 
     sweep_key = "sweep" if sc.sweep.declared else "<runs>"
     if len(specs) > limits.runs:

@@ -12,15 +12,22 @@ import math
 from dataclasses import replace
 from pathlib import Path
 
+from dispatch.api import registry
+from dispatch.api.acceptor import Pricing
 from dispatch.api.space import space_class
+from dispatch.config.breaks import BreaksConfig
 from dispatch.config.dispatching import DispatchConfig
+from dispatch.config.energy import ChargingConfig, EnergyConfig, read_socs, read_stations
 from dispatch.config.faults import FaultConfig
 from dispatch.config.fleet import FleetConfig
+from dispatch.config.offers import AcceptorConfig
 from dispatch.config.reposition import RepositionConfig
 from dispatch.config.scenario import _short
 from dispatch.config.sweep import SweepConfig
 from dispatch.config.world import (MAX_AXIS_CELLS, ROAD_KEYS, VOXEL_KEYS, ObstacleConfig,
                                    RoadConfig, WorldConfig)
+from dispatch.errors import PluginError
+from dispatch.files.empirical import load_factors
 from dispatch.files.failures import read_failures
 from dispatch.scenario.toml_table import Table
 
@@ -103,8 +110,6 @@ def _parse_congestion(w: Table, network: str) -> tuple[float, ...]:
     if v is False or "congestion" not in w.data:
         return w.default("congestion")
     if v == "chicago_taxi":
-        from dispatch.files.empirical import load_factors
-
         return load_factors().factors
     ok = isinstance(v, list) and len(v) == 24 and all(
         not isinstance(x, bool) and isinstance(x, (int, float)) and math.isfinite(x) and x > 0
@@ -157,8 +162,6 @@ def parse_faults(f: Table, path: Path) -> FaultConfig:
 def parse_breaks(b: Table, world: WorldConfig):
     """``[fleet.breaks]`` (see :mod:`dispatch.plan.breaks`): drivers' breaks on a road
     network."""
-    from dispatch.config.breaks import BreaksConfig
-
     if "depots" not in space_class(world.space).features:
         raise b.fail("after", "drivers' breaks need a road network ([world] network)")
     out = BreaksConfig(after=b.number("after", gt=0.0), duration=b.number("duration", gt=0.0))
@@ -168,8 +171,6 @@ def parse_breaks(b: Table, world: WorldConfig):
 
 def parse_energy(e: Table, fleet: FleetConfig, world: WorldConfig):
     """``[fleet.energy]`` (see :mod:`dispatch.fleet.battery`): batteries on a road network."""
-    from dispatch.config.energy import EnergyConfig, read_socs
-
     if "energy" not in space_class(world.space).features:
         raise e.fail("battery_kwh", "energy needs a road network ([world] network)")
     wh = e.get("wh_per_km")
@@ -200,9 +201,6 @@ def parse_charging(root: Table, path: Path, fleet: FleetConfig, faults, world):
     """``[chargers]`` (stations, taper, the snap limit of stations given by lon/lat) and
     ``[charging]`` (strategy, interval, ``[charging.<name>]``); None unless the fleet has
     energy."""
-    from dispatch.api import registry
-    from dispatch.config.energy import ChargingConfig, read_stations
-
     c, g = root.table("chargers", ChargingConfig), root.table("charging", ChargingConfig)
     if fleet.energy is None:
         for t, k in ((c, "file"), (g, "strategy")):
@@ -282,7 +280,6 @@ def parse_allocators(d: Table, s: Table, disp: DispatchConfig,
     one table per allocator or named variant (``[dispatch.allocator_params.magnnet]``,
     ``[dispatch.allocator_params."magnnet:paper"]``); a variant ``name:v`` in a list needs its
     table, unless its plugin declares ``v`` (:attr:`dispatch.api.contracts.Allocator.variants`)."""
-    from dispatch.api import registry
     installed = registry.available("allocator")
     p = Table(d.file, d.key("allocator_params") + ".", dict(disp.allocator_params))
     named = {disp.allocator, *sweep.allocator}
@@ -320,7 +317,6 @@ def parse_reposition(r: Table, sweep: SweepConfig, s: Table) -> RepositionConfig
     checked against the installed repositioners here; a policy's own arguments are checked by
     its constructor, the space it serves by :func:`dispatch.run.plugins.check_repositioner`
     (``dispatch validate`` does both)."""
-    from dispatch.api import registry
     installed = registry.available("repositioner")
     policy = r.string("policy")
     interval = r.number("interval", gt=0.0)
@@ -355,8 +351,6 @@ def parse_pricing(p: Table, world: WorldConfig):
     direct ride, less ``sharing_discount`` (a share, 0-1) for a pooled one
     (:class:`dispatch.api.acceptor.Pricing`); None without the section. Fares are of rides on a
     road network (the direct route's metres)."""
-    from dispatch.api.acceptor import Pricing
-
     if not p.data:
         return None
     if "pricing" not in space_class(world.space).features:
@@ -374,10 +368,6 @@ def parse_acceptor(a: Table, pricing):
     parameters, ``[acceptor.<name>]`` (checked here by building it: its constructor's refusal
     becomes one line naming the file and the table)
     (:class:`dispatch.config.offers.AcceptorConfig`)."""
-    from dispatch.api import registry
-    from dispatch.config.offers import AcceptorConfig
-    from dispatch.errors import PluginError
-
     if not a.data:  # every rider accepts: nothing to load
         return AcceptorConfig()
     installed = registry.available("acceptor")

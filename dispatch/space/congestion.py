@@ -71,6 +71,10 @@ class CongestedPlanner(Planner):
         self.stats = inner.stats  # one planner's counters: the wrapped one's
         self.travel_times = inner.travel_times
         self.inner, self.congestion, self.clock = inner, congestion, clock
+        # a cost is the free-flow one scaled by the hour's factor (the edge part-way driven
+        # aside, which only adds): at least the smallest factor times the wrapped one's floor
+        self.drive_floor = None if inner.drive_floor is None \
+            else inner.drive_floor * min(congestion.factors)
 
     @property
     def free_flow(self) -> Planner:

@@ -4,6 +4,11 @@ The simulation's truth is the grid and SimPy time; PyBullet mirrors it so that c
 be checked, rays cast (sampling planners) and images rendered. The client runs in DIRECT mode
 (headless) unless ``gui=True``. A run in a voxel world builds its mirror with
 :func:`mirror_of`, which reads the world's ``boxes`` and ``cell`` and so imports nothing of it.
+
+The voxel world is drawn here once: PyBullet imported and connected quietly
+(:func:`import_pybullet`, :func:`connect_direct`), a box (:func:`box_body`), a vehicle's body
+(:func:`vehicle_body`) and their colours; :mod:`analysis.render` draws a run's pictures with
+them.
 """
 
 from __future__ import annotations
@@ -14,6 +19,10 @@ import os
 
 UAV_RADIUS = 0.3  # of a cell: a vehicle body fits well inside its cell
 UGV_HALF = (0.35, 0.35, 0.25)
+#: colours (RGBA) of an obstacle, a UAV and a UGV
+OBSTACLE_RGBA = (0.55, 0.55, 0.6, 1)
+UAV_RGBA = (0.1, 0.4, 0.9, 1)
+UGV_RGBA = (0.9, 0.5, 0.1, 1)
 
 
 @contextlib.contextmanager
@@ -64,6 +73,33 @@ def connect_direct(p, gui: bool = False) -> int:
         return p.connect(p.GUI if gui else p.DIRECT)
 
 
+def box_body(p, client: int, centre, half, rgba, *, solid: bool = False) -> int:
+    """A fixed box of ``half`` extents around ``centre`` (metres) in colour ``rgba``;
+    ``solid``: with a collision shape (contacts, rays), else drawn only."""
+    col = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client) \
+        if solid else -1
+    vis = p.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=rgba,
+                              physicsClientId=client)
+    return p.createMultiBody(0, col, vis, basePosition=centre, physicsClientId=client)
+
+
+def vehicle_body(p, client: int, flies: bool, position, *, radius: float, half,
+                 solid: bool = False) -> int:
+    """A vehicle's body at ``position`` (metres): a UAV a sphere of ``radius``, a UGV a box of
+    ``half`` extents, in their colours; ``solid``: with a collision shape, else drawn only."""
+    if flies:
+        col = p.createCollisionShape(p.GEOM_SPHERE, radius=radius, physicsClientId=client) \
+            if solid else -1
+        vis = p.createVisualShape(p.GEOM_SPHERE, radius=radius, rgbaColor=UAV_RGBA,
+                                  physicsClientId=client)
+    else:
+        col = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client) \
+            if solid else -1
+        vis = p.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=UGV_RGBA,
+                                  physicsClientId=client)
+    return p.createMultiBody(0, col, vis, basePosition=position, physicsClientId=client)
+
+
 class Physics:
     """A PyBullet client holding the world's obstacles and the vehicles' bodies (``world``: a
     :class:`dispatch.space.world.World`)."""
@@ -72,29 +108,16 @@ class Physics:
         self.p = p = import_pybullet()
         self.world = world
         self.client = connect_direct(p, gui)
-        self.obstacles: list[int] = []
+        self.obstacles: list[int] = [
+            box_body(p, self.client, box.centre(), box.half_extents(), OBSTACLE_RGBA, solid=True)
+            for box in world.boxes]
         self.vehicles: dict[int, int] = {}
-        for box in world.boxes:
-            he = box.half_extents()
-            col = p.createCollisionShape(p.GEOM_BOX, halfExtents=he, physicsClientId=self.client)
-            vis = p.createVisualShape(p.GEOM_BOX, halfExtents=he, rgbaColor=(0.55, 0.55, 0.6, 1),
-                                      physicsClientId=self.client)
-            self.obstacles.append(p.createMultiBody(0, col, vis, basePosition=box.centre(),
-                                                    physicsClientId=self.client))
 
     def add_vehicle(self, agent_id: int, flies: bool, position) -> int:
         """Create a vehicle's body at ``position`` (metres); returns the body id."""
-        p, c, s = self.p, self.client, self.world.cell
-        if flies:
-            col = p.createCollisionShape(p.GEOM_SPHERE, radius=UAV_RADIUS * s, physicsClientId=c)
-            vis = p.createVisualShape(p.GEOM_SPHERE, radius=UAV_RADIUS * s,
-                                      rgbaColor=(0.1, 0.4, 0.9, 1), physicsClientId=c)
-        else:
-            he = tuple(h * s for h in UGV_HALF)
-            col = p.createCollisionShape(p.GEOM_BOX, halfExtents=he, physicsClientId=c)
-            vis = p.createVisualShape(p.GEOM_BOX, halfExtents=he, rgbaColor=(0.9, 0.5, 0.1, 1),
-                                      physicsClientId=c)
-        body = p.createMultiBody(0, col, vis, basePosition=position, physicsClientId=c)
+        s = self.world.cell
+        body = vehicle_body(self.p, self.client, flies, position, radius=UAV_RADIUS * s,
+                            half=tuple(h * s for h in UGV_HALF), solid=True)
         self.vehicles[agent_id] = body
         return body
 

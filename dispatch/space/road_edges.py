@@ -9,6 +9,7 @@ canonical pattern, else in Python: the same floats bit for bit either way.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from functools import cached_property
 from itertools import accumulate
@@ -151,3 +152,29 @@ class EdgeTable:
         times[1:] = self.time.data[k]
         metres[1:] = self.length.data[k]
         return Leg(nodes, np.cumsum(times), np.cumsum(metres), p.prev if not p.on_node else -1)
+
+
+def straight_line(xy: np.ndarray, time: csr_matrix
+                  ) -> tuple[float | None, tuple[tuple[float, float], ...]]:
+    """``(top_speed, speed_slacks)`` of the network of node metres ``xy`` and edge seconds
+    ``time`` (see :attr:`dispatch.api.space.Space.top_speed`; None and none for a network
+    without edges or whose nodes all stand on one point).
+
+    A fastest drive's straight line is at most the sum of its edges' straight lines, each at
+    most ``speed`` times the edge's seconds plus what it exceeds that by, and a fastest path
+    takes an edge at most once, so the excesses of all edges bound the slack. The top speed is
+    the fastest edge's (no slack); the slower speeds are a few percentiles of the edges' own,
+    each with its slack: a few edges whose ends lie further apart than their time would let a
+    car drive (a zone's connector) would otherwise weaken every bound."""
+    rows = np.repeat(np.arange(xy.shape[0]), np.diff(time.indptr))
+    straight = np.hypot(*(xy[time.indices] - xy[rows]).T)
+    speed = straight / time.data
+    top = float(speed.max()) if speed.size else 0.0
+    if not (top > 0 and math.isfinite(top)):
+        return None, ()
+    margin = 1e-9 * float(straight.sum())  # (the rounding of the sums)
+    slower = []
+    for s in np.unique(np.percentile(speed, [90, 95, 99, 99.5, 99.9, 99.99])).tolist():
+        if 0 < s < top:
+            slower.append((s, float(np.maximum(straight - s * time.data, 0.0).sum()) + margin))
+    return top, tuple(slower)

@@ -37,9 +37,10 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from dispatch.api.legs import Leg, RoadPoint
 from dispatch.api.legs import as_point as _as_point
 from dispatch.api.space import Space
-from dispatch.space.road_edges import EdgeTable
+from dispatch.errors import ScenarioError
 from dispatch.files.roads import RoadGraph, locate, read_graph
 from dispatch.locations import Position
+from dispatch.space.road_edges import EdgeTable, straight_line
 
 log = logging.getLogger(__name__)
 
@@ -151,6 +152,22 @@ class RoadNetwork(Space):
         """``(x, y, 0.0)`` of every node as Python floats (events are placed one by one):
         ``position(i)`` of node ``i`` is ``node_positions[i]``."""
         return [(float(x), float(y), 0.0) for x, y in self.xy.tolist()]
+
+    @cached_property
+    def _straight_line(self) -> tuple[float | None, tuple[tuple[float, float], ...]]:
+        """``(top_speed, speed_slacks)``: :func:`dispatch.space.road_edges.straight_line`."""
+        return straight_line(self.xy, self.time)
+
+    @property
+    def top_speed(self) -> float | None:
+        """See :attr:`_straight_line`; None for a network without edges or whose nodes all
+        stand on one point."""
+        return self._straight_line[0]
+
+    @property
+    def speed_slacks(self) -> tuple[tuple[float, float], ...]:
+        """See :attr:`_straight_line`."""
+        return self._straight_line[1]
 
     def position(self, loc: RoadPoint | int) -> Position:
         """``(x, y, 0.0)`` metres: the node's, or for a point part-way along ``prev -> node``
@@ -391,8 +408,6 @@ def network_for(cfg, scenario_path=None) -> RoadNetwork:
     """The road network of a ``[world]`` road configuration (loading is cached by the loader);
     a file that cannot be loaded is a ScenarioError naming the scenario file and
     ``world.network``."""
-    from dispatch.errors import ScenarioError
-
     try:
         return load_network(cfg.network, base=cfg.base, blocks=cfg.blocks, block=cfg.block,
                             speed=cfg.speed)

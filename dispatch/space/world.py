@@ -21,6 +21,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from dispatch.api import registry
 from dispatch.api.space import Space
 from dispatch.api.voxels import Box, Grid
 from dispatch.errors import ScenarioError, WorldError
@@ -93,7 +94,6 @@ class World(Space):
 
     @classmethod
     def check_runs(cls, sc, planners) -> None:
-        from dispatch.api import registry
         if sc.tasks.trips is not None and sc.tasks.trips.dest is not None \
                 and any(registry.load("planner", p).reservation_aware for p in planners):
             raise ScenarioError(sc.path, "tasks.trace", "trips with drop-offs are not supported "

@@ -3,9 +3,13 @@
 One source of truth each, read at build time, never copied by hand:
 
 * scenario keys: the typed configuration's frozen dataclasses (one per section, in the modules of
-  ``dispatch.config``, and ``[pricing]``'s wherever it lives), their types and defaults from
+  ``dispatch.config``, and ``[pricing]``'s wherever it lives), their defaults from
   :func:`dataclasses.fields`, their meaning from the comment on or above each field in the
-  source;
+  source (a leading unit word becomes part of the type), their type as the file writes it
+  (TOML: ``string``, ``float (seconds)``, ``array of [x, y, z]``), derived from the field's
+  annotation or given by its ``metadata["toml"]`` where the file's form differs from the
+  stored one (a file name read into rows); ``metadata["default"]`` words a default that is no
+  value (``name``: the file's stem);
 * the command line: the argument parser of ``dispatch.run.parser`` (the plugin commands included);
 * the Parquet tables: ``dispatch.output.parquet.SCHEMAS`` (column names and Arrow types), each
   column's meaning from the table of the results page (``explanation/output.md``) where it
@@ -22,12 +26,10 @@ import dataclasses
 import importlib
 import inspect
 import io
+import math
 import re
 import tokenize
 from pathlib import Path
-
-from sphinx.util.docutils import SphinxDirective
-from sphinx.util.nodes import nested_parse_with_titles
 
 ROOT = Path(__file__).resolve().parents[2]
 OUT = Path(__file__).resolve().parents[1] / "reference" / "generated"
@@ -81,12 +83,61 @@ def find_class(name: str, package: str = "dispatch"):
     raise LookupError(f"no module of {package} defines {name}")
 
 
-def type_text(tp) -> str:
-    s = tp if isinstance(tp, str) else getattr(tp, "__name__", str(tp))
-    return s.replace("typing.", "").replace("Vec3", "[x, y, z]")
+#: the TOML form of the annotations the configuration uses (``X | None``: X, left out)
+TOML_TYPES = {
+    "str": "string",
+    "int": "integer",
+    "float": "float",
+    "bool": "boolean",
+    "Path": "string (a file, relative to the scenario file)",
+    "datetime": "string (a date-time, e.g. \"2014-12-21T00:00\")",
+    "Vec3": "array of [x, y, z] (3 floats)",
+    "dt.date": "date (a TOML local date, e.g. 2026-09-23)",
+    "tuple[int, int]": "array of 2 integers",
+    "tuple[float, ...]": "array of floats",
+    "tuple[int, ...]": "array of integers",
+    "tuple[str, ...]": "array of strings",
+    "tuple[tuple[str, Any], ...]": "table (keys to values)",
+}
+
+
+def toml_type(f: dataclasses.Field, unit: str = "") -> str:
+    """The type of key ``f`` as a scenario file writes it (``"float (seconds)"``); LookupError
+    for an annotation with no TOML form here (give the field a ``metadata["toml"]``)."""
+    if "toml" in f.metadata:
+        return f.metadata["toml"]
+    ann = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", str(f.type))
+    ann = ann.replace("typing.", "").removesuffix(" | None")
+    if ann not in TOML_TYPES:
+        raise LookupError(f"{f.name}: annotation {ann!r} has no TOML type; give the field "
+                          "metadata={'toml': ...}")
+    base = TOML_TYPES[ann]
+    return f"{base} ({unit})" if unit and "(" not in base else base
+
+
+def toml_words(doc: str) -> str:
+    """A field comment in the file's words: Python's ``None`` is a key left out (``unset``),
+    ``True`` / ``False`` are TOML's ``true`` / ``false``."""
+    doc = re.sub(r"\bNone\b", "unset", doc)
+    return re.sub(r"\b(True|False)\b", lambda m: m.group(1).lower(), doc)
+
+
+def toml_value(v) -> str:
+    """``v`` written as in a TOML file."""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (tuple, list)):
+        return "[" + ", ".join(toml_value(x) for x in v) + "]"
+    if isinstance(v, str):
+        return '"' + v + '"'
+    if isinstance(v, float) and not math.isfinite(v):
+        return str(v)  # TOML's nan, inf, -inf
+    return repr(v)
 
 
 def default_text(f: dataclasses.Field) -> str:
+    if "default" in f.metadata:
+        return f.metadata["default"]
     if f.default is not dataclasses.MISSING:
         v = f.default
     elif f.default_factory is not dataclasses.MISSING:  # type: ignore[misc]
@@ -95,9 +146,27 @@ def default_text(f: dataclasses.Field) -> str:
             return "(table)"
     else:
         return "(required)"
-    if isinstance(v, tuple):
-        v = list(v)
-    return repr(v)
+    if v is None:
+        return "(unset)"
+    if isinstance(v, tuple) and not v and "tuple[tuple[str, Any]" in str(f.type):  # a table
+        return "(empty)"
+    return toml_value(v)
+
+
+def accepted_values(cls: type, name: str) -> str:
+    """The values a key accepts from a fixed set, said after its meaning ("" for most keys):
+    read from where the set is defined, so that a new shipped network is listed here too."""
+    if (cls.__name__, name) == ("RoadConfig", "network"):
+        from dispatch.files.roads import SHIPPED
+
+        shipped = {"chicago": "the Chicago Regional network",
+                   "manhattan_osm": "Manhattan's OSMnx street network, the NYC scenarios'"}
+        names = ", ".join(f'`"{k}"` ({shipped.get(k, "shipped with the package")})'
+                          for k in SHIPPED)
+        return ('accepted: `"manhattan"` (a generated grid of `blocks`, `block` and `speed`), '
+                f"{names}, or a file: `.graphml`, node-link `.json` (either may be `.gz`) or "
+                "`X_net.tntp` with its node file beside it.")
+    return ""
 
 
 def split_unit(doc: str) -> tuple[str, str]:
@@ -147,7 +216,8 @@ def file_keys() -> set[str]:
     parser never names is built from others (a file's rows, a derived flag) and is not a key
     of the file."""
     keys = set()
-    paths = [ROOT / "dispatch" / "scenario" / f"{mod}.py" for mod in ("load", "sections")]
+    paths = [ROOT / "dispatch" / "scenario" / f"{mod}.py" for mod in ("load", "sections",
+                                                                         "transit")]
     for path in [*paths, *sorted((ROOT / "dispatch" / "config").glob("*.py"))]:
         tree = ast.parse(path.read_text(encoding="utf-8"))
         keys |= {n.value for n in ast.walk(tree)
@@ -155,13 +225,14 @@ def file_keys() -> set[str]:
     return keys
 
 
-def key_table(title: str, table: str, cls: type, keys: set[str], skip=(),
-              guide=None) -> list[str]:
+def key_rows(table: str, cls: type, keys: set[str], skip=(), guide=None
+             ) -> tuple[list[dict[str, str]], list[str]]:
+    """``(rows, derived)``: one row per key of ``[table]`` that ``cls`` holds (``key``,
+    ``type``, ``default``, ``meaning``), and the fields the parser builds from others."""
     docs = field_comments(cls)
     rows, derived = [], []
     names = {f.name for f in dataclasses.fields(cls)}
     for f in dataclasses.fields(cls):
-        tp = f.type
         if f.name in skip or default_text(f) == "(table)":  # a nested table: its own section
             continue
         if f.name not in keys:
@@ -173,34 +244,86 @@ def key_table(title: str, table: str, cls: type, keys: set[str], skip=(),
         if not doc and cls.__name__ == "SweepConfig":
             doc = (f"a list of `{f.name}` values (a run key): every combination of the "
                    "lists is one run")
-        unit, meaning = split_unit(doc)
-        rows.append(f"| `{f.name}` | `{esc(type_text(tp))}` | `{esc(default_text(f))}` | "
-                    f"{esc(unit)} | {esc(meaning)} |")
+        doc = toml_words(doc)
+        unit = split_unit(doc)[0]  # the meaning keeps it: "seconds before the run stops"
+        meaning = "; ".join(m for m in (doc, accepted_values(cls, f.name)) if m)
+        rows.append({"key": f.name, "type": toml_type(f, unit), "default": default_text(f),
+                     "meaning": meaning})
     # keys of the file that fill a field under another name (or several fields): the guide's
     for (t, k), doc in (guide or {}).items():
         if (t == table and k and not k.startswith("=") and k not in names
                 and cls.__name__ != "RoadConfig"):  # the road keys share [world]
-            unit, meaning = split_unit(doc)
+            meaning = doc
             example = guide.get((t, "=" + k), "")
-            rows.append(f"| `{k}` | (see meaning) | e.g. `{esc(example)}` | {esc(unit)} | "
-                        f"{esc(meaning)} *(scenario guide; read into another field)* |")
-    out = [f"## {title}", "", f"From the dataclass `{cls.__name__}`."]
-    if cls.__doc__ and not cls.__doc__.startswith(cls.__name__ + "("):
-        out += ["", esc(inspect.cleandoc(cls.__doc__))]
+            rows.append({"key": k, "type": GUIDE_TYPES[(t, k)], "default": "(unset)",
+                         "meaning": f"{meaning} (e.g. `{k} = {example}`)"})
+    return rows, derived
+
+
+#: what a section is for, in a user's words (a dataclass's docstring speaks to the code's
+#: readers; the sections without an entry here use it)
+INTROS = {
+    "top level": "The keys outside any table.",
+    "[world]": "The voxel world of the robot teams: its size and cells (its obstacles in "
+               "`[world.obstacles]`). With `network` (next section) the run is on a road "
+               "network instead, where `size`, `cell`, `physics` and obstacles are refused.",
+    "[world] (road networks)": "A road network instead of the voxel world: the keys "
+                               "`network`, `blocks`, `block`, `speed` and `congestion` of "
+                               "`[world]`.",
+    "[world.obstacles]": "Boxes standing on the ground of the voxel world.",
+    "[fleet]": "The vehicles: how many, their speeds and seats, where they start (a start file "
+               "may add shifts: [driver shifts](../../howto/shifts.md)) and the fleet-sizing "
+               "strategy.",
+    "[fleet.energy]": "Batteries (road networks; no batteries without the table): capacity, "
+                      "consumption, idle draw, the reserve a car keeps.",
+    "[tasks]": "The requests: a generated source (`static`, `periodic`, `poisson`, "
+               "`empirical`) or a trace of your own trips, and the limits a rider accepts.",
+    "[dispatch]": "Who decides, and how: the allocator and the planner, batching, what a "
+                  "pair costs, the plugins' parameters, when a booked ride enters.",
+    "[faults]": "Breakdowns and radio blackouts; none by default.",
+    "[reposition]": "What idle vehicles do (road networks): the repositioner, how often it is "
+                    "called and what it sees; its parameters in `[reposition.<name>]`.",
+    "[chargers] and [charging]": "Charging stations (`[chargers]`, with `[fleet.energy]`) and "
+                                 "the charging strategy (`[charging]`; its parameters in "
+                                 "`[charging.<name>]`).",
+    "[sweep]": "Lists of run keys: every combination is one run, written to its own partition.",
+    "[acceptor]": "Offers riders may decline: the acceptor, how often a declined ride is "
+                  "offered again, its parameters in `[acceptor.<name>]`; every rider accepts "
+                  "without the table.",
+}
+
+#: the TOML type of the keys the parser reads into a field of another name (the guide's)
+GUIDE_TYPES = {
+    ("faults", "file"): "string (a CSV file, relative to the scenario file)",
+    ("faults", "blackout_region"): "array of [x0, y0, x1, y1] (metres)",
+}
+
+
+def key_table(title: str, table: str, cls: type, keys: set[str], skip=(),
+              guide=None) -> list[str]:
+    rows, derived = key_rows(table, cls, keys, skip, guide)
+    out = [f"## {title}", ""]
+    if title in INTROS:
+        out += [INTROS[title]]
+    elif cls.__doc__ and not cls.__doc__.startswith(cls.__name__ + "("):
+        out += [esc(inspect.cleandoc(cls.__doc__))]
     elif (guide or {}).get((table, "")):
-        out += ["", esc(guide[(table, "")]) + " *(scenario guide)*"]
-    out += ["", "| key | type | default | unit | meaning |", "|---|---|---|---|---|", *rows]
+        out += [esc(guide[(table, "")]) + " *(scenario guide)*"]
+    out += ["", f"Read into the dataclass `{cls.__name__}`."]
+    out += ["", "| key | TOML type | default | meaning |", "|---|---|---|---|",
+            *(f"| `{r['key']}` | {esc(r['type'])} | `{esc(r['default'])}` | "
+              f"{esc(r['meaning'])} |" for r in rows)]
     if derived:
         out += ["", "Built by the parser, not keys of the file: "
                 + ", ".join(f"`{d}`" for d in derived) + "."]
     return out + [""]
 
 
-def scenario_keys() -> str:
-    keys = file_keys() | {"blocks", "block", "speed", "network", "congestion"}
-    sections = [
-        ("top level", "", find_class("Scenario"), ("name", "path", "text", "charging",
-                                                   "acceptor", "pricing")),
+def sections() -> list[tuple[str, str, type, tuple[str, ...]]]:
+    """``(title, table, dataclass, fields left out)`` of each section of the reference."""
+    return [
+        ("top level", "", find_class("Scenario"), ("path", "text", "charging", "acceptor",
+                                                   "pricing", "transit")),
         ("[world]", "world", find_class("WorldConfig"), ("roads",)),
         ("[world] (road networks)", "world", find_class("RoadConfig"), ("base",)),
         ("[world.obstacles]", "world.obstacles", find_class("ObstacleConfig"), ()),
@@ -212,21 +335,44 @@ def scenario_keys() -> str:
         ("[comms]", "comms", find_class("CommsConfig"), ()),
         ("[faults]", "faults", find_class("FaultConfig"), ()),
         ("[reposition]", "reposition", find_class("RepositionConfig"), ()),
-        ("[chargers] and [charging]", "chargers", find_class("ChargingConfig"), ()),
+        # sweep: not a key of the file; tow: [faults]' key, copied here
+        ("[chargers] and [charging]", "chargers", find_class("ChargingConfig"), ("sweep", "tow")),
         ("[sweep]", "sweep", find_class("SweepConfig"), ()),
         ("[acceptor]", "acceptor", find_class("AcceptorConfig"), ()),
         ("[pricing]", "pricing", find_class("Pricing"), ()),
+        ("[transit]", "transit", find_class("TransitConfig"), ()),
     ]
+
+
+def reference_keys() -> set[str]:
+    """The names the reference takes for keys of the file (see :func:`file_keys`)."""
+    return file_keys() | {"blocks", "block", "speed", "network", "congestion"}
+
+
+def reference_guide() -> dict[tuple[str, str], str]:
+    """The scenario guide's comments, ``[charging]``'s also under ``[chargers]``."""
     guide = guide_comments()
     for (t, k), v in list(guide.items()):  # [charging] keys live in ChargingConfig too
         if t == "charging":
             guide.setdefault(("chargers", k), v)
+    return guide
+
+
+def scenario_rows() -> list[tuple[str, dict[str, str]]]:
+    """``(section title, row)`` for every key of the reference (what the tests read)."""
+    keys, guide = reference_keys(), reference_guide()
+    return [(title, row) for title, table, cls, skip in sections()
+            for row in key_rows(table, cls, keys, skip, guide)[0]]
+
+
+def scenario_keys() -> str:
+    keys, guide = reference_keys(), reference_guide()
     out = ["# Scenario keys", "",
            "Generated from the typed configuration the scenario parser builds (one frozen "
-           "dataclass per table). A unit is the first word of a field's comment in the code; "
+           "dataclass per table). A type is what the file writes (TOML), with its unit; "
            "the [scenario file guide](../scenario_guide.md) explains the keys with examples, "
            "and `dispatch validate FILE` checks a file against them.", ""]
-    for title, table, cls, skip in sections:
+    for title, table, cls, skip in sections():
         out += key_table(title, table, cls, keys, skip, guide)
     return "\n".join(out)
 
@@ -354,29 +500,35 @@ def generate(app=None) -> None:
             path.write_text(text, encoding="utf-8")  # unchanged pages keep Sphinx's cache
 
 
-class ContractDirective(SphinxDirective):
+def contract_directive():
     """``.. dispatch-contract:: Name ...``: ``autoclass`` of each class, found in whichever
-    module of ``dispatch`` defines it (modules move; the contract's name stays)."""
+    module of ``dispatch`` defines it (modules move; the contract's name stays). Made here,
+    not at import, so that the tests read this module without Sphinx installed."""
+    from docutils import nodes
+    from docutils.statemachine import StringList
+    from sphinx.util.docutils import SphinxDirective
+    from sphinx.util.nodes import nested_parse_with_titles
 
-    required_arguments = 1
-    optional_arguments = 20
+    class ContractDirective(SphinxDirective):
+        required_arguments = 1
+        optional_arguments = 20
 
-    def run(self):
-        from docutils import nodes
-        from docutils.statemachine import StringList
+        def run(self):
+            lines = []
+            for name in self.arguments:
+                cls = find_class(name)
+                lines += [f".. autoclass:: {cls.__module__}.{name}", "   :members:",
+                          "   :show-inheritance:", ""]
+            node = nodes.section()
+            node.document = self.state.document
+            nested_parse_with_titles(self.state, StringList(lines, source="dispatch-contract"),
+                                     node)
+            return node.children
 
-        lines = []
-        for name in self.arguments:
-            cls = find_class(name)
-            lines += [f".. autoclass:: {cls.__module__}.{name}", "   :members:",
-                      "   :show-inheritance:", ""]
-        node = nodes.section()
-        node.document = self.state.document
-        nested_parse_with_titles(self.state, StringList(lines, source="dispatch-contract"), node)
-        return node.children
+    return ContractDirective
 
 
 def setup(app):
     app.connect("builder-inited", generate)
-    app.add_directive("dispatch-contract", ContractDirective)
+    app.add_directive("dispatch-contract", contract_directive())
     return {"version": "1", "parallel_read_safe": True}

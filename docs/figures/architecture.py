@@ -79,7 +79,7 @@ def flow(ax):
         ("planner: cost of each idle (or pooling) vehicle × open request", ORANGE),
         ("allocator answers; the dispatcher checks the answer", ORANGE),
         ("vehicle drives its stop list: pickup, drop-off", BLUE),
-        ("request closes: completed, rejected, expired, cancelled", GREEN),
+        ("request closes: completed, rejected, expired, cut off", GREEN),
         ("its row is written to Parquet; the summary adds it up", GREY),
     ]
     h, gap = 0.074, 0.046

@@ -105,6 +105,62 @@ def test_old_single_run_folders_still_read(single_run, tmp_path):
     assert res.world(run_id) == new.world(run_id)
 
 
+def test_cancelled_of_older_versions_reads_as_cut_off(single_run, tmp_path):
+    """Older versions called a request the run's end cut off ``cancelled`` (its event
+    ``cancel``, the summary's ``tasks_cancelled``): read, they are ``cut_off`` (and
+    ``tasks_cut_off``), as the runs of this version write them."""
+    import shutil
+
+    import pyarrow as pa
+
+    copy = tmp_path / "old"
+    shutil.copytree(single_run, copy)
+    for name, col, old in (("tasks", "state", "cancelled"), ("events", "event", "cancel")):
+        f = next((copy / name).rglob("part-0.parquet"))
+        t = pq.read_table(f)
+        values = t.column(col).to_pylist()
+        values[0] = old
+        t = t.set_column(t.schema.get_field_index(col), col, pa.array(values, pa.string()))
+        pq.write_table(t, f)
+    f = next((copy / "summary").rglob("part-0.parquet"))
+    t = pq.read_table(f)
+    pq.write_table(t.rename_columns([{"tasks_cut_off": "tasks_cancelled"}.get(c, c)
+                                     for c in t.column_names]), f)
+    new, res = open_results(single_run), open_results(copy)
+    assert res.table("tasks")["state"].iloc[0] == "cut_off"
+    assert res.table("events")["event"].iloc[0] == "cut_off"
+    assert "tasks_cancelled" not in res.summary.columns
+    assert res.summary["tasks_cut_off"].tolist() == new.summary["tasks_cut_off"].tolist()
+    assert M.run_metrics(res.summary, res.table("tasks"), res.table("vehicles"))[
+        "cutOffRate"].notna().all()
+
+
+def test_runs_of_integer_and_string_request_ids_read_together(single_run, tmp_path):
+    """A folder holding runs of integer ids beside runs of string ids (two traces) reads its
+    request ids as strings, the integers in decimal."""
+    import shutil
+
+    import pyarrow as pa
+
+    from analysis.io import find_sources
+
+    copy = tmp_path / "mixed"
+    shutil.copytree(single_run, copy)
+    f = next((copy / "tasks").rglob("part-0.parquet"))
+    t = pq.read_table(f)
+    assert t.schema.field("request_id").type == pa.int64()
+    ints = t.column("request_id").to_pylist()
+    other = f.parent.parent / "seed=9" / "part-0.parquet"
+    other.parent.mkdir()
+    i = t.schema.get_field_index("request_id")
+    pq.write_table(t.set_column(i, "request_id", pa.array([f"x{v}" for v in ints])), other)
+    [src] = find_sources(copy)
+    got = src.dataset("tasks").to_table()
+    assert got.schema.field("request_id").type == pa.string()
+    assert sorted(got.column("request_id").to_pylist()) == sorted(
+        [str(v) for v in ints] + [f"x{v}" for v in ints])
+
+
 def test_sweep_files_with_fewer_columns_read_as_null(small_sweep, tmp_path):
     """Files written by an older version (a column missing) still read, the column null."""
     import shutil

@@ -154,7 +154,7 @@ def expected_counts(tasks: pd.DataFrame, t: float, walk_speed: float = 1.4) -> d
             "delivered": int(at_or_before("completed_at").sum()),
             "rejected": int((closed & tasks["state"].isin(["rejected", "expired"])).sum()),
             "declined": int((closed & (tasks["state"] == "declined")).sum()),
-            "cutoff": int((closed & (tasks["state"] == "cancelled")).sum()),
+            "cutoff": int((closed & (tasks["state"] == "cut_off")).sum()),
             "booked": int((at_or_before("booked_at") & ~picked & ~closed).sum()),
             "walking": int(walking)}
 
@@ -613,7 +613,7 @@ def test_the_page_data_carry_walks_bookings_and_offers(walk_run, shift_run, road
     np.testing.assert_allclose(arr(tk["ay"]) + d["origin"][1], tasks["alight_y"], atol=0.01)
     codes = arr(tk["state"])
     states = np.array(d["taskStates"])[codes]
-    np.testing.assert_array_equal(states, tasks["state"].to_numpy())  # cancelled: its own code
+    np.testing.assert_array_equal(states, tasks["state"].to_numpy())  # cut_off: its own code
     s = build_run(choose_run(shift_run, None), route=False)
     assert "declined" in set(np.array(s["taskStates"])[arr(s["tasks"]["state"])])
     plain = build_run(choose_run(road_run, None), route=False)["tasks"]
@@ -727,7 +727,7 @@ def test_browser_declined_offers(shift_run, browser, tmp_path):
 
 def test_browser_cut_off_requests(walk_run, browser, tmp_path):
     tasks = _table(walk_run, "tasks")
-    n = int((tasks["state"] == "cancelled").sum())
+    n = int((tasks["state"] == "cut_off").sum())
     assert n > 0, "the run's end cut nothing off"
     page = _write(walk_run, tmp_path / "replay.html")
     p = Page(browser, page, float(tasks["closed_at"].max()))
@@ -784,5 +784,62 @@ def test_browser_driver_shifts(shift_run, browser, tmp_path):
             "section.view canvas.map").screenshot())).convert("RGB")).astype(int)
         ring = im[int(round(y)) - 6:int(round(y)) + 7, int(round(x)) - 6:int(round(x)) + 7]
         assert (np.abs(ring - [0xb0, 0xb7, 0xbf]).sum(axis=2) < 40).any()
+    finally:
+        p.close()
+
+
+def test_fleet_states_at_end_show_the_state_the_run_ended_in():
+    """A vehicle whose last task completes at the run's last instant: with ``at_end`` its
+    states end in a zero-length idle row at the end (the replay's last frame shows it idle,
+    not at its task with nothing left); without, the rows are as before."""
+    from analysis.timeline import fleet_states
+
+    events = pd.DataFrame({"run_id": "r", "agent_id": [0, 0, 0, 1],
+                           "event": ["assign", "pickup", "idle", "assign"],
+                           "t": [1.0, 2.0, 10.0, 4.0], "task_id": [5, 5, -1, 6]})
+    vehicles = pd.DataFrame({"run_id": "r", "agent_id": [0, 1]})
+    plain = fleet_states(events, vehicles, end=10.0)
+    ended = fleet_states(events, vehicles, end=10.0, at_end=True)
+    mine = ended.loc[ended["agent_id"] == 0]
+    assert list(mine["state"]) == ["idle", "to_pickup", "occupied", "idle"]
+    assert list(mine["start"]) == [0.0, 1.0, 2.0, 10.0] and list(mine["end"]) == [1.0, 2.0,
+                                                                                 10.0, 10.0]
+    last = (ended["start"] == ended["end"]).to_numpy()
+    assert last.sum() == 1
+    pd.testing.assert_frame_equal(ended.loc[~last].reset_index(drop=True),
+                                  plain.reset_index(drop=True))
+    # the other vehicle, on its way when the run ends, keeps its state to the end: no extra row
+    other = ended.loc[ended["agent_id"] == 1]
+    assert list(other["state"]) == ["idle", "to_pickup"] and other["end"].iloc[-1] == 10.0
+
+
+@pytest.mark.parametrize("world", ["road", "voxel"])
+def test_the_panel_and_the_legend_speak_of_the_run_s_world(world, road_run, single_run, browser,
+                                                           tmp_path):
+    """Robots carry no riders and no task floats above a street: the voxel page counts the
+    vehicles at a task (no riders, no seats) and its legend has tasks in the air; the road page
+    counts riders and seats and its legend no air. At the last frame no vehicle is shown at or
+    on its way to a task while nothing waits, rides or was cut off."""
+    folder = road_run if world == "road" else single_run
+    page = _write(folder, tmp_path / "replay.html")
+    p = Page(browser, page)
+    try:
+        occupancy = p.page.text_content("[data-kpi-extra='occupancy']")
+        request = p.page.text_content("[data-legend='request']")
+        if world == "voxel":
+            assert occupancy.startswith("vehicles at a task: ")
+            assert "rider" not in occupancy and "seat" not in occupancy
+            assert "in the air" in request and request.startswith("task waiting")
+        else:
+            assert "riders on board" in occupancy and "seats taken" in occupancy
+            assert "in the air" not in request
+        end = p.page.evaluate("window.replay.span[1]")
+        p.page.evaluate("t => window.replay.seek(t)", end)
+        counts = p.page.evaluate("window.replay.counts()")
+        states = [v["state"] for v in p.page.evaluate("window.replay.vehicles()")]
+        # (a vehicle on its way to a request the run's end cut off is shown so: cut off > 0)
+        if counts["waiting"] == counts["onboard"] == counts["cutoff"] == 0:
+            assert not {"to_pickup", "occupied", "occupied_2", "occupied_3+"} & set(states), \
+                (counts, states)
     finally:
         p.close()

@@ -13,7 +13,8 @@ from PIL import Image
 from analysis.report import FIGURES, write_report
 from tests.analysis.helpers import read_hive_rows
 
-FILES = ("report.md", "allocators.csv", "taxi.csv", "runs.csv", *FIGURES)
+# (a voxel report: its service metrics are service.csv; taxi.csv is a road report's)
+FILES = ("report.md", "allocators.csv", "service.csv", "runs.csv", *FIGURES)
 
 
 @pytest.fixture(scope="module")
@@ -74,7 +75,9 @@ def test_report_tables_agree_with_parquet(report, small_sweep):
     for key, rs in by.items():
         assert float(got[key]["total_cost_mean"]) == pytest.approx(
             statistics.fmean(r["total_cost"] for r in rs))
-    with open(out / "taxi.csv") as f:
+    assert not (out / "taxi.csv").exists()
+    assert "All columns: service.csv" in text
+    with open(out / "service.csv") as f:
         taxi = list(csv.DictReader(f))
     assert len(taxi) == 6
     for col in ("wait_average", "wait_median", "wait_p90", "service_rate", "utilization",
@@ -209,6 +212,15 @@ def test_taxi_report_files(road_sweep, tmp_path):
     assert "Taxi study" in text and "Table I" not in text  # no paper tables for taxis
     for col in ("rejectionRate", "wait_p90", "utilization", "emptyRatio", "vkm_per_ride"):
         assert col in text
+    # the study opens with a few lines, then its table; each column's meaning is a short item
+    # of a list below the table
+    study = text.split("## Taxi study")[1]
+    opening = study.split("\n| allocator |")[0]
+    assert len(opening.split()) < 80, opening
+    glossary = [ln for ln in study.split("\n| allocator |")[1].splitlines()
+                if ln.startswith("- ")]
+    assert len(glossary) >= 10 and max(len(ln.split()) for ln in glossary) < 40
+    assert any(ln.startswith("- utilization: ") for ln in glossary)
     with open(tmp_path / "taxi.csv", newline="") as f:
         taxi = {r["allocator"]: r for r in csv.DictReader(f)}
     assert set(taxi) == {"fcfs", "hungarian"}

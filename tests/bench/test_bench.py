@@ -188,6 +188,51 @@ def test_intervals_and_paired_differences_equal_a_hand_computation():
     assert math.isnan(rows[6]["gap"])  # a failed run has no gap
 
 
+# ------------------------------------------------------------------------- the printed board
+
+def test_the_printed_board_fits_80_columns_and_marks_separated_allocators():
+    """Robots and fleets each get a table of at most 80 characters a line, every instance and
+    allocator in it, a cell ``mean ± half-width``; ``*`` on greedy where its paired difference
+    to hungarian excludes 0 (served share +0.1 on every seed), not where it does not (the
+    timing column, equal); an unsupported allocator says so in place of numbers."""
+    import io
+
+    from rich.console import Console
+
+    from bench.board import board_tables, interval_note
+
+    rows = [{**r, "world": "road"} for r in _board()]  # x: served 0.5, 0.6, 0.7; greedy +0.1
+    rows += [_row("static_n4", a, s, gap=g, conflict_free_share=1.0, ms_per_decision=2.0)
+             for a, gaps in (("hungarian", [0.0, 0.0]), ("local_hungarian", [0.1, 0.3]))
+             for s, g in enumerate(gaps)]
+    rows.append({**_row("x", "rtv", 0), "world": "road", "status": "unsupported: no times"})
+    buf = io.StringIO()
+    console = Console(file=buf, width=80, force_terminal=False)
+    tables = board_tables(rows)
+    for title, t in tables:
+        console.print(title)
+        console.print(t)
+    lines = buf.getvalue().splitlines()
+    assert len(tables) == 2 and max(len(line) for line in lines) <= 80
+
+    def row(name, n=0):
+        return [x for x in lines if x.split()[:1] == [name]][n].split()
+
+    # served %: greedy 70 ± t(2) * 10 / sqrt(3) = 24.8, separated from hungarian (+10 on each
+    # seed); its timing equals hungarian's: no star
+    assert row("greedy") == ["greedy", "70", "±", "24.8*", "–", "1", "±", "0"]
+    assert row("hungarian")[:4] == ["hungarian", "0", "±", "0"]  # robots first: its own gap
+    assert row("hungarian", 1)[:4] == ["hungarian", "60", "±", "24.8"]
+    # two seeds, gaps 10 % and 30 %: 20 ± 12.7 * 10 = 127, not separated from hungarian's 0
+    assert row("local_hungarian")[:4] == ["local_hungarian", "20", "±", "127"]
+    assert row("rtv") == ["rtv", "unsupported"]
+    assert ["x", "(3", "seeds)"] in [x.split() for x in lines]
+    assert ["static_n4", "(2", "seeds)"] in [x.split() for x in lines]
+    note = interval_note(rows)
+    assert "2 to 3 seed(s)" in note and "12.7 standard errors" in note
+    assert max(len(line) for line in note.splitlines()) <= 80
+
+
 # ------------------------------------------------------------------------- --against
 
 def _board():
@@ -231,8 +276,10 @@ def _error(capsys, argv):
 
 
 def test_wrong_inputs_give_one_line(tmp_path, capsys):
-    assert "unknown allocator 'nope'" in _error(capsys, ["bench", "nope", "--out",
-                                                         str(tmp_path)])
+    err = _error(capsys, ["bench", "nope", "--out", str(tmp_path)])
+    assert "unknown allocator 'nope'" in err and "dispatch new allocator nope" in err
+    assert "dispatch new allocator NAME" in _error(capsys, ["bench", "My-Alloc", "--out",
+                                                            str(tmp_path)])
     bad = tmp_path / "old.csv"
     bad.write_text("a,b\n1,2\n")
     assert "not a bench.csv" in _error(capsys, ["bench", "greedy", "--against", str(bad),
@@ -341,3 +388,17 @@ def test_a_network_trained_per_team_size_is_unsupported_on_other_sizes():
                       "{4, 8, 12, 20} only, not N = 50 agents, M = 50 tasks",
         "dynamic_n8": "unsupported: magnnet:paper decides static problems of N = M in "
                       "{4, 8, 12, 20} only, not poisson tasks"}
+
+
+def test_the_default_output_folder_is_ignored_by_git():
+    """``dispatch bench`` writes ``bench_out/`` by default: git ignores it, so a bench does not
+    leave the working tree dirty."""
+    import shutil
+    import subprocess
+
+    from tests.conftest import ROOT
+
+    if shutil.which("git") is None or not (ROOT / ".git").exists():
+        pytest.skip("needs git and a git checkout")
+    proc = subprocess.run(["git", "check-ignore", "-q", "bench_out/bench.csv"], cwd=ROOT)
+    assert proc.returncode == 0

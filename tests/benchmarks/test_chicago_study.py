@@ -137,18 +137,18 @@ def test_table_shows_conflicts(study):
     assert "| - | - | 12.3 |" in study.markdown_table(_table()).splitlines()[2]
 
 
-def test_three_seeds_intervals_and_cancelled(study):
-    """Three seeds by default; the table shows the cancelled share (served + rejected +
-    cancelled add up) and 95 % intervals over seeds (terminal: served and wait; study.md:
-    served, rejected, cancelled and wait), still within 80 columns."""
+def test_three_seeds_intervals_and_cut_off(study):
+    """Three seeds by default; the table shows the cut-off share (served + rejected + cut off
+    add up) and 95 % intervals over seeds (terminal: served and wait; study.md: served,
+    rejected, cut off and wait), still within 80 columns."""
     assert study.parse_args([]).seeds == [0, 1, 2]
-    t = _table().assign(served=0.75, rejected=0.2, cancelled=0.05, served_ci=0.012,
-                        rejected_ci=0.01, cancelled_ci=0.004, wait_mean_ci=12.4)
+    t = _table().assign(served=0.75, rejected=0.2, cut_off=0.05, served_ci=0.012,
+                        rejected_ci=0.01, cut_off_ci=0.004, wait_mean_ci=12.4)
     text = study.text_table(t)
     assert max(len(line) for line in text.splitlines()) <= 80
     head, _, first, *_ = text.splitlines()
-    assert "canc%" in head and "served%" in head
+    assert "cut%" in head and "served%" in head
     assert first.split()[-8:-4] == ["75.0±1.2", "20.0", "5.0", "300±12"], first
     md = study.markdown_table(t).splitlines()
-    assert "| canc% |" in md[0] and "| p90 |" in md[0]
+    assert "| cut% |" in md[0] and "| p90 |" in md[0]
     assert "| 75.0% ± 1.2 | 20.0% ± 1.0 | 5.0% ± 0.4 | 300 ± 12 |" in md[2]

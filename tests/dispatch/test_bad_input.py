@@ -1,7 +1,7 @@
 """Bad input in one line (exit 2, no traceback) and output safety: plugin parameters the
 constructor rejects, checkpoints that are not checkpoints, undecodable or unreadable files,
-resource limits and ``--force``, sanitised output folders, no silent overwrite, two scenarios
-in one folder."""
+resource limits and ``--ignore-limits``, sanitised output folders, no silent overwrite (a run
+already there is shown, not rerun; ``--overwrite`` reruns it), two scenarios in one folder."""
 
 from __future__ import annotations
 
@@ -114,7 +114,7 @@ def test_deep_nesting_and_huge_integer(tmp_path, capsys):
     assert "<syntax>" in one_line_error(path, capsys)
 
 
-def test_file_size_limits_and_force(tmp_path, capsys, monkeypatch):
+def test_file_size_limits_and_ignore_limits(tmp_path, capsys, monkeypatch):
     from dispatch.scenario import load as scenario
     path = write_scenario(tmp_path, tasks={"source": "trace", "trace": "t.csv",
                                            "ground_fraction": None})
@@ -123,8 +123,8 @@ def test_file_size_limits_and_force(tmp_path, capsys, monkeypatch):
     assert "MiB is refused" in one_line_error(path, capsys)
     monkeypatch.setattr(scenario, "LIMITS", Limits(input_bytes=10))
     err = one_line_error(path, capsys)
-    assert "t.csv" in err and "--force" in err
-    code, text, _ = validate(path, "--force", capsys=capsys)
+    assert "t.csv" in err and "--ignore-limits" in err
+    code, text, _ = validate(path, "--ignore-limits", capsys=capsys)
     assert code == 0, text
 
 
@@ -140,13 +140,13 @@ def test_file_size_limits_and_force(tmp_path, capsys, monkeypatch):
     ({"tasks": {"count": 10**6}}, "tasks.count"),
     ({"sweep": {"seed": list(range(20_000))}}, "sweep"),
 ])
-def test_resource_limits_refuse_then_force(tmp_path, capsys, kw, key):
+def test_resource_limits_refuse_then_ignore_limits(tmp_path, capsys, kw, key):
     path = write_scenario(tmp_path, **kw)
     err = one_line_error(path, capsys)
-    assert f": {key}: " in err and "use --force to run anyway" in err
-    # --force skips the bound (validate builds the plugins: cheap for these)
+    assert f": {key}: " in err and "use --ignore-limits to run anyway" in err
+    # --ignore-limits skips the bound (validate builds the plugins: cheap for these)
     if key not in ("world.cell",):
-        code, text, _ = validate(path, "--force", capsys=capsys)
+        code, text, _ = validate(path, "--ignore-limits", capsys=capsys)
         assert code == 0, text
 
 
@@ -156,9 +156,9 @@ def test_periodic_capped_by_count_is_within_limits(tmp_path, capsys):
     assert validate(path, capsys=capsys)[0] == 0
 
 
-def test_absurd_cell_is_refused_even_with_force(tmp_path, capsys):
+def test_absurd_cell_is_refused_even_past_the_limits(tmp_path, capsys):
     path = write_scenario(tmp_path, world={"size": [50, 50, 30], "cell": 1e-300})
-    err = one_line_error(path, capsys, "--force")
+    err = one_line_error(path, capsys, "--ignore-limits")
     assert "world.cell" in err and "per axis" in err and len(err) < 300
 
 
@@ -204,14 +204,51 @@ def test_scenario_name_is_sanitised_for_paths(tmp_path):
     assert out.parts[0] == "runs" and len(out.parts) == 2
 
 
-def test_run_refuses_to_overwrite_then_force(tmp_path, capsys):
+def _marker_mtime(out):
+    [marker] = (out / "_runs").rglob("done.json")
+    return marker.stat().st_mtime_ns
+
+
+def test_run_shows_a_run_already_there_then_overwrite_reruns_it(tmp_path, capsys):
+    """The same command twice: the second exits 0, runs nothing (the folder's files are not
+    touched), shows the stored summary and says where it is; --overwrite runs it again."""
+    path = write_scenario(tmp_path)
+    out = tmp_path / "out"
+    assert cli.main(["run", str(path), "--out", str(out)]) == 0
+    first = capsys.readouterr().out
+    stamp = _marker_mtime(out)
+    assert cli.main(["run", str(path), "--out", str(out)]) == 0
+    again = capsys.readouterr().out
+    assert _marker_mtime(out) == stamp
+    assert "already in" in again and str(out) in again and "--overwrite" in again
+    assert "run(s) in" not in again  # nothing was run
+    # the stored summary is shown as the fresh one was: the same table rows
+    rows = [line for line in first.splitlines() if "hungarian" in line]
+    assert rows and all(r in again for r in rows)
+    assert cli.main(["run", str(path), "--out", str(out), "--overwrite"]) == 0
+    assert "1 run(s) in" in capsys.readouterr().out and _marker_mtime(out) != stamp
+
+
+def test_run_refuses_other_results_of_the_same_run(tmp_path, capsys):
+    """Another version of the scenario (same run id, other settings) is not silently
+    replaced: one line naming the run and --overwrite."""
     path = write_scenario(tmp_path)
     out = tmp_path / "out"
     assert cli.main(["run", str(path), "--out", str(out)]) == 0
     capsys.readouterr()
-    err = one_line_error(path, capsys, "--out", str(out), cmd="run")
-    assert "already holds results" in err and "--force" in err
-    assert cli.main(["run", str(path), "--out", str(out), "--force"]) == 0
+    err = one_line_error(path, capsys, "--out", str(out), "--set", "fleet.uav_speed=2.0", cmd="run")
+    assert "already holds other results" in err and "--overwrite" in err
+    assert cli.main(["run", str(path), "--out", str(out), "--set", "fleet.uav_speed=2.0",
+                     "--overwrite"]) == 0
+
+
+@pytest.mark.parametrize("cmd", ["run", "validate", "sweep"])
+def test_old_force_flag_names_the_two_flags(tmp_path, capsys, cmd):
+    path = write_scenario(tmp_path)
+    with pytest.raises(SystemExit) as e:
+        cli.main([cmd, str(path), "--force"])
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and "--overwrite" in err and "--ignore-limits" in err
 
 
 def test_two_scenarios_share_one_folder(tmp_path, capsys):

@@ -1,6 +1,7 @@
 """Work bounds (dispatch.scenario.budget): the fuzzed runs that ran past 30 s without a word are
-refused by ``dispatch validate`` with the estimate and the bound (``--force`` runs them), the
-shipped scenarios are not; a long run says where it is on stderr when not on a terminal."""
+refused by ``dispatch validate`` with the estimate and the bound (``--ignore-limits`` runs
+them), the shipped scenarios are not; a long run says where it is on stderr when not on a
+terminal."""
 
 from __future__ import annotations
 
@@ -61,7 +62,7 @@ def test_fuzz_hang_is_refused_at_validate(case, tmp_path):
     key, amount, bound = EXPECT[case]
     line = proc.stderr.strip()
     assert line.startswith(f"error: {path}: {key}: about"), line
-    assert amount in line and bound in line and "use --force to run anyway" in line, line
+    assert amount in line and bound in line and "use --ignore-limits to run anyway" in line, line
     assert len(line.splitlines()) == 1
 
 
@@ -88,7 +89,7 @@ def test_rrt_star_with_huge_max_iterations_is_refused(tmp_path):
     assert proc.returncode == 2
     assert ("dispatch.planner_params: planner 'rrt_star': about 6e+07 tree iterations (2 trees "
             "x 3 tasks x max_iterations = 10,000,000; more than 60,000") in proc.stderr
-    forced = dispatch("validate", path, "--force")
+    forced = dispatch("validate", path, "--ignore-limits")
     assert forced.returncode == 0, forced.stderr
 
 
@@ -164,7 +165,7 @@ def test_rrt_star_with_a_tiny_step_is_refused(tmp_path):
     ok = tmp_path / "ok.toml"
     ok.write_text(text.replace("step = 1e-6", "step = 1.0"))
     assert dispatch("validate", ok).returncode == 0
-    assert dispatch("validate", path, "--force").returncode == 0
+    assert dispatch("validate", path, "--ignore-limits").returncode == 0
 
 
 def test_shipped_scenarios_are_within_the_bounds():

@@ -237,6 +237,9 @@ def test_a_short_empirical_run(tmp_path):
     tasks = r.tables["tasks"].to_pandas()
     assert 20 < len(tasks) < 120  # ~ 2400 x 602 / 12937 / 2 = 56 in the first half hour
     assert (tasks.max_wait == 600.0).all()
+    # each request's id: its number in the day drawn, the day's first trips released so far
+    assert r.tables["tasks"].schema.field("request_id").type == "int64"
+    assert sorted(tasks.request_id) == list(range(len(tasks)))
     done = tasks[tasks.state == "completed"]
     assert len(done) > 0 and ((done.picked_up_at - done.released_at) <= 600.0 + 1e-6).all()
     nodes, _ = pickup_weights(load_sample())
@@ -268,7 +271,7 @@ def test_a_short_empirical_run(tmp_path):
     ('size = [10, 10, 5]\ncongestion = "chicago_taxi"', "", 'source = "static"',
      ["world.congestion", "road network"]),
     ('network = "chicago"', "", 'source = "empirical"\ntrips_per_day = 3e6',
-     ["tasks.trips_per_day", "--force"]),
+     ["tasks.trips_per_day", "--ignore-limits"]),
 ])
 def test_bad_keys_one_line(tmp_path, capsys, world, fleet, tasks, words):
     path = tmp_path / "bad.toml"

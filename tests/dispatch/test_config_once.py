@@ -22,6 +22,7 @@ from dispatch.config.reposition import RepositionConfig
 from dispatch.config.scenario import Scenario
 from dispatch.config.sweep import SweepConfig
 from dispatch.config.tasks import TaskConfig
+from dispatch.config.transit import TransitConfig
 from dispatch.config.world import ObstacleConfig, RoadConfig, WorldConfig
 from dispatch.scenario.load import parse_scenario
 from tests.conftest import ROOT
@@ -29,8 +30,9 @@ from tests.conftest import ROOT
 #: every section's dataclass, as the parser reads it
 SECTIONS = (Scenario, WorldConfig, RoadConfig, ObstacleConfig, FleetConfig, EnergyConfig,
             TaskConfig, DispatchConfig, CommsConfig, FaultConfig, RepositionConfig,
-            ChargingConfig, SweepConfig, AcceptorConfig, Pricing)
-PARSER = ("dispatch/scenario/load.py", "dispatch/scenario/sections.py")
+            ChargingConfig, SweepConfig, AcceptorConfig, Pricing, TransitConfig)
+PARSER = ("dispatch/scenario/load.py", "dispatch/scenario/sections.py",
+          "dispatch/scenario/transit.py")
 GETTERS = {"get", "number", "string", "flag", "vec3", "int_list", "str_list"}
 
 

@@ -17,8 +17,8 @@ import simpy
 from dispatch.api.comms import Hearing, comm_graph
 from dispatch.api.problem import AgentViews
 from dispatch.decide.dispatcher import Wakeup
-from dispatch.decide.pipeline import deadlines, keep_servable, reject_late
-from dispatch.decide.planner_costs import PlannerCosts, lazy_costs
+from dispatch.decide.pipeline import keep_servable
+from dispatch.decide.planner_costs import PlannerCosts, deadlines, lazy_costs, reject_late
 from dispatch.decide.tally import Blame, Tally
 from dispatch.errors import PluginError
 from dispatch.plan.tasks import TaskState

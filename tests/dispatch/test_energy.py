@@ -20,7 +20,7 @@ from dispatch.run.runner import run_one
 from dispatch.scenario.load import load_scenario
 
 GRID = 'network = "manhattan"\nblocks = [6, 2]\nblock = 200.0\nspeed = 10.0'
-TERMINAL = {"completed", "expired", "rejected", "unreachable", "cancelled", "failed"}
+TERMINAL = {"completed", "expired", "rejected", "unreachable", "cut_off", "failed"}
 
 
 def grid(d: Path, energy: str, trips, starts=(0,), extra: str = "", name="ev",

@@ -20,7 +20,7 @@ from dispatch.scenario.load import load_scenario
 from tests.conftest import write_scenario
 
 TERMINAL = {"completed": "complete", "expired": "expire", "rejected": "reject",
-            "unreachable": "unreachable", "cancelled": "cancel", "failed": "failed"}
+            "unreachable": "unreachable", "cut_off": "cut_off", "failed": "failed"}
 MOVING = ("depart", "move", "pickup", "dropoff")
 
 

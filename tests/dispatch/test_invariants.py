@@ -35,7 +35,7 @@ SOURCES = ("static", "periodic", "poisson", "trace_csv", "trace_parquet")
 ALLOCATORS = ("hungarian", "greedy", "random")
 SEEDS = range(8)
 TERMINAL_EVENT = {"completed": "complete", "expired": "expire", "unreachable": "unreachable",
-                  "cancelled": "cancel", "rejected": "reject", "failed": "failed"}
+                  "cut_off": "cut_off", "rejected": "reject", "failed": "failed"}
 WORLD = (12.0, 12.0, 6.0)
 
 
@@ -65,7 +65,7 @@ def random_scenario(directory: Path, source: str, allocator: str, seed: int) -> 
                    "service_time": float(rng.choice([0.0, 0.0, 1.5]))}
     if rng.random() < 0.5:  # with and without ttl
         tasks["ttl"] = float(rng.choice([2.0, 8.0]))
-    duration = float(rng.choice([6.0, 40.0, 300.0]))  # a short horizon leaves tasks cancelled
+    duration = float(rng.choice([6.0, 40.0, 300.0]))  # a short horizon leaves tasks cut off
     if source == "static":
         tasks.update(source="static", count=int(rng.integers(1, 3 * agents + 1)))
         if rng.random() < 0.5:
@@ -239,11 +239,11 @@ def test_a_vehicle_serves_one_task_at_a_time(runs, case):
                 current = None
             elif e.event == "complete":
                 assert current == e.task_id, (vid, e)
-            elif e.event == "cancel":
+            elif e.event == "cut_off":
                 # only the task it is serving when the horizon comes
                 assert current == e.task_id, (vid, e)
         if current is not None:  # still serving at the horizon
-            assert r.tasks.set_index("task_id").state[current] == "cancelled"
+            assert r.tasks.set_index("task_id").state[current] == "cut_off"
         for (s0, e0, _), (s1, _, _) in zip(intervals, intervals[1:]):
             assert e0 <= s1
     # and per task: the service intervals of one vehicle never overlap
@@ -265,9 +265,9 @@ def test_summary_counts_add_up(runs, case):
     assert s["tasks_unfinished"] == len(tasks) - states.get("completed", 0)
     assert s["tasks_expired"] == states.get("expired", 0)
     assert s["tasks_unreachable"] == states.get("unreachable", 0)
-    assert s["tasks_cancelled"] == states.get("cancelled", 0)
+    assert s["tasks_cut_off"] == states.get("cut_off", 0)
     assert (s["tasks_completed"] + s["tasks_expired"] + s["tasks_unreachable"]
-            + s["tasks_cancelled"]) == s["n_tasks"]
+            + s["tasks_cut_off"]) == s["n_tasks"]
     assigned = tasks[tasks.agent_id >= 0]
     assert s["total_cost"] == pytest.approx(assigned.cost.sum())
     assert s["n_uav"] + s["n_ugv"] == s["n_agents"]
@@ -286,8 +286,8 @@ def test_summary_counts_add_up(runs, case):
     done = tasks[tasks.state == "completed"]
     assert s["makespan"] == pytest.approx(done.completed_at.max() if len(done) else 0.0)
     assert s["sim_time"] <= r.spec.scenario.duration + 1e-9
-    # runs end when the work is done, or at the horizon with cancelled tasks
-    if s["tasks_cancelled"]:
+    # runs end when the work is done, or at the horizon with cut-off tasks
+    if s["tasks_cut_off"]:
         assert s["sim_time"] == pytest.approx(r.spec.scenario.duration)
     if r.spec.scenario.tasks.source == "static":
         assert s["n_tasks"] == r.spec.n_static_tasks
@@ -372,7 +372,7 @@ def test_ugvs_stay_on_the_ground_and_serve_ground_tasks(runs, case):
 def test_cases_cover_every_outcome(runs):
     """The random scenarios exercise every terminal state and both task kinds."""
     states = pd.concat([r.tasks.state for r in runs.values()]).value_counts()
-    assert {"completed", "expired", "unreachable", "cancelled"} <= set(states.index), states
+    assert {"completed", "expired", "unreachable", "cut_off"} <= set(states.index), states
     kinds = set(pd.concat([r.tasks.kind for r in runs.values()]))
     assert kinds == {"ground", "air"}
     skipped = sum((r.events.event == "skipped").sum() for r in runs.values())

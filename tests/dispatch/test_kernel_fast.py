@@ -207,6 +207,7 @@ def test_event_rows_placed_per_chunk_equal_per_event_positions(tmp_path, flush_r
     assert {int, RoadPoint, type(None)} <= kinds  # every kind of place occurs
     for row, want in zip(got, seen):
         assert (row["t"], row["event"], row["agent_id"], row["task_id"]) == want[:4]
+        assert row["request_id"] == (sim.book.request_ids[want[3]] if want[3] >= 0 else None)
         for k, v in zip("xyz", want[4:7]):
             assert repr(row[k]) == repr(float(v))
 

@@ -23,7 +23,7 @@ from tests.dispatch.test_trips import road_scenario, write_csv
 GRID = 'network = "manhattan"\nblocks = [6, 5]\nblock = 100.0\nspeed = 10.0'
 PRICING = "\n[pricing]\nbase = 2.0\nper_km = 1.5\nper_minute = 0.5\nsharing_discount = 0.25\n"
 TERMINAL = {"completed": "complete", "expired": "expire", "rejected": "reject",
-            "unreachable": "unreachable", "cancelled": "cancel", "failed": "failed",
+            "unreachable": "unreachable", "cut_off": "cut_off", "failed": "failed",
             "declined": "decline"}
 
 
@@ -109,7 +109,7 @@ def _check_terminal(summary: dict, t: dict, retries: int) -> None:
     declines = declines.reindex(tasks.task_id, fill_value=0).to_numpy()
     declined = (tasks.state == "declined").to_numpy()
     # accepted: it got a vehicle (an offer is made once per request until it accepts; one
-    # declined and then expired or cancelled before its next offer accepted none)
+    # declined and then expired or cut off before its next offer accepted none)
     accepted = tasks.task_id.isin(ev[ev.event == "assign"].task_id).to_numpy()
     assert (tasks.offers.to_numpy()[accepted] >= 1).all()
     # a decline event per declined offer (the last one is a declined request's close)

@@ -14,7 +14,7 @@ from dispatch.run.runner import make_recorder
 from dispatch.run.sim import Simulation
 from dispatch.scenario.load import load_scenario
 
-TERMINAL = {"complete", "expire", "reject", "unreachable", "cancel", "failed"}
+TERMINAL = {"complete", "expire", "reject", "unreachable", "cut_off", "failed"}
 #: 10 x 2 intersections, 200 m blocks at 10 m/s: an edge is 20 s; node = row * 10 + column
 GRID = 'network = "manhattan"\nblocks = [10, 2]\nblock = 200.0\nspeed = 10.0'
 #: events the operator's own processes emit (the vehicle's plan process, a repair or a tow)

@@ -33,7 +33,7 @@ GOLDEN = pd.read_csv(ROOT / "tests" / "data" / "golden_summaries.csv")
 KEYS = ["scenario", "allocator", "planner", "n_agents", "seed"]
 EXACT = ["n_tasks", "tasks_completed", "tasks_unfinished", "n_uav", "n_ugv", "decisions",
          "rounds", "messages", "conflicts", "tasks_expired", "tasks_unreachable",
-         "tasks_cancelled"]
+         "tasks_cut_off"]
 CLOSE = ["total_cost", "conflict_free_rate", "makespan", "first_decision_cost",
          "realized_travel", "wait_time_mean", "sim_time", "comm_delay"]
 

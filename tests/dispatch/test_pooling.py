@@ -55,10 +55,10 @@ def check_invariants(summary: dict, tables: dict) -> None:
     ev = tables["events"]
     cap = tables["vehicles"].set_index("agent_id")["capacity"]
     # every request in exactly one terminal state, one terminal event each
-    terminal = {"complete", "expire", "reject", "unreachable", "cancel", "failed"}
+    terminal = {"complete", "expire", "reject", "unreachable", "cut_off", "failed"}
     ends = ev[ev.event.isin(terminal)].groupby("task_id").size()
     assert (ends.reindex(tasks.index, fill_value=0) == 1).all()
-    assert tasks.state.isin(["completed", "expired", "rejected", "unreachable", "cancelled",
+    assert tasks.state.isin(["completed", "expired", "rejected", "unreachable", "cut_off",
                              "failed"]).all()
     # occupancy from the events never exceeds the capacity; a drop-off follows a pickup of
     # the same request by the same vehicle (a breakdown empties the vehicle)

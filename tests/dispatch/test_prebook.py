@@ -68,8 +68,8 @@ def check_promises(summary: dict, tables: dict) -> None:
     broke = ev[ev.event == "breakdown"]
     end = summary["sim_time"]
     for k, t in promised.iterrows():
-        if t.state == "completed" or (t.state == "cancelled" and t.closed_at == end):
-            continue  # (cancelled: cut by the run's end)
+        if t.state == "completed" or (t.state == "cut_off" and t.closed_at == end):
+            continue  # (cut_off: cut by the run's end)
         assert t.state == "failed", (k, t.state)
         # a fault named: a breakdown of a vehicle that held the promise, before it ended
         named = broke[broke.agent_id.isin(holders[k]) & (broke.t <= t.closed_at + EPS)]
@@ -79,7 +79,7 @@ def check_promises(summary: dict, tables: dict) -> None:
     got = pick.reindex(booked.index).dropna()
     assert (got >= booked.released_at.reindex(got.index) - EPS).all()
     assert summary["promises"] == len(promised)
-    assert summary["promises_broken"] == int((~promised.state.isin(["completed", "cancelled"])
+    assert summary["promises_broken"] == int((~promised.state.isin(["completed", "cut_off"])
                                               ).sum())
 
 

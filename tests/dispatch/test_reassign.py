@@ -20,7 +20,7 @@ from dispatch.run.runner import run_one
 from dispatch.scenario.load import load_scenario
 from tests.dispatch.test_trips import road_scenario, write_csv
 
-TERMINAL_EVENTS = {"complete", "expire", "reject", "unreachable", "cancel", "failed"}
+TERMINAL_EVENTS = {"complete", "expire", "reject", "unreachable", "cut_off", "failed"}
 #: two rows of 10 intersections, 200 m apart, 10 m/s: 20 s per edge (row 0 is the line)
 LINE = 'network = "manhattan"\nblocks = [10, 2]\nblock = 200.0\nspeed = 10.0'
 
@@ -96,7 +96,7 @@ def _check_invariants(res) -> None:
         elif kind == "reassign":
             assert holds.get(a) == t
             del holds[a], held_by[t]
-        elif kind in ("complete", "cancel", "failed") and t in held_by:
+        elif kind in ("complete", "cut_off", "failed") and t in held_by:
             del holds[held_by.pop(t)]
     # a task given up is never picked up by the vehicle that gave it up (unless re-assigned)
     picked = {t: a for t, a in zip(ev.task_id[ev.event == "pickup"],

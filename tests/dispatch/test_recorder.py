@@ -30,7 +30,8 @@ LEAF = "allocator=greedy/planner=astar/n_agents=2/seed=7"
 
 
 def event(i: int) -> dict:
-    return dict(t=float(i), event="move", agent_id=i % 3, task_id=i, x=0.5, y=1.5, z=float(i))
+    return dict(t=float(i), event="move", agent_id=i % 3, task_id=i, request_id=100 + i, x=0.5,
+                y=1.5, z=float(i))
 
 
 def summary_row() -> dict:
@@ -295,7 +296,7 @@ def test_rows_are_tied_to_columns_by_name():
         recording.check_columns("tasks", recording.TASK_COLUMNS[:-1])
     with pytest.raises(KeyError, match="schema order"):
         recording.check_columns("assignments", ("round", "decision", "agent_id", "task_id",
-                                                "cost", "won", "alloc_seconds"))
+                                                "request_id", "cost", "won", "alloc_seconds"))
 
     class Tag(str):
         """A value that says which attribute it was read from."""
@@ -328,6 +329,29 @@ def test_rows_are_tied_to_columns_by_name():
                                      "capacity", "passenger_distance"))
     assert all(math.isnan(row[c]) for c in ("kwh_drawn", "soc_min", "soc_end"))
     row = dict(zip(recording.ASSIGNMENT_COLUMNS,
-                   recording.assignment_row("i", Tag(), "s"), strict=True))
+                   recording.assignment_row("i", Tag(), "s", "r"), strict=True))
     assert row == {"decision": "i", "round": "round", "agent_id": "agent_id",
-                   "task_id": "task_id", "cost": "cost", "won": "won", "alloc_seconds": "s"}
+                   "task_id": "task_id", "request_id": "r", "cost": "cost", "won": "won",
+                   "alloc_seconds": "s"}
+
+
+def test_a_runs_request_id_type_is_its_own_in_every_table(tmp_path):
+    """A run of string ids writes ``request_id`` as strings in each table that has it (empty
+    ones too); every other column keeps the schema's type."""
+    import pyarrow as pa
+
+    rec = Recorder(tmp_path, "run-1", {}, {"seed": 0}, types={"request_id": pa.string()})
+    rec.add("events", **{**event(0), "request_id": "trip-7"})
+    files = rec.finish()
+    having = [name for name, schema in SCHEMAS.items() if "request_id" in schema.names]
+    assert sorted(having) == ["assignments", "events", "tasks"]
+    for name in SCHEMAS:
+        got = pq.read_table(files[name]).schema.remove_metadata()
+        want = SCHEMAS[name].remove(SCHEMAS[name].get_field_index("seed")) \
+            if "seed" in SCHEMAS[name].names else SCHEMAS[name]
+        if name in having:
+            i = want.get_field_index("request_id")
+            assert want.field(i).type == pa.int64()
+            want = want.set(i, pa.field("request_id", pa.string()))
+        assert got.equals(want), name
+    assert pq.read_table(files["events"]).column("request_id").to_pylist() == ["trip-7"]

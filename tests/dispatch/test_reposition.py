@@ -18,7 +18,7 @@ from dispatch.run.runner import execute, run_one
 from dispatch.scenario.load import load_scenario
 
 TERMINAL = {"completed": "complete", "expired": "expire", "rejected": "reject",
-            "unreachable": "unreachable", "cancelled": "cancel", "failed": "failed"}
+            "unreachable": "unreachable", "cut_off": "cut_off", "failed": "failed"}
 #: 6 x 2 intersections, 200 m blocks at 10 m/s: an edge is 20 s. Node row * 6 + column at
 #: (200 column, 200 row). 600 m zones: columns 0-2 zone 0 (centre node 1), 3-5 zone 1 (node 4).
 GRID = 'network = "manhattan"\nblocks = [6, 2]\nblock = 200.0\nspeed = 10.0'

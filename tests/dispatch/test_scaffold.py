@@ -60,5 +60,5 @@ def test_new_refuses_bad_names_and_existing_folders(tmp_path):
     assert _dispatch("new", "allocator", "mine", "--out", tmp_path, env=env).returncode == 0
     proc = _dispatch("new", "allocator", "mine", "--out", tmp_path, env=env)
     assert proc.returncode == 2 and "exists" in proc.stderr
-    assert _dispatch("new", "allocator", "mine", "--out", tmp_path, "--force",
+    assert _dispatch("new", "allocator", "mine", "--out", tmp_path, "--overwrite",
                      env=env).returncode == 0

@@ -151,7 +151,7 @@ def test_changed_scenario_or_force_redoes_everything(small, tmp_path):
     out = tmp_path / "out"
     sweep(specs[:2], out, workers=1)
     assert [o.status for o in sweep(specs[:2], out, workers=1)] == ["skipped"] * 2
-    assert [o.status for o in sweep(specs[:2], out, workers=1, force=True)] == ["done"] * 2
+    assert [o.status for o in sweep(specs[:2], out, workers=1, overwrite=True)] == ["done"] * 2
     changed = scenario.with_name("changed.toml")
     changed.write_text(scenario.read_text().replace("duration = 300.0", "duration = 200.0"))
     specs2 = load_scenario(changed).runs()[:2]

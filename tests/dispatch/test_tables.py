@@ -51,7 +51,7 @@ def _summary(alloc: str, n: int, seed: int, space: str = "voxel") -> dict:
         "tasks_expired": 100,
         "tasks_rejected": 200,
         "tasks_unreachable": 0,
-        "tasks_cancelled": 45,
+        "tasks_cut_off": 45,
         "tasks_failed": 0,
         "sim_time": 86400.0,
         "comm_delay": 0.0,
@@ -97,6 +97,22 @@ def test_tables_fit_80_columns(kind):
         assert "12345" in text  # the widest numbers are whole
     else:
         assert "12345 released" in text and "Table" not in text.split("\n")[0]
+
+
+@pytest.mark.parametrize("kind", ["static", "road"])
+def test_titles_are_paragraphs_of_the_terminal_width_without_trailing_spaces(kind):
+    """A table's title is printed above it as a paragraph of the terminal's width (rich would
+    wrap it to the table's, 48 columns for Table III, and pad its lines with spaces)."""
+    runs = [dict(s, space="road") for s in SWEEP] if kind == "road" else SWEEP
+    lines = _render(runs).splitlines()
+    starts = [i for i, line in enumerate(lines)
+              if line.startswith(("Table I", "Trips,", "Shared rides,", "Energy,"))]
+    assert len(starts) == (1 if kind == "road" else 2), lines
+    for i in starts:
+        title = lines[i:next(j for j in range(i, len(lines))
+                             if lines[j].split()[:1] == ["allocator"])]
+        assert all(line == line.rstrip() for line in title), title
+        assert len(title) >= 2 and max(len(line) for line in title) > 70, title
 
 
 def test_static_and_dynamic_tables_say_what_they_measure():
@@ -174,7 +190,7 @@ def test_tables_and_analysis_share_one_gap_and_order():
 
 def test_trip_table_shows_cut_off_trips_and_fits_with_variant_labels():
     """The trip table has a column of the trips the run's end cut off (summary
-    ``tasks_cancelled``; served + rejected + cut off + failed add up to the trips), named so,
+    ``tasks_cut_off``; served + rejected + cut off + failed add up to the trips), named so,
     and fits 80 columns uncut with the longest labels (a swept batch window)."""
     rows = []
     for a, n, s in itertools.product(["local_hungarian", "magnnet_match", "fcfs"],
@@ -183,7 +199,7 @@ def test_trip_table_shows_cut_off_trips_and_fits_with_variant_labels():
             rows.append({**_summary("hungarian", n, s, "road"), "allocator": a,
                          "batch_window": window, "n_tasks": 1000, "tasks_completed": 900,
                          "tasks_rejected": 40, "tasks_expired": 20, "tasks_unreachable": 0,
-                         "tasks_cancelled": 38, "tasks_failed": 2})
+                         "tasks_cut_off": 38, "tasks_failed": 2})
     text = _render(rows)
     assert "…" not in text and max(map(len, text.splitlines())) <= 80
     line = next(ln for ln in text.splitlines() if ln.split()[:2] == ["local_hungarian", "30s"])
@@ -244,7 +260,8 @@ def test_tables_and_analysis_share_one_set_of_per_task_figures():
 
 
 ENERGY = {"kwh_drawn": 2400.0, "kwh_charged": 900.0, "charges": 37, "strandings": 1,
-          "soc_min": 0.123, "soc_end_mean": 0.456, "queue_seconds": 7200.0}
+          "soc_min": 0.123, "soc_end_mean": 0.456, "queue_seconds": 7200.0,
+          "kwh_auxiliary": 300.0}
 
 
 def test_one_road_run_says_cut_off_trips_and_its_energy():
@@ -255,9 +272,14 @@ def test_one_road_run_says_cut_off_trips_and_its_energy():
     text = " ".join(_render([s]).split())
     assert "12000 served (97.2 %), 45 cut off by the end of the run (still waiting or aboard)" \
         in text and "cancel" not in text
-    assert ("energy 2,400.0 kWh drawn (2.00 per vehicle), 900.0 kWh charged in 37 charges, "
-            "2.0 h queued; state of charge lowest 12.3%, mean at the end 45.6%; 1 vehicle "
-            "stranded") in text
+    # the driving part and the auxiliary load's apart (the kWh per km of driving is the first
+    # over the km); a summary written before the auxiliary column: no split
+    assert ("energy 2,400.0 kWh drawn (2.00 kWh per vehicle; 2,100.0 kWh driving, 300.0 kWh "
+            "the auxiliary load), 900.0 kWh charged in 37 charges, 2.0 h queued; state of "
+            "charge lowest 12.3%, mean at the end 45.6%; 1 vehicle stranded") in text
+    old = {k: v for k, v in s.items() if k != "kwh_auxiliary"}
+    assert "energy 2,400.0 kWh drawn (2.00 kWh per vehicle), 900.0 kWh charged" in " ".join(
+        _render([old]).split())
     plain = _render([_summary("hungarian", 1200, 0, "road")])
     assert "energy" not in plain and "kWh" not in plain
 

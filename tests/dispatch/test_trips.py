@@ -25,7 +25,7 @@ from tests.conftest import missing_data
 ROOT = Path(__file__).resolve().parents[2]
 TAXI = ROOT.parent / "shared" / "data" / "taxi" / "chicago_taxi_trips_sample.csv"
 TERMINAL = {"completed": "complete", "expired": "expire", "rejected": "reject",
-            "unreachable": "unreachable", "cancelled": "cancel", "failed": "failed"}
+            "unreachable": "unreachable", "cut_off": "cut_off", "failed": "failed"}
 
 
 def road_scenario(directory: Path, *, tasks: str, fleet: str = "agents = 4",
@@ -108,7 +108,7 @@ def test_every_trip_ends_in_exactly_one_terminal_state(runs, case):
     assert (rejected.agent_id == -1).all() and rejected.max_wait.notna().all()
     # summary counts match the tasks table
     states = tasks.state.value_counts().to_dict()
-    for state in ("completed", "expired", "rejected", "unreachable", "cancelled", "failed"):
+    for state in ("completed", "expired", "rejected", "unreachable", "cut_off", "failed"):
         assert s[f"tasks_{state}"] == states.get(state, 0), state
     assert s["n_tasks"] == len(tasks)
     assert s["total_cost"] == pytest.approx(tasks[tasks.agent_id >= 0].cost.sum())
@@ -134,7 +134,7 @@ def test_vehicle_distances_are_the_sum_of_shortest_legs(runs, case):
     metres = dijkstra(net.length, directed=True)
     tasks, veh = t["tasks"], t["vehicles"]
     node = {(x, y): i for i, (x, y) in enumerate(net.xy)}
-    assert s["tasks_cancelled"] == 0  # every leg driven to its end
+    assert s["tasks_cut_off"] == 0  # every leg driven to its end
     for v in veh.itertuples():
         here = node[(v.x0, v.y0)]
         empty = occupied = 0.0
