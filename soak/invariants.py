@@ -22,9 +22,11 @@ TOL = 1e-6
 #: wall-clock columns: the only ones two runs of one seed may differ in
 WALL_COLUMNS = {"alloc_seconds", "cost_seconds", "decide_seconds", "first_decision_seconds",
                 "agent_seconds"}
+#: each terminal state and its event (``cancelled`` / ``cancel``: what older versions wrote
+#: for ``cut_off``)
 TERMINAL_EVENT = {"completed": "complete", "expired": "expire", "rejected": "reject",
-                  "unreachable": "unreachable", "cancelled": "cancel", "failed": "failed",
-                  "declined": "decline"}
+                  "unreachable": "unreachable", "cut_off": "cut_off", "cancelled": "cancel",
+                  "failed": "failed", "declined": "decline"}
 #: events whose position is the vehicle's own (others give the task's pickup or a target)
 AT_VEHICLE = {"depart", "pickup", "dropoff", "complete", "idle", "charge_start", "charge_end",
               "queue", "stranded", "breakdown", "break_start", "break_end", "move", "wait"}
@@ -33,7 +35,8 @@ INVARIANTS = ("one_terminal_state", "pickup_not_early", "wait_limit", "delay_lim
               "promise_kept", "reachable", "assign_open_only", "summary_counts", "same_seed")
 SUMMARY_STATES = {"tasks_completed": "completed", "tasks_expired": "expired",
                   "tasks_rejected": "rejected", "tasks_unreachable": "unreachable",
-                  "tasks_cancelled": "cancelled", "tasks_failed": "failed",
+                  "tasks_cut_off": "cut_off", "tasks_cancelled": "cancelled",
+                  "tasks_failed": "failed",
                   "tasks_declined": "declined"}
 
 
@@ -239,7 +242,8 @@ def _promise(doc, tdoc, tables, tasks, events, vehicles):
     # the pickup), or aboard the vehicle that broke down (on_board = "fail")
     reopened = set(events.task_id[events.event == "reopen"])
     downs = events[events.event == "breakdown"]
-    broken = tasks[tasks.promised.astype(bool) & ~tasks.state.isin(["completed", "cancelled"])]
+    ended = ["completed", "cut_off", "cancelled"]
+    broken = tasks[tasks.promised.astype(bool) & ~tasks.state.isin(ended)]
     for t in broken.itertuples():
         named = t.task_id in reopened or bool(
             ((downs.agent_id == t.agent_id) & (downs.t <= t.closed_at + TOL)).any())

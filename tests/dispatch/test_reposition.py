@@ -286,7 +286,7 @@ def one_line_error(path: Path, error=ScenarioError):
 
         class Args:
             scenario = path
-            force = False
+            force = ignore_limits = False  # (the flag's name, and its older one)
             allocator = planner = agents = seed = duration = None
             capacity = batch_window = None  # the override options run, sweep and validate have
             overrides: list[str] = []
