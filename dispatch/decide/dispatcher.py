@@ -321,8 +321,8 @@ class Dispatcher:
         else:
             def vehicle_unchanged(a: int) -> bool:  # a vehicle of the decision, as it was then
                 v = by_id[a]
-                if a not in holding:  # (a standing one whose plan is as it was: it holds)
-                    return not v.busy or v.plan_version == p.versions.get(a)
+                if a not in holding:
+                    return not v.busy
                 task = self.operator.holds(v)
                 return task is not None and task.id == holding[a] \
                     and task.state is TaskState.ASSIGNED

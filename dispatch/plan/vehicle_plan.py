@@ -35,12 +35,10 @@ def starts_now(heading_none, free_at, now: float):
 
 def fixed_version(v, now: float) -> int | None:
     """``v``'s ``plan_version`` where an insertion planned at ``now`` still holds later while
-    the version stays: the vehicle stands (an empty plan, or a stop it is serving); None where
-    it drives (a re-route from where it got to costs more than the plan said) or its times
-    start at ``now`` (:func:`starts_now`) and move with the clock."""
-    if v.heading is not None or (v.plan and starts_now(True, v.free_at, now)):
-        return None
-    return v.plan_version
+    the version stays: the vehicle is idle (an empty plan: the insertion sets it out from where
+    it stands); None where it has a plan (it drives on, or serves a stop, and an insertion
+    planned around it goes stale: a re-route from where it got to costs more than planned)."""
+    return None if v.plan or v.heading is not None or v.serving is not None else v.plan_version
 
 
 def request_stops(task: Task, service: float) -> list[Stop]:
