@@ -140,6 +140,30 @@ def undeclared_variant(name: str) -> str | None:
                                     "no variants")
 
 
+def unknown_parameter(cls, params) -> tuple[str, str] | None:
+    """The first name of ``params`` (a mapping or pairs) that the constructor of ``cls`` does
+    not take, and why in words (``takes no parameter 'x' (did you mean 'y'?); its parameters:
+    ...``, to follow the plugin's name); None where it takes them all, takes ``**kwargs``, or
+    has no signature to read."""
+    import inspect
+
+    try:
+        sig = inspect.signature(cls)
+    except (TypeError, ValueError):
+        return None
+    ps = list(sig.parameters.values())
+    if any(p.kind is p.VAR_KEYWORD for p in ps):
+        return None
+    names = [p.name for p in ps if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
+    for k in dict(params):
+        if k not in names:
+            close = difflib.get_close_matches(str(k), names, n=1, cutoff=0.6)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            return str(k), (f"takes no parameter {str(k)!r}{hint}; its parameters: "
+                            f"{', '.join(names) or 'none'}")
+    return None
+
+
 def unknown(kind: str, name: str) -> str:
     """``unknown allocator 'hungrian' (did you mean 'hungarian'?); installed allocators: ...``"""
     plugins = available(kind)

@@ -50,6 +50,9 @@ class Limits:
     agents: int = 100_000  # vehicles of a run
     runs: int = 10_000  # runs of a sweep
     road_nodes: int = 1_000_000  # intersections of a generated manhattan grid
+    #: calls of one periodic process (repositioner, charging strategy, sizer, state-of-charge
+    #: samples) over a run: a shorter period would loop in (almost) no simulated time
+    periodic_calls: int = 2_000_000
 
 
 LIMITS = Limits()

@@ -89,6 +89,7 @@ from dispatch.heap import keep_large_blocks
 from dispatch.plan.operator import KEEP
 from dispatch.plan.stops import DROPOFF, PICKUP, PlannedStop
 from dispatch.plan.tasks import OPEN, TaskBook, TaskState
+from dispatch.plan.vehicle_plan import fixed_version
 
 if TYPE_CHECKING:
     import simpy
@@ -134,6 +135,8 @@ class _Pending:
     #: task id -> the meeting points it was planned at (one point per request; see
     #: :attr:`dispatch.decide.pipeline.Decision.meetings`)
     meetings: dict = field(default_factory=dict)
+    #: vehicle id -> its ``plan_version`` at the decision (the vehicles of its pairs)
+    versions: dict = field(default_factory=dict)
 
 
 class Wakeup:
@@ -232,6 +235,9 @@ class Dispatcher:
         self._pending = _Pending(problem, allocation, d.requests, d.cost_s, decide_s, delay,
                                  n_comp, d.holder, answer.index, answer.routes, d.inserts,
                                  d.cut, d.meetings)
+        if delay > 0:  # (the hand-out tells a stale insertion by them)
+            self._pending.versions = {a: fixed_version(self.fleet.by_id[a], self.env.now)
+                                      for a, _ in allocation.pairs}
         if delay <= 0:
             self._hand_out()
 
@@ -294,6 +300,7 @@ class Dispatcher:
         holding = {a: t for t, a in p.holder.items()}  # vehicle -> its task at the decision
         allocation = p.allocation
         cost = p.problem.cost
+        ats: dict = {}  # the slow path's pairs with their insertions
         if not holding and (p.delay <= 0 or all(by_task[t].state is OPEN and not by_id[a].busy
                                                 for a, t in allocation.pairs)):
             # (without latency nothing changed since the decision; with it, a pooled pair
@@ -330,9 +337,12 @@ class Dispatcher:
             if p.routes:  # a route planned before the deliberation is stale: dropped
                 handed = tuple((a, t) for a, t in handed if a not in p.routes)
             row, col = finders(p.problem)
-            if p.inserts:  # a pooled pair is stale once its vehicle has moved on: dropped
+            if p.inserts:  # a pair planned into a plan that changed since is stale: dropped
+                # (not one into a plan as it was: else such decisions came back forever)
                 handed = tuple((a, t) for a, t in handed
-                               if (row(a), col(t)) not in p.inserts)
+                               if (row(a), col(t)) not in p.inserts
+                               or by_id[a].plan_version == p.versions.get(a))
+                ats = {(a, t): p.inserts.get((row(a), col(t))) for a, t in handed}
             if self.offering is not None:  # (plain pairs only: routes, insertions dropped)
                 index = [(row(a), col(t)) for a, t in handed]
                 handed, _ = self._offer(p, handed, index, {})
@@ -345,7 +355,7 @@ class Dispatcher:
         self._recorded(p, allocation, pair_cost)
         if not holding:
             for (aid, tid), c in zip(handed, pair_cost):  # allocation.pairs is handed
-                self.operator.assign(by_task[tid], by_id[aid], c,
+                self.operator.assign(by_task[tid], by_id[aid], c, ats.get((aid, tid)),
                                      meeting=p.meetings.get(tid, KEEP))
             return
         self._reassign(p, holding, handed, pair_cost, vehicle_unchanged)

@@ -113,6 +113,19 @@ def direct_times(book: TaskBook, free: Planner, seen: int) -> int:
     return book.released - 1
 
 
+def rides(planner, tasks) -> np.ndarray | None:
+    """Each trip's drive from pickup to drop-off at this hour (0 for a point task); None on a
+    planner without congestion, where it is the trip's free-flow ``direct_time``."""
+    if planner.free_flow is planner:
+        return None
+    out = np.zeros(len(tasks))
+    trips = [k for k, t in enumerate(tasks) if t.dropoff is not None]
+    if trips:
+        out[trips] = planner.between([tasks[k].loc for k in trips],
+                                     [tasks[k].dropoff for k in trips], pairwise=True)
+    return out
+
+
 def candidates(fleet: Fleet, book: TaskBook, held: dict, pooled: bool
                ) -> tuple[np.ndarray, list[Task], dict[int, int]]:
     """``(slots, requests, holder)`` of a decision: the fleet positions of its vehicles,
@@ -362,7 +375,7 @@ class Pipeline:
             cost = self.energy_filter(cost, drive, idle, open_tasks)
         if self.shifts is not None:  # shifts: a plan ending after the shift and grace: inf
             cost = self.shifts.limit(cost, drive, now, idle, open_tasks, inserts,
-                                     plans=self.plans)
+                                     plans=self.plans, ride=rides(self.planner, open_tasks))
         cost_s = time.perf_counter() - t0
         self.tally.cost_seconds += cost_s
         if servable is not None:

@@ -257,11 +257,14 @@ class Shifts:
             self.until[k] = -math.inf if (d.ended or not d.on or d.home) else d.until
 
     def limit(self, cost: np.ndarray, drive: np.ndarray, now: float, slots: np.ndarray,
-              tasks: list, inserts, *, plans: bool) -> np.ndarray:
+              tasks: list, inserts, *, plans: bool, ride: np.ndarray | None = None
+              ) -> np.ndarray:
         """``cost`` with ``inf`` where vehicle ``slots[i]`` would complete its plan's last
         stop after its shift's end plus the grace with request ``j`` (see the module);
         ``drive``: the seconds from each vehicle to each pickup; ``inserts``: where a busy
-        vehicle's stops go (:class:`dispatch.decide.plan_costs.Inserts`)."""
+        vehicle's stops go (:class:`dispatch.decide.plan_costs.Inserts`); ``ride``: each
+        request's drive to its drop-off at this hour (congestion; None: its free-flow
+        ``direct_time``)."""
         lim = self.until[slots]
         if not (lim < math.inf).any() or not cost.size:
             return cost
@@ -269,9 +272,13 @@ class Shifts:
         point = np.array([t.dropoff is None for t in tasks])
         pd = np.array([0.0 if t.dropoff is None or t.direct_time != t.direct_time
                        else t.direct_time for t in tasks])
+        if ride is not None:
+            pd = np.where(point, 0.0, ride)
         svc_p = np.where(point, svc, 0.0)
         svc_d = np.where(point, 0.0, svc)
-        end = now + drive + (svc_p + pd + svc_d)[None, :]
+        # a booked pickup waits for its requested departure (dispatch.decide.prebook)
+        ep = np.array([t.earliest_pickup for t in tasks])
+        end = np.maximum(now + drive, ep[None, :]) + (svc_p + pd + svc_d)[None, :]
         if plans:
             fleet, vs = self.fleet, self.fleet.vehicles
             planned = fleet.busy_mask[slots]
@@ -335,8 +342,10 @@ class Shifts:
             self._go_home(v)
 
     def _free(self, v: Vehicle) -> bool:
-        """``v`` has nothing left to do (its plan empty, or a repositioning move)."""
-        return not v.failed and v.serving is None and (
+        """``v`` has nothing left to do (its plan empty, or a repositioning move) and is not
+        on a break (a break's stop leaves the plan when it starts: the drive home waits for
+        its end, whose ``idle`` event sends it)."""
+        return not v.failed and v.serving is None and v.break_since is None and (
             not v.plan or (len(v.plan) == 1 and v.plan[0].kind is REPOSITION))
 
     def _idle(self, ev) -> None:

@@ -84,6 +84,7 @@ def plan_break(v, due: float, duration: float, now: float, driver
     stops = v.plan.stops
     if any(s.kind is BREAK or s.kind is DEPOT for s in stops):
         return None
+    until = math.inf if v.duty is None else v.duty.until  # (dispatch.fleet.shifts)
     times = v.plan.times(now)
     n = len(stops)
     for k in range(n + 1):
@@ -104,7 +105,9 @@ def plan_break(v, due: float, duration: float, now: float, driver
                 _drive(driver, loc, stops[0].loc) if k == 0 else stops[k].leg)
             push = nxt - times[k]
             after = pushed(times, stops, k, k, push, push)[k:]
-            if any(t > s.latest + TOL for t, s in zip(after, stops[k:])):
+            last = stops[-1]  # (and the plan still ends by its shift's end plus grace)
+            if any(t > s.latest + TOL for t, s in zip(after, stops[k:])) or leave(
+                    after[-1], last.earliest, last.service) > until + TOL:
                 continue
         stop = Stop(BREAK, None, loc, 0, math.inf, False, earliest=due, service=duration,
                     holds_seats=True)

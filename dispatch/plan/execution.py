@@ -12,6 +12,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, Protocol
 
+import numpy as np
+
 from dispatch.plan.stops import PICKUP
 from dispatch.plan.tasks import Task
 from dispatch.plan.vehicle_plan import request_stops
@@ -70,8 +72,10 @@ class PlanExecution:
             times = [at.pickup_at, at.dropoff_at][:len(new)]
         else:  # (legs only matter to later insertions: pooled runs always pass ``at``)
             new[0].leg = op.driver.leg_seconds(path)
-            if len(new) > 1:
-                new[1].leg = task.direct_time
+            if len(new) > 1:  # the drive at this hour, as insertions time it (congestion)
+                planner = op.driver.planner
+                new[1].leg = task.direct_time if planner.free_flow is planner else float(
+                    np.asarray(planner.between([task.loc], [task.dropoff], pairwise=True))[0])
         v.plan.replace(new, times, now)
         op.fleet.refresh(v)
         v.proc = op.env.process(op.drive(v, path, new[0]))

@@ -24,8 +24,9 @@ if TYPE_CHECKING:
     from dispatch.decide.tally import Blame
     from dispatch.plan.tasks import TaskBook
 
-__all__ = ["check_repositioner", "check_runs", "describe", "make_acceptor", "make_charger",
-           "make_plugin", "make_repositioner", "make_sizer", "offering_for", "travel_times_needed"]
+__all__ = ["UnknownParameter", "check_repositioner", "check_runs", "describe", "make_acceptor",
+           "make_charger", "make_plugin", "make_repositioner", "make_sizer", "offering_for",
+           "travel_times_needed"]
 
 
 def make_plugin(kind: str, name: str, params, *args):
@@ -60,10 +61,23 @@ def check_variant(sc: Scenario, name: str, key: str = "dispatch.allocator") -> N
                                       f"[dispatch.allocator_params.\"{name}\"] table to make one")
 
 
+class UnknownParameter(PluginError):
+    """A scenario parameter the plugin's constructor does not take (a typo): ``key.param:
+    reason``, one line (``key``: the table it was read from)."""
+
+    def __init__(self, key: str, param: str, reason: str) -> None:
+        super().__init__(f"{key}.{param}: {reason}")
+        self.param, self.reason = param, reason
+
+
 def _construct(kind: str, name: str, params, args, key: str):
-    """``make_plugin`` for any kind, the parameters read from the scenario table ``key``."""
+    """``make_plugin`` for any kind, the parameters read from the scenario table ``key``; a
+    parameter its constructor does not take is an :class:`UnknownParameter`."""
     cls = registry.load(kind, name)
     params = dict(params)
+    bad = registry.unknown_parameter(cls, params)
+    if bad is not None:
+        raise UnknownParameter(key, bad[0], f"{kind} {name!r} {bad[1]}")
     try:
         return cls(*args, **params)
     except Exception as e:  # a plugin's constructor may raise anything
@@ -163,6 +177,14 @@ def check_runs(sc: Scenario, planners, repositioners=(), allocators=()) -> None:
     for name in repositioners:
         check_repositioner(sc, name)
     _check_breaks(sc, allocators)
+    for name in allocators if sc.dispatch.reassign else ():
+        if registry.declaration("allocator", name).multi_request:
+            # (its routes are handed out only where no vehicle holds a task: with one that
+            # does, every decision was dropped and came back at the same instant, forever)
+            raise ScenarioError(sc.path, "dispatch.reassign",
+                                f"re-assignment before pickup gives single tasks up; "
+                                f"allocator {name!r} routes several requests per vehicle "
+                                f"(multi_request): they do not go together")
     need = travel_times_needed(sc, allocators)
     for name in planners:
         caps = registry.declaration("planner", name)

@@ -88,16 +88,19 @@ def build_plugins(sc, specs, *, ignore_limits: bool = False) -> None:
     rejects stops here with one line, not in the middle of a sweep; place the first run's fleet
     when a start file places it (its rows are checked against the space)."""
     from dispatch.api.space import space_for
-    from dispatch.run.plugins import make_plugin, make_repositioner
+    from dispatch.run.plugins import UnknownParameter, make_plugin, make_repositioner, make_sizer
 
     def build(kind, name, params, *args):
         try:
             return make_plugin(kind, name, params, *args)
         except PluginError as e:  # name the file too: "file: key: reason"
             tables = dict(sc.dispatch.allocator_tables) if kind == "allocator" else {}
-            own = [k for k in (name, name.partition(":")[0]) if k in tables]
+            own = [k for k in (name, name.partition(":")[0]) if k in tables
+                   and (not isinstance(e, UnknownParameter) or e.param in dict(tables[k]))]
             key = f"dispatch.{kind}_params" + ("" if not own else f'."{own[0]}"'
                                                if ":" in own[0] else f".{own[0]}")
+            if isinstance(e, UnknownParameter):  # (a typo: the key is the parameter's)
+                raise PluginError(f"{sc.path}: {key}.{e.param}: {e.reason}") from e
             raise PluginError(f"{sc.path}: {key}: {e}") from e
 
     for name in sorted({s.allocator for s in specs}):
@@ -105,6 +108,11 @@ def build_plugins(sc, specs, *, ignore_limits: bool = False) -> None:
     for name in sorted({s.reposition for s in specs}):
         try:
             make_repositioner(sc, name)
+        except PluginError as e:
+            raise PluginError(f"{sc.path}: {e}") from e
+    if sc.fleet.sizing is not None:  # [fleet] sizing: the strategy and its parameters
+        try:
+            make_sizer(sc)
         except PluginError as e:
             raise PluginError(f"{sc.path}: {e}") from e
     if sc.charging is not None:  # [fleet.energy]: the charging strategy

@@ -198,3 +198,33 @@ def check_planner_budget(sc, specs, planner, name: str) -> None:
         if reason:
             raise ScenarioError(sc.path, "dispatch.planner_params",
                                 f"planner {name!r}: {reason}; {LIMITS_HINT}")
+
+
+def periods(sc) -> list[tuple[str, float]]:
+    """``(key, seconds)`` of each process a run of ``sc`` calls periodically: the repositioner,
+    the charging strategy, the state-of-charge samples and the ``utilization`` sizer (a sizer
+    of one's own sets its interval in code, checked positive by ``dispatch check``)."""
+    out = []
+    if sc.reposition.policy != "stay":
+        out.append(("reposition.interval", sc.reposition.interval))
+    if sc.charging is not None:
+        out.append(("charging.interval", sc.charging.interval))
+    if sc.fleet.energy is not None:
+        out.append(("fleet.energy.sample", sc.fleet.energy.sample))
+    interval = dict(sc.fleet.sizing_params).get("interval")
+    if sc.fleet.sizing not in (None, "fixed") and isinstance(interval, (int, float)) \
+            and not isinstance(interval, bool):
+        out.append(("fleet.sizing_params.interval", float(interval)))
+    return out
+
+
+def check_periodic(sc, bound: int, refuse) -> None:
+    """Refuse (``refuse(key, what)``) a period so short that its process would be called more
+    than ``bound`` times over the run: a tiny period loops in (almost) no simulated time, so
+    the run never ends."""
+    for key, seconds in periods(sc):
+        calls = sc.duration / seconds if seconds > 0 else float("inf")
+        if not calls <= bound:
+            raise refuse(key, f"{seconds:g} s: about {calls:.3g} calls in {sc.duration:g} s "
+                              f"(more than {bound:,})")
+

@@ -307,7 +307,7 @@ def _check_prebooking(path: Path, world: WorldConfig, tasks: TaskConfig,
 def _check_pooling(path: Path, world: WorldConfig, fleet: FleetConfig, tasks: TaskConfig,
                    disp: DispatchConfig) -> None:
     """Shared rides (a capacity above 1) and drop-off limits are for road networks; a pooled
-    fleet decides with exact costs and without re-assignment before pickup."""
+    fleet, or riders who walk, decide without re-assignment before pickup."""
     pooled = fleet.pooled
     pooling = "pooling" in space_class(world.space).features
     if not pooling:
@@ -327,6 +327,12 @@ def _check_pooling(path: Path, world: WorldConfig, fleet: FleetConfig, tasks: Ta
     if pooled and disp.reassign:
         raise ScenarioError(path, "dispatch.reassign", "re-assignment before pickup is for "
                                                        "vehicles of capacity 1")
+    if tasks.walking and disp.reassign:
+        # a decision hands meeting points out as insertions, which re-assignment's hand-out
+        # drops as stale: the same decision came back at the same instant, forever
+        raise ScenarioError(path, "dispatch.reassign", "re-assignment before pickup and "
+                                                       "meeting points (max_walk) do not go "
+                                                       "together")
     trips = tasks.trips
     if trips is not None and trips.passengers is not None and len(trips) and not pooling \
             and int(trips.passengers.max()) > 1:
@@ -450,9 +456,10 @@ def _parse_empirical(t: Table, tasks: TaskConfig, world: WorldConfig,
 
 
 def check_limits(sc: Scenario, specs: list[RunSpec], limits: Limits = LIMITS) -> None:
-    """Refuse runs that would not finish or not fit in memory (``--ignore-limits`` skips this): too
-    many runs, voxel cells, vehicles, static tasks, releases of a generated source, or
-    intersections of a generated grid. Each refusal names the key, the amount and the bound."""
+    """Refuse runs that would not finish or not fit in memory (``--ignore-limits`` skips this):
+    too many runs, voxel cells, vehicles, static tasks, releases of a generated source,
+    intersections of a generated grid, or calls of a periodic process (a period too short).
+    Each refusal names the key, the amount and the bound."""
 
     def refuse(key: str, what: str) -> ScenarioError:
         return ScenarioError(sc.path, key, f"{what}; {LIMITS_HINT}")
@@ -486,8 +493,9 @@ def check_limits(sc: Scenario, specs: list[RunSpec], limits: Limits = LIMITS) ->
                                             f"{limits.releases:,})")
     elif t.trips is not None and len(t.trips) > limits.releases:
         raise refuse("tasks.trace", f"{len(t.trips):,} trips (more than {limits.releases:,})")
-    from dispatch.scenario.budget import check_work  # work bounds: runs that would not finish
+    from dispatch.scenario.budget import check_periodic, check_work  # runs that would not end
 
+    check_periodic(sc, limits.periodic_calls, refuse)
     check_work(sc, specs, refuse)
 
 

@@ -400,6 +400,9 @@ def parse_acceptor(a: Table, pricing):
         cls = registry.load("acceptor", name)
     except PluginError as e:
         raise a.fail("name", str(e)) from None
+    bad = registry.unknown_parameter(cls, params)
+    if bad is not None:  # (a typo: one line naming the key, not Python's TypeError)
+        raise a.fail(f"{name}.{bad[0]}", f"acceptor {name!r} {bad[1]}")
     try:
         made = cls(**dict(params))
     except (TypeError, ValueError) as e:
