@@ -328,8 +328,7 @@ def _check_pooling(path: Path, world: WorldConfig, fleet: FleetConfig, tasks: Ta
         raise ScenarioError(path, "dispatch.reassign", "re-assignment before pickup is for "
                                                        "vehicles of capacity 1")
     if tasks.walking and disp.reassign:
-        # a decision hands meeting points out as insertions, which re-assignment's hand-out
-        # drops as stale: the same decision came back at the same instant, forever
+        # meeting points go out as insertions, which re-assignment drops as stale: a loop
         raise ScenarioError(path, "dispatch.reassign", "re-assignment before pickup and "
                                                        "meeting points (max_walk) do not go "
                                                        "together")
