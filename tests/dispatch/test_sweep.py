@@ -242,7 +242,8 @@ def test_cli_sweep_bad_plugin_parameters_stop_before_any_run(make_scenario, tmp_
     assert proc.returncode == 2, proc.stderr
     assert "Traceback" not in proc.stdout + proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1
-    assert "planner 'astar'" in proc.stderr and "no_such_parameter = 1" in proc.stderr
+    assert "dispatch.planner_params.no_such_parameter: planner 'astar' takes no parameter" \
+        in proc.stderr
     assert not out.exists()
 
 
