@@ -216,10 +216,3 @@ def travel_costs(allocation, problem):
     reqs = tuple(_replace(r, cost=float(problem.cost[row[r.agent_id], col[r.task_id]]))
                  for r in allocation.requests)
     return _replace(allocation, requests=reqs)
-
-
-def main(argv=None) -> int:
-    """``dispatch train value`` (:mod:`learning.value_train`)."""
-    from learning.value_train import main as train_main
-
-    return train_main(argv)

@@ -37,7 +37,7 @@ def test_learning_uses_only_public_modules_and_names_of_the_kernel():
 
 def test_the_value_trainer_is_the_learning_module_and_its_data_ship_with_it():
     meta = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
-    assert meta["project"]["entry-points"]["dispatch.trainers"]["value"] == "learning.value"
+    assert meta["project"]["entry-points"]["dispatch.trainers"]["value"] == "learning.value_train"
     assert "learning*" in meta["tool"]["setuptools"]["packages"]["find"]["include"]
     assert meta["tool"]["setuptools"]["package-data"]["learning"] == ["data/values/*"]
     assert (ROOT / "learning" / "data" / "values" / "chicago_n500.npz").is_file()
