@@ -29,18 +29,7 @@ from dispatch.config.world import (MAX_AXIS_CELLS, ROAD_KEYS, VOXEL_KEYS, Obstac
 from dispatch.errors import PluginError
 from dispatch.files.empirical import load_factors
 from dispatch.files.failures import read_failures
-from dispatch.scenario.toml_table import Table, did_you_mean
-
-
-def _refuse_unknown_world_key(w: Table) -> None:
-    """A key neither kind of world knows, refused with the closest of both kinds' keys (a
-    misspelt ``network`` leaves a table that looks like a voxel world's)."""
-    voxel, road = {*VOXEL_KEYS, "physics"}, {*ROAD_KEYS, "edge_events", "congestion", "physics"}
-    unknown = sorted(set(w.data) - voxel - road)
-    if unknown:
-        raise w.fail(unknown[0], f"unknown key{did_you_mean(unknown[0], voxel | road)} (known "
-                                 f"keys here: a voxel world's {', '.join(sorted(voxel))}; a road "
-                                 f"network's {', '.join(sorted(road))})")
+from dispatch.scenario.toml_table import Table
 
 
 def parse_world(w: Table, path: Path) -> WorldConfig:
@@ -69,7 +58,9 @@ def parse_world(w: Table, path: Path) -> WorldConfig:
         roads = RoadConfig(network=network, base=path.parent.resolve(), blocks=tuple(blocks),
                            block=block, speed=speed, congestion=_parse_congestion(w, network))
         return WorldConfig(roads=roads, physics=bool(physics), edge_events=edge_events)
-    _refuse_unknown_world_key(w)
+    # a misspelt ``network`` leaves a table that looks like a voxel world's: name the closest
+    # of both kinds' keys (road keys are then refused just below, with their reason)
+    w.expect({*VOXEL_KEYS, *ROAD_KEYS, "edge_events", "congestion", "physics"})
     for k in (*ROAD_KEYS, "edge_events", "congestion"):
         if k in w.data:
             raise w.fail(k, "describes a road network; set world.network to use one")
