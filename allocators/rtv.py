@@ -515,8 +515,8 @@ class _Batch:
 
     def _reorder_arrays(self, flat: list, src: list, rem: np.ndarray) -> None:
         """What :func:`allocators._rtv_kernel.best_orders` needs besides to reorder: each plan
-        stop's pickup in the plan (``p_pred``), the drive from its vehicle to it (``vp``), the drives
-        between the stops of each plan (``poff``, ``ppa``)."""
+        stop's pickup in the plan (``p_pred``), the drive from its vehicle to it (``vp``), the
+        drives between the stops of each plan (``poff``, ``ppa``)."""
         travel = self.problem.travel
         plocs = [s.loc for s in flat]
         owner = np.repeat(np.arange(self.nv), np.diff(self.off))
