@@ -169,3 +169,25 @@ def test_credit_must_match_the_critic():
         collect(_model("game"), game, sampler, 2, {}, cfg=PPOConfig(credit="agent"))
     with pytest.raises(ValueError, match="needs a critic with one value "):
         collect(_model("game", agent_values=True), game, sampler, 2, {}, cfg=PPOConfig())
+
+
+@pytest.mark.parametrize("team_weight", [0.0, 0.5, 1.0])
+def test_rounds_reward_mixes_own_and_team_as_configured(team_weight):
+    """In the rounds environment each agent trains on ``(1 - w) own + w team / N``: two agents
+    win two tasks and a third asks for a task already asked for (a conflict)."""
+    from allocators.magnnet.ppo_env import ENVS, RoundsEnv
+
+    cost = np.array([[[2.0, 8.0, 5.0], [6.0, 3.0, 5.0], [1.0, 9.0, 9.0]]])
+    env = RoundsEnv(1, 3, 3)
+    env.load([0], cost, np.ones((1, 3), bool))
+    probe = RoundsEnv(1, 3, 3)
+    probe.load([0], cost, np.ones((1, 3), bool))
+    actions = np.array([[1, 2, 1]])  # agents 0 and 2 ask for task 0 (2 wins), 1 for task 1
+    own, _, _ = probe.step(actions)
+    cfg = PPOConfig(env="rounds", credit="agent", team_weight=team_weight)
+    run = ENVS["rounds"].running(env)
+    r, acted, _, _ = ENVS["rounds"].step(env, torch.from_numpy(actions), cfg, run)
+    want = (1 - team_weight) * own + team_weight * own.sum() / 3
+    np.testing.assert_allclose(r.numpy(), want.astype(np.float32), rtol=1e-6)
+    assert acted.all() and run[0] == pytest.approx(own.sum())
+    assert own[0, 0] < 0 < own[0, 2]  # both asked for task 0 and paid; only the winner won
