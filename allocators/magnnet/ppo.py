@@ -35,9 +35,10 @@ What differs between the variants is three explicit options of :class:`PPOConfig
   the critic (so an untrained critic does not undo the warm start).
 
 When :func:`train` gets a ``validate`` function (held-out training instances, never the
-evaluation ones), the weights that validate best are kept. The two environments draw their
-random numbers as their trainers always did, so a seed gives the checkpoints it gave before
-the trainers were one.
+evaluation ones), the weights that validate best are kept. Each environment draws its random
+numbers in one fixed order (instances from ``numpy``'s generator seeded with ``seed``; actions
+and minibatch orders from torch's global generator in the game, from the trainer's own in the
+rounds environment), so one seed trains to the same weights every time.
 """
 
 from __future__ import annotations
