@@ -1,7 +1,7 @@
 """The compiled part of :mod:`allocators.rtv`: the best stop order of a group of new requests on
 one vehicle (a depth-first search over every order of the group's stops merged into the
-vehicle's plan, the plan's own order kept: :func:`best_orders`; or over every order of the
-plan's stops and the group's together: :func:`best_orders_any`), for many (vehicle, group)
+vehicle's plan, the plan's own order kept; or, with ``reorder``, over every order of the
+plan's stops and the group's together: :func:`best_orders`), for many (vehicle, group)
 candidates in one call.
 
 The schedule is the kernel's one rule (:mod:`dispatch.plan.stops`, compiled in
@@ -37,24 +37,38 @@ INF = np.inf
 
 @jit
 def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, p_svc, p_eta,
-                p_drop, p_e, pp, vn, pn, np_, nn, r_pax, r_lp, r_ld, r_rel, r_direct, r_hasdrop,
-                r_e, until, old_end, svc, objective, budget, tol, out_cost, out_order,
-                out_cut, out_end):  # pragma: no cover - compiled
+                p_drop, p_e, pp, p_pred, vp, poff, ppa, vn, pn, np_, nn, r_pax, r_lp, r_ld,
+                r_rel, r_direct, r_hasdrop, r_e, until, old_end, svc, objective, budget, tol,
+                reorder, out_cost, out_order, out_cut, out_end):  # pragma: no cover - compiled
     """For each candidate ``g``: vehicle ``gveh[g]`` (row of the per-vehicle arrays) and the
     requests ``groups[g, :]`` (indices of the batch's requests, ``-1`` padded): the cheapest
     feasible order (``out_cost[g]``, ``inf`` if none; ``out_order[g, :]`` its codes, ``-99``
     padded; ``out_end[g]`` when that order leaves its last stop). ``out_cut[g]`` is True when
     the search stopped after ``budget`` nodes (the answer is then the best found, maybe none).
 
+    ``reorder`` False: the group's stops merged into the plan, the plan's own order kept (at
+    each step the next stop is the plan's next one or one of the group's). True: every order
+    of the plan's stops and the group's (Alonso-Mora et al.'s whole-trip routing), each pickup
+    before its drop-off (a plan's drop-off after its pickup where that is in the plan too:
+    ``p_pred[s]``, the flat index of the pickup, or ``-1``). Same schedule, limits and costs;
+    the search tries the plan's stops first, then the group's in their order, so ties and a
+    cut search end alike in both.
+
     Vehicle ``j``: it can leave at ``start[j]``; reaching its plan's first stop first it arrives
     at ``first_eta[j]`` (the kernel's planned time); ``load[j]`` on board, ``cap[j]`` seats;
     plan stops ``off[j]:off[j + 1]`` of the flat arrays (passengers, limit, service,
-    planned arrival, is a drop-off, earliest); ``pp[s]`` drive from plan stop ``s`` to ``s + 1``;
-    ``old_end[j]`` when its plan ends now, ``until[j]`` when it must end at the latest.
-    ``r_e[r]``: the earliest start of request ``r``'s pickup (``-inf``: open). Drives:
-    ``vn[j, x]`` vehicle -> new stop ``x`` (``2 r`` pickup, ``2 r + 1`` drop-off of request
-    ``r``), ``pn[s, x]`` plan stop -> new stop, ``np_[x, s]`` new stop -> plan stop,
-    ``nn[x, y]`` between new stops."""
+    planned arrival, is a drop-off, earliest); ``old_end[j]`` when its plan ends now,
+    ``until[j]`` when it must end at the latest. ``r_e[r]``: the earliest start of request
+    ``r``'s pickup (``-inf``: open). Drives: ``vn[j, x]`` vehicle -> new stop ``x`` (``2 r``
+    pickup, ``2 r + 1`` drop-off of request ``r``), ``pn[s, x]`` plan stop -> new stop,
+    ``np_[x, s]`` new stop -> plan stop, ``nn[x, y]`` between new stops. Between the plan's
+    stops: kept order, ``pp[s]`` from plan stop ``s`` to ``s + 1``; reordered, any other stop
+    than the first may come first, reached at ``start[j]`` + ``vp[s]`` (the drive from where
+    the vehicle is, as the kernel re-routes a vehicle whose first stop changes: it finishes
+    the edge it is on, then drives there), and ``ppa[poff[j] + u * n + w]`` drives from the
+    plan's ``u``-th to its ``w``-th stop (``n`` stops). The arrays one mode does not read may
+    be empty. Reordered, a vehicle's plan and group together hold at most 62 stops (the bits
+    of the search's masks; the caller keeps longer plans in their order)."""
     G, K = groups.shape
     L = out_order.shape[1]
     # per-depth state
@@ -62,8 +76,9 @@ def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, 
     st_occ = np.empty(L + 1, np.int64)
     st_cost = np.empty(L + 1)
     st_pos = np.empty(L + 1, np.int64)  # -1 start; 0.. plan stop (flat); -2 - x new stop x
-    st_next = np.empty(L + 1, np.int64)  # next plan stop (flat index)
-    st_mask = np.empty(L + 1, np.int64)  # new stops visited (bit 2i, 2i+1)
+    st_next = np.empty(L + 1, np.int64)  # kept order: the plan's next stop (flat index)
+    # stops visited: bit boff + x new stop x; reordered, bit u the plan's u-th stop too
+    st_mask = np.empty(L + 1, np.int64)
     st_try = np.empty(L + 1, np.int64)  # next choice to try at this depth
     path = np.empty(L, np.int64)
     for g in range(G):
@@ -74,12 +89,15 @@ def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, 
         a, b = off[j], off[j + 1]
         nplan = b - a
         total = nplan + 2 * k
-        full = 0
-        init_mask = 0
+        # choices at a depth: the plan's stops (kept order: its next one only), then the new
+        nfirst = nplan if reorder else 1
+        boff = nplan if reorder else 0
+        choices = nfirst + 2 * k
+        full = (np.int64(1) << np.int64(boff + 2 * k)) - 1
+        init_mask = np.int64(0)
         for i in range(k):
-            full |= 3 << (2 * i)
             if not r_hasdrop[groups[g, i]]:
-                init_mask |= 2 << (2 * i)
+                init_mask |= np.int64(1) << np.int64(boff + 2 * i + 1)
                 total -= 1
         best = INF
         best_end = INF
@@ -95,20 +113,32 @@ def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, 
         d = 0
         while d >= 0:
             c = st_try[d]
-            if c > 2 * k or d == total:
+            if c >= choices or d == total:
                 d -= 1
                 continue
             st_try[d] = c + 1
             pos = st_pos[d]
             t0 = st_time[d]
-            if c == 0:  # the plan's next stop
-                s = st_next[d]
-                if s >= b:
-                    continue
+            mask = st_mask[d]
+            if c < nfirst:  # a stop of the plan
+                if reorder:
+                    s = a + c
+                    if mask & (np.int64(1) << np.int64(c)):
+                        continue
+                    q = p_pred[s]
+                    if q >= 0 and not (mask & (np.int64(1) << np.int64(q - a))):
+                        continue
+                else:
+                    s = st_next[d]
+                    if s >= b:
+                        continue
                 if pos == -1:
-                    t = first_eta[j]
+                    t = first_eta[j] if s == a else t0 + vp[s]
                 elif pos >= 0:
-                    t = t0 + pp[pos]
+                    if reorder:
+                        t = t0 + ppa[poff[j] + (pos - a) * nplan + (s - a)]
+                    else:
+                        t = t0 + pp[pos]
                 else:
                     t = t0 + np_[-2 - pos, s]
                 if t > p_limit[s] + tol:
@@ -128,17 +158,16 @@ def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, 
                 st_cost[d + 1] = st_cost[d] + add
                 st_pos[d + 1] = s
                 st_next[d + 1] = s + 1
-                st_mask[d + 1] = st_mask[d]
+                st_mask[d + 1] = mask | (np.int64(1) << np.int64(c)) if reorder else mask
                 path[d] = -(s - a) - 1
             else:
-                x = c - 1  # group-local stop: request x // 2, pickup if even
-                bit = 1 << x
-                mask = st_mask[d]
+                x = c - nfirst  # group-local stop: request x // 2, pickup if even
+                bit = np.int64(1) << np.int64(boff + x)
                 if mask & bit:
                     continue
                 i = x // 2
                 pick = x % 2 == 0
-                if not pick and not (mask & (1 << (x - 1))):
+                if not pick and not (mask & (bit >> np.int64(1))):
                     continue
                 r = groups[g, i]
                 gx = 2 * r + (0 if pick else 1)
@@ -183,7 +212,7 @@ def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, 
             d += 1
             st_try[d] = 0
             if d == total:
-                if st_next[d] == b and st_mask[d] == full:
+                if (reorder or st_next[d] == b) and st_mask[d] == full:
                     cost = st_cost[d]
                     if objective == 1:
                         cost = st_time[d] - old_end[j]
@@ -194,166 +223,6 @@ def best_orders(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, 
                             out_order[g, q] = path[q]
                         for q in range(total, L):
                             out_order[g, q] = -99
-                d -= 1
-            if nodes >= budget:
-                cut = True
-                break
-        out_cost[g] = best
-        out_cut[g] = cut
-        out_end[g] = best_end
-
-
-@jit
-def best_orders_any(groups, gveh, start, first_eta, load, cap, off, p_pax, p_limit, p_svc,
-                    p_eta, p_drop, p_e, p_pred, vp, poff, ppa, vn, pn, np_, nn, r_pax, r_lp, r_ld,
-                    r_rel, r_direct, r_hasdrop, r_e, until, old_end, svc, objective, budget, tol,
-                    out_cost, out_order, out_cut, out_end):  # pragma: no cover - compiled
-    """:func:`best_orders` with the plan's stops reordered too (Alonso-Mora et al.'s whole-trip
-    routing): every order of the plan's stops and the group's, each pickup before its drop-off
-    (a plan's drop-off after its pickup where that is in the plan too: ``p_pred[s]``, the flat
-    index of the pickup, or ``-1``), on the same schedule, limits and costs. Any stop may come
-    first: the plan's first stop, reached first, is reached at ``first_eta[j]`` (the drive the
-    vehicle is on); any other stop at ``start[j]`` + the drive from where the vehicle is
-    (``vp[s]`` for plan stop ``s``, ``vn[j, x]`` for a new one), as the kernel re-routes a
-    vehicle whose first stop changes (it finishes the edge it is on, then drives there).
-    Drives between the plan's stops: ``ppa[poff[j] + u * n + w]`` from its ``u``-th to its
-    ``w``-th stop (``n`` stops). A vehicle's plan and group together hold at most 62 stops (the
-    caller sends longer plans to :func:`best_orders`)."""
-    G, K = groups.shape
-    L = out_order.shape[1]
-    st_time = np.empty(L + 1)
-    st_occ = np.empty(L + 1, np.int64)
-    st_cost = np.empty(L + 1)
-    st_pos = np.empty(L + 1, np.int64)  # -1 start; 0.. plan stop (flat); -2 - x new stop x
-    st_mask = np.empty(L + 1, np.int64)  # stops visited: bit u plan stop u, nplan + x new x
-    st_try = np.empty(L + 1, np.int64)
-    path = np.empty(L, np.int64)
-    for g in range(G):
-        j = gveh[g]
-        k = 0
-        while k < K and groups[g, k] >= 0:
-            k += 1
-        a, b = off[j], off[j + 1]
-        nplan = b - a
-        total = nplan + 2 * k
-        choices = nplan + 2 * k
-        full = (np.int64(1) << np.int64(nplan + 2 * k)) - 1
-        init_mask = np.int64(0)
-        for i in range(k):
-            if not r_hasdrop[groups[g, i]]:
-                init_mask |= np.int64(1) << np.int64(nplan + 2 * i + 1)
-                total -= 1
-        best = INF
-        best_end = INF
-        nodes = 0
-        cut = False
-        st_time[0] = start[j]
-        st_occ[0] = load[j]
-        st_cost[0] = 0.0
-        st_pos[0] = -1
-        st_mask[0] = init_mask
-        st_try[0] = 0
-        d = 0
-        while d >= 0:
-            c = st_try[d]
-            if c >= choices or d == total:
-                d -= 1
-                continue
-            st_try[d] = c + 1
-            pos = st_pos[d]
-            t0 = st_time[d]
-            mask = st_mask[d]
-            bit = np.int64(1) << np.int64(c)
-            if mask & bit:
-                continue
-            if c < nplan:  # the plan's stop s
-                s = a + c
-                q = p_pred[s]
-                if q >= 0 and not (mask & (np.int64(1) << np.int64(q - a))):
-                    continue
-                if pos == -1:
-                    t = first_eta[j] if c == 0 else t0 + vp[s]
-                elif pos >= 0:
-                    t = t0 + ppa[poff[j] + (pos - a) * nplan + c]
-                else:
-                    t = t0 + np_[-2 - pos, s]
-                if t > p_limit[s] + tol:
-                    continue
-                occ = st_occ[d] + p_pax[s]
-                if occ > cap[j]:
-                    continue
-                add = 0.0
-                if p_drop[s] and objective == 0:
-                    add = t - p_eta[s]
-                dep = leave(t, p_e[s], p_svc[s])
-                if dep > until[j] + tol:  # departures only grow: the plan would end too late
-                    continue
-                nodes += 1
-                st_time[d + 1] = dep
-                st_occ[d + 1] = occ
-                st_cost[d + 1] = st_cost[d] + add
-                st_pos[d + 1] = s
-                st_mask[d + 1] = mask | bit
-                path[d] = -c - 1
-            else:
-                x = c - nplan  # group-local stop: request x // 2, pickup if even
-                i = x // 2
-                pick = x % 2 == 0
-                if not pick and not (mask & (bit >> np.int64(1))):
-                    continue
-                r = groups[g, i]
-                gx = 2 * r + (0 if pick else 1)
-                if pos == -1:
-                    t = t0 + vn[j, gx]
-                elif pos >= 0:
-                    t = t0 + pn[pos, gx]
-                else:
-                    t = t0 + nn[-2 - pos, gx]
-                limit = r_lp[r] if pick else r_ld[r]
-                if t > limit + tol:
-                    continue
-                add = 0.0
-                serve = 0.0
-                e = r_e[r] if pick else -INF  # (a pickup waits for its earliest time)
-                if pick:
-                    if r_hasdrop[r]:
-                        occ = st_occ[d] + r_pax[r]
-                    else:
-                        occ = st_occ[d]
-                        serve = svc
-                        if objective == 0:  # (served from the start of its service)
-                            add = leave(t, e, 0.0) - r_rel[r]
-                else:
-                    occ = st_occ[d] - r_pax[r]
-                    serve = svc
-                    if objective == 0:
-                        add = t - r_rel[r] - r_direct[r]
-                if occ > cap[j]:
-                    continue
-                dep = leave(t, e, serve)
-                if dep > until[j] + tol:
-                    continue
-                nodes += 1
-                st_time[d + 1] = dep
-                st_occ[d + 1] = occ
-                st_cost[d + 1] = st_cost[d] + add
-                st_pos[d + 1] = -2 - gx
-                st_mask[d + 1] = mask | bit
-                path[d] = x
-            d += 1
-            st_try[d] = 0
-            if d == total:
-                if st_mask[d] == full:
-                    cost = st_cost[d]
-                    if objective == 1:
-                        cost = st_time[d] - old_end[j]
-                    if cost < best - 1e-12:
-                        best = cost
-                        best_end = st_time[d]
-                        for q2 in range(total):
-                            out_order[g, q2] = path[q2]
-                        for q2 in range(total, L):
-                            out_order[g, q2] = -99
                 d -= 1
             if nodes >= budget:
                 cut = True

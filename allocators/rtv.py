@@ -159,7 +159,7 @@ class RtvAllocator(Allocator):
 
     # ------------------------------------------------------------------ the decision
     def allocate(self, problem: AllocationProblem) -> Allocation:
-        _warm(self.reorder)  # compile first: the time limit counts the decision's work, not numba's
+        _warm()  # compile first: the time limit counts the decision's work, not numba's
         t_start = time.perf_counter()
         n, m = problem.n_agents, problem.n_tasks
         if not n or not m or not (np.isfinite(problem.cost).any()
@@ -230,32 +230,24 @@ class RtvAllocator(Allocator):
 
 
 _WARM: set = set()
+#: the arrays a mode of :func:`allocators._rtv_kernel.best_orders` does not read
+_NO_F, _NO_I = np.zeros(0), np.zeros(0, np.int64)
 
 
-def _warm(reorder: bool = False) -> None:
-    """Compile the kernels (once per process; from the disk cache where there is one)."""
-    if reorder and "any" not in _WARM:
-        from allocators._rtv_kernel import best_orders_any
-
-        z, i = np.zeros(1), np.zeros(1, np.int64)
-        best_orders_any(np.zeros((1, 1), np.int64), i, z, z, i, np.ones(1, np.int64),
-                        np.zeros(2, np.int64), i, z, z, z, np.zeros(1, bool), z,
-                        np.full(1, -1, np.int64), z, np.zeros(2, np.int64), z,
-                        np.zeros((1, 2)), np.zeros((1, 2)), np.zeros((2, 1)), np.zeros((2, 2)),
-                        i, z + 1, z + 1, z, z, np.ones(1, bool), z - np.inf, z + np.inf, z, 0.0,
-                        0, 10, TOL, np.zeros(1), np.zeros((1, 3), np.int64), np.zeros(1, bool),
-                        np.zeros(1))
-        _WARM.add("any")
+def _warm() -> None:
+    """Compile the kernels (once per process; from the disk cache where there is one). One
+    compiled search serves both orders (``reorder`` is an argument, not a specialization)."""
     if "order" in _WARM:
         return
     from allocators._rtv_kernel import best_orders, pair_shareable
 
     z, i = np.zeros(1), np.zeros(1, np.int64)
     best_orders(np.zeros((1, 1), np.int64), i, z, z, i, np.ones(1, np.int64),
-                np.zeros(2, np.int64), i, z, z, z, np.zeros(1, bool), z, z, np.zeros((1, 2)),
+                np.zeros(2, np.int64), i, z, z, z, np.zeros(1, bool), z, z,
+                np.full(1, -1, np.int64), z, np.zeros(2, np.int64), z, np.zeros((1, 2)),
                 np.zeros((1, 2)), np.zeros((2, 1)), np.zeros((2, 2)), i, z + 1, z + 1, z, z,
-                np.ones(1, bool), z - np.inf, z + np.inf, z, 0.0, 0, 10, TOL, np.zeros(1),
-                np.zeros((1, 2), np.int64), np.zeros(1, bool), np.zeros(1))
+                np.ones(1, bool), z - np.inf, z + np.inf, z, 0.0, 0, 10, TOL, False,
+                np.zeros(1), np.zeros((1, 3), np.int64), np.zeros(1, bool), np.zeros(1))
     pair_shareable(0.0, np.zeros((2, 2)), i, z, z, z - np.inf, 0.0, 1, TOL)
     _WARM.add("order")
 
@@ -522,9 +514,9 @@ class _Batch:
         return out, reach
 
     def _reorder_arrays(self, flat: list, src: list, rem: np.ndarray) -> None:
-        """What :func:`allocators._rtv_kernel.best_orders_any` needs besides: each plan stop's
-        pickup in the plan (``p_pred``), the drive from its vehicle to it (``vp``), the drives
-        between the stops of each plan (``poff``, ``ppa``)."""
+        """What :func:`allocators._rtv_kernel.best_orders` needs besides to reorder: each plan
+        stop's pickup in the plan (``p_pred``), the drive from its vehicle to it (``vp``), the
+        drives between the stops of each plan (``poff``, ``ppa``)."""
         travel = self.problem.travel
         plocs = [s.loc for s in flat]
         owner = np.repeat(np.arange(self.nv), np.diff(self.off))
@@ -561,13 +553,13 @@ class _Batch:
         """Best orders of candidates ``groups`` (rows of request indices, -1 padded) on the
         vehicles ``gveh``: ``(cost, order codes, cut, end)`` (``end``: when the order leaves
         its last stop); with ``reorder`` the plan's stops
-        are reordered too (:func:`allocators._rtv_kernel.best_orders_any`)."""
+        are reordered too (:func:`allocators._rtv_kernel.best_orders` with ``reorder``)."""
         G, K = groups.shape
         plan_len = int((self.off[1:] - self.off[:-1]).max()) if self.nv else 0
         L = max(plan_len + 2 * K, 1)
         if not (G and self.alloc.reorder):
             return self._evaluate_in_order(groups, gveh, L)
-        from allocators._rtv_kernel import best_orders_any
+        from allocators._rtv_kernel import best_orders
 
         cost, end = np.empty(G), np.empty(G)
         order = np.full((G, L), -99, np.int64)
@@ -583,21 +575,20 @@ class _Batch:
             cost[rest], order[rest], cut[rest], end[rest] = c2, o2, k2, e2
         c1, o1, k1 = np.empty(len(groups[sel])), order[sel].copy(), cut[sel].copy()
         e1 = np.empty(len(c1))
-        best_orders_any(np.ascontiguousarray(groups[sel], np.int64),
-                        np.ascontiguousarray(gveh[sel], np.int64), self.start,
-                        self.first_eta, self.load, self.cap, self.off, self.p_pax,
-                        self.p_limit, self.p_svc, self.p_eta, self.p_drop, self.p_e,
-                        self.p_pred,
-                        self.vp, self.poff, self.ppa, self.vn, self.pn, self.np_, self.nn,
-                        self.pax, self.lp, self.ld, self.rel, self.direct, self.hasdrop,
-                        self.r_e, self.until, self.old_end, self.svc,
-                        OBJECTIVES[self.alloc.objective],
-                        self.alloc.max_nodes, TOL, c1, o1, k1, e1)
+        best_orders(np.ascontiguousarray(groups[sel], np.int64),
+                    np.ascontiguousarray(gveh[sel], np.int64), self.start, self.first_eta,
+                    self.load, self.cap, self.off, self.p_pax, self.p_limit, self.p_svc,
+                    self.p_eta, self.p_drop, self.p_e, _NO_F, self.p_pred, self.vp, self.poff,
+                    self.ppa, self.vn, self.pn, self.np_, self.nn, self.pax, self.lp, self.ld,
+                    self.rel, self.direct, self.hasdrop, self.r_e, self.until, self.old_end,
+                    self.svc, OBJECTIVES[self.alloc.objective], self.alloc.max_nodes, TOL, True,
+                    c1, o1, k1, e1)
         cost[sel], order[sel], cut[sel], end[sel] = c1, o1, k1, e1
         return cost, order, cut, end
 
     def _evaluate_in_order(self, groups: np.ndarray, gveh: np.ndarray, L: int):
-        """:meth:`evaluate` with the plan's stops in their order (:func:`best_orders`)."""
+        """:meth:`evaluate` with the plan's stops in their order (:func:`allocators._rtv_kernel.
+        best_orders` without ``reorder``)."""
         from allocators._rtv_kernel import best_orders
 
         G = len(groups)
@@ -605,15 +596,14 @@ class _Batch:
         order = np.full((G, L), -99, np.int64)
         cut = np.zeros(G, bool)
         if G:
-            best_orders(np.ascontiguousarray(groups, np.int64), np.ascontiguousarray(gveh,
-                                                                                     np.int64),
-                        self.start, self.first_eta, self.load, self.cap, self.off, self.p_pax,
-                        self.p_limit, self.p_svc, self.p_eta, self.p_drop, self.p_e, self.pp,
-                        self.vn,
-                        self.pn, self.np_, self.nn, self.pax, self.lp, self.ld, self.rel,
-                        self.direct, self.hasdrop, self.r_e, self.until, self.old_end, self.svc,
-                        OBJECTIVES[self.alloc.objective], self.alloc.max_nodes, TOL, cost,
-                        order, cut, end)
+            best_orders(np.ascontiguousarray(groups, np.int64),
+                        np.ascontiguousarray(gveh, np.int64), self.start, self.first_eta,
+                        self.load, self.cap, self.off, self.p_pax, self.p_limit, self.p_svc,
+                        self.p_eta, self.p_drop, self.p_e, self.pp, _NO_I, _NO_F, _NO_I, _NO_F,
+                        self.vn, self.pn, self.np_, self.nn, self.pax, self.lp, self.ld,
+                        self.rel, self.direct, self.hasdrop, self.r_e, self.until,
+                        self.old_end, self.svc, OBJECTIVES[self.alloc.objective],
+                        self.alloc.max_nodes, TOL, False, cost, order, cut, end)
         return cost, order, cut, end
 
     def groups(self, t_start: float):

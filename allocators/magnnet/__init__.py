@@ -13,7 +13,9 @@ Modules, in reading order:
   network trained to imitate the optimal assignment, with mutual-best requests;
 * :mod:`~allocators.magnnet.views` — the view model for partial views (limited range), trained
   CTDE with DAgger against the optimal assignment of the whole remaining problem;
-* :mod:`~allocators.magnnet.ppo` — PPO (CTDE), GAE, the imitation warm start, checkpoints;
+* :mod:`~allocators.magnnet.ppo` — the one PPO trainer (CTDE), GAE, checkpoints; its
+  training environments in :mod:`~allocators.magnnet.ppo_env` (the paper's game, the
+  plugin's decision rounds), the imitation warm start in :mod:`~allocators.magnnet.ppo_warm`;
 * :mod:`~allocators.magnnet.train` — ``dispatch train magnnet``;
 * :mod:`~allocators.magnnet.allocator` — the ``magnnet`` plugin (variants ``match``,
   ``paper``, ``paper_nb``).

@@ -1,43 +1,67 @@
-"""PPO with a centralized critic (CTDE) for MAGNNET, readable top to bottom.
+"""The one PPO trainer of MAGNNET (CTDE: decentralized actors, a centralized critic), readable
+top to bottom: :class:`PPOConfig`, :func:`gae`, the :class:`Sampler` of instances, the two
+training environments, :func:`collect`, :func:`ppo_update` and :func:`train`.
 
-Hyperparameters live in :class:`PPOConfig`, whose defaults are the paper's (Adam 1e-5, batch
-512, minibatch 64, 10 epochs, entropy 0.05, gamma 0.99, GAE lambda 0.95). GAE, rollout
-collection and the update are functions the tests call.
+Every agent acts from its own view through the shared actor (parameter sharing); the critic
+sees the whole state. Counting: one *environment step* is one round of one game (all its
+deciding agents act); ``batch_size`` and ``minibatch_size`` count environment steps. One
+update plays ``batch_size // n_envs`` rounds of ``n_envs`` games of one size (``sizes`` taken
+in turn, finished games replaced by fresh instances), then runs ``epochs`` passes of clipped
+PPO in minibatches; only the steps where an agent decided carry policy loss.
 
-CTDE: every agent acts from its own local view through the shared actor (parameter sharing);
-the critic sees the whole state and estimates the *team* return (the sum of the agents'
-rewards, team bonus included). Every acting agent of a round gets the round's team advantage.
+What differs between the variants is three explicit options of :class:`PPOConfig`:
 
-Counting: one *environment step* is one round of one game (all its deciding agents act).
-``batch_size`` and ``minibatch_size`` count environment steps.
+* ``env`` — the training environment. ``"game"``: the paper's game (:class:`~allocators.
+  magnnet.game.BatchedGame`, the rewards of :mod:`~allocators.magnnet.rules`, team bonus
+  included), actions drawn by ``Categorical`` from torch's global generator (seeded with
+  ``seed``), for the paper's networks (``dispatch train magnnet --variant paper``).
+  ``"rounds"``: the plugin's own decision rounds and conflict rule (:class:`~allocators.
+  magnnet.ppo_env.RoundsEnv`, rewards from the costs alone), each agent training on
+  ``(1 - team_weight) * own + team_weight * team / N``, actions and minibatches drawn from a
+  generator of its own (seeded with ``seed``), for the attention policy (``--variant ppo``).
+* ``credit`` — the advantages. ``"team"``: every acting agent of a round gets the round's
+  team advantage (the team reward against one critic value). ``"agent"``: each agent's
+  advantage comes from its own reward stream against its own value of the centralized critic
+  (advantages normalized over the decisions taken): an agent is credited with what it did,
+  not with what the others did in the same round. In the game the team bonus reaches every
+  agent of the episode at its end, those that left early too. The rounds environment pays
+  per agent, so it trains with ``"agent"`` only.
+* warm start (``bc_updates``, game only; off with 0, the paper's pure PPO): before PPO the
+  actor imitates the optimal assignment on the states it visits (DAgger-style: roll out the
+  current policy, label each deciding agent with its task in the optimal assignment of the
+  open tasks to the deciding agents, minimize cross-entropy). With ``bc_defer`` an agent whose
+  optimal task has a cheaper deciding contender is labelled "reject" for that round.
+  Centralized information used in training only; ``critic_warmup`` PPO updates then fit only
+  the critic (so an untrained critic does not undo the warm start).
 
-Warm start (our addition, off with ``bc_updates=0``): before PPO, the actor can imitate the
-optimal assignment on the states it visits (DAgger-style: roll out the current policy, label
-each deciding agent with its task in the optimal assignment of the open tasks to the deciding
-agents, minimize cross-entropy). With ``bc_defer`` an agent whose optimal task has a cheaper
-deciding contender is labelled "reject" for that round (it waits; the rest of the optimum
-stays optimal), which a policy can imitate without conflicts. This is centralized information
-used in training only; at execution the policy is as decentralized as ever.
-
-Also ours: ``critic_warmup`` PPO updates that fit only the critic first (so an untrained critic
-does not undo the warm start), and, when ``train`` gets a ``validate`` function (held-out
-training instances, never the evaluation ones), the weights that validate best are kept.
+When :func:`train` gets a ``validate`` function (held-out training instances, never the
+evaluation ones), the weights that validate best are kept. Each environment draws its random
+numbers in one fixed order (instances from ``numpy``'s generator seeded with ``seed``; actions
+and minibatch orders from torch's global generator in the game, from the trainer's own in the
+rounds environment), so one seed trains to the same weights every time.
 """
 
 from __future__ import annotations
 
 import time
 from dataclasses import asdict, dataclass
+from typing import NamedTuple
 
 import numpy as np
 import torch
-from torch.distributions import Categorical
 
 from allocators.magnnet.game import BatchedGame
+from allocators.magnnet.ppo_env import ENVS, RoundsEnv
 
 
 @dataclass
 class PPOConfig:
+    env: str = "game"
+    """training environment: ``"game"`` (the paper's game) or ``"rounds"`` (the plugin's
+    decision rounds, cost-only rewards); see the module doc."""
+    credit: str = "team"
+    """advantages: ``"team"`` (one per round, the team reward) or ``"agent"`` (each agent's
+    own reward stream and value; needs a critic with one value per agent)."""
     lr: float = 1e-5
     """Adam learning rate (paper: 1e-5)."""
     batch_size: int = 512
@@ -61,28 +85,44 @@ class PPOConfig:
     n_envs: int = 32
     """games stepped together by the batched environment."""
     total_steps: int = 200_000
-    """environment steps of PPO training."""
+    """environment steps of PPO training (``total_steps // batch_size`` updates)."""
+    sizes: tuple = ((8, 8),)
+    """``(N, M)`` game sizes, one per update in turn (a size-agnostic model can take several)."""
+    comm_ranges: tuple | None = None
+    """radio ranges (metres): a share ``p_range`` of the games gets a communication graph of
+    a range drawn uniformly from them, the rest a complete graph; None: complete graphs."""
+    p_range: float = 0.5
+    team_weight: float = 0.5
+    """rounds: share of the team reward (mean over agents) in each agent's reward."""
+    cost_weight: float = 1.0
+    """rounds: weight of the win and stall rewards against the conflict penalty
+    (:class:`~allocators.magnnet.ppo_env.RoundsEnv`)."""
     bc_updates: int = 0
-    """imitation (warm start) updates before PPO; 0 = pure PPO as in the paper."""
+    """game: imitation (warm start) updates before PPO; 0 = pure PPO as in the paper."""
     bc_lr: float = 3e-3
     """Adam learning rate of the warm start."""
-    critic_warmup: int = 0
-    """PPO updates at the start that fit only the critic (the actor is left as the warm start
-    made it, instead of being pushed around by advantages of an untrained critic)."""
     bc_defer: bool = False
     """warm-start target: agents whose optimal task has a cheaper contender wait a round
     (:func:`optimal_targets` with ``defer``)."""
+    critic_warmup: int = 0
+    """PPO updates at the start that fit only the critic."""
     seed: int = 0
-    """seed of torch and of the instance draws."""
+    """seed of torch (and of the rounds environment's generator) and of the instance draws."""
     val_every: int = 20
     """PPO updates between two validations (when ``train`` gets a ``validate`` function)."""
-    credit: str = "team"
-    """``"team"``: every acting agent of a round gets the round's team advantage (the team
-    reward, one critic value). ``"agent"`` (ours): each agent's advantage comes from its own
-    reward stream (its win, conflict, reject and stall rewards, plus the team bonus, which
-    reaches every agent of the episode at its end) against its own value from the
-    centralized critic (built with ``agent_values``): an agent is credited with what it did,
-    not with what the other agents did in the same round."""
+    wall_s: float = float("inf")
+    """wall-time budget: no update starts after it (a validation closes the run)."""
+
+    def __post_init__(self) -> None:
+        if self.env not in ENVS:
+            raise ValueError(f"PPOConfig env {self.env!r}: expected one of {sorted(ENVS)}")
+        kind = ENVS[self.env]
+        if self.credit not in kind.credits:
+            raise ValueError(f"PPOConfig credit {self.credit!r}: the {self.env!r} environment "
+                             f"trains with {' or '.join(map(repr, kind.credits))}")
+        if self.bc_updates and not kind.warm_start:
+            raise ValueError(f"PPOConfig bc_updates: the {self.env!r} environment has no "
+                             "teacher (the warm start needs the game's optimal assignment)")
 
 
 def gae(rewards, values, dones, last_value, gamma: float, lam: float):
@@ -104,139 +144,151 @@ def gae(rewards, values, dones, last_value, gamma: float, lam: float):
     return adv, adv + values
 
 
-class Sampler:
-    """Feeds a :class:`BatchedGame` with instances: random subsets of a pool's instances
-    (a pool of ``N' >= N`` agents gives ``N``-agent instances: a random half of UAVs and of UGVs
-    and random tasks; agents and tasks are shuffled, so the fixed-size model sees every order).
-    """
+class Draw(NamedTuple):
+    """``count`` instances cut by :meth:`Sampler.draw`: ``cost (k, N, M)``, positions, kinds,
+    radio graphs (``None`` when the sampler draws none) and the world's size."""
 
-    def __init__(self, pool, n: int, m: int, rng: np.random.Generator,
+    cost: np.ndarray
+    agent_pos: np.ndarray
+    task_pos: np.ndarray
+    flies: np.ndarray
+    comm: np.ndarray | None
+    world_size: np.ndarray
+
+
+class Sampler:
+    """Instances ``N x M`` cut from a pool's instances (a pool of ``N' >= N`` agents: random
+    agents, half of them UAVs where the pool has enough of both kinds, random tasks; agents
+    and tasks shuffled, so a fixed-size model sees every order), with a radio graph for a share
+    ``p_range`` of them when ``comm_ranges`` is given."""
+
+    def __init__(self, pool, rng: np.random.Generator,
                  comm_ranges: tuple[float, float] | None = None, p_range: float = 0.5) -> None:
-        self.pool, self.n, self.m, self.rng = pool, n, m, rng
+        self.pool, self.rng = pool, rng
         self.comm_ranges, self.p_range = comm_ranges, p_range
 
-    def draw(self, count: int):
-        p, n, m = self.pool, self.n, self.m
-        ks = self.rng.integers(len(p), size=count)
-        costs, aps, tps, fls = [], [], [], []
-        for k in ks:
+    def draw(self, count: int, n: int, m: int) -> Draw:
+        """``count`` instances; per instance the draws come in one order (pool index, agents,
+        their order, tasks, then the radio graph), so a seed gives the same instances."""
+        p, rng = self.pool, self.rng
+        costs, aps, tps, fls, comms = [], [], [], [], []
+        for k in rng.integers(len(p), size=count):
             fl = p.flies[k]
             uav, ugv = np.flatnonzero(fl), np.flatnonzero(~fl)
-            n_uav = min(len(uav), (n + 1) // 2 if len(ugv) else n)
-            a = np.concatenate([self.rng.choice(uav, n_uav, replace=False),
-                                self.rng.choice(ugv, n - n_uav, replace=False)])
-            a = self.rng.permutation(a)
-            t = self.rng.choice(p.cost.shape[2], m, replace=False)
+            n_uav = min(len(uav), max((n + 1) // 2, n - len(ugv)))
+            a = rng.permutation(np.concatenate([rng.choice(uav, n_uav, replace=False),
+                                                rng.choice(ugv, n - n_uav, replace=False)]))
+            t = rng.choice(p.cost.shape[2], m, replace=False)
             costs.append(p.cost[k][np.ix_(a, t)])
             aps.append(p.agent_pos[k][a])
             tps.append(p.task_pos[k][t])
             fls.append(fl[a])
-        return np.stack(costs), np.stack(aps), np.stack(tps), np.stack(fls), p.world_size
-
-    def fill(self, game: BatchedGame, slots) -> None:
-        slots = np.asarray(slots)
-        if slots.size:
-            c, a, t, f, s = self.draw(len(slots))
-            comm = None
-            if self.comm_ranges is not None:
+            comm = np.ones((n, n), bool)
+            if self.comm_ranges is not None and rng.random() < self.p_range:
                 from dispatch.api.comms import comm_graph
 
-                lo, hi = self.comm_ranges
-                comm = np.stack([
-                    comm_graph(a[k], self.rng.uniform(lo, hi))
-                    if self.rng.random() < self.p_range else np.ones((self.n, self.n), bool)
-                    for k in range(len(slots))])
-            game.load(slots, c, a, t, f, s, comm)
+                comm = comm_graph(p.agent_pos[k][a], rng.uniform(*self.comm_ranges))
+            comms.append(comm)
+        return Draw(np.stack(costs), np.stack(aps), np.stack(tps), np.stack(fls),
+                    None if self.comm_ranges is None else np.stack(comms), p.world_size)
+
+    def fill(self, env, slots) -> None:
+        """Fresh instances into ``slots`` of ``env`` (a game or a rounds environment)."""
+        slots = np.asarray(slots)
+        if slots.size:
+            d = self.draw(len(slots), env.n, env.m)
+            if isinstance(env, RoundsEnv):
+                env.load(slots, d.cost, d.flies, d.comm)
+            else:
+                env.load(slots, d.cost, d.agent_pos, d.task_pos, d.flies, d.world_size, d.comm)
 
 
-def _cat_obs(obs_list):
-    return {k: torch.stack([o[k] for o in obs_list]) for k in obs_list[0]}
-
-
-def collect(model, game: BatchedGame, sampler: Sampler, steps: int, stats: dict):
-    """Roll the current policy for ``steps`` rounds of every game (refilling finished games).
+def collect(model, env, sampler: Sampler, steps: int, stats: dict, *, cfg: PPOConfig,
+            gen: torch.Generator | None = None):
+    """Roll the current policy for ``steps`` rounds of every game of ``env`` (the environment
+    ``cfg.env`` names), refilling finished games from ``sampler``.
 
     Returns a dict of tensors with time first: ``obs`` (dict, ``(T, B, ...)``), ``actions``,
-    ``logp``, ``acted`` ``(T, B, N)``, ``values``, ``rewards``, ``dones`` ``(T, B)`` and
-    ``last_value (B,)``. Appends finished episodes' returns and gaps to ``stats``.
+    ``logp``, ``acted`` ``(T, B, N)``, ``values`` and ``rewards`` (``(T, B)`` under team
+    credit, ``(T, B, N)`` under agent credit), ``dones`` ``(T, B)`` and ``last_value``.
+    Finished episodes' figures go to ``stats`` (the environment's :meth:`charts` reads them).
     """
+    kind = ENVS[cfg.env]
     obs_l, act_l, logp_l, acted_l, val_l, rew_l, done_l = [], [], [], [], [], [], []
-    ep_ret = stats.setdefault("_running", torch.zeros(game.B))
+    run = stats.setdefault(("run", env.n, env.m), kind.running(env))
     for _ in range(steps):
-        obs = game.obs()
+        obs = env.obs()
         with torch.no_grad():
-            logits, z = model(obs)
-            v = model.value(obs, z)
-            dist = Categorical(logits=logits)
-            a = dist.sample()
-            lp = dist.log_prob(a)
-        rew, team, acted, ended, done, trunc = game.step(a)
+            a, lp, v = kind.act(model, obs, gen)
+        if (v.dim() == 2) != (cfg.credit == "agent"):
+            raise ValueError(f"credit {cfg.credit!r} needs a critic with "
+                             f"{'one value per agent' if cfg.credit == 'agent' else 'one value'}"
+                             f" (the model's values have shape {tuple(v.shape)})")
+        r, acted, done, finished = kind.step(env, a, cfg, run)
         obs_l.append(obs)
         act_l.append(a)
         logp_l.append(lp)
         acted_l.append(acted)
         val_l.append(v)
-        if v.dim() == 2:  # per-agent credit: the bonus reaches the agents that left early too
-            rew_l.append(rew + torch.where(done[:, None] & ~acted, game.last_bonus[:, None],
-                                           torch.zeros_like(rew)))
-        else:
-            rew_l.append(team)
-        done_l.append(done.float())
-        ep_ret += team
-        if done.any():
-            d = torch.nonzero(done).flatten()
-            gap = (game.totals()[d] - game.opt_total[d]) / game.opt_total[d].clamp(min=1e-9)
-            full = (game.agent_task[d] >= 0).sum(1) >= game.opt_count[d]
-            stats.setdefault("returns", []).extend(ep_ret[d].tolist())
-            stats.setdefault("gaps", []).extend(gap[full].tolist())
-            stats.setdefault("complete", []).extend(full.float().tolist())
-            stats.setdefault("conflict_free", []).extend(
-                (1.0 - game.conflicted[d].float().mean(1)).tolist())
-            ep_ret[d] = 0.0
-            sampler.fill(game, d.numpy())
+        rew_l.append(r)
+        done_l.append(done)
+        if len(finished):
+            kind.ended(env, finished, run, stats)
+            sampler.fill(env, np.asarray(finished))
     with torch.no_grad():
-        obs = game.obs()
-        logits, z = model(obs)
-        last_v = model.value(obs, z)
-    return {"obs": _cat_obs(obs_l), "actions": torch.stack(act_l), "logp": torch.stack(logp_l),
+        last_v = kind.value(model, env.obs())
+    return {"obs": {k: torch.stack([o[k] for o in obs_l]) for k in obs_l[0]},
+            "actions": torch.stack(act_l), "logp": torch.stack(logp_l),
             "acted": torch.stack(acted_l), "values": torch.stack(val_l),
             "rewards": torch.stack(rew_l), "dones": torch.stack(done_l), "last_value": last_v}
 
 
-def ppo_update(model, optimizer, batch, cfg: PPOConfig, actor: bool = True) -> dict[str, float]:
-    """The PPO update on one batch from :func:`collect`: ``cfg.epochs`` passes in minibatches of
-    ``cfg.minibatch_size`` environment steps. Returns mean losses and entropy. With
-    ``actor=False`` only the value loss is minimized (critic warm-up)."""
+def advantages(batch, cfg: PPOConfig):
+    """Normalized advantages and the returns of a :func:`collect` batch, flattened to
+    ``(T * B, ...)``: GAE over the team reward against one value per round (``credit``
+    ``"team"``: normalized over all steps), or over each agent's reward stream against its
+    own value (``"agent"``: normalized over the decisions taken, the steps of agents that
+    acted)."""
     dones = batch["dones"]
-    per_agent = batch["values"].dim() == 3  # (T, B, N): one value per agent
-    if per_agent:
+    if cfg.credit == "agent":
         dones = dones[..., None].expand_as(batch["values"])
     adv, ret = gae(batch["rewards"], batch["values"], dones, batch["last_value"],
                    cfg.gamma, cfg.gae_lambda)
     T, B = adv.shape[:2]
+    adv, ret = adv.reshape(T * B, *adv.shape[2:]), ret.reshape(T * B, *ret.shape[2:])
+    if cfg.credit == "agent":
+        sel = adv[batch["acted"].reshape(T * B, -1)]
+        if sel.numel() > 1:
+            adv = (adv - sel.mean()) / (sel.std() + 1e-8)
+    else:
+        adv = (adv - adv.mean()) / (adv.std() + 1e-8)
+    return adv, ret
+
+
+def ppo_update(model, optimizer, batch, cfg: PPOConfig, actor: bool = True,
+               gen: torch.Generator | None = None) -> dict[str, float]:
+    """The PPO update on one batch from :func:`collect`: ``cfg.epochs`` passes in minibatches of
+    ``cfg.minibatch_size`` environment steps (orders from ``gen``; None: torch's global
+    generator). Returns mean losses and entropy. With ``actor=False`` only the value loss is
+    minimized (critic warm-up)."""
+    kind = ENVS[cfg.env]
+    adv, ret = advantages(batch, cfg)
+    T, B = batch["actions"].shape[:2]
     flat = lambda x: x.reshape(T * B, *x.shape[2:])  # noqa: E731
     obs = {k: flat(v) for k, v in batch["obs"].items()}
     actions, old_lp, acted = flat(batch["actions"]), flat(batch["logp"]), flat(batch["acted"])
-    adv, ret = flat(adv), flat(ret)
-    if per_agent:  # normalized over the decisions taken (the steps of agents that acted)
-        sel = adv[acted]
-        adv = (adv - sel.mean()) / (sel.std() + 1e-8)
-    else:
-        adv = (adv - adv.mean()) / (adv.std() + 1e-8)
     logs = {"losses/policy": [], "losses/value": [], "losses/entropy": [], "losses/approx_kl": []}
     for _ in range(cfg.epochs):
-        perm = torch.randperm(T * B)
+        perm = torch.randperm(T * B, generator=gen)
         for s in range(0, T * B, cfg.minibatch_size):
             idx = perm[s:s + cfg.minibatch_size]
             o = {k: v[idx] for k, v in obs.items()}
             logits, z = model(o)
-            dist = Categorical(logits=logits)
-            lp = dist.log_prob(actions[idx])
-            ent = dist.entropy()
+            lp, ent = kind.log_probs(logits, actions[idx])
             mask = acted[idx].float()
             cnt = mask.sum().clamp(min=1.0)
             ratio = torch.exp(lp - old_lp[idx])
-            a = adv[idx] if per_agent else adv[idx][:, None]
+            a = adv[idx] if cfg.credit == "agent" else adv[idx][:, None]
             pg = -torch.min(ratio * a, ratio.clamp(1 - cfg.clip, 1 + cfg.clip) * a)
             pg = (pg * mask).sum() / cnt
             entropy = (ent * mask).sum() / cnt
@@ -258,110 +310,55 @@ def ppo_update(model, optimizer, batch, cfg: PPOConfig, actor: bool = True) -> d
     return {k: float(np.mean(v)) for k, v in logs.items()}
 
 
-def optimal_targets(game: BatchedGame, defer: bool = False) -> torch.Tensor:
-    """Per deciding agent, ``1 + its task`` in the optimal assignment of the open tasks to the
-    deciding agents (0 for agents left out of it); ``-1`` for agents not deciding.
+def train(model, pool, cfg: PPOConfig, on_update=None, validate=None) -> list[dict]:
+    """Warm start (``cfg.bc_updates``) then PPO for ``cfg.total_steps`` environment steps (or
+    until ``cfg.wall_s``), the sizes of ``cfg.sizes`` one per update in turn.
 
-    ``defer``: an agent whose optimal task has a cheaper deciding contender rejects this round
-    instead (it waits; the optimal assignment of what is left is unchanged by the commits of
-    the others), unless that would leave the round without any request. Same optimum, more
-    rounds, and a target a policy that sees its neighbours' costs per task can imitate better.
+    ``on_update(row)`` is called after every row with the logged scalars (``phase`` ``"bc"``,
+    ``"ppo"`` with ``charts/...`` and ``losses/...``, or ``"val"``); the rows are also
+    returned. ``validate(model) -> dict`` (optional; held-out instances, never the evaluation
+    ones): run after the warm start and every ``cfg.val_every`` PPO updates; its ``"score"``
+    (lower is better) picks the weights the model ends with.
     """
-    from allocators.hungarian import optimal_pairs
+    from allocators.magnnet.ppo_warm import bc_update
 
-    dec = game.deciding()
-    avail = game.available()
-    cost = torch.where(avail, game.cost, torch.full_like(game.cost, float("inf"))).numpy()
-    tgt = torch.full(dec.shape, -1, dtype=torch.long)
-    for b in range(game.B):
-        rows = np.flatnonzero(dec[b].numpy())
-        if rows.size == 0:
-            continue
-        tgt[b, rows] = 0
-        c = cost[b][rows]
-        pairs = optimal_pairs(c)
-        keep = [(a, t) for a, t in pairs if not defer or int(np.argmin(c[:, t])) == a]
-        for a, t in (keep or pairs):
-            tgt[b, rows[a]] = t + 1
-    return tgt
-
-
-def bc_update(model, optimizer, game: BatchedGame, sampler: Sampler, steps: int = 8,
-              defer: bool = False) -> float:
-    """One warm-start update: roll the current policy for ``steps`` rounds, label every state
-    with :func:`optimal_targets`, and take one cross-entropy step on all of them."""
-    obs_l, tgt_l = [], []
-    for _ in range(steps):
-        obs = game.obs()
-        tgt_l.append(optimal_targets(game, defer))
-        obs_l.append(obs)
-        with torch.no_grad():
-            logits, _ = model(obs)
-            a = Categorical(logits=logits).sample()
-        _, _, _, _, done, _ = game.step(a)
-        if done.any():
-            sampler.fill(game, torch.nonzero(done).flatten().numpy())
-    obs = {k: torch.cat([o[k] for o in obs_l]) for k in obs_l[0]}
-    tgt = torch.cat(tgt_l)
-    logits, _ = model(obs)
-    mask = tgt >= 0
-    loss = torch.nn.functional.cross_entropy(logits[mask], tgt[mask])
-    optimizer.zero_grad()
-    loss.backward()
-    optimizer.step()
-    return float(loss.item())
-
-
-def train(model, pool, n: int, m: int, cfg: PPOConfig, on_update=None,
-          sizes: list[tuple[int, int]] | None = None,
-          comm_ranges: tuple[float, float] | None = None, validate=None) -> list[dict]:
-    """Warm start (``cfg.bc_updates``) then PPO for ``cfg.total_steps`` environment steps.
-
-    ``comm_ranges``: when given, half the games get a communication graph of a range drawn
-    uniformly from it (metres), the rest a complete graph. ``sizes`` (size-agnostic model
-    only) lists ``(N, M)`` sizes to cycle through, one per
-    update; default ``[(n, m)]``. ``on_update(row)`` is called after every update with the
-    logged scalars (``charts/...``, ``losses/...``); the rows are also returned.
-
-    ``validate(model) -> dict`` (optional; held-out instances, never the evaluation ones): run
-    after the warm start and every ``cfg.val_every`` PPO updates; its ``"score"`` (lower is
-    better) picks the weights the model ends with (logged as ``phase="val"`` rows).
-    """
+    kind = ENVS[cfg.env]
     torch.manual_seed(cfg.seed)
-    rng = np.random.default_rng(cfg.seed)
-    sizes = sizes or [(n, m)]
-    games = []
-    for nn_, mm in sizes:
-        sampler = Sampler(pool, nn_, mm, rng, comm_ranges)
-        game = BatchedGame(cfg.n_envs, nn_, mm)
-        sampler.fill(game, np.arange(cfg.n_envs))
-        games.append((game, sampler, {}))
+    gen = torch.Generator().manual_seed(cfg.seed) if kind.own_generator else None
+    sampler = Sampler(pool, np.random.default_rng(cfg.seed), cfg.comm_ranges, cfg.p_range)
+    envs = []
+    for n, m in cfg.sizes:
+        env = kind.make(n, m, cfg)
+        sampler.fill(env, np.arange(cfg.n_envs))
+        envs.append((env, {}))
     rows: list[dict] = []
     started = time.perf_counter()
     env_steps = 0
+
+    def log(row):
+        rows.append(row)
+        if on_update:
+            on_update(row)
+
     if cfg.bc_updates:
         bc_opt = torch.optim.Adam(model.parameters(), lr=cfg.bc_lr)
         for u in range(cfg.bc_updates):
-            game, sampler, _ = games[u % len(games)]
-            loss = bc_update(model, bc_opt, game, sampler, defer=cfg.bc_defer)
+            env, _ = envs[u % len(envs)]
+            loss = bc_update(model, bc_opt, env, sampler, defer=cfg.bc_defer)
             env_steps += 8 * cfg.n_envs
-            row = {"phase": "bc", "update": u, "env_steps": env_steps, "n_agents": game.n,
-                   "wall_s": time.perf_counter() - started, "losses/imitation": loss}
-            rows.append(row)
-            if on_update:
-                on_update(row)
-        for game, sampler, _ in games:
-            sampler.fill(game, np.arange(cfg.n_envs))
+            log({"phase": "bc", "update": u, "env_steps": env_steps, "n_agents": env.n,
+                 "wall_s": time.perf_counter() - started, "losses/imitation": loss})
+        for env, _ in envs:
+            sampler.fill(env, np.arange(cfg.n_envs))
     best = {"score": float("inf"), "state": None}
 
     def check(u):
         if validate is None:
             return
         res = validate(model)
-        row = {"phase": "val", "update": u, "env_steps": env_steps,
-               "wall_s": time.perf_counter() - started,
-               **{f"val/{k}": float(v) for k, v in res.items()}}
-        rows.append(row)
+        log({"phase": "val", "update": u, "env_steps": env_steps,
+             "wall_s": time.perf_counter() - started,
+             **{f"val/{k}": float(v) for k, v in res.items()}})
         if res["score"] < best["score"]:
             best["score"] = res["score"]
             best["state"] = {k: v.clone() for k, v in model.state_dict().items()}
@@ -371,27 +368,17 @@ def train(model, pool, n: int, m: int, cfg: PPOConfig, on_update=None,
     steps_per = max(1, cfg.batch_size // cfg.n_envs)
     n_updates = cfg.total_steps // (steps_per * cfg.n_envs)
     for u in range(n_updates):
-        game, sampler, stats = games[u % len(games)]
-        batch = collect(model, game, sampler, steps_per, stats)
+        env, stats = envs[u % len(envs)]
+        batch = collect(model, env, sampler, steps_per, stats, cfg=cfg, gen=gen)
         env_steps += steps_per * cfg.n_envs
-        logs = ppo_update(model, opt, batch, cfg, actor=u >= cfg.critic_warmup)
-        rets = stats.pop("returns", [])
-        gaps = stats.pop("gaps", [])
-        comp = stats.pop("complete", [])
-        cf = stats.pop("conflict_free", [])
-        row = {"phase": "ppo", "update": u, "env_steps": env_steps, "n_agents": game.n,
-               "wall_s": time.perf_counter() - started,
-               "charts/episode_return": float(np.mean(rets)) if rets else float("nan"),
-               "charts/mean_step_reward": float(batch["rewards"].mean()),
-               "charts/gap": float(np.mean(gaps)) if gaps else float("nan"),
-               "charts/complete": float(np.mean(comp)) if comp else float("nan"),
-               "charts/conflict_free": float(np.mean(cf)) if cf else float("nan"),
-               "charts/episodes": len(rets), **logs}
-        rows.append(row)
-        if on_update:
-            on_update(row)
-        if (u + 1) % cfg.val_every == 0 or u == n_updates - 1:
+        logs = ppo_update(model, opt, batch, cfg, actor=u >= cfg.critic_warmup, gen=gen)
+        log({"phase": "ppo", "update": u, "env_steps": env_steps, "n_agents": env.n,
+             "wall_s": time.perf_counter() - started, **kind.charts(stats, batch), **logs})
+        last = u == n_updates - 1 or time.perf_counter() - started > cfg.wall_s
+        if (u + 1) % cfg.val_every == 0 or last:
             check(u)
+        if last:
+            break
     if best["state"] is not None:
         model.load_state_dict(best["state"])
     return rows
@@ -402,8 +389,9 @@ def validation_set(pool, n: int, m: int, count: int, seed: int = 12345):
     from ``pool``'s instances as the trainer's :class:`Sampler` cuts them."""
     from allocators.magnnet.problems import Pool
 
-    c, a, t, f, s = Sampler(pool, n, m, np.random.default_rng(seed)).draw(count)
-    return Pool(c, a, t, f, np.arange(count, dtype=np.int64), s)
+    d = Sampler(pool, np.random.default_rng(seed)).draw(count, n, m)
+    return Pool(d.cost, d.agent_pos, d.task_pos, d.flies, np.arange(count, dtype=np.int64),
+                d.world_size)
 
 
 def score(res: dict) -> float:

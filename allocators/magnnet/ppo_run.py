@@ -21,6 +21,13 @@ import numpy as np
 
 VAL_SIZES = (4, 8, 12, 20)
 
+#: the ``ppo`` variant's training, in :class:`~allocators.magnnet.ppo.PPOConfig` terms: the
+#: rounds environment, per-agent credit, 12 rounds of 48 decisions per update, every size from
+#: 4 to 12 in turn, a radio graph of 15-40 m for 30 % of the decisions
+RECIPE = {"env": "rounds", "credit": "agent", "n_envs": 48, "batch_size": 48 * 12, "epochs": 3,
+          "minibatch_size": 256, "sizes": ((4, 4), (6, 6), (8, 8), (10, 10), (12, 12)),
+          "comm_ranges": (15.0, 40.0), "p_range": 0.3, "val_every": 10}
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--updates", type=int, default=100_000)
@@ -46,12 +53,13 @@ def validation(pool, count: int, seed: int = 4321):
     """Fixed validation decisions per N (cut from held-out training instances) with their
     optimal totals (for the reported gap only; the trainer never sees them)."""
     from allocators.hungarian import optimal_pairs
-    from allocators.magnnet.ppo_train import Sampler
+    from allocators.magnnet.ppo import Sampler
 
     out = {}
     s = Sampler(pool, np.random.default_rng(seed))
     for n in VAL_SIZES:
-        cost, flies, _ = s.draw(count, n, n)
+        d = s.draw(count, n, n)
+        cost, flies = d.cost, d.flies
         opt = np.array([sum(c[a, t] for a, t in optimal_pairs(c)) for c in cost])
         out[n] = (cost, flies, opt)
     return out
@@ -62,7 +70,7 @@ def measure(model, val, gap_weight: float = 1.0) -> dict:
     per N; ``score`` (lower is better: ``gap_weight`` times the gap, plus the share of tasks
     not conflict-free, plus three times the share left incomplete, averaged over N) picks the
     kept weights."""
-    from allocators.magnnet.ppo_train import play
+    from allocators.magnnet.ppo_env import play
 
     res, score = {}, 0.0
     for n, (cost, flies, opt) in val.items():
@@ -82,8 +90,7 @@ def run(args, console=None) -> int:
     import torch
 
     from allocators.magnnet.attention import AttentionPolicy
-    from allocators.magnnet.ppo import save_checkpoint
-    from allocators.magnnet.ppo_train import Config, train
+    from allocators.magnnet.ppo import PPOConfig, save_checkpoint, train
     from allocators.magnnet.problems import load_pool
     from allocators.magnnet.train_files import write_log
 
@@ -96,9 +103,9 @@ def run(args, console=None) -> int:
     n_val = min(args.val, len(full) // 2)
     pool = full.take(slice(0, len(full) - n_val))
     val = validation(full.take(slice(len(full) - n_val, len(full))), args.val_count)
-    cfg = Config(lr=args.lr, ent_coef=args.ent, team_weight=args.team_weight,
-                 cost_weight=args.cost_weight,
-                 updates=args.updates, seed=args.seed, wall_s=60 * args.minutes)
+    cfg = PPOConfig(**RECIPE, lr=args.lr, ent_coef=args.ent, team_weight=args.team_weight,
+                    cost_weight=args.cost_weight, total_steps=args.updates * RECIPE["batch_size"],
+                    seed=args.seed, wall_s=60 * args.minutes)
     with torch.random.fork_rng():
         torch.manual_seed(cfg.seed)
         model = AttentionPolicy()

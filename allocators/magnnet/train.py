@@ -101,7 +101,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "issue 19 had 300)")
     p.add_argument("--bc-defer", action=argparse.BooleanOptionalAction, default=True,
                    help="warm-start target: agents with a cheaper contender for their optimal "
-                        "task wait a round (see ppo.optimal_targets)")
+                        "task wait a round (see ppo_warm.optimal_targets)")
     p.add_argument("--lr", type=float, default=None,
                    help=f"PPO learning rate (default {RECIPE['lr']:g}; the paper's {d.lr:g} "
                         "learns nothing in our step budget)")
@@ -154,7 +154,7 @@ def run(args, console=None) -> int:
     cfg = PPOConfig(lr=RECIPE["lr"] if args.lr is None else args.lr, total_steps=args.steps,
                     bc_updates=args.bc_updates, n_envs=args.envs, seed=args.seed,
                     bc_defer=args.bc_defer, critic_warmup=args.critic_warmup,
-                    ent_coef=args.ent, credit=args.credit)
+                    ent_coef=args.ent, credit=args.credit, sizes=((n, n),))
     pool_n = max(20, n)
     full = load_pool(pool_n, args.pool, "train", workers=2)
     n_val = min(args.val, len(full) // 2)
@@ -170,7 +170,6 @@ def run(args, console=None) -> int:
     with torch.random.fork_rng():  # seeded initial weights, without touching global state
         torch.manual_seed(cfg.seed)
         model = MagnnetPolicy(n, n, task_features=tf, agent_values=cfg.credit == "agent")
-    sizes = None
     started = time.perf_counter()
     total = cfg.bc_updates + cfg.total_steps // (max(1, cfg.batch_size // cfg.n_envs)
                                                  * cfg.n_envs)
@@ -187,9 +186,7 @@ def run(args, console=None) -> int:
             if row["phase"] != "val":
                 progress.update(bar, advance=1, description=desc)
 
-        rows = train(model, pool, n, n, cfg, on_update, sizes=sizes,
-                     comm_ranges=None,
-                     validate=validate)
+        rows = train(model, pool, cfg, on_update, validate=validate)
     wall = time.perf_counter() - started
     steps = rows[-1]["env_steps"] if rows else 0
     ppo_rows = [r for r in rows if r["phase"] == "ppo"]

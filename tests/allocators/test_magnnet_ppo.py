@@ -10,9 +10,9 @@ torch = pytest.importorskip("torch")
 
 from allocators.magnnet import attention  # noqa: E402
 from allocators.magnnet.attention import AttentionPolicy, act, observe, requests  # noqa: E402
-from allocators.magnnet.ppo import save_checkpoint  # noqa: E402
-from allocators.magnnet.ppo_env import RoundsEnv  # noqa: E402
-from allocators.magnnet.ppo_train import Config, Sampler, collect, play, train  # noqa: E402
+from allocators.magnnet.ppo import PPOConfig, Sampler, collect, save_checkpoint, train  # noqa: E402
+from allocators.magnnet.ppo_env import RoundsEnv, play  # noqa: E402
+from allocators.magnnet.ppo_run import RECIPE  # noqa: E402
 from allocators.magnnet.problems import Pool  # noqa: E402
 from dispatch.api.decentralized import WAIT  # noqa: E402
 from dispatch.api.problem import AgentView, AllocationProblem, TaskView  # noqa: E402
@@ -35,6 +35,15 @@ def _pool(count: int, n: int, seed: int = 0) -> Pool:
     cost[:, ~flies[0], 0] = np.inf  # a ground agent cannot reach task 0
     return Pool(cost, rng.uniform(0, 50, (count, n, 3)), rng.uniform(0, 50, (count, n, 3)),
                 flies, np.arange(count), np.array([50.0, 50.0, 30.0]))
+
+
+def _cfg(rounds: int, updates: int, **kw) -> PPOConfig:
+    """The ``ppo`` variant's training (:data:`RECIPE`) at a test's scale: ``rounds`` rounds of
+    ``n_envs`` decisions per update, ``updates`` updates."""
+    n_envs = kw.pop("n_envs")
+    return PPOConfig(**{**RECIPE, "lr": 3e-4, "ent_coef": 0.01, "n_envs": n_envs,
+                        "batch_size": rounds * n_envs, "total_steps": updates * rounds * n_envs,
+                        **kw})
 
 
 def _model(seed: int = 0, **kw) -> AttentionPolicy:
@@ -104,10 +113,11 @@ def test_training_learns_on_a_tiny_instance():
     """A few seconds of PPO on 3 x 3 decisions: the argmax policy's team return rises above
     the random policy's by a margin (fixed seed)."""
     pool = _pool(32, 3)
-    cfg = Config(n_envs=16, rounds=4, epochs=4, minibatch=64, sizes=(3,), comm_ranges=None,
-                 updates=30, lr=3e-3, seed=0)
+    cfg = _cfg(4, 30, n_envs=16, epochs=4, minibatch_size=64, sizes=((3, 3),),
+               comm_ranges=None, lr=3e-3, seed=0)
     model = _model(d=16, layers=1, heads=2)
-    c, f, _ = Sampler(pool, np.random.default_rng(99)).draw(64, 3, 3)
+    d = Sampler(pool, np.random.default_rng(99)).draw(64, 3, 3)
+    c, f = d.cost, d.flies
     gen = torch.Generator().manual_seed(5)
     _, rand = play(_Uniform(), c, f, greedy=False, generator=gen)
     _, before = play(model, c, f)
@@ -132,19 +142,19 @@ def test_no_teacher_reaches_the_trainer(monkeypatch):
     monkeypatch.setattr(scipy.optimize, "linear_sum_assignment", refuse)
     monkeypatch.setattr(rules, "optimal", refuse)
     pool = _pool(8, 4)
-    cfg = Config(n_envs=4, rounds=3, epochs=1, minibatch=8, sizes=(3, 4), updates=2,
-                 comm_ranges=(10.0, 30.0), p_range=0.5)
+    cfg = _cfg(3, 2, n_envs=4, epochs=1, minibatch_size=8, sizes=((3, 3), (4, 4)),
+               comm_ranges=(10.0, 30.0), p_range=0.5)
     rows = train(_model(d=8, layers=1, heads=2), pool, cfg)
     assert [r["phase"] for r in rows] == ["ppo", "ppo"]
     env = RoundsEnv(4, 4, 4)
     sampler = Sampler(pool, np.random.default_rng(0))
     sampler.fill(env, np.arange(4))
-    batch = collect(_model(d=8, layers=1, heads=2), env, sampler, cfg,
-                    torch.Generator().manual_seed(0), {})
+    batch = collect(_model(d=8, layers=1, heads=2), env, sampler, 3, {}, cfg=cfg,
+                    gen=torch.Generator().manual_seed(0))
     assert set(batch) == {"obs", "actions", "logp", "acted", "values", "rewards", "dones",
-                          "last"}
-    assert set(batch["obs"][0]) == {"pair", "agents", "available", "adjacency", "deciding"}
-    assert batch["obs"][0]["pair"].shape[-1] == attention.PAIR_F
+                          "last_value"}
+    assert set(batch["obs"]) == {"pair", "agents", "available", "adjacency", "deciding"}
+    assert batch["obs"]["pair"].shape[-1] == attention.PAIR_F
 
 
 def test_plugin_decides_as_the_training_env(tmp_path):

@@ -8,7 +8,7 @@ Held to the reference: the rule over a stop sequence (``timetable``, in Python a
 and ``schedule`` over Stop objects), the compiled insertion (its slack path and its
 re-simulating path for plans whose stops wait), the plan change (``insert`` and ``pushed``:
 the times the operator keeps after an insertion) and rtv's search over every order
-(``best_orders_any``) and over the orders keeping the plan's own (``best_orders``)."""
+(``best_orders`` with ``reorder``) and over the orders keeping the plan's own (without)."""
 
 from __future__ import annotations
 
@@ -365,7 +365,7 @@ def _rtv_reference(c, keep_plan_order: bool):
 @pytest.mark.parametrize("reorder,until", [(False, False), (True, False), (False, True),
                                            (True, True)])
 def test_rtv_orders_with_every_stop_kind_equal_the_reference(reorder, until):
-    from allocators._rtv_kernel import best_orders, best_orders_any
+    from allocators._rtv_kernel import best_orders
 
     rng = np.random.default_rng(280 + reorder + 2 * until)
     feasible = cases = waits = ended = 0
@@ -388,12 +388,13 @@ def test_rtv_orders_with_every_stop_kind_equal_the_reference(reorder, until):
                                     "p_pax", "p_limit", "p_svc", "p_eta", "p_drop", "p_e")]
         tail = [rargs[x] for x in ("vn", "pn", "np_", "nn", "r_pax", "r_lp", "r_ld", "r_rel",
                                    "r_direct", "r_hasdrop", "r_e", "until", "old_end")]
-        if reorder:
+        if reorder:  # (the arrays the other mode reads are left empty)
             vp = np.array([c["tt"](0, r[0]) for r in c["stops"]]).reshape(k)
-            best_orders_any(*common, np.full(k, -1, np.int64), vp, np.zeros(1, np.int64), ppa,
-                            *tail, svc, 1, 10**7, S.TOL, *out)
+            best_orders(*common, np.zeros(0), np.full(k, -1, np.int64), vp,
+                        np.zeros(1, np.int64), ppa, *tail, svc, 1, 10**7, S.TOL, True, *out)
         else:
-            best_orders(*common, pp, *tail, svc, 1, 10**7, S.TOL, *out)
+            best_orders(*common, pp, np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int64),
+                        np.zeros(0), *tail, svc, 1, 10**7, S.TOL, False, *out)
         want = _rtv_reference(c, keep_plan_order=not reorder)
         if math.isinf(want):
             assert math.isinf(out[0][0]), (want, out)

@@ -86,8 +86,9 @@ def test_training_raises_reward():
     torch.manual_seed(0)  # the initial weights come from torch's global generator
     pool = random_pool(0, 100, 3)
     model = MagnnetPolicy(3, 3, mlp=32)
-    cfg = PPOConfig(lr=3e-3, total_steps=256 * 12, batch_size=256, n_envs=32, epochs=4, seed=0)
-    rows = train(model, pool, 3, 3, cfg)
+    cfg = PPOConfig(lr=3e-3, total_steps=256 * 12, batch_size=256, n_envs=32, epochs=4, seed=0,
+                    sizes=((3, 3),))
+    rows = train(model, pool, cfg)
     ret = [r["charts/episode_return"] for r in rows]
     assert np.mean(ret[-3:]) > np.mean(ret[:3]) + 0.3
 
@@ -212,7 +213,7 @@ def test_neighbour_task_features_hand_computed():
 
 def test_deferring_teacher_is_optimal_and_conflict_free():
     """Following :func:`optimal_targets` with ``defer`` reaches the optimum without conflicts."""
-    from allocators.magnnet.ppo import optimal_targets
+    from allocators.magnnet.ppo_warm import optimal_targets
 
     pool = random_pool(5, 16, 6)
     g = BatchedGame(16, 6, 6)

@@ -91,14 +91,14 @@ def test_agent_credit_collects_per_agent_streams():
     pool = random_pool(1, 20, n)
     model = MagnnetPolicy(n, n, mlp=16, agent_values=True)
     game = BatchedGame(8, n, n)
-    sampler = Sampler(pool, n, n, np.random.default_rng(0))
+    sampler = Sampler(pool, np.random.default_rng(0))
     sampler.fill(game, np.arange(8))
     stats: dict = {}
-    batch = collect(model, game, sampler, 6, stats)
+    cfg = PPOConfig(lr=1e-3, minibatch_size=8, epochs=2, credit="agent")
+    batch = collect(model, game, sampler, 6, stats, cfg=cfg)
     assert batch["values"].shape == (6, 8, n) and batch["rewards"].shape == (6, 8, n)
     assert batch["last_value"].shape == (8, n)
     before = [p.clone() for p in model.actor.parameters()]
-    cfg = PPOConfig(lr=1e-3, minibatch_size=8, epochs=2, credit="agent")
     logs = ppo_update(model, torch.optim.Adam(model.parameters(), lr=1e-3), batch, cfg)
     assert all(np.isfinite(v) for v in logs.values())
     assert any(not torch.equal(a, b) for a, b in zip(before, model.actor.parameters()))
@@ -160,8 +160,8 @@ def test_pure_ppo_learns_to_assign_without_stalling():
         r = evaluate(m, val)
         return {**r, "score": score(r)}
 
-    rows = train(model, pool, 4, 4, PPOConfig(lr=3e-4, total_steps=160_000, seed=0,
-                                               val_every=10), validate=validate)
+    rows = train(model, pool, PPOConfig(lr=3e-4, total_steps=160_000, seed=0, val_every=10,
+                                        sizes=((4, 4),)), validate=validate)
     end = evaluate(model, val)
     assert end["complete"] >= 0.9
     assert end["success"] > start["success"] + 0.1
