@@ -206,14 +206,3 @@ def test_broken_mode_choices_are_caught():
 
     assert failed(Past) == failed(Yes) == {"valid"}
     assert "rng" in failed(Global)
-
-
-def test_a_run_with_transit_is_refused_not_run_without_trains(tmp_path):
-    """Until a run hands riders to trains, a scenario with ``[transit]`` is refused at the
-    run's start, naming the file and the section, rather than run as if it had none."""
-    from dispatch.run.runner import run_one
-    from dispatch.config.scenario import RunSpec
-
-    sc = _load(tmp_path, "[transit]\nfeed = \"nyc_subway\"\n")
-    with pytest.raises(ScenarioError, match=r"s\.toml: transit: a run does not hand riders"):
-        run_one(RunSpec(sc, "fcfs", "dijkstra", 2, 0))
