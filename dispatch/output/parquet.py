@@ -176,28 +176,6 @@ SCHEMAS: dict[str, pa.Schema] = {
     ]),
 }
 
-#: tables a run writes only where its scenario asks (:meth:`Recorder.add_table`), so that every
-#: other run's folder holds exactly the tables above
-OPTIONAL_SCHEMAS: dict[str, pa.Schema] = {
-    # [transit]: one row per leg of every rider's trip (dispatch.decide.riders): its mode
-    # (fleet, train, walk), start and end (simulated seconds; a train leg's departure from
-    # from_stop_id and arrival at to_stop_id), where it goes from and to (metres on the road
-    # network's frame), the feed's station ids (null: a street node), a train leg's route and
-    # trip, a fleet leg's vehicle
-    "legs": pa.schema([
-        ("run_id", _S), ("request_id", _I), ("leg", _I), ("mode", _S), ("start", _F),
-        ("end", _F), ("from_x", _F), ("from_y", _F), ("to_x", _F), ("to_y", _F),
-        ("from_stop_id", _S), ("to_stop_id", _S), ("route_id", _S), ("trip_id", _S),
-        ("agent_id", _I),
-    ]),
-}
-
-
-def schema_of(name: str) -> pa.Schema:
-    """The schema of a table, optional or not (KeyError for no table of that name)."""
-    return SCHEMAS[name] if name in SCHEMAS else OPTIONAL_SCHEMAS[name]
-
-
 #: the column of the user's request ids, in every table about requests; its type is a run's
 #: own (:func:`request_id_type`): the schemas above give the integer one
 REQUEST_ID = "request_id"
@@ -255,40 +233,27 @@ class Recorder:
         self.flush_rows = flush_rows
         self.metadata = {"dispatch.version": __version__, "dispatch.run_id": run_id, **metadata}
         self.table_metadata: dict[str, dict[str, str]] = {}
-        #: this run's tables: :data:`SCHEMAS`, and those :meth:`add_table` and :meth:`extend`
-        #: add to or widen
-        self.schemas: dict[str, pa.Schema] = dict(SCHEMAS)
+        #: this run's tables (:data:`SCHEMAS`, and those :meth:`add_table` adds or widens);
         #: buffered rows per table: tuples in schema order without ``run_id`` (the first column)
-        self._rows: dict[str, list[tuple]] = {name: [] for name in SCHEMAS}
-        self._names = {name: tuple(schema.names[1:]) for name, schema in SCHEMAS.items()}
+        self.schemas: dict[str, pa.Schema] = {}
+        self._rows: dict[str, list[tuple]] = {}
+        self._names: dict[str, tuple[str, ...]] = {}
         self._columns: dict[str, Callable[[list], dict]] = {}  # see appender()
-        self._chunks: dict[str, list[Path]] = {name: [] for name in SCHEMAS}
-        self._written = dict.fromkeys(SCHEMAS, 0)
+        self._chunks: dict[str, list[Path]] = {}
+        self._written: dict[str, int] = {}
         self._closed = False
         self._open: list[tuple[pq.ParquetWriter, Path]] = []  # writers of finish(), if any
-        for name in (*SCHEMAS, *OPTIONAL_SCHEMAS):  # chunks of an earlier run killed half-way
-            leaf = self.leaf(name)
-            if leaf.is_dir():
-                for stale in leaf.glob(f"{CHUNK_PREFIX}*{CHUNK_SUFFIX}"):
-                    stale.unlink()
+        for name, schema in SCHEMAS.items():
+            self.add_table(name, schema)
 
-    def add_table(self, name: str) -> None:
-        """Write the optional table ``name`` (:data:`OPTIONAL_SCHEMAS`) too."""
-        if name not in self.schemas:
-            self.schemas[name] = OPTIONAL_SCHEMAS[name]
-            self._rows[name], self._chunks[name], self._written[name] = [], [], 0
-            self._names[name] = tuple(self.schemas[name].names[1:])
-
-    def extend(self, name: str, fields: list[pa.Field]) -> None:
-        """Columns ``fields`` appended to this run's ``name`` table (before any row of it):
-        the summary's columns of a feature that other runs' files leave out."""
-        if self._rows[name] or self._chunks[name]:
-            raise RuntimeError(f"{name}: columns added after rows were written")
-        schema = self.schemas[name]
-        for f in fields:
-            schema = schema.append(f)
-        self.schemas[name] = schema
-        self._names[name] = tuple(schema.names[1:])
+    def add_table(self, name: str, schema: pa.Schema) -> None:
+        """Write the table ``name`` of ``schema`` (an optional one, dispatch.output.legs, or one
+        widened before its first row); chunks of an earlier run killed half-way are removed."""
+        self.schemas[name], self._names[name] = schema, tuple(schema.names[1:])
+        self._rows[name], self._chunks[name], self._written[name] = [], [], 0
+        if self.leaf(name).is_dir():
+            for stale in self.leaf(name).glob(f"{CHUNK_PREFIX}*{CHUNK_SUFFIX}"):
+                stale.unlink()
 
     # ------------------------------------------------------------------ paths, schemas
     def leaf(self, table: str) -> Path:

@@ -28,7 +28,8 @@ import pyarrow as pa
 from dispatch.decide.meeting import walk_m
 from dispatch.fleet.shifts import duty_columns
 from dispatch.output import space_files
-from dispatch.output.parquet import REQUEST_ID, SCHEMAS, schema_of
+from dispatch.output.legs import OPTIONAL_SCHEMAS, schema_of
+from dispatch.output.parquet import REQUEST_ID, SCHEMAS
 from dispatch.output.stats import RunStats
 
 NAN3 = (math.nan, math.nan, math.nan)
@@ -279,9 +280,11 @@ class RunRecording:
         check_columns("legs", columns)
         rec = self.recorder
         if hasattr(rec, "add_table"):  # (a recorder that keeps no files has no tables)
-            rec.add_table("legs")
-            rec.extend("summary", [pa.field(n, pa.int64() if n in counts else pa.float64())
-                                   for n in summary_names])
+            rec.add_table("legs", OPTIONAL_SCHEMAS["legs"])
+            summary = rec.schemas["summary"]  # (widened before its one row)
+            for n in summary_names:
+                summary = summary.append(pa.field(n, pa.int64() if n in counts else pa.float64()))
+            rec.add_table("summary", summary)
         return rec.appender("legs")
 
     def chargers(self, rows) -> None:

@@ -32,7 +32,8 @@ import pyarrow.parquet as pq
 from dispatch import __version__
 from dispatch.config.runkeys import RUN_KEYS, point_settings
 from dispatch.config.scenario import RunSpec
-from dispatch.output.parquet import OPTIONAL_SCHEMAS, SCHEMAS, partition_path, write_atomic
+from dispatch.output.legs import OPTIONAL_SCHEMAS
+from dispatch.output.parquet import SCHEMAS, partition_path, write_atomic
 
 MARKERS = "_runs"
 ERRORS = "errors"

@@ -33,7 +33,8 @@ import pyarrow.parquet as pq
 
 from dispatch.config.runkeys import key_names
 from dispatch.config.scenario import RunSpec, safe_name
-from dispatch.output.parquet import REQUEST_ID, Recorder, json_meta, request_id_type, schema_of
+from dispatch.output.legs import schema_of
+from dispatch.output.parquet import REQUEST_ID, Recorder, json_meta, request_id_type
 from dispatch.run.pools import Outcome, on_pool, on_ray, sigterm_exits
 from dispatch.run.resume import (clear_partition, is_complete, legacy_variant, read_summary,
                                  record_failure, write_marker)
@@ -72,7 +73,7 @@ class RunResult:
 def read_table(path: Path, partition: dict[str, Any], name: str) -> pa.Table:
     """One table file of a run with the ``partition`` columns (left out of the files) put
     back where ``SCHEMAS[name]`` has them (an optional table's, :data:`OPTIONAL_SCHEMAS`; columns
-    a run added to a table, :meth:`Recorder.extend`, after them)."""
+    a run added to a table, :meth:`Recorder.add_table`, after them)."""
     table = pq.read_table(path)
     schema = schema_of(name)
     for k, v in partition.items():
