@@ -9,8 +9,10 @@ Each configuration is one run per fleet size, found by bisection:
 
 * ``door to door``: the scenario without ``[transit]``: every request a taxi ride;
 * ``subway, <choice>``: ``[transit]`` with the mode choice (``cheapest``: least generalized
-  cost; ``logit``: a seeded multinomial logit, scale 0.1 per minute) at each
-  ``--penalties`` transfer penalty (seconds per change of train).
+  cost; ``logit``: a seeded multinomial logit, scale 0.1 per minute; ``train_first:S``: the
+  cheapest option with a train where it costs at most S generalized seconds more than the
+  cheapest, an operator steering riders to the train) at each ``--penalties`` transfer
+  penalty (seconds per change of train).
 
 A rider is served when every leg of their trip is made (``riders_served``; door to door: a
 completed request). For each configuration the script prints the smallest fleet serving at
@@ -58,7 +60,9 @@ def scenario_text(agents: int, start: str, hours: float, choice: str | None,
         elif key == "transfer_penalty":
             line = f"transfer_penalty = {penalty}"
         elif key == "mode_choice" and choice is not None:
-            line = f'mode_choice = "{choice}"'
+            name, _, slack = choice.partition(":")
+            line = f'mode_choice = "{name}"' + (f"\n[transit.{name}]\nslack = {slack}"
+                                                if slack else "")
         out.append(line)
     return "\n".join(out) + "\n"
 
@@ -139,7 +143,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--start", default="17:00", help="time of day the window starts (HH:MM)")
     p.add_argument("--hours", type=float, default=1.0)
     p.add_argument("--target", type=float, default=0.98)
-    p.add_argument("--choices", nargs="+", default=["cheapest", "logit"])
+    p.add_argument("--choices", nargs="+", default=["cheapest", "logit", "train_first:600"])
+    p.add_argument("--no-baseline", action="store_true", help="leave door to door out")
     p.add_argument("--penalties", type=float, nargs="+", default=[300.0])
     p.add_argument("--lo", type=int, default=20)
     p.add_argument("--hi", type=int, default=200)
@@ -148,7 +153,8 @@ def main(argv: list[str] | None = None) -> None:
     a = p.parse_args(argv)
     rows: list[dict] = []
     best = []
-    configs = [(None, 300.0)] + [(c, x) for c in a.choices for x in a.penalties]
+    configs = [] if a.no_baseline else [(None, 300.0)]
+    configs += [(c, x) for c in a.choices for x in a.penalties]
     for choice, penalty in configs:
         print(label(choice, penalty), flush=True)
         b = smallest(a.start, a.hours, choice, penalty, a.target, a.lo, a.hi, a.step, rows)
