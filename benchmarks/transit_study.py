@@ -138,6 +138,45 @@ def smallest(start: str, hours: float, choice: str | None, penalty: float, targe
     return runs[hi]
 
 
+def plot(csvs: list[Path], out: Path, target: float = 0.98) -> Path:
+    """Two panels from the rows of ``csvs`` (this script's ``--csv`` files): the share of
+    riders served against the fleet size, one line per configuration; and vehicle-km per
+    served rider against the median door-to-door time at each configuration's smallest fleet
+    serving ``target`` (labelled with that fleet)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import pandas as pd
+
+    rows = pd.concat([pd.read_csv(p) for p in csvs], ignore_index=True)
+    rows = rows.drop_duplicates(["config", "agents"])
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(12, 4.8), layout="constrained")
+    for config, g in rows.groupby("config", sort=False):
+        g = g.sort_values("agents")
+        ax.plot(g["agents"], g["served"] * 100, marker="o", ms=3, label=config)
+        ok = g.loc[g["served"] >= target]
+        if len(ok):
+            b = ok.iloc[0]
+            bx.scatter(b["d2d_median"] / 60, b["vkm_per_rider"])
+            bx.annotate(f"{config} ({int(b['agents'])} taxis)",
+                        (b["d2d_median"] / 60, b["vkm_per_rider"]), xytext=(4, 2),
+                        textcoords="offset points", fontsize="x-small")
+    ax.axhline(target * 100, color="grey", lw=0.8, ls="--")
+    ax.set_xlabel("taxis (4 seats)")
+    ax.set_ylabel("riders served (%)")
+    ax.set_ylim(90, 100.2)
+    ax.legend(fontsize="x-small")
+    lo, hi = bx.get_xlim()
+    bx.set_xlim(lo, hi + (hi - lo) * 0.5)  # (room for the labels)
+    bx.set_xlabel("median door-to-door time (min)")
+    bx.set_ylabel("vehicle-km per served rider")
+    bx.set_title(f"at the smallest fleet serving >= {target:.0%}", fontsize="small")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    return out
+
+
 def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--start", default="17:00", help="time of day the window starts (HH:MM)")
@@ -150,7 +189,13 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--hi", type=int, default=200)
     p.add_argument("--step", type=int, default=5, help="bisection stops within this many taxis")
     p.add_argument("--csv", type=Path)
+    p.add_argument("--plot", type=Path, nargs="+", metavar="CSV",
+                   help="draw tradeoff.png from these --csv files (no run) into --out-dir")
+    p.add_argument("--out-dir", type=Path, default=ROOT / "docs" / "transit_study")
     a = p.parse_args(argv)
+    if a.plot:
+        print(plot(a.plot, a.out_dir / "tradeoff.png", a.target))
+        return
     rows: list[dict] = []
     best = []
     configs = [] if a.no_baseline else [(None, 300.0)]
