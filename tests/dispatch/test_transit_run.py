@@ -53,7 +53,7 @@ def _goals(sc):
 
 
 def test_the_legs_table_and_summary_columns(run):
-    sc, r, legs, _tasks, s = run
+    _sc, r, legs, _tasks, s = run
     assert tuple(legs.columns) == ("run_id", *LEG_COLUMNS)
     assert set(summary_names()) <= set(s) and set(summary_names()) <= set(
         r.tables["summary"].column_names)
