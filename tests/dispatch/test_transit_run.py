@@ -213,3 +213,27 @@ def test_transit_with_booked_requests_is_refused(tmp_path):
     [spec] = load_scenario(p, overrides=WINDOW).runs()
     with pytest.raises(ScenarioError, match=r"transit: riders who book ahead"):
         run_one(spec)
+
+
+def test_the_soak_invariants_hold_for_a_transit_run(run, tmp_path):
+    """The soak's checks from the tables alone (its legs_in_order among them) find nothing
+    (but ``reachable``, which reads street speeds of the soak's own grid, 10 m/s, where
+    Manhattan's OSM streets allow more)."""
+    import tomllib
+
+    from soak.invariants import check, read_tables
+
+    _sc, r, _legs, _tasks, _s = run
+    tables = read_tables(r.out)
+    assert "legs" in tables
+    doc = tomllib.loads(SCENARIO.read_text())
+    assert [v for v in check(doc, tables) if v[0] != "reachable"] == []
+    # and it sees a leg out of time order, and a fleet leg that is no ride of the rider
+    bad = tables["legs"].copy()
+    k = bad.index[bad["leg"] == 1][0]
+    bad.loc[k, "start"] = bad.loc[k, "start"] - 1e5
+    f = bad.index[bad["mode"] == "fleet"][0]
+    bad.loc[f, "agent_id"] = -5
+    found = {m for n, m in check(doc, {**tables, "legs": bad}) if n == "legs_in_order"}
+    assert any("out of time order" in m for m in found)
+    assert any("no completed ride" in m for m in found)
