@@ -400,10 +400,11 @@
       for (var s = 0; s < d.stations.x.length; s++)
         g.fillRect(this.sx(d.stations.x[s]) - 4, this.sy(d.stations.y[s]) - 4, 8, 8);
     }
-    if (d.transit && LAYERS.transit) { // the stations the riders' legs name
-      g.fillStyle = TRANSIT.station;
+    if (d.transit && LAYERS.transit) { // the stations the riders' legs name: white rings
+      g.fillStyle = "#fff"; g.strokeStyle = TRANSIT.station; g.lineWidth = 1.5;
       for (var q = 0; q < d.transit.sx.length; q++) {
-        g.beginPath(); g.arc(this.sx(d.transit.sx[q]), this.sy(d.transit.sy[q]), 3, 0, 2 * Math.PI); g.fill();
+        g.beginPath(); g.arc(this.sx(d.transit.sx[q]), this.sy(d.transit.sy[q]), 3.5, 0, 2 * Math.PI);
+        g.fill(); g.stroke();
       }
     }
   };
@@ -683,7 +684,7 @@
   var LAYERS = { network: true, requests: true, arcs: true, flashes: true, trails: false, stations: true,
                  walks: true, offshift: false, transit: true };
   // [transit]: stations, riders aboard trains and riders walking to, from and between them
-  var TRANSIT = { station: "#6a1b9a", train: "#6a1b9a", walk: "#2e7d32" };
+  var TRANSIT = { station: "#455a64", train: "#00838f", walk: "#2e7d32" };
   var runs = DATA.runs.map(function (d, i) { return new Run(d, i); });
   if (runs.some(function (r) { return r.voxel; })) LAYERS.trails = true;
   var root = document.getElementById("views");
@@ -770,7 +771,11 @@
    ["walk", MARKS.walk, "rider walking (dotted): origin to boarding point, alighting point to destination", feature("walks")],
    ["ride", "rgba(46,134,222,.6)", "ride: arc from pickup to drop-off while on board", true],
    ["refused", MARKS.refused, "request rejected or expired (flash)", true],
-   ["declined", MARKS.declined, "offer declined by the rider (flash)", feature("offers")]].forEach(function (x) {
+   ["declined", MARKS.declined, "offer declined by the rider (flash)", feature("offers")],
+   ["station", TRANSIT.station, "subway station (ring)", runs.some(function (r) { return r.d.transit; })],
+   ["train", TRANSIT.train, "rider aboard a train (dot, stop to stop)", runs.some(function (r) { return r.d.transit; })],
+   ["on_foot", TRANSIT.walk, "rider walking to, from or between stations (small dot)",
+    runs.some(function (r) { return r.d.transit; })]].forEach(function (x) {
     if (!x[3]) return;
     var span = el("span", { "data-legend": x[0] }), sw = el("span", { "class": "sw" }); sw.style.background = x[1];
     span.appendChild(sw); span.appendChild(document.createTextNode(x[2])); legend.appendChild(span);
