@@ -48,7 +48,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from analysis.replay_data import ReplayInputError, RunFiles, choose_run, read_table
+from analysis.replay_data import ReplayInputError, RunFiles, choose_run, read_table, transit_of
 from analysis.replay_duty import DUTY_STATES, duty_spells, overlay
 from analysis.timeline import FLEET_STATES, fleet_states
 
@@ -494,6 +494,7 @@ def build_run(run: RunFiles, route: bool = True) -> dict:
                                          "e": _arr(net[2].ravel(), np.int32)},
         "obstacles": obstacles, "vehicles": veh, "tasks": tk, "jumps": jumps,
         "decisions": dec, "soc": socd, "stations": stations,
+        "transit": transit_of(read_table(run, "legs"), ox, oy, _arr),
         "fleetStates": list(states), "taskStates": list(TASK_STATES),
         "refused": list(REFUSED_STATES), "cutOff": CUT_OFF_STATE,
     }

@@ -12,6 +12,7 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -20,7 +21,7 @@ from analysis.io import NoResultsError, find_sources, legacy_values
 
 #: the tables the replay reads (a missing one reads as empty)
 TABLES = ("summary", "tasks", "vehicles", "events", "decisions", "assignments", "soc",
-          "chargers", "obstacles")
+          "chargers", "obstacles", "legs")
 
 
 class ReplayInputError(ValueError):
@@ -118,3 +119,25 @@ def read_table(run: RunFiles, table: str, won_only: bool = False) -> pd.DataFram
     if "run_id" in df.columns:
         df = df.loc[df["run_id"] == run.run_id].reset_index(drop=True)
     return legacy_values(df)  # (an older run's "cancelled": cut_off)
+
+
+def transit_of(legs: pd.DataFrame, ox: float, oy: float, arr) -> dict | None:
+    """The page's riders off the fleet (a run with ``[transit]``: its ``legs`` table): the
+    stations the legs name (``sx``, ``sy``, ``sid``) and each train or walk leg (``mode`` 1
+    train, 2 walk; ``t0``, ``t1``; from ``x0``, ``y0`` to ``x1``, ``y1``), sorted by start, and
+    the longest leg's seconds (``span``); positions relative to ``(ox, oy)``, arrays made by
+    ``arr(values, dtype)``. None without legs. The page draws a rider on a train or on foot as
+    a dot moving in a straight line from stop to stop."""
+    if legs is None or not len(legs):
+        return None
+    at = pd.concat([legs[["from_stop_id", "from_x", "from_y"]].set_axis(["s", "x", "y"], axis=1),
+                    legs[["to_stop_id", "to_x", "to_y"]].set_axis(["s", "x", "y"], axis=1)])
+    at = at.dropna(subset=["s"]).drop_duplicates("s").sort_values("s")
+    off = legs.loc[legs["mode"] != "fleet"].sort_values("start", kind="stable")
+    code = off["mode"].map({"train": 1, "walk": 2}).to_numpy()
+    return {"sid": [str(s) for s in at["s"]], "sx": arr(at["x"] - ox, np.float32),
+            "sy": arr(at["y"] - oy, np.float32), "mode": arr(code, np.uint8),
+            "t0": arr(off["start"], np.float64), "t1": arr(off["end"], np.float64),
+            "x0": arr(off["from_x"] - ox, np.float32), "y0": arr(off["from_y"] - oy, np.float32),
+            "x1": arr(off["to_x"] - ox, np.float32), "y1": arr(off["to_y"] - oy, np.float32),
+            "span": float((off["end"] - off["start"]).max()) if len(off) else 0.0}

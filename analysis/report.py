@@ -462,6 +462,10 @@ def _road_part(res, summary, tasks, vehicles, events, direct, out, written, only
 
     files, energy = energy_section(res, summary, out, nets, run_ids, keys)
     written += files
+    from analysis.transit_plots import transit_section
+
+    files, transit = transit_section(res, summary, out)
+    written += files
     if energy:  # the energy columns of taxi.csv, after the section's heading and text
         energy[2:2] = [("p", ENERGY_NOTE),
                        ("table", _taxi_view(taxi.loc[taxi["kwh_drawn_per_vehicle"].notna()],
@@ -481,7 +485,7 @@ def _road_part(res, summary, tasks, vehicles, events, direct, out, written, only
         ("img", "map.png"),
         ("p", f"Over time, in bins of {unit} (the CSV files are per hour):"),
         ("img", "hourly.png"), ("img", "fleet_state.png"), ("img", "wait_by_allocator.png"),
-        *energy,
+        *energy, *transit,
     ]
 
 

@@ -18,6 +18,8 @@ STREAM_PREBOOK = 8
 STREAM_OFFERS = 31
 #: fleet sizing (dispatch.fleet.shifts); numbered apart from the streams above
 STREAM_SIZING = 12
+#: riders' mode choices ([transit]; dispatch.decide.riders)
+STREAM_MODE_CHOICE = 13
 
 
 def rng_for(seed: int, stream: int) -> np.random.Generator:

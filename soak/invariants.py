@@ -32,7 +32,8 @@ AT_VEHICLE = {"depart", "pickup", "dropoff", "complete", "idle", "charge_start",
               "queue", "stranded", "breakdown", "break_start", "break_end", "move", "wait"}
 INVARIANTS = ("one_terminal_state", "pickup_not_early", "wait_limit", "delay_limit",
               "capacity", "walk_limit", "shift", "break_empty", "energy_balance", "soc_floor",
-              "promise_kept", "reachable", "assign_open_only", "summary_counts", "same_seed")
+              "promise_kept", "reachable", "assign_open_only", "summary_counts", "legs_in_order",
+              "same_seed")
 SUMMARY_STATES = {"tasks_completed": "completed", "tasks_expired": "expired",
                   "tasks_rejected": "rejected", "tasks_unreachable": "unreachable",
                   "tasks_cut_off": "cut_off", "tasks_cancelled": "cancelled",
@@ -317,12 +318,41 @@ def _summary(doc, tdoc, tables, tasks, events, vehicles):
         yield f"summary tasks_unfinished {s.tasks_unfinished} != {len(tasks) - done.sum()}"
 
 
+def _legs(doc, tdoc, tables, tasks, events, vehicles):
+    """[transit]: each rider's legs numbered 0, 1, ... in time order, each from where and no
+    sooner than the one before ended; a train leg names its trip and stops; a fleet leg is a
+    completed task of the rider with its vehicle; riders and those served as the summary's."""
+    legs = tables.get("legs")
+    if legs is None:
+        return
+    done = tasks.loc[tasks.state == "completed"]
+    ride = dict(zip(zip(done.request_id, done.agent_id), done.picked_up_at))
+    for rid, g in legs.sort_values(["request_id", "leg"]).groupby("request_id"):
+        if list(g.leg) != list(range(len(g))):
+            yield f"request {rid}: legs numbered {list(g.leg)}"
+        start, end = g.start.to_numpy(), g.end.to_numpy()
+        if (end < start - TOL).any() or (start[1:] < end[:-1] - TOL).any():
+            yield f"request {rid}: legs out of time order"
+        xy = g[["from_x", "from_y", "to_x", "to_y"]].to_numpy()
+        if not np.allclose(xy[1:, :2], xy[:-1, 2:]):
+            yield f"request {rid}: a leg starts away from where the one before ended"
+        for leg in g.itertuples():
+            if leg.mode == "train" and (leg.trip_id is None or leg.from_stop_id is None
+                                        or leg.to_stop_id is None):
+                yield f"request {rid}: train leg {leg.leg} names no trip or stop"
+            if leg.mode == "fleet" and ride.get((rid, leg.agent_id)) != leg.start:
+                yield f"request {rid}: fleet leg {leg.leg} is no completed ride of its vehicle"
+    s = tables["summary"].iloc[0]
+    if "riders" in s and legs.request_id.nunique() > s.riders:
+        yield f"{legs.request_id.nunique()} riders with legs, summary riders {s.riders}"
+
+
 CHECKS = (("one_terminal_state", _terminal), ("pickup_not_early", _pickup_early),
           ("wait_limit", _wait), ("delay_limit", _delay), ("capacity", _capacity),
           ("walk_limit", _walk), ("shift", _shift), ("break_empty", _break),
           ("energy_balance", _energy), ("soc_floor", _soc), ("promise_kept", _promise),
           ("reachable", _reachable), ("assign_open_only", _assign_open),
-          ("summary_counts", _summary))
+          ("summary_counts", _summary), ("legs_in_order", _legs))
 
 
 def same_tables(a: dict[str, pd.DataFrame], b: dict[str, pd.DataFrame]) -> list[str]:

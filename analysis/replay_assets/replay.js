@@ -400,6 +400,13 @@
       for (var s = 0; s < d.stations.x.length; s++)
         g.fillRect(this.sx(d.stations.x[s]) - 4, this.sy(d.stations.y[s]) - 4, 8, 8);
     }
+    if (d.transit && LAYERS.transit) { // the stations the riders' legs name: white rings
+      g.fillStyle = "#fff"; g.strokeStyle = TRANSIT.station; g.lineWidth = 1.5;
+      for (var q = 0; q < d.transit.sx.length; q++) {
+        g.beginPath(); g.arc(this.sx(d.transit.sx[q]), this.sy(d.transit.sy[q]), 3.5, 0, 2 * Math.PI);
+        g.fill(); g.stroke();
+      }
+    }
   };
 
   View.prototype.draw = function (t) {
@@ -503,6 +510,19 @@
       // booked ahead, not yet at their requested departure
       for (var q = 0, nb = ub(run.bookedBk, t); q < nb; q++)
         if (T.rel[run.bookedTasks[q]] > t) drawTask(run.bookedTasks[q]);
+    }
+    // riders off the fleet: on a train or on foot, a dot moving straight from stop to stop
+    if (d.transit && LAYERS.transit) {
+      var R = d.transit, r0 = ub(R.t0, t - R.span - 1), r1 = ub(R.t0, t);
+      for (var q2 = r0; q2 < r1; q2++) {
+        if (R.t1[q2] <= t) continue;
+        var fr = R.t1[q2] > R.t0[q2] ? (t - R.t0[q2]) / (R.t1[q2] - R.t0[q2]) : 1;
+        c.fillStyle = R.mode[q2] === 1 ? TRANSIT.train : TRANSIT.walk;
+        c.beginPath();
+        c.arc(this.sx(R.x0[q2] + fr * (R.x1[q2] - R.x0[q2])), this.sy(R.y0[q2] + fr * (R.y1[q2] - R.y0[q2])),
+              R.mode[q2] === 1 ? 3 : 2, 0, 2 * Math.PI);
+        c.fill();
+      }
     }
     // vehicles: one path per state, a triangle along the heading (drones: a diamond)
     var kinds = V.kindNames, uav = kinds.indexOf("uav");
@@ -662,7 +682,9 @@
 
   // ---------------------------------------------------------------- the application
   var LAYERS = { network: true, requests: true, arcs: true, flashes: true, trails: false, stations: true,
-                 walks: true, offshift: false };
+                 walks: true, offshift: false, transit: true };
+  // [transit]: stations, riders aboard trains and riders walking to, from and between them
+  var TRANSIT = { station: "#455a64", train: "#00838f", walk: "#2e7d32" };
   var runs = DATA.runs.map(function (d, i) { return new Run(d, i); });
   if (runs.some(function (r) { return r.voxel; })) LAYERS.trails = true;
   var root = document.getElementById("views");
@@ -708,7 +730,8 @@
   var layerBox = document.getElementById("layers");
   var layerNames = { network: runs.some(function (r) { return r.voxel; }) ? "map / obstacles" : "streets",
                      requests: "waiting requests", arcs: "rides (arcs)", flashes: "rejected / expired / declined",
-                     trails: "trails", stations: "stations", walks: "walks", offshift: "off-shift vehicles" };
+                     trails: "trails", stations: "stations", walks: "walks", offshift: "off-shift vehicles",
+                     transit: "subway stations, riders on trains and on foot" };
   function feature(f) { return runs.some(function (r) { return r.d.tasks && r.d.tasks.features && r.d.tasks.features[f]; }); }
   var hasShifts = runs.some(function (r) {
     var V = r.d.vehicles;
@@ -718,6 +741,7 @@
   Object.keys(LAYERS).forEach(function (k) {
     if (k === "stations" && !runs.some(function (r) { return r.d.stations; })) return;
     if ((k === "walks" && !feature("walks")) || (k === "offshift" && !hasShifts)) return;
+    if (k === "transit" && !runs.some(function (r) { return r.d.transit; })) return;
     var lab = el("label"), cb = el("input", { type: "checkbox", "data-layer": k });
     cb.checked = LAYERS[k];
     cb.addEventListener("change", function () { LAYERS[k] = cb.checked; views.forEach(function (v) { v.bgKey = ""; }); APP.dirty = true; });
@@ -747,7 +771,11 @@
    ["walk", MARKS.walk, "rider walking (dotted): origin to boarding point, alighting point to destination", feature("walks")],
    ["ride", "rgba(46,134,222,.6)", "ride: arc from pickup to drop-off while on board", true],
    ["refused", MARKS.refused, "request rejected or expired (flash)", true],
-   ["declined", MARKS.declined, "offer declined by the rider (flash)", feature("offers")]].forEach(function (x) {
+   ["declined", MARKS.declined, "offer declined by the rider (flash)", feature("offers")],
+   ["station", TRANSIT.station, "subway station (ring)", runs.some(function (r) { return r.d.transit; })],
+   ["train", TRANSIT.train, "rider aboard a train (dot, stop to stop)", runs.some(function (r) { return r.d.transit; })],
+   ["on_foot", TRANSIT.walk, "rider walking to, from or between stations (small dot)",
+    runs.some(function (r) { return r.d.transit; })]].forEach(function (x) {
     if (!x[3]) return;
     var span = el("span", { "data-legend": x[0] }), sw = el("span", { "class": "sw" }); sw.style.background = x[1];
     span.appendChild(sw); span.appendChild(document.createTextNode(x[2])); legend.appendChild(span);

@@ -36,7 +36,7 @@ class TransitConfig:
     w_walk: float = 2.0  # weight of a second walking to or from a station
     w_transfer: float = 2.0  # weight of a second spent changing trains
     transfer_penalty: float = 300.0  # seconds added per change of train
-    #: an installed mode choice (``dispatch plugins``): cheapest, logit
+    #: an installed mode choice (``dispatch plugins``): cheapest, logit, train_first
     mode_choice: str = "cheapest"
     #: the ``[transit.<mode_choice>]`` table: keyword arguments of its constructor
     params: tuple[tuple[str, Any], ...] = ()

@@ -233,19 +233,27 @@ class Recorder:
         self.flush_rows = flush_rows
         self.metadata = {"dispatch.version": __version__, "dispatch.run_id": run_id, **metadata}
         self.table_metadata: dict[str, dict[str, str]] = {}
+        #: this run's tables (:data:`SCHEMAS`, and those :meth:`add_table` adds or widens);
         #: buffered rows per table: tuples in schema order without ``run_id`` (the first column)
-        self._rows: dict[str, list[tuple]] = {name: [] for name in SCHEMAS}
-        self._names = {name: tuple(schema.names[1:]) for name, schema in SCHEMAS.items()}
+        self.schemas: dict[str, pa.Schema] = {}
+        self._rows: dict[str, list[tuple]] = {}
+        self._names: dict[str, tuple[str, ...]] = {}
         self._columns: dict[str, Callable[[list], dict]] = {}  # see appender()
-        self._chunks: dict[str, list[Path]] = {name: [] for name in SCHEMAS}
-        self._written = dict.fromkeys(SCHEMAS, 0)
+        self._chunks: dict[str, list[Path]] = {}
+        self._written: dict[str, int] = {}
         self._closed = False
         self._open: list[tuple[pq.ParquetWriter, Path]] = []  # writers of finish(), if any
-        for name in SCHEMAS:  # chunks of an earlier run of this partition killed half-way
-            leaf = self.leaf(name)
-            if leaf.is_dir():
-                for stale in leaf.glob(f"{CHUNK_PREFIX}*{CHUNK_SUFFIX}"):
-                    stale.unlink()
+        for name, schema in SCHEMAS.items():
+            self.add_table(name, schema)
+
+    def add_table(self, name: str, schema: pa.Schema) -> None:
+        """Write the table ``name`` of ``schema`` (an optional one, dispatch.output.legs, or one
+        widened before its first row); chunks of an earlier run killed half-way are removed."""
+        self.schemas[name], self._names[name] = schema, tuple(schema.names[1:])
+        self._rows[name], self._chunks[name], self._written[name] = [], [], 0
+        if self.leaf(name).is_dir():
+            for stale in self.leaf(name).glob(f"{CHUNK_PREFIX}*{CHUNK_SUFFIX}"):
+                stale.unlink()
 
     # ------------------------------------------------------------------ paths, schemas
     def leaf(self, table: str) -> Path:
@@ -254,7 +262,7 @@ class Recorder:
 
     def file_schema(self, table: str) -> pa.Schema:
         """``table``'s schema in the files: without the partition columns, with metadata."""
-        schema = SCHEMAS[table]
+        schema = self.schemas[table]
         for k, typ in self.types.items():
             if k in schema.names:
                 schema = schema.set(schema.get_field_index(k), pa.field(k, typ))
@@ -274,7 +282,7 @@ class Recorder:
             values = tuple([row[k] for k in names])
         except KeyError:
             row["run_id"] = self.run_id
-            cols = SCHEMAS[table].names
+            cols = self.schemas[table].names
             missing, extra = set(cols) - row.keys(), row.keys() - set(cols)
             raise KeyError(f"{table} row: missing {sorted(missing)}, unexpected {sorted(extra)}")
         self.append(table, values)
@@ -352,7 +360,7 @@ class Recorder:
 
     def flush(self, table: str | None = None) -> None:
         """Write the buffered rows of ``table`` (of every table if None) as a chunk file."""
-        for name in SCHEMAS if table is None else (table,):
+        for name in self.schemas if table is None else (table,):
             if not self._rows[name]:
                 continue
             data = self._take(name)
@@ -372,7 +380,7 @@ class Recorder:
         if self._closed:
             raise RuntimeError(f"recorder of {self.run_id} is closed (finish or abort)")
         files = {}
-        for name in SCHEMAS:
+        for name in self.schemas:
             schema = self.file_schema(name)
             rest = self._take(name)
             path = self.leaf(name) / FINAL_NAME
@@ -411,7 +419,7 @@ class Recorder:
                 pass
             tmp.unlink(missing_ok=True)
         self._open = []
-        for name in SCHEMAS:
+        for name in self.schemas:
             try:
                 self.flush(name)
             except Exception:  # noqa: BLE001 - e.g. a row of the wrong type: drop the rest

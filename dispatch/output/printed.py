@@ -348,6 +348,15 @@ def render_one(s: dict, console=None, *, dynamic: bool = False) -> None:
         t.add_row("walking", f"{_f(s['walk_mean'], 0)} m walked per ride (to board plus from "
                              f"alighting); {s['meeting_points']} candidate points, "
                              f"{s['meeting_cut']} left out by tasks.meeting_points")
+    if s.get("riders"):  # [transit] (dispatch.decide.riders)
+        t.add_row("riders", f"{s['riders_served']} of {s['riders']} served: door to door "
+                            f"{_f(s['mode_share_fleet'], 1, 100)} %, fleet then train "
+                            f"{_f(s['mode_share_fleet_train'], 1, 100)} %, train then fleet "
+                            f"{_f(s['mode_share_train_fleet'], 1, 100)} %, train "
+                            f"{_f(s['mode_share_train'], 1, 100)} %; "
+                            f"{_f(s['vehicle_km_per_rider'], 2)} vehicle-km per rider served, "
+                            f"door to door {_f(s['door_to_door_median'])} s median, "
+                            f"{s['missed_connections']} missed connections")
     if s.get("promises", 0):  # prebooking (dispatch.decide.prebook)
         t.add_row("promises", f"{s['promises']} booked rides promised, "
                               f"{s['promises_broken']} broken")

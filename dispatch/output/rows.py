@@ -28,6 +28,7 @@ import pyarrow as pa
 from dispatch.decide.meeting import walk_m
 from dispatch.fleet.shifts import duty_columns
 from dispatch.output import space_files
+from dispatch.output.legs import OPTIONAL_SCHEMAS, schema_of
 from dispatch.output.parquet import REQUEST_ID, SCHEMAS
 from dispatch.output.stats import RunStats
 
@@ -38,7 +39,7 @@ def check_columns(table: str, columns: tuple[str, ...]) -> None:
     """KeyError naming the difference unless ``columns`` are ``table``'s columns but ``run_id``,
     in the schema's order: what a row function says it returns (a column added to a schema
     without a value fails when the run starts, never as values shifted into other columns)."""
-    names = tuple(n for n in SCHEMAS[table].names if n != "run_id")
+    names = tuple(n for n in schema_of(table).names if n != "run_id")
     if columns != names:
         missing = [n for n in names if n not in columns]
         extra = [n for n in columns if n not in names]
@@ -269,6 +270,22 @@ class RunRecording:
         for name, (_meta, rows) in self.static.items():
             for row in rows:
                 self.recorder.add(name, **row)
+
+    def legs(self, columns: tuple[str, ...], summary_names: tuple[str, ...],
+             counts: tuple[str, ...]):
+        """``[transit]``: the ``legs`` table written too (its rows' ``columns``:
+        :data:`dispatch.decide.rider_legs.LEG_COLUMNS`), and the summary widened by the
+        riders' columns ``summary_names`` (int64 those in ``counts``, float64 the others);
+        returns what appends one leg's row."""
+        check_columns("legs", columns)
+        rec = self.recorder
+        if hasattr(rec, "add_table"):  # (a recorder that keeps no files has no tables)
+            rec.add_table("legs", OPTIONAL_SCHEMAS["legs"])
+            summary = rec.schemas["summary"]  # (widened before its one row)
+            for n in summary_names:
+                summary = summary.append(pa.field(n, pa.int64() if n in counts else pa.float64()))
+            rec.add_table("summary", summary)
+        return rec.appender("legs")
 
     def chargers(self, rows) -> None:
         """The ``chargers`` rows: each station's row with its position."""

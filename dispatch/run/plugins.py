@@ -25,7 +25,7 @@ if TYPE_CHECKING:
     from dispatch.plan.tasks import TaskBook
 
 __all__ = ["UnknownParameter", "check_repositioner", "check_runs", "describe", "make_acceptor",
-           "make_charger", "make_plugin", "make_repositioner", "make_sizer", "offering_for",
+           "make_charger", "make_mode_choice", "make_plugin", "make_repositioner", "make_sizer", "offering_for",
            "travel_times_needed"]
 
 
@@ -119,14 +119,19 @@ def make_sizer(sc: Scenario):
                       "fleet.sizing_params")
 
 
-def refuse_transit(sc: Scenario) -> None:
-    """ScenarioError for a scenario with ``[transit]``: the section is read and its feed
-    checked, but a run does not hand riders to trains yet; refusing beats a run that silently
-    leaves the trains out."""
-    if sc.transit is not None:
-        raise ScenarioError(sc.path, "transit", "a run does not hand riders to trains yet: the "
-                            "section is read and its feed checked, and the router is used from "
-                            "Python (docs/howto/transit.md); leave [transit] out to run")
+def make_mode_choice(sc: Scenario):
+    """The mode choice of ``[transit]`` built from its ``[transit.<mode_choice>]`` table."""
+    t = sc.transit
+    return _construct("mode_choice", t.mode_choice, t.params, (), f"transit.{t.mode_choice}")
+
+
+def check_transit(sc: Scenario) -> None:
+    """ScenarioError for ``[transit]`` with requests booked ahead: a rider's legs are timed
+    from the moment they ask, so a trip booked for later is not planned by train."""
+    if sc.transit is not None and sc.tasks.prebooked:
+        raise ScenarioError(sc.path, "transit", "riders who book ahead ([tasks] "
+                            "prebook_share, a trace's booked_at) are not combined with [transit]"
+                            "; leave one of them out")
 
 
 def check_repositioner(sc: Scenario, name: str) -> None:

@@ -32,6 +32,7 @@ import pyarrow.parquet as pq
 from dispatch import __version__
 from dispatch.config.runkeys import RUN_KEYS, point_settings
 from dispatch.config.scenario import RunSpec
+from dispatch.output.legs import OPTIONAL_SCHEMAS
 from dispatch.output.parquet import SCHEMAS, partition_path, write_atomic
 
 MARKERS = "_runs"
@@ -139,7 +140,7 @@ def clear_partition(out: Path, spec: RunSpec) -> None:
     if marker.parent.is_dir():
         for f in marker.parent.glob(f".{marker.name}.tmp-*"):
             f.unlink(missing_ok=True)
-    for table in (*SCHEMAS, ERRORS):
+    for table in (*SCHEMAS, *OPTIONAL_SCHEMAS, ERRORS):
         leaf = Path(out) / table / partition_dir(spec)
         if leaf.is_dir():
             for f in leaf.iterdir():

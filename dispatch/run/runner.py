@@ -33,7 +33,8 @@ import pyarrow.parquet as pq
 
 from dispatch.config.runkeys import key_names
 from dispatch.config.scenario import RunSpec, safe_name
-from dispatch.output.parquet import REQUEST_ID, SCHEMAS, Recorder, json_meta, request_id_type
+from dispatch.output.legs import schema_of
+from dispatch.output.parquet import REQUEST_ID, Recorder, json_meta, request_id_type
 from dispatch.run.pools import Outcome, on_pool, on_ray, sigterm_exits
 from dispatch.run.resume import (clear_partition, is_complete, legacy_variant, read_summary,
                                  record_failure, write_marker)
@@ -71,15 +72,17 @@ class RunResult:
 
 def read_table(path: Path, partition: dict[str, Any], name: str) -> pa.Table:
     """One table file of a run with the ``partition`` columns (left out of the files) put
-    back where ``SCHEMAS[name]`` has them."""
+    back where ``SCHEMAS[name]`` has them (an optional table's, :data:`OPTIONAL_SCHEMAS`; columns
+    a run added to a table, :meth:`Recorder.add_table`, after them)."""
     table = pq.read_table(path)
-    schema = SCHEMAS[name]
+    schema = schema_of(name)
     for k, v in partition.items():
         if k in schema.names and k not in table.column_names:
             field = schema.field(k)
             i = schema.get_field_index(k)
             table = table.add_column(i, field, pa.array([v] * table.num_rows, field.type))
-    return table.select(schema.names)
+    return table.select([*schema.names, *(c for c in table.column_names
+                                          if c not in schema.names)])
 
 
 def run_metadata(spec: RunSpec) -> dict[str, str]:

@@ -39,11 +39,14 @@ from functools import partial
 
 import simpy
 
+from dispatch.api.mode_choice import Weights
 from dispatch.api.space import space_for
 from dispatch.decide.dispatcher import Dispatcher, Wakeup
 from dispatch.decide.meeting import Walks
 from dispatch.decide.pipeline import Pipeline
 from dispatch.decide.prebook import task_source
+from dispatch.decide.rider_legs import LEG_COLUMNS, Transit, seconds_of_day
+from dispatch.decide.riders import Riders, TransitSource, summary_names
 from dispatch.decide.tally import Blame, Tally
 from dispatch.events import EventBus
 from dispatch.fleet.battery import Energy
@@ -61,12 +64,14 @@ from dispatch.plan.tasks import Task, TaskBook, TaskState
 from dispatch.plan.timed_drives import TimedExecution
 from dispatch.plan.traffic import Traffic
 from dispatch.plan.vehicles import Fleet, stop_leg
-from dispatch.run.plugins import (check_repositioner, describe, make_charger, make_plugin,
-                                  make_repositioner, make_sizer, offering_for, refuse_transit)
+from dispatch.run.plugins import (check_repositioner, check_transit, describe, make_charger,
+                                  make_mode_choice, make_plugin, make_repositioner, make_sizer,
+                                  offering_for)
 from dispatch.space.physics import mirror_of
 from dispatch.streams import (STREAM_ALLOCATOR, STREAM_CHARGING, STREAM_FAULTS, STREAM_FLEET,
-                              STREAM_OFFERS, STREAM_PREBOOK, STREAM_REPOSITION, STREAM_SIZING,
-                              STREAM_SOURCE, STREAM_TASKS, rng_for)
+                              STREAM_MODE_CHOICE, STREAM_OFFERS, STREAM_PREBOOK,
+                              STREAM_REPOSITION, STREAM_SIZING, STREAM_SOURCE, STREAM_TASKS,
+                              rng_for)
 
 log = logging.getLogger(__name__)
 
@@ -114,7 +119,7 @@ class Simulation:
     def __init__(self, spec, recorder, progress=None, *, allocator=None,
                  env: simpy.Environment | None = None) -> None:
         sc = spec.scenario
-        refuse_transit(sc)
+        check_transit(sc)
         self.spec, self.recorder = spec, recorder
         self.env = env = simpy.Environment() if env is None else env
         self.space = space = space_for(sc.world, spec.seed, sc.path)
@@ -185,13 +190,19 @@ class Simulation:
         self.walks = (Walks(space, sc.tasks.meeting_points) if sc.tasks.walking else None)
         if self.walks is not None:
             book.on_close.append(lambda t: self.walks.forget((t.id,)))
+        #: [transit]: riders who may take the train (dispatch.decide.riders), or None
+        self.riders = None if sc.transit is None else self._riders(sc)
+        if self.riders is not None:
+            book.on_close.append(self.riders.closed)
         pipeline = Pipeline(book, self.fleet, self.operator, self.planner, allocator, space,
                             cfg=d, comms=sc.comms, rng=rng_for(spec.seed, STREAM_ALLOCATOR),
                             tally=self.tally, blame=blame, links=blackout_filter(sc.faults),
                             energy_filter=None if self.energy is None else self.energy.filter,
                             pooled=any(v.capacity > 1 for v in self.vehicles)
-                            or sc.tasks.prebooked,  # (a promise waits in a plan)
-                            max_delay=sc.tasks.delay_limited,
+                            or sc.tasks.prebooked  # (a promise waits in a plan)
+                            or self.riders is not None,  # (so does a booked last leg)
+                            # (a feeder's drop-off makes its train)
+                            max_delay=sc.tasks.delay_limited or self.riders is not None,
                             shifts=self.shifts if self.shifts is not None
                             and self.shifts.limited else None, walks=self.walks)
         self.dispatcher = Dispatcher(env, wakeup, pipeline, self.fleet, self.operator,
@@ -204,6 +215,10 @@ class Simulation:
         driver.run_id = spec.run_id  # named in error messages
         t = sc.tasks
         source, extra = task_source(sc, rng_for(spec.seed, STREAM_PREBOOK))
+        if self.riders is not None:  # (booked last legs are released as prebooking's are)
+            source, extra = TransitSource, dict(
+                share=0.0, lead=t.prebook_lead, mode="at_booking", dispatch_lead=0.0,
+                booking_rng=rng_for(spec.seed, STREAM_PREBOOK), riders=self.riders)
         self.source = source.of(env, book, demand, t,
                                 spec.n_static_tasks if t.source == "static" else t.count,
                                 day_rng=lambda: rng_for(spec.seed, STREAM_TASKS),
@@ -235,6 +250,24 @@ class Simulation:
         while True:
             yield self.env.timeout(tick)
             self.progress(self.env.now, duration, self.book.released, self.stats.n_tasks)
+
+    def _riders(self, sc) -> Riders:
+        """``[transit]``: the timetable on the run's network and clock, the mode choice, and
+        the ``legs`` table and the summary's transit columns in the recording."""
+        cfg = sc.transit
+        free = self.planner.free_flow
+
+        def between(u: int, v: int) -> float:
+            return float(free.between([u], [v], pairwise=True)[0])
+
+        on_leg = self.recording.legs(LEG_COLUMNS, summary_names(),
+                                     ("riders", "riders_served", "missed_connections"))
+        return Riders(Transit(cfg, self.space, seconds_of_day(sc.tasks.start)),
+                      make_mode_choice(sc),
+                      Weights(cfg.w_ivt, cfg.w_wait, cfg.w_walk, cfg.w_transfer,
+                              cfg.transfer_penalty),
+                      rng_for(self.spec.seed, STREAM_MODE_CHOICE), between=between,
+                      limits=(sc.tasks.max_wait, sc.tasks.max_delay), on_leg=on_leg)
 
     def _energy(self, sc) -> Energy | None:
         """``[fleet.energy]``: the run's batteries and the dispatcher's reserve rule (see
@@ -314,5 +347,7 @@ class Simulation:
                  "objective": spec.scenario.dispatch.objective,
                  **fleet_summary(self.vehicles, now, self.stats.count[TaskState.COMPLETED]),
                  "meeting_points": 0 if self.walks is None else self.walks.points,
-                 "meeting_cut": 0 if self.walks is None else self.walks.cut}
+                 "meeting_cut": 0 if self.walks is None else self.walks.cut,
+                 **({} if self.riders is None else
+                    self.riders.summary(sum(v.distance for v in self.vehicles)))}
         return self.recording.summary(run, self.vehicles, self.tally, now, extra)

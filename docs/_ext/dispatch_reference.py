@@ -451,7 +451,8 @@ def output_meanings() -> dict[str, dict[str, str]]:
 
 def recorder_comments() -> dict[str, dict[str, str]]:
     """``{table: {column: the comment above its group}}`` in the recorder's schemas."""
-    src = (ROOT / "dispatch" / "output" / "parquet.py").read_text(encoding="utf-8")
+    src = "\n".join((ROOT / "dispatch" / "output" / f).read_text(encoding="utf-8")
+                    for f in ("parquet.py", "legs.py"))  # (legs.py: the optional tables)
     out, table, comment = {}, None, []
     for line in src.splitlines():
         m = re.match(r'\s*"(\w+)": pa\.schema', line)
@@ -470,6 +471,7 @@ def recorder_comments() -> dict[str, dict[str, str]]:
 
 
 def parquet_tables() -> str:
+    from dispatch.output.legs import OPTIONAL_SCHEMAS
     from dispatch.output.parquet import SCHEMAS
 
     meanings, comments = output_meanings(), recorder_comments()
@@ -478,8 +480,13 @@ def parquet_tables() -> str:
            "table a run writes, under `OUT/<table>/<partition>/part-0.parquet` (Hive "
            "partitions: the run keys). The meaning (with its unit) comes from the "
            "[results page](../../explanation/output.md), else from the recorder's comment.", ""]
-    for name, schema in SCHEMAS.items():
-        out += [f"## {name}", "", "| column | type | meaning |", "|---|---|---|"]
+    for name, schema in {**SCHEMAS, **OPTIONAL_SCHEMAS}.items():
+        if name in OPTIONAL_SCHEMAS:  # (written only where a scenario asks for it)
+            out += [f"## {name}", "", f"Only where the scenario asks for it "
+                    f"(`dispatch.output.legs.OPTIONAL_SCHEMAS`; {name}: `[transit]`).", ""]
+            out += ["| column | type | meaning |", "|---|---|---|"]
+        else:
+            out += [f"## {name}", "", "| column | type | meaning |", "|---|---|---|"]
         for f in schema:
             m = meanings.get(name, {}).get(f.name) or comments.get(name, {}).get(f.name, "")
             if f.name == "run_id":

@@ -208,12 +208,20 @@ def test_broken_mode_choices_are_caught():
     assert "rng" in failed(Global)
 
 
-def test_a_run_with_transit_is_refused_not_run_without_trains(tmp_path):
-    """Until a run hands riders to trains, a scenario with ``[transit]`` is refused at the
-    run's start, naming the file and the section, rather than run as if it had none."""
-    from dispatch.run.runner import run_one
-    from dispatch.config.scenario import RunSpec
-
-    sc = _load(tmp_path, "[transit]\nfeed = \"nyc_subway\"\n")
-    with pytest.raises(ScenarioError, match=r"s\.toml: transit: a run does not hand riders"):
-        run_one(RunSpec(sc, "fcfs", "dijkstra", 2, 0))
+def test_train_first_takes_a_train_within_its_slack():
+    """``train_first``: the cheapest option with a train where it costs at most ``slack``
+    more than the cheapest of all, else the cheapest."""
+    cls = registry.load("mode_choice", "train_first")
+    w = Weights(1.0, 2.0, 2.0, 2.0, 300.0)
+    fleet = Option("fleet", 0.0, ivt=600.0, wait=60.0, walk=0.0)  # cost 720
+    feeder = Option("fleet+train", 0.0, ivt=900.0, wait=60.0, walk=60.0)  # 1140
+    train = Option("train", 0.0, ivt=800.0, wait=100.0, walk=100.0, changes=1)  # 1500
+    rng = np.random.default_rng(0)
+    opts = [fleet, train, feeder]
+    assert cls(slack=0).choose(opts, w, rng) == 0
+    assert cls(slack=419).choose(opts, w, rng) == 0
+    assert cls(slack=420).choose(opts, w, rng) == 2
+    assert cls(slack=5000).choose(opts, w, rng) == 2
+    assert cls().choose([fleet], w, rng) == 0 and cls().choose([train], w, rng) == 0
+    with pytest.raises(ValueError, match="slack must be"):
+        cls(slack=-1)
