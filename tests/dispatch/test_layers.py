@@ -87,10 +87,10 @@ def test_a_plugin_contract_lives_in_api():
 
 
 #: functions numba compiles, which keep positional parameters (numba's compiled functions take
-#: no keyword-only ones): by their decorator, ``jit`` or ``_inline`` (dispatch._compiled,
-#: dispatch.plan._kernel), and by name the schedule rule of dispatch.plan.stops, written in
+#: no keyword-only ones): by their decorator, ``jit``, ``kernel`` or ``_inline``
+#: (dispatch._compiled, dispatch.plan._kernel), and by name the schedule rule of dispatch.plan.stops, written in
 #: plain Python and compiled as written by dispatch.plan._kernel's ``_twin``
-COMPILED_DECORATORS = {"jit", "_inline"}
+COMPILED_DECORATORS = {"jit", "kernel", "_inline"}
 COMPILED_TWINS = {("dispatch/plan/stops.py", name)
                   for name in ("timetable", "leave", "leave_late", "later")}
 
