@@ -27,9 +27,10 @@ import types
 
 import numpy as np
 
-#: Seconds of plain-Python calls of :func:`kernel` functions (and of their plain twins, see
+#: CPU seconds of plain-Python calls of :func:`kernel` functions (and of their plain twins, see
 #: :func:`charge`) after which a process compiles them: about a quarter of what numba's import
-#: and its first cache load cost.
+#: and its first cache load cost. (The calling thread's CPU time: a loaded machine's waits do
+#: not count.)
 INTERPRET_SECONDS = 0.1
 _MODES = ("auto", "python", "compiled")
 #: ``mode``: see :func:`set_mode`; ``spent``: plain-Python seconds so far; ``compiled``: whether
@@ -82,8 +83,9 @@ def interpreting() -> bool:
 
 
 def charge(seconds: float) -> None:
-    """Count ``seconds`` spent in a plain twin of a compiled function against
-    :data:`INTERPRET_SECONDS` (the kernels' own plain calls count themselves)."""
+    """Count ``seconds`` of CPU (``time.thread_time``) spent in a plain twin of a compiled
+    function against :data:`INTERPRET_SECONDS` (the kernels' own plain calls count
+    themselves)."""
     with _lock:
         _state["spent"] += seconds
 
@@ -119,11 +121,11 @@ class Kernel:
 
     def __call__(self, *args):
         if self.interpret and interpreting():
-            t = time.perf_counter()
+            t = time.thread_time()
             try:
                 return self.py_func(*args)
             finally:
-                charge(time.perf_counter() - t)
+                charge(time.thread_time() - t)
         c = self._compiled
         return (self.compiled if c is None else c)(*args)
 

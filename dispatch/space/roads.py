@@ -32,7 +32,6 @@ from typing import Any, ClassVar
 
 import numpy as np
 from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import connected_components, dijkstra
 
 from dispatch.api.legs import Leg, RoadPoint
 from dispatch.api.legs import as_point as _as_point
@@ -40,7 +39,7 @@ from dispatch.api.space import Space
 from dispatch.errors import ScenarioError
 from dispatch.files.roads import RoadGraph, locate, read_graph
 from dispatch.locations import Position
-from dispatch.space.road_edges import EdgeTable, straight_line
+from dispatch.space.road_edges import EdgeTable, largest_component, straight_line
 
 log = logging.getLogger(__name__)
 
@@ -105,9 +104,7 @@ class RoadNetwork(Space):
         u, v, seconds, metres = u[first], v[first], seconds[first], metres[first]
 
         time = _csr(u, v, seconds, n)
-        _, labels = connected_components(time, directed=True, connection="strong")
-        counts = np.bincount(labels, minlength=1)
-        inside = labels == int(np.argmax(counts)) if n else np.zeros(0, dtype=bool)
+        inside = largest_component(time)
         dropped = n - int(inside.sum())
         if dropped:
             log.info("road network %s: kept the largest strongly connected component, %d of %d "
@@ -252,6 +249,8 @@ class RoadNetwork(Space):
         goal = int(goal)
         if p.node == goal:
             return self.leg(p, [goal])
+        from scipy.sparse.csgraph import dijkstra
+
         dist, pred = dijkstra(self.time, indices=p.node, return_predecessors=True)
         if not np.isfinite(dist[goal]):
             return None
@@ -262,6 +261,8 @@ class RoadNetwork(Space):
 
     def _fields(self, graph: csr_matrix, sources: np.ndarray) -> np.ndarray:
         """``(len(sources), n)`` Dijkstra times from each source on ``graph``, in blocks."""
+        from scipy.sparse.csgraph import dijkstra
+
         out = np.empty((sources.size, self.n))
         for s in range(0, sources.size, DIJKSTRA_BLOCK):
             out[s:s + DIJKSTRA_BLOCK] = dijkstra(graph, indices=sources[s:s + DIJKSTRA_BLOCK])
@@ -269,6 +270,8 @@ class RoadNetwork(Space):
 
     def distance_to(self, target: int) -> np.ndarray:
         """Seconds from every node to node ``target`` (``inf`` where it cannot be reached)."""
+        from scipy.sparse.csgraph import dijkstra
+
         return dijkstra(self._time_t, indices=int(target))
 
     def distances_to(self, targets: Sequence[int] | np.ndarray) -> np.ndarray:

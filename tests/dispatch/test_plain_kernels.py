@@ -227,3 +227,28 @@ def test_chicago_fields_from_scipy_equal_the_compiled_search():
             _compiled.set_mode("auto")
         for a, b in zip(plain, compiled, strict=True):
             assert np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_largest_component_without_scipys_graph_module_where_connected(seed):
+    """Random directed graphs, strongly connected or not (components of equal size among them):
+    the nodes kept are scipy's largest strongly connected component (of equal ones, the lowest
+    label), and the breadth-first check says "strongly connected" exactly where scipy counts
+    one component."""
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from dispatch.space.road_edges import largest_component, strongly_connected
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 40))
+    m = int(rng.integers(0, 4 * n))
+    u, v = rng.integers(0, n, m), rng.integers(0, n, m)
+    if seed % 3 == 0:  # a ring through every node: strongly connected
+        u = np.concatenate([u, np.arange(n)])
+        v = np.concatenate([v, (np.arange(n) + 1) % n])
+    time = csr_matrix((rng.uniform(1, 9, u.size), (u, v)), shape=(n, n))
+    count, labels = connected_components(time, directed=True, connection="strong")
+    want = labels == int(np.argmax(np.bincount(labels, minlength=1)))
+    assert strongly_connected(time) == (count == 1)
+    assert largest_component(time).tolist() == want.tolist()
