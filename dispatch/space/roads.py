@@ -473,6 +473,9 @@ def manhattan(columns: int, rows: int, block: float = 200.0, speed: float = 10.0
                                   u, v, seconds=seconds, metres=metres)
 
 
+#: generated grids, kept as files' networks are (validation and the run share one; immutable)
+_grid = functools.lru_cache(maxsize=4)(manhattan)
+
 
 # ==================================================================== load by name
 @functools.lru_cache(maxsize=4)
@@ -487,10 +490,10 @@ def load_network(source: str, *, base: Path, blocks: Sequence[int] = (20, 20), b
     ``block`` metres apart, driven at ``speed`` m/s), a network shipped with the package
     (``"chicago"``: Chicago Regional; ``"manhattan_osm"``: Manhattan's OSMnx street network), or
     a file relative to ``base`` (see :func:`dispatch.files.roads.locate`). Files are read once
-    per (resolved path, modification time), up to four kept. ValueError with a one-line message
+    per (resolved path, modification time), up to four kept; grids likewise built once. ValueError with a one-line message
     naming the file for a missing file or an unknown suffix."""
     if source == "manhattan":
         columns, rows = (int(b) for b in blocks)
-        return manhattan(columns, rows, block, speed)
+        return _grid(columns, rows, block, speed)
     path, name, mtimes = locate(source, base)
     return _load_file(str(path), mtimes, name)
