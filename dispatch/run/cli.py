@@ -127,8 +127,10 @@ def _run(args, console) -> int:
                       "shown from there, not run again; --overwrite runs them again",
                       highlight=False, soft_wrap=True)
     if todo:
+        # (no highlighting: the status lines' style, and rich's highlighter compiles its
+        # patterns at first use, 10 ms of a short run)
         console.print(f"{len(todo)} run(s) in {time.perf_counter() - started:.1f} s; "
-                      f"Parquet written to {out}/", soft_wrap=True)
+                      f"Parquet written to {out}/", highlight=False, soft_wrap=True)
     return 0
 
 
