@@ -28,10 +28,11 @@ import types
 import numpy as np
 
 #: CPU seconds of plain-Python calls of :func:`kernel` functions (and of their plain twins, see
-#: :func:`charge`) after which a process compiles them: about a quarter of what numba's import
-#: and its first cache load cost. (The calling thread's CPU time: a loaded machine's waits do
-#: not count.)
-INTERPRET_SECONDS = 0.1
+#: :func:`charge`) after which a process compiles them: an eighth of what numba's import and
+#: its first cache load cost, five times what a ten-request road run spends in them (about
+#: 0.01 s), so a longer run pays at most this much before it compiles. (The calling thread's
+#: CPU time: a loaded machine's waits do not count.)
+INTERPRET_SECONDS = 0.05
 _MODES = ("auto", "python", "compiled")
 #: ``mode``: see :func:`set_mode`; ``spent``: plain-Python seconds so far; ``compiled``: whether
 #: a kernel module has been handed to numba in this process
