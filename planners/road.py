@@ -56,7 +56,7 @@ from typing import Any
 
 import numpy as np
 
-from dispatch import _compiled
+from dispatch._compiled import charge, interpreting
 from dispatch.api.contracts import Planner
 from dispatch.api.legs import RoadPoint
 from dispatch.space.roads import RoadNetwork
@@ -527,7 +527,7 @@ class RoadPlanner(Planner):
         process runs its compiled searches as plain Python (:func:`dispatch._compiled.
         interpreting`: a short run need not load numba) a plain Python Dijkstra gives them
         (:func:`_plain_field`)."""
-        if _compiled.interpreting():
+        if interpreting():
             started = time.thread_time()
             lists = self._lists_t if to else self._lists
             out = []
@@ -535,7 +535,7 @@ class RoadPlanner(Planner):
                 d = np.array(_plain_field(*lists, s))
                 d.setflags(write=False)
                 out.append(d)
-            _compiled.charge(time.thread_time() - started)
+            charge(time.thread_time() - started)
             return out
         want, hk, hn, _ = self._scratch
         graph = self._graph_t if to else self._graph
