@@ -163,9 +163,11 @@ def main() -> None:
     net = load_network("chicago", base=ROOT)
     t_build, _ = timed(lambda: road.contract(net))  # always contracted (not the disk cache)
     t_cached, h = timed(lambda: road.hierarchy(net))
-    hits = sum(sum(k.stats.cache_hits.values()) for k in (_road_fast.ch_contract,
-                                                         _road_fast.phast))
-    console.print(f"{net!r}; numba {_road_fast.numba.__version__}, FIELD_THREADS = "
+    hits = sum(sum(k.compiled.stats.cache_hits.values()) for k in (_road_fast.ch_contract,
+                                                                  _road_fast.phast))
+    import numba
+
+    console.print(f"{net!r}; numba {numba.__version__}, FIELD_THREADS = "
                   f"{road.FIELD_THREADS}, PHAST_BLOCK = {road.PHAST_BLOCK}")
     console.print(f"one-time: import planners {t_import * 1e3:.0f} ms; contraction hierarchy "
                   f"{t_build:.2f} s ({'kernels from the numba disk cache' if hits else 'incl. JIT compile'}"

@@ -28,25 +28,22 @@ arrays of the travel-time matrix and reads the fields back.
   nodes only: its row is exact at the wanted nodes and an upper bound elsewhere).
 
 The kernels release the GIL (``nogil``), so :mod:`planners.road` runs several PHAST blocks on
-threads. Compiled code is cached on disk (``cache=True``); where no cache directory is
-writable the kernels are compiled in every process instead.
+threads. They are :func:`dispatch._compiled.kernel` functions: numba is imported when one first
+compiles, not with this module; :func:`descend` and :func:`astar` (a small network's paths) run
+as the plain Python they are written in while the process is young (the same operations on the
+same doubles: the heuristic squares by ``dx * dx``, as numba compiles ``dx ** 2``, where Python's
+``**`` may round otherwise). Compiled code is cached on disk (``cache=True``); where no cache
+directory is writable the kernels are compiled in every process instead.
 """
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
-
-def _jit(fn):
-    """``numba.njit(cache=True, nogil=True)``, without the disk cache where none is writable."""
-    try:
-        return numba.njit(cache=True, nogil=True)(fn)
-    except RuntimeError:  # "cannot cache function ...: no locator available"
-        return numba.njit(cache=False, nogil=True)(fn)
+from dispatch._compiled import inline, kernel
 
 
-@numba.njit(inline="always")
+@inline
 def _hpush(hk, hn, size, key, node):  # pragma: no cover - compiled
     """Push ``(key, node)`` onto the binary min-heap ``hk``/``hn`` of ``size`` entries."""
     i = size
@@ -62,7 +59,7 @@ def _hpush(hk, hn, size, key, node):  # pragma: no cover - compiled
     return size + 1
 
 
-@numba.njit(inline="always")
+@inline
 def _hpop(hk, hn, size):  # pragma: no cover - compiled
     """Pop the smallest entry: ``(key, node, new size)``."""
     key = hk[0]
@@ -89,7 +86,7 @@ def _hpop(hk, hn, size):  # pragma: no cover - compiled
 
 
 # ==================================================================== plain Dijkstra
-@_jit
+@kernel(interpret=False, nogil=True)
 def dijkstra_until(indptr, indices, data, source, want, n_want, dist, hk, hn):  # pragma: no cover
     """Dijkstra from ``source`` on the CSR graph into ``dist`` (length n, overwritten), stopping
     once the ``n_want`` distinct nodes flagged in ``want`` are settled (``n_want <= 0``: never,
@@ -123,7 +120,7 @@ def dijkstra_until(indptr, indices, data, source, want, n_want, dist, hk, hn):  
 
 
 # ==================================================================== contraction hierarchy
-@_jit
+@kernel(interpret=False, nogil=True)
 def _witness(v, u, limit, settle_limit, goal, n_goal, head_out, nxt_out, ev, ew, contracted,
              wdist, touched, hk, hn):  # pragma: no cover - compiled
     """Witness search from ``u`` avoiding ``v`` and contracted nodes, into ``wdist`` (``inf``
@@ -166,7 +163,7 @@ def _witness(v, u, limit, settle_limit, goal, n_goal, head_out, nxt_out, ev, ew,
     return nt
 
 
-@_jit
+@kernel(interpret=False, nogil=True)
 def _shortcuts(v, settle_limit, head_out, nxt_out, head_in, nxt_in, eu, ev, ew, eh, contracted,
                wdist, touched, goal, hk, hn, su, sw, sc, sh):  # pragma: no cover - compiled
     """The shortcuts contracting ``v`` needs now, in ``su``/``sw``/``sc``/``sh`` (from, to,
@@ -228,7 +225,7 @@ def _shortcuts(v, settle_limit, head_out, nxt_out, head_in, nxt_in, eu, ev, ew, 
     return count, removed, hops, removed_hops
 
 
-@numba.njit(inline="always")
+@inline
 def _priority(level, count, removed, hops, removed_hops):  # pragma: no cover - compiled
     """RoutingKit's order: level + added / removed edges + added / removed hops."""
     p = float(level)
@@ -239,7 +236,7 @@ def _priority(level, count, removed, hops, removed_hops):  # pragma: no cover - 
     return p
 
 
-@_jit
+@kernel(interpret=False, nogil=True)
 def ch_contract(indptr, indices, data, settle_limit, simulate_neighbours):  # pragma: no cover - compiled
     """Contract every node of the CSR graph (no self-loops, no parallel edges, positive
     weights). Returns ``(rank, eu, ev, ew)``: each node's contraction rank (0 first) and the
@@ -449,7 +446,7 @@ def ch_contract(indptr, indices, data, settle_limit, simulate_neighbours):  # pr
 
 
 # ==================================================================== PHAST
-@_jit
+@kernel(interpret=False, nogil=True)
 def phast(up_ptr, up_idx, up_w, sw_ptr, sw_idx, sw_w, sources, out, D, stack, seen):
     """Complete fields of ``sources`` (node positions: 0 = highest rank) into ``out``
     (``(len(sources), n)``, position order). ``up_*``: each node's hierarchy edges to
@@ -512,7 +509,7 @@ def phast(up_ptr, up_idx, up_w, sw_ptr, sw_idx, sw_w, sources, out, D, stack, se
 
 
 # ==================================================================== paths from a field
-@_jit
+@kernel(nogil=True)
 def descend(indptr, indices, data, field, index, start, goal, path):  # pragma: no cover
     """A fastest path from ``start`` to ``goal`` read off ``field``, the seconds from every node
     to ``goal`` (``field[index[v]]`` for node ``v``: ``index`` maps nodes to the field's
@@ -542,7 +539,7 @@ def descend(indptr, indices, data, field, index, start, goal, path):  # pragma: 
     return k + 1
 
 
-@_jit
+@kernel(nogil=True)
 def astar(indptr, indices, data, xy, inv_speed, source, goal, dist, pred, touched, hk, hn,
           path):  # pragma: no cover - compiled
     """A fastest path from ``source`` to ``goal`` by A* with the straight-line lower bound
@@ -555,7 +552,9 @@ def astar(indptr, indices, data, xy, inv_speed, source, goal, dist, pred, touche
     dist[source] = 0.0
     touched[0] = source
     nt = 1
-    h0 = np.sqrt((xy[source, 0] - gx) ** 2 + (xy[source, 1] - gy) ** 2) * inv_speed
+    dx = xy[source, 0] - gx
+    dy = xy[source, 1] - gy
+    h0 = np.sqrt(dx * dx + dy * dy) * inv_speed
     size = _hpush(hk, hn, 0, h0, source)
     found = False
     while size > 0:
@@ -564,7 +563,9 @@ def astar(indptr, indices, data, xy, inv_speed, source, goal, dist, pred, touche
         if u == goal:
             found = True
             break
-        hu = np.sqrt((xy[u, 0] - gx) ** 2 + (xy[u, 1] - gy) ** 2) * inv_speed
+        dx = xy[u, 0] - gx
+        dy = xy[u, 1] - gy
+        hu = np.sqrt(dx * dx + dy * dy) * inv_speed
         if f > du + hu:
             continue  # stale entry
         for e in range(indptr[u], indptr[u + 1]):
@@ -576,7 +577,9 @@ def astar(indptr, indices, data, xy, inv_speed, source, goal, dist, pred, touche
                     nt += 1
                 dist[v] = nd
                 pred[v] = u
-                hv = np.sqrt((xy[v, 0] - gx) ** 2 + (xy[v, 1] - gy) ** 2) * inv_speed
+                dx = xy[v, 0] - gx
+                dy = xy[v, 1] - gy
+                hv = np.sqrt(dx * dx + dy * dy) * inv_speed
                 size = _hpush(hk, hn, size, nd + hv, v)
     k = 0
     if found:

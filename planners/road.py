@@ -39,19 +39,24 @@ Statistics: ``stats.cost_queries``, ``stats.plans``; ``stats.extra`` holds ``fie
 from __future__ import annotations
 
 import hashlib
+import heapq
 import logging
+import math
 import os
 import tempfile
 import threading
+import time
 import weakref
 from collections import OrderedDict
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from dispatch._compiled import charge, interpreting
 from dispatch.api.contracts import Planner
 from dispatch.api.legs import RoadPoint
 from dispatch.space.roads import RoadNetwork
@@ -306,6 +311,16 @@ class RoadPlanner(Planner):
         self.stats.extra.setdefault("field_reuses", 0)
         self.stats.extra.setdefault("forward_searches", 0)
 
+    @cached_property
+    def _lists(self) -> tuple[list, list, list]:
+        """:attr:`_graph` as Python lists (for :func:`_plain_field`)."""
+        return tuple(a.tolist() for a in self._graph)
+
+    @cached_property
+    def _lists_t(self) -> tuple[list, list, list]:
+        """:attr:`_graph_t` as Python lists (for :func:`_plain_field`)."""
+        return tuple(a.tolist() for a in self._graph_t)
+
     def _remember(self, task_id: Any, node: int) -> None:
         old = self._node_of.get(task_id)
         if old == node:
@@ -508,7 +523,20 @@ class RoadPlanner(Planner):
 
     def _dijkstra(self, nodes: np.ndarray, to: bool) -> list[np.ndarray]:
         """Complete fields by the compiled Dijkstra (networks without a hierarchy), node
-        order: seconds to (``to``) or from each node; one read-only row each."""
+        order: seconds to (``to``) or from each node; one read-only row each. While the
+        process runs its compiled searches as plain Python (:func:`dispatch._compiled.
+        interpreting`: a short run need not load numba) a plain Python Dijkstra gives them
+        (:func:`_plain_field`)."""
+        if interpreting():
+            started = time.thread_time()
+            lists = self._lists_t if to else self._lists
+            out = []
+            for s in np.asarray(nodes, dtype=np.int64).tolist():
+                d = np.array(_plain_field(*lists, s))
+                d.setflags(write=False)
+                out.append(d)
+            charge(time.thread_time() - started)
+            return out
         want, hk, hn, _ = self._scratch
         graph = self._graph_t if to else self._graph
         out = []
@@ -569,6 +597,30 @@ class RoadPlanner(Planner):
             field = self._fields.pop(node, None)
             if field is not None:
                 self._retire(node, field)
+
+
+def _plain_field(indptr: list, indices: list, data: list, source: int) -> list[float]:
+    """Seconds from ``source`` to every node of the CSR graph (``inf`` where unreachable), by
+    a binary-heap Dijkstra in plain Python: the same floats, bit for bit, as the compiled
+    :func:`planners._road_fast.dijkstra_until`'s complete field. (Each node's time is the
+    least, over its in-edges from nodes settled before it, of that node's time plus the edge,
+    added once; with positive edges that least sum does not depend on the order in which a
+    search settles nodes of equal time. Tests compare the two.)"""
+    dist = [math.inf] * (len(indptr) - 1)
+    dist[source] = 0.0
+    heap = [(0.0, source)]
+    pop, push = heapq.heappop, heapq.heappush
+    while heap:
+        d, u = pop(heap)
+        if d > dist[u]:
+            continue  # stale entry
+        for e in range(indptr[u], indptr[u + 1]):
+            v = indices[e]
+            nd = d + data[e]
+            if nd < dist[v]:
+                dist[v] = nd
+                push(heap, (nd, v))
+    return dist
 
 
 def _distinct(nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -37,7 +37,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import connected_components, shortest_path
 
 from dispatch.api.problem import AgentViews
 
@@ -84,6 +83,9 @@ def components(comm: np.ndarray) -> tuple[int, np.ndarray]:
         return 0, np.zeros(0, dtype=np.int64)
     if comm.all():  # everyone hears everyone (unlimited range): skip a dense N x N graph
         return 1, np.zeros(n, dtype=np.int64)
+    # (imported here: scipy's graph module costs a run that never asks 0.07 s)
+    from scipy.sparse.csgraph import connected_components
+
     count, labels = connected_components(csr_matrix(np.asarray(comm, bool)), directed=False)
     return int(count), labels.astype(np.int64)
 
@@ -93,6 +95,8 @@ def hop_distances(comm: np.ndarray) -> np.ndarray:
     n = len(comm)
     if n == 0:
         return np.zeros((0, 0), dtype=np.int64)
+    from scipy.sparse.csgraph import shortest_path
+
     d = shortest_path(csr_matrix(neighbours(comm).astype(float)), unweighted=True,
                       directed=False)
     return np.where(np.isfinite(d), d, -1).astype(np.int64)

@@ -27,7 +27,7 @@ import logging
 import re
 from dataclasses import dataclass
 from functools import cache
-from importlib.metadata import EntryPoint, entry_points
+from importlib.metadata import EntryPoint, EntryPoints, entry_points
 
 from dispatch.errors import PluginError
 
@@ -106,10 +106,24 @@ class Capabilities:
 
 
 @cache
+def _installed() -> EntryPoints:
+    """Every installed entry point, read once per process: each reading of the installed
+    distributions' entry points parses all of them, whichever group is asked for (several
+    milliseconds with a hundred distributions), and a run asks for several groups."""
+    return entry_points()
+
+
+def entry_point_group(group: str) -> EntryPoints:
+    """The installed entry points of ``group`` (``importlib.metadata.entry_points(group=...)``,
+    from the one reading of :func:`_installed`)."""
+    return _installed().select(group=group)
+
+
+@cache
 def _entry_points(kind: str) -> dict[str, EntryPoint]:
     """The entry points of a kind's group by name, sorted (of two with one name, the last
     found wins)."""
-    found = {ep.name: ep for ep in entry_points(group=GROUPS[kind])}
+    found = {ep.name: ep for ep in entry_point_group(GROUPS[kind])}
     return dict(sorted(found.items()))
 
 

@@ -9,7 +9,7 @@ import os
 import sys
 import time
 
-from dispatch.api.registry import available, describe, load
+from dispatch.api.registry import available, describe, entry_point_group, load
 from dispatch.errors import DispatchError, PluginError
 from dispatch.run.commands import installed
 from dispatch.run.parser import CHECKED_KINDS, OWN_COMMANDS, parser
@@ -127,8 +127,10 @@ def _run(args, console) -> int:
                       "shown from there, not run again; --overwrite runs them again",
                       highlight=False, soft_wrap=True)
     if todo:
+        # (no highlighting: the status lines' style, and rich's highlighter compiles its
+        # patterns at first use, 10 ms of a short run)
         console.print(f"{len(todo)} run(s) in {time.perf_counter() - started:.1f} s; "
-                      f"Parquet written to {out}/", soft_wrap=True)
+                      f"Parquet written to {out}/", highlight=False, soft_wrap=True)
     return 0
 
 
@@ -209,9 +211,8 @@ def _validate(args, console) -> int:
 def _train(args, console) -> int:
     """Hand the arguments to a trainer module (``main(argv)``) found by entry point."""
     import importlib
-    from importlib.metadata import entry_points
 
-    found = {ep.name: ep.value for ep in entry_points(group="dispatch.trainers")}
+    found = {ep.name: ep.value for ep in entry_point_group("dispatch.trainers")}
     if args.trainer not in found:
         raise PluginError(f"unknown trainer {args.trainer!r}; installed: {', '.join(found)}")
     try:

@@ -7,6 +7,7 @@ import argparse
 from pathlib import Path
 
 from dispatch import __version__
+from dispatch.api.registry import entry_point_group
 
 #: what ``dispatch --help`` says the command line is
 DESCRIPTION = ("The dispatch command line: run, validate, check, plugins, new, train, sweep; and "
@@ -137,9 +138,7 @@ def parser(commands=None) -> argparse.ArgumentParser:
 
 def _trainers() -> list[str]:
     """The installed trainers' names (entry-point group dispatch.trainers), sorted."""
-    from importlib.metadata import entry_points
-
-    return sorted(ep.name for ep in entry_points(group="dispatch.trainers"))
+    return sorted(ep.name for ep in entry_point_group("dispatch.trainers"))
 
 
 def _add_sweep_parser(sub) -> None:

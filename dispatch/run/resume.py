@@ -224,7 +224,8 @@ def legacy_variant(spec: RunSpec) -> RunSpec | None:
 def read_summary(out: Path, spec: RunSpec) -> dict:
     """The summary row of a finished partition, with its partition columns put back."""
     path = Path(out) / "summary" / partition_dir(spec) / "part-0.parquet"
-    row = pq.read_table(path).to_pylist()[0]
+    with pq.ParquetFile(path) as f:  # (pq.read_table would import pyarrow.dataset and pandas)
+        row = f.read().to_pylist()[0]
     return {**row, **spec.partition}
 
 

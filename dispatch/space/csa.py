@@ -19,11 +19,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from dispatch._compiled import jit
+from dispatch._compiled import kernel
 from dispatch.space.transit import Timetable
 
 
-@jit
+@kernel(interpret=False)  # (compiled at the first scan: numba is not imported with the module)
 def _scan(tt_dep, tt_arr, frm, to, trip, fp_ptr, fp_to, fp_dur, ready0, egress, n_trips,
           start, horizon):  # pragma: no cover - compiled
     """The scan: from connection ``start`` on, in order, while departures are at most

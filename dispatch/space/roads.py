@@ -32,7 +32,6 @@ from typing import Any, ClassVar
 
 import numpy as np
 from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import connected_components, dijkstra
 
 from dispatch.api.legs import Leg, RoadPoint
 from dispatch.api.legs import as_point as _as_point
@@ -40,7 +39,7 @@ from dispatch.api.space import Space
 from dispatch.errors import ScenarioError
 from dispatch.files.roads import RoadGraph, locate, read_graph
 from dispatch.locations import Position
-from dispatch.space.road_edges import EdgeTable, straight_line
+from dispatch.space.road_edges import EdgeTable, largest_component, straight_line
 
 log = logging.getLogger(__name__)
 
@@ -105,9 +104,7 @@ class RoadNetwork(Space):
         u, v, seconds, metres = u[first], v[first], seconds[first], metres[first]
 
         time = _csr(u, v, seconds, n)
-        _, labels = connected_components(time, directed=True, connection="strong")
-        counts = np.bincount(labels, minlength=1)
-        inside = labels == int(np.argmax(counts)) if n else np.zeros(0, dtype=bool)
+        inside = largest_component(time)
         dropped = n - int(inside.sum())
         if dropped:
             log.info("road network %s: kept the largest strongly connected component, %d of %d "
@@ -252,6 +249,8 @@ class RoadNetwork(Space):
         goal = int(goal)
         if p.node == goal:
             return self.leg(p, [goal])
+        from scipy.sparse.csgraph import dijkstra
+
         dist, pred = dijkstra(self.time, indices=p.node, return_predecessors=True)
         if not np.isfinite(dist[goal]):
             return None
@@ -262,6 +261,8 @@ class RoadNetwork(Space):
 
     def _fields(self, graph: csr_matrix, sources: np.ndarray) -> np.ndarray:
         """``(len(sources), n)`` Dijkstra times from each source on ``graph``, in blocks."""
+        from scipy.sparse.csgraph import dijkstra
+
         out = np.empty((sources.size, self.n))
         for s in range(0, sources.size, DIJKSTRA_BLOCK):
             out[s:s + DIJKSTRA_BLOCK] = dijkstra(graph, indices=sources[s:s + DIJKSTRA_BLOCK])
@@ -269,6 +270,8 @@ class RoadNetwork(Space):
 
     def distance_to(self, target: int) -> np.ndarray:
         """Seconds from every node to node ``target`` (``inf`` where it cannot be reached)."""
+        from scipy.sparse.csgraph import dijkstra
+
         return dijkstra(self._time_t, indices=int(target))
 
     def distances_to(self, targets: Sequence[int] | np.ndarray) -> np.ndarray:
@@ -470,6 +473,9 @@ def manhattan(columns: int, rows: int, block: float = 200.0, speed: float = 10.0
                                   u, v, seconds=seconds, metres=metres)
 
 
+#: generated grids, kept as files' networks are (validation and the run share one; immutable)
+_grid = functools.lru_cache(maxsize=4)(manhattan)
+
 
 # ==================================================================== load by name
 @functools.lru_cache(maxsize=4)
@@ -484,10 +490,10 @@ def load_network(source: str, *, base: Path, blocks: Sequence[int] = (20, 20), b
     ``block`` metres apart, driven at ``speed`` m/s), a network shipped with the package
     (``"chicago"``: Chicago Regional; ``"manhattan_osm"``: Manhattan's OSMnx street network), or
     a file relative to ``base`` (see :func:`dispatch.files.roads.locate`). Files are read once
-    per (resolved path, modification time), up to four kept. ValueError with a one-line message
+    per (resolved path, modification time), up to four kept; grids likewise built once. ValueError with a one-line message
     naming the file for a missing file or an unknown suffix."""
     if source == "manhattan":
         columns, rows = (int(b) for b in blocks)
-        return manhattan(columns, rows, block, speed)
+        return _grid(columns, rows, block, speed)
     path, name, mtimes = locate(source, base)
     return _load_file(str(path), mtimes, name)

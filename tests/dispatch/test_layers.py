@@ -87,10 +87,10 @@ def test_a_plugin_contract_lives_in_api():
 
 
 #: functions numba compiles, which keep positional parameters (numba's compiled functions take
-#: no keyword-only ones): by their decorator, ``jit`` or ``_inline`` (dispatch._compiled,
-#: dispatch.plan._kernel), and by name the schedule rule of dispatch.plan.stops, written in
+#: no keyword-only ones): by their decorator, ``jit``, ``kernel`` (called with options or not)
+#: or ``_inline`` (dispatch._compiled, dispatch.plan._kernel), and by name the schedule rule of dispatch.plan.stops, written in
 #: plain Python and compiled as written by dispatch.plan._kernel's ``_twin``
-COMPILED_DECORATORS = {"jit", "_inline"}
+COMPILED_DECORATORS = {"jit", "kernel", "_inline"}
 COMPILED_TWINS = {("dispatch/plan/stops.py", name)
                   for name in ("timetable", "leave", "leave_late", "later")}
 
@@ -104,7 +104,8 @@ def test_no_function_takes_more_than_six_positional_parameters():
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
             if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
                 continue
-            if ({ast.unparse(d) for d in node.decorator_list} & COMPILED_DECORATORS
+            if ({ast.unparse(d.func if isinstance(d, ast.Call) else d)
+                 for d in node.decorator_list} & COMPILED_DECORATORS
                     or (rel, node.name) in COMPILED_TWINS):
                 continue
             names = [a.arg for a in node.args.posonlyargs + node.args.args]
