@@ -2,6 +2,7 @@
 
 Each ``--series`` is ``ALLOCATOR[/OBJECTIVE][+demand][+value=FILE[@WEIGHT]]`` (e.g.
 ``hungarian/added_time+demand`` or ``hungarian/added_time+demand+value=v.npz@100``;
+``+reward=R`` gives the allocator the ``value_reward`` R (seconds a served request is worth),
 ``+dvalue=FILE`` gives the value to the ``demand`` repositioner, ``+dmix=0.3`` its mix),
 run on ``--scenario`` for each ``--agents`` N and ``--seeds`` S, batched every
 ``--batch-window`` seconds; keep the value's training seeds (its file's ``seeds``) out.
@@ -50,6 +51,8 @@ def parse(series: str) -> dict:
             out["params"]["value"] = path
             if w:
                 out["params"]["value_weight"] = float(w)
+        elif key == "reward":
+            out["params"]["value_reward"] = float(val)
         elif key == "dvalue":
             out["demand_params"]["value"] = val
         elif key == "dmix":
