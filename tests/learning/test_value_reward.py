@@ -15,7 +15,7 @@ import pytest
 
 from allocators.hungarian import HungarianAllocator, gated_pairs
 from learning.value_train import scenario_for
-from tests.learning.test_lookahead_value import MANHATTAN, _tables, _zero_file
+from tests.learning.test_lookahead_value import MANHATTAN, _zero_file
 from tests.learning.test_value import _problem, _value
 
 
@@ -102,7 +102,7 @@ def test_with_a_zero_value_and_a_reward_no_chosen_pickup_costs_more_than_it(tmp_
     sc = scenario_for(MANHATTAN, 30.0, hours=0.4, capacity=seats)
     sc = replace(sc, dispatch=replace(sc.dispatch, objective="pickup_time"))
     zero = str(_zero_file(tmp_path, sc, seats + 1 if seats > 1 else 1))
-    plain, s0 = _tasks(sc, allocator, {})
+    plain, _ = _tasks(sc, allocator, {})
     reward = 90.0
     gated, s1 = _tasks(sc, allocator, {"value": zero, "value_reward": reward})
     assert s1["tasks_completed"] > 0
