@@ -113,7 +113,10 @@ def table(rows: list[dict], series: list[str], agents: list[int], seeds: list[in
                 continue
 
             def cell(key, scale=1.0, fmt=".1f", got=got, name=name, by=by):
-                m, h = interval([scale * float(by[(name, s)][key]) for s in got])
+                x = [scale * float(by[(name, s)][key] or "nan") for s in got]
+                if any(math.isnan(v) for v in x):  # (a run that did not record it)
+                    return "–"
+                m, h = interval(x)
                 return f"{m:{fmt}} ± {h:{fmt}}"
 
             paired = [s for s in got if (base, s) in by]

@@ -45,3 +45,5 @@ def test_the_table_gives_means_intervals_and_paired_differences(lv):
     assert "| 100 ± 0 | 50 ± 0 |" in a and a.endswith("|  |")
     # b - a by seed: +5 and +3 points: mean +4, half-width 12.706 * 1.414 / 1.414 = 12.71
     assert b.endswith("| +4.00 ± 12.71 |")
+    rows[2]["vehicle_km"] = ""  # a run that did not record it: a dash, not a number
+    assert "| – | 50 ± 0 |" in lv.table(rows, ["a", "b"], [10], [0, 1]).splitlines()[3]
