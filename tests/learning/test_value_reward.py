@@ -111,3 +111,21 @@ def test_with_a_zero_value_and_a_reward_no_chosen_pickup_costs_more_than_it(tmp_
         assert gated["cost"].dropna().max() < reward
     assert not np.array_equal(plain["assigned_at"].to_numpy(), gated["assigned_at"].to_numpy(),
                               equal_nan=True)
+
+
+def test_training_from_a_start_value_with_a_reward_is_recorded_and_deterministic(tmp_path):
+    """Policy iteration resumed from a file, its days run by worth: the file names the reward
+    and the start, the days differ from the plain ones (the gate leaves some requests), and
+    the same arguments write the same bytes."""
+    from learning.value import ZoneValue
+    from learning.value_train import train
+
+    kw = dict(agents=20, seeds=(100,), zone=1000.0, hours=0.25, log=lambda s: None)
+    plain = train(MANHATTAN, tmp_path / "plain.npz", **kw)
+    assert "reward" not in plain.meta  # (older files' bytes as before)
+    a = train(MANHATTAN, tmp_path / "a.npz", reward=60.0, start=tmp_path / "plain.npz", **kw)
+    train(MANHATTAN, tmp_path / "b.npz", reward=60.0, start=tmp_path / "plain.npz", **kw)
+    assert (tmp_path / "a.npz").read_bytes() == (tmp_path / "b.npz").read_bytes()
+    got = ZoneValue.load(tmp_path / "a.npz")
+    assert got.meta["reward"] == 60.0 and got.meta["start"] == "plain.npz"
+    assert a.meta["days"][0]["served"] != plain.meta["days"][0]["served"]
