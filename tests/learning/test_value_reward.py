@@ -120,7 +120,7 @@ def test_training_from_a_start_value_with_a_reward_is_recorded_and_deterministic
     from learning.value import ZoneValue
     from learning.value_train import train
 
-    kw = dict(agents=20, seeds=(100,), zone=1000.0, hours=0.25, log=lambda s: None)
+    kw = {"agents": 20, "seeds": (100,), "zone": 1000.0, "hours": 0.25, "log": lambda s: None}
     plain = train(MANHATTAN, tmp_path / "plain.npz", **kw)
     assert "reward" not in plain.meta  # (older files' bytes as before)
     a = train(MANHATTAN, tmp_path / "a.npz", reward=60.0, start=tmp_path / "plain.npz", **kw)
