@@ -36,6 +36,7 @@ import numpy as np
 from learning.value import ROOT, ZoneValue
 from learning.zones import Zones
 
+
 # ---------------------------------------------------------------------------- learning
 def transitions(tasks, vehicles, zones: Zones, end: float,
                 repositioned: bool = False) -> dict[str, np.ndarray]:
