@@ -30,7 +30,8 @@ class HungarianAllocator(Allocator):
     one_by_minimum = True  # one task: the first cheapest finite row (see optimal_pairs)
     nearest_cut = True  # ... found among the vehicles a lower bound cannot rule out
 
-    def __init__(self, value: str | None = None, value_weight: float | None = None) -> None:
+    def __init__(self, value: str | None = None, value_weight: float | None = None,
+                 value_reward: float | None = None) -> None:
         """``value``: a learned value of where vehicles end up (a file of ``dispatch train
         value``, see :mod:`learning.value`): each pair's cost becomes its cost less the
         discounted value of the vehicle's zone and time after the trip, plus its value now
@@ -38,12 +39,17 @@ class HungarianAllocator(Allocator):
         cardinality, then the minimum of these costs; the cost recorded for a pair stays
         its travel time. With plans (shared rides, the ``added_time`` objective) the value is
         of where each pair's insertion leaves the vehicle's plan ending, and its free seats
-        (:func:`dispatch.api.value.value_costs`)."""
+        (:func:`dispatch.api.value.value_costs`). ``value_reward``: seconds one served request
+        is worth; with it (and a value) the answer is no longer of maximum cardinality but of
+        the greatest total worth, ``value_reward`` less each pair's adjusted cost, and a pair
+        worth nothing is left for a later batch (:func:`gated_pairs`)."""
         self.value = None
+        if value_reward is not None and value is None:
+            raise TypeError("value_reward needs a value file ('value')")
         if value is not None:
             from learning.value import ValueOption
 
-            self.value = ValueOption(value, value_weight)
+            self.value = ValueOption(value, value_weight, value_reward)
             self.value_function = self.value.value
             self.minimizes_total_cost = False  # of the adjusted costs, not problem.cost
             self.one_by_minimum = self.nearest_cut = False
@@ -52,7 +58,30 @@ class HungarianAllocator(Allocator):
         if self.value is None:
             return Allocation.centralized(problem, optimal_pairs(problem.cost))
         cost = self.value.costs(problem)
+        if self.value.reward is not None:
+            return Allocation.centralized(problem, gated_pairs(cost - self.value.reward))
         return Allocation.centralized(problem, optimal_pairs(cost))
+
+
+def gated_pairs(score: np.ndarray) -> list[tuple[int, int]]:
+    """Index pairs ``(agent, task)`` of an assignment of the least total ``score`` among pairs
+    of negative score: a maximum-weight matching of the worths ``-score`` (not a
+    maximum-cardinality one), an agent or task left out wherever no negative pair is worth its
+    place; ``inf`` and non-negative pairs are never chosen. (Every pair that cannot gain is set
+    to 0, the worth of leaving both out, and the full assignment of that matrix is solved: its
+    pairs at 0 are the ones left out.)"""
+    score = np.asarray(score, dtype=float)
+    if score.ndim != 2 or not score.size:
+        return []
+    gain = np.where(np.isfinite(score) & (score < 0), score, 0.0)
+    rows = np.flatnonzero((gain < 0).any(axis=1))
+    cols = np.flatnonzero((gain < 0).any(axis=0))
+    if not len(rows):
+        return []
+    sub = gain[np.ix_(rows, cols)]
+    r, c = linear_sum_assignment(sub)
+    keep = sub[r, c] < 0
+    return [(int(rows[a]), int(cols[t])) for a, t in zip(r[keep], c[keep])]
 
 
 def optimal_pairs(cost: np.ndarray) -> list[tuple[int, int]]:

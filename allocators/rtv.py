@@ -106,7 +106,8 @@ class RtvAllocator(Allocator):
                  max_groups: int = 200, max_nodes: int = 50_000,
                  time_limit: float = 10.0, solver: str = "milp",
                  reorder: bool = False, value: str | None = None,
-                 value_weight: float | None = None) -> None:
+                 value_weight: float | None = None,
+                 value_reward: float | None = None) -> None:
         if objective not in OBJECTIVES:
             raise TypeError(f"objective must be one of {', '.join(OBJECTIVES)}, got {objective!r}")
         if solver not in ("milp", "greedy"):
@@ -127,10 +128,12 @@ class RtvAllocator(Allocator):
         self.reorder = reorder
         #: a learned value of where a route leaves its vehicle (module doc, "Look-ahead")
         self.value = None
+        if value_reward is not None and value is None:
+            raise TypeError("value_reward needs a value file ('value')")
         if value is not None:
             from learning.value import ValueOption
 
-            self.value = ValueOption(value, value_weight)
+            self.value = ValueOption(value, value_weight, value_reward)
             self.value_function = self.value.value
         self.stats = {k: 0 for k in (
             "batches", "groups", "groups_feasible", "largest_group", "pairs_cut", "groups_cut",
@@ -152,6 +155,8 @@ class RtvAllocator(Allocator):
             from pathlib import Path
 
             out.update(value=Path(self.value.path).name, value_weight=f"{self.value.weight:g}")
+            if self.value.reward is not None:
+                out["value_reward"] = f"{self.value.reward:g}"
         if self.stats["batches"]:
             out.update({k: (f"{v:.3f}" if isinstance(v, float) else str(v))
                         for k, v in self.stats.items()})
@@ -188,20 +193,34 @@ class RtvAllocator(Allocator):
             return Allocation(pairs=())
         score = gcost if self.value is None \
             else b.value_scores(groups, gveh, gcost, gorder, self.value)
-        chosen = self._assign(b, groups, gveh, score, t_start)
+        if self.value is not None and self.value.reward is not None:
+            # worth, not count: each request is worth the reward (seconds), a candidate its
+            # requests' worth less its score; one worth nothing is never taken
+            score = score - self.value.reward * (groups >= 0).sum(axis=1)
+            keep = np.flatnonzero(score < 0)
+            if not len(keep):
+                return Allocation(pairs=())
+            groups, gveh, score, gorder = groups[keep], gveh[keep], score[keep], gorder[keep]
+            chosen = self._assign(b, groups, gveh, score, t_start, most=False)
+        else:
+            chosen = self._assign(b, groups, gveh, score, t_start)
         return b.answer(chosen, groups, gveh, gorder)
 
-    def _assign(self, b, groups, gveh, gcost, t_start: float) -> list[int]:
-        """Indices of the chosen (vehicle, group) candidates."""
+    def _assign(self, b, groups, gveh, gcost, t_start: float, most: bool = True) -> list[int]:
+        """Indices of the chosen (vehicle, group) candidates: the most requests, then the least
+        total ``gcost``; with ``most`` False the least total ``gcost`` alone (all negative:
+        the worths of :class:`learning.value.ValueOption`'s reward)."""
         sizes = (groups >= 0).sum(axis=1)
         if sizes.max() == 1:  # a linear assignment: exact
-            from allocators.hungarian import optimal_pairs
+            from allocators.hungarian import gated_pairs, optimal_pairs
 
             self.stats["assignment"] += 1
             c = np.full((b.nv, b.m), np.inf)
             c[gveh, groups[:, 0]] = gcost
             where = {(int(j), int(r)): g for g, (j, r) in enumerate(zip(gveh, groups[:, 0]))}
-            return [where[(j, r)] for j, r in optimal_pairs(c)]
+            return [where[(j, r)] for j, r in (optimal_pairs(c) if most else gated_pairs(c))]
+        if not most:  # the programs below count requests first: here a request counts 0
+            sizes = np.zeros_like(sizes)
         if self.solver == "greedy":
             self.stats["greedy"] += 1
             return _greedy(groups, gveh, gcost, sizes)

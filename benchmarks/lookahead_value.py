@@ -2,6 +2,7 @@
 
 Each ``--series`` is ``ALLOCATOR[/OBJECTIVE][+demand][+value=FILE[@WEIGHT]]`` (e.g.
 ``hungarian/added_time+demand`` or ``hungarian/added_time+demand+value=v.npz@100``;
+``+reward=R`` gives the allocator the ``value_reward`` R (seconds a served request is worth),
 ``+dvalue=FILE`` gives the value to the ``demand`` repositioner, ``+dmix=0.3`` its mix),
 run on ``--scenario`` for each ``--agents`` N and ``--seeds`` S, batched every
 ``--batch-window`` seconds; keep the value's training seeds (its file's ``seeds``) out.
@@ -50,6 +51,8 @@ def parse(series: str) -> dict:
             out["params"]["value"] = path
             if w:
                 out["params"]["value_weight"] = float(w)
+        elif key == "reward":
+            out["params"]["value_reward"] = float(val)
         elif key == "dvalue":
             out["demand_params"]["value"] = val
         elif key == "dmix":
@@ -95,6 +98,37 @@ def interval(x) -> tuple[float, float]:
                                   / math.sqrt(len(x)))
 
 
+def table(rows: list[dict], series: list[str], agents: list[int], seeds: list[int]) -> str:
+    """A Markdown table of the runs ``rows`` (as the CSV holds them): per N and series the mean
+    and 95 % t half-width over ``seeds`` of served share, mean wait, vehicle-km and
+    passenger-km, and the served share's paired difference from the first series."""
+    out = ["| N | series | served % | wait s | vehicle-km | passenger-km | served vs first, pts |",
+           "|---|---|---|---|---|---|---|"]
+    base = series[0]
+    for n in agents:
+        by = {(r["series"], int(r["seed"])): r for r in rows if int(r["n_agents"]) == n}
+        for name in series:
+            got = [s for s in seeds if (name, s) in by]
+            if not got:
+                continue
+
+            def cell(key, scale=1.0, fmt=".1f", got=got, name=name, by=by):
+                x = [scale * float(by[(name, s)][key] or "nan") for s in got]
+                if any(math.isnan(v) for v in x):  # (a run that did not record it)
+                    return "–"
+                m, h = interval(x)
+                return f"{m:{fmt}} ± {h:{fmt}}"
+
+            paired = [s for s in got if (base, s) in by]
+            diff = "" if name == base or not paired else "{:+.2f} ± {:.2f}".format(*interval(
+                [100 * (float(by[(name, s)]["served_share"])
+                        - float(by[(base, s)]["served_share"])) for s in paired]))
+            out.append(f"| {n} | `{name}` | {cell('served_share', 100.0, '.2f')} | "
+                       f"{cell('wait_mean')} | {cell('vehicle_km', fmt='.0f')} | "
+                       f"{cell('passenger_km', fmt='.0f')} | {diff} |")
+    return "\n".join(out)
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--scenario", default=str(ROOT / "scenarios" / "chicago_taxi.toml"))
@@ -105,7 +139,13 @@ def main(argv=None) -> int:
     p.add_argument("--hours", type=float, default=None)
     p.add_argument("--capacity", type=int, default=None)
     p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--table", action="store_true",
+                   help="only print the Markdown table of --out's runs (no new run)")
     a = p.parse_args(argv)
+    if a.table:
+        with a.out.open() as f:
+            print(table(list(csv.DictReader(f)), a.series, a.agents, a.seeds))
+        return 0
     sc = scenario_for(a.scenario, a.batch_window, a.hours, capacity=a.capacity)
     rows = []
     if a.out.exists():

@@ -163,17 +163,30 @@ class ZoneValue:
 
 # ---------------------------------------------------------------------------- an option
 class ValueOption:
-    """The ``value`` / ``value_weight`` option of an allocator or repositioner: the learned
-    value of ``path`` and the weight to use it with (None: the file's).
+    """The ``value`` / ``value_weight`` / ``value_reward`` option of an allocator or
+    repositioner: the learned value of ``path``, the weight to use it with (None: the file's)
+    and, where given, the seconds of cost one served request is worth (``reward``).
+
+    Without a reward an allocator still serves as many requests as it can and the value only
+    chooses among the ways to do so. With one, a pair is worth ``reward`` less its adjusted
+    cost, in the units of the value's own target (one served request = ``reward`` seconds,
+    the NeurADP score ``1 + gamma^dt V(after) - V(now)`` less the cost over the reward): the
+    assignment maximises the total worth and leaves a vehicle free, and a request for a later
+    batch, where no pair is worth anything (:func:`allocators.hungarian.gated_pairs`).
 
     Every adjustment is per agent: row ``i`` of :meth:`costs` depends only on agent ``i``'s
     state, the tasks and the time, so a decentralized agent adjusts its own costs and gets the
     same numbers as a central one."""
 
-    def __init__(self, path: str | Path, weight: float | None = None) -> None:
+    def __init__(self, path: str | Path, weight: float | None = None,
+                 reward: float | None = None) -> None:
         self.path = str(path)
         self.value = ZoneValue.load(path)
         self.weight = self.value.weight if weight is None else float(weight)
+        if reward is not None and (isinstance(reward, bool) or not isinstance(reward, (int, float))
+                                   or not reward > 0):
+            raise TypeError(f"value_reward must be a number of seconds > 0, got {reward!r}")
+        self.reward = None if reward is None else float(reward)
 
     @classmethod
     def of(cls, path, weight=None) -> ValueOption | None:

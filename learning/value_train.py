@@ -36,6 +36,7 @@ import numpy as np
 from learning.value import ROOT, ZoneValue
 from learning.zones import Zones
 
+
 # ---------------------------------------------------------------------------- learning
 def transitions(tasks, vehicles, zones: Zones, end: float,
                 repositioned: bool = False) -> dict[str, np.ndarray]:
@@ -215,12 +216,16 @@ def train(scenario: str | Path, out: str | Path, *, agents: int = 500, batch_win
           hours: float | None = None, cache: str | Path | None = None,
           reposition: str | None = None, allocator: str = "hungarian",
           capacity: int | None = None, objective: str | None = None, log=print,
-          progress=None) -> ZoneValue:
+          progress=None, reward: float | None = None,
+          start: str | Path | None = None) -> ZoneValue:
     """Learn a :class:`ZoneValue` from simulated days of ``allocator`` and save it to ``out``
     (see the module doc). ``reposition``: the days run with that repositioning policy (e.g.
     ``"demand"``): the value of where a vehicle ends up when idle vehicles are moved.
     ``capacity``: seats per vehicle (None: the scenario's); above 1 the value has a class per
-    number of free seats. ``progress(done, total)`` after each simulated day."""
+    number of free seats. ``progress(done, total)`` after each simulated day. ``reward``: the
+    days run with a value give the allocator this ``value_reward`` (seconds a served request
+    is worth: it may leave a pair worth nothing for later). ``start``: a value file the first
+    round's days already run with (policy iteration resumed from it)."""
     import pandas as pd
 
     from dispatch.api.space import space_for
@@ -234,14 +239,17 @@ def train(scenario: str | Path, out: str | Path, *, agents: int = 500, batch_win
     gamma = 0.5 ** (1.0 / half_life)
     seats_n = cap + 1 if cap > 1 else 1
     value: ZoneValue | None = None
+    using = None if start is None else str(Path(start).resolve())
     history = []
     rounds = max(1, iterations)
     for it in range(rounds):
         parts, trips = [], []
         for seed in seeds:
-            params = {} if value is None else {"value": str(Path(out).resolve())}
+            params = {} if using is None else {"value": using}
+            if using is not None and reward is not None:
+                params["value_reward"] = float(reward)
             got = None
-            plain = cache is not None and value is None  # days without a value are reusable
+            plain = cache is not None and using is None  # days without a value are reusable
             if plain:
                 key = Path(cache) / (f"{allocator}_{sc.dispatch.objective}_c{cap}_n{agents}"
                                      f"_w{batch_window:g}_h{hours}"
@@ -282,8 +290,11 @@ def train(scenario: str | Path, out: str | Path, *, agents: int = 500, batch_win
                 "iterations": it + 1, "half_life": half_life, "zone": zone, "bin": bin_s,
                 "shrink": shrink, "weight": weight, "transitions": len(tr["z"]),
                 "reposition": reposition, "hours": hours, "sweeps": sweeps, "days": history}
+        if reward is not None or start is not None:  # (only then: older files' bytes as before)
+            meta.update(reward=reward, start=None if start is None else Path(start).name)
         value = ZoneValue(zones, node_xy, bin_s, table, gamma, weight, fit, meta, seats_n)
         value.save(out)
+        using = str(Path(out).resolve())
         log(f"iteration {it}: {len(tr['z'])} transitions, {sweeps} TD sweeps, "
             f"max value {table.max():.2f}, saved {out}")
     return value
@@ -324,6 +335,11 @@ def main(argv=None) -> int:
     p.add_argument("--reposition", default=None,
                    help="run the training days with this repositioning policy (e.g. demand): "
                         "the value to use with it")
+    p.add_argument("--reward", type=float, default=None,
+                   help="the days run with a value give the allocator this value_reward (seconds "
+                        "a served request is worth)")
+    p.add_argument("--start", default=None,
+                   help="a value file the first round's days run with (policy iteration from it)")
     a = p.parse_args(argv)
     console = Console(stderr=True)
     with Progress(TextColumn("[bold]training days"), BarColumn(), TextColumn("{task.completed}"
@@ -333,7 +349,7 @@ def main(argv=None) -> int:
               iterations=a.iterations, zone=a.zone, bin_s=a.bin, half_life=a.half_life,
               weight=a.weight, shrink=a.shrink, hours=a.hours, cache=a.cache,
               reposition=a.reposition, allocator=a.allocator, capacity=a.capacity,
-              objective=a.objective,
+              objective=a.objective, reward=a.reward, start=a.start,
               log=bar.console.print,
               progress=lambda done, total: bar.update(task, completed=done))
     return 0
