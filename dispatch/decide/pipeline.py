@@ -66,7 +66,14 @@ from dispatch.decide.candidates import cut as candidate_cut
 from dispatch.decide.lazy import certify, resolve_open
 from dispatch.decide.meeting import meeting_costs, view_at
 from dispatch.decide.one_request import decided, fits
-from dispatch.decide.plan_costs import Inserts, PlanEnds, Plans, PlanTable, insertion_costs_of
+from dispatch.decide.plan_costs import (
+    Inserts,
+    PlanEnds,
+    Plans,
+    PlanTable,
+    insertion_costs_of,
+    ride_seconds,
+)
 from dispatch.decide.planner_costs import (
     PlannerCosts,
     close_unreachable,
@@ -114,16 +121,10 @@ def direct_times(book: TaskBook, free: Planner, seen: int) -> int:
 
 
 def rides(planner, tasks) -> np.ndarray | None:
-    """Each trip's drive from pickup to drop-off at this hour (0 for a point task); None on a
-    planner without congestion, where it is the trip's free-flow ``direct_time``."""
-    if planner.free_flow is planner:
-        return None
-    out = np.zeros(len(tasks))
-    trips = [k for k, t in enumerate(tasks) if t.dropoff is not None]
-    if trips:
-        out[trips] = planner.between([tasks[k].loc for k in trips],
-                                     [tasks[k].dropoff for k in trips], pairwise=True)
-    return out
+    """Each trip's drive from pickup to drop-off at this hour (0 for a point task), from
+    where a transferred rider waits now (:func:`dispatch.decide.plan_costs.ride_seconds`);
+    None where every one is the trip's free-flow ``direct_time``."""
+    return ride_seconds(planner, tasks, congested_only=True)
 
 
 def candidates(fleet: Fleet, book: TaskBook, held: dict, pooled: bool
