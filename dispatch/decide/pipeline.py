@@ -373,7 +373,8 @@ class Pipeline:
         cost, exact, servable, inserts = self.limits(now, agents, tasks, idle, open_tasks, holder,
                                                      cost=cost, exact=exact, servable=servable)
         if self.energy_filter is not None:  # [fleet.energy]: below the reserve after the trip: inf
-            cost = self.energy_filter(cost, drive, idle, open_tasks)
+            cost = self.energy_filter(cost, drive, idle, open_tasks,
+                                      frozenset(holder.values()))
         if self.shifts is not None:  # shifts: a plan ending after the shift and grace: inf
             cost = self.shifts.limit(cost, drive, now, idle, open_tasks, inserts,
                                      plans=self.plans, ride=rides(self.planner, open_tasks))
