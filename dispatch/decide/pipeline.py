@@ -314,8 +314,9 @@ class Pipeline:
         #: its cost minimum, and no certificate loop or re-assignment asks more of it
         self.one_request = allocator.one_by_minimum \
             and not allocator.multi_request and not self.lazy and not self.reassign
-        #: [fleet.energy]: ``(cost, drive, slots, tasks) -> cost`` with ``inf`` where a vehicle
-        #: would end below its reserve (dispatch.fleet.battery.Energy.filter); None without energy
+        #: [fleet.energy]: ``(cost, drive, slots, tasks[, holders]) -> cost`` with ``inf`` where
+        #: a vehicle would end below its reserve (dispatch.fleet.battery.Energy.filter); None
+        #: without energy
         self.energy_filter = energy_filter
         #: driver shifts (dispatch.fleet.shifts.Shifts.limit: ``inf`` where a plan would end after
         #: the vehicle's shift and grace); None without shift ends
