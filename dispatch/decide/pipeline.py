@@ -378,7 +378,8 @@ class Pipeline:
                                       frozenset(holder.values()))
         if self.shifts is not None:  # shifts: a plan ending after the shift and grace: inf
             cost = self.shifts.limit(cost, drive, now, idle, open_tasks, inserts,
-                                     plans=self.plans, ride=rides(self.planner, open_tasks))
+                                     plans=self.plans, ride=rides(self.planner, open_tasks),
+                                     holders=frozenset(holder.values()))
         cost_s = time.perf_counter() - t0
         self.tally.cost_seconds += cost_s
         if servable is not None:
