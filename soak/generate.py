@@ -24,6 +24,7 @@ from __future__ import annotations
 import copy
 import csv
 import io
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -40,6 +41,13 @@ VOXEL_ALLOCATORS = ("hungarian", "greedy", "fcfs", "random", "auction", "local_h
 VOXEL_PLANNERS = ("astar", "astar", "reservation", "rrt_star", "rstar")
 
 
+def _write_whole(path: Path, text: str) -> None:
+    """``text`` into ``path`` through a temporary name and an atomic rename."""
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, path)
+
+
 @dataclass
 class Case:
     """A scenario: its document and the files it names (``name -> (header, rows)``)."""
@@ -52,16 +60,18 @@ class Case:
         return Case(self.world, copy.deepcopy(self.doc), copy.deepcopy(self.files))
 
     def write(self, directory: Path, name: str = "scenario.toml") -> Path:
-        """Write the scenario and its files into ``directory``; return the scenario's path."""
+        """Write the scenario and its files into ``directory``, each whole (a temporary name,
+        then a rename: a soak killed meanwhile leaves no half-written file); return the
+        scenario's path."""
         directory.mkdir(parents=True, exist_ok=True)
         for fname, (header, rows) in self.files.items():
             buf = io.StringIO()
             w = csv.writer(buf, lineterminator="\n")
             w.writerow(header)
             w.writerows(["" if v is None else v for v in row] for row in rows)
-            (directory / fname).write_text(buf.getvalue(), encoding="utf-8")
+            _write_whole(directory / fname, buf.getvalue())
         path = directory / name
-        path.write_text(dumps(self.doc), encoding="utf-8")
+        _write_whole(path, dumps(self.doc))
         return path
 
     @classmethod

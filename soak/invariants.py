@@ -42,7 +42,9 @@ SUMMARY_STATES = {"tasks_completed": "completed", "tasks_expired": "expired",
 
 
 def read_tables(out: Path) -> dict[str, pd.DataFrame]:
-    """Every table of the one run in ``out`` (``OUT/<table>/<partition>/part-0.parquet``)."""
+    """Every table of the one run in ``out`` (``OUT/<table>/<partition>/part-0.parquet``), and
+    as ``_edges`` the road network's edges the run wrote once beside them
+    (``OUT/_spaces/road-*/edges.parquet``: ``u``, ``v``, free-flow ``seconds``, ``metres``)."""
     tables = {}
     for folder in sorted(Path(out).iterdir()):
         if folder.name.startswith("_") or not folder.is_dir():
@@ -50,6 +52,9 @@ def read_tables(out: Path) -> dict[str, pd.DataFrame]:
         parts = sorted(folder.rglob("part-0.parquet"))
         if len(parts) == 1:
             tables[folder.name] = pq.read_table(parts[0]).to_pandas()
+    edges = sorted(Path(out).glob("_spaces/road-*/edges.parquet"))
+    if len(edges) == 1:
+        tables["_edges"] = pq.read_table(edges[0]).to_pandas()
     return tables
 
 
@@ -255,7 +260,8 @@ def _promise(doc, tdoc, tables, tasks, events, vehicles):
 
 def _reachable(doc, tdoc, tables, tasks, events, vehicles):
     walking = float(tdoc.get("max_walk", 0.0)) > 0
-    speed = _top_speed(doc, vehicles)
+    speed = _top_speed(doc, tables, vehicles)
+    voxel = "network" not in doc.get("world", {})
     kinds = AT_VEHICLE - ({"pickup", "dropoff", "complete"} if walking else set())
     mine = events[(events.agent_id >= 0) & events.event.isin(kinds | {"repair", "shift_start"})]
     for agent, ev in mine.groupby("agent_id", sort=True):
@@ -264,22 +270,41 @@ def _reachable(doc, tdoc, tables, tasks, events, vehicles):
         t = ev.t.to_numpy(float)
         kind = ev.event.to_numpy()
         step = np.linalg.norm(np.diff(xyz, axis=0), axis=1)
-        allowed = v * np.diff(t) * (1 + 1e-9) + 1e-6
+        since = t[:-1]
+        if voxel:  # an event names the cell the vehicle stands in or is stepping out of (a
+            # `depart` mid-step): it may have left that cell from its first event there on
+            first = np.where(np.r_[True, step > 1e-9], np.arange(len(t)), 0)
+            since = t[np.maximum.accumulate(first)[:-1]]
+        allowed = v * (t[1:] - since) * (1 + 1e-9) + 1e-6
         # a tow (repair after a stranding) and a shift's start at the depot move without
         # driving
         jump = np.isin(kind[1:], ["repair", "shift_start"])
         bad = np.flatnonzero((step > allowed) & ~jump)
         for i in bad[:1]:
             yield (f"vehicle {agent}: {step[i]:.1f} m from {kind[i]} at {t[i]:.3f} s to "
-                   f"{kind[i + 1]} at {t[i + 1]:.3f} s, at most {v} m/s")
+                   f"{kind[i + 1]} at {t[i + 1]:.3f} s, at most {v:.6g} m/s")
 
 
-def _top_speed(doc, vehicles) -> dict[int, float]:
+def _top_speed(doc, tables, vehicles) -> dict[int, float]:
+    """Each vehicle's top speed: in a voxel world its own ``speed``; on roads the fastest edge
+    of the network the run wrote (``_edges``: metres over free-flow seconds; a generated grid
+    without that file: its ``[world] speed``), faster still by an hourly congestion factor
+    below 1."""
     world = doc.get("world", {})
-    if "network" in world:
+    if "network" not in world:
+        return dict(zip(vehicles.agent_id, vehicles.speed))
+    edges = tables.get("_edges")
+    if edges is not None and len(edges):
+        moves = edges[edges.metres > 0]
+        timed = moves.seconds > 0
+        top = (0.0 if not len(moves) else math.inf if not timed.all()
+               else float((moves.metres / moves.seconds).max()))
+    else:
         top = float(world.get("speed", 10.0))  # the generated grid: every street at `speed`
-        return {a: top for a in vehicles.agent_id}
-    return dict(zip(vehicles.agent_id, vehicles.speed))
+    factors = world.get("congestion")
+    if isinstance(factors, list) and factors:
+        top /= min(1.0, min(float(f) for f in factors))
+    return {a: top for a in vehicles.agent_id}
 
 
 def _assign_open(doc, tdoc, tables, tasks, events, vehicles):

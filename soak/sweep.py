@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import shutil
 from collections import Counter
 from collections.abc import Callable
@@ -76,6 +77,30 @@ def row_of(run: str, case: Case, got: Outcome) -> dict:
             "first": got.violations[0][1] if got.violations else ""}
 
 
+def _read_results(results: Path) -> dict[str, dict]:
+    """The rows of ``results`` by run. A line cut by a kill is left out (that run runs
+    again) and the file is rewritten without it (a temporary name, then a rename), so the
+    lines appended next start on a line of their own."""
+    done: dict[str, dict] = {}
+    if not results.exists():
+        return done
+    text = results.read_text(encoding="utf-8")
+    kept = []
+    for line in text.splitlines():
+        try:
+            row = json.loads(line)
+            done[row["run"]] = row
+            kept.append(line)
+        except (json.JSONDecodeError, KeyError, TypeError):
+            continue
+    whole = "".join(line + "\n" for line in kept)
+    if whole != text:
+        tmp = results.with_name(f".{results.name}.tmp-{os.getpid()}")
+        tmp.write_text(whole, encoding="utf-8")
+        os.replace(tmp, results)
+    return done
+
+
 def soak(runs: int, seed: int, out: Path, *, world: str | None = None, limit: float = 60.0,
          twice_every: int = 10, on_run: Callable[[dict], None] | None = None) -> Tally:
     """Run cases ``0 .. runs - 1`` of ``seed`` into ``out``; every ``twice_every``-th run
@@ -83,14 +108,7 @@ def soak(runs: int, seed: int, out: Path, *, world: str | None = None, limit: fl
     are read, not run again. ``on_run(row)`` after each run."""
     out.mkdir(parents=True, exist_ok=True)
     results = out / "results.jsonl"
-    done: dict[str, dict] = {}
-    if results.exists():
-        for line in results.read_text(encoding="utf-8").splitlines():
-            try:  # (a line cut by a kill is left out: that run runs again)
-                row = json.loads(line)
-                done[row["run"]] = row
-            except (json.JSONDecodeError, KeyError):
-                continue
+    done = _read_results(results)
     tally = Tally()
     with results.open("a", encoding="utf-8") as fh:
         for index in range(runs):

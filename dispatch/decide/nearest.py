@@ -32,7 +32,7 @@ from collections.abc import Callable, Iterable
 
 import numpy as np
 
-from dispatch.decide.plan_costs import insertion_costs_of
+from dispatch.decide.plan_costs import insertion_costs_of, ride_seconds
 from dispatch.decide.planner_costs import deadlines, reject_late
 
 #: True: every decision costs the whole column (tests compare the two)
@@ -229,5 +229,6 @@ def costed(pipe, now: float, slots: np.ndarray, requests: list, views: tuple):
     if pipe.energy_filter is not None:
         cost = pipe.energy_filter(cost, drive, slots, requests)
     if pipe.shifts is not None:
-        cost = pipe.shifts.limit(cost, drive, now, slots, requests, inserts, plans=pipe.plans)
+        cost = pipe.shifts.limit(cost, drive, now, slots, requests, inserts, plans=pipe.plans,
+                                 ride=ride_seconds(pipe.planner, requests, congested_only=True))
     return drive, cost, inserts

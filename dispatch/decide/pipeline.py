@@ -66,7 +66,14 @@ from dispatch.decide.candidates import cut as candidate_cut
 from dispatch.decide.lazy import certify, resolve_open
 from dispatch.decide.meeting import meeting_costs, view_at
 from dispatch.decide.one_request import decided, fits
-from dispatch.decide.plan_costs import Inserts, PlanEnds, Plans, PlanTable, insertion_costs_of
+from dispatch.decide.plan_costs import (
+    Inserts,
+    PlanEnds,
+    Plans,
+    PlanTable,
+    insertion_costs_of,
+    ride_seconds,
+)
 from dispatch.decide.planner_costs import (
     PlannerCosts,
     close_unreachable,
@@ -114,16 +121,10 @@ def direct_times(book: TaskBook, free: Planner, seen: int) -> int:
 
 
 def rides(planner, tasks) -> np.ndarray | None:
-    """Each trip's drive from pickup to drop-off at this hour (0 for a point task); None on a
-    planner without congestion, where it is the trip's free-flow ``direct_time``."""
-    if planner.free_flow is planner:
-        return None
-    out = np.zeros(len(tasks))
-    trips = [k for k, t in enumerate(tasks) if t.dropoff is not None]
-    if trips:
-        out[trips] = planner.between([tasks[k].loc for k in trips],
-                                     [tasks[k].dropoff for k in trips], pairwise=True)
-    return out
+    """Each trip's drive from pickup to drop-off at this hour (0 for a point task), from
+    where a transferred rider waits now (:func:`dispatch.decide.plan_costs.ride_seconds`);
+    None where every one is the trip's free-flow ``direct_time``."""
+    return ride_seconds(planner, tasks, congested_only=True)
 
 
 def candidates(fleet: Fleet, book: TaskBook, held: dict, pooled: bool
@@ -313,8 +314,9 @@ class Pipeline:
         #: its cost minimum, and no certificate loop or re-assignment asks more of it
         self.one_request = allocator.one_by_minimum \
             and not allocator.multi_request and not self.lazy and not self.reassign
-        #: [fleet.energy]: ``(cost, drive, slots, tasks) -> cost`` with ``inf`` where a vehicle
-        #: would end below its reserve (dispatch.fleet.battery.Energy.filter); None without energy
+        #: [fleet.energy]: ``(cost, drive, slots, tasks[, holders]) -> cost`` with ``inf`` where
+        #: a vehicle would end below its reserve (dispatch.fleet.battery.Energy.filter); None
+        #: without energy
         self.energy_filter = energy_filter
         #: driver shifts (dispatch.fleet.shifts.Shifts.limit: ``inf`` where a plan would end after
         #: the vehicle's shift and grace); None without shift ends
@@ -372,10 +374,12 @@ class Pipeline:
         cost, exact, servable, inserts = self.limits(now, agents, tasks, idle, open_tasks, holder,
                                                      cost=cost, exact=exact, servable=servable)
         if self.energy_filter is not None:  # [fleet.energy]: below the reserve after the trip: inf
-            cost = self.energy_filter(cost, drive, idle, open_tasks)
+            cost = self.energy_filter(cost, drive, idle, open_tasks,
+                                      frozenset(holder.values()))
         if self.shifts is not None:  # shifts: a plan ending after the shift and grace: inf
             cost = self.shifts.limit(cost, drive, now, idle, open_tasks, inserts,
-                                     plans=self.plans, ride=rides(self.planner, open_tasks))
+                                     plans=self.plans, ride=rides(self.planner, open_tasks),
+                                     holders=frozenset(holder.values()))
         cost_s = time.perf_counter() - t0
         self.tally.cost_seconds += cost_s
         if servable is not None:

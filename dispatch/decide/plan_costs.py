@@ -212,6 +212,26 @@ class PlanTable:
         return off, arr, svc, lat, oc, locs, ear, fleet.load.take(idx)
 
 
+def ride_seconds(planner: Planner, tasks: list, congested_only: bool = False
+                 ) -> np.ndarray | None:
+    """Each request's drive from its pickup to its drop-off (0 for a point task): its
+    free-flow ``direct_time``, but the drive at this hour on a congested planner
+    (:mod:`dispatch.space.congestion`) and, for a rider transferred after a breakdown, the
+    drive from where the rider waits now (``direct_time`` stays the original trip's: the
+    ``tasks`` row reports it). ``congested_only``: None where every value is the
+    ``direct_time`` (no congestion, no transfer)."""
+    congested = planner.free_flow is not planner
+    trips = [k for k, t in enumerate(tasks)
+             if t.dropoff is not None and (congested or t.transfers)]
+    if congested_only and not trips:
+        return None
+    pd = np.array([0.0 if t.dropoff is None else t.direct_time for t in tasks])
+    if trips:
+        pd[trips] = planner.between([tasks[k].loc for k in trips],
+                                    [tasks[k].dropoff for k in trips], pairwise=True)
+    return pd
+
+
 def insertion_costs_of(cost: np.ndarray, slots: np.ndarray, tasks: list, now: float,
                        holders: set, *, fleet: Fleet, operator: Operator, planner: Planner,
                        objective: int, table: PlanTable) -> tuple[np.ndarray, Inserts | dict]:
@@ -230,13 +250,7 @@ def insertion_costs_of(cost: np.ndarray, slots: np.ndarray, tasks: list, now: fl
     # a booked request's pickup opens at its requested departure (dispatch.decide.prebook)
     ep = np.array([t.earliest_pickup for t in tasks])
     point = np.array([t.dropoff is None for t in tasks])
-    pd = np.array([0.0 if t.dropoff is None else t.direct_time for t in tasks])
-    if planner.free_flow is not planner and not point.all():
-        # a congested planner (dispatch.space.congestion): the drive at this hour, not free flow
-        trips = np.flatnonzero(~point)
-        pd[trips] = planner.between([tasks[k].loc for k in trips.tolist()],
-                                         [tasks[k].dropoff for k in trips.tolist()],
-                                         pairwise=True)
+    pd = ride_seconds(planner, tasks)
     svc_p = np.where(point, svc, 0.0)
     svc_d = np.where(point, 0.0, svc)
     cap = fleet.capacity[slots]

@@ -114,12 +114,17 @@ class Energy:
         self.kwh_per_second = cfg.wh_per_metre(ref_speed) * ref_speed / 1000.0
         self.reserve_kwh = cfg.reserve * cfg.battery_kwh
 
-    def filter(self, cost: np.ndarray, drive: np.ndarray, slots: np.ndarray, tasks) -> np.ndarray:
+    def filter(self, cost: np.ndarray, drive: np.ndarray, slots: np.ndarray, tasks,
+               holders: frozenset = frozenset()) -> np.ndarray:
         """``cost`` with ``inf`` where vehicle ``slots[i]`` would end below the reserve after
-        the plan and request ``j`` (``drive``: seconds from each vehicle to each pickup)."""
+        the plan and request ``j`` (``drive``: seconds from each vehicle to each pickup).
+        ``holders``: ids of vehicles driving to a pickup they may give up (``[dispatch]
+        reassign``), whose plans count as empty, as the decision's costs take them (counting
+        the held trip too ruled each holder out of its own task in turn: two vehicles handed
+        one task back and forth at one instant forever)."""
         vs = self.fleet.vehicles
-        plan_s = np.array([sum(s.leg for s in vs[k].plan) for k in slots.tolist()]) \
-            if slots.size else np.zeros(0)
+        plan_s = np.array([0.0 if vs[k].id in holders else sum(s.leg for s in vs[k].plan)
+                           for k in slots.tolist()]) if slots.size else np.zeros(0)
         direct = np.array([0.0 if t.dropoff is None or t.direct_time != t.direct_time
                            else t.direct_time for t in tasks])
         need = (plan_s[:, None] + drive + direct[None, :]) * self.kwh_per_second

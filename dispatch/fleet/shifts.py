@@ -257,14 +257,17 @@ class Shifts:
             self.until[k] = -math.inf if (d.ended or not d.on or d.home) else d.until
 
     def limit(self, cost: np.ndarray, drive: np.ndarray, now: float, slots: np.ndarray,
-              tasks: list, inserts, *, plans: bool, ride: np.ndarray | None = None
-              ) -> np.ndarray:
+              tasks: list, inserts, *, plans: bool, ride: np.ndarray | None = None,
+              holders: frozenset = frozenset()) -> np.ndarray:
         """``cost`` with ``inf`` where vehicle ``slots[i]`` would complete its plan's last
         stop after its shift's end plus the grace with request ``j`` (see the module);
         ``drive``: the seconds from each vehicle to each pickup; ``inserts``: where a busy
         vehicle's stops go (:class:`dispatch.decide.plan_costs.Inserts`); ``ride``: each
         request's drive to its drop-off at this hour (congestion; None: its free-flow
-        ``direct_time``)."""
+        ``direct_time``); ``holders``: ids of vehicles driving to a pickup they may give up
+        (``[dispatch] reassign``), whose plans count as empty, as the decision's costs take
+        them (else each of two vehicles was ruled out of a task while it held it: a hand-back
+        loop at one instant)."""
         lim = self.until[slots]
         if not (lim < math.inf).any() or not cost.size:
             return cost
@@ -282,6 +285,8 @@ class Shifts:
         if plans:
             fleet, vs = self.fleet, self.fleet.vehicles
             planned = fleet.busy_mask[slots]
+            if holders:
+                planned = planned & ~np.isin(fleet.ids[slots], list(holders))
             rows_busy = np.flatnonzero(planned)
             if rows_busy.size:
                 end[rows_busy] = math.inf  # busy: only its feasible insertions

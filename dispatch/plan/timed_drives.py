@@ -9,12 +9,14 @@ counts ``waits``, ``replans`` and ``wait_seconds``.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Any
 
 import simpy
 
 from dispatch.api.motion import EPS, step_length, step_seconds
+from dispatch.plan.tasks import TaskState
 from dispatch.plan.traffic import TimedVehicle, Traffic
 from dispatch.plan.vehicle_plan import request_stops
 
@@ -146,6 +148,34 @@ class TimedExecution:
         t.task, v.busy_since = task, self.env.now
         self.traffic.emit(self.env.now, "depart", v.id, task.id, v.loc)
         self.traffic.request(t)
+        if task.deadline < math.inf:
+            self.env.process(self._deadline(v, t, task))
+
+    def _deadline(self, v, t: TimedVehicle, task):
+        """Process: ``task``'s pickup limit. The decision timed the drive on the free grid,
+        but reservations may hold the vehicle up on the way (a detour, a wait); a rider is
+        never picked up late, so if the vehicle is not there by the deadline (nor stepping
+        into the task's cell to arrive by it), it gives the task up where it is: the task
+        goes back to open and expires at once (as an open task does at its deadline), and
+        the vehicle stops at the end of its step, idle."""
+        env, traffic = self.env, self.traffic
+        yield env.timeout(max(task.deadline - env.now, 0.0))
+        if t.task is not task or t.arrived or task.state is not TaskState.ASSIGNED:
+            return
+        s = t.step
+        if s is not None and s[1] == task.loc and env.now <= s[3] <= task.deadline + EPS:
+            return  # arriving on time
+        op = self.op
+        end_wait(t, env.now)
+        t.task = None
+        v.plan.clear()
+        v.busy_seconds += env.now - v.busy_since
+        op.book.unassign(task)
+        op.book.close(task, TaskState.EXPIRED)
+        op.fleet.refresh(v)
+        traffic.stop(t)
+        traffic.emit(env.now, "idle", v.id, -1, v.loc)
+        op.notify()
 
     def holds(self, v):
         return self.traffic.of(v).task

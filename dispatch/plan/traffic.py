@@ -302,9 +302,14 @@ class Traffic:
         """``v`` broke down: it stops at its commit point (the end of the step it is executing,
         or its cell), its later reservations are released and its cell is held hard (nobody
         plans through it, nobody asks it to make way) until it is repaired."""
+        v.arrived = True
+        self.stop(v)
+
+    def stop(self, v: TimedVehicle) -> None:
+        """``v`` stops at its commit point (the end of the step it is executing, or its cell)
+        and holds it; its later reservations are released."""
         t, c = self.commit_point(v)
         v.route = [(t, c)]
-        v.arrived = True
         self._reserve(v)
         self._wake(v)
         self.notify()
