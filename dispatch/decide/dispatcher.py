@@ -377,7 +377,7 @@ class Dispatcher:
         declined request left open for a re-offer asks for the next decision."""
         off, by_id, op = self.offering, self.fleet.by_id, self.operator
         by_task = {t.id: t for t in p.tasks}
-        now, decided, cost = self.env.now, float(p.problem.time), p.problem.cost
+        now, cost = self.env.now, p.problem.cost  # (vehicles set out now, deliberated too)
         plans = self.pipeline.plans
         kept, gone = [], {}
         for (aid, tid), ij in zip(pairs, index):
@@ -393,9 +393,9 @@ class Dispatcher:
             elif at is not None:
                 est = insertion_estimates(task, v.plan.kept(), v.load, at)
             elif plans:  # a vehicle setting out on the request's stops, by the schedule rule
-                est = self._set_out_estimates(v, task, decided, float(cost[ij]))
+                est = self._set_out_estimates(v, task, now, float(cost[ij]))
             else:
-                est = plain_estimates(task, decided, float(cost[ij]))
+                est = plain_estimates(task, now, float(cost[ij]))
             if off.offer(task, aid, now, est):
                 kept.append((aid, tid))
             else:
@@ -418,8 +418,8 @@ class Dispatcher:
                 routes[aid] = (rows, times)
         return tuple(kept), routes
 
-    def _set_out_estimates(self, v, task, decided: float, cost: float) -> Estimates:
-        """Estimates of ``v`` driving ``task``'s stops from where it is now (the operator's
+    def _set_out_estimates(self, v, task, now: float, cost: float) -> Estimates:
+        """Estimates of ``v`` driving ``task``'s stops from where it is ``now`` (the operator's
         route times, no limit; a booked pickup waits for its departure, as the plan will), or
         from the decision's cost where those cannot be had."""
         n = task.passengers
@@ -429,7 +429,7 @@ class Dispatcher:
             rows.append(PlannedStop(DROPOFF, task.id, task.dropoff, -n, math.inf, True))
         times, _ = self.operator.route_times(v, rows)
         if times is None:
-            return plain_estimates(task, decided, cost)
+            return plain_estimates(task, now, cost)
         return route_estimates(task, rows, times, 0)
 
     def _follow(self, p: _Pending, allocation: Allocation, routes: dict,
