@@ -10,10 +10,13 @@ asks the allocator, checks the answer and hands the tasks to the vehicles.
 Latency. With ``[comms] latency > 0`` a decision takes simulated time: the allocator reports the
 sequential message hops of its decision (:attr:`Allocation.hops`; 0 for centralized methods)
 and the dispatcher hands the tasks out ``hops * latency`` seconds after the decision started.
-Meanwhile the deciding vehicles stay idle where they are and the dispatcher takes no other
-decision (events that arrive meanwhile trigger the next one, right after the hand-out). A pair
-whose task closed meanwhile (it expired) is not handed out: that vehicle stays idle and the next
-decision considers it again. The ``decisions`` row is written at the hand-out and counts only
+Meanwhile the fleet moves on (an idle vehicle stays where it is, a busy one drives its plan)
+and the dispatcher takes no other decision (events that arrive meanwhile trigger the next one,
+right after the hand-out). At the hand-out each pair is costed again from the fleet as it is
+then (:mod:`dispatch.decide.deliberation`): one whose task closed meanwhile (it expired), whose
+vehicle is no longer a candidate or that no longer keeps every limit is not handed out (the
+next decision, at once, considers them again); the others get the insertion planned at the
+hand-out. The ``decisions`` row is written at the hand-out and counts only
 the pairs handed out; the summary's rounds, messages and comm delay are added up at the
 hand-out too, so they always match the ``decisions`` table (a decision cut short by the end of
 the run is in neither). Tasks are stamped ``assigned_at`` at the hand-out, so the deliberation
@@ -79,6 +82,7 @@ from dispatch.api.comms import components
 from dispatch.api.contracts import Allocator
 from dispatch.api.problem import Allocation, AllocationProblem
 from dispatch.decide.answers import Checked, finders, route_stops, validate
+from dispatch.decide.deliberation import candidate, recheck
 from dispatch.decide.offer_step import (Estimates, Offering, insertion_estimates, plain_estimates,
                                         route_estimates)
 from dispatch.decide.pipeline import Pipeline
@@ -88,8 +92,7 @@ from dispatch.errors import AllocationError, DispatchError, PluginError
 from dispatch.heap import keep_large_blocks
 from dispatch.plan.operator import KEEP
 from dispatch.plan.stops import DROPOFF, PICKUP, PlannedStop
-from dispatch.plan.tasks import OPEN, TaskBook, TaskState
-from dispatch.plan.vehicle_plan import fixed_version
+from dispatch.plan.tasks import TaskBook, TaskState
 
 if TYPE_CHECKING:
     import simpy
@@ -135,8 +138,6 @@ class _Pending:
     #: task id -> the meeting points it was planned at (one point per request; see
     #: :attr:`dispatch.decide.pipeline.Decision.meetings`)
     meetings: dict = field(default_factory=dict)
-    #: vehicle id -> its ``plan_version`` at the decision (the vehicles of its pairs)
-    versions: dict = field(default_factory=dict)
 
 
 class Wakeup:
@@ -235,9 +236,6 @@ class Dispatcher:
         self._pending = _Pending(problem, allocation, d.requests, d.cost_s, decide_s, delay,
                                  n_comp, d.holder, answer.index, answer.routes, d.inserts,
                                  d.cut, d.meetings)
-        if delay > 0:  # (the hand-out tells a stale insertion by them)
-            self._pending.versions = {a: fixed_version(self.fleet.by_id[a], self.env.now)
-                                      for a, _ in allocation.pairs}
         if delay <= 0:
             self._hand_out()
 
@@ -301,10 +299,7 @@ class Dispatcher:
         allocation = p.allocation
         cost = p.problem.cost
         ats: dict = {}  # the slow path's pairs with their insertions
-        if not holding and (p.delay <= 0 or all(by_task[t].state is OPEN and not by_id[a].busy
-                                                for a, t in allocation.pairs)):
-            # (without latency nothing changed since the decision; with it, a pooled pair
-            # whose vehicle moved on is stale: the slow path below drops it)
+        if not holding and p.delay <= 0:  # (nothing changed since the decision)
             if self.offering is not None:
                 allocation = self._offered(p, allocation)
             handed = tuple(allocation.pairs)
@@ -321,8 +316,8 @@ class Dispatcher:
         else:
             def vehicle_unchanged(a: int) -> bool:  # a vehicle of the decision, as it was then
                 v = by_id[a]
-                if a not in holding:
-                    return not v.busy
+                if a not in holding:  # (still one a decision considers)
+                    return candidate(self.pipeline, v)
                 task = self.operator.holds(v)
                 return task is not None and task.id == holding[a] \
                     and task.state is TaskState.ASSIGNED
@@ -337,17 +332,19 @@ class Dispatcher:
             if p.routes:  # a route planned before the deliberation is stale: dropped
                 handed = tuple((a, t) for a, t in handed if a not in p.routes)
             row, col = finders(p.problem)
-            if p.inserts:  # a pair planned into a plan that changed since is stale: dropped
-                # (not one into a plan as it was: else such decisions came back forever)
-                handed = tuple((a, t) for a, t in handed
-                               if (row(a), col(t)) not in p.inserts
-                               or by_id[a].plan_version == p.versions.get(a))
+            if p.delay > 0:  # each pair costed again now (its insertion too), or dropped
+                new = [(a, t) for a, t in handed if holding.get(a) != t]
+                fresh = recheck(self.pipeline, self.env.now, new, by_task,
+                                {a for a, _ in new if a in holding})
+                handed = tuple(pair for pair in handed if pair in fresh or pair not in new)
+                p.inserts = {(row(a), col(t)): at for (a, t), at in fresh.items()}
+            if p.inserts:
                 ats = {(a, t): p.inserts.get((row(a), col(t))) for a, t in handed}
-            if self.offering is not None:  # (plain pairs only: routes, insertions dropped)
+            if self.offering is not None:  # (routes dropped, insertions as planned now)
                 index = [(row(a), col(t)) for a, t in handed]
                 handed, _ = self._offer(p, handed, index, {})
             if len(handed) != len(allocation.pairs):
-                log.debug("decision %d: %d pair(s) not handed out (task closed while deciding)",
+                log.debug("decision %d: %d pair(s) not handed out (stale after deliberating)",
                           self.tally.decisions, len(allocation.pairs) - len(handed))
                 allocation = replace(allocation, pairs=handed)
                 self.wakeup()
@@ -380,7 +377,7 @@ class Dispatcher:
         declined request left open for a re-offer asks for the next decision."""
         off, by_id, op = self.offering, self.fleet.by_id, self.operator
         by_task = {t.id: t for t in p.tasks}
-        now, decided, cost = self.env.now, float(p.problem.time), p.problem.cost
+        now, cost = self.env.now, p.problem.cost  # (vehicles set out now, deliberated too)
         plans = self.pipeline.plans
         kept, gone = [], {}
         for (aid, tid), ij in zip(pairs, index):
@@ -396,9 +393,9 @@ class Dispatcher:
             elif at is not None:
                 est = insertion_estimates(task, v.plan.kept(), v.load, at)
             elif plans:  # a vehicle setting out on the request's stops, by the schedule rule
-                est = self._set_out_estimates(v, task, decided, float(cost[ij]))
+                est = self._set_out_estimates(v, task, now, float(cost[ij]))
             else:
-                est = plain_estimates(task, decided, float(cost[ij]))
+                est = plain_estimates(task, now, float(cost[ij]))
             if off.offer(task, aid, now, est):
                 kept.append((aid, tid))
             else:
@@ -421,8 +418,8 @@ class Dispatcher:
                 routes[aid] = (rows, times)
         return tuple(kept), routes
 
-    def _set_out_estimates(self, v, task, decided: float, cost: float) -> Estimates:
-        """Estimates of ``v`` driving ``task``'s stops from where it is now (the operator's
+    def _set_out_estimates(self, v, task, now: float, cost: float) -> Estimates:
+        """Estimates of ``v`` driving ``task``'s stops from where it is ``now`` (the operator's
         route times, no limit; a booked pickup waits for its departure, as the plan will), or
         from the decision's cost where those cannot be had."""
         n = task.passengers
@@ -432,7 +429,7 @@ class Dispatcher:
             rows.append(PlannedStop(DROPOFF, task.id, task.dropoff, -n, math.inf, True))
         times, _ = self.operator.route_times(v, rows)
         if times is None:
-            return plain_estimates(task, decided, cost)
+            return plain_estimates(task, now, cost)
         return route_estimates(task, rows, times, 0)
 
     def _follow(self, p: _Pending, allocation: Allocation, routes: dict,

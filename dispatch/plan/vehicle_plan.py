@@ -34,14 +34,6 @@ def starts_now(heading_none, waiting, free_at, now: float):
     return (heading_none | waiting) & (free_at <= now)
 
 
-def fixed_version(v, now: float) -> int | None:
-    """``v``'s ``plan_version`` where an insertion planned at ``now`` still holds later while
-    the version stays: the vehicle is idle (an empty plan: the insertion sets it out from where
-    it stands); None where it has a plan (it drives on, or serves a stop, and an insertion
-    planned around it goes stale: a re-route from where it got to costs more than planned)."""
-    return None if v.plan or v.heading is not None or v.serving is not None else v.plan_version
-
-
 def request_stops(task: Task, service: float) -> list[Stop]:
     """The stops of ``task``: its pickup (which completes a point task) and its drop-off (at
     its meeting points where it walks: :mod:`dispatch.decide.meeting`; a booked ride's pickup
