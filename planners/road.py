@@ -445,7 +445,11 @@ class RoadPlanner(Planner):
             snodes, sinv = _distinct(node)
             fwd = self._forward(snodes)  # (distinct sources, n)
             at = tnode if index is None else index[tnode]
-            out = fwd[sinv][:, at]
+            # (the targets' columns first, then a row per source: the same elements as
+            # ``fwd[sinv][:, at]``, without copying whole fields or a two-axis fancy index)
+            out = fwd.take(at, axis=1)
+            if node.size > 1:  # (one source: its one row)
+                out = out.take(sinv, axis=0)
             return out if rem is None else out + rem[:, None]
         tnodes, tinv = _distinct(tnode)
         fields = [self._to(n) for n in tnodes.tolist()]
@@ -497,7 +501,8 @@ class RoadPlanner(Planner):
             rows.append(kept[n])
         while self._fwd_bytes > FORWARD_FIELD_BYTES and len(kept) > nodes.size:
             self._fwd_bytes -= kept.popitem(last=False)[1].nbytes
-        return np.stack(rows)
+        # (one field: a view as a row, no copy; a caller gathers from it, never writes)
+        return rows[0][None, :] if len(rows) == 1 else np.stack(rows)
 
     def _revive(self, node: int) -> np.ndarray | None:
         """The kept field of ``node`` back among the open tasks' fields, or None."""
