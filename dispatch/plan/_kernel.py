@@ -290,3 +290,29 @@ def candidate_pairs(cost, now, slots, planned, cap, free_at, lp, ld, n_req, ep, 
         pair_col[p] = col_at[cols[p]]
     return (rows[:q], cols[:q], pair_vehicle[:q], used[:u], ready[:u], seats[:u], ucols[:k],
             pair_col, first_tt[:q])
+
+
+@jit
+def gather_rows(idx, length, arr, svc, lat, occ, ear, node):  # pragma: no cover - compiled
+    """The plans of the table rows ``idx`` (each row ``k`` holds ``length[k]`` stops of the
+    fields ``arr``, ``svc``, ``lat``, ``occ``, ``ear``, ``node``), flat:
+    ``(off, arr, svc, lat, occ, ear, node)`` with row ``idx[i]``'s stops at
+    ``off[i]:off[i + 1]``, copied in one loop (no index arrays built per decision)."""
+    n = idx.size
+    off = np.zeros(n + 1, np.int64)
+    for i in range(n):
+        off[i + 1] = off[i] + length[idx[i]]
+    g = off[n]
+    a, s, la, e = np.empty(g), np.empty(g), np.empty(g), np.empty(g)
+    o, nd = np.empty(g, np.int64), np.empty(g, np.int64)
+    for i in range(n):
+        k = idx[i]
+        at = off[i]
+        for j in range(length[k]):
+            a[at + j] = arr[k, j]
+            s[at + j] = svc[k, j]
+            la[at + j] = lat[k, j]
+            o[at + j] = occ[k, j]
+            e[at + j] = ear[k, j]
+            nd[at + j] = node[k, j]
+    return off, a, s, la, o, e, nd

@@ -110,3 +110,13 @@ def candidate_pairs(cost, now: float, slots, planned, *, cap, free_at, lp, ld, n
                   f(cap, np.int64), f(free_at, float), f(lp, float), f(ld, float),
                   f(n_req, np.int64), f(ep, float), f(svc_p, float), f(svc_d, float),
                   f(pd, float), bool(pickup_time), out)
+
+
+def gather_rows(idx, length, fields):
+    """The plans of the rows ``idx`` of a plan table (``length`` stops per row of each of the
+    ``fields``: arrival, service, latest, occupancy, earliest, node), flat, compiled
+    (:func:`dispatch.plan._kernel.gather_rows`): ``(off, arrival, service, latest,
+    occupancy, earliest, node)``, row ``idx[i]``'s stops at ``off[i]:off[i + 1]``."""
+    from dispatch.plan._kernel import gather_rows as kernel
+
+    return kernel(np.ascontiguousarray(idx, np.int64), length, *fields)
