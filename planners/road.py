@@ -442,7 +442,8 @@ class RoadPlanner(Planner):
         index = self._index
         # only the smaller side is made distinct (the other may be a whole fleet's stops)
         if not pairwise and node.size < tnode.size:
-            snodes, sinv = _distinct(node)
+            # (one source: itself, distinct)
+            snodes, sinv = (node, None) if node.size == 1 else _distinct(node)
             fwd = self._forward(snodes)  # (distinct sources, n)
             at = tnode if index is None else index[tnode]
             # (the targets' columns first, then a row per source: the same elements as
@@ -451,9 +452,12 @@ class RoadPlanner(Planner):
             if node.size > 1:  # (one source: its one row)
                 out = out.take(sinv, axis=0)
             return out if rem is None else out + rem[:, None]
+        at = node if index is None else index[node]
+        if not pairwise and tnode.size == 1:  # one target (a new request): its field's column
+            out = self._to(int(tnode[0])).take(at)[:, None]
+            return out if rem is None else out + rem[:, None]
         tnodes, tinv = _distinct(tnode)
         fields = [self._to(n) for n in tnodes.tolist()]
-        at = node if index is None else index[node]
         if pairwise:
             out = np.fromiter((fields[k][a] for k, a in zip(tinv.tolist(), at.tolist())),
                               np.float64, tnode.size)
