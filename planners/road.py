@@ -442,14 +442,22 @@ class RoadPlanner(Planner):
         index = self._index
         # only the smaller side is made distinct (the other may be a whole fleet's stops)
         if not pairwise and node.size < tnode.size:
-            snodes, sinv = _distinct(node)
+            # (one source: itself, distinct)
+            snodes, sinv = (node, None) if node.size == 1 else _distinct(node)
             fwd = self._forward(snodes)  # (distinct sources, n)
             at = tnode if index is None else index[tnode]
-            out = fwd[sinv][:, at]
+            # (the targets' columns first, then a row per source: the same elements as
+            # ``fwd[sinv][:, at]``, without copying whole fields or a two-axis fancy index)
+            out = fwd.take(at, axis=1)
+            if node.size > 1:  # (one source: its one row)
+                out = out.take(sinv, axis=0)
+            return out if rem is None else out + rem[:, None]
+        at = node if index is None else index[node]
+        if not pairwise and tnode.size == 1:  # one target (a new request): its field's column
+            out = self._to(int(tnode[0])).take(at)[:, None]
             return out if rem is None else out + rem[:, None]
         tnodes, tinv = _distinct(tnode)
         fields = [self._to(n) for n in tnodes.tolist()]
-        at = node if index is None else index[node]
         if pairwise:
             out = np.fromiter((fields[k][a] for k, a in zip(tinv.tolist(), at.tolist())),
                               np.float64, tnode.size)
@@ -497,7 +505,8 @@ class RoadPlanner(Planner):
             rows.append(kept[n])
         while self._fwd_bytes > FORWARD_FIELD_BYTES and len(kept) > nodes.size:
             self._fwd_bytes -= kept.popitem(last=False)[1].nbytes
-        return np.stack(rows)
+        # (one field: a view as a row, no copy; a caller gathers from it, never writes)
+        return rows[0][None, :] if len(rows) == 1 else np.stack(rows)
 
     def _revive(self, node: int) -> np.ndarray | None:
         """The kept field of ``node`` back among the open tasks' fields, or None."""

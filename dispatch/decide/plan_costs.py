@@ -22,7 +22,7 @@ import numpy as np
 
 from dispatch.api.contracts import Planner
 from dispatch.api.problem import StopView
-from dispatch.plan.insertion import Insertion, insertion_costs
+from dispatch.plan.insertion import Insertion, candidate_pairs, gather_rows, insertion_costs
 from dispatch.plan.stops import PICKUP_TIME
 from dispatch.plan.vehicle_plan import starts_now
 
@@ -199,12 +199,8 @@ class PlanTable:
                 if got is not src[k]:
                     write(k, got)
             checked[idx[ask]] = version[ask]
-        lens = self.length.take(idx)
-        off = np.zeros(idx.size + 1, dtype=np.int64)
-        np.cumsum(lens, out=off[1:])
-        # each stop's place in the (row-major) tables: one ``take`` per field
-        at = np.repeat(idx * self.width - off[:-1], lens) + np.arange(off[-1])
-        arr, svc, lat, oc, ear, node = (f.take(at) for f in self._fields)
+        # the rows' stops, flat (compiled: one loop, no index arrays built per decision)
+        off, arr, svc, lat, oc, ear, node = gather_rows(idx, self.length, self._fields)
         if self.on_nodes:
             locs = node
         else:
@@ -244,6 +240,7 @@ def insertion_costs_of(cost: np.ndarray, slots: np.ndarray, tasks: list, now: fl
     :class:`PlanTable` (the busy vehicles' plans are read through it)."""
     svc = operator.service_time
     m = len(tasks)
+    slots = np.asarray(slots, dtype=np.int64)
     lp = np.array([t.deadline for t in tasks])
     ld = np.array([t.dropoff_deadline for t in tasks])
     n_req = np.array([0 if t.dropoff is None else t.passengers for t in tasks], np.int64)
@@ -253,41 +250,20 @@ def insertion_costs_of(cost: np.ndarray, slots: np.ndarray, tasks: list, now: fl
     pd = ride_seconds(planner, tasks)
     svc_p = np.where(point, svc, 0.0)
     svc_d = np.where(point, 0.0, svc)
-    cap = fleet.capacity[slots]
-    planned = fleet.busy_mask[slots]  # (a busy vehicle has stops or is serving)
+    planned = fleet.busy_mask.take(slots)  # (a busy vehicle has stops or is serving)
     if holders:  # [dispatch] reassign: a holder decides as if its plan were empty
         planned = planned & ~np.isin(fleet.ids[slots], list(holders))
     out = np.full(cost.shape, np.inf)
-    empty = np.flatnonzero(~planned)
-    if empty.size:
-        c = cost[empty]
-        arr_p = now + c
-        arr_d = np.maximum(arr_p, ep) + svc_p + pd
-        ok = (arr_p <= lp + 1e-9) & (arr_d <= ld + 1e-9) & (n_req <= cap[empty, None])
-        value = c if objective == PICKUP_TIME else c + svc_p + pd + svc_d
-        out[empty] = np.where(ok, value, np.inf)
-    busy = np.flatnonzero(planned)
-    if not busy.size:
-        return out, {}
-    ready = np.maximum(fleet.free_at[slots[busy]], now)
-    rows, cols = ((ready[:, None] + cost[busy] <= lp + 1e-9)
-                  & (n_req <= cap[busy, None])).nonzero()
+    # the empty plans' costs into ``out``, the busy vehicles' candidate pairs (by row, then
+    # column), compiled: one loop instead of some seventy numpy calls per decision
+    rows, cols, row_of, used, ready, seats, ucols, pcol, first_tt = candidate_pairs(
+        cost, now, slots, planned, cap=fleet.capacity, free_at=fleet.free_at, lp=lp, ld=ld,
+        n_req=n_req, ep=ep, svc_p=svc_p, svc_d=svc_d, pd=pd,
+        pickup_time=objective == PICKUP_TIME, out=out)
     if not rows.size:
         return out, {}
-    # the busy vehicles' plans, flat (rows come sorted: np.nonzero is row-major); requests
-    # by column
-    first = np.empty(rows.size, dtype=bool)
-    first[0] = True
-    np.not_equal(rows[1:], rows[:-1], out=first[1:])
-    used = rows[first]
-    row_of = np.cumsum(first) - 1  # each pair's vehicle among ``used``
     off, s_arr, s_svc, s_latest, s_occ, locs, s_e, load = table.gather(
-        fleet, slots[busy[used]], now)
-    seen = np.zeros(m, dtype=bool)
-    seen[cols] = True
-    ucols = np.flatnonzero(seen)
-    cmap = np.full(m, -1, np.int64)
-    cmap[ucols] = np.arange(ucols.size)
+        fleet, slots.take(used), now)
     picks = [tasks[c].loc for c in ucols.tolist()]
     drops = [tasks[c].loc if tasks[c].dropoff is None else tasks[c].dropoff
              for c in ucols.tolist()]
@@ -299,15 +275,17 @@ def insertion_costs_of(cost: np.ndarray, slots: np.ndarray, tasks: list, now: fl
     else:
         to_p = to_d = np.zeros((0, ucols.size))
         from_p = from_d = np.zeros((ucols.size, 0))
-    vrow = busy[rows]
+    if ucols.size < m:  # the requests of the pairs only
+        pd, n_req, lp, ld = pd[ucols], n_req[ucols], lp[ucols], ld[ucols]
+        svc_p, svc_d, ep = svc_p[ucols], svc_d[ucols], ep[ucols]
     ins = insertion_costs(
-        row_of, cmap[cols], ready=ready[used], first_tt=cost[vrow, cols], off=off, s_arr=s_arr,
-        s_svc=s_svc, s_latest=s_latest, s_occ=s_occ, load=load, cap=cap[busy[used]],
-        to_p=to_p, from_p=from_p, to_d=to_d, from_d=from_d, pd_tt=pd[ucols],
-        req_n=n_req[ucols], req_lp=lp[ucols], req_ld=ld[ucols], req_svc_p=svc_p[ucols],
-        req_svc_d=svc_d[ucols], objective=objective, s_earliest=s_e, req_earliest=ep[ucols])
-    out[vrow, cols] = ins.cost
-    return out, Inserts(ins, vrow, cols, m)
+        row_of, pcol, ready=ready, first_tt=first_tt, off=off, s_arr=s_arr, s_svc=s_svc,
+        s_latest=s_latest, s_occ=s_occ, load=load, cap=seats, to_p=to_p, from_p=from_p,
+        to_d=to_d, from_d=from_d, pd_tt=pd, req_n=n_req, req_lp=lp, req_ld=ld,
+        req_svc_p=svc_p, req_svc_d=svc_d, objective=objective, s_earliest=s_e,
+        req_earliest=ep)
+    out[rows, cols] = ins.cost
+    return out, Inserts(ins, rows, cols, m)
 
 
 class PlanEnds:

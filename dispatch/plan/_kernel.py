@@ -217,3 +217,102 @@ def insert_pairs(rows, cols, ready, first_tt, off, s_arr, s_svc, s_latest, s_occ
         out_cost[q], out_i[q], out_j[q], out_pick[q] = best, bi, bj, bpick
         out_drop[q], out_s1[q], out_s2[q] = bdrop, bs1, bs2
     return 0
+
+
+@jit
+def candidate_pairs(cost, now, slots, planned, cap, free_at, lp, ld, n_req, ep, svc_p, svc_d,
+                    pd, pickup_time, out):  # pragma: no cover - compiled
+    """The set-up of a decision's insertions (:func:`dispatch.decide.plan_costs.insertion_costs_of`)
+    in one loop over its vehicles (rows of ``cost``, the drives to each request's pickup;
+    fleet positions ``slots``) instead of a numpy call per step: the same doubles as those
+    array operations give, by the same operations in the same order.
+
+    A row not ``planned`` (an empty plan) gets its cost of each request written into ``out``:
+    the pickup and the drop-off in that order, ``inf`` past a limit or the seats (``cap`` and
+    ``free_at`` by fleet position). A planned one, ready at ``max(free_at, now)``, is a
+    candidate pair with each request whose pickup it reaches by the deadline and whose riders
+    fit its seats.
+
+    Returns ``(rows, cols, pair_vehicle, used, ready, seats, ucols, pair_col, first_tt)``:
+    the candidate pairs by row, then column (rows of ``cost``, its columns); each pair's
+    vehicle among ``used`` (the rows with a pair, ascending), their ready times and seats;
+    the columns with a pair (ascending) and each pair's column among them; each pair's drive
+    to the pickup."""
+    inf = np.inf
+    n, m = cost.shape
+    rows = np.empty(n * m, np.int64)
+    cols = np.empty(n * m, np.int64)
+    pair_vehicle = np.empty(n * m, np.int64)
+    first_tt = np.empty(n * m)
+    used = np.empty(n, np.int64)
+    ready = np.empty(n)
+    seats = np.empty(n, np.int64)
+    seen = np.zeros(m, np.bool_)
+    q = 0
+    u = 0
+    for i in range(n):
+        s = slots[i]
+        if not planned[i]:
+            for j in range(m):
+                c = cost[i, j]
+                arr_p = now + c
+                e = ep[j]
+                later = arr_p if (arr_p > e or np.isnan(arr_p)) else e  # (np.maximum's)
+                arr_d = later + svc_p[j] + pd[j]
+                if arr_p <= lp[j] + 1e-9 and arr_d <= ld[j] + 1e-9 and n_req[j] <= cap[s]:
+                    out[i, j] = c if pickup_time else c + svc_p[j] + pd[j] + svc_d[j]
+                else:
+                    out[i, j] = inf
+            continue
+        f = free_at[s]
+        r = f if (f > now or np.isnan(f)) else now  # (np.maximum's)
+        first = True
+        for j in range(m):
+            c = cost[i, j]
+            if r + c <= lp[j] + 1e-9 and n_req[j] <= cap[s]:
+                if first:
+                    first = False
+                    used[u], ready[u], seats[u] = i, r, cap[s]
+                    u += 1
+                rows[q], cols[q], pair_vehicle[q], first_tt[q] = i, j, u - 1, c
+                seen[j] = True
+                q += 1
+    col_at = np.full(m, -1, np.int64)
+    ucols = np.empty(m, np.int64)
+    k = 0
+    for j in range(m):
+        if seen[j]:
+            col_at[j] = k
+            ucols[k] = j
+            k += 1
+    pair_col = np.empty(q, np.int64)
+    for p in range(q):
+        pair_col[p] = col_at[cols[p]]
+    return (rows[:q], cols[:q], pair_vehicle[:q], used[:u], ready[:u], seats[:u], ucols[:k],
+            pair_col, first_tt[:q])
+
+
+@jit
+def gather_rows(idx, length, arr, svc, lat, occ, ear, node):  # pragma: no cover - compiled
+    """The plans of the table rows ``idx`` (each row ``k`` holds ``length[k]`` stops of the
+    fields ``arr``, ``svc``, ``lat``, ``occ``, ``ear``, ``node``), flat:
+    ``(off, arr, svc, lat, occ, ear, node)`` with row ``idx[i]``'s stops at
+    ``off[i]:off[i + 1]``, copied in one loop (no index arrays built per decision)."""
+    n = idx.size
+    off = np.zeros(n + 1, np.int64)
+    for i in range(n):
+        off[i + 1] = off[i] + length[idx[i]]
+    g = off[n]
+    a, s, la, e = np.empty(g), np.empty(g), np.empty(g), np.empty(g)
+    o, nd = np.empty(g, np.int64), np.empty(g, np.int64)
+    for i in range(n):
+        k = idx[i]
+        at = off[i]
+        for j in range(length[k]):
+            a[at + j] = arr[k, j]
+            s[at + j] = svc[k, j]
+            la[at + j] = lat[k, j]
+            o[at + j] = occ[k, j]
+            e[at + j] = ear[k, j]
+            nd[at + j] = node[k, j]
+    return off, a, s, la, o, e, nd

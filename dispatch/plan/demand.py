@@ -36,11 +36,12 @@ class VoxelDemand(Demand):
         self.ground_fraction = ground_fraction
         self.rng = rng
 
-    def draw(self) -> Request:
+    def draw(self, request_id: int | None = None) -> Request:
         on_ground = self.rng.random() < self.ground_fraction or len(self.air) == 0
         pool = self.ground if on_ground else self.air
         c = pool[self.rng.integers(len(pool))]
-        return Request("ground" if on_ground else "air", (int(c[0]), int(c[1]), int(c[2])))
+        return Request("ground" if on_ground else "air", (int(c[0]), int(c[1]), int(c[2])),
+                       request_id=request_id)
 
     def from_trace(self, trips: Trips) -> Iterator[Request]:
         grid, dest = self.grid, trips.dest
@@ -60,11 +61,12 @@ class RoadDemand(Demand):
     def __init__(self, network, rng: np.random.Generator) -> None:
         self.network, self.rng = network, rng
 
-    def draw(self) -> Request:
+    def draw(self, request_id: int | None = None) -> Request:
         n = self.network.n
         o = int(self.rng.integers(n))
         d = int(self.rng.integers(n - 1))
-        return Request("trip", o, d + (d >= o))  # uniform over the other nodes
+        # uniform over the other nodes
+        return Request("trip", o, d + (d >= o), request_id=request_id)
 
     def from_trace(self, trips: Trips) -> Iterator[Request]:
         net = self.network

@@ -96,3 +96,27 @@ def insertion_costs(rows, cols, *, ready, first_tt, off, s_arr, s_svc, s_latest,
                      f(pd_tt, float), f(req_n, np.int64), f(req_lp, float), f(req_ld, float),
                      f(req_svc_p, float), f(req_svc_d, float), int(objective), s_e, r_e, *out)
     return Insertions(*out)
+
+
+def candidate_pairs(cost, now: float, slots, planned, *, cap, free_at, lp, ld, n_req, ep, svc_p,
+                    svc_d, pd, pickup_time: bool, out):
+    """The set-up of a decision's insertions, compiled
+    (:func:`dispatch.plan._kernel.candidate_pairs`, which says what it returns): the costs of
+    the vehicles with empty plans written into ``out``, the busy ones' candidate pairs."""
+    from dispatch.plan._kernel import candidate_pairs as kernel
+
+    f = np.ascontiguousarray
+    return kernel(f(cost, float), float(now), f(slots, np.int64), f(planned, np.bool_),
+                  f(cap, np.int64), f(free_at, float), f(lp, float), f(ld, float),
+                  f(n_req, np.int64), f(ep, float), f(svc_p, float), f(svc_d, float),
+                  f(pd, float), bool(pickup_time), out)
+
+
+def gather_rows(idx, length, fields):
+    """The plans of the rows ``idx`` of a plan table (``length`` stops per row of each of the
+    ``fields``: arrival, service, latest, occupancy, earliest, node), flat, compiled
+    (:func:`dispatch.plan._kernel.gather_rows`): ``(off, arrival, service, latest,
+    occupancy, earliest, node)``, row ``idx[i]``'s stops at ``off[i]:off[i + 1]``."""
+    from dispatch.plan._kernel import gather_rows as kernel
+
+    return kernel(np.ascontiguousarray(idx, np.int64), length, *fields)

@@ -335,13 +335,13 @@ class Request:
 
 class Demand:
     """Turns a scenario's task description into requests in its space: ``draw`` makes a
-    generated one (static, periodic, poisson); ``from_trace`` converts a trace's trips: it
-    checks them all when called and returns an iterator that makes each trip's request when
-    it is asked for, in the trips' (release) order (a day of a million trips is never a
-    million requests at once). ``valid(loc)`` says whether a task there can be served at all
-    (a cell inside an obstacle cannot)."""
+    generated one (static, periodic, poisson) with the ``request_id`` given; ``from_trace``
+    converts a trace's trips: it checks them all when called and returns an iterator that
+    makes each trip's request when it is asked for, in the trips' (release) order (a day of
+    a million trips is never a million requests at once). ``valid(loc)`` says whether a
+    task there can be served at all (a cell inside an obstacle cannot)."""
 
-    def draw(self) -> Request:
+    def draw(self, request_id: int | None = None) -> Request:
         raise NotImplementedError
 
     def from_trace(self, trips) -> Iterator[Request]:
@@ -478,7 +478,7 @@ class TaskSource:
     def _draw(self, i: int) -> Request:
         """The generated request ``i`` (0: the first drawn), its request id ``i``: the draw
         order, which a booked request entering later keeps."""
-        return replace(self.demand.draw(), request_id=i)
+        return self.demand.draw(request_id=i)
 
     def _run(self):
         if self.kind == "trace":

@@ -369,6 +369,15 @@ def test_between_equals_scipy_in_every_form():
     assert np.allclose(p.between(src, tgt), expect, atol=1e-9)  # backward (as many targets)
     assert np.allclose(p.between(src[:2], tgt), expect[:2], atol=1e-9)  # forward
     assert np.allclose(p.between(src, tgt[:2]), expect[:, :2], atol=1e-9)
+    # one target (a new request's pickup: its field's column), one source (forward: its row),
+    # a road point among the sources in both; and the matrix of a whole fleet's stops as a
+    # node array, as a decision asks
+    assert np.allclose(p.between(src, tgt[5:6]), expect[:, 5:6], atol=1e-9)
+    assert np.allclose(p.between(src[3:4], tgt), expect[3:4], atol=1e-9)
+    assert np.allclose(p.between(src[4:5], tgt), expect[4:5], atol=1e-9)
+    nodes = np.array(src[4:], dtype=np.int64)
+    assert np.allclose(p.between(nodes, tgt[:1]), expect[4:, :1], atol=1e-9)
+    assert np.allclose(p.between(tgt[:1], nodes), full[tgt[0], nodes][None, :], atol=1e-9)
     diag = np.diag(expect)
     assert np.allclose(p.between(src, tgt, pairwise=True), diag, atol=1e-9)
     assert np.allclose(p.between(src[:4], tgt[:4], pairwise=True), diag[:4], atol=1e-9)
