@@ -39,8 +39,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from dispatch.api.mode_choice import KINDS, ModeChoice, Weights
-from dispatch.decide.prebook import PrebookSource
-from dispatch.decide.rider_legs import Leg, Transit, percentile
+from dispatch.decide.prebook import PrebookSource, task_source
+from dispatch.decide.rider_legs import LEG_COLUMNS, Leg, Transit, percentile, seconds_of_day
 from dispatch.plan.tasks import Task, TaskState
 
 #: pickups the fleet's wait estimate averages over
@@ -243,3 +243,31 @@ class TransitSource(PrebookSource):
     def leg(self, req, booking=None) -> Task:
         """Release a fleet leg now (``booking``: ``(booked_at, departure)`` of a booked one)."""
         return PrebookSource.release(self, req, booking)
+
+
+def riders_for(sc, space, mode_choice: ModeChoice, rng: np.random.Generator, *,
+               between, recording) -> Riders:
+    """``[transit]``'s riders of a run of scenario ``sc``: the timetable on the run's network
+    (``space``) and clock (``[tasks] start`` on the feed's service day), the ``mode_choice``
+    plugin made for it, its stream ``rng``, ``between(u, v)``: the free-flow seconds from node
+    ``u`` to ``v``; the ``legs`` table and the summary's transit columns are added to
+    ``recording`` (:class:`dispatch.output.rows.RunRecording`)."""
+    cfg = sc.transit
+    on_leg = recording.legs(LEG_COLUMNS, summary_names(),
+                            ("riders", "riders_served", "missed_connections"))
+    return Riders(Transit(cfg, space, seconds_of_day(sc.tasks.start)), mode_choice,
+                  Weights(cfg.w_ivt, cfg.w_wait, cfg.w_walk, cfg.w_transfer,
+                          cfg.transfer_penalty),
+                  rng, between=between, limits=(sc.tasks.max_wait, sc.tasks.max_delay),
+                  on_leg=on_leg)
+
+
+def rider_source(sc, booking_rng: np.random.Generator, riders: Riders | None):
+    """The run's task source class and its own arguments: prebooking's
+    (:func:`dispatch.decide.prebook.task_source`), or with ``[transit]`` riders a
+    :class:`TransitSource` (nothing booked by the trace; a trip's last leg after the train is
+    released as a booking at once)."""
+    if riders is None:
+        return task_source(sc, booking_rng)
+    return TransitSource, dict(share=0.0, lead=sc.tasks.prebook_lead, mode="at_booking",
+                               dispatch_lead=0.0, booking_rng=booking_rng, riders=riders)

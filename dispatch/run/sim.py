@@ -39,14 +39,11 @@ from functools import partial
 
 import simpy
 
-from dispatch.api.mode_choice import Weights
 from dispatch.api.space import space_for
 from dispatch.decide.dispatcher import Dispatcher, Wakeup
 from dispatch.decide.meeting import Walks
 from dispatch.decide.pipeline import Pipeline
-from dispatch.decide.prebook import task_source
-from dispatch.decide.rider_legs import LEG_COLUMNS, Transit, seconds_of_day
-from dispatch.decide.riders import Riders, TransitSource, summary_names
+from dispatch.decide.riders import Riders, rider_source, riders_for
 from dispatch.decide.tally import Blame, Tally
 from dispatch.events import EventBus
 from dispatch.fleet.battery import Energy
@@ -214,11 +211,7 @@ class Simulation:
                                                            blame))
         driver.run_id = spec.run_id  # named in error messages
         t = sc.tasks
-        source, extra = task_source(sc, rng_for(spec.seed, STREAM_PREBOOK))
-        if self.riders is not None:  # (booked last legs are released as prebooking's are)
-            source, extra = TransitSource, dict(
-                share=0.0, lead=t.prebook_lead, mode="at_booking", dispatch_lead=0.0,
-                booking_rng=rng_for(spec.seed, STREAM_PREBOOK), riders=self.riders)
+        source, extra = rider_source(sc, rng_for(spec.seed, STREAM_PREBOOK), self.riders)
         self.source = source.of(env, book, demand, t,
                                 spec.n_static_tasks if t.source == "static" else t.count,
                                 day_rng=lambda: rng_for(spec.seed, STREAM_TASKS),
@@ -254,20 +247,14 @@ class Simulation:
     def _riders(self, sc) -> Riders:
         """``[transit]``: the timetable on the run's network and clock, the mode choice, and
         the ``legs`` table and the summary's transit columns in the recording."""
-        cfg = sc.transit
         free = self.planner.free_flow
 
         def between(u: int, v: int) -> float:
             return float(free.between([u], [v], pairwise=True)[0])
 
-        on_leg = self.recording.legs(LEG_COLUMNS, summary_names(),
-                                     ("riders", "riders_served", "missed_connections"))
-        return Riders(Transit(cfg, self.space, seconds_of_day(sc.tasks.start)),
-                      make_mode_choice(sc),
-                      Weights(cfg.w_ivt, cfg.w_wait, cfg.w_walk, cfg.w_transfer,
-                              cfg.transfer_penalty),
-                      rng_for(self.spec.seed, STREAM_MODE_CHOICE), between=between,
-                      limits=(sc.tasks.max_wait, sc.tasks.max_delay), on_leg=on_leg)
+        return riders_for(sc, self.space, make_mode_choice(sc),
+                          rng_for(self.spec.seed, STREAM_MODE_CHOICE), between=between,
+                          recording=self.recording)
 
     def _energy(self, sc) -> Energy | None:
         """``[fleet.energy]``: the run's batteries and the dispatcher's reserve rule (see
