@@ -296,6 +296,9 @@ class Shifts:
                 last = np.zeros(len(slots))
                 n_stops = np.zeros(len(slots), np.int64)
                 for r in np.unique(rows).tolist():
+                    if not planned[r]:  # its pairs were costed into an empty plan (idle, a
+                        # holder, or a repositioning drive the pickup replaces): end there
+                        continue
                     v = vs[int(slots[r])]
                     times, svcs, _, _, _, earliest = v.plan.arrays(now)
                     n_stops[r] = len(times)
