@@ -28,10 +28,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from dispatch.decide.meeting import meeting_costs
-from dispatch.decide.pipeline import rides
-from dispatch.decide.plan_costs import insertion_costs_of
-from dispatch.decide.planner_costs import deadlines
+from dispatch.decide.nearest import within_limits
 
 if TYPE_CHECKING:
     from dispatch.decide.pipeline import Pipeline
@@ -80,24 +77,8 @@ def recheck(pipe: Pipeline, now: float, pairs, by_task: dict, holders: set) -> d
         cols = np.array([col[t] for _, t in pairs], np.int64)
         drive = drive.copy()
         drive[rows, cols] = pipe.costs.exact(agents, views)(rows, cols)
-    cost, inserts = drive, {}
-    if pipe.plans and pipe.walks is not None:
-        cost, inserts, _ = meeting_costs(pipe.walks, drive, slots, agents, requests, now,
-                                         holders=holders, fleet=fleet, operator=pipe.operator,
-                                         planner=pipe.planner, objective=pipe.objective)
-    elif pipe.plans:
-        cost, inserts = insertion_costs_of(drive, slots, requests, now, holders, fleet=fleet,
-                                           operator=pipe.operator, planner=pipe.planner,
-                                           objective=pipe.objective, table=pipe.table)
-    else:
-        limits = np.array([t.deadline for t in requests])
-        if (limits < math.inf).any():
-            cost = deadlines(drive, limits, now)
-    if pipe.energy_filter is not None:
-        cost = pipe.energy_filter(cost, drive, slots, requests)
-    if pipe.shifts is not None:
-        cost = pipe.shifts.limit(cost, drive, now, slots, requests, inserts, plans=pipe.plans,
-                                 ride=rides(pipe.planner, requests))
+    cost, inserts = within_limits(pipe, now, drive, slots, requests, agents=agents,
+                                  holders=frozenset(holders))
     out = {}
     for a, t in pairs:
         ij = (row[a], col[t])

@@ -32,6 +32,7 @@ from collections.abc import Callable, Iterable
 
 import numpy as np
 
+from dispatch.decide.meeting import meeting_costs
 from dispatch.decide.plan_costs import insertion_costs_of, ride_seconds
 from dispatch.decide.planner_costs import deadlines, reject_late
 
@@ -215,11 +216,30 @@ def costed(pipe, now: float, slots: np.ndarray, requests: list, views: tuple):
     (:meth:`dispatch.decide.pipeline.Pipeline.build`) but closing nothing: the planner's drives,
     the costs within every limit (with plans by the objective), where a busy vehicle's stops
     would go."""
-    drive = pipe.costs(pipe.fleet.views(slots, now, ascending=True), views)[0]
+    agents = pipe.fleet.views(slots, now, ascending=True)
+    drive = pipe.costs(agents, views)[0]
     pipe.costs.reachable(drive)  # (a nan is the planner's error)
+    return (drive, *within_limits(pipe, now, drive, slots, requests, agents=agents))
+
+
+def within_limits(pipe, now: float, drive: np.ndarray, slots: np.ndarray, requests: list, *,
+                  agents, holders: frozenset = frozenset()):
+    """``(cost, inserts)``: the drives ``drive`` from the vehicles at fleet positions ``slots``
+    (views ``agents``) to the pickups of ``requests`` costed as the pipeline ``pipe`` costs a
+    decision's pairs: with plans each pair's cheapest feasible insertion by the objective (with
+    meeting points the best of the request's boarding and alighting pairs), else the drive
+    within the pickup deadline; then ``inf`` below a battery's reserve after the trip or past a
+    shift's end. ``holders``: ids of vehicles driving to a pickup they may give up
+    (``[dispatch] reassign``), whose plans count as empty; ``inserts`` maps a ``(row, col)``
+    pair to where its stops go."""
     cost, inserts = drive, {}
-    if pipe.plans:
-        cost, inserts = insertion_costs_of(drive, slots, requests, now, set(), fleet=pipe.fleet,
+    if pipe.plans and pipe.walks is not None:
+        cost, inserts, _ = meeting_costs(pipe.walks, drive, slots, agents, requests, now,
+                                         holders=holders, fleet=pipe.fleet,
+                                         operator=pipe.operator, planner=pipe.planner,
+                                         objective=pipe.objective)
+    elif pipe.plans:
+        cost, inserts = insertion_costs_of(drive, slots, requests, now, holders, fleet=pipe.fleet,
                                            operator=pipe.operator, planner=pipe.planner,
                                            objective=pipe.objective, table=pipe.table)
     else:
@@ -227,8 +247,9 @@ def costed(pipe, now: float, slots: np.ndarray, requests: list, views: tuple):
         if (limits < math.inf).any():
             cost = deadlines(drive, limits, now)
     if pipe.energy_filter is not None:
-        cost = pipe.energy_filter(cost, drive, slots, requests)
+        cost = pipe.energy_filter(cost, drive, slots, requests, holders)
     if pipe.shifts is not None:
         cost = pipe.shifts.limit(cost, drive, now, slots, requests, inserts, plans=pipe.plans,
-                                 ride=ride_seconds(pipe.planner, requests, congested_only=True))
-    return drive, cost, inserts
+                                 ride=ride_seconds(pipe.planner, requests, congested_only=True),
+                                 holders=holders)
+    return cost, inserts
