@@ -5,7 +5,8 @@ DispatchError); any other exception fails the test.
 
 The ``slow`` part runs (``dispatch run``, one run per file: the first of its sweep) every file
 that validates, in a subprocess under a time limit (30 CPU seconds, 120 s wall) and a memory
-limit (2 GiB address space): no traceback, no hang.
+limit (2 GiB resident, the child's own peak read by ``wait4``; 8 GiB of address space as a
+backstop): no traceback, no hang, no blow-up.
 
 Mutations: wrong types, missing and unknown keys, huge / negative / zero / NaN / inf numbers,
 seeds past int64, sections swapped, renamed or replaced by a scalar, deep nesting, bad
@@ -46,7 +47,10 @@ N_FILES = 1100
 SEED = 20261123
 RUN_CPU_S = 30  # a hang is judged by CPU time: on a loaded machine wall time says little
 RUN_TIMEOUT_S = 4 * RUN_CPU_S  # wall: a run blocked without using CPU is a hang too
-RUN_MEMORY_BYTES = 2 * 2**30
+RUN_MEMORY_BYTES = 2 * 2**30  # resident: a run past it is a memory blow-up
+# address space, a backstop only: numba's LLVM, pyarrow's pools and the threads' stacks reserve
+# about 2 GiB of it in a ten-task voxel run that keeps under 0.3 GiB resident
+RUN_ADDRESS_BYTES = 8 * 2**30
 MAX_SHIP_DURATION = 600.0  # bases are shortened so that a run that validates is quick
 
 # ----------------------------------------------------------------------------- a TOML writer
@@ -467,7 +471,7 @@ def test_generator_is_seeded(tmp_path):
 def _limit_memory() -> None:  # in the child, before exec
     import resource
 
-    resource.setrlimit(resource.RLIMIT_AS, (RUN_MEMORY_BYTES, RUN_MEMORY_BYTES))
+    resource.setrlimit(resource.RLIMIT_AS, (RUN_ADDRESS_BYTES, RUN_ADDRESS_BYTES))
     resource.setrlimit(resource.RLIMIT_CPU, (RUN_CPU_S, RUN_CPU_S + 5))
 
 
@@ -476,21 +480,35 @@ def run_case(case: Case, out: Path) -> tuple[str, str]:
            *case.overrides]
     env = {**os.environ, "COLUMNS": "400", "NO_COLOR": "1", "TERM": "dumb",
            "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
-    try:
-        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=RUN_TIMEOUT_S,
-                              env=env, cwd=case.path.parent, preexec_fn=_limit_memory,
-                              check=False)
-    except subprocess.TimeoutExpired:
-        return "hang", ""
+    with open(out.parent / f"{out.name}.stdout", "w+") as so, \
+            open(out.parent / f"{out.name}.stderr", "w+") as se:
+        proc = subprocess.Popen(cmd, stdout=so, stderr=se, text=True, env=env,
+                                cwd=case.path.parent, preexec_fn=_limit_memory)
+        started = time.monotonic()
+        while True:  # wait4: the child's own peak resident memory (not the other workers')
+            pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
+            if pid:
+                break
+            if time.monotonic() - started > RUN_TIMEOUT_S:
+                proc.kill()
+                os.wait4(proc.pid, 0)
+                return "hang", ""
+            time.sleep(0.05)
+        proc.returncode = os.waitstatus_to_exitcode(status)
+        so.seek(0)
+        se.seek(0)
+        stdout, stderr = so.read(), se.read()
     if proc.returncode in (-signal.SIGXCPU, -signal.SIGKILL):  # past the CPU limit
         return "hang", ""
-    text = proc.stdout + proc.stderr
+    if usage.ru_maxrss * 1024 > RUN_MEMORY_BYTES:  # (ru_maxrss: KiB on Linux)
+        return "blow-up", f"{usage.ru_maxrss / 2**20:.2f} GiB resident"
+    text = stdout + stderr
     if "Traceback" in text:
         return "traceback", text[-1500:]
     if proc.returncode == 0:
         return "run", ""
-    if proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1:
-        return "error", proc.stderr.strip()
+    if proc.returncode == 2 and len(stderr.strip().splitlines()) == 1:
+        return "error", stderr.strip()
     return "other", f"exit {proc.returncode}: {text[-800:]}"
 
 
@@ -503,7 +521,8 @@ def test_fuzz_runs_no_traceback_no_hang(fuzzed, tmp_path):
     counts = Counter(r for r, _ in results)
     print(f"\nfuzz runs: {len(ok)} files that validate: {counts['run']} ran, "
           f"{counts['error']} one-line errors, {counts['traceback']} tracebacks, "
-          f"{counts['hang']} hangs (> {RUN_CPU_S} CPU s), {counts['other']} other")
+          f"{counts['hang']} hangs (> {RUN_CPU_S} CPU s), {counts['blow-up']} blow-ups "
+          f"(> {RUN_MEMORY_BYTES / 2**30:.0f} GiB resident), {counts['other']} other")
     bad = [f"{c.path} ({c.mutation}) {c.overrides}: {r}: {m}"
-           for c, (r, m) in zip(ok, results) if r in ("traceback", "hang", "other")]
+           for c, (r, m) in zip(ok, results) if r in ("traceback", "hang", "blow-up", "other")]
     assert not bad, "\n\n".join(bad[:10])
