@@ -44,12 +44,10 @@ class HungarianAllocator(Allocator):
         the greatest total worth, ``value_reward`` less each pair's adjusted cost, and a pair
         worth nothing is left for a later batch (:func:`gated_pairs`)."""
         self.value = None
-        if value_reward is not None and value is None:
-            raise TypeError("value_reward needs a value file ('value')")
-        if value is not None:
+        if value is not None or value_reward is not None:
             from learning.value import ValueOption
 
-            self.value = ValueOption(value, value_weight, value_reward)
+            self.value = ValueOption.of(value, value_weight, value_reward)
             self.value_function = self.value.value
             self.minimizes_total_cost = False  # of the adjusted costs, not problem.cost
             self.one_by_minimum = self.nearest_cut = False

@@ -128,12 +128,10 @@ class RtvAllocator(Allocator):
         self.reorder = reorder
         #: a learned value of where a route leaves its vehicle (module doc, "Look-ahead")
         self.value = None
-        if value_reward is not None and value is None:
-            raise TypeError("value_reward needs a value file ('value')")
-        if value is not None:
+        if value is not None or value_reward is not None:
             from learning.value import ValueOption
 
-            self.value = ValueOption(value, value_weight, value_reward)
+            self.value = ValueOption.of(value, value_weight, value_reward)
             self.value_function = self.value.value
         self.stats = {k: 0 for k in (
             "batches", "groups", "groups_feasible", "largest_group", "pairs_cut", "groups_cut",

@@ -189,9 +189,14 @@ class ValueOption:
         self.reward = None if reward is None else float(reward)
 
     @classmethod
-    def of(cls, path, weight=None) -> ValueOption | None:
-        """The option of an allocator's parameters (None without a ``value`` file)."""
-        return None if path is None else cls(path, weight)
+    def of(cls, path, weight=None, reward=None) -> ValueOption | None:
+        """The option of an allocator's parameters (None without a ``value`` file; a
+        ``value_reward`` without one is refused)."""
+        if path is None:
+            if reward is not None:
+                raise TypeError("value_reward needs a value file ('value')")
+            return None
+        return cls(path, weight, reward)
 
     def costs(self, problem) -> np.ndarray:
         """The problem's costs less the discounted value after each pair plus the value now
