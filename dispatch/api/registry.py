@@ -183,8 +183,11 @@ def unknown(kind: str, name: str) -> str:
     plugins = available(kind)
     close = difflib.get_close_matches(base_name(name), list(plugins), n=1, cutoff=0.6)
     hint = f" (did you mean {close[0]!r}?)" if close else ""
+    # every kind ships plugins of its own: none at all means the install's metadata is older
+    # than the kind (an editable install made before it), not a misspelt name
+    stale = "" if plugins else " (reinstall the project, e.g. `pip install -e .`, to register them)"
     return (f"unknown {kind} {name!r}{hint}; installed {kind}s: "
-            f"{', '.join(plugins) or 'none'}")
+            f"{', '.join(plugins) or 'none'}{stale}")
 
 
 def load(kind: str, name: str) -> type:
