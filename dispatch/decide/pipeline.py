@@ -293,7 +293,7 @@ class Pipeline:
         #: the allocator asks the value of its pairs' post-decision states
         #: (:attr:`dispatch.api.contracts.Allocator.value_function`): with plans, the problem
         #: says where each pair's plan ends (:class:`dispatch.decide.plan_costs.PlanEnds`)
-        self.looks_ahead = getattr(allocator, "value_function", None) is not None
+        self.looks_ahead = allocator.value_function is not None
         self._points: dict = {}  # (one_point) task id -> its Meeting, of the last limits
         self.plans = self.pooled or cfg.objective != "pickup_time" or bool(max_delay) \
             or walks is not None
