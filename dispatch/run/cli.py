@@ -12,6 +12,7 @@ import time
 from dispatch.api.registry import available, describe, entry_point_group, load
 from dispatch.errors import DispatchError, PluginError
 from dispatch.run.commands import installed
+from dispatch.run.held import hold_root, release_root
 from dispatch.run.parser import CHECKED_KINDS, OWN_COMMANDS, parser
 from dispatch.run.prepare import checked_specs
 from dispatch.run.progress import Heartbeat
@@ -38,11 +39,17 @@ class _Output:
                        emoji=False)
 
 
+#: Commands whose warnings are not held back: they run for long and report as they go.
+LONG = frozenset({"sweep", "train"})
+
+
 def main(argv: list[str] | None = None) -> int:
     commands = installed(reserved=OWN_COMMANDS)
     args = parser(commands).parse_args(argv)
     level = logging.DEBUG if args.debug else logging.INFO if args.verbose else logging.WARNING
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
+    # warnings wait until the set-up is over: a refusal part-way through it reads as one line
+    held = hold_root() if level == logging.WARNING and args.command not in LONG else None
     from rich.console import Console
     from rich.markup import escape
 
@@ -52,10 +59,14 @@ def main(argv: list[str] | None = None) -> int:
     err = Console(stderr=True, soft_wrap=True)
     try:
         if args.command in commands:  # registered by another package (dispatch.commands)
-            return commands[args.command].run(args, _Output(console, err))
-        return {"run": _run, "validate": _validate, "plugins": _plugins, "sweep": _sweep,
-                "train": _train, "check": _check, "new": _new}[args.command](args, console)
+            code = commands[args.command].run(args, _Output(console, err))
+        else:
+            code = {"run": _run, "validate": _validate, "plugins": _plugins, "sweep": _sweep,
+                    "train": _train, "check": _check, "new": _new}[args.command](args, console)
+        return code
     except DispatchError as e:
+        if held is not None:
+            held.forget()
         if args.debug or args.verbose:  # the chain: where a plugin raised, then where we caught
             import traceback
 
@@ -68,6 +79,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         err.print("interrupted")
         return 130
+    finally:
+        if held is not None:  # (after a refusal: dropped already, nothing left to write)
+            held.pass_on()
 
 
 def _run(args, console) -> int:
@@ -98,7 +112,7 @@ def _run(args, console) -> int:
     started = time.perf_counter()
     if len(todo) == 1:  # one long run: simulated time, wall time, requests released and closed
         with _run_progress(console, todo[0]) as report:
-            fresh = execute(todo, out, progress=report)
+            fresh = execute(todo, out, progress=_releasing(report))
     elif todo:  # (rich.progress imported here: a single run off a terminal does without it)
         from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
                                    TimeElapsedColumn)
@@ -111,6 +125,7 @@ def _run(args, console) -> int:
             bar = progress.add_task(f"{sc.name}", total=len(todo))
 
             def done(result):
+                release_root()  # (the first run's set-up went through)
                 finished.append(result.spec.run_id)
                 progress.update(bar, advance=1, description=result.spec.run_id)
 
@@ -132,6 +147,14 @@ def _run(args, console) -> int:
         console.print(f"{len(todo)} run(s) in {time.perf_counter() - started:.1f} s; "
                       f"Parquet written to {out}/", highlight=False, soft_wrap=True)
     return 0
+
+
+def _releasing(report):
+    """``report``, releasing the held warnings at its first call: the run's set-up is over."""
+    def first(*a) -> None:
+        release_root()
+        report(*a)
+    return first
 
 
 class _run_progress:

@@ -295,3 +295,37 @@ def test_an_electric_run_prints_its_energy_and_cut_off_trips(tmp_path, cli):
             f"{s['kwh_drawn'] - aux:,.1f} kWh driving, {aux:,.1f} kWh the auxiliary load), "
             f"0.0 kWh charged in 0 charges, 0.0 h queued; state of charge lowest "
             f"{100 * s['soc_min']:.1f}%") in text
+
+
+_WARN_THEN = """
+import logging, sys
+from dispatch.errors import DispatchError
+from dispatch.run import cli
+
+def validate(args, console):
+    logging.getLogger("dispatch.scenario.load").warning("11 of 40 trips left out")
+    if {refuse}:
+        raise DispatchError("shifts.csv: row 2: depot 'nan' is off the network")
+    return 0
+
+cli._validate = validate
+sys.exit(cli.main(["validate", "any.toml"]))
+"""
+
+
+@pytest.mark.parametrize("refuse", [True, False])
+def test_a_refusal_is_one_line_without_the_warnings_before_it(refuse):
+    """Warnings logged during the set-up are held back: a refusal part-way through prints its
+    one error line alone; a command that goes through prints them as before."""
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, "-c", _WARN_THEN.format(refuse=refuse)],
+                          capture_output=True, text=True, timeout=120)
+    lines = proc.stderr.strip().splitlines()
+    if refuse:
+        assert proc.returncode == 2
+        assert lines == ["error: shifts.csv: row 2: depot 'nan' is off the network"]
+    else:
+        assert proc.returncode == 0
+        assert lines == ["WARNING dispatch.scenario.load: 11 of 40 trips left out"]
