@@ -44,8 +44,8 @@ the vehicle's plan ends.
 Look-ahead (``value``, a file of ``dispatch train value``; ``value_weight`` seconds per unit of
 value, default the file's): the assignment compares each candidate's score, its cost less
 ``value_weight`` x (the value of where and when its route ends -- the kernel's end of its best
-order -- discounted to now, with the seats its vehicle then holds free, minus the value of the
-vehicle where it is now), instead of its cost (:meth:`_Batch.value_scores`, one vectorised
+order -- discounted to now, with the seats its vehicle then holds free, minus the same of the
+vehicle taking nothing: where and when its own plan ends, an idle one where it is now), instead of its cost (:meth:`_Batch.value_scores`, one vectorised
 call per batch; :mod:`dispatch.api.value`). Still the most requests first; the requests record
 their costs. A value of zero decides exactly as no value.
 
@@ -709,8 +709,8 @@ class _Batch:
 
     def value_scores(self, groups, gveh, gcost, gorder, option) -> np.ndarray:
         """Each candidate's cost less ``weight`` x (the discounted value of where and when its
-        route ends, with the seats its vehicle then holds free, minus the value of the vehicle
-        where it is now): the scores the assignment compares (module doc, "Look-ahead")."""
+        route ends, with the seats its vehicle then holds free, minus the same of its vehicle
+        taking nothing): the scores the assignment compares (module doc, "Look-ahead")."""
         vf, w = option.value, option.weight
         G = len(gveh)
         ints = all(isinstance(x, (int, np.integer)) for x in (*self.new_locs, *self.src,
@@ -739,7 +739,15 @@ class _Batch:
         seats = np.maximum(self.cap[gveh] - held[gveh] - gpax, 0)
         now = self.now
         after = np.power(vf.gamma, np.maximum(end - now, 0.0)) * vf.value(place, end, seats)
-        before = vf.value(np.asarray(self.src, np.int64), np.full(self.nv, now), self.cap)
+        # taking nothing: the vehicle's own plan ends where and when it ends now (an idle one:
+        # where it is, now), its seats less who it holds
+        busy = self.off[1:] > self.off[:-1]
+        rest_place = np.asarray(self.src, np.int64).copy()
+        if busy.any():
+            rest_place[busy] = plan_nodes[self.off[1:][busy] - 1]
+        rest_end = np.where(busy, np.maximum(self.old_end, now), now)
+        before = np.power(vf.gamma, rest_end - now) * vf.value(
+            rest_place, rest_end, np.maximum(self.cap - held, 0))
         return gcost - w * (after - before[gveh])
 
     def answer(self, chosen, groups, gveh, gorder) -> Allocation:

@@ -7,7 +7,8 @@ Each ``--series`` is ``ALLOCATOR[/OBJECTIVE][+demand][+value=FILE[@WEIGHT]]`` (e
 run on ``--scenario`` for each ``--agents`` N and ``--seeds`` S, batched every
 ``--batch-window`` seconds; keep the value's training seeds (its file's ``seeds``) out.
 Writes ``--out`` (CSV: ``series, n_agents, seed, served_share, wait_mean, passenger_km,
-vehicle_km``; appended run by run, runs already there skipped) and prints per series and N the
+vehicle_km, delay_mean``; the served riders' mean delay: drop-off time less release and direct
+drive; appended run by run, runs already there skipped) and prints per series and N the
 mean served share and wait with 95 % t-intervals over the seeds and, against the first series,
 the paired difference by seed.
 
@@ -33,7 +34,7 @@ sys.path.insert(0, str(ROOT))
 from learning.value_train import scenario_for  # noqa: E402
 
 FIELDS = ("series", "n_agents", "seed", "served_share", "wait_mean", "passenger_km",
-          "vehicle_km")
+          "vehicle_km", "delay_mean")
 
 
 def parse(series: str) -> dict:
@@ -84,7 +85,7 @@ def run(sc, spec: dict, agents: int, seed: int) -> dict:
     vkm = float(veh["distance"].sum() / 1000.0) if "distance" in veh else float("nan")
     return {"served_share": s["tasks_completed"] / max(1, s["n_tasks"]),
             "wait_mean": s.get("wait_time_mean"), "passenger_km": round(pkm, 1),
-            "vehicle_km": round(vkm, 1)}
+            "vehicle_km": round(vkm, 1), "delay_mean": s.get("delay_mean")}
 
 
 def interval(x) -> tuple[float, float]:
@@ -102,8 +103,8 @@ def table(rows: list[dict], series: list[str], agents: list[int], seeds: list[in
     """A Markdown table of the runs ``rows`` (as the CSV holds them): per N and series the mean
     and 95 % t half-width over ``seeds`` of served share, mean wait, vehicle-km and
     passenger-km, and the served share's paired difference from the first series."""
-    out = ["| N | series | served % | wait s | vehicle-km | passenger-km | served vs first, pts |",
-           "|---|---|---|---|---|---|---|"]
+    out = ["| N | series | served % | wait s | delay s | vehicle-km | passenger-km | "
+           "served vs first, pts |", "|---|---|---|---|---|---|---|---|"]
     base = series[0]
     for n in agents:
         by = {(r["series"], int(r["seed"])): r for r in rows if int(r["n_agents"]) == n}
@@ -113,7 +114,7 @@ def table(rows: list[dict], series: list[str], agents: list[int], seeds: list[in
                 continue
 
             def cell(key, scale=1.0, fmt=".1f", got=got, name=name, by=by):
-                x = [scale * float(by[(name, s)][key] or "nan") for s in got]
+                x = [scale * float(by[(name, s)].get(key) or "nan") for s in got]
                 if any(math.isnan(v) for v in x):  # (a run that did not record it)
                     return "–"
                 m, h = interval(x)
@@ -124,7 +125,8 @@ def table(rows: list[dict], series: list[str], agents: list[int], seeds: list[in
                 [100 * (float(by[(name, s)]["served_share"])
                         - float(by[(base, s)]["served_share"])) for s in paired]))
             out.append(f"| {n} | `{name}` | {cell('served_share', 100.0, '.2f')} | "
-                       f"{cell('wait_mean')} | {cell('vehicle_km', fmt='.0f')} | "
+                       f"{cell('wait_mean')} | {cell('delay_mean')} | "
+                       f"{cell('vehicle_km', fmt='.0f')} | "
                        f"{cell('passenger_km', fmt='.0f')} | {diff} |")
     return "\n".join(out)
 
@@ -150,7 +152,11 @@ def main(argv=None) -> int:
     rows = []
     if a.out.exists():
         with a.out.open() as f:
-            rows = list(csv.DictReader(f))
+            reader = csv.DictReader(f)
+            rows = list(reader)
+        if tuple(reader.fieldnames or ()) != FIELDS:
+            raise SystemExit(f"{a.out} has the columns of another version of this benchmark "
+                             f"({', '.join(reader.fieldnames or ())}); write to another --out")
     have = {(r["series"], int(r["n_agents"]), int(r["seed"])) for r in rows}
     a.out.parent.mkdir(parents=True, exist_ok=True)
     for n in a.agents:
@@ -188,6 +194,10 @@ def main(argv=None) -> int:
                 dm, dh = interval(d)
                 wm, wh = interval(dw)
                 line += f"; vs {base}: {dm:+.2f} ± {dh:.2f} pts, wait {wm:+.1f} ± {wh:.1f} %"
+                dl = [100 * (float(by[(name, s)].get("delay_mean") or "nan")
+                             / float(by[(base, s)].get("delay_mean") or "nan") - 1) for s in seeds]
+                if not any(math.isnan(x) for x in dl):
+                    line += ", delay {:+.1f} ± {:.1f} %".format(*interval(dl))
             print(line)
     return 0
 

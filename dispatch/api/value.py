@@ -8,11 +8,14 @@ with ``seats_left`` free seats will still serve -- for whole arrays of candidate
 problem's cost matrix into
 
     cost[i, j] - weight * (gamma ** (end[i, j] - now) * V(place[i, j], end[i, j], seats[i, j])
-                           - V(node_i, now, seats_i))
+                           - gamma ** (end_i - now) * V(place_i, end_i, seats_i))
 
 where ``place``, ``end`` and ``seats`` are the vehicle's post-decision state
 (:func:`post_decision`): where and when its plan ends if it takes request ``j``, and its free
-seats then. ``weight`` is seconds of cost per unit of value; ``weight = 0`` (or a value that
+seats then; ``place_i``, ``end_i``, ``seats_i`` are the same of vehicle ``i`` taking nothing:
+the end of its own plan (an idle vehicle: where it is, now, all its seats free). The
+difference is what taking ``j`` adds to the vehicle's future, the same state the trainer
+learns values of (a busy vehicle's value "now, all seats free" is one it is never in). ``weight`` is seconds of cost per unit of value; ``weight = 0`` (or a value that
 is zero everywhere) returns the cost matrix itself, so the allocator decides exactly as
 without a value. ``inf`` pairs stay ``inf``.
 
@@ -59,11 +62,14 @@ class ValueFunction(Protocol):
 
 class PostDecision(NamedTuple):
     """Where each pair's plan ends, how many seconds after the decision, and the seats then
-    free (``(n, m)`` arrays aligned with a problem's cost matrix)."""
+    free (``(n, m)`` arrays aligned with a problem's cost matrix); ``rest``: the same of each
+    vehicle taking nothing (``(n,)`` arrays: its own plan's end), None where no vehicle has a
+    plan (it stays where it is, now, all seats free)."""
 
     place: np.ndarray
     after: np.ndarray
     seats: np.ndarray
+    rest: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
 
 def network_key(node_xy) -> str:
@@ -155,6 +161,11 @@ def value_costs(problem, value: ValueFunction | None, weight: float | None = Non
     finite = np.isfinite(cost)
     dt = post.after
     after = np.power(value.gamma, dt) * value.value(post.place, now + dt, post.seats)
-    seats_now = None if problem.capacity is None else np.asarray(problem.capacity, np.int64)
-    before = value.value(nodes, np.full(nodes.shape, now), seats_now)[:, None]
-    return np.where(finite, cost - w * (after - before), np.inf)
+    if post.rest is None:  # no plans: a vehicle that takes nothing stays where it is, now
+        seats_now = None if problem.capacity is None else np.asarray(problem.capacity,
+                                                                      np.int64)
+        before = value.value(nodes, np.full(nodes.shape, now), seats_now)
+    else:  # its own plan's end: the post-decision state of taking nothing
+        place, dt0, seats0 = post.rest
+        before = np.power(value.gamma, dt0) * value.value(place, now + dt0, seats0)
+    return np.where(finite, cost - w * (after - before[:, None]), np.inf)

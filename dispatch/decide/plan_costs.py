@@ -298,7 +298,9 @@ class PlanEnds:
     the service and the direct drive after now; a busy vehicle's at the drop-off when it is
     inserted after the plan's last stop, else at the last stop, later by the insertion's
     shift (an upper bound where a stop's wait absorbs some of it). Free seats: the seats less
-    the most on board along the plan and the request's passengers (none below 0)."""
+    the most on board along the plan and the request's passengers (none below 0). Each
+    vehicle taking nothing (``rest``): a busy one's plan ends at its last stop as planned, its
+    seats less the most on board; an idle one stays where it is, now."""
 
     def __init__(self, now: float, slots: np.ndarray, tasks: list, inserts, table: PlanTable, *,
                  fleet: Fleet, objective: int, service: float) -> None:
@@ -321,11 +323,12 @@ class PlanEnds:
         used = np.arange(width)[None, :] < self.length[:, None]
         # (only a busy vehicle's row is current: the decision gathered it)
         most = np.where(used, occ[slots], 0).max(axis=1, initial=0)
+        self.busy = fleet.busy_mask[slots] & (self.length > 0)
         self.most = np.maximum(np.where(fleet.busy_mask[slots], most, 0), fleet.load[slots])
         self.cap = fleet.capacity[slots].astype(np.int64)
 
     def __call__(self, problem):
-        from dispatch.api.value import PostDecision
+        from dispatch.api.value import PostDecision, nodes_of
 
         cost = np.asarray(problem.cost, dtype=float)
         n, m = cost.shape
@@ -345,4 +348,9 @@ class PlanEnds:
             after[r, k] = self.last_end[r] + ins.shift2[inside] - self.now
             out = ~inside
             after[rows[out], cols[out]] = ins.dropoff_at[out] + self.service - self.now
-        return PostDecision(place, np.maximum(after, 0.0), seats)
+        # taking nothing: a busy vehicle's plan ends as it is, an idle one stays, now
+        here = nodes_of(problem)[0]
+        rest = (np.where(self.busy, self.last_node, here),
+                np.where(self.busy, np.maximum(self.last_end - self.now, 0.0), 0.0),
+                np.maximum(self.cap - self.most, 0))
+        return PostDecision(place, np.maximum(after, 0.0), seats, rest)
