@@ -12,9 +12,12 @@ through :func:`dispatch.api.value.value_costs` (``hungarian``, ``local_hungarian
 ends, and the ``demand`` repositioner. A pair's cost becomes
 
     dt = seconds until the pair's plan ends (cost + expected trip, or the insertion's end)
-    cost[i, j] - weight * (gamma^dt * V(zone(end_ij), now + dt, seats_ij) - V(zone(vehicle_i), now))
+    cost[i, j] - weight * (gamma^dt * V(zone(end_ij), now + dt, seats_ij)
+                           - gamma^dt_i * V(zone(end_i), now + dt_i, seats_i))
 
-with the expected trip a fit of the simulated trips' durations on the straight-line distance
+where ``end_i``, ``dt_i`` and ``seats_i`` are vehicle ``i``'s own plan's end (an idle vehicle:
+where it is, now, all seats free): what taking request ``j`` adds to the vehicle's future. The
+expected trip is a fit of the simulated trips' durations on the straight-line distance
 from pickup to drop-off, per hour of the day, and ``weight`` seconds per served request (the
 exchange rate between waiting and the future). A file records the network it was learned on
 (its node positions and their fingerprint, :func:`dispatch.api.value.network_key`); on

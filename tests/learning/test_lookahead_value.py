@@ -243,4 +243,36 @@ def test_the_pooled_post_decision_states_are_the_plans_ends(tmp_path, monkeypatc
                 assert post.place[i, j] in (drops[j], last.loc)
                 ends_at_drop += post.place[i, j] == drops[j]
                 assert now + post.after[i, j] >= last.eta - 1e-6
+        # taking nothing: an idle vehicle stays where it is, now, all seats free; a busy one's
+        # plan ends at its last stop as planned, with no fewer seats than after taking any
+        place, after, seats = post.rest
+        here = api.nodes_of(problem)[0]
+        for i, aid in enumerate(problem.agent_ids.tolist()):
+            plan = plans[aid]
+            if not plan:
+                assert place[i] == here[i] and after[i] == 0.0 and seats[i] == 3
+            else:
+                assert place[i] == plan[-1].loc and now + after[i] >= plan[-1].eta - 1e-6
+                assert (seats[i] >= post.seats[i][np.isfinite(problem.cost[i])]).all()
     assert busy_pairs > 20 and 0 < ends_at_drop < busy_pairs  # both kinds of end seen
+
+
+def test_the_value_before_a_decision_is_the_vehicles_own_plan_end():
+    """With plans, a pair's score subtracts the value of the vehicle taking nothing (its own
+    plan's end, discounted), not of where it is now with all seats free: one vehicle whose
+    plan ends at node 1 (worth 3) in 600 s, one idle at node 0 (worth nothing)."""
+    from dispatch.api.value import PostDecision
+    from tests.learning.test_value import _problem, _value
+
+    v = _value(weight=100.0)
+    p = _problem([[100.0, 90.0], [100.0, 90.0]])
+    after = np.array([[900.0, 800.0], [700.0, 600.0]])
+    rest = (np.array([1, 0]), np.array([600.0, 0.0]), np.array([1, 1]))
+    post = PostDecision(np.array([[1, 2], [1, 2]]), after, np.ones((2, 2), np.int64), rest)
+    object.__setattr__(p, "post", lambda problem: post)
+    adj = value_costs(p, v)
+    g = v.gamma
+    before = np.array([3.0 * g ** 600.0, 0.0])
+    for i in range(2):
+        assert adj[i, 0] == pytest.approx(100.0 - 100.0 * (3.0 * g ** after[i, 0] - before[i]))
+        assert adj[i, 1] == pytest.approx(90.0 + 100.0 * before[i])
