@@ -103,8 +103,8 @@ def table(rows: list[dict], series: list[str], agents: list[int], seeds: list[in
     """A Markdown table of the runs ``rows`` (as the CSV holds them): per N and series the mean
     and 95 % t half-width over ``seeds`` of served share, mean wait, vehicle-km and
     passenger-km, and the served share's paired difference from the first series."""
-    out = ["| N | series | served % | wait s | delay s | vehicle-km | passenger-km | "
-           "served vs first, pts |", "|---|---|---|---|---|---|---|---|"]
+    out = [("| N | series | served % | wait s | delay s | vehicle-km | passenger-km | "
+            "served vs first, pts |"), "|---|---|---|---|---|---|---|---|"]
     base = series[0]
     for n in agents:
         by = {(r["series"], int(r["seed"])): r for r in rows if int(r["n_agents"]) == n}
