@@ -139,6 +139,8 @@ def main(argv=None) -> int:
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     p.add_argument("--batch-window", type=float, default=30.0)
     p.add_argument("--hours", type=float, default=None)
+    p.add_argument("--half", choices=("a", "b"), default=None,
+                   help="only this half of the scenario's trace (learning.value_train.trace_half)")
     p.add_argument("--capacity", type=int, default=None)
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--table", action="store_true",
@@ -148,7 +150,7 @@ def main(argv=None) -> int:
         with a.out.open() as f:
             print(table(list(csv.DictReader(f)), a.series, a.agents, a.seeds))
         return 0
-    sc = scenario_for(a.scenario, a.batch_window, a.hours, capacity=a.capacity)
+    sc = scenario_for(a.scenario, a.batch_window, a.hours, capacity=a.capacity, half=a.half)
     rows = []
     if a.out.exists():
         with a.out.open() as f:

@@ -138,12 +138,27 @@ def _day(sc, allocator: str, params: dict, agents: int, seed: int, reposition: s
     return tabs["tasks"].to_pandas(), tabs["vehicles"].to_pandas(), res.summary
 
 
+#: the generator seed of :func:`trace_half`'s split (fixed: half "a" is always the same trips)
+HALF_SEED = 20141221
+
+
+def trace_half(trips, half: str):
+    """Half ``"a"`` or ``"b"`` of a trace's trips: each trip falls in one half by a draw of a
+    fixed generator (:data:`HALF_SEED`), so the two halves are disjoint samples of one day's
+    demand, a day to learn on and another to test on (a trace holds one day)."""
+    if half not in ("a", "b"):
+        raise ValueError(f"half must be 'a' or 'b', got {half!r}")
+    in_a = np.random.default_rng(HALF_SEED).random(len(trips)) < 0.5
+    return trips.subset(in_a if half == "a" else ~in_a, f"trace half {half}: the other half")
+
+
 def scenario_for(path: str | Path, batch_window: float, hours: float | None = None,
                  trips_per_day: float | None = None, capacity: int | None = None,
-                 objective: str | None = None):
+                 objective: str | None = None, half: str | None = None):
     """The scenario of a study: its sweep dropped, the batch window fixed, optionally a
-    shorter run (``hours``), another demand (``trips_per_day``), other seats (``capacity``)
-    or another ``[dispatch] objective``."""
+    shorter run (``hours``), another demand (``trips_per_day``), other seats (``capacity``),
+    another ``[dispatch] objective`` or half of its trace's trips (``half``, "a" or "b":
+    :func:`trace_half`)."""
     from dispatch.config.sweep import SweepConfig
     from dispatch.scenario.load import load_scenario
 
@@ -158,6 +173,11 @@ def scenario_for(path: str | Path, batch_window: float, hours: float | None = No
         sc = replace(sc, fleet=replace(sc.fleet, capacity=int(capacity)))
     if objective is not None:
         sc = replace(sc, dispatch=replace(sc.dispatch, objective=objective))
+    if half is not None:
+        if sc.tasks.trips is None:
+            raise ValueError(f"{Path(path).name}: half of a trace needs [tasks] source = "
+                             f"\"trace\", not {sc.tasks.source!r}")
+        sc = replace(sc, tasks=replace(sc.tasks, trips=trace_half(sc.tasks.trips, half)))
     return sc
 
 
@@ -217,7 +237,7 @@ def train(scenario: str | Path, out: str | Path, *, agents: int = 500, batch_win
           reposition: str | None = None, allocator: str = "hungarian",
           capacity: int | None = None, objective: str | None = None, log=print,
           progress=None, reward: float | None = None,
-          start: str | Path | None = None) -> ZoneValue:
+          start: str | Path | None = None, half: str | None = None) -> ZoneValue:
     """Learn a :class:`ZoneValue` from simulated days of ``allocator`` and save it to ``out``
     (see the module doc). ``reposition``: the days run with that repositioning policy (e.g.
     ``"demand"``): the value of where a vehicle ends up when idle vehicles are moved.
@@ -225,12 +245,14 @@ def train(scenario: str | Path, out: str | Path, *, agents: int = 500, batch_win
     number of free seats. ``progress(done, total)`` after each simulated day. ``reward``: the
     days run with a value give the allocator this ``value_reward`` (seconds a served request
     is worth: it may leave a pair worth nothing for later). ``start``: a value file the first
-    round's days already run with (policy iteration resumed from it)."""
+    round's days already run with (policy iteration resumed from it). ``half``: the days hold
+    only that half of the scenario's trace (:func:`trace_half`; test on the other)."""
     import pandas as pd
 
     from dispatch.api.space import space_for
 
-    sc = scenario_for(scenario, batch_window, hours, capacity=capacity, objective=objective)
+    sc = scenario_for(scenario, batch_window, hours, capacity=capacity, objective=objective,
+                      half=half)
     cap = int(sc.fleet.capacity)
     space = space_for(sc.world, 0, sc.path)
     node_xy = np.asarray(space.node_positions, dtype=float)[:, :2]
@@ -253,7 +275,8 @@ def train(scenario: str | Path, out: str | Path, *, agents: int = 500, batch_win
             if plain:
                 key = Path(cache) / (f"{allocator}_{sc.dispatch.objective}_c{cap}_n{agents}"
                                      f"_w{batch_window:g}_h{hours}"
-                                     f"_s{seed}" + (f"_r{reposition}" if reposition else ""))
+                                     + (f"_half{half}" if half else "")
+                                     + f"_s{seed}" + (f"_r{reposition}" if reposition else ""))
                 if (key / "summary.json").exists():
                     got = (pd.read_parquet(key / "tasks.parquet"),
                            pd.read_parquet(key / "vehicles.parquet"),
@@ -290,6 +313,8 @@ def train(scenario: str | Path, out: str | Path, *, agents: int = 500, batch_win
                 "iterations": it + 1, "half_life": half_life, "zone": zone, "bin": bin_s,
                 "shrink": shrink, "weight": weight, "transitions": len(tr["z"]),
                 "reposition": reposition, "hours": hours, "sweeps": sweeps, "days": history}
+        if half is not None:
+            meta["half"] = half
         if reward is not None or start is not None:  # (only then: older files' bytes as before)
             meta.update(reward=reward, start=None if start is None else Path(start).name)
         value = ZoneValue(zones, node_xy, bin_s, table, gamma, weight, fit, meta, seats_n)
@@ -340,6 +365,9 @@ def main(argv=None) -> int:
                         "a served request is worth)")
     p.add_argument("--start", default=None,
                    help="a value file the first round's days run with (policy iteration from it)")
+    p.add_argument("--half", choices=("a", "b"), default=None,
+                   help="the days hold only this half of the scenario's trace (a fixed split; "
+                        "test on the other half: a day the value never saw)")
     a = p.parse_args(argv)
     console = Console(stderr=True)
     with Progress(TextColumn("[bold]training days"), BarColumn(), TextColumn("{task.completed}"
@@ -349,7 +377,7 @@ def main(argv=None) -> int:
               iterations=a.iterations, zone=a.zone, bin_s=a.bin, half_life=a.half_life,
               weight=a.weight, shrink=a.shrink, hours=a.hours, cache=a.cache,
               reposition=a.reposition, allocator=a.allocator, capacity=a.capacity,
-              objective=a.objective, reward=a.reward, start=a.start,
+              objective=a.objective, reward=a.reward, start=a.start, half=a.half,
               log=bar.console.print,
               progress=lambda done, total: bar.update(task, completed=done))
     return 0

@@ -276,3 +276,24 @@ def test_the_value_before_a_decision_is_the_vehicles_own_plan_end():
     for i in range(2):
         assert adj[i, 0] == pytest.approx(100.0 - 100.0 * (3.0 * g ** after[i, 0] - before[i]))
         assert adj[i, 1] == pytest.approx(90.0 + 100.0 * before[i])
+
+
+def test_the_trace_halves_are_disjoint_fixed_and_whole(tmp_path):
+    """``--half a`` and ``--half b`` split one trace into two disjoint samples of its day (a
+    day to learn on, another to test on), the same trips every time, together all of them."""
+    from learning.value_train import trace_half
+
+    sc = scenario_for(ROOT / "scenarios" / "nyc_manhattan_pooled.toml", 30.0)
+    trips = sc.tasks.trips
+    a, b = trace_half(trips, "a"), trace_half(trips, "b")
+    assert len(a) + len(b) == len(trips) and 0.45 < len(a) / len(trips) < 0.55
+    ids_a, ids_b = set(a.row.tolist()), set(b.row.tolist())
+    assert not ids_a & ids_b and ids_a | ids_b == set(trips.row.tolist())
+    assert np.array_equal(trace_half(trips, "a").row, a.row)
+    assert np.all(np.diff(a.t) >= 0) and np.all(np.diff(b.t) >= 0)  # still in release order
+    half = scenario_for(ROOT / "scenarios" / "nyc_manhattan_pooled.toml", 30.0, half="b")
+    assert np.array_equal(half.tasks.trips.row, b.row)
+    with pytest.raises(ValueError, match="half must be"):
+        trace_half(trips, "c")
+    with pytest.raises(ValueError, match="needs \\[tasks\\] source"):
+        scenario_for(ROOT / "scenarios" / "chicago_taxi.toml", 30.0, half="a")
