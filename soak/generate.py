@@ -5,8 +5,10 @@ A :class:`Case` is a scenario document (the TOML tables as nested dicts) and the
 files it names (a header and rows each), so that :mod:`soak.shrink` can cut keys, values and
 rows and write the result again. Two worlds:
 
-* **road**: a generated grid of a few blocks, or the shipped 20 x 20 grid with the first
-  rows of its shipped trace (``scenarios/data/manhattan_trips.csv``), cut to minutes; shared
+* **road**: a generated grid of a few blocks, the shipped 20 x 20 grid with the first
+  rows of its shipped trace (``scenarios/data/manhattan_trips.csv``), or Manhattan's street
+  network (``manhattan_osm``) with the first minutes of the NYC taxi day and, mostly, the
+  subway (``[transit]``: the shipped feed, every key and mode choice), cut to minutes; shared
   rides, batching, both objectives, every allocator, walking, prebooking (a share or a trace's
   ``booked_at``; entry at booking or by lead), offers with each acceptor and pricing, shifts
   (a start file's columns) and sizing, electric fleets with each charging strategy,
@@ -23,6 +25,7 @@ from __future__ import annotations
 
 import copy
 import csv
+import functools
 import io
 import os
 from dataclasses import dataclass, field
@@ -34,6 +37,8 @@ from bench.tomltext import dumps
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED_TRIPS = ROOT / "scenarios" / "data" / "manhattan_trips.csv"
+NYC_TRIPS = ROOT / "dispatch" / "data" / "nyc_manhattan" / "nyc_taxi_2014-12-21_20k.csv"
+MODE_CHOICES = ("cheapest", "logit", "train_first")
 WORLDS = ("road", "voxel")
 ROAD_ALLOCATORS = ("hungarian", "greedy", "fcfs", "random", "auction", "local_hungarian", "rtv")
 VOXEL_ALLOCATORS = ("hungarian", "greedy", "fcfs", "random", "auction", "local_hungarian",
@@ -126,11 +131,64 @@ def _shipped_trips(n: int) -> list[list]:
     return [[float(t), int(o), int(d)] for t, o, d, *_ in rows]
 
 
+@functools.lru_cache(maxsize=1)
+def _osm_nodes() -> np.ndarray:
+    """The node ids of Manhattan's street network (``manhattan_osm``), read once."""
+    from dispatch.space.roads import load_network
+
+    return np.asarray(load_network("manhattan_osm", base=ROOT).ids, dtype=np.int64)
+
+
+def _nyc_trips(seconds: float) -> list[list]:
+    """The NYC taxi day's trips released in its first ``seconds`` (``t`` from midnight, which
+    is also the subway feed's service day's midnight), by coordinates."""
+    out = []
+    with NYC_TRIPS.open(encoding="utf-8") as fh:
+        for row in csv.DictReader(fh):
+            hh, mm, ss = (int(x) for x in row["departure_time"].split(" ")[1].split(":"))
+            t = float(hh * 3600 + mm * 60 + ss)
+            if t > seconds:
+                break
+            out.append([t, float(row["o_lat"]), float(row["o_lon"]), float(row["d_lat"]),
+                        float(row["d_lon"])])
+    return out
+
+
+def _node(rng, nodes) -> int:
+    """A node drawn uniformly: of ``0 .. nodes - 1`` (a grid), or of the ids ``nodes``."""
+    if isinstance(nodes, int):
+        return int(rng.integers(nodes))
+    return int(nodes[rng.integers(len(nodes))])
+
+
+def _transit(rng) -> dict:
+    """A ``[transit]`` table on the shipped subway feed, every key drawn in its range."""
+    choice = _pick(rng, MODE_CHOICES)
+    table: dict = {"feed": "nyc_subway", "service_date": "2026-09-23",
+                   "max_access_walk": _r(rng, 100, 1500, 0), "mode_choice": choice}
+    for key, lo, hi in (("walk_speed", 0.5, 2.5), ("transfer_walk", 0, 600),
+                        ("min_change", 0, 300), ("w_ivt", 0.5, 2), ("w_wait", 0.5, 4),
+                        ("w_walk", 0.5, 4), ("w_transfer", 0.5, 4),
+                        ("transfer_penalty", 0, 900)):
+        if _p(rng, 0.3):
+            table[key] = _r(rng, lo, hi, 2)
+    if choice == "logit" and _p(rng, 0.5):
+        table["logit"] = {"scale": _r(rng, 0.01, 1.0, 2)}
+    elif choice == "train_first" and _p(rng, 0.5):
+        table["train_first"] = {"slack": _r(rng, 0, 1800, 0)}
+    return table
+
+
 def _road(rng) -> Case:
     doc: dict = {}
     files: dict = {}
     shipped = _p(rng, 0.3)
-    if shipped:
+    osm = shipped and _p(rng, 0.4)
+    if osm:
+        world = {"network": "manhattan_osm"}
+        trips = _nyc_trips(_r(rng, 60, 600, 0))
+        header = ["t", "o_lat", "o_lon", "d_lat", "d_lon"]
+    elif shipped:
         cols = rows = 20
         world = {"network": "manhattan", "blocks": [20, 20], "block": 200.0, "speed": 10.0}
         trips = _shipped_trips(int(rng.integers(5, 60)))
@@ -144,7 +202,9 @@ def _road(rng) -> Case:
         for ti in t:
             o, d = rng.choice(cols * rows, size=2, replace=False)
             trips.append([float(ti), int(o), int(d)])
-    nodes = cols * rows
+    nodes = _osm_nodes() if osm else cols * rows
+    if not osm:
+        header = ["t", "origin_node", "dest_node"]
     if _p(rng, 0.2):
         world["congestion"] = [_r(rng, 1.0, 2.0, 2) for _ in range(24)]
     doc["duration"] = round(max(r[0] for r in trips) + _r(rng, 60, 3600, 0), 1)
@@ -154,7 +214,6 @@ def _road(rng) -> Case:
     fleet: dict = {"agents": agents, "capacity": capacity}
     tasks: dict = {"source": "trace", "trace": "trips.csv"}
     dispatch: dict = {"allocator": _pick(rng, ROAD_ALLOCATORS), "planner": "dijkstra"}
-    header = ["t", "origin_node", "dest_node"]
     # the trace's optional columns: riders per request, own limits, bookings
     if capacity > 1 and _p(rng, 0.4):
         header.append("passengers")
@@ -186,7 +245,7 @@ def _road(rng) -> Case:
     if _p(rng, 0.15):
         tasks["ttl"] = _r(rng, 10, 900, 0)
     if _p(rng, 0.3):
-        tasks["max_walk"] = _r(rng, 0, 2.5 * world["block"], 0)
+        tasks["max_walk"] = _r(rng, 0, 2.5 * world.get("block", 200.0), 0)
         if _p(rng, 0.5):
             tasks["walk_speed"] = _r(rng, 0.5, 2.5, 2)
         if _p(rng, 0.5):
@@ -204,6 +263,8 @@ def _road(rng) -> Case:
     doc["fleet"] = fleet
     doc["dispatch"] = dispatch
     _road_extras(rng, doc, files, nodes, agents)
+    if osm and _p(rng, 0.7):
+        doc["transit"] = _transit(rng)
     return Case("road", doc, files)
 
 
@@ -212,14 +273,14 @@ def _road_fleet(rng, doc, fleet, files, nodes, dispatch) -> None:
     shifts = _p(rng, 0.25)
     if shifts or _p(rng, 0.2):
         header = ["vehicle_id", "node"]
-        rows = [[i, int(rng.integers(nodes))] for i in range(agents)]
+        rows = [[i, _node(rng, nodes)] for i in range(agents)]
         if shifts:
             header += ["shift_start", "shift_end", "depot"]
             span = doc["duration"]
             for r in rows:
                 s = _r(rng, 0, span * 0.5, 0) if _p(rng, 0.6) else 0.0
                 e = round(s + _r(rng, 60, span, 0), 1) if _p(rng, 0.8) else None
-                r += [s, e, int(rng.integers(nodes)) if _p(rng, 0.5) else None]
+                r += [s, e, _node(rng, nodes) if _p(rng, 0.5) else None]
             if _p(rng, 0.5):
                 fleet["shift_grace"] = _r(rng, 0, 900, 0)
             if _p(rng, 0.35):
@@ -247,7 +308,7 @@ def _road_fleet(rng, doc, fleet, files, nodes, dispatch) -> None:
         if _p(rng, 0.7):
             k = int(rng.integers(1, 4))
             files["stations.csv"] = (["station_id", "node", "plugs", "kw"],
-                                     [[f"S{i}", int(rng.integers(nodes)), int(rng.integers(1, 4)),
+                                     [[f"S{i}", _node(rng, nodes), int(rng.integers(1, 4)),
                                        _r(rng, 3, 150, 1)] for i in range(k)])
             doc["chargers"] = {"file": "stations.csv"}
             strategy = _pick(rng, ("threshold", "idle", "valley"))
