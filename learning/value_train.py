@@ -251,8 +251,13 @@ def train(scenario: str | Path, out: str | Path, *, agents: int = 500, batch_win
 
     from dispatch.api.space import space_for
 
-    sc = scenario_for(scenario, batch_window, hours, capacity=capacity, objective=objective,
-                      half=half)
+    from dispatch.errors import DispatchError
+
+    try:
+        sc = scenario_for(scenario, batch_window, hours, capacity=capacity,
+                          objective=objective, half=half)
+    except ValueError as e:  # (a half of a scenario without a trace: one line, exit 2)
+        raise DispatchError(str(e)) from e
     cap = int(sc.fleet.capacity)
     space = space_for(sc.world, 0, sc.path)
     node_xy = np.asarray(space.node_positions, dtype=float)[:, :2]

@@ -297,3 +297,12 @@ def test_the_trace_halves_are_disjoint_fixed_and_whole(tmp_path):
         trace_half(trips, "c")
     with pytest.raises(ValueError, match="needs \\[tasks\\] source"):
         scenario_for(ROOT / "scenarios" / "chicago_taxi.toml", 30.0, half="a")
+
+
+def test_a_half_of_a_scenario_without_a_trace_is_one_line(tmp_path, capsys):
+    from dispatch.run import cli
+
+    code = cli.main(["train", "value", "--half", "a", "--out", str(tmp_path / "v.npz")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and err[-1].startswith("error: chicago_taxi.toml: half of a trace needs")
+    assert not (tmp_path / "v.npz").exists()
