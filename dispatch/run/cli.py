@@ -226,6 +226,7 @@ def _validate(args, console) -> int:
     from dispatch.api.space import space_class
 
     world = space_class(sc.world.space).label(sc.world)
+    release_root()  # (the scenario went through: its warnings come before the ok)
     console.print(f"[green]ok[/]: {args.scenario} ({sc.name}): {len(specs)} run(s); "
                   f"source {sc.tasks.source}, {world}", soft_wrap=True)
     return 0
