@@ -26,6 +26,7 @@ import pyarrow.parquet as pq
 
 from dispatch import __version__
 from dispatch.config.runkeys import format_value
+from dispatch.output.stale import remove_stale_temps
 
 # pyarrow's default allocator (jemalloc or mimalloc) keeps what a chunk write or the final merge
 # freed: measured with benchmarks/memory.py, 40-65 MB more peak memory per run than the C
@@ -490,6 +491,7 @@ def write_atomic(table: pa.Table, path: Path, compression: str = "zstd", **optio
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     pq.write_table(table, tmp, compression=compression, **options)
     os.replace(tmp, path)
+    remove_stale_temps(path)
 
 
 def json_meta(obj: Any) -> str:

@@ -5,10 +5,11 @@ A space's :meth:`~dispatch.api.space.Space.shared_tables` (a road network: ``nod
 are written under ``_spaces/<kind>-<digest>/<name>.parquet`` (``<digest>``: of the tables'
 contents, so runs on one space share the folder and a changed space gets a new one; the
 leading ``_`` keeps Hive readers out), each file whole (a rename) and only where it is not
-there yet. Every file of a run names that folder, relative to the results folder, in the
-``dispatch.output.space_files`` metadata. A road network's columns: ``nodes.parquet`` ``x``, ``y``
-(float64 metres, node order); ``edges.parquet`` ``u``, ``v`` (int64 node indices),
-``seconds`` (float64 free-flow), ``metres`` (float64), in CSR order (by ``u``, then ``v``).
+there yet; a temporary file a killed run left beside it is removed. Every file of a run names
+that folder, relative to the results folder, in the ``dispatch.output.space_files`` metadata.
+A road network's columns: ``nodes.parquet`` ``x``, ``y`` (float64 metres, node order);
+``edges.parquet`` ``u``, ``v`` (int64 node indices), ``seconds`` (float64 free-flow),
+``metres`` (float64), in CSR order (by ``u``, then ``v``).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import numpy as np
 import pyarrow as pa
 
 from dispatch.output.parquet import arrow_column, write_atomic
+from dispatch.output.stale import remove_stale_temps
 
 FOLDER = "_spaces"
 METADATA_KEY = "dispatch.output.space_files"
@@ -53,4 +55,6 @@ def store(out: Path | None, space) -> dict[str, str]:
             arrays = {k: np.asarray(v) for k, v in columns.items()}
             write_atomic(pa.table({k: arrow_column(a, pa.from_numpy_dtype(a.dtype))
                                    for k, a in arrays.items()}), path)
+        else:  # (a run killed while it wrote the file leaves its temporary name)
+            remove_stale_temps(path)
     return {METADATA_KEY: rel}

@@ -70,3 +70,29 @@ def test_a_folder_without_its_network_has_none(road_folder, tmp_path, caplog):
     with caplog.at_level(logging.INFO, logger="analysis.network"):
         assert road_network(older, [road_folder]) is None
     assert "before networks were stored" in caplog.text
+
+
+def test_a_killed_writers_temporary_file_is_removed_a_live_ones_kept(tmp_path):
+    """A run killed while it wrote ``_spaces/.../nodes.parquet`` leaves ``.nodes.parquet.tmp-
+    <pid>``; the next run that stores the space removes it (its process is gone) and keeps a
+    temporary file whose writer still runs."""
+    import os
+    import subprocess
+    import sys
+
+    from dispatch.output.space_files import store
+    from dispatch.space.roads import manhattan
+
+    space = manhattan(3, 2, 100.0, 10.0)
+    rel = store(tmp_path, space)["dispatch.output.space_files"]
+    folder = tmp_path / rel
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True, check=True)
+    stale = folder / f".nodes.parquet.tmp-{int(dead.stdout)}"
+    live = folder / f".edges.parquet.tmp-{os.getppid()}"
+    stale.write_bytes(b"PAR1")
+    live.write_bytes(b"PAR1")
+    store(tmp_path, space)
+    assert not stale.exists() and live.exists()
+    assert sorted(p.name for p in folder.iterdir() if not p.name.startswith(".")) == [
+        "edges.parquet", "nodes.parquet"]
