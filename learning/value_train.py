@@ -250,7 +250,6 @@ def train(scenario: str | Path, out: str | Path, *, agents: int = 500, batch_win
     import pandas as pd
 
     from dispatch.api.space import space_for
-
     from dispatch.errors import DispatchError
 
     try:
