@@ -55,14 +55,17 @@ def _write_whole(path: Path, text: str) -> None:
 
 @dataclass
 class Case:
-    """A scenario: its document and the files it names (``name -> (header, rows)``)."""
+    """A scenario: its document, the CSV files it names (``name -> (header, rows)``) and its
+    binary files (``name -> bytes``: a learned value, ``value.npz``), kept whole."""
 
     world: str
     doc: dict
     files: dict[str, tuple[list[str], list[list]]] = field(default_factory=dict)
+    blobs: dict[str, bytes] = field(default_factory=dict)
 
     def copy(self) -> Case:
-        return Case(self.world, copy.deepcopy(self.doc), copy.deepcopy(self.files))
+        return Case(self.world, copy.deepcopy(self.doc), copy.deepcopy(self.files),
+                    dict(self.blobs))
 
     def write(self, directory: Path, name: str = "scenario.toml") -> Path:
         """Write the scenario and its files into ``directory``, each whole (a temporary name,
@@ -75,14 +78,18 @@ class Case:
             w.writerow(header)
             w.writerows(["" if v is None else v for v in row] for row in rows)
             _write_whole(directory / fname, buf.getvalue())
+        for fname, data in self.blobs.items():
+            tmp = directory / f".{fname}.tmp-{os.getpid()}"
+            tmp.write_bytes(data)
+            os.replace(tmp, directory / fname)
         path = directory / name
         _write_whole(path, dumps(self.doc))
         return path
 
     @classmethod
     def read(cls, directory: Path, name: str = "scenario.toml") -> Case:
-        """The case written in ``directory`` (its scenario and every CSV file beside it; the
-        cells kept as text)."""
+        """The case written in ``directory`` (its scenario and every CSV file beside it, the
+        cells kept as text; every ``.npz`` file as bytes)."""
         import tomllib
 
         doc = tomllib.loads((directory / name).read_text(encoding="utf-8"))
@@ -91,7 +98,8 @@ class Case:
             with f.open(encoding="utf-8", newline="") as fh:
                 header, *rows = list(csv.reader(fh))
             files[f.name] = (header, rows)
-        return cls("road" if "network" in doc.get("world", {}) else "voxel", doc, files)
+        blobs = {f.name: f.read_bytes() for f in sorted(directory.glob("*.npz"))}
+        return cls("road" if "network" in doc.get("world", {}) else "voxel", doc, files, blobs)
 
     def text(self) -> str:
         """The scenario's TOML text (its files aside)."""
@@ -265,7 +273,58 @@ def _road(rng) -> Case:
     _road_extras(rng, doc, files, nodes, agents)
     if osm and _p(rng, 0.7):
         doc["transit"] = _transit(rng)
-    return Case("road", doc, files)
+    blobs = {} if osm else _lookahead(rng, doc, world, capacity)
+    return Case("road", doc, files, blobs)
+
+
+VALUE_ALLOCATORS = ("hungarian", "local_hungarian", "rtv")
+
+
+def _lookahead(rng, doc, world, capacity: int) -> dict[str, bytes]:
+    """A learned value of the grid (random, of the file's valid shape: zones, time bins, seat
+    classes, discount, weight) for the allocators and the ``demand`` repositioner that take
+    one, with its keys (``value_weight``, ``value_reward``, ``value_mix``); ``{}`` where none
+    is drawn."""
+    dispatch = doc["dispatch"]
+    alloc = dispatch["allocator"] in VALUE_ALLOCATORS and _p(rng, 0.25)
+    repo = "reposition" in doc and _p(rng, 0.4)
+    if not (alloc or repo):
+        return {}
+    if alloc:
+        params: dict = {"value": "value.npz"}
+        if _p(rng, 0.5):
+            params["value_weight"] = _r(rng, 0, 900, 0)
+        if dispatch["allocator"] != "local_hungarian" and _p(rng, 0.2):
+            params["value_reward"] = _r(rng, 60, 1800, 0)
+        dispatch["allocator_params"] = {dispatch["allocator"]: params}
+    if repo:
+        doc["reposition"]["demand"]["value"] = "value.npz"
+        if _p(rng, 0.5):
+            doc["reposition"]["demand"]["value_mix"] = _r(rng, 0, 1, 2)
+    return {"value.npz": _value_file(rng, world, capacity)}
+
+
+def _value_file(rng, world, capacity: int) -> bytes:
+    """The bytes of a :class:`learning.value.ZoneValue` file on the grid ``world``."""
+    import tempfile
+
+    from dispatch.space.roads import manhattan
+    from learning.value import ZoneValue
+    from learning.zones import Zones
+
+    cols, rows = (int(b) for b in world["blocks"])
+    xy = np.asarray(manhattan(cols, rows, float(world["block"]), float(world["speed"])).xy,
+                    dtype=float)[:, :2]
+    zones = Zones(xy, _r(rng, 50, 2000, 0))
+    seats = capacity + 1 if capacity > 1 else 1
+    table = np.round(rng.uniform(0.0, 5.0, (zones.n * seats, int(rng.integers(1, 5)))), 3)
+    value = ZoneValue(zones, xy, float(_pick(rng, (300.0, 1800.0, 3600.0))), table,
+                      0.5 ** (1.0 / _r(rng, 60, 7200, 0)), _r(rng, 0, 600, 0),
+                      np.tile([_r(rng, 0, 300, 0), _r(rng, 0.05, 0.3, 2)], (24, 1)),
+                      {"soak": True}, seats)
+    with tempfile.TemporaryDirectory() as d:
+        value.save(Path(d) / "value.npz")
+        return (Path(d) / "value.npz").read_bytes()
 
 
 def _road_fleet(rng, doc, fleet, files, nodes, dispatch) -> None:

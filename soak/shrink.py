@@ -28,6 +28,7 @@ def unused_files(case: Case) -> Case:
     """``case`` without the files its scenario no longer names."""
     text = case.text()
     case.files = {f: rows for f, rows in case.files.items() if f'"{f}"' in text}
+    case.blobs = {f: data for f, data in case.blobs.items() if f'"{f}"' in text}
     return case
 
 

@@ -44,6 +44,24 @@ def test_both_worlds_and_the_features_are_drawn():
     allocators = {d["dispatch"]["allocator"] for d in docs}
     assert {"hungarian", "greedy", "fcfs", "random", "auction", "local_hungarian", "rtv",
             "magnnet"} <= allocators
+    # Manhattan's street network with the subway, and learned values on the grids
+    assert any(d["world"].get("network") == "manhattan_osm" for d in docs)
+    assert {d["transit"]["mode_choice"] for d in docs if "transit" in d} == {
+        "cheapest", "logit", "train_first"}
+    params = [p for d in docs for p in d["dispatch"].get("allocator_params", {}).values()]
+    assert {k for p in params for k in p} == {"value", "value_weight", "value_reward"}
+    assert any("value" in d.get("reposition", {}).get("demand", {}) for d in docs)
+
+
+def test_a_case_with_a_value_file_writes_and_reads_it_back(tmp_path):
+    from soak.generate import Case
+    from learning.value import ZoneValue
+
+    case = next(c for c in (draw(11, i, "road") for i in range(100)) if c.blobs)
+    case.write(tmp_path)
+    back = Case.read(tmp_path)
+    assert back.blobs == case.blobs and back.text() == case.text()
+    ZoneValue.load(tmp_path / "value.npz")  # a valid file of the case's network
 
 
 @pytest.fixture(scope="module")
