@@ -272,7 +272,7 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     charging = parse_charging(root, path, fleet, faults, world)
     pricing = parse_pricing(root.table("pricing", Pricing), world)
     acceptor = parse_acceptor(root.table("acceptor", AcceptorConfig), pricing)
-    transit = (parse_transit(root.table("transit", TransitConfig), path, world)
+    transit = (parse_transit(root.table("transit", TransitConfig), path, world, disp.reassign)
                if "transit" in root.data else None)
     s.done()
     root.done()

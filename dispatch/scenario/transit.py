@@ -59,9 +59,13 @@ def _mode_choice(t: Table) -> tuple[str, tuple]:
     return name, tuple(params)
 
 
-def parse_transit(t: Table, path: Path, world: WorldConfig) -> TransitConfig:
+def parse_transit(t: Table, path: Path, world: WorldConfig, reassign: bool = False
+                  ) -> TransitConfig:
     """``[transit]`` (see :class:`~dispatch.config.transit.TransitConfig`), on a road network
-    with a CRS (riders' doors and the stations are placed on it)."""
+    with a CRS (riders' doors and the stations are placed on it), without re-assignment
+    before pickup (``reassign``: a booked last leg waits in a vehicle's plan, which
+    re-assignment gives up whole, as with prebooking)."""
+    from dispatch.errors import ScenarioError
     from dispatch.files.gtfs import feed_path, load_feed
 
     given = t.data.get("mode_choice")
@@ -69,6 +73,9 @@ def parse_transit(t: Table, path: Path, world: WorldConfig) -> TransitConfig:
     if "snap" not in space_class(world.space).features:
         raise t.fail(next(iter(t.data), "feed"), "transit needs a road network "
                                                  "([world] network)")
+    if reassign:
+        raise ScenarioError(path, "dispatch.reassign", "re-assignment before pickup and "
+                                                       "[transit] do not go together")
     feed = t.string("feed")
     cfg = TransitConfig(
         feed=feed, service_date=_date(t),
