@@ -190,14 +190,15 @@ def main(argv=None) -> int:
             mw, hw = interval(wait)
             line = f"N={n} {name}: served {m:.2f} ± {h:.2f} %, wait {mw:.1f} ± {hw:.1f} s"
             if name != base:
+                def change(key, name=name, by=by, seeds=seeds):  # % against the first series
+                    return [100 * (float(by[(name, s)].get(key) or "nan")
+                                   / float(by[(base, s)].get(key) or "nan") - 1) for s in seeds]
+
                 d = [x - 100 * float(by[(base, s)]["served_share"]) for x, s in zip(served, seeds)]
-                dw = [100 * (x / float(by[(base, s)]["wait_mean"]) - 1) for x, s in
-                      zip(wait, seeds)]
                 dm, dh = interval(d)
-                wm, wh = interval(dw)
+                wm, wh = interval(change("wait_mean"))
                 line += f"; vs {base}: {dm:+.2f} ± {dh:.2f} pts, wait {wm:+.1f} ± {wh:.1f} %"
-                dl = [100 * (float(by[(name, s)].get("delay_mean") or "nan")
-                             / float(by[(base, s)].get("delay_mean") or "nan") - 1) for s in seeds]
+                dl = change("delay_mean")
                 if not any(math.isnan(x) for x in dl):
                     line += ", delay {:+.1f} ± {:.1f} %".format(*interval(dl))
             print(line)

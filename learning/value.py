@@ -124,11 +124,10 @@ class ZoneValue:
         return value_costs(problem, self, self.weight if weight is None else weight)
 
     # ------------------------------------------------------------------ files
-    def save(self, path: str | Path) -> None:
-        """Write the value to ``path`` (npz): the same value gives the same bytes (fixed
-        arrays in a fixed order; the zip entries carry a fixed date, not the clock)."""
+    def to_bytes(self) -> bytes:
+        """The value's file (npz): the same value gives the same bytes (fixed arrays in a fixed
+        order; the zip entries carry a fixed date, not the clock)."""
         import io
-        import os
         import zipfile
 
         buf = io.BytesIO()
@@ -138,14 +137,23 @@ class ZoneValue:
             table=self.table, gamma=self.gamma, weight=self.weight, trip_fit=self.trip_fit,
             seats=self.seats, network=self.network, meta=json.dumps(self.meta, sort_keys=True))
         buf.seek(0)
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + ".tmp")
-        with zipfile.ZipFile(buf) as src, zipfile.ZipFile(tmp, "w") as dst:
+        out = io.BytesIO()
+        with zipfile.ZipFile(buf) as src, zipfile.ZipFile(out, "w") as dst:
             for name in sorted(src.namelist()):
                 info = zipfile.ZipInfo(name, date_time=(1980, 1, 1, 0, 0, 0))
                 info.compress_type = zipfile.ZIP_DEFLATED
                 dst.writestr(info, src.read(name))
+        return out.getvalue()
+
+    def save(self, path: str | Path) -> None:
+        """Write the value to ``path`` (:meth:`to_bytes`), whole (a temporary name, then a
+        rename)."""
+        import os
+
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(path.name + ".tmp")
+        tmp.write_bytes(self.to_bytes())
         os.replace(tmp, path)
 
     @classmethod

@@ -46,10 +46,10 @@ VOXEL_ALLOCATORS = ("hungarian", "greedy", "fcfs", "random", "auction", "local_h
 VOXEL_PLANNERS = ("astar", "astar", "reservation", "rrt_star", "rstar")
 
 
-def _write_whole(path: Path, text: str) -> None:
-    """``text`` into ``path`` through a temporary name and an atomic rename."""
+def _write_whole(path: Path, data: str | bytes) -> None:
+    """``data`` (text as UTF-8) into ``path`` through a temporary name and an atomic rename."""
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    tmp.write_text(text, encoding="utf-8")
+    tmp.write_bytes(data.encode("utf-8") if isinstance(data, str) else data)
     os.replace(tmp, path)
 
 
@@ -79,9 +79,7 @@ class Case:
             w.writerows(["" if v is None else v for v in row] for row in rows)
             _write_whole(directory / fname, buf.getvalue())
         for fname, data in self.blobs.items():
-            tmp = directory / f".{fname}.tmp-{os.getpid()}"
-            tmp.write_bytes(data)
-            os.replace(tmp, directory / fname)
+            _write_whole(directory / fname, data)
         path = directory / name
         _write_whole(path, dumps(self.doc))
         return path
@@ -150,11 +148,15 @@ def _osm_nodes() -> np.ndarray:
 def _nyc_trips(seconds: float) -> list[list]:
     """The NYC taxi day's trips released in its first ``seconds`` (``t`` from midnight, which
     is also the subway feed's service day's midnight), by coordinates."""
+    from dispatch.files.traces import parse_datetime, seconds_between
+
     out = []
+    midnight = None
     with NYC_TRIPS.open(encoding="utf-8") as fh:
         for row in csv.DictReader(fh):
-            hh, mm, ss = (int(x) for x in row["departure_time"].split(" ")[1].split(":"))
-            t = float(hh * 3600 + mm * 60 + ss)
+            when = parse_datetime(row["departure_time"])
+            midnight = midnight or when.replace(hour=0, minute=0, second=0, microsecond=0)
+            t = seconds_between(when, midnight)
             if t > seconds:
                 break
             out.append([t, float(row["o_lat"]), float(row["o_lon"]), float(row["d_lat"]),
@@ -306,8 +308,6 @@ def _lookahead(rng, doc, world, capacity: int) -> dict[str, bytes]:
 
 def _value_file(rng, world, capacity: int) -> bytes:
     """The bytes of a :class:`learning.value.ZoneValue` file on the grid ``world``."""
-    import tempfile
-
     from dispatch.space.roads import manhattan
     from learning.value import ZoneValue
     from learning.zones import Zones
@@ -322,9 +322,7 @@ def _value_file(rng, world, capacity: int) -> bytes:
                       0.5 ** (1.0 / _r(rng, 60, 7200, 0)), _r(rng, 0, 600, 0),
                       np.tile([_r(rng, 0, 300, 0), _r(rng, 0.05, 0.3, 2)], (24, 1)),
                       {"soak": True}, seats)
-    with tempfile.TemporaryDirectory() as d:
-        value.save(Path(d) / "value.npz")
-        return (Path(d) / "value.npz").read_bytes()
+    return value.to_bytes()
 
 
 def _road_fleet(rng, doc, fleet, files, nodes, dispatch) -> None:

@@ -59,11 +59,9 @@ def main(argv: list[str] | None = None) -> int:
     err = Console(stderr=True, soft_wrap=True)
     try:
         if args.command in commands:  # registered by another package (dispatch.commands)
-            code = commands[args.command].run(args, _Output(console, err))
-        else:
-            code = {"run": _run, "validate": _validate, "plugins": _plugins, "sweep": _sweep,
-                    "train": _train, "check": _check, "new": _new}[args.command](args, console)
-        return code
+            return commands[args.command].run(args, _Output(console, err))
+        return {"run": _run, "validate": _validate, "plugins": _plugins, "sweep": _sweep,
+                "train": _train, "check": _check, "new": _new}[args.command](args, console)
     except DispatchError as e:
         if held is not None:
             held.forget()
