@@ -57,6 +57,17 @@ NETWORKS = [("grid", lambda: manhattan(9, 7, block=173.0, speed=7.3))] + [
     (f"random-{s}", lambda s=s: random_network(s)) for s in range(8)]
 
 
+def _both_modes(call):
+    """``(call() with the kernels as plain Python, call() compiled)``, back to ``"auto"``."""
+    _compiled.set_mode("python")
+    try:
+        plain = call()
+        _compiled.set_mode("compiled")
+        return plain, call()
+    finally:
+        _compiled.set_mode("auto")
+
+
 @pytest.mark.parametrize("which", [name for name, _ in NETWORKS])
 def test_searches_as_plain_python_equal_the_compiled_ones(which):
     """A* paths, paths walked down a field, and complete fields (the planner's scipy twin against
@@ -67,13 +78,7 @@ def test_searches_as_plain_python_equal_the_compiled_ones(which):
     rng = np.random.default_rng(7)
     nodes = rng.integers(0, net.n, 12)
     for to in (True, False):
-        _compiled.set_mode("python")
-        try:
-            plain = planner._dijkstra(nodes, to=to)
-        finally:
-            _compiled.set_mode("compiled")
-        compiled = planner._dijkstra(nodes, to=to)
-        _compiled.set_mode("auto")
+        plain, compiled = _both_modes(lambda: planner._dijkstra(nodes, to=to))
         for a, b in zip(plain, compiled, strict=True):
             assert np.array_equal(a, b)  # bit for bit (no tolerance)
             assert not a.flags.writeable
@@ -216,15 +221,7 @@ def test_chicago_fields_from_scipy_equal_the_compiled_search():
                         np.empty(t.nnz + 1, dtype=np.int64), np.empty(net.n, dtype=np.int64))
     nodes = np.random.default_rng(2).integers(0, net.n, 6)
     for to in (True, False):
-        _compiled.set_mode("python")
-        try:
-            plain = planner._dijkstra(nodes, to=to)
-        finally:
-            _compiled.set_mode("compiled")
-        try:
-            compiled = planner._dijkstra(nodes, to=to)
-        finally:
-            _compiled.set_mode("auto")
+        plain, compiled = _both_modes(lambda: planner._dijkstra(nodes, to=to))
         for a, b in zip(plain, compiled, strict=True):
             assert np.array_equal(a, b)
 
