@@ -3,7 +3,10 @@
 Each ``--series`` is ``ALLOCATOR[/OBJECTIVE][+demand][+value=FILE[@WEIGHT]]`` (e.g.
 ``hungarian/added_time+demand`` or ``hungarian/added_time+demand+value=v.npz@100``;
 ``+reward=R`` gives the allocator the ``value_reward`` R (seconds a served request is worth),
-``+dvalue=FILE`` gives the value to the ``demand`` repositioner, ``+dmix=0.3`` its mix),
+``+dvalue=FILE`` gives the value to the ``demand`` repositioner, ``+dmix=0.3`` its mix,
+``+d.max_moves=100`` / ``+d.zone=1500`` its other keys, ``+every=60`` / ``+horizon=900`` the
+``[reposition]`` interval and horizon in seconds, ``+wait`` the ``[dispatch] out_of_reach =
+"wait"``: a request no taxi reaches in time at its first offer waits for its deadline),
 run on ``--scenario`` for each ``--agents`` N and ``--seeds`` S, batched every
 ``--batch-window`` seconds; keep the value's training seeds (its file's ``seeds``) out.
 Writes ``--out`` (CSV: ``series, n_agents, seed, served_share, wait_mean, passenger_km,
@@ -47,6 +50,8 @@ def parse(series: str) -> dict:
         key, _, val = e.partition("=")
         if key == "demand":
             out["demand"] = True
+        elif key == "wait":
+            out["out_of_reach"] = "wait"
         elif key == "value":
             path, _, w = val.partition("@")
             out["params"]["value"] = path
@@ -58,6 +63,10 @@ def parse(series: str) -> dict:
             out["demand_params"]["value"] = val
         elif key == "dmix":
             out["demand_params"]["value_mix"] = float(val)
+        elif key.startswith("d.") and key[2:] in ("zone", "max_moves"):
+            out["demand_params"][key[2:]] = int(val) if key == "d.max_moves" else float(val)
+        elif key in ("every", "horizon"):
+            out["reposition_" + key] = float(val)
         else:
             raise SystemExit(f"unknown series part {e!r} in {series!r}")
     return out
@@ -71,9 +80,13 @@ def run(sc, spec: dict, agents: int, seed: int) -> dict:
                                       allocator_tables=()))
     if spec["objective"]:
         sc = replace(sc, dispatch=replace(sc.dispatch, objective=spec["objective"]))
+    if "out_of_reach" in spec:
+        sc = replace(sc, dispatch=replace(sc.dispatch, out_of_reach=spec["out_of_reach"]))
     if spec["demand"]:
         sc = replace(sc, reposition=replace(
             sc.reposition, policy="demand", declared=True,
+            interval=spec.get("reposition_every", sc.reposition.interval),
+            horizon=spec.get("reposition_horizon", sc.reposition.horizon),
             params=(("demand", tuple(sorted(spec["demand_params"].items()))),)))
     res = run_one(sc.runs(allocator=spec["allocator"], agents=agents, seed=seed)[0])
     s = res.summary

@@ -9,7 +9,8 @@ rows and write the result again. Two worlds:
   rows of its shipped trace (``scenarios/data/manhattan_trips.csv``), or Manhattan's street
   network (``manhattan_osm``) with the first minutes of the NYC taxi day and, mostly, the
   subway (``[transit]``: the shipped feed, every key and mode choice), cut to minutes; shared
-  rides, batching, both objectives, every allocator, walking, prebooking (a share or a trace's
+  rides, batching, both objectives, requests out of reach waiting (``out_of_reach``), every
+  allocator, walking, prebooking (a share or a trace's
   ``booked_at``; entry at booking or by lead), offers with each acceptor and pricing, shifts
   (a start file's columns) and sizing, electric fleets with each charging strategy,
   repositioning, congestion, breakdowns (by rate and by file, transfer or failure), radio
@@ -248,6 +249,8 @@ def _road(rng) -> Case:
     files["trips.csv"] = (header, trips)
     if _p(rng, 0.8):
         tasks["max_wait"] = _r(rng, 30, 900, 0)
+        if _p(rng, 0.25):
+            dispatch["out_of_reach"] = "wait"  # (a request out of reach waits, not rejected)
     if _p(rng, 0.6 if capacity > 1 else 0.25):
         tasks["max_delay"] = _r(rng, 30, 1200, 0)
     if _p(rng, 0.3):

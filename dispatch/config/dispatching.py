@@ -6,6 +6,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+#: ``[dispatch] out_of_reach``: what becomes of a request no vehicle reaches in time at its
+#: first offer (:func:`dispatch.decide.planner_costs.reject_late`)
+OUT_OF_REACH = ("reject", "wait")
+
 
 @dataclass(frozen=True)
 class DispatchConfig:
@@ -38,6 +42,11 @@ class DispatchConfig:
     #: seconds before its departure a booked request enters dispatch with prebook = "lead"
     #: (unset: the [tasks] prebook_lead)
     prebook_lead: float | None = None
+    #: what becomes of a request that, at its first offer, no vehicle of the decision can
+    #: reach before its deadline: "reject" (closed ``rejected`` at once) or "wait" (it stays
+    #: open: a vehicle that frees up or drives near it may still take it before its deadline,
+    #: else it expires); see dispatch.decide.planner_costs.reject_late
+    out_of_reach: str = "reject"
 
     def params_for(self, allocator: str) -> tuple[tuple[str, Any], ...]:
         """The constructor arguments of ``allocator`` (a name, or ``name:variant``): the flat

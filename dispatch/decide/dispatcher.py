@@ -26,7 +26,9 @@ Requests with a ``max_wait``. A pair whose vehicle would reach the pickup after 
 deadline (``released_at + max_wait``) is infeasible (``inf`` in the problem's cost). A request
 that, the first time it is offered, no idle vehicle can reach in time is closed ``rejected`` at
 once (as ride-hailing studies reject a request nobody can serve); one that had a chance but is
-still open at its deadline expires.
+still open at its deadline expires. With ``[dispatch] out_of_reach = "wait"`` none is rejected:
+a request out of reach stays open, a vehicle that frees up near it may take it at a later
+decision, and it expires at its deadline if none does.
 
 Re-assignment before pickup (``[dispatch] reassign = true``, road networks). A decision also
 considers the vehicles still driving to a pickup (as FleetPy and MATSim DRT allow): they join

@@ -206,7 +206,7 @@ def search(pipe, now: float):
         if not one.size or not np.isfinite(costed(pipe, now, one, requests, views)[0]).any():
             return WHOLE
     pipe.tally.cost_seconds += time.perf_counter() - t0
-    reject_late(pipe.book, requests, cost_col, np.ones(1, bool))
+    reject_late(pipe.book, requests, cost_col, np.ones(1, bool), pipe.reject)
     return None
 
 

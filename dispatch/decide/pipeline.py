@@ -299,6 +299,9 @@ class Pipeline:
             or walks is not None
         self.objective = OBJECTIVES[cfg.objective]
         self.reassign = cfg.reassign
+        #: [dispatch] out_of_reach: a request no vehicle reaches in time at its first offer is
+        #: rejected at once (else it waits for its deadline)
+        self.reject = cfg.out_of_reach == "reject"
         #: the planner routes between any two locations (direct times, insertions)
         self.routes = planner.travel_times
         if self.plans and not self.routes:
@@ -446,7 +449,7 @@ class Pipeline:
                                                    set(holder.values()), fleet=self.fleet,
                                                    operator=self.operator, planner=self.planner,
                                                    objective=self.objective, table=self.table)
-            servable = reject_late(self.book, open_tasks, cost, servable)
+            servable = reject_late(self.book, open_tasks, cost, servable, self.reject)
         elif any(d < math.inf for d in limits):
             if servable is None:
                 servable = np.ones(len(open_tasks), dtype=bool)
@@ -456,7 +459,7 @@ class Pipeline:
                 exact = exact | ~np.isfinite(cost)
                 self.tally.lazy_pairs += resolve_open(cost, exact, self.costs.exact(agents, tasks),
                                                       now, limits)
-            servable = reject_late(self.book, open_tasks, cost, servable)
+            servable = reject_late(self.book, open_tasks, cost, servable, self.reject)
         return cost, exact, servable, inserts
 
     def answer(self, d: Decision, ask: Ask) -> Checked:

@@ -126,15 +126,18 @@ def close_unreachable(book: TaskBook, fleet: Fleet, costs: PlannerCosts, tasks, 
         book.close(t, TaskState.UNREACHABLE)
 
 
-def reject_late(book: TaskBook, open_tasks: list, cost: np.ndarray, servable: np.ndarray
-                ) -> np.ndarray:
+def reject_late(book: TaskBook, open_tasks: list, cost: np.ndarray, servable: np.ndarray,
+                reject: bool = True) -> np.ndarray:
     """``servable`` less the tasks no vehicle can reach in time (no finite cost); of those,
-    a task offered for the first time is closed ``rejected`` at once (see
-    :mod:`dispatch.decide.dispatcher`), one offered before waits for its deadline."""
+    a task offered for the first time is closed ``rejected`` at once when ``reject`` (see
+    :mod:`dispatch.decide.dispatcher`), one offered before waits for its deadline. Without
+    ``reject`` (``out_of_reach = "wait"``) every one of them stays open until its deadline:
+    a vehicle that frees up near it in time may take it at a later decision."""
     late = servable & ~np.isfinite(cost).any(axis=0)
-    for t, bad in zip(open_tasks, late):
-        if bad and not t.offered:
-            book.close(t, TaskState.REJECTED)
+    if reject:
+        for t, bad in zip(open_tasks, late):
+            if bad and not t.offered:
+                book.close(t, TaskState.REJECTED)
     return servable & ~late
 
 

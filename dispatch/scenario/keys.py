@@ -26,7 +26,8 @@ KEYS: dict[str, tuple[str, ...]] = {
               "meeting_points", "trips_per_day", "weekday", "prebook_share", "prebook_lead",
               "trace", "id_column", "start", "max_snap"),
     "dispatch": ("allocator", "planner", "batch_window", "max_rounds", "reassign", "lazy_costs",
-                 "objective", "allocator_params", "planner_params", "prebook", "prebook_lead"),
+                 "objective", "allocator_params", "planner_params", "prebook", "prebook_lead",
+                 "out_of_reach"),
     "comms": ("range", "latency", "loss"),
     "sweep": ("allocator", "planner", "agents", "seed", "batch_window", "reposition"),
 }

@@ -26,7 +26,7 @@ from dispatch.api import registry
 from dispatch.api.acceptor import Pricing
 from dispatch.api.space import space_class
 from dispatch.config.comms import CommsConfig
-from dispatch.config.dispatching import DispatchConfig
+from dispatch.config.dispatching import OUT_OF_REACH, DispatchConfig
 from dispatch.config.breaks import BreaksConfig
 from dispatch.config.energy import EnergyConfig
 from dispatch.config.faults import FaultConfig
@@ -223,20 +223,20 @@ def parse_scenario(data: dict, path: Path, text: str = "", *,
     if reassign and "reassign" not in features:
         raise d.fail("reassign", "re-assignment before pickup needs a road network "
                                  "([world] network)")
-    lazy = d.flag("lazy_costs")
     disp = DispatchConfig(
         allocator=d.string("allocator"),
         planner=d.string("planner", space_class(world.space).default_planner),
         batch_window=d.number("batch_window", lo=0.0),
         max_rounds=d.number("max_rounds", lo=1, integer=True),
         reassign=reassign,
-        lazy_costs=lazy,
+        lazy_costs=d.flag("lazy_costs"),
         objective=d.string("objective", choices=("pickup_time", "added_time")),
         allocator_params=d.params("allocator_params"),
         planner_params=d.params("planner_params"),
     )
     disp = replace(disp, prebook=d.string("prebook", choices=PREBOOK_MODES),
-                   prebook_lead=d.number("prebook_lead", gt=0.0))
+                   prebook_lead=d.number("prebook_lead", gt=0.0),
+                   out_of_reach=d.string("out_of_reach", choices=OUT_OF_REACH))
     d.done()
     _check_prebooking(path, world, tasks, disp)
     _check_pooling(path, world, fleet, tasks, disp)

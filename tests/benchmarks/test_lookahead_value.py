@@ -26,8 +26,15 @@ def test_a_series_name_gives_its_allocator_objective_and_parameters(lv):
     got = lv.parse("hungarian/added_time+demand+dvalue=d.npz+dmix=0.3")
     assert got["objective"] == "added_time" and got["demand"]
     assert got["params"] == {} and got["demand_params"] == {"value": "d.npz", "value_mix": 0.3}
+    got = lv.parse("hungarian/added_time+demand+d.max_moves=100+d.zone=1500+every=60+horizon=900")
+    assert got["demand_params"] == {"max_moves": 100, "zone": 1500.0}
+    assert isinstance(got["demand_params"]["max_moves"], int)
+    assert got["reposition_every"] == 60.0 and got["reposition_horizon"] == 900.0
+    assert "out_of_reach" not in got and lv.parse("hungarian+wait")["out_of_reach"] == "wait"
     with pytest.raises(SystemExit, match="unknown series part"):
         lv.parse("hungarian+bogus=1")
+    with pytest.raises(SystemExit, match="unknown series part"):
+        lv.parse("hungarian+demand+d.value_mix=1")  # the mix is dmix=
 
 
 def test_the_table_gives_means_intervals_and_paired_differences(lv):

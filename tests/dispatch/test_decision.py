@@ -82,6 +82,9 @@ def test_reject_late_closes_first_offers_only_and_leaves_late_columns_out():
     got = reject_late(book, tasks, cost, servable)
     assert got.tolist() == [True, False, False, False]
     assert book.closed == [(1, TaskState.REJECTED)]  # task 2 was offered: it waits
+    book = _Book(tasks)  # out_of_reach = "wait": the same columns left out, none closed
+    assert reject_late(book, tasks, cost, servable, reject=False).tolist() == got.tolist()
+    assert book.closed == []
 
 
 def test_keep_servable_drops_columns_and_renumbers_insertions():

@@ -39,7 +39,7 @@ def test_both_worlds_and_the_features_are_drawn():
     for want in ("fleet.capacity", "fleet.breaks", "fleet.energy", "fleet.sizing",
                  "tasks.max_walk", "tasks.prebook_share", "dispatch.prebook",
                  "dispatch.objective", "dispatch.batch_window", "world.congestion",
-                 "world.obstacles", "tasks.service_time"):
+                 "world.obstacles", "tasks.service_time", "dispatch.out_of_reach"):
         assert want in keys, want
     allocators = {d["dispatch"]["allocator"] for d in docs}
     assert {"hungarian", "greedy", "fcfs", "random", "auction", "local_hungarian", "rtv",
